@@ -1,0 +1,129 @@
+"""The validated in-memory models of a work cell (what kb.py builds from YAML).
+
+Units inside: lengths in the problem file's length unit (the paper's cell: inches),
+angles in radians. Frames: world Z up, table top at z = 0, 4x4 homogeneous
+transforms with column vectors, ``T_world_obj``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Union
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from .kinematics import Robot
+
+Face = Union[int, str]
+
+
+@dataclass(frozen=True)
+class StablePose:
+    """A stable pose (Fig. 18): the faces it rests on, the faces it hides, its orientation R (3x3, world)."""
+
+    label: str
+    rfaces: tuple[Face, ...]
+    ofaces: tuple[Face, ...]
+    R: np.ndarray
+
+
+@dataclass(frozen=True)
+class Grasp:
+    """A grasping configuration (Fig. 19).
+
+    ``euler`` is (X, Y, Z, phi, theta, psi): lengths in the cell unit, angles in radians;
+    ``T`` is the characteristic T_g, the tool frame in the object frame (4x4);
+    ``width`` is W_g, the object's width along the fingers' sliding axis (tool y).
+    """
+
+    label: str
+    gfaces: tuple[Face, ...]
+    ofaces: tuple[Face, ...]
+    euler: tuple[float, float, float, float, float, float]
+    width: float
+    T: np.ndarray
+
+
+@dataclass(frozen=True)
+class MatingFeature:
+    """A round peg or hole (Sec. 3.2.2): ``kind`` 'peg' or 'hole', its radius, and its
+    vector in the object frame (F_p, the peg tip centre; F_h, the hole's bottom centre)."""
+
+    kind: str
+    faces: tuple[Face, ...]
+    radius: float
+    vector: np.ndarray
+
+
+@dataclass
+class ObjectModel:
+    """An object model: faces, stable poses, grasps and mating feature."""
+
+    name: str
+    faces: tuple[Face, ...]
+    poses: dict[str, StablePose]
+    grasps: dict[str, Grasp]
+    feature: MatingFeature | None = None
+
+    @property
+    def mating_faces(self) -> tuple[Face, ...]:
+        """Faces that must stay free for assembly (empty without a feature)."""
+        return self.feature.faces if self.feature else ()
+
+
+@dataclass(frozen=True)
+class Position:
+    """An absolute position (Sec. 5.2.3): plan-variable name (``init_pos1``), label (``tr1``),
+    the object resting there and its 4x4 world transform."""
+
+    name: str
+    label: str
+    obj: str
+    T: np.ndarray
+
+
+@dataclass(frozen=True)
+class Bounds:
+    """Uncertainty bounds (Table 2): lengths in the cell unit, angles in radians."""
+
+    dx: tuple[float, float]
+    dy: tuple[float, float]
+    dz: tuple[float, float]
+    dtheta: tuple[float, float]
+
+
+@dataclass(frozen=True)
+class Sensor:
+    """A sensing action (Fig. 11) and the bounds it leaves on the object it scans."""
+
+    name: str
+    leaves: Bounds
+
+
+@dataclass
+class Cell:
+    """A whole problem: robot, objects, initial positions, uncertainty, sensors and goals."""
+
+    name: str
+    file: str
+    unit: str
+    robot: "Robot"
+    finger_separation: float  # W_m, cell unit
+    objects: dict[str, ObjectModel]
+    positions: dict[str, Position]  # by label (tr1, ...)
+    transforms: dict[str, np.ndarray]  # named constant transforms (trans_1: T_a)
+    vectors: dict[str, np.ndarray]  # named vectors (vec_1: V_a)
+    initial: list[str]  # initial-state facts, Prolog text (gripper(open), ...)
+    goals: list[str]  # goals, Prolog text
+    manipulator_bounds: Bounds
+    object_bounds: dict[str, Bounds]
+    sensors: dict[str, Sensor]
+    placement_regions: list[dict] = field(default_factory=list)
+
+    def position_of(self, label: str) -> Position:
+        """The absolute position labelled ``label`` (KeyError if none)."""
+        return self.positions[label]
+
+    def is_pose_label(self, obj: str, label: str) -> bool:
+        """True if ``label`` names a stable pose of ``obj``."""
+        return label in self.objects[obj].poses
