@@ -19,12 +19,14 @@ Face = Union[int, str]
 
 @dataclass(frozen=True)
 class StablePose:
-    """A stable pose (Fig. 18): the faces it rests on, the faces it hides, its orientation R (3x3, world)."""
+    """A stable pose (Fig. 18): the faces it rests on, the faces it hides, its orientation R
+    (3x3, world) and ``height``, the object frame's height above the table top (cell unit)."""
 
     label: str
     rfaces: tuple[Face, ...]
     ofaces: tuple[Face, ...]
     R: np.ndarray
+    height: float = 0.0
 
 
 @dataclass(frozen=True)
