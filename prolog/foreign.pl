@@ -7,8 +7,11 @@
 */
 :- module(foreign,
           [ arc_pairs/5,             % +Constraint, +Objects, +GLabels, +PLabels, -Pairs
-            py_bridge/2              % +Call, -Result (for phase 2)
+            py_bridge/2,             % +Call, -Result (for phase 2)
+            spar_load_facts/1,       % +Data (from Python)
+            data_term/2              % +Data, -Term
           ]).
+:- use_module(kb, []).
 :- use_module(library(janus)).
 :- use_module(library(error)).
 :- use_module(library(apply)).
@@ -53,3 +56,32 @@ pair_term([G, P], G/P).
 
 py_bridge(Call, Result) :-
     py_call(spar_py.engine:Call, Result).
+
+%!  spar_load_facts(+Data:list) is det.
+%
+%   Replace the knowledge base by the facts Data sent from Python
+%   (spar_py.kb.facts/1: tuples for compounds, strings for atoms).
+
+spar_load_facts(Data) :-
+    must_be(list, Data),
+    maplist(data_term, Data, Facts),
+    kb:replace_facts(Facts).
+
+%!  data_term(+Data, -Term) is det.
+%
+%   Turn janus data into a term: a string becomes an atom, a Python tuple
+%   (functor, Arg...) (janus: -(F, A1, ...)) a compound, a list a list.
+%
+%   @error type_error(spar_data, D) for anything else.
+
+data_term(D, T) :-
+    (   string(D) -> atom_string(T, D)
+    ;   number(D) -> T = D
+    ;   atom(D) -> T = D
+    ;   is_list(D) -> maplist(data_term, D, T)
+    ;   compound(D), compound_name_arguments(D, -, [F0|As0]), As0 \== []
+    ->  data_term(F0, F), must_be(atom, F),
+        maplist(data_term, As0, As),
+        compound_name_arguments(T, F, As)
+    ;   type_error(spar_data, D)
+    ).

@@ -1,0 +1,31 @@
+# spar-py: `make demo` plans the paper's peg-and-block cell; `make test` runs every test.
+# Both set everything up first (scripts/setup.sh), on a fresh machine too.
+VENV   := .venv
+PY     := $(VENV)/bin/python
+SPAR   := $(VENV)/bin/spar
+PROBLEM ?= kb/problems/peg_in_block.yaml
+
+.PHONY: setup demo test test-python test-prolog bench regress lint clean
+
+setup:
+	@scripts/setup.sh
+
+demo: setup
+	$(SPAR) plan $(PROBLEM) --dot docs/demo --png docs/demo
+
+test: setup
+	$(PY) -m pytest
+	$(PY) -m spar_py.plunit tests/prolog
+
+bench: setup
+	$(PY) -m pip install -q -e '.[bench]' 2>&1 | grep -v '^WARNING: Location' || true
+	$(PY) -m bench
+
+regress: setup
+	$(SPAR) regress kb/problems
+
+lint: setup
+	$(VENV)/bin/ruff check src tests bench
+
+clean:
+	rm -rf $(VENV) src/spar_py/_swipl.json .pytest_cache .hypothesis

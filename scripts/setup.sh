@@ -1,0 +1,55 @@
+#!/usr/bin/env bash
+# One-step set-up, run by `make setup` (and so by `make demo` and `make test`):
+#   1. system prerequisites (a C compiler, Python headers and venv) via apt-get;
+#   2. a SWI-Prolog >= 9.1.12 (scripts/provision-swipl.sh: PATH, $SWIPL, the
+#      per-user cache, or a build from the distribution's source package);
+#   3. .venv with `pip install -e '.[dev]'`, janus-swi compiled against that SWI;
+#   4. src/spar_py/_swipl.json: the SWI-Prolog home the package must start.
+# Re-running it when all is in place takes a few seconds.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+PYTHON=${PYTHON:-python3}
+log() { printf 'setup: %s\n' "$*" >&2; }
+SUDO=""; [ "$(id -u)" -eq 0 ] || SUDO=sudo
+
+# 1. prerequisites -----------------------------------------------------------------
+need=""
+command -v cc >/dev/null 2>&1 || need="$need build-essential"
+command -v "$PYTHON" >/dev/null 2>&1 || need="$need python3"
+if command -v "$PYTHON" >/dev/null 2>&1; then
+    inc=$("$PYTHON" -c 'import sysconfig; print(sysconfig.get_paths()["include"])')
+    [ -f "$inc/Python.h" ] || need="$need python3-dev"
+    "$PYTHON" -c 'import ensurepip, venv' >/dev/null 2>&1 || need="$need python3-venv"
+fi
+if [ -n "$need" ]; then
+    command -v apt-get >/dev/null 2>&1 || { log "error: missing$need and no apt-get; install them by hand"; exit 1; }
+    log "installing:$need"
+    $SUDO apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends $need
+fi
+
+# 2. SWI-Prolog ----------------------------------------------------------------------
+swipl=$(scripts/provision-swipl.sh)
+vars=$("$swipl" --dump-runtime-variables)
+home=$(printf '%s\n' "$vars" | sed -n 's/^PLBASE="\(.*\)";$/\1/p')
+version=$(printf '%s\n' "$vars" | sed -n 's/^PLVERSION="\(.*\)";$/\1/p')
+[ -d "$home" ] || { log "error: $swipl reports no home directory"; exit 1; }
+
+# 3. virtual environment and packages ---------------------------------------------------
+[ -x .venv/bin/python ] || { log "creating .venv"; "$PYTHON" -m venv .venv; }
+stamp=.venv/.spar-setup
+want="$(sha1sum pyproject.toml | cut -d' ' -f1) $home"
+if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
+    log "installing spar-py and janus-swi (against $home)"
+    export PATH="$(dirname "$swipl"):$PATH"
+    .venv/bin/python -m pip install -q --upgrade pip 2>&1 | grep -v '^WARNING: Location' >&2 || true
+    .venv/bin/python -m pip install -q --no-cache-dir --force-reinstall --no-deps --no-binary janus-swi janus-swi 2>&1 \
+        | grep -v '^WARNING: Location' >&2 || true
+    .venv/bin/python -m pip install -q -e '.[dev]' 2>&1 | grep -v '^WARNING: Location' >&2 || true
+    .venv/bin/python -c 'import janus_swi' 2>/dev/null || { log "error: janus-swi did not install"; exit 1; }
+    echo "$want" > "$stamp"
+fi
+
+# 4. record the SWI-Prolog home ----------------------------------------------------------
+printf '{"home": "%s", "version": %s, "swipl": "%s"}\n' "$home" "$version" "$swipl" > src/spar_py/_swipl.json
+log "ready: SWI-Prolog $version at $home"

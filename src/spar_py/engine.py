@@ -1,0 +1,130 @@
+"""The janus bridge, Python side: start the embedded SWI-Prolog, load the planner, run queries.
+
+This is the only Python module that imports janus. Prolog reaches Python through
+the functions at the bottom of this file (called from prolog/foreign.pl with
+``py_call(spar_py.engine:...)``); they delegate to the numeric modules.
+
+SWI-Prolog is located from ``_swipl.json`` beside this file, written by ``make setup``
+with the home directory janus-swi was compiled against. Setting ``SWI_HOME_DIR``
+before janus starts makes the embedded Prolog use that home even when an older
+``swipl`` (whose boot file would abort with "incompatible VM-signature") is first on
+PATH.
+"""
+from __future__ import annotations
+
+import json
+import os
+import threading
+from pathlib import Path
+from typing import Any, Iterator
+
+from .errors import PrologError, SparError
+
+PACKAGE_DIR = Path(__file__).resolve().parent
+ROOT = PACKAGE_DIR.parent.parent  # the checkout: prolog/, kb/ live here
+PROLOG_DIR = ROOT / "prolog"
+TEMPLATES_DIR = ROOT / "kb" / "templates"
+RECORD = PACKAGE_DIR / "_swipl.json"
+
+_lock = threading.Lock()
+_engine: "Engine | None" = None
+
+
+def swipl_record() -> dict[str, Any]:
+    """The SWI-Prolog recorded at set-up: ``{"home": ..., "version": ..., "swipl": ...}`` or {}."""
+    try:
+        return json.loads(RECORD.read_text())
+    except (OSError, ValueError):
+        return {}
+
+
+def _import_janus() -> Any:
+    rec = swipl_record()
+    home = os.environ.get("SPAR_SWIPL_HOME") or rec.get("home")
+    if home:
+        os.environ["SWI_HOME_DIR"] = home
+    try:
+        import janus_swi as janus
+    except ImportError as e:  # pragma: no cover - set-up problem, not a planner one
+        raise SparError(f"janus-swi is not importable ({e}); run `make setup`") from None
+    return janus
+
+
+class Engine:
+    """The embedded SWI-Prolog with prolog/spar.pl and kb/templates/ consulted (one per process)."""
+
+    def __init__(self) -> None:
+        self.janus = _import_janus()
+        self._consult(PROLOG_DIR / "spar.pl")
+        for f in sorted(TEMPLATES_DIR.glob("*.pl")):
+            self._consult(f)
+        self.cell = None
+
+    def _consult(self, path: Path) -> None:
+        self.query_once("consult(File)", {"File": str(path)})
+
+    # ------------------------------------------------------------------ queries
+
+    def query_once(self, goal: str, bindings: dict[str, Any] | None = None) -> dict[str, Any]:
+        """Run ``goal`` once with input ``bindings``; the answer dict has ``truth`` and outputs.
+
+        Prolog exceptions are raised as :class:`PrologError` with Prolog's message.
+        """
+        try:
+            return self.janus.query_once(goal, bindings or {})
+        except self.janus.PrologError as e:
+            raise self._translate(e) from None
+
+    def query(self, goal: str, bindings: dict[str, Any] | None = None) -> Iterator[dict[str, Any]]:
+        """All answers of ``goal`` (lazily), exceptions translated as in :meth:`query_once`."""
+        try:
+            yield from self.janus.query(goal, bindings or {})
+        except self.janus.PrologError as e:
+            raise self._translate(e) from None
+
+    def _translate(self, e: Any) -> PrologError:
+        try:
+            message = str(e)
+        except Exception:  # message_to_string itself failed
+            message = repr(e)
+        return PrologError(repr(e), message)
+
+    # ------------------------------------------------------------------ knowledge
+
+    def load_cell(self, cell: Any) -> None:
+        """Replace the kb module's facts by ``cell``'s (kb.facts) and remember the cell for py_calls."""
+        from .kb import facts
+
+        self.query_once("spar_load_facts(Facts)", {"Facts": facts(cell)})
+        self.cell = cell
+
+
+def engine() -> Engine:
+    """The process's engine, started on first use."""
+    global _engine
+    with _lock:
+        if _engine is None:
+            _engine = Engine()
+        return _engine
+
+
+def current_cell() -> Any:
+    """The cell loaded into the engine (SparError if none)."""
+    if _engine is None or _engine.cell is None:
+        raise SparError("no problem loaded")
+    return _engine.cell
+
+
+# ---------------------------------------------------------------------- called from Prolog
+
+
+def arc_pairs(kind: str, objects: list[str], grasps: list[str], positions: list[str], ta: str) -> list[list[str]]:
+    """All grasp/position pairs satisfying ``kind`` (reachable | mate_reachable), Sec. 5.2.4."""
+    from . import reach
+
+    cell = current_cell()
+    if kind == "reachable":
+        return reach.reachable_pairs(cell, objects[0], grasps, positions)
+    if kind == "mate_reachable":
+        return reach.mate_reachable_pairs(cell, objects[0], objects[1], grasps, positions, cell.transforms[ta])
+    raise SparError(f"unknown geometric constraint {kind}")
