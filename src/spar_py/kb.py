@@ -27,6 +27,7 @@ from .model import (
     ObjectModel,
     Position,
     Sensor,
+    Solid,
     StablePose,
 )
 
@@ -248,7 +249,25 @@ def load_object(path: str | Path, unit: str) -> ObjectModel:
             fnode.key("radius").positive() * scale,
             fnode.key("vector").vector(3) * scale,
         )
-    return ObjectModel(name, faces, poses, grasps, feature)
+    shape = tuple(_solid(n, scale) for n in (root.key("shape", required=False) or Node("", "", [])).elements())
+    return ObjectModel(name, faces, poses, grasps, feature, shape)
+
+
+def _solid(node: Node, scale: float) -> Solid:
+    """One shape primitive: ``{box: {min: [x,y,z], max: [x,y,z]}}`` or
+    ``{cylinder: {radius: r, z: [z0, z1]}}`` (axis = object z)."""
+    if isinstance(node.value, dict) and "box" in node.value:
+        b = node.key("box")
+        lo, hi = b.key("min").vector(3) * scale, b.key("max").vector(3) * scale
+        if np.any(lo >= hi):
+            raise b.fail("min < max in every coordinate")
+        return Solid("box", lo, hi)
+    if isinstance(node.value, dict) and "cylinder" in node.value:
+        c = node.key("cylinder")
+        r = c.key("radius").positive() * scale
+        z0, z1 = c.key("z").interval()
+        return Solid("cylinder", np.array([-r, -r, z0 * scale]), np.array([r, r, z1 * scale]), r)
+    raise node.fail("a shape primitive {box: {min, max}} or {cylinder: {radius, z}}")
 
 
 # --------------------------------------------------------------------------- terms

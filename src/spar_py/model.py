@@ -57,15 +57,37 @@ class MatingFeature:
     vector: np.ndarray
 
 
+@dataclass(frozen=True)
+class Solid:
+    """A primitive of an object's shape, in the object frame (cell unit): a box
+    (``lo``, ``hi`` corners) or a z-axis cylinder (``radius``, ``lo``/``hi`` as z range
+    in ``lo[2]``, ``hi[2]``, centred on the z axis). Used for pictures and clearances."""
+
+    kind: str
+    lo: np.ndarray
+    hi: np.ndarray
+    radius: float = 0.0
+
+
 @dataclass
 class ObjectModel:
-    """An object model: faces, stable poses, grasps and mating feature."""
+    """An object model: faces, stable poses, grasps, mating feature and shape."""
 
     name: str
     faces: tuple[Face, ...]
     poses: dict[str, StablePose]
     grasps: dict[str, Grasp]
     feature: MatingFeature | None = None
+    shape: tuple[Solid, ...] = ()
+
+    def bounding_radius(self) -> float:
+        """Radius of a sphere about the object origin containing the shape (0 without one)."""
+        r = 0.0
+        for s in self.shape:
+            corners = np.array([[x, y, z] for x in (s.lo[0], s.hi[0]) for y in (s.lo[1], s.hi[1])
+                                for z in (s.lo[2], s.hi[2])])
+            r = max(r, float(np.linalg.norm(corners, axis=1).max()))
+        return r
 
     @property
     def mating_faces(self) -> tuple[Face, ...]:
