@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from spar_py.errors import KBError, SparValueError
-from spar_py.geometry import inv, rotx, rpy, rotz, trans
+from spar_py.geometry import inv, rotx, rotz, rpy, trans
 from spar_py.kinematics import LIMIT_TOL, Robot
 
 ROOT = Path(__file__).resolve().parent.parent

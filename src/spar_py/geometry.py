@@ -19,9 +19,25 @@ from numpy.typing import ArrayLike
 from .errors import SparValueError
 
 __all__ = [
-    "trans", "rotx", "roty", "rotz", "rpy", "inv", "compose", "eulerxyz", "euler_zyz",
-    "tm_rows", "to_tm_rows", "is_orthonormal", "check_rotation", "check_transform",
-    "yaw_about_world_z", "same_stable_pose", "up_vectors", "transl", "rot",
+    "check_rotation",
+    "check_transform",
+    "compose",
+    "euler_zyz",
+    "eulerxyz",
+    "inv",
+    "is_orthonormal",
+    "rot",
+    "rotx",
+    "roty",
+    "rotz",
+    "rpy",
+    "same_stable_pose",
+    "tm_rows",
+    "to_tm_rows",
+    "trans",
+    "transl",
+    "up_vectors",
+    "yaw_about_world_z",
 ]
 
 ORTHO_TOL = 1e-6

@@ -21,9 +21,9 @@ from pathlib import Path
 import numpy as np
 
 from .errors import KBError, SparValueError
-from .geometry import inv, rpy, rotx, trans
+from .geometry import inv, rotx, rpy, trans
 
-__all__ = ["Robot", "LIMIT_TOL"]
+__all__ = ["LIMIT_TOL", "Robot"]
 
 LIMIT_TOL = 1e-9  # rad: a joint value this far outside its limits still counts as inside
 _EPS = np.finfo(float).eps
@@ -109,7 +109,7 @@ class Robot:
     # ------------------------------------------------------------------ loading
 
     @classmethod
-    def from_yaml(cls, path: str | Path, unit: str | None = None) -> "Robot":
+    def from_yaml(cls, path: str | Path, unit: str | None = None) -> Robot:
         """Load ``kb/robots/*.yaml``; lengths converted to ``unit`` (default: the file's), angles to rad.
 
         Malformed files raise :class:`KBError` naming the file, the key path and what
