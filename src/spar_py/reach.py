@@ -1,0 +1,195 @@
+"""Reachability of grasps (Sec. 5.2.4): the pairs behind the CMS's reachable / mate_reachable arcs.
+
+Numbers only; Prolog reaches this module through ``spar_py.engine.arc_pairs``.
+For a grasp label G and a position label P the paper checks
+
+1. the faces the fingers touch (G's gfaces) are not the faces P rests on (rfaces);
+2. the arm has a joint solution inside its limits for the tool pose T = T_O T_g
+   (reachable) or T = T_O T_a T_g (mate_reachable), T_O the position's world
+   transform, T_g the grasp's characteristic transform, T_a the assembly transform.
+
+A position label is either a stable pose of the object (``p2P1``: no X, Y, Z, so
+condition 2 is assumed satisfiable, as the paper does) or an absolute position of
+the cell (``tr1``: its rotation is classified into the object's stable poses to
+find its rfaces, Sec. 5.2.3). Every pair needing IK goes into one batched call.
+Lengths are in the cell's unit, which is also the unit the robot was loaded in.
+"""
+from __future__ import annotations
+
+import re
+from collections.abc import Callable, Iterable, Sequence
+
+import numpy as np
+
+from .errors import SparValueError
+from .geometry import same_stable_pose
+from .model import Cell, Face, Grasp, ObjectModel
+
+__all__ = [
+    "ARCS",
+    "arc",
+    "mate_reachable_pairs",
+    "natural_key",
+    "reachable_pairs",
+    "resting_faces",
+    "solutions_for",
+]
+
+
+def natural_key(label: str) -> tuple:
+    """Sort key putting p1G2 before p1G10 (digit runs compare as numbers)."""
+    return tuple(int(t) if t.isdigit() else t for t in re.split(r"(\d+)", label))
+
+
+def _sorted_pairs(pairs: Iterable[tuple[str, str]]) -> list[list[str]]:
+    return [[g, p] for g, p in sorted(set(pairs), key=lambda gp: (natural_key(gp[0]), natural_key(gp[1])))]
+
+
+def _object(cell: Cell, obj: str) -> ObjectModel:
+    try:
+        return cell.objects[obj]
+    except KeyError:
+        raise SparValueError(f"unknown object {obj!r} (known: {', '.join(sorted(cell.objects))})") from None
+
+
+def _grasps(model: ObjectModel, labels: Sequence[str]) -> list[Grasp]:
+    out = []
+    for g in labels:
+        if g not in model.grasps:
+            raise SparValueError(f"{g!r} is not a grasp of {model.name}")
+        out.append(model.grasps[g])
+    return out
+
+
+def _absolute(cell: Cell, model: ObjectModel, label: str) -> np.ndarray | None:
+    """T_O of an absolute position label of ``model``'s object, None for a stable-pose label."""
+    if label in model.poses:
+        return None
+    pos = cell.positions.get(label)
+    if pos is None:
+        raise SparValueError(f"{label!r} is neither a stable pose of {model.name} nor an absolute position")
+    if pos.obj != model.name:
+        raise SparValueError(f"position {label} ({pos.name}) holds {pos.obj}, not {model.name}")
+    return pos.T
+
+
+def resting_faces(cell: Cell, obj: str, label: str) -> tuple[Face, ...]:
+    """The faces ``obj`` rests on at position ``label`` (stable pose or absolute position, Sec. 5.2.3).
+
+    An absolute position is classified by its rotation (``same_stable_pose``); if
+    several stable poses match, the union of their rfaces is returned (the
+    conservative choice for condition 1). No match raises SparValueError.
+    """
+    model = _object(cell, obj)
+    T = _absolute(cell, model, label)
+    if T is None:
+        return model.poses[label].rfaces
+    faces: list[Face] = []
+    for pose in model.poses.values():
+        if same_stable_pose(T[:3, :3], pose.R):
+            faces += [f for f in pose.rfaces if f not in faces]
+    if not faces:
+        pos = cell.positions[label]
+        raise SparValueError(f"position {label} ({pos.name}) of {obj} is in none of its stable poses")
+    return tuple(faces)
+
+
+def _ik_pass(cell: Cell, poses: list[np.ndarray]) -> np.ndarray:
+    """(k,) bool: which world tool poses (each 4x4) the arm reaches within its limits, one batched call."""
+    if not poses:
+        return np.zeros(0, dtype=bool)
+    return cell.robot.reachable_mask(np.stack(poses))
+
+
+def reachable_pairs(cell: Cell, obj: str, grasp_labels: Sequence[str],
+                    pos_labels: Sequence[str]) -> list[list[str]]:
+    """All [grasp, position] pairs satisfying reachable(Grasp, Position) for ``obj`` (Sec. 5.2.4).
+
+    Condition 1 for every pair; condition 2 (IK with T = T_O T_g inside the joint
+    limits) only for absolute positions. Sorted by natural label order.
+    """
+    model = _object(cell, obj)
+    grasps = _grasps(model, grasp_labels)
+    pairs: list[tuple[str, str]] = []
+    pending: list[tuple[str, str]] = []
+    poses: list[np.ndarray] = []
+    for p in pos_labels:
+        T_O = _absolute(cell, model, p)
+        rfaces = set(resting_faces(cell, obj, p))
+        for g in grasps:
+            if rfaces & set(g.gfaces):
+                continue  # condition 1: the fingers would have to touch a face on the table
+            if T_O is None:
+                pairs.append((g.label, p))  # stable pose: some X, Y, Z is assumed to reach it
+            else:
+                pending.append((g.label, p))
+                poses.append(T_O @ g.T)
+    ok = _ik_pass(cell, poses)
+    pairs += [gp for gp, reached in zip(pending, ok) if reached]
+    return _sorted_pairs(pairs)
+
+
+def mate_reachable_pairs(cell: Cell, held_obj: str, fixed_obj: str, grasp_labels: Sequence[str],
+                         pos_labels: Sequence[str], Ta: np.ndarray | str) -> list[list[str]]:
+    """All [grasp, position] pairs satisfying mate_reachable(Grasp, Position, T_a) (Sec. 5.2.4).
+
+    Grasps are of ``held_obj``, positions of ``fixed_obj``; ``Ta`` (4x4, cell unit,
+    or the name of a cell transform) is the held object's frame in the fixed
+    object's frame once mated. Condition 2 only, with T = T_O T_a T_g; a stable-pose
+    label passes every grasp (the paper assumes some X, Y, Z reaches it).
+    """
+    if isinstance(Ta, str):
+        if Ta not in cell.transforms:
+            raise SparValueError(f"unknown transform {Ta!r}")
+        Ta = cell.transforms[Ta]
+    Ta = np.asarray(Ta, float)
+    if Ta.shape != (4, 4):
+        raise SparValueError(f"T_a must be a 4x4 transform, got shape {Ta.shape}")
+    grasps = _grasps(_object(cell, held_obj), grasp_labels)
+    fixed = _object(cell, fixed_obj)
+    pairs: list[tuple[str, str]] = []
+    pending: list[tuple[str, str]] = []
+    poses: list[np.ndarray] = []
+    for p in pos_labels:
+        T_O = _absolute(cell, fixed, p)
+        if T_O is None:
+            pairs += [(g.label, p) for g in grasps]
+            continue
+        T_held = T_O @ Ta
+        for g in grasps:
+            pending.append((g.label, p))
+            poses.append(T_held @ g.T)
+    ok = _ik_pass(cell, poses)
+    pairs += [gp for gp, reached in zip(pending, ok) if reached]
+    return _sorted_pairs(pairs)
+
+
+def _arc_reachable(cell: Cell, objects: Sequence[str], grasps: Sequence[str],
+                   positions: Sequence[str], ta: np.ndarray | str | None) -> list[list[str]]:
+    return reachable_pairs(cell, objects[0], grasps, positions)
+
+
+def _arc_mate(cell: Cell, objects: Sequence[str], grasps: Sequence[str],
+              positions: Sequence[str], ta: np.ndarray | str | None) -> list[list[str]]:
+    if ta is None or len(objects) != 2:
+        raise SparValueError("mate_reachable needs objects [held, fixed] and T_a")
+    return mate_reachable_pairs(cell, objects[0], objects[1], grasps, positions, ta)
+
+
+ARCS: dict[str, Callable[..., list[list[str]]]] = {
+    "reachable": _arc_reachable,
+    "mate_reachable": _arc_mate,
+}
+
+
+def arc(cell: Cell, kind: str, objects: Sequence[str], grasps: Sequence[str],
+        positions: Sequence[str], ta: np.ndarray | str | None = None) -> list[list[str]]:
+    """The pairs of a geometric arc ``kind`` (reachable | mate_reachable); objects [obj] or [held, fixed]."""
+    if kind not in ARCS:
+        raise SparValueError(f"unknown geometric constraint {kind!r} (one of {', '.join(ARCS)})")
+    return ARCS[kind](cell, objects, grasps, positions, ta)
+
+
+def solutions_for(cell: Cell, T: np.ndarray) -> list[list[float]]:
+    """Every in-limit joint vector (degrees, for display) reaching world tool pose T (4x4, cell unit)."""
+    return [[float(v) for v in np.degrees(q)] for q in cell.robot.ik(T)]
