@@ -14,6 +14,7 @@ offset_i``). Limits are checked with a tolerance of 1e-9 rad.
 """
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -21,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import KBError, SparValueError
-from .geometry import inv, rotx, rpy, trans
+from .geometry import check_transform, inv, rotx, rpy, trans
 
 __all__ = ["LIMIT_TOL", "Robot"]
 
@@ -88,6 +89,7 @@ class Robot:
     unit: str
     _puma: _Puma | str = field(init=False, repr=False)
     _reps: tuple[int, ...] = field(init=False, repr=False)
+    _turns: tuple[np.ndarray, np.ndarray, np.ndarray] = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         """Check shapes, precompute the closed-form parameters and the per-joint turn counts."""
@@ -105,6 +107,11 @@ class Robot:
         # how many representations q + 2 pi k of one angle can lie inside each joint's range
         span = self.limits[:, 1] - self.limits[:, 0] + 2 * LIMIT_TOL
         self._reps = tuple(int(s // (2 * math.pi)) + 1 for s in span)
+        # turn combinations, row-major over the joints: k[c, j] full turns added to joint j
+        k = np.array(list(itertools.product(*(range(m) for m in self._reps))), dtype=float)
+        self._turns = ((self.limits[:, 0] - LIMIT_TOL)[:, None, None],
+                       (self.limits[:, 1] + LIMIT_TOL)[:, None, None],
+                       (2 * math.pi * k.T)[:, None, None, :])
 
     # ------------------------------------------------------------------ loading
 
@@ -208,8 +215,6 @@ class Robot:
         Rows come in the order of :meth:`ik_batch`'s candidates (shoulder, elbow,
         wrist flip, then turn representations); see there for singular poses.
         """
-        from .geometry import check_transform
-
         T = check_transform(T, "ik: T")
         Q, ok = self.ik_batch(T[None])
         return Q[0][ok[0]]
@@ -232,9 +237,13 @@ class Robot:
         Singularities (documented choices, every returned row is a true solution):
         - wrist (|sin theta5| < 1e-12, axes 4 and 6 aligned): q4 = 0 and the whole
           rotation goes on q6; the flipped wrist is dropped (it is the same family).
+          Conservative: were q6's range under a full turn, a pose whose rotation q6
+          cannot take alone would be reported unreachable (not so for the PUMA 762).
         - shoulder (wrist centre on the z0 axis, only possible when d3 = 0): q1 = 0.
         - coinciding roots (shoulder with r = 0, elbow at full stretch): the second
-          root is dropped, so no row is listed twice.
+          root is dropped, so no row is listed twice. A discriminant within 64 eps L^2
+          of zero (L the arm's length scale) counts as zero, so a pose beyond full
+          stretch by float rounding (~1e-13 L) is still solved.
         """
         k = self._structure()
         T = np.asarray(T, float)
@@ -258,7 +267,8 @@ class Robot:
         th1 = np.arctan2(py, px)[:, None] - np.arctan2(d3, sign * root1[:, None])  # (n, 2)
         # shoulder singularity (d3 = 0 and the wrist centre on z0): theta1 is free; take q1 = 0
         th1 = np.where((rho2 <= tol)[:, None], k.offset[0], th1)
-        ok_sh = np.stack([ok1, ok1 & (disc1 > tol)], axis=1)  # equal roots: keep one
+        ok_sh = np.empty((n, 2), dtype=bool)
+        ok_sh[:, 0], ok_sh[:, 1] = ok1, ok1 & (disc1 > tol)  # equal roots: keep one
 
         # --- theta3:  K = (px^2 + py^2 + pz^2 - a2^2 - a3^2 - d3^2 - d4^2) / (2 a2)
         #              theta3 = Atan2(a3, d4) - Atan2(K, +-sqrt(a3^2 + d4^2 - K^2))
@@ -267,7 +277,8 @@ class Robot:
         ok3 = disc3 >= -tol
         root3 = np.sqrt(np.where(disc3 > tol, disc3, 0.0))
         th3 = math.atan2(a3, d4) - np.arctan2(K[:, None], sign * root3[:, None])  # (n, 2)
-        ok_el = np.stack([ok3, ok3 & (disc3 > tol)], axis=1)
+        ok_el = np.empty((n, 2), dtype=bool)
+        ok_el[:, 0], ok_el[:, 1] = ok3, ok3 & (disc3 > tol)
 
         # --- theta2 via theta23 (shoulder x elbow -> axes (n, 2, 2)):
         #   s23 = [(-a3 - a2 c3) pz + (c1 px + s1 py)(a2 s3 - d4)] / (pz^2 + (c1 px + s1 py)^2)
@@ -330,26 +341,11 @@ class Robot:
                          offset: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Joint angles theta (6, n, 8) -> every in-limit q + 2 pi k: ((n, 8 M, 6), (n, 8 M)), M turn combinations."""
         n = theta.shape[1]
-        reps = self._reps
-        M = math.prod(reps)
-        Q = np.empty((6, n, 8, M))
-        V = np.broadcast_to(ok[:, :, None], (n, 8, M)).copy()
-        stride = M
-        for j in range(6):
-            lo = self.limits[j, 0] - LIMIT_TOL
-            hi = self.limits[j, 1] + LIMIT_TOL
-            qj = theta[j] - offset[j]
-            # the lowest representation >= lo (the angles here lie within a few turns of 0)
-            q0 = qj - (2 * math.pi) * np.floor((qj - lo) * (0.5 / math.pi))
-            m = reps[j]
-            if m == 1:
-                Q[j] = q0[:, :, None]
-                V &= (q0 <= hi)[:, :, None]
-                continue
-            # combination index c = sum_j k_j * stride_j (row-major over the multi-turn joints)
-            stride //= m
-            k = (np.arange(M) // stride) % m
-            qk = q0[:, :, None] + (2 * math.pi) * k
-            Q[j] = qk
-            V &= qk <= hi
+        lo, hi, shift = self._turns
+        q = theta - offset[:, None, None]
+        # the lowest representation >= lo of each angle (these lie within a few turns of 0)
+        q0 = q - (2 * math.pi) * np.floor((q - lo) * (0.5 / math.pi))
+        Q = q0[..., None] + shift  # (6, n, 8, M): combination c adds 2 pi k_j(c) to joint j
+        V = ok[..., None] & (Q <= hi[..., None]).all(axis=0)
+        M = shift.shape[-1]
         return Q.transpose(1, 2, 3, 0).reshape(n, 8 * M, 6), V.reshape(n, 8 * M)
