@@ -196,3 +196,15 @@ def test_paper_cell_pairs_are_sound() -> None:
             if expected:
                 sol = np.radians(solutions_for(cell, T)[0])
                 assert np.allclose(cell.robot.fk(sol), T, atol=1e-9)
+
+
+def test_wrist_under_the_table_is_not_reachable() -> None:
+    """A tool pose pointing up from under the table top fails condition 2, whatever IK says."""
+    from spar_py.geometry import roty, trans
+    from spar_py.kb import load_problem
+    from spar_py.reach import above_table
+
+    cell = load_problem(Path(__file__).resolve().parent.parent / "kb/problems/peg_in_block.yaml")
+    down = trans(30, 0, 1.0) @ roty(np.pi)   # tool z pointing down: flange above
+    up = trans(30, 0, 1.0)                   # tool z pointing up: flange ~9.8 in under the top
+    assert above_table(cell, np.stack([down, up])).tolist() == [True, False]

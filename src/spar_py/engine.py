@@ -122,9 +122,4 @@ def arc_pairs(kind: str, objects: list[str], grasps: list[str], positions: list[
     """All grasp/position pairs satisfying ``kind`` (reachable | mate_reachable), Sec. 5.2.4."""
     from . import reach
 
-    cell = current_cell()
-    if kind == "reachable":
-        return reach.reachable_pairs(cell, objects[0], grasps, positions)
-    if kind == "mate_reachable":
-        return reach.mate_reachable_pairs(cell, objects[0], objects[1], grasps, positions, cell.transforms[ta])
-    raise SparError(f"unknown geometric constraint {kind}")
+    return reach.arc(current_cell(), kind, objects, grasps, positions, None if ta == "none" else ta)

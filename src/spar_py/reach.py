@@ -94,11 +94,24 @@ def resting_faces(cell: Cell, obj: str, label: str) -> tuple[Face, ...]:
     return tuple(faces)
 
 
+def above_table(cell: Cell, T: np.ndarray) -> np.ndarray:
+    """(n,) bool: for world tool poses T (n,4,4), the flange (wrist) origin lies above the table top.
+
+    The paper's condition 2 looks at joint limits only; a tool pose whose wrist
+    would be under the table top (z = 0), e.g. a grasp from below, is not reachable
+    either, so the CMS stays conservative (Sec. 7.1).
+    """
+    flange = T @ np.linalg.inv(cell.robot.tool)
+    return flange[:, 2, 3] > 0.0
+
+
 def _ik_pass(cell: Cell, poses: list[np.ndarray]) -> np.ndarray:
-    """(k,) bool: which world tool poses (each 4x4) the arm reaches within its limits, one batched call."""
+    """(k,) bool: which world tool poses (each 4x4) the arm reaches within its limits, wrist above
+    the table; one batched IK call."""
     if not poses:
         return np.zeros(0, dtype=bool)
-    return cell.robot.reachable_mask(np.stack(poses))
+    T = np.stack(poses)
+    return cell.robot.reachable_mask(T) & above_table(cell, T)
 
 
 def reachable_pairs(cell: Cell, obj: str, grasp_labels: Sequence[str],
