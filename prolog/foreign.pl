@@ -35,7 +35,7 @@ arc_pairs(Constraint, Objects, GLabels, PLabels, Pairs) :-
     must_be(list(atom), GLabels),
     must_be(list(atom), PLabels),
     arc_call(Constraint, Objects, GLabels, PLabels, Call),
-    py_call(spar_py.engine:Call, Raw),
+    py_call('spar_py.engine':Call, Raw),
     maplist(pair_term, Raw, Pairs).
 
 arc_call(reachable, Obj, Gs, Ps, arc_pairs(reachable, [Obj], Gs, Ps, none)) :-
@@ -55,7 +55,7 @@ pair_term([G, P], G/P).
 %   Call a function of spar_py.engine (phase 2: world state, UR constraints).
 
 py_bridge(Call, Result) :-
-    py_call(spar_py.engine:Call, Result).
+    py_call('spar_py.engine':Call, Result).
 
 %!  spar_load_facts(+Data:list) is det.
 %

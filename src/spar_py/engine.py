@@ -95,7 +95,7 @@ class Engine:
         """Replace the kb module's facts by ``cell``'s (kb.facts) and remember the cell for py_calls."""
         from .kb import facts
 
-        self.query_once("spar_load_facts(Facts)", {"Facts": facts(cell)})
+        self.query_once("foreign:spar_load_facts(Facts)", {"Facts": facts(cell)})
         self.cell = cell
 
 
