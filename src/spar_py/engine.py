@@ -123,3 +123,17 @@ def arc_pairs(kind: str, objects: list[str], grasps: list[str], positions: list[
     from . import reach
 
     return reach.arc(current_cell(), kind, objects, grasps, positions, None if ta == "none" else ta)
+
+
+def ur_world(steps: list[dict[str, Any]]) -> Any:
+    """Phase 2: the initial world of a plan instance whose steps are ``steps`` (phase2.py)."""
+    from . import phase2
+
+    return phase2.new_world(current_cell(), steps)
+
+
+def ur_step(world: Any, step: dict[str, Any]) -> tuple[list[dict[str, Any]], Any, dict[str, Any]]:
+    """Phase 2: (verdicts, world after, geometry) of one step (phase2.step)."""
+    from . import phase2
+
+    return phase2.step(world, step)

@@ -1,0 +1,247 @@
+"""Phase 2's world along a plan instance: geometry (placements, tool poses, joint angles)
+and uncertainty (uncertainty.py), one step at a time.
+
+prolog/uncertainty.pl drives the loop (which remedy, when); through the bridge it calls
+:func:`new_world` once per run of an instance and :func:`step` for each action, getting
+back the verdicts of the action's uncertainty-reduction preconditions and the world
+after it. A step is plain data from Prolog: ``{"id": "action_2", "name": "pickup",
+"args": ["peg", "p1G11"]}``; names: pickup, putdown, assemble, dense_range_scan, squeeze.
+
+Units: lengths in the cell unit, angles in radians inside, degrees in the dicts
+returned for display; world frame, table top z = 0.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from . import placement as pl
+from . import uncertainty as ur
+from .errors import SparValueError
+from .model import Cell, Grasp
+from .reach import above_table
+from .symbolic import Registry
+
+Step = dict[str, Any]
+
+
+@dataclass(frozen=True)
+class World:
+    """The world before a step: uncertainty state, what the hand holds and with which grasp,
+    the put-down placements chosen for this instance, the arm's last joint vector."""
+
+    cell: Cell
+    unc: ur.WorldState
+    placements: dict[str, pl.Placement | None]
+    grasps: dict[str, str] = field(default_factory=dict)  # object -> grasp label while held
+    joints: np.ndarray | None = None
+
+
+# ---------------------------------------------------------------------- set-up
+
+
+def new_world(cell: Cell, steps: list[Step]) -> World:
+    """The initial world for an instance whose steps (in order) are ``steps``; chooses
+    every put-down placement now, knowing the later actions on the object (Sec. 5.2.4)."""
+    return World(cell, ur.initial_world(cell, Registry()), choose_placements(cell, steps))
+
+
+def _grasp(cell: Cell, obj: str, label: str) -> Grasp:
+    try:
+        return cell.objects[obj].grasps[label]
+    except KeyError:
+        raise SparValueError(f"{label!r} is not a grasp of {obj!r}") from None
+
+
+def choose_placements(cell: Cell, steps: list[Step]) -> dict[str, pl.Placement | None]:
+    """For each putdown into a stable pose, the placement nearest the object's previous spot
+    at which the arm reaches the put-down grasp and every later grasp and mate on the object
+    until it is picked up again; None where no placement in the free regions works."""
+    where = {p.obj: p.T for p in cell.positions.values()}  # objects on the table
+    held: dict[str, str] = {}
+    out: dict[str, pl.Placement | None] = {}
+    for i, s in enumerate(steps):
+        name, args = s["name"], s["args"]
+        if name == "pickup":
+            held[args[0]] = args[1]
+            last = where.pop(args[0], None)
+            if last is not None:
+                where[f"_last_{args[0]}"] = last
+        elif name == "putdown":
+            obj, pos = args[0], args[1]
+            prev = where.pop(f"_last_{obj}", None)
+            if pos in cell.positions:
+                T = cell.positions[pos].T
+                out[s["id"]] = pl.Placement(obj, cell.positions[pos].label, *T[:3, 3], 0.0, T)
+            else:
+                reqs = [_grasp(cell, obj, held[obj]).T] + _later_requirements(cell, steps[i + 1:], obj, held)
+                occupied = [(T[:2, 3], cell.objects[o].bounding_radius())
+                            for o, T in where.items() if not o.startswith("_last_")]
+                near = prev[:2, 3] if prev is not None else None
+                out[s["id"]] = pl.choose(cell, obj, pos, reqs, occupied, near)
+            held.pop(obj, None)
+            if out[s["id"]] is not None:
+                where[obj] = out[s["id"]].T
+        elif name == "assemble":
+            held.pop(args[0], None)
+    return out
+
+
+def _later_requirements(cell: Cell, rest: list[Step], obj: str, held: dict[str, str]) -> list[np.ndarray]:
+    """The tool transforms relative to ``obj``'s frame that later steps need while it stays put."""
+    reqs: list[np.ndarray] = []
+    grasps = dict(held)
+    for s in rest:
+        name, args = s["name"], s["args"]
+        if name == "pickup":
+            grasps[args[0]] = args[1]
+            if args[0] == obj:
+                reqs.append(_grasp(cell, obj, args[1]).T)
+                break
+        elif name == "assemble" and args[1] == obj and args[0] in grasps:
+            reqs.append(cell.transforms[args[3]] @ _grasp(cell, args[0], grasps[args[0]]).T)
+    return reqs
+
+
+# ---------------------------------------------------------------------- one step
+
+
+def step(world: World, s: Step) -> tuple[list[dict[str, Any]], World, dict[str, Any]]:
+    """The verdicts of step ``s``'s preconditions in ``world``, the world after it, and its
+    geometry for display (tool pose, joint angles in degrees, placement)."""
+    handler = STEPS.get(s["name"])
+    if handler is None:
+        raise SparValueError(f"phase 2 cannot execute {s['name']!r}")
+    return handler(world, s)
+
+
+def _arm(world: World, T: np.ndarray) -> tuple[np.ndarray | None, dict[str, Any]]:
+    """The joint vector reaching tool pose T nearest the previous one, and display data."""
+    sols = world.cell.robot.ik(T)
+    ok = bool(len(sols)) and bool(above_table(world.cell, T[None])[0])
+    q = None
+    if ok:
+        ref = world.joints if world.joints is not None else np.zeros(6)
+        q = sols[int(np.argmin(np.abs(sols - ref).sum(axis=1)))]
+    geo = {"tool_pose": np.round(T, 9).tolist(),
+           "joints_deg": None if q is None else [round(float(v), 6) for v in np.degrees(q)]}
+    return q, geo
+
+
+def _reach_verdict(action: str, ok: bool, what: str) -> dict[str, Any]:
+    return {"action": action, "constraint": "reachable", "kind": "geometric", "sense": "",
+            "bound": None, "threshold": None, "satisfied": ok, "tolerance_reached": True,
+            "description": what}
+
+
+def _verdicts(world: World, cs: list[ur.Constraint]) -> list[dict[str, Any]]:
+    out = []
+    for v in ur.evaluate_all(cs, world.unc.registry):
+        d = v.as_dict()
+        d["kind"] = "uncertainty"
+        out.append(d)
+    return out
+
+
+def _pickup(world: World, s: Step) -> tuple[list[dict], World, dict]:
+    obj, label = s["args"][0], s["args"][1]
+    g = _grasp(world.cell, obj, label)
+    o = world.unc.obj(obj)
+    manip = world.unc.manipulator_error()
+    checks = _verdicts(world, ur.pickup_constraints(world.unc, obj, g.T, g.width, world.cell.finger_separation,
+                                                    manip, action=s["id"]))
+    q, geo = _arm(world, o.pose @ g.T)
+    if q is None:
+        checks.append(_reach_verdict(s["id"], False, f"no joint solution for pickup({obj}, {label})"))
+    w = replace(world, unc=ur.pickup(world.unc, obj, g.T, manip), grasps={**world.grasps, obj: label},
+                joints=q if q is not None else world.joints)
+    return checks, w, geo
+
+
+def _putdown(world: World, s: Step) -> tuple[list[dict], World, dict]:
+    obj = s["args"][0]
+    place = world.placements.get(s["id"])
+    if place is None:
+        checks = [_reach_verdict(s["id"], False, f"no placement in the free table regions where the arm "
+                                 f"reaches {obj} for this put-down and the actions after it")]
+        return checks, world, {"tool_pose": None, "joints_deg": None, "placement": None}
+    g = _grasp(world.cell, obj, world.grasps[obj])
+    q, geo = _arm(world, place.T @ g.T)
+    geo["placement"] = place.as_dict()
+    checks = [] if q is not None else [_reach_verdict(s["id"], False, f"no joint solution for putdown({obj})")]
+    grasps = {k: v for k, v in world.grasps.items() if k != obj}
+    w = replace(world, unc=ur.putdown(world.unc, obj, place.T), grasps=grasps,
+                joints=q if q is not None else world.joints)
+    return checks, w, geo
+
+
+def _assemble(world: World, s: Step) -> tuple[list[dict], World, dict]:
+    peg, hole, ta = s["args"][0], s["args"][1], s["args"][3]
+    cell = world.cell
+    Ta = cell.transforms[ta]
+    fp, fh = cell.objects[peg].feature, cell.objects[hole].feature
+    if fp is None or fh is None:
+        raise SparValueError(f"assemble({peg}, {hole}): both objects need a mating feature")
+    g = _grasp(cell, peg, world.grasps[peg])
+    checks = _verdicts(world, ur.assemble_constraints(world.unc, peg, hole, Ta, fp, fh, action=s["id"]))
+    q, geo = _arm(world, world.unc.obj(hole).pose @ Ta @ g.T)
+    if q is None:
+        checks.append(_reach_verdict(s["id"], False, f"no joint solution for assemble({peg}, {hole})"))
+    grasps = {k: v for k, v in world.grasps.items() if k != peg}
+    w = replace(world, unc=ur.assemble(world.unc, peg, hole, Ta), grasps=grasps,
+                joints=q if q is not None else world.joints)
+    return checks, w, geo
+
+
+def _scan(world: World, s: Step) -> tuple[list[dict], World, dict]:
+    obj = s["args"][0]
+    sensor = world.cell.sensors.get("dense_range_scan")
+    geo = {"tool_pose": None, "joints_deg": None}
+    if sensor is None:
+        return [_reach_verdict(s["id"], False, "the cell has no dense_range_scan sensor")], world, geo
+    return [], replace(world, unc=ur.dense_range_scan(world.unc, obj, sensor.leaves)), geo
+
+
+def _squeeze(world: World, s: Step) -> tuple[list[dict], World, dict]:
+    """Squeeze ``obj`` in place with the first of its grasps the arm reaches there whose pickup
+    preconditions hold (Sec. 4.3: the squeeze must meet the pickup's own preconditions)."""
+    obj = s["args"][0]
+    cell = world.cell
+    o = world.unc.obj(obj)
+    from .reach import reachable_pairs
+
+    labels = [g for g, _ in reachable_pairs(cell, obj, list(cell.objects[obj].grasps), _position_label(cell, obj, o))]
+    for label in labels:
+        g = _grasp(cell, obj, label)
+        manip = world.unc.manipulator_error()
+        checks = _verdicts(world, ur.pickup_constraints(world.unc, obj, g.T, g.width, cell.finger_separation,
+                                                        manip, action=s["id"]))
+        q, geo = _arm(world, o.pose @ g.T)
+        if q is not None and all(c["satisfied"] for c in checks):
+            geo["grasp"] = label
+            w = replace(world, unc=ur.squeeze(world.unc, obj, g.T, manip), joints=q)
+            return checks, w, geo
+    return ([_reach_verdict(s["id"], False, f"no grasp of {obj} both reachable and sure to succeed for a squeeze")],
+            world, {"tool_pose": None, "joints_deg": None})
+
+
+def _position_label(cell: Cell, obj: str, o: ur.ObjectState) -> list[str]:
+    """The label of ``obj``'s current table pose for the reach check: its initial absolute
+    position if it is still there, else the stable pose its rotation is in."""
+    for p in cell.positions.values():
+        if p.obj == obj and np.allclose(p.T, o.pose, atol=1e-9):
+            return [p.label]
+    from .geometry import same_stable_pose
+
+    return [lbl for lbl, sp in cell.objects[obj].poses.items() if same_stable_pose(o.pose[:3, :3], sp.R)][:1]
+
+
+STEPS = {
+    "pickup": _pickup,
+    "putdown": _putdown,
+    "assemble": _assemble,
+    "dense_range_scan": _scan,
+    "squeeze": _squeeze,
+}
