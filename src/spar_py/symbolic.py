@@ -1,0 +1,306 @@
+"""Symbolic homogeneous transforms (CasADi SX) and the registry of bounded uncertainty variables.
+
+The paper represents every uncertain quantity as an expression in *uncertainty
+variables*, each a bounded real (Sec. 3.2.1), whose bounds are recorded once, as
+``supinf_variable(V)`` and ``supinf_less(Lo, V)``, ``supinf_less(V, Hi)`` facts, when the
+variable is made (Fig. 11, Sec. 5.3). Bounds never change: reducing uncertainty means
+re-expressing a quantity in *new* variables with tighter bounds. :class:`Registry` is
+that global store, one per planning run.
+
+The transform helpers follow the spatialmath idea of one code path for numbers and
+symbols: :func:`trans`, :func:`rotz`, :func:`compose`, :func:`inv` and :func:`apply`
+return numpy arrays when every argument is a plain number or array, and CasADi ``SX``
+matrices as soon as one argument is symbolic. Conventions are DESIGN.md's: 4x4
+homogeneous matrices, column vectors, ``T_world_obj``; lengths in the caller's unit
+(the paper's cell: inches), angles in radians.
+"""
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Iterable, Iterator, Mapping
+from typing import Union
+
+import casadi as ca
+import numpy as np
+from numpy.typing import ArrayLike
+
+from .errors import SparValueError
+
+__all__ = [
+    "Matrix",
+    "Registry",
+    "Scalar",
+    "apply",
+    "as_sx",
+    "compose",
+    "cse",
+    "free_names",
+    "inv",
+    "is_symbolic",
+    "n_nodes",
+    "rot",
+    "rotz",
+    "snap",
+    "to_function",
+    "trans",
+    "transl",
+]
+
+Scalar = Union[float, ca.SX]
+Matrix = Union[np.ndarray, ca.SX]
+
+_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
+SNAP_TOL = 1e-12
+
+
+# ------------------------------------------------------------------ numbers or symbols
+
+
+def is_symbolic(*xs: object) -> bool:
+    """True if any argument is a CasADi SX/MX/DM value (then the helpers build SX)."""
+    return any(isinstance(x, (ca.SX, ca.MX, ca.DM)) for x in xs)
+
+
+def as_sx(M: Matrix | ArrayLike) -> ca.SX:
+    """``M`` as a CasADi SX matrix (numbers become constant entries)."""
+    if isinstance(M, ca.SX):
+        return M
+    if isinstance(M, ca.DM):
+        return ca.SX(M)
+    if isinstance(M, ca.MX):
+        raise SparValueError("as_sx: MX expressions are not supported (build with SX)")
+    return ca.SX(ca.DM(np.asarray(M, float)))
+
+
+def _cos(a: Scalar) -> Scalar:
+    return ca.cos(a) if is_symbolic(a) else math.cos(float(a))
+
+
+def _sin(a: Scalar) -> Scalar:
+    return ca.sin(a) if is_symbolic(a) else math.sin(float(a))
+
+
+def _rows(rows: list[list[Scalar]]) -> Matrix:
+    """A matrix from a list of rows: SX if any entry is symbolic, else a float numpy array."""
+    if any(is_symbolic(v) for row in rows for v in row):
+        return ca.vertcat(*[ca.horzcat(*row) for row in rows])
+    return np.array(rows, dtype=float)
+
+
+# ------------------------------------------------------------------ transforms
+
+
+def trans(x: Scalar, y: Scalar, z: Scalar) -> Matrix:
+    """Pure translation by (x, y, z) (caller's length unit): the paper's ``trans(X, Y, Z)``."""
+    return _rows([[1.0, 0.0, 0.0, x], [0.0, 1.0, 0.0, y], [0.0, 0.0, 1.0, z], [0.0, 0.0, 0.0, 1.0]])
+
+
+def rotz(theta: Scalar) -> Matrix:
+    """Rotation by ``theta`` (rad, right hand) about z, as a 4x4 transform."""
+    c, s = _cos(theta), _sin(theta)
+    return _rows([[c, -s, 0.0, 0.0], [s, c, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
+
+
+def compose(*Ts: Matrix | ArrayLike) -> Matrix:
+    """The product ``Ts[0] @ Ts[1] @ ...`` (frames chained left to right); identity if none.
+
+    Numeric factors next to each other are multiplied in numpy first, so a symbolic
+    chain only grows where a symbolic factor enters.
+    """
+    acc: list[Matrix] = []
+    for T in Ts:
+        if is_symbolic(T):
+            acc.append(as_sx(T))
+        elif acc and not is_symbolic(acc[-1]):
+            acc[-1] = acc[-1] @ np.asarray(T, float)
+        else:
+            acc.append(np.asarray(T, float))
+    if not acc:
+        return np.eye(4)
+    out = acc[0]
+    for T in acc[1:]:
+        out = ca.mtimes(as_sx(out), as_sx(T))
+    return out
+
+
+def rot(T: Matrix) -> Matrix:
+    """The rotation block (3x3) of a transform, numeric or symbolic."""
+    return T[:3, :3]
+
+
+def transl(T: Matrix) -> Matrix:
+    """The translation column of a transform: (3,) numpy or 3x1 SX."""
+    return T[:3, 3]
+
+
+def inv(T: Matrix) -> Matrix:
+    """Closed-form inverse of a rigid transform, ``[R.T, -R.T t]`` (no general matrix inverse)."""
+    if is_symbolic(T):
+        T = as_sx(T)
+        Rt = T[:3, :3].T
+        t = -ca.mtimes(Rt, T[:3, 3])
+        return ca.vertcat(ca.horzcat(Rt, t), ca.horzcat(ca.SX.zeros(1, 3), ca.SX(1.0)))
+    T = np.asarray(T, float)
+    out = np.eye(4)
+    Rt = T[:3, :3].T
+    out[:3, :3] = Rt
+    out[:3, 3] = -Rt @ T[:3, 3]
+    return out
+
+
+def apply(T: Matrix, p: Iterable[Scalar] | Matrix) -> Matrix:
+    """The point ``p`` (3 coordinates in T's source frame) mapped by ``T``: ``(T @ [p, 1])[:3]``.
+
+    Returns a (3,) numpy array, or a 3x1 SX column when anything is symbolic.
+    """
+    if is_symbolic(p):
+        ph: Matrix = ca.vertcat(as_sx(p)[:3], ca.SX(1.0))
+    else:
+        pl = list(np.asarray(p, dtype=object).reshape(-1))
+        if len(pl) != 3:
+            raise SparValueError(f"apply: a point has 3 coordinates, got {len(pl)}")
+        ph = ca.vertcat(*pl, 1.0) if is_symbolic(*pl) else np.array([*pl, 1.0], dtype=float)
+    if is_symbolic(T, ph):
+        return ca.mtimes(as_sx(T), as_sx(ph))[:3]
+    return (np.asarray(T, float) @ ph)[:3]
+
+
+# ------------------------------------------------------------------ simplification
+
+
+def snap(T: ArrayLike, tol: float = SNAP_TOL) -> np.ndarray:
+    """A numeric matrix with entries within ``tol`` of 0, +1 or -1 set exactly to them.
+
+    Rotation matrices built from degrees carry noise such as cos(90 deg) = 6e-17; left
+    in, every such entry multiplies an uncertainty variable into a useless term. Snapping
+    the *data* (the ideal poses, grasps) before it enters a symbolic product lets CasADi
+    drop those terms structurally (0 * x is folded at construction). It moves the modelled
+    pose by less than ``tol`` per entry; it is never applied to symbolic expressions.
+    """
+    A = np.array(T, dtype=float)
+    for v in (0.0, 1.0, -1.0):
+        A[np.abs(A - v) <= tol] = v
+    return A
+
+
+def cse(expr: ca.SX) -> ca.SX:
+    """Common-subexpression elimination (CasADi's ``cse``): equal subtrees become one node."""
+    return ca.cse(expr)
+
+
+def n_nodes(expr: ca.SX) -> int:
+    """Number of nodes of an SX expression graph (a size measure for reports)."""
+    return int(ca.n_nodes(expr))
+
+
+def free_names(expr: ca.SX) -> list[str]:
+    """Names of the free symbols of ``expr``, in CasADi's order (first appearance)."""
+    return [v.name() for v in ca.symvar(as_sx(expr))]
+
+
+def to_function(expr: ca.SX, names: list[str], registry: Registry, label: str = "f") -> ca.Function:
+    """A CasADi Function of one input vector (the variables ``names``, in that order) giving ``expr``.
+
+    Called with a (len(names), N) array it evaluates N points at once (CasADi's
+    automatic mapping); raises SparValueError if ``expr`` uses a symbol not in ``names``.
+    """
+    syms = [registry.symbol(n) for n in names]
+    missing = set(free_names(expr)) - set(names)
+    if missing:
+        raise SparValueError(f"to_function: expression uses symbols not listed: {sorted(missing)}")
+    return ca.Function(label, [ca.vertcat(*syms) if syms else ca.SX(0, 1)], [as_sx(expr)])
+
+
+# ------------------------------------------------------------------ the registry
+
+
+class Registry:
+    """The bounded uncertainty variables of one planning run (Fig. 11's supinf facts).
+
+    ``new(hint, lo, hi)`` makes a fresh SX symbol whose bounds are fixed for good; the
+    first variable with a hint takes the hint as its name (``dx_peg``, ``thetagr``), later
+    ones get ``_1``, ``_2``, ... (``dx_peg_1``). Bounds are in the unit the caller uses
+    (lengths in the cell unit, angles in radians).
+    """
+
+    def __init__(self) -> None:
+        self._syms: dict[str, ca.SX] = {}
+        self._bounds: dict[str, tuple[float, float]] = {}
+        self._count: dict[str, int] = {}
+
+    def new(self, name_hint: str, lo: float, hi: float) -> ca.SX:
+        """A fresh variable bounded by ``lo <= v <= hi`` (finite, lo <= hi); SparValueError otherwise."""
+        if not isinstance(name_hint, str) or not _NAME.match(name_hint):
+            raise SparValueError(f"uncertainty variable name {name_hint!r}: must be an identifier "
+                                 "([A-Za-z_][A-Za-z0-9_]*)")
+        try:
+            lo_f, hi_f = float(lo), float(hi)
+        except (TypeError, ValueError):
+            raise SparValueError(f"uncertainty variable {name_hint}: bounds must be numbers, "
+                                 f"got {lo!r}, {hi!r}") from None
+        if not (math.isfinite(lo_f) and math.isfinite(hi_f)):
+            raise SparValueError(f"uncertainty variable {name_hint}: bounds must be finite, "
+                                 f"got [{lo_f}, {hi_f}]")
+        if lo_f > hi_f:
+            raise SparValueError(f"uncertainty variable {name_hint}: lower bound {lo_f} > upper bound {hi_f}")
+        name = name_hint
+        k = self._count.get(name_hint, 0)
+        while name in self._syms:
+            k += 1
+            name = f"{name_hint}_{k}"
+        self._count[name_hint] = k
+        sym = ca.SX.sym(name)
+        self._syms[name] = sym
+        self._bounds[name] = (lo_f, hi_f)
+        return sym
+
+    def symbol(self, name: str) -> ca.SX:
+        """The symbol called ``name`` (SparValueError if none)."""
+        try:
+            return self._syms[name]
+        except KeyError:
+            raise SparValueError(f"no uncertainty variable named {name!r}") from None
+
+    def bounds(self, name: str) -> tuple[float, float]:
+        """The fixed bounds (lo, hi) of the variable ``name`` (SparValueError if none)."""
+        try:
+            return self._bounds[name]
+        except KeyError:
+            raise SparValueError(f"no uncertainty variable named {name!r}") from None
+
+    def box(self, expr: ca.SX | Matrix) -> dict[str, tuple[float, float]]:
+        """``{name: (lo, hi)}`` for the free symbols of ``expr`` (SparValueError for unknown ones)."""
+        if not is_symbolic(expr):
+            return {}
+        out: dict[str, tuple[float, float]] = {}
+        for v in ca.symvar(as_sx(expr)):
+            name = v.name()
+            known = self._syms.get(name)
+            if known is None or not ca.is_equal(known, v):
+                raise SparValueError(f"expression uses {name!r}, which is not a variable of this registry")
+            out[name] = self._bounds[name]
+        return out
+
+    def facts(self) -> list[tuple]:
+        """The registry as the paper's facts: ``('supinf_variable', V)``, ``('supinf_less', A, B)``."""
+        out: list[tuple] = []
+        for name, (lo, hi) in self._bounds.items():
+            out += [("supinf_variable", name), ("supinf_less", lo, name), ("supinf_less", name, hi)]
+        return out
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._syms
+
+    def __len__(self) -> int:
+        return len(self._syms)
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._syms)
+
+    def items(self) -> Mapping[str, tuple[float, float]]:
+        """A read-only view ``{name: (lo, hi)}`` of every variable made so far."""
+        return dict(self._bounds)
+
+    def __repr__(self) -> str:
+        return f"Registry({len(self)} variables)"
