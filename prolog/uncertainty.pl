@@ -20,7 +20,9 @@
 :- module(uncertainty,
           [ phase2/3,              % +Partial, +Options, -Result
             check_instance/2,      % +Steps, -Augmented
-            instance_steps/3       % +Instance, -Steps, -Bindings
+            instance_steps/3,      % +Instance, -Steps, -Bindings
+            ur_dict/2,             % +Result, -Dict
+            print_ur/1             % +Result
           ]).
 :- use_module(library(apply)).
 :- use_module(library(lists)).
@@ -140,15 +142,21 @@ run([Step|Rest], GivenUp, W0, Prefix, Vs0, Gs0, Result) :-
     ->  Vs1 = Vs0
     ;   Vs1 = [verdict(Id, Action, Checks)|Vs0]
     ),
-    (   member(C, Checks), get_dict(kind, C, geometric), get_dict(satisfied, C, false)
+    (   member(C, Checks), get_dict(kind, C, "geometric"), \+ satisfied(C)
     ->  Result = infeasible(Step)
     ;   \+ all_satisfied(Checks), \+ memberchk(Id, GivenUp)
     ->  reverse(Prefix, Before), Result = failed(Step, Before)
-    ;   run(Rest, GivenUp, W1, [Step|Prefix], Vs1, [Id-Geo|Gs0], Result)
+    ;   step_id_text(Id, IdText),
+        run(Rest, GivenUp, W1, [Step|Prefix], Vs1, [IdText-Geo|Gs0], Result)
     ).
 
 all_satisfied(Checks) :-
-    forall(member(C, Checks), get_dict(satisfied, C, true)).
+    forall(member(C, Checks), satisfied(C)).
+
+%   janus passes Python's True as @(true).
+satisfied(C) :-
+    get_dict(satisfied, C, S),
+    S == @(true).
 
 %   remedy(+Failing, +Before, +Steps, +GivenUp, -Steps1): the first remedy
 %   of Sec. 4.3 that makes Failing's preconditions hold.
@@ -231,4 +239,111 @@ recovery(step(Id, Action), R) :-
     (   spar_sensing:recovery_template(Action, R0)
     ->  R0 = recovery(Id, _), R = R0
     ;   existence_error(recovery_template, Action)
+    ).
+
+%!  ur_dict(+Result, -Dict) is det.
+%
+%   The phase-2 Result (phase2/3) as a dict for janus, the "instance" of the
+%   JSON schema (docs/json-schema.md): bindings, steps (each with its kind,
+%   the action it serves, tool pose, joint angles, placement), constraints
+%   (one per checked uncertainty-reduction inequality: action, constraint,
+%   bound, threshold, satisfied), verifications, recoveries, error_count,
+%   instances_examined, instance_cap, complete. For no_instance/3 the dict
+%   has steps = [] and error_count = null.
+
+ur_dict(ur(aug(Steps, E, Vs, Rs, Verdicts, Geo, Bindings), N, Cap, Complete), D) :-
+    !,
+    maplist(binding_pair, Bindings, BPairs),
+    dict_pairs(BDict, _, BPairs),
+    maplist(step_out(Geo), Steps, SDicts),
+    foldl(verdict_dicts, Verdicts, [], Cs0),
+    reverse(Cs0, Cs),
+    maplist(term_dict, Vs, VDicts),
+    maplist(term_dict, Rs, RDicts),
+    json_bool(Complete, C),
+    D = _{bindings: BDict, steps: SDicts, constraints: Cs, verifications: VDicts,
+          recoveries: RDicts, error_count: E, instances_examined: N,
+          instance_cap: Cap, complete: C}.
+ur_dict(no_instance(N, Cap, Complete), D) :-
+    json_bool(Complete, C),
+    D = _{bindings: _{}, steps: [], constraints: [], verifications: [], recoveries: [],
+          error_count: @(none), instances_examined: N, instance_cap: Cap, complete: C,
+          reason: "no instance could be executed: a put-down without a reachable placement or a step without a joint solution"}.
+
+json_bool(true, @(true)) :- !.
+json_bool(_, @(false)).
+
+binding_pair(V = L, V-L).
+
+step_out(Geo, step(Id, Action), D) :-
+    step_id_text(Id, IdText),
+    step_kind(Id, Action, Kind, Serves),
+    format(string(Term), "~q", [Action]),
+    Action =.. [Name, Obj|_],
+    (   memberchk(IdText-G, Geo) -> true ; G = _{} ),
+    geo_value(G, tool_pose, TP),
+    geo_value(G, joints_deg, Q),
+    geo_value(G, placement, Pl),
+    D = _{id: IdText, kind: Kind, serves: Serves, term: Term, name: Name, object: Obj,
+          tool_pose: TP, joints_deg: Q, placement: Pl}.
+
+step_kind(sense(A, _), _, sensing, A) :- !.
+step_kind(squeeze(A), _, squeeze, A) :- !.
+step_kind(Id, _, manipulation, Id).
+
+geo_value(G, K, V) :-
+    (   get_dict(K, G, V0), V0 \== 'None' -> V = V0 ; V = @(none) ).
+
+verdict_dicts(verdict(_, _, Checks), Acc0, Acc) :-
+    foldl([C, A0, [C|A0]]>>true, Checks, Acc0, Acc).
+
+term_dict(T, _{action: Id, term: S}) :-
+    arg(1, T, Id),
+    format(string(S), "~q", [T]).
+
+%!  print_ur(+Result) is det.
+%
+%   Print the chosen plan instance: its steps in order (inserted sensing and
+%   squeezes marked), the verdict of every uncertainty-reduction constraint
+%   (bound against threshold), verifications, recoveries, the error count.
+
+print_ur(no_instance(N, Cap, _)) :-
+    !,
+    format("PHASE 2: no executable plan instance among ~w examined (cap ~w)~n", [N, Cap]).
+print_ur(ur(aug(Steps, E, Vs, Rs, Verdicts, Geo, Bindings), N, Cap, Complete)) :-
+    (   Complete == true -> All = ", all instances" ; All = "" ),
+    format("PLAN INSTANCE (~w examined, cap ~w~s), error count ~w~n", [N, Cap, All, E]),
+    format("  bindings: ~q~n", [Bindings]),
+    forall(nth1(I, Steps, step(Id, A)), print_step(Geo, I, Id, A)),
+    format("UNCERTAINTY-REDUCTION CONSTRAINTS~n"),
+    forall(member(verdict(Id, _, Cs), Verdicts),
+           forall(member(C, Cs), print_verdict(Id, C))),
+    (   Vs == [] -> true
+    ;   format("VERIFICATIONS~n"), forall(member(V, Vs), format("  ~q~n", [V]))
+    ),
+    (   Rs == [] -> true
+    ;   format("RECOVERIES~n"), forall(member(R, Rs), format("  ~q~n", [R]))
+    ).
+
+print_step(Geo, I, Id, A) :-
+    step_id_text(Id, T),
+    step_kind(Id, A, Kind, _),
+    (   Kind == manipulation -> Mark = "" ; format(string(Mark), "  [~w]", [Kind]) ),
+    format("  ~w. ~w: ~q~s~n", [I, T, A, Mark]),
+    (   memberchk(T-G, Geo), get_dict(joints_deg, G, Q), is_list(Q)
+    ->  format("       joints (deg): ~w~n", [Q])
+    ;   true
+    ),
+    (   memberchk(T-G2, Geo), get_dict(placement, G2, P), is_dict(P)
+    ->  format("       placement: x=~w y=~w z=~w yaw=~w deg (~w)~n",
+               [P.x, P.y, P.z, P.yaw_deg, P.pose])
+    ;   true
+    ).
+
+print_verdict(Id, C) :-
+    (   satisfied(C) -> V = "satisfied" ; V = "NOT satisfied" ),
+    (   get_dict(kind, C, "geometric")
+    ->  format("  ~w ~w: ~w (~w)~n", [Id, C.constraint, V, C.description])
+    ;   format("  ~w ~w: bound ~4f ~w ~w: ~w~n",
+               [Id, C.constraint, C.bound, C.sense, C.threshold, V])
     ).
