@@ -19,7 +19,6 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Iterable, Iterator, Mapping
-from typing import Union
 
 import casadi as ca
 import numpy as np
@@ -47,8 +46,8 @@ __all__ = [
     "transl",
 ]
 
-Scalar = Union[float, ca.SX]
-Matrix = Union[np.ndarray, ca.SX]
+Scalar = float | ca.SX
+Matrix = np.ndarray | ca.SX
 
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 SNAP_TOL = 1e-12

@@ -1,0 +1,413 @@
+"""supinf.py: SUP/INF (Sec. 5.3) — interval operations, soundness on random HTM products, tightness.
+
+Soundness: ``lo <= f(x) <= hi`` at every sampled point x of the box, for random
+expressions built like the planner's (products of homogeneous transforms with bounded
+translations and rotations about z, plan lengths 1..8). Tightness: the bounds are within
+1% of the range width of the true extremum, found by dense sampling plus local
+optimisation (CasADi's bundled IPOPT) started from many points.
+"""
+from __future__ import annotations
+
+import math
+from fractions import Fraction
+
+import casadi as ca
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from spar_py import geometry
+from spar_py.errors import SparValueError
+from spar_py.supinf import (
+    AffineProgram,
+    Bounder,
+    BoundResult,
+    IntervalProgram,
+    bounds,
+    inf,
+    interval,
+    iv_add,
+    iv_atan2,
+    iv_cos,
+    iv_div,
+    iv_exp,
+    iv_fabs,
+    iv_log,
+    iv_mul,
+    iv_neg,
+    iv_pow_const,
+    iv_scale,
+    iv_sin,
+    iv_sq,
+    iv_sqrt,
+    iv_sub,
+    iv_tan,
+    sup,
+)
+from spar_py.symbolic import Registry, apply, compose, inv, rotz, trans
+
+# ------------------------------------------------------------------ helpers
+
+
+def iv(lo: float, hi: float) -> np.ndarray:
+    """A batch of one interval."""
+    return np.array([[lo], [hi]], float)
+
+
+def ends(r: np.ndarray) -> tuple[float, float]:
+    return float(r[0, 0]), float(r[1, 0])
+
+
+def contains(r: np.ndarray, x: float | Fraction) -> bool:
+    """lo <= x <= hi, exactly (x may be a rational; infinite ends hold everything beyond)."""
+    lo, hi = ends(r)
+    X = Fraction(x)
+    return (lo == -math.inf or Fraction(lo) <= X) and (hi == math.inf or X <= Fraction(hi))
+
+
+finite = st.floats(-1e6, 1e6, allow_nan=False, allow_infinity=False)
+
+
+def rand_rigid(rng: np.random.Generator, scale: float) -> np.ndarray:
+    a = rng.uniform(-np.pi, np.pi, 3)
+    T = geometry.rotz(a[0]) @ geometry.roty(a[1]) @ geometry.rotx(a[2])
+    T[:3, 3] = rng.uniform(-scale, scale, 3)
+    return T
+
+
+def rand_bounds(rng: np.random.Generator, half_width: float) -> tuple[float, float]:
+    """Bounds around 0 (as uncertainty is), sometimes off-centre or not containing 0."""
+    if rng.random() < 0.2:
+        a, b = sorted(rng.uniform(-half_width, half_width, 2))
+        return float(a), float(b)
+    return float(rng.uniform(-half_width, 0)), float(rng.uniform(0, half_width))
+
+
+def random_chain(rng: np.random.Generator, n_actions: int, reg: Registry, big_angles: float = 0.15) -> ca.SX:
+    """A scalar from a product of homogeneous transforms, as a plan of n_actions would build it.
+
+    Each action contributes an error transform trans(dx, dy, dz) rotz(theta) with fresh
+    bounded variables (lengths up to +-0.2, angles up to +-0.2 rad, or with probability
+    ``big_angles`` up to +-3 rad), sometimes inverted, between random rigid transforms.
+    The scalar is a translation component, a coordinate of T^-1 p (a pickup-like
+    inequality) or a squared distance (an assemble-like one).
+    """
+    T = rand_rigid(rng, 30.0)
+    for _ in range(n_actions):
+        w = 10 ** rng.uniform(-3, -0.7)
+        th = 3.0 if rng.random() < big_angles else w
+        E = compose(trans(reg.new("dx", *rand_bounds(rng, w)), reg.new("dy", *rand_bounds(rng, w)),
+                          reg.new("dz", *rand_bounds(rng, w))), rotz(reg.new("th", *rand_bounds(rng, th))))
+        if rng.random() < 0.3:
+            E = inv(E)
+        N = rand_rigid(rng, 5.0)
+        T = compose(T, E, N) if rng.random() < 0.7 else compose(E, T, N)
+    kind = int(rng.integers(3))
+    p = rng.uniform(-3, 3, 3)
+    if kind == 0:
+        return T[int(rng.integers(3)), 3]
+    if kind == 1:
+        return apply(inv(T), p)[int(rng.integers(3))]
+    return ca.sumsqr(apply(T, p) - rng.uniform(-30, 30, 3))
+
+
+def box_arrays(B: Bounder, box: dict) -> tuple[np.ndarray, np.ndarray]:
+    return (np.array([box[n][0] for n in B.names]), np.array([box[n][1] for n in B.names]))
+
+
+def check_sound(e: ca.SX, box: dict, rng: np.random.Generator, n_points: int, **opts: object) -> BoundResult:
+    """Bound e over box and check lo <= f <= hi at random points, corners and the found optima."""
+    B = Bounder(e)
+    r = B.bounds(box, **opts)
+    lo, hi = box_arrays(B, box)
+    P = np.vstack([rng.uniform(lo, hi, (n_points, lo.size)), lo, hi,
+                   np.where(rng.random((64, lo.size)) < 0.5, lo, hi)])
+    v = B.values(P)
+    v = v[np.isfinite(v)]
+    slack = 1e-12 * (1.0 + np.abs(v).max())  # CasADi's float evaluation rounds to nearest
+    assert r.lo <= v.min() + slack, (r, v.min())
+    assert v.max() - slack <= r.hi, (r, v.max())
+    assert r.lo <= r.lo_found and r.hi_found <= r.hi
+    return r
+
+
+def true_extrema(e: ca.SX, box: dict, rng: np.random.Generator, starts: list[np.ndarray]) -> tuple[float, float]:
+    """Best min and max of e over box by dense sampling then IPOPT from the best points and ``starts``."""
+    B = Bounder(e)
+    lo, hi = box_arrays(B, box)
+    P = np.vstack([rng.uniform(lo, hi, (20000, lo.size)), np.where(rng.random((2000, lo.size)) < 0.5, lo, hi)])
+    v = B.values(P)
+    x = ca.vertcat(*ca.symvar(e))
+    best = [float(v.min()), float(v.max())]
+    opts = {"ipopt.print_level": 0, "print_time": 0, "ipopt.sb": "yes", "ipopt.max_iter": 200}
+    for k, sign in ((0, 1.0), (1, -1.0)):
+        solver = ca.nlpsol("s", "ipopt", {"x": x, "f": sign * e}, opts)
+        seeds = [P[np.argmin(sign * v)], 0.5 * (lo + hi), *starts]
+        for x0 in seeds:
+            sol = solver(x0=x0, lbx=lo, ubx=hi)
+            xs = np.clip(np.asarray(sol["x"]).ravel(), lo, hi)
+            fx = float(B.values(xs[None, :])[0])
+            best[k] = min(best[k], fx) if k == 0 else max(best[k], fx)
+    return best[0], best[1]
+
+
+# ------------------------------------------------------------------ interval operations
+
+
+@given(finite, finite, finite, finite)
+def test_add_sub_mul_contain_exact_results(a: float, b: float, c: float, d: float) -> None:
+    A, Bv = iv(*sorted((a, b))), iv(*sorted((c, d)))
+    for x in {a, b}:
+        for y in {c, d}:
+            X, Y = Fraction(x), Fraction(y)
+            assert contains(iv_add(A, Bv), X + Y)
+            assert contains(iv_sub(A, Bv), X - Y)
+            assert contains(iv_mul(A, Bv), X * Y)
+            assert contains(iv_scale(A, y), X * Y)
+            if y != 0 and not (min(c, d) <= 0 <= max(c, d)):
+                assert contains(iv_div(A, Bv), X / Y)
+
+
+def test_outward_rounding_is_strict() -> None:
+    r = iv_add(iv(0.1, 0.1), iv(0.2, 0.2))
+    lo, hi = ends(r)
+    assert lo < 0.1 + 0.2 < hi  # the float sum is one of many reals the interval must cover
+    assert hi - lo <= 4 * math.ulp(0.3)
+    lo, hi = ends(iv_mul(iv(1 / 3, 1 / 3), iv(3.0, 3.0)))
+    assert lo < 1.0 <= hi or lo <= 1.0 < hi
+    assert ends(iv_neg(iv(1.0, 2.0))) == (-2.0, -1.0)
+
+
+@given(st.floats(0, 1e6), st.floats(0, 1e6))
+def test_sqrt_and_sq_contain_exact_results(a: float, b: float) -> None:
+    lo, hi = sorted((a, b))
+    r = iv_sqrt(iv(lo, hi))
+    assert Fraction(ends(r)[0]) ** 2 <= Fraction(lo) and Fraction(hi) <= Fraction(ends(r)[1]) ** 2
+    s = iv_sq(iv(-lo, hi))
+    assert ends(s)[0] == 0.0 and Fraction(ends(s)[1]) >= Fraction(max(lo, hi)) ** 2
+
+
+def test_division_by_an_interval_holding_zero_is_unbounded() -> None:
+    assert ends(iv_div(iv(1, 2), iv(-1, 1))) == (-math.inf, math.inf)
+    assert ends(iv_div(iv(1, 2), iv(0, 1))) == (-math.inf, math.inf)
+    lo, hi = ends(iv_div(iv(1, 2), iv(4, 8)))
+    assert lo <= 0.125 and hi >= 0.5
+
+
+@pytest.mark.parametrize("lo, hi, want_lo, want_hi", [
+    (-0.1, 0.1, None, 1.0),                     # max of cos at 0 inside
+    (3.0, 3.3, -1.0, None),                     # min at pi inside
+    (-7.0, 0.0, -1.0, 1.0),                     # a whole period
+    (0.1, 0.2, math.cos(0.2), math.cos(0.1)),   # monotone piece
+    (2 * math.pi - 1e-3, 2 * math.pi + 1e-3, None, 1.0),
+])
+def test_cos_exact_over_intervals(lo: float, hi: float, want_lo: float | None, want_hi: float | None) -> None:
+    r = iv_cos(iv(lo, hi))
+    xs = np.linspace(lo, hi, 2001)
+    assert ends(r)[0] <= np.cos(xs).min() and np.cos(xs).max() <= ends(r)[1]
+    if want_lo is not None:
+        assert ends(r)[0] == pytest.approx(want_lo, abs=1e-13)
+    if want_hi is not None:
+        assert ends(r)[1] == pytest.approx(want_hi, abs=1e-13)
+
+
+def test_sin_exact_over_intervals() -> None:
+    assert ends(iv_sin(iv(1.0, 2.0)))[1] == 1.0
+    assert ends(iv_sin(iv(-2.0, -1.0)))[0] == -1.0
+    lo, hi = ends(iv_sin(iv(-0.1, 0.1)))
+    assert lo == pytest.approx(math.sin(-0.1), abs=1e-14) and hi == pytest.approx(math.sin(0.1), abs=1e-14)
+    assert lo <= math.sin(-0.1) and math.sin(0.1) <= hi
+    lo, hi = ends(iv_sin(iv(1e-3, 1e-3)))  # a point: tight but outward
+    assert lo <= math.sin(1e-3) <= hi and hi - lo < 1e-17
+
+
+@given(st.floats(-50, 50), st.floats(0, 7))
+def test_trig_contain_samples(a: float, w: float) -> None:
+    xs = np.linspace(a, a + w, 257)
+    for f, F in ((np.sin, iv_sin), (np.cos, iv_cos)):
+        r = F(iv(a, a + w))
+        v = f(xs)
+        assert ends(r)[0] <= v.min() and v.max() <= ends(r)[1]
+        assert -1.0 <= ends(r)[0] and ends(r)[1] <= 1.0
+
+
+def test_tan_poles_and_pieces() -> None:
+    assert ends(iv_tan(iv(1.5, 1.6))) == (-math.inf, math.inf)
+    assert ends(iv_tan(iv(-1.0, 5.0))) == (-math.inf, math.inf)
+    lo, hi = ends(iv_tan(iv(-1.0, 1.0)))
+    assert lo <= math.tan(-1.0) and math.tan(1.0) <= hi and hi - math.tan(1.0) < 1e-13
+
+
+def test_atan2_corners_and_branch_cut() -> None:
+    lo, hi = ends(iv_atan2(iv(1.0, 2.0), iv(1.0, 2.0)))
+    assert lo <= math.atan2(1, 2) and math.atan2(2, 1) <= hi and hi - math.atan2(2, 1) < 1e-13
+    lo, hi = ends(iv_atan2(iv(-1.0, 1.0), iv(-2.0, -1.0)))  # crosses the cut
+    assert lo <= -math.pi and math.pi <= hi
+    lo, hi = ends(iv_atan2(iv(0.0, 1.0), iv(-2.0, -1.0)))  # touches it (atan2(+0, x<0) = pi)
+    assert hi >= math.pi
+
+
+def test_pow_fabs_exp_log() -> None:
+    assert ends(iv_pow_const(iv(-2, 1), 2))[0] == 0.0
+    lo, hi = ends(iv_pow_const(iv(-2, 1), 3))
+    assert lo <= -8 and 1 <= hi
+    lo, hi = ends(iv_pow_const(iv(1, 4), 0.5))
+    assert lo <= 1 and 2 <= hi
+    assert ends(iv_pow_const(iv(-1, 1), -1)) == (-math.inf, math.inf)
+    assert ends(iv_fabs(iv(-3, 2))) == (0.0, 3.0)
+    assert ends(iv_fabs(iv(-3, -2))) == (2.0, 3.0)
+    lo, hi = ends(iv_exp(iv(0, 1)))
+    assert lo <= 1 and math.e <= hi
+    lo, hi = ends(iv_log(iv(1, math.e)))
+    assert lo <= 0 and 1 <= hi
+    assert np.isnan(iv_log(iv(-2, -1))).all()
+
+
+def test_program_reports_unknown_as_unbounded() -> None:
+    reg = Registry()
+    x = reg.new("x", -2.0, -1.0)
+    assert interval(ca.sqrt(x), reg.box(x)) == (-math.inf, math.inf)  # outside the domain: unknown
+    y = reg.new("y", -1.0, 1.0)
+    assert interval(1 / y, reg.box(y)) == (-math.inf, math.inf)
+
+
+def test_affine_arithmetic_keeps_correlations() -> None:
+    reg = Registry()
+    th, d = reg.new("th", -0.1, 0.1), reg.new("d", -1, 1)
+    e = (30 + d) * ca.cos(th) - 30 * ca.cos(th)  # = d cos(th), in [-1, 1]
+    B = Bounder(e)
+    lo, hi = box_arrays(B, reg.box(e))
+    A = B.affine.enclosure(B.affine(lo[None], hi[None])[:, 0, :])[:, 0]
+    plain = B.interval(reg.box(e))
+    assert A[0] <= -1.0 and 1.0 <= A[1]
+    assert A[1] - A[0] < 2.05  # the two cos(th) share one noise symbol: the 30s cancel
+    assert plain[1] - plain[0] > 2.2  # intervals lose that: [29, 31] [0.995, 1] - [29.85, 30]
+
+
+# ------------------------------------------------------------------ the bounder
+
+
+def test_constants_points_and_errors() -> None:
+    assert bounds(ca.SX(2.5), {}) == (2.5, 2.5)
+    assert bounds(3.0, {}) == (3.0, 3.0)
+    reg = Registry()
+    x = reg.new("x", 1.0, 1.0)
+    lo, hi = bounds(ca.sin(x), reg.box(x))
+    assert lo <= math.sin(1.0) <= hi and hi - lo < 1e-14
+    with pytest.raises(SparValueError):
+        bounds(x, {})  # no bounds for x
+    with pytest.raises(SparValueError):
+        bounds(x, {"x": (2, 1)})
+    with pytest.raises(SparValueError):
+        bounds(x, {"x": (0, math.inf)})
+    with pytest.raises(SparValueError):
+        bounds(ca.vertcat(x, x), reg.box(x))
+    with pytest.raises(SparValueError):
+        bounds(ca.floor(x), reg.box(x))  # no interval rule for floor
+    with pytest.raises(SparValueError):
+        bounds("x", {})  # type: ignore[arg-type]
+    with pytest.raises(SparValueError):
+        Bounder(x).bounds(reg.box(x), want="middle")
+    with pytest.raises(SparValueError):
+        Bounder(x).bounds(reg.box(x), rel_tol=0, abs_tol=0)
+
+
+def test_inf_sup_one_sided() -> None:
+    reg = Registry()
+    x, y = reg.new("x", -1, 2), reg.new("y", -0.5, 0.7)
+    e = ca.sin(x) * y + x ** 2 - ca.cos(3 * y) * x
+    box = reg.box(e)
+    lo, hi = bounds(e, box)
+    assert inf(e, box) == pytest.approx(lo, abs=2e-3 * (hi - lo))
+    assert sup(e, box) == pytest.approx(hi, abs=2e-3 * (hi - lo))
+    r = Bounder(e).bounds(box)
+    assert r.tolerance_reached and r.gap <= 1e-3 * (r.hi_found - r.lo_found) + 1e-12
+
+
+def test_budget_exhausted_is_still_sound() -> None:
+    rng = np.random.default_rng(6)
+    reg = Registry()
+    e = random_chain(rng, 6, reg, big_angles=1.0)
+    r = check_sound(e, reg.box(e), rng, 2000, max_boxes=8)
+    assert not r.tolerance_reached and r.boxes <= 8 + 2 * 256
+    r2 = check_sound(e, reg.box(e), rng, 2000, max_time=1e-4)
+    assert r2.lo <= r2.lo_found
+
+
+def test_discontinuous_atan2_no_monotonicity_shortcut() -> None:
+    reg = Registry()
+    y, x = reg.new("y", -0.5, 0.5), reg.new("x", -2.0, -1.0)
+    e = ca.atan2(y, x) + 0.01 * y  # jumps from pi to -pi across y = 0
+    r = check_sound(e, reg.box(e), np.random.default_rng(0), 20000)
+    assert r.hi >= math.pi - 1e-9 and r.lo <= -math.pi + 1e-9
+
+
+def test_monotone_expression_is_exact_at_a_corner() -> None:
+    reg = Registry()
+    a, b = reg.new("a", 0.1, 0.2), reg.new("b", 1.0, 3.0)
+    e = ca.exp(a) * b + ca.sqrt(b)
+    r = Bounder(e).bounds(reg.box(e))
+    assert r.lo == pytest.approx(math.exp(0.1) + 1.0, abs=1e-12)
+    assert r.hi == pytest.approx(math.exp(0.2) * 3 + math.sqrt(3), abs=1e-12)
+    assert r.lo <= math.exp(0.1) + 1.0 and math.exp(0.2) * 3 + math.sqrt(3) <= r.hi
+
+
+def test_program_rejects_multi_input_functions() -> None:
+    x, y = ca.SX.sym("x"), ca.SX.sym("y")
+    with pytest.raises(SparValueError):
+        IntervalProgram(ca.Function("f", [x, y], [x + y]))
+    with pytest.raises(SparValueError):
+        AffineProgram(ca.Function("f", [x, y], [x + y]))
+
+
+# ------------------------------------------------------------------ soundness on random HTM products
+
+
+def _random_case(seed: int, n: int) -> None:
+    rng = np.random.default_rng(seed)
+    reg = Registry()
+    e = random_chain(rng, n, reg)
+    check_sound(e, reg.box(e), rng, N_POINTS, max_boxes=MAX_BOXES)
+
+
+N_POINTS = 2_000
+MAX_BOXES = 600
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.integers(0, 2**32 - 1), st.integers(1, 8))
+def test_sound_on_random_htm_products(seed: int, n: int) -> None:
+    """Fast default sample: 40 expressions, 2000 points each (the slow test does 200 x 10^5)."""
+    _random_case(seed, n)
+
+
+@pytest.mark.slow
+@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.integers(0, 2**32 - 1), st.integers(1, 8))
+def test_sound_on_random_htm_products_dense(seed: int, n: int) -> None:
+    """200 random HTM-product expressions, 10^5 random points of the box each."""
+    rng = np.random.default_rng(seed)
+    reg = Registry()
+    e = random_chain(rng, n, reg)
+    check_sound(e, reg.box(e), rng, 100_000, max_boxes=MAX_BOXES)
+
+
+# ------------------------------------------------------------------ tightness
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_tight_on_small_uncertainty_chains(seed: int) -> None:
+    """Plan-like chains with small angles: within 1% of the true range (sampling + IPOPT)."""
+    rng = np.random.default_rng(100 + seed)
+    reg = Registry()
+    e = random_chain(rng, 1 + seed % 4, reg, big_angles=0.0)
+    box = reg.box(e)
+    B = Bounder(e)
+    r = B.bounds(box)
+    tmin, tmax = true_extrema(e, box, rng, [])
+    width = tmax - tmin
+    assert r.lo <= tmin + 1e-9 * (1 + abs(tmin)) and tmax - 1e-9 * (1 + abs(tmax)) <= r.hi
+    assert tmin - r.lo <= 0.01 * width and r.hi - tmax <= 0.01 * width
+    plain = B.interval(box)
+    assert plain[0] <= r.lo + 1e-12 and r.hi <= plain[1] + 1e-12
