@@ -1,0 +1,425 @@
+"""World uncertainty, its propagation by actions, and the uncertainty-reduction preconditions.
+
+This is the numeric side of the paper's Secs. 3.2 and 4.3 (phase 2 of planning; the
+planner's control is prolog/uncertainty.pl). Conventions: world Z up, table top z = 0;
+4x4 homogeneous transforms with column vectors (``T_world_obj``); lengths in the cell
+unit (the paper's cell: inches), angles in radians.
+
+Uncertain quantities are CasADi SX expressions in bounded uncertainty variables made
+by a :class:`~spar_py.symbolic.Registry` (Fig. 11's supinf facts). An object's error is
+an :class:`ErrorTm`, ``trans(dx, dy, dz) @ rotz(theta)`` (Fig. 11's ErrTm), read
+
+* on the table, in the world frame: ``dx, dy, dz`` is ``Tr_dO`` and ``theta`` the rotation
+  about the world z axis through the object's origin (``R_dO``), so the possible pose is
+  Eq. 2: ``T_{O+d} = Tr_dO Tr_O R_dO R_O``;
+* in the hand, in the tool (manipulator) frame: the paper's ``T_dO``, so the possible
+  pose is Eq. 4: ``T_{O+d} = T_M T_dO T_G^-1`` with ``T_M = T_O T_G`` the ideal tool pose.
+
+The manipulator's own error ``T_dM`` (Sec. 3.2.1) is an ErrorTm in the tool frame:
+rotation by ``thetagr`` about tool z and the tool-centre offset ``dxgr, dygr, dzgr``;
+each manipulation gets fresh manipulator variables (one motion's error is independent
+of another's), shared by that action's preconditions and its effect.
+
+:class:`WorldState` is immutable; the actions (:func:`pickup`, :func:`putdown`,
+:func:`squeeze`, :func:`dense_range_scan`, :func:`assemble`) return updated copies.
+:func:`pickup_constraints` and :func:`assemble_constraints` build the inequalities of
+Sec. 3.2.2 as :class:`Constraint` records; :func:`evaluate` decides one with SUP/INF.
+"""
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from types import MappingProxyType
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from .errors import SparValueError
+from .model import Bounds, Cell, MatingFeature
+from .supinf import Bounder
+from .symbolic import Matrix, Registry, Scalar, apply, as_sx, compose, inv, rotz, snap, trans
+
+__all__ = [
+    "Constraint",
+    "ErrorTm",
+    "ObjectState",
+    "Verdict",
+    "WorldState",
+    "assemble",
+    "assemble_constraints",
+    "dense_range_scan",
+    "evaluate",
+    "evaluate_all",
+    "initial_world",
+    "manipulator_error",
+    "pickup",
+    "pickup_constraints",
+    "putdown",
+    "squeeze",
+    "table_error",
+]
+
+TABLE, HAND, ASSEMBLED = "table", "hand", "assembled"
+_IDENT = re.compile(r"[^A-Za-z0-9_]")
+
+
+# ------------------------------------------------------------------ error transforms
+
+
+@dataclass(frozen=True)
+class ErrorTm:
+    """An error transform ``trans(dx, dy, dz) @ rotz(theta)`` (Fig. 11's ErrTm).
+
+    Entries are SX expressions (or numbers) in uncertainty variables; lengths in the cell
+    unit, ``theta`` in radians. The frame it is read in depends on its use (module doc).
+    """
+
+    theta: Scalar
+    dx: Scalar
+    dy: Scalar
+    dz: Scalar
+
+    def matrix(self) -> Matrix:
+        """The 4x4 transform ``trans(dx, dy, dz) @ rotz(theta)``."""
+        return compose(trans(self.dx, self.dy, self.dz), rotz(self.theta))
+
+    def offset(self) -> Matrix:
+        """The displacement (dx, dy, dz) as a 3x1 SX column."""
+        return ca.vertcat(self.dx, self.dy, self.dz)
+
+    def tm_rows(self) -> list[list[Scalar]]:
+        """The paper's row form ``[[r1], [r2], [r3], [d]]`` of Fig. 11 (rows: images of x, y, z; offset)."""
+        c, s = ca.cos(self.theta), ca.sin(self.theta)
+        return [[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0], [self.dx, self.dy, self.dz]]
+
+
+def _hint(obj: str) -> str:
+    """An identifier fragment for an object name (variable names must be identifiers)."""
+    return _IDENT.sub("_", obj) or "o"
+
+
+def table_error(registry: Registry, obj: str, bounds: Bounds) -> ErrorTm:
+    """Fresh world-frame error variables ``dx_<obj>, dy_<obj>, dz_<obj>, theta_<obj>`` with ``bounds``."""
+    h = _hint(obj)
+    return ErrorTm(theta=registry.new(f"theta_{h}", *bounds.dtheta),
+                   dx=registry.new(f"dx_{h}", *bounds.dx),
+                   dy=registry.new(f"dy_{h}", *bounds.dy),
+                   dz=registry.new(f"dz_{h}", *bounds.dz))
+
+
+def manipulator_error(registry: Registry, bounds: Bounds) -> ErrorTm:
+    """Fresh manipulator error variables ``dxgr, dygr, dzgr, thetagr`` (Table 2's names): T_dM."""
+    return ErrorTm(theta=registry.new("thetagr", *bounds.dtheta),
+                   dx=registry.new("dxgr", *bounds.dx),
+                   dy=registry.new("dygr", *bounds.dy),
+                   dz=registry.new("dzgr", *bounds.dz))
+
+
+# ------------------------------------------------------------------ world state
+
+
+@dataclass(frozen=True)
+class ObjectState:
+    """One object's ideal pose and error.
+
+    ``where`` is 'table', 'hand' or 'assembled'. ``pose`` is the ideal ``T_world_obj``
+    (4x4). ``error`` is world-frame on the table, tool-frame otherwise (the paper's
+    ``T_dO``). ``grasp`` is ``T_G``, the tool frame in the object frame, while the error
+    is tool-frame (held or assembled), else None.
+    """
+
+    name: str
+    where: str
+    pose: np.ndarray
+    error: ErrorTm
+    grasp: np.ndarray | None = None
+
+    def possible(self) -> Matrix:
+        """The possible pose ``T_{O+d}`` (4x4 SX, world): Eq. 2 on the table, Eq. 4 otherwise."""
+        if self.where == TABLE:
+            e = self.error
+            Tr_O = trans(*self.pose[:3, 3])
+            R_O = snap(self.pose).copy()
+            R_O[:3, 3] = 0.0
+            return compose(trans(e.dx, e.dy, e.dz), Tr_O, rotz(e.theta), R_O)
+        T_G = self.grasp
+        return compose(self.pose, T_G, self.error.matrix(), inv(T_G))
+
+
+@dataclass(frozen=True)
+class WorldState:
+    """The uncertainty part of the world description: every object's :class:`ObjectState`.
+
+    ``registry`` is the run's variable store (shared by all copies: bounds never change);
+    ``manipulator`` the bounds of a fresh T_dM (Table 2: dxgr ... thetagr).
+    """
+
+    registry: Registry
+    manipulator: Bounds
+    objects: Mapping[str, ObjectState] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "objects", MappingProxyType(dict(self.objects)))
+
+    def obj(self, name: str) -> ObjectState:
+        """The state of object ``name`` (SparValueError if unknown)."""
+        try:
+            return self.objects[name]
+        except KeyError:
+            raise SparValueError(f"no object {name!r} in the world state "
+                                 f"(known: {', '.join(sorted(self.objects))})") from None
+
+    def with_object(self, o: ObjectState) -> WorldState:
+        """A copy with ``o`` replacing the state of the object of the same name."""
+        return replace(self, objects={**self.objects, o.name: o})
+
+    def manipulator_error(self) -> ErrorTm:
+        """Fresh manipulator error variables for one motion (see :func:`manipulator_error`)."""
+        return manipulator_error(self.registry, self.manipulator)
+
+    @property
+    def holding(self) -> str | None:
+        """The name of the object in the hand, or None."""
+        return next((n for n, o in self.objects.items() if o.where == HAND), None)
+
+
+def initial_world(cell: Cell, registry: Registry | None = None) -> WorldState:
+    """The initial world of ``cell``: each object on the table at its initial position with
+    fresh error variables bounded by the cell's object bounds (Table 2)."""
+    reg = registry if registry is not None else Registry()
+    objs: dict[str, ObjectState] = {}
+    for pos in cell.positions.values():
+        if pos.obj not in cell.object_bounds:
+            raise SparValueError(f"no uncertainty bounds for object {pos.obj!r}")
+        objs[pos.obj] = ObjectState(pos.obj, TABLE, _pose(pos.T, pos.name),
+                                    table_error(reg, pos.obj, cell.object_bounds[pos.obj]))
+    return WorldState(reg, cell.manipulator_bounds, objs)
+
+
+def _pose(T: Any, what: str) -> np.ndarray:
+    A = np.asarray(T, float)
+    if A.shape != (4, 4) or not np.isfinite(A).all():
+        raise SparValueError(f"{what}: a pose must be a finite 4x4 transform")
+    return snap(A)
+
+
+def _on_table(state: WorldState, obj: str, action: str) -> ObjectState:
+    o = state.obj(obj)
+    if o.where != TABLE:
+        raise SparValueError(f"{action}({obj}): the object must be on the table, it is {o.where}")
+    return o
+
+
+def _in_hand(state: WorldState, obj: str, action: str) -> ObjectState:
+    o = state.obj(obj)
+    if o.where != HAND:
+        raise SparValueError(f"{action}({obj}): the object must be held, it is {o.where}")
+    return o
+
+
+def _vec(R: np.ndarray, v: Matrix) -> list[Scalar]:
+    """R (3x3 numeric) times the SX column v, as three scalars."""
+    w = ca.mtimes(as_sx(R), as_sx(v))
+    return [w[i] for i in range(3)]
+
+
+# ------------------------------------------------------------------ propagation (Sec. 3.2.3)
+
+
+def pickup(state: WorldState, obj: str, grasp_T: np.ndarray, manip: ErrorTm) -> WorldState:
+    """The world after ``pickup(obj, grasp)`` with T_G ``grasp_T`` and the motion's error ``manip``.
+
+    Sec. 3.2.3: the world displacement error is taken into the tool frame,
+    ``[D_x, D_y, D_z] = (R_O R_G)^-1 Tr_dO [0, 0, 0, 1]^t``; the fingers then limit the y
+    component to the manipulator's, and the rotation to the manipulator's:
+    ``T_dO = trans(D_x + dxgr, dygr, D_z + dzgr) @ rotz(thetagr)``. The paper prints the
+    rotation block as [[cos, sin], [sin, cos]], which is no rotation (a typo); we use
+    the proper rotation [[cos, -sin], [sin, cos]], the same as its T_dM. As in the paper,
+    the object's own angle error and its lever arm are dropped (the grasp re-seats it).
+    """
+    o = _on_table(state, obj, "pickup")
+    if state.holding is not None:
+        raise SparValueError(f"pickup({obj}): the hand already holds {state.holding}")
+    T_G = _pose(grasp_T, f"pickup({obj}) grasp")
+    R = snap(o.pose[:3, :3] @ T_G[:3, :3])
+    D = _vec(R.T, o.error.offset())
+    err = ErrorTm(theta=manip.theta, dx=D[0] + manip.dx, dy=manip.dy, dz=D[2] + manip.dz)
+    return state.with_object(ObjectState(obj, HAND, o.pose, err, T_G))
+
+
+def putdown(state: WorldState, obj: str, pose: np.ndarray) -> WorldState:
+    """The world after ``putdown(obj, position)``, ``pose`` the position's ideal T_world_obj.
+
+    Sec. 3.2.3: the held (tool-frame) displacement error goes to the world frame,
+    ``D = (R_O R_G) [dx, dy, dz]`` with R_O the new orientation; the rotation error
+    about tool z becomes one about world z, ``dtheta = Z * thetagr`` with Z the world-z
+    component of the tool z axis, ``(R_O R_G)[2, 2]``.
+    """
+    o = _in_hand(state, obj, "putdown")
+    T = _pose(pose, f"putdown({obj}) position")
+    R = snap(T[:3, :3] @ o.grasp[:3, :3])
+    D = _vec(R, o.error.offset())
+    Z = float(R[2, 2])
+    err = ErrorTm(theta=Z * o.error.theta, dx=D[0], dy=D[1], dz=D[2])
+    return state.with_object(ObjectState(obj, TABLE, T, err, None))
+
+
+def squeeze(state: WorldState, obj: str, grasp_T: np.ndarray, manip: ErrorTm) -> WorldState:
+    """The world after squeezing ``obj`` between the fingers in place (grasp, then release).
+
+    Sec. 4.3: the reduction is the pickup's; the object stays at its ideal pose on the
+    table, with the reduced error mapped back to the world as a putdown does.
+    """
+    o = _on_table(state, obj, "squeeze")
+    return putdown(pickup(state, obj, grasp_T, manip), obj, o.pose)
+
+
+def dense_range_scan(state: WorldState, obj: str, leaves: Bounds) -> WorldState:
+    """The world after ``dense_range_scan(obj)`` (Fig. 11): fresh error variables bounded by ``leaves``."""
+    o = _on_table(state, obj, "dense_range_scan")
+    return state.with_object(replace(o, error=table_error(state.registry, obj, leaves)))
+
+
+def assemble(state: WorldState, peg: str, hole: str, T_a: np.ndarray) -> WorldState:
+    """The world after ``assemble(peg, hole, ..., T_a, ...)``: uncertainty unchanged (Sec. 3.2.3).
+
+    The peg leaves the hand; its ideal pose becomes ``T_H T_a`` and it keeps its
+    tool-frame error and grasp (its possible pose is Eq. 4 at the assembled pose).
+    """
+    p = _in_hand(state, peg, "assemble")
+    h = _on_table(state, hole, "assemble")
+    Ta = _pose(T_a, f"assemble({peg}, {hole}) T_a")
+    return state.with_object(replace(p, where=ASSEMBLED, pose=snap(h.pose @ Ta)))
+
+
+# ------------------------------------------------------------------ preconditions (Sec. 3.2.2)
+
+
+@dataclass(frozen=True)
+class Constraint:
+    """An uncertainty-reduction precondition ``expr <sense> threshold`` (Sec. 4.3).
+
+    ``sense`` is '>' (needs INF(expr) > threshold) or '<' (needs SUP(expr) < threshold);
+    ``action`` names the action it belongs to, ``name`` the inequality.
+    """
+
+    action: str
+    name: str
+    expr: ca.SX
+    sense: str
+    threshold: float
+    description: str
+
+    def __post_init__(self) -> None:
+        if self.sense not in (">", "<"):
+            raise SparValueError(f"constraint {self.name}: sense must be '>' or '<', got {self.sense!r}")
+
+
+def pickup_constraints(state: WorldState, obj: str, grasp_T: np.ndarray, width: float,
+                       finger_separation: float, manip: ErrorTm, action: str = "pickup") -> list[Constraint]:
+    """The four pickup inequalities of Sec. 3.2.2: both contact points between the fingers.
+
+    Finger frames ``P_1,2 = T_O T_G T_dM trans(0, -+W_m/2, 0)`` (T_O the ideal pose, the
+    arm is sent there); contact points ``C_1,2 = T_{O+d} T_G trans(0, +-W_g/2, 0) [0,0,0,1]^t``
+    (Eq. 2). Needs ``y(P_1^-1 C_i) > 0`` and ``y(P_2^-1 C_i) < 0``. ``width`` is W_g,
+    ``finger_separation`` W_m (cell unit); ``manip`` the pickup motion's T_dM.
+    """
+    o = _on_table(state, obj, "pickup")
+    T_G = _pose(grasp_T, f"pickup({obj}) grasp")
+    Wg, Wm = _positive(width, "grasp width W_g"), _positive(finger_separation, "finger separation W_m")
+    T_M = snap(o.pose @ T_G)
+    dM_inv = inv(manip.matrix())
+    contact = compose(o.possible(), T_G)
+    C = {1: apply(contact, [0.0, Wg / 2, 0.0]), 2: apply(contact, [0.0, -Wg / 2, 0.0])}
+    out = []
+    for k, (ysign, sense) in {1: (-1.0, ">"), 2: (1.0, "<")}.items():
+        # P_k^-1 = trans(0, -+W_m/2, 0)^-1 T_dM^-1 (T_O T_G)^-1, inverted factor by factor
+        P_inv = compose(trans(0.0, -ysign * Wm / 2, 0.0), dM_inv, inv(T_M))
+        for i in (1, 2):
+            y = apply(P_inv, C[i])[1]
+            side = "positive" if sense == ">" else "negative"
+            out.append(Constraint(action, f"p{k}_c{i}", ca.cse(y), sense, 0.0,
+                                  f"contact C{i} of {obj} on the {side} y side of finger frame P{k}"))
+    return out
+
+
+def assemble_constraints(state: WorldState, peg: str, hole: str, T_a: np.ndarray,
+                         peg_feature: MatingFeature, hole_feature: MatingFeature,
+                         action: str = "assemble", motion: ErrorTm | None = None) -> list[Constraint]:
+    """The assemble inequality of Sec. 3.2.2: the peg tip centre within R_h - R_p of the hole's.
+
+    ``C_h = T_{H+d} F_h`` (Eq. 2), ``C_p = T_H T_a T_G T_dP T_G^-1 F_p`` (Eqs. 5, 6).
+    The paper prints ``|C_h - C_p|^2 - (R_h - R_p) > 0``, which has the wrong sense (and
+    mixes a squared length with a length); success needs ``|C_h - C_p| < R_h - R_p``,
+    built here as ``|C_h - C_p|^2 < (R_h - R_p)^2`` (smooth, so SUP bounds it tightly).
+    If R_h <= R_p no position fits: the threshold is 0, which SUP of a square never
+    beats. ``motion`` (optional, not in the paper) is the assemble motion's own T_dM,
+    inserted after T_G to account for the arm's error when it goes to T_H T_a T_G.
+    """
+    p = _in_hand(state, peg, "assemble")
+    h = _on_table(state, hole, "assemble")
+    if peg_feature.kind != "peg" or hole_feature.kind != "hole":
+        raise SparValueError(f"assemble({peg}, {hole}): needs a peg feature and a hole feature, got "
+                             f"{peg_feature.kind} and {hole_feature.kind}")
+    Ta = _pose(T_a, f"assemble({peg}, {hole}) T_a")
+    T_G = p.grasp
+    chain: list[Matrix] = [snap(h.pose @ Ta @ T_G)]
+    if motion is not None:
+        chain.append(motion.matrix())
+    chain += [p.error.matrix(), inv(T_G)]
+    C_p = apply(compose(*chain), np.asarray(peg_feature.vector, float))
+    C_h = apply(h.possible(), np.asarray(hole_feature.vector, float))
+    d = C_h - C_p
+    d2 = ca.cse(ca.sumsqr(d))
+    margin = float(hole_feature.radius) - float(peg_feature.radius)
+    threshold = margin * margin if margin > 0 else 0.0
+    note = "" if margin > 0 else f" (impossible: hole radius {hole_feature.radius} <= peg radius {peg_feature.radius})"
+    return [Constraint(action, "centres", d2, "<", threshold,
+                       f"|C_h - C_p|^2 < (R_h - R_p)^2: {peg}'s tip centre within {margin:g} of {hole}'s hole centre{note}")]
+
+
+def _positive(v: float, what: str) -> float:
+    x = float(v)
+    if not (math.isfinite(x) and x > 0):
+        raise SparValueError(f"{what} must be a positive number, got {v!r}")
+    return x
+
+
+# ------------------------------------------------------------------ evaluation (Sec. 5.3)
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """The decision on one :class:`Constraint`: ``bound`` is INF (sense '>') or SUP (sense '<')
+    of its expression; ``satisfied`` iff the bound strictly beats ``threshold``."""
+
+    constraint: Constraint
+    bound: float
+    threshold: float
+    satisfied: bool
+    tolerance_reached: bool
+
+    def as_dict(self) -> dict[str, Any]:
+        """Plain data for the Prolog bridge: action, constraint, sense, bound, threshold, ..."""
+        c = self.constraint
+        return {"action": c.action, "constraint": c.name, "sense": c.sense, "bound": self.bound,
+                "threshold": self.threshold, "satisfied": self.satisfied,
+                "tolerance_reached": self.tolerance_reached, "description": c.description}
+
+
+def evaluate(constraint: Constraint, registry: Registry, **options: Any) -> Verdict:
+    """Decide ``constraint`` with SUP/INF over its variables' registry bounds (options: Bounder.bounds)."""
+    box = registry.box(constraint.expr)
+    want = "lo" if constraint.sense == ">" else "hi"
+    r = Bounder(constraint.expr).bounds(box, want=want, **options)
+    bound = r.lo if want == "lo" else r.hi
+    ok = bound > constraint.threshold if want == "lo" else bound < constraint.threshold
+    return Verdict(constraint, float(bound), float(constraint.threshold), bool(ok), r.tolerance_reached)
+
+
+def evaluate_all(constraints: Sequence[Constraint], registry: Registry, **options: Any) -> list[Verdict]:
+    """:func:`evaluate` each constraint, in order."""
+    return [evaluate(c, registry, **options) for c in constraints]
