@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from fractions import Fraction
+from pathlib import Path
 
 import casadi as ca
 import numpy as np
@@ -19,6 +20,7 @@ from hypothesis import strategies as st
 
 from spar_py import geometry
 from spar_py.errors import SparValueError
+from spar_py.kb import load_problem
 from spar_py.supinf import (
     AffineProgram,
     Bounder,
@@ -46,6 +48,14 @@ from spar_py.supinf import (
     sup,
 )
 from spar_py.symbolic import Registry, apply, compose, inv, rotz, trans
+from spar_py.uncertainty import (
+    assemble_constraints,
+    dense_range_scan,
+    initial_world,
+    pickup,
+    pickup_constraints,
+    putdown,
+)
 
 # ------------------------------------------------------------------ helpers
 
@@ -232,6 +242,19 @@ def test_trig_contain_samples(a: float, w: float) -> None:
         assert -1.0 <= ends(r)[0] and ends(r)[1] <= 1.0
 
 
+@given(st.floats(-1.4, 1.4), st.floats(0, 1.4))
+def test_trig_fast_paths_contain_samples(a: float, w: float) -> None:
+    """Small angles (the planner's case) take the fast paths: still exact and outward."""
+    lo, hi = a, min(a + w, 2.9)
+    xs = np.append(np.linspace(lo, hi, 257), [0.0] if lo <= 0 <= hi else [])  # with cos's maximum
+    rc, rs = iv_cos(iv(lo, hi)), iv_sin(iv(lo, hi))
+    assert ends(rc)[0] <= np.cos(xs).min() and np.cos(xs).max() <= ends(rc)[1] <= 1.0
+    assert ends(rc)[1] - np.cos(xs).max() < 1e-12 and np.cos(xs).min() - ends(rc)[0] < 1e-12
+    if hi < 1.5:
+        assert ends(rs)[0] <= math.sin(lo) and math.sin(hi) <= ends(rs)[1]
+        assert ends(rs)[1] - math.sin(hi) < 1e-14 and math.sin(lo) - ends(rs)[0] < 1e-14
+
+
 def test_tan_poles_and_pieces() -> None:
     assert ends(iv_tan(iv(1.5, 1.6))) == (-math.inf, math.inf)
     assert ends(iv_tan(iv(-1.0, 5.0))) == (-math.inf, math.inf)
@@ -411,3 +434,48 @@ def test_tight_on_small_uncertainty_chains(seed: int) -> None:
     assert tmin - r.lo <= 0.01 * width and r.hi - tmax <= 0.01 * width
     plain = B.interval(box)
     assert plain[0] <= r.lo + 1e-12 and r.hi <= plain[1] + 1e-12
+
+
+def paper_expressions() -> list[tuple[str, ca.SX, Registry]]:
+    """The paper's cell: the peg's first pickup (Sec. 6: W_p = 3, W_m = 4, Table 2) and the
+    assemble inequality after turning the block hole up, with and without the range scans."""
+    cell = load_problem(Path(__file__).resolve().parent.parent / "kb" / "problems" / "peg_in_block.yaml")
+    peg, block = cell.objects["peg"], cell.objects["block"]
+    w = initial_world(cell)
+    g = peg.grasps["p1G1"]
+    out = [(f"pickup {c.name}", c.expr, w.registry)
+           for c in pickup_constraints(w, "peg", g.T, g.width, cell.finger_separation, w.manipulator_error())]
+    gb = next(gr for gr in block.grasps.values() if abs(gr.T[2, 2]) < 1e-9)
+    up = next(p for p in block.poses.values() if np.allclose(p.R, np.eye(3)))
+    w = putdown(pickup(w, "block", gb.T, w.manipulator_error()), "block", geometry.trans(30, 0, up.height))
+    for scans in (False, True):
+        ws = w
+        if scans:
+            leaves = cell.sensors["dense_range_scan"].leaves
+            ws = dense_range_scan(dense_range_scan(ws, "block", leaves), "peg", leaves)
+        ws = pickup(ws, "peg", g.T, ws.manipulator_error())
+        (c,) = assemble_constraints(ws, "peg", "block", cell.transforms["trans_1"], peg.feature, block.feature)
+        out.append((f"assemble scans={scans}", c.expr, ws.registry))
+    return out
+
+
+def test_tight_on_the_paper_cell(capsys: pytest.CaptureFixture[str]) -> None:
+    """Within 1% of the true range width (sampling + IPOPT) on the paper's pickup and assemble
+    expressions; the plain interval evaluation's gap is reported (``pytest -s``)."""
+    rng = np.random.default_rng(7)
+    lines = []
+    for name, e, reg in paper_expressions():
+        box = reg.box(e)
+        B = Bounder(e)
+        r = B.bounds(box)
+        tmin, tmax = true_extrema(e, box, rng, [])
+        width = tmax - tmin
+        assert r.lo <= tmin + 1e-12 and tmax - 1e-12 <= r.hi, name
+        ours = max(tmin - r.lo, r.hi - tmax) / width
+        plain = B.interval(box)
+        gap = max(tmin - plain[0], plain[1] - tmax) / width
+        assert ours <= 0.01 and r.tolerance_reached, name
+        assert ours <= gap + 1e-12
+        lines.append(f"{name:<22} true [{tmin:.6f}, {tmax:.6f}]  ours {ours:.1e}  plain {gap:.1e} of the width")
+    with capsys.disabled():
+        print("\n" + "\n".join(lines))

@@ -32,6 +32,7 @@ whatever the expression's are (the planner: cell length unit, radians).
 """
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections.abc import Callable, Mapping
@@ -193,13 +194,25 @@ def _trig_range(a: np.ndarray, f: Callable[[np.ndarray], np.ndarray], max_at: fl
     return r
 
 
+def _small(a: np.ndarray, limit: float) -> bool:
+    """True if every end of the batch is finite with |x| < limit (the fast paths' condition)."""
+    return bool(np.all(np.abs(a) < limit))
+
+
 def iv_cos(a: np.ndarray) -> np.ndarray:
     """cos([a]), exact up to rounding: 1 / -1 where 2k*pi / pi + 2k*pi lie inside."""
+    if _small(a, 3.0):  # within (-pi, pi): the only extremum inside can be the maximum at 0
+        v = np.cos(a)
+        hi = np.where((a[0] <= 0) & (a[1] >= 0), 1.0, np.maximum(v[0], v[1]))
+        r = _widen(np.array((np.minimum(v[0], v[1]), hi)))
+        return np.minimum(r, 1.0)
     return _trig_range(a, np.cos, 0.0, _PI)
 
 
 def iv_sin(a: np.ndarray) -> np.ndarray:
     """sin([a]), exact up to rounding: 1 / -1 where pi/2 + 2k*pi / -pi/2 + 2k*pi lie inside."""
+    if _small(a, 1.5):  # within (-pi/2, pi/2): increasing
+        return np.clip(_widen(np.sin(a)), -1.0, 1.0)
     return _trig_range(a, np.sin, _HALF_PI, -_HALF_PI)
 
 
@@ -332,6 +345,16 @@ def _op_name(op: int) -> str:
     return _OP_NAMES.get(op, str(op))
 
 
+def _instructions(fn: ca.Function) -> list[tuple[int, list[int], list[int], float]]:
+    """A Function's instruction list: (operation, input registers, output registers, constant)."""
+    out = []
+    for k in range(fn.n_instructions()):
+        op = fn.instruction_id(k)
+        out.append((op, list(fn.instruction_input(k)), list(fn.instruction_output(k)),
+                    float(fn.instruction_constant(k)) if op == ca.OP_CONST else 0.0))
+    return out
+
+
 class IntervalProgram:
     """A CasADi Function's instruction list, evaluated in interval arithmetic on batches of boxes.
 
@@ -350,13 +373,10 @@ class IntervalProgram:
         self.n_work = int(fn.sz_w())
         consts: dict[int, float] = {}  # register -> constant value held there, if any
         steps: list[tuple] = []
-        for k in range(fn.n_instructions()):
-            op = fn.instruction_id(k)
-            ins = list(fn.instruction_input(k))
-            outs = list(fn.instruction_output(k))
+        for op, ins, outs, const in _instructions(fn):
             o = outs[0] if outs else -1
             if op == ca.OP_CONST:
-                c = float(fn.instruction_constant(k))
+                c = const
                 consts[o] = c
                 steps.append(("const", o, c))
                 continue
@@ -473,13 +493,10 @@ class AffineProgram:
             nsym += 1
             return nsym
 
-        for k in range(fn.n_instructions()):
-            op = fn.instruction_id(k)
-            ins = list(fn.instruction_input(k))
-            outs = list(fn.instruction_output(k))
+        for op, ins, outs, const in _instructions(fn):
             o = outs[0] if outs else -1
             if op == ca.OP_CONST:
-                consts[o] = float(fn.instruction_constant(k))
+                consts[o] = const
                 steps.append((self._const, o, (), (consts[o],)))
                 continue
             if op == ca.OP_INPUT:
@@ -805,16 +822,41 @@ class Bounder:
             raise SparValueError("supinf: two different symbols share a name in the expression")
         self.expr = e
         x = ca.vertcat(*syms) if syms else ca.SX(0, 1)
-        self._point = ca.Function("f", [x], [e], {"cse": True})
-        self.program = IntervalProgram(self._point)
-        self.affine = AffineProgram(self._point)
+        self._x = x
         self.gradient: IntervalProgram | None = None
+        self._fg: ca.Function | None = None  # value and gradient, when the gradient can be bounded
         if syms:
+            fg = ca.Function("fg", [x], [e, ca.densify(ca.jacobian(e, x))], {"cse": True})
             try:
-                J = ca.densify(ca.jacobian(e, x))
-                self.gradient = IntervalProgram(ca.Function("fg", [x], [e, J], {"cse": True}))
+                self.gradient = IntervalProgram(fg)
+                self._fg = fg
             except SparValueError:
                 self.gradient = None  # derivative uses operations we cannot bound: bisection only
+        if self.gradient is None:
+            _ = self.program  # compile now, so unsupported operations fail here
+
+    @functools.cached_property
+    def _point(self) -> ca.Function:
+        """The expression alone as a CasADi Function of the variable vector (built on first use)."""
+        return ca.Function("f", [self._x], [self.expr], {"cse": True})
+
+    @functools.cached_property
+    def program(self) -> IntervalProgram:
+        """The interval program of the expression alone (built on first use)."""
+        return IntervalProgram(self._point)
+
+    @functools.cached_property
+    def affine(self) -> AffineProgram:
+        """The affine-arithmetic program of the expression (built on first use)."""
+        return AffineProgram(self._point)
+
+    def enclose(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """Rigorous interval values (2, n) of the expression on boxes (n, n_vars)."""
+        if self.gradient is not None:
+            outs, _ = self.gradient(lo, hi)
+        else:
+            outs, _ = self.program(lo, hi)
+        return outs[0][:, 0, :]
 
     # -------------------------------------------------------------- plain interval evaluation
 
@@ -829,6 +871,8 @@ class Bounder:
         P = np.atleast_2d(np.asarray(points, float))
         if not self.names:
             return np.full(P.shape[0], float(self._point(np.zeros((0, 1)))))
+        if self._fg is not None and P.shape[0] <= 256:  # few points: reuse the compiled f + gradient
+            return np.asarray(self._fg(P.T)[0]).reshape(-1)
         return np.asarray(self._point(P.T)).reshape(-1)
 
     # -------------------------------------------------------------- branch and bound
@@ -1053,9 +1097,9 @@ class _Search:
         lo, hi = max(lo, plain[0]), min(hi, plain[1])  # the plain enclosure is valid too
         # rigorous values at the best points found; the tolerance claim is made with them
         P = np.vstack(self.best)
-        (fp,), _ = self.B.program(P, P)
-        lo_found = float(fp[1, 0, 0]) if math.isfinite(fp[1, 0, 0]) else _INF
-        hi_found = float(fp[0, 0, 1]) if math.isfinite(fp[0, 0, 1]) else -_INF
+        fp = self.B.enclose(P, P)
+        lo_found = float(fp[1, 0]) if math.isfinite(fp[1, 0]) else _INF
+        hi_found = float(fp[0, 1]) if math.isfinite(fp[0, 1]) else -_INF
         tol = max(self.abs_tol, self.rel_tol * max(0.0, hi_found - lo_found))
         reached = ((0 not in self.sides or lo_found - lo <= tol)
                    and (1 not in self.sides or hi - hi_found <= tol))
@@ -1064,8 +1108,8 @@ class _Search:
 
 def _branch_and_bound(B: Bounder, lo0: np.ndarray, hi0: np.ndarray, rel_tol: float, abs_tol: float,
                       max_boxes: int, max_time: float | None, want: str) -> BoundResult:
-    (f0,), _ = B.program(lo0[None, :], hi0[None, :])
-    plain = (float(f0[0, 0, 0]), float(f0[1, 0, 0]))
+    f0 = B.enclose(lo0[None, :], hi0[None, :])
+    plain = (float(f0[0, 0]), float(f0[1, 0]))
     if lo0.size == 0 or np.all(lo0 == hi0):  # a constant or a point: one evaluation is all
         exact = math.isfinite(plain[0]) and math.isfinite(plain[1])
         return BoundResult(plain[0], plain[1], exact, 1, plain[1], plain[0])

@@ -227,6 +227,7 @@ class Registry:
         self._syms: dict[str, ca.SX] = {}
         self._bounds: dict[str, tuple[float, float]] = {}
         self._count: dict[str, int] = {}
+        self._nodes: dict[int, str] = {}  # element_hash (the SX node) -> name
 
     def new(self, name_hint: str, lo: float, hi: float) -> ca.SX:
         """A fresh variable bounded by ``lo <= v <= hi`` (finite, lo <= hi); SparValueError otherwise."""
@@ -252,6 +253,7 @@ class Registry:
         sym = ca.SX.sym(name)
         self._syms[name] = sym
         self._bounds[name] = (lo_f, hi_f)
+        self._nodes[sym.element_hash()] = name
         return sym
 
     def symbol(self, name: str) -> ca.SX:
@@ -274,10 +276,9 @@ class Registry:
             return {}
         out: dict[str, tuple[float, float]] = {}
         for v in ca.symvar(as_sx(expr)):
-            name = v.name()
-            known = self._syms.get(name)
-            if known is None or not ca.is_equal(known, v):
-                raise SparValueError(f"expression uses {name!r}, which is not a variable of this registry")
+            name = self._nodes.get(v.element_hash())  # the very node this registry made
+            if name is None:
+                raise SparValueError(f"expression uses {v.name()!r}, which is not a variable of this registry")
             out[name] = self._bounds[name]
         return out
 

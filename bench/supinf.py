@@ -1,0 +1,271 @@
+"""SUP/INF tightness and speed: spar-py's bounds against plain interval evaluation and the true range.
+
+Run from the project root: ``.venv/bin/python -m bench.supinf [--per-length 10] [--seed 0]``.
+
+For each expression it reports, as medians over a group of expressions:
+
+- ``ours``: ``Bounder.bounds`` (both ends, refined to the default tolerance 1e-3 of the
+  range width) — its excess over the true range as a fraction of the true width, and
+  its time; ``compile`` is the one-off cost of ``Bounder(expr)`` (CasADi Function,
+  gradient, instruction lists); ``one-sided`` is what ``uncertainty.evaluate`` spends
+  on one constraint (INF or SUP only), compile included;
+- ``plain``: one pass of interval arithmetic over the box (SUP/INF as the paper
+  describes it: bounds of subexpressions combined by interval rules);
+- ``true``: the extremum found by 20 000 samples plus IPOPT (bundled with CasADi)
+  started from the best samples and the box centre (and our best points' values).
+
+Groups: the paper's cell (the first pickup's four inequalities, Sec. 6's expression among
+them; the assemble inequality with and without the dense range scans; the paper's printed
+Sec. 6 expression), plan-like expressions (random pickup / putdown / scan / squeeze plans
+of length 1..8 on the paper's cell, then a pickup or assemble inequality), and random
+products of homogeneous transforms of plan length 1..8 (small angles, as uncertainty is).
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import statistics
+import time
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+
+from spar_py import geometry
+from spar_py.kb import load_problem
+from spar_py.model import Cell
+from spar_py.supinf import Bounder
+from spar_py.symbolic import Registry, apply, compose, inv, rotz, trans
+from spar_py.uncertainty import (
+    WorldState,
+    assemble_constraints,
+    dense_range_scan,
+    evaluate,
+    initial_world,
+    pickup,
+    pickup_constraints,
+    putdown,
+    squeeze,
+)
+
+ROOT = Path(__file__).resolve().parent.parent
+CELL = ROOT / "kb" / "problems" / "peg_in_block.yaml"
+IPOPT = {"ipopt.print_level": 0, "print_time": 0, "ipopt.sb": "yes", "ipopt.max_iter": 300}
+
+
+# ------------------------------------------------------------------ measuring one expression
+
+
+def true_range(B: Bounder, lo: np.ndarray, hi: np.ndarray, rng: np.random.Generator,
+               starts: list[np.ndarray]) -> tuple[float, float]:
+    """The best min and max found by dense sampling and IPOPT (inner bounds of the true range)."""
+    P = np.vstack([rng.uniform(lo, hi, (20000, lo.size)), np.where(rng.random((2000, lo.size)) < 0.5, lo, hi),
+                   *[s[None, :] for s in starts]])
+    v = B.values(P)
+    best = [float(np.nanmin(v)), float(np.nanmax(v))]
+    x = ca.vertcat(*ca.symvar(B.expr))
+    for k, sign in ((0, 1.0), (1, -1.0)):
+        solver = ca.nlpsol("s", "ipopt", {"x": x, "f": sign * B.expr}, IPOPT)
+        for x0 in (P[np.nanargmin(sign * v)], 0.5 * (lo + hi), *starts):
+            xs = np.clip(np.asarray(solver(x0=x0, lbx=lo, ubx=hi)["x"]).ravel(), lo, hi)
+            fx = float(B.values(xs[None, :])[0])
+            best[k] = min(best[k], fx) if k == 0 else max(best[k], fx)
+    return best[0], best[1]
+
+
+def median_time(fn, repeats: int) -> float:
+    ts = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        fn()
+        ts.append(time.perf_counter() - t)
+    return statistics.median(ts)
+
+
+def measure(expr: ca.SX, box: dict, rng: np.random.Generator, repeats: int = 5) -> dict:
+    """Tightness (fractions of the true width) and times (ms) of ours and plain on one expression."""
+    t = time.perf_counter()
+    B = Bounder(expr)
+    t_compile = time.perf_counter() - t
+    lo = np.array([box[n][0] for n in B.names])
+    hi = np.array([box[n][1] for n in B.names])
+    r = B.bounds(box)
+    t_ours = median_time(lambda: B.bounds(box), repeats)
+    t_one = median_time(lambda: Bounder(expr).bounds(box, want="lo"), repeats)
+    plain = B.interval(box)
+    t_plain = median_time(lambda: B.interval(box), repeats)
+    tmin, tmax = true_range(B, lo, hi, rng, [])
+    tmin, tmax = min(tmin, r.lo_found), max(tmax, r.hi_found)  # values attained at our best points
+    w = max(tmax - tmin, 1e-300)
+    sound = r.lo <= tmin + 1e-12 * (1 + abs(tmin)) and tmax - 1e-12 * (1 + abs(tmax)) <= r.hi
+    return {
+        "n_vars": len(B.names),
+        "ours": max(tmin - r.lo, r.hi - tmax) / w,
+        "plain": max(tmin - plain[0], plain[1] - tmax) / w,
+        "reached": r.tolerance_reached,
+        "sound": sound,
+        "lo": r.lo, "hi": r.hi, "true": (tmin, tmax), "boxes": r.boxes,
+        "t_ours": t_ours * 1e3, "t_one": t_one * 1e3, "t_compile": t_compile * 1e3, "t_plain": t_plain * 1e3,
+    }
+
+
+# ------------------------------------------------------------------ expressions
+
+
+def paper_cell_expressions(cell: Cell) -> list[tuple[str, ca.SX, Registry]]:
+    """The first pickup's four inequalities (Sec. 6), the assemble inequality, Sec. 6 as printed."""
+    out: list[tuple[str, ca.SX, Registry]] = []
+    w = initial_world(cell)
+    peg = cell.objects["peg"]
+    g = peg.grasps["p1G1"]
+    for c in pickup_constraints(w, "peg", g.T, g.width, cell.finger_separation, w.manipulator_error()):
+        out.append((f"pickup(peg) {c.name}", c.expr, w.registry))
+    for scans in (False, True):
+        ws, (c,) = peg_in_block(cell, scans)
+        out.append((f"assemble{' after scans' if scans else ''}", c.expr, ws.registry))
+    # Sec. 6's expression exactly as printed (it does not reproduce 3.2793; illustration only)
+    reg = Registry()
+    deg = math.pi / 180
+    tg, dxg, dyg = (reg.new(n, -0.001 * deg if n == "thetagr" else -0.001, 0.001 * deg if n == "thetagr" else 0.001)
+                    for n in ("thetagr", "dxgr", "dygr"))
+    to = reg.new("theta_o", -5.5 * deg, 5.5 * deg)
+    dxo, dyo = reg.new("dx_o", -0.11, 0.11), reg.new("dy_o", -0.11, 0.11)
+    c, s = ca.cos, ca.sin
+    printed = (-2.0 + 3.0 * c(tg) * c(to) + c(tg) * dxo + s(tg) + s(tg) * dxg - c(tg) * s(to) - 1.5 * c(tg)
+               - 3.0 * s(tg) * s(to) - c(to) * s(tg) - s(tg) * dyo - c(tg) * dyg)
+    out.append(("Sec. 6 as printed", printed, reg))
+    return out
+
+
+def peg_in_block(cell: Cell, scans: bool) -> tuple[WorldState, list]:
+    """The paper's plan: turn the block hole up, (scan both,) pick up the peg, assemble."""
+    peg, block = cell.objects["peg"], cell.objects["block"]
+    w = initial_world(cell)
+    gb = next(g for g in block.grasps.values() if abs(g.T[2, 2]) < 1e-9)
+    up = next(p for p in block.poses.values() if np.allclose(p.R, np.eye(3)))
+    w = putdown(pickup(w, "block", gb.T, w.manipulator_error()), "block", geometry.trans(30, 0, up.height))
+    if scans:
+        leaves = cell.sensors["dense_range_scan"].leaves
+        w = dense_range_scan(dense_range_scan(w, "block", leaves), "peg", leaves)
+    w = pickup(w, "peg", peg.grasps["p1G1"].T, w.manipulator_error())
+    return w, assemble_constraints(w, "peg", "block", cell.transforms["trans_1"], peg.feature, block.feature)
+
+
+def plan_like(cell: Cell, rng: np.random.Generator, length: int) -> tuple[ca.SX, Registry]:
+    """A random plan of ``length`` actions on the paper's cell, then a pickup or assemble inequality."""
+    w = initial_world(cell)
+    leaves = cell.sensors["dense_range_scan"].leaves
+    grasps = {o: list(m.grasps.values()) for o, m in cell.objects.items()}
+    held = None
+    for _ in range(length - 1):
+        if held is None:
+            obj = str(rng.choice(sorted(cell.objects)))
+            kind = rng.choice(["pickup", "pickup", "squeeze", "scan"])
+            g = grasps[obj][int(rng.integers(len(grasps[obj])))]
+            if kind == "pickup":
+                w, held = pickup(w, obj, g.T, w.manipulator_error()), obj
+            elif kind == "squeeze":
+                w = squeeze(w, obj, g.T, w.manipulator_error())
+            else:
+                w = dense_range_scan(w, obj, leaves)
+        else:
+            pose = cell.objects[held].poses[str(rng.choice(sorted(cell.objects[held].poses)))]
+            T = geometry.rotz(rng.uniform(-np.pi, np.pi)) @ np.eye(4)
+            T[:3, :3] = T[:3, :3] @ pose.R
+            T[:3, 3] = [rng.uniform(20, 35), rng.uniform(-10, 10), pose.height]
+            w, held = putdown(w, held, T), None
+    peg, block = cell.objects["peg"], cell.objects["block"]
+    if held == "peg":
+        (c,) = assemble_constraints(w, "peg", "block", cell.transforms["trans_1"], peg.feature, block.feature)
+        return c.expr, w.registry
+    if held is not None:
+        w = putdown(w, held, w.obj(held).pose)
+    obj = str(rng.choice(sorted(cell.objects)))
+    g = grasps[obj][int(rng.integers(len(grasps[obj])))]
+    cs = pickup_constraints(w, obj, g.T, g.width, cell.finger_separation, w.manipulator_error())
+    return cs[int(rng.integers(4))].expr, w.registry
+
+
+def _rigid(rng: np.random.Generator, scale: float) -> np.ndarray:
+    a = rng.uniform(-np.pi, np.pi, 3)
+    T = geometry.rotz(a[0]) @ geometry.roty(a[1]) @ geometry.rotx(a[2])
+    T[:3, 3] = rng.uniform(-scale, scale, 3)
+    return T
+
+
+def random_chain(rng: np.random.Generator, length: int) -> tuple[ca.SX, Registry]:
+    """A product of ``length`` error transforms (bounded trans + rotz, up to +-0.2 in / rad)
+    between random rigid transforms; then a translation component, a coordinate of T^-1 p
+    or a squared distance (as tests/test_supinf.py builds them)."""
+    reg = Registry()
+    T = _rigid(rng, 30.0)
+    for _ in range(length):
+        w = 10 ** rng.uniform(-3, -0.7)
+
+        def b(w: float = w) -> tuple[float, float]:
+            return float(rng.uniform(-w, 0)), float(rng.uniform(0, w))
+
+        E = compose(trans(reg.new("dx", *b()), reg.new("dy", *b()), reg.new("dz", *b())), rotz(reg.new("th", *b())))
+        if rng.random() < 0.3:
+            E = inv(E)
+        T = compose(T, E, _rigid(rng, 5.0)) if rng.random() < 0.7 else compose(E, T, _rigid(rng, 5.0))
+    kind, p = int(rng.integers(3)), rng.uniform(-3, 3, 3)
+    if kind == 0:
+        return T[int(rng.integers(3)), 3], reg
+    if kind == 1:
+        return apply(inv(T), p)[int(rng.integers(3))], reg
+    return ca.sumsqr(apply(T, p) - rng.uniform(-30, 30, 3)), reg
+
+
+# ------------------------------------------------------------------ report
+
+
+HEADER = (f"{'expression':<26}{'vars':>5}{'ours/w':>10}{'plain/w':>10}{'reached':>9}{'ours ms':>9}"
+          f"{'1-side ms':>10}{'compile':>9}{'plain ms':>9}")
+
+
+def row(name: str, ms: list[dict]) -> str:
+    def med(k: str) -> float:
+        return statistics.median(m[k] for m in ms)
+    reached = sum(m["reached"] for m in ms)
+    return (f"{name:<26}{med('n_vars'):>5.0f}{med('ours'):>10.1e}{med('plain'):>10.1e}{reached:>5}/{len(ms):<3}"
+            f"{med('t_ours'):>9.2f}{med('t_one'):>10.2f}{med('t_compile'):>9.2f}{med('t_plain'):>9.2f}")
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(prog="python -m bench.supinf", description=__doc__.split("\n")[0])
+    ap.add_argument("--per-length", type=int, default=6, help="expressions per plan length (default 6)")
+    ap.add_argument("--seed", type=int, default=0)
+    args = ap.parse_args(argv)
+    rng = np.random.default_rng(args.seed)
+    cell = load_problem(CELL)
+    unsound = 0
+    print("tightness: max excess of a bound over the true range, as a fraction of the true width "
+          "(medians); times in ms (medians)\n")
+    print(HEADER)
+    print("-- the paper's cell (Table 2 bounds; W_p = 3, W_m = 4)")
+    for name, e, reg in paper_cell_expressions(cell):
+        m = measure(e, reg.box(e), rng)
+        unsound += not m["sound"]
+        print(row(name, [m]) + f"   INF {m['lo']:.4f} SUP {m['hi']:.4f}")
+    for title, make in (("-- plan-like (paper's cell)", lambda n: plan_like(cell, rng, n)),
+                        ("-- random HTM products", lambda n: random_chain(rng, n))):
+        print(title)
+        for n in range(1, 9):
+            ms = []
+            for _ in range(args.per_length):
+                e, reg = make(n)
+                ms.append(measure(e, reg.box(e), rng, repeats=3))
+            unsound += sum(not m["sound"] for m in ms)
+            print(row(f"plan length {n}", ms))
+    # the planner's own use: one verdict per constraint (evaluate = compile + one-sided bound)
+    w = initial_world(cell)
+    g = cell.objects["peg"].grasps["p1G1"]
+    cs = pickup_constraints(w, "peg", g.T, g.width, cell.finger_separation, w.manipulator_error())
+    t = median_time(lambda: [evaluate(c, w.registry) for c in cs], 5)
+    print(f"\nuncertainty.evaluate, the first pickup's 4 constraints: {t * 1e3 / 4:.2f} ms per constraint")
+    print(f"unsound bounds: {unsound}")
+
+
+if __name__ == "__main__":
+    main()
