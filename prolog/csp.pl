@@ -1,0 +1,168 @@
+/*  spar-py: consistency of the geometric binary constraint network
+    (Sec. 5.2.1, Figs. 15-17).
+
+    A network here is net(Nodes, Arcs):
+
+      Nodes  an assoc Var -> ordset of labels (the label sets)
+      Arcs   an assoc V1-V2 -> ordset of L1/L2 pairs (the allowed pairs of
+             the undirected arc between V1 and V2; stored once, under the
+             orientation it was created with)
+
+    csp/3, choose_one/4 and all_consistent/3 are the paper's Fig. 17
+    depth-first search with backtracking; it decides consistency and, on
+    backtracking, enumerates every solution (plan instances for phase 2).
+    ac3/2 is arc consistency (AC-3), used to show users label sets pruned of
+    labels that no solution can use; the planner's consistency test is the
+    search of Fig. 17.
+*/
+:- module(csp,
+          [ csp/3,                  % +VarSet, +Net, -Result
+            consistent/1,           % +Net
+            solution/2,             % +Net, -Assignment
+            ac3/2,                  % +Net, -PrunedNodes
+            get_label_set/3,        % +Var, -LabelSet, +Net
+            get_constraint_pairs/4  % +Var, +V1, -Pairs, +Net
+          ]).
+:- use_module(library(assoc)).
+:- use_module(library(lists)).
+:- use_module(library(apply)).
+:- use_module(library(ordsets)).
+:- use_module(library(pairs)).
+:- use_module(library(yall)).
+
+%!  csp(+VarSet:list, +Net, -Result:list) is nondet.
+%
+%   Result is a consistent assignment [V/Label, ...] of every variable of
+%   VarSet (Fig. 17): labels come from the label sets of Net and every pair
+%   of assigned variables joined by an arc takes an allowed pair. The most
+%   recently assigned variable comes first in Result. Backtracking gives the
+%   next assignment.
+
+csp(VarSet, Constraints, Result) :-
+    csp(VarSet, Constraints, [], Result).
+
+csp([], _, R, R).
+csp([V|Rest], Constraints, Asns, R) :-
+    choose_one(V, Constraints, Asns, Label),
+    csp(Rest, Constraints, [V/Label|Asns], R).
+
+%!  choose_one(+Var, +Net, +PrevAssns, -Label) is nondet.
+%
+%   Label is a label of Var consistent with the previous assignments.
+
+choose_one(Var, Constraints, PrevAssns, Label) :-
+    get_label_set(Var, LabelSet, Constraints),
+    member(Label, LabelSet),
+    all_consistent(Var/Label, PrevAssns, Constraints).
+
+%!  all_consistent(+VarLabel, +PrevAssns, +Net) is semidet.
+%
+%   Var/Label agrees with every previous assignment V1/L1 whose variable is
+%   joined to Var by an arc.
+
+all_consistent(_, [], _).
+all_consistent(Var/Label, [V1/L1|Rest], Constraints) :-
+    get_constraint_pairs(Var, V1, Pairs, Constraints),
+    !,
+    ord_memberchk(Label/L1, Pairs),
+    all_consistent(Var/Label, Rest, Constraints).
+all_consistent(Var/Label, [_|Rest], Constraints) :-
+    all_consistent(Var/Label, Rest, Constraints).
+
+%!  get_label_set(+Var, -LabelSet, +Net) is semidet.
+%
+%   The label set of Var's node; fails if Var has no node.
+
+get_label_set(Var, LabelSet, net(Nodes, _)) :-
+    get_assoc(Var, Nodes, LabelSet).
+
+%!  get_constraint_pairs(+Var, +V1, -Pairs, +Net) is semidet.
+%
+%   Pairs are the allowed pairs Label/L1 of the arc between Var and V1,
+%   oriented Var first (an ordset); fails if there is no such arc.
+
+get_constraint_pairs(Var, V1, Pairs, net(_, Arcs)) :-
+    (   get_assoc(Var-V1, Arcs, Pairs)
+    ->  true
+    ;   get_assoc(V1-Var, Arcs, Pairs0)
+    ->  maplist(flip, Pairs0, Pairs1),
+        sort(Pairs1, Pairs)
+    ).
+
+flip(A/B, B/A).
+
+%!  consistent(+Net) is semidet.
+%
+%   Net has at least one solution (Sec. 5.2.1).
+
+consistent(Net) :-
+    net_vars(Net, Vars),
+    once(csp(Vars, Net, _)).
+
+%!  solution(+Net, -Assignment:list) is nondet.
+%
+%   Assignment is a solution of Net as Var-Label pairs ordered by Var;
+%   backtracking enumerates all solutions, lazily.
+%
+%   ==
+%   ?- fig15(Net), findall(S, solution(Net, S), Ss).
+%   Ss = [[v1-1,v2-2,v3-4], [v1-2,v2-2,v3-4]].
+%   ==
+
+solution(Net, Assignment) :-
+    net_vars(Net, Vars),
+    csp(Vars, Net, Result),
+    maplist([V/L, V-L]>>true, Result, Pairs),
+    keysort(Pairs, Assignment).
+
+%   Variables are searched in order of increasing label-set size (ties in
+%   standard order), the usual first-fail choice of the "head of Nodes".
+
+net_vars(net(Nodes, _), Vars) :-
+    assoc_to_list(Nodes, VLs),
+    map_list_to_pairs([_-Ls, N]>>length(Ls, N), VLs, Sized),
+    keysort(Sized, Sorted),
+    pairs_values(Sorted, SortedVLs),
+    pairs_keys(SortedVLs, Vars).
+
+%!  ac3(+Net, -Nodes) is semidet.
+%
+%   Nodes is the assoc of label sets of Net made arc consistent (AC-3):
+%   a label stays only if every arc at its node has a pair supporting it
+%   with a label still in the other node. Fails if a label set becomes
+%   empty. AC-3 removes no label of any solution.
+
+ac3(net(Nodes0, Arcs), Nodes) :-
+    assoc_to_keys(Arcs, Keys),
+    foldl([V1-V2, Q0, Q]>>append(Q0, [V1-V2, V2-V1], Q), Keys, [], Queue),
+    ac3_loop(Queue, Keys, Arcs, Nodes0, Nodes).
+
+ac3_loop([], _, _, Nodes, Nodes).
+ac3_loop([X-Y|Queue], Keys, Arcs, Nodes0, Nodes) :-
+    revise(X, Y, net(Nodes0, Arcs), Nodes0, Nodes1, Changed),
+    (   Changed == true
+    ->  get_assoc(X, Nodes1, LX),
+        LX \== [],
+        findall(Z-X, ( neighbour(X, Keys, Z), Z \== Y ), New),
+        append(Queue, New, Queue1)
+    ;   Queue1 = Queue
+    ),
+    ac3_loop(Queue1, Keys, Arcs, Nodes1, Nodes).
+
+neighbour(X, Keys, Z) :-
+    (   member(X-Z, Keys) ; member(Z-X, Keys) ).
+
+revise(X, Y, Net, Nodes0, Nodes, Changed) :-
+    get_assoc(X, Nodes0, LX),
+    get_assoc(Y, Nodes0, LY),
+    get_constraint_pairs(X, Y, Pairs, Net),
+    include(supported(Pairs, LY), LX, LX1),
+    (   LX1 == LX
+    ->  Nodes = Nodes0, Changed = false
+    ;   put_assoc(X, Nodes0, LX1, Nodes), Changed = true
+    ).
+
+supported(Pairs, LY, Lx) :-
+    member(Lx/Ly, Pairs),
+    ord_memberchk(Ly, LY),
+    !.

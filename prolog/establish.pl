@@ -1,0 +1,236 @@
+/*  spar-py: satisfying operational goals (Sec. 4.1): establishment,
+    clobbering, promotion and white knights.
+
+    establish/4 finds an action E whose add list has an element unifying
+    with the goal's condition and posts prior_to(E, S), trying in order
+
+      1. the actions already in the plan, newest first (constraint posting
+         before adding actions, Sec. 2),
+      2. the initial state, the add list of the null action `start`
+         (Sec. 7.1); a position it names gets its single label in the CMS,
+      3. a new action from the rule base (kb/templates/actions.pl).
+
+    declobber/4 then deals with every action C that may clobber the goal:
+    C has a delete-list element unifiable with the condition (tested
+    without binding anything) and may fall between E and S. (If C must
+    fall between them, E is dropped: establishing by the white knight
+    directly is the same plan with fewer orderings.) The methods
+    are a table tried in the order the plan's options give
+    (declobber([promotion, white_knight]) by default):
+
+      promotion     prior_to(S, C)
+      white_knight  an action W, existing or new, that establishes the
+                    condition, with prior_to(C, W) and prior_to(W, S)
+                    (W = E is the establisher acting as its own white
+                    knight, Sec. 4.1)
+
+    Separation (Sec. 4.1; not in SPAR) would be one more clause of
+    declobber_by/7 and one more name in known_declobber_method/1.
+
+    add_action/5 is the one place an action enters the plan: it posts the
+    action's initial constraints and ordering arcs, pushes its
+    preconditions and moves back to the operational stack every satisfied
+    goal the action could clobber (Sec. 2).
+*/
+:- module(establish,
+          [ establish/4,               % +Goal, +Plan0, -Plan, -Establisher
+            declobber/4,               % +Goal, +Establisher, +Plan0, -Plan
+            new_action/5,              % +Cond, -Id, +Arcs, +Plan0, -Plan
+            add_action/5,              % +Action, +Constraints, +Arcs, +Plan0, -Plan
+            post_prior_to/4,           % +A1, +A2, +Plan0, -Plan
+            possible_clobberer/5,      % +Cond, +E, +S, +Plan, -C
+            known_declobber_method/1   % ?Method
+          ]).
+:- use_module(library(lists)).
+:- use_module(library(apply)).
+:- use_module(library(error)).
+:- use_module(kb, []).
+:- use_module(ordering).
+:- use_module(cms).
+:- use_module(goals).
+:- use_module('../kb/templates/actions', [instantiate_establishing_action//3]).
+
+%!  establish(+Goal, +Plan0, -Plan, -Establisher) is nondet.
+%
+%   Goal = op(Id, S, Cond) holds before S because of Establisher (an action
+%   id, or `start` for the initial state), constrained to precede S.
+%   Alternatives on backtracking, in the order of the module header.
+
+establish(op(_, S, Cond), Plan0, Plan, E) :-
+    (   existing_establisher(Cond, S, Plan0, Plan, E)
+    ;   initial_establisher(Cond, Plan0, Plan),
+        E = start
+    ;   new_action(Cond, E, [E-S], Plan0, Plan)
+    ),
+    note(Plan, "  ~q established by ~q~n", [Cond, E]).
+
+existing_establisher(Cond, S, Plan0, Plan, E) :-
+    plan_actions(Plan0, Actions),
+    member(action(E, _, _, addlist(Adds), _), Actions),
+    E \== S,
+    member(Cond, Adds),
+    post_prior_to(E, S, Plan0, Plan).
+
+initial_establisher(Cond, Plan0, Plan) :-
+    kb:initial(Cond),
+    plan_net(Plan0, Net0),
+    cms_initial_state(Cond, Net0, Net),
+    set_net_of_plan(Net, Plan0, Plan).
+
+%!  post_prior_to(+A1, +A2, +Plan0, -Plan) is semidet.
+%
+%   Post prior_to(A1, A2) in the ordering graph; fails if it closes a cycle.
+
+post_prior_to(A1, A2, Plan0, Plan) :-
+    plan_order(Plan0, G0),
+    prior_to(A1, A2, G0, G),
+    set_order_of_plan(G, Plan0, Plan).
+
+%!  new_action(+Cond, -Id, +Arcs, +Plan0, -Plan) is nondet.
+%
+%   Add a new action Id from the rule base that establishes Cond, posting
+%   Arcs (A1-A2 pairs that may mention Id). Fails when the plan has as many
+%   actions as its bound allows.
+
+new_action(Cond, Id, Arcs, Plan0, Plan) :-
+    plan_ids(Plan0, Ids0),
+    call_dcg(instantiate_establishing_action(Cond, Action, Constraints), Ids0, Ids),
+    Action = action(Id, _, _, addlist(Adds), _),
+    memberchk(Cond, Adds),
+    room_for_action(Plan0),
+    set_ids_of_plan(Ids, Plan0, Plan1),
+    add_action(Action, Constraints, Arcs, Plan1, Plan).
+
+room_for_action(Plan) :-
+    plan_actions(Plan, Actions),
+    plan_bound(Plan, Bound),
+    length(Actions, N),
+    (   N < Bound
+    ->  true
+    ;   note(Plan, "  no new action: the plan has ~d, the bound~n", [N]),
+        bound_hit(Plan),
+        fail
+    ).
+
+%!  add_action(+Action, +Constraints, +Arcs, +Plan0, -Plan) is semidet.
+%
+%   Put Action (an instantiated template) into the plan: its node in the
+%   ordering graph, the arcs Arcs, its initial constraints (Sec. 3.1), its
+%   preconditions on the goal stacks, and, on top of the operational stack,
+%   every satisfied goal it could clobber (Sec. 2, 4.1). Fails if an arc
+%   or a constraint on an existing node is refused.
+
+add_action(Action, Constraints, Arcs, Plan0, Plan) :-
+    Action = action(Id, Term, preconditions(Ops, Geos), _, _),
+    plan_actions(Plan0, Actions),
+    set_actions_of_plan([Action|Actions], Plan0, Plan1),
+    plan_order(Plan1, G0),
+    ordering_add_action(Id, G0, G1),
+    set_order_of_plan(G1, Plan1, Plan2),
+    foldl([A1-A2, P0, P]>>post_prior_to(A1, A2, P0, P), Arcs, Plan2, Plan3),
+    plan_net(Plan3, Net0),
+    foldl(cms_initial, Constraints, Net0, Net),
+    set_net_of_plan(Net, Plan3, Plan4),
+    note(Plan4, "  new action(~q, ~q)~n", [Id, Term]),
+    undone_goals(Action, Plan4, Undone, Sat),
+    set_sat_of_plan(Sat, Plan4, Plan5),
+    forall(member(G, Undone), note(Plan5, "  may be clobbered: ~q~n", [G])),
+    plan_ops(Plan5, Ops0),
+    append(Ops, Ops0, Ops1),
+    append(Undone, Ops1, Ops2),
+    set_ops_of_plan(Ops2, Plan5, Plan6),
+    plan_geos(Plan6, Geos0),
+    append(Geos, Geos0, Geos1),
+    set_geos_of_plan(Geos1, Plan6, Plan).
+
+%   undone_goals(+Action, +Plan, -Undone, -Sat): the satisfied operational
+%   goals Action could clobber, and the satisfied list without them.
+
+undone_goals(action(Id, _, _, _, dellist(Dels)), Plan, Undone, Sat) :-
+    plan_sat(Plan, Sat0),
+    plan_order(Plan, G),
+    partition(undone_by(Id, Dels, G), Sat0, Moved, Sat),
+    maplist([sat(Goal, _), Goal]>>true, Moved, Undone).
+
+undone_by(C, Dels, G, sat(op(_, S, Cond), E)) :-
+    clobbers(Dels, Cond),
+    possibly_between(C, E, S, G).
+
+clobbers(Dels, Cond) :-
+    member(D, Dels),
+    \+ \+ D = Cond,
+    !.
+
+%!  possible_clobberer(+Cond, +E, +S, +Plan, -C) is nondet.
+%
+%   C is a plan action that may clobber Cond between its establisher E and
+%   S: a delete-list element unifies with Cond (nothing is bound) and C may
+%   be executed after E and before S.
+
+possible_clobberer(Cond, E, S, Plan, C) :-
+    plan_actions(Plan, Actions),
+    plan_order(Plan, G),
+    member(action(C, _, _, _, dellist(Dels)), Actions),
+    clobbers(Dels, Cond),
+    possibly_between(C, E, S, G).
+
+%!  known_declobber_method(?Method) is nondet.
+%
+%   The declobbering methods declobber_by/7 implements.
+
+known_declobber_method(promotion).
+known_declobber_method(white_knight).
+
+%!  declobber(+Goal, +Establisher, +Plan0, -Plan) is nondet.
+%
+%   Plan makes Goal = op(Id, S, Cond), established by Establisher, safe
+%   from every possible clobberer (Sec. 4.1, the truth criterion of
+%   Sec. 7.1): each is dealt with by one of the plan's declobbering
+%   methods, tried in order. Clobberers are taken one at a time, the
+%   next one computed from the plan as it is then, so actions added by a
+%   white knight are considered too.
+
+declobber(op(_, S, Cond), E, Plan0, Plan) :-
+    plan_methods(Plan0, Methods),
+    declobber_(Cond, E, S, Methods, [], Plan0, Plan).
+
+declobber_(Cond, E, S, Methods, Done, Plan0, Plan) :-
+    (   possible_clobberer(Cond, E, S, Plan0, C),
+        \+ memberchk(C, Done)
+    ->  \+ necessarily_between(C, E, S, Plan0),
+        member(Method, Methods),
+        declobber_by(Method, Cond, E, S, C, Plan0, Plan1),
+        declobber_(Cond, E, S, Methods, [C|Done], Plan1, Plan)
+    ;   Plan = Plan0
+    ).
+
+%   necessarily_between(+C, +E, +S, +Plan): C follows E and precedes S
+%   in every linearisation. Then only a white knight W between C and S can
+%   save the goal, and establishing it by W directly (W acting as its own
+%   white knight for C) gives the same actions and a weaker ordering; that
+%   alternative is tried as an establishment, so this one is dropped.
+
+necessarily_between(C, E, S, Plan) :-
+    plan_order(Plan, G),
+    necessarily_before(E, C, G),
+    necessarily_before(C, S, G).
+
+%!  declobber_by(+Method, +Cond, +E, +S, +C, +Plan0, -Plan) is nondet.
+%
+%   Protect Cond, needed by S, from clobberer C by Method.
+
+declobber_by(promotion, Cond, _, S, C, Plan0, Plan) :-
+    post_prior_to(S, C, Plan0, Plan),
+    note(Plan, "  ~q may clobber ~q: promotion prior_to(~q, ~q)~n",
+         [C, Cond, S, C]).
+declobber_by(white_knight, Cond, _, S, C, Plan0, Plan) :-
+    (   plan_actions(Plan0, Actions),
+        member(action(W, _, _, addlist(Adds), _), Actions),
+        W \== C, W \== S,
+        member(Cond, Adds),
+        post_prior_to(C, W, Plan0, Plan1),
+        post_prior_to(W, S, Plan1, Plan)
+    ;   new_action(Cond, W, [C-W, W-S], Plan0, Plan)
+    ),
+    note(Plan, "  ~q may clobber ~q: white knight ~q, prior_to(~q, ~q), prior_to(~q, ~q)~n",
+         [C, Cond, W, C, W, W, S]).

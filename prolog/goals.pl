@@ -1,0 +1,463 @@
+/*  spar-py: the phase-1 loop (Secs. 2, 3.4, 4.2): goal stacks, the
+    satisfied list, geometric goals and the bound on plan size.
+
+    Goals (Sec. 3.4) are
+
+      op(GoalId, ActionId, Condition)                 operational
+      geo(GoalId, ActionId, Constraint, OpConditions) geometric
+
+    to be satisfied just before action ActionId; the user's goals are
+    op(top_N, finish, Goal), `finish` being the virtual last action.
+
+    The plan state is a plan/13 record threaded through the search
+    (Plan0 -> Plan): the plan actions (instantiated templates, newest first,
+    as Fig. 23 lists them), the ordering graph (ordering.pl), the geometric
+    network (cms.pl), the symbol counters (spar_actions:gensym//2), the
+    operational and geometric goal stacks, the satisfied list of
+    sat(Goal, Establisher) entries, the step count, the bound on the number
+    of actions, the declobbering methods, the trace flag, the history of
+    the operational steps (for backjumping) and the search recorder
+    failures(DeepestStep, Goal, BoundHit, Budget-steps(Spent)), a term
+    updated with nb_setarg/3: the only non-backtrackable state, as it must
+    outlive the failures it records. Every planner choice is a Prolog
+    choice point; backtracking undoes it completely, symbol numbers
+    included.
+
+    The loop (Sec. 2): take the first goal of the operational stack, else of
+    the geometric stack; satisfy it (establish.pl for operational goals,
+    satisfy_geo/3 here for geometric ones); repeat until both stacks are
+    empty. A geometric goal is a committed call on the CMS: if the CMS
+    refuses, the goal fails and chronological backtracking returns to the
+    establishment of the operational goals, whose next alternative is a new
+    action (Sec. 4.2: the putdown(block, pos_1) of Sec. 6). It returns
+    straight to the latest step that could change the CMS's answer
+    (conflict-directed backjumping, see step/3), which keeps the search of
+    unsolvable problems short.
+
+    Depth first search with a bound on the number of plan actions, raised
+    from the number of user goals to max_actions one step at a time
+    (iterative deepening): the first plan found is a smallest one, and an
+    unsolvable problem ends, reporting the goal that failed at the deepest
+    point of the last round. A round that never met the bound ends the
+    search at once. Planning of this kind is exponential in the plan size
+    (Sec. 7.2) and undecidable (Sec. 2), so a budget of steps over all
+    rounds (max_steps, default 20000) keeps even a hard unsolvable problem
+    short; when it is spent, the outcome names the last bound searched
+    completely.
+*/
+:- module(goals,
+          [ phase1_search/3,         % +Options, -Outcome, -Bound
+            initial_plan/3,          % +Bound, +Options, -Plan
+            solve/2,                 % +Plan0, -Plan
+            satisfy_geo/3,           % +Goal, +Plan0, -Plan
+            plan_partial/2,          % +Plan, -Partial
+            note/3,                  % +Plan, +Format, +Args
+            print_goal/1,            % +Goal
+            print_action/1,          % +Action
+            % the plan record (library(record))
+            plan_actions/2, plan_order/2, plan_net/2, plan_ids/2,
+            plan_ops/2, plan_geos/2, plan_sat/2, plan_steps/2,
+            plan_bound/2, plan_methods/2, plan_trace/2, plan_deepest/2,
+            plan_history/2, conflict_steps/3, bound_hit/1,
+            set_actions_of_plan/3, set_order_of_plan/3, set_net_of_plan/3,
+            set_ids_of_plan/3, set_ops_of_plan/3, set_geos_of_plan/3,
+            set_sat_of_plan/3, set_steps_of_plan/3, set_deepest_of_plan/3
+          ]).
+:- use_module(library(record)).
+:- use_module(library(lists)).
+:- use_module(library(apply)).
+:- use_module(library(error)).
+:- use_module(library(option)).
+:- use_module(library(yall)).
+:- use_module(library(ordsets)).
+:- use_module(kb, []).
+:- use_module(ordering).
+:- use_module(cms).
+:- use_module(establish).
+:- use_module('../kb/templates/actions', [gensym//2]).
+
+:- record plan(actions:list = [],
+               order:list = [],
+               net,
+               ids:list = [],
+               ops:list = [],
+               geos:list = [],
+               sat:list = [],
+               steps:integer = 0,
+               bound:integer = 12,
+               methods:list = [promotion, white_knight],
+               trace:boolean = false,
+               history:list = [],
+               deepest).
+
+%!  phase1_search(+Options, -Outcome, -Bound) is det.
+%
+%   Iterative deepening over the bound on plan size, from the number of
+%   user goals (kb:goal/1) to max_actions. Outcome is plan(Partial) for
+%   the first plan found, Bound the bound it was found at; otherwise
+%   Outcome is no_plan(MaxActions, UnmetGoal), UnmetGoal the goal that
+%   failed at the deepest step of the last round, and Bound = MaxActions.
+%   Options are checked by spar:phase1/3.
+
+phase1_search(Options, Outcome, Bound) :-
+    option(max_actions(Max), Options, 12),
+    option(max_steps(Budget), Options, 20000),
+    aggregate_all(count, kb:goal(_), NGoals),
+    Lo is min(NGoals, Max),
+    Spent = steps(0),
+    rounds(Lo, Max, Budget-Spent, none, Options, Outcome, Bound).
+
+%   rounds(+B, +Max, +Budget, +Unmet0, +Options, -Outcome, -Bound): search
+%   with bound B, then B+1, ...; stop early when a round failed without
+%   the bound ever refusing an action (a larger bound would search the
+%   same tree), or when the step budget is spent (then the last bound
+%   searched completely is reported, with its unmet goal Unmet0).
+
+rounds(B, Max, Budget, Unmet0, Options, Outcome, Bound) :-
+    Recorder = failures(-1, none, false, Budget),
+    initial_plan(B, Options, Plan0),
+    set_deepest_of_plan(Recorder, Plan0, Plan1),
+    note(Plan1, "~n=== phase 1, at most ~d actions ===~n", [B]),
+    catch(( solve(Plan1, Plan) -> Found = true ; Found = false ),
+          spar_step_budget, Found = budget),
+    (   Found == true
+    ->  plan_partial(Plan, Partial),
+        Outcome = plan(Partial),
+        Bound = B
+    ;   Found == false,
+        B < Max,
+        arg(3, Recorder, true)
+    ->  B1 is B + 1,
+        unmet_goal(Recorder, Unmet1),
+        rounds(B1, Max, Budget, Unmet1, Options, Outcome, Bound)
+    ;   (   Found == budget
+        ->  Bound is B - 1,
+            note(Plan1, "~nstep budget spent at bound ~d~n", [B]),
+            (   Unmet0 == none -> unmet_goal(Recorder, Unmet) ; Unmet = Unmet0 )
+        ;   Bound = Max,
+            unmet_goal(Recorder, Unmet)
+        ),
+        note(Plan1, "~nno plan of at most ~d actions: ~q~n", [Bound, Unmet]),
+        Outcome = no_plan(Bound, Unmet)
+    ).
+
+unmet_goal(Recorder, Unmet) :-
+    arg(2, Recorder, Unmet0),
+    (   Unmet0 == none                    % nothing recorded: the first goal
+    ->  findall(G, kb:goal(G), [G1|_]),
+        Unmet = op(top_1, finish, G1)
+    ;   Unmet = Unmet0
+    ).
+
+%!  initial_plan(+Bound, +Options, -Plan) is det.
+%
+%   The null plan: no actions, the user's goals (kb:goal/1, in order) on
+%   the operational stack as op(top_N, finish, Goal).
+
+initial_plan(Bound, Options, Plan) :-
+    option(declobber(Methods), Options, [promotion, white_knight]),
+    option(trace(Trace), Options, false),
+    (   option(oracle(Oracle), Options)
+    ->  cms_empty(Oracle, Net)
+    ;   cms_empty(Net)
+    ),
+    findall(G, kb:goal(G), Goals),
+    foldl(top_goal, Goals, Tops, [], Ids),
+    make_plan([ net(Net), ids(Ids), ops(Tops), bound(Bound),
+                methods(Methods), trace(Trace), deepest(failures(-1, none, false, 0-steps(0))) ],
+              Plan).
+
+top_goal(G, op(Id, finish, G), Ids0, Ids) :-
+    gensym(top_, Id, Ids0, Ids).
+
+%!  solve(+Plan0, -Plan) is nondet.
+%
+%   The loop of Sec. 2: Plan satisfies every goal of Plan0's stacks.
+%   Operational goals first; geometric goals only when the operational
+%   stack is empty.
+
+solve(Plan0, Plan) :-
+    catch(solve_(Plan0, Plan), backjump(_), fail).
+
+solve_(Plan0, Plan) :-
+    plan_ops(Plan0, Ops),
+    plan_geos(Plan0, Geos),
+    (   Ops = [Goal|Rest]
+    ->  set_ops_of_plan(Rest, Plan0, Plan1),
+        step(Goal, Plan1, Plan)
+    ;   Geos = [Goal|Rest]
+    ->  set_geos_of_plan(Rest, Plan0, Plan1),
+        step(Goal, Plan1, Plan)
+    ;   note(Plan0, "~nall goals satisfied~n", []),
+        Plan = Plan0
+    ).
+
+%   step(+Goal, +Plan0, -Plan): one iteration of the loop, then the rest of
+%   the loop (so that a later step can jump back here).
+%
+%   A goal without any way to satisfy it is recorded (its step and
+%   bindings) as the search backtracks. An operational goal backtracks
+%   chronologically. A geometric goal the CMS refuses jumps back
+%   (conflict-directed backjumping) to the latest step whose choice could
+%   make the CMS answer differently, skipping the choice points of the
+%   steps in between, which can only add actions and constraints and so
+%   can never turn the refusal into success (conflict_steps/3).
+
+step(Goal, Plan0, Plan) :-
+    spend_step(Plan0),
+    plan_steps(Plan0, K0),
+    K is K0 + 1,
+    set_steps_of_plan(K, Plan0, Plan1),
+    trace_step(K, Goal, Plan1),
+    step(Goal, K, Plan1, Plan).
+
+step(Goal, K, Plan0, Plan) :-
+    Goal = op(_, _, _),
+    (   satisfy_op(Goal, Plan0, Plan1)
+    *-> (   true
+        ;   note(Plan0, "step ~d: backtracking into ~q~n", [K, Goal]),
+            fail
+        ),
+        add_history(K, Goal, Plan0, Plan1, Plan2),
+        catch(solve_(Plan2, Plan), backjump(Ks), jump(K, Ks, Plan0))
+    ;   note(Plan0, "step ~d: cannot satisfy ~q~n", [K, Goal]),
+        record_failure(K, Goal, Plan0),
+        fail
+    ).
+step(Goal, K, Plan0, Plan) :-
+    Goal = geo(_, _, _, _),
+    geo_step(Goal, Plan0, Result),
+    (   Result = ok(Plan1)
+    ->  solve_(Plan1, Plan)
+    ;   Result = refused(Vars),
+        record_failure(K, Goal, Plan0),
+        conflict_steps(Vars, Plan0, Ks),
+        note(Plan0, "step ~d: cannot satisfy ~q, backjump to one of steps ~w~n",
+             [K, Goal, Ks]),
+        throw(backjump(Ks))
+    ).
+
+jump(K, Ks, Plan) :-
+    (   memberchk(K, Ks)
+    ->  fail
+    ;   note(Plan, "  step ~d skipped~n", [K]),
+        throw(backjump(Ks))
+    ).
+
+%   add_history(+K, +Goal, +Plan0, +Plan1, -Plan): remember what step K
+%   decided for an operational goal: its condition as bound and the
+%   actions it added.
+
+add_history(K, Goal, Plan0, Plan1, Plan) :-
+    (   Goal = op(_, _, Cond)
+    ->  plan_actions(Plan0, As0),
+        plan_actions(Plan1, As1),
+        length(As0, N0),
+        length(New, N0),
+        append(NewActions, New, As1),
+        plan_history(Plan1, H0),
+        set_history_of_plan([h(K, Cond, NewActions)|H0], Plan1, Plan)
+    ;   Plan = Plan1
+    ).
+
+%!  conflict_steps(+Vars, +Plan, -Ks) is det.
+%
+%   The steps whose choices may have caused a CMS refusal that depends
+%   only on the constraints on the network variables Vars (cms_try/4):
+%   only a step that bound one of Vars (its condition mentions it) or
+%   added an action mentioning one can change those constraints; every
+%   other choice only adds actions, orderings and constraints elsewhere,
+%   and more constraints never turn a refusal into success. Ks is in
+%   decreasing order.
+
+conflict_steps(Vars, Plan, Ks) :-
+    plan_history(Plan, History),
+    findall(K, ( member(h(K, Cond, New), History),
+                 mentions_any(Cond-New, Vars) ),
+            Ks).
+
+mentions_any(Term, Atoms) :-
+    sub_term(X, Term),
+    atom(X),
+    ord_memberchk(X, Atoms),
+    !.
+
+%   satisfy_op(+Goal, +Plan0, -Plan): Sec. 4.1, establishment then
+%   declobbering (establish.pl).
+
+satisfy_op(Goal, Plan0, Plan) :-
+    establish(Goal, Plan0, Plan1, E),
+    declobber(Goal, E, Plan1, Plan2),
+    add_satisfied(Goal, E, Plan2, Plan).
+
+add_satisfied(Goal, E, Plan0, Plan) :-
+    plan_sat(Plan0, Sat),
+    set_sat_of_plan([sat(Goal, E)|Sat], Plan0, Plan).
+
+record_failure(K, Goal, Plan) :-
+    plan_deepest(Plan, Recorder),
+    arg(1, Recorder, K0),
+    (   K > K0
+    ->  nb_setarg(1, Recorder, K),
+        nb_setarg(2, Recorder, Goal)
+    ;   true
+    ).
+
+%   spend_step(+Plan): count a step against the budget of the phase1
+%   call (all rounds together); throw spar_step_budget when it is spent.
+
+spend_step(Plan) :-
+    plan_deepest(Plan, Recorder),
+    arg(4, Recorder, Budget-Spent),
+    arg(1, Spent, N0),
+    N is N0 + 1,
+    nb_setarg(1, Spent, N),
+    (   Budget > 0, N > Budget
+    ->  throw(spar_step_budget)
+    ;   true
+    ).
+
+%!  bound_hit(+Plan) is det.
+%
+%   Note that the bound refused a new action in this round.
+
+bound_hit(Plan) :-
+    plan_deepest(Plan, Recorder),
+    nb_setarg(3, Recorder, true).
+
+%!  satisfy_geo(+Goal, +Plan0, -Plan) is semidet.
+%
+%   Sec. 4.2: the operational conditions of geo(Id, A, Constraint, Conds)
+%   are satisfied already (the operational stack is empty); find their
+%   establishers and ask the CMS to add Constraint. Committed: the CMS's
+%   answer is final, and a refusal fails the goal (the network of Plan0
+%   stays in force).
+
+satisfy_geo(Goal, Plan0, Plan) :-
+    geo_step(Goal, Plan0, ok(Plan)).
+
+%   geo_step(+Goal, +Plan0, -Result): ok(Plan) or refused(Vars), Vars the
+%   network variables the refusal depends on (cms:cms_try/4).
+
+geo_step(Goal, Plan0, Result) :-
+    Goal = geo(_, A, Constraint, Conds),
+    plan_sat(Plan0, Sat),
+    maplist(establisher(Sat, A), Conds, Es),
+    geo_objects(Constraint, Conds, Objects),
+    plan_net(Plan0, Net0),
+    cms_try(Constraint, Objects, Net0, Answer),
+    (   Answer = ok(Net)
+    ->  note(Plan0, "  CMS adds ~q~n", [Constraint]),
+        set_net_of_plan(Net, Plan0, Plan1),
+        add_satisfied(Goal, Es, Plan1, Plan),
+        Result = ok(Plan)
+    ;   Answer = refused(Reason, Vars),
+        note(Plan0, "  CMS refuses ~q (~w: ~q)~n", [Constraint, Reason, Vars]),
+        Result = refused(Vars)
+    ).
+
+establisher(Sat, A, Cond, E) :-
+    (   member(sat(op(_, A1, C1), E0), Sat),
+        A1 == A, C1 == Cond
+    ->  E = E0
+    ;   E = unknown
+    ).
+
+%!  plan_partial(+Plan, -Partial) is det.
+%
+%   The partial plan of phase 1: partial(Actions, Order, Net, Satisfied),
+%   the plan actions newest first, the ordering graph (ugraph), the CMS
+%   network and the satisfied goals with their establishers.
+
+plan_partial(Plan, partial(Actions, Order, Net, Sat)) :-
+    plan_actions(Plan, Actions),
+    plan_order(Plan, Order),
+    plan_net(Plan, Net),
+    plan_sat(Plan, Sat).
+
+                 /*******************************
+                 *            TRACE             *
+                 *******************************/
+
+%!  note(+Plan, +Format, +Args) is det.
+%
+%   Print to current output if Plan traces.
+
+note(Plan, Format, Args) :-
+    (   plan_trace(Plan, true)
+    ->  format(Format, Args)
+    ;   true
+    ).
+
+%   trace_step(+K, +Goal, +Plan): the stacks and plan actions in the
+%   layout of Figs. 21-22, then the goal selected.
+
+trace_step(K, Goal, Plan) :-
+    (   plan_trace(Plan, true)
+    ->  plan_ops(Plan, Ops),
+        plan_geos(Plan, Geos),
+        plan_actions(Plan, Actions),
+        \+ \+ ( name_variables([Goal, Ops, Geos, Actions]),
+                format("~n--- step ~d: ~W~n", [K, Goal, [quoted(true), numbervars(true)]]),
+                format("OPERATIONAL GOAL STACK~n"),
+                forall(member(G, Ops), print_goal(G)),
+                format("GEOMETRIC GOAL STACK~n"),
+                forall(member(G, Geos), print_goal(G)),
+                format("PLAN ACTIONS~n"),
+                forall(member(A, Actions), print_action(A)) )
+    ;   true
+    ).
+
+%!  print_goal(+Goal) is det.
+%
+%   Print a goal as Figs. 21-22 do: a geometric goal over several lines,
+%   long label lists shortened to [first, second, ... last].
+
+print_goal(op(Id, A, Cond)) :-
+    format("  op(~q, ~q, ~W)~n", [Id, A, Cond, [quoted(true), numbervars(true)]]).
+print_goal(geo(Id, A, C, Conds)) :-
+    short_lists(C, C1),
+    format("  geo(~q, ~q,~n      ~W", [Id, A, C1, [quoted(true), numbervars(true)]]),
+    forall(member(X, Conds),
+           format(",~n      ~W", [X, [quoted(true), numbervars(true)]])),
+    format(")~n").
+
+%!  print_action(+Action) is det.
+%
+%   Print a plan action as Fig. 23: action(Id, Term).
+
+print_action(action(Id, Term, _, _, _)) :-
+    format("  action(~q, ~W)~n", [Id, Term, [quoted(true), numbervars(true)]]).
+
+short_lists(T0, T) :-
+    (   is_list(T0), length(T0, N), N > 4
+    ->  T0 = [A, B|_], last(T0, Z),
+        T = [A, B, '...', Z]
+    ;   compound(T0)
+    ->  T0 =.. [F|As0],
+        maplist(short_lists, As0, As),
+        T =.. [F|As]
+    ;   T = T0
+    ).
+
+%   name_variables(+Terms): bind the unbound plan variables as the figures
+%   name them: Grasp_N, Pos_N, else V_N.
+
+name_variables(Terms) :-
+    term_variables(Terms, Vs),
+    foldl(name_variable(Terms), Vs, [], _).
+
+name_variable(Terms, V, Counts0, Counts) :-
+    (   sub_term(S, Terms), compound(S),
+        ( S = holding(_, W) ; S = reachable(W, _) ), W == V
+    ->  Base = 'Grasp'
+    ;   sub_term(S, Terms), compound(S),
+        S = part_location(_, W), W == V
+    ->  Base = 'Pos'
+    ;   Base = 'V'
+    ),
+    (   selectchk(Base-N0, Counts0, Rest) -> true ; N0 = 0, Rest = Counts0 ),
+    N is N0 + 1,
+    Counts = [Base-N|Rest],
+    format(atom(Name), "~w_~d", [Base, N]),
+    V = '$VAR'(Name).

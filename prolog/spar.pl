@@ -1,0 +1,281 @@
+/*  spar-py: the planner's entry points (phase 1 of Sec. 2) and the partial
+    plan it returns.
+
+    Load this file; it loads the rest (Fig. 1, one module per box):
+
+      goals.pl      goal stacks, satisfied list, the loop, geometric goals
+      establish.pl  establishment, clobbering, promotion, white knights
+      ordering.pl   the ordering graph: prior_to/2, cycles, linearisations
+      cms.pl        the geometric constraint network
+      csp.pl        network consistency (Figs. 16-17), AC-3, solutions
+      kb.pl         the knowledge base (module kb), loaded from Python
+      foreign.pl    the calls into Python
+      ../kb/templates/actions.pl   templates and rules (Figs. 2-6)
+      ../kb/templates/sensing.pl   Figs. 11-13, for phase 2
+
+    Terms:
+
+      Outcome  = plan(Partial) | no_plan(MaxActions, UnmetGoal)
+      Partial  = partial(Actions, Order, Net, Satisfied)
+                   Actions    instantiated templates, newest first (Fig. 23):
+                              action(Id, Term, preconditions(Ops, Geos),
+                                     addlist(Adds), dellist(Dels))
+                   Order      the ordering graph (a ugraph over action ids)
+                   Net        the CMS network (cms.pl)
+                   Satisfied  sat(Goal, Establisher) for every goal met
+      Instance = instance(Steps, Bindings)
+                   Steps      the actions in an execution order, every plan
+                              variable replaced by its label
+                   Bindings   Var = Label for every network variable
+      Goals    = op(Id, ActionId, Cond) | geo(Id, ActionId, Constraint, Conds)
+*/
+:- module(spar,
+          [ plan_phase1/2,           % +Problem, -Partial
+            phase1/3,                % +Problem, +Options, -Outcome
+            partial_dict/2,          % +Partial, -Dict
+            print_partial/1,         % +Partial
+            partial_instances/2,     % +Partial, -Instance
+            partial_actions/2,       % +Partial, -Actions
+            partial_ordering/2,      % +Partial, -PriorTos
+            partial_network/2        % +Partial, -Net
+          ]).
+:- use_module(library(error)).
+:- use_module(library(lists)).
+:- use_module(library(apply)).
+:- use_module(library(option)).
+:- use_module(library(pairs)).
+:- use_module(library(yall)).
+:- use_module(kb).
+:- use_module(foreign).
+:- use_module(csp).
+:- use_module(ordering).
+:- use_module(cms).
+:- use_module(establish).
+:- use_module(goals).
+:- use_module('../kb/templates/actions').
+:- use_module('../kb/templates/sensing').
+
+:- meta_predicate phase1(+, :, -).
+
+%!  plan_phase1(+Problem, -Partial) is semidet.
+%
+%   Phase 1 with the default options: Partial satisfies every operational
+%   and geometric goal of the loaded problem Problem (kb:problem/1). Fails
+%   if there is no plan of at most 12 actions.
+%
+%   @error existence_error(problem, Problem) if Problem is not loaded.
+
+plan_phase1(Problem, Partial) :-
+    phase1(Problem, [], Outcome),
+    Outcome = plan(Partial).
+
+%!  phase1(+Problem, +Options, -Outcome) is det.
+%
+%   Run phase 1 on the loaded problem Problem. Outcome is plan(Partial) or
+%   no_plan(MaxActions, UnmetGoal): no plan of at most MaxActions actions,
+%   UnmetGoal the goal that failed at the deepest step of the search with
+%   that bound. Options:
+%
+%     - max_actions(N)   the largest plan tried (default 12); the bound
+%                        rises from the number of goals to N
+%     - trace(Bool)      print the goal stacks and plan actions at each
+%                        step (Figs. 21-22) to current output (false)
+%     - declobber(Ms)    the declobbering methods, in the order tried
+%                        (default [promotion, white_knight])
+%     - oracle(Closure)  compute arc pairs with call(Closure, Constraint,
+%                        Objects, Gs, Ps, Pairs) instead of
+%                        foreign:arc_pairs/5; a test double for Prolog-only
+%                        tests
+%
+%   ==
+%   ?- phase1(peg_in_block, [max_actions(6)], plan(P)), print_partial(P).
+%   ==
+%
+%   @error existence_error(problem, Problem) if Problem is not loaded.
+%   @error type_error(nonneg, N), type_error(boolean, B),
+%          domain_error(declobber_method, M) for bad options.
+
+phase1(Problem, M:Options0, Outcome) :-
+    must_be(atom, Problem),
+    must_be(list, Options0),
+    (   kb:problem(Problem)
+    ->  true
+    ;   existence_error(problem, Problem)
+    ),
+    maplist(check_option(M), Options0, Options),
+    phase1_search(Options, Outcome, _).
+
+check_option(_, max_actions(N), max_actions(N)) :- !,
+    must_be(nonneg, N).
+check_option(_, trace(B), trace(B)) :- !,
+    must_be(boolean, B).
+check_option(_, declobber(Ms), declobber(Ms)) :- !,
+    must_be(list(atom), Ms),
+    forall(member(X, Ms),
+           (   known_declobber_method(X)
+           ->  true
+           ;   domain_error(declobber_method, X)
+           )).
+check_option(M, oracle(O0), oracle(O)) :- !,
+    must_be(callable, O0),
+    strip_module(M:O0, Mod, O1),
+    O = Mod:O1.
+check_option(_, Option, Option).
+
+%!  partial_actions(+Partial, -Actions:list) is det.
+%
+%   The plan actions as action(Id, Term), newest first (Fig. 23).
+
+partial_actions(partial(Actions, _, _, _), List) :-
+    maplist([action(Id, T, _, _, _), action(Id, T)]>>true, Actions, List).
+
+%!  partial_ordering(+Partial, -PriorTos:list) is det.
+%
+%   The ordering constraints as prior_to(A1, A2), in standard order.
+
+partial_ordering(partial(_, Order, _, _), PriorTos) :-
+    ordering_arcs(Order, PriorTos).
+
+%!  partial_network(+Partial, -Net) is det.
+%
+%   The CMS network of the partial plan (see cms.pl).
+
+partial_network(partial(_, _, Net, _), Net).
+
+%!  partial_instances(+Partial, -Instance) is nondet.
+%
+%   A plan instance for phase 2 (Sec. 3.3): a solution of the network
+%   combined with a linearisation of the ordering graph. Instance is
+%   instance(Steps, Bindings): Steps the instantiated templates in
+%   execution order with every network variable replaced by its label,
+%   Bindings the Var = Label pairs in standard order of Var. Backtracking
+%   enumerates solutions (outer) and linearisations (inner), lazily.
+
+partial_instances(partial(Actions, Order, Net, _), instance(Steps, Bindings)) :-
+    cms_solution(Net, Assignment),
+    linearisation(Order, Ids),
+    maplist(instance_step(Actions, Assignment), Ids, Steps),
+    maplist([V-L, V=L]>>true, Assignment, Bindings).
+
+instance_step(Actions, Assignment, Id, Step) :-
+    memberchk(action(Id, T, Pre, Add, Del), Actions),
+    substitute(Assignment, action(Id, T, Pre, Add, Del), Step).
+
+substitute(Assignment, T0, T) :-
+    (   atom(T0), memberchk(T0-L, Assignment)
+    ->  T = L
+    ;   compound(T0)
+    ->  T0 =.. [F|As0],
+        maplist(substitute(Assignment), As0, As),
+        T =.. [F|As]
+    ;   T = T0
+    ).
+
+%!  partial_dict(+Partial, -Dict) is det.
+%
+%   Partial as a dict for janus (the JSON of issue 4):
+%
+%     _{actions: [_{id, term, name, args}],    newest first (Fig. 23)
+%       ordering: [[Before, After]],
+%       variables: _{Var: [Label]},             label sets after AC-3
+%       raw_variables: _{Var: [Label]},         as posted (Fig. 25)
+%       arcs: [_{vars: [V1, V2], pairs: [[L1, L2]]}]}
+%
+%   Terms and arguments are strings written with ~q; ids, variables and
+%   labels are atoms.
+
+partial_dict(Partial, Dict) :-
+    Partial = partial(Actions, _, Net, _),
+    maplist(action_dict, Actions, ADicts),
+    partial_ordering(Partial, PriorTos),
+    maplist([prior_to(A, B), [A, B]]>>true, PriorTos, Ordering),
+    cms_nodes(Net, Raw),
+    (   cms_pruned_nodes(Net, Pruned) -> true ; Pruned = Raw ),
+    dict_pairs(RawDict, _, Raw),
+    dict_pairs(PrunedDict, _, Pruned),
+    cms_arcs(Net, Arcs),
+    maplist(arc_dict, Arcs, ArcDicts),
+    Dict = _{actions: ADicts, ordering: Ordering, variables: PrunedDict,
+             raw_variables: RawDict, arcs: ArcDicts}.
+
+action_dict(action(Id, Term, _, _, _),
+            _{id: Id, term: S, name: Name, args: ArgStrings}) :-
+    format(string(S), "~q", [Term]),
+    Term =.. [Name|Args],
+    maplist([A, AS]>>format(string(AS), "~q", [A]), Args, ArgStrings).
+
+arc_dict(arc(V1, V2, Pairs), _{vars: [V1, V2], pairs: Ps}) :-
+    maplist([A/B, [A, B]]>>true, Pairs, Ps).
+
+%!  print_partial(+Partial) is det.
+%
+%   Print Partial to current output: the plan actions as Fig. 23, the
+%   ordering constraints, the network arcs and label sets as Fig. 25
+%   (`grasp_1-pos_1: [p1G1/p2P1, ...]`), and the label sets after arc
+%   consistency.
+
+print_partial(Partial) :-
+    Partial = partial(Actions, _, Net, _),
+    format("PLAN ACTIONS~n"),
+    forall(member(A, Actions), print_action(A)),
+    partial_ordering(Partial, PriorTos),
+    format("ORDERING~n"),
+    forall(member(P, PriorTos), format("  ~q~n", [P])),
+    format("NETWORK ARCS~n"),
+    cms_arcs(Net, Arcs),
+    forall(member(arc(V1, V2, Pairs), Arcs),
+           print_labelled(V1-V2, Pairs)),
+    format("LABEL SETS~n"),
+    cms_nodes(Net, Raw),
+    forall(member(V-Ls, Raw), print_labels(V, Ls)),
+    format("LABEL SETS AFTER ARC CONSISTENCY~n"),
+    (   cms_pruned_nodes(Net, Pruned)
+    ->  forall(member(V-Ls, Pruned), print_labels(V, Ls))
+    ;   format("  (inconsistent)~n")
+    ).
+
+print_labels(V, Labels) :-
+    map_list_to_pairs(natural_key, Labels, Keyed),
+    keysort(Keyed, Sorted),
+    pairs_values(Sorted, Natural),
+    print_labelled(V, Natural).
+
+%   print_labelled(+Head, +List): "  Head: [a,b,...]" wrapped at 76 columns.
+
+print_labelled(Head, List) :-
+    format(string(H), "  ~q: [", [Head]),
+    string_length(H, Col0),
+    format("~s", [H]),
+    foldl(print_item(Col0), List, Col0-first, _),
+    format("]~n").
+
+print_item(Indent, X, Col0-State, Col-later) :-
+    format(string(S), "~q", [X]),
+    string_length(S, Len),
+    (   State == first
+    ->  Sep = "", Col1 = Col0
+    ;   Col0 + Len + 1 > 76
+    ->  format(",~n~*c", [Indent, 0'\s]), Sep = "", Col1 = Indent
+    ;   Sep = ",", Col1 = Col0 + 1
+    ),
+    format("~s~s", [Sep, S]),
+    Col is Col1 + Len.
+
+%   natural_key(+Label, -Key): p1G11 sorts after p1G2.
+
+natural_key(Label, Key) :-
+    atom_codes(Label, Codes),
+    phrase(chunks(Key), Codes).
+
+chunks([C|Cs]) --> chunk(C), !, chunks(Cs).
+chunks([]) --> [].
+
+chunk(N) --> digit(D), digits(Ds), { number_codes(N, [D|Ds]) }.
+chunk(A) --> nondigit(C), nondigits(Cs), { atom_codes(A, [C|Cs]) }.
+
+digits([D|Ds]) --> digit(D), !, digits(Ds).
+digits([]) --> [].
+digit(D) --> [D], { code_type(D, digit) }.
+nondigits([C|Cs]) --> nondigit(C), !, nondigits(Cs).
+nondigits([]) --> [].
+nondigit(C) --> [C], { \+ code_type(C, digit) }.
