@@ -403,3 +403,27 @@ def test_manipulator_error_is_a_rotation_about_tool_z() -> None:
     M = value(m.matrix(), {"thetagr": 0.3, "dxgr": 1.0, "dygr": 2.0, "dzgr": 3.0})
     np.testing.assert_allclose(M, geometry.trans(1, 2, 3) @ geometry.rotz(0.3), atol=1e-12)
     assert isinstance(m, ErrorTm)
+
+
+def test_sec6_printed_expression_reproduces_with_the_constant_sign_fixed() -> None:
+    """Sec. 6 prints y(P_1^-1 C_1) with a constant -2.0 and reports INF = 3.2793. As printed
+    the expression is negative everywhere (INF -0.7207: the constraint would fail); with
+    +2.0 instead (its value at zero error is then 3.5 = (W_m + W_p) / 2, as it must be)
+    and Table 2's bounds (angles in degrees), INF is the paper's 3.2793."""
+    def printed(const: float) -> tuple[ca.SX, Registry]:
+        reg = Registry()
+        tg = reg.new("thetagr", -0.001 * DEG, 0.001 * DEG)
+        dxg, dyg = reg.new("dxgr", -0.001, 0.001), reg.new("dygr", -0.001, 0.001)
+        to = reg.new("theta_o", -5.5 * DEG, 5.5 * DEG)
+        dxo, dyo = reg.new("dx_o", -0.11, 0.11), reg.new("dy_o", -0.11, 0.11)
+        c, s = ca.cos, ca.sin
+        e = (const + 3.0 * c(tg) * c(to) + c(tg) * dxo + s(tg) + s(tg) * dxg - c(tg) * s(to) - 1.5 * c(tg)
+             - 3.0 * s(tg) * s(to) - c(to) * s(tg) - s(tg) * dyo - c(tg) * dyg)
+        return e, reg
+
+    e, reg = printed(-2.0)
+    assert Bounder(e).bounds(reg.box(e)).hi < 0
+    e, reg = printed(2.0)
+    assert float(value(e)) == pytest.approx(3.5)
+    r = Bounder(e).bounds(reg.box(e))
+    assert round(r.lo, 4) == 3.2793 and r.lo <= r.lo_found and r.tolerance_reached
