@@ -20,6 +20,7 @@
 :- module(uncertainty,
           [ phase2/3,              % +Partial, +Options, -Result
             check_instance/2,      % +Steps, -Augmented
+            check_instance/3,      % +Steps, +Bound, -Augmented
             instance_steps/3,      % +Instance, -Steps, -Bindings
             ur_dict/2,             % +Result, -Dict
             print_ur/1             % +Result
@@ -64,9 +65,9 @@ phase2(Partial, Options, Result) :-
 examine(Instance, State, Aug) :-
     arg(3, State, N0), N is N0 + 1, nb_setarg(3, State, N),
     instance_steps(Instance, Steps, Bindings),
-    check_instance(Steps, aug(S, E, V, R, C, G)),
-    Aug = aug(S, E, V, R, C, G, Bindings),
     arg(2, State, BestE),
+    check_instance(Steps, BestE, aug(S, E, V, R, C, G)),
+    Aug = aug(S, E, V, R, C, G, Bindings),
     (   (BestE == inf ; E < BestE)
     ->  nb_setarg(1, State, Aug), nb_setarg(2, State, E)
     ;   true
@@ -90,9 +91,15 @@ instance_steps(instance(Actions, Bindings), Steps, Bindings) :-
 %   angles, placement). Fails if the instance cannot be executed at all (a
 %   geometric precondition fails: no placement, no joint solution).
 
-check_instance(Steps, aug(Final, Errors, Verifs, Recovs, Verdicts, Geometry)) :-
+check_instance(Steps, Aug) :-
+    check_instance(Steps, inf, Aug).
+
+%   check_instance(+Steps, +Bound, -Aug): as check_instance/2, but fails as
+%   soon as the instance has Bound errors (it cannot beat the best so far).
+
+check_instance(Steps, Bound, aug(Final, Errors, Verifs, Recovs, Verdicts, Geometry)) :-
     must_be(list, Steps),
-    remedy_loop(Steps, [], Final, Failed, Verdicts, Geometry),
+    remedy_loop(Steps, [], Bound, Final, Failed, Verdicts, Geometry),
     length(Failed, Errors),
     maplist(failed_step(Final), Failed, FailedSteps),
     maplist(verification, FailedSteps, Verifs),
@@ -106,15 +113,18 @@ failed_step(Steps, Id, step(Id, A)) :-
 %   remedies in order; an action no remedy helps is given up (it counts as
 %   an error) and the run goes on past it.
 
-remedy_loop(Steps, GivenUp, Final, Failed, Verdicts, Geometry) :-
+remedy_loop(Steps, GivenUp, Bound, Final, Failed, Verdicts, Geometry) :-
     run(Steps, GivenUp, Result),
     (   Result = ok(Verdicts, Geometry)
     ->  Final = Steps, reverse(GivenUp, Failed)
     ;   Result = failed(Step, Before)
     ->  (   remedy(Step, Before, Steps, GivenUp, Steps1)
-        ->  remedy_loop(Steps1, GivenUp, Final, Failed, Verdicts, Geometry)
+        ->  remedy_loop(Steps1, GivenUp, Bound, Final, Failed, Verdicts, Geometry)
         ;   Step = step(Id, _),
-            remedy_loop(Steps, [Id|GivenUp], Final, Failed, Verdicts, Geometry)
+            length(GivenUp, N0),
+            N is N0 + 1,
+            (Bound == inf -> true ; N < Bound),
+            remedy_loop(Steps, [Id|GivenUp], Bound, Final, Failed, Verdicts, Geometry)
         )
     ).
 
@@ -142,7 +152,7 @@ run([Step|Rest], GivenUp, W0, Prefix, Vs0, Gs0, Result) :-
     ->  Vs1 = Vs0
     ;   Vs1 = [verdict(Id, Action, Checks)|Vs0]
     ),
-    (   member(C, Checks), get_dict(kind, C, "geometric"), \+ satisfied(C)
+    (   member(C, Checks), get_dict(kind, C, geometric), \+ satisfied(C)
     ->  Result = infeasible(Step)
     ;   \+ all_satisfied(Checks), \+ memberchk(Id, GivenUp)
     ->  reverse(Prefix, Before), Result = failed(Step, Before)
@@ -342,7 +352,7 @@ print_step(Geo, I, Id, A) :-
 
 print_verdict(Id, C) :-
     (   satisfied(C) -> V = "satisfied" ; V = "NOT satisfied" ),
-    (   get_dict(kind, C, "geometric")
+    (   get_dict(kind, C, geometric)
     ->  format("  ~w ~w: ~w (~w)~n", [Id, C.constraint, V, C.description])
     ;   format("  ~w ~w: bound ~4f ~w ~w: ~w~n",
                [Id, C.constraint, C.bound, C.sense, C.threshold, V])

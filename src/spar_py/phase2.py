@@ -37,6 +37,7 @@ class World:
     placements: dict[str, pl.Placement | None]
     grasps: dict[str, str] = field(default_factory=dict)  # object -> grasp label while held
     joints: np.ndarray | None = None
+    key: tuple = ()  # what determines this world: the placements' key and the steps so far
 
 
 # ---------------------------------------------------------------------- set-up
@@ -45,7 +46,32 @@ class World:
 def new_world(cell: Cell, steps: list[Step]) -> World:
     """The initial world for an instance whose steps (in order) are ``steps``; chooses
     every put-down placement now, knowing the later actions on the object (Sec. 5.2.4)."""
-    return World(cell, ur.initial_world(cell, Registry()), choose_placements(cell, steps))
+    key, placements = _placements(cell, steps)
+    return World(cell, ur.initial_world(cell, Registry()), placements, key=(key,))
+
+
+#: Memo tables (bounded): placements per manipulation sequence; step results per world
+#: key. Phase 2 re-runs an instance from the start after each remedy it tries, and
+#: instances share prefixes; a world is fully determined by its key, so a step's result
+#: can be reused (its uncertainty variables stay in the registry they were made in).
+_PLACEMENTS: dict[tuple, dict[str, pl.Placement | None]] = {}
+_STEPS: dict[tuple, tuple[list[dict[str, Any]], "World", dict[str, Any]]] = {}
+_MEMO_LIMIT = 4096
+
+
+def _step_key(s: Step) -> tuple:
+    return (s["id"], s["name"], tuple(s["args"]))
+
+
+def _placements(cell: Cell, steps: list[Step]) -> tuple[tuple, dict[str, pl.Placement | None]]:
+    """choose_placements memoised per cell and manipulation sequence (sensing moves nothing)."""
+    manip = [s for s in steps if s["name"] in ("pickup", "putdown", "assemble")]
+    key = (id(cell), tuple(_step_key(s) for s in manip))
+    if key not in _PLACEMENTS:
+        if len(_PLACEMENTS) > _MEMO_LIMIT:
+            _PLACEMENTS.clear()
+        _PLACEMENTS[key] = choose_placements(cell, manip)
+    return key, _PLACEMENTS[key]
 
 
 def _grasp(cell: Cell, obj: str, label: str) -> Grasp:
@@ -114,7 +140,13 @@ def step(world: World, s: Step) -> tuple[list[dict[str, Any]], World, dict[str, 
     handler = STEPS.get(s["name"])
     if handler is None:
         raise SparValueError(f"phase 2 cannot execute {s['name']!r}")
-    return handler(world, s)
+    key = world.key + (_step_key(s),)
+    if key not in _STEPS:
+        if len(_STEPS) > _MEMO_LIMIT:
+            _STEPS.clear()
+        checks, after, geo = handler(world, s)
+        _STEPS[key] = (checks, replace(after, key=key), geo)
+    return _STEPS[key]
 
 
 def _arm(world: World, T: np.ndarray) -> tuple[np.ndarray | None, dict[str, Any]]:
