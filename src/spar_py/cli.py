@@ -7,13 +7,16 @@ line on stderr, never a traceback.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
+import tempfile
+from pathlib import Path
 from typing import Callable
 
 from . import __version__
 from .errors import KBError, PlanningTimeout, PrologError, SparError
 
-EXIT_OK, EXIT_FAIL, EXIT_INPUT, EXIT_INTERNAL = 0, 1, 2, 3
+EXIT_OK, EXIT_FAIL, EXIT_INPUT, EXIT_INTERNAL, EXIT_TIMEOUT = 0, 1, 2, 3, 4
 DEFAULT_PROBLEM = "kb/problems/peg_in_block.yaml"
 
 BANNER = """\
@@ -67,11 +70,78 @@ def cmd_repl(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+# ---------------------------------------------------------------------- plan
+
+
+def write_atomically(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` through a temporary file and a rename: never half a file."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w") as f:
+            f.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def cmd_plan(args: argparse.Namespace) -> int:
+    """Plan a problem; print the plan (or its JSON) and write pictures if asked."""
+    from .planner import Planner
+
+    planner = Planner(max_actions=args.max_actions, max_instances=args.max_instances,
+                      separation=not args.no_separation, timeout=args.timeout)
+    cell = planner.load_problem(args.problem)
+    plan = planner.plan(cell, phase1_only=args.phase1_only, trace=args.trace)
+    if args.json:
+        text = plan.dumps() + "\n"
+        if args.output:
+            write_atomically(Path(args.output), text)
+        else:
+            sys.stdout.write(text)
+    else:
+        sys.stdout.write(plan.trace)
+        if args.output:
+            write_atomically(Path(args.output), plan.dumps() + "\n")
+    for outdir in {d for d in (args.dot, args.png) if d}:
+        from .draw import write_pictures
+
+        paths = write_pictures(cell, plan.to_json(), Path(outdir))
+        print(f"spar: wrote {len(paths)} pictures to {outdir}", file=sys.stderr)
+    return EXIT_OK if plan.ok else EXIT_FAIL
+
+
+# ---------------------------------------------------------------------- regress
+
+
+def cmd_regress(args: argparse.Namespace) -> int:
+    """Check every problem under a directory against its expected outcome."""
+    from .regress import run_regression
+
+    return run_regression(Path(args.dir), jobs=args.jobs, update=args.update)
+
+
+# ---------------------------------------------------------------------- gen
+
+
+def cmd_gen(args: argparse.Namespace) -> int:
+    """Generate a problem (``spar gen assembly --parts N``)."""
+    from .gen import generate_assembly
+
+    path = generate_assembly(args.parts, Path(args.output))
+    print(path)
+    return EXIT_OK
+
+
 # ---------------------------------------------------------------------- main
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "kb_check": cmd_kb_check,
     "repl": cmd_repl,
+    "plan": cmd_plan,
+    "regress": cmd_regress,
+    "gen": cmd_gen,
 }
 
 
@@ -90,7 +160,57 @@ def build_parser() -> argparse.ArgumentParser:
     repl = sub.add_parser("repl", help="interactive Prolog toplevel with the planner loaded")
     repl.add_argument("problem", nargs="?", default=DEFAULT_PROBLEM)
     repl.set_defaults(func="repl")
+
+    plan = sub.add_parser("plan", help="plan a problem (phase 1 and phase 2)")
+    plan.add_argument("problem", help="a problem file, e.g. kb/problems/peg_in_block.yaml")
+    plan.add_argument("--json", action="store_true", help="print the plan as JSON (schema 1)")
+    plan.add_argument("-o", "--output", help="write the JSON to this file (atomically)")
+    plan.add_argument("--trace", action="store_true", help="print the goal stacks at each step (Figs. 21-22)")
+    plan.add_argument("--phase1-only", action="store_true", help="stop after the partial plan")
+    plan.add_argument("--max-actions", type=_positive_int, default=12, metavar="N",
+                      help="bound on the plan size (default 12)")
+    plan.add_argument("--max-instances", type=_positive_int, default=50, metavar="N",
+                      help="plan instances examined at most in phase 2 (default 50)")
+    plan.add_argument("--no-separation", action="store_true",
+                      help="declobber without separation, as the paper's planner")
+    plan.add_argument("--timeout", type=_positive_float, metavar="S", help="give up after S seconds")
+    plan.add_argument("--dot", metavar="DIR", help="write the ordering graph, network and cell pictures here")
+    plan.add_argument("--png", metavar="DIR", help="same as --dot (both write .dot and .png)")
+    plan.set_defaults(func="plan")
+
+    reg = sub.add_parser("regress", help="check every problem under DIR against its expected outcome")
+    reg.add_argument("dir", nargs="?", default="kb/problems")
+    reg.add_argument("-j", "--jobs", type=_positive_int, default=1, help="worker processes")
+    reg.add_argument("--update", action="store_true", help="accept the new outcomes as expected")
+    reg.set_defaults(func="regress")
+
+    gen = sub.add_parser("gen", help="generate problems")
+    gensub = gen.add_subparsers(dest="gen_command", required=True)
+    asm = gensub.add_parser("assembly", help="N pegs into N blocks, each block to be turned over")
+    asm.add_argument("--parts", type=_positive_int, required=True, metavar="N")
+    asm.add_argument("-o", "--output", default="out/gen", metavar="DIR")
+    asm.set_defaults(func="gen")
     return p
+
+
+def _positive_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, not {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, not {v}")
+    return v
+
+
+def _positive_float(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of seconds, not {text!r}") from None
+    if not v > 0 or v != v:
+        raise argparse.ArgumentTypeError(f"expected a positive number of seconds, not {text}")
+    return v
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -104,7 +224,7 @@ def main(argv: list[str] | None = None) -> None:
         code = EXIT_INPUT
     except PlanningTimeout as e:
         _err(f"timeout: {e}")
-        code = EXIT_FAIL
+        code = EXIT_TIMEOUT
     except PrologError as e:
         _err(f"prolog: {e.message.splitlines()[0] if e.message else e.term}")
         code = EXIT_INTERNAL
