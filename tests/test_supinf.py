@@ -398,10 +398,10 @@ N_POINTS = 2_000
 MAX_BOXES = 600
 
 
-@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.integers(0, 2**32 - 1), st.integers(1, 8))
 def test_sound_on_random_htm_products(seed: int, n: int) -> None:
-    """Fast default sample: 40 expressions, 2000 points each (the slow test does 200 x 10^5)."""
+    """Fast default sample: 100 expressions, 2000 points each (the slow test does 200 x 10^5)."""
     _random_case(seed, n)
 
 

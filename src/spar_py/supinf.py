@@ -16,16 +16,22 @@ the guarantee and removes most of the looseness:
    takes the corners of a box that avoids its branch cut and (-pi, pi] otherwise.
    A result that cannot be bounded (NaN: 0 * inf, a function outside its domain) is
    reported as (-inf, inf).
-2. **Refinement** (branch and bound), both ends at once: each box's lower bound is the
-   best of the natural interval extension and the mean-value form ``f(c) + G (X - c)``
-   (G the interval gradient); a variable whose interval derivative has constant sign is
-   fixed at the end that minimises (monotonicity; only on boxes where every operation is
-   continuous); other boxes are bisected on the variable with the largest
-   ``width * |derivative|``. Each pass evaluates the interval program once on all
-   frontier boxes plus their centres, whose (rigorous) values are the best points
-   found. The search stops when each bound is within ``max(abs_tol, rel_tol * width)``
-   of a value the function attains (``width`` the spread of attained values found) or
-   when ``max_boxes`` / ``max_time`` run out; :class:`BoundResult` says which.
+2. **Affine arithmetic** over the same instruction list (:class:`AffineProgram`): every
+   quantity is a centre plus a linear form in one noise symbol per input variable and
+   per nonlinear unary operation, plus a rigorous remainder. It keeps the correlations
+   that plain intervals lose, e.g. in ``(30 + d) cos(th) - 30 cos(th)`` or in the inverse
+   of a chain of transforms with long lever arms.
+3. **Refinement** (branch and bound), both ends at once: a box's lower bound is the best
+   of the natural interval extension, the mean-value form ``f(c) + G (X - c)`` (G the
+   interval gradient) and the affine form; a variable whose interval derivative has
+   constant sign is fixed at the end that minimises (monotonicity; only on boxes where
+   every operation is continuous); other boxes are bisected on the variable with the
+   largest ``width * |derivative|``. Values at points (box centres, rigorously; corners
+   chosen by the gradient or the affine form and single-coordinate flips of the best
+   points, in floating point) steer the search; the search stops when each bound is
+   within ``max(abs_tol, rel_tol * width)`` of a value the function attains (``width``
+   the spread of attained values found; the final claim is re-checked with rigorous
+   values) or when ``max_boxes`` / ``max_time`` run out; :class:`BoundResult` says which.
 
 Variables are named by their SX symbol names; a box is ``{name: (lo, hi)}``. Units are
 whatever the expression's are (the planner: cell length unit, radians).
