@@ -17,6 +17,8 @@
 */
 :- module(csp,
           [ csp/3,                  % +VarSet, +Net, -Result
+            choose_one/4,           % +Var, +Net, +PrevAssns, -Label
+            all_consistent/3,       % +Var/Label, +PrevAssns, +Net
             consistent/1,           % +Net
             solution/2,             % +Net, -Assignment
             ac3/2,                  % +Net, -PrunedNodes

@@ -183,10 +183,12 @@ solve_(Plan0, Plan) :-
     plan_ops(Plan0, Ops),
     plan_geos(Plan0, Geos),
     (   Ops = [Goal|Rest]
-    ->  set_ops_of_plan(Rest, Plan0, Plan1),
+    ->  trace_step(Goal, Plan0),
+        set_ops_of_plan(Rest, Plan0, Plan1),
         step(Goal, Plan1, Plan)
     ;   Geos = [Goal|Rest]
-    ->  set_geos_of_plan(Rest, Plan0, Plan1),
+    ->  trace_step(Goal, Plan0),
+        set_geos_of_plan(Rest, Plan0, Plan1),
         step(Goal, Plan1, Plan)
     ;   note(Plan0, "~nall goals satisfied~n", []),
         Plan = Plan0
@@ -208,7 +210,6 @@ step(Goal, Plan0, Plan) :-
     plan_steps(Plan0, K0),
     K is K0 + 1,
     set_steps_of_plan(K, Plan0, Plan1),
-    trace_step(K, Goal, Plan1),
     step(Goal, K, Plan1, Plan).
 
 step(Goal, K, Plan0, Plan) :-
@@ -389,22 +390,26 @@ note(Plan, Format, Args) :-
     ;   true
     ).
 
-%   trace_step(+K, +Goal, +Plan): the stacks and plan actions in the
-%   layout of Figs. 21-22, then the goal selected.
+%   trace_step(+Goal, +Plan): the goal stacks and plan actions of Plan in
+%   the layout of Figs. 21-22, then the goal about to be considered (the
+%   first of its stack).
 
-trace_step(K, Goal, Plan) :-
+trace_step(Goal, Plan) :-
     (   plan_trace(Plan, true)
-    ->  plan_ops(Plan, Ops),
+    ->  plan_steps(Plan, K0),
+        K is K0 + 1,
+        plan_ops(Plan, Ops),
         plan_geos(Plan, Geos),
         plan_actions(Plan, Actions),
-        \+ \+ ( name_variables([Goal, Ops, Geos, Actions]),
-                format("~n--- step ~d: ~W~n", [K, Goal, [quoted(true), numbervars(true)]]),
+        \+ \+ ( name_variables([Ops, Geos, Actions]),
+                format("~n--- step ~d~n", [K]),
                 format("OPERATIONAL GOAL STACK~n"),
                 forall(member(G, Ops), print_goal(G)),
                 format("GEOMETRIC GOAL STACK~n"),
                 forall(member(G, Geos), print_goal(G)),
                 format("PLAN ACTIONS~n"),
-                forall(member(A, Actions), print_action(A)) )
+                forall(member(A, Actions), print_action(A)),
+                format("considering ~W~n", [Goal, [quoted(true), numbervars(true), spacing(next_argument)]]) )
     ;   true
     ).
 
@@ -414,20 +419,24 @@ trace_step(K, Goal, Plan) :-
 %   long label lists shortened to [first, second, ... last].
 
 print_goal(op(Id, A, Cond)) :-
-    format("  op(~q, ~q, ~W)~n", [Id, A, Cond, [quoted(true), numbervars(true)]]).
+    write_options(O),
+    format("  op(~q, ~q, ~W)~n", [Id, A, Cond, O]).
 print_goal(geo(Id, A, C, Conds)) :-
+    write_options(O),
     short_lists(C, C1),
-    format("  geo(~q, ~q,~n      ~W", [Id, A, C1, [quoted(true), numbervars(true)]]),
-    forall(member(X, Conds),
-           format(",~n      ~W", [X, [quoted(true), numbervars(true)]])),
+    format("  geo(~q, ~q,~n      ~W", [Id, A, C1, O]),
+    forall(member(X, Conds), format(",~n      ~W", [X, O])),
     format(")~n").
+
+write_options([quoted(true), numbervars(true), spacing(next_argument)]).
 
 %!  print_action(+Action) is det.
 %
 %   Print a plan action as Fig. 23: action(Id, Term).
 
 print_action(action(Id, Term, _, _, _)) :-
-    format("  action(~q, ~W)~n", [Id, Term, [quoted(true), numbervars(true)]]).
+    write_options(O),
+    format("  action(~q, ~W)~n", [Id, Term, O]).
 
 short_lists(T0, T) :-
     (   is_list(T0), length(T0, N), N > 4

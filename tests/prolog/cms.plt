@@ -1,0 +1,138 @@
+/*  Tests of prolog/cms.pl: the geometric network of Sec. 5.2 with a
+    table-driven arc oracle (a test double for foreign:arc_pairs/5).
+
+    swipl -g run_tests -t halt tests/prolog/cms.plt
+*/
+:- use_module('../../prolog/spar').
+:- use_module('../../prolog/cms').
+:- use_module(fixtures/paper_cell).
+:- use_module(library(plunit)).
+:- use_module(library(apply)).
+
+:- begin_tests(cms_sec5_2, [setup(load_cell(hole_down))]).
+
+oracle(fixture_paper_cell:table_oracle(hole_down)).
+
+%   The peg's grasp node and its initial position, as after goal_7 of Sec. 6.
+
+peg_net(Net) :-
+    oracle(O),
+    cms_empty(O, N0),
+    spar_actions:get_all_grasps(peg, Gs),
+    cms_initial(member(grasp_1, Gs), N0, N1),
+    cms_initial_state(part_location(peg, init_pos1), N1, Net).
+
+test(default_oracle_is_python, O == foreign:arc_pairs) :-
+    cms_empty(cms(_, _, _, O)).
+
+test(initial_constraint_creates_node, L == [p2P1, p2P2]) :-
+    cms_empty(N0),
+    cms_initial(in_position_class(pos_1, [p2P2, p2P1]), N0, N),
+    cms_node(N, pos_1, L).
+
+test(initial_state_single_label, L == [tr1]) :-
+    peg_net(N),
+    cms_node(N, init_pos1, L).
+
+test(sec5_2_2_member_intersects, L == [p1G12, p1G3]) :-
+    peg_net(N0),
+    cms_add(member(grasp_1, [p1G3, p1G12, nosuch]), none, N0, N),
+    cms_node(N, grasp_1, L).
+
+test(member_empty_refused, R == refused(node, [grasp_1])) :-
+    peg_net(N0),
+    cms_try(member(grasp_1, [nosuch]), none, N0, R).
+
+test(fig25_reachable_arc, Arcs == [arc(grasp_1, init_pos1, [p1G12/tr1, p1G3/tr1, p1G7/tr1, p1G8/tr1])]) :-
+    peg_net(N0),
+    cms_add(reachable(grasp_1, init_pos1), peg, N0, N),
+    cms_arcs(N, Arcs).
+
+test(unary_prunes_arc, Arcs == [arc(grasp_1, init_pos1, [p1G3/tr1])]) :-
+    peg_net(N0),
+    cms_add(reachable(grasp_1, init_pos1), peg, N0, N1),
+    cms_add(member(grasp_1, [p1G1, p1G3]), none, N1, N),
+    cms_arcs(N, Arcs).
+
+test(raw_label_set_kept_by_arc, L == 20) :-
+    peg_net(N0),
+    cms_add(reachable(grasp_1, init_pos1), peg, N0, N),
+    cms_node(N, grasp_1, Ls),
+    length(Ls, L).
+
+test(pruned_label_set, L == [p1G12, p1G3, p1G7, p1G8]) :-
+    peg_net(N0),
+    cms_add(reachable(grasp_1, init_pos1), peg, N0, N),
+    cms_pruned_nodes(N, Pruned),
+    memberchk(grasp_1-L, Pruned).
+
+%   Sec. 5.2.4: "If the consistency check fails, the CMS signals failure and
+%   the old network is restored."
+
+test(restoration_after_network_refusal, [Before == After, R = refused(network, _)]) :-
+    peg_net(N0),
+    cms_add(reachable(grasp_1, init_pos1), peg, N0, N1),
+    cms_nodes(N1, Before),
+    cms_try(member(grasp_1, [p1G1, p1G9]), none, N1, R),
+    cms_nodes(N1, After),
+    cms_consistent(N1).
+
+test(restoration_after_arc_refusal, L == [p1G3]) :-
+    peg_net(N0),
+    cms_add(reachable(grasp_1, init_pos1), peg, N0, N1),
+    \+ cms_add(mate_reachable(grasp_1, init_pos1, trans_1), peg-peg, N1, _),
+    cms_add(member(grasp_1, [p1G1, p1G3]), none, N1, N2),
+    cms_pruned_nodes(N2, Pruned),
+    memberchk(grasp_1-L, Pruned).
+
+test(sec5_2_3_position_class_absolute_refused, fail) :-
+    cms_empty(N0),
+    cms_initial_state(part_location(block, init_pos2), N0, N1),
+    cms_add(in_position_class(init_pos2, [p2P1, p2P2, p2P4, p2P5, p2P6]), none, N1, _).
+
+test(position_class_absolute_kept, L == [tr2]) :-
+    cms_empty(N0),
+    cms_initial_state(part_location(block, init_pos2), N0, N1),
+    cms_add(in_position_class(init_pos2, [p2P3]), none, N1, N),
+    cms_node(N, init_pos2, L).
+
+test(position_class_pose, L == [p2P1, p2P2, p2P4, p2P5, p2P6]) :-
+    spar_actions:get_all_poses(block, Ps),
+    cms_empty(N0),
+    cms_initial(in_position_class(pos_1, Ps), N0, N1),
+    cms_add(in_position_class(pos_1, [p2P1, p2P2, p2P4, p2P5, p2P6]), none, N1, N),
+    cms_node(N, pos_1, L).
+
+%   A second constraint on the same two nodes (here an oracle that allows
+%   only p1G3/tr1) intersects with the arc already there.
+
+test(second_arc_intersects, Arcs == [arc(grasp_1, init_pos1, [p1G3/tr1])]) :-
+    peg_net(N0),
+    cms_add(reachable(grasp_1, init_pos1), peg, N0, N1),
+    N1 = cms(Nodes, As, Order, _),
+    cms_add(reachable(grasp_1, init_pos1), peg,
+            cms(Nodes, As, Order, [_, _, _, _, [p1G3/tr1]]>>true), N),
+    cms_arcs(N, Arcs).
+
+test(component, C == [grasp_1, init_pos1]) :-
+    peg_net(N0),
+    cms_add(reachable(grasp_1, init_pos1), peg, N0, N),
+    cms_component(N, [init_pos1], C).
+
+test(geo_objects_mate, O == peg-block) :-
+    geo_objects(mate_reachable(grasp_1, pos_1, trans_1),
+                [holding(peg, grasp_1), part_location(block, pos_1)], O).
+
+test(missing_node, [error(existence_error(cms_node, pos_9))]) :-
+    peg_net(N0),
+    cms_add(reachable(grasp_1, pos_9), peg, N0, _).
+
+test(unbound_variable, [error(instantiation_error)]) :-
+    peg_net(N0),
+    cms_add(member(_, [p1G1]), none, N0, _).
+
+test(unknown_constraint, [error(domain_error(geometric_constraint, near(a, b)))]) :-
+    peg_net(N0),
+    cms_add(near(a, b), none, N0, _).
+
+:- end_tests(cms_sec5_2).

@@ -1,0 +1,149 @@
+/*  Tests of prolog/establish.pl: establishment, promotion and white knights
+    (Sec. 4.1), on the paper cell's knowledge base with a table oracle.
+
+    swipl -g run_tests -t halt tests/prolog/establish.plt
+*/
+:- use_module('../../prolog/spar').
+:- use_module('../../prolog/goals').
+:- use_module('../../prolog/establish').
+:- use_module('../../prolog/ordering').
+:- use_module('../../prolog/cms').
+:- use_module(fixtures/paper_cell).
+:- use_module(library(plunit)).
+:- use_module(library(apply)).
+:- use_module(library(lists)).
+
+:- begin_tests(establish_sec4_1, [setup(load_cell(hole_down))]).
+
+plan0(Methods, P) :-
+    initial_plan(10, [ oracle(fixture_paper_cell:table_oracle(hole_down)),
+                       declobber(Methods) ], P).
+
+%   new_actions(+Conds, +P0, -P): add one new action per condition, in
+%   order (action_1, action_2, ...), without ordering constraints.
+
+new_actions(Conds, P0, P) :-
+    foldl([C, X0, X]>>once(new_action(C, _, [], X0, X)), Conds, P0, P).
+
+arcs(P, Arcs) :-
+    plan_order(P, G),
+    ordering_arcs(G, Arcs).
+
+terms(P, Terms) :-
+    plan_actions(P, As),
+    maplist([action(_, T, _, _, _), T]>>true, As, Terms).
+
+test(by_new_action, [E-Terms == action_1-[assemble(peg, block, [[peg_face], [block_face]], trans_1, vec_1)]]) :-
+    plan0([promotion, white_knight], P0),
+    Goal = op(top_1, finish,
+              assembled(peg, block, [[peg_face], [block_face]], trans_1, vec_1)),
+    once(establish(Goal, P0, P, E)),
+    terms(P, Terms).
+
+test(by_initial_state, [E-Pos-L == start-init_pos2-[tr2]]) :-
+    plan0([promotion, white_knight], P0),
+    new_actions([assembled(peg, block, [[peg_face], [block_face]], trans_1, vec_1)], P0, P1),
+    once(establish(op(goal_2, action_1, part_location(block, Pos)), P1, P, E)),
+    plan_net(P, Net),
+    cms_node(Net, init_pos2, L).
+
+test(by_existing_action, [E-G-Arcs == action_2-grasp_1-[prior_to(action_2, action_1)]]) :-
+    plan0([promotion, white_knight], P0),
+    new_actions([ assembled(peg, block, [[peg_face], [block_face]], trans_1, vec_1),
+                  holding(peg, _) ], P0, P1),
+    once(establish(op(goal_1, action_1, holding(peg, G)), P1, P, E)),
+    arcs(P, Arcs).
+
+test(existing_refused_by_cycle, E == start) :-
+    plan0([promotion, white_knight], P0),
+    new_actions([ holding(peg, _), part_location(block, _) ], P0, P1),
+    post_prior_to(action_1, action_2, P1, P2),
+    % action_2 (a putdown) adds gripper(open) but must follow action_1
+    once(establish(op(goal_x, action_1, gripper(open)), P2, _, E)).
+
+test(new_action_pushes_preconditions, Ids == [goal_1-[goal_2]]) :-
+    plan0([promotion, white_knight], P0),
+    new_actions([part_location(block, _)], P0, P),
+    plan_ops(P, [op(G1, action_1, holding(block, _))|_]),
+    plan_geos(P, Geos),
+    maplist([geo(Id, _, _, _), Id]>>true, Geos, GeoIds),
+    Ids = [G1-GeoIds].
+
+test(bound_refuses_new_action, fail) :-
+    initial_plan(0, [oracle(fixture_paper_cell:table_oracle(hole_down))], P0),
+    new_action(holding(peg, _), _, [], P0, _).
+
+%   Promotion: pickup(block) (action_2) deletes the gripper(open) that
+%   pickup(peg) (action_1) needs from the initial state; it is put after.
+
+test(promotion, Arcs == [prior_to(action_1, action_2)]) :-
+    plan0([promotion, white_knight], P0),
+    new_actions([holding(peg, _), holding(block, _)], P0, P1),
+    Goal = op(goal_x, action_1, gripper(open)),
+    once(declobber(Goal, start, P1, P)),
+    arcs(P, Arcs).
+
+test(clobberer_found, Cs == [action_2]) :-
+    plan0([promotion, white_knight], P0),
+    new_actions([holding(peg, _), holding(block, _)], P0, P),
+    findall(C, possible_clobberer(gripper(open), start, action_1, P, C), Cs).
+
+%   White knight, existing: the putdown action_4 re-establishes gripper(open)
+%   between the clobberer action_2 and action_1 (promotion is refused).
+
+test(white_knight_existing,
+     Arcs == [ prior_to(action_2, action_1), prior_to(action_2, action_4),
+               prior_to(action_3, action_1), prior_to(action_4, action_1) ]) :-
+    plan0([promotion, white_knight], P0),
+    new_actions([ holding(peg, _), holding(block, _),
+                  part_location(block, _), part_location(peg, _) ], P0, P1),
+    post_prior_to(action_2, action_1, P1, P2),
+    post_prior_to(action_3, action_1, P2, P3),       % action_3 establishes
+    once(declobber(op(goal_x, action_1, gripper(open)), action_3, P3, P)),
+    arcs(P, Arcs).
+
+%   The establisher as its own white knight: prior_to(C, E).
+
+test(white_knight_establisher,
+     Arcs == [ prior_to(action_2, action_1), prior_to(action_2, action_3),
+               prior_to(action_3, action_1) ]) :-
+    plan0([promotion, white_knight], P0),
+    new_actions([holding(peg, _), holding(block, _), part_location(block, _)], P0, P1),
+    post_prior_to(action_2, action_1, P1, P2),
+    post_prior_to(action_3, action_1, P2, P3),
+    once(declobber(op(goal_x, action_1, gripper(open)), action_3, P3, P)),
+    arcs(P, Arcs).
+
+%   White knight, new: no action in the plan adds gripper(open), so a new
+%   putdown is added between the clobberer and action_1.
+
+test(white_knight_new,
+     [ T-Arcs == putdown(peg, pos_1)-[prior_to(action_2, action_3), prior_to(action_3, action_1)] ]) :-
+    plan0([white_knight], P0),
+    new_actions([holding(peg, _), holding(block, _)], P0, P1),
+    once(declobber(op(goal_x, action_1, gripper(open)), start, P1, P)),
+    plan_actions(P, [action(action_3, T, _, _, _)|_]),
+    arcs(P, Arcs).
+
+test(no_method_no_declobbering, fail) :-
+    plan0([], P0),
+    new_actions([holding(peg, _), holding(block, _)], P0, P1),
+    declobber(op(goal_x, action_1, gripper(open)), start, P1, _).
+
+%   A new action moves back the satisfied goals it may clobber (Sec. 2).
+
+test(clobbered_goal_moved_back, Ops == [op(goal_6, action_1, gripper(open))]) :-
+    plan0([promotion, white_knight], P0),
+    new_actions([holding(peg, _)], P0, P1),
+    set_ops_of_plan([], P1, P2),
+    set_sat_of_plan([sat(op(goal_6, action_1, gripper(open)), start)], P2, P3),
+    new_actions([holding(block, _)], P3, P),
+    plan_ops(P, [Op|_]),
+    Ops = [Op].
+
+test(no_binding_by_clobber_test, [C == action_1, true(var(State))]) :-
+    plan0([promotion, white_knight], P0),
+    new_actions([holding(peg, _)], P0, P),
+    once(possible_clobberer(gripper(State), start, finish, P, C)).
+
+:- end_tests(establish_sec4_1).

@@ -1,0 +1,80 @@
+/*  Tests of prolog/ordering.pl: the ordering graph of Sec. 5.1 (Fig. 14).
+
+    swipl -g run_tests -t halt tests/prolog/ordering.plt
+*/
+:- use_module('../../prolog/spar').
+:- use_module('../../prolog/ordering').
+:- use_module(library(plunit)).
+:- use_module(library(apply)).
+
+:- begin_tests(ordering_sec5_1).
+
+graph(Arcs, G) :-
+    empty_ordering(G0),
+    foldl([A-B, X0, X]>>( ordering_add_action(A, X0, X1),
+                          ordering_add_action(B, X1, X2),
+                          prior_to(A, B, X2, X) ),
+          Arcs, G0, G).
+
+test(prior_to_adds_arc, PriorTos == [prior_to(action_2, action_1)]) :-
+    graph([action_2-action_1], G),
+    ordering_arcs(G, PriorTos).
+
+test(fig14_cycle_refused, fail) :-
+    graph([a1-a2, a2-a3], G),
+    prior_to(a3, a1, G, _).
+
+test(self_refused, fail) :-
+    graph([a1-a2], G),
+    prior_to(a1, a1, G, _).
+
+test(repeated_arc_is_noop, G == G1) :-
+    graph([a1-a2], G),
+    prior_to(a1, a2, G, G1).
+
+test(start_precedes_everything, G == G1) :-
+    graph([a1-a2], G),
+    prior_to(start, a2, G, G1).
+
+test(nothing_before_start, fail) :-
+    graph([a1-a2], G),
+    prior_to(a1, start, G, _).
+
+test(nothing_after_finish, fail) :-
+    graph([a1-a2], G),
+    prior_to(finish, a1, G, _).
+
+test(necessarily_before_transitive) :-
+    graph([a1-a2, a2-a3], G),
+    necessarily_before(a1, a3, G),
+    \+ necessarily_before(a3, a1, G).
+
+test(possibly_between_unordered) :-
+    graph([e-s], G0),
+    ordering_add_action(c, G0, G),
+    possibly_between(c, e, s, G).
+
+test(not_between_after_s, fail) :-
+    graph([e-s, s-c], G),
+    possibly_between(c, e, s, G).
+
+test(not_between_before_e, fail) :-
+    graph([c-e, e-s], G),
+    possibly_between(c, e, s, G).
+
+test(linearisations, Ls == [[a, b, c], [a, c, b], [b, a, c]]) :-
+    empty_ordering(G0),
+    foldl(ordering_add_action, [a, b, c], G0, G1),
+    prior_to(a, c, G1, G),
+    findall(L, linearisation(G, L), Ls).
+
+test(linearisation_total_order, Ls == [[action_4, action_3, action_2, action_1]]) :-
+    graph([action_2-action_1, action_3-action_1, action_3-action_2,
+           action_4-action_3], G),
+    findall(L, linearisation(G, L), Ls).
+
+test(type_error, [error(type_error(atom, 1))]) :-
+    empty_ordering(G),
+    prior_to(1, a, G, _).
+
+:- end_tests(ordering_sec5_1).

@@ -1,0 +1,272 @@
+/*  Tests of the phase-1 planner (prolog/spar.pl, goals.pl): the worked
+    example of Sec. 6 (Figs. 21-25) on a fixture knowledge base shaped like
+    the real cell, with a table oracle giving the arcs of Fig. 25.
+
+    swipl -g run_tests -t halt tests/prolog/phase1.plt
+*/
+:- use_module('../../prolog/spar').
+:- use_module('../../prolog/goals').
+:- use_module('../../prolog/establish').
+:- use_module('../../prolog/cms').
+:- use_module(fixtures/paper_cell).
+:- use_module(library(plunit)).
+:- use_module(library(apply)).
+:- use_module(library(lists)).
+
+                 /*******************************
+                 *   SEC. 6: THE PAPER'S CELL   *
+                 *******************************/
+
+:- begin_tests(sec6_paper_cell, [setup(load_cell(hole_down))]).
+
+options([oracle(fixture_paper_cell:table_oracle(hole_down))]).
+
+partial(P) :-
+    options(Os),
+    phase1(peg_in_block, Os, plan(P)).
+
+goal_ids(Goals, Ids) :-
+    maplist([G, Id]>>arg(1, G, Id), Goals, Ids).
+
+test(fig23_actions,
+     As == [ action(action_4, pickup(block, grasp_2)),
+             action(action_3, putdown(block, pos_1)),
+             action(action_2, pickup(peg, grasp_1)),
+             action(action_1, assemble(peg, block, [[peg_face], [block_face]],
+                                       trans_1, vec_1)) ]) :-
+    partial(P),
+    partial_actions(P, As).
+
+%   Fig. 24's ordering graph: prior_to(action_3, action_2) is the white knight
+%   that re-establishes gripper(open) for action_2 after action_4 took it.
+
+test(fig24_ordering,
+     Order == [ prior_to(action_2, action_1), prior_to(action_3, action_1),
+                prior_to(action_3, action_2), prior_to(action_4, action_3) ]) :-
+    partial(P),
+    partial_ordering(P, Order).
+
+test(fig24_white_knight_goal_6, E == action_3) :-
+    partial(partial(_, _, _, Sat)),
+    memberchk(sat(op(goal_6, action_2, gripper(open)), E), Sat).
+
+test(fig25_arcs, Arcs == Expected) :-
+    partial(P),
+    partial_network(P, Net),
+    cms_arcs(Net, Arcs0),
+    msort(Arcs0, Arcs),
+    findall(arc(V1, V2, Ps), ( fig25_arc(V1-V2, Ps0), msort(Ps0, Ps) ), E0),
+    msort(E0, Expected).
+
+test(fig25_label_sets,
+     Raw == [ grasp_1-[p1G1, p1G11, p1G12, p1G13, p1G14, p1G15, p1G17, p1G18,
+                       p1G20, p1G3, p1G6, p1G7, p1G8, p1G9],
+              grasp_2-G2,
+              init_pos1-[tr1],
+              init_pos2-[tr2],
+              pos_1-[p2P1, p2P2, p2P4, p2P5, p2P6] ]) :-
+    findall(G, kb:grasp(block, G, _, _, _, _), G20),
+    msort(G20, G2),
+    partial(P),
+    partial_network(P, Net),
+    cms_nodes(Net, Raw).
+
+%   After arc consistency p2P2 goes: no grasp that can pick the block up at
+%   tr2 can put it down in p2P2.
+
+test(label_sets_after_ac3,
+     Pruned == [ grasp_1-[p1G12, p1G3, p1G7, p1G8],
+                 grasp_2-[p2G1, p2G16, p2G2, p2G3, p2G4, p2G5, p2G6, p2G7],
+                 init_pos1-[tr1],
+                 init_pos2-[tr2],
+                 pos_1-[p2P1, p2P4, p2P5, p2P6] ]) :-
+    partial(P),
+    partial_network(P, Net),
+    cms_pruned_nodes(Net, Pruned).
+
+test(fast, true(T < 1.0)) :-
+    options(Os),
+    statistics(cputime, T0),
+    phase1(peg_in_block, Os, plan(_)),
+    statistics(cputime, T1),
+    T is T1 - T0.
+
+test(plan_phase1_needs_python_or_oracle, [error(_)]) :-
+    % without an oracle the planner calls Python (foreign:arc_pairs/5); in
+    % plain swipl there is no Python cell loaded, which must not pass silently
+    plan_phase1(peg_in_block, _).
+
+%   Fig. 21: the goal stacks after the assemble action is added.
+
+test(fig21_stacks,
+     [ Ops-Geos-Lists == [goal_1, goal_2]-[goal_3, goal_4, goal_5]-[14, [p2P1, p2P2, p2P4, p2P5, p2P6]] ]) :-
+    fig21(P),
+    plan_ops(P, OpGoals), goal_ids(OpGoals, Ops),
+    plan_geos(P, GeoGoals), goal_ids(GeoGoals, Geos),
+    GeoGoals = [geo(_, _, member(_, GL), _), geo(_, _, in_position_class(_, PL), _)|_],
+    length(GL, NG),
+    Lists = [NG, PL].
+
+%   Fig. 22: after pickup(peg, grasp_1) is added for goal_1.
+
+test(fig22_stacks,
+     [ Ops-Geos-As == [goal_6, goal_7, goal_2]-[goal_8, goal_3, goal_4, goal_5]
+                      -[pickup(peg, grasp_1), assemble(peg, block, [[peg_face], [block_face]], trans_1, vec_1)] ]) :-
+    fig21(P0),
+    plan_ops(P0, [G1|Rest]),
+    set_ops_of_plan(Rest, P0, P1),
+    once(establish(G1, P1, P, _)),
+    plan_ops(P, OpGoals), goal_ids(OpGoals, Ops),
+    plan_geos(P, GeoGoals), goal_ids(GeoGoals, Geos),
+    plan_actions(P, Actions),
+    maplist([action(_, T, _, _, _), T]>>true, Actions, As).
+
+fig21(P) :-
+    options(Os),
+    initial_plan(4, Os, P0),
+    plan_ops(P0, [Top]),
+    set_ops_of_plan([], P0, P1),
+    once(establish(Top, P1, P2, E)),
+    once(declobber(Top, E, P2, P)).
+
+test(trace_layout) :-
+    options(Os),
+    with_output_to(string(S), phase1(peg_in_block, [trace(true)|Os], plan(_))),
+    contains(S, "OPERATIONAL GOAL STACK\n  op(goal_6, action_2, gripper(open))\n  op(goal_7, action_2, part_location(peg, Pos_1))\n  op(goal_2, action_1, part_location(block, Pos_2))\nGEOMETRIC GOAL STACK\n  geo(goal_8, action_2,\n      reachable(grasp_1, Pos_1),\n      part_location(peg, Pos_1))"),
+    contains(S, "CMS refuses in_position_class(init_pos2"),
+    contains(S, "new action(action_3, putdown(block,pos_1))").
+
+test(no_trace_no_output, S == "") :-
+    options(Os),
+    with_output_to(string(S), phase1(peg_in_block, Os, plan(_))).
+
+test(partial_dict) :-
+    partial(P),
+    partial_dict(P, D),
+    D.actions = [A4|_],
+    dict_pairs(A4, _, A4Pairs),
+    assertion(A4Pairs == [args-["block", "grasp_2"], id-action_4, name-pickup,
+                          term-"pickup(block,grasp_2)"]),
+    assertion(memberchk([action_3, action_2], D.ordering)),
+    assertion(D.variables.pos_1 == [p2P1, p2P4, p2P5, p2P6]),
+    assertion(D.raw_variables.pos_1 == [p2P1, p2P2, p2P4, p2P5, p2P6]),
+    D.arcs = [Arc1|_],
+    assertion(Arc1.vars == [grasp_2, init_pos2]),
+    assertion(memberchk([p2G16, tr2], Arc1.pairs)).
+
+test(print_partial) :-
+    partial(P),
+    with_output_to(string(S), print_partial(P)),
+    contains(S, "  action(action_4, pickup(block, grasp_2))"),
+    contains(S, "  prior_to(action_3, action_2)"),
+    contains(S, "  grasp_1-init_pos1: [p1G12/tr1,p1G3/tr1,p1G7/tr1,p1G8/tr1]"),
+    contains(S, "  pos_1: [p2P1,p2P2,p2P4,p2P5,p2P6]").
+
+contains(S, Sub) :-
+    once(sub_string(S, _, _, _, Sub)).
+
+%   Plan instances (Sec. 3.3): 4 peg grasps x 12 block grasp/pose pairs,
+%   one linearisation.
+
+test(instances_count, N == 48) :-
+    partial(P),
+    aggregate_all(count, partial_instances(P, _), N).
+
+test(first_instance,
+     [ Terms-Bindings == [ pickup(block, p2G1), putdown(block, p2P1),
+                           pickup(peg, p1G12),
+                           assemble(peg, block, [[peg_face], [block_face]], trans_1, vec_1) ]
+                         -[ grasp_1 = p1G12, grasp_2 = p2G1, init_pos1 = tr1,
+                            init_pos2 = tr2, pos_1 = p2P1 ] ]) :-
+    partial(P),
+    once(partial_instances(P, instance(Steps, Bindings))),
+    maplist([action(_, T, _, _, _), T]>>true, Steps, Terms).
+
+test(instance_substitutes_everywhere) :-
+    partial(P),
+    once(partial_instances(P, instance([S1|_], _))),
+    S1 = action(action_4, _, preconditions(Ops, _), _, dellist(Dels)),
+    assertion(memberchk(op(_, action_4, part_location(block, tr2)), Ops)),
+    assertion(memberchk(part_location(block, tr2), Dels)).
+
+:- end_tests(sec6_paper_cell).
+
+                 /*******************************
+                 *      VARIANTS, FAILURES      *
+                 *******************************/
+
+:- begin_tests(sec6_hole_up, [setup(load_cell(hole_up))]).
+
+test(two_actions,
+     [ As-Order == [ action(action_2, pickup(peg, grasp_1)),
+                     action(action_1, assemble(peg, block, [[peg_face], [block_face]], trans_1, vec_1)) ]
+                   -[prior_to(action_2, action_1)] ]) :-
+    phase1(peg_in_block, [oracle(fixture_paper_cell:table_oracle(hole_up))], plan(P)),
+    partial_actions(P, As),
+    partial_ordering(P, Order).
+
+test(block_stays, L == [tr2]) :-
+    phase1(peg_in_block, [oracle(fixture_paper_cell:table_oracle(hole_up))], plan(P)),
+    partial_network(P, Net),
+    cms_node(Net, init_pos2, L).
+
+:- end_tests(sec6_hole_up).
+
+:- begin_tests(phase1_unsolvable).
+
+test(no_mating_grasp,
+     [ setup(load_cell(no_mating_grasp)),
+       O == no_plan(6, geo(goal_3, action_1, member(grasp_1, []), [holding(peg, grasp_1)])) ]) :-
+    phase1(peg_in_block, [ oracle(fixture_paper_cell:table_oracle(no_mating_grasp)),
+                           max_actions(6) ], O).
+
+test(no_establisher,
+     [ setup(load_cell(glued)),
+       O == no_plan(12, op(top_1, finish, glued(peg, block))) ]) :-
+    phase1(peg_in_block, [oracle(fixture_paper_cell:table_oracle(glued))], O).
+
+test(unreachable_mating,
+     [ setup(load_cell(hole_down)),
+       O = no_plan(5, geo(_, action_1, mate_reachable(grasp_1, _, trans_1), _)) ]) :-
+    phase1(peg_in_block, [oracle(no_mate), max_actions(5)], O).
+
+test(too_small_bound, [setup(load_cell(hole_down)), O = no_plan(3, _)]) :-
+    phase1(peg_in_block, [ oracle(fixture_paper_cell:table_oracle(hole_down)),
+                           max_actions(3) ], O).
+
+test(step_budget, [setup(load_cell(hole_down)), true((B < 12, Goal \== none))]) :-
+    phase1(peg_in_block, [oracle(no_mate), max_steps(300)], no_plan(B, Goal)).
+
+test(reason_names_deepest_goal,
+     [ setup(load_cell(hole_down)),
+       G = geo(goal_4, action_1, in_position_class(init_pos2, _), _) ]) :-
+    phase1(peg_in_block, [ oracle(fixture_paper_cell:table_oracle(hole_down)),
+                           max_actions(2) ], no_plan(2, G)).
+
+no_mate(mate_reachable(_), _, _, _, []) :- !.
+no_mate(C, O, Gs, Ps, Pairs) :-
+    table_oracle(hole_down, C, O, Gs, Ps, Pairs).
+
+:- end_tests(phase1_unsolvable).
+
+:- begin_tests(phase1_errors, [setup(load_cell(hole_down))]).
+
+test(unknown_problem, [error(existence_error(problem, nosuch))]) :-
+    phase1(nosuch, [], _).
+
+test(problem_not_atom, [error(type_error(atom, 42))]) :-
+    phase1(42, [], _).
+
+test(max_actions_type, [error(type_error(nonneg, x))]) :-
+    phase1(peg_in_block, [max_actions(x)], _).
+
+test(trace_type, [error(type_error(boolean, maybe))]) :-
+    phase1(peg_in_block, [trace(maybe)], _).
+
+test(unknown_method, [error(domain_error(declobber_method, separation))]) :-
+    phase1(peg_in_block, [declobber([promotion, separation])], _).
+
+test(options_not_list, [error(type_error(list, foo))]) :-
+    phase1(peg_in_block, foo, _).
+
+:- end_tests(phase1_errors).
