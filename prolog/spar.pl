@@ -30,7 +30,11 @@
       Goals    = op(Id, ActionId, Cond) | geo(Id, ActionId, Constraint, Conds)
 */
 :- module(spar,
-          [ plan_phase1/2,           % +Problem, -Partial
+          [ plan/2,                  % +Problem, -Plan
+            plan/3,                  % +Problem, +Options, -Plan
+            print_plan/1,            % +Plan
+            plan_dict/4,             % +Problem, +Options, -Dict, -Text
+            plan_phase1/2,           % +Problem, -Partial
             phase1/3,                % +Problem, +Options, -Outcome
             partial_dict/2,          % +Partial, -Dict
             print_partial/1,         % +Partial
@@ -54,6 +58,8 @@
 :- use_module(goals).
 :- use_module('../kb/templates/actions').
 :- use_module('../kb/templates/sensing').
+:- use_module(uncertainty).
+:- use_module(library(time)).
 
 :- meta_predicate phase1(+, :, -).
 
@@ -280,3 +286,95 @@ digit(D) --> [D], { code_type(D, digit) }.
 nondigits([C|Cs]) --> nondigit(C), !, nondigits(Cs).
 nondigits([]) --> [].
 nondigit(C) --> [C], { \+ code_type(C, digit) }.
+
+		 /*******************************
+		 *     BOTH PHASES (Sec. 2)     *
+		 *******************************/
+
+%!  plan(+Problem, -Plan) is semidet.
+%!  plan(+Problem, +Options, -Plan) is semidet.
+%
+%   Plan the loaded problem Problem in both phases: Plan is
+%   plan(Partial, Result), Partial the phase-1 partial plan (phase1/3),
+%   Result the phase-2 outcome (uncertainty:phase2/3). Fails if phase 1
+%   finds no plan. Options are phase1/3's plus max_instances(Cap).
+%
+%   ==
+%   ?- plan(peg_in_block, P), print_plan(P).
+%   ==
+%
+%   @error existence_error(problem, Problem) if Problem is not loaded.
+
+plan(Problem, Plan) :-
+    plan(Problem, [], Plan).
+
+plan(Problem, Options, plan(Partial, Result)) :-
+    must_be(list, Options),
+    partition(phase2_option, Options, P2, P1),
+    phase1(Problem, P1, Outcome),
+    Outcome = plan(Partial),
+    uncertainty:phase2(Partial, P2, Result).
+
+phase2_option(max_instances(_)).
+
+%!  print_plan(+Plan) is det.
+%
+%   Print a plan/3 result: the partial plan (Figs. 23-25) and the chosen
+%   plan instance with its sensing, verdicts, verifications and recoveries.
+
+print_plan(plan(Partial, Result)) :-
+    print_partial(Partial),
+    uncertainty:print_ur(Result).
+
+%!  plan_dict(+Problem, +Options:dict, -Dict, -Text) is det.
+%
+%   The bridge's entry point: plan Problem with Options (a dict with keys
+%   max_actions, max_instances, separation, phase1_only, trace, timeout;
+%   timeout 0 means none) and return the outcome as a dict for the JSON
+%   schema (docs/json-schema.md) and Text, what print_plan/1 and the trace
+%   print.
+%
+%   @error time_limit_exceeded if the timeout passes.
+
+plan_dict(Problem, Opts, Dict, Text) :-
+    must_be(atom, Problem),
+    must_be(dict, Opts),
+    phase1_options(Opts, P1),
+    (   Opts.timeout > 0
+    ->  call_with_time_limit(Opts.timeout,
+                             with_output_to(string(Text), plan_dict_(Problem, Opts, P1, Dict)))
+    ;   with_output_to(string(Text), plan_dict_(Problem, Opts, P1, Dict))
+    ).
+
+phase1_options(Opts, [max_actions(Opts.max_actions), trace(Trace), declobber(Ms)]) :-
+    (   Opts.trace == @(true) -> Trace = true ; Trace = false ),
+    (   Opts.separation == @(true), known_declobber_method(separation)
+    ->  Ms = [promotion, separation, white_knight]
+    ;   Ms = [promotion, white_knight]
+    ).
+
+plan_dict_(Problem, Opts, P1, Dict) :-
+    statistics(cputime, T0),
+    phase1(Problem, P1, Outcome),
+    statistics(cputime, T1),
+    Phase1 is T1 - T0,
+    (   Outcome = no_plan(N, Goal)
+    ->  format(string(G), "~q", [Goal]),
+        format("NO PLAN within ~w actions: the goal that could not be met: ~s~n", [N, G]),
+        Dict = _{outcome: "no_plan", reason: _{max_actions: N, goal: G},
+                 partial: @(none), instance: @(none), timing: _{phase1_s: Phase1}}
+    ;   Outcome = plan(Partial),
+        partial_dict(Partial, PD),
+        print_partial(Partial),
+        (   Opts.phase1_only == @(true)
+        ->  Dict = _{outcome: "plan", reason: @(none), partial: PD, instance: @(none),
+                     timing: _{phase1_s: Phase1}}
+        ;   uncertainty:phase2(Partial, [max_instances(Opts.max_instances)], R),
+            statistics(cputime, T2),
+            Phase2 is T2 - T1,
+            uncertainty:print_ur(R),
+            uncertainty:ur_dict(R, ID),
+            Dict = _{outcome: "plan", reason: @(none), partial: PD, instance: ID,
+                     timing: _{phase1_s: Phase1, phase2_s: Phase2}}
+        )
+    ).

@@ -262,7 +262,7 @@ def test_hole_mouth_from_the_goal_approach_vector(cell: Cell) -> None:
     # vec_1 = [0, 0, -1] runs down the hole, so the hole opens along the block's +z,
     # on block_face (z = 1.5 in), above its bottom centre F_h = (0, 0, 0)
     centre, axis, r = hole_mouth(cell, "block")
-    assert np.allclose(centre, [0, 0, 1.5]) and np.allclose(axis, [0, 0, 1]) and r == 0.75
+    assert np.allclose(centre, [0, 0, 1.5]) and np.allclose(axis, [0, 0, 1]) and r == 0.9
     assert hole_mouth(cell, "peg") is None
     # initially the block rests on block_face (p2P3): the mouth faces the table
     T0 = cell.positions["tr2"].T
@@ -275,7 +275,7 @@ def test_box_corners_follow_the_pose(cell: Cell) -> None:
     T = trans(1, 2, 3) @ rotz(math.pi / 2)
     pts = solid_points(box, T)
     # object corner (x, y, z) -> world (1 - y, 2 + x, 3 + z)
-    want = [[1 - y, 2 + x, 3 + z] for x in (-2, 2) for y in (-2, 2) for z in (-1.5, 1.5)]
+    want = [[1 - y, 2 + x, 3 + z] for x in (-1.5, 1.5) for y in (-1.5, 1.5) for z in (-1.5, 1.5)]
     assert np.allclose(pts, want)
     cyl = cell.objects["peg"].shape[1]
     rim = solid_points(cyl, np.eye(4), segments=12)
