@@ -20,11 +20,14 @@
     (Net0 -> Net), leaves the old network in force: "the old network is
     restored" costs nothing.
 
-    The network term is cms(Nodes, Arcs, ArcOrder, Oracle): Nodes and Arcs as
-    net/2 of csp.pl, ArcOrder the arc keys newest first (for display) and
-    Oracle the closure that computes an arc's allowed pairs, called as
-    call(Oracle, Constraint, Objects, GraspLabels, PosLabels, Pairs) with the
-    arguments of foreign:arc_pairs/5. The planner uses foreign:arc_pairs
+    The network term is cms(Nodes, Arcs, ArcOrder, oracle(Oracle, Memo)):
+    Nodes and Arcs as net/2 of csp.pl, ArcOrder the arc keys newest first
+    (for display), Oracle the closure that computes an arc's allowed pairs,
+    called as call(Oracle, Constraint, Objects, GraspLabels, PosLabels,
+    Pairs) with the arguments of foreign:arc_pairs/5, and Memo its answers
+    so far (memo(Assoc), kept with nb_setarg/3 across backtracking: the
+    oracle is a function of its arguments, and the search asks the same
+    question many times). The planner uses foreign:arc_pairs
     (the Python kinematics) unless it is given another oracle; Prolog-only
     tests give a table-driven test double.
 */
@@ -66,9 +69,10 @@
 cms_empty(Net) :-
     cms_empty(foreign:arc_pairs, Net).
 
-cms_empty(Oracle, cms(Nodes, Arcs, [], Oracle)) :-
+cms_empty(Oracle, cms(Nodes, Arcs, [], oracle(Oracle, memo(Memo)))) :-
     empty_assoc(Nodes),
-    empty_assoc(Arcs).
+    empty_assoc(Arcs),
+    empty_assoc(Memo).
 
 %!  cms_initial(+Constraint, +Net0, -Net) is semidet.
 %
@@ -202,7 +206,8 @@ checked(Net, Vars, Result) :-
 put_node(V, Labels, cms(Nodes0, Arcs, Order, O), cms(Nodes, Arcs, Order, O)) :-
     put_assoc(V, Nodes0, Labels, Nodes).
 
-prune_arcs(V, Labels, cms(Nodes, Arcs0, Order, O), cms(Nodes, Arcs, Order, O)) :-
+prune_arcs(V, Labels, cms(Nodes, Arcs0, Order, O),
+           cms(Nodes, Arcs, Order, O)) :-
     foldl(prune_arc(V, Labels), Order, Arcs0, Arcs).
 
 prune_arc(V, Labels, V1-V2, Arcs0, Arcs) :-
@@ -230,8 +235,7 @@ add_arc(Kind, Objects, G, P, Net0, Result) :-
     node_labels(Net0, G, Gs),
     node_labels(Net0, P, Ps),
     Net0 = cms(Nodes, Arcs0, Order0, Oracle),
-    call(Oracle, Kind, Objects, Gs, Ps, Pairs0),
-    must_be(list, Pairs0),
+    oracle_pairs(Oracle, Kind, Objects, Gs, Ps, Pairs0),
     include(pair_in(Gs, Ps), Pairs0, Pairs1),
     sort(Pairs1, Pairs2),
     (   get_assoc(G-P, Arcs0, Old)
@@ -246,6 +250,17 @@ add_arc(Kind, Objects, G, P, Net0, Result) :-
     ->  Result = refused(arc, [G, P])
     ;   put_assoc(Key, Arcs0, Pairs, Arcs),
         checked(cms(Nodes, Arcs, Order, Oracle), [G, P], Result)
+    ).
+
+oracle_pairs(oracle(Closure, Memo), Kind, Objects, Gs, Ps, Pairs) :-
+    Key = q(Kind, Objects, Gs, Ps),
+    arg(1, Memo, Assoc0),
+    (   get_assoc(Key, Assoc0, Pairs)
+    ->  true
+    ;   call(Closure, Kind, Objects, Gs, Ps, Pairs),
+        must_be(list, Pairs),
+        put_assoc(Key, Assoc0, Pairs, Assoc),
+        nb_setarg(1, Memo, Assoc)
     ).
 
 node_labels(Net, V, Labels) :-

@@ -36,7 +36,7 @@
           [ establish/4,               % +Goal, +Plan0, -Plan, -Establisher
             declobber/4,               % +Goal, +Establisher, +Plan0, -Plan
             new_action/5,              % +Cond, -Id, +Arcs, +Plan0, -Plan
-            add_action/5,              % +Action, +Constraints, +Arcs, +Plan0, -Plan
+            add_action/5,              % +Action, +Cs, +Arcs, +Plan0, -Plan
             post_prior_to/4,           % +A1, +A2, +Plan0, -Plan
             possible_clobberer/5,      % +Cond, +E, +S, +Plan, -C
             known_declobber_method/1   % ?Method
@@ -94,7 +94,8 @@ post_prior_to(A1, A2, Plan0, Plan) :-
 
 new_action(Cond, Id, Arcs, Plan0, Plan) :-
     plan_ids(Plan0, Ids0),
-    call_dcg(instantiate_establishing_action(Cond, Action, Constraints), Ids0, Ids),
+    call_dcg(instantiate_establishing_action(Cond, Action, Constraints),
+             Ids0, Ids),
     Action = action(Id, _, _, addlist(Adds), _),
     memberchk(Cond, Adds),
     room_for_action(Plan0),
@@ -232,5 +233,5 @@ declobber_by(white_knight, Cond, _, S, C, Plan0, Plan) :-
         post_prior_to(W, S, Plan1, Plan)
     ;   new_action(Cond, W, [C-W, W-S], Plan0, Plan)
     ),
-    note(Plan, "  ~q may clobber ~q: white knight ~q, prior_to(~q, ~q), prior_to(~q, ~q)~n",
-         [C, Cond, W, C, W, W, S]).
+    note(Plan, "  ~q may clobber ~q: white knight ~q, prior_to(~q, ~q), \c
+                prior_to(~q, ~q)~n", [C, Cond, W, C, W, W, S]).

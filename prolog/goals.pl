@@ -9,15 +9,17 @@
     to be satisfied just before action ActionId; the user's goals are
     op(top_N, finish, Goal), `finish` being the virtual last action.
 
-    The plan state is a plan/13 record threaded through the search
+    The plan state is a plan/15 record threaded through the search
     (Plan0 -> Plan): the plan actions (instantiated templates, newest first,
     as Fig. 23 lists them), the ordering graph (ordering.pl), the geometric
     network (cms.pl), the symbol counters (spar_actions:gensym//2), the
     operational and geometric goal stacks, the satisfied list of
     sat(Goal, Establisher) entries, the step count, the bound on the number
     of actions, the declobbering methods, the trace flag, the history of
-    the operational steps (for backjumping) and the search recorder
-    failures(DeepestStep, Goal, BoundHit, Budget-steps(Spent)), a term
+    the operational steps (for backjumping), the geometric goals checked
+    ahead of their turn and whether to check them so (forward checking,
+    option forward_check) and the search recorder
+    failures(DeepestOp, DeepestGeo, BoundHit, Budget-steps(Spent)), a term
     updated with nb_setarg/3: the only non-backtrackable state, as it must
     outlive the failures it records. Every planner choice is a Prolog
     choice point; backtracking undoes it completely, symbol numbers
@@ -27,23 +29,24 @@
     the geometric stack; satisfy it (establish.pl for operational goals,
     satisfy_geo/3 here for geometric ones); repeat until both stacks are
     empty. A geometric goal is a committed call on the CMS: if the CMS
-    refuses, the goal fails and chronological backtracking returns to the
-    establishment of the operational goals, whose next alternative is a new
-    action (Sec. 4.2: the putdown(block, pos_1) of Sec. 6). It returns
-    straight to the latest step that could change the CMS's answer
-    (conflict-directed backjumping, see step/3), which keeps the search of
-    unsolvable problems short.
+    refuses, the goal fails and the search returns to the establishment of
+    the operational goals, whose next alternative is a new action (Sec.
+    4.2: the putdown(block, pos_1) of Sec. 6). It returns straight to the
+    latest step that could change the CMS's answer (conflict-directed
+    backjumping, see step/3), and a geometric goal is checked as soon as its
+    variables are bound (forward checking), which find the same plans and
+    keep the search of unsolvable problems short.
 
     Depth first search with a bound on the number of plan actions, raised
     from the number of user goals to max_actions one step at a time
     (iterative deepening): the first plan found is a smallest one, and an
     unsolvable problem ends, reporting the goal that failed at the deepest
-    point of the last round. A round that never met the bound ends the
-    search at once. Planning of this kind is exponential in the plan size
-    (Sec. 7.2) and undecidable (Sec. 2), so a budget of steps over all
-    rounds (max_steps, default 20000) keeps even a hard unsolvable problem
-    short; when it is spent, the outcome names the last bound searched
-    completely.
+    point of the last round (a geometric goal the CMS refused, if any). A
+    round that never met the bound ends the search at once. Planning of
+    this kind is exponential in the plan size (Sec. 7.2) and undecidable
+    (Sec. 2), so a budget of steps over all rounds (max_steps, default
+    10000) keeps even a hard unsolvable problem short; when it is spent,
+    the outcome names the last bound searched completely.
 */
 :- module(goals,
           [ phase1_search/3,         % +Options, -Outcome, -Bound
@@ -58,10 +61,11 @@
             plan_actions/2, plan_order/2, plan_net/2, plan_ids/2,
             plan_ops/2, plan_geos/2, plan_sat/2, plan_steps/2,
             plan_bound/2, plan_methods/2, plan_trace/2, plan_deepest/2,
-            plan_history/2, conflict_steps/3, bound_hit/1,
+            plan_history/2, plan_checked/2, conflict_steps/3, bound_hit/1,
             set_actions_of_plan/3, set_order_of_plan/3, set_net_of_plan/3,
             set_ids_of_plan/3, set_ops_of_plan/3, set_geos_of_plan/3,
-            set_sat_of_plan/3, set_steps_of_plan/3, set_deepest_of_plan/3
+            set_sat_of_plan/3, set_steps_of_plan/3, set_deepest_of_plan/3,
+            set_checked_of_plan/3, plan_lookahead/2
           ]).
 :- use_module(library(record)).
 :- use_module(library(lists)).
@@ -88,6 +92,8 @@
                methods:list = [promotion, white_knight],
                trace:boolean = false,
                history:list = [],
+               checked:list = [],
+               lookahead:boolean = true,
                deepest).
 
 %!  phase1_search(+Options, -Outcome, -Bound) is det.
@@ -95,13 +101,15 @@
 %   Iterative deepening over the bound on plan size, from the number of
 %   user goals (kb:goal/1) to max_actions. Outcome is plan(Partial) for
 %   the first plan found, Bound the bound it was found at; otherwise
-%   Outcome is no_plan(MaxActions, UnmetGoal), UnmetGoal the goal that
-%   failed at the deepest step of the last round, and Bound = MaxActions.
-%   Options are checked by spar:phase1/3.
+%   Outcome is no_plan(Bound, UnmetGoal), UnmetGoal the goal that failed
+%   at the deepest step of the last round searched completely (see
+%   unmet_goal/2) and Bound = max_actions, or the last bound searched
+%   completely if the step budget ran out. Options are checked by
+%   spar:phase1/3.
 
 phase1_search(Options, Outcome, Bound) :-
     option(max_actions(Max), Options, 12),
-    option(max_steps(Budget), Options, 20000),
+    option(max_steps(Budget), Options, 10000),
     aggregate_all(count, kb:goal(_), NGoals),
     Lo is min(NGoals, Max),
     Spent = steps(0),
@@ -114,7 +122,7 @@ phase1_search(Options, Outcome, Bound) :-
 %   searched completely is reported, with its unmet goal Unmet0).
 
 rounds(B, Max, Budget, Unmet0, Options, Outcome, Bound) :-
-    Recorder = failures(-1, none, false, Budget),
+    Recorder = failures(none, none, false, Budget),
     initial_plan(B, Options, Plan0),
     set_deepest_of_plan(Recorder, Plan0, Plan1),
     note(Plan1, "~n=== phase 1, at most ~d actions ===~n", [B]),
@@ -141,12 +149,20 @@ rounds(B, Max, Budget, Unmet0, Options, Outcome, Bound) :-
         Outcome = no_plan(Bound, Unmet)
     ).
 
+%   unmet_goal(+Recorder, -Goal): the geometric goal the CMS refused at the
+%   deepest step, else the operational goal that failed at the deepest
+%   step (a refusal is a reason in itself, while an operational goal often
+%   fails only because the bound allowed no further action), else the
+%   first user goal.
+
 unmet_goal(Recorder, Unmet) :-
-    arg(2, Recorder, Unmet0),
-    (   Unmet0 == none                    % nothing recorded: the first goal
-    ->  findall(G, kb:goal(G), [G1|_]),
+    Recorder = failures(Op, Geo, _, _),
+    (   Geo = _-Goal
+    ->  Unmet = Goal
+    ;   Op = _-Goal
+    ->  Unmet = Goal
+    ;   findall(G, kb:goal(G), [G1|_]),
         Unmet = op(top_1, finish, G1)
-    ;   Unmet = Unmet0
     ).
 
 %!  initial_plan(+Bound, +Options, -Plan) is det.
@@ -157,6 +173,7 @@ unmet_goal(Recorder, Unmet) :-
 initial_plan(Bound, Options, Plan) :-
     option(declobber(Methods), Options, [promotion, white_knight]),
     option(trace(Trace), Options, false),
+    option(forward_check(Lookahead), Options, true),
     (   option(oracle(Oracle), Options)
     ->  cms_empty(Oracle, Net)
     ;   cms_empty(Net)
@@ -164,7 +181,8 @@ initial_plan(Bound, Options, Plan) :-
     findall(G, kb:goal(G), Goals),
     foldl(top_goal, Goals, Tops, [], Ids),
     make_plan([ net(Net), ids(Ids), ops(Tops), bound(Bound),
-                methods(Methods), trace(Trace), deepest(failures(-1, none, false, 0-steps(0))) ],
+                methods(Methods), trace(Trace), lookahead(Lookahead),
+                deepest(failures(none, none, false, 0-steps(0))) ],
               Plan).
 
 top_goal(G, op(Id, finish, G), Ids0, Ids) :-
@@ -220,7 +238,8 @@ step(Goal, K, Plan0, Plan) :-
             fail
         ),
         add_history(K, Goal, Plan0, Plan1, Plan2),
-        catch(solve_(Plan2, Plan), backjump(Ks), jump(K, Ks, Plan0))
+        forward_check(K, Plan2, Plan3),
+        catch(solve_(Plan3, Plan), backjump(Ks), jump(K, Ks, Plan0))
     ;   note(Plan0, "step ~d: cannot satisfy ~q~n", [K, Goal]),
         record_failure(K, Goal, Plan0),
         fail
@@ -237,6 +256,53 @@ step(Goal, K, Plan0, Plan) :-
              [K, Goal, Ks]),
         throw(backjump(Ks))
     ).
+
+%   forward_check(+K, +Plan0, -Plan): every pending geometric goal whose
+%   variables are all bound must still be acceptable to the CMS. The
+%   network only grows tighter, so a refusal now is a refusal when the
+%   goal's turn comes: cutting the branch here finds the same first plan
+%   sooner. A refusal fails step K's choice if it is among the causes,
+%   else jumps back to them.
+
+forward_check(_, Plan0, Plan) :-
+    plan_lookahead(Plan0, false),
+    !,
+    Plan = Plan0.
+forward_check(K, Plan0, Plan) :-
+    plan_geos(Plan0, Geos),
+    plan_net(Plan0, Net),
+    plan_checked(Plan0, Checked0),
+    include(unchecked_ground(Checked0, Net), Geos, ToCheck),
+    (   member(Goal, ToCheck),
+        Goal = geo(_, _, Constraint, Conds),
+        geo_objects(Constraint, Conds, Objects),
+        cms_try(Constraint, Objects, Net, refused(_, Vars))
+    ->  record_failure(K, Goal, Plan0),
+        conflict_steps(Vars, Plan0, Ks),
+        note(Plan0, "  forward check: the CMS would refuse ~q, back to ~w~n",
+             [Constraint, Ks]),
+        (   memberchk(K, Ks)
+        ->  fail
+        ;   throw(backjump(Ks))
+        )
+    ;   maplist([geo(Id, _, _, _), Id]>>true, ToCheck, Ids),
+        append(Ids, Checked0, Checked),
+        set_checked_of_plan(Checked, Plan0, Plan)
+    ).
+
+%   A goal is checked ahead once, as soon as its variables are bound: the
+%   network does not change on operational steps (they only add nodes).
+
+unchecked_ground(Checked, Net, geo(Id, _, Constraint, _)) :-
+    \+ memberchk(Id, Checked),
+    ground(Constraint),
+    constraint_vars(Constraint, Vs),
+    forall(member(V, Vs), cms_node(Net, V, _)).
+
+constraint_vars(member(V, _), [V]).
+constraint_vars(in_position_class(V, _), [V]).
+constraint_vars(reachable(G, P), [G, P]).
+constraint_vars(mate_reachable(G, P, _), [G, P]).
 
 jump(K, Ks, Plan) :-
     (   memberchk(K, Ks)
@@ -297,10 +363,10 @@ add_satisfied(Goal, E, Plan0, Plan) :-
 
 record_failure(K, Goal, Plan) :-
     plan_deepest(Plan, Recorder),
-    arg(1, Recorder, K0),
-    (   K > K0
-    ->  nb_setarg(1, Recorder, K),
-        nb_setarg(2, Recorder, Goal)
+    (   Goal = geo(_, _, _, _) -> Arg = 2 ; Arg = 1 ),
+    arg(Arg, Recorder, Old),
+    (   ( Old == none ; Old = K0-_, K > K0 )
+    ->  nb_setarg(Arg, Recorder, K-Goal)
     ;   true
     ).
 
@@ -409,7 +475,8 @@ trace_step(Goal, Plan) :-
                 forall(member(G, Geos), print_goal(G)),
                 format("PLAN ACTIONS~n"),
                 forall(member(A, Actions), print_action(A)),
-                format("considering ~W~n", [Goal, [quoted(true), numbervars(true), spacing(next_argument)]]) )
+                write_options(O),
+                format("considering ~W~n", [Goal, O]) )
     ;   true
     ).
 

@@ -77,24 +77,20 @@ prior_to_(A1, A2, G0, G) :-
 
 path(From, To, G) :-
     neighbours_(From, G, Ns),
-    (   memberchk(To, Ns)
+    path_dfs(Ns, To, G, [From]).
+
+path_dfs([V|Vs], To, G, Seen) :-
+    (   V == To
     ->  true
-    ;   reachable_from(Ns, G, Reach),
-        memberchk(To, Reach)
+    ;   memberchk(V, Seen)
+    ->  path_dfs(Vs, To, G, Seen)
+    ;   neighbours_(V, G, Ns),
+        append(Ns, Vs, Stack),
+        path_dfs(Stack, To, G, [V|Seen])
     ).
 
 neighbours_(V, G, Ns) :-
     (   memberchk(V-Ns0, G) -> Ns = Ns0 ; Ns = [] ).
-
-reachable_from(Vs, G, Reach) :-
-    foldl(reach_union(G), Vs, [], Reach).
-
-reach_union(G, V, R0, R) :-
-    (   memberchk(V-_, G)
-    ->  reachable(V, G, RV),
-        ord_union(R0, RV, R)
-    ;   ord_union(R0, [V], R)
-    ).
 
 %!  necessarily_before(+A1, +A2, +G) is semidet.
 %

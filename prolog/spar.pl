@@ -80,7 +80,10 @@ plan_phase1(Problem, Partial) :-
 %   Run phase 1 on the loaded problem Problem. Outcome is plan(Partial) or
 %   no_plan(MaxActions, UnmetGoal): no plan of at most MaxActions actions,
 %   UnmetGoal the goal that failed at the deepest step of the search with
-%   that bound. Options:
+%   that bound: the deepest geometric goal the CMS refused if there is
+%   one, else the deepest operational goal. MaxActions is max_actions
+%   unless the step budget ran out first; it is then the largest bound
+%   searched completely. Options:
 %
 %     - max_actions(N)   the largest plan tried (default 12); the bound
 %                        rises from the number of goals to N
@@ -88,6 +91,13 @@ plan_phase1(Problem, Partial) :-
 %                        step (Figs. 21-22) to current output (false)
 %     - declobber(Ms)    the declobbering methods, in the order tried
 %                        (default [promotion, white_knight])
+%     - forward_check(B) check a geometric goal with the CMS as soon as its
+%                        variables are bound, not only at its turn (true);
+%                        the same plan, found sooner; false gives the
+%                        paper's order of events in the trace (Sec. 6)
+%     - max_steps(N)     a budget of goal steps over all rounds (10000; 0
+%                        for none); phase-1 planning is exponential in the
+%                        plan size and undecidable (Secs. 2, 7.2)
 %     - oracle(Closure)  compute arc pairs with call(Closure, Constraint,
 %                        Objects, Gs, Ps, Pairs) instead of
 %                        foreign:arc_pairs/5; a test double for Prolog-only
@@ -113,6 +123,10 @@ phase1(Problem, M:Options0, Outcome) :-
 
 check_option(_, max_actions(N), max_actions(N)) :- !,
     must_be(nonneg, N).
+check_option(_, max_steps(N), max_steps(N)) :- !,
+    must_be(nonneg, N).
+check_option(_, forward_check(B), forward_check(B)) :- !,
+    must_be(boolean, B).
 check_option(_, trace(B), trace(B)) :- !,
     must_be(boolean, B).
 check_option(_, declobber(Ms), declobber(Ms)) :- !,

@@ -76,7 +76,8 @@ instantiate_establishing_action(holding(Object, Grasp), Action, Constraints) -->
     action_template(pickup(Object, Grasp), Action),
     { get_all_grasps(Object, GraspList),
       Constraints = [member(Grasp, GraspList)] }.
-instantiate_establishing_action(part_location(Object, Pos), Action, Constraints) -->
+instantiate_establishing_action(part_location(Object, Pos), Action,
+                                Constraints) -->
     { object_of(Object) },
     new_plan_variable(pos_, Pos),
     action_template(putdown(Object, Pos), Action),
@@ -86,7 +87,8 @@ instantiate_establishing_action(gripper(open), Action, Constraints) -->
     instantiate_establishing_action(part_location(_, _), Action, Constraints).
 instantiate_establishing_action(gripper(closed), Action, Constraints) -->
     instantiate_establishing_action(holding(_, _), Action, Constraints).
-instantiate_establishing_action(assembled(Obj1, Obj2, [M1, M2], Ta, Va), Action, []) -->
+instantiate_establishing_action(assembled(Obj1, Obj2, [M1, M2], Ta, Va),
+                                Action, []) -->
     action_template(assemble(Obj1, Obj2, [M1, M2], Ta, Va), Action),
     { action_geo_goals(Action, Geos),
       memberchk(geo(_, _, member(_, GraspList), _), Geos),
@@ -133,7 +135,8 @@ action_template(putdown(Object, Pos), Template) -->             % Fig. 3
                          [holding(Object, Grasp)]) ]),
                addlist([part_location(Object, Pos), gripper(open)]),
                dellist([gripper(closed), holding(Object, Grasp)])) }.
-action_template(assemble(Obj1, Obj2, [M1, M2], Transform, Mvector), Template) --> % Fig. 4
+action_template(assemble(Obj1, Obj2, [M1, M2], Transform, Mvector),   % Fig. 4
+                Template) -->
     gensym(action_, Id),
     gensym(goal_, G1), gensym(goal_, G2), gensym(goal_, G3),
     gensym(goal_, G4), gensym(goal_, G5),

@@ -17,7 +17,7 @@
     sensors.dense_range_scan entry takes precedence where phase 2 has it.
 */
 :- module(spar_sensing,
-          [ sensing_rule/5,            % ?Sensing, -Variables, -Bounds, -ErrTm, -Template
+          [ sensing_rule/5,            % ?Sensing, -Vars, -Bounds, -ErrTm, -Template
             verification_template/2,   % ?Action, -Verification
             recovery_template/2        % ?Action, -Recovery
           ]).
@@ -41,7 +41,8 @@ sensing_rule(dense_range_scan(Object),
              ErrTm,
              sensing_action(ActionId,
                             dense_range_scan(Object),
-                            preconditions([op(_Gid, ActionId, gripper(open))], []),
+                            preconditions([op(_Gid, ActionId, gripper(open))],
+                                          []),
                             addlist([part_location_unc(Object, ErrTm)]),
                             dellist([part_location_unc(Object, _)]))) :-
     ErrTm = tm([ [cos(Theta), sin(Theta), 0],

@@ -23,7 +23,7 @@ peg_net(Net) :-
     cms_initial_state(part_location(peg, init_pos1), N1, Net).
 
 test(default_oracle_is_python, O == foreign:arc_pairs) :-
-    cms_empty(cms(_, _, _, O)).
+    cms_empty(cms(_, _, _, oracle(O, _))).
 
 test(initial_constraint_creates_node, L == [p2P1, p2P2]) :-
     cms_empty(N0),
@@ -110,8 +110,8 @@ test(second_arc_intersects, Arcs == [arc(grasp_1, init_pos1, [p1G3/tr1])]) :-
     peg_net(N0),
     cms_add(reachable(grasp_1, init_pos1), peg, N0, N1),
     N1 = cms(Nodes, As, Order, _),
-    cms_add(reachable(grasp_1, init_pos1), peg,
-            cms(Nodes, As, Order, [_, _, _, _, [p1G3/tr1]]>>true), N),
+    cms_empty([_, _, _, _, [p1G3/tr1]]>>true, cms(_, _, _, Oracle)),
+    cms_add(reachable(grasp_1, init_pos1), peg, cms(Nodes, As, Order, Oracle), N),
     cms_arcs(N, Arcs).
 
 test(component, C == [grasp_1, init_pos1]) :-
@@ -134,5 +134,23 @@ test(unbound_variable, [error(instantiation_error)]) :-
 test(unknown_constraint, [error(domain_error(geometric_constraint, near(a, b)))]) :-
     peg_net(N0),
     cms_add(near(a, b), none, N0, _).
+
+counting_oracle(Count, K, O, Gs, Ps, Pairs) :-
+    arg(1, Count, C0),
+    C is C0 + 1,
+    nb_setarg(1, Count, C),
+    table_oracle(hole_down, K, O, Gs, Ps, Pairs).
+
+%   The oracle (Python: inverse kinematics) is asked each question once.
+
+test(oracle_asked_once, N == 1) :-
+    Count = count(0),
+    cms_empty(counting_oracle(Count), N0),
+    spar_actions:get_all_grasps(peg, Gs),
+    cms_initial(member(grasp_1, Gs), N0, N1),
+    cms_initial_state(part_location(peg, init_pos1), N1, N2),
+    cms_add(reachable(grasp_1, init_pos1), peg, N2, _),
+    cms_add(reachable(grasp_1, init_pos1), peg, N2, _),
+    arg(1, Count, N).
 
 :- end_tests(cms_sec5_2).

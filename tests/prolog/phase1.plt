@@ -133,8 +133,16 @@ test(trace_layout) :-
     options(Os),
     with_output_to(string(S), phase1(peg_in_block, [trace(true)|Os], plan(_))),
     contains(S, "OPERATIONAL GOAL STACK\n  op(goal_6, action_2, gripper(open))\n  op(goal_7, action_2, part_location(peg, Pos_1))\n  op(goal_2, action_1, part_location(block, Pos_2))\nGEOMETRIC GOAL STACK\n  geo(goal_8, action_2,\n      reachable(grasp_1, Pos_1),\n      part_location(peg, Pos_1))"),
-    contains(S, "CMS refuses in_position_class(init_pos2"),
+    contains(S, "the CMS would refuse in_position_class(init_pos2"),
     contains(S, "new action(action_3, putdown(block,pos_1))").
+
+test(paper_order_without_forward_check, As-Order == As1-Order1) :-
+    options(Os),
+    with_output_to(string(S), phase1(peg_in_block, [forward_check(false), trace(true)|Os], plan(P))),
+    contains(S, "CMS refuses in_position_class(init_pos2"),
+    partial_actions(P, As), partial_ordering(P, Order),
+    partial(P1),
+    partial_actions(P1, As1), partial_ordering(P1, Order1).
 
 test(no_trace_no_output, S == "") :-
     options(Os),
