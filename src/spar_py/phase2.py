@@ -38,6 +38,7 @@ class World:
     grasps: dict[str, str] = field(default_factory=dict)  # object -> grasp label while held
     joints: np.ndarray | None = None
     key: tuple = ()  # what determines this world: the placements' key and the steps so far
+    checked: tuple = ()  # (Constraint, satisfied) of every UR precondition checked so far
 
 
 # ---------------------------------------------------------------------- set-up
@@ -177,18 +178,24 @@ def _verdicts(world: World, cs: list[ur.Constraint]) -> list[dict[str, Any]]:
     return out
 
 
+def _checked(world: World, cs: list[ur.Constraint], checks: list[dict[str, Any]]) -> tuple:
+    """``world.checked`` extended by this step's constraints and their verdicts."""
+    ur_checks = [c for c in checks if c["kind"] == "uncertainty"]
+    return world.checked + tuple((c, v["satisfied"]) for c, v in zip(cs, ur_checks))
+
+
 def _pickup(world: World, s: Step) -> tuple[list[dict], World, dict]:
     obj, label = s["args"][0], s["args"][1]
     g = _grasp(world.cell, obj, label)
     o = world.unc.obj(obj)
     manip = world.unc.manipulator_error()
-    checks = _verdicts(world, ur.pickup_constraints(world.unc, obj, g.T, g.width, world.cell.finger_separation,
-                                                    manip, action=s["id"]))
+    cs = ur.pickup_constraints(world.unc, obj, g.T, g.width, world.cell.finger_separation, manip, action=s["id"])
+    checks = _verdicts(world, cs)
     q, geo = _arm(world, o.pose @ g.T)
     if q is None:
         checks.append(_reach_verdict(s["id"], False, f"no joint solution for pickup({obj}, {label})"))
     w = replace(world, unc=ur.pickup(world.unc, obj, g.T, manip), grasps={**world.grasps, obj: label},
-                joints=q if q is not None else world.joints)
+                joints=q if q is not None else world.joints, checked=_checked(world, cs, checks))
     return checks, w, geo
 
 
@@ -217,13 +224,14 @@ def _assemble(world: World, s: Step) -> tuple[list[dict], World, dict]:
     if fp is None or fh is None:
         raise SparValueError(f"assemble({peg}, {hole}): both objects need a mating feature")
     g = _grasp(cell, peg, world.grasps[peg])
-    checks = _verdicts(world, ur.assemble_constraints(world.unc, peg, hole, Ta, fp, fh, action=s["id"]))
+    cs = ur.assemble_constraints(world.unc, peg, hole, Ta, fp, fh, action=s["id"])
+    checks = _verdicts(world, cs)
     q, geo = _arm(world, world.unc.obj(hole).pose @ Ta @ g.T)
     if q is None:
         checks.append(_reach_verdict(s["id"], False, f"no joint solution for assemble({peg}, {hole})"))
     grasps = {k: v for k, v in world.grasps.items() if k != peg}
     w = replace(world, unc=ur.assemble(world.unc, peg, hole, Ta), grasps=grasps,
-                joints=q if q is not None else world.joints)
+                joints=q if q is not None else world.joints, checked=_checked(world, cs, checks))
     return checks, w, geo
 
 
@@ -248,12 +256,13 @@ def _squeeze(world: World, s: Step) -> tuple[list[dict], World, dict]:
     for label in labels:
         g = _grasp(cell, obj, label)
         manip = world.unc.manipulator_error()
-        checks = _verdicts(world, ur.pickup_constraints(world.unc, obj, g.T, g.width, cell.finger_separation,
-                                                        manip, action=s["id"]))
+        cs = ur.pickup_constraints(world.unc, obj, g.T, g.width, cell.finger_separation, manip, action=s["id"])
+        checks = _verdicts(world, cs)
         q, geo = _arm(world, o.pose @ g.T)
         if q is not None and all(c["satisfied"] for c in checks):
             geo["grasp"] = label
-            w = replace(world, unc=ur.squeeze(world.unc, obj, g.T, manip), joints=q)
+            w = replace(world, unc=ur.squeeze(world.unc, obj, g.T, manip), joints=q,
+                        checked=_checked(world, cs, checks))
             return checks, w, geo
     return ([_reach_verdict(s["id"], False, f"no grasp of {obj} both reachable and sure to succeed for a squeeze")],
             world, {"tool_pose": None, "joints_deg": None})
@@ -277,3 +286,33 @@ STEPS = {
     "dense_range_scan": _scan,
     "squeeze": _squeeze,
 }
+
+
+# ---------------------------------------------------------------------- execution check
+
+
+def sample_check(cell: Cell, steps: list[Step], draws: int = 10_000, seed: int = 0) -> list[dict[str, Any]]:
+    """Replay an instance numerically: for every uncertainty-reduction precondition checked
+    along ``steps`` (in order, sensing and squeezes included), evaluate its expression at
+    ``draws`` points drawn uniformly from its variables' bounds and count the draws in
+    which the inequality fails. A precondition declared satisfied must never fail."""
+    import casadi as ca
+
+    world = new_world(cell, steps)
+    for s in steps:
+        _, world, _ = step(world, s)
+    rng = np.random.default_rng(seed)
+    reg = world.unc.registry
+    out = []
+    for c, declared in world.checked:
+        names = sorted(reg.box(c.expr))
+        syms = [reg.symbol(n) for n in names]
+        f = ca.Function("f", [ca.vertcat(*syms)] if syms else [ca.SX.sym("none", 0)], [c.expr])
+        lo = np.array([reg.bounds(n)[0] for n in names])
+        hi = np.array([reg.bounds(n)[1] for n in names])
+        pts = rng.uniform(lo, hi, size=(draws, len(names))) if names else np.zeros((draws, 0))
+        vals = np.asarray(f.map(draws)(pts.T)).ravel()
+        bad = vals <= c.threshold if c.sense == ">" else vals >= c.threshold
+        out.append({"action": c.action, "constraint": c.name, "declared_satisfied": bool(declared),
+                    "failed_draws": int(bad.sum()), "min": float(vals.min()), "max": float(vals.max())})
+    return out
