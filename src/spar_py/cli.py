@@ -22,7 +22,8 @@ DEFAULT_PROBLEM = "kb/problems/peg_in_block.yaml"
 BANNER = """\
 spar-py {version} - SPAR's planner in SWI-Prolog {swi}; problem {problem} loaded.
 Try:
-    ?- plan_phase1({problem}, P), print_partial(P).
+    ?- plan({problem}, P), print_plan(P).
+    ?- phase1({problem}, [trace(true)], plan(P)), print_partial(P).
     ?- kb:grasp(peg, G, gfaces(F), _, _, _).
 Quit with end_of_file (Ctrl-D)."""
 

@@ -1,0 +1,71 @@
+"""The janus bridge: the recorded SWI-Prolog, typed errors, surviving failed queries, the toplevel."""
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from spar_py.engine import engine, swipl_record
+from spar_py.errors import PlanningTimeout, PrologError
+from spar_py.planner import Planner
+
+ROOT = Path(__file__).resolve().parent.parent
+SPAR = [sys.executable, "-m", "spar_py.cli"]
+
+
+def test_runs_the_recorded_swi_prolog() -> None:
+    rec = swipl_record()
+    assert rec["version"] >= 90112
+    assert engine().query_once("current_prolog_flag(version, V)")["V"] == rec["version"]
+
+
+def test_prolog_exception_is_typed_with_its_message() -> None:
+    with pytest.raises(PrologError) as e:
+        engine().query_once("atom_length(X, Y)")
+    assert "instantiated" in e.value.message
+
+
+def test_engine_survives_a_failed_query() -> None:
+    eng = engine()
+    with pytest.raises(PrologError):
+        eng.query_once("spar:phase1(no_such_problem, [], _)")
+    plan = Planner().plan(ROOT / "kb/problems/hole_up.yaml", phase1_only=True)
+    assert plan.ok and len(plan.actions) == 2
+
+
+def test_timeout_ends_the_search_cleanly() -> None:
+    with pytest.raises(PlanningTimeout):
+        Planner(timeout=0.05).plan(ROOT / "kb/problems/unreachable.yaml")
+    assert Planner().plan(ROOT / "kb/problems/hole_up.yaml", phase1_only=True).ok
+
+
+def test_repl_answers_with_the_built_version() -> None:
+    r = subprocess.run(SPAR + ["repl"], input="current_prolog_flag(version, V).\n",
+                       capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert f"V = {swipl_record()['version']}." in r.stdout
+    assert "plan(peg_in_block, P), print_plan(P)" in r.stdout
+
+
+def _old_swipl() -> str | None:
+    """A swipl older than janus's floor on this machine (Debian's 9.0.4), if any."""
+    exe = shutil.which("swipl", path="/usr/bin")
+    if not exe:
+        return None
+    out = subprocess.run([exe, "--dump-runtime-variables"], capture_output=True, text=True).stdout
+    v = next((int(l.split('"')[1]) for l in out.splitlines() if l.startswith("PLVERSION=")), 0)
+    return exe if v < 90112 else None
+
+
+@pytest.mark.skipif(_old_swipl() is None, reason="no SWI-Prolog older than 9.1.12 in /usr/bin to mix in")
+def test_old_swipl_first_on_path_does_not_break_the_engine() -> None:
+    env = {**os.environ, "PATH": f"/usr/bin:{os.environ['PATH']}"}
+    r = subprocess.run([sys.executable, "-c",
+                        "from spar_py.engine import engine; "
+                        "print(engine().query_once('current_prolog_flag(version, V)')['V'])"],
+                       capture_output=True, text=True, timeout=120, env=env)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip() == str(swipl_record()["version"])
