@@ -1,0 +1,55 @@
+"""Bad input to `spar plan`: one clear line, a stable exit code, no traceback, no partial output file."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+BAD = sorted((ROOT / "tests" / "bad").glob("*.yaml"))
+SPAR = [sys.executable, "-m", "spar_py.cli"]
+
+
+def spar(*args: str, timeout: float = 300) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(SPAR + list(args), capture_output=True, text=True, timeout=timeout, cwd=ROOT)
+
+
+@pytest.mark.parametrize("path", BAD, ids=[p.stem for p in BAD])
+def test_bad_file_to_plan(path: Path, tmp_path: Path) -> None:
+    out = tmp_path / "plan.json"
+    r = spar("plan", str(path), "--json", "-o", str(out))
+    assert r.returncode == 2, r.stderr
+    assert r.stderr.count("\n") == 1 and r.stderr.startswith("spar: ") and str(path) in r.stderr
+    assert "Traceback" not in r.stderr + r.stdout
+    assert not out.exists() and list(tmp_path.iterdir()) == []
+
+
+def test_unreachable_goal_is_a_no_plan_outcome_with_its_reason(tmp_path: Path) -> None:
+    out = tmp_path / "plan.json"
+    r = spar("plan", "kb/problems/unreachable.yaml", "--json", "-o", str(out))
+    assert r.returncode == 1
+    doc = json.loads(out.read_text())
+    assert doc["outcome"] == "no_plan" and "reachable" in doc["reason"]["goal"]
+    r = spar("plan", "kb/problems/unreachable.yaml")
+    assert r.returncode == 1 and "NO PLAN within" in r.stdout
+
+
+def test_timeout_is_a_clean_exit(tmp_path: Path) -> None:
+    out = tmp_path / "plan.json"
+    r = spar("plan", "kb/problems/unreachable.yaml", "--timeout", "0.2", "--json", "-o", str(out))
+    assert r.returncode == 4
+    assert r.stderr.count("\n") == 1 and "timeout" in r.stderr and "Traceback" not in r.stderr
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("args, what", [
+    (["plan", "kb/problems/peg_in_block.yaml", "--max-actions", "0"], "positive integer"),
+    (["plan", "kb/problems/peg_in_block.yaml", "--timeout", "nan"], "positive number of seconds"),
+    (["plan", "no/such/file.yaml"], "a readable file"),
+])
+def test_bad_arguments(args: list[str], what: str) -> None:
+    r = spar(*args)
+    assert r.returncode == 2 and what in r.stderr and "Traceback" not in r.stderr
