@@ -105,7 +105,7 @@ def test_unreachable_ends_without_plan_naming_the_goal() -> None:
 
 
 @pytest.mark.parametrize("name", ["peg_in_block", "large_uncertainty", "hopeless_uncertainty",
-                                  "placement_trap", "second_base"])
+                                  "second_base"])
 def test_paper_plan(name: str) -> None:
     o = phase1(name)
     assert o.kind == "plan"

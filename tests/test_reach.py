@@ -116,8 +116,13 @@ def test_gfaces_on_the_resting_face_never_reachable(cell: Cell) -> None:
     labels = ["tr1", "tr_down", "tr_yaw", "box_up", "box_down"]
     pairs = reachable_pairs(cell, "box", GRASPS, labels)
     assert not [p for p in pairs if p[0] == "g2"]
-    # stable-pose labels: condition 1 only, so every other grasp passes
-    assert ["g1", "box_up"] in pairs and ["g10", "box_down"] in pairs
+    # stable-pose labels under the paper's rule: condition 1 only, so every other grasp passes
+    cell.stable_pose_rule = "paper"
+    paper = reachable_pairs(cell, "box", GRASPS, labels)
+    cell.stable_pose_rule = "reachable"
+    assert ["g1", "box_up"] in paper and ["g10", "box_down"] in paper
+    # our rule asks for a placement the arm reaches: a subset of the paper's pairs
+    assert set(map(tuple, pairs)) <= set(map(tuple, paper)) and ["g1", "box_up"] in pairs
 
 
 def test_absolute_positions_are_classified_into_stable_poses(cell: Cell) -> None:
@@ -151,9 +156,14 @@ def test_all_pairs_in_one_batched_ik_call(cell: Cell, monkeypatch: pytest.Monkey
 
 
 def test_mate_reachable(cell: Cell) -> None:
-    # a stable-pose label of the fixed object: condition 2 is assumed satisfiable, all pairs pass
+    # a stable-pose label of the fixed object under the paper's rule: condition 2 is assumed
+    # satisfiable, all pairs pass; ours keeps those some placement of the plate lets the arm reach
+    cell.stable_pose_rule = "paper"
     pairs = mate_reachable_pairs(cell, "box", "plate", GRASPS, ["plate_up", "plate_down"], cell.transforms["on_top"])
+    cell.stable_pose_rule = "reachable"
     assert len(pairs) == 6
+    ours = mate_reachable_pairs(cell, "box", "plate", GRASPS, ["plate_up", "plate_down"], cell.transforms["on_top"])
+    assert 0 < len(ours) < 6 and set(map(tuple, ours)) <= set(map(tuple, pairs))
     # absolute: T = T_O T_a T_g; the box on the plate at (30, 0, 3) in is reachable from above,
     # and condition 1 does not apply (g2's faces are not checked)
     pairs = mate_reachable_pairs(cell, "box", "plate", GRASPS, ["trp", "trp_far"], "on_top")

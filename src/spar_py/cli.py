@@ -92,7 +92,8 @@ def cmd_plan(args: argparse.Namespace) -> int:
     from .planner import Planner
 
     planner = Planner(max_actions=args.max_actions, max_instances=args.max_instances,
-                      separation=not args.no_separation, timeout=args.timeout)
+                      separation=not args.no_separation, timeout=args.timeout,
+                      paper_placements=args.paper_placements)
     cell = planner.load_problem(args.problem)
     plan = planner.plan(cell, phase1_only=args.phase1_only, trace=args.trace)
     if args.json:
@@ -174,6 +175,8 @@ def build_parser() -> argparse.ArgumentParser:
                       help="plan instances examined at most in phase 2 (default 50)")
     plan.add_argument("--no-separation", action="store_true",
                       help="declobber without separation, as the paper's planner")
+    plan.add_argument("--paper-placements", action="store_true",
+                      help="assume a put-down into a stable pose is reachable somewhere (the paper's rule)")
     plan.add_argument("--timeout", type=_positive_float, metavar="S", help="give up after S seconds")
     plan.add_argument("--dot", metavar="DIR", help="write the ordering graph, network and cell pictures here")
     plan.add_argument("--png", metavar="DIR", help="same as --dot (both write .dot and .png)")

@@ -143,6 +143,10 @@ class Cell:
     object_bounds: dict[str, Bounds]
     sensors: dict[str, Sensor]
     placement_regions: list[dict] = field(default_factory=list)
+    #: How reach treats a stable-pose label (a put-down position with no X, Y): "reachable"
+    #: (some placement in the free regions must reach it) or "paper" (Sec. 5.2.4's rule:
+    #: condition 2 assumed satisfiable).
+    stable_pose_rule: str = "reachable"
 
     def position_of(self, label: str) -> Position:
         """The absolute position labelled ``label`` (KeyError if none)."""

@@ -53,7 +53,8 @@ def default_regions(cell: Cell) -> list[dict]:
     return [{"x": (float(lo[0]), float(hi[0])), "y": (float(lo[1]), float(hi[1]))}]
 
 
-def candidates(cell: Cell, obj: str, pose: str, occupied: list[tuple[np.ndarray, float]]) -> list[Placement]:
+def candidates(cell: Cell, obj: str, pose: str, occupied: list[tuple[np.ndarray, float]],
+               step: float = GRID_STEP, yaw_steps: int = YAW_STEPS) -> list[Placement]:
     """Grid placements of ``obj`` in stable pose ``pose`` inside the free regions, clear of
     ``occupied`` (list of (xy centre, radius) of other objects on the table)."""
     model = cell.objects[obj]
@@ -61,14 +62,14 @@ def candidates(cell: Cell, obj: str, pose: str, occupied: list[tuple[np.ndarray,
     r = model.bounding_radius()
     out: list[Placement] = []
     for reg in default_regions(cell):
-        xs = np.arange(reg["x"][0], reg["x"][1] + 1e-9, GRID_STEP)
-        ys = np.arange(reg["y"][0], reg["y"][1] + 1e-9, GRID_STEP)
+        xs = np.arange(reg["x"][0], reg["x"][1] + 1e-9, step)
+        ys = np.arange(reg["y"][0], reg["y"][1] + 1e-9, step)
         for x in xs:
             for y in ys:
                 if any(np.hypot(x - c[0], y - c[1]) < r + rc + CLEARANCE for c, rc in occupied):
                     continue
-                for k in range(YAW_STEPS):
-                    yaw = 2 * np.pi * k / YAW_STEPS
+                for k in range(yaw_steps):
+                    yaw = 2 * np.pi * k / yaw_steps
                     T = np.eye(4)
                     T[:3, :3] = rotz(yaw)[:3, :3] @ sp.R
                     T[:3, 3] = (x, y, sp.height)
@@ -106,3 +107,59 @@ def choose(cell: Cell, obj: str, pose: str, requirements: list[np.ndarray],
         regs = default_regions(cell)
         near = np.mean([[(r["x"][0] + r["x"][1]) / 2, (r["y"][0] + r["y"][1]) / 2] for r in regs], axis=0)
     return min(good, key=lambda p: (round(float(np.hypot(p.x - near[0], p.y - near[1])), 9), p.yaw))
+
+
+#: The coarser grid phase 1 uses to decide whether a stable pose is reachable at all.
+PHASE1_STEP = 6.0
+PHASE1_YAWS = 6
+
+
+def reachable_somewhere(cell: Cell, obj: str, pose: str, requirements: list[np.ndarray]) -> np.ndarray:
+    """(m,) bool: for each tool transform X (object frame), some placement of ``obj`` in
+    ``pose`` on the phase-1 grid of the free regions where the arm reaches T_O @ X.
+
+    A necessary condition for a put-down or mate at a stable-pose position: it ignores
+    the other objects (phase 1 does not know where they will be); phase 2 chooses a real
+    placement clear of them that serves every later action at once.
+    """
+    if not requirements:
+        return np.zeros(0, dtype=bool)
+    X = np.stack(requirements)
+    out = np.zeros(len(X), dtype=bool)
+    todo = []
+    for i, x in enumerate(X):
+        key = (id(cell), obj, pose, np.round(x, 12).tobytes())
+        if key in _SOMEWHERE:
+            out[i] = _SOMEWHERE[key]
+        else:
+            todo.append((i, key))
+    if todo:
+        cands = _grid(cell, obj, pose)
+        if len(cands):
+            Xs = X[[i for i, _ in todo]]
+            T = np.einsum("nij,mjk->nmik", cands, Xs).reshape(-1, 4, 4)
+            ok = (cell.robot.reachable_mask(T) & above_table(cell, T)).reshape(len(cands), len(Xs)).any(axis=0)
+        else:
+            ok = np.zeros(len(todo), dtype=bool)
+        if len(_SOMEWHERE) > 100_000:
+            _SOMEWHERE.clear()
+        for (i, key), v in zip(todo, ok):
+            _SOMEWHERE[key] = out[i] = bool(v)
+    return out
+
+
+#: Memo of reachable_somewhere per (cell, object, pose, requirement): phase 1 asks the
+#: same arcs again in every round of its deepening search.
+_SOMEWHERE: dict[tuple, bool] = {}
+_GRIDS: dict[tuple, np.ndarray] = {}
+
+
+def _grid(cell: Cell, obj: str, pose: str) -> np.ndarray:
+    """(n,4,4) object poses of the phase-1 grid (memoised per cell, object and pose)."""
+    key = (id(cell), obj, pose)
+    if key not in _GRIDS:
+        if len(_GRIDS) > 1024:
+            _GRIDS.clear()
+        cands = candidates(cell, obj, pose, [], PHASE1_STEP, PHASE1_YAWS)
+        _GRIDS[key] = np.stack([p.T for p in cands]) if cands else np.zeros((0, 4, 4))
+    return _GRIDS[key]

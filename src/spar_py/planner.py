@@ -75,11 +75,14 @@ class Planner:
 
     Options: ``max_actions`` (phase-1 plan-size bound), ``max_instances`` (phase-2
     cap on plan instances examined), ``separation`` (declobber by separation, dif/2),
-    ``timeout`` (seconds for the whole query, None for none).
+    ``paper_placements`` (the paper's rule: a put-down into a stable pose is assumed
+    reachable somewhere, Sec. 5.2.4; by default some placement in the free table
+    regions must reach it), ``timeout`` (seconds for the whole query, None for none).
     """
 
     def __init__(self, max_actions: int = 12, max_instances: int = 50,
-                 separation: bool = True, timeout: float | None = None) -> None:
+                 separation: bool = True, timeout: float | None = None,
+                 paper_placements: bool = False) -> None:
         if max_actions < 1 or max_instances < 1:
             raise SparValueError("max_actions and max_instances must be at least 1")
         if timeout is not None and timeout <= 0:
@@ -88,6 +91,7 @@ class Planner:
         self.max_instances = max_instances
         self.separation = separation
         self.timeout = timeout
+        self.paper_placements = paper_placements
         self.engine = engine()
 
     def load_problem(self, path: str | Path) -> Cell:
@@ -97,6 +101,7 @@ class Planner:
     def plan(self, problem: Cell | str | Path, phase1_only: bool = False, trace: bool = False) -> Plan:
         """Plan ``problem`` (a loaded Cell or a problem file path)."""
         cell = problem if isinstance(problem, Cell) else self.load_problem(problem)
+        cell.stable_pose_rule = "paper" if self.paper_placements else "reachable"
         t0 = time.perf_counter()
         self.engine.load_cell(cell)
         opts = {

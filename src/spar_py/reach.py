@@ -105,6 +105,18 @@ def above_table(cell: Cell, T: np.ndarray) -> np.ndarray:
     return flange[:, 2, 3] > 0.0
 
 
+def _somewhere(cell: Cell, obj: str, pose: str, grasps: list[Grasp], X: list[np.ndarray]) -> list[Grasp]:
+    """The grasps whose tool transform X (object frame) the arm reaches at some placement
+    of ``obj`` in stable pose ``pose`` (placement.reachable_somewhere); all of them under
+    the paper's rule (``cell.stable_pose_rule == "paper"``: "some suitable choice of
+    X, Y, Z" is assumed, Sec. 5.2.4)."""
+    if cell.stable_pose_rule == "paper" or not grasps:
+        return list(grasps)
+    from .placement import reachable_somewhere  # placement builds on this module
+
+    return [g for g, ok in zip(grasps, reachable_somewhere(cell, obj, pose, X)) if ok]
+
+
 def _ik_pass(cell: Cell, poses: list[np.ndarray]) -> np.ndarray:
     """(k,) bool: which world tool poses (each 4x4) the arm reaches within its limits, wrist above
     the table; one batched IK call."""
@@ -129,14 +141,13 @@ def reachable_pairs(cell: Cell, obj: str, grasp_labels: Sequence[str],
     for p in pos_labels:
         T_O = _absolute(cell, model, p)
         rfaces = set(resting_faces(cell, obj, p))
-        for g in grasps:
-            if rfaces & set(g.gfaces):
-                continue  # condition 1: the fingers would have to touch a face on the table
-            if T_O is None:
-                pairs.append((g.label, p))  # stable pose: some X, Y, Z is assumed to reach it
-            else:
-                pending.append((g.label, p))
-                poses.append(T_O @ g.T)
+        free = [g for g in grasps if not rfaces & set(g.gfaces)]  # condition 1
+        if T_O is None:
+            pairs += [(g.label, p) for g in _somewhere(cell, obj, p, free, [g.T for g in free])]
+            continue
+        for g in free:
+            pending.append((g.label, p))
+            poses.append(T_O @ g.T)
     ok = _ik_pass(cell, poses)
     pairs += [gp for gp, reached in zip(pending, ok) if reached]
     return _sorted_pairs(pairs)
@@ -166,7 +177,7 @@ def mate_reachable_pairs(cell: Cell, held_obj: str, fixed_obj: str, grasp_labels
     for p in pos_labels:
         T_O = _absolute(cell, fixed, p)
         if T_O is None:
-            pairs += [(g.label, p) for g in grasps]
+            pairs += [(g.label, p) for g in _somewhere(cell, fixed_obj, p, grasps, [Ta @ g.T for g in grasps])]
             continue
         T_held = T_O @ Ta
         for g in grasps:
