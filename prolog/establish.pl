@@ -16,16 +16,31 @@
     fall between them, E is dropped: establishing by the white knight
     directly is the same plan with fewer orderings.) The methods
     are a table tried in the order the plan's options give
-    (declobber([promotion, white_knight]) by default):
+    (declobber([promotion, separation, white_knight]) by default;
+    declobber([promotion, white_knight]) is the paper's planner):
 
       promotion     prior_to(S, C)
+      separation    dif(D, Cond) for every delete-list element D of C that
+                    unifies with the condition (Sec. 4.1, Chapman's
+                    separation; not in SPAR): C then cannot clobber it,
+                    whatever the still unbound variables of D become
       white_knight  an action W, existing or new, that establishes the
                     condition, with prior_to(C, W) and prior_to(W, S)
                     (W = E is the establisher acting as its own white
                     knight, Sec. 4.1)
 
-    Separation (Sec. 4.1; not in SPAR) would be one more clause of
-    declobber_by/7 and one more name in known_declobber_method/1.
+    Why this order: promotion adds one ordering and binds nothing, and is
+    the paper's first choice; separation adds neither an action nor an
+    ordering, but it commits a variable of C away from a value (C's own
+    precondition must later be established by something else, which may
+    cost actions), so it comes after promotion; a white knight adds an
+    action or orderings and comes last. A separation is a constraint
+    posted with dif/2 on the plan's terms (attributed variables: it lives
+    in the threaded plan state and backtracking removes it) and is also
+    recorded as sep(D, Cond) in the plan state (goals.pl), since a dif/2
+    between two terms that become different atoms vanishes: plan
+    instances (spar:partial_instances/2) must keep D and Cond different
+    after the network variables get their labels.
 
     add_action/5 is the one place an action enters the plan: it posts the
     action's initial constraints and ordering arcs, pushes its
@@ -180,6 +195,7 @@ possible_clobberer(Cond, E, S, Plan, C) :-
 %   The declobbering methods declobber_by/7 implements.
 
 known_declobber_method(promotion).
+known_declobber_method(separation).
 known_declobber_method(white_knight).
 
 %!  declobber(+Goal, +Establisher, +Plan0, -Plan) is nondet.
@@ -198,18 +214,22 @@ declobber(op(_, S, Cond), E, Plan0, Plan) :-
 declobber_(Cond, E, S, Methods, Done, Plan0, Plan) :-
     (   possible_clobberer(Cond, E, S, Plan0, C),
         \+ memberchk(C, Done)
-    ->  \+ necessarily_between(C, E, S, Plan0),
-        member(Method, Methods),
+    ->  (   necessarily_between(C, E, S, Plan0)
+        ->  memberchk(separation, Methods),
+            Method = separation
+        ;   member(Method, Methods)
+        ),
         declobber_by(Method, Cond, E, S, C, Plan0, Plan1),
         declobber_(Cond, E, S, Methods, [C|Done], Plan1, Plan)
     ;   Plan = Plan0
     ).
 
 %   necessarily_between(+C, +E, +S, +Plan): C follows E and precedes S
-%   in every linearisation. Then only a white knight W between C and S can
-%   save the goal, and establishing it by W directly (W acting as its own
-%   white knight for C) gives the same actions and a weaker ordering; that
-%   alternative is tried as an establishment, so this one is dropped.
+%   in every linearisation. Then promotion closes a cycle, and of the white
+%   knights only one W between C and S can save the goal; establishing it
+%   by W directly (W acting as its own white knight for C) gives the same
+%   actions and a weaker ordering; that alternative is tried as an
+%   establishment, so this one is dropped. Separation alone remains.
 
 necessarily_between(C, E, S, Plan) :-
     plan_order(Plan, G),
@@ -224,6 +244,15 @@ declobber_by(promotion, Cond, _, S, C, Plan0, Plan) :-
     post_prior_to(S, C, Plan0, Plan),
     note(Plan, "  ~q may clobber ~q: promotion prior_to(~q, ~q)~n",
          [C, Cond, S, C]).
+declobber_by(separation, Cond, _, _, C, Plan0, Plan) :-
+    plan_actions(Plan0, Actions),
+    memberchk(action(C, _, _, _, dellist(Dels)), Actions),
+    unifying(Dels, Cond, Unifying),
+    Unifying \== [],
+    plan_seps(Plan0, Seps0),
+    separate(Unifying, Cond, Seps0, Seps),
+    set_seps_of_plan(Seps, Plan0, Plan),
+    note(Plan, "  ~q may clobber ~q: separation ~q~n", [C, Cond, Unifying]).
 declobber_by(white_knight, Cond, _, S, C, Plan0, Plan) :-
     (   plan_actions(Plan0, Actions),
         member(action(W, _, _, addlist(Adds), _), Actions),
@@ -235,3 +264,23 @@ declobber_by(white_knight, Cond, _, S, C, Plan0, Plan) :-
     ),
     note(Plan, "  ~q may clobber ~q: white knight ~q, prior_to(~q, ~q), \c
                 prior_to(~q, ~q)~n", [C, Cond, W, C, W, W, S]).
+
+%   unifying(+Dels, +Cond, -Ds): the elements of Dels that unify with Cond
+%   (nothing is bound). No yall lambda here or in separate/4: a lambda
+%   with free variables may be copied, and the dif/2 posted on the copy.
+
+unifying([], _, []).
+unifying([D|Ds], Cond, Us) :-
+    (   \+ D \= Cond
+    ->  Us = [D|Us1]
+    ;   Us = Us1
+    ),
+    unifying(Ds, Cond, Us1).
+
+%   separate(+Ds, +Cond, +Seps0, -Seps): post dif(D, Cond) for every D and
+%   record sep(D, Cond). Fails if some D cannot be kept apart from Cond.
+
+separate([], _, Seps, Seps).
+separate([D|Ds], Cond, Seps0, Seps) :-
+    dif(D, Cond),
+    separate(Ds, Cond, [sep(D, Cond)|Seps0], Seps).

@@ -18,10 +18,12 @@
     of actions, the declobbering methods, the trace flag, the history of
     the operational steps (for backjumping), the geometric goals checked
     ahead of their turn and whether to check them so (forward checking,
-    option forward_check) and the search recorder
+    option forward_check), the search recorder
     failures(DeepestOp, DeepestGeo, BoundHit, Budget-steps(Spent)), a term
     updated with nb_setarg/3: the only non-backtrackable state, as it must
-    outlive the failures it records. Every planner choice is a Prolog
+    outlive the failures it records, and the separations sep(D, Cond)
+    posted by declobbering (establish.pl; each also a dif/2 constraint on
+    the plan's terms). Every planner choice is a Prolog
     choice point; backtracking undoes it completely, symbol numbers
     included.
 
@@ -61,6 +63,7 @@
             plan_actions/2, plan_order/2, plan_net/2, plan_ids/2,
             plan_ops/2, plan_geos/2, plan_sat/2, plan_steps/2,
             plan_bound/2, plan_methods/2, plan_trace/2, plan_deepest/2,
+            plan_seps/2, set_seps_of_plan/3,
             plan_history/2, plan_checked/2, conflict_steps/3, bound_hit/1,
             set_actions_of_plan/3, set_order_of_plan/3, set_net_of_plan/3,
             set_ids_of_plan/3, set_ops_of_plan/3, set_geos_of_plan/3,
@@ -89,12 +92,13 @@
                sat:list = [],
                steps:integer = 0,
                bound:integer = 12,
-               methods:list = [promotion, white_knight],
+               methods:list = [promotion, separation, white_knight],
                trace:boolean = false,
                history:list = [],
                checked:list = [],
                lookahead:boolean = true,
-               deepest).
+               deepest,
+               seps:list = []).
 
 %!  phase1_search(+Options, -Outcome, -Bound) is det.
 %
@@ -171,7 +175,7 @@ unmet_goal(Recorder, Unmet) :-
 %   the operational stack as op(top_N, finish, Goal).
 
 initial_plan(Bound, Options, Plan) :-
-    option(declobber(Methods), Options, [promotion, white_knight]),
+    option(declobber(Methods), Options, [promotion, separation, white_knight]),
     option(trace(Trace), Options, false),
     option(forward_check(Lookahead), Options, true),
     (   option(oracle(Oracle), Options)
@@ -434,13 +438,18 @@ establisher(Sat, A, Cond, E) :-
 %
 %   The partial plan of phase 1: partial(Actions, Order, Net, Satisfied),
 %   the plan actions newest first, the ordering graph (ugraph), the CMS
-%   network and the satisfied goals with their establishers.
+%   network and the satisfied goals with their establishers,
+%   sat(Goal, Establisher), followed by the separations posted,
+%   sep(DeleteElement, Condition), oldest first (establish.pl).
 
-plan_partial(Plan, partial(Actions, Order, Net, Sat)) :-
+plan_partial(Plan, partial(Actions, Order, Net, Satisfied)) :-
     plan_actions(Plan, Actions),
     plan_order(Plan, Order),
     plan_net(Plan, Net),
-    plan_sat(Plan, Sat).
+    plan_sat(Plan, Sat),
+    plan_seps(Plan, Seps0),
+    reverse(Seps0, Seps),
+    append(Sat, Seps, Satisfied).
 
                  /*******************************
                  *            TRACE             *
@@ -460,14 +469,17 @@ note(Plan, Format, Args) :-
 %   the layout of Figs. 21-22, then the goal about to be considered (the
 %   first of its stack).
 
-trace_step(Goal, Plan) :-
+trace_step(Goal0, Plan) :-
     (   plan_trace(Plan, true)
     ->  plan_steps(Plan, K0),
         K is K0 + 1,
-        plan_ops(Plan, Ops),
-        plan_geos(Plan, Geos),
-        plan_actions(Plan, Actions),
-        \+ \+ ( name_variables([Ops, Geos, Actions]),
+        plan_ops(Plan, Ops0),
+        plan_geos(Plan, Geos0),
+        plan_actions(Plan, Actions0),
+        % a copy without dif/2 constraints (separations), which naming
+        % the variables must not trip over
+        copy_term([Ops0, Geos0, Actions0, Goal0], [Ops, Geos, Actions, Goal], _),
+        \+ \+ ( name_variables([Ops, Geos, Actions, Goal]),
                 format("~n--- step ~d~n", [K]),
                 format("OPERATIONAL GOAL STACK~n"),
                 forall(member(G, Ops), print_goal(G)),

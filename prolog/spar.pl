@@ -22,7 +22,11 @@
                                      addlist(Adds), dellist(Dels))
                    Order      the ordering graph (a ugraph over action ids)
                    Net        the CMS network (cms.pl)
-                   Satisfied  sat(Goal, Establisher) for every goal met
+                   Satisfied  sat(Goal, Establisher) for every goal met,
+                              then sep(D, Cond) for every separation
+                              (establish.pl): D, a delete-list element of
+                              a possible clobberer, is kept apart from
+                              Cond, in the plan and in every instance
       Instance = instance(Steps, Bindings)
                    Steps      the actions in an execution order, every plan
                               variable replaced by its label
@@ -90,7 +94,8 @@ plan_phase1(Problem, Partial) :-
 %     - trace(Bool)      print the goal stacks and plan actions at each
 %                        step (Figs. 21-22) to current output (false)
 %     - declobber(Ms)    the declobbering methods, in the order tried
-%                        (default [promotion, white_knight])
+%                        (default [promotion, separation, white_knight];
+%                        [promotion, white_knight] is the paper's planner)
 %     - forward_check(B) check a geometric goal with the CMS as soon as its
 %                        variables are bound, not only at its turn (true);
 %                        the same plan, found sooner; false gives the
@@ -169,10 +174,16 @@ partial_network(partial(_, _, Net, _), Net).
 %   instance(Steps, Bindings): Steps the instantiated templates in
 %   execution order with every network variable replaced by its label,
 %   Bindings the Var = Label pairs in standard order of Var. Backtracking
-%   enumerates solutions (outer) and linearisations (inner), lazily.
+%   enumerates solutions (outer) and linearisations (inner), lazily. A
+%   solution that gives a separated pair sep(D, Cond) the same labels
+%   (D would clobber Cond after all) is skipped.
 
-partial_instances(partial(Actions, Order, Net, _), instance(Steps, Bindings)) :-
+partial_instances(partial(Actions, Order, Net, Sat), instance(Steps, Bindings)) :-
     cms_solution(Net, Assignment),
+    forall(member(sep(D, Cond), Sat),
+           ( substitute(Assignment, D, D1),
+             substitute(Assignment, Cond, Cond1),
+             D1 \= Cond1 )),
     linearisation(Order, Ids),
     maplist(instance_step(Actions, Assignment), Ids, Steps),
     maplist([V-L, V=L]>>true, Assignment, Bindings).
@@ -199,13 +210,15 @@ substitute(Assignment, T0, T) :-
 %       ordering: [[Before, After]],
 %       variables: _{Var: [Label]},             label sets after AC-3
 %       raw_variables: _{Var: [Label]},         as posted (Fig. 25)
-%       arcs: [_{vars: [V1, V2], pairs: [[L1, L2]]}]}
+%       arcs: [_{vars: [V1, V2], pairs: [[L1, L2]]}],
+%       separations: [[Deleted, Cond]]}          dif(Deleted, Cond) posted
+%                                                 by separation, oldest first
 %
 %   Terms and arguments are strings written with ~q; ids, variables and
 %   labels are atoms.
 
 partial_dict(Partial, Dict) :-
-    Partial = partial(Actions, _, Net, _),
+    Partial = partial(Actions, _, Net, Sat),
     maplist(action_dict, Actions, ADicts),
     partial_ordering(Partial, PriorTos),
     maplist([prior_to(A, B), [A, B]]>>true, PriorTos, Ordering),
@@ -215,8 +228,13 @@ partial_dict(Partial, Dict) :-
     dict_pairs(PrunedDict, _, Pruned),
     cms_arcs(Net, Arcs),
     maplist(arc_dict, Arcs, ArcDicts),
+    findall([DS, CS], ( member(sep(D, C), Sat),
+                        format(string(DS), "~q", [D]),
+                        format(string(CS), "~q", [C]) ),
+            Separations),
     Dict = _{actions: ADicts, ordering: Ordering, variables: PrunedDict,
-             raw_variables: RawDict, arcs: ArcDicts}.
+             raw_variables: RawDict, arcs: ArcDicts,
+             separations: Separations}.
 
 action_dict(action(Id, Term, _, _, _),
             _{id: Id, term: S, name: Name, args: ArgStrings}) :-
@@ -232,10 +250,11 @@ arc_dict(arc(V1, V2, Pairs), _{vars: [V1, V2], pairs: Ps}) :-
 %   Print Partial to current output: the plan actions as Fig. 23, the
 %   ordering constraints, the network arcs and label sets as Fig. 25
 %   (`grasp_1-pos_1: [p1G1/p2P1, ...]`), and the label sets after arc
-%   consistency.
+%   consistency, and the separations posted (`sep(D, Cond)`: D, deleted
+%   by a possible clobberer, is kept apart from Cond), if any.
 
 print_partial(Partial) :-
-    Partial = partial(Actions, _, Net, _),
+    Partial = partial(Actions, _, Net, Sat),
     format("PLAN ACTIONS~n"),
     forall(member(A, Actions), print_action(A)),
     partial_ordering(Partial, PriorTos),
@@ -253,6 +272,14 @@ print_partial(Partial) :-
     (   cms_pruned_nodes(Net, Pruned)
     ->  forall(member(V-Ls, Pruned), print_labels(V, Ls))
     ;   format("  (inconsistent)~n")
+    ),
+    (   memberchk(sep(_, _), Sat)
+    ->  format("SEPARATIONS~n"),
+        forall(member(sep(D, C), Sat),
+               format("  dif(~W, ~W)~n",
+                      [D, [quoted(true), spacing(next_argument)],
+                       C, [quoted(true), spacing(next_argument)]]))
+    ;   true
     ).
 
 print_labels(V, Labels) :-

@@ -271,8 +271,8 @@ test(max_actions_type, [error(type_error(nonneg, x))]) :-
 test(trace_type, [error(type_error(boolean, maybe))]) :-
     phase1(peg_in_block, [trace(maybe)], _).
 
-test(unknown_method, [error(domain_error(declobber_method, separation))]) :-
-    phase1(peg_in_block, [declobber([promotion, separation])], _).
+test(unknown_method, [error(domain_error(declobber_method, disjunction))]) :-
+    phase1(peg_in_block, [declobber([promotion, disjunction])], _).
 
 test(options_not_list, [error(type_error(list, foo))]) :-
     phase1(peg_in_block, foo, _).
