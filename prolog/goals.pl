@@ -102,8 +102,8 @@
 
 %!  phase1_search(+Options, -Outcome, -Bound) is det.
 %
-%   Iterative deepening over the bound on plan size, from the number of
-%   user goals (kb:goal/1) to max_actions. Outcome is plan(Partial) for
+%   Iterative deepening over the bound on plan size, from lower_bound/1
+%   to max_actions. Outcome is plan(Partial) for
 %   the first plan found, Bound the bound it was found at; otherwise
 %   Outcome is no_plan(Bound, UnmetGoal), UnmetGoal the goal that failed
 %   at the deepest step of the last round searched completely (see
@@ -114,10 +114,40 @@
 phase1_search(Options, Outcome, Bound) :-
     option(max_actions(Max), Options, 12),
     option(max_steps(Budget), Options, 10000),
-    aggregate_all(count, kb:goal(_), NGoals),
-    Lo is min(NGoals, Max),
+    lower_bound(LB),
+    Lo is min(LB, Max),
     Spent = steps(0),
     rounds(Lo, Max, Budget-Spent, none, Options, Outcome, Bound).
+
+%!  lower_bound(-N) is det.
+%
+%   A lower bound on the number of actions any plan needs, where iterative
+%   deepening starts: each user goal needs at least one action; a goal
+%   assembled(Peg, Hole, [_, HoleFaces], _, _) needs a pickup of Peg and the
+%   assemble, and two more (a pickup and a putdown of Hole) when Hole rests
+%   initially in a stable pose that hides a face of HoleFaces (Sec. 6: the
+%   block on its hole). These actions serve only their own goal, so the sum
+%   never exceeds the size of a smallest plan, and starting there finds the
+%   same first plan as starting from 1, without the rounds that must fail.
+
+lower_bound(N) :-
+    aggregate_all(sum(K), (kb:goal(G), goal_lower_bound(G, K)), N0),
+    N is max(1, N0).
+
+goal_lower_bound(G, 0) :-
+    kb:initial(G),
+    !.
+goal_lower_bound(assembled(_, Hole, [_, HoleFaces], _, _), K) :-
+    !,
+    (   kb:initial(part_location(Hole, Pos)),
+        kb:position(Pos, Hole, Label, _),
+        kb:position_class(Label, Pose),
+        kb:pose(Hole, Pose, _, ofaces(Hidden), _),
+        member(F, HoleFaces), memberchk(F, Hidden)
+    ->  K = 4
+    ;   K = 2
+    ).
+goal_lower_bound(_, 1).
 
 %   rounds(+B, +Max, +Budget, +Unmet0, +Options, -Outcome, -Bound): search
 %   with bound B, then B+1, ...; stop early when a round failed without
