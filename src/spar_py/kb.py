@@ -8,6 +8,7 @@ The formats are documented in docs/kb-format.md.
 """
 from __future__ import annotations
 
+import hashlib
 import math
 import re
 from dataclasses import dataclass
@@ -128,15 +129,20 @@ def _show(v: Any) -> str:
     return s if len(s) <= 40 else s[:37] + "..."
 
 
+#: SHA-1 of the text of every KB file read, by resolved path (for Cell.fingerprint).
+_DIGESTS: dict[str, str] = {}
+
+
 def read_yaml(path: str | Path) -> Node:
     """Parse a YAML file into a root :class:`Node`; syntax errors become one-line KBErrors."""
     p = Path(path)
     try:
         text = p.read_text(encoding="utf-8")
+        _DIGESTS[str(p.resolve())] = hashlib.sha1(text.encode()).hexdigest()
     except OSError as e:
         raise KBError(str(path), "(file)", f"a readable file ({e.strerror})") from None
     try:
-        data = yaml.safe_load(text)
+        data = yaml.load(text, Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
     except yaml.YAMLError as e:
         mark = getattr(e, "problem_mark", None)
         where = f"line {mark.line + 1}, column {mark.column + 1}" if mark else "(file)"
@@ -469,7 +475,10 @@ def load_problem(path: str | Path) -> Cell:
     for r in rnode2.elements() if rnode2 is not None else []:
         lo, hi = r.key("x").interval(), r.key("y").interval()
         regions.append({"x": lo, "y": hi})
+    used = [path, rpath] + [base / n.key("model").text() for _, n in root.key("objects").items()]
+    fingerprint = hashlib.sha1("".join(_DIGESTS.get(str(Path(u).resolve()), "") for u in used).encode()).hexdigest()
     return Cell(
+        fingerprint=fingerprint,
         name=name,
         file=str(path),
         unit=unit,

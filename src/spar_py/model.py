@@ -147,6 +147,13 @@ class Cell:
     #: (some placement in the free regions must reach it) or "paper" (Sec. 5.2.4's rule:
     #: condition 2 assumed satisfiable).
     stable_pose_rule: str = "reachable"
+    #: SHA-1 of every file the cell was loaded from: equal fingerprints, equal cells
+    #: (memo tables key on it, so planning a file again reuses their work).
+    fingerprint: str = ""
+
+    def memo_key(self) -> tuple[str, str]:
+        """The key memo tables use for this cell (fingerprint and rule; id() without one)."""
+        return (self.fingerprint or f"id{id(self)}", self.stable_pose_rule)
 
     def position_of(self, label: str) -> Position:
         """The absolute position labelled ``label`` (KeyError if none)."""

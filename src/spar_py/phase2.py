@@ -67,7 +67,7 @@ def _step_key(s: Step) -> tuple:
 def _placements(cell: Cell, steps: list[Step]) -> tuple[tuple, dict[str, pl.Placement | None]]:
     """choose_placements memoised per cell and manipulation sequence (sensing moves nothing)."""
     manip = [s for s in steps if s["name"] in ("pickup", "putdown", "assemble")]
-    key = (id(cell), tuple(_step_key(s) for s in manip))
+    key = (cell.memo_key(), tuple(_step_key(s) for s in manip))
     if key not in _PLACEMENTS:
         if len(_PLACEMENTS) > _MEMO_LIMIT:
             _PLACEMENTS.clear()

@@ -128,7 +128,7 @@ def reachable_somewhere(cell: Cell, obj: str, pose: str, requirements: list[np.n
     out = np.zeros(len(X), dtype=bool)
     todo = []
     for i, x in enumerate(X):
-        key = (id(cell), obj, pose, np.round(x, 12).tobytes())
+        key = (cell.memo_key(), obj, pose, np.round(x, 12).tobytes())
         if key in _SOMEWHERE:
             out[i] = _SOMEWHERE[key]
         else:
@@ -156,7 +156,7 @@ _GRIDS: dict[tuple, np.ndarray] = {}
 
 def _grid(cell: Cell, obj: str, pose: str) -> np.ndarray:
     """(n,4,4) object poses of the phase-1 grid (memoised per cell, object and pose)."""
-    key = (id(cell), obj, pose)
+    key = (cell.memo_key(), obj, pose)
     if key not in _GRIDS:
         if len(_GRIDS) > 1024:
             _GRIDS.clear()
