@@ -4,7 +4,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pytest
 
+from spar_py.geometry import rotz, trans
 from spar_py.kb import load_problem
 from spar_py.planner import Planner
 
@@ -35,3 +37,23 @@ def test_every_putdown_placement_checks_out_by_fk() -> None:
         assert p is not None and p["z"] == cell.objects[s["object"]].poses[p["pose"]].height
         q = np.radians(s["joints_deg"])
         assert np.allclose(cell.robot.fk(q), np.array(s["tool_pose"]), atol=1e-6)
+
+
+@pytest.mark.parametrize("name", sorted(p.stem for p in (ROOT / "kb/problems").glob("*.yaml")))
+def test_every_regression_putdown_has_a_placement_checked_by_fk(name: str) -> None:
+    cell = load_problem(ROOT / "kb/problems" / f"{name}.yaml")
+    plan = Planner(max_instances=3).plan(cell).to_json()
+    inst = plan["instance"] or {"steps": []}
+    for s in inst["steps"]:
+        if s["kind"] == "sensing":
+            continue
+        q = np.radians(s["joints_deg"])
+        assert cell.robot.in_limits(q)
+        assert np.allclose(cell.robot.fk(q), np.array(s["tool_pose"]), atol=1e-6)
+        if s["name"] == "putdown":
+            # the tool pose is the placement's object pose times one of the object's grasps
+            p, model = s["placement"], cell.objects[s["object"]]
+            T_obj = trans(p["x"], p["y"], p["z"]) @ rotz(np.radians(p["yaw_deg"]))
+            T_obj[:3, :3] = T_obj[:3, :3] @ model.poses[p["pose"]].R
+            T_g = np.linalg.inv(T_obj) @ np.array(s["tool_pose"])
+            assert any(np.allclose(T_g, g.T, atol=1e-6) for g in model.grasps.values())
