@@ -70,6 +70,32 @@ def bench_rtb(n: int, repeats: int) -> tuple[float, float, float] | None:
     return one, every, ok / n
 
 
+def run(n: int = 10_000, single: int = 1000, rtb: int = 200, repeats: int = 5) -> dict:
+    """All the IK figures as data: microseconds per pose (medians of ``repeats``), ratios.
+
+    Keys: ``n``, ``n_single``, ``n_rtb``, ``repeats``, ``batch_us``, ``single_us``,
+    ``solutions_per_pose``, and, when Robotics Toolbox is installed (else None),
+    ``rtb_us`` (one ``ikine_a`` call), ``rtb_all8_us`` (all eight configurations),
+    ``rtb_success`` and the ratios ``rtb_over_batch``, ``rtb_all8_over_batch``,
+    ``rtb_over_single``, ``rtb_all8_over_single``. The spar-py and RTB runs happen
+    one after the other in the same process, so their ratio is a same-run figure.
+    """
+    n_single = min(single, n)
+    batch, single_us, nsol = bench_spar(n, n_single, repeats)
+    out: dict = {"n": n, "n_single": n_single, "n_rtb": rtb, "repeats": repeats,
+                 "batch_us": batch, "single_us": single_us, "solutions_per_pose": nsol,
+                 "rtb_us": None, "rtb_all8_us": None, "rtb_success": None,
+                 "rtb_over_batch": None, "rtb_all8_over_batch": None,
+                 "rtb_over_single": None, "rtb_all8_over_single": None}
+    r = bench_rtb(rtb, repeats)
+    if r is not None:
+        one, every, success = r
+        out.update(rtb_us=one, rtb_all8_us=every, rtb_success=success,
+                   rtb_over_batch=one / batch, rtb_all8_over_batch=every / batch,
+                   rtb_over_single=one / single_us, rtb_all8_over_single=every / single_us)
+    return out
+
+
 def main(argv: list[str] | None = None) -> None:
     """Print the IK timings (microseconds per pose, medians) and the speed ratios to stdout."""
     ap = argparse.ArgumentParser(prog="python -m bench.ik", description=__doc__.splitlines()[0])
@@ -79,20 +105,20 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--repeats", type=int, default=5, help="repeats; medians are reported (default 5)")
     a = ap.parse_args(argv)
 
-    batch, single, nsol = bench_spar(a.n, min(a.single, a.n), a.repeats)
-    print(f"spar-py ik_batch   : {batch:9.2f} us/pose  (n = {a.n}, all solutions, "
-          f"{nsol:.1f} in-limit rows/pose on average; median of {a.repeats})")
-    print(f"spar-py ik (single): {single:9.2f} us/pose  (n = {min(a.single, a.n)}, one call per pose)")
-    r = bench_rtb(a.rtb, a.repeats)
-    if r is None:
+    r = run(a.n, a.single, a.rtb, a.repeats)
+    print(f"spar-py ik_batch   : {r['batch_us']:9.2f} us/pose  (n = {a.n}, all solutions, "
+          f"{r['solutions_per_pose']:.1f} in-limit rows/pose on average; median of {a.repeats})")
+    print(f"spar-py ik (single): {r['single_us']:9.2f} us/pose  (n = {r['n_single']}, one call per pose)")
+    if r["rtb_us"] is None:
         print("rtb ikine_a        : skipped: pip install -e '.[bench]'")
         return
-    one, every, success = r
-    print(f"rtb ikine_a        : {one:9.2f} us/pose  (n = {a.rtb}, one configuration per call, "
-          f"{success:.0%} succeeded)")
-    print(f"rtb ikine_a x 8    : {every:9.2f} us/pose  (all eight configurations)")
-    print(f"ratio ikine_a / ik_batch      : {one / batch:8.1f}x  (all 8 configs: {every / batch:.1f}x)")
-    print(f"ratio ikine_a / ik (single)   : {one / single:8.1f}x  (all 8 configs: {every / single:.1f}x)")
+    print(f"rtb ikine_a        : {r['rtb_us']:9.2f} us/pose  (n = {a.rtb}, one configuration per call, "
+          f"{r['rtb_success']:.0%} succeeded)")
+    print(f"rtb ikine_a x 8    : {r['rtb_all8_us']:9.2f} us/pose  (all eight configurations)")
+    print(f"ratio ikine_a / ik_batch      : {r['rtb_over_batch']:8.1f}x  "
+          f"(all 8 configs: {r['rtb_all8_over_batch']:.1f}x)")
+    print(f"ratio ikine_a / ik (single)   : {r['rtb_over_single']:8.1f}x  "
+          f"(all 8 configs: {r['rtb_all8_over_single']:.1f}x)")
 
 
 if __name__ == "__main__":

@@ -224,14 +224,72 @@ def random_chain(rng: np.random.Generator, length: int) -> tuple[ca.SX, Registry
 
 HEADER = (f"{'expression':<26}{'vars':>5}{'ours/w':>10}{'plain/w':>10}{'reached':>9}{'ours ms':>9}"
           f"{'1-side ms':>10}{'compile':>9}{'plain ms':>9}")
+#: The figures of one group, each a median over its expressions (``reached``: a count).
+SUMMARY_KEYS = ("n_vars", "ours", "plain", "t_ours", "t_one", "t_compile", "t_plain")
+GROUPS = ("plan_like", "random")
+
+
+def summarise(name: str, ms: list[dict]) -> dict:
+    """One table row: medians of ``ms``'s figures, how many reached the tolerance, all sound."""
+    out: dict = {"name": name, "count": len(ms)}
+    out.update({k: statistics.median(m[k] for m in ms) for k in SUMMARY_KEYS})
+    out["reached"] = sum(bool(m["reached"]) for m in ms)
+    out["sound"] = all(m["sound"] for m in ms)
+    return out
 
 
 def row(name: str, ms: list[dict]) -> str:
-    def med(k: str) -> float:
-        return statistics.median(m[k] for m in ms)
-    reached = sum(m["reached"] for m in ms)
-    return (f"{name:<26}{med('n_vars'):>5.0f}{med('ours'):>10.1e}{med('plain'):>10.1e}{reached:>5}/{len(ms):<3}"
-            f"{med('t_ours'):>9.2f}{med('t_one'):>10.2f}{med('t_compile'):>9.2f}{med('t_plain'):>9.2f}")
+    r = summarise(name, ms)
+    return (f"{name:<26}{r['n_vars']:>5.0f}{r['ours']:>10.1e}{r['plain']:>10.1e}"
+            f"{r['reached']:>5}/{r['count']:<3}{r['t_ours']:>9.2f}{r['t_one']:>10.2f}"
+            f"{r['t_compile']:>9.2f}{r['t_plain']:>9.2f}")
+
+
+def run(per_length: int = 6, seed: int = 0, lengths: tuple[int, ...] = tuple(range(1, 9)),
+        groups: tuple[str, ...] = GROUPS, repeats: int = 5,
+        progress=None) -> dict:
+    """All the SUP/INF figures as data.
+
+    Keys: ``paper`` (one :func:`measure` dict per expression of the paper's cell, with
+    its ``name``), ``plan_like`` and ``random`` (lists of :func:`summarise` rows, one per
+    plan length in ``lengths`` over ``per_length`` expressions; only the ``groups``
+    asked for), ``evaluate_ms`` (``uncertainty.evaluate`` per constraint of the first
+    pickup, compile included: the planner's own cost of one verdict) and ``unsound`` (how
+    many bounds fell inside the sampled/optimised range: must be 0). ``progress``, if
+    given, is called with each printable table line as it is measured.
+    """
+    say = progress or (lambda line: None)
+    rng = np.random.default_rng(seed)
+    cell = load_problem(CELL)
+    out: dict = {"per_length": per_length, "seed": seed, "lengths": list(lengths),
+                 "paper": [], "unsound": 0}
+    say(HEADER)
+    say("-- the paper's cell (Table 2 bounds; W_p = 3, W_m = 4)")
+    for name, e, reg in paper_cell_expressions(cell):
+        m = measure(e, reg.box(e), rng, repeats=repeats)
+        out["unsound"] += not m["sound"]
+        out["paper"].append({"name": name, **m})
+        say(row(name, [m]) + f"   INF {m['lo']:.4f} SUP {m['hi']:.4f}")
+    makers = {"plan_like": ("-- plan-like (paper's cell)", lambda n: plan_like(cell, rng, n)),
+              "random": ("-- random HTM products", lambda n: random_chain(rng, n))}
+    for group in groups:
+        title, make = makers[group]
+        say(title)
+        out[group] = []
+        for n in lengths:
+            ms = []
+            for _ in range(per_length):
+                e, reg = make(n)
+                ms.append(measure(e, reg.box(e), rng, repeats=min(3, repeats)))
+            out["unsound"] += sum(not m["sound"] for m in ms)
+            out[group].append({**summarise(f"plan length {n}", ms), "length": n})
+            say(row(f"plan length {n}", ms))
+    # the planner's own use: one verdict per constraint (evaluate = compile + one-sided bound)
+    w = initial_world(cell)
+    g = cell.objects["peg"].grasps["p1G1"]
+    cs = pickup_constraints(w, "peg", g.T, g.width, cell.finger_separation, w.manipulator_error())
+    out["evaluate_ms"] = median_time(lambda: [evaluate(c, w.registry) for c in cs], repeats) * 1e3 / 4
+    return out
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -239,34 +297,11 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--per-length", type=int, default=6, help="expressions per plan length (default 6)")
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args(argv)
-    rng = np.random.default_rng(args.seed)
-    cell = load_problem(CELL)
-    unsound = 0
     print("tightness: max excess of a bound over the true range, as a fraction of the true width "
           "(medians); times in ms (medians)\n")
-    print(HEADER)
-    print("-- the paper's cell (Table 2 bounds; W_p = 3, W_m = 4)")
-    for name, e, reg in paper_cell_expressions(cell):
-        m = measure(e, reg.box(e), rng)
-        unsound += not m["sound"]
-        print(row(name, [m]) + f"   INF {m['lo']:.4f} SUP {m['hi']:.4f}")
-    for title, make in (("-- plan-like (paper's cell)", lambda n: plan_like(cell, rng, n)),
-                        ("-- random HTM products", lambda n: random_chain(rng, n))):
-        print(title)
-        for n in range(1, 9):
-            ms = []
-            for _ in range(args.per_length):
-                e, reg = make(n)
-                ms.append(measure(e, reg.box(e), rng, repeats=3))
-            unsound += sum(not m["sound"] for m in ms)
-            print(row(f"plan length {n}", ms))
-    # the planner's own use: one verdict per constraint (evaluate = compile + one-sided bound)
-    w = initial_world(cell)
-    g = cell.objects["peg"].grasps["p1G1"]
-    cs = pickup_constraints(w, "peg", g.T, g.width, cell.finger_separation, w.manipulator_error())
-    t = median_time(lambda: [evaluate(c, w.registry) for c in cs], 5)
-    print(f"\nuncertainty.evaluate, the first pickup's 4 constraints: {t * 1e3 / 4:.2f} ms per constraint")
-    print(f"unsound bounds: {unsound}")
+    r = run(args.per_length, args.seed, progress=print)
+    print(f"\nuncertainty.evaluate, the first pickup's 4 constraints: {r['evaluate_ms']:.2f} ms per constraint")
+    print(f"unsound bounds: {r['unsound']}")
 
 
 if __name__ == "__main__":
