@@ -237,8 +237,9 @@ def render(r: dict) -> str:
           (f"One subprocess per N, a warm-up plan of the paper's cell first; "
           f"`Planner(max_actions=5N+2, timeout={p['timeout_s']:g})` (the problem needs 4N actions; phase 1's "
           "default bound 12 is too small for N > 2). Times: phase 1/2 are Prolog CPU seconds, wall the "
-          "`plan()` call; peak RSS is the child's maxrss (Python and the embedded Prolog), "
-          "'before' the RSS after the warm-up."), ""]
+          "`plan()` call; RSS (Python and the embedded Prolog share the process): 'before' after the "
+          "warm-up, 'peak' sampled every 5 ms while planning (getrusage's maxrss is not used: on Linux "
+          "a child keeps its parent's high-water mark across exec). Profiles below are of a separate child's first plan of that N."), ""]
     rows = []
     for x in p["scaling"]:
         why = ""
@@ -252,9 +253,9 @@ def render(r: dict) -> str:
         rows.append([str(x["n"]), str(x["max_actions"]), str(x.get("outcome")), _f(x.get("phase1_s"), ".3f"),
                      _f(x.get("phase2_s"), ".3f"), _f(x.get("wall_s"), ".3f"), _f(x.get("actions"), "d"),
                      _f(x.get("instances_examined"), "d"), _f(x.get("rss_before_mb"), ".0f"),
-                     _f(x.get("peak_rss_mb"), ".0f"), _f(x.get("prolog_stack_mb"), ".1f"), why])
+                     _f(x.get("rss_peak_mb"), ".0f"), _f(x.get("prolog_stack_mb"), ".1f"), why])
     L += _table(["N", "max_actions", "outcome", "phase 1 s", "phase 2 s", "wall s", "actions", "instances",
-                 "RSS before MB", "peak RSS MB", "Prolog stacks MB", "note"], rows)
+                 "RSS before MB", "RSS peak MB", "Prolog stacks MB", "note"], rows)
 
     L += ["## Where the time goes (cProfile)", "",
           ("Python's profiler sees SWI-Prolog as one call (`janus_swi._swipl.call`): its internal time "
@@ -312,7 +313,10 @@ def reading(r: dict) -> str:
         f"(phase 1 {w['phase1_s'] * 1e3:.0f} ms, phase 2 {w['phase2_s'] * 1e3:.0f} ms): "
         f"{_met(v['warm'][0])} against {WARM_S * 1e3:g} ms; cold `spar plan` takes {c['plan_s']:.2f} s "
         f"({_met(v['cold'][0])} against {COLD_S:g} s), of which starting Python and the engine alone is "
-        f"{c['start_s']:.2f} s ({c['start_s'] / c['plan_s']:.0%})." + where)
+        f"{c['start_s']:.2f} s ({c['start_s'] / c['plan_s']:.0%})." + where
+        + " The warm repeats plan the same cell again, so they find the memo tables (keyed on the "
+        "cell's content) filled by the run before; a first plan of a new cell on a warm engine is "
+        "the N = 1 row of the scaling table.")
     sc = p["scaling"]
     planned = [x["n"] for x in sc if x.get("outcome") == "plan"]
     other = [f"N = {x['n']} {x.get('outcome')}" + (" (step budget)" if x.get("budget_spent") else "")

@@ -29,6 +29,7 @@ import statistics
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -158,10 +159,11 @@ def one(n: int, timeout: float = TIMEOUT, profile_top: int = 0) -> dict:
     start and first-call costs. Keys: ``n``, ``max_actions``, ``outcome`` ("plan",
     "no_plan" or "timeout"), ``reason`` (phase 1's, for no_plan), ``budget_spent``
     (phase 1 stopped by its step budget), ``phase1_s``, ``phase2_s``, ``wall_s``,
-    ``actions``, ``instances_examined``, ``rss_before_mb`` (after the warm-up),
-    ``peak_rss_mb`` (getrusage maxrss of this process: Python and the embedded Prolog),
-    ``prolog_stack_mb`` (SWI-Prolog's stacks in use at the end) and, with ``profile_top``,
-    ``profile`` (cProfile of a second plan of the same problem).
+    ``actions``, ``instances_examined``, ``rss_before_mb`` (resident set after the warm-up),
+    ``rss_peak_mb`` (the largest resident set sampled every 5 ms while planning: Python and
+    the embedded Prolog), ``maxrss_mb`` (getrusage's high-water mark; on Linux it includes the
+    parent's at fork, so read it with care), ``prolog_stack_mb`` (SWI-Prolog's stacks in use at the end). With
+    ``profile_top`` the plan runs under cProfile instead and only ``profile`` is returned.
     """
     from spar_py.engine import engine
     from spar_py.errors import PlanningTimeout
@@ -169,14 +171,19 @@ def one(n: int, timeout: float = TIMEOUT, profile_top: int = 0) -> dict:
     from spar_py.planner import Planner
 
     Planner().plan(CELL)
-    rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    rss0 = _rss_mb()
     out: dict = {"n": n, "max_actions": max_actions_for(n), "rss_before_mb": rss0}
     with tempfile.TemporaryDirectory(prefix=f"spar-bench-{n}-") as d:
         path = generate_assembly(n, d)
         p = Planner(max_actions=max_actions_for(n), timeout=timeout)
+        if profile_top:  # a separate child: profile the first (unmemoised) plan, no figures
+            out["profile"] = profile(lambda: p.plan(path), profile_top)
+            return out
+        watch = _RssWatch()
         t = time.perf_counter()
         try:
-            plan = p.plan(path)
+            with watch:
+                plan = p.plan(path)
         except PlanningTimeout:
             out.update(outcome="timeout", wall_s=time.perf_counter() - t)
         else:
@@ -190,12 +197,44 @@ def one(n: int, timeout: float = TIMEOUT, profile_top: int = 0) -> dict:
                 # only when its step budget ran out first
                 budget_spent=plan.outcome == "no_plan"
                 and (plan.reason or {}).get("max_actions", max_actions_for(n)) < max_actions_for(n))
-            if profile_top:
-                out["profile"] = profile(lambda: p.plan(path), profile_top)
-    out["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+        out["rss_peak_mb"] = max(watch.peak, rss0)
+    out["maxrss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     stack = engine().query_once("statistics(stack, S)")
     out["prolog_stack_mb"] = stack["S"] / 2**20 if stack.get("truth") else None
     return out
+
+
+def _rss_mb() -> float:
+    """This process's resident set now (MB), from /proc (0 where there is none)."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    return 0.0
+
+
+class _RssWatch:
+    """A thread that samples the resident set every 5 ms while the ``with`` block runs."""
+
+    def __init__(self) -> None:
+        self.peak = 0.0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            self.peak = max(self.peak, _rss_mb())
+            self._stop.wait(0.005)
+
+    def __enter__(self) -> None:
+        self._thread.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        self._thread.join()
+        self.peak = max(self.peak, _rss_mb())
 
 
 def scaling(ns: range | list[int] = range(1, 11), timeout: float = TIMEOUT,
