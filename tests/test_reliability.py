@@ -38,8 +38,11 @@ def test_unreachable_goal_is_a_no_plan_outcome_with_its_reason(tmp_path: Path) -
 
 
 def test_timeout_is_a_clean_exit(tmp_path: Path) -> None:
+    from spar_py.gen import generate_assembly
+
+    big = generate_assembly(10, tmp_path / "gen")  # seconds of planning: 40 actions
     out = tmp_path / "plan.json"
-    r = spar("plan", "kb/problems/unreachable.yaml", "--timeout", "0.2", "--json", "-o", str(out))
+    r = spar("plan", str(big), "--max-actions", "42", "--timeout", "0.3", "--json", "-o", str(out))
     assert r.returncode == 4
     assert r.stderr.count("\n") == 1 and "timeout" in r.stderr and "Traceback" not in r.stderr
     assert not out.exists()
