@@ -6,6 +6,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from spar_py.errors import KBError, SparValueError
 from spar_py.geometry import inv, rotx, rotz, rpy, trans
@@ -250,3 +252,13 @@ def test_base_frame_moves_the_workspace(puma: Robot) -> None:
     T = moved.fk(q)
     assert np.allclose(inv(rotz(0.5) @ trans(100, 0, 0)) @ T, puma.fk(q))
     assert np.any(np.isclose(moved.ik(T), q, atol=1e-9).all(axis=1))
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.floats(0.0, 1.0, allow_nan=False), min_size=6, max_size=6))
+def test_round_trip_property(puma: Robot, u: list[float]) -> None:
+    """Hypothesis: for any in-limit q (a point of the limit box), ik(fk(q)) holds q and every
+    returned solution is in limits and reaches fk(q)."""
+    lo, hi = puma.limits[:, 0], puma.limits[:, 1]
+    q = lo + np.array(u) * (hi - lo)
+    check_round_trip(puma, q[None], 1e-9)
