@@ -294,8 +294,9 @@ step_out(Geo, step(Id, Action), D) :-
     geo_value(G, tool_pose, TP),
     geo_value(G, joints_deg, Q),
     geo_value(G, placement, Pl),
+    geo_value(G, ik_solutions_deg, Sols),
     D = _{id: IdText, kind: Kind, serves: Serves, term: Term, name: Name, object: Obj,
-          tool_pose: TP, joints_deg: Q, placement: Pl}.
+          tool_pose: TP, joints_deg: Q, ik_solutions_deg: Sols, placement: Pl}.
 
 step_kind(sense(A, _), _, sensing, A) :- !.
 step_kind(squeeze(A), _, squeeze, A) :- !.

@@ -50,6 +50,9 @@ def test_every_regression_putdown_has_a_placement_checked_by_fk(name: str) -> No
         q = np.radians(s["joints_deg"])
         assert cell.robot.in_limits(q)
         assert np.allclose(cell.robot.fk(q), np.array(s["tool_pose"]), atol=1e-6)
+        sols = np.radians(s["ik_solutions_deg"])
+        assert len(sols) >= 1 and cell.robot.in_limits(sols).all()
+        assert np.allclose(cell.robot.fk_batch(sols), np.array(s["tool_pose"]), atol=1e-6)
         if s["name"] == "putdown":
             # the tool pose is the placement's object pose times one of the object's grasps
             p, model = s["placement"], cell.objects[s["object"]]

@@ -159,7 +159,8 @@ def _arm(world: World, T: np.ndarray) -> tuple[np.ndarray | None, dict[str, Any]
         ref = world.joints if world.joints is not None else np.zeros(6)
         q = sols[int(np.argmin(np.abs(sols - ref).sum(axis=1)))]
     geo = {"tool_pose": np.round(T, 9).tolist(),
-           "joints_deg": None if q is None else [round(float(v), 6) for v in np.degrees(q)]}
+           "joints_deg": None if q is None else [round(float(v), 6) for v in np.degrees(q)],
+           "ik_solutions_deg": [[round(float(v), 6) for v in np.degrees(r)] for r in sols] if ok else []}
     return q, geo
 
 
