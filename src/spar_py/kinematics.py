@@ -344,8 +344,9 @@ class Robot:
         lo, hi, shift = self._turns
         q = theta - offset[:, None, None]
         # the lowest representation >= lo of each angle (these lie within a few turns of 0)
-        q0 = q - (2 * math.pi) * np.floor((q - lo) * (0.5 / math.pi))
+        # (within LIMIT_TOL: an angle a rounding error below lo is at lo, not a turn above it)
+        q0 = q - (2 * math.pi) * np.floor((q - lo + LIMIT_TOL) * (0.5 / math.pi))
         Q = q0[..., None] + shift  # (6, n, 8, M): combination c adds 2 pi k_j(c) to joint j
-        V = ok[..., None] & (Q <= hi[..., None]).all(axis=0)
+        V = ok[..., None] & (Q <= hi[..., None] + LIMIT_TOL).all(axis=0)
         M = shift.shape[-1]
         return Q.transpose(1, 2, 3, 0).reshape(n, 8 * M, 6), V.reshape(n, 8 * M)
