@@ -80,6 +80,10 @@ cms_empty(Oracle, cms(Nodes, Arcs, [], oracle(Oracle, memo(Memo)))) :-
 %   variable without a node, member(V, Ls) or in_position_class(V, Ls)
 %   creates its node with label set Ls and needs no consistency check. On a
 %   variable that has a node already it is an ordinary, checked constraint.
+%   A named absolute position (a putdown into init_pos1, for a goal
+%   part_location(peg, init_pos1)) is no free variable: it gets its node
+%   [tr1] first (as cms_initial_state/3 gives it), and the constraint is
+%   checked against that.
 
 cms_initial(C, Net0, Net) :-
     unary(C, V, Ls),
@@ -88,6 +92,9 @@ cms_initial(C, Net0, Net) :-
     must_be(list, Ls),
     (   cms_node(Net0, V, _)
     ->  cms_add(C, none, Net0, Net)
+    ;   kb:position(V, _, _, _)
+    ->  initial_node(V, Net0, Net1),
+        cms_add(C, none, Net1, Net)
     ;   sort(Ls, Labels),
         put_node(V, Labels, Net0, Net)
     ).
