@@ -220,8 +220,18 @@ class Robot:
         return Q[0][ok[0]]
 
     def reachable_mask(self, T: np.ndarray) -> np.ndarray:
-        """(n,) bool: which world tool poses T (n, 4, 4) have at least one in-limit IK solution."""
-        return self.ik_batch(T)[1].any(axis=1)
+        """(n,) bool: which world tool poses T (n, 4, 4) have at least one in-limit IK solution.
+
+        The same answer as ``ik_batch(T)[1].any(axis=1)`` without listing the turn
+        representations: the candidates of a branch are every combination of per-joint
+        representations q + 2 pi k, each joint's lowest one (>= its lower limit) among
+        them, so some combination is in limits iff every joint's lowest one is.
+        """
+        theta, ok, offset = self._branches(T)
+        lo, hi, _ = self._turns
+        q = theta - offset[:, None, None]
+        q0 = q - (2 * math.pi) * np.floor((q - lo + LIMIT_TOL) * (0.5 / math.pi))
+        return (ok & (q0 <= hi + LIMIT_TOL).all(axis=0)).any(axis=1)
 
     def ik_batch(self, T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """All closed-form IK candidates for n world tool poses, vectorised: ``(Q (n, C, 6) rad, ok (n, C) bool)``.
@@ -245,6 +255,10 @@ class Robot:
           of zero (L the arm's length scale) counts as zero, so a pose beyond full
           stretch by float rounding (~1e-13 L) is still solved.
         """
+        return self._representations(*self._branches(T))
+
+    def _branches(self, T: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The eight closed-form branches of n poses: (theta (6, n, 8) rad, ok (n, 8), offsets (6,))."""
         k = self._structure()
         T = np.asarray(T, float)
         if T.ndim != 3 or T.shape[1:] != (4, 4):
@@ -335,7 +349,7 @@ class Robot:
         ok = np.empty((n, 2, 2, 2), dtype=bool)
         ok[..., 0] = ok_sh[:, :, None] & ok_el[:, None, :]
         ok[..., 1] = ok[..., 0] & ~sing  # wrist singular: the flip is the same family
-        return self._representations(theta.reshape(6, n, 8), ok.reshape(n, 8), k.offset)
+        return theta.reshape(6, n, 8), ok.reshape(n, 8), k.offset
 
     def _representations(self, theta: np.ndarray, ok: np.ndarray,
                          offset: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
