@@ -53,28 +53,51 @@ def default_regions(cell: Cell) -> list[dict]:
     return [{"x": (float(lo[0]), float(hi[0])), "y": (float(lo[1]), float(hi[1]))}]
 
 
+def _grid_arrays(cell: Cell, obj: str, pose: str, occupied: list[tuple[np.ndarray, float]],
+                 step: float, yaw_steps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The grid placements of :func:`candidates` as arrays, in the same order (regions, x,
+    y, yaw): ``(xy (n, 2), yaw (n,), T (n, 4, 4))``. Each yaw's rotation is computed once,
+    by the same expression (``rotz(yaw)[:3, :3] @ R``) a placement at a time would use."""
+    sp = cell.objects[obj].poses[pose]
+    r = cell.objects[obj].bounding_radius() if occupied else 0.0
+    yaws = [2 * np.pi * k / yaw_steps for k in range(yaw_steps)]
+    rots = np.stack([rotz(yaw)[:3, :3] @ sp.R for yaw in yaws])  # (yaw_steps, 3, 3)
+    xy_parts = []
+    for reg in default_regions(cell):
+        xs = np.arange(reg["x"][0], reg["x"][1] + 1e-9, step)
+        ys = np.arange(reg["y"][0], reg["y"][1] + 1e-9, step)
+        X, Y = np.meshgrid(xs, ys, indexing="ij")
+        X, Y = X.ravel(), Y.ravel()
+        free = np.ones(len(X), dtype=bool)
+        for c, rc in occupied:
+            free &= ~(np.hypot(X - c[0], Y - c[1]) < r + rc + CLEARANCE)
+        xy_parts.append(np.stack([X[free], Y[free]], axis=1))
+    xy = np.concatenate(xy_parts) if xy_parts else np.zeros((0, 2))
+    n = len(xy) * yaw_steps
+    T = np.zeros((len(xy), yaw_steps, 4, 4))
+    T[:, :, :3, :3] = rots
+    T[:, :, 0, 3] = xy[:, 0, None]
+    T[:, :, 1, 3] = xy[:, 1, None]
+    T[:, :, 2, 3] = sp.height
+    T[:, :, 3, 3] = 1.0
+    return np.repeat(xy, yaw_steps, axis=0), np.tile(np.array(yaws), len(xy)), T.reshape(n, 4, 4)
+
+
 def candidates(cell: Cell, obj: str, pose: str, occupied: list[tuple[np.ndarray, float]],
                step: float = GRID_STEP, yaw_steps: int = YAW_STEPS) -> list[Placement]:
     """Grid placements of ``obj`` in stable pose ``pose`` inside the free regions, clear of
     ``occupied`` (list of (xy centre, radius) of other objects on the table)."""
-    model = cell.objects[obj]
-    sp = model.poses[pose]
-    r = model.bounding_radius()
-    out: list[Placement] = []
-    for reg in default_regions(cell):
-        xs = np.arange(reg["x"][0], reg["x"][1] + 1e-9, step)
-        ys = np.arange(reg["y"][0], reg["y"][1] + 1e-9, step)
-        for x in xs:
-            for y in ys:
-                if any(np.hypot(x - c[0], y - c[1]) < r + rc + CLEARANCE for c, rc in occupied):
-                    continue
-                for k in range(yaw_steps):
-                    yaw = 2 * np.pi * k / yaw_steps
-                    T = np.eye(4)
-                    T[:3, :3] = rotz(yaw)[:3, :3] @ sp.R
-                    T[:3, 3] = (x, y, sp.height)
-                    out.append(Placement(obj, pose, float(x), float(y), sp.height, yaw, T))
-    return out
+    height = cell.objects[obj].poses[pose].height
+    xy, yaw, T = _grid_arrays(cell, obj, pose, occupied, step, yaw_steps)
+    return [Placement(obj, pose, x, y, height, w, t) for (x, y), w, t in zip(xy.tolist(), yaw.tolist(), T)]
+
+
+def _reach_all(cell: Cell, TO: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """(n, m) bool: the arm reaches T_O @ X (wrist above the table) for object poses TO
+    (n, 4, 4) and tool transforms X (m, 4, 4); one batched IK call."""
+    T = np.einsum("nij,mjk->nmik", TO, X).reshape(-1, 4, 4)     # (n*m,4,4)
+    ok = cell.robot.reachable_mask(T) & above_table(cell, T)
+    return ok.reshape(len(TO), len(X))
 
 
 def feasible(cell: Cell, placements: list[Placement], requirements: list[np.ndarray]) -> np.ndarray:
@@ -88,25 +111,40 @@ def feasible(cell: Cell, placements: list[Placement], requirements: list[np.ndar
         return np.zeros(0, dtype=bool)
     if not requirements:
         return np.ones(len(placements), dtype=bool)
-    TO = np.stack([p.T for p in placements])                   # (n,4,4)
-    X = np.stack(requirements)                                  # (m,4,4)
-    T = np.einsum("nij,mjk->nmik", TO, X).reshape(-1, 4, 4)     # (n*m,4,4)
-    ok = cell.robot.reachable_mask(T) & above_table(cell, T)
-    return ok.reshape(len(placements), len(requirements)).all(axis=1)
+    return _reach_all(cell, np.stack([p.T for p in placements]), np.stack(requirements)).all(axis=1)
+
+
+#: Placements :func:`choose` checks at a time, nearest first.
+CHOOSE_CHUNK = 96
 
 
 def choose(cell: Cell, obj: str, pose: str, requirements: list[np.ndarray],
            occupied: list[tuple[np.ndarray, float]], near: np.ndarray | None = None) -> Placement | None:
-    """The feasible placement nearest ``near`` (xy; default the regions' centre), or None."""
-    cands = candidates(cell, obj, pose, occupied)
-    ok = feasible(cell, cands, requirements)
-    good = [c for c, f in zip(cands, ok) if f]
-    if not good:
+    """The feasible placement nearest ``near`` (xy; default the regions' centre), or None.
+
+    Nearest: least distance rounded to 1e-9, then least yaw, then first in grid order.
+    The candidates are checked in that order a chunk at a time, so the search stops
+    at the first chunk holding a feasible one instead of solving IK for the whole grid.
+    """
+    xy, yaw, T = _grid_arrays(cell, obj, pose, occupied, GRID_STEP, YAW_STEPS)
+    if not len(T):
         return None
     if near is None:
         regs = default_regions(cell)
         near = np.mean([[(r["x"][0] + r["x"][1]) / 2, (r["y"][0] + r["y"][1]) / 2] for r in regs], axis=0)
-    return min(good, key=lambda p: (round(float(np.hypot(p.x - near[0], p.y - near[1])), 9), p.yaw))
+    dist = np.hypot(xy[:, 0] - near[0], xy[:, 1] - near[1]).tolist()
+    yaws = yaw.tolist()
+    order = sorted(range(len(T)), key=lambda i: (round(dist[i], 9), yaws[i]))  # stable: grid order breaks ties
+    X = np.stack(requirements) if requirements else None
+    for start in range(0, len(order), CHOOSE_CHUNK):
+        idx = order[start:start + CHOOSE_CHUNK]
+        ok = np.ones(len(idx), dtype=bool) if X is None else _reach_all(cell, T[idx], X).all(axis=1)
+        hits = np.flatnonzero(ok)
+        if len(hits):
+            i = idx[hits[0]]
+            height = cell.objects[obj].poses[pose].height
+            return Placement(obj, pose, float(xy[i, 0]), float(xy[i, 1]), height, yaws[i], T[i])
+    return None
 
 
 #: The coarser grid phase 1 uses to decide whether a stable pose is reachable at all.
@@ -126,19 +164,20 @@ def reachable_somewhere(cell: Cell, obj: str, pose: str, requirements: list[np.n
         return np.zeros(0, dtype=bool)
     X = np.stack(requirements)
     out = np.zeros(len(X), dtype=bool)
-    todo = []
+    gkey = _grid_key(cell, obj, pose)
+    todo: dict[tuple, list[int]] = {}  # equal requirements are solved once
     for i, x in enumerate(X):
-        key = (cell.memo_key(), obj, pose, np.round(x, 12).tobytes())
+        key = (gkey, np.round(x, 12).tobytes())
         if key in _SOMEWHERE:
             out[i] = _SOMEWHERE[key]
         else:
-            todo.append((i, key))
+            todo.setdefault(key, []).append(i)
     if todo:
-        ok = _any_placement(cell, _grid(cell, obj, pose), X[[i for i, _ in todo]])
+        ok = _any_placement(cell, _grid(cell, obj, pose), X[[ix[0] for ix in todo.values()]])
         if len(_SOMEWHERE) > 100_000:
             _SOMEWHERE.clear()
-        for (i, key), v in zip(todo, ok):
-            _SOMEWHERE[key] = out[i] = bool(v)
+        for (key, ix), v in zip(todo.items(), ok):
+            _SOMEWHERE[key] = out[ix] = bool(v)
     return out
 
 
@@ -158,18 +197,25 @@ def _any_placement(cell: Cell, cands: np.ndarray, X: np.ndarray, chunk: int = 48
     return ok
 
 
-#: Memo of reachable_somewhere per (cell, object, pose, requirement): phase 1 asks the
-#: same arcs again in every round of its deepening search.
+#: Memo of reachable_somewhere per (cell, grid, requirement): phase 1 asks the same arcs
+#: again in every round of its deepening search, and objects that are copies of one model
+#: (the same stable pose, so the same grid) ask the same questions.
 _SOMEWHERE: dict[tuple, bool] = {}
 _GRIDS: dict[tuple, np.ndarray] = {}
 
 
+def _grid_key(cell: Cell, obj: str, pose: str) -> tuple:
+    """What the phase-1 grid of ``obj`` in ``pose`` depends on: the cell (its free regions)
+    and the stable pose's rotation and height, not the object's name."""
+    sp = cell.objects[obj].poses[pose]
+    return (cell.memo_key(), np.asarray(sp.R, float).tobytes(), float(sp.height))
+
+
 def _grid(cell: Cell, obj: str, pose: str) -> np.ndarray:
-    """(n,4,4) object poses of the phase-1 grid (memoised per cell, object and pose)."""
-    key = (cell.memo_key(), obj, pose)
+    """(n,4,4) object poses of the phase-1 grid (memoised per cell and stable-pose geometry)."""
+    key = _grid_key(cell, obj, pose)
     if key not in _GRIDS:
         if len(_GRIDS) > 1024:
             _GRIDS.clear()
-        cands = candidates(cell, obj, pose, [], PHASE1_STEP, PHASE1_YAWS)
-        _GRIDS[key] = np.stack([p.T for p in cands]) if cands else np.zeros((0, 4, 4))
+        _GRIDS[key] = _grid_arrays(cell, obj, pose, [], PHASE1_STEP, PHASE1_YAWS)[2]
     return _GRIDS[key]
