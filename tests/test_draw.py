@@ -208,7 +208,19 @@ def test_parse_dot_reads_chains_comments_and_defaults() -> None:
 def test_separations_are_drawn_when_present() -> None:
     partial = paper_partial() | {"separations": [{"vars": ["pos_1", "init_pos1"]}, {"junk": 1}]}
     dot = network_dot({"outcome": "plan", "partial": partial})
-    assert '"pos_1" -- "init_pos1" [label="separated", style="dotted"];' in dot
+    assert '"pos_1" -- "init_pos1" [label="separated (dif)", style="dotted"];' in dot
+
+
+def test_separations_as_the_plan_json_gives_them(tmp_path: Path) -> None:
+    """The JSON lists a separation as the two terms of its dif/2; the edge joins the plan
+    variables they differ in, and the picture lays out (two position nodes in one column,
+    joined only by the dotted edge, once made the layout's sort fail)."""
+    partial = paper_partial() | {"separations": [["part_location(peg,pos_1)", "part_location(peg,init_pos1)"]]}
+    dot = network_dot({"outcome": "plan", "partial": partial})
+    assert '"pos_1" -- "init_pos1" [label="separated (dif)", style="dotted"];' in dot
+    assert "part_location" not in dot
+    render_png(dot, tmp_path / "n.png", use_graphviz=False)
+    assert (tmp_path / "n.png").stat().st_size > 0
 
 
 # --------------------------------------------------------------------------- layouts

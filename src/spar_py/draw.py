@@ -231,12 +231,36 @@ def _fill_of(var: str) -> str:
     return GRASP_FILL if var.startswith("grasp") else POSITION_FILL
 
 
-def _separation_vars(sep: Any) -> list[str] | None:
-    """The two variables of a separation entry ({"vars": [a, b], ...} or [a, b]), else None."""
+def _separation_vars(sep: Any, variables: Mapping[str, Any] | None = None) -> list[str] | None:
+    """The two plan variables a separation keeps apart, else None. An entry is
+    ``{"vars": [a, b]}``, ``[a, b]`` of variables, or, as the plan JSON gives it, the two
+    terms of its ``dif/2`` (``["part_location(peg,init_pos5)", "part_location(peg,init_pos1)"]``):
+    then the first argument pair in which they differ, where both are ``variables``."""
     vs = sep.get("vars") if isinstance(sep, Mapping) else sep
-    if isinstance(vs, (list, tuple)) and len(vs) == 2 and all(isinstance(v, str) for v in vs):
+    if not (isinstance(vs, (list, tuple)) and len(vs) == 2 and all(isinstance(v, str) for v in vs)):
+        return None
+    if variables is None or (vs[0] in variables and vs[1] in variables):
         return [vs[0], vs[1]]
+    from .kb import parse_term
+
+    try:
+        a, b = parse_term(vs[0]), parse_term(vs[1])
+    except ValueError:
+        return None
+    for x, y in _differing(a, b):
+        if isinstance(x, str) and isinstance(y, str) and x in variables and y in variables:
+            return [x, y]
     return None
+
+
+def _differing(a: Any, b: Any) -> list[tuple[Any, Any]]:
+    """The pairs of corresponding subterms of ``a`` and ``b`` that differ, outermost last."""
+    if a == b:
+        return []
+    if isinstance(a, (tuple, list)) and isinstance(b, (tuple, list)) and len(a) == len(b) \
+            and type(a) is type(b) and (isinstance(a, list) or a[0] == b[0]):
+        return [d for x, y in zip(a, b) for d in _differing(x, y)] + [(a, b)]
+    return [(a, b)]
 
 
 def network_dot(plan: Plan) -> str:
@@ -253,10 +277,7 @@ def network_dot(plan: Plan) -> str:
     for a in arcs:
         for v in a.get("vars", [])[:2]:
             variables.setdefault(str(v), [])
-    seps = [s for s in (_separation_vars(x) for x in part.get("separations") or []) if s]
-    for s in seps:
-        for v in s:
-            variables.setdefault(v, [])
+    seps = [s for s in (_separation_vars(x, variables) for x in part.get("separations") or []) if s]
     bindings = _instance(plan).get("bindings") or {}
     title = f"constraint network: {plan.get('problem', '')}"
     out = [
@@ -276,7 +297,7 @@ def network_dot(plan: Plan) -> str:
         label = f"{a['kind']}\n{count}" if a.get("kind") else count
         out.append(f"  {_q(vs[0])} -- {_q(vs[1])} {_attrs(label=label)};")
     for s in seps:
-        out.append(f"  {_q(s[0])} -- {_q(s[1])} {_attrs(label='separated', style='dotted')};")
+        out.append(f"  {_q(s[0])} -- {_q(s[1])} {_attrs(label='separated (dif)', style='dotted')};")
     out.append("}")
     return "\n".join(out) + "\n"
 
@@ -563,9 +584,10 @@ def bipartite_layout(nodes: Sequence[str], edges: Sequence[tuple[str, str]]) -> 
     for _ in range(2):
         for c in (1, 0):
             other = {n: i for i, n in enumerate(cols[1 - c])}
-            def key(n: str, c: int = c, other: dict[str, int] = other) -> float:
+            here = {n: i for i, n in enumerate(cols[c])}  # list.sort empties the list meanwhile
+            def key(n: str, here: dict[str, int] = here, other: dict[str, int] = other) -> float:
                 ns = [other[m] for m in adj[n] if m in other]
-                return sum(ns) / len(ns) if ns else cols[c].index(n)
+                return sum(ns) / len(ns) if ns else here[n]
             cols[c].sort(key=key)
     return {n: (c, r) for c in (0, 1) for r, n in enumerate(cols[c])}
 
@@ -1053,6 +1075,7 @@ def _apply_step(cell: Cell, plan: Plan, step: Mapping[str, Any], before: Scene, 
     s = Scene(index, f"step {index}: {term}", "", dict(before.poses), before.held, before.grasp)
     s.q, s.tool, s.arm_note = (q, tool, "") if q is not None else (before.q, before.tool, "unchanged")
     obj = step.get("object") or (args[0] if args else None)
+    _take_parts(cell, s.poses, step.get("from") or {})
     if name == "pickup" and len(args) >= 2:
         s.held, s.grasp = args[0], args[1]
     Tg = _grasp_T(cell, s.held, s.grasp)
@@ -1070,6 +1093,21 @@ def _apply_step(cell: Cell, plan: Plan, step: Mapping[str, Any], before: Scene, 
         s.held = s.grasp = None
     s.detail = _step_detail(s, step, obj)
     return s
+
+
+def _model(key: str) -> str:
+    """The object (model) a scene key draws: ``peg`` for a stock's part ``peg@init_pos1``."""
+    return key.split("@", 1)[0]
+
+
+def _take_parts(cell: Cell, poses: dict[str, np.ndarray], sources: Mapping[str, str]) -> None:
+    """Make the stock part a step takes (``from``: object -> initial position label) the one
+    drawn under the object's name, as phase 2 does; the part it replaces keeps a key of its own."""
+    for obj, label in sources.items():
+        pos = cell.positions.get(label)
+        key = f"{obj}@{pos.name}" if pos is not None else None
+        if key in poses and obj in poses:
+            poses[obj], poses[key] = poses[key], poses[obj]
 
 
 def _step_detail(s: Scene, step: Mapping[str, Any], obj: str | None) -> str:
@@ -1095,7 +1133,9 @@ def scenes(cell: Cell, plan: Plan) -> list[Scene]:
     greyed, in the first configuration the plan uses (the plan gives no rest pose).
     """
     plan = _doc(plan)
-    poses = {p.obj: np.array(p.T, float) for p in cell.positions.values()}
+    poses: dict[str, np.ndarray] = {}
+    for p in cell.positions.values():  # a stock's further parts as "<obj>@<position name>"
+        poses[p.obj if p.obj not in poses else f"{p.obj}@{p.name}"] = np.array(p.T, float)
     steps = list(_instance(plan).get("steps") or [])
     first = next((st for st in steps if st.get("joints_deg") is not None), None)
     q0, tool0 = _step_arm(cell, first) if first is not None else (None, None)
@@ -1153,7 +1193,8 @@ def _finger_length(cell: Cell) -> float:
 def _table(cell: Cell, all_scenes: Sequence[Scene]) -> tuple[float, float, float, float]:
     """The table top (x0, x1, y0, y1 at z = 0, cell unit): every object of every scene, padded
     by a fifth of their spread or the largest object's bounding radius, whichever is more."""
-    objs = [object_points(cell.objects[o], T) for s in all_scenes for o, T in s.poses.items() if o in cell.objects]
+    objs = [object_points(cell.objects[_model(o)], T) for s in all_scenes for o, T in s.poses.items()
+            if _model(o) in cell.objects]
     op = np.vstack(objs) if objs else np.zeros((1, 3))
     span = float(max(np.ptp(op[:, 0]), np.ptp(op[:, 1])))
     pad = max(0.2 * span, max((m.bounding_radius() for m in cell.objects.values()), default=1.0), 1e-6)
@@ -1167,7 +1208,8 @@ def _extent(cell: Cell, all_scenes: Sequence[Scene]) -> _Frame:
     table = _table(cell, all_scenes)
     base = np.asarray(cell.robot.base, float)[:3, 3]
     pts = [np.array([[table[0], table[2], 0.0], [table[1], table[3], 0.0], base, [base[0], base[1], 0.0]])]
-    pts += [object_points(cell.objects[o], T) for s in all_scenes for o, T in s.poses.items() if o in cell.objects]
+    pts += [object_points(cell.objects[_model(o)], T) for s in all_scenes for o, T in s.poses.items()
+            if _model(o) in cell.objects]
     pts += [p for s in all_scenes if (p := _arm_points(cell, s)) is not None]
     allp = np.vstack(pts)
     lo, hi = allp.min(axis=0), allp.max(axis=0)
@@ -1230,7 +1272,8 @@ def _paint_list(cell: Cell, s: Scene, eye: Sequence[float]) -> list[tuple[str, n
     eye = np.asarray(eye, float)
     items: list[tuple[float, str, np.ndarray, str]] = []
     size = max((m.bounding_radius() for m in cell.objects.values()), default=1.0)
-    for o, T in s.poses.items():
+    for key, T in s.poses.items():
+        o = _model(key)
         if o not in cell.objects:
             continue
         for sd in cell.objects[o].shape:
