@@ -21,7 +21,9 @@
           [ phase2/3,              % +Partial, +Options, -Result
             check_instance/2,      % +Steps, -Augmented
             check_instance/3,      % +Steps, +Bound, -Augmented
+            check_instance/4,      % +Steps, +Sources, +Bound, -Augmented
             instance_steps/3,      % +Instance, -Steps, -Bindings
+            instance_sources/2,    % +Instance, -Sources
             ur_dict/2,             % +Result, -Dict
             print_ur/1             % +Result
           ]).
@@ -65,8 +67,9 @@ phase2(Partial, Options, Result) :-
 examine(Instance, State, Aug) :-
     arg(3, State, N0), N is N0 + 1, nb_setarg(3, State, N),
     instance_steps(Instance, Steps, Bindings),
+    instance_sources(Instance, Sources),
     arg(2, State, BestE),
-    check_instance(Steps, BestE, aug(S, E, V, R, C, G)),
+    check_instance(Steps, Sources, BestE, aug(S, E, V, R, C, G)),
     Aug = aug(S, E, V, R, C, G, Bindings),
     (   (BestE == inf ; E < BestE)
     ->  nb_setarg(1, State, Aug), nb_setarg(2, State, E)
@@ -81,6 +84,22 @@ examine(Instance, State, Aug) :-
 instance_steps(instance(Actions, Bindings), Steps, Bindings) :-
     maplist([action(Id, T, _, _, _), step(Id, T)]>>true, Actions, Steps).
 
+%!  instance_sources(+Instance, -Sources) is det.
+%
+%   Where each action of a plan instance finds the objects it needs on the
+%   table: Sources is a list Id-[Object-Label, ...] of the part_location/2
+%   preconditions of its actions (pickup: the object taken; assemble: the
+%   object mated onto), Label the position's label in the instance (tr5 or
+%   a stable pose). Phase 2 needs it when an object has several initial
+%   positions (a stock of identical parts): it says which part is taken.
+
+instance_sources(instance(Actions, _), Sources) :-
+    convlist(action_sources, Actions, Sources).
+
+action_sources(action(Id, _, preconditions(Ops, _), _, _), Id-Pairs) :-
+    findall(O-L, member(op(_, _, part_location(O, L)), Ops), Pairs),
+    Pairs \== [].
+
 %!  check_instance(+Steps, -Augmented) is semidet.
 %
 %   Steps is a list of step(Id, Action) in execution order. Augmented is
@@ -92,14 +111,22 @@ instance_steps(instance(Actions, Bindings), Steps, Bindings) :-
 %   geometric precondition fails: no placement, no joint solution).
 
 check_instance(Steps, Aug) :-
-    check_instance(Steps, inf, Aug).
+    check_instance(Steps, [], inf, Aug).
 
-%   check_instance(+Steps, +Bound, -Aug): as check_instance/2, but fails as
-%   soon as the instance has Bound errors (it cannot beat the best so far).
+%!  check_instance(+Steps, +Bound, -Aug) is semidet.
+%!  check_instance(+Steps, +Sources, +Bound, -Aug) is semidet.
+%
+%   As check_instance/2, but fails as soon as the instance has Bound errors
+%   (it cannot beat the best so far); Sources as instance_sources/2 gives
+%   them (default []: every object has one initial position).
 
-check_instance(Steps, Bound, aug(Final, Errors, Verifs, Recovs, Verdicts, Geometry)) :-
+check_instance(Steps, Bound, Aug) :-
+    check_instance(Steps, [], Bound, Aug).
+
+check_instance(Steps, Sources, Bound, aug(Final, Errors, Verifs, Recovs, Verdicts, Geometry)) :-
     must_be(list, Steps),
-    remedy_loop(Steps, [], Bound, Final, Failed, Verdicts, Geometry),
+    must_be(list, Sources),
+    remedy_loop(Sources, Steps, [], Bound, Final, Failed, Verdicts, Geometry),
     length(Failed, Errors),
     maplist(failed_step(Final), Failed, FailedSteps),
     maplist(verification, FailedSteps, Verifs),
@@ -108,35 +135,37 @@ check_instance(Steps, Bound, aug(Final, Errors, Verifs, Recovs, Verdicts, Geomet
 failed_step(Steps, Id, step(Id, A)) :-
     memberchk(step(Id, A), Steps).
 
-%   remedy_loop(+Steps, +GivenUp, -Final, -Failed, -Verdicts, -Geometry):
-%   run the steps; at the first failing action not yet given up, try the
-%   remedies in order; an action no remedy helps is given up (it counts as
-%   an error) and the run goes on past it.
+%   remedy_loop(+Sources, +Steps, +GivenUp, +Bound, -Final, -Failed,
+%   -Verdicts, -Geometry): run the steps; at the first failing action not
+%   yet given up, try the remedies in order; an action no remedy helps is
+%   given up (it counts as an error) and the run goes on past it.
 
-remedy_loop(Steps, GivenUp, Bound, Final, Failed, Verdicts, Geometry) :-
-    run(Steps, GivenUp, Result),
+remedy_loop(Sources, Steps, GivenUp, Bound, Final, Failed, Verdicts, Geometry) :-
+    run(Sources, Steps, GivenUp, Result),
     (   Result = ok(Verdicts, Geometry)
     ->  Final = Steps, reverse(GivenUp, Failed)
     ;   Result = failed(Step, Before)
-    ->  (   remedy(Step, Before, Steps, GivenUp, Steps1)
-        ->  remedy_loop(Steps1, GivenUp, Bound, Final, Failed, Verdicts, Geometry)
+    ->  (   remedy(Sources, Step, Before, Steps, GivenUp, Steps1)
+        ->  remedy_loop(Sources, Steps1, GivenUp, Bound, Final, Failed, Verdicts, Geometry)
         ;   Step = step(Id, _),
             length(GivenUp, N0),
             N is N0 + 1,
             (Bound == inf -> true ; N < Bound),
-            remedy_loop(Steps, [Id|GivenUp], Bound, Final, Failed, Verdicts, Geometry)
+            remedy_loop(Sources, Steps, [Id|GivenUp], Bound, Final, Failed, Verdicts, Geometry)
         )
     ).
 
-%   run(+Steps, +GivenUp, -Result): propagate the world through Steps.
+%   run(+Sources, +Steps, +GivenUp, -Result): propagate the world through
+%   Steps (Sources: see instance_sources/2).
 %   Result = ok(Verdicts, Geometry); failed(Step, Prefix) for the first
 %   action whose uncertainty-reduction preconditions are not all satisfied
 %   and that is not in GivenUp; infeasible(Step) if a geometric
 %   precondition fails (the run cannot go on; the caller fails).
 
-run(Steps, GivenUp, Result) :-
+run(Sources, Steps, GivenUp, Result) :-
     maplist(step_dict, Steps, Dicts),
-    py_bridge(ur_world(Dicts), W0),
+    maplist(source_data, Sources, SourceData),
+    py_bridge(ur_world(Dicts, SourceData), W0),
     run(Steps, GivenUp, W0, [], [], [], Result0),
     Result0 \= infeasible(_),
     Result = Result0.
@@ -168,24 +197,24 @@ satisfied(C) :-
     get_dict(satisfied, C, S),
     S == @(true).
 
-%   remedy(+Failing, +Before, +Steps, +GivenUp, -Steps1): the first remedy
-%   of Sec. 4.3 that makes Failing's preconditions hold.
+%   remedy(+Sources, +Failing, +Before, +Steps, +GivenUp, -Steps1): the
+%   first remedy of Sec. 4.3 that makes Failing's preconditions hold.
 
-remedy(step(Id, pickup(Obj, _)), _, Steps, GivenUp, Steps1) :-
+remedy(Sources, step(Id, pickup(Obj, _)), _, Steps, GivenUp, Steps1) :-
     \+ inserted_for(Id, Steps),
     insert_before(Id, [step(sense(Id, 1), dense_range_scan(Obj))], Steps, Steps1),
-    passes(Id, Steps1, GivenUp).
-remedy(step(Id, assemble(O1, O2, _, _, _)), Before, Steps, GivenUp, Steps1) :-
+    passes(Sources, Id, Steps1, GivenUp).
+remedy(Sources, step(Id, assemble(O1, O2, _, _, _)), Before, Steps, GivenUp, Steps1) :-
     \+ inserted_for(Id, Steps),
     establisher_of_holding(O1, Before, EId),
     Scans = [ step(sense(Id, 1), dense_range_scan(O1)),
               step(sense(Id, 2), dense_range_scan(O2)) ],
     (   insert_before(EId, Scans, Steps, Steps1),
-        passes(Id, Steps1, GivenUp)
+        passes(Sources, Id, Steps1, GivenUp)
     ->  true
     ;   append(Scans, [step(squeeze(Id), squeeze(O2))], WithSqueeze),
         insert_before(EId, WithSqueeze, Steps, Steps1),
-        passes(Id, Steps1, GivenUp)
+        passes(Sources, Id, Steps1, GivenUp)
     ).
 
 inserted_for(Id, Steps) :-
@@ -206,10 +235,10 @@ insert_before(Id, New, Steps, Steps1) :-
     append(Pre, New, Pre1),
     append(Pre1, [step(Id, A)|Post], Steps1).
 
-%   passes(+Id, +Steps, +GivenUp): with Steps, action Id's preconditions
-%   hold (the run gets past Id).
-passes(Id, Steps, GivenUp) :-
-    run(Steps, GivenUp, Result),
+%   passes(+Sources, +Id, +Steps, +GivenUp): with Steps, action Id's
+%   preconditions hold (the run gets past Id).
+passes(Sources, Id, Steps, GivenUp) :-
+    run(Sources, Steps, GivenUp, Result),
     (   Result = ok(_, _)
     ->  true
     ;   Result = failed(_, Before),
@@ -225,6 +254,13 @@ step_dict(step(Id, Action), _{id: IdText, name: Name, args: Args}) :-
     step_id_text(Id, IdText),
     Action =.. [Name|Args0],
     maplist(arg_data, Args0, Args).
+
+%   source_data(+Source, -Data): Id-[Obj-Label] as the dict
+%   _{id: IdText, from: _{Obj: Label}} Python's new_world/3 reads.
+
+source_data(Id-Pairs, _{id: IdText, from: From}) :-
+    step_id_text(Id, IdText),
+    dict_pairs(From, _, Pairs).
 
 %!  step_id_text(+Id, -Text) is det.
 %
@@ -295,8 +331,10 @@ step_out(Geo, step(Id, Action), D) :-
     geo_value(G, joints_deg, Q),
     geo_value(G, placement, Pl),
     geo_value(G, ik_solutions_deg, Sols),
+    geo_value(G, from, From),
     D = _{id: IdText, kind: Kind, serves: Serves, term: Term, name: Name, object: Obj,
-          tool_pose: TP, joints_deg: Q, ik_solutions_deg: Sols, placement: Pl}.
+          tool_pose: TP, joints_deg: Q, ik_solutions_deg: Sols, placement: Pl,
+          from: From}.
 
 step_kind(sense(A, _), _, sensing, A) :- !.
 step_kind(squeeze(A), _, squeeze, A) :- !.

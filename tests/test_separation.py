@@ -1,12 +1,12 @@
-"""Declobbering by separation (issue 8; Sec. 4.1): the CLI's `separations` field and
-`--no-separation` switch, end to end, and through the embedded Prolog the fixture cell
-whose only plan within the bound needs a separation (tests/prolog/fixtures/
-separation_cell.pl; the plunit suite tests/prolog/separation.plt goes into detail).
+"""Declobbering by separation (issue 8; Sec. 4.1): kb/problems/separation.yaml, whose
+only plans need separation, end to end through the CLI, and through the embedded Prolog
+the fixture cell of the plunit suite (tests/prolog/fixtures/separation_cell.pl;
+tests/prolog/separation.plt goes into detail).
 
-kb/problems/separation.yaml does not need separation (its header says why: with the
-real rule base a separated clobberer would need one object in two places or two
-grasps at once), so on it both switches give the same 6-action plan and no
-separation survives in the partial plan; the trace shows that separation was tried.
+The problem: two identical pegs (one object, two initial positions), the spare at
+init_pos1 out of the arm's reach, the other at init_pos5; goals: the spare stays put,
+a peg goes into the block. The pickup for the assembly may clobber the first goal
+until its position is established; only a separation lets phase 1 go on.
 """
 from __future__ import annotations
 
@@ -15,38 +15,62 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from spar_py.engine import engine
+from spar_py.kb import load_problem
 
 ROOT = Path(__file__).resolve().parent.parent
 PROBLEM = ROOT / "kb" / "problems" / "separation.yaml"
 SPAR = [sys.executable, "-m", "spar_py.cli"]
 FIXTURE = ROOT / "tests" / "prolog" / "fixtures" / "separation_cell.pl"
-SIX = ["pickup(peg2,grasp_3)", "putdown(peg2,pos_1)", "pickup(peg2,grasp_2)",
-       "assemble(peg2,block2,[[peg_face],[block_face]],trans_1,vec_1)",
-       "pickup(peg,grasp_1)", "assemble(peg,block,[[peg_face],[block_face]],trans_1,vec_1)"]
+TWO = ["pickup(peg,grasp_1)", "assemble(peg,block,[[peg_face],[block_face]],trans_1,vec_1)"]
 
 
 def spar(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([*SPAR, "plan", str(PROBLEM), "--phase1-only", *args],
+    return subprocess.run([*SPAR, "plan", str(PROBLEM), *args],
                           capture_output=True, text=True, cwd=ROOT, timeout=300)
 
 
-@pytest.mark.parametrize("switch", [[], ["--no-separation"]])
-def test_cli_json_separations_field(switch: list[str]) -> None:
-    r = spar("--json", *switch)
+def test_separation_gives_the_two_action_plan() -> None:
+    r = spar("--json")
     assert r.returncode == 0, r.stderr
     d = json.loads(r.stdout)
     assert d["outcome"] == "plan"
-    assert [a["term"] for a in d["partial"]["actions"]] == SIX
-    assert d["partial"]["separations"] == []
+    assert sorted(a["term"] for a in d["partial"]["actions"]) == sorted(TWO)
+    assert d["partial"]["separations"] == [["part_location(peg,init_pos5)", "part_location(peg,init_pos1)"]]
+    assert d["instance"]["error_count"] == 0
+
+
+def test_phase2_takes_the_part_the_separation_leaves() -> None:
+    """The pickup takes the peg at init_pos5 (label tr5): the JSON says so, and its tool
+    pose is a grasp of that peg, not of the spare 30 in further out."""
+    d = json.loads(spar("--json").stdout)
+    pick = next(s for s in d["instance"]["steps"] if s["name"] == "pickup")
+    assert pick["from"] == {"peg": "tr5"}
+    cell = load_problem(PROBLEM)
+    g = cell.objects["peg"].grasps[d["instance"]["bindings"]["grasp_1"]]
+    np.testing.assert_allclose(np.array(pick["tool_pose"]), cell.positions["tr5"].T @ g.T, atol=1e-6)
+
+
+def test_paper_planner_finds_no_plan() -> None:
+    """--no-separation is the paper's planner: promotion cannot help (the goal is the initial
+    state's, needed by finish) and the white knight, a putdown into the spare's place, is
+    out of reach; it says no plan, with that reason, and exits 1. The bound it searched
+    completely is well past the 2 actions separation needs."""
+    r = spar("--json", "--no-separation")
+    assert r.returncode == 1, r.stderr
+    d = json.loads(r.stdout)
+    assert d["outcome"] == "no_plan"
+    assert "reachable(" in d["reason"]["goal"] and "init_pos1" in d["reason"]["goal"]
+    assert d["reason"]["max_actions"] >= 4
 
 
 def test_cli_trace_separation_switch() -> None:
-    on = spar("--trace")
-    off = spar("--trace", "--no-separation")
-    assert on.returncode == off.returncode == 0
+    on = spar("--phase1-only", "--trace")
+    off = spar("--phase1-only", "--trace", "--no-separation")
+    assert on.returncode == 0 and off.returncode == 1
     assert ": separation [" in on.stdout
     assert ": separation [" not in off.stdout
 

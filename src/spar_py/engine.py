@@ -125,11 +125,12 @@ def arc_pairs(kind: str, objects: list[str], grasps: list[str], positions: list[
     return reach.arc(current_cell(), kind, objects, grasps, positions, None if ta == "none" else ta)
 
 
-def ur_world(steps: list[dict[str, Any]]) -> Any:
-    """Phase 2: the initial world of a plan instance whose steps are ``steps`` (phase2.py)."""
+def ur_world(steps: list[dict[str, Any]], sources: list[dict[str, Any]] | None = None) -> Any:
+    """Phase 2: the initial world of a plan instance whose steps are ``steps``, its actions
+    taking their objects from ``sources`` (phase2.new_world)."""
     from . import phase2
 
-    return phase2.new_world(current_cell(), steps)
+    return phase2.new_world(current_cell(), steps, sources)
 
 
 def ur_step(world: Any, step: dict[str, Any]) -> tuple[list[dict[str, Any]], Any, dict[str, Any]]:

@@ -371,13 +371,23 @@ def _bounds(node: Node, len_scale: float, rad_per: float) -> Bounds:
     return Bounds(iv("dx", len_scale), iv("dy", len_scale), iv("dz", len_scale), iv("dtheta", rad_per))
 
 
-GOAL_SHAPES: dict[str, int] = {"assembled": 5}
+GOAL_SHAPES: dict[str, int] = {"assembled": 5, "part_location": 2}
 
 
-def _check_goal(node: Node, goal: Any, cell_objects: dict[str, ObjectModel], transforms: dict, vectors: dict) -> None:
-    """Validate a parsed goal against the cell (known objects, faces, transforms)."""
+def _check_goal(node: Node, goal: Any, cell_objects: dict[str, ObjectModel], transforms: dict, vectors: dict,
+                positions: dict[str, Position]) -> None:
+    """Validate a parsed goal against the cell (known objects, faces, transforms, positions)."""
     if not isinstance(goal, tuple) or goal[0] not in GOAL_SHAPES or len(goal) - 1 != GOAL_SHAPES[goal[0]]:
-        raise node.fail("a goal assembled(Peg, Hole, [[PegFaces], [HoleFaces]], Ta, Va)")
+        raise node.fail("a goal assembled(Peg, Hole, [[PegFaces], [HoleFaces]], Ta, Va) "
+                        "or part_location(Object, InitialPosition)")
+    if goal[0] == "part_location":
+        _, obj, pos = goal
+        if obj not in cell_objects:
+            raise node.fail(f"a known object in part_location/2 ({', '.join(sorted(cell_objects))}), not {_show(obj)}")
+        names = sorted(p.name for p in positions.values() if p.obj == obj)
+        if pos not in names:
+            raise node.fail(f"an initial position of {obj} in part_location/2 ({', '.join(names)}), not {_show(pos)}")
+        return
     _, held, fixed, faces, ta, va = goal
     for role, obj in (("first", held), ("second", fixed)):
         if obj not in cell_objects:
@@ -423,15 +433,19 @@ def load_problem(path: str | Path) -> Cell:
         if model.name != oname:
             raise mnode.fail(f"the model of {oname}, not of {model.name}")
         objects[oname] = model
-        init = onode.key("initial")
-        pname, plabel = init.key("name").label(), init.key("label").label()
-        if plabel in positions or pname in names:
-            raise init.fail(f"a position name and label not used before ({pname}, {plabel})")
-        T = tm_node(init.key("tm"), 1.0)
-        if not any(same_stable_pose(T[:3, :3], p.R) for p in model.poses.values()):
-            raise init.key("tm").fail(f"an orientation of one of {oname}'s stable poses")
-        positions[plabel] = Position(pname, plabel, oname, T)
-        names.add(pname)
+        inode = onode.key("initial")
+        # one position, or a list of them: a stock of identical parts of this model
+        # (part_location(Obj, Pos) holds for each; "the peg" is whichever is taken)
+        inits = inode.elements(1) if isinstance(inode.value, list) else [inode]
+        for init in inits:
+            pname, plabel = init.key("name").label(), init.key("label").label()
+            if plabel in positions or pname in names:
+                raise init.fail(f"a position name and label not used before ({pname}, {plabel})")
+            T = tm_node(init.key("tm"), 1.0)
+            if not any(same_stable_pose(T[:3, :3], p.R) for p in model.poses.values()):
+                raise init.key("tm").fail(f"an orientation of one of {oname}'s stable poses")
+            positions[plabel] = Position(pname, plabel, oname, T)
+            names.add(pname)
     if not objects:
         raise root.key("objects").fail("at least one object")
 
@@ -466,7 +480,7 @@ def load_problem(path: str | Path) -> Cell:
             term = parse_term(g.text())
         except ValueError as e:
             raise g.fail(f"a Prolog term ({e})") from None
-        _check_goal(g, term, objects, transforms, vectors)
+        _check_goal(g, term, objects, transforms, vectors, positions)
         goals.append(term_text(term))
 
     initial = [f"gripper({grip.value})"] + [f"part_location({p.obj}, {p.name})" for p in positions.values()]

@@ -7,6 +7,13 @@ back the verdicts of the action's uncertainty-reduction preconditions and the wo
 after it. A step is plain data from Prolog: ``{"id": "action_2", "name": "pickup",
 "args": ["peg", "p1G11"]}``; names: pickup, putdown, assemble, dense_range_scan, squeeze.
 
+An object may have several initial positions (a stock of identical parts, kb-format.md).
+The world then holds one state per part: the part the plan is working with under the
+object's name, each other under ``"<object>@<its initial position name>"``. Which part an
+action takes comes from the plan: the *sources* of an instance (uncertainty.pl's
+instance_sources/2) give, per action id, the label of the position each
+``part_location(Obj, Pos)`` precondition was established at (``{"action_2": {"peg": "tr5"}}``).
+
 Units: lengths in the cell unit, angles in radians inside, degrees in the dicts
 returned for display; world frame, table top z = 0.
 """
@@ -37,6 +44,8 @@ class World:
     placements: dict[str, pl.Placement | None]
     grasps: dict[str, str] = field(default_factory=dict)  # object -> grasp label while held
     joints: np.ndarray | None = None
+    sources: dict[str, dict[str, str]] = field(default_factory=dict)  # step id -> {object: position label}
+    active: dict[str, str] = field(default_factory=dict)  # stock object -> initial position name of its active part
     key: tuple = ()  # what determines this world: the placements' key and the steps so far
     checked: tuple = ()  # (Constraint, satisfied) of every UR precondition checked so far
 
@@ -44,11 +53,61 @@ class World:
 # ---------------------------------------------------------------------- set-up
 
 
-def new_world(cell: Cell, steps: list[Step]) -> World:
+def new_world(cell: Cell, steps: list[Step], sources: Sources | None = None) -> World:
     """The initial world for an instance whose steps (in order) are ``steps``; chooses
-    every put-down placement now, knowing the later actions on the object (Sec. 5.2.4)."""
-    key, placements = _placements(cell, steps)
-    return World(cell, ur.initial_world(cell, Registry()), placements, key=(key,))
+    every put-down placement now, knowing the later actions on the object (Sec. 5.2.4).
+    ``sources`` says where each action takes its objects from (module doc): a list of
+    ``{"id": ..., "from": {obj: label}}`` as Prolog sends it, or a dict id -> {obj: label};
+    needed only where an object has several initial positions."""
+    src = _inherit_sources(steps, _sources(sources))
+    key, placements = _placements(cell, steps, src)
+    active = _first_parts(cell, steps, src)
+    unc = ur.initial_world(cell, Registry(), active=active)
+    return World(cell, unc, placements, sources=src, active=active, key=(key,))
+
+
+Sources = list[dict[str, Any]] | dict[str, dict[str, str]]
+
+
+def _sources(sources: Sources | None) -> dict[str, dict[str, str]]:
+    if not sources:
+        return {}
+    if isinstance(sources, dict):
+        return {str(k): {str(o): str(lbl) for o, lbl in v.items()} for k, v in sources.items()}
+    return {str(d["id"]): {str(o): str(lbl) for o, lbl in d["from"].items()} for d in sources}
+
+
+def _inherit_sources(steps: list[Step], src: dict[str, dict[str, str]]) -> dict[str, dict[str, str]]:
+    """Sensing and squeezes inserted by phase 2 act on the part the next action on their
+    object takes: they get that action's source."""
+    out = dict(src)
+    for i, s in enumerate(steps):
+        if s["name"] in ("dense_range_scan", "squeeze") and s["id"] not in out:
+            obj = s["args"][0]
+            nxt = next((src[t["id"]][obj] for t in steps[i + 1:] if obj in src.get(t["id"], {})), None)
+            if nxt is not None:
+                out[s["id"]] = {obj: nxt}
+    return out
+
+
+def _stock(cell: Cell) -> dict[str, list]:
+    """Objects with several initial positions -> those positions (in the file's order)."""
+    by_obj: dict[str, list] = {}
+    for p in cell.positions.values():
+        by_obj.setdefault(p.obj, []).append(p)
+    return {o: ps for o, ps in by_obj.items() if len(ps) > 1}
+
+
+def _first_parts(cell: Cell, steps: list[Step], src: dict[str, dict[str, str]]) -> dict[str, str]:
+    """For each stock object, the initial position name of the part the plan takes first
+    (the first position listed if the plan never says)."""
+    out = {}
+    for obj, ps in _stock(cell).items():
+        names = {p.label: p.name for p in ps}
+        first = next((names[src[s["id"]][obj]] for s in steps
+                      if obj in src.get(s["id"], {}) and src[s["id"]][obj] in names), None)
+        out[obj] = first if first is not None else ps[0].name
+    return out
 
 
 #: Memo tables (bounded): placements per manipulation sequence; step results per world
@@ -64,14 +123,17 @@ def _step_key(s: Step) -> tuple:
     return (s["id"], s["name"], tuple(s["args"]))
 
 
-def _placements(cell: Cell, steps: list[Step]) -> tuple[tuple, dict[str, pl.Placement | None]]:
-    """choose_placements memoised per cell and manipulation sequence (sensing moves nothing)."""
+def _placements(cell: Cell, steps: list[Step],
+                src: dict[str, dict[str, str]]) -> tuple[tuple, dict[str, pl.Placement | None]]:
+    """choose_placements memoised per cell, manipulation sequence (sensing moves nothing)
+    and the parts those manipulations take."""
     manip = [s for s in steps if s["name"] in ("pickup", "putdown", "assemble")]
-    key = (cell.memo_key(), tuple(_step_key(s) for s in manip))
+    key = (cell.memo_key(), tuple(_step_key(s) for s in manip),
+           tuple(sorted((k, tuple(sorted(v.items()))) for k, v in src.items())))
     if key not in _PLACEMENTS:
         if len(_PLACEMENTS) > _MEMO_LIMIT:
             _PLACEMENTS.clear()
-        _PLACEMENTS[key] = choose_placements(cell, manip)
+        _PLACEMENTS[key] = choose_placements(cell, manip, src)
     return key, _PLACEMENTS[key]
 
 
@@ -82,38 +144,65 @@ def _grasp(cell: Cell, obj: str, label: str) -> Grasp:
         raise SparValueError(f"{label!r} is not a grasp of {obj!r}") from None
 
 
-def choose_placements(cell: Cell, steps: list[Step]) -> dict[str, pl.Placement | None]:
+def choose_placements(cell: Cell, steps: list[Step],
+                      sources: dict[str, dict[str, str]] | None = None) -> dict[str, pl.Placement | None]:
     """For each putdown into a stable pose, the placement nearest the object's previous spot
     at which the arm reaches the put-down grasp and every later grasp and mate on the object
-    until it is picked up again; None where no placement in the free regions works."""
-    where = {p.obj: p.T for p in cell.positions.values()}  # objects on the table
+    until it is picked up again, clear of every part on the table; None where no placement
+    in the free regions works. ``sources`` (see :func:`new_world`) says which part of a
+    stock a pickup takes."""
+    src = sources or {}
+    # parts on the table: initial position name or putdown id -> (object, pose)
+    on_table: dict[str, tuple[str, np.ndarray]] = {p.name: (p.obj, p.T) for p in cell.positions.values()}
+    last: dict[str, np.ndarray] = {}  # object -> where the part in the hand was picked from
     held: dict[str, str] = {}
     out: dict[str, pl.Placement | None] = {}
     for i, s in enumerate(steps):
         name, args = s["name"], s["args"]
         if name == "pickup":
             held[args[0]] = args[1]
-            last = where.pop(args[0], None)
-            if last is not None:
-                where[f"_last_{args[0]}"] = last
+            k = _taken(cell, on_table, args[0], src.get(s["id"], {}).get(args[0]))
+            if k is not None:
+                last[args[0]] = on_table.pop(k)[1]
         elif name == "putdown":
             obj, pos = args[0], args[1]
-            prev = where.pop(f"_last_{obj}", None)
+            prev = last.pop(obj, None)
             if pos in cell.positions:
                 T = cell.positions[pos].T
                 out[s["id"]] = pl.Placement(obj, cell.positions[pos].label, *T[:3, 3], 0.0, T)
             else:
                 reqs = [_grasp(cell, obj, held[obj]).T] + _later_requirements(cell, steps[i + 1:], obj, held)
-                occupied = [(T[:2, 3], cell.objects[o].bounding_radius())
-                            for o, T in where.items() if not o.startswith("_last_")]
+                occupied = [(T[:2, 3], cell.objects[o].bounding_radius()) for o, T in on_table.values()]
                 near = prev[:2, 3] if prev is not None else None
                 out[s["id"]] = pl.choose(cell, obj, pos, reqs, occupied, near)
             held.pop(obj, None)
             if out[s["id"]] is not None:
-                where[obj] = out[s["id"]].T
+                on_table[s["id"]] = (obj, out[s["id"]].T)
         elif name == "assemble":
             held.pop(args[0], None)
     return out
+
+
+def _taken(cell: Cell, on_table: dict[str, tuple[str, np.ndarray]], obj: str, label: str | None) -> str | None:
+    """The key in ``on_table`` of the part of ``obj`` a pickup from ``label`` takes: the
+    initial position with that label, else the part of ``obj`` put down last (in that
+    stable pose, if ``label`` is one), else the only or first part of ``obj``."""
+    if label is not None and label in cell.positions:
+        name = cell.positions[label].name
+        if name in on_table:
+            return name
+    keys = [k for k, (o, _) in on_table.items() if o == obj]
+    if label is not None and label in cell.objects[obj].poses:
+        from .geometry import same_stable_pose
+
+        R = cell.objects[obj].poses[label].R
+        fit = [k for k in keys if same_stable_pose(on_table[k][1][:3, :3], R)]
+        keys = fit or keys
+    initial = {p.name for p in cell.positions.values()}
+    placed = [k for k in keys if k not in initial]
+    if placed:
+        return placed[-1]
+    return keys[0] if keys else None
 
 
 def _later_requirements(cell: Cell, rest: list[Step], obj: str, held: dict[str, str]) -> list[np.ndarray]:
@@ -145,9 +234,48 @@ def step(world: World, s: Step) -> tuple[list[dict[str, Any]], World, dict[str, 
     if key not in _STEPS:
         if len(_STEPS) > _MEMO_LIMIT:
             _STEPS.clear()
-        checks, after, geo = handler(world, s)
+        checks, after, geo = handler(_activate(world, s), s)
+        if s["id"] in world.sources:
+            geo["from"] = dict(world.sources[s["id"]])
         _STEPS[key] = (checks, replace(after, key=key), geo)
     return _STEPS[key]
+
+
+def _activate(world: World, s: Step) -> World:
+    """``world`` with the parts step ``s`` takes (its sources) made the active parts of
+    their stock objects; the part they replace keeps its state under ``obj@origin``."""
+    for obj, label in world.sources.get(s["id"], {}).items():
+        if obj not in world.active:
+            continue
+        key = _part_at(world, obj, label)
+        if key is None or key == obj:
+            continue
+        objs = dict(world.unc.objects)
+        retired = f"{obj}@{world.active[obj]}"
+        objs[retired] = replace(objs.pop(obj), name=retired)
+        objs[obj] = replace(objs.pop(key), name=obj)
+        world = replace(world, unc=replace(world.unc, objects=objs),
+                        active={**world.active, obj: key.split("@", 1)[1]})
+    return world
+
+
+def _part_at(world: World, obj: str, label: str) -> str | None:
+    """The world key of the part of stock object ``obj`` lying at position ``label`` (an
+    initial position's label, or a stable pose): the active part if it is there."""
+    from .geometry import same_stable_pose
+
+    cell = world.cell
+    keys = [obj] + [k for k in world.unc.objects if k.startswith(f"{obj}@")]
+    on_table = [k for k in keys if world.unc.objects[k].where == ur.TABLE]
+    if label in cell.positions:
+        T = cell.positions[label].T
+        fit = [k for k in on_table if np.allclose(world.unc.objects[k].pose, T, atol=1e-9)]
+    elif label in cell.objects[obj].poses:
+        R = cell.objects[obj].poses[label].R
+        fit = [k for k in on_table if same_stable_pose(world.unc.objects[k].pose[:3, :3], R)]
+    else:
+        fit = []
+    return fit[0] if fit else None
 
 
 def _arm(world: World, T: np.ndarray) -> tuple[np.ndarray | None, dict[str, Any]]:
@@ -296,10 +424,13 @@ def sample_check(cell: Cell, steps: list[Step], draws: int = 10_000, seed: int =
     """Replay an instance numerically: for every uncertainty-reduction precondition checked
     along ``steps`` (in order, sensing and squeezes included), evaluate its expression at
     ``draws`` points drawn uniformly from its variables' bounds and count the draws in
-    which the inequality fails. A precondition declared satisfied must never fail."""
+    which the inequality fails. A precondition declared satisfied must never fail.
+    Steps as in the plan's JSON; a step's ``from`` (which part of a stock it takes) is
+    honoured."""
     import casadi as ca
 
-    world = new_world(cell, steps)
+    sources = {s["id"]: s["from"] for s in steps if s.get("from")}
+    world = new_world(cell, steps, sources)
     for s in steps:
         _, world, _ = step(world, s)
     rng = np.random.default_rng(seed)

@@ -186,16 +186,25 @@ class WorldState:
         return next((n for n, o in self.objects.items() if o.where == HAND), None)
 
 
-def initial_world(cell: Cell, registry: Registry | None = None) -> WorldState:
+def initial_world(cell: Cell, registry: Registry | None = None,
+                  active: Mapping[str, str] | None = None) -> WorldState:
     """The initial world of ``cell``: each object on the table at its initial position with
-    fresh error variables bounded by the cell's object bounds (Table 2)."""
+    fresh error variables bounded by the cell's object bounds (Table 2).
+
+    An object with several initial positions (a stock of identical parts) has one state
+    per part: the part at initial position ``active[obj]`` (default: the first listed)
+    under the object's name, every other under ``"<obj>@<position name>"``.
+    """
     reg = registry if registry is not None else Registry()
+    active = dict(active or {})
     objs: dict[str, ObjectState] = {}
     for pos in cell.positions.values():
         if pos.obj not in cell.object_bounds:
             raise SparValueError(f"no uncertainty bounds for object {pos.obj!r}")
-        objs[pos.obj] = ObjectState(pos.obj, TABLE, _pose(pos.T, pos.name),
-                                    table_error(reg, pos.obj, cell.object_bounds[pos.obj]))
+        active.setdefault(pos.obj, pos.name)
+        key = pos.obj if active[pos.obj] == pos.name else f"{pos.obj}@{pos.name}"
+        objs[key] = ObjectState(key, TABLE, _pose(pos.T, pos.name),
+                                table_error(reg, key, cell.object_bounds[pos.obj]))
     return WorldState(reg, cell.manipulator_bounds, objs)
 
 
