@@ -30,6 +30,20 @@ test(initial_constraint_creates_node, L == [p2P1, p2P2]) :-
     cms_initial(in_position_class(pos_1, [p2P2, p2P1]), N0, N),
     cms_node(N, pos_1, L).
 
+%   A putdown into a named absolute position (a white knight for a goal
+%   part_location(peg, init_pos1)) constrains that position, whose only
+%   label is tr1 (class p1P5), not a free variable over stable poses.
+
+test(initial_constraint_on_absolute_position, L == [tr1]) :-
+    cms_empty(N0),
+    spar_actions:get_all_poses(peg, Ps),
+    cms_initial(in_position_class(init_pos1, Ps), N0, N),
+    cms_node(N, init_pos1, L).
+
+test(initial_constraint_on_absolute_position_other_class, fail) :-
+    cms_empty(N0),
+    cms_initial(in_position_class(init_pos1, [p1P1, p1P2]), N0, _).
+
 test(initial_state_single_label, L == [tr1]) :-
     peg_net(N),
     cms_node(N, init_pos1, L).
