@@ -24,7 +24,8 @@ def _steps(instance: dict) -> list[dict]:
     out = []
     for s in instance["steps"]:
         t = parse_term(s["term"])
-        out.append({"id": s["id"], "name": t[0], "args": [a if isinstance(a, str) else term_text(a) for a in t[1:]]})
+        out.append({"id": s["id"], "name": t[0], "args": [a if isinstance(a, str) else term_text(a) for a in t[1:]]}
+                   | ({"from": s["from"]} if s.get("from") else {}))
     return out
 
 
@@ -83,3 +84,57 @@ def test_hopeless_uncertainty_plans_for_failure(planner: Planner) -> None:
     assert all(c["failed_draws"] == 0 for c in checks if c["declared_satisfied"])
     # the check can fail: some precondition declared unsatisfied does fail in some draws
     assert any(c["failed_draws"] > 0 for c in checks if not c["declared_satisfied"])
+
+
+# ---------------------------------------------------------------------- stocks of identical parts
+
+
+def _two_part_stock(tmp: Path) -> Path:
+    """kb/problems/separation.yaml with the spare brought into reach (x = 38 in) and a second
+    block: both pegs of the stock go into blocks, so phase 2 must switch parts."""
+    kb = ROOT / "kb"
+    s = (PROBLEMS / "separation.yaml").read_text()
+    s = s[s.index("problem:"):].replace("../robots/", f"{kb}/robots/").replace("../objects/", f"{kb}/objects/")
+    s = s.replace("[60, -8, 1.5]", "[38, -8, 1.5]")
+    s = s.replace("  block:\n", f"  block2:\n    model: {kb}/objects/block2.yaml\n"
+                  "    initial: {name: init_pos4, label: tr4, tm: [[1, 0, 0], [0, 1, 0], [0, 0, 1], [38, 8, 1.5]]}\n"
+                  "  block:\n")
+    s = s.replace("    block: {dx", "    block2: {dx: [-0.11, 0.11], dy: [-0.11, 0.11], dz: [-0.11, 0.11], "
+                  "dtheta: [-5.5, 5.5]}\n    block: {dx")
+    s = s.replace("  - part_location(peg, init_pos1)\n",
+                  "  - assembled(peg, block2, [[peg_face], [block_face]], trans_1, vec_1)\n")
+    path = tmp / "two_part_stock.yaml"
+    path.write_text(s)
+    return path
+
+
+def test_stock_parts_each_picked_where_they_lie(planner: Planner, tmp_path: Path) -> None:
+    """Two pegs of one stock into two blocks: each pickup takes a different part (its
+    ``from``), grasps it where that part lies, and the replay at 10^4 draws agrees."""
+    path = _two_part_stock(tmp_path)
+    cell = load_problem(path)
+    plan = planner.plan(path).to_json()
+    assert plan["outcome"] == "plan"
+    inst = plan["instance"]
+    picks = [s for s in inst["steps"] if s["name"] == "pickup"]
+    assert sorted(s["from"]["peg"] for s in picks) == ["tr1", "tr5"]
+    for s in picks:
+        g = cell.objects["peg"].grasps[parse_term(s["term"])[2]]
+        np.testing.assert_allclose(np.array(s["tool_pose"]), cell.positions[s["from"]["peg"]].T @ g.T, atol=1e-6)
+    mates = {parse_term(s["term"])[2]: s for s in inst["steps"] if s["name"] == "assemble"}
+    assert mates["block"]["from"] == {"block": "tr2"} and mates["block2"]["from"] == {"block2": "tr4"}
+    report = phase2.sample_check(cell, _steps(inst), draws=10_000)
+    assert report and all(r["failed_draws"] == 0 for r in report if r["declared_satisfied"])
+
+
+def test_stock_world_keeps_the_spare() -> None:
+    """The initial world of kb/problems/separation.yaml: the part the plan takes first is
+    'peg', the spare keeps its own state at its own place."""
+    cell = load_problem(PROBLEMS / "separation.yaml")
+    steps = [{"id": "action_2", "name": "pickup", "args": ["peg", "p1G10"]}]
+    w = phase2.new_world(cell, steps, {"action_2": {"peg": "tr5"}})
+    assert set(w.unc.objects) == {"peg", "peg@init_pos1", "block"}
+    np.testing.assert_allclose(w.unc.objects["peg"].pose, cell.positions["tr5"].T)
+    np.testing.assert_allclose(w.unc.objects["peg@init_pos1"].pose, cell.positions["tr1"].T)
+    _, after, _ = phase2.step(w, steps[0])
+    assert after.unc.objects["peg"].where == "hand" and after.unc.objects["peg@init_pos1"].where == "table"
