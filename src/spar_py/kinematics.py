@@ -189,6 +189,14 @@ class Robot:
             T = T @ A[:, i]
         return T @ self.tool
 
+    def tool_inverse(self) -> np.ndarray:
+        """inv(tool), T_tool_flange (4x4), computed once per value of ``tool``."""
+        key = self.tool.tobytes()
+        cached = self.__dict__.get("_tool_inv")
+        if cached is None or cached[0] != key:
+            cached = self.__dict__["_tool_inv"] = (key, np.linalg.inv(self.tool))
+        return cached[1]
+
     # ------------------------------------------------------------------ limits
 
     def in_limits(self, q: np.ndarray) -> np.ndarray | bool:

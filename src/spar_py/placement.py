@@ -184,10 +184,22 @@ def reachable_somewhere(cell: Cell, obj: str, pose: str, requirements: list[np.n
 def _any_placement(cell: Cell, cands: np.ndarray, X: np.ndarray, chunk: int = 48) -> np.ndarray:
     """(m,) bool: for each X, some object pose of ``cands`` (n,4,4) with T_O @ X reachable.
     Placements are tried a chunk at a time and a requirement is dropped once met, so the
-    usual case (met in the first chunk) costs a fraction of the whole grid."""
+    usual case (met in the first chunk) costs a fraction of the whole grid.
+
+    The grid's placements differ only by a turn about world z and a shift in x, y, so
+    the height of the wrist for a given X is the same at all of them: an X whose wrist
+    is below the table top at the first placement (by more than rounding) is below it at
+    every one and fails without solving IK over the whole grid."""
     ok = np.zeros(len(X), dtype=bool)
+    if not len(cands):
+        return ok
+    if np.all(cands[:, 2, :] == cands[0, 2, :]):  # one z row: turns about z, shifts in x, y
+        T0 = np.einsum("ij,mjk->mik", cands[0], X)
+        below = (T0 @ cell.robot.tool_inverse())[:, 2, 3] < -1e-9
+    else:
+        below = np.zeros(len(X), dtype=bool)
     for start in range(0, len(cands), chunk):
-        open_ = np.flatnonzero(~ok)
+        open_ = np.flatnonzero(~ok & ~below)
         if not len(open_):
             break
         C = cands[start:start + chunk]

@@ -101,7 +101,7 @@ def above_table(cell: Cell, T: np.ndarray) -> np.ndarray:
     would be under the table top (z = 0), e.g. a grasp from below, is not reachable
     either, so the CMS stays conservative (Sec. 7.1).
     """
-    flange = T @ np.linalg.inv(cell.robot.tool)
+    flange = T @ cell.robot.tool_inverse()
     return flange[:, 2, 3] > 0.0
 
 
