@@ -89,6 +89,9 @@ def write_atomically(path: Path, text: str) -> None:
 
 def cmd_plan(args: argparse.Namespace) -> int:
     """Plan a problem; print the plan (or its JSON) and write pictures if asked."""
+    from .engine import start_engine
+
+    start_engine()  # Prolog consults the planner while the imports below run
     from .planner import Planner
 
     planner = Planner(max_actions=args.max_actions, max_instances=args.max_instances,

@@ -53,15 +53,42 @@ def _import_janus() -> Any:
 class Engine:
     """The embedded SWI-Prolog with prolog/spar.pl and kb/templates/ consulted (one per process)."""
 
-    def __init__(self) -> None:
+    def __init__(self, background: bool = False) -> None:
+        """Start SWI-Prolog (in this thread) and consult the planner: here, or with
+        ``background`` in a thread of its own, so the caller can go on (importing numpy,
+        reading the problem) while Prolog compiles; every query waits for it first."""
         self.janus = _import_janus()
+        self.cell = None
+        self._loader: threading.Thread | None = None
+        self._load_error: BaseException | None = None
+        if background:
+            self._loader = threading.Thread(target=self._load_in_thread, name="spar-consult")
+            self._loader.start()
+        else:
+            self._load()
+
+    def _load(self) -> None:
         self._consult(PROLOG_DIR / "spar.pl")
         for f in sorted(TEMPLATES_DIR.glob("*.pl")):
             self._consult(f)
-        self.cell = None
+
+    def _load_in_thread(self) -> None:
+        try:
+            self._load()
+        except BaseException as e:  # re-raised in the thread that next queries
+            self._load_error = e
+
+    def wait_loaded(self) -> None:
+        """Return once the planner's files are consulted (re-raising what stopped that)."""
+        loader = self._loader
+        if loader is not None and loader is not threading.current_thread():
+            loader.join()
+            self._loader = None
+        if self._load_error is not None:
+            raise self._load_error
 
     def _consult(self, path: Path) -> None:
-        self.query_once("consult(File)", {"File": str(path)})
+        self._query_once("consult(File)", {"File": str(path)})
 
     # ------------------------------------------------------------------ queries
 
@@ -70,6 +97,10 @@ class Engine:
 
         Prolog exceptions are raised as :class:`PrologError` with Prolog's message.
         """
+        self.wait_loaded()
+        return self._query_once(goal, bindings)
+
+    def _query_once(self, goal: str, bindings: dict[str, Any] | None = None) -> dict[str, Any]:
         try:
             return self.janus.query_once(goal, bindings or {})
         except self.janus.PrologError as e:
@@ -77,6 +108,7 @@ class Engine:
 
     def query(self, goal: str, bindings: dict[str, Any] | None = None) -> Iterator[dict[str, Any]]:
         """All answers of ``goal`` (lazily), exceptions translated as in :meth:`query_once`."""
+        self.wait_loaded()
         try:
             yield from self.janus.query(goal, bindings or {})
         except self.janus.PrologError as e:
@@ -106,6 +138,16 @@ def engine() -> Engine:
         if _engine is None:
             _engine = Engine()
         return _engine
+
+
+def start_engine() -> None:
+    """Start the process's engine now and consult the planner in the background (a
+    command line calls this first: Prolog compiles the planner while Python imports
+    numpy and reads the problem). A no-op once the engine exists."""
+    global _engine
+    with _lock:
+        if _engine is None:
+            _engine = Engine(background=True)
 
 
 def current_cell() -> Any:
