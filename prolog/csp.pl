@@ -40,13 +40,64 @@
 %   recently assigned variable comes first in Result. Backtracking gives the
 %   next assignment.
 
-csp(VarSet, Constraints, Result) :-
-    csp(VarSet, Constraints, [], Result).
+%
+%   The search is the one of Fig. 17 (variables in VarSet's order, labels in
+%   label-set order, the same answers in the same order); a label is checked
+%   only against the assigned variables joined to Var by an arc, found
+%   through a table built once per search (arcs_by_var/2), not by looking up
+%   an arc between Var and every previous assignment as all_consistent/3
+%   does.
 
-csp([], _, R, R).
-csp([V|Rest], Constraints, Asns, R) :-
-    choose_one(V, Constraints, Asns, Label),
-    csp(Rest, Constraints, [V/Label|Asns], R).
+csp(VarSet, Constraints, Result) :-
+    arcs_by_var(Constraints, ByVar),
+    empty_assoc(Assigned),
+    csp(VarSet, Constraints, ByVar, Assigned, [], Result).
+
+csp([], _, _, _, R, R).
+csp([V|Rest], Constraints, ByVar, Assigned, Asns, R) :-
+    get_label_set(V, LabelSet, Constraints),
+    (   get_assoc(V, ByVar, Arcs)
+    ->  true
+    ;   Arcs = []
+    ),
+    member(Label, LabelSet),
+    agrees(Arcs, Label, Assigned),
+    put_assoc(V, Assigned, Label, Assigned1),
+    csp(Rest, Constraints, ByVar, Assigned1, [V/Label|Asns], R).
+
+%   agrees(+Arcs, +Label, +Assigned): Label of a variable V agrees with every
+%   assigned variable V1 of its arcs V1-fwd(Pairs) (Pairs are V-label/V1-label)
+%   and V1-rev(Pairs) (Pairs are V1-label/V-label).
+
+agrees([], _, _).
+agrees([V1-Dir|Arcs], Label, Assigned) :-
+    (   get_assoc(V1, Assigned, L1)
+    ->  allowed(Dir, Label, L1)
+    ;   true
+    ),
+    agrees(Arcs, Label, Assigned).
+
+allowed(fwd(Pairs), Label, L1) :-
+    ord_memberchk(Label/L1, Pairs).
+allowed(rev(Pairs), Label, L1) :-
+    ord_memberchk(L1/Label, Pairs).
+
+%   arcs_by_var(+Net, -ByVar): the assoc Var -> [V1-fwd(Pairs)|V1-rev(Pairs)]
+%   of the arcs at each variable, in the orientation get_constraint_pairs/4
+%   uses (an arc stored as Var-V1 wins over one stored as V1-Var).
+
+arcs_by_var(net(_, Arcs), ByVar) :-
+    assoc_to_list(Arcs, KPs),
+    foldl(arc_ends(Arcs), KPs, Ends, []),
+    keysort(Ends, Sorted),
+    group_pairs_by_key(Sorted, Grouped),
+    list_to_assoc(Grouped, ByVar).
+
+arc_ends(Arcs, (V1-V2)-Pairs, [V1-(V2-fwd(Pairs))|Ends0], Ends) :-
+    (   get_assoc(V2-V1, Arcs, _)
+    ->  Ends0 = Ends
+    ;   Ends0 = [V2-(V1-rev(Pairs))|Ends]
+    ).
 
 %!  choose_one(+Var, +Net, +PrevAssns, -Label) is nondet.
 %
