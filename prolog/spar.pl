@@ -415,7 +415,19 @@ plan_dict_(Problem, Opts, P1, Dict) :-
             Phase2 is T2 - T1,
             uncertainty:print_ur(R),
             uncertainty:ur_dict(R, ID),
-            Dict = _{outcome: "plan", reason: @(none), partial: PD, instance: ID,
+            phase2_outcome(R, ID, Out, Reason),
+            Dict = _{outcome: Out, reason: Reason, partial: PD, instance: ID,
                      timing: _{phase1_s: Phase1, phase2_s: Phase2}}
         )
     ).
+
+%   phase2_outcome(+Result, +InstanceDict, -Outcome, -Reason): a partial
+%   plan none of whose instances examined can be executed at all (a
+%   put-down with no reachable placement, a step with no joint solution)
+%   is no plan; phase 2 says why.
+
+phase2_outcome(no_instance(N, _, _), ID, "no_plan",
+               _{phase: 2, instances_examined: N, why: Why}) :-
+    !,
+    get_dict(reason, ID, Why).
+phase2_outcome(_, _, "plan", @(none)).

@@ -15,10 +15,14 @@ TRAP = ROOT / "kb/problems/placement_trap.yaml"
 
 
 def test_paper_rule_accepts_a_plan_the_arm_cannot_execute() -> None:
+    """Phase 1 under the paper's rule gives Fig. 23's four actions; phase 2 can execute
+    none of its instances, so the outcome is no plan, with phase 2's reason."""
     plan = Planner(paper_placements=True, max_instances=5).plan(TRAP).to_json()
-    assert plan["outcome"] == "plan" and len(plan["partial"]["actions"]) == 4
+    assert plan["outcome"] == "no_plan" and len(plan["partial"]["actions"]) == 4
     inst = plan["instance"]
     assert inst["steps"] == [] and "no instance could be executed" in inst["reason"]
+    assert plan["reason"]["phase"] == 2 and plan["reason"]["instances_examined"] == 5
+    assert plan["reason"]["why"] == inst["reason"]
 
 
 def test_reachable_rule_refuses_the_branch_and_says_why() -> None:
