@@ -166,8 +166,8 @@ def reachable_somewhere(cell: Cell, obj: str, pose: str, requirements: list[np.n
     out = np.zeros(len(X), dtype=bool)
     gkey = _grid_key(cell, obj, pose)
     todo: dict[tuple, list[int]] = {}  # equal requirements are solved once
-    for i, x in enumerate(X):
-        key = (gkey, np.round(x, 12).tobytes())
+    for i, x in enumerate(np.round(X, 12)):
+        key = (gkey, x.tobytes())
         if key in _SOMEWHERE:
             out[i] = _SOMEWHERE[key]
         else:

@@ -16,6 +16,7 @@ Lengths are in the cell's unit, which is also the unit the robot was loaded in.
 """
 from __future__ import annotations
 
+import functools
 import re
 from collections.abc import Callable, Iterable, Sequence
 
@@ -36,6 +37,7 @@ __all__ = [
 ]
 
 
+@functools.lru_cache(maxsize=65536)
 def natural_key(label: str) -> tuple:
     """Sort key putting p1G2 before p1G10 (digit runs compare as numbers)."""
     return tuple(int(t) if t.isdigit() else t for t in re.split(r"(\d+)", label))
