@@ -62,7 +62,8 @@ def machine() -> dict:
         load = " ".join(f"{x:.2f}" for x in os.getloadavg())
     except OSError:
         load = "unknown"
-    return {"uname": uname, "cpu": model, "cores": os.cpu_count(), "load": load}
+    return {"uname": uname, "cpu": model, "cores": os.cpu_count(), "load": load,
+            "bytecode": not (sys.dont_write_bytecode or os.environ.get("PYTHONDONTWRITEBYTECODE"))}
 
 
 def versions() -> dict:
@@ -155,6 +156,9 @@ def render(r: dict) -> str:
          f"{m.get('load_after', '?')} after (a shared, noisy machine)"),
          (f"- Python {ver['python']}, numpy {ver['numpy']}, casadi {ver['casadi']}, "
          f"SWI-Prolog {ver['swipl']}, roboticstoolbox-python {ver['roboticstoolbox']}"),
+         ("- Python bytecode cache: "
+          + ("written as usual" if m.get("bytecode", True) else
+             "off (PYTHONDONTWRITEBYTECODE is set, so every cold process compiles spar-py's sources)")),
          "- time spent: " + ", ".join(f"{n} {t:.0f} s" for n, t in r["seconds"].items()), "",
          "## Targets (issue 7)", ""]
     L += _table(["target", "measured", "verdict"], [
@@ -305,8 +309,8 @@ def reading(r: dict) -> str:
     where = ""
     if share:
         where = (f" Under the profiler Prolog's own work is {share[0] * 1e3:.0f} ms of "
-                 f"{share[1] * 1e3:.0f} ms: the time is in Python called back from Prolog "
-                 "(reachability by batch IK, placement candidates) and in reading the YAML "
+                 f"{share[1] * 1e3:.0f} ms: the rest is Python called back from Prolog "
+                 "(reachability arcs, placements, phase 2's SUP/INF bounds) and reading the YAML "
                  f"({w['load_s'] * 1e3:.0f} ms of each warm run).")
     parts.append(
         f"Planning the paper's cell warm takes {w['wall_s'] * 1e3:.0f} ms "
