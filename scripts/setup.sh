@@ -50,6 +50,11 @@ if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
     echo "$want" > "$stamp"
 fi
 
+# bytecode for spar-py's own modules: pip compiled the dependencies, but an editable
+# install leaves src/ to the first import, and with PYTHONDONTWRITEBYTECODE set (some CI
+# images) every cold `spar plan` would compile them again (25-60 ms measured)
+.venv/bin/python -m compileall -q src bench >/dev/null || true
+
 # 4. record the SWI-Prolog home ----------------------------------------------------------
 printf '{"home": "%s", "version": %s, "swipl": "%s"}\n' "$home" "$version" "$swipl" > src/spar_py/_swipl.json
 log "ready: SWI-Prolog $version at $home"
