@@ -62,8 +62,22 @@ def machine() -> dict:
         load = " ".join(f"{x:.2f}" for x in os.getloadavg())
     except OSError:
         load = "unknown"
-    return {"uname": uname, "cpu": model, "cores": os.cpu_count(), "load": load,
-            "bytecode": not (sys.dont_write_bytecode or os.environ.get("PYTHONDONTWRITEBYTECODE"))}
+    return {"uname": uname, "cpu": model, "cores": os.cpu_count(), "load": load, "bytecode": bytecode()}
+
+
+def bytecode() -> str:
+    """How a cold process gets spar-py's bytecode: 'written' (Python caches it as usual),
+    'compiled' (not written at import, PYTHONDONTWRITEBYTECODE, but compiled by set-up)
+    or 'none' (every cold process compiles the sources)."""
+    import importlib.util
+
+    import spar_py.cli
+
+    writes = not (sys.dont_write_bytecode or os.environ.get("PYTHONDONTWRITEBYTECODE"))
+    if writes:
+        return "written"
+    pyc = Path(importlib.util.cache_from_source(spar_py.cli.__file__))
+    return "compiled" if pyc.exists() else "none"
 
 
 def versions() -> dict:
@@ -157,8 +171,10 @@ def render(r: dict) -> str:
          (f"- Python {ver['python']}, numpy {ver['numpy']}, casadi {ver['casadi']}, "
          f"SWI-Prolog {ver['swipl']}, roboticstoolbox-python {ver['roboticstoolbox']}"),
          ("- Python bytecode cache: "
-          + ("written as usual" if m.get("bytecode", True) else
-             "off (PYTHONDONTWRITEBYTECODE is set, so every cold process compiles spar-py's sources)")),
+          + {"written": "written as usual",
+             "compiled": "not written at import (PYTHONDONTWRITEBYTECODE is set); compiled by `make setup`",
+             "none": "off (PYTHONDONTWRITEBYTECODE is set and nothing compiled, so every cold process "
+                     "compiles spar-py's sources)"}.get(str(m.get("bytecode", "written")), "unknown")),
          "- time spent: " + ", ".join(f"{n} {t:.0f} s" for n, t in r["seconds"].items()), "",
          "## Targets (issue 7)", ""]
     L += _table(["target", "measured", "verdict"], [
