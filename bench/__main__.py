@@ -259,7 +259,8 @@ def render(r: dict) -> str:
           "default bound 12 is too small for N > 2). Times: phase 1/2 are Prolog CPU seconds, wall the "
           "`plan()` call; RSS (Python and the embedded Prolog share the process): 'before' after the "
           "warm-up, 'peak' sampled every 5 ms while planning (getrusage's maxrss is not used: on Linux "
-          "a child keeps its parent's high-water mark across exec). Profiles below are of a separate child's first plan of that N."), ""]
+          "a child keeps its parent's high-water mark across exec). "
+          "Profiles below are of a separate child's first plan of that N."), ""]
     rows = []
     for x in p["scaling"]:
         why = ""

@@ -59,7 +59,7 @@ def _old_swipl() -> str | None:
     if not exe:
         return None
     out = subprocess.run([exe, "--dump-runtime-variables"], capture_output=True, text=True).stdout
-    v = next((int(l.split('"')[1]) for l in out.splitlines() if l.startswith("PLVERSION=")), 0)
+    v = next((int(line.split('"')[1]) for line in out.splitlines() if line.startswith("PLVERSION=")), 0)
     return exe if v < 90112 else None
 
 

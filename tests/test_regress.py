@@ -21,7 +21,8 @@ def _copy_problem(name: str, dest: Path) -> None:
     (dest / "expected" / exp.name).write_text(exp.read_text())
 
 
-def test_regression_passes_then_fails_on_a_changed_expectation(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_regression_passes_then_fails_on_a_changed_expectation(tmp_path: Path,
+                                                               capsys: pytest.CaptureFixture[str]) -> None:
     for name in ("hole_up", "placement_trap"):
         _copy_problem(name, tmp_path)
     assert run_regression(tmp_path) == 0

@@ -551,8 +551,10 @@ def facts(cell: Cell) -> list[tuple]:
             out.append(("pose", o.name, p.label, ("rfaces", list(p.rfaces)), ("ofaces", list(p.ofaces)), _tm(T)))
         for g in o.grasps.values():
             x, y, z, a, b, c = g.euler
-            e = ("eulerxyz", _num(x), _num(y), _num(z), _num(math.degrees(a)), _num(math.degrees(b)), _num(math.degrees(c)))
-            out.append(("grasp", o.name, g.label, ("gfaces", list(g.gfaces)), ("ofaces", list(g.ofaces)), e, ("width", g.width)))
+            e = ("eulerxyz", _num(x), _num(y), _num(z),
+                 _num(math.degrees(a)), _num(math.degrees(b)), _num(math.degrees(c)))
+            out.append(("grasp", o.name, g.label, ("gfaces", list(g.gfaces)), ("ofaces", list(g.ofaces)), e,
+                        ("width", g.width)))
     for p in cell.positions.values():
         out.append(("position", p.name, p.obj, p.label, _tm(p.T)))
         out.append(("position_class", p.label, position_class(cell, p)))
@@ -578,7 +580,8 @@ def check_file(path: str | Path) -> str:
     if "object" in v:
         unit = _units(root)[0]
         o = load_object(path, unit)
-        return f"{path}: ok (object {o.name}: {len(o.faces)} faces, {len(o.poses)} stable poses, {len(o.grasps)} grasps)"
+        return (f"{path}: ok (object {o.name}: {len(o.faces)} faces, {len(o.poses)} stable poses, "
+                f"{len(o.grasps)} grasps)")
     if "dh" in v:
         r = Robot.from_yaml(path)
         return f"{path}: ok (robot {r.name})"

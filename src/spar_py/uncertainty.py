@@ -387,7 +387,8 @@ def assemble_constraints(state: WorldState, peg: str, hole: str, T_a: np.ndarray
     threshold = margin * margin if margin > 0 else 0.0
     note = "" if margin > 0 else f" (impossible: hole radius {hole_feature.radius} <= peg radius {peg_feature.radius})"
     return [Constraint(action, "centres", d2, "<", threshold,
-                       f"|C_h - C_p|^2 < (R_h - R_p)^2: {peg}'s tip centre within {margin:g} of {hole}'s hole centre{note}")]
+                       f"|C_h - C_p|^2 < (R_h - R_p)^2: {peg}'s tip centre within {margin:g} "
+                       f"of {hole}'s hole centre{note}")]
 
 
 def _positive(v: float, what: str) -> float:
