@@ -126,7 +126,8 @@ check_instance(Steps, Bound, Aug) :-
 check_instance(Steps, Sources, Bound, aug(Final, Errors, Verifs, Recovs, Verdicts, Geometry)) :-
     must_be(list, Steps),
     must_be(list, Sources),
-    remedy_loop(Sources, Steps, [], Bound, Final, Failed, Verdicts, Geometry),
+    sources_dict(Sources, From),
+    remedy_loop(From, Steps, [], Bound, Final, Failed, Verdicts, Geometry),
     length(Failed, Errors),
     maplist(failed_step(Final), Failed, FailedSteps),
     maplist(verification, FailedSteps, Verifs),
@@ -135,37 +136,37 @@ check_instance(Steps, Sources, Bound, aug(Final, Errors, Verifs, Recovs, Verdict
 failed_step(Steps, Id, step(Id, A)) :-
     memberchk(step(Id, A), Steps).
 
-%   remedy_loop(+Sources, +Steps, +GivenUp, +Bound, -Final, -Failed,
+%   remedy_loop(+From, +Steps, +GivenUp, +Bound, -Final, -Failed,
 %   -Verdicts, -Geometry): run the steps; at the first failing action not
 %   yet given up, try the remedies in order; an action no remedy helps is
-%   given up (it counts as an error) and the run goes on past it.
+%   given up (it counts as an error) and the run goes on past it. From is
+%   the instance's sources as sources_dict/2 gives them.
 
-remedy_loop(Sources, Steps, GivenUp, Bound, Final, Failed, Verdicts, Geometry) :-
-    run(Sources, Steps, GivenUp, Result),
+remedy_loop(From, Steps, GivenUp, Bound, Final, Failed, Verdicts, Geometry) :-
+    run(From, Steps, GivenUp, Result),
     (   Result = ok(Verdicts, Geometry)
     ->  Final = Steps, reverse(GivenUp, Failed)
     ;   Result = failed(Step, Before)
-    ->  (   remedy(Sources, Step, Before, Steps, GivenUp, Steps1)
-        ->  remedy_loop(Sources, Steps1, GivenUp, Bound, Final, Failed, Verdicts, Geometry)
+    ->  (   remedy(From, Step, Before, Steps, GivenUp, Steps1)
+        ->  remedy_loop(From, Steps1, GivenUp, Bound, Final, Failed, Verdicts, Geometry)
         ;   Step = step(Id, _),
             length(GivenUp, N0),
             N is N0 + 1,
             (Bound == inf -> true ; N < Bound),
-            remedy_loop(Sources, Steps, [Id|GivenUp], Bound, Final, Failed, Verdicts, Geometry)
+            remedy_loop(From, Steps, [Id|GivenUp], Bound, Final, Failed, Verdicts, Geometry)
         )
     ).
 
-%   run(+Sources, +Steps, +GivenUp, -Result): propagate the world through
-%   Steps (Sources: see instance_sources/2).
+%   run(+From, +Steps, +GivenUp, -Result): propagate the world through
+%   Steps (From: see sources_dict/2).
 %   Result = ok(Verdicts, Geometry); failed(Step, Prefix) for the first
 %   action whose uncertainty-reduction preconditions are not all satisfied
 %   and that is not in GivenUp; infeasible(Step) if a geometric
 %   precondition fails (the run cannot go on; the caller fails).
 
-run(Sources, Steps, GivenUp, Result) :-
+run(From, Steps, GivenUp, Result) :-
     maplist(step_dict, Steps, Dicts),
-    maplist(source_data, Sources, SourceData),
-    py_bridge(ur_world(Dicts, SourceData), W0),
+    py_bridge(ur_world(Dicts, From), W0),
     run(Steps, GivenUp, W0, [], [], [], Result0),
     Result0 \= infeasible(_),
     Result = Result0.
@@ -197,24 +198,24 @@ satisfied(C) :-
     get_dict(satisfied, C, S),
     S == @(true).
 
-%   remedy(+Sources, +Failing, +Before, +Steps, +GivenUp, -Steps1): the
-%   first remedy of Sec. 4.3 that makes Failing's preconditions hold.
+%   remedy(+From, +Failing, +Before, +Steps, +GivenUp, -Steps1): the first
+%   remedy of Sec. 4.3 that makes Failing's preconditions hold.
 
-remedy(Sources, step(Id, pickup(Obj, _)), _, Steps, GivenUp, Steps1) :-
+remedy(From, step(Id, pickup(Obj, _)), _, Steps, GivenUp, Steps1) :-
     \+ inserted_for(Id, Steps),
     insert_before(Id, [step(sense(Id, 1), dense_range_scan(Obj))], Steps, Steps1),
-    passes(Sources, Id, Steps1, GivenUp).
-remedy(Sources, step(Id, assemble(O1, O2, _, _, _)), Before, Steps, GivenUp, Steps1) :-
+    passes(From, Id, Steps1, GivenUp).
+remedy(From, step(Id, assemble(O1, O2, _, _, _)), Before, Steps, GivenUp, Steps1) :-
     \+ inserted_for(Id, Steps),
     establisher_of_holding(O1, Before, EId),
     Scans = [ step(sense(Id, 1), dense_range_scan(O1)),
               step(sense(Id, 2), dense_range_scan(O2)) ],
     (   insert_before(EId, Scans, Steps, Steps1),
-        passes(Sources, Id, Steps1, GivenUp)
+        passes(From, Id, Steps1, GivenUp)
     ->  true
     ;   append(Scans, [step(squeeze(Id), squeeze(O2))], WithSqueeze),
         insert_before(EId, WithSqueeze, Steps, Steps1),
-        passes(Sources, Id, Steps1, GivenUp)
+        passes(From, Id, Steps1, GivenUp)
     ).
 
 inserted_for(Id, Steps) :-
@@ -235,10 +236,10 @@ insert_before(Id, New, Steps, Steps1) :-
     append(Pre, New, Pre1),
     append(Pre1, [step(Id, A)|Post], Steps1).
 
-%   passes(+Sources, +Id, +Steps, +GivenUp): with Steps, action Id's
+%   passes(+From, +Id, +Steps, +GivenUp): with Steps, action Id's
 %   preconditions hold (the run gets past Id).
-passes(Sources, Id, Steps, GivenUp) :-
-    run(Sources, Steps, GivenUp, Result),
+passes(From, Id, Steps, GivenUp) :-
+    run(From, Steps, GivenUp, Result),
     (   Result = ok(_, _)
     ->  true
     ;   Result = failed(_, Before),
@@ -255,12 +256,15 @@ step_dict(step(Id, Action), _{id: IdText, name: Name, args: Args}) :-
     Action =.. [Name|Args0],
     maplist(arg_data, Args0, Args).
 
-%   source_data(+Source, -Data): Id-[Obj-Label] as the dict
-%   _{id: IdText, from: _{Obj: Label}} Python's new_world/3 reads.
+%   sources_dict(+Sources, -From): the list Id-[Obj-Label, ...] of
+%   instance_sources/2 as the dict _{Id: _{Obj: Label}} Python's
+%   new_world/3 reads; made once per instance, passed to every run.
 
-source_data(Id-Pairs, _{id: IdText, from: From}) :-
-    step_id_text(Id, IdText),
-    dict_pairs(From, _, Pairs).
+sources_dict(Sources, From) :-
+    maplist([Id-Pairs, IdText-D]>>( step_id_text(Id, IdText),
+                                     dict_pairs(D, _, Pairs) ),
+            Sources, KVs),
+    dict_pairs(From, _, KVs).
 
 %!  step_id_text(+Id, -Text) is det.
 %

@@ -167,7 +167,7 @@ def arc_pairs(kind: str, objects: list[str], grasps: list[str], positions: list[
     return reach.arc(current_cell(), kind, objects, grasps, positions, None if ta == "none" else ta)
 
 
-def ur_world(steps: list[dict[str, Any]], sources: list[dict[str, Any]] | None = None) -> Any:
+def ur_world(steps: list[dict[str, Any]], sources: dict[str, dict[str, str]] | None = None) -> Any:
     """Phase 2: the initial world of a plan instance whose steps are ``steps``, its actions
     taking their objects from ``sources`` (phase2.new_world)."""
     from . import phase2

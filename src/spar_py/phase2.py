@@ -27,6 +27,7 @@ import numpy as np
 from . import placement as pl
 from . import uncertainty as ur
 from .errors import SparValueError
+from .geometry import same_stable_pose
 from .model import Cell, Grasp
 from .reach import above_table
 from .symbolic import Registry
@@ -56,25 +57,16 @@ class World:
 def new_world(cell: Cell, steps: list[Step], sources: Sources | None = None) -> World:
     """The initial world for an instance whose steps (in order) are ``steps``; chooses
     every put-down placement now, knowing the later actions on the object (Sec. 5.2.4).
-    ``sources`` says where each action takes its objects from (module doc): a list of
-    ``{"id": ..., "from": {obj: label}}`` as Prolog sends it, or a dict id -> {obj: label};
-    needed only where an object has several initial positions."""
-    src = _inherit_sources(steps, _sources(sources))
+    ``sources`` says where each action takes its objects from (module doc), step id ->
+    {obj: label}; needed only where an object has several initial positions."""
+    src = _inherit_sources(steps, {str(k): dict(v) for k, v in (sources or {}).items()})
     key, placements = _placements(cell, steps, src)
     active = _first_parts(cell, steps, src)
     unc = ur.initial_world(cell, Registry(), active=active)
     return World(cell, unc, placements, sources=src, active=active, key=(key,))
 
 
-Sources = list[dict[str, Any]] | dict[str, dict[str, str]]
-
-
-def _sources(sources: Sources | None) -> dict[str, dict[str, str]]:
-    if not sources:
-        return {}
-    if isinstance(sources, dict):
-        return {str(k): {str(o): str(lbl) for o, lbl in v.items()} for k, v in sources.items()}
-    return {str(d["id"]): {str(o): str(lbl) for o, lbl in d["from"].items()} for d in sources}
+Sources = dict[str, dict[str, str]]
 
 
 def _inherit_sources(steps: list[Step], src: dict[str, dict[str, str]]) -> dict[str, dict[str, str]]:
@@ -183,20 +175,23 @@ def choose_placements(cell: Cell, steps: list[Step],
     return out
 
 
+def _lies_at(cell: Cell, obj: str, label: str, T: np.ndarray) -> bool:
+    """A part of ``obj`` with pose ``T`` lies at position ``label``: at that initial
+    position (an absolute label), or in that stable pose (a pose label)."""
+    if label in cell.positions:
+        return bool(np.allclose(T, cell.positions[label].T, atol=1e-9))
+    if label in cell.objects[obj].poses:
+        return same_stable_pose(T[:3, :3], cell.objects[obj].poses[label].R)
+    return False
+
+
 def _taken(cell: Cell, on_table: dict[str, tuple[str, np.ndarray]], obj: str, label: str | None) -> str | None:
     """The key in ``on_table`` of the part of ``obj`` a pickup from ``label`` takes: the
-    initial position with that label, else the part of ``obj`` put down last (in that
-    stable pose, if ``label`` is one), else the only or first part of ``obj``."""
-    if label is not None and label in cell.positions:
-        name = cell.positions[label].name
-        if name in on_table:
-            return name
+    part lying there, the one put down last first; else the one put down last, else the
+    first part of ``obj``."""
     keys = [k for k, (o, _) in on_table.items() if o == obj]
-    if label is not None and label in cell.objects[obj].poses:
-        from .geometry import same_stable_pose
-
-        R = cell.objects[obj].poses[label].R
-        fit = [k for k in keys if same_stable_pose(on_table[k][1][:3, :3], R)]
+    if label is not None:
+        fit = [k for k in keys if _lies_at(cell, obj, label, on_table[k][1])]
         keys = fit or keys
     initial = {p.name for p in cell.positions.values()}
     placed = [k for k in keys if k not in initial]
@@ -262,20 +257,10 @@ def _activate(world: World, s: Step) -> World:
 def _part_at(world: World, obj: str, label: str) -> str | None:
     """The world key of the part of stock object ``obj`` lying at position ``label`` (an
     initial position's label, or a stable pose): the active part if it is there."""
-    from .geometry import same_stable_pose
-
-    cell = world.cell
-    keys = [obj] + [k for k in world.unc.objects if k.startswith(f"{obj}@")]
-    on_table = [k for k in keys if world.unc.objects[k].where == ur.TABLE]
-    if label in cell.positions:
-        T = cell.positions[label].T
-        fit = [k for k in on_table if np.allclose(world.unc.objects[k].pose, T, atol=1e-9)]
-    elif label in cell.objects[obj].poses:
-        R = cell.objects[obj].poses[label].R
-        fit = [k for k in on_table if same_stable_pose(world.unc.objects[k].pose[:3, :3], R)]
-    else:
-        fit = []
-    return fit[0] if fit else None
+    parts = world.unc.objects
+    keys = [obj] + [k for k in parts if k.startswith(f"{obj}@")]
+    return next((k for k in keys if parts[k].where == ur.TABLE and _lies_at(world.cell, obj, label, parts[k].pose)),
+                None)
 
 
 def _arm(world: World, T: np.ndarray) -> tuple[np.ndarray | None, dict[str, Any]]:
@@ -400,12 +385,8 @@ def _squeeze(world: World, s: Step) -> tuple[list[dict], World, dict]:
 def _position_label(cell: Cell, obj: str, o: ur.ObjectState) -> list[str]:
     """The label of ``obj``'s current table pose for the reach check: its initial absolute
     position if it is still there, else the stable pose its rotation is in."""
-    for p in cell.positions.values():
-        if p.obj == obj and np.allclose(p.T, o.pose, atol=1e-9):
-            return [p.label]
-    from .geometry import same_stable_pose
-
-    return [lbl for lbl, sp in cell.objects[obj].poses.items() if same_stable_pose(o.pose[:3, :3], sp.R)][:1]
+    labels = [p.label for p in cell.positions.values() if p.obj == obj] + list(cell.objects[obj].poses)
+    return [lbl for lbl in labels if _lies_at(cell, obj, lbl, o.pose)][:1]
 
 
 STEPS = {
