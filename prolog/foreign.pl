@@ -7,19 +7,22 @@
 */
 :- module(foreign,
           [ arc_pairs/5,             % +Constraint, +Objects, +GLabels, +PLabels, -Pairs
+            arc_pairs/7,             % +Problem, +Rule, +Constraint, +Objects, +GLabels, +PLabels, -Pairs
             py_bridge/2,             % +Call, -Result (for phase 2)
             spar_load_facts/1,       % +Data (from Python)
-            data_term/2              % +Data, -Term
+            data_term/2,             % +Data, -Term
+            term_data/2,             % +Term, -Data
+            error_info/2             % +Error, -Info
           ]).
 :- use_module(kb, []).
 :- use_module(library(janus)).
 :- use_module(library(error)).
 :- use_module(library(apply)).
 
-%!  arc_pairs(+Constraint, +Objects, +GraspLabels, +PosLabels, -Pairs) is det.
+%!  arc_pairs(+Problem, +Rule, +Constraint, +Objects, +GraspLabels, +PosLabels, -Pairs) is det.
 %
-%   All pairs Grasp/Position of the two label sets that satisfy Constraint,
-%   computed in one Python call (Sec. 5.2.4):
+%   All pairs Grasp/Position of the two label sets that satisfy Constraint
+%   in the loaded problem Problem, computed in one Python call (Sec. 5.2.4):
 %
 %     - Constraint = reachable, Objects = Obj: conditions 1 and 2 for an
 %       absolute position label (tr1), condition 1 only for a stable pose
@@ -27,16 +30,32 @@
 %     - Constraint = mate_reachable(Ta), Objects = Held-Fixed: condition 2 for
 %       T = T_O Ta T_g, Ta the name of a kb:transform/2.
 %
-%   Pairs is a list of GraspLabel/PosLabel, as the paper's Fig. 25.
+%   Rule says how a stable-pose label counts for condition 2: reachable
+%   (some placement in the free table regions reaches it) or paper (assumed
+%   reachable, Sec. 5.2.4). Pairs is a list of GraspLabel/PosLabel, as the
+%   paper's Fig. 25. Phase 1 passes arc_pairs(Problem, Rule) as its oracle.
 %
 %   @error type_error(list, X) if a label set is not a list.
 
-arc_pairs(Constraint, Objects, GLabels, PLabels, Pairs) :-
+arc_pairs(Problem, Rule, Constraint, Objects, GLabels, PLabels, Pairs) :-
+    must_be(atom, Problem),
+    must_be(oneof([reachable, paper]), Rule),
     must_be(list(atom), GLabels),
     must_be(list(atom), PLabels),
-    arc_call(Constraint, Objects, GLabels, PLabels, Call),
+    arc_call(Constraint, Objects, GLabels, PLabels, Call0),
+    Call0 =.. [F|Args],
+    Call =.. [F, Problem, Rule|Args],
     py_call('spar_py.engine':Call, Raw),
     maplist(pair_term, Raw, Pairs).
+
+%!  arc_pairs(+Constraint, +Objects, +GraspLabels, +PosLabels, -Pairs) is det.
+%
+%   arc_pairs/7 for the problem in scope (kb:with_problem/2) with the
+%   default rule, reachable.
+
+arc_pairs(Constraint, Objects, GLabels, PLabels, Pairs) :-
+    kb:problem_in_scope(Problem),
+    arc_pairs(Problem, reachable, Constraint, Objects, GLabels, PLabels, Pairs).
 
 arc_call(reachable, Obj, Gs, Ps, arc_pairs(reachable, [Obj], Gs, Ps, none)) :-
     !,
@@ -84,4 +103,56 @@ data_term(D, T) :-
         maplist(data_term, As0, As),
         compound_name_arguments(T, F, As)
     ;   type_error(spar_data, D)
+    ).
+
+%!  error_info(+Error, -Info:dict) is det.
+%
+%   What the Python side needs to raise the right exception for a Prolog
+%   exception Error (spar_py.engine, the one place that maps them):
+%
+%     - _{kind: timeout} for time_limit_exceeded;
+%     - _{kind: interrupted} for an abort (unwind(abort), '$aborted');
+%     - _{kind: python, class: C, value: V} for an exception a Python
+%       function raised inside py_call (V is the Python exception object);
+%     - _{kind: prolog, formal: F, message: M} otherwise: F the formal
+%       term as data (term_data/2), M the first line of Prolog's message.
+
+error_info(E, _{kind: timeout}) :-
+    E == time_limit_exceeded, !.
+error_info(E, _{kind: interrupted}) :-
+    ( E == '$aborted' ; E == unwind(abort) ), !.
+error_info(E, _{kind: python, class: C, value: V}) :-
+    subsumes_term(error(python_error(_, _), _), E), !,
+    E = error(python_error(C, V), _).
+error_info(E, _{kind: prolog, formal: F, message: M}) :-
+    (   E = error(Formal, _) -> true ; Formal = E ),
+    term_data(Formal, F),
+    (   catch(message_text(E, M0), _, fail)
+    ->  true
+    ;   format(string(M0), "~q", [E])
+    ),
+    split_string(M0, "\n", " \t", Lines),
+    exclude(==(""), Lines, [M|_]).
+
+message_text(E, S) :-
+    '$messages':translate_message(E, Lines, []),
+    with_output_to(string(S), print_message_lines(current_output, '', Lines)).
+
+%!  term_data(+Term, -Data) is det.
+%
+%   Term as janus data, the inverse of data_term/2 for ground terms: an
+%   atom becomes a string, a number stays, a string S becomes
+%   _{string: S}, a list a list, a compound _{functor: F, args: [...]}, a
+%   variable _{var: Name}. Plans cross to Python this way, not as text.
+
+term_data(T, D) :-
+    (   var(T) -> format(string(N), "~p", [T]), D = _{var: N}
+    ;   atom(T) -> atom_string(T, D)
+    ;   number(T) -> D = T
+    ;   string(T) -> D = _{string: T}
+    ;   is_list(T) -> maplist(term_data, T, D)
+    ;   compound_name_arguments(T, F, As),
+        atom_string(F, FS),
+        maplist(term_data, As, AD),
+        D = _{functor: FS, args: AD}
     ).

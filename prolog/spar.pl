@@ -103,6 +103,10 @@ plan_phase1(Problem, Partial) :-
 %     - max_steps(N)     a budget of goal steps over all rounds (10000; 0
 %                        for none); phase-1 planning is exponential in the
 %                        plan size and undecidable (Secs. 2, 7.2)
+%     - placements(Rule) how a put-down into a stable pose (no X, Y)
+%                        counts as reachable: reachable (some placement
+%                        in the cell's free table regions reaches it, the
+%                        default) or paper (Sec. 5.2.4: assumed)
 %     - oracle(Closure)  compute arc pairs with call(Closure, Constraint,
 %                        Objects, Gs, Ps, Pairs) instead of
 %                        foreign:arc_pairs/5; a test double for Prolog-only
@@ -119,12 +123,20 @@ plan_phase1(Problem, Partial) :-
 phase1(Problem, M:Options0, Outcome) :-
     must_be(atom, Problem),
     must_be(list, Options0),
-    (   kb:problem(Problem)
-    ->  true
-    ;   existence_error(problem, Problem)
-    ),
-    maplist(check_option(M), Options0, Options),
-    phase1_search(Options, Outcome, _).
+    maplist(check_option(M), Options0, Options1),
+    run_options(Problem, Options1, Options),
+    with_problem(Problem, phase1_search(Options, Outcome, _)).
+
+%   run_options(+Problem, +Options0, -Options): the arcs of Problem's
+%   network come from the Python kinematics of that problem, told which
+%   problem and which placement rule (foreign:arc_pairs/7), unless a test
+%   gives its own oracle.
+run_options(Problem, Options0, Options) :-
+    (   option(oracle(_), Options0)
+    ->  Options = Options0
+    ;   option(placements(Rule), Options0, reachable),
+        Options = [oracle(foreign:arc_pairs(Problem, Rule))|Options0]
+    ).
 
 check_option(_, max_actions(N), max_actions(N)) :- !,
     must_be(nonneg, N).
@@ -141,6 +153,8 @@ check_option(_, declobber(Ms), declobber(Ms)) :- !,
            ->  true
            ;   domain_error(declobber_method, X)
            )).
+check_option(_, placements(R), placements(R)) :- !,
+    must_be(oneof([reachable, paper]), R).
 check_option(M, oracle(O0), oracle(O)) :- !,
     must_be(callable, O0),
     strip_module(M:O0, Mod, O1),
@@ -352,9 +366,10 @@ plan(Problem, Plan) :-
 plan(Problem, Options, plan(Partial, Result)) :-
     must_be(list, Options),
     partition(phase2_option, Options, P2, P1),
-    phase1(Problem, P1, Outcome),
-    Outcome = plan(Partial),
-    uncertainty:phase2(Partial, P2, Result).
+    with_problem(Problem,
+                 ( phase1(Problem, P1, Outcome),
+                   Outcome = plan(Partial),
+                   uncertainty:phase2(Problem, Partial, P2, Result) )).
 
 phase2_option(max_instances(_)).
 
@@ -370,8 +385,8 @@ print_plan(plan(Partial, Result)) :-
 %!  plan_dict(+Problem, +Options:dict, -Dict, -Text) is det.
 %
 %   The bridge's entry point: plan Problem with Options (a dict with keys
-%   max_actions, max_instances, separation, phase1_only, trace, timeout;
-%   timeout 0 means none) and return the outcome as a dict for the JSON
+%   max_actions, max_instances, separation, placements ("reachable" or
+%   "paper"), phase1_only, trace, timeout; timeout 0 means none) and return the outcome as a dict for the JSON
 %   schema (docs/json-schema.md) and Text, what print_plan/1 and the trace
 %   print.
 %
@@ -381,14 +396,16 @@ plan_dict(Problem, Opts, Dict, Text) :-
     must_be(atom, Problem),
     must_be(dict, Opts),
     phase1_options(Opts, P1),
+    Run = with_problem(Problem, plan_dict_(Problem, Opts, P1, Dict)),
     (   Opts.timeout > 0
-    ->  call_with_time_limit(Opts.timeout,
-                             with_output_to(string(Text), plan_dict_(Problem, Opts, P1, Dict)))
-    ;   with_output_to(string(Text), plan_dict_(Problem, Opts, P1, Dict))
+    ->  call_with_time_limit(Opts.timeout, with_output_to(string(Text), Run))
+    ;   with_output_to(string(Text), Run)
     ).
 
-phase1_options(Opts, [max_actions(Opts.max_actions), trace(Trace), declobber(Ms)]) :-
+phase1_options(Opts, [max_actions(Opts.max_actions), trace(Trace), declobber(Ms),
+                      placements(Rule)]) :-
     (   Opts.trace == @(true) -> Trace = true ; Trace = false ),
+    atom_string(Rule, Opts.placements),
     (   Opts.separation == @(true), known_declobber_method(separation)
     ->  Ms = [promotion, separation, white_knight]
     ;   Ms = [promotion, white_knight]
@@ -410,7 +427,7 @@ plan_dict_(Problem, Opts, P1, Dict) :-
         (   Opts.phase1_only == @(true)
         ->  Dict = _{outcome: "plan", reason: @(none), partial: PD, instance: @(none),
                      timing: _{phase1_s: Phase1}}
-        ;   uncertainty:phase2(Partial, [max_instances(Opts.max_instances)], R),
+        ;   uncertainty:phase2(Problem, Partial, [max_instances(Opts.max_instances)], R),
             statistics(cputime, T2),
             Phase2 is T2 - T1,
             uncertainty:print_ur(R),

@@ -18,10 +18,8 @@
     errors among at most max_instances(Cap) examined.
 */
 :- module(uncertainty,
-          [ phase2/3,              % +Partial, +Options, -Result
-            check_instance/2,      % +Steps, -Augmented
-            check_instance/3,      % +Steps, +Bound, -Augmented
-            check_instance/4,      % +Steps, +Sources, +Bound, -Augmented
+          [ phase2/4,              % +Problem, +Partial, +Options, -Result
+            check_instance/5,      % +Problem, +Steps, +Sources, +Bound, -Augmented
             instance_steps/3,      % +Instance, -Steps, -Bindings
             instance_sources/2,    % +Instance, -Sources
             ur_dict/2,             % +Result, -Dict
@@ -35,8 +33,9 @@
 :- use_module(foreign, [py_bridge/2]).
 :- use_module('../kb/templates/sensing', []).
 
-%!  phase2(+Partial, +Options, -Result) is det.
+%!  phase2(+Problem, +Partial, +Options, -Result) is det.
 %
+%   Phase 2 of the loaded problem Problem on its phase-1 plan Partial.
 %   Result = ur(Best, Examined, Cap, Complete), or no_instance(Examined, Cap,
 %   Complete) when no instance could be executed at all (every one needed
 %   a put-down with no reachable placement). Best is an augmented instance
@@ -45,12 +44,13 @@
 %   Complete true if the partial plan has no further instance.
 %   Options: max_instances(Cap) (default 50).
 
-phase2(Partial, Options, Result) :-
+phase2(Problem, Partial, Options, Result) :-
+    must_be(atom, Problem),
     option(max_instances(Cap), Options, 50),
     must_be(positive_integer, Cap),
     State = best(none, inf, 0, false),
     (   once(( limit(Cap, spar:partial_instances(Partial, Instance)),
-               examine(Instance, State, Aug),
+               examine(Problem, Instance, State, Aug),
                arg(2, Aug, 0)
              ))
     ->  true
@@ -64,12 +64,12 @@ phase2(Partial, Options, Result) :-
     ;   Result = ur(Best, Examined, Cap, Complete)
     ).
 
-examine(Instance, State, Aug) :-
+examine(Problem, Instance, State, Aug) :-
     arg(3, State, N0), N is N0 + 1, nb_setarg(3, State, N),
     instance_steps(Instance, Steps, Bindings),
     instance_sources(Instance, Sources),
     arg(2, State, BestE),
-    check_instance(Steps, Sources, BestE, aug(S, E, V, R, C, G)),
+    check_instance(Problem, Steps, Sources, BestE, aug(S, E, V, R, C, G)),
     Aug = aug(S, E, V, R, C, G, Bindings),
     (   (BestE == inf ; E < BestE)
     ->  nb_setarg(1, State, Aug), nb_setarg(2, State, E)
@@ -100,33 +100,25 @@ action_sources(action(Id, _, preconditions(Ops, _), _, _), Id-Pairs) :-
     findall(O-L, member(op(_, _, part_location(O, L)), Ops), Pairs),
     Pairs \== [].
 
-%!  check_instance(+Steps, -Augmented) is semidet.
+%!  check_instance(+Problem, +Steps, +Sources, +Bound, -Augmented) is semidet.
 %
-%   Steps is a list of step(Id, Action) in execution order. Augmented is
+%   Steps of the loaded problem Problem is a list of step(Id, Action) in execution order. Augmented is
 %   aug(Steps1, ErrorCount, Verifications, Recoveries, Verdicts, Geometry):
 %   Steps1 with sensing and squeezes inserted; Verdicts a list of
 %   verdict(Id, Action, Dicts) (Python's verdict dicts: constraint, bound,
 %   threshold, satisfied, ...); Geometry a list of Id-Dict (tool pose, joint
 %   angles, placement). Fails if the instance cannot be executed at all (a
 %   geometric precondition fails: no placement, no joint solution).
+%   It fails as soon as the instance has Bound errors (it cannot beat the
+%   best so far; inf for no bound); Sources as instance_sources/2 gives
+%   them ([]: every object has one initial position).
 
-check_instance(Steps, Aug) :-
-    check_instance(Steps, [], inf, Aug).
-
-%!  check_instance(+Steps, +Bound, -Aug) is semidet.
-%!  check_instance(+Steps, +Sources, +Bound, -Aug) is semidet.
-%
-%   As check_instance/2, but fails as soon as the instance has Bound errors
-%   (it cannot beat the best so far); Sources as instance_sources/2 gives
-%   them (default []: every object has one initial position).
-
-check_instance(Steps, Bound, Aug) :-
-    check_instance(Steps, [], Bound, Aug).
-
-check_instance(Steps, Sources, Bound, aug(Final, Errors, Verifs, Recovs, Verdicts, Geometry)) :-
+check_instance(Problem, Steps, Sources, Bound, aug(Final, Errors, Verifs, Recovs, Verdicts, Geometry)) :-
+    must_be(atom, Problem),
     must_be(list, Steps),
     must_be(list, Sources),
-    sources_dict(Sources, From),
+    sources_dict(Sources, From0),
+    From = ctx(Problem, From0),
     remedy_loop(From, Steps, [], Bound, Final, Failed, Verdicts, Geometry),
     length(Failed, Errors),
     maplist(failed_step(Final), Failed, FailedSteps),
@@ -140,7 +132,8 @@ failed_step(Steps, Id, step(Id, A)) :-
 %   -Verdicts, -Geometry): run the steps; at the first failing action not
 %   yet given up, try the remedies in order; an action no remedy helps is
 %   given up (it counts as an error) and the run goes on past it. From is
-%   the instance's sources as sources_dict/2 gives them.
+%   ctx(Problem, Sources), Sources the instance's sources as sources_dict/2
+%   gives them.
 
 remedy_loop(From, Steps, GivenUp, Bound, Final, Failed, Verdicts, Geometry) :-
     run(From, Steps, GivenUp, Result),
@@ -164,9 +157,9 @@ remedy_loop(From, Steps, GivenUp, Bound, Final, Failed, Verdicts, Geometry) :-
 %   and that is not in GivenUp; infeasible(Step) if a geometric
 %   precondition fails (the run cannot go on; the caller fails).
 
-run(From, Steps, GivenUp, Result) :-
+run(ctx(Problem, From), Steps, GivenUp, Result) :-
     maplist(step_dict, Steps, Dicts),
-    py_bridge(ur_world(Dicts, From), W0),
+    py_bridge(ur_world(Problem, Dicts, From), W0),
     run(Steps, GivenUp, W0, [], [], [], Result0),
     Result0 \= infeasible(_),
     Result = Result0.

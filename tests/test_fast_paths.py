@@ -7,7 +7,6 @@ import numpy as np
 
 from spar_py import placement
 from spar_py.kb import load_problem
-from spar_py.reach import above_table
 
 ROOT = Path(__file__).resolve().parent.parent
 CELL = load_problem(ROOT / "kb/problems/peg_in_block.yaml")
@@ -31,12 +30,13 @@ def test_reachable_mask_is_any_ik_candidate() -> None:
 def _reach_everywhere(cell, cands: np.ndarray, X: np.ndarray) -> np.ndarray:
     """(m,) bool by brute force: some placement of cands reaches T_O @ X (no pruning, no chunks)."""
     T = np.einsum("nij,mjk->nmik", cands, X).reshape(-1, 4, 4)
-    ok = cell.robot.reachable_mask(T) & above_table(cell, T)
+    flange = T @ np.linalg.inv(cell.robot.tool)
+    ok = cell.robot.reachable_mask(T) & (flange[:, 2, 3] > 0)
     return ok.reshape(len(cands), len(X)).any(axis=0)
 
 
 def test_reachable_somewhere_matches_the_whole_grid() -> None:
-    placement._SOMEWHERE.clear()
+    CELL.memo.clear()
     for obj, model in CELL.objects.items():
         X = [g.T for g in model.grasps.values()]
         X += [CELL.transforms["trans_1"] @ g.T for g in CELL.objects["peg"].grasps.values()]

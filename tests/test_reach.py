@@ -117,9 +117,7 @@ def test_gfaces_on_the_resting_face_never_reachable(cell: Cell) -> None:
     pairs = reachable_pairs(cell, "box", GRASPS, labels)
     assert not [p for p in pairs if p[0] == "g2"]
     # stable-pose labels under the paper's rule: condition 1 only, so every other grasp passes
-    cell.stable_pose_rule = "paper"
-    paper = reachable_pairs(cell, "box", GRASPS, labels)
-    cell.stable_pose_rule = "reachable"
+    paper = reachable_pairs(cell, "box", GRASPS, labels, rule="paper")
     assert ["g1", "box_up"] in paper and ["g10", "box_down"] in paper
     # our rule asks for a placement the arm reaches: a subset of the paper's pairs
     assert set(map(tuple, pairs)) <= set(map(tuple, paper)) and ["g1", "box_up"] in pairs
@@ -158,9 +156,8 @@ def test_all_pairs_in_one_batched_ik_call(cell: Cell, monkeypatch: pytest.Monkey
 def test_mate_reachable(cell: Cell) -> None:
     # a stable-pose label of the fixed object under the paper's rule: condition 2 is assumed
     # satisfiable, all pairs pass; ours keeps those some placement of the plate lets the arm reach
-    cell.stable_pose_rule = "paper"
-    pairs = mate_reachable_pairs(cell, "box", "plate", GRASPS, ["plate_up", "plate_down"], cell.transforms["on_top"])
-    cell.stable_pose_rule = "reachable"
+    pairs = mate_reachable_pairs(cell, "box", "plate", GRASPS, ["plate_up", "plate_down"], cell.transforms["on_top"],
+                                 rule="paper")
     assert len(pairs) == 6
     ours = mate_reachable_pairs(cell, "box", "plate", GRASPS, ["plate_up", "plate_down"], cell.transforms["on_top"])
     assert 0 < len(ours) < 6 and set(map(tuple, ours)) <= set(map(tuple, pairs))
@@ -212,9 +209,9 @@ def test_wrist_under_the_table_is_not_reachable() -> None:
     """A tool pose pointing up from under the table top fails condition 2, whatever IK says."""
     from spar_py.geometry import roty, trans
     from spar_py.kb import load_problem
-    from spar_py.reach import above_table
+    from spar_py.workspace import wrist_above_table
 
     cell = load_problem(Path(__file__).resolve().parent.parent / "kb/problems/peg_in_block.yaml")
     down = trans(30, 0, 1.0) @ roty(np.pi)   # tool z pointing down: flange above
     up = trans(30, 0, 1.0)                   # tool z pointing up: flange ~9.8 in under the top
-    assert above_table(cell, np.stack([down, up])).tolist() == [True, False]
+    assert wrist_above_table(cell.robot, np.stack([down, up])).tolist() == [True, False]

@@ -4,18 +4,43 @@ Public API (see docs/quickstart.md)::
 
     from spar_py import Planner
     planner = Planner()
-    cell = planner.load_problem("kb/problems/peg_in_block.yaml")
-    plan = planner.plan(cell)
+    plan = planner.plan("kb/problems/peg_in_block.yaml")
+    print(plan.outcome, [a.term for a in plan.actions])
+
+Importing the package is cheap: the planner (numpy, janus, the embedded Prolog) is
+imported on first use of ``Planner``, ``Plan``, ``load_problem`` and the rest.
 """
-from .errors import KBError, PlanningTimeout, PrologError, SparError, SparValueError
+from __future__ import annotations
+
+from typing import Any
+
+from .errors import InternalError, KBError, PlanningTimeout, PrologError, SparError, SparValueError
 
 __version__ = "0.1.0"
 
+#: Lazily imported names -> the module that defines them.
+_LAZY = {
+    "Planner": "planner", "Plan": "planner", "Outcome": "planner", "Action": "planner",
+    "Step": "planner", "Verdict": "planner", "load_problem": "kb", "Cell": "model",
+}
+
 __all__ = [
-    "KBError",
-    "PlanningTimeout",
-    "PrologError",
-    "SparError",
-    "SparValueError",
-    "__version__",
+    "Action", "Cell", "InternalError", "KBError", "Outcome", "Plan", "Planner", "PlanningTimeout",
+    "PrologError", "SparError", "SparValueError", "Step", "Verdict", "__version__", "load_problem",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    """Import ``Planner`` and friends on first use (PEP 562)."""
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'spar_py' has no attribute {name!r}")
+    from importlib import import_module
+
+    value = getattr(import_module(f".{module}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(__all__)

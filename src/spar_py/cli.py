@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Callable
 
 from . import __version__
-from .errors import KBError, PlanningTimeout, PrologError, SparError
+from .errors import InternalError, KBError, PlanningTimeout, PrologError, SparError
 
 EXIT_OK, EXIT_FAIL, EXIT_INPUT, EXIT_INTERNAL, EXIT_TIMEOUT = 0, 1, 2, 3, 4
 DEFAULT_PROBLEM = "kb/problems/peg_in_block.yaml"
@@ -92,13 +92,15 @@ def cmd_plan(args: argparse.Namespace) -> int:
     from .engine import start_engine
 
     start_engine()  # Prolog consults the planner while the imports below run
-    from .planner import Planner
+    from .planner import Outcome, Planner
 
     planner = Planner(max_actions=args.max_actions, max_instances=args.max_instances,
                       separation=not args.no_separation, timeout=args.timeout,
                       paper_placements=args.paper_placements)
     cell = planner.load_problem(args.problem)
     plan = planner.plan(cell, phase1_only=args.phase1_only, trace=args.trace)
+    if plan.outcome is Outcome.TIMEOUT:
+        raise PlanningTimeout(f"{cell.name}: no result within {args.timeout:g} s")
     if args.json:
         text = plan.dumps() + "\n"
         if args.output:
@@ -168,7 +170,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     plan = sub.add_parser("plan", help="plan a problem (phase 1 and phase 2)")
     plan.add_argument("problem", help="a problem file, e.g. kb/problems/peg_in_block.yaml")
-    plan.add_argument("--json", action="store_true", help="print the plan as JSON (schema 1)")
+    plan.add_argument("--json", action="store_true", help="print the plan as JSON (schema 2)")
     plan.add_argument("-o", "--output", help="write the JSON to this file (atomically)")
     plan.add_argument("--trace", action="store_true", help="print the goal stacks at each step (Figs. 21-22)")
     plan.add_argument("--phase1-only", action="store_true", help="stop after the partial plan")
@@ -232,8 +234,8 @@ def main(argv: list[str] | None = None) -> None:
     except PlanningTimeout as e:
         _err(f"timeout: {e}")
         code = EXIT_TIMEOUT
-    except PrologError as e:
-        _err(f"prolog: {e.message.splitlines()[0] if e.message else e.term}")
+    except (PrologError, InternalError) as e:
+        _err(f"internal error (please report it): {e}")
         code = EXIT_INTERNAL
     except SparError as e:
         _err(str(e))

@@ -15,10 +15,11 @@ from __future__ import annotations
 import json
 import os
 import threading
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Iterator
 
-from .errors import PrologError, SparError
+from .errors import InternalError, PlanningTimeout, PrologError, SparError
 
 PACKAGE_DIR = Path(__file__).resolve().parent
 ROOT = PACKAGE_DIR.parent.parent  # the checkout: prolog/, kb/ live here
@@ -28,6 +29,11 @@ RECORD = PACKAGE_DIR / "_swipl.json"
 
 _lock = threading.Lock()
 _engine: "Engine | None" = None
+
+
+def _one_line(text: str) -> str:
+    """The first non-empty line of ``text``, stripped."""
+    return next((ln.strip() for ln in text.splitlines() if ln.strip()), "")
 
 
 def swipl_record() -> dict[str, Any]:
@@ -51,14 +57,23 @@ def _import_janus() -> Any:
 
 
 class Engine:
-    """The embedded SWI-Prolog with prolog/spar.pl and kb/templates/ consulted (one per process)."""
+    """The embedded SWI-Prolog with prolog/spar.pl and kb/templates/ consulted (one per process).
+
+    Loaded problems are kept by name (:meth:`load_cell`): their facts in Prolog's kb
+    module, their cells here in :attr:`cells`; every call from Prolog into Python says
+    which problem it is about. Queries are serialised: the engine holds one re-entrant
+    lock for each query, and :meth:`session` holds it for a whole planning run (load,
+    plan, unload), so threads sharing an engine take turns and never see each other's
+    problem.
+    """
 
     def __init__(self, background: bool = False) -> None:
         """Start SWI-Prolog (in this thread) and consult the planner: here, or with
         ``background`` in a thread of its own, so the caller can go on (importing numpy,
         reading the problem) while Prolog compiles; every query waits for it first."""
         self.janus = _import_janus()
-        self.cell = None
+        self.cells: dict[str, Any] = {}
+        self.lock = threading.RLock()
         self._loader: threading.Thread | None = None
         self._load_error: BaseException | None = None
         if background:
@@ -98,7 +113,8 @@ class Engine:
         Prolog exceptions are raised as :class:`PrologError` with Prolog's message.
         """
         self.wait_loaded()
-        return self._query_once(goal, bindings)
+        with self.lock:
+            return self._query_once(goal, bindings)
 
     def _query_once(self, goal: str, bindings: dict[str, Any] | None = None) -> dict[str, Any]:
         try:
@@ -107,28 +123,77 @@ class Engine:
             raise self._translate(e) from None
 
     def query(self, goal: str, bindings: dict[str, Any] | None = None) -> Iterator[dict[str, Any]]:
-        """All answers of ``goal`` (lazily), exceptions translated as in :meth:`query_once`."""
+        """All answers of ``goal`` (lazily), exceptions translated as in :meth:`query_once`.
+        The engine's lock is held until the iterator is exhausted or closed."""
         self.wait_loaded()
-        try:
-            yield from self.janus.query(goal, bindings or {})
-        except self.janus.PrologError as e:
-            raise self._translate(e) from None
+        with self.lock:
+            try:
+                yield from self.janus.query(goal, bindings or {})
+            except self.janus.PrologError as e:
+                raise self._translate(e) from None
 
-    def _translate(self, e: Any) -> PrologError:
+    def _translate(self, e: Any) -> BaseException:
+        """The exception to raise for a janus PrologError ``e``: the one place Prolog's
+        error terms become the SparError family (foreign:error_info/2 classifies them).
+
+        A time limit is :class:`PlanningTimeout`; an abort is KeyboardInterrupt; an
+        exception a Python function raised under py_call is raised again as itself when
+        it is a SparError (its own one-line message, no Python stack), else as an
+        :class:`InternalError` naming its class; any other Prolog error is a
+        :class:`PrologError` with the first line of Prolog's message."""
+        if getattr(e, "term", None) is None:
+            return PrologError("", str(getattr(e, "message", "") or "Prolog error"))
         try:
-            message = str(e)
-        except Exception:  # message_to_string itself failed
-            message = repr(e)
-        return PrologError(repr(e), message)
+            info = self.janus.query_once("foreign:error_info(E, Info)", {"E": e.term})["Info"]
+        except Exception:  # the classification itself failed: keep what janus says
+            return PrologError(repr(e), _one_line(str(e)))
+        kind = info["kind"]
+        if kind == "timeout":
+            return PlanningTimeout("no result within the time limit")
+        if kind == "interrupted":
+            return KeyboardInterrupt()
+        if kind == "python":
+            value = info["value"]
+            if isinstance(value, (SparError, KeyboardInterrupt, MemoryError)):
+                return value
+            return InternalError(f"{info['class']}: {_one_line(str(value)) or '(no message)'}")
+        return PrologError(repr(e), _one_line(info["message"]), formal=info["formal"])
 
     # ------------------------------------------------------------------ knowledge
 
     def load_cell(self, cell: Any) -> None:
-        """Replace the kb module's facts by ``cell``'s (kb.facts) and remember the cell for py_calls."""
+        """Load ``cell`` as problem ``cell.name``: its facts replace that problem's in Prolog
+        (other loaded problems stay), and Python calls about that problem get ``cell``."""
         from .kb import facts
 
-        self.query_once("foreign:spar_load_facts(Facts)", {"Facts": facts(cell)})
-        self.cell = cell
+        with self.lock:
+            self.query_once("foreign:spar_load_facts(Facts)", {"Facts": facts(cell)})
+            self.cells[cell.name] = cell
+
+    def unload(self, name: str) -> None:
+        """Forget problem ``name`` (its Prolog facts and its cell); a no-op if not loaded."""
+        with self.lock:
+            self.cells.pop(name, None)
+            self.query_once("kb:unload_problem(P)", {"P": name})
+
+    def cell(self, name: str) -> Any:
+        """The loaded cell of problem ``name`` (SparError if it is not loaded)."""
+        try:
+            return self.cells[name]
+        except KeyError:
+            raise SparError(f"problem {name!r} is not loaded") from None
+
+    @contextmanager
+    def session(self, cell: Any) -> Iterator[None]:
+        """Hold the engine for one planning run of ``cell``: load it, yield, unload it
+        (the cell and its memo tables are then freed with the caller's last reference)."""
+        self.wait_loaded()
+        with self.lock:
+            self.load_cell(cell)
+            try:
+                yield
+            finally:
+                self.unload(cell.name)
 
 
 def engine() -> Engine:
@@ -150,29 +215,31 @@ def start_engine() -> None:
             _engine = Engine(background=True)
 
 
-def current_cell() -> Any:
-    """The cell loaded into the engine (SparError if none)."""
-    if _engine is None or _engine.cell is None:
-        raise SparError("no problem loaded")
-    return _engine.cell
+def _cell(problem: str) -> Any:
+    """The cell of loaded problem ``problem`` (for the calls from Prolog below)."""
+    if _engine is None:
+        raise SparError("the engine is not started")
+    return _engine.cell(problem)
 
 
 # ---------------------------------------------------------------------- called from Prolog
 
 
-def arc_pairs(kind: str, objects: list[str], grasps: list[str], positions: list[str], ta: str) -> list[list[str]]:
-    """All grasp/position pairs satisfying ``kind`` (reachable | mate_reachable), Sec. 5.2.4."""
+def arc_pairs(problem: str, rule: str, kind: str, objects: list[str], grasps: list[str],
+              positions: list[str], ta: str) -> list[list[str]]:
+    """All grasp/position pairs of loaded problem ``problem`` satisfying ``kind``
+    (reachable | mate_reachable), Sec. 5.2.4; ``rule`` for stable-pose labels (reach.RULES)."""
     from . import reach
 
-    return reach.arc(current_cell(), kind, objects, grasps, positions, None if ta == "none" else ta)
+    return reach.arc(_cell(problem), kind, objects, grasps, positions, None if ta == "none" else ta, rule)
 
 
-def ur_world(steps: list[dict[str, Any]], sources: dict[str, dict[str, str]] | None = None) -> Any:
-    """Phase 2: the initial world of a plan instance whose steps are ``steps``, its actions
-    taking their objects from ``sources`` (phase2.new_world)."""
+def ur_world(problem: str, steps: list[dict[str, Any]], sources: dict[str, dict[str, str]] | None = None) -> Any:
+    """Phase 2: the initial world of a plan instance of ``problem`` whose steps are ``steps``,
+    its actions taking their objects from ``sources`` (phase2.new_world)."""
     from . import phase2
 
-    return phase2.new_world(current_cell(), steps, sources)
+    return phase2.new_world(_cell(problem), steps, sources)
 
 
 def ur_step(world: Any, step: dict[str, Any]) -> tuple[list[dict[str, Any]], Any, dict[str, Any]]:

@@ -19,11 +19,17 @@ class KBError(SparValueError):
 
 
 class PrologError(SparError):
-    """A Prolog exception raised inside a query; ``message`` is Prolog's own rendering of it."""
+    """A Prolog exception raised inside a query: ``message`` the first line of Prolog's own
+    rendering, ``term`` the exception term as written by write_canonical, ``formal`` the
+    formal part of an ISO error term as data (foreign.pl's term_data/2), or None."""
 
-    def __init__(self, term: str, message: str) -> None:
-        self.term, self.message = term, message
+    def __init__(self, term: str, message: str, formal: object = None) -> None:
+        self.term, self.message, self.formal = term, message, formal
         super().__init__(message)
+
+
+class InternalError(SparError):
+    """A bug: an exception spar-py did not raise on purpose (its class and message, one line)."""
 
 
 class PlanningTimeout(SparError):

@@ -129,8 +129,15 @@ def _show(v: Any) -> str:
     return s if len(s) <= 40 else s[:37] + "..."
 
 
-#: SHA-1 of the text of every KB file read, by resolved path (for Cell.fingerprint).
-_DIGESTS: dict[str, str] = {}
+def _fingerprint(files: Iterable[str]) -> str:
+    """SHA-1 over the bytes of ``files`` (the files a cell was loaded from)."""
+    h = hashlib.sha1()
+    for f in files:
+        try:
+            h.update(hashlib.sha1(Path(f).read_bytes()).digest())
+        except OSError:
+            h.update(b"?")
+    return h.hexdigest()
 
 
 def read_yaml(path: str | Path) -> Node:
@@ -138,7 +145,6 @@ def read_yaml(path: str | Path) -> Node:
     p = Path(path)
     try:
         text = p.read_text(encoding="utf-8")
-        _DIGESTS[str(p.resolve())] = hashlib.sha1(text.encode()).hexdigest()
     except OSError as e:
         raise KBError(str(path), "(file)", f"a readable file ({e.strerror})") from None
     try:
@@ -490,9 +496,10 @@ def load_problem(path: str | Path) -> Cell:
         lo, hi = r.key("x").interval(), r.key("y").interval()
         regions.append({"x": lo, "y": hi})
     used = [path, rpath] + [base / n.key("model").text() for _, n in root.key("objects").items()]
-    fingerprint = hashlib.sha1("".join(_DIGESTS.get(str(Path(u).resolve()), "") for u in used).encode()).hexdigest()
+    files = tuple(dict.fromkeys(str(Path(u).resolve()) for u in used))
     return Cell(
-        fingerprint=fingerprint,
+        fingerprint=_fingerprint(files),
+        files=files,
         name=name,
         file=str(path),
         unit=unit,

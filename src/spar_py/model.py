@@ -11,6 +11,8 @@ from typing import TYPE_CHECKING, Union
 
 import numpy as np
 
+from .memo import Memo
+
 if TYPE_CHECKING:
     from .kinematics import Robot
 
@@ -143,17 +145,12 @@ class Cell:
     object_bounds: dict[str, Bounds]
     sensors: dict[str, Sensor]
     placement_regions: list[dict] = field(default_factory=list)
-    #: How reach treats a stable-pose label (a put-down position with no X, Y): "reachable"
-    #: (some placement in the free regions must reach it) or "paper" (Sec. 5.2.4's rule:
-    #: condition 2 assumed satisfiable).
-    stable_pose_rule: str = "reachable"
-    #: SHA-1 of every file the cell was loaded from: equal fingerprints, equal cells
-    #: (memo tables key on it, so planning a file again reuses their work).
+    #: SHA-1 of every file the cell was loaded from: equal fingerprints, equal cells.
     fingerprint: str = ""
-
-    def memo_key(self) -> tuple[str, str]:
-        """The key memo tables use for this cell (fingerprint and rule; id() without one)."""
-        return (self.fingerprint or f"id{id(self)}", self.stable_pose_rule)
+    #: The files the cell was loaded from (resolved paths: problem, robot, models).
+    files: tuple[str, ...] = ()
+    #: The cell's memo tables (bounded; freed with the cell): see memo.py.
+    memo: Memo = field(default_factory=Memo, compare=False, repr=False)
 
     def position_of(self, label: str) -> Position:
         """The absolute position labelled ``label`` (KeyError if none)."""

@@ -29,7 +29,7 @@ from . import uncertainty as ur
 from .errors import SparValueError
 from .geometry import same_stable_pose
 from .model import Cell, Grasp
-from .reach import above_table
+from .workspace import solutions
 from .symbolic import Registry
 
 Step = dict[str, Any]
@@ -102,13 +102,12 @@ def _first_parts(cell: Cell, steps: list[Step], src: dict[str, dict[str, str]]) 
     return out
 
 
-#: Memo tables (bounded): placements per manipulation sequence; step results per world
-#: key. Phase 2 re-runs an instance from the start after each remedy it tries, and
-#: instances share prefixes; a world is fully determined by its key, so a step's result
-#: can be reused (its uncertainty variables stay in the registry they were made in).
-_PLACEMENTS: dict[tuple, dict[str, pl.Placement | None]] = {}
-_STEPS: dict[tuple, tuple[list[dict[str, Any]], "World", dict[str, Any]]] = {}
-_MEMO_LIMIT = 4096
+#: Bounds of the cell's memo tables (cell.memo): placements per manipulation sequence;
+#: step results per world key. Phase 2 re-runs an instance from the start after each
+#: remedy it tries, and instances share prefixes; a world is fully determined by its key,
+#: so a step's result can be reused (its uncertainty variables stay in the registry they
+#: were made in).
+MEMO_LIMIT = 4096
 
 
 def _step_key(s: Step) -> tuple:
@@ -120,13 +119,10 @@ def _placements(cell: Cell, steps: list[Step],
     """choose_placements memoised per cell, manipulation sequence (sensing moves nothing)
     and the parts those manipulations take."""
     manip = [s for s in steps if s["name"] in ("pickup", "putdown", "assemble")]
-    key = (cell.memo_key(), tuple(_step_key(s) for s in manip),
+    key = (tuple(_step_key(s) for s in manip),
            tuple(sorted((k, tuple(sorted(v.items()))) for k, v in src.items())))
-    if key not in _PLACEMENTS:
-        if len(_PLACEMENTS) > _MEMO_LIMIT:
-            _PLACEMENTS.clear()
-        _PLACEMENTS[key] = choose_placements(cell, manip, src)
-    return key, _PLACEMENTS[key]
+    memo = cell.memo.table("phase2.placements", MEMO_LIMIT)
+    return key, memo.get_or_compute(key, lambda: choose_placements(cell, manip, src))
 
 
 def _grasp(cell: Cell, obj: str, label: str) -> Grasp:
@@ -226,14 +222,14 @@ def step(world: World, s: Step) -> tuple[list[dict[str, Any]], World, dict[str, 
     if handler is None:
         raise SparValueError(f"phase 2 cannot execute {s['name']!r}")
     key = world.key + (_step_key(s),)
-    if key not in _STEPS:
-        if len(_STEPS) > _MEMO_LIMIT:
-            _STEPS.clear()
+
+    def run() -> tuple[list[dict[str, Any]], World, dict[str, Any]]:
         checks, after, geo = handler(_activate(world, s), s)
         if s["id"] in world.sources:
             geo["from"] = dict(world.sources[s["id"]])
-        _STEPS[key] = (checks, replace(after, key=key), geo)
-    return _STEPS[key]
+        return checks, replace(after, key=key), geo
+
+    return world.cell.memo.table("phase2.steps", MEMO_LIMIT).get_or_compute(key, run)
 
 
 def _activate(world: World, s: Step) -> World:
@@ -265,8 +261,8 @@ def _part_at(world: World, obj: str, label: str) -> str | None:
 
 def _arm(world: World, T: np.ndarray) -> tuple[np.ndarray | None, dict[str, Any]]:
     """The joint vector reaching tool pose T nearest the previous one, and display data."""
-    sols = world.cell.robot.ik(T)
-    ok = bool(len(sols)) and bool(above_table(world.cell, T[None])[0])
+    sols = solutions(world.cell.robot, T)
+    ok = bool(len(sols))
     q = None
     if ok:
         ref = world.joints if world.joints is not None else np.zeros(6)

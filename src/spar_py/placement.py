@@ -16,7 +16,7 @@ import numpy as np
 
 from .geometry import rotz
 from .model import Cell
-from .reach import above_table
+from .workspace import reaches, wrist_height
 
 #: Grid spacing of candidate placements (cell units) and number of yaw steps.
 GRID_STEP = 2.0
@@ -96,8 +96,7 @@ def _reach_all(cell: Cell, TO: np.ndarray, X: np.ndarray) -> np.ndarray:
     """(n, m) bool: the arm reaches T_O @ X (wrist above the table) for object poses TO
     (n, 4, 4) and tool transforms X (m, 4, 4); one batched IK call."""
     T = np.einsum("nij,mjk->nmik", TO, X).reshape(-1, 4, 4)     # (n*m,4,4)
-    ok = cell.robot.reachable_mask(T) & above_table(cell, T)
-    return ok.reshape(len(TO), len(X))
+    return reaches(cell.robot, T).reshape(len(TO), len(X))
 
 
 def feasible(cell: Cell, placements: list[Placement], requirements: list[np.ndarray]) -> np.ndarray:
@@ -164,20 +163,19 @@ def reachable_somewhere(cell: Cell, obj: str, pose: str, requirements: list[np.n
         return np.zeros(0, dtype=bool)
     X = np.stack(requirements)
     out = np.zeros(len(X), dtype=bool)
+    memo = cell.memo.table("placement.somewhere", SOMEWHERE_LIMIT)
     gkey = _grid_key(cell, obj, pose)
     todo: dict[tuple, list[int]] = {}  # equal requirements are solved once
     for i, x in enumerate(np.round(X, 12)):
         key = (gkey, x.tobytes())
-        if key in _SOMEWHERE:
-            out[i] = _SOMEWHERE[key]
+        if key in memo:
+            out[i] = memo[key]
         else:
             todo.setdefault(key, []).append(i)
     if todo:
         ok = _any_placement(cell, _grid(cell, obj, pose), X[[ix[0] for ix in todo.values()]])
-        if len(_SOMEWHERE) > 100_000:
-            _SOMEWHERE.clear()
         for (key, ix), v in zip(todo.items(), ok):
-            _SOMEWHERE[key] = out[ix] = bool(v)
+            memo[key] = out[ix] = bool(v)
     return out
 
 
@@ -195,7 +193,7 @@ def _any_placement(cell: Cell, cands: np.ndarray, X: np.ndarray, chunk: int = 48
         return ok
     if np.all(cands[:, 2, :] == cands[0, 2, :]):  # one z row: turns about z, shifts in x, y
         T0 = np.einsum("ij,mjk->mik", cands[0], X)
-        below = (T0 @ cell.robot.tool_inverse())[:, 2, 3] < -1e-9
+        below = wrist_height(cell.robot, T0) < -1e-9
     else:
         below = np.zeros(len(X), dtype=bool)
     for start in range(0, len(cands), chunk):
@@ -204,30 +202,27 @@ def _any_placement(cell: Cell, cands: np.ndarray, X: np.ndarray, chunk: int = 48
             break
         C = cands[start:start + chunk]
         T = np.einsum("nij,mjk->nmik", C, X[open_]).reshape(-1, 4, 4)
-        hit = (cell.robot.reachable_mask(T) & above_table(cell, T)).reshape(len(C), len(open_)).any(axis=0)
+        hit = reaches(cell.robot, T).reshape(len(C), len(open_)).any(axis=0)
         ok[open_[hit]] = True
     return ok
 
 
-#: Memo of reachable_somewhere per (cell, grid, requirement): phase 1 asks the same arcs
-#: again in every round of its deepening search, and objects that are copies of one model
-#: (the same stable pose, so the same grid) ask the same questions.
-_SOMEWHERE: dict[tuple, bool] = {}
-_GRIDS: dict[tuple, np.ndarray] = {}
+#: Bounds of the cell's memo tables (cell.memo): reachable_somewhere's answers per
+#: (grid, requirement), and the phase-1 grids per stable-pose geometry. Phase 1 asks the
+#: same arcs again in every round of its deepening search, and objects that are copies of
+#: one model (the same stable pose, so the same grid) ask the same questions.
+SOMEWHERE_LIMIT = 100_000
+GRID_LIMIT = 1024
 
 
 def _grid_key(cell: Cell, obj: str, pose: str) -> tuple:
-    """What the phase-1 grid of ``obj`` in ``pose`` depends on: the cell (its free regions)
-    and the stable pose's rotation and height, not the object's name."""
+    """What the phase-1 grid of ``obj`` in ``pose`` depends on within a cell: the stable
+    pose's rotation and height, not the object's name."""
     sp = cell.objects[obj].poses[pose]
-    return (cell.memo_key(), np.asarray(sp.R, float).tobytes(), float(sp.height))
+    return (np.asarray(sp.R, float).tobytes(), float(sp.height))
 
 
 def _grid(cell: Cell, obj: str, pose: str) -> np.ndarray:
-    """(n,4,4) object poses of the phase-1 grid (memoised per cell and stable-pose geometry)."""
-    key = _grid_key(cell, obj, pose)
-    if key not in _GRIDS:
-        if len(_GRIDS) > 1024:
-            _GRIDS.clear()
-        _GRIDS[key] = _grid_arrays(cell, obj, pose, [], PHASE1_STEP, PHASE1_YAWS)[2]
-    return _GRIDS[key]
+    """(n,4,4) object poses of the phase-1 grid (memoised in the cell per stable-pose geometry)."""
+    return cell.memo.table("placement.grids", GRID_LIMIT).get_or_compute(
+        _grid_key(cell, obj, pose), lambda: _grid_arrays(cell, obj, pose, [], PHASE1_STEP, PHASE1_YAWS)[2])

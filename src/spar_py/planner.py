@@ -1,64 +1,159 @@
-"""The Python API: load a problem, plan it (phase 1, then phase 2), get a Plan.
+"""The Python API: load a problem, plan it (phase 1, then phase 2), get a typed Plan.
 
 Example (runnable; docs/quickstart.md)::
 
-    from spar_py.planner import Planner
+    from spar_py import Planner
     planner = Planner()
-    cell = planner.load_problem("kb/problems/peg_in_block.yaml")
-    plan = planner.plan(cell)
-    print([a["term"] for a in plan.actions])
-    print(plan.to_json()["instance"]["error_count"])
+    plan = planner.plan("kb/problems/peg_in_block.yaml")
+    print(plan.outcome, [a.term for a in plan.actions])
+    print(plan.error_count, [s.joints_deg for s in plan.steps])
+
+Threads: one process has one embedded SWI-Prolog (engine.py). A planning run holds it
+from loading the cell to unloading it, so runs from several threads (on one Planner or
+on several) take turns; each sees only its own cell. A run's timeout counts from when
+the run gets the engine.
 """
 from __future__ import annotations
 
 import json
+import os
+import threading
 import time
 from dataclasses import dataclass, field
+from enum import Enum
 from pathlib import Path
 from typing import Any
 
 from .engine import engine
-from .errors import PlanningTimeout, PrologError, SparValueError
+from .errors import PlanningTimeout, SparValueError
 from .kb import load_problem
+from .memo import LRU
 from .model import Cell
 
-SCHEMA = 1
+SCHEMA = 2
+
+__all__ = ["Action", "Outcome", "Plan", "Planner", "SCHEMA", "Step", "Verdict", "term_text"]
+
+
+class Outcome(str, Enum):
+    """How a planning run ended."""
+
+    PLAN = "plan"
+    NO_PLAN = "no_plan"
+    TIMEOUT = "timeout"
+
+
+def term_text(data: Any) -> str:
+    """Prolog-like text of a term given as data (foreign.pl's term_data/2): atoms are
+    strings, compounds ``{"functor": f, "args": [...]}``, lists lists."""
+    if isinstance(data, dict) and "functor" in data:
+        return f"{data['functor']}({', '.join(term_text(a) for a in data['args'])})"
+    if isinstance(data, dict) and "string" in data:
+        return json.dumps(data["string"])
+    if isinstance(data, dict) and "var" in data:
+        return str(data["var"])
+    if isinstance(data, list):
+        return "[" + ", ".join(term_text(a) for a in data) + "]"
+    return str(data)
+
+
+@dataclass(frozen=True)
+class Action:
+    """A phase-1 plan action (Fig. 23): ``id`` (action_3), ``name`` (putdown), ``args`` as
+    term data (plan variables and labels are strings), ``term`` its Prolog text."""
+
+    id: str
+    name: str
+    args: tuple[Any, ...]
+    term: str
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """One checked precondition of a step. ``kind`` "uncertainty" (a SUP/INF bound against
+    a threshold: for sense ">" the bound is INF of the expression, for "<" its SUP) or
+    "geometric" (reachability; bound and threshold None). Lengths in the cell unit."""
+
+    action: str
+    constraint: str
+    kind: str
+    sense: str
+    bound: float | None
+    threshold: float | None
+    satisfied: bool
+    tolerance_reached: bool
+    description: str
+
+
+@dataclass(frozen=True)
+class Step:
+    """A step of the chosen plan instance, in execution order.
+
+    ``kind`` manipulation | sensing | squeeze (``serves``: the action an inserted step
+    serves); ``tool_pose`` 4x4 world (cell unit) or None; ``joints_deg`` the joint
+    solution used (deg, the robot file's DH zero convention) or None; ``poses`` every
+    part's 4x4 world pose at the step's end-point (part key: the object name, or
+    ``object@initial_position`` for the other parts of a stock); ``held`` the object in
+    the hand after the step, or None."""
+
+    id: str
+    kind: str
+    serves: str
+    name: str
+    object: str
+    term: str
+    args: tuple[Any, ...]
+    tool_pose: list[list[float]] | None
+    joints_deg: list[float] | None
+    ik_solutions_deg: list[list[float]]
+    placement: dict[str, Any] | None
+    source: dict[str, str] | None
+    poses: dict[str, list[list[float]]]
+    held: str | None
+    verdicts: tuple[Verdict, ...]
 
 
 @dataclass
 class Plan:
-    """A planning outcome (JSON schema 1, docs/json-schema.md).
+    """A planning outcome (JSON schema 2, docs/json-schema.md).
 
-    ``outcome`` is "plan" or "no_plan"; ``partial`` the phase-1 partial plan (actions,
-    ordering, variables, arcs, separations); ``instance`` the chosen phase-2 instance
-    (steps with joint angles, constraint verdicts, verifications, recoveries, error
-    count) or None with ``phase1_only``; ``reason`` why there is no plan.
+    ``outcome`` an :class:`Outcome`; ``partial`` the phase-1 partial plan (actions,
+    ordering, variables, arcs, separations) as the JSON has it; ``instance`` the chosen
+    phase-2 instance or None (``phase1_only``, no plan, timeout); ``reason`` why there is
+    no plan (or the timeout); ``actions``, ``steps`` and ``verdicts`` the typed views.
     """
 
     problem: str
-    outcome: str
+    outcome: Outcome
     partial: dict[str, Any] | None = None
     instance: dict[str, Any] | None = None
     reason: dict[str, Any] | None = None
     timing: dict[str, float] = field(default_factory=dict)
     trace: str = ""
+    actions: list[Action] = field(default_factory=list)
+    steps: list[Step] = field(default_factory=list)
 
     @property
     def ok(self) -> bool:
         """True when a plan was found."""
-        return self.outcome == "plan"
+        return self.outcome is Outcome.PLAN
 
     @property
-    def actions(self) -> list[dict[str, Any]]:
-        """The phase-1 actions (id, term, name, args), [] without a plan."""
-        return list(self.partial["actions"]) if self.partial else []
+    def verdicts(self) -> list[Verdict]:
+        """Every checked precondition of the instance, in the order checked."""
+        return [_verdict(c) for c in (self.instance or {}).get("constraints", [])]
+
+    @property
+    def error_count(self) -> int | None:
+        """Actions planned for failure (verification + recovery), None without an instance."""
+        return (self.instance or {}).get("error_count")
 
     def to_json(self) -> dict[str, Any]:
         """The versioned JSON document (a dict; ``json.dumps`` it to write)."""
         return {
             "schema": SCHEMA,
             "problem": self.problem,
-            "outcome": self.outcome,
+            "outcome": self.outcome.value,
             "reason": self.reason,
             "partial": self.partial,
             "instance": self.instance,
@@ -69,6 +164,54 @@ class Plan:
         """The JSON text, indented."""
         return json.dumps(self.to_json(), indent=2)
 
+    @classmethod
+    def from_json(cls, doc: dict[str, Any]) -> Plan:
+        """A Plan from its JSON document (schema 2)."""
+        if doc.get("schema") != SCHEMA:
+            raise SparValueError(f"plan JSON schema {doc.get('schema')!r}, not {SCHEMA}")
+        return _plan(doc["problem"], doc, "")
+
+
+def _verdict(c: dict[str, Any]) -> Verdict:
+    return Verdict(action=c["action"], constraint=c["constraint"], kind=c["kind"], sense=c.get("sense", ""),
+                   bound=c.get("bound"), threshold=c.get("threshold"), satisfied=bool(c["satisfied"]),
+                   tolerance_reached=bool(c.get("tolerance_reached", True)),
+                   description=c.get("description", ""))
+
+
+def _step(s: dict[str, Any], verdicts: list[Verdict]) -> Step:
+    return Step(id=s["id"], kind=s["kind"], serves=s["serves"], name=s["name"], object=s["object"],
+                term=s["term"], args=tuple(s.get("args", ())), tool_pose=s.get("tool_pose"),
+                joints_deg=s.get("joints_deg"), ik_solutions_deg=list(s.get("ik_solutions_deg") or []),
+                placement=s.get("placement"), source=s.get("from"), poses=dict(s.get("poses") or {}),
+                held=s.get("held"), verdicts=tuple(v for v in verdicts if v.action == s["id"]))
+
+
+def _plan(problem: str, d: dict[str, Any], trace: str) -> Plan:
+    partial, instance = d.get("partial"), d.get("instance")
+    actions = [Action(a["id"], a["name"], tuple(a["args"]), a["term"]) for a in (partial or {}).get("actions", [])]
+    verdicts = [_verdict(c) for c in (instance or {}).get("constraints", [])]
+    steps = [_step(s, verdicts) for s in (instance or {}).get("steps", [])]
+    return Plan(problem=problem, outcome=Outcome(d["outcome"]), partial=partial, instance=instance,
+                reason=d.get("reason"), timing=dict(d.get("timing") or {}), trace=trace,
+                actions=actions, steps=steps)
+
+
+#: Loaded cells a Planner keeps, by file (their memo tables make planning a file again fast).
+CELL_CACHE = 8
+
+
+def _signature(files: tuple[str, ...]) -> tuple:
+    """What says a cell's files are unchanged: each file's size and modification time."""
+    out = []
+    for f in files:
+        try:
+            st = os.stat(f)
+            out.append((st.st_size, st.st_mtime_ns))
+        except OSError:
+            out.append(None)
+    return tuple(out)
+
 
 class Planner:
     """SPAR's two-phase planner on the embedded SWI-Prolog.
@@ -78,6 +221,9 @@ class Planner:
     ``paper_placements`` (the paper's rule: a put-down into a stable pose is assumed
     reachable somewhere, Sec. 5.2.4; by default some placement in the free table
     regions must reach it), ``timeout`` (seconds for the whole query, None for none).
+
+    A Planner keeps the last few cells it loaded from files (at most ``CELL_CACHE``,
+    reloaded when a file changes), so planning a file again reuses their memo tables.
     """
 
     def __init__(self, max_actions: int = 12, max_instances: int = 50,
@@ -93,34 +239,47 @@ class Planner:
         self.timeout = timeout
         self.paper_placements = paper_placements
         self.engine = engine()
+        self._cells: LRU[tuple[tuple, Cell]] = LRU(CELL_CACHE)
+        self._cells_lock = threading.Lock()
 
     def load_problem(self, path: str | Path) -> Cell:
-        """Load and validate a problem file (KBError on bad input)."""
-        return load_problem(path)
+        """Load and validate a problem file (KBError on bad input); the same cell again while
+        its files are unchanged."""
+        key = str(Path(path).resolve())
+        with self._cells_lock:
+            hit = self._cells.get(key)
+        if hit is not None and _signature(hit[1].files) == hit[0]:
+            return hit[1]
+        cell = load_problem(path)
+        with self._cells_lock:
+            self._cells[key] = (_signature(cell.files), cell)
+        return cell
 
-    def plan(self, problem: Cell | str | Path, phase1_only: bool = False, trace: bool = False) -> Plan:
-        """Plan ``problem`` (a loaded Cell or a problem file path)."""
-        cell = problem if isinstance(problem, Cell) else self.load_problem(problem)
-        cell.stable_pose_rule = "paper" if self.paper_placements else "reachable"
-        t0 = time.perf_counter()
-        self.engine.load_cell(cell)
-        opts = {
+    def options(self, phase1_only: bool = False, trace: bool = False) -> dict[str, Any]:
+        """The options dict spar:plan_dict/4 reads."""
+        return {
             "max_actions": self.max_actions,
             "max_instances": self.max_instances,
             "separation": self.separation,
+            "placements": "paper" if self.paper_placements else "reachable",
             "phase1_only": phase1_only,
             "trace": trace,
             "timeout": self.timeout if self.timeout is not None else 0,
         }
-        try:
-            ans = self.engine.query_once("spar:plan_dict(Problem, Options, Dict, Trace)",
-                                         {"Problem": cell.name, "Options": opts})
-        except PrologError as e:
-            if "time_limit_exceeded" in e.term:
-                raise PlanningTimeout(f"{cell.name}: no result within {self.timeout} s") from None
-            raise
+
+    def plan(self, problem: Cell | str | Path, phase1_only: bool = False, trace: bool = False) -> Plan:
+        """Plan ``problem`` (a loaded Cell or a problem file path)."""
+        cell = problem if isinstance(problem, Cell) else self.load_problem(problem)
+        opts = self.options(phase1_only, trace)
+        with self.engine.session(cell):
+            t0 = time.perf_counter()
+            try:
+                ans = self.engine.query_once("spar:plan_dict(Problem, Options, Dict, Trace)",
+                                             {"Problem": cell.name, "Options": opts})
+            except PlanningTimeout:
+                return Plan(problem=cell.name, outcome=Outcome.TIMEOUT,
+                            reason={"timeout_s": self.timeout},
+                            timing={"total_s": round(time.perf_counter() - t0, 6)})
         d = ans["Dict"]
         d.setdefault("timing", {})["total_s"] = round(time.perf_counter() - t0, 6)
-        return Plan(problem=cell.name, outcome=d["outcome"], partial=d.get("partial"),
-                    instance=d.get("instance"), reason=d.get("reason"), timing=d["timing"],
-                    trace=ans.get("Trace", ""))
+        return _plan(cell.name, d, ans.get("Trace", ""))

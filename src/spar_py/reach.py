@@ -25,6 +25,7 @@ import numpy as np
 from .errors import SparValueError
 from .geometry import same_stable_pose
 from .model import Cell, Face, Grasp, ObjectModel
+from .workspace import reaches
 
 __all__ = [
     "ARCS",
@@ -96,45 +97,45 @@ def resting_faces(cell: Cell, obj: str, label: str) -> tuple[Face, ...]:
     return tuple(faces)
 
 
-def above_table(cell: Cell, T: np.ndarray) -> np.ndarray:
-    """(n,) bool: for world tool poses T (n,4,4), the flange (wrist) origin lies above the table top.
-
-    The paper's condition 2 looks at joint limits only; a tool pose whose wrist
-    would be under the table top (z = 0), e.g. a grasp from below, is not reachable
-    either, so the CMS stays conservative (Sec. 7.1).
-    """
-    flange = T @ cell.robot.tool_inverse()
-    return flange[:, 2, 3] > 0.0
+#: How a stable-pose label (a put-down position with no X, Y) counts for condition 2:
+#: "reachable" (some placement in the free regions reaches it) or "paper" (Sec. 5.2.4:
+#: "some suitable choice of X, Y, Z" is assumed). Phase 1's placements(Rule) option.
+RULES = ("reachable", "paper")
 
 
-def _somewhere(cell: Cell, obj: str, pose: str, grasps: list[Grasp], X: list[np.ndarray]) -> list[Grasp]:
+def _check_rule(rule: str) -> None:
+    if rule not in RULES:
+        raise SparValueError(f"placement rule {rule!r} is not one of {', '.join(RULES)}")
+
+
+def _somewhere(cell: Cell, obj: str, pose: str, grasps: list[Grasp], X: list[np.ndarray],
+               rule: str) -> list[Grasp]:
     """The grasps whose tool transform X (object frame) the arm reaches at some placement
     of ``obj`` in stable pose ``pose`` (placement.reachable_somewhere); all of them under
-    the paper's rule (``cell.stable_pose_rule == "paper"``: "some suitable choice of
-    X, Y, Z" is assumed, Sec. 5.2.4)."""
-    if cell.stable_pose_rule == "paper" or not grasps:
+    the paper's rule."""
+    if rule == "paper" or not grasps:
         return list(grasps)
-    from .placement import reachable_somewhere  # placement builds on this module
+    from .placement import reachable_somewhere  # placement builds on workspace, not on this module
 
     return [g for g, ok in zip(grasps, reachable_somewhere(cell, obj, pose, X)) if ok]
 
 
 def _ik_pass(cell: Cell, poses: list[np.ndarray]) -> np.ndarray:
-    """(k,) bool: which world tool poses (each 4x4) the arm reaches within its limits, wrist above
-    the table; one batched IK call."""
+    """(k,) bool: which world tool poses (each 4x4) the arm reaches (workspace.reaches)."""
     if not poses:
         return np.zeros(0, dtype=bool)
-    T = np.stack(poses)
-    return cell.robot.reachable_mask(T) & above_table(cell, T)
+    return reaches(cell.robot, np.stack(poses))
 
 
 def reachable_pairs(cell: Cell, obj: str, grasp_labels: Sequence[str],
-                    pos_labels: Sequence[str]) -> list[list[str]]:
+                    pos_labels: Sequence[str], rule: str = "reachable") -> list[list[str]]:
     """All [grasp, position] pairs satisfying reachable(Grasp, Position) for ``obj`` (Sec. 5.2.4).
 
     Condition 1 for every pair; condition 2 (IK with T = T_O T_g inside the joint
-    limits) only for absolute positions. Sorted by natural label order.
+    limits) only for absolute positions, and for stable poses as ``rule`` says (RULES).
+    Sorted by natural label order.
     """
+    _check_rule(rule)
     model = _object(cell, obj)
     grasps = _grasps(model, grasp_labels)
     pairs: list[tuple[str, str]] = []
@@ -145,7 +146,7 @@ def reachable_pairs(cell: Cell, obj: str, grasp_labels: Sequence[str],
         rfaces = set(resting_faces(cell, obj, p))
         free = [g for g in grasps if not rfaces & set(g.gfaces)]  # condition 1
         if T_O is None:
-            pairs += [(g.label, p) for g in _somewhere(cell, obj, p, free, [g.T for g in free])]
+            pairs += [(g.label, p) for g in _somewhere(cell, obj, p, free, [g.T for g in free], rule)]
             continue
         for g in free:
             pending.append((g.label, p))
@@ -156,14 +157,16 @@ def reachable_pairs(cell: Cell, obj: str, grasp_labels: Sequence[str],
 
 
 def mate_reachable_pairs(cell: Cell, held_obj: str, fixed_obj: str, grasp_labels: Sequence[str],
-                         pos_labels: Sequence[str], Ta: np.ndarray | str) -> list[list[str]]:
+                         pos_labels: Sequence[str], Ta: np.ndarray | str,
+                         rule: str = "reachable") -> list[list[str]]:
     """All [grasp, position] pairs satisfying mate_reachable(Grasp, Position, T_a) (Sec. 5.2.4).
 
     Grasps are of ``held_obj``, positions of ``fixed_obj``; ``Ta`` (4x4, cell unit,
     or the name of a cell transform) is the held object's frame in the fixed
     object's frame once mated. Condition 2 only, with T = T_O T_a T_g; a stable-pose
-    label passes every grasp (the paper assumes some X, Y, Z reaches it).
+    label as ``rule`` says (RULES).
     """
+    _check_rule(rule)
     if isinstance(Ta, str):
         if Ta not in cell.transforms:
             raise SparValueError(f"unknown transform {Ta!r}")
@@ -179,7 +182,7 @@ def mate_reachable_pairs(cell: Cell, held_obj: str, fixed_obj: str, grasp_labels
     for p in pos_labels:
         T_O = _absolute(cell, fixed, p)
         if T_O is None:
-            pairs += [(g.label, p) for g in _somewhere(cell, fixed_obj, p, grasps, [Ta @ g.T for g in grasps])]
+            pairs += [(g.label, p) for g in _somewhere(cell, fixed_obj, p, grasps, [Ta @ g.T for g in grasps], rule)]
             continue
         T_held = T_O @ Ta
         for g in grasps:
@@ -191,15 +194,15 @@ def mate_reachable_pairs(cell: Cell, held_obj: str, fixed_obj: str, grasp_labels
 
 
 def _arc_reachable(cell: Cell, objects: Sequence[str], grasps: Sequence[str],
-                   positions: Sequence[str], ta: np.ndarray | str | None) -> list[list[str]]:
-    return reachable_pairs(cell, objects[0], grasps, positions)
+                   positions: Sequence[str], ta: np.ndarray | str | None, rule: str) -> list[list[str]]:
+    return reachable_pairs(cell, objects[0], grasps, positions, rule)
 
 
 def _arc_mate(cell: Cell, objects: Sequence[str], grasps: Sequence[str],
-              positions: Sequence[str], ta: np.ndarray | str | None) -> list[list[str]]:
+              positions: Sequence[str], ta: np.ndarray | str | None, rule: str) -> list[list[str]]:
     if ta is None or len(objects) != 2:
         raise SparValueError("mate_reachable needs objects [held, fixed] and T_a")
-    return mate_reachable_pairs(cell, objects[0], objects[1], grasps, positions, ta)
+    return mate_reachable_pairs(cell, objects[0], objects[1], grasps, positions, ta, rule)
 
 
 ARCS: dict[str, Callable[..., list[list[str]]]] = {
@@ -209,11 +212,13 @@ ARCS: dict[str, Callable[..., list[list[str]]]] = {
 
 
 def arc(cell: Cell, kind: str, objects: Sequence[str], grasps: Sequence[str],
-        positions: Sequence[str], ta: np.ndarray | str | None = None) -> list[list[str]]:
-    """The pairs of a geometric arc ``kind`` (reachable | mate_reachable); objects [obj] or [held, fixed]."""
+        positions: Sequence[str], ta: np.ndarray | str | None = None,
+        rule: str = "reachable") -> list[list[str]]:
+    """The pairs of a geometric arc ``kind`` (reachable | mate_reachable); objects [obj] or
+    [held, fixed]; ``rule`` for stable-pose labels (RULES)."""
     if kind not in ARCS:
         raise SparValueError(f"unknown geometric constraint {kind!r} (one of {', '.join(ARCS)})")
-    return ARCS[kind](cell, objects, grasps, positions, ta)
+    return ARCS[kind](cell, objects, grasps, positions, ta, rule)
 
 
 def solutions_for(cell: Cell, T: np.ndarray) -> list[list[float]]:
