@@ -10,6 +10,8 @@
             arc_pairs/7,             % +Problem, +Rule, +Constraint, +Objects, +GLabels, +PLabels, -Pairs
             py_bridge/2,             % +Call, -Result (for phase 2)
             spar_load_facts/1,       % +Data (from Python)
+            load_problem_file/2,     % +File, -Problem
+            unload_problem_cell/1,   % +Problem
             data_term/2,             % +Data, -Term
             term_data/2,             % +Term, -Data
             error_info/2             % +Error, -Info
@@ -85,6 +87,44 @@ spar_load_facts(Data) :-
     must_be(list, Data),
     maplist(data_term, Data, Facts),
     kb:replace_facts(Facts).
+
+%!  load_problem_file(+File, -Problem) is det.
+%
+%   Load the problem file File through the Python loader (spar_py.kb,
+%   every check applies): its facts replace those of the problem of the
+%   same name, and Python keeps its cell for the calls about Problem.
+%
+%   @error spar_error(Message) if the file is not a valid problem (the
+%          loader's one-line message).
+
+load_problem_file(File, Problem) :-
+    atom_string(File, FileS),
+    catch(py_call('spar_py.engine':load_problem_file(FileS), [Name, Data]), E,
+          spar_error(E)),
+    atom_string(Problem, Name),
+    spar_load_facts(Data).
+
+%!  unload_problem_cell(+Problem) is det.
+%
+%   Forget Problem on both sides: its facts and its Python cell.
+
+unload_problem_cell(Problem) :-
+    kb:unload_facts(Problem),
+    py_call('spar_py.engine':forget_cell(Problem)).
+
+%   A SparError raised by the loader becomes error(spar_error(Msg), _),
+%   printed as its one-line message.
+spar_error(error(python_error(_, V), _)) :-
+    py_call('spar_py.engine':is_spar_error(V), @(true)),
+    !,
+    py_call(str(V), Msg),
+    throw(error(spar_error(Msg), _)).
+spar_error(E) :-
+    throw(E).
+
+:- multifile prolog:error_message//1.
+prolog:error_message(spar_error(Msg)) -->
+    [ '~w'-[Msg] ].
 
 %!  data_term(+Data, -Term) is det.
 %

@@ -24,7 +24,7 @@
 */
 :- module(kb,
           [ replace_facts/1,        % +Facts
-            unload_problem/1,       % +Problem
+            unload_facts/1,       % +Problem
             loaded_problem/1,       % ?Problem
             with_problem/2,         % +Problem, :Goal
             problem_in_scope/1      % -Problem
@@ -87,7 +87,7 @@ replace_facts(Facts) :-
     ->  true
     ;   domain_error(kb_facts_with_one_problem, Facts)
     ),
-    unload_problem(Problem),
+    unload_facts(Problem),
     forall(member(F, Facts), (stored(F, Problem, S), assertz(S))).
 
 check_fact(F) :-
@@ -96,11 +96,11 @@ check_fact(F) :-
     ;   domain_error(kb_fact, F)
     ).
 
-%!  unload_problem(+Problem:atom) is det.
+%!  unload_facts(+Problem:atom) is det.
 %
 %   Retract every fact stored for Problem (nothing if it is not loaded).
 
-unload_problem(Problem) :-
+unload_facts(Problem) :-
     must_be(atom, Problem),
     forall(kb_predicate(N, A),
            ( functor(H, N, A), stored(H, Problem, S), retractall(S) )).

@@ -53,7 +53,7 @@
 :- use_module(library(option)).
 :- use_module(library(pairs)).
 :- use_module(library(yall)).
-:- use_module(kb).
+:- use_module(kb, [with_problem/2]).
 :- use_module(foreign).
 :- use_module(csp).
 :- use_module(ordering).
@@ -63,6 +63,7 @@
 :- use_module('../kb/templates/actions').
 :- use_module('../kb/templates/sensing').
 :- use_module(uncertainty).
+:- reexport(toplevel).
 :- use_module(library(time)).
 
 :- meta_predicate phase1(+, :, -).

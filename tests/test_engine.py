@@ -53,7 +53,7 @@ def test_repl_answers_with_the_built_version() -> None:
     r = subprocess.run(SPAR + ["repl"], input="current_prolog_flag(version, V).\n",
                        capture_output=True, text=True, timeout=120, cwd=ROOT)
     assert f"V = {swipl_record()['version']}." in r.stdout
-    assert "plan(peg_in_block, P), print_plan(P)" in r.stdout
+    assert "plan(peg_in_block, P)." in r.stdout
 
 
 def _old_swipl() -> str | None:

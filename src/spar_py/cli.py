@@ -20,11 +20,13 @@ EXIT_OK, EXIT_FAIL, EXIT_INPUT, EXIT_INTERNAL, EXIT_TIMEOUT = 0, 1, 2, 3, 4
 DEFAULT_PROBLEM = "kb/problems/peg_in_block.yaml"
 
 BANNER = """\
-spar-py {version} - SPAR's planner in SWI-Prolog {swi}; problem {problem} loaded.
+spar-py {version} - SPAR's planner in SWI-Prolog {swi}; loaded: {loaded}.
 Try:
-    ?- plan({problem}, P), print_plan(P).
-    ?- phase1({problem}, [trace(true)], plan(P)), print_partial(P).
-    ?- kb:grasp(peg, G, gfaces(F), _, _, _).
+    ?- plan({problem}, P).
+    ?- phase1({problem}, [trace(true)], plan(P)).
+    ?- load_problem('kb/problems/two_pegs.yaml', Q), plan(Q, P).
+    ?- loaded_problems(L).
+    ?- help(plan/2).
 Quit with end_of_file (Ctrl-D)."""
 
 
@@ -57,17 +59,25 @@ def cmd_kb_check(args: argparse.Namespace) -> int:
 
 
 def cmd_repl(args: argparse.Namespace) -> int:
-    """The interactive Prolog toplevel with planner and a problem loaded."""
+    """The Prolog toplevel with the planner and a problem loaded. Interactive on a terminal;
+    with standard input piped, a scripted session (spar_toplevel:batch_toplevel/0: each
+    query answered once, so none is swallowed as the answer to "more?")."""
     from .engine import engine
     from .kb import load_problem
 
     cell = load_problem(args.problem)
     eng = engine()
+    eng.query_once("spar_toplevel:collect_docs")  # before loading: it reloads kb.pl
     eng.load_cell(cell)
     swi = eng.query_once("current_prolog_flag(version, V)")["V"]
-    print(BANNER.format(version=__version__, swi=f"{swi // 10000}.{swi // 100 % 100}.{swi % 100}", problem=cell.name))
+    loaded = ", ".join(eng.query_once("spar:loaded_problems(L)")["L"])
+    print(BANNER.format(version=__version__, swi=f"{swi // 10000}.{swi // 100 % 100}.{swi % 100}",
+                        problem=cell.name, loaded=loaded))
     sys.stdout.flush()
-    eng.query_once("prolog")
+    if sys.stdin.isatty():
+        eng.query_once("prolog")
+    else:
+        eng.query_once("spar_toplevel:batch_toplevel")
     return EXIT_OK
 
 

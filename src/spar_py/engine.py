@@ -174,7 +174,7 @@ class Engine:
         """Forget problem ``name`` (its Prolog facts and its cell); a no-op if not loaded."""
         with self.lock:
             self.cells.pop(name, None)
-            self.query_once("kb:unload_problem(P)", {"P": name})
+            self.query_once("kb:unload_facts(P)", {"P": name})
 
     def cell(self, name: str) -> Any:
         """The loaded cell of problem ``name`` (SparError if it is not loaded)."""
@@ -223,6 +223,29 @@ def _cell(problem: str) -> Any:
 
 
 # ---------------------------------------------------------------------- called from Prolog
+
+
+def load_problem_file(path: str) -> list[Any]:
+    """The toplevel's load_problem/1,2: load and check ``path``, keep its cell by name, and
+    return ``[name, facts]`` for Prolog to assert (foreign:load_problem_file/2)."""
+    from .kb import facts, load_problem
+
+    cell = load_problem(path)
+    if _engine is None:
+        raise SparError("the engine is not started")
+    _engine.cells[cell.name] = cell
+    return [cell.name, facts(cell)]
+
+
+def is_spar_error(value: Any) -> bool:
+    """True if ``value`` is an exception spar-py raises on purpose (a SparError)."""
+    return isinstance(value, SparError)
+
+
+def forget_cell(problem: str) -> None:
+    """The toplevel's unload_problem/1: drop the cell of ``problem`` (if loaded)."""
+    if _engine is not None:
+        _engine.cells.pop(problem, None)
 
 
 def arc_pairs(problem: str, rule: str, kind: str, objects: list[str], grasps: list[str],
