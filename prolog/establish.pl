@@ -62,7 +62,7 @@
 :- use_module(kb, []).
 :- use_module(ordering).
 :- use_module(cms).
-:- use_module(goals).
+:- use_module(plan_state).
 :- use_module('../kb/templates/actions', [instantiate_establishing_action//3]).
 
 %!  establish(+Goal, +Plan0, -Plan, -Establisher) is nondet.

@@ -56,21 +56,10 @@
             solve/2,                 % +Plan0, -Plan
             satisfy_geo/3,           % +Goal, +Plan0, -Plan
             plan_partial/2,          % +Plan, -Partial
-            note/3,                  % +Plan, +Format, +Args
             print_goal/1,            % +Goal
             print_action/1,          % +Action
-            % the plan record (library(record))
-            plan_actions/2, plan_order/2, plan_net/2, plan_ids/2,
-            plan_ops/2, plan_geos/2, plan_sat/2, plan_steps/2,
-            plan_bound/2, plan_methods/2, plan_trace/2, plan_deepest/2,
-            plan_seps/2, set_seps_of_plan/3,
-            plan_history/2, plan_checked/2, conflict_steps/3, bound_hit/1,
-            set_actions_of_plan/3, set_order_of_plan/3, set_net_of_plan/3,
-            set_ids_of_plan/3, set_ops_of_plan/3, set_geos_of_plan/3,
-            set_sat_of_plan/3, set_steps_of_plan/3, set_deepest_of_plan/3,
-            set_checked_of_plan/3, plan_lookahead/2
+            conflict_steps/3         % +Vars, +Plan, -Ks
           ]).
-:- use_module(library(record)).
 :- use_module(library(lists)).
 :- use_module(library(apply)).
 :- use_module(library(error)).
@@ -81,24 +70,9 @@
 :- use_module(ordering).
 :- use_module(cms).
 :- use_module(establish).
+:- use_module(plan_state).
+:- use_module(spar_defaults).
 :- use_module('../kb/templates/actions', [gensym//2]).
-
-:- record plan(actions:list = [],
-               order:list = [],
-               net,
-               ids:list = [],
-               ops:list = [],
-               geos:list = [],
-               sat:list = [],
-               steps:integer = 0,
-               bound:integer = 12,
-               methods:list = [promotion, separation, white_knight],
-               trace:boolean = false,
-               history:list = [],
-               checked:list = [],
-               lookahead:boolean = true,
-               deepest,
-               seps:list = []).
 
 %!  phase1_search(+Options, -Outcome, -Bound) is det.
 %
@@ -112,8 +86,10 @@
 %   spar:phase1/3.
 
 phase1_search(Options, Outcome, Bound) :-
-    option(max_actions(Max), Options, 12),
-    option(max_steps(Budget), Options, 10000),
+    default_option(max_actions, Max0),
+    default_option(max_steps, Budget0),
+    option(max_actions(Max), Options, Max0),
+    option(max_steps(Budget), Options, Budget0),
     lower_bound(LB),
     Lo is min(LB, Max),
     Spent = steps(0),
@@ -156,9 +132,9 @@ goal_lower_bound(_, 1).
 %   searched completely is reported, with its unmet goal Unmet0).
 
 rounds(B, Max, Budget, Unmet0, Options, Outcome, Bound) :-
-    Recorder = failures(none, none, false, Budget),
+    failure_recorder(Budget, Recorder),
     initial_plan(B, Options, Plan0),
-    set_deepest_of_plan(Recorder, Plan0, Plan1),
+    set_recorder_of_plan(Recorder, Plan0, Plan1),
     note(Plan1, "~n=== phase 1, at most ~d actions ===~n", [B]),
     catch(( solve(Plan1, Plan) -> Found = true ; Found = false ),
           spar_step_budget, Found = budget),
@@ -168,7 +144,7 @@ rounds(B, Max, Budget, Unmet0, Options, Outcome, Bound) :-
         Bound = B
     ;   Found == false,
         B < Max,
-        arg(3, Recorder, true)
+        recorder_bound_hit(Recorder)
     ->  B1 is B + 1,
         unmet_goal(Recorder, Unmet1),
         rounds(B1, Max, Budget, Unmet1, Options, Outcome, Bound)
@@ -190,7 +166,7 @@ rounds(B, Max, Budget, Unmet0, Options, Outcome, Bound) :-
 %   first user goal.
 
 unmet_goal(Recorder, Unmet) :-
-    Recorder = failures(Op, Geo, _, _),
+    recorder_deepest(Recorder, Op, Geo),
     (   Geo = _-Goal
     ->  Unmet = Goal
     ;   Op = _-Goal
@@ -205,9 +181,12 @@ unmet_goal(Recorder, Unmet) :-
 %   the operational stack as op(top_N, finish, Goal).
 
 initial_plan(Bound, Options, Plan) :-
-    option(declobber(Methods), Options, [promotion, separation, white_knight]),
-    option(trace(Trace), Options, false),
-    option(forward_check(Lookahead), Options, true),
+    default_option(declobber, Methods0),
+    default_option(trace, Trace0),
+    default_option(forward_check, Lookahead0),
+    option(declobber(Methods), Options, Methods0),
+    option(trace(Trace), Options, Trace0),
+    option(forward_check(Lookahead), Options, Lookahead0),
     (   option(oracle(Oracle), Options)
     ->  cms_empty(Oracle, Net)
     ;   cms_empty(Net)
@@ -215,8 +194,7 @@ initial_plan(Bound, Options, Plan) :-
     findall(G, kb:goal(G), Goals),
     foldl(top_goal, Goals, Tops, [], Ids),
     make_plan([ net(Net), ids(Ids), ops(Tops), bound(Bound),
-                methods(Methods), trace(Trace), lookahead(Lookahead),
-                deepest(failures(none, none, false, 0-steps(0))) ],
+                methods(Methods), trace(Trace), lookahead(Lookahead) ],
               Plan).
 
 top_goal(G, op(Id, finish, G), Ids0, Ids) :-
@@ -395,37 +373,6 @@ add_satisfied(Goal, E, Plan0, Plan) :-
     plan_sat(Plan0, Sat),
     set_sat_of_plan([sat(Goal, E)|Sat], Plan0, Plan).
 
-record_failure(K, Goal, Plan) :-
-    plan_deepest(Plan, Recorder),
-    (   Goal = geo(_, _, _, _) -> Arg = 2 ; Arg = 1 ),
-    arg(Arg, Recorder, Old),
-    (   ( Old == none ; Old = K0-_, K > K0 )
-    ->  nb_setarg(Arg, Recorder, K-Goal)
-    ;   true
-    ).
-
-%   spend_step(+Plan): count a step against the budget of the phase1
-%   call (all rounds together); throw spar_step_budget when it is spent.
-
-spend_step(Plan) :-
-    plan_deepest(Plan, Recorder),
-    arg(4, Recorder, Budget-Spent),
-    arg(1, Spent, N0),
-    N is N0 + 1,
-    nb_setarg(1, Spent, N),
-    (   Budget > 0, N > Budget
-    ->  throw(spar_step_budget)
-    ;   true
-    ).
-
-%!  bound_hit(+Plan) is det.
-%
-%   Note that the bound refused a new action in this round.
-
-bound_hit(Plan) :-
-    plan_deepest(Plan, Recorder),
-    nb_setarg(3, Recorder, true).
-
 %!  satisfy_geo(+Goal, +Plan0, -Plan) is semidet.
 %
 %   Sec. 4.2: the operational conditions of geo(Id, A, Constraint, Conds)
@@ -484,16 +431,6 @@ plan_partial(Plan, partial(Actions, Order, Net, Satisfied)) :-
                  /*******************************
                  *            TRACE             *
                  *******************************/
-
-%!  note(+Plan, +Format, +Args) is det.
-%
-%   Print to current output if Plan traces.
-
-note(Plan, Format, Args) :-
-    (   plan_trace(Plan, true)
-    ->  format(Format, Args)
-    ;   true
-    ).
 
 %   trace_step(+Goal, +Plan): the goal stacks and plan actions of Plan in
 %   the layout of Figs. 21-22, then the goal about to be considered (the
