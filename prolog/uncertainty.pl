@@ -33,6 +33,7 @@
 :- use_module(library(error)).
 :- use_module(library(yall)).
 :- use_module(foreign, [py_bridge/2]).
+:- use_module(spar_defaults, [default_option/2]).
 :- use_module('../kb/templates/sensing', []).
 
 %!  phase2(+Partial, +Options, -Result) is det.
@@ -43,10 +44,11 @@
 %   aug(Steps, ErrorCount, Verifications, Recoveries, Verdicts, Geometry,
 %   Bindings) (see check_instance/2); Examined the instances checked;
 %   Complete true if the partial plan has no further instance.
-%   Options: max_instances(Cap) (default 50).
+%   Options: max_instances(Cap) (default: spar_defaults:default_option/2).
 
 phase2(Partial, Options, Result) :-
-    option(max_instances(Cap), Options, 50),
+    default_option(max_instances, Cap0),
+    option(max_instances(Cap), Options, Cap0),
     must_be(positive_integer, Cap),
     State = best(none, inf, 0, false),
     (   once(( limit(Cap, spar:partial_instances(Partial, Instance)),
