@@ -9,23 +9,16 @@
     to be satisfied just before action ActionId; the user's goals are
     op(top_N, finish, Goal), `finish` being the virtual last action.
 
-    The plan state is a plan/15 record threaded through the search
-    (Plan0 -> Plan): the plan actions (instantiated templates, newest first,
-    as Fig. 23 lists them), the ordering graph (ordering.pl), the geometric
-    network (cms.pl), the symbol counters (spar_actions:gensym//2), the
-    operational and geometric goal stacks, the satisfied list of
-    sat(Goal, Establisher) entries, the step count, the bound on the number
-    of actions, the declobbering methods, the trace flag, the history of
-    the operational steps (for backjumping), the geometric goals checked
-    ahead of their turn and whether to check them so (forward checking,
-    option forward_check), the search recorder
-    failures(DeepestOp, DeepestGeo, BoundHit, Budget-steps(Spent)), a term
-    updated with nb_setarg/3: the only non-backtrackable state, as it must
-    outlive the failures it records, and the separations sep(D, Cond)
-    posted by declobbering (establish.pl; each also a dif/2 constraint on
-    the plan's terms). Every planner choice is a Prolog
-    choice point; backtracking undoes it completely, symbol numbers
-    included.
+    The plan state is the plan/16 record of plan_state.pl, threaded
+    through the search (Plan0 -> Plan): the plan actions (newest first, as
+    Fig. 23 lists them), the ordering graph, the geometric network, the
+    goal stacks, the satisfied list of sat(Goal, Establisher) entries, the
+    separations and the rest, described there. Every planner choice is a
+    Prolog choice point; backtracking undoes it completely, symbol numbers
+    included. Two things outlive backtracking, on purpose: the search
+    recorder in the plan (plan_state.pl: the deepest failures, whether the
+    bound refused an action, the step budget; nb_setarg/3), and the memo of
+    arc pairs in the CMS network (cms.pl; nb_setarg/3).
 
     The loop (Sec. 2): take the first goal of the operational stack, else of
     the geometric stack; satisfy it (establish.pl for operational goals,
@@ -36,19 +29,20 @@
     4.2: the putdown(block, pos_1) of Sec. 6). It returns straight to the
     latest step that could change the CMS's answer (conflict-directed
     backjumping, see step/3), and a geometric goal is checked as soon as its
-    variables are bound (forward checking), which find the same plans and
+    variables are bound (forward checking); both find the same plans and
     keep the search of unsolvable problems short.
 
     Depth first search with a bound on the number of plan actions, raised
-    from the number of user goals to max_actions one step at a time
-    (iterative deepening): the first plan found is a smallest one, and an
-    unsolvable problem ends, reporting the goal that failed at the deepest
-    point of the last round (a geometric goal the CMS refused, if any). A
+    from a lower bound on the plan size (lower_bound/1) to max_actions one
+    step at a time (iterative deepening): the first plan found is a
+    smallest one, and an unsolvable problem ends, reporting the goal that
+    failed at the deepest point of the last round (a geometric goal the CMS refused, if any). A
     round that never met the bound ends the search at once. Planning of
     this kind is exponential in the plan size (Sec. 7.2) and undecidable
-    (Sec. 2), so a budget of steps over all rounds (max_steps, default
-    10000) keeps even a hard unsolvable problem short; when it is spent,
-    the outcome names the last bound searched completely.
+    (Sec. 2), so a budget of steps over all rounds (max_steps; the
+    defaults are spar_defaults.pl's) keeps even a hard unsolvable problem
+    short; when it is spent, the outcome names the last bound searched
+    completely.
 */
 :- module(goals,
           [ phase1_search/3,         % +Options, -Outcome, -Bound
@@ -86,6 +80,7 @@
 %   spar:phase1/3.
 
 phase1_search(Options, Outcome, Bound) :-
+    must_be(list, Options),
     default_option(max_actions, Max0),
     default_option(max_steps, Budget0),
     option(max_actions(Max), Options, Max0),
@@ -98,7 +93,8 @@ phase1_search(Options, Outcome, Bound) :-
 %!  lower_bound(-N) is det.
 %
 %   A lower bound on the number of actions any plan needs, where iterative
-%   deepening starts: each user goal needs at least one action; a goal
+%   deepening starts (at least 1): each user goal not true initially
+%   needs at least one action; a goal
 %   assembled(Peg, Hole, [_, HoleFaces], _, _) needs a pickup of Peg and the
 %   assemble, and two more (a pickup and a putdown of Hole) when Hole rests
 %   initially in a stable pose that hides a face of HoleFaces (Sec. 6: the
@@ -178,9 +174,17 @@ unmet_goal(Recorder, Unmet) :-
 %!  initial_plan(+Bound, +Options, -Plan) is det.
 %
 %   The null plan: no actions, the user's goals (kb:goal/1, in order) on
-%   the operational stack as op(top_N, finish, Goal).
+%   the operational stack as op(top_N, finish, Goal), at most Bound
+%   actions, and a recorder without a step budget (phase1_search/3 gives
+%   each round its own). Options (spar:phase1/3's; the defaults are
+%   spar_defaults.pl's): declobber(Methods), trace(Bool),
+%   forward_check(Bool) and oracle(Closure) for the CMS (cms_empty/2).
+%
+%   @error type_error(nonneg, Bound), type_error(list, Options).
 
 initial_plan(Bound, Options, Plan) :-
+    must_be(nonneg, Bound),
+    must_be(list, Options),
     default_option(declobber, Methods0),
     default_option(trace, Trace0),
     default_option(forward_check, Lookahead0),
