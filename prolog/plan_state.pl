@@ -17,9 +17,9 @@
     operational steps, the geometric goals checked ahead of their turn,
     whether to check them so, the search recorder and the separations.
 
-    Every field but one is undone on backtracking: goals.pl and
+    Backtracking undoes every change to a plan state but one: goals.pl and
     establish.pl only build new plan terms (and dif/2 constraints, for the
-    separations). The exception is the search recorder,
+    separations). The exception is the contents of the search recorder,
     failures(DeepestOp, DeepestGeo, BoundHit, Budget-steps(Spent)), which
     record_failure/3, bound_hit/1 and spend_step/1 update with nb_setarg/3
     because it must outlive the failures it records. (The CMS network's
@@ -124,9 +124,9 @@ plan_field(seps,     16, list).
 %!  plan_actions(+Plan, -Actions:list) is det.
 %!  set_actions_of_plan(+Actions:list, +Plan0, -Plan) is det.
 %
-%   The plan actions, instantiated templates
-%   action(Id, Term, preconditions(Ops, Geos), addlist(Adds), dellist(Dels)),
-%   newest first (as Fig. 23 lists them).
+%   The plan actions, newest first, each an instantiated template
+%   action(Id, Term, preconditions(Ops, Geos), addlist(Adds), dellist(Dels)).
+%   Fig. 23 lists them in this order.
 %
 %   @error type_error(list, Actions) from set_actions_of_plan/3 if Actions is
 %          not a list (instantiation_error if it is unbound or partial).
