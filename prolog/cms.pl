@@ -16,18 +16,22 @@
                                     the held object at T_P Ta
 
     After each addition the network is checked with the search of Fig. 17
-    (csp.pl); a refused constraint fails and, the network being threaded
+    (csp.pl); a refused constraint fails (cms_add/4) or is answered
+    refused(Reason, Vars) (cms_try/4) and, the network being threaded
     (Net0 -> Net), leaves the old network in force: "the old network is
     restored" costs nothing.
 
     The network term is cms(Nodes, Arcs, ArcOrder, oracle(Oracle, Memo)):
     Nodes and Arcs as net/2 of csp.pl, ArcOrder the arc keys newest first
     (for display), Oracle the closure that computes an arc's allowed pairs,
-    called as call(Oracle, Constraint, Objects, GraspLabels, PosLabels,
-    Pairs) with the arguments of foreign:arc_pairs/5, and Memo its answers
-    so far (memo(Assoc), kept with nb_setarg/3 across backtracking: the
-    oracle is a function of its arguments, and the search asks the same
-    question many times). The planner uses foreign:arc_pairs
+    called as call(Oracle, Kind, Objects, GraspLabels, PosLabels, Pairs)
+    with the arguments of foreign:arc_pairs/5 (Kind is reachable or
+    mate_reachable(Ta), the constraint without its two variables), and
+    Memo its answers so far (memo(Assoc), kept with nb_setarg/3 across
+    backtracking: the oracle is a function of its arguments, and the search
+    asks the same question many times). With the plan's search recorder
+    (plan_state.pl) this memo is the only Prolog state of phase 1 that
+    backtracking does not undo. The planner uses foreign:arc_pairs
     (the Python kinematics) unless it is given another oracle; Prolog-only
     tests give a table-driven test double.
 */
@@ -84,6 +88,10 @@ cms_empty(Oracle, cms(Nodes, Arcs, [], oracle(Oracle, memo(Memo)))) :-
 %   part_location(peg, init_pos1)) is no free variable: it gets its node
 %   [tr1] first (as cms_initial_state/3 gives it), and the constraint is
 %   checked against that.
+%
+%   @error instantiation_error, type_error(atom, V) or type_error(list, Ls)
+%          for a bad member/2 or in_position_class/2 constraint.
+%   @error domain_error(initial_constraint, C) for any other constraint.
 
 cms_initial(C, Net0, Net) :-
     unary(C, V, Ls),

@@ -8,12 +8,16 @@
              the undirected arc between V1 and V2; stored once, under the
              orientation it was created with)
 
-    csp/3, choose_one/4 and all_consistent/3 are the paper's Fig. 17
-    depth-first search with backtracking; it decides consistency and, on
-    backtracking, enumerates every solution (plan instances for phase 2).
-    ac3/2 is arc consistency (AC-3), used to show users label sets pruned of
-    labels that no solution can use; the planner's consistency test is the
-    search of Fig. 17.
+    csp/3 is the paper's Fig. 17 depth-first search with backtracking; it
+    decides consistency (consistent/1) and, on backtracking, enumerates
+    every solution (solution/2: plan instances for phase 2). It checks a
+    label only against the assigned variables that share an arc with it;
+    choose_one/4 and all_consistent/3 are the figure's own predicates, which
+    check every previous assignment: csp/3 does not call them, and
+    tests/prolog/csp_search.plt checks that both give the same solutions in
+    the same order. ac3/2 is arc consistency (AC-3), used to show users
+    label sets pruned of labels that no solution can use; the planner's
+    consistency test is the search of Fig. 17.
 */
 :- module(csp,
           [ csp/3,                  % +VarSet, +Net, -Result
@@ -39,7 +43,6 @@
 %   of assigned variables joined by an arc takes an allowed pair. The most
 %   recently assigned variable comes first in Result. Backtracking gives the
 %   next assignment.
-
 %
 %   The search is the one of Fig. 17 (variables in VarSet's order, labels in
 %   label-set order, the same answers in the same order); a label is checked
@@ -158,7 +161,7 @@ consistent(Net) :-
 %   backtracking enumerates all solutions, lazily.
 %
 %   ==
-%   ?- fig15(Net), findall(S, solution(Net, S), Ss).
+%   ?- fig15(Net), findall(S, solution(Net, S), Ss).   % tests/prolog/csp.plt
 %   Ss = [[v1-1,v2-2,v3-4], [v1-2,v2-2,v3-4]].
 %   ==
 

@@ -1,8 +1,9 @@
 /*  spar-py: satisfying operational goals (Sec. 4.1): establishment,
-    clobbering, promotion and white knights.
+    clobbering, promotion, separation and white knights.
 
     establish/4 finds an action E whose add list has an element unifying
-    with the goal's condition and posts prior_to(E, S), trying in order
+    with the goal's condition and posts prior_to(E, S) (nothing to post for
+    `start`, which precedes every action), trying in order
 
       1. the actions already in the plan, newest first (constraint posting
          before adding actions, Sec. 2),
@@ -12,12 +13,11 @@
 
     declobber/4 then deals with every action C that may clobber the goal:
     C has a delete-list element unifiable with the condition (tested
-    without binding anything) and may fall between E and S. (If C must
-    fall between them, E is dropped: establishing by the white knight
-    directly is the same plan with fewer orderings.) The methods
-    are a table tried in the order the plan's options give
-    (declobber([promotion, separation, white_knight]) by default;
-    declobber([promotion, white_knight]) is the paper's planner):
+    without binding anything) and may fall between E and S. The methods
+    are a table tried in the order of the plan's methods (option
+    declobber, by default [promotion, separation, white_knight] as
+    spar_defaults.pl says; [promotion, white_knight] is the paper's
+    planner):
 
       promotion     prior_to(S, C)
       separation    dif(D, Cond) for every delete-list element D of C that
@@ -29,6 +29,11 @@
                     (W = E is the establisher acting as its own white
                     knight, Sec. 4.1)
 
+    If C must fall between E and S, only separation is tried: promotion
+    would close a cycle, and a white knight between C and S is the same
+    plan as establishing the goal by it directly, with fewer orderings,
+    which establish/4 tries among its alternatives.
+
     Why this order: promotion adds one ordering and binds nothing, and is
     the paper's first choice; separation adds neither an action nor an
     ordering, but it commits a variable of C away from a value (C's own
@@ -37,7 +42,7 @@
     action or orderings and comes last. A separation is a constraint
     posted with dif/2 on the plan's terms (attributed variables: it lives
     in the threaded plan state and backtracking removes it) and is also
-    recorded as sep(D, Cond) in the plan state (goals.pl), since a dif/2
+    recorded as sep(D, Cond) in the plan state (plan_state.pl), since a dif/2
     between two terms that become different atoms vanishes: plan
     instances (spar:partial_instances/2) must keep D and Cond different
     after the network variables get their labels.
@@ -62,7 +67,7 @@
 :- use_module(kb, []).
 :- use_module(ordering).
 :- use_module(cms).
-:- use_module(goals).
+:- use_module(plan_state).
 :- use_module('../kb/templates/actions', [instantiate_establishing_action//3]).
 
 %!  establish(+Goal, +Plan0, -Plan, -Establisher) is nondet.
@@ -203,9 +208,10 @@ known_declobber_method(white_knight).
 %   Plan makes Goal = op(Id, S, Cond), established by Establisher, safe
 %   from every possible clobberer (Sec. 4.1, the truth criterion of
 %   Sec. 7.1): each is dealt with by one of the plan's declobbering
-%   methods, tried in order. Clobberers are taken one at a time, the
-%   next one computed from the plan as it is then, so actions added by a
-%   white knight are considered too.
+%   methods, tried in order (by separation only, if it necessarily falls
+%   between Establisher and S: see necessarily_between/4). Clobberers are
+%   taken one at a time, the next one computed from the plan as it is
+%   then, so actions added by a white knight are considered too.
 
 declobber(op(_, S, Cond), E, Plan0, Plan) :-
     plan_methods(Plan0, Methods),

@@ -9,23 +9,16 @@
     to be satisfied just before action ActionId; the user's goals are
     op(top_N, finish, Goal), `finish` being the virtual last action.
 
-    The plan state is a plan/15 record threaded through the search
-    (Plan0 -> Plan): the plan actions (instantiated templates, newest first,
-    as Fig. 23 lists them), the ordering graph (ordering.pl), the geometric
-    network (cms.pl), the symbol counters (spar_actions:gensym//2), the
-    operational and geometric goal stacks, the satisfied list of
-    sat(Goal, Establisher) entries, the step count, the bound on the number
-    of actions, the declobbering methods, the trace flag, the history of
-    the operational steps (for backjumping), the geometric goals checked
-    ahead of their turn and whether to check them so (forward checking,
-    option forward_check), the search recorder
-    failures(DeepestOp, DeepestGeo, BoundHit, Budget-steps(Spent)), a term
-    updated with nb_setarg/3: the only non-backtrackable state, as it must
-    outlive the failures it records, and the separations sep(D, Cond)
-    posted by declobbering (establish.pl; each also a dif/2 constraint on
-    the plan's terms). Every planner choice is a Prolog
-    choice point; backtracking undoes it completely, symbol numbers
-    included.
+    The plan state is the plan/16 record of plan_state.pl, threaded
+    through the search (Plan0 -> Plan): the plan actions (newest first, as
+    Fig. 23 lists them), the ordering graph, the geometric network, the
+    goal stacks, the satisfied list of sat(Goal, Establisher) entries, the
+    separations and the rest, described there. Every planner choice is a
+    Prolog choice point; backtracking undoes it completely, symbol numbers
+    included. Two things outlive backtracking, on purpose: the search
+    recorder in the plan (plan_state.pl: the deepest failures, whether the
+    bound refused an action, the step budget; nb_setarg/3), and the memo of
+    arc pairs in the CMS network (cms.pl; nb_setarg/3).
 
     The loop (Sec. 2): take the first goal of the operational stack, else of
     the geometric stack; satisfy it (establish.pl for operational goals,
@@ -36,19 +29,20 @@
     4.2: the putdown(block, pos_1) of Sec. 6). It returns straight to the
     latest step that could change the CMS's answer (conflict-directed
     backjumping, see step/3), and a geometric goal is checked as soon as its
-    variables are bound (forward checking), which find the same plans and
+    variables are bound (forward checking); both find the same plans and
     keep the search of unsolvable problems short.
 
     Depth first search with a bound on the number of plan actions, raised
-    from the number of user goals to max_actions one step at a time
-    (iterative deepening): the first plan found is a smallest one, and an
-    unsolvable problem ends, reporting the goal that failed at the deepest
-    point of the last round (a geometric goal the CMS refused, if any). A
+    from a lower bound on the plan size (lower_bound/1) to max_actions one
+    step at a time (iterative deepening): the first plan found is a
+    smallest one, and an unsolvable problem ends, reporting the goal that
+    failed at the deepest point of the last round (a geometric goal the CMS refused, if any). A
     round that never met the bound ends the search at once. Planning of
     this kind is exponential in the plan size (Sec. 7.2) and undecidable
-    (Sec. 2), so a budget of steps over all rounds (max_steps, default
-    10000) keeps even a hard unsolvable problem short; when it is spent,
-    the outcome names the last bound searched completely.
+    (Sec. 2), so a budget of steps over all rounds (max_steps; the
+    defaults are spar_defaults.pl's) keeps even a hard unsolvable problem
+    short; when it is spent, the outcome names the last bound searched
+    completely.
 */
 :- module(goals,
           [ phase1_search/3,         % +Options, -Outcome, -Bound
@@ -56,21 +50,10 @@
             solve/2,                 % +Plan0, -Plan
             satisfy_geo/3,           % +Goal, +Plan0, -Plan
             plan_partial/2,          % +Plan, -Partial
-            note/3,                  % +Plan, +Format, +Args
             print_goal/1,            % +Goal
             print_action/1,          % +Action
-            % the plan record (library(record))
-            plan_actions/2, plan_order/2, plan_net/2, plan_ids/2,
-            plan_ops/2, plan_geos/2, plan_sat/2, plan_steps/2,
-            plan_bound/2, plan_methods/2, plan_trace/2, plan_deepest/2,
-            plan_seps/2, set_seps_of_plan/3,
-            plan_history/2, plan_checked/2, conflict_steps/3, bound_hit/1,
-            set_actions_of_plan/3, set_order_of_plan/3, set_net_of_plan/3,
-            set_ids_of_plan/3, set_ops_of_plan/3, set_geos_of_plan/3,
-            set_sat_of_plan/3, set_steps_of_plan/3, set_deepest_of_plan/3,
-            set_checked_of_plan/3, plan_lookahead/2
+            conflict_steps/3         % +Vars, +Plan, -Ks
           ]).
-:- use_module(library(record)).
 :- use_module(library(lists)).
 :- use_module(library(apply)).
 :- use_module(library(error)).
@@ -81,24 +64,9 @@
 :- use_module(ordering).
 :- use_module(cms).
 :- use_module(establish).
+:- use_module(plan_state).
+:- use_module(spar_defaults).
 :- use_module('../kb/templates/actions', [gensym//2]).
-
-:- record plan(actions:list = [],
-               order:list = [],
-               net,
-               ids:list = [],
-               ops:list = [],
-               geos:list = [],
-               sat:list = [],
-               steps:integer = 0,
-               bound:integer = 12,
-               methods:list = [promotion, separation, white_knight],
-               trace:boolean = false,
-               history:list = [],
-               checked:list = [],
-               lookahead:boolean = true,
-               deepest,
-               seps:list = []).
 
 %!  phase1_search(+Options, -Outcome, -Bound) is det.
 %
@@ -112,8 +80,11 @@
 %   spar:phase1/3.
 
 phase1_search(Options, Outcome, Bound) :-
-    option(max_actions(Max), Options, 12),
-    option(max_steps(Budget), Options, 10000),
+    must_be(list, Options),
+    default_option(max_actions, Max0),
+    default_option(max_steps, Budget0),
+    option(max_actions(Max), Options, Max0),
+    option(max_steps(Budget), Options, Budget0),
     lower_bound(LB),
     Lo is min(LB, Max),
     Spent = steps(0),
@@ -122,7 +93,8 @@ phase1_search(Options, Outcome, Bound) :-
 %!  lower_bound(-N) is det.
 %
 %   A lower bound on the number of actions any plan needs, where iterative
-%   deepening starts: each user goal needs at least one action; a goal
+%   deepening starts (at least 1): each user goal not true initially
+%   needs at least one action; a goal
 %   assembled(Peg, Hole, [_, HoleFaces], _, _) needs a pickup of Peg and the
 %   assemble, and two more (a pickup and a putdown of Hole) when Hole rests
 %   initially in a stable pose that hides a face of HoleFaces (Sec. 6: the
@@ -156,9 +128,9 @@ goal_lower_bound(_, 1).
 %   searched completely is reported, with its unmet goal Unmet0).
 
 rounds(B, Max, Budget, Unmet0, Options, Outcome, Bound) :-
-    Recorder = failures(none, none, false, Budget),
+    failure_recorder(Budget, Recorder),
     initial_plan(B, Options, Plan0),
-    set_deepest_of_plan(Recorder, Plan0, Plan1),
+    set_recorder_of_plan(Recorder, Plan0, Plan1),
     note(Plan1, "~n=== phase 1, at most ~d actions ===~n", [B]),
     catch(( solve(Plan1, Plan) -> Found = true ; Found = false ),
           spar_step_budget, Found = budget),
@@ -168,7 +140,7 @@ rounds(B, Max, Budget, Unmet0, Options, Outcome, Bound) :-
         Bound = B
     ;   Found == false,
         B < Max,
-        arg(3, Recorder, true)
+        recorder_bound_hit(Recorder)
     ->  B1 is B + 1,
         unmet_goal(Recorder, Unmet1),
         rounds(B1, Max, Budget, Unmet1, Options, Outcome, Bound)
@@ -190,7 +162,7 @@ rounds(B, Max, Budget, Unmet0, Options, Outcome, Bound) :-
 %   first user goal.
 
 unmet_goal(Recorder, Unmet) :-
-    Recorder = failures(Op, Geo, _, _),
+    recorder_deepest(Recorder, Op, Geo),
     (   Geo = _-Goal
     ->  Unmet = Goal
     ;   Op = _-Goal
@@ -202,12 +174,23 @@ unmet_goal(Recorder, Unmet) :-
 %!  initial_plan(+Bound, +Options, -Plan) is det.
 %
 %   The null plan: no actions, the user's goals (kb:goal/1, in order) on
-%   the operational stack as op(top_N, finish, Goal).
+%   the operational stack as op(top_N, finish, Goal), at most Bound
+%   actions, and a recorder without a step budget (phase1_search/3 gives
+%   each round its own). Options (spar:phase1/3's; the defaults are
+%   spar_defaults.pl's): declobber(Methods), trace(Bool),
+%   forward_check(Bool) and oracle(Closure) for the CMS (cms_empty/2).
+%
+%   @error type_error(nonneg, Bound), type_error(list, Options).
 
 initial_plan(Bound, Options, Plan) :-
-    option(declobber(Methods), Options, [promotion, separation, white_knight]),
-    option(trace(Trace), Options, false),
-    option(forward_check(Lookahead), Options, true),
+    must_be(nonneg, Bound),
+    must_be(list, Options),
+    default_option(declobber, Methods0),
+    default_option(trace, Trace0),
+    default_option(forward_check, Lookahead0),
+    option(declobber(Methods), Options, Methods0),
+    option(trace(Trace), Options, Trace0),
+    option(forward_check(Lookahead), Options, Lookahead0),
     (   option(oracle(Oracle), Options)
     ->  cms_empty(Oracle, Net)
     ;   cms_empty(Net)
@@ -215,8 +198,7 @@ initial_plan(Bound, Options, Plan) :-
     findall(G, kb:goal(G), Goals),
     foldl(top_goal, Goals, Tops, [], Ids),
     make_plan([ net(Net), ids(Ids), ops(Tops), bound(Bound),
-                methods(Methods), trace(Trace), lookahead(Lookahead),
-                deepest(failures(none, none, false, 0-steps(0))) ],
+                methods(Methods), trace(Trace), lookahead(Lookahead) ],
               Plan).
 
 top_goal(G, op(Id, finish, G), Ids0, Ids) :-
@@ -395,37 +377,6 @@ add_satisfied(Goal, E, Plan0, Plan) :-
     plan_sat(Plan0, Sat),
     set_sat_of_plan([sat(Goal, E)|Sat], Plan0, Plan).
 
-record_failure(K, Goal, Plan) :-
-    plan_deepest(Plan, Recorder),
-    (   Goal = geo(_, _, _, _) -> Arg = 2 ; Arg = 1 ),
-    arg(Arg, Recorder, Old),
-    (   ( Old == none ; Old = K0-_, K > K0 )
-    ->  nb_setarg(Arg, Recorder, K-Goal)
-    ;   true
-    ).
-
-%   spend_step(+Plan): count a step against the budget of the phase1
-%   call (all rounds together); throw spar_step_budget when it is spent.
-
-spend_step(Plan) :-
-    plan_deepest(Plan, Recorder),
-    arg(4, Recorder, Budget-Spent),
-    arg(1, Spent, N0),
-    N is N0 + 1,
-    nb_setarg(1, Spent, N),
-    (   Budget > 0, N > Budget
-    ->  throw(spar_step_budget)
-    ;   true
-    ).
-
-%!  bound_hit(+Plan) is det.
-%
-%   Note that the bound refused a new action in this round.
-
-bound_hit(Plan) :-
-    plan_deepest(Plan, Recorder),
-    nb_setarg(3, Recorder, true).
-
 %!  satisfy_geo(+Goal, +Plan0, -Plan) is semidet.
 %
 %   Sec. 4.2: the operational conditions of geo(Id, A, Constraint, Conds)
@@ -484,16 +435,6 @@ plan_partial(Plan, partial(Actions, Order, Net, Satisfied)) :-
                  /*******************************
                  *            TRACE             *
                  *******************************/
-
-%!  note(+Plan, +Format, +Args) is det.
-%
-%   Print to current output if Plan traces.
-
-note(Plan, Format, Args) :-
-    (   plan_trace(Plan, true)
-    ->  format(Format, Args)
-    ;   true
-    ).
 
 %   trace_step(+Goal, +Plan): the goal stacks and plan actions of Plan in
 %   the layout of Figs. 21-22, then the goal about to be considered (the

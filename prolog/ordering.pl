@@ -55,6 +55,9 @@ ordering_add_action(Id, G0, G) :-
 %   ==
 %   ?- empty_ordering(G0), prior_to(a1, a2, G0, G1), \+ prior_to(a2, a1, G1, _).
 %   ==
+%
+%   @error type_error(atom, A) if A1 or A2 is not an atom
+%          (instantiation_error if unbound).
 
 prior_to(A1, A2, G0, G) :-
     must_be(atom, A1),
@@ -141,7 +144,7 @@ ordering_actions(G, Ids) :-
 %   ==
 %   ?- empty_ordering(G0), foldl(ordering_add_action, [a,b,c], G0, G1),
 %      prior_to(a, c, G1, G), findall(L, linearisation(G, L), Ls).
-%   Ls = [[a,b,c],[b,a,c],[a,c,b]] (in some order).
+%   Ls = [[a,b,c],[a,c,b],[b,a,c]].
 %   ==
 
 linearisation(G, Ids) :-

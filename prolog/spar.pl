@@ -4,6 +4,8 @@
     Load this file; it loads the rest (Fig. 1, one module per box):
 
       goals.pl      goal stacks, satisfied list, the loop, geometric goals
+      plan_state.pl the plan record the loop threads, the search recorder
+      spar_defaults.pl  the default of every planner option
       establish.pl  establishment, clobbering, promotion, white knights
       ordering.pl   the ordering graph: prior_to/2, cycles, linearisations
       cms.pl        the geometric constraint network
@@ -60,6 +62,7 @@
 :- use_module(cms).
 :- use_module(establish).
 :- use_module(goals).
+:- use_module(spar_defaults).
 :- use_module('../kb/templates/actions').
 :- use_module('../kb/templates/sensing').
 :- use_module(uncertainty).
@@ -408,7 +411,7 @@ phase1_options(Opts, [max_actions(Opts.max_actions), trace(Trace), declobber(Ms)
     (   Opts.trace == @(true) -> Trace = true ; Trace = false ),
     atom_string(Rule, Opts.placements),
     (   Opts.separation == @(true), known_declobber_method(separation)
-    ->  Ms = [promotion, separation, white_knight]
+    ->  default_option(declobber, Ms)
     ;   Ms = [promotion, white_knight]
     ).
 

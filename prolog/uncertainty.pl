@@ -31,6 +31,7 @@
 :- use_module(library(error)).
 :- use_module(library(yall)).
 :- use_module(foreign, [py_bridge/2]).
+:- use_module(spar_defaults, [default_option/2]).
 :- use_module('../kb/templates/sensing', []).
 
 %!  phase2(+Problem, +Partial, +Options, -Result) is det.
@@ -42,11 +43,12 @@
 %   aug(Steps, ErrorCount, Verifications, Recoveries, Verdicts, Geometry,
 %   Bindings) (see check_instance/2); Examined the instances checked;
 %   Complete true if the partial plan has no further instance.
-%   Options: max_instances(Cap) (default 50).
+%   Options: max_instances(Cap) (default: spar_defaults:default_option/2).
 
 phase2(Problem, Partial, Options, Result) :-
     must_be(atom, Problem),
-    option(max_instances(Cap), Options, 50),
+    default_option(max_instances, Cap0),
+    option(max_instances(Cap), Options, Cap0),
     must_be(positive_integer, Cap),
     State = best(none, inf, 0, false),
     (   once(( limit(Cap, spar:partial_instances(Partial, Instance)),
@@ -286,7 +288,7 @@ recovery(step(Id, Action), R) :-
 
 %!  ur_dict(+Result, -Dict) is det.
 %
-%   The phase-2 Result (phase2/3) as a dict for janus, the "instance" of the
+%   The phase-2 Result (phase2/4) as a dict for janus, the "instance" of the
 %   JSON schema (docs/json-schema.md): bindings, steps (each with its kind,
 %   the action it serves, tool pose, joint angles, placement), constraints
 %   (one per checked uncertainty-reduction inequality: action, constraint,

@@ -5,6 +5,7 @@
 */
 :- use_module('../../prolog/spar').
 :- use_module('../../prolog/goals').
+:- use_module('../../prolog/plan_state').
 :- use_module('../../prolog/establish').
 :- use_module('../../prolog/ordering').
 :- use_module('../../prolog/cms').

@@ -6,6 +6,7 @@
 */
 :- use_module('../../prolog/spar').
 :- use_module('../../prolog/goals').
+:- use_module('../../prolog/plan_state').
 :- use_module('../../prolog/establish').
 :- use_module('../../prolog/cms').
 :- use_module(fixtures/paper_cell).

@@ -9,6 +9,7 @@
 */
 :- use_module('../../prolog/spar').
 :- use_module('../../prolog/goals').
+:- use_module('../../prolog/plan_state').
 :- use_module('../../prolog/establish').
 :- use_module(fixtures/separation_cell).
 :- use_module(library(plunit)).

@@ -1,0 +1,60 @@
+/*  spar-py: the planner's default options, written once.
+
+    Every default of the planner's options lives in default_option/2 below;
+    the Prolog code reads it (option/3 with the default from here) and the
+    Python side reads all of them in one query of default_options/1, so a
+    default is changed in one place.
+
+      max_actions    12       the largest plan phase 1 tries (Sec. 2)
+      max_steps      10000    goal steps over all rounds of phase 1; 0: none
+      declobber      [promotion, separation, white_knight]
+                              declobbering methods in the order tried
+                              (Sec. 4.1; [promotion, white_knight] is the
+                              paper's planner)
+      forward_check  true     check a geometric goal with the CMS as soon as
+                              its variables are bound
+      trace          false    print the goal stacks at each step
+      max_instances  50       plan instances examined at most in phase 2
+*/
+:- module(spar_defaults,
+          [ default_option/2,        % ?Name, ?Value
+            default_options/1        % -Dict
+          ]).
+
+%!  default_option(?Name, ?Value) is nondet.
+%
+%   Value is the default of the planner option Name (see the module
+%   header). With Name bound it is semidet.
+%
+%   ==
+%   ?- default_option(max_actions, N).
+%   N = 12.
+%   ==
+
+default_option(max_actions, 12).
+default_option(max_steps, 10000).
+default_option(declobber, [promotion, separation, white_knight]).
+default_option(forward_check, true).
+default_option(trace, false).
+default_option(max_instances, 50).
+
+%!  default_options(-Dict) is det.
+%
+%   Dict maps every option name of default_option/2 to its default, for
+%   the Python side to read once. The booleans are written @(true) and
+%   @(false), so that janus gives Python a dict of ints, bools and a list
+%   of str: {"max_actions": 12, "forward_check": True, ...}.
+%
+%   ==
+%   ?- default_options(D), get_dict(max_instances, D, N).
+%   N = 50.
+%   ==
+
+default_options(Dict) :-
+    findall(Name-Value, ( default_option(Name, V), janus_value(V, Value) ),
+            Pairs),
+    dict_pairs(Dict, _, Pairs).
+
+janus_value(true, @(true)) :- !.
+janus_value(false, @(false)) :- !.
+janus_value(V, V).
