@@ -75,3 +75,11 @@ def test_old_swipl_first_on_path_does_not_break_the_engine() -> None:
                        capture_output=True, text=True, timeout=120, env=env)
     assert r.returncode == 0, r.stderr
     assert r.stdout.strip() == str(swipl_record()["version"])
+
+
+def test_the_planner_takes_its_defaults_from_prolog() -> None:
+    d = engine().query_once("spar_defaults:default_options(D)")["D"]
+    p = Planner()
+    assert (p.max_actions, p.max_instances, p.separation) == (d["max_actions"], d["max_instances"],
+                                                               "separation" in d["declobber"])
+    assert Planner(max_actions=3, separation=False).max_actions == 3

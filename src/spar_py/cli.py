@@ -105,7 +105,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
     from .planner import Outcome, Planner
 
     planner = Planner(max_actions=args.max_actions, max_instances=args.max_instances,
-                      separation=not args.no_separation, timeout=args.timeout,
+                      separation=False if args.no_separation else None, timeout=args.timeout,
                       paper_placements=args.paper_placements)
     cell = planner.load_problem(args.problem)
     plan = planner.plan(cell, phase1_only=args.phase1_only, trace=args.trace)
@@ -184,10 +184,10 @@ def build_parser() -> argparse.ArgumentParser:
     plan.add_argument("-o", "--output", help="write the JSON to this file (atomically)")
     plan.add_argument("--trace", action="store_true", help="print the goal stacks at each step (Figs. 21-22)")
     plan.add_argument("--phase1-only", action="store_true", help="stop after the partial plan")
-    plan.add_argument("--max-actions", type=_positive_int, default=12, metavar="N",
-                      help="bound on the plan size (default 12)")
-    plan.add_argument("--max-instances", type=_positive_int, default=50, metavar="N",
-                      help="plan instances examined at most in phase 2 (default 50)")
+    plan.add_argument("--max-actions", type=_positive_int, metavar="N",
+                      help="bound on the plan size (default: prolog/spar_defaults.pl)")
+    plan.add_argument("--max-instances", type=_positive_int, metavar="N",
+                      help="plan instances examined at most in phase 2 (default: prolog/spar_defaults.pl)")
     plan.add_argument("--no-separation", action="store_true",
                       help="declobber without separation, as the paper's planner")
     plan.add_argument("--paper-placements", action="store_true",

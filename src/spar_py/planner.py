@@ -216,8 +216,9 @@ def _signature(files: tuple[str, ...]) -> tuple:
 class Planner:
     """SPAR's two-phase planner on the embedded SWI-Prolog.
 
-    Options: ``max_actions`` (phase-1 plan-size bound), ``max_instances`` (phase-2
-    cap on plan instances examined), ``separation`` (declobber by separation, dif/2),
+    Options (None: the planner's default, prolog/spar_defaults.pl): ``max_actions``
+    (phase-1 plan-size bound), ``max_instances`` (phase-2 cap on plan instances
+    examined), ``separation`` (declobber by separation, dif/2),
     ``paper_placements`` (the paper's rule: a put-down into a stable pose is assumed
     reachable somewhere, Sec. 5.2.4; by default some placement in the free table
     regions must reach it), ``timeout`` (seconds for the whole query, None for none).
@@ -226,19 +227,20 @@ class Planner:
     reloaded when a file changes), so planning a file again reuses their memo tables.
     """
 
-    def __init__(self, max_actions: int = 12, max_instances: int = 50,
-                 separation: bool = True, timeout: float | None = None,
+    def __init__(self, max_actions: int | None = None, max_instances: int | None = None,
+                 separation: bool | None = None, timeout: float | None = None,
                  paper_placements: bool = False) -> None:
-        if max_actions < 1 or max_instances < 1:
+        self.engine = engine()
+        defaults = self.engine.query_once("spar_defaults:default_options(D)")["D"]
+        self.max_actions = defaults["max_actions"] if max_actions is None else max_actions
+        self.max_instances = defaults["max_instances"] if max_instances is None else max_instances
+        self.separation = "separation" in defaults["declobber"] if separation is None else separation
+        if self.max_actions < 1 or self.max_instances < 1:
             raise SparValueError("max_actions and max_instances must be at least 1")
         if timeout is not None and timeout <= 0:
             raise SparValueError("timeout must be positive")
-        self.max_actions = max_actions
-        self.max_instances = max_instances
-        self.separation = separation
         self.timeout = timeout
         self.paper_placements = paper_placements
-        self.engine = engine()
         self._cells: LRU[tuple[tuple, Cell]] = LRU(CELL_CACHE)
         self._cells_lock = threading.Lock()
 
