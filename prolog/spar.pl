@@ -222,17 +222,21 @@ substitute(Assignment, T0, T) :-
 
 %!  partial_dict(+Partial, -Dict) is det.
 %
-%   Partial as a dict for janus (the JSON of issue 4):
+%   Partial as a dict for janus (the "partial" of the plan JSON, schema 2,
+%   docs/json-schema.md):
 %
 %     _{actions: [_{id, term, name, args}],    newest first (Fig. 23)
-%       ordering: [[Before, After]],
+%       ordering: [[Before, After]],           prior_to/2 (Fig. 24)
 %       variables: _{Var: [Label]},             label sets after AC-3
 %       raw_variables: _{Var: [Label]},         as posted (Fig. 25)
 %       arcs: [_{vars: [V1, V2], pairs: [[L1, L2]]}],
-%       separations: [[Deleted, Cond]]}          dif(Deleted, Cond) posted
-%                                                 by separation, oldest first
+%       separations: [_{deleted, condition, text}]}   dif(Deleted, Cond)
+%                                                 posted by separation,
+%                                                 oldest first
 %
-%   Terms and arguments are strings written with ~q; ids, variables and
+%   Arguments, deleted and condition are term data (foreign:term_data/2:
+%   atoms as strings, compounds as _{functor, args}); term and text are
+%   the same terms written with ~q, for display only. Ids, variables and
 %   labels are atoms.
 
 partial_dict(Partial, Dict) :-
@@ -246,19 +250,22 @@ partial_dict(Partial, Dict) :-
     dict_pairs(PrunedDict, _, Pruned),
     cms_arcs(Net, Arcs),
     maplist(arc_dict, Arcs, ArcDicts),
-    findall([DS, CS], ( member(sep(D, C), Sat),
-                        format(string(DS), "~q", [D]),
-                        format(string(CS), "~q", [C]) ),
-            Separations),
+    findall(SD, ( member(sep(D, C), Sat), separation_dict(D, C, SD) ), Separations),
     Dict = _{actions: ADicts, ordering: Ordering, variables: PrunedDict,
              raw_variables: RawDict, arcs: ArcDicts,
              separations: Separations}.
 
+separation_dict(D, C, _{deleted: DD, condition: CD, text: [DS, CS]}) :-
+    term_data(D, DD),
+    term_data(C, CD),
+    format(string(DS), "~q", [D]),
+    format(string(CS), "~q", [C]).
+
 action_dict(action(Id, Term, _, _, _),
-            _{id: Id, term: S, name: Name, args: ArgStrings}) :-
+            _{id: Id, term: S, name: Name, args: ArgData}) :-
     format(string(S), "~q", [Term]),
     Term =.. [Name|Args],
-    maplist([A, AS]>>format(string(AS), "~q", [A]), Args, ArgStrings).
+    maplist(term_data, Args, ArgData).
 
 arc_dict(arc(V1, V2, Pairs), _{vars: [V1, V2], pairs: Ps}) :-
     maplist([A/B, [A, B]]>>true, Pairs, Ps).
@@ -423,7 +430,8 @@ plan_dict_(Problem, Opts, P1, Dict) :-
     (   Outcome = no_plan(N, Goal)
     ->  format(string(G), "~q", [Goal]),
         format("NO PLAN within ~w actions: the goal that could not be met: ~s~n", [N, G]),
-        Dict = _{outcome: "no_plan", reason: _{max_actions: N, goal: G},
+        term_data(Goal, GD),
+        Dict = _{outcome: "no_plan", reason: _{max_actions: N, goal: G, goal_data: GD},
                  partial: @(none), instance: @(none), timing: _{phase1_s: Phase1}}
     ;   Outcome = plan(Partial),
         partial_dict(Partial, PD),

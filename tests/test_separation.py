@@ -39,7 +39,10 @@ def test_separation_gives_the_two_action_plan() -> None:
     d = json.loads(r.stdout)
     assert d["outcome"] == "plan"
     assert sorted(a["term"] for a in d["partial"]["actions"]) == sorted(TWO)
-    assert d["partial"]["separations"] == [["part_location(peg,init_pos5)", "part_location(peg,init_pos1)"]]
+    (sep,) = d["partial"]["separations"]
+    assert sep["text"] == ["part_location(peg,init_pos5)", "part_location(peg,init_pos1)"]
+    assert sep["deleted"] == {"functor": "part_location", "args": ["peg", "init_pos5"]}
+    assert sep["condition"] == {"functor": "part_location", "args": ["peg", "init_pos1"]}
     assert d["instance"]["error_count"] == 0
 
 
@@ -97,7 +100,7 @@ def prolog():
 def test_fixture_needs_separation(prolog) -> None:
     a = prolog.query_once(PHASE1.replace("Ms", "[promotion, separation, white_knight]"))
     assert a["Kind"] == "plan"
-    assert a["Seps"] == [["part_location(peg,init_pos5)", "part_location(peg,init_pos1)"]]
+    assert [x["text"] for x in a["Seps"]] == [["part_location(peg,init_pos5)", "part_location(peg,init_pos1)"]]
 
 
 def test_fixture_paper_planner_no_plan(prolog) -> None:
