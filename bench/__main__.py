@@ -18,7 +18,7 @@ import sys
 import time
 from pathlib import Path
 
-from . import ik, planning, supinf
+from . import ik, memory, planning, supinf
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "RESULTS.md"
@@ -31,14 +31,18 @@ SUPINF_MS_PER_BOUND = 5.0
 WARM_S = 0.050
 COLD_S = 0.6
 N10_S = 2.0
+#: Issue 12's target: RSS growth per plan after the warm-up (kB).
+RSS_KB_PER_PLAN = memory.LIMIT_KB
 
 #: Sizes of a full and a quick run.
 FULL = {"ik": {"n": 10_000, "single": 1000, "rtb": 200, "repeats": 5},
         "supinf": {"per_length": 6, "repeats": 5},
-        "planning": {"quick": False, "max_n": 10}}
+        "planning": {"quick": False, "max_n": 10},
+        "memory": {"plans": 1000, "warmup": 50}}
 QUICK = {"ik": {"n": 1000, "single": 100, "rtb": 20, "repeats": 3},
          "supinf": {"per_length": 1, "lengths": (1, 4, 8), "repeats": 3},
-         "planning": {"quick": True, "max_n": 2, "timeout": 60.0}}
+         "planning": {"quick": True, "max_n": 2, "timeout": 60.0},
+         "memory": {"plans": 100, "warmup": 10}}
 
 
 # ---------------------------------------------------------------------- where and with what
@@ -109,7 +113,8 @@ def run_all(quick: bool = False, log=None) -> dict:
                  "machine": machine(), "versions": versions(), "seconds": {}}
     for name, fn in (("ik", lambda: ik.run(**sizes["ik"])),
                      ("supinf", lambda: supinf.run(**sizes["supinf"], progress=say)),
-                     ("planning", lambda: planning.run(**sizes["planning"], progress=say))):
+                     ("planning", lambda: planning.run(**sizes["planning"], progress=say)),
+                     ("memory", lambda: memory.run(**sizes["memory"]))):
         say(f"== {name}")
         t = time.perf_counter()
         out[name] = fn()
@@ -153,6 +158,9 @@ def verdicts(r: dict) -> dict:
     else:
         ok = n10.get("outcome") == "plan" and n10.get("wall_s", 1e9) < N10_S
         v["n10"] = (ok, f"{n10.get('outcome')} after {_f(n10.get('wall_s'))} s")
+    for row in r.get("memory", []):
+        v[f"rss_{row['cell']}"] = (row["kb_per_plan"] <= RSS_KB_PER_PLAN,
+                                   f"{row['kb_per_plan']:.2f} kB/plan over {row['plans']} plans")
     return v
 
 
@@ -187,7 +195,9 @@ def render(r: dict) -> str:
         [f"paper's cell warm < {WARM_S * 1e3:g} ms", v["warm"][1], _met(v["warm"][0])],
         [f"paper's cell cold < {COLD_S:g} s", v["cold"][1], _met(v["cold"][0])],
         [f"N = 10 planned under {N10_S:g} s", v["n10"][1], _met(v["n10"][0])],
-    ])
+    ] + [[f"RSS growth, {name}, <= {RSS_KB_PER_PLAN:g} kB per plan (issue 12)", v[key][1], _met(v[key][0])]
+         for key, name in (("rss_paper", "paper's cell"), ("rss_n3", "generated N = 3"))
+         if key in v])
     L += ["## Reading", "", reading(r), ""]
 
     L += ["## IK (bench/ik.py)", "",
@@ -277,6 +287,18 @@ def render(r: dict) -> str:
                      _f(x.get("rss_peak_mb"), ".0f"), _f(x.get("prolog_stack_mb"), ".1f"), why])
     L += _table(["N", "max_actions", "outcome", "phase 1 s", "phase 2 s", "wall s", "actions", "instances",
                  "RSS before MB", "RSS peak MB", "Prolog stacks MB", "note"], rows)
+
+    if r.get("memory"):
+        L += ["## Memory per plan (bench/memory.py)", "",
+              ("Each cell in a fresh process: planned by path with one Planner, "
+               f"{r['memory'][0]['warmup']} warm-up plans, then {r['memory'][0]['plans']} more; "
+               "growth = (RSS after - RSS after the warm-up) / plans, RSS after `gc.collect()`; "
+               "live objects counted after the run."), ""]
+        L += _table(["cell", "plans", "RSS after warm-up MB", "RSS after MB", "kB per plan", "live Cell",
+                     "live World"],
+                    [[x["cell"], str(x["plans"]), f"{x['rss_before_kb'] / 1024:.1f}",
+                      f"{x['rss_after_kb'] / 1024:.1f}", f"{x['kb_per_plan']:.2f}", str(x["live"]["Cell"]),
+                      str(x["live"]["World"])] for x in r["memory"]])
 
     L += ["## Where the time goes (cProfile)", "",
           ("Python's profiler sees SWI-Prolog as one call (`janus_swi._swipl.call`): its internal time "
