@@ -1,8 +1,9 @@
 """The ``spar`` command.
 
-Exit codes: 0 success; 1 a plan could not be found or a check failed; 2 bad input
-(a knowledge-base file, an argument); 3 an internal Prolog error. Errors are one
-line on stderr, never a traceback.
+Exit codes (EXIT_CODES, also in ``spar --help`` and the README): 0 a plan; 1 no plan
+or a failed check; 2 bad input (a knowledge-base file, an argument, an output that
+cannot be written); 3 an internal error (a bug); 4 timeout; 130 Ctrl-C; 143 SIGTERM.
+Errors are one line on stderr, never a traceback.
 """
 from __future__ import annotations
 
@@ -97,35 +98,91 @@ def write_atomically(path: Path, text: str) -> None:
         raise
 
 
+def _existing_parent(path: Path) -> Path:
+    """The nearest ancestor of ``path`` that exists."""
+    p = path.absolute().parent
+    while not p.exists() and p != p.parent:
+        p = p.parent
+    return p
+
+
+def _check_output_file(option: str, path: Path) -> None:
+    """An output file must be creatable: not a directory, in a writable directory (exit 2)."""
+    if path.is_dir():
+        raise SparError(f"{path}: {option}: expected a file to write, not a directory")
+    parent = _existing_parent(path)
+    if not parent.is_dir():
+        raise SparError(f"{path}: {option}: expected a path in a directory, not under the file {parent}")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise SparError(f"{path}: {option}: expected a writable directory, not {parent} (permission denied)")
+
+
+def _check_output_dir(option: str, path: Path) -> None:
+    """A picture directory must be a directory (or creatable) in a writable place (exit 2)."""
+    if path.exists() and not path.is_dir():
+        raise SparError(f"{path}: {option}: expected a directory for the pictures, not a file")
+    target = path if path.is_dir() else _existing_parent(path)
+    if not target.is_dir():
+        raise SparError(f"{path}: {option}: expected a path in a directory, not under the file {target}")
+    parent = _existing_parent(path)
+    for d in {target, parent}:
+        if not os.access(d, os.W_OK | os.X_OK):
+            raise SparError(f"{path}: {option}: expected a writable directory, not {d} (permission denied)")
+
+
 def cmd_plan(args: argparse.Namespace) -> int:
-    """Plan a problem; print the plan (or its JSON) and write pictures if asked."""
+    """Plan a problem; print the plan (or its JSON) and write pictures if asked.
+
+    Every output is checked before planning (exit 2 if one cannot be written), made in a
+    temporary file or directory, and moved into place at the end under the run guard,
+    so a timeout, Ctrl-C or SIGTERM never leaves part of them."""
+    output = Path(args.output) if args.output else None
+    picture_dirs = sorted({Path(d) for d in (args.dot, args.png) if d})
+    if output is not None:
+        _check_output_file("-o", output)
+    for d in picture_dirs:
+        _check_output_dir("--png" if args.png and Path(args.png) == d else "--dot", d)
+    guard = args.guard
     from .engine import start_engine
 
     start_engine()  # Prolog consults the planner while the imports below run
     from .planner import Outcome, Planner
 
     planner = Planner(max_actions=args.max_actions, max_instances=args.max_instances,
-                      separation=False if args.no_separation else None, timeout=args.timeout,
+                      separation=False if args.no_separation else None,
                       paper_placements=args.paper_placements)
     cell = planner.load_problem(args.problem)
+    planner.timeout = guard.remaining()  # what the load left of the command's time limit
     plan = planner.plan(cell, phase1_only=args.phase1_only, trace=args.trace)
     if plan.outcome is Outcome.TIMEOUT:
         raise PlanningTimeout(f"{cell.name}: no result within {args.timeout:g} s")
-    if args.json:
-        text = plan.dumps() + "\n"
-        if args.output:
-            write_atomically(Path(args.output), text)
-        else:
-            sys.stdout.write(text)
-    else:
-        sys.stdout.write(plan.trace)
-        if args.output:
-            write_atomically(Path(args.output), plan.dumps() + "\n")
-    for outdir in {d for d in (args.dot, args.png) if d}:
+    staged: list[tuple[Path, Path]] = []  # (temporary, final)
+    for d in picture_dirs:
         from .draw import write_pictures
 
-        paths = write_pictures(cell, plan.to_json(), Path(outdir))
-        print(f"spar: wrote {len(paths)} pictures to {outdir}", file=sys.stderr)
+        d.absolute().parent.mkdir(parents=True, exist_ok=True)
+        tmp = guard.temporary(Path(tempfile.mkdtemp(dir=d.absolute().parent, prefix=f".{d.name}.")))
+        for p in write_pictures(cell, plan.to_json(), tmp):
+            staged.append((p, d / p.name))
+    if output is not None:
+        output.absolute().parent.mkdir(parents=True, exist_ok=True)
+        fd, name = tempfile.mkstemp(dir=output.absolute().parent, prefix=f".{output.name}.", suffix=".tmp")
+        tmpfile = guard.temporary(Path(name))
+        with os.fdopen(fd, "w") as f:
+            f.write(plan.dumps() + "\n")
+        staged.append((tmpfile, output))
+    with guard.commit():
+        for d in picture_dirs:
+            d.mkdir(parents=True, exist_ok=True)
+        for tmp, final in staged:
+            os.replace(tmp, final)
+    if args.json and output is None:
+        sys.stdout.write(plan.dumps() + "\n")
+    elif not args.json:
+        sys.stdout.write(plan.trace)
+    for d in picture_dirs:
+        n = sum(1 for _, f in staged if f.parent == d)
+        print(f"spar: wrote {n} pictures to {d}", file=sys.stderr)
     return EXIT_OK if plan.ok else EXIT_FAIL
 
 
@@ -164,7 +221,8 @@ COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``spar``."""
-    p = argparse.ArgumentParser(prog="spar", description="SPAR assembly task planner (Hutchinson & Kak)")
+    p = argparse.ArgumentParser(prog="spar", description="SPAR assembly task planner (Hutchinson & Kak)",
+                                epilog=EXIT_CODES, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--version", action="version", version=f"spar-py {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
 
@@ -232,12 +290,27 @@ def _positive_float(text: str) -> float:
     return v
 
 
+EXIT_CODES = """\
+exit codes:
+  0    a plan (or every check passed)
+  1    no plan (or a check or regression failed)
+  2    bad input or arguments: a knowledge-base file, an option, an output that
+       cannot be written
+  3    internal error: a bug in spar-py (one line; please report it)
+  4    timeout (--timeout)
+  130  interrupted (Ctrl-C); 143 terminated (SIGTERM)"""
+
+
 def main(argv: list[str] | None = None) -> None:
-    """Entry point of the ``spar`` console script."""
+    """Entry point of the ``spar`` console script: one line on stderr for every error,
+    never a traceback; the exit codes of EXIT_CODES."""
+    from .guard import RunGuard
+
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        code = COMMANDS[args.func](args)
+        with RunGuard(getattr(args, "timeout", None)) as args.guard:
+            code = COMMANDS[args.func](args)
     except KBError as e:
         _err(str(e))
         code = EXIT_INPUT
@@ -251,7 +324,14 @@ def main(argv: list[str] | None = None) -> None:
         _err(str(e))
         code = EXIT_INPUT
     except KeyboardInterrupt:
+        _err("interrupted")
         code = 130
+    except OSError as e:
+        _err(f"{e.filename or ''}: {e.strerror or e}".lstrip(": "))
+        code = EXIT_INPUT
+    except Exception as e:  # a bug: one line, never a traceback
+        _err(f"internal error (please report it): {type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}")
+        code = EXIT_INTERNAL
     sys.exit(code)
 
 

@@ -1,0 +1,145 @@
+"""Bounds on a ``spar`` command as a whole: its time limit, Ctrl-C and SIGTERM.
+
+The planner's own time limit (Prolog's ``call_with_time_limit``) stops Prolog work, but
+a signal or an alarm reaches Python code only between bytecodes, and Prolog code only
+when control returns to Prolog. A :class:`RunGuard` makes the bound hold whatever is
+running: a watchdog thread waits on the signal wake-up descriptor (written by the
+interpreter's C-level handler the moment a signal arrives) and on the deadline; when one
+comes, it removes the command's temporary outputs, prints one line and ends the process
+with ``os._exit``: within a few milliseconds, never with half-written outputs, since
+outputs are written to temporary files and moved into place under the guard's lock
+(:meth:`RunGuard.commit`).
+
+Exit codes (also in the README and ``spar --help``): 4 for the time limit, 130 for
+SIGINT (Ctrl-C), 143 for SIGTERM.
+"""
+from __future__ import annotations
+
+import os
+import select
+import shutil
+import signal
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+EXIT_TIMEOUT, EXIT_SIGINT, EXIT_SIGTERM = 4, 130, 143
+
+#: Time after the deadline the guard leaves the planner to stop by itself (s).
+GRACE_S = 0.25
+
+__all__ = ["EXIT_SIGINT", "EXIT_SIGTERM", "EXIT_TIMEOUT", "GRACE_S", "RunGuard"]
+
+
+class RunGuard:
+    """Watch one command: its deadline (``timeout`` seconds from now, None for none) and
+    SIGINT/SIGTERM. Use as a context manager in the main thread."""
+
+    def __init__(self, timeout: float | None = None, *, exit: Callable[[int], None] = os._exit) -> None:
+        self.start = time.monotonic()
+        self.deadline = None if timeout is None else self.start + timeout
+        self.timeout = timeout
+        self.lock = threading.Lock()
+        self._temporaries: list[Path] = []
+        self._exit = exit
+        self._old: dict[int, object] = {}
+        self._old_fd = -1
+        self._r = self._w = -1
+        self._thread: threading.Thread | None = None
+        self._done = threading.Event()
+
+    # ------------------------------------------------------------------ set-up
+
+    def __enter__(self) -> RunGuard:
+        self._r, self._w = os.pipe()
+        os.set_blocking(self._w, False)
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            # a Python-level handler, so the interpreter writes the wake-up byte; the
+            # watchdog does the rest (the handler itself may never get to run)
+            self._old[sig] = signal.signal(sig, lambda *_: None)
+        self._old_fd = signal.set_wakeup_fd(self._w, warn_on_full_buffer=False)
+        self._thread = threading.Thread(target=self._watch, name="spar-guard", daemon=True)
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._done.set()
+        os.write(self._w, b"\0")  # wake the watchdog so it sees _done
+        if self._thread is not None:
+            self._thread.join()
+        signal.set_wakeup_fd(self._old_fd)
+        for sig, h in self._old.items():
+            signal.signal(sig, h)  # type: ignore[arg-type]
+        os.close(self._r)
+        os.close(self._w)
+        self.cleanup()
+
+    def remaining(self) -> float | None:
+        """Seconds left before the deadline (None without one; never below 0.01)."""
+        if self.deadline is None:
+            return None
+        return max(self.deadline - time.monotonic(), 0.01)
+
+    # ------------------------------------------------------------------ outputs
+
+    def temporary(self, path: Path) -> Path:
+        """Register ``path`` (a file or directory) to be removed if the run is cut short."""
+        with self.lock:
+            self._temporaries.append(path)
+        return path
+
+    @contextmanager
+    def commit(self) -> Iterator[None]:
+        """Hold off the watchdog while outputs move into place (a few renames)."""
+        with self.lock:
+            yield
+
+    def cleanup(self) -> None:
+        """Remove every registered temporary that is still there."""
+        for p in self._temporaries:
+            try:
+                if p.is_dir() and not p.is_symlink():
+                    shutil.rmtree(p, ignore_errors=True)
+                else:
+                    p.unlink(missing_ok=True)
+            except OSError:
+                pass
+        self._temporaries.clear()
+
+    # ------------------------------------------------------------------ the watchdog
+
+    def _watch(self) -> None:
+        while True:
+            wait = None
+            if self.deadline is not None:
+                wait = max(self.deadline + GRACE_S - time.monotonic(), 0.0)
+            ready, _, _ = select.select([self._r], [], [], wait)
+            if self._done.is_set():
+                return
+            if not ready:
+                self._stop(EXIT_TIMEOUT, f"timeout: no result within {self.timeout:g} s")
+                return
+            data = os.read(self._r, 64)
+            sigs = set(data) & {int(signal.SIGINT), int(signal.SIGTERM)}
+            if sigs:
+                code = EXIT_SIGINT if int(signal.SIGINT) in sigs else EXIT_SIGTERM
+                self._stop(code, "interrupted" if code == EXIT_SIGINT else "terminated")
+                return
+
+    def _stop(self, code: int, message: str) -> None:
+        with self.lock:  # never in the middle of a commit
+            if self._done.is_set():
+                return
+            self.cleanup()
+            try:
+                sys.stdout.flush()
+            except Exception:
+                pass
+            try:
+                os.write(2, f"spar: {message}\n".encode())
+            except OSError:
+                pass
+            self._exit(code)

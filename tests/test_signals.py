@@ -1,0 +1,95 @@
+"""Time limits and signals bound a whole `spar plan` run (guard.py): Ctrl-C, SIGTERM and
+--timeout end it within 0.5 s with one line and their exit code, leaving no partial outputs."""
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+SPAR = [sys.executable, "-m", "spar_py.cli"]
+PAPER = ROOT / "kb/problems/peg_in_block.yaml"
+
+
+@pytest.fixture(scope="module")
+def slow_problem(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    from spar_py.gen import generate_assembly
+
+    return generate_assembly(10, tmp_path_factory.mktemp("gen"))
+
+
+#: Runs of many seconds: phase 1 in Prolog (N = 10 needs 40 actions: a bound of 39 searches
+#: every smaller plan), and phase 2 in Python (hopeless_uncertainty.yaml: SUP/INF on every
+#: instance examined).
+def _long_runs(slow: Path) -> dict[str, list[str]]:
+    return {"phase1": ["plan", str(slow), "--max-actions", "39"],
+            "phase2": ["plan", str(ROOT / "kb/problems/hopeless_uncertainty.yaml")]}
+
+
+def _signal_after(cmd: list[str], sig: int, delay: float) -> tuple[int, float, str]:
+    p = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=ROOT)
+    time.sleep(delay)
+    t = time.monotonic()
+    p.send_signal(sig)
+    _, err = p.communicate(timeout=30)
+    return p.returncode, time.monotonic() - t, err
+
+
+@pytest.mark.parametrize("sig, code, word", [(signal.SIGINT, 130, "interrupted"),
+                                             (signal.SIGTERM, 143, "terminated")])
+@pytest.mark.parametrize("delay", [0.3, 2.0])
+@pytest.mark.parametrize("run", ["phase1", "phase2"])
+def test_a_signal_ends_the_run_at_once(slow_problem: Path, sig: int, code: int, word: str, delay: float,
+                                       run: str) -> None:
+    rc, took, err = _signal_after(SPAR + _long_runs(slow_problem)[run], sig, delay)
+    assert rc == code and took < 0.5, (rc, took, err)
+    assert err == f"spar: {word}\n"
+
+
+@pytest.mark.parametrize("run", ["phase1", "phase2"])
+def test_timeout_bounds_the_whole_run(slow_problem: Path, run: str) -> None:
+    t = time.monotonic()
+    r = subprocess.run(SPAR + _long_runs(slow_problem)[run] + ["--timeout", "1"],
+                       capture_output=True, text=True, cwd=ROOT, timeout=60)
+    took = time.monotonic() - t
+    assert r.returncode == 4 and took < 1.5, (r.returncode, took, r.stderr)
+    assert r.stderr.count("\n") == 1 and "timeout" in r.stderr
+
+
+def test_no_partial_pictures_or_json(tmp_path: Path) -> None:
+    """Ctrl-C at any point of a run that writes pictures and JSON: all of them or none."""
+    whole = tmp_path / "whole"
+    r = subprocess.run(SPAR + ["plan", str(PAPER), "--png", str(whole)], capture_output=True, cwd=ROOT)
+    assert r.returncode == 0
+    every = sorted(p.name for p in whole.glob("*"))
+    assert len(every) >= 7  # ordering, network, the cell before and after each of the four steps
+    seen = set()
+    for i, delay in enumerate([0.2, 0.5, 0.8, 1.1, 1.4, 1.7, 2.0, 2.5, 3.0]):
+        out = tmp_path / f"run{i}"
+        pics, js = out / "pics", out / "plan.json"
+        rc, _, err = _signal_after(SPAR + ["plan", str(PAPER), "--png", str(pics), "-o", str(js)],
+                                   signal.SIGINT, delay)
+        names = sorted(p.name for p in pics.glob("*")) if pics.exists() else []
+        if rc == 0:
+            assert js.exists() and names == every, names
+        else:
+            assert rc == 130 and not js.exists() and names == [], (rc, names, err)
+        assert not [p for p in out.glob(".*")] if out.exists() else True  # no temporaries left
+        seen.add(rc)
+    assert 130 in seen  # the signal did arrive during some run
+
+
+def test_unwritable_outputs_are_bad_input_before_planning(tmp_path: Path) -> None:
+    afile = tmp_path / "afile"
+    afile.write_text("x")
+    for args, what in ((["-o", str(tmp_path)], "not a directory"),
+                       (["--png", str(afile)], "not a file"),
+                       (["-o", str(afile / "x.json")], "under the file")):
+        r = subprocess.run(SPAR + ["plan", str(PAPER), *args], capture_output=True, text=True, cwd=ROOT)
+        assert r.returncode == 2, (args, r.stderr)
+        assert r.stderr.count("\n") == 1 and what in r.stderr and "Traceback" not in r.stderr
+        assert r.stdout == ""  # nothing planned, nothing printed
