@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from spar_py.cli import main
-from spar_py.kb import facts, load_problem, parse_term
+from spar_py.errors import KBError
+from spar_py.kb import facts, load_object, load_problem, parse_term
 
 ROOT = Path(__file__).resolve().parent.parent
 BAD = sorted((ROOT / "tests" / "bad").glob("*.yaml"))
@@ -110,3 +111,13 @@ def test_tm_rows_are_images_of_axes() -> None:
     assert np.allclose(T[:3, 2], [0, 0, -1])
     assert np.allclose(T[:3, 0], [math.cos(math.radians(30)), 0.5, 0])
     assert np.allclose(T[:3, 3], [30, 8, 1.5])
+
+
+def test_rotation_check_says_what_was_expected(tmp_path: Path) -> None:
+    text = (ROOT / "kb" / "objects" / "peg.yaml").read_text()
+    old = "tm: [[1, 0, 0], [0, 1, 0], [0, 0, 1], [0, 0, 0]]"
+    assert old in text
+    bad = tmp_path / "peg.yaml"
+    bad.write_text(text.replace(old, "tm: [[1, 0, 0], [0, 1, 0], [0, 0, 1.001], [0, 0, 0]]", 1))
+    with pytest.raises(KBError, match=r"orthonormal to 1e-06, det \+1; R\^T R is off I by 0\.002"):
+        load_object(bad, "in")

@@ -19,6 +19,7 @@ import numpy as np
 import yaml
 
 from .errors import KBError, SparError
+from .geometry import ORTHO_TOL, rotation_problem, tm_rows
 from .model import (
     Bounds,
     Cell,
@@ -34,7 +35,6 @@ from .model import (
 
 LENGTH_UNITS = {"mm": 1.0, "m": 1000.0, "in": 25.4, "cm": 10.0}
 ANGLE_UNITS = {"deg": math.pi / 180.0, "rad": 1.0}
-ORTHO_TOL = 1e-6
 LABEL_RE = re.compile(r"^[a-z][A-Za-z0-9_]*$")
 
 
@@ -169,18 +169,20 @@ def tm_node(node: Node, length_scale: float) -> np.ndarray:
     """A 4x4 transform from the paper's row form ``[[r1], [r2], [r3], [d]]`` (Fig. 18).
 
     The rows r1..r3 are the images of the frame's x, y, z axes (row-vector
-    convention, as the paper prints its matrices), d the displacement.
+    convention, as the paper prints its matrices), d the displacement, in the file's
+    length unit (multiplied by ``length_scale``). The rotation must pass geometry's
+    check (orthonormal to ``ORTHO_TOL``, det +1).
     """
     rows = node.elements()
     if len(rows) != 4:
         raise node.fail("tm rows [[r1], [r2], [r3], [d]] (4 rows of 3 numbers)")
     m = np.array([r.vector(3) for r in rows])
-    R = m[:3].T
-    if not np.allclose(R.T @ R, np.eye(3), atol=ORTHO_TOL) or np.linalg.det(R) < 0:
-        raise node.fail("an orthonormal right-handed rotation in rows 1-3")
-    T = np.eye(4)
-    T[:3, :3] = R
-    T[:3, 3] = m[3] * length_scale
+    m[3] *= length_scale
+    T = tm_rows(m)
+    why = rotation_problem(T[:3, :3])
+    if why is not None:
+        raise node.fail(f"an orthonormal right-handed rotation in rows 1-3 "
+                        f"(orthonormal to {ORTHO_TOL:g}, det +1; {why})")
     return T
 
 
