@@ -118,30 +118,55 @@ def as_sx(M: Any) -> ca.SX:
 
 
 class _Ops(Protocol):
-    """What the transforms need of a backend; a "vector" is (..., 3) in numpy, 3x1 in SX."""
+    """What the transforms need of a backend (numbers and lengths pass through unchanged in unit).
+
+    A "matrix" is (..., m, n) in numpy and m x n in SX; a "vector" is (..., 3) in
+    numpy and a 3x1 column in SX.
+    """
 
     @staticmethod
-    def cos(a: Any) -> Any: ...
+    def cos(a: Any) -> Any:
+        """cos of an angle (rad), elementwise."""
+
     @staticmethod
-    def sin(a: Any) -> Any: ...
+    def sin(a: Any) -> Any:
+        """sin of an angle (rad), elementwise."""
+
     @staticmethod
-    def matrix(rows: Sequence[Sequence[Any]], *args: Any) -> Any: ...
+    def matrix(rows: Sequence[Sequence[Any]], *args: Any) -> Any:
+        """The matrix with these rows of entries; ``args`` are the parameters the entries came from."""
+
     @staticmethod
-    def asarray(M: Any) -> Any: ...
+    def asarray(M: Any) -> Any:
+        """M as this backend's matrix (float array, or SX)."""
+
     @staticmethod
-    def shape(M: Any) -> tuple[int, ...]: ...
+    def shape(M: Any) -> tuple[int, ...]:
+        """The shape of a matrix (batch axes first in numpy)."""
+
     @staticmethod
-    def block(M: Any, rows: slice, cols: slice) -> Any: ...
+    def block(M: Any, rows: slice, cols: slice) -> Any:
+        """The sub-matrix ``M[rows, cols]`` (of each matrix of a batch)."""
+
     @staticmethod
-    def row(M: Any, i: int, cols: slice) -> Any: ...
+    def row(M: Any, i: int, cols: slice) -> Any:
+        """Row i of M, restricted to ``cols``, as a vector."""
+
     @staticmethod
-    def col(M: Any, rows: slice, j: int) -> Any: ...
+    def col(M: Any, rows: slice, j: int) -> Any:
+        """Column j of M, restricted to ``rows``, as a vector."""
+
     @staticmethod
-    def transpose(M: Any) -> Any: ...
+    def transpose(M: Any) -> Any:
+        """M transposed (each matrix of a batch)."""
+
     @staticmethod
-    def matvec(M: Any, v: Any) -> Any: ...
+    def matvec(M: Any, v: Any) -> Any:
+        """The product M v of a 3x3 matrix and a vector."""
+
     @staticmethod
-    def frame(R: Any, t: Any) -> Any: ...
+    def frame(R: Any, t: Any) -> Any:
+        """The 4x4 transform ``[[R, t], [0 0 0 1]]`` from a rotation block R and a translation vector t."""
 
 
 class _Numpy:
