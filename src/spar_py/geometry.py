@@ -168,6 +168,10 @@ class _Ops(Protocol):
     def frame(R: Any, t: Any) -> Any:
         """The 4x4 transform ``[[R, t], [0 0 0 1]]`` from a rotation block R and a translation vector t."""
 
+    @staticmethod
+    def product(*Ts: Any) -> Any:
+        """``Ts[0] @ Ts[1] @ ...``, left to right (the factors made by this backend's constructors)."""
+
 
 class _Numpy:
     """The float backend: numpy arrays, batched over leading axes."""
@@ -230,6 +234,13 @@ class _Numpy:
         out[..., :3, 3] = t
         return out
 
+    @staticmethod
+    def product(*Ts: np.ndarray) -> np.ndarray:
+        out = Ts[0]
+        for T in Ts[1:]:
+            out = out @ T
+        return out
+
 
 class _Casadi:
     """The symbolic backend: one CasADi SX matrix (no batch form)."""
@@ -289,6 +300,10 @@ class _Casadi:
 
         return ca.vertcat(ca.horzcat(R, t), ca.horzcat(ca.SX.zeros(1, 3), ca.SX(1.0)))
 
+    @staticmethod
+    def product(*Ts: Any) -> ca.SX:
+        return compose(*Ts)  # folds the numeric factors among the symbolic ones
+
 
 def _ops(*xs: object) -> type[_Ops]:
     """The backend for these arguments: CasADi if any (or any entry of a list) is symbolic, else numpy."""
@@ -341,7 +356,7 @@ def rotz(angle: Scalar) -> Matrix:
 
 def rpy(roll: Scalar, pitch: Scalar, yaw: Scalar) -> Matrix:
     """Roll-pitch-yaw (rad) about the fixed x, y, z axes: ``rotz(yaw) @ roty(pitch) @ rotx(roll)``."""
-    return compose(rotz(yaw), roty(pitch), rotx(roll))
+    return _ops(roll, pitch, yaw).product(rotz(yaw), roty(pitch), rotx(roll))
 
 
 def transl(T: Matrix) -> Matrix:
@@ -415,7 +430,7 @@ def apply(T: Matrix, p: Iterable[Scalar] | Matrix) -> Matrix:
 
 def euler_zyz(phi: Scalar, theta: Scalar, psi: Scalar) -> Matrix:
     """Z-Y-Z Euler rotation (rad): ``rotz(phi) @ roty(theta) @ rotz(psi)``; (4,4), (..., 4, 4) or SX."""
-    return compose(rotz(phi), roty(theta), rotz(psi))
+    return _ops(phi, theta, psi).product(rotz(phi), roty(theta), rotz(psi))
 
 
 def eulerxyz(X: Scalar, Y: Scalar, Z: Scalar, phi: Scalar, theta: Scalar, psi: Scalar) -> Matrix:
@@ -429,7 +444,7 @@ def eulerxyz(X: Scalar, Y: Scalar, Z: Scalar, phi: Scalar, theta: Scalar, psi: S
     the object frame, so the tool's approach axis (tool z) is
     ``(cos phi sin theta, sin phi sin theta, cos theta)`` in the object frame.
     """
-    return compose(trans(X, Y, Z), euler_zyz(phi, theta, psi))
+    return _ops(X, Y, Z, phi, theta, psi).product(trans(X, Y, Z), euler_zyz(phi, theta, psi))
 
 
 # ------------------------------------------------------------------ the paper's row form
