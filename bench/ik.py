@@ -38,9 +38,9 @@ def median_us(fn: Callable[[], object], per: int, repeats: int) -> float:
 
 def bench_spar(n: int, n_single: int, repeats: int) -> tuple[float, float, float]:
     """(batch us/pose, single us/pose, mean solutions per pose) for the PUMA 762."""
-    from spar_py.kinematics import Robot
+    from spar_py.kb import load_robot
 
-    robot = Robot.from_yaml(PUMA)
+    robot = load_robot(PUMA)
     rng = np.random.default_rng(1)
     q = rng.uniform(robot.limits[:, 0], robot.limits[:, 1], size=(n, 6))
     T = robot.fk_batch(q)  # reachable by construction

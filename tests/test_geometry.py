@@ -2,7 +2,10 @@
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
 
+import casadi as ca
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -10,6 +13,7 @@ from hypothesis import strategies as st
 
 from spar_py.errors import SparValueError
 from spar_py.geometry import (
+    apply,
     check_rotation,
     check_transform,
     compose,
@@ -17,6 +21,7 @@ from spar_py.geometry import (
     eulerxyz,
     inv,
     is_orthonormal,
+    is_symbolic,
     rot,
     rotx,
     roty,
@@ -175,3 +180,128 @@ def test_tilted_is_another_stable_pose() -> None:
     assert not same_stable_pose(rot(rotx(0.01)), R_pose)
     assert not same_stable_pose(rot(rotx(math.pi)), R_pose)  # upside down
     assert same_stable_pose(rot(rotx(1e-9)), R_pose)
+
+
+# ---------------------------------------------------------------- one code path: floats and CasADi SX
+
+TWO_PI = 2 * math.pi
+# constructor -> the ranges of its parameters (lengths in any unit, angles in rad)
+CONSTRUCTORS = {
+    "trans": (trans, [100.0] * 3),
+    "rotx": (rotx, [TWO_PI]),
+    "roty": (roty, [TWO_PI]),
+    "rotz": (rotz, [TWO_PI]),
+    "rpy": (rpy, [TWO_PI] * 3),
+    "euler_zyz": (euler_zyz, [TWO_PI] * 3),
+    "eulerxyz": (eulerxyz, [100.0] * 3 + [TWO_PI] * 3),
+}
+
+
+def sx_function(name: str, n: int) -> tuple[ca.Function, list[ca.SX]]:
+    """The constructor ``name`` built on n SX symbols, as a Function of the parameter vector."""
+    f, _ = CONSTRUCTORS[name]
+    syms = [ca.SX.sym(f"p{i}") for i in range(n)]
+    T = f(*syms)
+    assert isinstance(T, ca.SX) and T.shape == (4, 4)
+    return ca.Function(name, [ca.vertcat(*syms)], [T]), syms
+
+
+def random_params(rng: np.random.Generator, scales: list[float]) -> np.ndarray:
+    return rng.uniform(-1.0, 1.0, len(scales)) * np.array(scales)
+
+
+@pytest.mark.parametrize("name", sorted(CONSTRUCTORS))
+def test_sx_constructor_evaluates_to_the_float_one(name: str) -> None:
+    f, scales = CONSTRUCTORS[name]
+    F, _ = sx_function(name, len(scales))
+    rng = np.random.default_rng(sum(map(ord, name)))
+    for _ in range(50):
+        p = random_params(rng, scales)
+        Tf = f(*p)
+        assert isinstance(Tf, np.ndarray) and Tf.shape == (4, 4)
+        np.testing.assert_allclose(np.asarray(F(p)), Tf, rtol=0.0, atol=1e-12)
+
+
+@pytest.mark.parametrize("name", sorted(CONSTRUCTORS))
+def test_mixed_numbers_and_symbols_build_sx(name: str) -> None:
+    # only the first parameter symbolic, the others plain floats: still SX, same values
+    f, scales = CONSTRUCTORS[name]
+    rng = np.random.default_rng(1 + sum(map(ord, name)))
+    p = random_params(rng, scales)
+    x = ca.SX.sym("x")
+    T = f(x, *p[1:])
+    assert isinstance(T, ca.SX)
+    np.testing.assert_allclose(np.asarray(ca.Function("f", [x], [T])(p[0])), f(*p), rtol=0.0, atol=1e-12)
+
+
+def test_sx_products_inverses_points_agree_with_floats() -> None:
+    Fa, _ = sx_function("eulerxyz", 6)
+    a_sym = ca.SX.sym("a", 6)
+    A_sym = eulerxyz(*[a_sym[i] for i in range(6)])
+    B_sym = compose(trans(a_sym[0], 1.5, -2.0), rotx(a_sym[4]))
+    p_sym = [a_sym[1], 0.25, a_sym[2]]
+    exprs = {
+        "inv": inv(A_sym),
+        "compose": compose(A_sym, B_sym),
+        "compose_numeric_between": compose(A_sym, rpy(0.1, 0.2, 0.3), trans(1.0, 2.0, 3.0), B_sym),
+        "inv_of_product": inv(compose(A_sym, B_sym)),
+        "A_invA": compose(A_sym, inv(A_sym)),
+        "apply": apply(compose(A_sym, B_sym), p_sym),
+        "tm_rows": tm_rows(to_tm_rows(A_sym)),
+        "rot": rot(A_sym),
+        "transl": transl(A_sym),
+    }
+    for e in exprs.values():
+        assert isinstance(e, ca.SX)
+    F = ca.Function("all", [a_sym], list(exprs.values()))
+    rng = np.random.default_rng(12)
+    scales = CONSTRUCTORS["eulerxyz"][1]
+    for _ in range(50):
+        a = random_params(rng, scales)
+        A = eulerxyz(*a)
+        B = compose(trans(a[0], 1.5, -2.0), rotx(a[4]))
+        want = {
+            "inv": inv(A),
+            "compose": compose(A, B),
+            "compose_numeric_between": compose(A, rpy(0.1, 0.2, 0.3), trans(1.0, 2.0, 3.0), B),
+            "inv_of_product": inv(compose(A, B)),
+            "A_invA": np.eye(4),
+            "apply": apply(compose(A, B), [a[1], 0.25, a[2]]).reshape(3, 1),
+            "tm_rows": A,
+            "rot": rot(A),
+            "transl": transl(A).reshape(3, 1),
+        }
+        got = F(a)
+        for (name, w), g in zip(want.items(), got):
+            np.testing.assert_allclose(np.asarray(g), w, rtol=0.0, atol=1e-12, err_msg=name)
+        np.testing.assert_allclose(inv(A), np.linalg.inv(A), rtol=0.0, atol=1e-10)
+
+
+def test_batch_equals_single_bit_for_bit() -> None:
+    rng = np.random.default_rng(3)
+    a = rng.uniform(-TWO_PI, TWO_PI, (7, 6))
+    for name, (f, scales) in CONSTRUCTORS.items():
+        args = [a[:, i] * (s / TWO_PI) for i, s in enumerate(scales)]
+        batch = f(*args)
+        assert batch.shape == (7, 4, 4), name
+        for k in range(7):
+            assert np.array_equal(batch[k], f(*[x[k] for x in args])), name
+    Ts = eulerxyz(*a.T)
+    assert all(np.array_equal(inv(Ts)[k], inv(Ts[k])) for k in range(7))
+
+
+def test_numeric_results_are_fresh_float_arrays() -> None:
+    T = np.eye(4)
+    out = compose(T)
+    assert out is not T and out.dtype == float
+    out[0, 3] = 5.0
+    assert T[0, 3] == 0.0
+    assert trans(1, 2, 3).dtype == float and not is_symbolic(trans(1, 2, 3))
+    with pytest.raises(SparValueError, match="batch"):
+        compose(ca.SX.sym("x"), rotz(np.zeros(3)))
+
+
+def test_importing_geometry_and_kinematics_does_not_load_casadi() -> None:
+    code = "import sys, spar_py.geometry, spar_py.kinematics; print('casadi' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False", out.stdout + out.stderr

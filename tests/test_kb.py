@@ -1,6 +1,7 @@
 """Knowledge-base loading: the paper's cell loads; every malformed file gives its own one-line error."""
 from __future__ import annotations
 
+import ast
 import math
 import subprocess
 import sys
@@ -10,11 +11,13 @@ import numpy as np
 import pytest
 
 from spar_py.cli import main
-from spar_py.kb import facts, load_problem, parse_term
+from spar_py.errors import KBError, SparValueError
+from spar_py.kb import facts, load_object, load_problem, load_robot, parse_term
 
 ROOT = Path(__file__).resolve().parent.parent
 BAD = sorted((ROOT / "tests" / "bad").glob("*.yaml"))
 PAPER = ROOT / "kb" / "problems" / "peg_in_block.yaml"
+PUMA = ROOT / "kb" / "robots" / "puma762.yaml"
 
 
 def expected_message(path: Path) -> str:
@@ -110,3 +113,70 @@ def test_tm_rows_are_images_of_axes() -> None:
     assert np.allclose(T[:3, 2], [0, 0, -1])
     assert np.allclose(T[:3, 0], [math.cos(math.radians(30)), 0.5, 0])
     assert np.allclose(T[:3, 3], [30, 8, 1.5])
+
+
+# ---------------------------------------------------------------- robots (kb/robots/*.yaml)
+
+
+def test_load_puma762_in_mm_and_inches() -> None:
+    puma = load_robot(PUMA)  # millimetres
+    assert puma.name == "puma762" and puma.unit == "mm"
+    assert puma.dh[2, 1] == 650 and puma.dh[2, 2] == 190 and puma.dh[3, 2] == 600
+    assert np.allclose(np.degrees(puma.dh[:, 0]), [0, -90, 0, -90, 90, -90])
+    assert np.allclose(np.degrees(puma.limits[3]), [-266, 266])
+    assert puma.finger_separation == pytest.approx(101.6)
+    r_in = load_robot(PUMA, unit="in")
+    assert r_in.unit == "in"
+    assert r_in.dh[2, 1] == pytest.approx(650 / 25.4)
+    assert r_in.finger_separation == pytest.approx(4.0)
+    assert r_in.base[2, 3] == pytest.approx(600 / 25.4) and r_in.tool[2, 3] == pytest.approx(250 / 25.4)
+    assert np.allclose(r_in.limits, puma.limits)
+    assert puma.n_candidates == 32  # 8 branches x 2 wrist-roll x 2 swivel turns (532 deg spans)
+    with pytest.raises(SparValueError, match="unknown length unit"):
+        load_robot(PUMA, unit="furlong")
+
+
+@pytest.mark.parametrize("old, new, key, expected", [
+    ("- {alpha: 0,   a: 650, d: 190", "- {alpha: x,   a: 650, d: 190", "dh[2].alpha", "a number"),
+    ("  - [-200, 20]\n", "  - [20, -200]\n", "limits[1]", "lo <= hi"),
+    ("  - {alpha: -90, a: 0,   d: 0,   offset: 0}   # 6 wrist swivel\n", "", "dh", "6 joint rows"),
+    ("finger_separation: 101.6", "finger_separation: -1", "gripper.finger_separation", "a positive number"),
+    ("units: {length: mm, angle: deg}", "units: {length: mm, angle: grad}", "units.angle", "one of"),
+    ("base: {xyz: [0, 0, 600], rpy: [0, 0, 0]}", "base: {rpy: [0, 0, 0]}", "base.xyz", "key missing"),
+])
+def test_bad_robot_file_one_line_error(tmp_path: Path, old: str, new: str, key: str, expected: str) -> None:
+    text = PUMA.read_text()
+    assert old in text
+    bad = tmp_path / "bad_robot.yaml"
+    bad.write_text(text.replace(old, new))
+    with pytest.raises(KBError) as exc:
+        load_robot(bad)
+    msg = str(exc.value)
+    assert msg.count("\n") == 0 and str(bad) in msg and f": {key}: " in msg and expected in msg
+
+
+@pytest.mark.parametrize("module", ["spar_py.kinematics", "spar_py.model", "spar_py.geometry"])
+def test_the_model_does_not_import_the_kb(module: str) -> None:
+    # kb -> model -> kinematics -> kb was an import circle: the robot loader lives in kb now
+    code = f"import sys, {module}; print(sorted(m for m in ('spar_py.kb', 'yaml') if m in sys.modules))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]", out.stdout + out.stderr
+    # nor lazily, inside a function (as Robot.from_yaml did): no import of kb or yaml anywhere in the file
+    path = ROOT / "src" / Path(*module.split(".")).with_suffix(".py")
+    imported = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom):
+            imported.add("." * node.level + (node.module or ""))
+        elif isinstance(node, ast.Import):
+            imported.update(a.name for a in node.names)
+    assert not imported & {".kb", "spar_py.kb", "yaml"}, imported
+
+
+def test_rotation_check_says_what_was_expected(tmp_path: Path) -> None:
+    text = (ROOT / "kb" / "objects" / "peg.yaml").read_text()
+    old = "tm: [[1, 0, 0], [0, 1, 0], [0, 0, 1], [0, 0, 0]]"
+    assert old in text
+    bad = tmp_path / "peg.yaml"
+    bad.write_text(text.replace(old, "tm: [[1, 0, 0], [0, 1, 0], [0, 0, 1.001], [0, 0, 0]]", 1))
+    with pytest.raises(KBError, match=r"orthonormal to 1e-06, det \+1; R\^T R is off I by 0\.002"):
+        load_object(bad, "in")

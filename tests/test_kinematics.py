@@ -9,8 +9,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from spar_py.errors import KBError, SparValueError
+from spar_py.errors import SparValueError
 from spar_py.geometry import inv, rotx, rotz, rpy, trans
+from spar_py.kb import load_robot
 from spar_py.kinematics import LIMIT_TOL, Robot
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -20,7 +21,7 @@ TWO_PI = 2 * math.pi
 
 @pytest.fixture(scope="module")
 def puma() -> Robot:
-    return Robot.from_yaml(PUMA)  # millimetres
+    return load_robot(PUMA)  # millimetres
 
 
 def random_q(robot: Robot, n: int, seed: int = 0) -> np.ndarray:
@@ -44,43 +45,7 @@ def generic_robot() -> Robot:
                  trans(10, 5, 120) @ rpy(0.2, 0.1, -0.4), 80.0, "mm")
 
 
-# ---------------------------------------------------------------- loading
-
-
-def test_load_puma762_in_mm_and_inches(puma: Robot) -> None:
-    assert puma.name == "puma762" and puma.unit == "mm"
-    assert puma.dh[2, 1] == 650 and puma.dh[2, 2] == 190 and puma.dh[3, 2] == 600
-    assert np.allclose(np.degrees(puma.dh[:, 0]), [0, -90, 0, -90, 90, -90])
-    assert np.allclose(np.degrees(puma.limits[3]), [-266, 266])
-    assert puma.finger_separation == pytest.approx(101.6)
-    r_in = Robot.from_yaml(PUMA, unit="in")
-    assert r_in.unit == "in"
-    assert r_in.dh[2, 1] == pytest.approx(650 / 25.4)
-    assert r_in.finger_separation == pytest.approx(4.0)
-    assert r_in.base[2, 3] == pytest.approx(600 / 25.4) and r_in.tool[2, 3] == pytest.approx(250 / 25.4)
-    assert np.allclose(r_in.limits, puma.limits)
-    assert puma.n_candidates == 32  # 8 branches x 2 wrist-roll x 2 swivel turns (532 deg spans)
-    with pytest.raises(SparValueError, match="unknown length unit"):
-        Robot.from_yaml(PUMA, unit="furlong")
-
-
-@pytest.mark.parametrize("old, new, key, expected", [
-    ("- {alpha: 0,   a: 650, d: 190", "- {alpha: x,   a: 650, d: 190", "dh[2].alpha", "a number"),
-    ("  - [-200, 20]\n", "  - [20, -200]\n", "limits[1]", "lo <= hi"),
-    ("  - {alpha: -90, a: 0,   d: 0,   offset: 0}   # 6 wrist swivel\n", "", "dh", "6 joint rows"),
-    ("finger_separation: 101.6", "finger_separation: -1", "gripper.finger_separation", "a positive number"),
-    ("units: {length: mm, angle: deg}", "units: {length: mm, angle: grad}", "units.angle", "one of"),
-    ("base: {xyz: [0, 0, 600], rpy: [0, 0, 0]}", "base: {rpy: [0, 0, 0]}", "base.xyz", "key missing"),
-])
-def test_bad_robot_file_one_line_error(tmp_path: Path, old: str, new: str, key: str, expected: str) -> None:
-    text = PUMA.read_text()
-    assert old in text
-    bad = tmp_path / "bad_robot.yaml"
-    bad.write_text(text.replace(old, new))
-    with pytest.raises(KBError) as exc:
-        Robot.from_yaml(bad)
-    msg = str(exc.value)
-    assert msg.count("\n") == 0 and str(bad) in msg and f": {key}: " in msg and expected in msg
+# ---------------------------------------------------------------- the model (loading: test_kb.py)
 
 
 def test_post_init_checks_shapes_and_family() -> None:

@@ -9,8 +9,7 @@ import pytest
 
 from spar_py.errors import SparValueError
 from spar_py.geometry import eulerxyz, rot, rotx, rotz, trans
-from spar_py.kb import load_problem
-from spar_py.kinematics import Robot
+from spar_py.kb import load_problem, load_robot
 from spar_py.model import Bounds, Cell, Grasp, ObjectModel, Position, StablePose
 from spar_py.reach import (
     arc,
@@ -58,7 +57,7 @@ def at(x: float, y: float, z: float, R: np.ndarray | None = None) -> np.ndarray:
 
 @pytest.fixture(scope="module")
 def cell() -> Cell:
-    robot = Robot.from_yaml(PUMA, unit="in")
+    robot = load_robot(PUMA, unit="in")
     positions = {
         "tr1": Position("init_pos1", "tr1", "box", at(30, 0, 1, rotz(-math.pi / 2))),  # upright, turned
         "tr_far": Position("far_pos", "tr_far", "box", at(118, 0, 1)),  # 3 m out

@@ -35,6 +35,14 @@ def substitute(M: ca.SX, values: dict[str, float]) -> np.ndarray:
 # ------------------------------------------------------------------ transforms
 
 
+def test_transforms_are_geometrys_one_code_path() -> None:
+    from spar_py import symbolic
+
+    for name in ("trans", "rotx", "roty", "rotz", "rpy", "euler_zyz", "eulerxyz", "compose", "inv", "apply",
+                 "tm_rows", "rot", "transl", "is_symbolic", "as_sx"):
+        assert getattr(symbolic, name) is getattr(geometry, name), name
+
+
 def test_numeric_path_matches_geometry() -> None:
     assert isinstance(trans(1, 2, 3), np.ndarray)
     np.testing.assert_allclose(trans(1, 2, 3), geometry.trans(1, 2, 3))

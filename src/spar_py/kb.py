@@ -18,7 +18,9 @@ from typing import Any, Iterable
 import numpy as np
 import yaml
 
-from .errors import KBError, SparError
+from .errors import KBError, SparError, SparValueError
+from .geometry import ORTHO_TOL, eulerxyz, rotation_problem, rpy, same_stable_pose, tm_rows, trans
+from .kinematics import Robot
 from .model import (
     Bounds,
     Cell,
@@ -34,7 +36,6 @@ from .model import (
 
 LENGTH_UNITS = {"mm": 1.0, "m": 1000.0, "in": 25.4, "cm": 10.0}
 ANGLE_UNITS = {"deg": math.pi / 180.0, "rad": 1.0}
-ORTHO_TOL = 1e-6
 LABEL_RE = re.compile(r"^[a-z][A-Za-z0-9_]*$")
 
 
@@ -175,18 +176,20 @@ def tm_node(node: Node, length_scale: float) -> np.ndarray:
     """A 4x4 transform from the paper's row form ``[[r1], [r2], [r3], [d]]`` (Fig. 18).
 
     The rows r1..r3 are the images of the frame's x, y, z axes (row-vector
-    convention, as the paper prints its matrices), d the displacement.
+    convention, as the paper prints its matrices), d the displacement, in the file's
+    length unit (multiplied by ``length_scale``). The rotation must pass geometry's
+    check (orthonormal to ``ORTHO_TOL``, det +1).
     """
     rows = node.elements()
     if len(rows) != 4:
         raise node.fail("tm rows [[r1], [r2], [r3], [d]] (4 rows of 3 numbers)")
     m = np.array([r.vector(3) for r in rows])
-    R = m[:3].T
-    if not np.allclose(R.T @ R, np.eye(3), atol=ORTHO_TOL) or np.linalg.det(R) < 0:
-        raise node.fail("an orthonormal right-handed rotation in rows 1-3")
-    T = np.eye(4)
-    T[:3, :3] = R
-    T[:3, 3] = m[3] * length_scale
+    m[3] *= length_scale
+    T = tm_rows(m)
+    why = rotation_problem(T[:3, :3])
+    if why is not None:
+        raise node.fail(f"an orthonormal right-handed rotation in rows 1-3 "
+                        f"(orthonormal to {ORTHO_TOL:g}, det +1; {why})")
     return T
 
 
@@ -207,8 +210,6 @@ def _faces(node: Node, known: set[Face] | None, min_len: int = 1) -> tuple[Face,
 
 def load_object(path: str | Path, unit: str) -> ObjectModel:
     """Load ``kb/objects/*.yaml`` converting lengths to ``unit``."""
-    from .geometry import eulerxyz  # local: geometry is numeric and loads numpy only
-
     root = read_yaml(path)
     name = root.key("object").label()
     _, mm_per, rad_per = _units(root)
@@ -263,6 +264,58 @@ def load_object(path: str | Path, unit: str) -> ObjectModel:
         )
     shape = tuple(_solid(n, scale) for n in (root.key("shape", required=False) or Node("", "", [])).elements())
     return ObjectModel(name, faces, poses, grasps, feature, shape)
+
+
+# --------------------------------------------------------------------------- robots
+
+
+def _robot_frame(node: Node, length_scale: float, rad_per: float) -> np.ndarray:
+    """``{xyz: [x, y, z], rpy: [r, p, y]}`` (file units; rpy optional) as ``trans(xyz) @ rpy(r, p, y)``."""
+    xyz = node.key("xyz").vector(3) * length_scale
+    r = node.key("rpy", required=False)
+    ang = r.vector(3) * rad_per if r is not None else np.zeros(3)
+    return trans(*xyz) @ rpy(*ang)
+
+
+def load_robot(path: str | Path, unit: str | None = None) -> Robot:
+    """Load ``kb/robots/*.yaml`` as a :class:`~spar_py.kinematics.Robot`.
+
+    Lengths (DH a and d, base and tool frames, finger separation) are converted to
+    ``unit`` (default: the file's own length unit), angles (DH alpha and offset,
+    limits, rpy) to radians; ``base`` is T_world_frame0 and ``tool`` T_flange_tool,
+    each ``trans(xyz) @ rpy(r, p, y)``. Malformed files raise :class:`KBError` naming
+    the file, the key path and what was expected (``puma.yaml: dh[2].alpha: a number,
+    not 'x'``); an unknown ``unit`` raises SparValueError.
+    """
+    if unit is not None and unit not in LENGTH_UNITS:
+        raise SparValueError(f"unknown length unit {unit!r} (one of {', '.join(LENGTH_UNITS)})")
+    root = read_yaml(path)
+    name = root.key("name").label()
+    file_unit, mm_per, rad_per = _units(root)
+    unit = file_unit if unit is None else unit
+    scale = mm_per / LENGTH_UNITS[unit]
+
+    dh_node = root.key("dh")
+    rows = dh_node.elements()
+    if len(rows) != 6:
+        raise dh_node.fail(f"a list of 6 joint rows {{alpha, a, d, offset}}, not {len(rows)}")
+    dh = np.array([[r.key("alpha").number() * rad_per, r.key("a").number() * scale,
+                    r.key("d").number() * scale,
+                    (o.number() if (o := r.key("offset", required=False)) is not None else 0.0) * rad_per]
+                   for r in rows])
+    lim_node = root.key("limits")
+    lims = lim_node.elements()
+    if len(lims) != 6:
+        raise lim_node.fail(f"a list of 6 [lo, hi] joint limits, not {len(lims)}")
+    limits = np.array([lim.interval() for lim in lims]) * rad_per
+
+    base = _robot_frame(root.key("base"), scale, rad_per)
+    tool = _robot_frame(root.key("tool"), scale, rad_per)
+    wm = root.key("gripper").key("finger_separation").positive() * scale
+    try:
+        return Robot(name, dh, limits, base, tool, wm, unit)
+    except SparValueError as e:
+        raise KBError(str(path), "(robot)", str(e)) from None
 
 
 def _solid(node: Node, scale: float) -> Solid:
@@ -412,9 +465,6 @@ def _check_goal(node: Node, goal: Any, cell_objects: dict[str, ObjectModel], tra
 
 def load_problem(path: str | Path) -> Cell:
     """Load and validate ``kb/problems/*.yaml`` with the robot and object files it names."""
-    from .geometry import same_stable_pose
-    from .kinematics import Robot
-
     path = Path(path)
     root = read_yaml(path)
     name = root.key("problem").label()
@@ -425,7 +475,7 @@ def load_problem(path: str | Path) -> Cell:
     rpath = base / rnode.text()
     if not rpath.is_file():
         raise rnode.fail(f"a robot file (no file {rpath})")
-    robot = Robot.from_yaml(rpath, unit=unit)
+    robot = load_robot(rpath, unit=unit)
 
     objects: dict[str, ObjectModel] = {}
     positions: dict[str, Position] = {}
@@ -533,8 +583,6 @@ def _num(v: float) -> float:
 
 def position_class(cell: Cell, pos: Position) -> str:
     """The stable pose an absolute position rests in (Sec. 5.2.3)."""
-    from .geometry import same_stable_pose
-
     for label, pose in cell.objects[pos.obj].poses.items():
         if same_stable_pose(pos.T[:3, :3], pose.R):
             return label
@@ -577,8 +625,6 @@ def facts(cell: Cell) -> list[tuple]:
 
 def check_file(path: str | Path) -> str:
     """Validate one KB file of any kind (problem, object, robot); return a one-line summary."""
-    from .kinematics import Robot
-
     root = read_yaml(path)
     v = root.value
     if "problem" in v:
@@ -590,7 +636,7 @@ def check_file(path: str | Path) -> str:
         return (f"{path}: ok (object {o.name}: {len(o.faces)} faces, {len(o.poses)} stable poses, "
                 f"{len(o.grasps)} grasps)")
     if "dh" in v:
-        r = Robot.from_yaml(path)
+        r = load_robot(path)
         return f"{path}: ok (robot {r.name})"
     raise root.fail("a problem (key problem), object (key object) or robot (key dh) file")
 

@@ -11,18 +11,20 @@ Frames and units: ``T`` arguments are ``T_world_tool`` (4x4, column vectors), wi
 lengths in ``Robot.unit`` (the unit the robot was loaded in); joint vectors ``q``
 are in radians, in the DH zero convention of the robot file (``theta_i = q_i +
 offset_i``). Limits are checked with a tolerance of 1e-9 rad.
+
+This module is the model only: reading a robot file (``kb/robots/*.yaml``) is
+:func:`spar_py.kb.load_robot`'s job, so kinematics knows nothing of YAML or the KB.
 """
 from __future__ import annotations
 
 import itertools
 import math
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
-from .errors import KBError, SparValueError
-from .geometry import check_transform, inv, rotx, rpy, trans
+from .errors import SparValueError
+from .geometry import check_transform, inv, rotx, trans
 
 __all__ = ["LIMIT_TOL", "Robot"]
 
@@ -112,53 +114,6 @@ class Robot:
         self._turns = ((self.limits[:, 0] - LIMIT_TOL)[:, None, None],
                        (self.limits[:, 1] + LIMIT_TOL)[:, None, None],
                        (2 * math.pi * k.T)[:, None, None, :])
-
-    # ------------------------------------------------------------------ loading
-
-    @classmethod
-    def from_yaml(cls, path: str | Path, unit: str | None = None) -> Robot:
-        """Load ``kb/robots/*.yaml``; lengths converted to ``unit`` (default: the file's), angles to rad.
-
-        Malformed files raise :class:`KBError` naming the file, the key path and what
-        was expected (``puma.yaml: dh[2].alpha: a number, not 'x'``).
-        """
-        from .kb import LENGTH_UNITS, _units, read_yaml  # kb imports this module lazily
-
-        root = read_yaml(path)
-        name = root.key("name").label()
-        file_unit, mm_per, rad_per = _units(root)
-        unit = file_unit if unit is None else unit
-        if unit not in LENGTH_UNITS:
-            raise SparValueError(f"unknown length unit {unit!r} (one of {', '.join(LENGTH_UNITS)})")
-        scale = mm_per / LENGTH_UNITS[unit]
-
-        dh_node = root.key("dh")
-        rows = dh_node.elements()
-        if len(rows) != 6:
-            raise dh_node.fail(f"a list of 6 joint rows {{alpha, a, d, offset}}, not {len(rows)}")
-        dh = np.array([[r.key("alpha").number() * rad_per, r.key("a").number() * scale,
-                        r.key("d").number() * scale,
-                        (o.number() if (o := r.key("offset", required=False)) is not None else 0.0) * rad_per]
-                       for r in rows])
-        lim_node = root.key("limits")
-        lims = lim_node.elements()
-        if len(lims) != 6:
-            raise lim_node.fail(f"a list of 6 [lo, hi] joint limits, not {len(lims)}")
-        limits = np.array([lim.interval() for lim in lims]) * rad_per
-
-        def frame(key: str) -> np.ndarray:
-            node = root.key(key)
-            xyz = node.key("xyz").vector(3) * scale
-            r = node.key("rpy", required=False)
-            ang = r.vector(3) * rad_per if r is not None else np.zeros(3)
-            return trans(*xyz) @ rpy(*ang)
-
-        base, tool = frame("base"), frame("tool")
-        wm = root.key("gripper").key("finger_separation").positive() * scale
-        try:
-            return cls(name, dh, limits, base, tool, wm, unit)
-        except SparValueError as e:
-            raise KBError(str(path), "(robot)", str(e)) from None
 
     # ------------------------------------------------------------------ forward kinematics
 

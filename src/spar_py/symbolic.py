@@ -1,4 +1,4 @@
-"""Symbolic homogeneous transforms (CasADi SX) and the registry of bounded uncertainty variables.
+"""Uncertainty variables (CasADi SX): their registry, and the symbolic helpers around geometry's transforms.
 
 The paper represents every uncertain quantity as an expression in *uncertainty
 variables*, each a bounded real (Sec. 3.2.1), whose bounds are recorded once, as
@@ -7,9 +7,9 @@ variable is made (Fig. 11, Sec. 5.3). Bounds never change: reducing uncertainty 
 re-expressing a quantity in *new* variables with tighter bounds. :class:`Registry` is
 that global store, one per planning run.
 
-The transform helpers follow the spatialmath idea of one code path for numbers and
-symbols: :func:`trans`, :func:`rotz`, :func:`compose`, :func:`inv` and :func:`apply`
-return numpy arrays when every argument is a plain number or array, and CasADi ``SX``
+The transforms themselves (:func:`trans`, :func:`rotz`, :func:`compose`, :func:`inv`,
+:func:`apply`, ...) are geometry.py's, re-exported here: one code path that returns
+numpy arrays when every argument is a plain number or array, and CasADi ``SX``
 matrices as soon as one argument is symbolic. Conventions are DESIGN.md's: 4x4
 homogeneous matrices, column vectors, ``T_world_obj``; lengths in the caller's unit
 (the paper's cell: inches), angles in radians.
@@ -18,13 +18,30 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import Iterator, Mapping
 
 import casadi as ca
 import numpy as np
 from numpy.typing import ArrayLike
 
 from .errors import SparValueError
+from .geometry import (
+    apply,
+    as_sx,
+    compose,
+    euler_zyz,
+    eulerxyz,
+    inv,
+    is_symbolic,
+    rot,
+    rotx,
+    roty,
+    rotz,
+    rpy,
+    tm_rows,
+    trans,
+    transl,
+)
 
 __all__ = [
     "Matrix",
@@ -34,135 +51,29 @@ __all__ = [
     "as_sx",
     "compose",
     "cse",
+    "euler_zyz",
+    "eulerxyz",
     "free_names",
     "inv",
     "is_symbolic",
     "n_nodes",
     "rot",
+    "rotx",
+    "roty",
     "rotz",
+    "rpy",
     "snap",
+    "tm_rows",
     "to_function",
     "trans",
     "transl",
 ]
 
-Scalar = float | ca.SX
-Matrix = np.ndarray | ca.SX
+Scalar = float | ca.SX  # a number or an SX expression in uncertainty variables
+Matrix = np.ndarray | ca.SX  # a numeric 4x4 (numpy) or a symbolic one (SX)
 
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 SNAP_TOL = 1e-12
-
-
-# ------------------------------------------------------------------ numbers or symbols
-
-
-def is_symbolic(*xs: object) -> bool:
-    """True if any argument is a CasADi SX/MX/DM value (then the helpers build SX)."""
-    return any(isinstance(x, (ca.SX, ca.MX, ca.DM)) for x in xs)
-
-
-def as_sx(M: Matrix | ArrayLike) -> ca.SX:
-    """``M`` as a CasADi SX matrix (numbers become constant entries)."""
-    if isinstance(M, ca.SX):
-        return M
-    if isinstance(M, ca.DM):
-        return ca.SX(M)
-    if isinstance(M, ca.MX):
-        raise SparValueError("as_sx: MX expressions are not supported (build with SX)")
-    return ca.SX(ca.DM(np.asarray(M, float)))
-
-
-def _cos(a: Scalar) -> Scalar:
-    return ca.cos(a) if is_symbolic(a) else math.cos(float(a))
-
-
-def _sin(a: Scalar) -> Scalar:
-    return ca.sin(a) if is_symbolic(a) else math.sin(float(a))
-
-
-def _rows(rows: list[list[Scalar]]) -> Matrix:
-    """A matrix from a list of rows: SX if any entry is symbolic, else a float numpy array."""
-    if any(is_symbolic(v) for row in rows for v in row):
-        return ca.vertcat(*[ca.horzcat(*row) for row in rows])
-    return np.array(rows, dtype=float)
-
-
-# ------------------------------------------------------------------ transforms
-
-
-def trans(x: Scalar, y: Scalar, z: Scalar) -> Matrix:
-    """Pure translation by (x, y, z) (caller's length unit): the paper's ``trans(X, Y, Z)``."""
-    return _rows([[1.0, 0.0, 0.0, x], [0.0, 1.0, 0.0, y], [0.0, 0.0, 1.0, z], [0.0, 0.0, 0.0, 1.0]])
-
-
-def rotz(theta: Scalar) -> Matrix:
-    """Rotation by ``theta`` (rad, right hand) about z, as a 4x4 transform."""
-    c, s = _cos(theta), _sin(theta)
-    return _rows([[c, -s, 0.0, 0.0], [s, c, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
-
-
-def compose(*Ts: Matrix | ArrayLike) -> Matrix:
-    """The product ``Ts[0] @ Ts[1] @ ...`` (frames chained left to right); identity if none.
-
-    Numeric factors next to each other are multiplied in numpy first, so a symbolic
-    chain only grows where a symbolic factor enters.
-    """
-    acc: list[Matrix] = []
-    for T in Ts:
-        if is_symbolic(T):
-            acc.append(as_sx(T))
-        elif acc and not is_symbolic(acc[-1]):
-            acc[-1] = acc[-1] @ np.asarray(T, float)
-        else:
-            acc.append(np.asarray(T, float))
-    if not acc:
-        return np.eye(4)
-    out = acc[0]
-    for T in acc[1:]:
-        out = ca.mtimes(as_sx(out), as_sx(T))
-    return out
-
-
-def rot(T: Matrix) -> Matrix:
-    """The rotation block (3x3) of a transform, numeric or symbolic."""
-    return T[:3, :3]
-
-
-def transl(T: Matrix) -> Matrix:
-    """The translation column of a transform: (3,) numpy or 3x1 SX."""
-    return T[:3, 3]
-
-
-def inv(T: Matrix) -> Matrix:
-    """Closed-form inverse of a rigid transform, ``[R.T, -R.T t]`` (no general matrix inverse)."""
-    if is_symbolic(T):
-        T = as_sx(T)
-        Rt = T[:3, :3].T
-        t = -ca.mtimes(Rt, T[:3, 3])
-        return ca.vertcat(ca.horzcat(Rt, t), ca.horzcat(ca.SX.zeros(1, 3), ca.SX(1.0)))
-    T = np.asarray(T, float)
-    out = np.eye(4)
-    Rt = T[:3, :3].T
-    out[:3, :3] = Rt
-    out[:3, 3] = -Rt @ T[:3, 3]
-    return out
-
-
-def apply(T: Matrix, p: Iterable[Scalar] | Matrix) -> Matrix:
-    """The point ``p`` (3 coordinates in T's source frame) mapped by ``T``: ``(T @ [p, 1])[:3]``.
-
-    Returns a (3,) numpy array, or a 3x1 SX column when anything is symbolic.
-    """
-    if is_symbolic(p):
-        ph: Matrix = ca.vertcat(as_sx(p)[:3], ca.SX(1.0))
-    else:
-        pl = list(np.asarray(p, dtype=object).reshape(-1))
-        if len(pl) != 3:
-            raise SparValueError(f"apply: a point has 3 coordinates, got {len(pl)}")
-        ph = ca.vertcat(*pl, 1.0) if is_symbolic(*pl) else np.array([*pl, 1.0], dtype=float)
-    if is_symbolic(T, ph):
-        return ca.mtimes(as_sx(T), as_sx(ph))[:3]
-    return (np.asarray(T, float) @ ph)[:3]
 
 
 # ------------------------------------------------------------------ simplification
