@@ -25,7 +25,7 @@ def test_quickstart_python_example(capsys) -> None:
 def test_demo_graphs_are_current() -> None:
     """docs/demo holds what `make demo` writes for the paper's cell; its DOT files must be
     the planner's current output (a stale demo shows arcs the planner no longer gives)."""
-    from spar_py.draw import network_dot, ordering_dot
+    from spar_py.pictures import network_dot, ordering_dot
     from spar_py.planner import Planner
 
     plan = Planner().plan(ROOT / "kb" / "problems" / "peg_in_block.yaml").to_json()

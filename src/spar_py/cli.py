@@ -110,7 +110,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
         if args.output:
             write_atomically(Path(args.output), plan.dumps() + "\n")
     for outdir in {d for d in (args.dot, args.png) if d}:
-        from .draw import write_pictures
+        from .pictures import write_pictures
 
         paths = write_pictures(cell, plan.to_json(), Path(outdir))
         print(f"spar: wrote {len(paths)} pictures to {outdir}", file=sys.stderr)
