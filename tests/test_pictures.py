@@ -418,6 +418,15 @@ def test_legacy_replay_gives_the_poses_the_planner_now_writes(cell: Cell, plan: 
     assert [(s.title, s.held, s.grasp, s.detail) for s in old] == [(s.title, s.held, s.grasp, s.detail) for s in new]
 
 
+def test_an_empty_poses_dict_is_no_world(cell: Cell, plan: dict[str, Any]) -> None:
+    """A step whose ``poses`` is empty (a typed Step's default) is replayed, not drawn empty."""
+    p = legacy_plan(cell)
+    for st in p["instance"]["steps"]:
+        st.update(poses={}, held=None)
+    assert [s.held for s in scenes(cell, p)] == [None, "block", None, None, "peg", None]
+    assert all(set(s.poses) == {"block", "peg"} for s in scenes(cell, p))
+
+
 def test_legacy_objects_move_with_the_steps(cell: Cell) -> None:
     sc = scenes(cell, legacy_plan(cell))
     assert [s.held for s in sc] == [None, "block", None, None, "peg", None]
