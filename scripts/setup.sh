@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # One-step set-up, run by `make setup` (and so by `make demo` and `make test`):
-#   1. system prerequisites (a C compiler, Python headers and venv) via apt-get;
+#   1. system prerequisites (a C compiler, Python headers and venv, Graphviz's `dot`
+#      for the plan pictures) via apt-get;
 #   2. a SWI-Prolog >= 9.1.12 (scripts/provision-swipl.sh: PATH, $SWIPL, the
 #      per-user cache, or a build from the distribution's source package);
 #   3. .venv with `pip install -e '.[dev]'`, janus-swi compiled against that SWI;
@@ -16,6 +17,7 @@ SUDO=""; [ "$(id -u)" -eq 0 ] || SUDO=sudo
 need=""
 command -v cc >/dev/null 2>&1 || need="$need build-essential"
 command -v "$PYTHON" >/dev/null 2>&1 || need="$need python3"
+command -v dot >/dev/null 2>&1 || need="$need graphviz"  # lays out and draws the plan's graphs
 if command -v "$PYTHON" >/dev/null 2>&1; then
     inc=$("$PYTHON" -c 'import sysconfig; print(sysconfig.get_paths()["include"])')
     [ -f "$inc/Python.h" ] || need="$need python3-dev"

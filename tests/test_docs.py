@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import os
 import re
+import struct
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -22,12 +23,26 @@ def test_quickstart_python_example(capsys) -> None:
     assert "centres" in out
 
 
-def test_demo_graphs_are_current() -> None:
-    """docs/demo holds what `make demo` writes for the paper's cell; its DOT files must be
-    the planner's current output (a stale demo shows arcs the planner no longer gives)."""
-    from spar_py.draw import network_dot, ordering_dot
+def _png_size(path: Path) -> tuple[int, int]:
+    data = path.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n", f"{path} is not a PNG"
+    return struct.unpack(">II", data[16:24])
+
+
+def test_demo_graphs_are_current(tmp_path: Path) -> None:
+    """docs/demo holds what `make demo` writes for the paper's cell: its DOT files must be
+    the planner's current output (a stale demo shows arcs the planner no longer gives), its
+    graph PNGs dot's drawing of those files (same pixel size as drawn now), and its cell
+    pictures one per step of the plan, named as write_pictures names them."""
+    from spar_py.pictures import network_dot, ordering_dot, render_png
     from spar_py.planner import Planner
 
     plan = Planner().plan(ROOT / "kb" / "problems" / "peg_in_block.yaml").to_json()
-    assert (ROOT / "docs" / "demo" / "network.dot").read_text() == network_dot(plan)
-    assert (ROOT / "docs" / "demo" / "ordering.dot").read_text() == ordering_dot(plan)
+    demo = ROOT / "docs" / "demo"
+    for stem, text in (("network", network_dot(plan)), ("ordering", ordering_dot(plan))):
+        assert (demo / f"{stem}.dot").read_text() == text
+        assert _png_size(demo / f"{stem}.png") == _png_size(render_png(text, tmp_path / f"{stem}.png"))
+    steps = plan["instance"]["steps"]
+    cells = sorted(p.name for p in demo.glob("cell_*.png"))
+    assert len(cells) == len(steps) + 1 and cells[0] == "cell_00_initial.png"
+    assert [c.split("_", 2)[2][:-4] for c in cells[1:]] == [st["name"] for st in steps]

@@ -84,6 +84,23 @@ def test_fk_batch_matches_fk(puma: Robot) -> None:
         puma.fk(np.zeros(5))
 
 
+@pytest.mark.parametrize("which", ["puma", "generic"])
+def test_frames_run_from_the_base_to_the_tool(puma: Robot, which: str) -> None:
+    """frames(q): base, frames 1..6 by Craig's link transform one joint at a time, fk(q) last."""
+    robot = puma if which == "puma" else generic_robot()
+    for q in random_q(robot, 20, seed=7):
+        F = robot.frames(q)
+        assert F.shape == (8, 4, 4)
+        assert np.array_equal(F[0], robot.base)
+        assert np.allclose(F[-1], robot.fk(q), atol=1e-9)
+        for i, (alpha, a, d, off) in enumerate(robot.dh):  # written out, not fk_batch's code
+            want = F[i] @ rotx(alpha) @ trans(a, 0.0, 0.0) @ rotz(q[i] + off) @ trans(0.0, 0.0, d)
+            assert np.allclose(F[i + 1], want, atol=1e-9)
+        assert np.allclose(F[7], F[6] @ robot.tool, atol=1e-12)
+    with pytest.raises(SparValueError, match="frames"):
+        robot.frames(np.zeros((1, 6)))
+
+
 # ---------------------------------------------------------------- inverse kinematics
 
 

@@ -158,7 +158,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
         raise PlanningTimeout(f"{cell.name}: no result within {args.timeout:g} s")
     staged: list[tuple[Path, Path]] = []  # (temporary, final)
     for d in picture_dirs:
-        from .draw import write_pictures
+        from .pictures import write_pictures
 
         d.absolute().parent.mkdir(parents=True, exist_ok=True)
         tmp = guard.temporary(Path(tempfile.mkdtemp(dir=d.absolute().parent, prefix=f".{d.name}.")))

@@ -129,16 +129,7 @@ class Robot:
         q = np.asarray(q, float)
         if q.ndim != 2 or q.shape[1] != 6:
             raise SparValueError(f"fk_batch takes joint vectors of shape (n, 6), got {q.shape}")
-        alpha, a, d, off = self.dh.T
-        th = q + off
-        ct, st = np.cos(th), np.sin(th)
-        ca, sa = np.cos(alpha), np.sin(alpha)
-        # Craig's link transform (3.6): rotx(alpha_{i-1}) transx(a_{i-1}) rotz(theta_i) transz(d_i)
-        A = np.zeros(q.shape + (4, 4))
-        A[..., 0, 0], A[..., 0, 1], A[..., 0, 3] = ct, -st, a
-        A[..., 1, 0], A[..., 1, 1], A[..., 1, 2], A[..., 1, 3] = st * ca, ct * ca, -sa, -sa * d
-        A[..., 2, 0], A[..., 2, 1], A[..., 2, 2], A[..., 2, 3] = st * sa, ct * sa, ca, ca * d
-        A[..., 3, 3] = 1.0
+        A = self._links(q)
         T = self.base @ A[:, 0]
         for i in range(1, 6):
             T = T @ A[:, i]
@@ -327,3 +318,37 @@ class Robot:
         V = ok[..., None] & (Q <= hi[..., None] + LIMIT_TOL).all(axis=0)
         M = shift.shape[-1]
         return Q.transpose(1, 2, 3, 0).reshape(n, 8 * M, 6), V.reshape(n, 8 * M)
+
+    # ------------------------------------------------------------------ frames (drawing)
+
+    def _links(self, q: np.ndarray) -> np.ndarray:
+        """Link transforms A_1..A_6 (n, 6, 4, 4), frame i-1 -> frame i (``unit``), for q (n, 6) rad."""
+        alpha, a, d, off = self.dh.T
+        th = q + off
+        ct, st = np.cos(th), np.sin(th)
+        ca, sa = np.cos(alpha), np.sin(alpha)
+        # Craig's link transform (3.6): rotx(alpha_{i-1}) transx(a_{i-1}) rotz(theta_i) transz(d_i)
+        A = np.zeros(q.shape + (4, 4))
+        A[..., 0, 0], A[..., 0, 1], A[..., 0, 3] = ct, -st, a
+        A[..., 1, 0], A[..., 1, 1], A[..., 1, 2], A[..., 1, 3] = st * ca, ct * ca, -sa, -sa * d
+        A[..., 2, 0], A[..., 2, 1], A[..., 2, 2], A[..., 2, 3] = st * sa, ct * sa, ca, ca * d
+        A[..., 3, 3] = 1.0
+        return A
+
+    def frames(self, q: np.ndarray) -> np.ndarray:
+        """World frames (8, 4, 4) (``unit``) of the arm at joint vector q (6,) rad, DH zero convention.
+
+        Row 0 is ``base`` (T_world_frame0), rows 1..6 T_world_frame_i = base @ A_1..A_i
+        (frame 6 is the flange), row 7 the tool, ``frames[6] @ tool`` (equal to :meth:`fk`).
+        The link transforms are :meth:`fk_batch`'s own.
+        """
+        q = np.asarray(q, float)
+        if q.shape != (6,):
+            raise SparValueError(f"frames takes a joint vector of shape (6,), got {q.shape}")
+        A = self._links(q[None])[0]
+        out = np.empty((8, 4, 4))
+        out[0] = self.base
+        for i in range(6):
+            out[i + 1] = out[i] @ A[i]
+        out[7] = out[6] @ self.tool
+        return out

@@ -1,0 +1,411 @@
+"""The work-cell picture at one step: the table, each part drawn from its object's shape at
+its world pose, the arm as a polyline through its frames, and the gripper.
+
+Three panels per picture: a 3-D view, a top view and a side view, with equal axis scaling
+and the same extents for every step of a plan. What is drawn is a :class:`Scene`
+(:mod:`spar_py.pictures.scene`); the arm's points come from ``Scene.frames``, the
+robot's own ``Robot.frames(q)``.
+
+Frames and units: world Z up, table top at z = 0, 4x4 transforms with column vectors
+(``T_world_obj``), lengths in the cell's unit (``cell.unit``, which is also the unit the
+robot was loaded in). matplotlib is imported (Agg backend) inside the drawing functions only.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from itertools import product
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ..errors import SparValueError
+from .plandoc import term_parts
+from .scene import Scene, part_model, scenes
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+
+    from ..kinematics import Robot
+    from ..model import Cell, ObjectModel, Solid
+
+__all__ = ["arm_polyline", "cell_figure", "cell_png", "extent", "gripper_segments", "hole_mouth",
+           "object_points", "solid_faces", "solid_points"]
+
+OBJECT_COLOURS = ("#4c72b0", "#dd8452", "#55a868", "#c44e52", "#8172b3", "#937860", "#da8bc3")
+TABLE_COLOUR = "#c8b48a"
+ARM_COLOUR = "#3a3a3a"
+GRIPPER_COLOUR = "#b22222"
+HOLE_COLOUR = "#1a1a1a"
+VIEW_3D = (22.0, -58.0)  # elevation, azimuth (deg) of the 3-D panel
+TOP_EYE = (0.0, 0.0, 1.0)  # the top view looks down from +z
+SIDE_EYE = (0.0, -1.0, 0.0)  # the side view looks from -y
+
+Projection = Callable[[np.ndarray], tuple[np.ndarray, ...]]  # (k, 3) world points -> plot arguments
+
+
+# =========================================================================== geometry
+
+
+def solid_points(solid: Solid, T: np.ndarray, segments: int = 24) -> np.ndarray:
+    """World points (k, 3) outlining a Solid placed by ``T`` (4x4, T_world_obj, cell unit).
+
+    A box gives its 8 corners (x slowest, z fastest: lo/hi per axis); a cylinder its two
+    rim circles, ``segments`` points each (bottom rim first).
+    """
+    if solid.kind == "cylinder":
+        a = np.linspace(0.0, 2 * math.pi, segments, endpoint=False)
+        rim = np.stack([solid.radius * np.cos(a), solid.radius * np.sin(a)], axis=1)
+        local = np.vstack([np.column_stack([rim, np.full(segments, z)]) for z in (solid.lo[2], solid.hi[2])])
+    else:
+        local = np.array(list(product(*zip(solid.lo, solid.hi))), float)
+    return local @ np.asarray(T, float)[:3, :3].T + np.asarray(T, float)[:3, 3]
+
+
+def _faces_of_points(p: np.ndarray) -> list[np.ndarray]:
+    """Faces of a solid from its :func:`solid_points` outline (8 box corners or two rims)."""
+    if len(p) == 8:
+        quads = [(0, 1, 3, 2), (4, 5, 7, 6), (0, 1, 5, 4), (2, 3, 7, 6), (0, 2, 6, 4), (1, 3, 7, 5)]
+        return [p[list(q)] for q in quads]
+    n = len(p) // 2
+    bottom, top = p[:n], p[n:]
+    return [bottom, top, *[np.array([bottom[i], bottom[(i + 1) % n], top[(i + 1) % n], top[i]]) for i in range(n)]]
+
+
+def solid_faces(solid: Solid, T: np.ndarray, segments: int = 24) -> list[np.ndarray]:
+    """The faces (each (m, 3) world points, in order round the face) of a Solid placed by ``T``."""
+    return _faces_of_points(solid_points(solid, T, segments))
+
+
+def object_points(model: ObjectModel, T: np.ndarray) -> np.ndarray:
+    """All outline points (k, 3) of an object's shape at world pose ``T``; its origin if it has no shape."""
+    if not model.shape:
+        return np.asarray(T, float)[:3, 3][None]
+    return np.vstack([solid_points(s, T) for s in model.shape])
+
+
+def arm_polyline(robot: Robot, frames: np.ndarray) -> np.ndarray:
+    """World points (k, 3) of the arm's skeleton through ``frames`` = ``robot.frames(q)`` (8, 4, 4):
+    frame 0, then per link the corner after its a_{i-1} (along x_{i-1}) and frame i's origin
+    (after d_i), up to frame 6 (the flange). Repeated points (zero-length links) are dropped.
+    """
+    F = np.asarray(frames, float)
+    pts = [F[0, :3, 3]]
+    for i, a in enumerate(np.asarray(robot.dh, float)[:, 1]):
+        # rotx(alpha_{i-1}) leaves x_{i-1} alone: the corner is a_{i-1} along it
+        pts += [F[i, :3, 3] + a * F[i, :3, 0], F[i + 1, :3, 3]]
+    out = [pts[0]]
+    for p in pts[1:]:
+        if np.linalg.norm(p - out[-1]) > 1e-9:
+            out.append(p)
+    return np.array(out)
+
+
+def gripper_segments(tool: np.ndarray, width: float, length: float) -> list[np.ndarray]:
+    """Line segments (each (2, 3) world points) of a parallel gripper at tool pose ``tool``.
+
+    The tool centre point is midway between the finger tips (Sec. 3.2.2); fingers lie
+    at tool y = +-width/2 and run ``length`` back along -z to the palm, which is joined
+    by the palm bar. Lengths in the cell unit.
+    """
+    T = np.asarray(tool, float)
+    w = width / 2
+
+    def world(p: Sequence[float]) -> np.ndarray:
+        return T[:3, :3] @ np.asarray(p, float) + T[:3, 3]
+
+    return [np.array([world((0, s * w, -length)), world((0, s * w, 0))]) for s in (-1, 1)] + [
+        np.array([world((0, -w, -length)), world((0, w, -length))])
+    ]
+
+
+def hole_mouth(cell: Cell, obj: str) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """The mouth of ``obj``'s hole in its object frame: (centre (3,), outward axis (3,), radius), or None.
+
+    The model gives the hole's bottom centre F_h and radius (Sec. 3.2.2) but not its
+    axis; a goal ``assembled(P, obj, _, Ta, Va)`` does: the mating motion Va (obj's
+    frame) runs down the hole, so the mouth is where the ray F_h - t Va leaves obj's
+    boxes. None for an object with no hole or no such goal.
+    """
+    model = cell.objects.get(obj)
+    if model is None or model.feature is None or model.feature.kind != "hole":
+        return None
+    axis = None
+    for g in cell.goals:
+        name, args = term_parts(g)
+        if name == "assembled" and len(args) == 5 and args[1] == obj and args[4] in cell.vectors:
+            va = np.asarray(cell.vectors[args[4]], float)
+            if np.linalg.norm(va) > 0:
+                axis = -va / np.linalg.norm(va)
+                break
+    if axis is None:
+        return None
+    origin = np.asarray(model.feature.vector, float)
+    exits = [0.0]
+    for sd in model.shape:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t1, t2 = (np.asarray(sd.lo) - origin) / axis, (np.asarray(sd.hi) - origin) / axis
+        lo = np.where(axis != 0, np.minimum(t1, t2), -np.inf)
+        hi = np.where(axis != 0, np.maximum(t1, t2), np.inf)
+        inside_other = np.all((axis != 0) | ((sd.lo <= origin) & (origin <= sd.hi)))
+        if inside_other and lo.max() <= 1e-9 <= hi.min():
+            exits.append(float(hi.min()))
+    return origin + max(exits) * axis, axis, float(model.feature.radius)
+
+
+def _disc(centre: np.ndarray, normal: np.ndarray, radius: float, segments: int = 24) -> np.ndarray:
+    """Points (segments, 3) of a circle of ``radius`` about ``centre`` in the plane normal to ``normal``."""
+    n = normal / np.linalg.norm(normal)
+    u = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
+    u /= np.linalg.norm(u)
+    v = np.cross(n, u)
+    a = np.linspace(0.0, 2 * math.pi, segments, endpoint=False)
+    return centre + radius * (np.outer(np.cos(a), u) + np.outer(np.sin(a), v))
+
+
+def _hull(points: np.ndarray) -> np.ndarray:
+    """Convex hull (counter-clockwise, (m, 2)) of 2-D points: Andrew's monotone chain."""
+    pts = sorted(set(map(tuple, np.round(points, 9))))
+    if len(pts) <= 2:
+        return np.array(pts)
+
+    def half(seq: list[tuple[float, float]]) -> list[tuple[float, float]]:
+        h: list[tuple[float, float]] = []
+        for p in seq:
+            while len(h) >= 2 and ((h[-1][0] - h[-2][0]) * (p[1] - h[-2][1])
+                                   - (h[-1][1] - h[-2][1]) * (p[0] - h[-2][0])) <= 0:
+                h.pop()
+            h.append(p)
+        return h
+
+    lower, upper = half(pts), half(pts[::-1])
+    return np.array(lower[:-1] + upper[:-1])
+
+
+# =========================================================================== extents
+
+
+@dataclass(frozen=True)
+class Extent:
+    """Shared extents of a picture series: the table rectangle and the axis box (cell unit)."""
+
+    table: tuple[float, float, float, float]  # x0, x1, y0, y1 at z = 0
+    lo: np.ndarray
+    hi: np.ndarray
+
+
+def _finger_length(cell: Cell) -> float:
+    return 0.5 * cell.finger_separation
+
+
+def _arm_points(cell: Cell, s: Scene) -> np.ndarray | None:
+    """The arm's skeleton (k, 3) at scene ``s``, on to the gripper's palm; None without a configuration."""
+    if s.frames is None:
+        return None
+    tool = s.frames[-1]
+    palm = tool[:3, :3] @ [0.0, 0.0, -_finger_length(cell)] + tool[:3, 3]
+    return np.vstack([arm_polyline(cell.robot, s.frames), palm])
+
+
+def _part_points(cell: Cell, all_scenes: Sequence[Scene]) -> list[np.ndarray]:
+    return [object_points(cell.objects[part_model(k)], T) for s in all_scenes for k, T in s.poses.items()
+            if part_model(k) in cell.objects]
+
+
+def _table(cell: Cell, all_scenes: Sequence[Scene]) -> tuple[float, float, float, float]:
+    """The table top (x0, x1, y0, y1 at z = 0, cell unit): every part of every scene, padded
+    by a fifth of their spread or the largest object's bounding radius, whichever is more."""
+    objs = _part_points(cell, all_scenes)
+    op = np.vstack(objs) if objs else np.zeros((1, 3))
+    span = float(max(np.ptp(op[:, 0]), np.ptp(op[:, 1])))
+    pad = max(0.2 * span, max((m.bounding_radius() for m in cell.objects.values()), default=1.0), 1e-6)
+    return (float(op[:, 0].min() - pad), float(op[:, 0].max() + pad),
+            float(op[:, 1].min() - pad), float(op[:, 1].max() + pad))
+
+
+def extent(cell: Cell, all_scenes: Sequence[Scene]) -> Extent:
+    """Table and axis box shared by all pictures of a plan: parts, table, pedestal and
+    every arm configuration, with a 5 % margin (cell unit)."""
+    table = _table(cell, all_scenes)
+    base = np.asarray(cell.robot.base, float)[:3, 3]
+    pts = [np.array([[table[0], table[2], 0.0], [table[1], table[3], 0.0], base, [base[0], base[1], 0.0]])]
+    pts += _part_points(cell, all_scenes)
+    pts += [p for s in all_scenes if (p := _arm_points(cell, s)) is not None]
+    allp = np.vstack(pts)
+    lo, hi = allp.min(axis=0), allp.max(axis=0)
+    m = 0.05 * float(max(hi - lo))
+    return Extent(table, lo - m, hi + m)
+
+
+# =========================================================================== painting
+
+
+def _colour(cell: Cell, obj: str) -> str:
+    names = list(cell.objects)
+    return OBJECT_COLOURS[names.index(obj) % len(OBJECT_COLOURS)] if obj in names else "#777777"
+
+
+def _paint_list(cell: Cell, s: Scene, eye: Sequence[float]) -> list[tuple[str, np.ndarray, str]]:
+    """What to paint for the parts, far to near along ``eye`` (unit vector towards the viewer):
+    (kind 'solid' | 'hole', world points, colour). Hole mouths facing away are left out."""
+    eye = np.asarray(eye, float)
+    items: list[tuple[float, str, np.ndarray, str]] = []
+    size = max((m.bounding_radius() for m in cell.objects.values()), default=1.0)
+    for key, T in s.poses.items():
+        o = part_model(key)
+        if o not in cell.objects:
+            continue
+        for sd in cell.objects[o].shape:
+            p = solid_points(sd, T, 24)
+            items.append((float(p.mean(axis=0) @ eye), "solid", p, _colour(cell, o)))
+        mouth = hole_mouth(cell, o)
+        if mouth is not None:
+            c, n, r = mouth
+            nw = T[:3, :3] @ n
+            if float(nw @ eye) > 1e-6:
+                cw = T[:3, :3] @ c + T[:3, 3] + 1e-3 * size * nw
+                items.append((float(cw @ eye), "hole", _disc(cw, nw, r), HOLE_COLOUR))
+    items.sort(key=lambda t: t[0])
+    return [(k, p, col) for _, k, p, col in items]
+
+
+def _view_eye(elev_deg: float, azim_deg: float) -> np.ndarray:
+    """Unit vector from the scene towards a 3-D axes' viewer at (elev, azim) degrees."""
+    e, a = math.radians(elev_deg), math.radians(azim_deg)
+    return np.array([math.cos(e) * math.cos(a), math.cos(e) * math.sin(a), math.sin(e)])
+
+
+def _arm_alpha(s: Scene) -> float:
+    return 0.35 if s.arm_note == "first configuration" else 1.0
+
+
+def _draw_arm(ax: Any, cell: Cell, s: Scene, proj: Projection, zorder: float = 3) -> None:
+    """The pedestal, the arm skeleton and the gripper on ``ax``."""
+    base = np.asarray(cell.robot.base, float)[:3, 3]
+    ax.plot(*proj(np.array([[base[0], base[1], 0.0], base])), color="#888888", lw=7, solid_capstyle="butt",
+            zorder=zorder)
+    pts = _arm_points(cell, s)
+    if pts is None or s.tool is None:
+        return
+    ax.plot(*proj(pts), color=ARM_COLOUR, lw=3.5, alpha=_arm_alpha(s), marker="o", ms=4, solid_capstyle="round",
+            zorder=zorder)
+    width = cell.finger_separation
+    if s.held is not None and s.grasp is not None:
+        width = cell.objects[part_model(s.held)].grasps[s.grasp].width
+    for seg in gripper_segments(s.tool, width, _finger_length(cell)):
+        ax.plot(*proj(seg), color=GRIPPER_COLOUR, lw=2.4, alpha=_arm_alpha(s), zorder=zorder + 0.1)
+
+
+def _draw_3d(ax: Any, cell: Cell, s: Scene, fr: Extent) -> None:
+    """The 3-D panel; painted in a fixed order (table, parts far to near, arm on top)."""
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    ax.computed_zorder = False
+    x0, x1, y0, y1 = fr.table
+    ax.add_collection3d(Poly3DCollection([np.array([[x0, y0, 0], [x1, y0, 0], [x1, y1, 0], [x0, y1, 0]])],
+                                         facecolor=TABLE_COLOUR, alpha=0.35, edgecolor="#8a7a5a", zorder=1),
+                        autolim=False)
+    for k, (kind, p, colour) in enumerate(_paint_list(cell, s, _view_eye(*VIEW_3D))):
+        faces = [p] if kind == "hole" else _faces_of_points(p)
+        ax.add_collection3d(Poly3DCollection(faces, facecolor=colour, alpha=0.92 if kind == "solid" else 1.0,
+                                             edgecolor="#222222", linewidths=0.3, zorder=2 + k * 1e-3),
+                            autolim=False)
+    _draw_arm(ax, cell, s, lambda p: (p[:, 0], p[:, 1], p[:, 2]), zorder=3)
+    c, h = (fr.lo + fr.hi) / 2, float(max(fr.hi - fr.lo)) / 2
+    ax.set_xlim(c[0] - h, c[0] + h)
+    ax.set_ylim(c[1] - h, c[1] + h)
+    z0 = max(c[2] - h, fr.lo[2])
+    ax.set_zlim(z0, z0 + 2 * h)
+    ax.set_box_aspect((1, 1, 1), zoom=1.0)
+    ax.view_init(elev=VIEW_3D[0], azim=VIEW_3D[1])
+    u = cell.unit
+    ax.set_xlabel(f"x ({u})")
+    ax.set_ylabel(f"y ({u})")
+    ax.set_zlabel(f"z ({u})")
+
+
+def _draw_2d(ax: Axes, cell: Cell, s: Scene, fr: Extent, axes: tuple[int, int], eye: Sequence[float]) -> None:
+    """An orthographic view onto world axes ``axes`` (0 x, 1 y, 2 z) seen from ``eye``, far to near."""
+    from matplotlib.patches import Polygon, Rectangle
+
+    i, j = axes
+    x0, x1, y0, y1 = fr.table
+    if axes == (0, 1):
+        ax.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, fc=TABLE_COLOUR, alpha=0.35, ec="#8a7a5a"))
+    else:
+        lo, hi = (x0, x1) if i == 0 else (y0, y1)
+        ax.plot([lo, hi], [0, 0], color="#8a7a5a", lw=4, solid_capstyle="butt")
+    for kind, p, colour in _paint_list(cell, s, eye):
+        ax.add_patch(Polygon(_hull(p[:, [i, j]]), closed=True, fc=colour, ec="#222222",
+                             lw=0.6 if kind == "solid" else 0.0, alpha=0.92 if kind == "solid" else 1.0))
+    _draw_arm(ax, cell, s, lambda p: (p[:, i], p[:, j]))
+    ax.set_xlim(fr.lo[i], fr.hi[i])
+    ax.set_ylim(fr.lo[j], fr.hi[j])
+    ax.set_aspect("equal", adjustable="box", anchor="W")
+    names = "xyz"
+    ax.set_xlabel(f"{names[i]} ({cell.unit})")
+    ax.set_ylabel(f"{names[j]} ({cell.unit})")
+    ax.grid(True, lw=0.3, alpha=0.5)
+
+
+def _legend(cell: Cell, s: Scene) -> list[Any]:
+    """Legend entries: each object present (the held one with its grasp), hole mouths if any
+    is seen, the table, the arm and the gripper."""
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    held = part_model(s.held) if s.held else None
+    drawn = {part_model(k) for k in s.poses}
+    handles: list[Any] = [Patch(fc=_colour(cell, o), ec="#222222",
+                                label=o + ((f" (held, {s.grasp})" if s.grasp else " (held)") if o == held else ""))
+                          for o in cell.objects if o in drawn]
+    eyes = (_view_eye(*VIEW_3D), TOP_EYE, SIDE_EYE)
+    if any(kind == "hole" for e in eyes for kind, *_ in _paint_list(cell, s, e)):
+        handles.append(Patch(fc=HOLE_COLOUR, label="hole mouth"))
+    return handles + [
+        Patch(fc=TABLE_COLOUR, alpha=0.35, ec="#8a7a5a", label="table (z = 0)"),
+        Line2D([], [], color=ARM_COLOUR, lw=3.5, marker="o", ms=4, alpha=_arm_alpha(s),
+               label=f"{cell.robot.name} DH frames" + (f" ({s.arm_note})" if s.arm_note else "")),
+        Line2D([], [], color=GRIPPER_COLOUR, lw=2.4, label="gripper"),
+    ]
+
+
+def cell_figure(cell: Cell, s: Scene, fr: Extent, path: str | Path) -> Path:
+    """Draw scene ``s`` within extents ``fr`` into the PNG ``path`` (1200 x 720 px) and return the path."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig = plt.figure(figsize=(12, 7.2), dpi=100)
+    try:
+        _draw_3d(fig.add_axes((0.0, 0.09, 0.6, 0.82), projection="3d"), cell, s, fr)
+        top = fig.add_axes((0.6, 0.56, 0.38, 0.32))
+        _draw_2d(top, cell, s, fr, (0, 1), TOP_EYE)
+        top.set_title("top view (looking down)", fontsize=9)
+        side = fig.add_axes((0.6, 0.13, 0.38, 0.32))
+        _draw_2d(side, cell, s, fr, (0, 2), SIDE_EYE)
+        side.set_title("side view (from -y)", fontsize=9)
+        fig.text(0.5, 0.975, s.title, ha="center", va="top", fontsize=13, weight="bold", family="monospace")
+        if s.detail:
+            fig.text(0.5, 0.935, s.detail, ha="center", va="top", fontsize=9, family="monospace")
+        handles = _legend(cell, s)
+        fig.legend(handles=handles, loc="lower center", ncol=len(handles), fontsize=9, frameon=False)
+        fig.savefig(path, dpi=100, facecolor="white")
+    finally:
+        plt.close(fig)
+    return Path(path)
+
+
+def cell_png(cell: Cell, plan: Any, step_index: int, path: str | Path) -> Path:
+    """Draw the work cell at step ``step_index`` (0 = initial state, k = after step k) into ``path``.
+
+    Extents are those of the whole plan, as :func:`spar_py.pictures.write_pictures` uses.
+    Raises SparValueError for a step index outside 0..n.
+    """
+    all_scenes = scenes(cell, plan)
+    if not 0 <= step_index < len(all_scenes):
+        raise SparValueError(f"step_index {step_index} outside 0..{len(all_scenes) - 1}")
+    return cell_figure(cell, all_scenes[step_index], extent(cell, all_scenes), path)

@@ -1,0 +1,177 @@
+"""The work cell at each step of a plan instance, as the cell pictures draw it.
+
+A :class:`Scene` is read, not computed: each step of ``instance.steps`` in the plan JSON
+carries ``poses`` (part key -> 4x4 world pose at the step's end-point), ``held`` (the
+object in the hand after the step, or null) and ``joints_deg``; the scene takes those
+and the arm's frames ``robot.frames(q)``. Nothing here replays the plan. The one
+exception is clearly fenced: a step without ``poses`` (missing or empty: plans written
+before the planner gave them) is replayed by :func:`spar_py.pictures._legacy.legacy_poses`,
+which is to be deleted once every plan carries ``poses``.
+
+Frames and units: world Z up, table top z = 0, ``T_world_part`` 4x4 with column vectors,
+lengths in the cell's unit (``cell.unit``); ``joints_deg`` in degrees in the robot file's
+DH zero convention, ``Scene.q`` in radians. A part key is the object's name, or
+``"<object>@<initial position name>"`` for the other parts of a stock of identical parts.
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ..errors import SparValueError
+from .plandoc import as_doc, instance, pretty_term
+
+if TYPE_CHECKING:
+    from ..model import Cell
+
+__all__ = ["Scene", "World", "initial_poses", "part_model", "scenes", "step_world"]
+
+GRASP_TOL = 1e-4  # relative to the object's bounding radius: T_part @ T_g within this of the tool pose
+
+
+@dataclass(frozen=True)
+class World:
+    """Where the parts are after one step: part key -> T_world_part (4x4, cell unit), and the held object."""
+
+    poses: dict[str, np.ndarray]
+    held: str | None
+
+
+@dataclass
+class Scene:
+    """The work cell at one step (index 0 = before the plan): titles, the parts' world poses
+    (4x4, cell unit), the held object and the grasp it is held by, the arm's joints q (6,)
+    rad and its 8 world frames (``robot.frames(q)``; None when no configuration is known),
+    and a note on the arm (``"first configuration"``, ``"unchanged"`` or "")."""
+
+    index: int
+    title: str
+    detail: str
+    poses: dict[str, np.ndarray]
+    held: str | None = None
+    grasp: str | None = None
+    q: np.ndarray | None = None
+    frames: np.ndarray | None = None
+    arm_note: str = ""
+
+    @property
+    def tool(self) -> np.ndarray | None:
+        """The tool's world pose T_world_tool (4x4, cell unit), the last of ``frames``."""
+        return None if self.frames is None else self.frames[-1]
+
+
+def part_model(key: str) -> str:
+    """The object (model) a part key draws: ``peg`` for a stock's part ``peg@init_pos1``."""
+    return key.split("@", 1)[0]
+
+
+def initial_poses(cell: Cell) -> dict[str, np.ndarray]:
+    """Every part's world pose before the plan (from ``cell.positions``); a stock's further
+    parts keyed ``"<object>@<position name>"``."""
+    poses: dict[str, np.ndarray] = {}
+    for p in cell.positions.values():
+        poses[p.obj if p.obj not in poses else f"{p.obj}@{p.name}"] = np.array(p.T, float)
+    return poses
+
+
+def _pose(value: Any, where: str) -> np.ndarray:
+    T = np.asarray(value, float)
+    if T.shape != (4, 4) or not np.all(np.isfinite(T)):
+        raise SparValueError(f"{where}: a 4x4 world pose, got shape {T.shape}")
+    return T
+
+
+def step_world(step: Mapping[str, Any], index: int) -> World:
+    """The world after step ``index`` (1-based, for messages) as the step gives it: ``poses``, ``held``."""
+    poses = {str(k): _pose(v, f"step {index}: poses[{k!r}]") for k, v in step["poses"].items()}
+    held = step.get("held")
+    if held is not None and str(held) not in poses:
+        raise SparValueError(f"step {index}: held object {held!r} has no pose in poses")
+    return World(poses, None if held is None else str(held))
+
+
+def _worlds(cell: Cell, plan: Mapping[str, Any], steps: Sequence[Mapping[str, Any]]) -> list[World]:
+    """Each step's world from its ``poses`` and ``held``; the legacy replay only for steps without
+    ``poses`` (no key, or an empty dict: a cell always has parts)."""
+    legacy: list[World] | None = None
+    out = []
+    for k, step in enumerate(steps):
+        if step.get("poses"):
+            out.append(step_world(step, k + 1))
+            continue
+        if legacy is None:  # LEGACY: plans written before steps carried poses; delete with _legacy.py
+            from ._legacy import legacy_poses
+
+            legacy = legacy_poses(cell, plan)
+        out.append(legacy[k])
+    return out
+
+
+def held_grasp(cell: Cell, held: str | None, T_part: np.ndarray | None, tool: np.ndarray | None) -> str | None:
+    """The grasp label of ``held`` whose T_part @ T_g is the tool pose (GRASP_TOL), else None."""
+    if held is None or T_part is None or tool is None or part_model(held) not in cell.objects:
+        return None
+    model = cell.objects[part_model(held)]
+    tol = GRASP_TOL * max(model.bounding_radius(), 1.0)
+    for label, g in model.grasps.items():
+        if np.abs(T_part @ np.asarray(g.T, float) - tool).max() <= tol:
+            return str(label)
+    return None
+
+
+def _joints(cell: Cell, step: Mapping[str, Any] | None) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """(q rad, robot.frames(q)) of a step's ``joints_deg``; (None, None) when it has none."""
+    if step is None or step.get("joints_deg") is None:
+        return None, None
+    q = np.radians(np.asarray(step["joints_deg"], float))
+    return q, cell.robot.frames(q)
+
+
+def _detail(s: Scene, step: Mapping[str, Any]) -> str:
+    """The picture's subtitle: step kind (unless a manipulation), held object, joints (deg), placement."""
+    kind = step.get("kind", "")
+    parts = [str(kind)] if kind and kind != "manipulation" else []
+    if s.held:
+        parts.append(f"holding {s.held}" + (f" ({s.grasp})" if s.grasp else ""))
+    if s.q is not None:
+        parts.append("q = (" + ", ".join(f"{v:.0f}" for v in np.degrees(s.q)) + ") deg"
+                     + (" (unchanged)" if s.arm_note else ""))
+    pl = step.get("placement")
+    if pl:
+        obj = pl.get("object") or step.get("object") or ""
+        parts.append(f"placed {obj} {pl.get('pose', '')} at ({pl.get('x', 0):.3g}, {pl.get('y', 0):.3g})"
+                     f" yaw {pl.get('yaw_deg', 0):.3g} deg")
+    return "; ".join(parts)
+
+
+def _step_scene(cell: Cell, step: Mapping[str, Any], world: World, before: Scene, index: int) -> Scene:
+    """The scene after step ``index``: its world, its joints (or the arm where it was)."""
+    q, frames = _joints(cell, step)
+    note = ""
+    if q is None:
+        q, frames, note = before.q, before.frames, "unchanged"
+    title = f"step {index}: {pretty_term(str(step.get('term') or step.get('name') or ''))}"
+    s = Scene(index, title, "", world.poses, world.held, None, q, frames, note)
+    s.grasp = held_grasp(cell, s.held, s.poses.get(s.held) if s.held else None, s.tool)
+    s.detail = _detail(s, step)
+    return s
+
+
+def scenes(cell: Cell, plan: Any) -> list[Scene]:
+    """The work cell before the plan (index 0) and after each step of the plan instance (1..n).
+
+    Initial part poses come from ``cell.positions``; the initial picture shows the arm,
+    greyed, in the first configuration the plan uses (the plan gives no rest pose).
+    """
+    plan = as_doc(plan)
+    steps = list(instance(plan).get("steps") or [])
+    q0, frames0 = _joints(cell, next((st for st in steps if st.get("joints_deg") is not None), None))
+    known = q0 is not None
+    out = [Scene(0, "initial state", "arm drawn in the plan's first configuration" if known else "",
+                 initial_poses(cell), q=q0, frames=frames0, arm_note="first configuration" if known else "")]
+    for k, (step, world) in enumerate(zip(steps, _worlds(cell, plan, steps)), start=1):
+        out.append(_step_scene(cell, step, world, out[-1], k))
+    return out
