@@ -385,6 +385,18 @@ def _verdicts(world: World, cs: list[ur.Constraint]) -> list[dict[str, Any]]:
     return out
 
 
+def _verdicts_until_unsatisfied(world: World, cs: list[ur.Constraint]) -> list[dict[str, Any]]:
+    """The verdicts of ``cs`` in order, up to and including the first unsatisfied one."""
+    out = []
+    for c in cs:
+        d = ur.evaluate(c, world.unc.registry).as_dict()
+        d["kind"] = "uncertainty"
+        out.append(d)
+        if not d["satisfied"]:
+            break
+    return out
+
+
 def _checked(world: World, cs: list[ur.Constraint], checks: list[dict[str, Any]]) -> tuple:
     """``world.checked`` extended by this step's constraints and their verdicts."""
     ur_checks = [c for c in checks if c["kind"] == "uncertainty"]
@@ -454,7 +466,9 @@ def _scan(world: World, s: Step) -> tuple[list[dict], World, dict]:
 
 def _squeeze(world: World, s: Step) -> tuple[list[dict], World, dict]:
     """Squeeze ``obj`` in place with the first of its grasps the arm reaches there whose pickup
-    preconditions hold (Sec. 4.3: the squeeze must meet the pickup's own preconditions)."""
+    preconditions hold (Sec. 4.3: the squeeze must meet the pickup's own preconditions).
+    A grasp is checked for a joint solution first and its constraints one by one, up to
+    the first that fails (only the chosen grasp's verdicts are reported)."""
     obj = s["args"][0]
     cell = world.cell
     o = world.unc.obj(obj)
@@ -463,11 +477,13 @@ def _squeeze(world: World, s: Step) -> tuple[list[dict], World, dict]:
     labels = [g for g, _ in reachable_pairs(cell, obj, list(cell.objects[obj].grasps), _position_label(cell, obj, o))]
     for label in labels:
         g = _grasp(cell, obj, label)
+        q, geo = _arm(world, o.pose @ g.T)
+        if q is None:
+            continue
         manip = world.unc.manipulator_error()
         cs = ur.pickup_constraints(world.unc, obj, g.T, g.width, cell.finger_separation, manip, action=s["id"])
-        checks = _verdicts(world, cs)
-        q, geo = _arm(world, o.pose @ g.T)
-        if q is not None and all(c["satisfied"] for c in checks):
+        checks = _verdicts_until_unsatisfied(world, cs)
+        if len(checks) == len(cs) and all(c["satisfied"] for c in checks):
             geo["grasp"] = label
             w = replace(world, unc=ur.squeeze(world.unc, obj, g.T, manip), joints=q,
                         checked=_checked(world, cs, checks))
