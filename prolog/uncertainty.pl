@@ -466,7 +466,8 @@ print_step(Geo, I, Id, A) :-
     ;   true
     ).
 
-print_verdict(Id, C) :-
+print_verdict(Id0, C) :-
+    step_id_text(Id0, Id),
     (   satisfied(C) -> V = "satisfied" ; V = "NOT satisfied" ),
     (   get_dict(kind, C, geometric)
     ->  format("  ~w ~w: ~w (~w)~n", [Id, C.constraint, V, C.description])
