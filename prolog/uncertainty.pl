@@ -55,7 +55,7 @@
 %   Complete) when no instance could be executed at all (every one needed
 %   a put-down with no reachable placement). Best is an augmented instance
 %   aug(Steps, ErrorCount, Verifications, Recoveries, Verdicts, Geometry,
-%   Bindings) (see check_instance/2); Examined the instances checked;
+%   Bindings) (see check_instance/5); Examined the instances checked;
 %   Complete true if the partial plan has no further instance.
 %   Options: max_instances(Cap) (default 50).
 

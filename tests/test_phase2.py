@@ -285,3 +285,15 @@ def test_scan_without_a_sensors_entry_uses_the_sensing_rule() -> None:
     own = phase2.new_world(cell, steps, None, phase2.sensing_bounds(cell, {"dense_range_scan": {
         **FIG11["dense_range_scan"], "dx": [-9, 9]}}))
     assert own.scans["dense_range_scan"] == cell.sensors["dense_range_scan"].leaves
+
+
+def test_stock_spare_keeps_its_own_key_in_poses(planner: Planner) -> None:
+    """kb/problems/separation.yaml: the plan takes the peg at init_pos5 (tr5); the spare
+    stays at init_pos1 and is keyed ``peg@init_pos1`` in every step's poses."""
+    cell = load_problem(PROBLEMS / "separation.yaml")
+    inst = planner.plan(cell).to_json()["instance"]
+    for s in inst["steps"]:
+        assert set(s["poses"]) == {"peg", "peg@init_pos1", "block"}
+        np.testing.assert_allclose(np.array(s["poses"]["peg@init_pos1"]), cell.positions["tr1"].T, atol=1e-9)
+    pick = next(s for s in inst["steps"] if s["name"] == "pickup")
+    np.testing.assert_allclose(np.array(pick["poses"]["peg"]), cell.positions["tr5"].T, atol=1e-9)
