@@ -257,16 +257,11 @@ def arc_pairs(problem: str, rule: str, kind: str, objects: list[str], grasps: li
     return reach.arc(_cell(problem), kind, objects, grasps, positions, None if ta == "none" else ta, rule)
 
 
-def ur_world(problem: str, steps: list[dict[str, Any]], sources: dict[str, dict[str, str]] | None = None) -> Any:
-    """Phase 2: the initial world of a plan instance of ``problem`` whose steps are ``steps``,
-    its actions taking their objects from ``sources`` (phase2.new_world)."""
+def evaluate(problem: str, steps: list[dict[str, Any]], sources: dict[str, dict[str, str]] | None = None,
+             given_up: list[str] | None = None, sensing: dict[str, dict[str, Any]] | None = None) -> dict[str, Any]:
+    """Phase 2: run a whole plan instance of loaded problem ``problem`` in one call and
+    return plain data: every step's verdicts, geometry, part poses and held part, and
+    where the run stopped (phase2.evaluate; cell unit, degrees, world frame)."""
     from . import phase2
 
-    return phase2.new_world(_cell(problem), steps, sources)
-
-
-def ur_step(world: Any, step: dict[str, Any]) -> tuple[list[dict[str, Any]], Any, dict[str, Any]]:
-    """Phase 2: (verdicts, world after, geometry) of one step (phase2.step)."""
-    from . import phase2
-
-    return phase2.step(world, step)
+    return phase2.evaluate(_cell(problem), steps, sources, given_up or (), sensing)
