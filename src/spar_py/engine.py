@@ -31,6 +31,19 @@ _lock = threading.Lock()
 _engine: "Engine | None" = None
 
 
+def _malloc_trim() -> Any:
+    """glibc's malloc_trim(3), or None where the C library has none."""
+    try:
+        import ctypes
+
+        return ctypes.CDLL(None).malloc_trim
+    except (OSError, AttributeError):
+        return None
+
+
+_MALLOC_TRIM = _malloc_trim()
+
+
 def _one_line(text: str) -> str:
     """The first non-empty line of ``text``, stripped."""
     return next((ln.strip() for ln in text.splitlines() if ln.strip()), "")
@@ -194,6 +207,16 @@ class Engine:
                 yield
             finally:
                 self.unload(cell.name)
+                self._give_back()
+
+    def _give_back(self) -> None:
+        """After a run: shrink this thread's Prolog stacks to what they hold, and hand the
+        C heap's free memory back to the system (glibc's malloc_trim, where there is one),
+        so a long-lived process planning again and again stays at one size
+        (bench/memory.py)."""
+        self._query_once("trim_stacks")
+        if _MALLOC_TRIM is not None:
+            _MALLOC_TRIM(0)
 
 
 def engine() -> Engine:
