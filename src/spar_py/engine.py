@@ -31,6 +31,11 @@ _lock = threading.Lock()
 _engine: "Engine | None" = None
 
 
+#: Problems a session keeps loaded after its run (the last ones planned), so planning one
+#: again does not reload its facts.
+KEEP_LOADED = 8
+
+
 def _malloc_trim() -> Any:
     """glibc's malloc_trim(3), or None where the C library has none."""
     try:
@@ -76,7 +81,7 @@ class Engine:
     module, their cells here in :attr:`cells`; every call from Prolog into Python says
     which problem it is about. Queries are serialised: the engine holds one re-entrant
     lock for each query, and :meth:`session` holds it for a whole planning run (load,
-    plan, unload), so threads sharing an engine take turns and never see each other's
+    plan), so threads sharing an engine take turns and never see each other's
     problem.
     """
 
@@ -86,6 +91,7 @@ class Engine:
         reading the problem) while Prolog compiles; every query waits for it first."""
         self.janus = _import_janus()
         self.cells: dict[str, Any] = {}
+        self._kept: dict[str, None] = {}  # problems sessions keep loaded, oldest first
         self.lock = threading.RLock()
         self._loader: threading.Thread | None = None
         self._load_error: BaseException | None = None
@@ -187,6 +193,7 @@ class Engine:
         """Forget problem ``name`` (its Prolog facts and its cell); a no-op if not loaded."""
         with self.lock:
             self.cells.pop(name, None)
+            self._kept.pop(name, None)
             self.query_once("kb:unload_facts(P)", {"P": name})
 
     def cell(self, name: str) -> Any:
@@ -198,16 +205,28 @@ class Engine:
 
     @contextmanager
     def session(self, cell: Any) -> Iterator[None]:
-        """Hold the engine for one planning run of ``cell``: load it, yield, unload it
-        (the cell and its memo tables are then freed with the caller's last reference)."""
+        """Hold the engine for one planning run of ``cell``: load it (unless this very cell
+        is loaded already), yield, and keep it loaded for the next run of it; the engine
+        keeps the last ``KEEP_LOADED`` cells planned this way and unloads older ones, so
+        their facts and memo tables are freed with them."""
         self.wait_loaded()
         with self.lock:
-            self.load_cell(cell)
+            if self.cells.get(cell.name) is not cell:
+                self.load_cell(cell)
             try:
                 yield
             finally:
-                self.unload(cell.name)
+                self._keep(cell.name)
                 self._give_back()
+
+    def _keep(self, name: str) -> None:
+        """Remember ``name`` as kept loaded by a session; unload the oldest beyond the bound."""
+        self._kept.pop(name, None)
+        self._kept[name] = None
+        while len(self._kept) > KEEP_LOADED:
+            old = next(iter(self._kept))
+            del self._kept[old]
+            self.unload(old)
 
     def _give_back(self) -> None:
         """After a run: shrink this thread's Prolog stacks to what they hold, and hand the
