@@ -152,7 +152,6 @@ def cmd_plan(args: argparse.Namespace) -> int:
                       separation=False if args.no_separation else None,
                       paper_placements=args.paper_placements)
     cell = planner.load_problem(args.problem)
-    planner.timeout = guard.remaining()  # what the load left of the command's time limit
     plan = planner.plan(cell, phase1_only=args.phase1_only, trace=args.trace)
     if plan.outcome is Outcome.TIMEOUT:
         raise PlanningTimeout(f"{cell.name}: no result within {args.timeout:g} s")
@@ -309,7 +308,9 @@ def main(argv: list[str] | None = None) -> None:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        with RunGuard(getattr(args, "timeout", None)) as args.guard:
+        # the guard alone enforces --timeout: Prolog's own time limit, landing inside a
+        # foreign predicate, can make SWI-Prolog print a second line on stderr
+        with RunGuard(getattr(args, "timeout", None), grace=0.0) as args.guard:
             code = COMMANDS[args.func](args)
     except KBError as e:
         _err(str(e))

@@ -36,10 +36,14 @@ __all__ = ["EXIT_SIGINT", "EXIT_SIGTERM", "EXIT_TIMEOUT", "GRACE_S", "RunGuard"]
 
 class RunGuard:
     """Watch one command: its deadline (``timeout`` seconds from now, None for none) and
-    SIGINT/SIGTERM. Use as a context manager in the main thread."""
+    SIGINT/SIGTERM. The watchdog ends the process ``grace`` seconds after the deadline
+    (leave some when the work has a time limit of its own that should end it first).
+    Use as a context manager in the main thread."""
 
-    def __init__(self, timeout: float | None = None, *, exit: Callable[[int], None] = os._exit) -> None:
+    def __init__(self, timeout: float | None = None, *, grace: float = GRACE_S,
+                 exit: Callable[[int], None] = os._exit) -> None:
         self.start = time.monotonic()
+        self.grace = grace
         self.deadline = None if timeout is None else self.start + timeout
         self.timeout = timeout
         self.lock = threading.Lock()
@@ -115,7 +119,7 @@ class RunGuard:
         while True:
             wait = None
             if self.deadline is not None:
-                wait = max(self.deadline + GRACE_S - time.monotonic(), 0.0)
+                wait = max(self.deadline + self.grace - time.monotonic(), 0.0)
             ready, _, _ = select.select([self._r], [], [], wait)
             if self._done.is_set():
                 return
