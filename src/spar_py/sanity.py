@@ -81,7 +81,8 @@ def _fmt(v: float, unit: str = "") -> str:
 
 
 def _sources(cell: Cell) -> dict[str, Any]:
-    """The problem file's own text as data (for file names of the robot and models):
+    """The problem file's own text as data, read again on the error path only (to name
+    the robot and model files):
     ``{"robot": path, "models": {obj: path}}``; paths as the problem names them,
     resolved against its folder. Empty where the file cannot be read again."""
     import yaml
@@ -190,7 +191,6 @@ def _reach(cell: Cell) -> Iterator[KBError]:
             yield KBError(cell.file, f"transforms.{name}",
                           f"expected a displacement shorter than {robot}'s reach bound {_fmt(h, u)}, "
                           f"not {_fmt(float(np.abs(T[:3, 3]).max()), u)}")
-    models = _sources(cell).get("models", {})
     for obj, m in cell.objects.items():
         sizes = [(f"shape[{i}]", float(np.abs(np.concatenate([s.lo, s.hi])).max())) for i, s in enumerate(m.shape)]
         sizes += [(f"grasps[{i}].eulerxyz", float(np.abs(g.euler[:3]).max())) for i, g in enumerate(m.grasps.values())]
@@ -199,6 +199,7 @@ def _reach(cell: Cell) -> Iterator[KBError]:
             sizes += [("feature", max(float(np.abs(m.feature.vector).max()), m.feature.radius))]
         for key, size in sizes:
             if size > h:
+                models = _sources(cell).get("models", {})  # read again only to name the file
                 yield KBError(models.get(obj, cell.file), key if obj in models else f"objects.{obj}.model",
                               f"expected a length of {obj} within {robot}'s reach bound {_fmt(h, u)}, "
                               f"not {_fmt(size, u)}")
@@ -207,11 +208,11 @@ def _reach(cell: Cell) -> Iterator[KBError]:
 
 def _gripper(cell: Cell) -> Iterator[KBError]:
     """Every grasp fits the open gripper: W_g <= W_m."""
-    src = _sources(cell)
     wm, u = cell.finger_separation, cell.unit
     for obj, m in cell.objects.items():
         for i, g in enumerate(m.grasps.values()):
             if g.width > wm * (1 + 1e-9):
+                src = _sources(cell)  # read again only to name the files
                 file = src.get("models", {}).get(obj, cell.file)
                 key = f"grasps[{i}].width" if obj in src.get("models", {}) else f"objects.{obj}.model"
                 yield KBError(file, key,
