@@ -12,7 +12,8 @@ from spar_py import gen
 from spar_py.engine import engine
 from spar_py.errors import SparValueError
 from spar_py.kb import check_file, iter_kb_files, load_problem
-from spar_py.placement import CLEARANCE
+from spar_py.placement import CLEARANCE_MM
+from spar_py.units import from_mm
 from spar_py.reach import reachable_pairs
 
 
@@ -65,7 +66,7 @@ def test_layout_is_clear_and_in_reach(tmp_path: Path) -> None:
     xy = {p.obj: p.T[:2, 3] for p in cell.positions.values()}
     r = {o: m.bounding_radius() for o, m in cell.objects.items()}
     for a, b in combinations(xy, 2):
-        assert np.hypot(*(xy[a] - xy[b])) >= r[a] + r[b] + CLEARANCE, (a, b)
+        assert np.hypot(*(xy[a] - xy[b])) >= r[a] + r[b] + from_mm(cell.unit, CLEARANCE_MM), (a, b)
     (region,) = cell.placement_regions
     for x, y in xy.values():
         assert region["x"][0] <= x <= region["x"][1] and region["y"][0] <= y <= region["y"][1]

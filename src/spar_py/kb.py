@@ -18,6 +18,7 @@ from typing import Any, Iterable
 import numpy as np
 import yaml
 
+from . import sanity
 from .errors import KBError, SparError, SparValueError
 from .geometry import ORTHO_TOL, eulerxyz, rotation_problem, rpy, same_stable_pose, tm_rows, trans
 from .kinematics import Robot
@@ -547,7 +548,7 @@ def load_problem(path: str | Path) -> Cell:
         regions.append({"x": lo, "y": hi})
     used = [path, rpath] + [base / n.key("model").text() for _, n in root.key("objects").items()]
     files = tuple(dict.fromkeys(str(Path(u).resolve()) for u in used))
-    return Cell(
+    cell = Cell(
         fingerprint=_fingerprint(files),
         files=files,
         name=name,
@@ -566,6 +567,8 @@ def load_problem(path: str | Path) -> Cell:
         sensors=sensors,
         placement_regions=regions,
     )
+    sanity.check_cell(cell)  # physically possible: parts apart, on the table, in reach (sanity.py)
+    return cell
 
 
 # --------------------------------------------------------------------------- facts

@@ -4,25 +4,47 @@ The paper leaves a put-down position as a stable pose and assumes "some suitable
 choice of X, Y, Z" reaches it (Sec. 5.2.4). Plan instances need real coordinates,
 and the arm must reach the object there for the put-down and for every later action
 on it (a pickup, a mate). This module searches a grid of placements (x, y, yaw) over
-the free table regions, batching every inverse-kinematics query.
+the free table regions, batching every inverse-kinematics query. A placement's whole
+footprint (its shape projected on the table, a convex polygon) lies in one free region
+and keeps the clearance from every other part's footprint.
 
-Units: lengths in the cell unit, angles in radians; world frame, table top z = 0.
+Units: lengths in the cell unit, angles in radians; world frame, table top z = 0. The
+constants below are in mm (units.INTERNAL_UNIT) and converted to the cell's unit
+where used (units.from_mm), so a cell plans alike in in, mm or m.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+from typing import Sequence
 
 import numpy as np
 
 from .geometry import rotz
-from .model import Cell
+from .model import Cell, ObjectModel
+from .units import from_mm, mm_per
 from .workspace import reaches, wrist_height
 
-#: Grid spacing of candidate placements (cell units) and number of yaw steps.
-GRID_STEP = 2.0
+#: Grid spacing of candidate placements: 50.8 mm (2 in); number of yaw steps.
+GRID_STEP_MM = 50.8
 YAW_STEPS = 12
-#: Extra distance kept between objects' bounding circles (cell units).
-CLEARANCE = 1.0
+#: Gap kept between two parts' footprints on the table: 25.4 mm (1 in).
+CLEARANCE_MM = 25.4
+#: Without ``placement_regions``: the initial positions' rectangle grown by 304.8 mm
+#: (12 in) each way is the free table.
+REGION_MARGIN_MM = 304.8
+#: Length rounding: a footprint this far outside a region is inside it (float
+#: rounding, not geometry), and distances to ``near`` equal to this are ties: 1e-6 mm.
+ROUND_MM = 1e-6
+#: Sides of the polygon circumscribed about a cylinder's rim in a footprint (the
+#: polygon contains the rim, so a footprint never understates the shape).
+ARC_SIDES = 16
+
+#: An entry of ``occupied``: (xy centre, bounding radius) of a part on the table, or
+#: (xy centre, bounding radius, footprint) with its footprint polygon ((k, 2) world xy,
+#: counter-clockwise; :func:`occupant`). Without a footprint the part counts as the disc
+#: of its bounding radius (a superset of its footprint: conservative).
+Occupant = tuple
 
 
 @dataclass(frozen=True)
@@ -44,50 +66,161 @@ class Placement:
 
 
 def default_regions(cell: Cell) -> list[dict]:
-    """The free table regions: the problem's ``placement_regions`` or, without any, the
-    rectangle spanned by the initial positions grown by 12 units each way."""
+    """The free table regions (cell unit): the problem's ``placement_regions`` or, without
+    any, the rectangle spanned by the initial positions grown by REGION_MARGIN_MM each way."""
     if cell.placement_regions:
         return cell.placement_regions
     xy = np.array([p.T[:2, 3] for p in cell.positions.values()])
-    lo, hi = xy.min(axis=0) - 12.0, xy.max(axis=0) + 12.0
+    margin = from_mm(cell.unit, REGION_MARGIN_MM)
+    lo, hi = xy.min(axis=0) - margin, xy.max(axis=0) + margin
     return [{"x": (float(lo[0]), float(hi[0])), "y": (float(lo[1]), float(hi[1]))}]
 
 
-def _grid_arrays(cell: Cell, obj: str, pose: str, occupied: list[tuple[np.ndarray, float]],
+def _hull(P: np.ndarray) -> np.ndarray:
+    """(k, 2) the convex hull of points P (n, 2), counter-clockwise, no repeated or
+    collinear vertices (Andrew's monotone chain); one point for a single point."""
+    pts = sorted(set(map(tuple, np.round(P, 12).tolist())))
+    if len(pts) <= 2:
+        return np.array(pts, float)
+
+    def half(seq: list) -> list:
+        out: list = []
+        for p in seq:
+            while len(out) >= 2 and ((out[-1][0] - out[-2][0]) * (p[1] - out[-2][1])
+                                     - (out[-1][1] - out[-2][1]) * (p[0] - out[-2][0])) <= 0:
+                out.pop()
+            out.append(p)
+        return out
+
+    lower, upper = half(pts), half(pts[::-1])
+    return np.array(lower[:-1] + upper[:-1], float)
+
+
+def _disc(c: np.ndarray, r: float) -> np.ndarray:
+    """(ARC_SIDES, 2) the regular polygon circumscribed about the disc (c, r), CCW."""
+    a = 2 * np.pi * np.arange(ARC_SIDES) / ARC_SIDES
+    R = r / math.cos(math.pi / ARC_SIDES)
+    return np.asarray(c, float)[:2] + R * np.stack([np.cos(a), np.sin(a)], axis=1)
+
+
+def footprint(model: ObjectModel, R: np.ndarray) -> np.ndarray:
+    """(k, 2) the footprint of ``model`` turned by rotation R (3x3, object to world):
+    the convex hull of its shape projected on the table, in world xy about the object
+    origin (cell unit), counter-clockwise. Boxes by their 8 corners; a z-cylinder by the
+    ARC_SIDES-gons circumscribed about its two rims (a superset of the cylinder's
+    shadow). A model without a shape has the point footprint [[0, 0]]."""
+    pts = [np.zeros((1, 3))]
+    for s in model.shape:
+        if s.kind == "cylinder":
+            rim = _disc(np.zeros(2), s.radius)
+            pts += [np.column_stack([rim, np.full(len(rim), z)]) for z in (s.lo[2], s.hi[2])]
+        else:
+            pts.append(np.array([[x, y, z] for x in (s.lo[0], s.hi[0]) for y in (s.lo[1], s.hi[1])
+                                 for z in (s.lo[2], s.hi[2])], float))
+    P = np.concatenate(pts[1:] if len(pts) > 1 else pts)
+    return _hull((P @ np.asarray(R, float).T)[:, :2])
+
+
+def occupant(cell: Cell, obj: str, T: np.ndarray) -> Occupant:
+    """The ``occupied`` entry of a part of ``obj`` at world pose T (4x4): its xy centre,
+    bounding radius and footprint polygon in world xy (cell unit)."""
+    model = cell.objects[obj]
+    return (np.asarray(T, float)[:2, 3].copy(), model.bounding_radius(),
+            footprint(model, T[:3, :3]) + T[:2, 3])
+
+
+def _occupant_polygon(entry: Sequence) -> np.ndarray:
+    """The footprint polygon (k, 2) of an ``occupied`` entry (the bounding disc's
+    circumscribed polygon for a (centre, radius) entry)."""
+    if len(entry) >= 3 and entry[2] is not None:
+        return np.asarray(entry[2], float)
+    return _disc(np.asarray(entry[0], float), float(entry[1]))
+
+
+def _minkowski(P: np.ndarray, Q: np.ndarray) -> np.ndarray:
+    """(k, 2) the Minkowski sum of convex CCW polygons P and Q (edges merged by angle)."""
+    def start(V: np.ndarray) -> np.ndarray:
+        i = int(np.lexsort((V[:, 0], V[:, 1]))[0])  # lowest, then leftmost vertex first
+        return np.roll(V, -i, axis=0)
+
+    P, Q = start(P), start(Q)
+    E = np.concatenate([np.roll(P, -1, axis=0) - P, np.roll(Q, -1, axis=0) - Q])
+    ang = np.mod(np.arctan2(E[:, 1], E[:, 0]), 2 * np.pi)
+    steps = E[np.argsort(ang, kind="stable")]
+    return P[0] + Q[0] + np.concatenate([np.zeros((1, 2)), np.cumsum(steps, axis=0)[:-1]])
+
+
+def _clear_of(M: np.ndarray, t: np.ndarray, gap: float) -> np.ndarray:
+    """(n,) bool: points t (n, 2) lie outside the convex CCW polygon M, at least ``gap``
+    from it."""
+    A = M
+    B = np.roll(M, -1, axis=0)
+    E = B - A                                                   # (m, 2)
+    D = t[:, None, :] - A[None, :, :]                           # (n, m, 2)
+    cross = E[None, :, 0] * D[..., 1] - E[None, :, 1] * D[..., 0]
+    inside = np.all(cross >= 0, axis=1)
+    L2 = np.einsum("ij,ij->i", E, E)
+    u = np.clip(np.einsum("nmj,mj->nm", D, E) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
+    d = np.hypot(D[..., 0] - u * E[None, :, 0], D[..., 1] - u * E[None, :, 1]).min(axis=1)
+    return ~inside & (d >= gap)
+
+
+def _grid_arrays(cell: Cell, obj: str, pose: str, occupied: list[Occupant],
                  step: float, yaw_steps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The grid placements of :func:`candidates` as arrays, in the same order (regions, x,
-    y, yaw): ``(xy (n, 2), yaw (n,), T (n, 4, 4))``. Each yaw's rotation is computed once,
-    by the same expression (``rotz(yaw)[:3, :3] @ R``) a placement at a time would use."""
-    sp = cell.objects[obj].poses[pose]
-    r = cell.objects[obj].bounding_radius() if occupied else 0.0
-    yaws = [2 * np.pi * k / yaw_steps for k in range(yaw_steps)]
+    y, yaw): ``(xy (n, 2), yaw (n,), T (n, 4, 4))``, lengths in the cell unit.
+
+    Kept: the placements whose footprint (:func:`footprint`, turned by the yaw) lies in
+    the region of the grid point, and is at least the clearance (CLEARANCE_MM) from the
+    footprint of every ``occupied`` entry (exactly, for the polygons: the placement's
+    origin outside the Minkowski sum of the other footprint and the mirrored own one, by
+    the clearance). Each yaw's rotation is computed once, by the same expression
+    (``rotz(yaw)[:3, :3] @ R``) a placement at a time would use."""
+    model = cell.objects[obj]
+    sp = model.poses[pose]
+    tol = from_mm(cell.unit, ROUND_MM)
+    gap = from_mm(cell.unit, CLEARANCE_MM) - tol
+    yaws = np.array([2 * np.pi * k / yaw_steps for k in range(yaw_steps)])
     rots = np.stack([rotz(yaw)[:3, :3] @ sp.R for yaw in yaws])  # (yaw_steps, 3, 3)
-    xy_parts = []
+    feet = [footprint(model, R) for R in rots]
+    lo = np.array([f.min(axis=0) for f in feet])                # (yaw_steps, 2)
+    hi = np.array([f.max(axis=0) for f in feet])
+    others = [_occupant_polygon(e) for e in occupied]
+    mirrored = [[_minkowski(W, -f) for W in others] for f in feet]
+    xy_parts, yaw_parts = [], []
     for reg in default_regions(cell):
-        xs = np.arange(reg["x"][0], reg["x"][1] + 1e-9, step)
-        ys = np.arange(reg["y"][0], reg["y"][1] + 1e-9, step)
+        (x0, x1), (y0, y1) = reg["x"], reg["y"]
+        xs = x0 + step * np.arange(math.floor((x1 - x0) / step + 1e-9) + 1)
+        ys = y0 + step * np.arange(math.floor((y1 - y0) / step + 1e-9) + 1)
         X, Y = np.meshgrid(xs, ys, indexing="ij")
-        X, Y = X.ravel(), Y.ravel()
-        free = np.ones(len(X), dtype=bool)
-        for c, rc in occupied:
-            free &= ~(np.hypot(X - c[0], Y - c[1]) < r + rc + CLEARANCE)
-        xy_parts.append(np.stack([X[free], Y[free]], axis=1))
+        P = np.stack([X.ravel(), Y.ravel()], axis=1)             # (n, 2)
+        ok = ((P[:, None, 0] + lo[None, :, 0] >= x0 - tol) & (P[:, None, 0] + hi[None, :, 0] <= x1 + tol)
+              & (P[:, None, 1] + lo[None, :, 1] >= y0 - tol) & (P[:, None, 1] + hi[None, :, 1] <= y1 + tol))
+        for k in range(yaw_steps):
+            for M in mirrored[k]:
+                idx = np.flatnonzero(ok[:, k])
+                ok[idx, k] = _clear_of(M, P[idx], gap)
+        i, k = np.nonzero(ok)                                    # row-major: grid order, then yaw
+        xy_parts.append(P[i])
+        yaw_parts.append(k)
     xy = np.concatenate(xy_parts) if xy_parts else np.zeros((0, 2))
-    n = len(xy) * yaw_steps
-    T = np.zeros((len(xy), yaw_steps, 4, 4))
-    T[:, :, :3, :3] = rots
-    T[:, :, 0, 3] = xy[:, 0, None]
-    T[:, :, 1, 3] = xy[:, 1, None]
-    T[:, :, 2, 3] = sp.height
-    T[:, :, 3, 3] = 1.0
-    return np.repeat(xy, yaw_steps, axis=0), np.tile(np.array(yaws), len(xy)), T.reshape(n, 4, 4)
+    k = np.concatenate(yaw_parts) if yaw_parts else np.zeros(0, dtype=int)
+    T = np.zeros((len(xy), 4, 4))
+    T[:, :3, :3] = rots[k]
+    T[:, 0, 3] = xy[:, 0]
+    T[:, 1, 3] = xy[:, 1]
+    T[:, 2, 3] = sp.height
+    T[:, 3, 3] = 1.0
+    return xy, yaws[k], T
 
 
-def candidates(cell: Cell, obj: str, pose: str, occupied: list[tuple[np.ndarray, float]],
-               step: float = GRID_STEP, yaw_steps: int = YAW_STEPS) -> list[Placement]:
-    """Grid placements of ``obj`` in stable pose ``pose`` inside the free regions, clear of
-    ``occupied`` (list of (xy centre, radius) of other objects on the table)."""
+def candidates(cell: Cell, obj: str, pose: str, occupied: list[Occupant],
+               step: float | None = None, yaw_steps: int = YAW_STEPS) -> list[Placement]:
+    """Grid placements of ``obj`` in stable pose ``pose`` whose footprint lies in a free
+    region, clear of ``occupied`` (:data:`Occupant` entries: the other parts on the
+    table) by the clearance. ``step``: grid spacing in the cell unit (default GRID_STEP_MM)."""
     height = cell.objects[obj].poses[pose].height
+    step = from_mm(cell.unit, GRID_STEP_MM) if step is None else step
     xy, yaw, T = _grid_arrays(cell, obj, pose, occupied, step, yaw_steps)
     return [Placement(obj, pose, x, y, height, w, t) for (x, y), w, t in zip(xy.tolist(), yaw.tolist(), T)]
 
@@ -118,22 +251,26 @@ CHOOSE_CHUNK = 96
 
 
 def choose(cell: Cell, obj: str, pose: str, requirements: list[np.ndarray],
-           occupied: list[tuple[np.ndarray, float]], near: np.ndarray | None = None) -> Placement | None:
-    """The feasible placement nearest ``near`` (xy; default the regions' centre), or None.
+           occupied: list[Occupant], near: np.ndarray | None = None) -> Placement | None:
+    """The feasible placement nearest ``near`` (xy, cell unit; default the regions'
+    centre), or None. Candidates as :func:`candidates`: the footprint in a free region,
+    clear of the ``occupied`` parts' footprints by the clearance.
 
-    Nearest: least distance rounded to 1e-9, then least yaw, then first in grid order.
+    Nearest: least distance rounded to ROUND_MM, then least yaw, then first in grid order.
     The candidates are checked in that order a chunk at a time, so the search stops
     at the first chunk holding a feasible one instead of solving IK for the whole grid.
     """
-    xy, yaw, T = _grid_arrays(cell, obj, pose, occupied, GRID_STEP, YAW_STEPS)
+    xy, yaw, T = _grid_arrays(cell, obj, pose, occupied, from_mm(cell.unit, GRID_STEP_MM), YAW_STEPS)
     if not len(T):
         return None
     if near is None:
         regs = default_regions(cell)
         near = np.mean([[(r["x"][0] + r["x"][1]) / 2, (r["y"][0] + r["y"][1]) / 2] for r in regs], axis=0)
-    dist = np.hypot(xy[:, 0] - near[0], xy[:, 1] - near[1]).tolist()
+    # distances in mm, so ties are broken alike whatever the cell's unit
+    dist = (np.hypot(xy[:, 0] - near[0], xy[:, 1] - near[1]) * mm_per(cell.unit)).tolist()
     yaws = yaw.tolist()
-    order = sorted(range(len(T)), key=lambda i: (round(dist[i], 9), yaws[i]))  # stable: grid order breaks ties
+    digits = -round(math.log10(ROUND_MM))
+    order = sorted(range(len(T)), key=lambda i: (round(dist[i], digits), yaws[i]))  # stable: grid order breaks ties
     X = np.stack(requirements) if requirements else None
     for start in range(0, len(order), CHOOSE_CHUNK):
         idx = order[start:start + CHOOSE_CHUNK]
@@ -146,8 +283,9 @@ def choose(cell: Cell, obj: str, pose: str, requirements: list[np.ndarray],
     return None
 
 
-#: The coarser grid phase 1 uses to decide whether a stable pose is reachable at all.
-PHASE1_STEP = 6.0
+#: The coarser grid phase 1 uses to decide whether a stable pose is reachable at all:
+#: 152.4 mm (6 in) apart, 6 yaws.
+PHASE1_STEP_MM = 152.4
 PHASE1_YAWS = 6
 
 
@@ -187,13 +325,14 @@ def _any_placement(cell: Cell, cands: np.ndarray, X: np.ndarray, chunk: int = 48
     The grid's placements differ only by a turn about world z and a shift in x, y, so
     the height of the wrist for a given X is the same at all of them: an X whose wrist
     is below the table top at the first placement (by more than rounding) is below it at
-    every one and fails without solving IK over the whole grid."""
+    every one and fails without solving IK over the whole grid (below by more than
+    ROUND_MM: a prune only, as :func:`workspace.reaches` refuses every wrist below z = 0)."""
     ok = np.zeros(len(X), dtype=bool)
     if not len(cands):
         return ok
     if np.all(cands[:, 2, :] == cands[0, 2, :]):  # one z row: turns about z, shifts in x, y
         T0 = np.einsum("ij,mjk->mik", cands[0], X)
-        below = wrist_height(cell.robot, T0) < -1e-9
+        below = wrist_height(cell.robot, T0) < -from_mm(cell.unit, ROUND_MM)
     else:
         below = np.zeros(len(X), dtype=bool)
     for start in range(0, len(cands), chunk):
@@ -217,12 +356,14 @@ GRID_LIMIT = 1024
 
 def _grid_key(cell: Cell, obj: str, pose: str) -> tuple:
     """What the phase-1 grid of ``obj`` in ``pose`` depends on within a cell: the stable
-    pose's rotation and height, not the object's name."""
-    sp = cell.objects[obj].poses[pose]
-    return (np.asarray(sp.R, float).tobytes(), float(sp.height))
+    pose's rotation and height and the object's footprint in it, not the object's name."""
+    model = cell.objects[obj]
+    sp = model.poses[pose]
+    return (np.asarray(sp.R, float).tobytes(), float(sp.height), footprint(model, sp.R).tobytes())
 
 
 def _grid(cell: Cell, obj: str, pose: str) -> np.ndarray:
     """(n,4,4) object poses of the phase-1 grid (memoised in the cell per stable-pose geometry)."""
+    step = from_mm(cell.unit, PHASE1_STEP_MM)
     return cell.memo.table("placement.grids", GRID_LIMIT).get_or_compute(
-        _grid_key(cell, obj, pose), lambda: _grid_arrays(cell, obj, pose, [], PHASE1_STEP, PHASE1_YAWS)[2])
+        _grid_key(cell, obj, pose), lambda: _grid_arrays(cell, obj, pose, [], step, PHASE1_YAWS)[2])

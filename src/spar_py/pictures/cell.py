@@ -23,7 +23,8 @@ import numpy as np
 
 from ..errors import SparValueError
 from .plandoc import term_parts
-from .scene import Scene, part_model, scenes
+from ..units import from_mm
+from .scene import MIN_SIZE_MM, Scene, part_model, scenes
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -220,7 +221,8 @@ def _table(cell: Cell, all_scenes: Sequence[Scene]) -> tuple[float, float, float
     objs = _part_points(cell, all_scenes)
     op = np.vstack(objs) if objs else np.zeros((1, 3))
     span = float(max(np.ptp(op[:, 0]), np.ptp(op[:, 1])))
-    pad = max(0.2 * span, max((m.bounding_radius() for m in cell.objects.values()), default=1.0), 1e-6)
+    size = max((m.bounding_radius() for m in cell.objects.values()), default=from_mm(cell.unit, MIN_SIZE_MM))
+    pad = max(0.2 * span, size, from_mm(cell.unit, 1e-3))  # never below 1 micrometre
     return (float(op[:, 0].min() - pad), float(op[:, 0].max() + pad),
             float(op[:, 1].min() - pad), float(op[:, 1].max() + pad))
 
@@ -252,7 +254,7 @@ def _paint_list(cell: Cell, s: Scene, eye: Sequence[float]) -> list[tuple[str, n
     (kind 'solid' | 'hole', world points, colour). Hole mouths facing away are left out."""
     eye = np.asarray(eye, float)
     items: list[tuple[float, str, np.ndarray, str]] = []
-    size = max((m.bounding_radius() for m in cell.objects.values()), default=1.0)
+    size = max((m.bounding_radius() for m in cell.objects.values()), default=from_mm(cell.unit, MIN_SIZE_MM))
     for key, T in s.poses.items():
         o = part_model(key)
         if o not in cell.objects:

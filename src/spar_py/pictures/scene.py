@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..errors import SparValueError
+from ..units import from_mm
 from .plandoc import as_doc, instance, pretty_term
 
 if TYPE_CHECKING:
@@ -28,6 +29,8 @@ if TYPE_CHECKING:
 __all__ = ["Scene", "World", "initial_poses", "part_model", "scenes", "step_world"]
 
 GRASP_TOL = 1e-4  # relative to the object's bounding radius: T_part @ T_g within this of the tool pose
+#: The least object size GRASP_TOL is taken of (mm; 25.4 mm = 1 in), for tiny or shapeless objects.
+MIN_SIZE_MM = 25.4
 
 
 @dataclass(frozen=True)
@@ -106,7 +109,7 @@ def held_grasp(cell: Cell, held: str | None, T_part: np.ndarray | None, tool: np
     if held is None or T_part is None or tool is None or part_model(held) not in cell.objects:
         return None
     model = cell.objects[part_model(held)]
-    tol = GRASP_TOL * max(model.bounding_radius(), 1.0)
+    tol = GRASP_TOL * max(model.bounding_radius(), from_mm(cell.unit, MIN_SIZE_MM))
     for label, g in model.grasps.items():
         if np.abs(T_part @ np.asarray(g.T, float) - tool).max() <= tol:
             return str(label)

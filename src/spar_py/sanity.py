@@ -1,0 +1,275 @@
+"""Physical sanity of a loaded cell (issue 13, item 2): is the cell one that could exist?
+
+Checked once at load (:func:`check_cell`, the last step of kb.load_problem), before any
+grid or IK is built, each failure a one-line :class:`~spar_py.errors.KBError` naming the
+file, the key and both parties:
+
+- reach: every initial position, placement region, named transform's displacement and
+  object-frame length (shape, grasp, feature, pose height) lies within a box about the
+  robot's base of half-width REACH_FACTOR x (sum of the DH link lengths |a| + |d| and
+  the tool offset), so no placement grid is ever unbounded;
+- table: each initial part's rotation is one of its stable poses (kb checks this) and
+  its lowest point is on the table top, z = 0, within REST_TOL_MM;
+- overlap: no two initial parts overlap by more than OVERLAP_TOL_MM;
+- gripper: every grasp's width W_g is at most the finger separation W_m;
+- vectors: every approach / mating vector under ``vectors:`` is non-zero.
+
+Overlap test: a separating-axis test between convex polytopes, per pair of shape
+primitives (model.Solid) placed at the positions' transforms. Boxes are exact (their 3
+face normals each and the 9 edge cross products); a z-cylinder is the prism on the
+regular CYL_SIDES-gon *inscribed* in its rims, a subset of the cylinder, so an overlap
+is never reported that the true solids do not have (no false errors); an overlap
+shallower than r (1 - cos(pi / CYL_SIDES)) (1.9 % of the radius) of a cylinder's side
+can go unreported. The depth printed is the least overlap of the projections over the
+tested axes (for two boxes: the penetration depth along a separating-axis direction).
+
+Units: lengths in the cell unit (``Cell.unit``); the tolerances are mm (units.py) and
+converted. Frames: world Z up, table top z = 0; shapes in the object frame.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any, Iterator
+
+import numpy as np
+
+from .errors import KBError
+from .model import Cell, ObjectModel, Position, Solid
+from .units import from_mm
+
+__all__ = ["check_cell", "overlap_depth", "reach_box", "solid_points"]
+
+#: Half-width of the box of admissible coordinates, in multiples of the arm's length
+#: (sum of |a| + |d| + tool offset: 66.5 in for the PUMA 762, whose real reach from the
+#: shoulder is about 49 in). 2, not 1.5: kb/problems/unreachable.yaml puts its parts
+#: 100 in out on purpose, a cell that loads and has no plan; 1.5 x 66.5 in is 99.8 in.
+REACH_FACTOR = 2.0
+#: A resting part's lowest point may be this far from the table top (mm).
+REST_TOL_MM = 0.5
+#: Parts may overlap this much (mm): touching parts, rounding.
+OVERLAP_TOL_MM = 0.01
+#: Sides of the polygon inscribed in a cylinder's rims for the overlap test.
+CYL_SIDES = 16
+#: A vector shorter than this is zero (vectors are directions: no unit).
+ZERO_VECTOR = 1e-9
+
+
+def check_cell(cell: Cell) -> None:
+    """Raise KBError for the first physically impossible thing in ``cell`` (see the
+    module docstring); return None for a sane cell."""
+    for err in _problems(cell):
+        raise err
+
+
+def _problems(cell: Cell) -> Iterator[KBError]:
+    """Every check in order, cheapest and most basic first; each yields its errors."""
+    yield from _reach(cell)
+    yield from _gripper(cell)
+    yield from _vectors(cell)
+    yield from _on_table(cell)
+    yield from _overlaps(cell)
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def _fmt(v: float, unit: str = "") -> str:
+    """A number rounded for reading (4 significant digits), with its unit."""
+    s = f"{v:.4g}"
+    return f"{s} {unit}" if unit else s
+
+
+def _sources(cell: Cell) -> dict[str, Any]:
+    """The problem file's own text as data, read again on the error path only (to name
+    the robot and model files):
+    ``{"robot": path, "models": {obj: path}}``; paths as the problem names them,
+    resolved against its folder. Empty where the file cannot be read again."""
+    import yaml
+
+    try:
+        data = yaml.load(Path(cell.file).read_text(encoding="utf-8"),
+                         Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
+        base = Path(cell.file).parent
+        return {"robot": str(base / data["robot"]),
+                "models": {o: str(base / n["model"]) for o, n in data["objects"].items()}}
+    except Exception:  # the file was read once by kb; a race is reported against the problem
+        return {}
+
+
+def _position_key(cell: Cell, pos: Position) -> str:
+    """The key of a position in the problem file: ``objects.OBJ.initial`` (``[i]`` in a stock)."""
+    same = [p for p in cell.positions.values() if p.obj == pos.obj]
+    return f"objects.{pos.obj}.initial" + (f"[{same.index(pos)}]" if len(same) > 1 else "")
+
+
+def reach_box(cell: Cell) -> tuple[np.ndarray, float]:
+    """(centre (3,), half-width) of the box of admissible world coordinates (cell unit):
+    the robot base's origin, REACH_FACTOR x (sum over the DH rows of |a| + |d| plus the
+    tool offset's length)."""
+    r = cell.robot
+    arm = float(np.abs(r.dh[:, 1]).sum() + np.abs(r.dh[:, 2]).sum() + np.linalg.norm(r.tool[:3, 3]))
+    return r.base[:3, 3].copy(), REACH_FACTOR * arm
+
+
+def solid_points(s: Solid, sides: int = CYL_SIDES) -> np.ndarray:
+    """(k, 3) vertices of a primitive's polytope in the object frame: a box's 8 corners,
+    or the prism on the regular ``sides``-gon inscribed in a z-cylinder's rims."""
+    if s.kind == "cylinder":
+        a = 2 * np.pi * np.arange(sides) / sides
+        ring = s.radius * np.stack([np.cos(a), np.sin(a)], axis=1)
+        return np.concatenate([np.column_stack([ring, np.full(sides, z)]) for z in (s.lo[2], s.hi[2])])
+    return np.array([[x, y, z] for x in (s.lo[0], s.hi[0]) for y in (s.lo[1], s.hi[1])
+                     for z in (s.lo[2], s.hi[2])], float)
+
+
+def _axes(s: Solid, sides: int = CYL_SIDES) -> tuple[np.ndarray, np.ndarray]:
+    """(face normals (f, 3), edge directions (e, 3)) of a primitive's polytope, object frame."""
+    if s.kind == "cylinder":
+        a = 2 * np.pi * (np.arange(sides) + 0.5) / sides
+        normals = np.concatenate([np.stack([np.cos(a), np.sin(a), np.zeros(sides)], axis=1), np.eye(3)[2:]])
+        b = 2 * np.pi * np.arange(sides) / sides + np.pi / 2 + np.pi / sides
+        edges = np.concatenate([np.stack([np.cos(b), np.sin(b), np.zeros(sides)], axis=1), np.eye(3)[2:]])
+        return normals, edges
+    return np.eye(3), np.eye(3)
+
+
+def overlap_depth(s1: Solid, T1: np.ndarray, s2: Solid, T2: np.ndarray) -> float:
+    """How deep two primitives at world poses T1, T2 (4x4) overlap (cell unit): the
+    least overlap of their projections over the separating-axis candidates (face
+    normals of each, cross products of their edges); <= 0 when an axis separates them."""
+    P1 = solid_points(s1) @ T1[:3, :3].T + T1[:3, 3]
+    P2 = solid_points(s2) @ T2[:3, :3].T + T2[:3, 3]
+    n1, e1 = (m @ T1[:3, :3].T for m in _axes(s1))
+    n2, e2 = (m @ T2[:3, :3].T for m in _axes(s2))
+    cross = np.cross(e1[:, None, :], e2[None, :, :]).reshape(-1, 3)
+    A = np.concatenate([n1, n2, cross])
+    norm = np.linalg.norm(A, axis=1)
+    A = A[norm > 1e-9] / norm[norm > 1e-9, None]            # parallel edges give no axis
+    p1, p2 = P1 @ A.T, P2 @ A.T                              # (k, axes)
+    over = np.minimum(p1.max(axis=0) - p2.min(axis=0), p2.max(axis=0) - p1.min(axis=0))
+    return float(over.min())
+
+
+def _lowest(model: ObjectModel, T: np.ndarray) -> float:
+    """The lowest world z of ``model``'s shape at pose T (cell unit): boxes by their
+    corners, cylinders exactly (a rim of radius r about axis a reaches r sqrt(1 - a_z^2)
+    below its centre)."""
+    low = math.inf
+    for s in model.shape:
+        if s.kind == "cylinder":
+            a = T[:3, 2]
+            drop = s.radius * math.sqrt(max(0.0, 1.0 - float(a[2]) ** 2))
+            for z in (s.lo[2], s.hi[2]):
+                low = min(low, float((T @ np.array([0.0, 0.0, z, 1.0]))[2]) - drop)
+        else:
+            low = min(low, float((solid_points(s) @ T[:3, :3].T + T[:3, 3])[:, 2].min()))
+    return low
+
+
+# --------------------------------------------------------------------------- checks
+
+
+def _reach(cell: Cell) -> Iterator[KBError]:
+    """Coordinates within the reach box (a fast guard before any grid is built)."""
+    c, h = reach_box(cell)
+    u, robot = cell.unit, cell.robot.name
+    where = f"within {_fmt(h, u)} of {robot}'s base at ({', '.join(_fmt(v) for v in c)}) {u}"
+    for pos in cell.positions.values():
+        d = pos.T[:3, 3]
+        for i in np.flatnonzero(np.abs(d - c) > h):
+            yield KBError(cell.file, _position_key(cell, pos),
+                          f"expected {pos.obj} at {pos.name} {where}, not {'xyz'[i]} = {_fmt(d[i], u)}")
+    for k, reg in enumerate(cell.placement_regions):
+        for i, ax in enumerate("xy"):
+            for v in reg[ax]:
+                if abs(v - c[i]) > h:
+                    yield KBError(cell.file, f"placement_regions[{k}].{ax}",
+                                  f"expected a free table region {where}, not {ax} = {_fmt(v, u)}")
+    for name, T in cell.transforms.items():
+        if np.abs(T[:3, 3]).max() > h:
+            yield KBError(cell.file, f"transforms.{name}",
+                          f"expected a displacement shorter than {robot}'s reach bound {_fmt(h, u)}, "
+                          f"not {_fmt(float(np.abs(T[:3, 3]).max()), u)}")
+    for obj, m in cell.objects.items():
+        sizes = [(f"shape[{i}]", float(np.abs(np.concatenate([s.lo, s.hi])).max())) for i, s in enumerate(m.shape)]
+        sizes += [(f"grasps[{i}].eulerxyz", float(np.abs(g.euler[:3]).max())) for i, g in enumerate(m.grasps.values())]
+        sizes += [(f"stable_poses[{i}].tm", abs(p.height)) for i, p in enumerate(m.poses.values())]
+        if m.feature is not None:
+            sizes += [("feature", max(float(np.abs(m.feature.vector).max()), m.feature.radius))]
+        for key, size in sizes:
+            if size > h:
+                models = _sources(cell).get("models", {})  # read again only to name the file
+                yield KBError(models.get(obj, cell.file), key if obj in models else f"objects.{obj}.model",
+                              f"expected a length of {obj} within {robot}'s reach bound {_fmt(h, u)}, "
+                              f"not {_fmt(size, u)}")
+                break
+
+
+def _gripper(cell: Cell) -> Iterator[KBError]:
+    """Every grasp fits the open gripper: W_g <= W_m."""
+    wm, u = cell.finger_separation, cell.unit
+    for obj, m in cell.objects.items():
+        for i, g in enumerate(m.grasps.values()):
+            if g.width > wm * (1 + 1e-9):
+                src = _sources(cell)  # read again only to name the files
+                file = src.get("models", {}).get(obj, cell.file)
+                key = f"grasps[{i}].width" if obj in src.get("models", {}) else f"objects.{obj}.model"
+                yield KBError(file, key,
+                              f"expected a grasp that fits {cell.robot.name}'s gripper (finger separation "
+                              f"W_m = {_fmt(wm, u)}, {src.get('robot', cell.file)}: gripper.finger_separation), "
+                              f"not {obj}'s {g.label} {_fmt(g.width, u)} wide")
+
+
+def _vectors(cell: Cell) -> Iterator[KBError]:
+    """Approach and mating vectors (``vectors:``, the V_a of assembled goals) are non-zero."""
+    users: dict[str, list[str]] = {}
+    for k, g in enumerate(cell.goals):
+        for name in cell.vectors:
+            if name in g.replace("(", ",").replace(")", ",").replace(" ", "").split(","):
+                users.setdefault(name, []).append(f"goals[{k}] {g.split('(')[0]}")
+    for name, v in cell.vectors.items():
+        if float(np.linalg.norm(v)) <= ZERO_VECTOR:
+            who = ", ".join(users.get(name, [])) or "no goal"
+            yield KBError(cell.file, f"vectors.{name}",
+                          f"expected a non-zero approach vector (used by {who}), "
+                          f"not [{', '.join(_fmt(float(x)) for x in v)}]")
+
+
+def _on_table(cell: Cell) -> Iterator[KBError]:
+    """Each initial part rests on the table top: its lowest point at z = 0 (within
+    REST_TOL_MM); a part without a shape: its frame at its stable pose's height."""
+    tol, u = from_mm(cell.unit, REST_TOL_MM), cell.unit
+    for pos in cell.positions.values():
+        m = cell.objects[pos.obj]
+        if m.shape:
+            low, what = _lowest(m, pos.T), "its lowest point"
+        else:
+            from .geometry import same_stable_pose
+
+            sp = next((p for p in m.poses.values() if same_stable_pose(pos.T[:3, :3], p.R)), None)
+            if sp is None:
+                continue  # kb refuses an orientation that is no stable pose
+            low, what = float(pos.T[2, 3] - sp.height), f"its frame {_fmt(sp.height, u)} up (stable pose {sp.label})"
+        if abs(low) > tol:
+            how = f"{_fmt(low, u)} above it" if low > 0 else f"{_fmt(-low, u)} below it"
+            yield KBError(cell.file, _position_key(cell, pos),
+                          f"expected {pos.obj} at {pos.name} resting on the table (z = 0, {what}), not {how}")
+
+
+def _overlaps(cell: Cell) -> Iterator[KBError]:
+    """No two initial parts overlap (separating axes over their primitives' polytopes)."""
+    tol, u = from_mm(cell.unit, OVERLAP_TOL_MM), cell.unit
+    pos = list(cell.positions.values())
+    shapes = [cell.objects[p.obj].shape for p in pos]
+    radii = [cell.objects[p.obj].bounding_radius() for p in pos]
+    for i in range(len(pos)):
+        for j in range(i + 1, len(pos)):
+            a, b = pos[i], pos[j]
+            if np.linalg.norm(a.T[:3, 3] - b.T[:3, 3]) > radii[i] + radii[j] + tol:
+                continue  # bounding spheres apart
+            depth = max((overlap_depth(s1, a.T, s2, b.T) for s1 in shapes[i] for s2 in shapes[j]), default=0.0)
+            if depth > tol:
+                yield KBError(cell.file, _position_key(cell, a),
+                              f"expected a part clear of {b.obj} at {b.name}, "
+                              f"not overlapping it by {_fmt(depth, u)}")
