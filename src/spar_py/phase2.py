@@ -216,7 +216,7 @@ def choose_placements(cell: Cell, steps: list[Step],
                 out[s["id"]] = pl.Placement(obj, cell.positions[pos].label, *T[:3, 3], 0.0, T)
             else:
                 reqs = [_grasp(cell, obj, held[obj]).T] + _later_requirements(cell, steps[i + 1:], obj, held)
-                occupied = [(T[:2, 3], cell.objects[o].bounding_radius()) for o, T in on_table.values()]
+                occupied = [pl.occupant(cell, o, T) for o, T in on_table.values()]
                 near = prev[:2, 3] if prev is not None else None
                 out[s["id"]] = pl.choose(cell, obj, pos, reqs, occupied, near)
             held.pop(obj, None)
