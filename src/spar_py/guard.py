@@ -75,8 +75,10 @@ class RunGuard:
         if self._thread is not None:
             self._thread.join()
         signal.set_wakeup_fd(self._old_fd)
-        for sig, h in self._old.items():
-            signal.signal(sig, h)  # type: ignore[arg-type]
+        for sig in self._old:
+            # the command's work is done and its outputs are in place: a signal now, while
+            # the process exits, changes nothing (and must not kill it half-way out)
+            signal.signal(sig, signal.SIG_IGN)
         os.close(self._r)
         os.close(self._w)
         self.cleanup()

@@ -87,10 +87,13 @@ test(default_options_separate, [Terms == [pickup(peg, grasp_1)]]) :-
     maplist([action(_, T), T]>>true, As, Terms).
 
 test(partial_dict_separations,
-     [ Seps == [["part_location(peg,init_pos5)", "part_location(peg,init_pos1)"]] ]) :-
+     [ Texts-Deleted == [["part_location(peg,init_pos5)", "part_location(peg,init_pos1)"]]-
+                        _{functor: "part_location", args: ["peg", "init_pos5"]} ]) :-
     phase1_with([promotion, separation, white_knight], plan(P)),
     partial_dict(P, D),
-    Seps = D.separations.
+    [Sep] = D.separations,
+    Texts = [Sep.text],
+    Deleted = Sep.deleted.
 
 test(print_partial_section) :-
     phase1_with([promotion, separation, white_knight], plan(P)),
