@@ -88,12 +88,12 @@ test(default_options_separate, [Terms == [pickup(peg, grasp_1)]]) :-
 
 test(partial_dict_separations,
      [ Texts-Deleted == [["part_location(peg,init_pos5)", "part_location(peg,init_pos1)"]]-
-                        _{functor: "part_location", args: ["peg", "init_pos5"]} ]) :-
+                        [args-["peg", "init_pos5"], functor-"part_location"] ]) :-
     phase1_with([promotion, separation, white_knight], plan(P)),
     partial_dict(P, D),
     [Sep] = D.separations,
     Texts = [Sep.text],
-    Deleted = Sep.deleted.
+    dict_pairs(Sep.deleted, _, Deleted).
 
 test(print_partial_section) :-
     phase1_with([promotion, separation, white_knight], plan(P)),
