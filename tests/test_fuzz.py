@@ -193,3 +193,49 @@ def test_full_fuzz(capsys: pytest.CaptureFixture[str]) -> None:
         kbfuzz.save_findings(report, Path(os.environ["SPAR_FUZZ_SAVE"]), seed, count)
     assert findings(report, ("",)) == []
 
+
+# ---------------------------------------------------------------------- the corpus
+
+CORPUS = sorted((Path(__file__).parent / "fuzz" / "corpus").glob("*.yaml"))
+CORPUS_SECONDS = 2.0  #: a bad cell is refused within this
+CORPUS_RSS_MB = 1024.0
+
+
+def header(path: Path) -> dict[str, str]:
+    """The ``# key: value`` lines at the top of a corpus cell (expect-exit, mentions, xfail)."""
+    out = {}
+    for line in path.read_text().splitlines():
+        if not line.startswith("# "):
+            break
+        key, _, value = line[2:].partition(": ")
+        out[key] = value
+    return out
+
+
+def corpus_params(command: str) -> list:
+    """One test per corpus cell, strict xfail where its header names the fix that is under way."""
+    params = []
+    for p in CORPUS:
+        xfail = header(p).get("xfail")
+        marks = [pytest.mark.xfail(strict=True, reason=xfail)] if xfail else []
+        params.append(pytest.param(command, p, id=f"{command.replace(' ', '_')}-{p.stem}", marks=marks))
+    return params
+
+
+def test_corpus_headers() -> None:
+    assert len(CORPUS) >= 10
+    for p in CORPUS:
+        h = header(p)
+        assert h.get("expect-exit") == "2" and h.get("mentions"), p.name
+
+
+@pytest.mark.parametrize(("command", "path"), corpus_params("plan") + corpus_params("kb check"))
+def test_corpus_cell_is_refused(command: str, path: Path) -> None:
+    """A physically impossible or unusable cell: exit 2, one line naming the parties, in 2 s and 1 GB."""
+    h = header(path)
+    args = ["plan", str(path), "--timeout", "5"] if command == "plan" else ["kb", "check", str(path)]
+    code, err, seconds, rss = kbfuzz.execute(kbfuzz.spar(args), kbfuzz.ROOT, CORPUS_SECONDS + 1.0)
+    lines = err.strip().splitlines()
+    assert (code, len(lines)) == (int(h["expect-exit"]), 1), err
+    assert all(name in lines[0] for name in h["mentions"].split(", ")), lines[0]
+    assert seconds <= CORPUS_SECONDS and rss < CORPUS_RSS_MB, (seconds, rss)
