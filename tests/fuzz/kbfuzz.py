@@ -63,6 +63,9 @@ CAP_SLACK = 1.0  #: seconds past TIME_FACTOR * timeout before the run is killed
 STDERR_KEEP = 64 * 1024  #: bytes of stderr kept per run
 
 OK_CODES = (0, 1, 2, 4)
+#: Mutations the strict schema (issue 13 item 1) must refuse: a key written twice, an unknown
+#: key. An exit 0 or 1 for one is reported as "accepted silently" (not a finding of the judge).
+MUST_REFUSE = ("duplicate_key", "typo_key")
 NEEDS_ONE_LINE = (2, 4)
 
 Key = Union[str, int]
@@ -465,8 +468,10 @@ def execute(argv: Sequence[str], cwd: Path, cap: float) -> tuple[int, str, float
     peak RSS in MB). Killed (its whole process group) once it has run ``cap`` seconds."""
     with tempfile.TemporaryFile() as err:
         t0 = time.monotonic()
+        # PYTHONFAULTHANDLER: a crash (one SIGSEGV at start-up so far) leaves its Python stacks on stderr
         proc = subprocess.Popen(argv, cwd=cwd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=err,
-                                preexec_fn=limit_resources, start_new_session=True)
+                                preexec_fn=limit_resources, start_new_session=True,
+                                env=os.environ | {"PYTHONFAULTHANDLER": "1"})
         status, usage = wait_capped(proc.pid, t0 + cap)
         seconds = time.monotonic() - t0
         proc.returncode = os.waitstatus_to_exitcode(status)  # reaped here: Popen must not wait again
@@ -586,6 +591,10 @@ class Report:
     def findings(self) -> list[Run]:
         return [r for r in self.runs if r.finding]
 
+    def accepted(self) -> list[Run]:
+        """Runs that took a mutant of MUST_REFUSE as a good cell (exit 0 or 1)."""
+        return [r for r in self.runs if r.op in MUST_REFUSE and r.code in (0, 1) and not r.finding]
+
     def causes(self) -> dict[str, list[Run]]:
         out: dict[str, list[Run]] = {}
         for r in self.findings():
@@ -598,7 +607,11 @@ class Report:
                 f"{len(self.runs)} runs in {self.seconds:.0f} s (--timeout {self.timeout:g})")
         counts = [f"  {k}: {n}" for k, n in sorted(self.outcomes().items())]
         causes = self.causes()
-        lines = [head, *counts, f"  findings: {len(self.findings())} in {len(causes)} causes"]
+        accepted = self.accepted()
+        lines = [head, *counts, f"  accepted silently ({', '.join(MUST_REFUSE)}; exit 0 or 1): {len(accepted)}"
+                 + "".join(f"\n      {r.mutant} {r.op} at {r.where}: spar {r.command} -> exit {r.code}"
+                           for r in accepted[:12]),
+                 f"  findings: {len(self.findings())} in {len(causes)} causes"]
         for c, runs in causes.items():
             r = runs[0]
             lines.append(f"  [{len(runs)}] {c}\n      e.g. {r.mutant} {r.op} at {r.where}: spar {r.command} -> "
@@ -632,11 +645,17 @@ def fuzz(seed: int = 0, count: int = 20, timeout: float = 3.0, files: Sequence[s
 
 
 def save_findings(report: Report, directory: Path, seed: int, count: int) -> list[Path]:
-    """Write one reproducing mutant per cause into ``directory`` with an index.json to replay them."""
+    """Write one reproducing mutant per cause into ``directory`` with an index.json to replay them
+    (causes already in an index.json there are kept, not written again)."""
     directory.mkdir(parents=True, exist_ok=True)
-    index = []
+    index_path = directory / "index.json"
+    index = json.loads(index_path.read_text()) if index_path.exists() else []
+    known = {e["cause"] for e in index}
     saved = []
-    for n, (cause, runs) in enumerate(report.causes().items(), 1):
+    for cause, runs in report.causes().items():
+        if cause in known:
+            continue
+        n = len(index) + 1
         run = runs[0]
         source, i = run.mutant.split("#")
         m = next(m for m in mutants(source, seed, count) if m.index == int(i))
@@ -644,9 +663,9 @@ def save_findings(report: Report, directory: Path, seed: int, count: int) -> lis
         path = directory / f"{n:02d}-{slug}.yaml"
         path.write_bytes(m.data)
         saved.append(path)
-        index.append({"file": path.name, "replaces": source, "cause": cause, "count": len(runs),
+        index.append({"file": path.name, "replaces": source, "seed": seed, "cause": cause, "count": len(runs),
                       "run": asdict(run) | {"stderr": first_line(run.stderr)}})
-    (directory / "index.json").write_text(json.dumps(index, indent=1, ensure_ascii=False) + "\n")
+    index_path.write_text(json.dumps(index, indent=1, ensure_ascii=False) + "\n")
     return saved
 
 
