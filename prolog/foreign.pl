@@ -73,9 +73,15 @@ pair_term([G, P], G/P).
 
 %!  py_bridge(+Call, -Result) is det.
 %
-%   Call a function of spar_py.engine (phase 2: world state, UR constraints).
+%   Call a function of spar_py.engine for phase 2: uncertainty.pl calls
+%   evaluate(Problem, Steps, Sources, GivenUp, Sensing) once per run of a
+%   plan instance; Result is plain data (dicts, lists, strings, numbers),
+%   no Python object.
+%
+%   @error type_error(callable, Call) if Call is not a term.
 
 py_bridge(Call, Result) :-
+    must_be(callable, Call),
     py_call('spar_py.engine':Call, Result).
 
 %!  spar_load_facts(+Data:list) is det.

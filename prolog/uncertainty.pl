@@ -2,17 +2,31 @@
 
     Plan instances (a solution of the constraint network x a linearisation of
     the ordering graph) are generated lazily from the phase-1 partial plan.
-    Each is checked action by action with the world's uncertainty propagated
-    forward (the numbers and symbols are Python's, reached through foreign.pl);
-    an unmet uncertainty-reduction precondition triggers, in order:
+    Each is run with the world's uncertainty propagated forward by Python
+    (numbers and symbols, reached through foreign.pl): ONE call,
+    spar_py.engine:evaluate/5, per run of an instance, which executes the
+    whole step list and returns plain data: each step's verdicts, geometry,
+    the poses of every part and the held part at its end-point, and where the
+    run stopped (ok, failed at a step, infeasible at a step). Every decision
+    stays here. At the first action whose uncertainty-reduction
+    preconditions fail (and that is not given up), the remedies are read as
+    data from kb/templates/sensing.pl and tried in order:
 
-      1. pickup(Obj, G): a dense_range_scan(Obj) just before the pickup;
-         assemble(O1, O2, ...): two scans, of O1 and O2, just before the
-         action that establishes holding(O1, _) (Sec. 4.3);
-      2. a squeeze of the object on the table, spliced in just before that
-         same pickup (assemble only: Sec. 4.3);
-      3. otherwise the error count + 1, a verification action (Fig. 12) and a
-         local recovery plan (Fig. 13) for the action.
+      1. spar_sensing:remedy_rule/3, clause by clause: insert its actions
+         (dense_range_scan sensing, squeeze) before the failing action or
+         before the action that established one of its preconditions
+         (Sec. 4.3: a scan before a pickup; two scans, then two scans and a
+         squeeze, before the pickup that establishes holding for an
+         assemble), keeping the first that makes the action's
+         preconditions hold;
+      2. otherwise the action is given up: the error count + 1, a
+         verification action (Fig. 12) and a local recovery plan (Fig. 13)
+         for it, and the run goes on past it.
+
+    What a sensing action leaves (the bounds of the uncertainty variables it
+    introduces) is read from spar_sensing:sensing_rule/5 (Fig. 11, in the
+    units of spar_sensing:sensing_units/2) and passed to Python with every
+    evaluation; a problem file's sensors entry takes precedence there.
 
     The first instance with no error wins; otherwise the one with the fewest
     errors among at most max_instances(Cap) examined.
@@ -30,9 +44,10 @@
 :- use_module(library(option)).
 :- use_module(library(error)).
 :- use_module(library(yall)).
-:- use_module(foreign, [py_bridge/2]).
+:- use_module(foreign, [py_bridge/2, term_data/2]).
 :- use_module(spar_defaults, [default_option/2]).
 :- use_module('../kb/templates/sensing', []).
+:- use_module('../kb/templates/actions', []).
 
 %!  phase2(+Problem, +Partial, +Options, -Result) is det.
 %
@@ -41,7 +56,7 @@
 %   Complete) when no instance could be executed at all (every one needed
 %   a put-down with no reachable placement). Best is an augmented instance
 %   aug(Steps, ErrorCount, Verifications, Recoveries, Verdicts, Geometry,
-%   Bindings) (see check_instance/2); Examined the instances checked;
+%   Bindings) (see check_instance/5); Examined the instances checked;
 %   Complete true if the partial plan has no further instance.
 %   Options: max_instances(Cap) (default: spar_defaults:default_option/2).
 
@@ -104,24 +119,31 @@ action_sources(action(Id, _, preconditions(Ops, _), _, _), Id-Pairs) :-
 
 %!  check_instance(+Problem, +Steps, +Sources, +Bound, -Augmented) is semidet.
 %
-%   Steps of the loaded problem Problem is a list of step(Id, Action) in execution order. Augmented is
-%   aug(Steps1, ErrorCount, Verifications, Recoveries, Verdicts, Geometry):
-%   Steps1 with sensing and squeezes inserted; Verdicts a list of
-%   verdict(Id, Action, Dicts) (Python's verdict dicts: constraint, bound,
-%   threshold, satisfied, ...); Geometry a list of Id-Dict (tool pose, joint
-%   angles, placement). Fails if the instance cannot be executed at all (a
-%   geometric precondition fails: no placement, no joint solution).
-%   It fails as soon as the instance has Bound errors (it cannot beat the
-%   best so far; inf for no bound); Sources as instance_sources/2 gives
-%   them ([]: every object has one initial position).
+%   Steps of the loaded problem Problem is a list of step(Id, Action) in
+%   execution order. Augmented is aug(Steps1, ErrorCount, Verifications,
+%   Recoveries, Verdicts, Geometry): Steps1 with sensing and squeezes
+%   inserted; Verdicts a list of verdict(Id, Action, Dicts) (Python's
+%   verdict dicts: constraint, bound, threshold, sense, satisfied, ...);
+%   Geometry a list of IdText-Dict (tool pose, joint angles, IK solutions,
+%   placement, from, poses, held). Fails if the instance cannot be executed
+%   at all (a geometric precondition fails: no placement, no joint
+%   solution). It fails as soon as the instance has Bound errors (it cannot
+%   beat the best so far; inf for no bound); Sources as instance_sources/2
+%   gives them ([]: every object has one initial position).
+%
+%   @error domain_error(sensing_error_transform, E) if a sensing rule's
+%   error transformation is not the trans(Dx, Dy, Dz) rotz(Theta) Python
+%   implements.
 
 check_instance(Problem, Steps, Sources, Bound, aug(Final, Errors, Verifs, Recovs, Verdicts, Geometry)) :-
     must_be(atom, Problem),
     must_be(list, Steps),
     must_be(list, Sources),
-    sources_dict(Sources, From0),
-    From = ctx(Problem, From0),
-    remedy_loop(From, Steps, [], Bound, Final, Failed, Verdicts, Geometry),
+    sources_dict(Sources, From),
+    sensing_data(Sensing),
+    Ctx = ctx(Problem, From, Sensing),
+    run(Ctx, Steps, [], Result),
+    remedy_loop(Ctx, Steps, [], Result, Bound, Final, Failed, Verdicts, Geometry),
     length(Failed, Errors),
     maplist(failed_step(Final), Failed, FailedSteps),
     maplist(verification, FailedSteps, Verifs),
@@ -130,88 +152,79 @@ check_instance(Problem, Steps, Sources, Bound, aug(Final, Errors, Verifs, Recovs
 failed_step(Steps, Id, step(Id, A)) :-
     memberchk(step(Id, A), Steps).
 
-%   remedy_loop(+From, +Steps, +GivenUp, +Bound, -Final, -Failed,
-%   -Verdicts, -Geometry): run the steps; at the first failing action not
-%   yet given up, try the remedies in order; an action no remedy helps is
-%   given up (it counts as an error) and the run goes on past it. From is
-%   ctx(Problem, Sources), Sources the instance's sources as sources_dict/2
-%   gives them.
+%   remedy_loop(+Ctx, +Steps, +GivenUp, +Result, +Bound, -Final, -Failed,
+%   -Verdicts, -Geometry): Result is the run of Steps (run/4). At its first
+%   failing action not yet given up, try the remedies in order; an action
+%   no remedy helps is given up (it counts as an error) and the run goes on
+%   past it. Ctx is ctx(Problem, Sources, Sensing) (sources_dict/2,
+%   sensing_data/1).
 
-remedy_loop(From, Steps, GivenUp, Bound, Final, Failed, Verdicts, Geometry) :-
-    run(From, Steps, GivenUp, Result),
-    (   Result = ok(Verdicts, Geometry)
-    ->  Final = Steps, reverse(GivenUp, Failed)
-    ;   Result = failed(Step, Before)
-    ->  (   remedy(From, Step, Before, Steps, GivenUp, Steps1)
-        ->  remedy_loop(From, Steps1, GivenUp, Bound, Final, Failed, Verdicts, Geometry)
-        ;   Step = step(Id, _),
-            length(GivenUp, N0),
-            N is N0 + 1,
-            (Bound == inf -> true ; N < Bound),
-            remedy_loop(From, Steps, [Id|GivenUp], Bound, Final, Failed, Verdicts, Geometry)
-        )
+remedy_loop(_, Steps, GivenUp, ok(Verdicts, Geometry), _, Steps, Failed, Verdicts, Geometry) :-
+    !,
+    reverse(GivenUp, Failed).
+remedy_loop(Ctx, Steps, GivenUp, failed(Step, Before), Bound, Final, Failed, Verdicts, Geometry) :-
+    (   remedy(Ctx, Step, Before, Steps, GivenUp, Steps1, Result1)
+    ->  remedy_loop(Ctx, Steps1, GivenUp, Result1, Bound, Final, Failed, Verdicts, Geometry)
+    ;   Step = step(Id, _),
+        length(GivenUp, N0),
+        N is N0 + 1,
+        (Bound == inf -> true ; N < Bound),
+        GivenUp1 = [Id|GivenUp],
+        run(Ctx, Steps, GivenUp1, Result1),
+        remedy_loop(Ctx, Steps, GivenUp1, Result1, Bound, Final, Failed, Verdicts, Geometry)
     ).
 
-%   run(+From, +Steps, +GivenUp, -Result): propagate the world through
-%   Steps (From: see sources_dict/2).
-%   Result = ok(Verdicts, Geometry); failed(Step, Prefix) for the first
-%   action whose uncertainty-reduction preconditions are not all satisfied
-%   and that is not in GivenUp; infeasible(Step) if a geometric
-%   precondition fails (the run cannot go on; the caller fails).
+%   run(+Ctx, +Steps, +GivenUp, -Result): run Steps in one Python call
+%   (spar_py.engine:evaluate/5). Result = ok(Verdicts, Geometry), or
+%   failed(Step, Before) for the first action whose uncertainty-reduction
+%   preconditions are not all satisfied and that is not in GivenUp, Before
+%   the steps before it. Fails if a geometric precondition fails (the
+%   instance cannot be executed).
 
-run(ctx(Problem, From), Steps, GivenUp, Result) :-
+run(ctx(Problem, From, Sensing), Steps, GivenUp, Result) :-
     maplist(step_dict, Steps, Dicts),
-    py_bridge(ur_world(Problem, Dicts, From), W0),
-    run(Steps, GivenUp, W0, [], [], [], Result0),
-    Result0 \= infeasible(_),
-    Result = Result0.
+    maplist(step_id_text, GivenUp, GivenUpText),
+    py_bridge(evaluate(Problem, Dicts, From, GivenUpText, Sensing), Eval),
+    atom_string(Status, Eval.status),
+    eval_result(Status, Eval, Steps, Result).
 
-run([], _, _, _, Vs0, Gs0, ok(Vs, Gs)) :-
-    reverse(Vs0, Vs),
-    reverse(Gs0, Gs).
-run([Step|Rest], GivenUp, W0, Prefix, Vs0, Gs0, Result) :-
-    Step = step(Id, Action),
-    step_dict(Step, Dict),
-    py_bridge(ur_step(W0, Dict), -(Checks, W1, Geo)),
-    (   Checks == []
-    ->  Vs1 = Vs0
-    ;   Vs1 = [verdict(Id, Action, Checks)|Vs0]
-    ),
-    (   member(C, Checks), get_dict(kind, C, geometric), \+ satisfied(C)
-    ->  Result = infeasible(Step)
-    ;   \+ all_satisfied(Checks), \+ memberchk(Id, GivenUp)
-    ->  reverse(Prefix, Before), Result = failed(Step, Before)
-    ;   step_id_text(Id, IdText),
-        run(Rest, GivenUp, W1, [Step|Prefix], Vs1, [IdText-Geo|Gs0], Result)
-    ).
+eval_result(ok, Eval, Steps, ok(Verdicts, Geometry)) :-
+    foldl(step_record, Eval.steps, Steps, Verdicts0, []),
+    exclude([verdict(_, _, [])]>>true, Verdicts0, Verdicts),
+    maplist(step_geometry, Eval.steps, Geometry).
+eval_result(failed, Eval, Steps, failed(Step, Before)) :-
+    atom_string(At, Eval.at),
+    append(Before, [Step|_], Steps),
+    Step = step(Id, _),
+    step_id_text(Id, At),
+    !.
 
-all_satisfied(Checks) :-
-    forall(member(C, Checks), satisfied(C)).
+step_record(Record, step(Id, Action), [verdict(Id, Action, Record.verdicts)|Vs], Vs).
+
+step_geometry(Record, IdText-Geo) :-
+    atom_string(IdText, Record.id),
+    put_dict(_{poses: Record.poses, held: Record.held}, Record.geometry, Geo).
 
 %   janus passes Python's True as @(true).
 satisfied(C) :-
     get_dict(satisfied, C, S),
     S == @(true).
 
-%   remedy(+From, +Failing, +Before, +Steps, +GivenUp, -Steps1): the first
-%   remedy of Sec. 4.3 that makes Failing's preconditions hold.
+%   remedy(+Ctx, +Failing, +Before, +Steps, +GivenUp, -Steps1, -Result):
+%   the first remedy rule (spar_sensing:remedy_rule/3) whose insertion
+%   makes Failing's preconditions hold; Result the run of Steps1. A remedy
+%   is tried once per action: not when something is inserted for it
+%   already.
 
-remedy(From, step(Id, pickup(Obj, _)), _, Steps, GivenUp, Steps1) :-
+remedy(Ctx, step(Id, Action), Before, Steps, GivenUp, Steps1, Result) :-
     \+ inserted_for(Id, Steps),
-    insert_before(Id, [step(sense(Id, 1), dense_range_scan(Obj))], Steps, Steps1),
-    passes(From, Id, Steps1, GivenUp).
-remedy(From, step(Id, assemble(O1, O2, _, _, _)), Before, Steps, GivenUp, Steps1) :-
-    \+ inserted_for(Id, Steps),
-    establisher_of_holding(O1, Before, EId),
-    Scans = [ step(sense(Id, 1), dense_range_scan(O1)),
-              step(sense(Id, 2), dense_range_scan(O2)) ],
-    (   insert_before(EId, Scans, Steps, Steps1),
-        passes(From, Id, Steps1, GivenUp)
-    ->  true
-    ;   append(Scans, [step(squeeze(Id), squeeze(O2))], WithSqueeze),
-        insert_before(EId, WithSqueeze, Steps, Steps1),
-        passes(From, Id, Steps1, GivenUp)
-    ).
+    spar_sensing:remedy_rule(Action, Where, Inserted),
+    insertion_point(Where, Id, Before, At),
+    inserted_steps(Inserted, Id, New),
+    insert_before(At, New, Steps, Steps1),
+    run(Ctx, Steps1, GivenUp, Result),
+    gets_past(Id, Result),
+    !.
 
 inserted_for(Id, Steps) :-
     (   memberchk(step(sense(Id, _), _), Steps)
@@ -219,11 +232,39 @@ inserted_for(Id, Steps) :-
     ),
     !.
 
-%   The last pickup of O1 before the assemble establishes holding(O1, _).
-establisher_of_holding(O1, Before, EId) :-
+%   insertion_point(+Where, +Id, +Before, -At): the id of the step the
+%   remedy goes before (remedy_rule/3's Where).
+insertion_point(action, Id, _, Id).
+insertion_point(establisher(Condition), _, Before, At) :-
     reverse(Before, Rev),
-    member(step(EId, pickup(O1, _)), Rev),
+    member(step(At, A), Rev),
+    establishes(A, Condition),
     !.
+
+%   establishes(+Action, ?Condition): Condition is in the add list of
+%   Action's template (Figs. 2-4); sensing and squeezes establish nothing.
+establishes(Action, Condition) :-
+    phrase(spar_actions:action_template(Action, action(_, _, _, addlist(Adds), _)), [], _),
+    member(C, Adds),
+    subsumes_term(Condition, C),
+    !.
+
+%   inserted_steps(+Actions, +Id, -Steps): the actions a remedy inserts
+%   for action Id as steps: sensing actions get ids sense(Id, K) (K = 1,
+%   2, ... among them), a squeeze squeeze(Id).
+inserted_steps(Actions, Id, Steps) :-
+    foldl(inserted_step(Id), Actions, Steps, 1, _).
+
+inserted_step(Id, A, step(sense(Id, K), A), K, K1) :-
+    sensing_action(A),
+    !,
+    K1 is K + 1.
+inserted_step(Id, squeeze(O), step(squeeze(Id), squeeze(O)), K, K) :- !.
+inserted_step(_, A, _, _, _) :-
+    domain_error(remedy_action, A).
+
+sensing_action(A) :-
+    \+ \+ spar_sensing:sensing_rule(A, _, _, _, _).
 
 insert_before(Id, New, Steps, Steps1) :-
     append(Pre, [step(Id, A)|Post], Steps),
@@ -231,35 +272,70 @@ insert_before(Id, New, Steps, Steps1) :-
     append(Pre, New, Pre1),
     append(Pre1, [step(Id, A)|Post], Steps1).
 
-%   passes(+From, +Id, +Steps, +GivenUp): with Steps, action Id's
-%   preconditions hold (the run gets past Id).
-passes(From, Id, Steps, GivenUp) :-
-    run(From, Steps, GivenUp, Result),
-    (   Result = ok(_, _)
-    ->  true
-    ;   Result = failed(_, Before),
-        memberchk(step(Id, _), Before)
-    ).
+%   gets_past(+Id, +Result): in the run Result, action Id's
+%   preconditions hold (it is done, or the run fails at a later step).
+gets_past(_, ok(_, _)) :- !.
+gets_past(Id, failed(_, Before)) :-
+    memberchk(step(Id, _), Before).
 
 %!  step_dict(+Step, -Dict) is det.
 %
-%   The data Python receives for a step: id (text), name, atomic arguments
-%   (compound arguments as quoted text).
+%   The data Python receives for a step: id (text), name, arguments as
+%   term data (foreign:term_data/2).
 
 step_dict(step(Id, Action), _{id: IdText, name: Name, args: Args}) :-
     step_id_text(Id, IdText),
     Action =.. [Name|Args0],
-    maplist(arg_data, Args0, Args).
+    maplist(term_data, Args0, Args).
 
 %   sources_dict(+Sources, -From): the list Id-[Obj-Label, ...] of
 %   instance_sources/2 as the dict _{Id: _{Obj: Label}} Python's
-%   new_world/3 reads; made once per instance, passed to every run.
+%   new_world/4 reads; made once per instance, passed to every run.
 
 sources_dict(Sources, From) :-
     maplist([Id-Pairs, IdText-D]>>( step_id_text(Id, IdText),
                                      dict_pairs(D, _, Pairs) ),
             Sources, KVs),
     dict_pairs(From, _, KVs).
+
+%!  sensing_data(-Data:dict) is det.
+%
+%   What each sensing action leaves, from spar_sensing:sensing_rule/5, as
+%   the data Python's phase2.sensing_bounds/2 reads: Name: _{dx: [Lo, Hi],
+%   dy: .., dz: .., dtheta: .., units: _{length: L, angle: A}}, the
+%   variables named by their place in the rule's error transformation
+%   tm([[cos(T), sin(T), 0], [-1*sin(T), cos(T), 0], [0, 0, 1], [Dx, Dy, Dz]])
+%   and bounded by its supinf_less/2 terms, in spar_sensing:sensing_units/2.
+%
+%   @error domain_error(sensing_error_transform, E) for another shape.
+
+sensing_data(Data) :-
+    spar_sensing:sensing_units(L, A),
+    findall(Name-D,
+            ( spar_sensing:sensing_rule(S, Vars, Bounds, ErrTm, _),
+              functor(S, Name, _),
+              rule_bounds(ErrTm, Vars, Bounds, D0),
+              put_dict(units, D0, _{length: L, angle: A}, D)
+            ),
+            Pairs),
+    dict_pairs(Data, _, Pairs).
+
+rule_bounds(ErrTm, Vars, Bounds, _{dx: X, dy: Y, dz: Z, dtheta: T}) :-
+    (   subsumes_term(tm([[cos(Th), sin(Th), 0], [-1*sin(Th), cos(Th), 0], [0, 0, 1], [_, _, _]]), ErrTm),
+        ErrTm = tm([[cos(Th), _, _], _, _, [Dx, Dy, Dz]]),
+        Vs = [Dx, Dy, Dz, Th],
+        maplist(var, Vs),
+        forall(member(V, Vs), (member(supinf_variable(W), Vars), W == V))
+    ->  maplist(var_interval(Bounds), Vs, [X, Y, Z, T])
+    ;   domain_error(sensing_error_transform, ErrTm)
+    ).
+
+var_interval(Bounds, V, [Lo, Hi]) :-
+    (   member(supinf_less(Lo, W1), Bounds), W1 == V, number(Lo),
+        member(supinf_less(W2, Hi), Bounds), W2 == V, number(Hi)
+    ->  true
+    ;   existence_error(supinf_bounds, V)
+    ).
 
 %!  step_id_text(+Id, -Text) is det.
 %
@@ -270,8 +346,6 @@ step_id_text(sense(Id, K), T) :- !, format(atom(T), 'sense_~w_~w', [Id, K]).
 step_id_text(squeeze(Id), T) :- !, format(atom(T), 'squeeze_~w', [Id]).
 step_id_text(Id, Id).
 
-arg_data(A, A) :- atomic(A), !.
-arg_data(T, S) :- format(string(S), '~q', [T]).
 
 %   verification(+Step, -V) and recovery(+Step, -R): Figs. 12-13 from the
 %   templates in kb/templates/sensing.pl, their action id bound.
@@ -290,9 +364,11 @@ recovery(step(Id, Action), R) :-
 %
 %   The phase-2 Result (phase2/4) as a dict for janus, the "instance" of the
 %   JSON schema (docs/json-schema.md): bindings, steps (each with its kind,
-%   the action it serves, tool pose, joint angles, placement), constraints
-%   (one per checked uncertainty-reduction inequality: action, constraint,
-%   bound, threshold, satisfied), verifications, recoveries, error_count,
+%   the action it serves, its term as text and its args as term data, tool
+%   pose, joint angles, placement, the poses of every part and the held part
+%   at its end-point), constraints (one per checked precondition: action,
+%   constraint, bound, threshold, sense, satisfied), verifications and
+%   recoveries (the term as text and as data), error_count,
 %   instances_examined, instance_cap, complete. For no_instance/3 the dict
 %   has steps = [] and error_count = null.
 
@@ -324,30 +400,34 @@ step_out(Geo, step(Id, Action), D) :-
     step_id_text(Id, IdText),
     step_kind(Id, Action, Kind, Serves),
     format(string(Term), "~q", [Action]),
-    Action =.. [Name, Obj|_],
+    Action =.. [Name, Obj|Args0],
+    maplist(term_data, [Obj|Args0], Args),
     (   memberchk(IdText-G, Geo) -> true ; G = _{} ),
     geo_value(G, tool_pose, TP),
     geo_value(G, joints_deg, Q),
     geo_value(G, placement, Pl),
     geo_value(G, ik_solutions_deg, Sols),
     geo_value(G, from, From),
+    geo_value(G, poses, Poses),
+    geo_value(G, held, Held),
     D = _{id: IdText, kind: Kind, serves: Serves, term: Term, name: Name, object: Obj,
-          tool_pose: TP, joints_deg: Q, ik_solutions_deg: Sols, placement: Pl,
-          from: From}.
+          args: Args, tool_pose: TP, joints_deg: Q, ik_solutions_deg: Sols, placement: Pl,
+          from: From, poses: Poses, held: Held}.
 
 step_kind(sense(A, _), _, sensing, A) :- !.
 step_kind(squeeze(A), _, squeeze, A) :- !.
 step_kind(Id, _, manipulation, Id).
 
 geo_value(G, K, V) :-
-    (   get_dict(K, G, V0), V0 \== 'None' -> V = V0 ; V = @(none) ).
+    (   get_dict(K, G, V0) -> V = V0 ; V = @(none) ).
 
 verdict_dicts(verdict(_, _, Checks), Acc0, Acc) :-
     foldl([C, A0, [C|A0]]>>true, Checks, Acc0, Acc).
 
-term_dict(T, _{action: Id, term: S}) :-
+term_dict(T, _{action: Id, term: S, data: D}) :-
     arg(1, T, Id),
-    format(string(S), "~q", [T]).
+    format(string(S), "~q", [T]),
+    term_data(T, D).
 
 %!  print_ur(+Result) is det.
 %
@@ -388,7 +468,8 @@ print_step(Geo, I, Id, A) :-
     ;   true
     ).
 
-print_verdict(Id, C) :-
+print_verdict(Id0, C) :-
+    step_id_text(Id0, Id),
     (   satisfied(C) -> V = "satisfied" ; V = "NOT satisfied" ),
     (   get_dict(kind, C, geometric)
     ->  format("  ~w ~w: ~w (~w)~n", [Id, C.constraint, V, C.description])

@@ -83,3 +83,12 @@ def test_the_planner_takes_its_defaults_from_prolog() -> None:
     assert (p.max_actions, p.max_instances, p.separation) == (d["max_actions"], d["max_instances"],
                                                                "separation" in d["declobber"])
     assert Planner(max_actions=3, separation=False).max_actions == 3
+
+
+def test_the_package_imports_cheaply_and_exports_the_api() -> None:
+    code = ("import sys, spar_py; heavy = [m for m in ('numpy', 'janus_swi', 'casadi', 'yaml') if m in sys.modules]; "
+            "print(heavy); from spar_py import Planner, Plan, load_problem, Outcome; "
+            "print(Planner.__name__, Plan.__name__, load_problem.__name__, Outcome.PLAN.value)")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split("\n")[:2] == ["[]", "Planner Plan load_problem plan"]

@@ -1,13 +1,19 @@
-"""Phase 2 end to end (Secs. 3.2, 4.3): verdicts, sensing, verification, and the execution check."""
+"""Phase 2 end to end (Secs. 3.2, 4.3): verdicts, sensing, squeezes, verification, the
+execution check, one bridge call per run of an instance, the per-step world."""
 from __future__ import annotations
 
+import math
+from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 
+from spar_py import engine as engine_module
 from spar_py import phase2
-from spar_py.kb import load_problem, parse_term, term_text
+from spar_py.geometry import rotz
+from spar_py.kb import load_problem
 from spar_py.planner import Planner
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -20,13 +26,10 @@ def planner() -> Planner:
 
 
 def _steps(instance: dict) -> list[dict]:
-    """The instance's steps as phase2 takes them (args back from the Prolog term text)."""
-    out = []
-    for s in instance["steps"]:
-        t = parse_term(s["term"])
-        out.append({"id": s["id"], "name": t[0], "args": [a if isinstance(a, str) else term_text(a) for a in t[1:]]}
-                   | ({"from": s["from"]} if s.get("from") else {}))
-    return out
+    """The instance's steps as phase2 takes them: id, name, args (term data, as the JSON
+    has them), from."""
+    return [{"id": s["id"], "name": s["name"], "args": s["args"]} | ({"from": s["from"]} if s.get("from") else {})
+            for s in instance["steps"]]
 
 
 def _execution_check(problem: str, instance: dict) -> list[dict]:
@@ -119,9 +122,9 @@ def test_stock_parts_each_picked_where_they_lie(planner: Planner, tmp_path: Path
     picks = [s for s in inst["steps"] if s["name"] == "pickup"]
     assert sorted(s["from"]["peg"] for s in picks) == ["tr1", "tr5"]
     for s in picks:
-        g = cell.objects["peg"].grasps[parse_term(s["term"])[2]]
+        g = cell.objects["peg"].grasps[s["args"][1]]
         np.testing.assert_allclose(np.array(s["tool_pose"]), cell.positions[s["from"]["peg"]].T @ g.T, atol=1e-6)
-    mates = {parse_term(s["term"])[2]: s for s in inst["steps"] if s["name"] == "assemble"}
+    mates = {s["args"][1]: s for s in inst["steps"] if s["name"] == "assemble"}
     assert mates["block"]["from"] == {"block": "tr2"} and mates["block2"]["from"] == {"block2": "tr4"}
     report = phase2.sample_check(cell, _steps(inst), draws=10_000)
     assert report and all(r["failed_draws"] == 0 for r in report if r["declared_satisfied"])
@@ -138,3 +141,159 @@ def test_stock_world_keeps_the_spare() -> None:
     np.testing.assert_allclose(w.unc.objects["peg@init_pos1"].pose, cell.positions["tr1"].T)
     _, after, _ = phase2.step(w, steps[0])
     assert after.unc.objects["peg"].where == "hand" and after.unc.objects["peg@init_pos1"].where == "table"
+
+
+# ---------------------------------------------------------------------- one bridge call per run
+
+
+@pytest.fixture
+def evaluations(monkeypatch: pytest.MonkeyPatch) -> list[dict[str, Any]]:
+    """Every call Prolog makes to spar_py.engine.evaluate, and how many steps phase 2
+    executed in it (each call's arguments and result recorded)."""
+    calls: list[dict[str, Any]] = []
+    real = engine_module.evaluate
+
+    def counted(problem: str, steps: list, *rest: Any) -> dict[str, Any]:
+        out = real(problem, steps, *rest)
+        calls.append({"steps": [s["id"] for s in steps], "status": out["status"], "ran": len(out["steps"])})
+        return out
+
+    monkeypatch.setattr(engine_module, "evaluate", counted)
+    return calls
+
+
+def test_no_per_step_bridge_functions_left() -> None:
+    assert not hasattr(engine_module, "ur_step") and not hasattr(engine_module, "ur_world")
+
+
+def test_paper_cell_is_one_bridge_call(planner: Planner, evaluations: list[dict[str, Any]]) -> None:
+    """The paper's cell: one instance, no remedy: one call to Python runs all four steps."""
+    inst = planner.plan(PROBLEMS / "peg_in_block.yaml").to_json()["instance"]
+    assert inst["instances_examined"] == 1
+    assert evaluations == [{"steps": ["action_4", "action_3", "action_2", "action_1"], "status": "ok", "ran": 4}]
+
+
+def test_large_uncertainty_is_one_bridge_call_per_run(planner: Planner, evaluations: list[dict[str, Any]]) -> None:
+    """large_uncertainty: each run of the instance (the first, then one per remedy tried)
+    is one call with the whole step list; 14 steps executed in 3 calls, not 14 calls."""
+    inst = planner.plan(PROBLEMS / "large_uncertainty.yaml").to_json()["instance"]
+    final = [s["id"] for s in inst["steps"]]
+    assert [c["status"] for c in evaluations] == ["failed", "failed", "ok"]
+    assert evaluations[-1]["steps"] == final and evaluations[-1]["ran"] == len(final)
+    # each run is the instance so far: the first the bare instance, each later one more remedies
+    assert [len(c["steps"]) for c in evaluations] == [4, 5, 7]
+    assert all(c["ran"] <= len(c["steps"]) for c in evaluations)
+    assert sum(c["ran"] for c in evaluations) > len(evaluations)
+
+
+# ---------------------------------------------------------------------- the world at each step
+
+
+def test_paper_cell_poses_at_each_step(planner: Planner) -> None:
+    """Every step's ``poses`` and ``held`` agree with an independent computation: a picked
+    part is where it lay (and the tool is at pose @ grasp), the put-down block is at its
+    placement (x, y, z, yaw of a stable pose), the assembled peg at block @ T_a."""
+    cell = load_problem(PROBLEMS / "peg_in_block.yaml")
+    inst = planner.plan(cell).to_json()["instance"]
+    by_name = {s["name"]: [] for s in inst["steps"]}
+    for s in inst["steps"]:
+        by_name[s["name"]].append(s)
+        assert set(s["poses"]) == {"peg", "block"}
+    (pick_block, pick_peg), (put,), (mate,) = by_name["pickup"], by_name["putdown"], by_name["assemble"]
+    P = {k: {o: np.array(T) for o, T in s["poses"].items()} for k, s in
+         (("pb", pick_block), ("put", put), ("pp", pick_peg), ("mate", mate))}
+    # pickups: where the part lay; the tool at part @ grasp; the part in the hand after
+    np.testing.assert_allclose(P["pb"]["block"], cell.positions["tr2"].T, atol=1e-9)
+    np.testing.assert_allclose(P["pp"]["peg"], cell.positions["tr1"].T, atol=1e-9)
+    for s, obj in ((pick_block, "block"), (pick_peg, "peg")):
+        g = cell.objects[obj].grasps[s["args"][1]]
+        np.testing.assert_allclose(np.array(s["tool_pose"]), np.array(s["poses"][obj]) @ g.T, atol=1e-6)
+        assert s["held"] == obj
+    # put-down: x, y, z and yaw about world z of the stable pose
+    pl = put["placement"]
+    R = rotz(math.radians(pl["yaw_deg"]))[:3, :3] @ cell.objects["block"].poses[pl["pose"]].R
+    np.testing.assert_allclose(P["put"]["block"][:3, :3], R, atol=1e-9)
+    np.testing.assert_allclose(P["put"]["block"][:3, 3], [pl["x"], pl["y"], pl["z"]], atol=1e-6)
+    assert put["held"] is None and pick_peg["poses"]["block"] == put["poses"]["block"]
+    # assemble: the peg inserted at block @ T_a (trans_1); the block has not moved
+    np.testing.assert_allclose(P["mate"]["peg"], P["put"]["block"] @ cell.transforms["trans_1"], atol=1e-9)
+    np.testing.assert_allclose(P["mate"]["block"], P["put"]["block"], atol=1e-12)
+    assert mate["held"] is None
+    # the args are term data, not text: the assemble's mating faces are a list of lists
+    assert mate["args"] == ["peg", "block", [["peg_face"], ["block_face"]], "trans_1", "vec_1"]
+
+
+# ---------------------------------------------------------------------- the squeeze (Sec. 4.3)
+
+
+def test_squeeze_is_the_remedy_that_works(planner: Planner) -> None:
+    """kb/problems/squeeze.yaml: the two scans before the peg's pickup leave the assemble
+    unmet; with a squeeze of the block after them it holds; error count 0."""
+    cell = load_problem(PROBLEMS / "squeeze.yaml")
+    inst = planner.plan(cell).to_json()["instance"]
+    kinds = [(s["kind"], s["name"], s["object"]) for s in inst["steps"]]
+    assert ("squeeze", "squeeze", "block") in kinds
+    assert inst["error_count"] == 0 and inst["verifications"] == []
+    sq = next(s for s in inst["steps"] if s["kind"] == "squeeze")
+    assert sq["serves"] == "action_1" and sq["held"] is None
+    assert sq["poses"]["block"] == inst["steps"][inst["steps"].index(sq) - 1]["poses"]["block"]  # squeezed in place
+    steps = _steps(inst)
+    sources = {s["id"]: s["from"] for s in steps if s.get("from")}
+    ok = phase2.evaluate(cell, steps, sources)
+    assert ok["status"] == "ok"
+    # sensing alone: the same instance without the squeeze fails at the assemble
+    alone = phase2.evaluate(cell, [s for s in steps if s["name"] != "squeeze"], sources)
+    assert (alone["status"], alone["at"]) == ("failed", "action_1")
+    centres = [v for v in alone["steps"][-1]["verdicts"] if v["constraint"] == "centres"]
+    assert centres and not centres[0]["satisfied"]
+
+
+def test_squeeze_cell_replay_never_fails_a_satisfied_precondition(planner: Planner) -> None:
+    inst = planner.plan(PROBLEMS / "squeeze.yaml").to_json()["instance"]
+    checks = _execution_check("squeeze", inst)
+    assert any(c["action"] == "squeeze_action_1" for c in checks)
+    assert checks and all(c["failed_draws"] == 0 for c in checks if c["declared_satisfied"])
+
+
+# ---------------------------------------------------------------------- Fig. 11's bounds as data
+
+
+FIG11 = {"dense_range_scan": {"dx": [-0.05, 0.05], "dy": [-0.05, 0.05], "dz": [-0.05, 0.05],
+                              "dtheta": [-0.5, 0.5], "units": {"length": "in", "angle": "deg"}}}
+
+
+def test_sensing_rule_bounds_are_converted_to_the_cell_unit() -> None:
+    cell = load_problem(PROBLEMS / "peg_in_block.yaml")
+    b = phase2.sensing_bounds(cell, FIG11)["dense_range_scan"]
+    assert b.dx == pytest.approx((-0.05, 0.05)) and b.dtheta == pytest.approx((-math.radians(0.5), math.radians(0.5)))
+    mm = phase2.sensing_bounds(replace(cell, unit="mm"), FIG11)["dense_range_scan"]
+    assert mm.dz == pytest.approx((-1.27, 1.27))
+
+
+def test_scan_without_a_sensors_entry_uses_the_sensing_rule() -> None:
+    """A cell with no sensors entry: a scan leaves Fig. 11's bounds (the rule's data that
+    Prolog passes); with one, the cell's entry takes precedence."""
+    cell = load_problem(PROBLEMS / "large_uncertainty.yaml")
+    steps = [{"id": "sense_action_4_1", "name": "dense_range_scan", "args": ["block"]},
+             {"id": "action_4", "name": "pickup", "args": ["block", "p2G1"]}]
+    bare = replace(cell, sensors={})
+    assert phase2.evaluate(bare, steps)["status"] == "infeasible"  # no bounds at all
+    w = phase2.new_world(bare, steps, None, phase2.sensing_bounds(bare, FIG11))
+    _, after, _ = phase2.step(w, steps[0])
+    e = after.unc.obj("block").error
+    assert after.unc.registry.bounds(e.dx.name()) == pytest.approx((-0.05, 0.05))
+    own = phase2.new_world(cell, steps, None, phase2.sensing_bounds(cell, {"dense_range_scan": {
+        **FIG11["dense_range_scan"], "dx": [-9, 9]}}))
+    assert own.scans["dense_range_scan"] == cell.sensors["dense_range_scan"].leaves
+
+
+def test_stock_spare_keeps_its_own_key_in_poses(planner: Planner) -> None:
+    """kb/problems/separation.yaml: the plan takes the peg at init_pos5 (tr5); the spare
+    stays at init_pos1 and is keyed ``peg@init_pos1`` in every step's poses."""
+    cell = load_problem(PROBLEMS / "separation.yaml")
+    inst = planner.plan(cell).to_json()["instance"]
+    for s in inst["steps"]:
+        assert set(s["poses"]) == {"peg", "peg@init_pos1", "block"}
+        np.testing.assert_allclose(np.array(s["poses"]["peg@init_pos1"]), cell.positions["tr1"].T, atol=1e-9)
+    pick = next(s for s in inst["steps"] if s["name"] == "pickup")
+    np.testing.assert_allclose(np.array(pick["poses"]["peg"]), cell.positions["tr5"].T, atol=1e-9)

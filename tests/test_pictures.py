@@ -5,8 +5,7 @@ The plan dicts are built by hand in the planner's JSON shape: the paper's own pa
 (Fig. 23 actions, Fig. 24 ordering, Fig. 25 label sets and arcs) and an instance of it on
 the paper's cell (kb/problems/peg_in_block.yaml) whose joint vectors come from the
 closed-form IK, so every picture shows a configuration the arm can take. Each step carries
-``poses`` and ``held`` as the planner writes them; :func:`legacy_plan` strips them, for the
-fallback replay (spar_py.pictures._legacy) that stays until every plan carries them.
+``poses`` and ``held`` as the planner writes them.
 """
 from __future__ import annotations
 
@@ -23,12 +22,11 @@ import numpy as np
 import pytest
 
 from spar_py.errors import SparError, SparValueError
-from spar_py.geometry import inv, rotz, trans
+from spar_py.geometry import rotz, trans
 from spar_py.kb import load_problem
 from spar_py.model import Cell
 from spar_py.pictures import cell_png, network_dot, ordering_dot, render_png, scenes, write_pictures
 from spar_py.pictures import graphs
-from spar_py.pictures._legacy import legacy_poses, placement_pose
 from spar_py.pictures.cell import arm_polyline, gripper_segments, hole_mouth, object_points, solid_points
 from spar_py.pictures.graphs import DPI, implied_edges
 from spar_py.pictures.scene import held_grasp, step_world
@@ -129,14 +127,6 @@ def paper_plan(cell: Cell) -> dict[str, Any]:
                      "steps": steps, "constraints": [], "verifications": [], "recoveries": [],
                      "error_count": 0},
     }
-
-
-def legacy_plan(cell: Cell) -> dict[str, Any]:
-    """The same plan as the planner wrote it before steps carried ``poses`` and ``held``."""
-    plan = paper_plan(cell)
-    for st in plan["instance"]["steps"]:
-        del st["poses"], st["held"]
-    return plan
 
 
 @pytest.fixture(scope="module")
@@ -353,12 +343,9 @@ def test_scenes_draw_the_poses_and_held_the_plan_gives(cell: Cell, plan: dict[st
     assert sc[1].detail.startswith(f"holding block ({BLOCK_GRASP}); q = (")
 
 
-def test_scenes_do_not_replay_the_plan(cell: Cell, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_scenes_do_not_replay_the_plan(cell: Cell) -> None:
     """A pose the replay would never give (the peg far off, the block upside down at the assemble)
-    is drawn as given, and the legacy replay is not called for a plan with poses."""
-    import spar_py.pictures._legacy as legacy
-
-    monkeypatch.setattr(legacy, "legacy_poses", lambda *a: pytest.fail("legacy replay used"))
+    is drawn as given: the scene is the step's world, not a replay."""
     p = paper_plan(cell)
     odd = {"peg": trans(100, -40, 0.5).tolist(), "block": (trans(1, 2, 3) @ rotz(1.0)).tolist()}
     p["instance"]["steps"][-1]["poses"] = odd
@@ -407,55 +394,28 @@ def test_stock_parts_keep_keys_of_their_own(cell: Cell) -> None:
     assert np.array_equal(last.poses["peg@tr9"], np.asarray(spare))
 
 
-# --------------------------------------------------------------------------- LEGACY replay (delete with _legacy.py)
+# --------------------------------------------------------------------------- the planner's own plan
 
 
-def test_legacy_replay_gives_the_poses_the_planner_now_writes(cell: Cell, plan: dict[str, Any]) -> None:
-    """For a plan without ``poses``, the fallback's worlds are those the planner writes."""
-    worlds = legacy_poses(cell, legacy_plan(cell))
-    for w, st in zip(worlds, plan["instance"]["steps"], strict=True):
-        assert w.held == st["held"] and set(w.poses) == set(st["poses"])
-        for key, T in st["poses"].items():
-            assert np.allclose(w.poses[key], T, atol=1e-6), (st["term"], key)
-    old, new = scenes(cell, legacy_plan(cell)), scenes(cell, plan)
-    assert [(s.title, s.held, s.grasp, s.detail) for s in old] == [(s.title, s.held, s.grasp, s.detail) for s in new]
+def test_the_planners_plan_draws_the_peg_seated_in_the_hole(cell: Cell) -> None:
+    """The scenes of a real plan (poses from phase 2): after the assemble, the peg's tip
+    F_p sits at the hole's bottom centre F_h, computed here from the object models."""
+    from spar_py.planner import Planner
 
-
-def test_an_empty_poses_dict_is_no_world(cell: Cell, plan: dict[str, Any]) -> None:
-    """A step whose ``poses`` is empty (a typed Step's default) is replayed, not drawn empty."""
-    p = legacy_plan(cell)
-    for st in p["instance"]["steps"]:
-        st.update(poses={}, held=None)
-    assert [s.held for s in scenes(cell, p)] == [None, "block", None, None, "peg", None]
-    assert all(set(s.poses) == {"block", "peg"} for s in scenes(cell, p))
-
-
-def test_legacy_objects_move_with_the_steps(cell: Cell) -> None:
-    sc = scenes(cell, legacy_plan(cell))
-    assert [s.held for s in sc] == [None, "block", None, None, "peg", None]
-    assert np.allclose(sc[1].poses["block"], sc[1].tool @ inv(cell.objects["block"].grasps[BLOCK_GRASP].T))
-    T_place = sc[2].poses["block"]
-    assert np.allclose(T_place[:3, 3], [24, 0, 1.5]) and np.allclose(T_place[:3, 2], [0, 0, 1])
-    # assemble: the peg's tip F_p sits at the hole's bottom centre F_h
+    doc = Planner().plan(PROBLEM).to_json()
+    sc = scenes(cell, doc)
     peg, block = cell.objects["peg"], cell.objects["block"]
-    tip = sc[5].poses["peg"] @ np.append(peg.feature.vector, 1)
-    bottom = sc[5].poses["block"] @ np.append(block.feature.vector, 1)
-    assert np.allclose(tip, bottom)
+    tip = sc[-1].poses["peg"] @ np.append(peg.feature.vector, 1)
+    bottom = sc[-1].poses["block"] @ np.append(block.feature.vector, 1)
+    assert np.allclose(tip, bottom, atol=1e-9)
+    assert [s.held for s in sc] == [None, "block", None, "peg", None]
 
 
-def test_legacy_assemble_without_a_tool_pose_uses_ta(cell: Cell) -> None:
-    p = legacy_plan(cell)
-    p["instance"]["steps"][-1].update(joints_deg=None, tool_pose=None)
-    last = scenes(cell, p)[-1]
-    assert np.allclose(last.poses["peg"], last.poses["block"] @ cell.transforms["trans_1"])
-
-
-def test_legacy_placement_pose_turns_the_stable_pose_about_world_z(cell: Cell) -> None:
-    T = placement_pose(cell, "peg", {"x": 1, "y": 2, "yaw_deg": 90, "pose": "p1P5"})
-    R = cell.objects["peg"].poses["p1P5"].R
-    assert np.allclose(T[:3, :3], rotz(math.pi / 2)[:3, :3] @ R)
-    assert np.allclose(T[:3, 3], [1, 2, 1.5])  # z defaults to the pose's resting height
-    assert np.allclose(placement_pose(cell, "peg", {"pose": "tr1"}), cell.positions["tr1"].T)
+def test_a_step_without_poses_is_a_value_error(cell: Cell, plan: dict[str, Any]) -> None:
+    p = paper_plan(cell)
+    del p["instance"]["steps"][1]["poses"]
+    with pytest.raises(SparValueError, match="step 2: no poses"):
+        scenes(cell, p)
 
 
 # --------------------------------------------------------------------------- cell geometry

@@ -31,6 +31,19 @@ _lock = threading.Lock()
 _engine: "Engine | None" = None
 
 
+def _malloc_trim() -> Any:
+    """glibc's malloc_trim(3), or None where the C library has none."""
+    try:
+        import ctypes
+
+        return ctypes.CDLL(None).malloc_trim
+    except (OSError, AttributeError):
+        return None
+
+
+_MALLOC_TRIM = _malloc_trim()
+
+
 def _one_line(text: str) -> str:
     """The first non-empty line of ``text``, stripped."""
     return next((ln.strip() for ln in text.splitlines() if ln.strip()), "")
@@ -194,6 +207,16 @@ class Engine:
                 yield
             finally:
                 self.unload(cell.name)
+                self._give_back()
+
+    def _give_back(self) -> None:
+        """After a run: shrink this thread's Prolog stacks to what they hold, and hand the
+        C heap's free memory back to the system (glibc's malloc_trim, where there is one),
+        so a long-lived process planning again and again stays at one size
+        (bench/memory.py)."""
+        self._query_once("trim_stacks")
+        if _MALLOC_TRIM is not None:
+            _MALLOC_TRIM(0)
 
 
 def engine() -> Engine:
@@ -257,16 +280,11 @@ def arc_pairs(problem: str, rule: str, kind: str, objects: list[str], grasps: li
     return reach.arc(_cell(problem), kind, objects, grasps, positions, None if ta == "none" else ta, rule)
 
 
-def ur_world(problem: str, steps: list[dict[str, Any]], sources: dict[str, dict[str, str]] | None = None) -> Any:
-    """Phase 2: the initial world of a plan instance of ``problem`` whose steps are ``steps``,
-    its actions taking their objects from ``sources`` (phase2.new_world)."""
+def evaluate(problem: str, steps: list[dict[str, Any]], sources: dict[str, dict[str, str]] | None = None,
+             given_up: list[str] | None = None, sensing: dict[str, dict[str, Any]] | None = None) -> dict[str, Any]:
+    """Phase 2: run a whole plan instance of loaded problem ``problem`` in one call and
+    return plain data: every step's verdicts, geometry, part poses and held part, and
+    where the run stopped (phase2.evaluate; cell unit, degrees, world frame)."""
     from . import phase2
 
-    return phase2.new_world(_cell(problem), steps, sources)
-
-
-def ur_step(world: Any, step: dict[str, Any]) -> tuple[list[dict[str, Any]], Any, dict[str, Any]]:
-    """Phase 2: (verdicts, world after, geometry) of one step (phase2.step)."""
-    from . import phase2
-
-    return phase2.step(world, step)
+    return phase2.evaluate(_cell(problem), steps, sources, given_up or (), sensing)

@@ -1,11 +1,24 @@
 """Phase 2's world along a plan instance: geometry (placements, tool poses, joint angles)
-and uncertainty (uncertainty.py), one step at a time.
+and uncertainty (uncertainty.py), evaluated a whole instance at a time.
 
-prolog/uncertainty.pl drives the loop (which remedy, when); through the bridge it calls
-:func:`new_world` once per run of an instance and :func:`step` for each action, getting
-back the verdicts of the action's uncertainty-reduction preconditions and the world
-after it. A step is plain data from Prolog: ``{"id": "action_2", "name": "pickup",
-"args": ["peg", "p1G11"]}``; names: pickup, putdown, assemble, dense_range_scan, squeeze.
+prolog/uncertainty.pl makes every decision (which remedy, where to insert it, giving up,
+verification and recovery) and, through the bridge, calls :func:`evaluate` once per run
+of an instance: Python runs the whole step list and returns plain data (dicts, lists,
+numbers, strings; no Python objects): each step's verdicts, its geometry, the world at
+its end-point (every part's pose, the held part) and where the run stopped (ok, failed
+at a step, infeasible at a step). A step is plain data from Prolog: ``{"id":
+"action_2", "name": "pickup", "args": ["peg", "p1G11"]}``, the arguments as term data
+(foreign.pl's term_data/2: atoms are strings, lists lists, compounds
+``{"functor", "args"}``); names: pickup, putdown, assemble, dense_range_scan, squeeze.
+
+Step results are memoised in the cell's memo tables (cell.memo), keyed by everything
+that determines the world before the step, so a re-run after a remedy reuses the
+prefix it shares with earlier runs, and instances reuse each other's prefixes.
+
+The bounds a sensing action leaves (Fig. 11) come from the problem file's ``sensors``
+entry where it has one, else from the sensing rule's bounds that Prolog passes with
+the call (kb/templates/sensing.pl's sensing_rule/5, in its own units, converted here by
+:func:`sensing_bounds`).
 
 An object may have several initial positions (a stock of identical parts, kb-format.md).
 The world then holds one state per part: the part the plan is working with under the
@@ -19,6 +32,7 @@ returned for display; world frame, table top z = 0.
 """
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -28,7 +42,7 @@ from . import placement as pl
 from . import uncertainty as ur
 from .errors import SparValueError
 from .geometry import same_stable_pose
-from .model import Cell, Grasp
+from .model import Bounds, Cell, Grasp
 from .workspace import solutions
 from .symbolic import Registry
 
@@ -47,6 +61,7 @@ class World:
     joints: np.ndarray | None = None
     sources: dict[str, dict[str, str]] = field(default_factory=dict)  # step id -> {object: position label}
     active: dict[str, str] = field(default_factory=dict)  # stock object -> initial position name of its active part
+    scans: Mapping[str, Bounds] = field(default_factory=dict)  # sensing action -> the bounds it leaves (cell units)
     key: tuple = ()  # what determines this world: the placements' key and the steps so far
     checked: tuple = ()  # (Constraint, satisfied) of every UR precondition checked so far
 
@@ -54,16 +69,48 @@ class World:
 # ---------------------------------------------------------------------- set-up
 
 
-def new_world(cell: Cell, steps: list[Step], sources: Sources | None = None) -> World:
+def new_world(cell: Cell, steps: list[Step], sources: Sources | None = None,
+              sensing: Mapping[str, Bounds] | None = None) -> World:
     """The initial world for an instance whose steps (in order) are ``steps``; chooses
     every put-down placement now, knowing the later actions on the object (Sec. 5.2.4).
     ``sources`` says where each action takes its objects from (module doc), step id ->
-    {obj: label}; needed only where an object has several initial positions."""
+    {obj: label}; needed only where an object has several initial positions.
+    ``sensing``: the bounds each sensing action's rule leaves (cell units,
+    :func:`sensing_bounds`); the cell's own ``sensors`` entries take precedence."""
     src = _inherit_sources(steps, {str(k): dict(v) for k, v in (sources or {}).items()})
     key, placements = _placements(cell, steps, src)
     active = _first_parts(cell, steps, src)
+    scans = {**(sensing or {}), **{n: sn.leaves for n, sn in cell.sensors.items()}}
     unc = ur.initial_world(cell, Registry(), active=active)
-    return World(cell, unc, placements, sources=src, active=active, key=(key,))
+    scan_key = tuple(sorted(scans.items()))
+    return World(cell, unc, placements, sources=src, active=active, scans=scans, key=(key, scan_key))
+
+
+def sensing_bounds(cell: Cell, rules: Mapping[str, Mapping[str, Any]] | None) -> dict[str, Bounds]:
+    """The bounds each sensing rule leaves, in the cell's units: ``rules`` maps a sensing
+    action's name to ``{"dx": [lo, hi], "dy": ..., "dz": ..., "dtheta": [lo, hi],
+    "units": {"length": "in", "angle": "deg"}}`` (uncertainty.pl's sensing data, from
+    kb/templates/sensing.pl's sensing_rule/5, in the units the templates state)."""
+    from .kb import ANGLE_UNITS, LENGTH_UNITS
+
+    out: dict[str, Bounds] = {}
+    for name, r in (rules or {}).items():
+        units = r.get("units", {})
+        try:
+            length = LENGTH_UNITS[str(units["length"])] / LENGTH_UNITS[cell.unit]
+            angle = ANGLE_UNITS[str(units["angle"])]
+        except KeyError:
+            raise SparValueError(f"sensing rule {name}: units must name a length ({', '.join(LENGTH_UNITS)}) "
+                                 f"and an angle ({', '.join(ANGLE_UNITS)}), got {units!r}") from None
+
+        def iv(k: str, scale: float) -> tuple[float, float]:
+            lo, hi = (float(v) for v in r[k])
+            if not lo <= hi:
+                raise SparValueError(f"sensing rule {name}: {k} bounds [{lo}, {hi}] are not an interval")
+            return lo * scale, hi * scale
+
+        out[str(name)] = Bounds(iv("dx", length), iv("dy", length), iv("dz", length), iv("dtheta", angle))
+    return out
 
 
 Sources = dict[str, dict[str, str]]
@@ -110,8 +157,17 @@ def _first_parts(cell: Cell, steps: list[Step], src: dict[str, dict[str, str]]) 
 MEMO_LIMIT = 4096
 
 
+def _frozen(d: Any) -> Any:
+    """Term data (lists, dicts) as a hashable value."""
+    if isinstance(d, list):
+        return tuple(_frozen(x) for x in d)
+    if isinstance(d, dict):
+        return tuple(sorted((str(k), _frozen(v)) for k, v in d.items()))
+    return d
+
+
 def _step_key(s: Step) -> tuple:
-    return (s["id"], s["name"], tuple(s["args"]))
+    return (s["id"], s["name"], _frozen(list(s["args"])))
 
 
 def _placements(cell: Cell, steps: list[Step],
@@ -232,6 +288,47 @@ def step(world: World, s: Step) -> tuple[list[dict[str, Any]], World, dict[str, 
     return world.cell.memo.table("phase2.steps", MEMO_LIMIT).get_or_compute(key, run)
 
 
+def poses(world: World) -> dict[str, list[list[float]]]:
+    """Every part's ideal 4x4 world pose (cell unit) in ``world``, keyed by object name or
+    ``"<object>@<initial position name>"`` for the other parts of a stock. A held part's
+    pose is where it was grasped, an assembled one's where it was inserted."""
+    return {k: np.round(o.pose, 9).tolist() for k, o in sorted(world.unc.objects.items())}
+
+
+def _all_satisfied(checks: list[dict[str, Any]], kind: str) -> bool:
+    return all(c["satisfied"] for c in checks if c["kind"] == kind)
+
+
+def evaluate(cell: Cell, steps: Sequence[Step], sources: Sources | None = None,
+             given_up: Sequence[str] = (), sensing: Mapping[str, Mapping[str, Any]] | None = None) -> dict[str, Any]:
+    """Run the plan instance ``steps`` (in order) of ``cell`` from its initial world: one
+    call per run, the result plain data for Prolog.
+
+    ``sources`` as :func:`new_world`; ``given_up`` the ids of steps whose unmet
+    uncertainty-reduction preconditions the run goes past (they count as errors);
+    ``sensing`` the sensing rules' bounds in their own units (:func:`sensing_bounds`).
+    Returns ``{"status": "ok" | "failed" | "infeasible", "at": step id or None, "steps":
+    [...]}``: the run stops at the first step whose uncertainty-reduction preconditions
+    are not all satisfied and that is not in ``given_up`` (failed) or at the first whose
+    geometric precondition fails (infeasible: no placement, no joint solution); each
+    step record, up to and including that one, is ``{"id", "verdicts": [verdict dicts],
+    "geometry": {"tool_pose", "joints_deg", "ik_solutions_deg", "placement", "from",
+    ...}, "poses": poses(world after it), "held": the object in the hand after it or
+    None}``. Lengths in the cell unit, angles in degrees, world frame."""
+    world = new_world(cell, list(steps), sources, sensing_bounds(cell, sensing))
+    skip = set(given_up)
+    out: list[dict[str, Any]] = []
+    for s in steps:
+        checks, world, geo = step(world, s)
+        out.append({"id": s["id"], "verdicts": checks, "geometry": geo,
+                    "poses": poses(world), "held": world.unc.holding})
+        if not _all_satisfied(checks, "geometric"):
+            return {"status": "infeasible", "at": s["id"], "steps": out}
+        if not _all_satisfied(checks, "uncertainty") and s["id"] not in skip:
+            return {"status": "failed", "at": s["id"], "steps": out}
+    return {"status": "ok", "at": None, "steps": out}
+
+
 def _activate(world: World, s: Step) -> World:
     """``world`` with the parts step ``s`` takes (its sources) made the active parts of
     their stock objects; the part they replace keeps its state under ``obj@origin``."""
@@ -285,6 +382,18 @@ def _verdicts(world: World, cs: list[ur.Constraint]) -> list[dict[str, Any]]:
         d = v.as_dict()
         d["kind"] = "uncertainty"
         out.append(d)
+    return out
+
+
+def _verdicts_until_unsatisfied(world: World, cs: list[ur.Constraint]) -> list[dict[str, Any]]:
+    """The verdicts of ``cs`` in order, up to and including the first unsatisfied one."""
+    out = []
+    for c in cs:
+        d = ur.evaluate(c, world.unc.registry).as_dict()
+        d["kind"] = "uncertainty"
+        out.append(d)
+        if not d["satisfied"]:
+            break
     return out
 
 
@@ -347,16 +456,19 @@ def _assemble(world: World, s: Step) -> tuple[list[dict], World, dict]:
 
 def _scan(world: World, s: Step) -> tuple[list[dict], World, dict]:
     obj = s["args"][0]
-    sensor = world.cell.sensors.get("dense_range_scan")
+    leaves = world.scans.get(s["name"])
     geo = {"tool_pose": None, "joints_deg": None}
-    if sensor is None:
-        return [_reach_verdict(s["id"], False, "the cell has no dense_range_scan sensor")], world, geo
-    return [], replace(world, unc=ur.dense_range_scan(world.unc, obj, sensor.leaves)), geo
+    if leaves is None:
+        return [_reach_verdict(s["id"], False, f"neither the cell nor a sensing rule says what {s['name']} "
+                               "leaves")], world, geo
+    return [], replace(world, unc=ur.dense_range_scan(world.unc, obj, leaves)), geo
 
 
 def _squeeze(world: World, s: Step) -> tuple[list[dict], World, dict]:
     """Squeeze ``obj`` in place with the first of its grasps the arm reaches there whose pickup
-    preconditions hold (Sec. 4.3: the squeeze must meet the pickup's own preconditions)."""
+    preconditions hold (Sec. 4.3: the squeeze must meet the pickup's own preconditions).
+    A grasp is checked for a joint solution first and its constraints one by one, up to
+    the first that fails (only the chosen grasp's verdicts are reported)."""
     obj = s["args"][0]
     cell = world.cell
     o = world.unc.obj(obj)
@@ -365,11 +477,13 @@ def _squeeze(world: World, s: Step) -> tuple[list[dict], World, dict]:
     labels = [g for g, _ in reachable_pairs(cell, obj, list(cell.objects[obj].grasps), _position_label(cell, obj, o))]
     for label in labels:
         g = _grasp(cell, obj, label)
+        q, geo = _arm(world, o.pose @ g.T)
+        if q is None:
+            continue
         manip = world.unc.manipulator_error()
         cs = ur.pickup_constraints(world.unc, obj, g.T, g.width, cell.finger_separation, manip, action=s["id"])
-        checks = _verdicts(world, cs)
-        q, geo = _arm(world, o.pose @ g.T)
-        if q is not None and all(c["satisfied"] for c in checks):
+        checks = _verdicts_until_unsatisfied(world, cs)
+        if len(checks) == len(cs) and all(c["satisfied"] for c in checks):
             geo["grasp"] = label
             w = replace(world, unc=ur.squeeze(world.unc, obj, g.T, manip), joints=q,
                         checked=_checked(world, cs, checks))
@@ -397,17 +511,19 @@ STEPS = {
 # ---------------------------------------------------------------------- execution check
 
 
-def sample_check(cell: Cell, steps: list[Step], draws: int = 10_000, seed: int = 0) -> list[dict[str, Any]]:
+def sample_check(cell: Cell, steps: list[Step], draws: int = 10_000, seed: int = 0,
+                 sensing: Mapping[str, Bounds] | None = None) -> list[dict[str, Any]]:
     """Replay an instance numerically: for every uncertainty-reduction precondition checked
     along ``steps`` (in order, sensing and squeezes included), evaluate its expression at
     ``draws`` points drawn uniformly from its variables' bounds and count the draws in
     which the inequality fails. A precondition declared satisfied must never fail.
-    Steps as in the plan's JSON; a step's ``from`` (which part of a stock it takes) is
-    honoured."""
+    Steps as in the plan's JSON (``id``, ``name``, ``args`` as term data); a step's
+    ``from`` (which part of a stock it takes) is honoured; ``sensing`` as
+    :func:`new_world` (needed only when the cell has no sensors entry)."""
     import casadi as ca
 
     sources = {s["id"]: s["from"] for s in steps if s.get("from")}
-    world = new_world(cell, steps, sources)
+    world = new_world(cell, steps, sources, sensing)
     for s in steps:
         _, world, _ = step(world, s)
     rng = np.random.default_rng(seed)

@@ -3,10 +3,8 @@
 A :class:`Scene` is read, not computed: each step of ``instance.steps`` in the plan JSON
 carries ``poses`` (part key -> 4x4 world pose at the step's end-point), ``held`` (the
 object in the hand after the step, or null) and ``joints_deg``; the scene takes those
-and the arm's frames ``robot.frames(q)``. Nothing here replays the plan. The one
-exception is clearly fenced: a step without ``poses`` (missing or empty: plans written
-before the planner gave them) is replayed by :func:`spar_py.pictures._legacy.legacy_poses`,
-which is to be deleted once every plan carries ``poses``.
+and the arm's frames ``robot.frames(q)``. Nothing here replays the plan; a step without
+``poses`` (a plan JSON older than schema 2) is a SparValueError.
 
 Frames and units: world Z up, table top z = 0, ``T_world_part`` 4x4 with column vectors,
 lengths in the cell's unit (``cell.unit``); ``joints_deg`` in degrees in the robot file's
@@ -94,19 +92,12 @@ def step_world(step: Mapping[str, Any], index: int) -> World:
 
 
 def _worlds(cell: Cell, plan: Mapping[str, Any], steps: Sequence[Mapping[str, Any]]) -> list[World]:
-    """Each step's world from its ``poses`` and ``held``; the legacy replay only for steps without
-    ``poses`` (no key, or an empty dict: a cell always has parts)."""
-    legacy: list[World] | None = None
+    """Each step's world from its ``poses`` and ``held`` (plan JSON schema 2)."""
     out = []
     for k, step in enumerate(steps):
-        if step.get("poses"):
-            out.append(step_world(step, k + 1))
-            continue
-        if legacy is None:  # LEGACY: plans written before steps carried poses; delete with _legacy.py
-            from ._legacy import legacy_poses
-
-            legacy = legacy_poses(cell, plan)
-        out.append(legacy[k])
+        if not step.get("poses"):
+            raise SparValueError(f"step {k + 1}: no poses (a plan JSON of schema 2 gives every part's pose)")
+        out.append(step_world(step, k + 1))
     return out
 
 
