@@ -5,7 +5,7 @@ PY     := $(VENV)/bin/python
 SPAR   := $(VENV)/bin/spar
 PROBLEM ?= kb/problems/peg_in_block.yaml
 
-.PHONY: setup demo test test-python test-prolog bench regress lint clean
+.PHONY: setup demo test test-python test-prolog bench regress lint fuzz fuzz-full clean
 
 setup:
 	@scripts/setup.sh
@@ -23,6 +23,14 @@ bench: setup
 
 regress: setup
 	$(SPAR) regress kb/problems
+
+# kbfuzz (tests/fuzz/README.md): `make fuzz` mutates the paper's cell files (the sample that
+# `make test` runs); `make fuzz-full` every kb file, 200 mutants each (about 30 min on 2 cores)
+fuzz: setup
+	$(PY) -m tests.fuzz.kbfuzz --paper --seed 13 --count 50 --timeout 3 --jobs 2
+
+fuzz-full: setup
+	SPAR_FUZZ_FULL=1 $(PY) -m pytest -m fuzz_full tests/test_fuzz.py
 
 lint: setup
 	$(VENV)/bin/ruff check src tests bench
