@@ -32,6 +32,11 @@ class UnknownKeyError(KBError):
         SparValueError.__init__(self, f"{file}: {key}: unknown key{hint}")
 
 
+class WrongKindError(KBError):
+    """A KB file of another kind than wanted (an object model given as a problem):
+    ``FILE: expected a problem file, not an object model (it has `object:`)``."""
+
+
 class PrologError(SparError):
     """A Prolog exception raised inside a query: ``message`` the first line of Prolog's own
     rendering, ``term`` the exception term as written by write_canonical, ``formal`` the
