@@ -19,7 +19,8 @@ class KBError(SparValueError):
         expected = expected.removeprefix("expected ")
         self.file, self.key, self.expected, self.got = file, key, expected, got
         where = f"{file}: {key}: " if key else f"{file}: "
-        super().__init__(f"{where}expected {expected}" + (f", not {got}" if got is not None else ""))
+        text = f"{where}expected {expected}" + (f", not {got}" if got is not None else "")
+        super().__init__(" ".join(text.splitlines()))  # one line, whatever a name holds
 
 
 class UnknownKeyError(KBError):

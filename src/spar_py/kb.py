@@ -597,10 +597,12 @@ def _faces(node: Node, known: set[Face] | None, min_len: int = 1) -> tuple[Face,
     out = []
     for e in node.elements(min_len):
         f = e.value
-        if isinstance(f, bool) or not isinstance(f, (int, str)):
+        if isinstance(f, bool) or not isinstance(f, (int, str)) or (isinstance(f, int) and abs(f) > MAX_MAGNITUDE):
             raise e.fail("a face name or number", show(f))
+        if isinstance(f, str):
+            e.label()
         if known is not None and f not in known:
-            raise e.fail(f"a face of the object ({', '.join(map(str, sorted(known, key=str)))})", show(f))
+            raise e.fail(f"a face of the object ({_cut(', '.join(map(str, sorted(known, key=str))))})", show(f))
         out.append(f)
     return tuple(out)
 
