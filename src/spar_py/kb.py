@@ -483,9 +483,9 @@ def _check_graph(root: yaml.Node) -> None:
         stack.extend((c, False) for c in _children(node) if id(c) not in sizes)
 
 
-def read_yaml(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> Node:
-    """Parse a KB file into a root :class:`Node` (any kind); every reading, decoding or YAML
-    problem is a one-line KBError; the top level must be a mapping."""
+def parse_yaml(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> Any:
+    """The YAML data of a file, bounded (read_text, BoundedLoader); every reading, decoding
+    or YAML problem is a one-line KBError."""
     text = read_text(path, max_bytes)
     try:
         data = _load(text)
@@ -501,6 +501,12 @@ def read_yaml(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> Node:
         mark = getattr(e, "problem_mark", None)
         problem = str(getattr(e, "problem", None) or "valid YAML")
         raise KBError(str(path), _where(mark), f"valid YAML ({problem[:80]})") from None
+    return data
+
+
+def read_yaml(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> Node:
+    """Parse a KB file of any kind into a root :class:`Node`; the top level must be a mapping."""
+    data = parse_yaml(path, max_bytes)
     if not isinstance(data, dict):
         raise KBError(str(path), "", "a mapping of keys (a problem, object or robot file)", describe(data))
     return Node(str(path), "", data)
@@ -547,15 +553,11 @@ def read_kb(path: str | Path, kind: str, max_bytes: int = MAX_INPUT_BYTES) -> No
     """Read a KB file that must be of ``kind`` ('problem', 'object' or 'robot') and check it
     against that kind's schema; a file of another kind is named for what it is."""
     want = KINDS[kind]
-    try:
-        root = read_yaml(path, max_bytes)
-    except KBError as e:
-        if e.key == "" and e.expected.startswith("a mapping of keys"):
-            raise WrongKindError(str(path), "", want.wanted, e.got) from None
-        raise
-    got = file_kind(root)
+    data = parse_yaml(path, max_bytes)
+    root = Node(str(path), "", data)
+    got = file_kind(root) if isinstance(data, dict) else None
     if got is not want:
-        what = describe(root.value) if got is not None else f"a mapping without `{want.marker}:`"
+        what = f"a mapping without `{want.marker}:`" if isinstance(data, dict) and got is None else describe(data)
         raise WrongKindError(str(path), "", want.wanted, what)
     check_shape(root, want.schema)
     return root
