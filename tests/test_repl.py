@@ -46,7 +46,8 @@ def test_loading_a_bad_file_is_one_line() -> None:
     r = session("load_problem('kb/objects/peg.yaml').\nloaded_problems(L).\n")
     assert r.returncode == 0
     errors = [ln for ln in r.stderr.splitlines() if ln.strip()]
-    assert errors == ["ERROR: kb/objects/peg.yaml: problem: a value (key missing)"], r.stderr
+    assert errors == ["ERROR: kb/objects/peg.yaml: expected a problem file, not an object model (it has `object:`)"], \
+        r.stderr
     assert "L = [peg_in_block]." in r.stdout
 
 

@@ -49,7 +49,7 @@ def cmd_kb_check(args: argparse.Namespace) -> int:
     status = EXIT_OK
     for f in files:
         try:
-            print(check_file(f))
+            print(check_file(f, _max_input_bytes(args)))
         except KBError as e:
             _err(str(e))
             status = EXIT_INPUT
@@ -146,12 +146,13 @@ def cmd_plan(args: argparse.Namespace) -> int:
     from .engine import start_engine
 
     start_engine()  # Prolog consults the planner while the imports below run
+    from .kb import load_problem
     from .planner import Outcome, Planner
 
     planner = Planner(max_actions=args.max_actions, max_instances=args.max_instances,
                       separation=False if args.no_separation else None,
                       paper_placements=args.paper_placements)
-    cell = planner.load_problem(args.problem)
+    cell = load_problem(args.problem, max_bytes=_max_input_bytes(args))
     plan = planner.plan(cell, phase1_only=args.phase1_only, trace=args.trace)
     if plan.outcome is Outcome.TIMEOUT:
         raise PlanningTimeout(f"{cell.name}: no result within {args.timeout:g} s")
@@ -229,6 +230,7 @@ def build_parser() -> argparse.ArgumentParser:
     kbsub = kb.add_subparsers(dest="kb_command", required=True)
     check = kbsub.add_parser("check", help="validate KB files (problems, objects, robots) or directories")
     check.add_argument("files", nargs="+")
+    _add_max_input_bytes(check)
     check.set_defaults(func="kb_check")
 
     repl = sub.add_parser("repl", help="interactive Prolog toplevel with the planner loaded")
@@ -250,6 +252,7 @@ def build_parser() -> argparse.ArgumentParser:
     plan.add_argument("--paper-placements", action="store_true",
                       help="assume a put-down into a stable pose is reachable somewhere (the paper's rule)")
     plan.add_argument("--timeout", type=_positive_float, metavar="S", help="give up after S seconds")
+    _add_max_input_bytes(plan)
     plan.add_argument("--dot", metavar="DIR", help="write the ordering graph, network and cell pictures here")
     plan.add_argument("--png", metavar="DIR", help="same as --dot (both write .dot and .png)")
     plan.set_defaults(func="plan")
@@ -267,6 +270,20 @@ def build_parser() -> argparse.ArgumentParser:
     asm.add_argument("-o", "--output", default="out/gen", metavar="DIR")
     asm.set_defaults(func="gen")
     return p
+
+
+def _add_max_input_bytes(p: argparse.ArgumentParser) -> None:
+    # the default is kb.MAX_INPUT_BYTES (a test checks this text); not imported here: kb
+    # imports numpy, and `spar plan` starts Prolog before it
+    p.add_argument("--max-input-bytes", type=_positive_int, metavar="N",
+                   help="refuse a KB file larger than N bytes (default 1000000)")
+
+
+def _max_input_bytes(args: argparse.Namespace) -> int:
+    """The per-file size limit of a command: --max-input-bytes, or kb.MAX_INPUT_BYTES."""
+    from .kb import MAX_INPUT_BYTES
+
+    return MAX_INPUT_BYTES if args.max_input_bytes is None else int(args.max_input_bytes)
 
 
 def _positive_int(text: str) -> int:

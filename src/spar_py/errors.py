@@ -11,11 +11,31 @@ class SparValueError(SparError, ValueError):
 
 
 class KBError(SparValueError):
-    """A knowledge-base file is malformed; ``str()`` is one line naming file, key path and expectation."""
+    """A knowledge-base file is malformed. ``str()`` is one line:
+    ``FILE: KEY: expected EXPECTED, not GOT`` (``FILE: expected ...`` when no key is at fault,
+    e.g. the file is not UTF-8); ``got`` is already shown for reading (cut, rounded) or None."""
 
-    def __init__(self, file: str, key: str, expected: str) -> None:
-        self.file, self.key, self.expected = file, key, expected
-        super().__init__(f"{file}: {key}: {expected}")
+    def __init__(self, file: str, key: str, expected: str, got: str | None = None) -> None:
+        expected = expected.removeprefix("expected ")
+        self.file, self.key, self.expected, self.got = file, key, expected, got
+        where = f"{file}: {key}: " if key else f"{file}: "
+        text = f"{where}expected {expected}" + (f", not {got}" if got is not None else "")
+        super().__init__(" ".join(text.splitlines()))  # one line, whatever a name holds
+
+
+class UnknownKeyError(KBError):
+    """A key no schema knows: ``FILE: KEY: unknown key; did you mean NEAR?``."""
+
+    def __init__(self, file: str, key: str, near: str | None) -> None:
+        self.file, self.key, self.near = file, key, near
+        self.expected, self.got = "a known key", key.rsplit(".", 1)[-1]
+        hint = f"; did you mean {near}?" if near else ""
+        SparValueError.__init__(self, f"{file}: {key}: unknown key{hint}")
+
+
+class WrongKindError(KBError):
+    """A KB file of another kind than wanted (an object model given as a problem):
+    ``FILE: expected a problem file, not an object model (it has `object:`)``."""
 
 
 class PrologError(SparError):

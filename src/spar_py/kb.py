@@ -1,25 +1,35 @@
 """Knowledge-base loading: YAML files -> validated models (model.py) -> Prolog facts.
 
 Every malformed input raises :class:`~spar_py.errors.KBError`, whose message is one
-line: ``FILE: KEY.PATH: what was expected``. Units are converted once, here: lengths
-to the problem file's length unit, angles to radians.
+line: ``FILE: KEY.PATH: expected ..., not ...``. Reading is bounded before anything
+is parsed: a file must be a regular file (never a FIFO or a device), at most
+``max_bytes`` (MAX_INPUT_BYTES by default), UTF-8, and its YAML at most MAX_NODES
+nodes once aliases are expanded, without duplicate keys. Each file kind (problem,
+object, robot) has one schema (PROBLEM_SCHEMA, OBJECT_SCHEMA, ROBOT_SCHEMA): unknown
+keys are errors with a did-you-mean. Units are converted once, here: lengths to the
+problem file's length unit, angles to radians.
 
 The formats are documented in docs/kb-format.md.
 """
 from __future__ import annotations
 
+import difflib
 import hashlib
 import math
+import os
 import re
+import stat
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterable
+from types import MappingProxyType
+from typing import Any, Iterable, Iterator, Mapping, Union
 
 import numpy as np
 import yaml
 
 from . import sanity
-from .errors import KBError, SparError, SparValueError
+from .errors import KBError, SparError, SparValueError, UnknownKeyError, WrongKindError
 from .geometry import ORTHO_TOL, eulerxyz, rotation_problem, rpy, same_stable_pose, tm_rows, trans
 from .kinematics import Robot
 from .model import (
@@ -35,9 +45,175 @@ from .model import (
     StablePose,
 )
 
-LENGTH_UNITS = {"mm": 1.0, "m": 1000.0, "in": 25.4, "cm": 10.0}
-ANGLE_UNITS = {"deg": math.pi / 180.0, "rad": 1.0}
-LABEL_RE = re.compile(r"^[a-z][A-Za-z0-9_]*$")
+LENGTH_UNITS = MappingProxyType({"mm": 1.0, "m": 1000.0, "in": 25.4, "cm": 10.0})
+ANGLE_UNITS = MappingProxyType({"deg": math.pi / 180.0, "rad": 1.0})
+LABEL_RE = re.compile(r"[a-z][A-Za-z0-9_]*")  # used with fullmatch: no trailing newline
+MAX_INPUT_BYTES = 1_000_000  # per file; `spar plan/kb check --max-input-bytes N` raises it
+MAX_NODES = 100_000  # YAML nodes of one file with every alias expanded (a billion-laughs bomb)
+MAX_DEPTH = 64  # nesting of YAML collections
+MAX_MAGNITUDE = 1e9  # any number in a KB file, in the file's units
+# The sensing actions kb/templates/sensing.pl defines: the names `sensors:` may use.
+SENSOR_NAMES = ("dense_range_scan",)
+SHOW_CHARS = 40  # a value quoted in a message is cut to this many characters
+
+
+# --------------------------------------------------------------------------- schemas
+
+
+@dataclass(frozen=True)
+class Leaf:
+    """A value the loader checks itself (a number, label, list of numbers, tm rows, ...)."""
+
+
+@dataclass(frozen=True)
+class Keys:
+    """A mapping with fixed keys: each required or optional key with the spec of its value."""
+
+    required: Mapping[str, "Spec"]
+    optional: Mapping[str, "Spec"]
+
+
+@dataclass(frozen=True)
+class Each:
+    """A list whose items all follow ``item`` (at least ``min_len`` of them)."""
+
+    item: "Spec"
+    min_len: int = 0
+
+
+@dataclass(frozen=True)
+class Named:
+    """A mapping from the user's labels (object, sensor, transform names) to ``value`` specs."""
+
+    value: "Spec"
+
+
+@dataclass(frozen=True)
+class OneOf:
+    """A mapping with exactly one key, one of ``choices`` (a shape primitive)."""
+
+    choices: Mapping[str, "Spec"]
+
+
+@dataclass(frozen=True)
+class OneOrMany:
+    """Either one ``item`` or a non-empty list of them (an initial position or a stock)."""
+
+    item: "Spec"
+
+
+Spec = Union[Leaf, Keys, Each, Named, OneOf, OneOrMany]
+LEAF = Leaf()
+
+
+def keys(required: Iterable[str] | Mapping[str, Spec], optional: Iterable[str] | Mapping[str, Spec] = ()) -> Keys:
+    """A :class:`Keys` spec; a plain iterable of names means leaf values."""
+    def table(ks: Iterable[str] | Mapping[str, Spec]) -> Mapping[str, Spec]:
+        return MappingProxyType(dict(ks) if isinstance(ks, Mapping) else dict.fromkeys(ks, LEAF))
+    return Keys(table(required), table(optional))
+
+
+UNITS_SCHEMA = keys(["length", "angle"])
+BOUNDS_SCHEMA = keys(["dx", "dy", "dz", "dtheta"])
+FRAME_SCHEMA = keys(["xyz"], ["rpy"])
+
+OBJECT_SCHEMA = keys(
+    {"object": LEAF, "units": UNITS_SCHEMA, "faces": LEAF,
+     "stable_poses": Each(keys(["label", "rfaces", "ofaces", "tm"]), 1),
+     "grasps": Each(keys(["label", "gfaces", "ofaces", "eulerxyz", "width"]), 1)},
+    {"feature": keys(["kind", "faces", "radius", "vector"]),
+     "shape": Each(OneOf(MappingProxyType({"box": keys(["min", "max"]), "cylinder": keys(["radius", "z"])})))},
+)
+
+ROBOT_SCHEMA = keys(
+    {"name": LEAF, "units": UNITS_SCHEMA, "dh": Each(keys(["alpha", "a", "d"], ["offset"])),
+     "limits": LEAF, "base": FRAME_SCHEMA, "tool": FRAME_SCHEMA, "gripper": keys(["finger_separation"])},
+)
+
+PROBLEM_SCHEMA = keys(
+    {"problem": LEAF, "units": UNITS_SCHEMA, "robot": LEAF,
+     "objects": Named(keys({"model": LEAF, "initial": OneOrMany(keys(["name", "label", "tm"]))})),
+     "gripper": LEAF,
+     "uncertainty": keys({"manipulator": BOUNDS_SCHEMA, "objects": Named(BOUNDS_SCHEMA)}),
+     "goals": LEAF},
+    {"sensors": Named(BOUNDS_SCHEMA), "transforms": Named(keys(["tm"])), "vectors": Named(LEAF),
+     "placement_regions": Each(keys(["x", "y"]))},
+)
+
+
+@dataclass(frozen=True)
+class Kind:
+    """A file kind: the top-level key that marks it, its schema, and what a reader calls it."""
+
+    name: str
+    marker: str
+    schema: Keys
+    called: str
+
+    @property
+    def wanted(self) -> str:
+        """How a message asks for a file of this kind: 'an object file'."""
+        return self.called.replace(" model", " file")
+
+
+KINDS = MappingProxyType({
+    "problem": Kind("problem", "problem", PROBLEM_SCHEMA, "a problem file"),
+    "object": Kind("object", "object", OBJECT_SCHEMA, "an object model"),
+    "robot": Kind("robot", "dh", ROBOT_SCHEMA, "a robot model"),
+})
+
+
+def schema_keys(spec: Spec) -> set[str]:
+    """Every key name a schema accepts, at any depth (docs/kb-format.md must mention each)."""
+    if isinstance(spec, Keys):
+        subs = {**spec.required, **spec.optional}
+        return set(subs).union(*(schema_keys(s) for s in subs.values()))
+    if isinstance(spec, OneOf):
+        return set(spec.choices).union(*(schema_keys(s) for s in spec.choices.values()))
+    if isinstance(spec, (Each, OneOrMany)):
+        return schema_keys(spec.item)
+    if isinstance(spec, Named):
+        return schema_keys(spec.value)
+    return set()
+
+
+# --------------------------------------------------------------------------- messages
+
+
+def show(v: Any) -> str:
+    """A value for a message: numbers rounded for reading (``0.16``), strings quoted, cut to
+    SHOW_CHARS characters; collections by size only (never a whole structure, never a file)."""
+    if v is None:
+        return "nothing"
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int):
+        return str(v) if abs(v) < 10**15 else f"an integer of about {int(v.bit_length() * 0.30103) + 1} digits"
+    if isinstance(v, float):
+        return f"{v:.6g}"
+    if isinstance(v, str):
+        return _cut(repr(v[: SHOW_CHARS + 2]))
+    if isinstance(v, list):
+        if len(v) <= 6 and all(isinstance(x, (int, float, str)) for x in v):
+            return _cut("[" + ", ".join(show(x) for x in v) + "]")
+        return f"a list of {len(v)} items"
+    if isinstance(v, dict):
+        return f"a mapping of {len(v)} keys"
+    return _cut(type(v).__name__)
+
+
+def num(x: float) -> str:
+    """A number rounded for reading in a message (6 significant digits)."""
+    return f"{x:.6g}"
+
+
+def _cut(s: str) -> str:
+    return s if len(s) <= SHOW_CHARS else s[: SHOW_CHARS - 3] + "..."
+
+
+def _did_you_mean(name: str, choices: Iterable[str]) -> str | None:
+    close = difflib.get_close_matches(name, list(choices), n=1, cutoff=0.6)
+    return close[0] if close else None
 
 
 # --------------------------------------------------------------------------- reading
@@ -51,14 +227,14 @@ class Node:
     path: str
     value: Any
 
-    def fail(self, expected: str) -> KBError:
-        """The error for this node: ``FILE: PATH: EXPECTED``."""
-        return KBError(self.file, self.path or "(top level)", expected)
+    def fail(self, expected: str, got: str | None = None) -> KBError:
+        """The error for this node: ``FILE: PATH: expected EXPECTED, not GOT``."""
+        return KBError(self.file, self.path or "(top level)", expected, got)
 
     def key(self, name: str, required: bool = True) -> "Node | None":
         """The child ``name`` of a mapping (None if absent and not required)."""
         if not isinstance(self.value, dict):
-            raise self.fail("a mapping")
+            raise self.fail("a mapping", show(self.value))
         if name not in self.value:
             if required:
                 raise Node(self.file, self._join(name), None).fail("a value (key missing)")
@@ -68,67 +244,108 @@ class Node:
     def items(self) -> list[tuple[str, "Node"]]:
         """The (key, child) pairs of a mapping."""
         if not isinstance(self.value, dict):
-            raise self.fail("a mapping")
+            raise self.fail("a mapping", show(self.value))
         return [(str(k), Node(self.file, self._join(str(k)), v)) for k, v in self.value.items()]
 
     def elements(self, min_len: int = 0) -> list["Node"]:
         """The children of a sequence (at least ``min_len`` of them)."""
         if not isinstance(self.value, list) or len(self.value) < min_len:
-            raise self.fail(f"a list of at least {min_len} items" if min_len else "a list")
+            raise self.fail((f"a list of at least {min_len} item" + "s" * (min_len > 1)) if min_len else "a list",
+                            show(self.value))
         return [Node(self.file, f"{self.path}[{i}]", v) for i, v in enumerate(self.value)]
 
     def number(self) -> float:
-        """A finite real number."""
+        """A finite real number of magnitude at most MAX_MAGNITUDE."""
         v = self.value
         if isinstance(v, bool) or not isinstance(v, (int, float)):
-            raise self.fail(f"a number, not {_show(v)}")
-        if not math.isfinite(v):
-            raise self.fail(f"a finite number, not {v}")
+            raise self.fail("a number", show(v))
+        if isinstance(v, float) and not math.isfinite(v):
+            raise self.fail("a finite number", show(v))
+        if abs(v) > MAX_MAGNITUDE:
+            raise self.fail(f"a number of magnitude at most {num(MAX_MAGNITUDE)}", show(v))
         return float(v)
 
     def positive(self) -> float:
         """A number > 0."""
         v = self.number()
         if v <= 0:
-            raise self.fail(f"a positive number, not {v}")
+            raise self.fail("a positive number", num(v))
         return v
 
     def label(self) -> str:
-        """A Prolog-atom-like label (lower-case start, letters, digits, underscores)."""
+        """A Prolog-atom-like label (lower-case start, letters, digits, underscores), exactly."""
         v = self.value
-        if not isinstance(v, str) or not LABEL_RE.match(v):
-            raise self.fail(f"a label (letters, digits, _; lower-case first), not {_show(v)}")
+        if not isinstance(v, str) or not LABEL_RE.fullmatch(v):
+            raise self.fail("a label (letters, digits, _; lower-case first)", show(v))
         return v
 
     def text(self) -> str:
         """A non-empty string."""
         if not isinstance(self.value, str) or not self.value.strip():
-            raise self.fail(f"a non-empty string, not {_show(self.value)}")
+            raise self.fail("a non-empty string", show(self.value))
+        return self.value
+
+    def choice(self, options: Iterable[str]) -> str:
+        """One of the strings ``options``."""
+        opts = tuple(options)
+        if not isinstance(self.value, str) or self.value not in opts:
+            raise self.fail(f"one of {', '.join(opts)}", show(self.value))
         return self.value
 
     def vector(self, n: int) -> np.ndarray:
         """A list of ``n`` numbers."""
         items = self.elements()
         if len(items) != n:
-            raise self.fail(f"a list of {n} numbers, not {len(items)} items")
+            raise self.fail(f"a list of {n} numbers", f"{len(items)} items")
         return np.array([e.number() for e in items])
 
     def interval(self) -> tuple[float, float]:
         """A ``[lo, hi]`` pair with lo <= hi."""
         lo, hi = self.vector(2)
         if lo > hi:
-            raise self.fail(f"[lo, hi] with lo <= hi, not [{lo}, {hi}]")
+            raise self.fail("[lo, hi] with lo <= hi", f"[{num(lo)}, {num(hi)}]")
         return float(lo), float(hi)
 
     def _join(self, name: str) -> str:
         return f"{self.path}.{name}" if self.path else name
 
 
-def _show(v: Any) -> str:
-    if v is None:
-        return "nothing"
-    s = repr(v)
-    return s if len(s) <= 40 else s[:37] + "..."
+def check_shape(node: Node, spec: Spec) -> None:
+    """Check ``node`` against a schema: mappings, lists, no unknown key (with a did-you-mean),
+    every required key present, user names are labels. Leaves are left to the loaders."""
+    if isinstance(spec, Keys):
+        _check_keys(node, spec)
+    elif isinstance(spec, Each):
+        for e in node.elements(spec.min_len):
+            check_shape(e, spec.item)
+    elif isinstance(spec, OneOrMany):
+        check_shape(node, Each(spec.item, 1) if isinstance(node.value, list) else spec.item)
+    elif isinstance(spec, Named):
+        for k, child in node.items():
+            Node(node.file, child.path, k).label()
+            check_shape(child, spec.value)
+    elif isinstance(spec, OneOf):
+        children = node.items()
+        if len(children) != 1:
+            raise node.fail(f"one of {', '.join(spec.choices)}", f"{len(children)} keys")
+        (k, child), = children
+        if k not in spec.choices:
+            raise UnknownKeyError(node.file, child.path, _did_you_mean(k, spec.choices))
+        check_shape(child, spec.choices[k])
+
+
+def _check_keys(node: Node, spec: Keys) -> None:
+    allowed = {**spec.required, **spec.optional}
+    children = node.items()
+    for k, child in children:
+        if k not in allowed:
+            raise UnknownKeyError(node.file, child.path, _did_you_mean(k, allowed))
+    present = {k for k, _ in children}
+    for k in spec.required:
+        if k not in present:
+            node.key(k)  # raises: key missing
+    for k, child in children:
+        check_shape(child, allowed[k])
 
 
 def _fingerprint(files: Iterable[str]) -> str:
@@ -142,35 +359,217 @@ def _fingerprint(files: Iterable[str]) -> str:
     return h.hexdigest()
 
 
-def read_yaml(path: str | Path) -> Node:
-    """Parse a YAML file into a root :class:`Node`; syntax errors become one-line KBErrors."""
-    p = Path(path)
+_FILE_TYPES = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a character device"),
+               (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"))
+
+
+def read_text(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> str:
+    """The text of a KB file: a regular file (checked with os.stat before it is opened, so a
+    FIFO or /dev/zero is refused at once) of at most ``max_bytes``, in UTF-8."""
+    f = str(path)
     try:
-        text = p.read_text(encoding="utf-8")
+        st = os.stat(path)
     except OSError as e:
-        raise KBError(str(path), "(file)", f"a readable file ({e.strerror})") from None
+        raise KBError(f, "", f"a readable file ({e.strerror})") from None
+    if not stat.S_ISREG(st.st_mode):
+        what = next((w for test, w in _FILE_TYPES if test(st.st_mode)), "a special file")
+        raise KBError(f, "", "a regular file", what)
+    too_big = f"a file of at most {max_bytes} bytes (--max-input-bytes raises the limit)"
+    if st.st_size > max_bytes:
+        raise KBError(f, "", too_big, f"{st.st_size} bytes")
     try:
-        data = yaml.load(text, Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
+        with open(path, "rb") as fh:
+            data = fh.read(max_bytes + 1)
+    except OSError as e:
+        raise KBError(f, "", f"a readable file ({e.strerror})") from None
+    if len(data) > max_bytes:
+        raise KBError(f, "", too_big, "a file that grew while read")
+    if data.startswith((b"\xff\xfe", b"\xfe\xff")):
+        raise KBError(f, "", "a UTF-8 text file", "UTF-16 (it starts with a UTF-16 byte-order mark)")
+    try:
+        return data.decode("utf-8").removeprefix("\ufeff")
+    except UnicodeDecodeError as e:
+        raise KBError(f, "", "a UTF-8 text file", f"one with byte 0x{data[e.start]:02x} at offset {e.start}") from None
+
+
+_BASE_LOADER: type = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+
+
+class Refused(yaml.YAMLError):
+    """The loader refuses a document (a duplicate key, an alias bomb): where, expected, not what."""
+
+    def __init__(self, mark: Any, expected: str, got: str | None = None) -> None:
+        self.mark, self.expected, self.got = mark, expected, got
+        super().__init__(expected)
+
+
+class BoundedLoader(_BASE_LOADER):  # type: ignore[misc, valid-type]
+    """PyYAML's safe loader that refuses duplicate keys and, in a document with anchors,
+    more than MAX_NODES nodes with aliases expanded, nesting deeper than MAX_DEPTH and
+    recursive aliases, before it builds any Python object. (Without an anchor there is no
+    alias: the node count is bounded by the file size; read_yaml bounds the nesting.)"""
+
+    def get_single_data(self) -> Any:
+        """The document, once its node graph passed :func:`_check_graph` (if it has anchors)."""
+        node = self.get_single_node()
+        if node is None:
+            return None
+        if getattr(self, "has_anchors", True):
+            _check_graph(node)
+        return self.construct_document(node)
+
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict:
+        """A mapping, refusing a key given twice (merge keys ``<<`` may be overridden)."""
+        seen: set[Any] = set()
+        for key_node, _ in node.value:
+            if key_node.tag == "tag:yaml.org,2002:merge":
+                continue
+            key = self.construct_object(key_node, deep=True)
+            try:
+                dup = key in seen
+                seen.add(key)
+            except TypeError:
+                raise Refused(key_node.start_mark, "a mapping key that is a plain value", show(key)) from None
+            if dup:
+                raise Refused(key_node.start_mark, f"the key {show(key)} once in its mapping", "a second time")
+        return super().construct_mapping(node, deep=deep)
+
+    def construct_bounded_int(self, node: yaml.ScalarNode) -> int:
+        """An integer; one too long for Python's int parser is a YAML error, not a ValueError."""
+        try:
+            return self.construct_yaml_int(node)
+        except ValueError:
+            raise Refused(node.start_mark, "an integer of at most 4300 digits", "a longer one") from None
+
+
+BoundedLoader.add_constructor("tag:yaml.org,2002:int", BoundedLoader.construct_bounded_int)
+# YAML 1.2 floats PyYAML (YAML 1.1) reads as strings: 1e-3, 1.0e308 (1.1 wants a dot and a signed exponent)
+BoundedLoader.add_implicit_resolver("tag:yaml.org,2002:float", re.compile(r"^[-+]?[0-9]+(\.[0-9]*)?[eE][-+]?[0-9]+$"),
+                                    list("-+0123456789"))
+
+
+def _children(node: yaml.Node) -> Iterator[yaml.Node]:
+    if isinstance(node, yaml.SequenceNode):
+        yield from node.value
+    elif isinstance(node, yaml.MappingNode):
+        for k, v in node.value:
+            yield k
+            yield v
+
+
+def _check_graph(root: yaml.Node) -> None:
+    """Refuse a YAML node graph whose alias-expanded size exceeds MAX_NODES, whose nesting
+    exceeds MAX_DEPTH, or with a recursive alias; linear in the graph (sizes memoised)."""
+    sizes: dict[int, int] = {}
+    open_: set[int] = set()  # the ancestors of the node being visited
+    stack: list[tuple[yaml.Node, bool]] = [(root, False)]
+    while stack:
+        node, closing = stack.pop()
+        k = id(node)
+        if closing:
+            open_.discard(k)
+            sizes[k] = 1 + sum(sizes[id(c)] for c in _children(node))
+            if sizes[k] > MAX_NODES:
+                raise Refused(node.start_mark, f"at most {MAX_NODES} YAML nodes with aliases expanded",
+                              "more (an alias bomb?)")
+            continue
+        if k in sizes:
+            continue
+        if k in open_:
+            raise Refused(node.start_mark, "an alias that does not contain itself", "a recursive one")
+        if len(open_) >= MAX_DEPTH:
+            raise Refused(node.start_mark, f"at most {MAX_DEPTH} levels of nesting", "more")
+        open_.add(k)
+        stack.append((node, True))
+        stack.extend((c, False) for c in _children(node) if id(c) not in sizes)
+
+
+def parse_yaml(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> Any:
+    """The YAML data of a file, bounded (read_text, BoundedLoader); every reading, decoding
+    or YAML problem is a one-line KBError."""
+    text = read_text(path, max_bytes)
+    try:
+        data = _load(text)
+    except yaml.reader.ReaderError as e:
+        raise KBError(str(path), "", "a UTF-8 text file of printable characters",
+                      f"one with character #x{e.character:04x} at offset {e.position}"
+                      if isinstance(e.character, int) else "one with a control character") from None
+    except Refused as e:
+        raise KBError(str(path), _where(e.mark), e.expected, e.got) from None
+    except RecursionError:
+        raise KBError(str(path), "", f"at most {MAX_DEPTH} levels of nesting", "far more") from None
     except yaml.YAMLError as e:
         mark = getattr(e, "problem_mark", None)
-        where = f"line {mark.line + 1}, column {mark.column + 1}" if mark else "(file)"
-        problem = getattr(e, "problem", None) or "valid YAML"
-        raise KBError(str(path), where, f"valid YAML ({problem})") from None
+        problem = str(getattr(e, "problem", None) or "valid YAML")
+        raise KBError(str(path), _where(mark), f"valid YAML ({problem[:80]})") from None
+    return data
+
+
+def read_yaml(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> Node:
+    """Parse a KB file of any kind into a root :class:`Node`; the top level must be a mapping."""
+    data = parse_yaml(path, max_bytes)
     if not isinstance(data, dict):
-        raise KBError(str(path), "(top level)", "a mapping of keys")
+        raise KBError(str(path), "", "a mapping of keys (a problem, object or robot file)", describe(data))
     return Node(str(path), "", data)
+
+
+def _load(text: str) -> Any:
+    """``yaml.load(text)`` with :class:`BoundedLoader`; the alias-graph check only where an
+    alias can be (an anchor ``&`` in the text): it costs a third of a load."""
+    loader = BoundedLoader(text)
+    loader.has_anchors = "&" in text
+    try:
+        return loader.get_single_data()
+    finally:
+        loader.dispose()
+
+
+def _where(mark: Any) -> str:
+    """'line L, column C' of a YAML mark ('' without one)."""
+    return f"line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+
+
+def describe(data: Any) -> str:
+    """What a parsed file is, in a few words, never quoting it: 'an object model (it has `object:`)'."""
+    if isinstance(data, dict):
+        for kind in KINDS.values():
+            if kind.marker in data:
+                return f"{kind.called} (it has `{kind.marker}:`)"
+        return f"a mapping with none of {', '.join(f'`{k.marker}:`' for k in KINDS.values())}"
+    if data is None:
+        return "an empty file"
+    if isinstance(data, str):
+        return "a plain text file"
+    if isinstance(data, list):
+        return "a YAML list"
+    return f"a single {type(data).__name__} value"
+
+
+def file_kind(root: Node) -> Kind | None:
+    """The kind of a parsed KB file, by its marker key (None if it has none)."""
+    return next((k for k in KINDS.values() if k.marker in root.value), None)
+
+
+def read_kb(path: str | Path, kind: str, max_bytes: int = MAX_INPUT_BYTES) -> Node:
+    """Read a KB file that must be of ``kind`` ('problem', 'object' or 'robot') and check it
+    against that kind's schema; a file of another kind is named for what it is."""
+    want = KINDS[kind]
+    data = parse_yaml(path, max_bytes)
+    root = Node(str(path), "", data)
+    got = file_kind(root) if isinstance(data, dict) else None
+    if got is not want:
+        what = f"a mapping without `{want.marker}:`" if isinstance(data, dict) and got is None else describe(data)
+        raise WrongKindError(str(path), "", want.wanted, what)
+    check_shape(root, want.schema)
+    return root
 
 
 def _units(root: Node) -> tuple[str, float, float]:
     """(length unit name, mm per unit, radians per unit) from a ``units`` block."""
     u = root.key("units")
-    length = u.key("length")
-    angle = u.key("angle")
-    if length.value not in LENGTH_UNITS:
-        raise length.fail(f"one of {', '.join(LENGTH_UNITS)}, not {_show(length.value)}")
-    if angle.value not in ANGLE_UNITS:
-        raise angle.fail(f"one of {', '.join(ANGLE_UNITS)}, not {_show(angle.value)}")
-    return length.value, LENGTH_UNITS[length.value], ANGLE_UNITS[angle.value]
+    length = u.key("length").choice(LENGTH_UNITS)
+    angle = u.key("angle").choice(ANGLE_UNITS)
+    return length, LENGTH_UNITS[length], ANGLE_UNITS[angle]
 
 
 def tm_node(node: Node, length_scale: float) -> np.ndarray:
@@ -183,7 +582,7 @@ def tm_node(node: Node, length_scale: float) -> np.ndarray:
     """
     rows = node.elements()
     if len(rows) != 4:
-        raise node.fail("tm rows [[r1], [r2], [r3], [d]] (4 rows of 3 numbers)")
+        raise node.fail("tm rows [[r1], [r2], [r3], [d]] (4 rows of 3 numbers)", f"{len(rows)} rows")
     m = np.array([r.vector(3) for r in rows])
     m[3] *= length_scale
     T = tm_rows(m)
@@ -201,17 +600,19 @@ def _faces(node: Node, known: set[Face] | None, min_len: int = 1) -> tuple[Face,
     out = []
     for e in node.elements(min_len):
         f = e.value
-        if isinstance(f, bool) or not isinstance(f, (int, str)):
-            raise e.fail(f"a face name or number, not {_show(f)}")
+        if isinstance(f, bool) or not isinstance(f, (int, str)) or (isinstance(f, int) and abs(f) > MAX_MAGNITUDE):
+            raise e.fail("a face name or number", show(f))
+        if isinstance(f, str):
+            e.label()
         if known is not None and f not in known:
-            raise e.fail(f"a face of the object ({', '.join(map(str, sorted(known, key=str)))}), not {_show(f)}")
+            raise e.fail(f"a face of the object ({_cut(', '.join(map(str, sorted(known, key=str))))})", show(f))
         out.append(f)
     return tuple(out)
 
 
-def load_object(path: str | Path, unit: str) -> ObjectModel:
+def load_object(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES) -> ObjectModel:
     """Load ``kb/objects/*.yaml`` converting lengths to ``unit``."""
-    root = read_yaml(path)
+    root = read_kb(path, "object", max_bytes)
     name = root.key("object").label()
     _, mm_per, rad_per = _units(root)
     scale = mm_per / LENGTH_UNITS[unit]
@@ -225,7 +626,7 @@ def load_object(path: str | Path, unit: str) -> ObjectModel:
     for p in root.key("stable_poses").elements(1):
         label = p.key("label").label()
         if label in poses:
-            raise p.key("label").fail(f"a label not used before, not {label}")
+            raise p.key("label").fail("a label not used before", show(label))
         T = tm_node(p.key("tm"), scale)
         poses[label] = StablePose(
             label, _faces(p.key("rfaces"), known), _faces(p.key("ofaces"), known, 0),
@@ -236,7 +637,7 @@ def load_object(path: str | Path, unit: str) -> ObjectModel:
     for g in root.key("grasps").elements(1):
         label = g.key("label").label()
         if label in grasps:
-            raise g.key("label").fail(f"a label not used before, not {label}")
+            raise g.key("label").fail("a label not used before", show(label))
         e = g.key("eulerxyz").vector(6)
         euler = (e[0] * scale, e[1] * scale, e[2] * scale, e[3] * rad_per, e[4] * rad_per, e[5] * rad_per)
         grasps[label] = Grasp(
@@ -254,11 +655,8 @@ def load_object(path: str | Path, unit: str) -> ObjectModel:
     feature = None
     fnode = root.key("feature", required=False)
     if fnode is not None:
-        kind = fnode.key("kind")
-        if kind.value not in ("peg", "hole"):
-            raise kind.fail(f"peg or hole, not {_show(kind.value)}")
         feature = MatingFeature(
-            kind.value,
+            fnode.key("kind").choice(("peg", "hole")),
             _faces(fnode.key("faces"), known),
             fnode.key("radius").positive() * scale,
             fnode.key("vector").vector(3) * scale,
@@ -278,7 +676,7 @@ def _robot_frame(node: Node, length_scale: float, rad_per: float) -> np.ndarray:
     return trans(*xyz) @ rpy(*ang)
 
 
-def load_robot(path: str | Path, unit: str | None = None) -> Robot:
+def load_robot(path: str | Path, unit: str | None = None, max_bytes: int = MAX_INPUT_BYTES) -> Robot:
     """Load ``kb/robots/*.yaml`` as a :class:`~spar_py.kinematics.Robot`.
 
     Lengths (DH a and d, base and tool frames, finger separation) are converted to
@@ -290,7 +688,7 @@ def load_robot(path: str | Path, unit: str | None = None) -> Robot:
     """
     if unit is not None and unit not in LENGTH_UNITS:
         raise SparValueError(f"unknown length unit {unit!r} (one of {', '.join(LENGTH_UNITS)})")
-    root = read_yaml(path)
+    root = read_kb(path, "robot", max_bytes)
     name = root.key("name").label()
     file_unit, mm_per, rad_per = _units(root)
     unit = file_unit if unit is None else unit
@@ -299,7 +697,7 @@ def load_robot(path: str | Path, unit: str | None = None) -> Robot:
     dh_node = root.key("dh")
     rows = dh_node.elements()
     if len(rows) != 6:
-        raise dh_node.fail(f"a list of 6 joint rows {{alpha, a, d, offset}}, not {len(rows)}")
+        raise dh_node.fail("a list of 6 joint rows {alpha, a, d, offset}", f"{len(rows)} rows")
     dh = np.array([[r.key("alpha").number() * rad_per, r.key("a").number() * scale,
                     r.key("d").number() * scale,
                     (o.number() if (o := r.key("offset", required=False)) is not None else 0.0) * rad_per]
@@ -307,7 +705,7 @@ def load_robot(path: str | Path, unit: str | None = None) -> Robot:
     lim_node = root.key("limits")
     lims = lim_node.elements()
     if len(lims) != 6:
-        raise lim_node.fail(f"a list of 6 [lo, hi] joint limits, not {len(lims)}")
+        raise lim_node.fail("a list of 6 [lo, hi] joint limits", f"{len(lims)} items")
     limits = np.array([lim.interval() for lim in lims]) * rad_per
 
     base = _robot_frame(root.key("base"), scale, rad_per)
@@ -316,7 +714,7 @@ def load_robot(path: str | Path, unit: str | None = None) -> Robot:
     try:
         return Robot(name, dh, limits, base, tool, wm, unit)
     except SparValueError as e:
-        raise KBError(str(path), "(robot)", str(e)) from None
+        raise KBError(str(path), "dh", f"a robot the kinematics accepts ({e})") from None
 
 
 def _solid(node: Node, scale: float) -> Solid:
@@ -333,7 +731,7 @@ def _solid(node: Node, scale: float) -> Solid:
         r = c.key("radius").positive() * scale
         z0, z1 = c.key("z").interval()
         return Solid("cylinder", np.array([-r, -r, z0 * scale]), np.array([r, r, z1 * scale]), r)
-    raise node.fail("a shape primitive {box: {min, max}} or {cylinder: {radius, z}}")
+    raise node.fail("a shape primitive {box: {min, max}} or {cylinder: {radius, z}}", show(node.value))
 
 
 # --------------------------------------------------------------------------- terms
@@ -443,111 +841,165 @@ def _check_goal(node: Node, goal: Any, cell_objects: dict[str, ObjectModel], tra
     if goal[0] == "part_location":
         _, obj, pos = goal
         if obj not in cell_objects:
-            raise node.fail(f"a known object in part_location/2 ({', '.join(sorted(cell_objects))}), not {_show(obj)}")
+            raise node.fail(f"a known object in part_location/2 ({', '.join(sorted(cell_objects))})", show(obj))
         names = sorted(p.name for p in positions.values() if p.obj == obj)
         if pos not in names:
-            raise node.fail(f"an initial position of {obj} in part_location/2 ({', '.join(names)}), not {_show(pos)}")
+            raise node.fail(f"an initial position of {obj} in part_location/2 ({', '.join(names)})", show(pos))
         return
     _, held, fixed, faces, ta, va = goal
     for role, obj in (("first", held), ("second", fixed)):
         if obj not in cell_objects:
-            raise node.fail(f"a known object as {role} argument ({', '.join(sorted(cell_objects))}), not {_show(obj)}")
+            raise node.fail(f"a known object as {role} argument ({', '.join(sorted(cell_objects))})", show(obj))
     if not (isinstance(faces, list) and len(faces) == 2 and all(isinstance(f, list) for f in faces)):
         raise node.fail("mating faces as [[PegFaces], [HoleFaces]]")
     for obj, fl in ((held, faces[0]), (fixed, faces[1])):
         for f in fl:
             if f not in cell_objects[obj].faces:
-                raise node.fail(f"faces of {obj} in the mating faces, not {_show(f)}")
-    if ta not in transforms:
-        raise node.fail(f"Ta naming a transform under transforms:, not {_show(ta)}")
-    if va not in vectors:
-        raise node.fail(f"Va naming a vector under vectors:, not {_show(va)}")
+                raise node.fail(f"faces of {obj} in the mating faces", show(f))
+    if not isinstance(ta, str) or ta not in transforms:
+        raise node.fail(f"Ta naming a transform under transforms: ({_names(transforms)})", show(ta))
+    if not isinstance(va, str) or va not in vectors:
+        raise node.fail(f"Va naming a vector under vectors: ({_names(vectors)})", show(va))
 
 
-def load_problem(path: str | Path) -> Cell:
-    """Load and validate ``kb/problems/*.yaml`` with the robot and object files it names."""
+def _names(table: Mapping[str, Any]) -> str:
+    """The names of a table for a message (cut), or 'none'."""
+    return _cut(", ".join(table)) if table else "none"
+
+
+def _ref_path(node: Node, base: Path, kind: str) -> Path:
+    """The file a ``robot:`` or ``model:`` reference names, relative to the problem file."""
+    ref = base / node.text()
+    if not os.path.lexists(ref):
+        raise node.fail(f"the path of {KINDS[kind].wanted}", f"{show(node.value)} (no such file)")
+    return ref
+
+
+@contextmanager
+def _referenced(node: Node, kind: str) -> Iterator[None]:
+    """Load the file a reference names: a file of another kind is the reference's error
+    (``robot: expected the path of a robot file, not '/etc/passwd', a plain text file``)."""
+    try:
+        yield
+    except WrongKindError as e:
+        raise node.fail(f"the path of {KINDS[kind].wanted}", f"{show(node.value)}, {e.got}") from None
+
+
+def _positions(onode: Node, oname: str, model: ObjectModel, taken: dict[str, Position]) -> list[Position]:
+    """An object's initial position, or the list of them (a stock of identical parts:
+    part_location(Obj, Pos) holds for each; "the peg" is whichever is taken)."""
+    inode = onode.key("initial")
+    inits = inode.elements(1) if isinstance(inode.value, list) else [inode]
+    out: list[Position] = []
+    names = {p.name for p in taken.values()}
+    for init in inits:
+        pname, plabel = init.key("name").label(), init.key("label").label()
+        if plabel in taken or pname in names or any(plabel == p.label or pname == p.name for p in out):
+            raise init.fail("a position name and label not used before", f"{pname}, {plabel}")
+        T = tm_node(init.key("tm"), 1.0)
+        if not any(same_stable_pose(T[:3, :3], p.R) for p in model.poses.values()):
+            raise init.key("tm").fail(f"an orientation of one of {oname}'s stable poses")
+        out.append(Position(pname, plabel, oname, T))
+    return out
+
+
+def _objects(root: Node, base: Path, unit: str, max_bytes: int) -> tuple[dict[str, ObjectModel],
+                                                                           dict[str, Position], list[Path]]:
+    """The problem's objects (models loaded), their initial positions and the model files."""
+    objects: dict[str, ObjectModel] = {}
+    positions: dict[str, Position] = {}
+    files: list[Path] = []
+    for oname, onode in root.key("objects").items():
+        mnode = onode.key("model")
+        mpath = _ref_path(mnode, base, "object")
+        with _referenced(mnode, "object"):
+            model = load_object(mpath, unit, max_bytes)
+        if model.name != oname:
+            raise mnode.fail(f"the model of {oname}", f"the model of {model.name}")
+        objects[oname] = model
+        files.append(mpath)
+        for pos in _positions(onode, oname, model, positions):
+            positions[pos.label] = pos
+    if not objects:
+        raise root.key("objects").fail("at least one object", "none")
+    return objects, positions, files
+
+
+def _object_bounds(unc: Node, objects: Mapping[str, ObjectModel], rad_per: float) -> dict[str, Bounds]:
+    """``uncertainty.objects``: bounds for every object of the cell, and only for them."""
+    onodes = unc.key("objects")
+    out: dict[str, Bounds] = {}
+    for oname, bnode in onodes.items():
+        if oname not in objects:
+            near = _did_you_mean(oname, objects)
+            raise bnode.fail(f"bounds of a known object ({', '.join(sorted(objects))})",
+                             show(oname) + (f"; did you mean {near}?" if near else ""))
+        out[oname] = _bounds(bnode, 1.0, rad_per)
+    for oname in objects:
+        if oname not in out:
+            raise onodes.fail(f"bounds for every object (missing {oname})")
+    return out
+
+
+def _sensors(root: Node, rad_per: float) -> dict[str, Sensor]:
+    """``sensors``: each named after a sensing action of kb/templates/sensing.pl (SENSOR_NAMES)."""
+    snode = root.key("sensors", required=False)
+    out: dict[str, Sensor] = {}
+    for sname, s in snode.items() if snode is not None else []:
+        if sname not in SENSOR_NAMES:
+            near = _did_you_mean(sname, SENSOR_NAMES)
+            raise UnknownKeyError(s.file, s.path, near) if near else s.fail(
+                f"a sensing action ({', '.join(SENSOR_NAMES)})", show(sname))
+        out[sname] = Sensor(sname, _bounds(s, 1.0, rad_per))
+    return out
+
+
+def _goals(root: Node, objects: dict[str, ObjectModel], transforms: dict, vectors: dict,
+           positions: dict[str, Position]) -> list[str]:
+    """The goals, parsed and checked against the cell, as Prolog text."""
+    goals: list[str] = []
+    for g in root.key("goals").elements(1):
+        text = g.text()  # outside the try: a KBError is a ValueError too, and must not nest
+        try:
+            term = parse_term(text)
+        except ValueError as e:
+            raise g.fail(f"a Prolog term ({e})", show(text)) from None
+        _check_goal(g, term, objects, transforms, vectors, positions)
+        goals.append(term_text(term))
+    return goals
+
+
+def _regions(root: Node) -> list[dict[str, tuple[float, float]]]:
+    """``placement_regions``: the free table rectangles ``{x: [lo, hi], y: [lo, hi]}``."""
+    rnode = root.key("placement_regions", required=False)
+    return [{"x": r.key("x").interval(), "y": r.key("y").interval()}
+            for r in (rnode.elements() if rnode is not None else [])]
+
+
+def load_problem(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> Cell:
+    """Load and validate ``kb/problems/*.yaml`` with the robot and object files it names
+    (each file at most ``max_bytes``)."""
     path = Path(path)
-    root = read_yaml(path)
+    root = read_kb(path, "problem", max_bytes)
     name = root.key("problem").label()
-    unit, mm_per, rad_per = _units(root)
+    unit, _, rad_per = _units(root)
     base = path.parent
 
     rnode = root.key("robot")
-    rpath = base / rnode.text()
-    if not rpath.is_file():
-        raise rnode.fail(f"a robot file (no file {rpath})")
-    robot = load_robot(rpath, unit=unit)
-
-    objects: dict[str, ObjectModel] = {}
-    positions: dict[str, Position] = {}
-    names: set[str] = set()
-    for oname, onode in root.key("objects").items():
-        mnode = onode.key("model")
-        mpath = base / mnode.text()
-        if not mpath.is_file():
-            raise mnode.fail(f"an object file (no file {mpath})")
-        model = load_object(mpath, unit)
-        if model.name != oname:
-            raise mnode.fail(f"the model of {oname}, not of {model.name}")
-        objects[oname] = model
-        inode = onode.key("initial")
-        # one position, or a list of them: a stock of identical parts of this model
-        # (part_location(Obj, Pos) holds for each; "the peg" is whichever is taken)
-        inits = inode.elements(1) if isinstance(inode.value, list) else [inode]
-        for init in inits:
-            pname, plabel = init.key("name").label(), init.key("label").label()
-            if plabel in positions or pname in names:
-                raise init.fail(f"a position name and label not used before ({pname}, {plabel})")
-            T = tm_node(init.key("tm"), 1.0)
-            if not any(same_stable_pose(T[:3, :3], p.R) for p in model.poses.values()):
-                raise init.key("tm").fail(f"an orientation of one of {oname}'s stable poses")
-            positions[plabel] = Position(pname, plabel, oname, T)
-            names.add(pname)
-    if not objects:
-        raise root.key("objects").fail("at least one object")
-
-    grip = root.key("gripper")
-    if grip.value not in ("open", "closed"):
-        raise grip.fail(f"open or closed, not {_show(grip.value)}")
-
+    rpath = _ref_path(rnode, base, "robot")
+    with _referenced(rnode, "robot"):
+        robot = load_robot(rpath, unit=unit, max_bytes=max_bytes)
+    objects, positions, model_files = _objects(root, base, unit, max_bytes)
+    grip = root.key("gripper").choice(("open", "closed"))
     unc = root.key("uncertainty")
-    len_scale = 1.0
-    man = _bounds(unc.key("manipulator"), len_scale, rad_per)
-    obj_bounds: dict[str, Bounds] = {}
-    onodes = unc.key("objects")
-    for oname, bnode in onodes.items():
-        if oname not in objects:
-            raise bnode.fail(f"bounds of a known object ({', '.join(sorted(objects))})")
-        obj_bounds[oname] = _bounds(bnode, len_scale, rad_per)
-    for oname in objects:
-        if oname not in obj_bounds:
-            raise onodes.fail(f"bounds for every object (missing {oname})")
-
-    sensors: dict[str, Sensor] = {}
-    snode = root.key("sensors", required=False)
-    for sname, s in snode.items() if snode is not None else []:
-        sensors[sname] = Sensor(sname, _bounds(s, len_scale, rad_per))
-
+    man = _bounds(unc.key("manipulator"), 1.0, rad_per)
+    obj_bounds = _object_bounds(unc, objects, rad_per)
+    sensors = _sensors(root, rad_per)
     transforms = {k: tm_node(n.key("tm"), 1.0) for k, n in (root.key("transforms", False) or Node("", "", {})).items()}
     vectors = {k: n.vector(3) for k, n in (root.key("vectors", False) or Node("", "", {})).items()}
-
-    goals: list[str] = []
-    for g in root.key("goals").elements(1):
-        try:
-            term = parse_term(g.text())
-        except ValueError as e:
-            raise g.fail(f"a Prolog term ({e})") from None
-        _check_goal(g, term, objects, transforms, vectors, positions)
-        goals.append(term_text(term))
-
-    initial = [f"gripper({grip.value})"] + [f"part_location({p.obj}, {p.name})" for p in positions.values()]
-    regions = []
-    rnode2 = root.key("placement_regions", required=False)
-    for r in rnode2.elements() if rnode2 is not None else []:
-        lo, hi = r.key("x").interval(), r.key("y").interval()
-        regions.append({"x": lo, "y": hi})
-    used = [path, rpath] + [base / n.key("model").text() for _, n in root.key("objects").items()]
-    files = tuple(dict.fromkeys(str(Path(u).resolve()) for u in used))
+    goals = _goals(root, objects, transforms, vectors, positions)
+    initial = [f"gripper({grip})"] + [f"part_location({p.obj}, {p.name})" for p in positions.values()]
+    files = tuple(dict.fromkeys(str(Path(u).resolve()) for u in [path, rpath, *model_files]))
     cell = Cell(
         fingerprint=_fingerprint(files),
         files=files,
@@ -565,7 +1017,7 @@ def load_problem(path: str | Path) -> Cell:
         manipulator_bounds=man,
         object_bounds=obj_bounds,
         sensors=sensors,
-        placement_regions=regions,
+        placement_regions=_regions(root),
     )
     sanity.check_cell(cell)  # physically possible: parts apart, on the table, in reach (sanity.py)
     return cell
@@ -626,22 +1078,21 @@ def facts(cell: Cell) -> list[tuple]:
 # --------------------------------------------------------------------------- checking
 
 
-def check_file(path: str | Path) -> str:
+def check_file(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> str:
     """Validate one KB file of any kind (problem, object, robot); return a one-line summary."""
-    root = read_yaml(path)
-    v = root.value
-    if "problem" in v:
-        cell = load_problem(path)
+    root = read_yaml(path, max_bytes)
+    kind = file_kind(root)
+    if kind is None:
+        raise KBError(str(path), "", "a problem, object or robot file", describe(root.value))
+    if kind.name == "problem":
+        cell = load_problem(path, max_bytes)
         return f"{path}: ok (problem {cell.name}: {len(cell.objects)} objects, {len(cell.goals)} goals)"
-    if "object" in v:
-        unit = _units(root)[0]
-        o = load_object(path, unit)
+    if kind.name == "object":
+        o = load_object(path, _units(root)[0], max_bytes)
         return (f"{path}: ok (object {o.name}: {len(o.faces)} faces, {len(o.poses)} stable poses, "
                 f"{len(o.grasps)} grasps)")
-    if "dh" in v:
-        r = load_robot(path)
-        return f"{path}: ok (robot {r.name})"
-    raise root.fail("a problem (key problem), object (key object) or robot (key dh) file")
+    r = load_robot(path, max_bytes=max_bytes)
+    return f"{path}: ok (robot {r.name})"
 
 
 def iter_kb_files(paths: Iterable[str | Path]) -> list[Path]:

@@ -1,8 +1,10 @@
 """Batch regression runs: every problem of a knowledge base against its expected outcome.
 
-For each ``DIR/*.yaml`` problem the expected outcome lives in
-``DIR/expected/<stem>.json``: the summary of its plan (outcome, actions, orderings,
-sensing inserted, error count, the bindings that are unique). ``spar regress DIR``
+For each problem file under DIR (a ``*.yaml`` whose top-level mapping has ``problem:``,
+at any depth) the expected outcome lives beside it in ``expected/<stem>.json``: the
+summary of its plan (outcome, actions, orderings, sensing inserted, error count, the
+bindings that are unique). Object and robot models are skipped with a note line (so
+``spar regress kb`` works). ``spar regress DIR``
 plans every problem (``-j N`` worker processes, each with its own embedded Prolog),
 prints a table of pass/fail and times, a readable diff for each failure, and exits 1
 if anything failed; ``--update`` writes the new outcomes as the expected ones.
@@ -45,15 +47,15 @@ def summarize(plan: dict[str, Any]) -> dict[str, Any]:
 
 
 def _plan_one(path: str) -> tuple[str, dict[str, Any] | None, str, float]:
-    """Plan one problem file; (stem, summary or None, error text, seconds)."""
+    """Plan one problem file; (path, summary or None, error text, seconds)."""
     from .planner import Planner
 
     t0 = time.perf_counter()
     try:
         plan = Planner().plan(Path(path))
-        return Path(path).stem, summarize(plan.to_json()), "", time.perf_counter() - t0
+        return path, summarize(plan.to_json()), "", time.perf_counter() - t0
     except SparError as e:
-        return Path(path).stem, None, str(e).splitlines()[0], time.perf_counter() - t0
+        return path, None, str(e).splitlines()[0], time.perf_counter() - t0
 
 
 def _progress(done: int, total: int, name: str) -> None:
@@ -74,13 +76,43 @@ def diff(expected: dict[str, Any], got: dict[str, Any]) -> list[str]:
     return list(difflib.unified_diff(a, b, "expected", "got", lineterm="", n=1))
 
 
+def problem_files(directory: Path) -> tuple[list[Path], list[str]]:
+    """The problem files under ``directory`` (sorted) and a note line for each other KB file.
+
+    A file that cannot be read or parsed counts as a problem: planning it reports why."""
+    from .kb import KINDS, file_kind, read_yaml
+
+    problems: list[Path] = []
+    notes: list[str] = []
+    for p in sorted(directory.rglob("*.yaml")):
+        try:
+            kind = file_kind(read_yaml(p))
+        except SparError:
+            problems.append(p)
+            continue
+        if kind is KINDS["problem"]:
+            problems.append(p)
+        else:
+            what = kind.called if kind is not None else "not a problem file (no `problem:`)"
+            notes.append(f"skipped {p.relative_to(directory)}: {what}")
+    return problems, notes
+
+
+def _row_name(directory: Path, problem: Path) -> str:
+    """A problem's name in the table: its stem, with its folder below DIR if any."""
+    rel = problem.relative_to(directory).with_suffix("")
+    return rel.name if rel.parent == Path(".") else str(rel)
+
+
 def run_regression(directory: Path, jobs: int = 1, update: bool = False) -> int:
     """Run every problem under ``directory``; print the table; return the exit code (0/1)."""
-    problems = sorted(directory.glob("*.yaml"))
+    problems, notes = problem_files(directory)
+    for note in notes:
+        print(note)
     if not problems:
-        print(f"spar: regress: no problems (*.yaml) in {directory}", file=sys.stderr)
+        print(f"spar: regress: no problem files (*.yaml with `problem:`) in {directory}", file=sys.stderr)
         return 2
-    expected_dir = directory / "expected"
+    names = {str(p): _row_name(directory, p) for p in problems}
     results: list[tuple[str, dict | None, str, float]] = []
     if jobs == 1:
         for i, p in enumerate(problems):
@@ -99,8 +131,9 @@ def run_regression(directory: Path, jobs: int = 1, update: bool = False) -> int:
     failed = 0
     rows = []
     diffs: list[str] = []
-    for stem, got, err, secs in results:
-        exp_path = expected_dir / f"{stem}.json"
+    for path, got, err, secs in results:
+        stem, expected_dir = names[path], Path(path).parent / "expected"
+        exp_path = expected_dir / f"{Path(path).stem}.json"
         if got is None:
             status, note = "ERROR", err
             failed += 1
