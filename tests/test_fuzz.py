@@ -157,28 +157,18 @@ def test_sample_no_traceback(sample: kbfuzz.Report) -> None:
     assert findings(sample, ("traceback",)) == []
 
 
-@pytest.mark.xfail(strict=True, reason="issue 13 items 1/2/7: exit 3 for OverflowError on 10**400, "
-                   "UnicodeDecodeError on non-UTF-8 files, MemoryError and ValueError on 1e308 or -1e7 "
-                   "coordinates: being fixed on branches schema and sanity")
 def test_sample_no_internal_error(sample: kbfuzz.Report) -> None:
     assert findings(sample, ("exit 3", "exit ", "killed")) == []
 
 
-@pytest.mark.xfail(strict=True, reason="issue 13 items 2/7: numpy RuntimeWarnings on 1e308 values print "
-                   "beside the message or the plan; a newline in a path breaks the message: being fixed on "
-                   "branches schema and sanity")
 def test_sample_one_line(sample: kbfuzz.Report) -> None:
     assert findings(sample, ("no message", "empty message", "multi-line")) == []
 
 
-@pytest.mark.xfail(strict=True, reason="issue 13 item 2: a joint limit of 1e9 deg takes 1.3 GB (kb check: "
-                   "MemoryError; plan: past its timeout): being fixed on branch sanity")
 def test_sample_time_and_memory(sample: kbfuzz.Report) -> None:
     assert findings(sample, ("past", "RSS")) == []
 
 
-@pytest.mark.xfail(strict=True, reason="issue 13 item 1: a duplicate key (the second wins) and an unknown key "
-                   "(dh[3].offseet) are accepted silently: being fixed on branch schema")
 def test_sample_refuses_duplicate_and_unknown_keys(sample: kbfuzz.Report) -> None:
     assert [f"{r.mutant} {r.op} at {r.where}: spar {r.command}: exit {r.code}" for r in sample.accepted()] == []
 

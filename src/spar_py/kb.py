@@ -676,6 +676,11 @@ def _robot_frame(node: Node, length_scale: float, rad_per: float) -> np.ndarray:
     return trans(*xyz) @ rpy(*ang)
 
 
+#: The largest joint limit a robot file may give (rad): two turns either way. Beyond it
+#: the turn representations IK enumerates grow without use (a limit of 1e9 took 1.3 GB).
+MAX_JOINT_RAD = 4 * math.pi
+
+
 def load_robot(path: str | Path, unit: str | None = None, max_bytes: int = MAX_INPUT_BYTES) -> Robot:
     """Load ``kb/robots/*.yaml`` as a :class:`~spar_py.kinematics.Robot`.
 
@@ -707,14 +712,23 @@ def load_robot(path: str | Path, unit: str | None = None, max_bytes: int = MAX_I
     if len(lims) != 6:
         raise lim_node.fail("a list of 6 [lo, hi] joint limits", f"{len(lims)} items")
     limits = np.array([lim.interval() for lim in lims]) * rad_per
+    for i, lim in enumerate(lims):
+        if np.abs(limits[i]).max() > MAX_JOINT_RAD:
+            raise lim.fail(f"joint limits within +-{math.degrees(MAX_JOINT_RAD):g} deg",
+                           f"[{show(limits[i][0] / rad_per)}, {show(limits[i][1] / rad_per)}]")
 
     base = _robot_frame(root.key("base"), scale, rad_per)
     tool = _robot_frame(root.key("tool"), scale, rad_per)
     wm = root.key("gripper").key("finger_separation").positive() * scale
     try:
-        return Robot(name, dh, limits, base, tool, wm, unit)
+        robot = Robot(name, dh, limits, base, tool, wm, unit)
     except SparValueError as e:
         raise KBError(str(path), "dh", f"a robot the kinematics accepts ({e})") from None
+    if robot.unsupported is not None:
+        own = robot if unit == file_unit else load_robot(path, file_unit, max_bytes)  # say it in the file's unit
+        raise KBError(str(path), "dh", "a PUMA 560-family arm (6R, spherical wrist: the closed-form IK "
+                      "spar-py has; docs/kb-format.md)", f"one with {own.unsupported}")
+    return robot
 
 
 def _solid(node: Node, scale: float) -> Solid:

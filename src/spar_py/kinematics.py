@@ -49,18 +49,21 @@ class _Puma:
     tol_sq: float  # length^2 below which a discriminant counts as zero
 
 
-def _puma_structure(dh: np.ndarray, base: np.ndarray, tool: np.ndarray) -> _Puma | str:
-    """Craig's PUMA parameters of a DH table, or the reason the table is not of that family."""
+def _puma_structure(dh: np.ndarray, base: np.ndarray, tool: np.ndarray, unit: str = "") -> _Puma | str:
+    """Craig's PUMA parameters of a DH table, or the reason the table is not of that family
+    (lengths in ``unit``, the table's)."""
     alpha, a, d, off = dh.T
     for i, want in enumerate(_PUMA_ALPHAS, start=1):
         if abs(math.remainder(alpha[i] - want, 2 * math.pi)) > 1e-9:
-            return f"alpha_{i} (dh[{i}].alpha) is {math.degrees(alpha[i]):g} deg, not {math.degrees(want):g}"
+            return (f"alpha_{i} (dh[{i}].alpha) = {math.degrees(alpha[i]):g} deg where the family has "
+                    f"{math.degrees(want):g}")
     for what, v in (("a_1 (dh[1].a)", a[1]), ("a_4 (dh[4].a)", a[4]), ("a_5 (dh[5].a)", a[5]),
                     ("d_5 (dh[4].d)", d[4])):
         if v != 0.0:
-            return f"{what} is {v:g}, not 0 (no spherical wrist / shoulder offset the closed form handles)"
+            return (f"{what} = {v:g} {unit} where the family has 0 (an offset the spherical-wrist closed "
+                    "form does not handle)").replace("  ", " ")
     if a[2] == 0.0:
-        return "a_2 (dh[2].a) is 0"
+        return "a_2 (dh[2].a) = 0 where the family needs an upper arm"
     scale = abs(a[2]) + abs(a[3]) + abs(d[1] + d[2]) + abs(d[3])
     return _Puma(
         a2=float(a[2]), a3=float(a[3]), d3=float(d[1] + d[2]), d4=float(d[3]),
@@ -105,7 +108,7 @@ class Robot:
                 raise SparValueError(f"robot {self.name}: {what} must be a finite {shape} array, got {arr.shape}")
         if np.any(self.limits[:, 0] > self.limits[:, 1]):
             raise SparValueError(f"robot {self.name}: limits need lo <= hi")
-        self._puma = _puma_structure(self.dh, self.base, self.tool)
+        self._puma = _puma_structure(self.dh, self.base, self.tool, self.unit)
         # how many representations q + 2 pi k of one angle can lie inside each joint's range
         span = self.limits[:, 1] - self.limits[:, 0] + 2 * LIMIT_TOL
         self._reps = tuple(int(s // (2 * math.pi)) + 1 for s in span)
@@ -157,6 +160,12 @@ class Robot:
         return 8 * math.prod(self._reps)
 
     # ------------------------------------------------------------------ inverse kinematics
+
+    @property
+    def unsupported(self) -> str | None:
+        """Why the closed-form IK cannot solve this arm (which DH entry breaks the PUMA 560
+        family's structure), or None when it can."""
+        return self._puma if isinstance(self._puma, str) else None
 
     def _structure(self) -> _Puma:
         if isinstance(self._puma, str):
