@@ -473,6 +473,12 @@ print_verdict(Id0, C) :-
     (   satisfied(C) -> V = "satisfied" ; V = "NOT satisfied" ),
     (   get_dict(kind, C, geometric)
     ->  format("  ~w ~w: ~w (~w)~n", [Id, C.constraint, V, C.description])
-    ;   format("  ~w ~w: bound ~4f ~w ~w: ~w~n",
-               [Id, C.constraint, C.bound, C.sense, C.threshold, V])
+    ;   readable(C.threshold, Th),
+        format("  ~w ~w: bound ~4f ~w ~w: ~w~n",
+               [Id, C.constraint, C.bound, C.sense, Th, V])
     ).
+
+%   readable(+X, -Y): X rounded to 9 decimals for printing (0.16, not the
+%   0.16000000000000003 that 0.4^2 is in floating point).
+readable(X, Y) :-
+    (   float(X) -> Y is round(X * 1.0e9) / 1.0e9 ; Y = X ).
