@@ -42,7 +42,7 @@ FULL = {"ik": {"n": 10_000, "single": 1000, "rtb": 200, "repeats": 5},
 QUICK = {"ik": {"n": 1000, "single": 100, "rtb": 20, "repeats": 3},
          "supinf": {"per_length": 1, "lengths": (1, 4, 8), "repeats": 3},
          "planning": {"quick": True, "max_n": 2, "timeout": 60.0},
-         "memory": {"plans": 100, "warmup": 10}}
+         "memory": {"plans": 100, "warmup": 10, "processes": 1}}
 
 
 # ---------------------------------------------------------------------- where and with what
@@ -159,8 +159,10 @@ def verdicts(r: dict) -> dict:
         ok = n10.get("outcome") == "plan" and n10.get("wall_s", 1e9) < N10_S
         v["n10"] = (ok, f"{n10.get('outcome')} after {_f(n10.get('wall_s'))} s")
     for row in r.get("memory", []):
+        runs = row.get("runs", [row["kb_per_plan"]])
         v[f"rss_{row['cell']}"] = (row["kb_per_plan"] <= RSS_KB_PER_PLAN,
-                                   f"{row['kb_per_plan']:.2f} kB/plan over {row['plans']} plans")
+                                   f"{row['kb_per_plan']:.2f} kB/plan over {row['plans']} plans (median of "
+                                   f"{len(runs)} processes: {', '.join(f'{x:.2f}' for x in runs)})")
     return v
 
 
@@ -290,15 +292,27 @@ def render(r: dict) -> str:
 
     if r.get("memory"):
         L += ["## Memory per plan (bench/memory.py)", "",
-              ("Each cell in a fresh process: planned by path with one Planner, "
+              ("Each cell in 3 fresh processes (the median is the figure; each process's figure beside it): "
+               "planned by path with one Planner, "
                f"{r['memory'][0]['warmup']} warm-up plans, then {r['memory'][0]['plans']} more; "
                "growth = (RSS after - RSS after the warm-up) / plans, RSS after `gc.collect()`; "
                "live objects counted after the run."), ""]
-        L += _table(["cell", "plans", "RSS after warm-up MB", "RSS after MB", "kB per plan", "live Cell",
-                     "live World"],
+        L += _table(["cell", "plans", "RSS after warm-up MB", "RSS after MB", "kB per plan (median)",
+                     "each process", "live Cell", "live World"],
                     [[x["cell"], str(x["plans"]), f"{x['rss_before_kb'] / 1024:.1f}",
-                      f"{x['rss_after_kb'] / 1024:.1f}", f"{x['kb_per_plan']:.2f}", str(x["live"]["Cell"]),
-                      str(x["live"]["World"])] for x in r["memory"]])
+                      f"{x['rss_after_kb'] / 1024:.1f}", f"{x['kb_per_plan']:.2f}",
+                      ", ".join(f"{k:.2f}" for k in x.get("runs", [x["kb_per_plan"]])),
+                      str(x["live"]["Cell"]), str(x["live"]["World"])] for x in r["memory"]])
+
+    if r.get("before_after"):
+        ba = r["before_after"]
+        L += ["## Before and after (bench/before_after.py)", "",
+              (f"This checkout against `{ba['dir']}` (commit {ba['commit']}), measured in the same run: "
+               "cold `spar plan` of the paper's cell, the two checkouts alternating; warm, the median plan "
+               "of one process per checkout. Medians."), ""]
+        L += _table(["figure", "before", "after", "after/before"],
+                    [[name, f"{v['before'] * 1e3:.1f} ms", f"{v['after'] * 1e3:.1f} ms",
+                      f"{v['after'] / v['before']:.2f}"] for name, v in ba["figures"].items()])
 
     L += ["## Where the time goes (cProfile)", "",
           ("Python's profiler sees SWI-Prolog as one call (`janus_swi._swipl.call`): its internal time "
@@ -375,13 +389,29 @@ def reading(r: dict) -> str:
     return " ".join(parts)
 
 
+def _commit(root: Path) -> str:
+    """The short commit of checkout ``root`` (or "?")."""
+    try:
+        return subprocess.run(["git", "-C", str(root), "rev-parse", "--short", "HEAD"], capture_output=True,
+                              text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "?"
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(prog="python -m bench", description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="a short smoke run (fewer repeats, N = 1..2)")
     ap.add_argument("--out", type=Path, default=None,
                     help="where to write the results (default bench/RESULTS.md; with --quick, stdout only)")
+    ap.add_argument("--before", type=Path, default=None, metavar="DIR",
+                    help="also time warm and cold planning against the checkout DIR (bench/before_after.py)")
     a = ap.parse_args(argv)
     r = run_all(a.quick, log=lambda line: print(line, file=sys.stderr, flush=True))
+    if a.before is not None:
+        from . import before_after
+
+        r["before_after"] = {"dir": str(a.before), "commit": _commit(a.before),
+                             "figures": before_after.run(a.before.resolve(), 5 if a.quick else 15)}
     text = render(r)
     out = a.out if a.out is not None else (None if a.quick else RESULTS)
     if out is None:
