@@ -243,6 +243,11 @@ class Planner:
         self.paper_placements = paper_placements
         self._cells: LRU[tuple[tuple, Cell]] = LRU(CELL_CACHE)
         self._cells_lock = threading.Lock()
+        #: The last plan this Planner made (None before the first). Keeping it also keeps
+        #: its dict keys alive: janus interns every Prolog dict key it converts, and keys
+        #: freed after one plan and interned again by the next make CPython's
+        #: interned-string table churn and, once, double (about 1 MB; bench/memory.py).
+        self.last: Plan | None = None
 
     def load_problem(self, path: str | Path) -> Cell:
         """Load and validate a problem file (KBError on bad input); the same cell again while
@@ -284,4 +289,6 @@ class Planner:
                             timing={"total_s": round(time.perf_counter() - t0, 6)})
         d = ans["Dict"]
         d.setdefault("timing", {})["total_s"] = round(time.perf_counter() - t0, 6)
-        return _plan(cell.name, d, ans.get("Trace", ""))
+        plan = _plan(cell.name, d, ans.get("Trace", ""))
+        self.last = plan
+        return plan
