@@ -85,19 +85,6 @@ def cmd_repl(args: argparse.Namespace) -> int:
 # ---------------------------------------------------------------------- plan
 
 
-def write_atomically(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` through a temporary file and a rename: never half a file."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def _existing_parent(path: Path) -> Path:
     """The nearest ancestor of ``path`` that exists."""
     p = path.absolute().parent

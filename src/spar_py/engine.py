@@ -141,16 +141,6 @@ class Engine:
         except self.janus.PrologError as e:
             raise self._translate(e) from None
 
-    def query(self, goal: str, bindings: dict[str, Any] | None = None) -> Iterator[dict[str, Any]]:
-        """All answers of ``goal`` (lazily), exceptions translated as in :meth:`query_once`.
-        The engine's lock is held until the iterator is exhausted or closed."""
-        self.wait_loaded()
-        with self.lock:
-            try:
-                yield from self.janus.query(goal, bindings or {})
-            except self.janus.PrologError as e:
-                raise self._translate(e) from None
-
     def _translate(self, e: Any) -> BaseException:
         """The exception to raise for a janus PrologError ``e``: the one place Prolog's
         error terms become the SparError family (foreign:error_info/2 classifies them).

@@ -46,6 +46,7 @@ __all__ = [
     "check_rotation",
     "check_transform",
     "compose",
+    "convex_hull_2d",
     "euler_zyz",
     "eulerxyz",
     "inv",
@@ -556,3 +557,24 @@ def same_stable_pose(R_abs: ArrayLike, R_pose: ArrayLike, tol: float = ORTHO_TOL
 def up_vectors(Rs: ArrayLike) -> np.ndarray:
     """The object-frame vector pointing up (world +z) for each rotation of a (..., 3, 3) stack."""
     return np.asarray(Rs, float)[..., 2, :3]
+
+
+def convex_hull_2d(P: ArrayLike) -> np.ndarray:
+    """(k, 2) the convex hull of points P (n, 2), counter-clockwise, no repeated or
+    collinear vertices (Andrew's monotone chain; points equal to 12 decimals are one);
+    the points themselves when there are at most two. Any length unit."""
+    pts = sorted(set(map(tuple, np.round(np.asarray(P, float), 12).tolist())))
+    if len(pts) <= 2:
+        return np.array(pts, float)
+
+    def half(seq: list) -> list:
+        out: list = []
+        for p in seq:
+            while len(out) >= 2 and ((out[-1][0] - out[-2][0]) * (p[1] - out[-2][1])
+                                     - (out[-1][1] - out[-2][1]) * (p[0] - out[-2][0])) <= 0:
+                out.pop()
+            out.append(p)
+        return out
+
+    lower, upper = half(pts), half(pts[::-1])
+    return np.array(lower[:-1] + upper[:-1], float)

@@ -28,6 +28,9 @@ from pathlib import Path
 
 EXIT_TIMEOUT, EXIT_SIGINT, EXIT_SIGTERM = 4, 130, 143
 
+#: The signals a guard turns into a clean stop.
+SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
 #: Time after the deadline the guard leaves the planner to stop by itself (s).
 GRACE_S = 0.25
 
@@ -49,7 +52,6 @@ class RunGuard:
         self.lock = threading.Lock()
         self._temporaries: list[Path] = []
         self._exit = exit
-        self._old: dict[int, object] = {}
         self._old_fd = -1
         self._r = self._w = -1
         self._thread: threading.Thread | None = None
@@ -60,10 +62,10 @@ class RunGuard:
     def __enter__(self) -> RunGuard:
         self._r, self._w = os.pipe()
         os.set_blocking(self._w, False)
-        for sig in (signal.SIGINT, signal.SIGTERM):
+        for sig in SIGNALS:
             # a Python-level handler, so the interpreter writes the wake-up byte; the
             # watchdog does the rest (the handler itself may never get to run)
-            self._old[sig] = signal.signal(sig, lambda *_: None)
+            signal.signal(sig, lambda *_: None)
         self._old_fd = signal.set_wakeup_fd(self._w, warn_on_full_buffer=False)
         self._thread = threading.Thread(target=self._watch, name="spar-guard", daemon=True)
         self._thread.start()
@@ -75,7 +77,7 @@ class RunGuard:
         if self._thread is not None:
             self._thread.join()
         signal.set_wakeup_fd(self._old_fd)
-        for sig in self._old:
+        for sig in SIGNALS:
             # the command's work is done and its outputs are in place: a signal now, while
             # the process exits, changes nothing (and must not kill it half-way out)
             signal.signal(sig, signal.SIG_IGN)

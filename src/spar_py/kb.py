@@ -14,7 +14,6 @@ The formats are documented in docs/kb-format.md.
 from __future__ import annotations
 
 import difflib
-import hashlib
 import math
 import os
 import re
@@ -346,17 +345,6 @@ def _check_keys(node: Node, spec: Keys) -> None:
             node.key(k)  # raises: key missing
     for k, child in children:
         check_shape(child, allowed[k])
-
-
-def _fingerprint(files: Iterable[str]) -> str:
-    """SHA-1 over the bytes of ``files`` (the files a cell was loaded from)."""
-    h = hashlib.sha1()
-    for f in files:
-        try:
-            h.update(hashlib.sha1(Path(f).read_bytes()).digest())
-        except OSError:
-            h.update(b"?")
-    return h.hexdigest()
 
 
 _FILE_TYPES = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a character device"),
@@ -1015,7 +1003,6 @@ def load_problem(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> Cell:
     initial = [f"gripper({grip})"] + [f"part_location({p.obj}, {p.name})" for p in positions.values()]
     files = tuple(dict.fromkeys(str(Path(u).resolve()) for u in [path, rpath, *model_files]))
     cell = Cell(
-        fingerprint=_fingerprint(files),
         files=files,
         name=name,
         file=str(path),

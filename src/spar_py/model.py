@@ -145,8 +145,6 @@ class Cell:
     object_bounds: dict[str, Bounds]
     sensors: dict[str, Sensor]
     placement_regions: list[dict] = field(default_factory=list)
-    #: SHA-1 of every file the cell was loaded from: equal fingerprints, equal cells.
-    fingerprint: str = ""
     #: The files the cell was loaded from (resolved paths: problem, robot, models).
     files: tuple[str, ...] = ()
     #: The cell's memo tables (bounded; freed with the cell): see memo.py.

@@ -20,7 +20,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .geometry import rotz
+from .geometry import convex_hull_2d, rotz
 from .model import Cell, ObjectModel
 from .units import from_mm, mm_per
 from .workspace import reaches, wrist_height
@@ -76,26 +76,6 @@ def default_regions(cell: Cell) -> list[dict]:
     return [{"x": (float(lo[0]), float(hi[0])), "y": (float(lo[1]), float(hi[1]))}]
 
 
-def _hull(P: np.ndarray) -> np.ndarray:
-    """(k, 2) the convex hull of points P (n, 2), counter-clockwise, no repeated or
-    collinear vertices (Andrew's monotone chain); one point for a single point."""
-    pts = sorted(set(map(tuple, np.round(P, 12).tolist())))
-    if len(pts) <= 2:
-        return np.array(pts, float)
-
-    def half(seq: list) -> list:
-        out: list = []
-        for p in seq:
-            while len(out) >= 2 and ((out[-1][0] - out[-2][0]) * (p[1] - out[-2][1])
-                                     - (out[-1][1] - out[-2][1]) * (p[0] - out[-2][0])) <= 0:
-                out.pop()
-            out.append(p)
-        return out
-
-    lower, upper = half(pts), half(pts[::-1])
-    return np.array(lower[:-1] + upper[:-1], float)
-
-
 def _disc(c: np.ndarray, r: float) -> np.ndarray:
     """(ARC_SIDES, 2) the regular polygon circumscribed about the disc (c, r), CCW."""
     a = 2 * np.pi * np.arange(ARC_SIDES) / ARC_SIDES
@@ -118,7 +98,7 @@ def footprint(model: ObjectModel, R: np.ndarray) -> np.ndarray:
             pts.append(np.array([[x, y, z] for x in (s.lo[0], s.hi[0]) for y in (s.lo[1], s.hi[1])
                                  for z in (s.lo[2], s.hi[2])], float))
     P = np.concatenate(pts[1:] if len(pts) > 1 else pts)
-    return _hull((P @ np.asarray(R, float).T)[:, :2])
+    return convex_hull_2d((P @ np.asarray(R, float).T)[:, :2])
 
 
 def occupant(cell: Cell, obj: str, T: np.ndarray) -> Occupant:

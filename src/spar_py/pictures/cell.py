@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..errors import SparValueError
+from ..geometry import convex_hull_2d
 from .plandoc import term_parts
 from ..units import from_mm
 from .scene import MIN_SIZE_MM, Scene, part_model, scenes
@@ -164,25 +165,6 @@ def _disc(centre: np.ndarray, normal: np.ndarray, radius: float, segments: int =
     v = np.cross(n, u)
     a = np.linspace(0.0, 2 * math.pi, segments, endpoint=False)
     return centre + radius * (np.outer(np.cos(a), u) + np.outer(np.sin(a), v))
-
-
-def _hull(points: np.ndarray) -> np.ndarray:
-    """Convex hull (counter-clockwise, (m, 2)) of 2-D points: Andrew's monotone chain."""
-    pts = sorted(set(map(tuple, np.round(points, 9))))
-    if len(pts) <= 2:
-        return np.array(pts)
-
-    def half(seq: list[tuple[float, float]]) -> list[tuple[float, float]]:
-        h: list[tuple[float, float]] = []
-        for p in seq:
-            while len(h) >= 2 and ((h[-1][0] - h[-2][0]) * (p[1] - h[-2][1])
-                                   - (h[-1][1] - h[-2][1]) * (p[0] - h[-2][0])) <= 0:
-                h.pop()
-            h.append(p)
-        return h
-
-    lower, upper = half(pts), half(pts[::-1])
-    return np.array(lower[:-1] + upper[:-1])
 
 
 # =========================================================================== extents
@@ -340,7 +322,7 @@ def _draw_2d(ax: Axes, cell: Cell, s: Scene, fr: Extent, axes: tuple[int, int], 
         lo, hi = (x0, x1) if i == 0 else (y0, y1)
         ax.plot([lo, hi], [0, 0], color="#8a7a5a", lw=4, solid_capstyle="butt")
     for kind, p, colour in _paint_list(cell, s, eye):
-        ax.add_patch(Polygon(_hull(p[:, [i, j]]), closed=True, fc=colour, ec="#222222",
+        ax.add_patch(Polygon(convex_hull_2d(p[:, [i, j]]), closed=True, fc=colour, ec="#222222",
                              lw=0.6 if kind == "solid" else 0.0, alpha=0.92 if kind == "solid" else 1.0))
     _draw_arm(ax, cell, s, lambda p: (p[:, i], p[:, j]))
     ax.set_xlim(fr.lo[i], fr.hi[i])
