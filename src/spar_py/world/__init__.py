@@ -1,0 +1,14 @@
+"""The world layer: the geometry past the paper, in one place the phases ask questions of.
+
+- ``shapes``     meshes and primitives: faces, stable poses, grasps, features, T_a derived
+- ``robots``     robot models: DH tables, URDF import, link and gripper collision shapes
+- ``ik``         closed-form IK families (PUMA, UR) and a numeric fallback, one interface
+- ``collision``  one collision scene per run: links, gripper, held part, parts, obstacles,
+                 table; clearance and the closest pair
+- ``motion``     transit/transfer joint paths, approach and retreat
+- ``workspace``  "the arm reaches T, clear of the world": what phase 1's arcs, the
+                 placements and phase 2's steps ask
+
+Frames: world Z up, table top z = 0; transforms 4x4, column vectors, ``T_world_obj``.
+Units: lengths in the cell's internal unit (see ``spar_py.units``), angles in radians.
+"""
