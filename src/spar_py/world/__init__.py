@@ -10,5 +10,6 @@
                  placements and phase 2's steps ask
 
 Frames: world Z up, table top z = 0; transforms 4x4, column vectors, ``T_world_obj``.
-Units: lengths in the cell's internal unit (see ``spar_py.units``), angles in radians.
+Units: lengths in the cell's unit (``Cell.unit``); constants written in the code are in mm
+and converted where used (``spar_py.units``); angles in radians.
 """
