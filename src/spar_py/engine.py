@@ -94,6 +94,7 @@ class Engine:
         self._kept: dict[str, None] = {}  # problems sessions keep loaded, oldest first
         self.lock = threading.RLock()
         self._loader: threading.Thread | None = None
+        self.loaded_from = ""  # how the planner was loaded: "qlf", "compiled" or "source"
         self._load_error: BaseException | None = None
         if background:
             self._loader = threading.Thread(target=self._load_in_thread, name="spar-consult")
@@ -102,9 +103,81 @@ class Engine:
             self._load()
 
     def _load(self) -> None:
-        self._consult(PROLOG_DIR / "spar.pl")
-        for f in sorted(TEMPLATES_DIR.glob("*.pl")):
-            self._consult(f)
+        """Load the planner (prolog/spar.pl, then kb/templates/*.pl): from its compiled
+        image when the cache has one for these very sources (spar_py/qlf.py), compiling
+        it there first when not, and from the sources when there is no usable cache.
+        :attr:`loaded_from` says which ("qlf", "compiled" or "source")."""
+        roots = [PROLOG_DIR / "spar.pl", *sorted(TEMPLATES_DIR.glob("*.pl"))]
+        how = self._load_image(roots)
+        if how is None:
+            for f in roots:
+                self._consult(f)
+            how = "source"
+        self.loaded_from = how
+
+    def _load_image(self, roots: list[Path]) -> str | None:
+        """Load the planner from the .qlf cache (see :mod:`spar_py.qlf`); "qlf" if loaded
+        from an image, "compiled" if this process compiled (and so loaded) it, None if the
+        cache is off or unusable (nothing loaded)."""
+        from . import qlf
+
+        base = qlf.cache_dir()
+        if base is None:
+            return None
+        sources = qlf.Sources.scan(roots, [PROLOG_DIR, TEMPLATES_DIR])
+        swi = self._query_once("current_prolog_flag(version, V), current_prolog_flag(home, H)")
+        entry = qlf.entry(base, qlf.key(sources, int(swi["V"]), str(swi["H"])))
+        if entry.ready():
+            return self._load_qlf(entry, roots)
+        try:
+            with qlf.building(entry) as must:
+                if not must:
+                    return self._load_qlf(entry, roots)
+                return self._compile_qlf(entry, sources, str(swi["H"]))
+        except OSError:  # an unwritable cache: consult the sources
+            return None
+
+    def _load_qlf(self, entry: Any, roots: list[Path]) -> str | None:
+        """Load ``entry``'s image; None if SWI-Prolog refuses it or it did not load every
+        root file (the caller then consults the sources, and the next run rebuilds it)."""
+        try:
+            self._query_once("load_files(File, [silent(true)])", {"File": str(entry.image)})
+            ok = self._query_once("forall(member(_S, Fs), (atom_string(_F, _S), source_file(_F)))",
+                                  {"Fs": [str(p.resolve()) for p in roots]})["truth"]
+        except SparError:
+            ok = False
+        if not ok:
+            entry.manifest.unlink(missing_ok=True)
+            return None
+        entry.touch()
+        return "qlf"
+
+    def _compile_qlf(self, entry: Any, sources: Any, swi_home: str) -> str:
+        """Compile the planner into ``entry`` (qcompile/2 with include(user): every planner
+        file in one image), which also loads it here; publish the entry only if no file it
+        holds changed while it was compiled."""
+        from . import qlf
+
+        for stale in (entry.image, entry.manifest):
+            stale.unlink(missing_ok=True)
+        entry.loader.write_text(qlf.loader_text(sources.roots))
+        before = set(self._query_once("findall(_F, source_file(_F), Fs)")["Fs"])
+        self._query_once("qcompile(File, [include(user)])", {"File": str(entry.loader)})
+        after = set(self._query_once("findall(_F, source_file(_F), Fs)")["Fs"])
+        extra: dict[str, str] = {}
+        for f in sorted(after - before - {str(entry.loader)}):
+            if f.startswith(swi_home.rstrip("/") + "/"):
+                continue  # SWI-Prolog's own library: the version is in the key
+            digest = qlf.file_digest(Path(f))
+            if sources.covers(f):
+                if sources.hashes.get(f) != digest:  # edited while compiling: do not keep it
+                    entry.image.unlink(missing_ok=True)
+                    return "compiled"
+            else:
+                extra[f] = digest
+        entry.publish(extra)
+        qlf.evict(entry.directory.parent, spare=entry.directory.name)
+        return "compiled"
 
     def _load_in_thread(self) -> None:
         try:

@@ -1,0 +1,229 @@
+"""The compiled planner: a cache of SWI-Prolog quick-load files (.qlf) keyed by content.
+
+Consulting prolog/*.pl and kb/templates/*.pl from source costs every process tens of
+milliseconds; loading them from one .qlf (SWI-Prolog's ``qcompile/2`` with
+``include(user)``: every planner file in one image) costs a few. The image is kept in a
+cache directory under a key that is the SHA-256 of
+
+- every ``*.pl`` file of the source directories (prolog/, kb/templates/): name and
+  content, so an edit, an added or a removed file gives a new key;
+- the SWI-Prolog version and home (a .qlf is only valid for the VM that wrote it);
+- the files' absolute paths (the image records its source files by path: two
+  checkouts with the same sources must not share one);
+- :data:`FORMAT`, this module's own layout version.
+
+A process computes the key from the files as they are now, before it loads anything,
+and loads the image only if an entry under that very key is complete (its ``manifest``
+is written last, atomically). A stale image is therefore never loaded: a developer who
+edits a .pl file gets a new key, and the next run compiles and loads the edited code.
+Files the image turns out to contain beyond those directories (none today) are listed
+with their hashes in the manifest and checked on every load.
+
+The cache is filled at set-up (``python -m spar_py.qlf``, run by scripts/setup.sh) and
+otherwise by the first run after a change. ``SPAR_QLF_CACHE`` names the cache directory
+(default ``$XDG_CACHE_HOME/spar-py/qlf``, else ``~/.cache/spar-py/qlf``); set it to
+``off`` to consult the sources every time. At most :data:`KEEP` entries are kept, the
+least recently used are removed.
+
+This module does the file work only; engine.py does the Prolog side (compile, load).
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+#: Layout version of a cache entry; part of every key.
+FORMAT = 1
+#: Entries (compiled images) kept in the cache directory; older ones are removed.
+KEEP = 16
+ENV = "SPAR_QLF_CACHE"
+LOADER = "planner.pl"
+IMAGE = "planner.qlf"
+MANIFEST = "manifest.json"
+
+
+def cache_dir() -> Path | None:
+    """The cache directory (``$SPAR_QLF_CACHE``, ``$XDG_CACHE_HOME/spar-py/qlf`` or
+    ``~/.cache/spar-py/qlf``), or None when ``SPAR_QLF_CACHE=off``."""
+    env = os.environ.get(ENV)
+    if env is not None and env.strip().lower() in ("off", "0", "no", "false", ""):
+        return None
+    if env:
+        return Path(env).expanduser()
+    xdg = os.environ.get("XDG_CACHE_HOME")
+    base = Path(xdg).expanduser() if xdg else Path.home() / ".cache"
+    return base / "spar-py" / "qlf"
+
+
+def file_digest(path: Path) -> str:
+    """SHA-256 of the bytes of ``path`` (hex)."""
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+@dataclass(frozen=True)
+class Sources:
+    """The planner's source files as they are now: ``roots`` the files a process loads
+    (in that order), ``hashes`` every ``*.pl`` of ``dirs`` by absolute path (hex SHA-256)."""
+
+    roots: tuple[Path, ...]
+    dirs: tuple[Path, ...]
+    hashes: dict[str, str]
+
+    @classmethod
+    def scan(cls, roots: list[Path], dirs: list[Path]) -> "Sources":
+        """Hash every ``*.pl`` under ``dirs`` (not recursive) now."""
+        hashes: dict[str, str] = {}
+        for d in dirs:
+            for f in sorted(d.glob("*.pl")):
+                hashes[str(f.resolve())] = file_digest(f)
+        return cls(tuple(p.resolve() for p in roots), tuple(d.resolve() for d in dirs), hashes)
+
+    def covers(self, path: str) -> bool:
+        """True if ``path`` lies in one of the scanned directories (so its hash is in the key)."""
+        return Path(path).parent in self.dirs
+
+
+def key(sources: Sources, swi_version: int, swi_home: str) -> str:
+    """The cache key of ``sources`` compiled by SWI-Prolog ``swi_version`` at ``swi_home``."""
+    doc = {"format": FORMAT, "swi": [swi_version, swi_home],
+           "roots": [str(p) for p in sources.roots], "files": sorted(sources.hashes.items())}
+    return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:32]
+
+
+def loader_text(roots: tuple[Path, ...]) -> str:
+    """The Prolog file the image is compiled from: one ``use_module/1`` per root file,
+    each written as a quoted atom (a path is never read as code)."""
+    lines = ["% spar-py: the planner's files, compiled into one image by spar_py.qlf.", ""]
+    lines += [f":- use_module({_quoted(str(p))})." for p in roots]
+    return "\n".join(lines) + "\n"
+
+
+def _quoted(text: str) -> str:
+    """``text`` as a Prolog quoted atom."""
+    return "'" + text.replace("\\", "\\\\").replace("'", "\\'") + "'"
+
+
+@dataclass(frozen=True)
+class Entry:
+    """One cache entry: ``directory`` holds the loader, the image and the manifest."""
+
+    directory: Path
+
+    @property
+    def loader(self) -> Path:
+        return self.directory / LOADER
+
+    @property
+    def image(self) -> Path:
+        return self.directory / IMAGE
+
+    @property
+    def manifest(self) -> Path:
+        return self.directory / MANIFEST
+
+    def ready(self) -> bool:
+        """True if the entry is complete, its image is the one published, and every extra
+        file it lists is unchanged."""
+        try:
+            doc = json.loads(self.manifest.read_text())
+            if doc.get("format") != FORMAT or file_digest(self.image) != doc.get("sha256"):
+                return False  # damaged, truncated or replaced since it was published
+            for path, digest in doc.get("extra", {}).items():
+                if file_digest(Path(path)) != digest:
+                    return False
+        except (OSError, ValueError, AttributeError):
+            return False
+        return True
+
+    def touch(self) -> None:
+        """Mark the entry as just used (its manifest's mtime orders eviction)."""
+        try:
+            os.utime(self.manifest)
+        except OSError:
+            pass
+
+    def publish(self, extra: dict[str, str]) -> None:
+        """Write the manifest (atomically, last): the entry is complete from now on. It holds
+        the image's own hash and ``extra``: the files the image holds beyond the scanned
+        directories, with their hashes."""
+        import tempfile
+
+        doc = {"format": FORMAT, "image": IMAGE, "sha256": file_digest(self.image), "extra": extra}
+        fd, tmp = tempfile.mkstemp(dir=self.directory, prefix=".manifest.", suffix=".tmp")
+        with os.fdopen(fd, "w") as f:
+            json.dump(doc, f, sort_keys=True)
+        os.replace(tmp, self.manifest)
+
+
+def entry(base: Path, cache_key: str) -> Entry:
+    """The entry of ``cache_key`` under ``base`` (it may not exist yet)."""
+    return Entry(base / cache_key)
+
+
+@contextmanager
+def building(e: Entry) -> Iterator[bool]:
+    """Hold the entry's build lock; yield True if this process must compile it (False if
+    another process completed it while this one waited). Raises OSError if the cache
+    directory cannot be written (the caller then consults the sources)."""
+    e.directory.mkdir(parents=True, exist_ok=True)
+    lock = e.directory.parent / f"{e.directory.name}.lock"
+    with open(lock, "a+") as fh:
+        try:
+            import fcntl
+        except ImportError:  # pragma: no cover - not POSIX: no lock, compile anyway
+            yield not e.ready()
+            return
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            yield not e.ready()
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
+
+
+def evict(base: Path, keep: int = KEEP, spare: str | None = None) -> list[Path]:
+    """Remove all but the ``keep`` most recently used entries under ``base`` (never
+    ``spare``); return the removed directories. Best effort: errors are ignored."""
+    import shutil
+
+    entries: list[tuple[float, Path]] = []
+    try:
+        for d in base.iterdir():
+            if d.is_dir() and d.name != spare:
+                m = d / MANIFEST
+                entries.append((m.stat().st_mtime if m.exists() else d.stat().st_mtime, d))
+    except OSError:
+        return []
+    entries.sort(reverse=True)
+    removed = []
+    for _, d in entries[max(keep - (spare is not None), 0):]:
+        shutil.rmtree(d, ignore_errors=True)
+        try:
+            (base / f"{d.name}.lock").unlink()
+        except OSError:
+            pass
+        removed.append(d)
+    return removed
+
+
+def main() -> None:
+    """``python -m spar_py.qlf``: compile the planner into the cache now (set-up runs it);
+    prints where the image is, or that the cache is off."""
+    from .engine import Engine
+
+    eng = Engine()
+    base = cache_dir()
+    where = "the cache is off" if base is None else f"cache {base}"
+    print(f"setup: planner Prolog {_DONE.get(eng.loaded_from, eng.loaded_from)} ({where})", file=sys.stderr)
+
+
+_DONE = {"qlf": "image up to date", "compiled": "compiled to a .qlf image", "source": "consulted from source"}
+
+
+if __name__ == "__main__":
+    main()

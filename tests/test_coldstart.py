@@ -1,0 +1,196 @@
+"""Cold start: the planner loaded from its compiled image (.qlf), never a stale one.
+
+Each test runs a copy of the checkout's package and Prolog sources in a fresh process
+(its own cache directory), so it can edit a .pl file without touching the checkout.
+"""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import pytest
+
+from spar_py import qlf
+
+ROOT = Path(__file__).resolve().parent.parent
+
+#: Run in the copy: load the planner, report how, and ask it two questions (the default
+#: action bound from spar_defaults.pl and whether a probe predicate exists).
+PROBE = """
+import json
+from spar_py.engine import Engine
+e = Engine()
+bound = e.query_once("spar_defaults:default_option(max_actions, N)")["N"]
+probe = e.query_once("catch(spar_defaults:coldstart_probe(X), _, fail)")
+print(json.dumps({"how": e.loaded_from, "bound": bound, "probe": probe.get("X") if probe["truth"] else None}))
+"""
+
+
+@pytest.fixture()
+def tree(tmp_path: Path) -> Path:
+    """A copy of src/spar_py, prolog/ and kb/templates/ (the package finds its sources
+    beside itself, two levels up)."""
+    dest = tmp_path / "tree"
+    shutil.copytree(ROOT / "src" / "spar_py", dest / "src" / "spar_py",
+                    ignore=shutil.ignore_patterns("__pycache__"))
+    shutil.copytree(ROOT / "prolog", dest / "prolog")
+    shutil.copytree(ROOT / "kb" / "templates", dest / "kb" / "templates")
+    return dest
+
+
+def _run(tree: Path, cache: Path | str, code: str = PROBE) -> dict:
+    env = {**os.environ, "PYTHONPATH": str(tree / "src"), qlf.ENV: str(cache)}
+    r = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120,
+                       cwd=tree)
+    assert r.returncode == 0, r.stderr
+    return json.loads(r.stdout.strip().splitlines()[-1])
+
+
+def _defaults(tree: Path) -> Path:
+    return tree / "prolog" / "spar_defaults.pl"
+
+
+def test_compiled_once_then_loaded_from_the_image(tree: Path, tmp_path: Path) -> None:
+    cache = tmp_path / "cache"
+    first = _run(tree, cache)
+    assert first["how"] == "compiled"
+    second = _run(tree, cache)
+    assert second == {**first, "how": "qlf"}
+    images = list(cache.glob("*/planner.qlf"))
+    assert len(images) == 1 and (images[0].parent / qlf.MANIFEST).is_file()
+
+
+def test_an_edited_source_is_loaded_on_the_next_run(tree: Path, tmp_path: Path) -> None:
+    """A developer edits prolog/*.pl: the next run compiles and loads the edited code, even
+    when the edit keeps the file's size and modification time (the key is the content)."""
+    cache = tmp_path / "cache"
+    assert _run(tree, cache)["probe"] is None
+    assert _run(tree, cache)["how"] == "qlf"
+    f = _defaults(tree)
+    st = f.stat()
+    f.write_text(f.read_text() + "\ncoldstart_probe(1).\n")
+    got = _run(tree, cache)
+    assert got["how"] == "compiled" and got["probe"] == 1
+    assert _run(tree, cache)["probe"] == 1
+
+    # the same length, the old timestamp: a timestamp check would load the image of "1"
+    f.write_text(f.read_text().replace("coldstart_probe(1).", "coldstart_probe(2)."))
+    os.utime(f, ns=(st.st_atime_ns, st.st_mtime_ns))
+    got = _run(tree, cache)
+    assert got["how"] == "compiled" and got["probe"] == 2
+
+    # back to the first edit: its image is still in the cache and is loaded again
+    f.write_text(f.read_text().replace("coldstart_probe(2).", "coldstart_probe(1)."))
+    assert _run(tree, cache) == {"how": "qlf", "bound": got["bound"], "probe": 1}
+
+
+def test_an_edit_to_a_module_loaded_by_another_is_seen(tree: Path, tmp_path: Path) -> None:
+    """kb/templates/actions.pl is loaded through use_module from prolog/ files; changing it
+    (here: a new clause of a predicate the planner reads) gives a new image."""
+    cache = tmp_path / "cache"
+    code = PROBE.replace('"spar_defaults:default_option(max_actions, N)"',
+                         '"catch(spar_actions:coldstart_marker(N), _, N = none)"')
+    assert _run(tree, cache, code)["bound"] == "none"
+    f = tree / "kb" / "templates" / "actions.pl"
+    f.write_text(f.read_text() + "\ncoldstart_marker(seen).\n")
+    got = _run(tree, cache, code)
+    assert got["how"] == "compiled" and got["bound"] == "seen"
+
+
+def test_a_changed_default_is_what_the_planner_uses(tree: Path, tmp_path: Path) -> None:
+    cache = tmp_path / "cache"
+    before = _run(tree, cache)["bound"]
+    f = _defaults(tree)
+    text = f.read_text()
+    assert f"default_option(max_actions, {before})" in text
+    f.write_text(text.replace(f"default_option(max_actions, {before})",
+                              f"default_option(max_actions, {before + 7})"))
+    assert _run(tree, cache)["bound"] == before + 7
+
+
+def test_a_damaged_image_is_rebuilt(tree: Path, tmp_path: Path) -> None:
+    """An image that is not the one published (its hash is in the manifest) is compiled again."""
+    cache = tmp_path / "cache"
+    good = _run(tree, cache)
+    (image,) = cache.glob("*/planner.qlf")
+    image.write_bytes(image.read_bytes()[:1000])  # truncated
+    assert _run(tree, cache) == {**good, "how": "compiled"}
+    assert _run(tree, cache)["how"] == "qlf"
+
+
+def test_an_image_prolog_refuses_is_not_trusted(tree: Path, tmp_path: Path) -> None:
+    """An image whose hash matches but which SWI-Prolog does not load (another VM, say):
+    this run consults the sources, the next one compiles it again."""
+    cache = tmp_path / "cache"
+    good = _run(tree, cache)
+    (image,) = cache.glob("*/planner.qlf")
+    image.write_bytes(b"not a qlf file\n" * 10)
+    manifest = image.parent / qlf.MANIFEST
+    doc = json.loads(manifest.read_text())
+    manifest.write_text(json.dumps({**doc, "sha256": qlf.file_digest(image)}))
+    assert _run(tree, cache) == {**good, "how": "source"}
+    assert _run(tree, cache) == {**good, "how": "compiled"}
+    assert _run(tree, cache)["how"] == "qlf"
+
+
+def test_cache_off_or_unwritable_consults_the_sources(tree: Path, tmp_path: Path) -> None:
+    assert _run(tree, "off")["how"] == "source"
+    blocker = tmp_path / "a-file"
+    blocker.write_text("")
+    assert _run(tree, blocker / "cache")["how"] == "source"
+
+
+def test_processes_starting_together_share_one_image(tree: Path, tmp_path: Path) -> None:
+    cache = tmp_path / "cache"
+    with ThreadPoolExecutor(4) as pool:
+        got = list(pool.map(lambda _: _run(tree, cache), range(4)))
+    assert {g["how"] for g in got} <= {"compiled", "qlf"}
+    assert sum(g["how"] == "compiled" for g in got) == 1  # the others waited on the lock
+    assert len({(g["bound"], g["probe"]) for g in got}) == 1
+    assert len(list(cache.glob("*/planner.qlf"))) == 1
+
+
+def test_two_checkouts_with_the_same_sources_do_not_share_an_image(tree: Path, tmp_path: Path) -> None:
+    """The image records its files by path; a second copy gets its own entry, and its
+    modules are its own files."""
+    cache = tmp_path / "cache"
+    other = tmp_path / "other"
+    shutil.copytree(tree, other)
+    code = PROBE.replace('"spar_defaults:default_option(max_actions, N)"',
+                         '"module_property(spar_toplevel, file(N))"')
+    a, b = _run(tree, cache, code), _run(other, cache, code)
+    assert a["how"] == b["how"] == "compiled"
+    assert a["bound"].startswith(str(tree)) and b["bound"].startswith(str(other))
+
+
+def test_eviction_keeps_the_most_recently_used(tmp_path: Path) -> None:
+    for i in range(5):
+        d = tmp_path / f"k{i}"
+        d.mkdir()
+        (d / qlf.MANIFEST).write_text("{}")
+        os.utime(d / qlf.MANIFEST, (1000 + i, 1000 + i))
+    removed = qlf.evict(tmp_path, keep=3, spare="k0")
+    assert sorted(p.name for p in removed) == ["k1", "k2"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["k0", "k3", "k4"]
+
+
+def test_the_key_changes_with_every_part() -> None:
+    roots = [ROOT / "prolog" / "spar.pl"]
+    s = qlf.Sources.scan(roots, [ROOT / "prolog"])
+    k = qlf.key(s, 90209, "/swi")
+    assert k == qlf.key(qlf.Sources.scan(roots, [ROOT / "prolog"]), 90209, "/swi")
+    assert k != qlf.key(s, 90210, "/swi") and k != qlf.key(s, 90209, "/other")
+    one = next(iter(s.hashes))
+    changed = qlf.Sources(s.roots, s.dirs, {**s.hashes, one: "0" * 64})
+    fewer = qlf.Sources(s.roots, s.dirs, {p: h for p, h in s.hashes.items() if p != one})
+    assert len({k, qlf.key(changed, 90209, "/swi"), qlf.key(fewer, 90209, "/swi")}) == 3
+
+
+def test_loader_quotes_paths() -> None:
+    text = qlf.loader_text((Path("/a b/it's.pl"),))
+    assert ":- use_module('/a b/it\\'s.pl')." in text
