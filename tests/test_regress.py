@@ -44,3 +44,121 @@ def test_every_problem_has_an_expected_outcome() -> None:
     problems = {p.stem for p in (KB / "problems").glob("*.yaml")}
     expected = {p.stem for p in (KB / "problems" / "expected").glob("*.json")}
     assert problems == expected
+
+
+# ---------------------------------------------------------------------- on a Dask cluster
+
+distributed = pytest.importorskip("distributed")
+
+#: Problems that plan in well under a second each (kept small: each test starts a cluster).
+CLUSTER_SUITE = ("hole_up", "peg_in_block", "placement_trap", "separation", "two_pegs")
+
+
+@pytest.fixture()
+def suite(tmp_path: Path) -> Path:
+    for name in CLUSTER_SUITE:
+        _copy_problem(name, tmp_path)
+    return tmp_path
+
+
+@pytest.fixture()
+def cluster():
+    """A LocalCluster of two single-threaded worker processes (each its own Prolog), and a
+    client that is not made the process's default."""
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as c, \
+            distributed.Client(c, set_as_default=False) as client:
+        yield client
+
+
+def _table_rows(out: str) -> list[tuple[str, str]]:
+    """(problem, result) of each table row printed by run_regression."""
+    lines = out.splitlines()
+    start = next(i for i, ln in enumerate(lines) if ln.startswith("problem "))
+    rows = []
+    for ln in lines[start + 1:]:
+        parts = ln.split()
+        if len(parts) < 2 or parts[1] not in ("PASS", "FAIL", "ERROR", "NEW", "UPDATED"):
+            break
+        rows.append((parts[0], parts[1]))
+    return rows
+
+
+def test_cluster_run_gives_every_result_in_the_problems_order(suite: Path, cluster,
+                                                              capsys: pytest.CaptureFixture[str]) -> None:
+    assert run_regression(suite, client=cluster) == 0
+    out = capsys.readouterr().out
+    assert _table_rows(out) == [(n, "PASS") for n in sorted(CLUSTER_SUITE)]
+    assert f"{len(CLUSTER_SUITE)} of {len(CLUSTER_SUITE)} passed" in out
+
+    # a changed expectation fails on the cluster as it does here, with the same diff
+    exp = suite / "expected" / "hole_up.json"
+    doc = json.loads(exp.read_text())
+    exp.write_text(json.dumps({**doc, "actions": doc["actions"][:1]}))
+    assert run_regression(suite, client=cluster) == 1
+    on_cluster = capsys.readouterr().out
+    assert run_regression(suite) == 1
+    here = capsys.readouterr().out
+    assert _table_rows(on_cluster) == _table_rows(here)
+    assert on_cluster.split("planning\n", 1)[1] == here.split("planning\n", 1)[1]  # the diffs
+
+
+def test_a_problem_that_does_not_load_is_an_error_row(suite: Path, cluster,
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    (suite / "broken.yaml").write_text("problem: broken\nrobot: nowhere.yaml\n")
+    assert run_regression(suite, client=cluster) == 1
+    rows = dict(_table_rows(capsys.readouterr().out))
+    assert rows.pop("broken") == "ERROR" and set(rows.values()) == {"PASS"}
+
+
+def test_a_worker_killed_mid_run_loses_no_result(suite: Path, cluster,
+                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    """SIGKILL the worker running a problem: its task runs again on a worker that is
+    alive (the nanny restarts the killed one) and every problem still has its result."""
+    import os
+    import signal
+    import threading
+    import time
+
+    done: dict[str, int] = {}
+    run = threading.Thread(target=lambda: done.update(code=run_regression(suite, client=cluster)))
+    run.start()
+    victim = None
+    deadline = time.monotonic() + 60
+    while victim is None and time.monotonic() < deadline:
+        for worker, keys in cluster.processing().items():
+            ours = [k for k in keys if str(k).startswith("spar-regress-")]
+            if ours:
+                victim = (worker, ours)
+                break
+        time.sleep(0.005)
+    assert victim is not None, "no task was seen processing"
+    worker, keys = victim
+    pid = cluster.run(os.getpid, workers=[worker])[worker]
+    os.kill(pid, signal.SIGKILL)
+    run.join(timeout=300)
+    assert not run.is_alive()
+    assert done["code"] == 0
+    out = capsys.readouterr().out
+    assert _table_rows(out) == [(n, "PASS") for n in sorted(CLUSTER_SUITE)]
+
+    # the killed worker's task went to processing again after the kill (the scheduler's story)
+    def processing_count(key: str):
+        def count(dask_scheduler) -> int:
+            return sum(1 for t in dask_scheduler.story(key) if t[0] == key and t[2] == "processing")
+        return count
+
+    assert any(cluster.run_on_scheduler(processing_count(k)) >= 2 for k in keys)
+
+
+def test_scheduler_and_jobs_exclude_each_other_and_a_bad_address_is_one_line(suite: Path) -> None:
+    import subprocess
+    import sys
+
+    spar = [sys.executable, "-m", "spar_py.cli", "regress", str(suite)]
+    r = subprocess.run(spar + ["-j", "2", "--scheduler", "tcp://127.0.0.1:8786"], capture_output=True,
+                       text=True, timeout=60)
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and "-j" in r.stderr and "--scheduler" in r.stderr
+    r = subprocess.run(spar + ["--scheduler", "bogus://x:1"], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and r.stderr.count("\n") == 1
+    assert r.stderr.startswith("spar: regress: --scheduler bogus://x:1: expected an address")

@@ -180,7 +180,9 @@ def cmd_regress(args: argparse.Namespace) -> int:
     """Check every problem under a directory against its expected outcome."""
     from .regress import run_regression
 
-    return run_regression(Path(args.dir), jobs=args.jobs, update=args.update)
+    if args.scheduler is not None and args.jobs != 1:
+        raise SparError("regress: -j N runs processes on this machine, --scheduler on a cluster: give one")
+    return run_regression(Path(args.dir), jobs=args.jobs, update=args.update, scheduler=args.scheduler)
 
 
 # ---------------------------------------------------------------------- gen
@@ -246,7 +248,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     reg = sub.add_parser("regress", help="check every problem under DIR against its expected outcome")
     reg.add_argument("dir", nargs="?", default="kb/problems")
-    reg.add_argument("-j", "--jobs", type=_positive_int, default=1, help="worker processes")
+    reg.add_argument("-j", "--jobs", type=_positive_int, default=1, help="worker processes on this machine")
+    reg.add_argument("--scheduler", metavar="ADDRESS",
+                     help="run each problem as a task on this Dask scheduler (tcp://host:8786; "
+                          "needs the 'cluster' extra)")
     reg.add_argument("--update", action="store_true", help="accept the new outcomes as expected")
     reg.set_defaults(func="regress")
 

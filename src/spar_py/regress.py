@@ -5,9 +5,18 @@ at any depth) the expected outcome lives beside it in ``expected/<stem>.json``: 
 summary of its plan (outcome, actions, orderings, sensing inserted, error count, the
 bindings that are unique). Object and robot models are skipped with a note line (so
 ``spar regress kb`` works). ``spar regress DIR``
-plans every problem (``-j N`` worker processes, each with its own embedded Prolog),
-prints a table of pass/fail and times, a readable diff for each failure, and exits 1
-if anything failed; ``--update`` writes the new outcomes as the expected ones.
+plans every problem (``-j N`` worker processes on this machine, each with its own
+embedded Prolog; or ``--scheduler ADDRESS``, the workers of a Dask cluster), prints a
+table of pass/fail and times in the problems' order, a readable diff for each failure,
+and exits 1 if anything failed; ``--update`` writes the new outcomes as the expected ones.
+
+On a cluster (:func:`run_on_cluster`) each problem is one task. The problem is loaded
+and checked here and its validated cell is sent to the task, so the workers need
+spar-py installed (the same version) but not the knowledge-base files. A task whose
+worker is lost (killed, crashed, cut off) is run again on another worker: the
+scheduler reschedules it (Dask's ``distributed.scheduler.allowed-failures``), and if
+it still gives up (``KilledWorker``) the task is submitted again, up to
+:data:`CLUSTER_RETRIES` times, before its row says ERROR.
 """
 from __future__ import annotations
 
@@ -17,6 +26,7 @@ import json
 import multiprocessing
 import sys
 import time
+import uuid
 from pathlib import Path
 from typing import Any
 
@@ -46,7 +56,17 @@ def summarize(plan: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def _plan_one(path: str) -> tuple[str, dict[str, Any] | None, str, float]:
+#: One row of a run: (problem path, summary or None, error text, seconds).
+Result = tuple[str, "dict[str, Any] | None", str, float]
+
+#: Times a task lost with its workers is submitted again on a cluster (after the
+#: scheduler's own rescheduling gave up on it).
+CLUSTER_RETRIES = 2
+#: Seconds to wait for the scheduler of ``--scheduler ADDRESS`` to answer.
+CONNECT_TIMEOUT_S = 10.0
+
+
+def _plan_one(path: str) -> Result:
     """Plan one problem file; (path, summary or None, error text, seconds)."""
     from .planner import Planner
 
@@ -56,6 +76,101 @@ def _plan_one(path: str) -> tuple[str, dict[str, Any] | None, str, float]:
         return path, summarize(plan.to_json()), "", time.perf_counter() - t0
     except SparError as e:
         return path, None, str(e).splitlines()[0], time.perf_counter() - t0
+
+
+def _plan_cell(path: str, cell: Any) -> Result:
+    """A cluster task: plan the loaded ``cell`` of problem file ``path`` in this worker
+    (its own embedded Prolog); the row as :func:`_plan_one` gives it."""
+    from .planner import Planner
+
+    t0 = time.perf_counter()
+    try:
+        plan = Planner().plan(cell)
+        return path, summarize(plan.to_json()), "", time.perf_counter() - t0
+    except SparError as e:
+        return path, None, str(e).splitlines()[0], time.perf_counter() - t0
+
+
+def run_on_cluster(paths: list[str], client: Any, progress: Any = None) -> list[Result]:
+    """Plan every problem file of ``paths`` on the Dask cluster of ``client`` (a
+    ``distributed.Client``), one task each; the rows in the order of ``paths``.
+
+    A problem that does not load is an ERROR row at once (no task). A task lost with its
+    worker is rescheduled by Dask; one that Dask gives up on (``KilledWorker``) is
+    submitted again, at most :data:`CLUSTER_RETRIES` times; any other failure of a task
+    (not a SparError, which its row reports) is an ERROR row naming it."""
+    from distributed import as_completed
+    from distributed.scheduler import KilledWorker
+
+    from .kb import load_problem
+
+    rows: dict[str, Result] = {}
+    futures: dict[Any, str] = {}
+
+    def submit(path: str) -> Any:
+        """Load ``path`` here and submit its cell as a task (None if it does not load)."""
+        t0 = time.perf_counter()
+        try:
+            cell = load_problem(path)
+        except SparError as e:
+            rows[path] = (path, None, _first_line(e), time.perf_counter() - t0)
+            return None
+        # pure=False and a fresh key: a suite run twice plans twice; the key names the problem
+        fut = client.submit(_plan_cell, path, cell, pure=False,
+                            key=f"spar-regress-{Path(path).stem}-{uuid.uuid4().hex[:12]}")
+        futures[fut] = path
+        return fut
+
+    queue = as_completed([f for f in map(submit, paths) if f is not None], loop=client.loop)
+    tries = dict.fromkeys(paths, 0)
+    for fut in queue:
+        path = futures.pop(fut)
+        try:
+            rows[path] = fut.result()
+        except KilledWorker as e:
+            if tries[path] < CLUSTER_RETRIES:
+                tries[path] += 1
+                again = submit(path)
+                if again is not None:
+                    queue.add(again)
+                    continue
+            else:
+                rows[path] = (path, None, f"lost with its workers {tries[path] + 1} times ({_first_line(e)})", 0.0)
+        except Exception as e:  # a task that failed another way: its row says how
+            rows[path] = (path, None, f"task failed: {type(e).__name__}: {_first_line(e)}", 0.0)
+        if progress is not None:
+            progress(len(rows), len(paths), Path(path).stem)
+    return [rows[p] for p in paths]
+
+
+def _first_line(e: BaseException) -> str:
+    return (str(e).splitlines() or [""])[0]
+
+
+def connect(address: str) -> Any:
+    """A ``distributed.Client`` of the scheduler at ``address``; SparError (one line) if
+    distributed is not installed or the scheduler does not answer."""
+    try:
+        from distributed import Client
+    except ImportError:
+        raise SparError("regress: --scheduler needs Dask's distributed (pip install 'spar-py[cluster]')") from None
+    from distributed.comm import parse_address
+    from distributed.comm.registry import backends
+
+    try:
+        scheme = parse_address(address)[0]
+    except (ValueError, TypeError) as e:
+        scheme, why = "", _first_line(e)
+    else:
+        why = f"unknown scheme {scheme!r}"
+    if scheme not in backends:  # refused before a Client exists: a half-made one hangs at exit
+        raise SparError(f"regress: --scheduler {address}: expected an address such as tcp://host:8786 "
+                        f"(schemes {', '.join(sorted(backends))}), not one with {why}")
+    try:
+        return Client(address, timeout=CONNECT_TIMEOUT_S, set_as_default=False)
+    except (OSError, TimeoutError, ValueError) as e:
+        raise SparError(f"regress: --scheduler {address}: expected a Dask scheduler that answers within "
+                        f"{CONNECT_TIMEOUT_S:g} s, not ({type(e).__name__}: {_first_line(e)})") from None
 
 
 def _progress(done: int, total: int, name: str) -> None:
@@ -104,8 +219,14 @@ def _row_name(directory: Path, problem: Path) -> str:
     return rel.name if rel.parent == Path(".") else str(rel)
 
 
-def run_regression(directory: Path, jobs: int = 1, update: bool = False) -> int:
-    """Run every problem under ``directory``; print the table; return the exit code (0/1)."""
+def run_regression(directory: Path, jobs: int = 1, update: bool = False, scheduler: str | None = None,
+                   client: Any = None) -> int:
+    """Run every problem under ``directory``; print the table; return the exit code (0/1).
+
+    ``jobs`` > 1: that many worker processes here. ``scheduler`` (an address such as
+    ``tcp://host:8786``) or ``client`` (a ``distributed.Client``): the problems run as
+    tasks on that Dask cluster (:func:`run_on_cluster`). The table is in the problems'
+    order whichever way they ran."""
     problems, notes = problem_files(directory)
     for note in notes:
         print(note)
@@ -113,19 +234,29 @@ def run_regression(directory: Path, jobs: int = 1, update: bool = False) -> int:
         print(f"spar: regress: no problem files (*.yaml with `problem:`) in {directory}", file=sys.stderr)
         return 2
     names = {str(p): _row_name(directory, p) for p in problems}
-    results: list[tuple[str, dict | None, str, float]] = []
-    if jobs == 1:
+    paths = [str(p) for p in problems]
+    results: list[Result] = []
+    if client is not None or scheduler is not None:
+        own = client is None
+        client = connect(scheduler) if own else client
+        try:
+            results = run_on_cluster(paths, client, _progress)
+        finally:
+            if own:
+                client.close()
+    elif jobs == 1:
         for i, p in enumerate(problems):
             _progress(i, len(problems), p.stem)
             results.append(_plan_one(str(p)))
     else:
         ctx = multiprocessing.get_context("spawn")
         with cf.ProcessPoolExecutor(max_workers=jobs, mp_context=ctx) as pool:
-            futs = {pool.submit(_plan_one, str(p)): p for p in problems}
+            futs = {pool.submit(_plan_one, p): p for p in paths}
             for i, f in enumerate(cf.as_completed(futs)):
-                _progress(i, len(problems), futs[f].stem)
+                _progress(i, len(problems), Path(futs[f]).stem)
                 results.append(f.result())
-        results.sort()
+        order = {p: i for i, p in enumerate(paths)}
+        results.sort(key=lambda r: order[r[0]])
     _progress(len(problems), len(problems), "")
 
     failed = 0
