@@ -60,6 +60,8 @@
 :- use_module(library(option)).
 :- use_module(library(yall)).
 :- use_module(library(ordsets)).
+:- use_module(library(aggregate), [aggregate_all/3]).  % imported, not autoloaded: loads with the
+:- use_module(library(occurs), [sub_term/2]).            % planner, not in the first plan (issue 18)
 :- use_module(kb, []).
 :- use_module(ordering).
 :- use_module(cms).

@@ -44,6 +44,7 @@
 :- use_module(library(option)).
 :- use_module(library(error)).
 :- use_module(library(yall)).
+:- use_module(library(solution_sequences), [limit/2]).  % imported, not autoloaded (issue 18)
 :- use_module(foreign, [py_bridge/2, term_data/2]).
 :- use_module(spar_defaults, [default_option/2]).
 :- use_module('../kb/templates/sensing', []).

@@ -10,7 +10,6 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-import tempfile
 from pathlib import Path
 from typing import Callable
 
@@ -132,7 +131,9 @@ def cmd_plan(args: argparse.Namespace) -> int:
     guard = args.guard
     from .engine import start_engine
 
-    start_engine()  # Prolog consults the planner while the imports below run
+    start_engine()  # Prolog loads the planner while the imports below run
+    import tempfile
+
     from .kb import load_problem
     from .planner import Outcome, Planner
 

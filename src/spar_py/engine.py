@@ -46,7 +46,6 @@ def _malloc_trim() -> Any:
         return None
 
 
-_MALLOC_TRIM = _malloc_trim()
 
 
 def _one_line(text: str) -> str:
@@ -94,6 +93,7 @@ class Engine:
         self._kept: dict[str, None] = {}  # problems sessions keep loaded, oldest first
         self.lock = threading.RLock()
         self._loader: threading.Thread | None = None
+        self._trim: Any = False  # glibc's malloc_trim once looked up (None: there is none)
         self.loaded_from = ""  # how the planner was loaded: "qlf", "compiled" or "source"
         self._load_error: BaseException | None = None
         if background:
@@ -297,8 +297,10 @@ class Engine:
         so a long-lived process planning again and again stays at one size
         (bench/memory.py)."""
         self._query_once("trim_stacks")
-        if _MALLOC_TRIM is not None:
-            _MALLOC_TRIM(0)
+        if self._trim is False:  # looked up after the first run: ctypes is 2 ms of a cold start
+            self._trim = _malloc_trim()
+        if self._trim is not None:
+            self._trim(0)
 
 
 def engine() -> Engine:

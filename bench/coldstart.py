@@ -1,0 +1,174 @@
+"""Cold start: `spar plan` of the paper's cell as a fresh process, against the import floor (issue 18).
+
+Run from the project root: ``.venv/bin/python -m bench.coldstart [--repeats 15] [--quick]``.
+
+Each round runs these fresh processes one after the other, so all see the same machine
+load (the order rotates from round to round); the figures are medians over the rounds:
+
+- ``floor``: ``python -c "import numpy, casadi, janus_swi"`` (importing janus starts
+  the embedded SWI-Prolog): what any process of this design pays before planning;
+- ``plan``: ``spar plan kb/problems/peg_in_block.yaml``, the planner's Prolog loaded
+  from its compiled image (spar_py/qlf.py; the cache is filled first);
+- ``plan, sources``: the same with ``SPAR_QLF_CACHE=off``: the Prolog consulted from
+  prolog/*.pl and kb/templates/*.pl at every start, as before the image;
+- ``engine`` and ``engine, sources``: ``python -c "import spar_py.engine as e; e.engine()"``,
+  the engine start alone, both ways.
+
+Beside them, from ``python -X importtime`` of cold plans: what the plan imports beyond
+the floor (self time by top-level package, medians), and which heavy libraries a cold
+plan of the paper's cell imports at all (trimesh, fcl, coal, ompl, yourdfpy, scipy,
+matplotlib, distributed, ...).
+"""
+from __future__ import annotations
+
+import argparse
+import collections
+import os
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+CELL = "kb/problems/peg_in_block.yaml"
+BIN = Path(sys.executable).parent
+FLOOR = "import numpy, casadi, janus_swi"
+ENGINE = "import spar_py.engine as e; e.engine()"
+#: The target of issue 18: cold `spar plan` of the paper's cell over the floor.
+TARGET_RATIO = 1.5
+#: Libraries the world layer and the tools may bring; a cold plan of the paper's cell
+#: should import none of them.
+HEAVY = ("trimesh", "fcl", "coal", "hppfcl", "ompl", "yourdfpy", "scipy", "matplotlib", "networkx",
+         "manifold3d", "distributed", "dask", "roboticstoolbox", "spatialmath", "PIL", "pandas", "sympy")
+
+
+def _commands() -> dict[str, tuple[list[str], dict[str, str]]]:
+    """Name -> (argv, extra environment) of each timed process."""
+    py = sys.executable
+    off = {"SPAR_QLF_CACHE": "off"}
+    plan = [str(BIN / "spar"), "plan", CELL]
+    return {"floor": ([py, "-c", FLOOR], {}),
+            "plan": (plan, {}),
+            "plan, sources": (plan, off),
+            "engine": ([py, "-c", ENGINE], {}),
+            "engine, sources": ([py, "-c", ENGINE], off)}
+
+
+def _time(argv: list[str], env: dict[str, str]) -> float:
+    t = time.perf_counter()
+    r = subprocess.run(argv, cwd=ROOT, env={**os.environ, **env}, stdout=subprocess.DEVNULL,
+                       stderr=subprocess.PIPE, timeout=120, check=False)
+    dt = time.perf_counter() - t
+    if r.returncode != 0:
+        raise RuntimeError(f"{' '.join(argv)} exited {r.returncode}: {r.stderr.decode()[-300:]}")
+    return dt
+
+
+def _fill_cache() -> str:
+    """Make sure the planner's image is in the cache (as set-up does); how it was loaded."""
+    out = subprocess.run([sys.executable, "-c", "from spar_py.engine import Engine; print(Engine().loaded_from)"],
+                         cwd=ROOT, capture_output=True, text=True, check=True)
+    return out.stdout.strip()
+
+
+def importtime(runs: int = 5) -> dict:
+    """``-X importtime`` of ``runs`` cold plans and as many floor processes.
+
+    Keys: ``beyond_floor`` [(package, median ms)] of the modules a plan imports that the
+    floor does not (self time summed by top-level package; spar_py by module), largest
+    first; ``beyond_floor_ms`` their sum; ``heavy`` the HEAVY libraries a cold plan imported;
+    ``modules`` how many modules a plan imports beyond the floor."""
+    def imported(argv: list[str]) -> dict[str, int]:
+        r = subprocess.run([sys.executable, "-X", "importtime", *argv], cwd=ROOT, capture_output=True, text=True,
+                           timeout=120, check=False)
+        us: dict[str, int] = {}
+        for line in r.stderr.splitlines():
+            if line.startswith("import time:") and "self [us]" not in line:
+                parts = line.split("|")
+                us[parts[2].strip()] = int(parts[0].split(":")[1])
+        return us
+
+    floor_mods: set[str] = set()
+    per: dict[str, list[float]] = collections.defaultdict(list)
+    heavy: set[str] = set()
+    counts = []
+    for _ in range(runs):
+        floor_mods |= set(imported(["-c", FLOOR]))
+        plan = imported(["-m", "spar_py.cli", "plan", CELL])
+        heavy |= {m.split(".")[0] for m in plan if m.split(".")[0] in HEAVY}
+        extra = {m: t for m, t in plan.items() if m not in floor_mods}
+        counts.append(len(extra))
+        groups: collections.Counter[str] = collections.Counter()
+        for m, t in extra.items():
+            top = m.split(".")[0]
+            groups[".".join(m.split(".")[:2]) if top == "spar_py" else top] += t
+        for g, t in groups.items():
+            per[g].append(t / 1000)
+    med = sorted(((g, statistics.median(v + [0.0] * (runs - len(v)))) for g, v in per.items()),
+                 key=lambda x: -x[1])
+    return {"runs": runs, "beyond_floor": med, "beyond_floor_ms": sum(t for _, t in med),
+            "heavy": sorted(heavy), "modules": statistics.median(counts)}
+
+
+def run(repeats: int = 15, importtime_runs: int = 5) -> dict:
+    """The cold-start figures: medians (s) by command name in ``median``, every run in
+    ``runs``, ``ratio`` plan/floor, ``ratio_sources`` plan from sources/floor,
+    ``engine_saving_s``, the import breakdown in ``imports``."""
+    first = _fill_cache()
+    cmds = _commands()
+    names = list(cmds)
+    runs: dict[str, list[float]] = {n: [] for n in names}
+    for n in names:  # one unrecorded round: the OS file cache, bytecode
+        _time(*cmds[n])
+    for i in range(repeats):
+        for n in names[i % len(names):] + names[:i % len(names)]:
+            runs[n].append(_time(*cmds[n]))
+    med = {n: statistics.median(v) for n, v in runs.items()}
+    return {"repeats": repeats, "cache_before": first, "median": med, "runs": runs,
+            "ratio": med["plan"] / med["floor"], "ratio_sources": med["plan, sources"] / med["floor"],
+            "engine_saving_s": med["engine, sources"] - med["engine"],
+            "plan_saving_s": med["plan, sources"] - med["plan"],
+            "target": TARGET_RATIO, "imports": importtime(importtime_runs)}
+
+
+def render(r: dict) -> list[str]:
+    """The RESULTS.md section of :func:`run`'s dict (Markdown lines)."""
+    m, f = r["median"], r["median"]["floor"]
+    L = ["## Cold start (bench/coldstart.py)", "",
+         (f"Fresh processes, {r['repeats']} rounds, each round running every command once (rotating "
+          "order); medians. `floor` = `python -c \"import numpy, casadi, janus_swi\"` (janus starts "
+          "SWI-Prolog); `plan` = `spar plan kb/problems/peg_in_block.yaml`; `sources` = the same with "
+          "`SPAR_QLF_CACHE=off` (the Prolog consulted at every start instead of loaded from its .qlf "
+          "image); `engine` = `python -c \"import spar_py.engine as e; e.engine()\"`."), ""]
+    rows = []
+    for name in ("floor", "plan", "plan, sources", "engine", "engine, sources"):
+        rows.append([name, f"{m[name] * 1e3:.0f} ms", f"{m[name] / f:.2f}",
+                     f"{min(r['runs'][name]) * 1e3:.0f}-{max(r['runs'][name]) * 1e3:.0f} ms"])
+    L += ["| process | median | x floor | range |", "|---|---|---|---|",
+          *["| " + " | ".join(x) + " |" for x in rows], ""]
+    ok = r["ratio"] <= r["target"]
+    L += [(f"Cold `spar plan` is {r['ratio']:.2f}x the floor (target <= {r['target']:g}x: "
+           f"{'met' if ok else 'NOT met'}); from sources it is {r['ratio_sources']:.2f}x. The image saves "
+           f"{r['engine_saving_s'] * 1e3:.0f} ms of the engine start and {r['plan_saving_s'] * 1e3:.0f} ms of "
+           "the whole plan (the background load overlaps the imports, so the plan gains less)."), ""]
+    imp = r["imports"]
+    top = ", ".join(f"{g} {t:.1f}" for g, t in imp["beyond_floor"][:14])
+    L += [(f"Imports beyond the floor (`-X importtime`, {imp['runs']} runs, median self time in ms, "
+           f"{imp['modules']:.0f} modules, {imp['beyond_floor_ms']:.0f} ms in all): {top}. "
+           "Heavy libraries a cold plan of the paper's cell imports: "
+           f"{', '.join(imp['heavy']) if imp['heavy'] else 'none'} (of {', '.join(HEAVY)})."), ""]
+    return L
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(prog="python -m bench.coldstart", description=__doc__.splitlines()[0])
+    ap.add_argument("--repeats", type=int, default=15)
+    ap.add_argument("--quick", action="store_true", help="3 rounds, 1 importtime run")
+    a = ap.parse_args(argv)
+    r = run(3, 1) if a.quick else run(a.repeats)
+    print("\n".join(render(r)))
+
+
+if __name__ == "__main__":
+    main()
