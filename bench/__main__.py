@@ -18,7 +18,7 @@ import sys
 import time
 from pathlib import Path
 
-from . import ik, memory, planning, supinf
+from . import coldstart, ik, memory, planning, supinf
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "RESULTS.md"
@@ -38,11 +38,13 @@ RSS_KB_PER_PLAN = memory.LIMIT_KB
 FULL = {"ik": {"n": 10_000, "single": 1000, "rtb": 200, "repeats": 5},
         "supinf": {"per_length": 6, "repeats": 5},
         "planning": {"quick": False, "max_n": 10},
-        "memory": {"plans": 1000, "warmup": 50}}
+        "memory": {"plans": 1000, "warmup": 50},
+        "coldstart": {"repeats": 15, "importtime_runs": 5}}
 QUICK = {"ik": {"n": 1000, "single": 100, "rtb": 20, "repeats": 3},
          "supinf": {"per_length": 1, "lengths": (1, 4, 8), "repeats": 3},
          "planning": {"quick": True, "max_n": 2, "timeout": 60.0},
-         "memory": {"plans": 100, "warmup": 10, "processes": 1}}
+         "memory": {"plans": 100, "warmup": 10, "processes": 1},
+         "coldstart": {"repeats": 3, "importtime_runs": 1}}
 
 
 # ---------------------------------------------------------------------- where and with what
@@ -114,7 +116,8 @@ def run_all(quick: bool = False, log=None) -> dict:
     for name, fn in (("ik", lambda: ik.run(**sizes["ik"])),
                      ("supinf", lambda: supinf.run(**sizes["supinf"], progress=say)),
                      ("planning", lambda: planning.run(**sizes["planning"], progress=say)),
-                     ("memory", lambda: memory.run(**sizes["memory"]))):
+                     ("memory", lambda: memory.run(**sizes["memory"])),
+                     ("coldstart", lambda: coldstart.run(**sizes["coldstart"]))):
         say(f"== {name}")
         t = time.perf_counter()
         out[name] = fn()
@@ -197,7 +200,8 @@ def render(r: dict) -> str:
         [f"paper's cell warm < {WARM_S * 1e3:g} ms", v["warm"][1], _met(v["warm"][0])],
         [f"paper's cell cold < {COLD_S:g} s", v["cold"][1], _met(v["cold"][0])],
         [f"N = 10 planned under {N10_S:g} s", v["n10"][1], _met(v["n10"][0])],
-    ] + [[f"RSS growth, {name}, <= {RSS_KB_PER_PLAN:g} kB per plan (issue 12)", v[key][1], _met(v[key][0])]
+    ] + coldstart.target_rows(r.get("coldstart")) + [
+        [f"RSS growth, {name}, <= {RSS_KB_PER_PLAN:g} kB per plan (issue 12)", v[key][1], _met(v[key][0])]
          for key, name in (("rss_paper", "paper's cell"), ("rss_n3", "generated N = 3"))
          if key in v])
     L += ["## Reading", "", reading(r), ""]
@@ -313,6 +317,9 @@ def render(r: dict) -> str:
         L += _table(["figure", "before", "after", "after/before"],
                     [[name, f"{v['before'] * 1e3:.1f} ms", f"{v['after'] * 1e3:.1f} ms",
                       f"{v['after'] / v['before']:.2f}"] for name, v in ba["figures"].items()])
+
+    if r.get("coldstart"):
+        L += coldstart.render(r["coldstart"])
 
     L += ["## Where the time goes (cProfile)", "",
           ("Python's profiler sees SWI-Prolog as one call (`janus_swi._swipl.call`): its internal time "
