@@ -61,7 +61,7 @@ Result = tuple[str, "dict[str, Any] | None", str, float]
 
 #: Times a task lost with its workers is submitted again on a cluster (after the
 #: scheduler's own rescheduling gave up on it).
-CLUSTER_RETRIES = 2
+CLUSTER_RETRIES = 1
 #: Seconds to wait for the scheduler of ``--scheduler ADDRESS`` to answer.
 CONNECT_TIMEOUT_S = 10.0
 
