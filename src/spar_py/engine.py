@@ -15,6 +15,7 @@ from __future__ import annotations
 import json
 import os
 import threading
+import time
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Iterator
@@ -95,6 +96,7 @@ class Engine:
         self._loader: threading.Thread | None = None
         self._trim: Any = False  # glibc's malloc_trim once looked up (None: there is none)
         self.loaded_from = ""  # how the planner was loaded: "qlf", "compiled" or "source"
+        self.load_s = 0.0  # seconds that took (wall, in the thread that loaded it)
         self._load_error: BaseException | None = None
         if background:
             self._loader = threading.Thread(target=self._load_in_thread, name="spar-consult")
@@ -107,6 +109,7 @@ class Engine:
         image when the cache has one for these very sources (spar_py/qlf.py), compiling
         it there first when not, and from the sources when there is no usable cache.
         :attr:`loaded_from` says which ("qlf", "compiled" or "source")."""
+        t0 = time.perf_counter()
         roots = [PROLOG_DIR / "spar.pl", *sorted(TEMPLATES_DIR.glob("*.pl"))]
         how = self._load_image(roots)
         if how is None:
@@ -114,6 +117,7 @@ class Engine:
                 self._consult(f)
             how = "source"
         self.loaded_from = how
+        self.load_s = time.perf_counter() - t0
 
     def _load_image(self, roots: list[Path]) -> str | None:
         """Load the planner from the .qlf cache (see :mod:`spar_py.qlf`); "qlf" if loaded
