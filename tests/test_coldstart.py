@@ -213,3 +213,37 @@ def test_the_benchmark_measures_plan_and_floor_in_one_run() -> None:
     text = "\n".join(coldstart.render(r))
     assert "## Cold start" in text and "x the floor" in text
     assert coldstart.target_rows(r)[0][2] in ("met", "NOT met") and coldstart.target_rows(None) == []
+
+
+def test_spar_plan_after_an_edit_compiles_in_its_loading_thread(tree: Path, tmp_path: Path) -> None:
+    """`spar plan` loads the Prolog in a background thread: after an edit that thread
+    compiles the new image, and the plan is the same as from the sources."""
+    cache = tmp_path / "cache"
+    env = {**os.environ, "PYTHONPATH": str(tree / "src")}
+    cmd = [sys.executable, "-m", "spar_py.cli", "plan", str(ROOT / "kb" / "problems" / "peg_in_block.yaml"),
+           "--json"]
+
+    def plan(cache_setting: str) -> dict:
+        r = subprocess.run(cmd, env={**env, qlf.ENV: cache_setting}, capture_output=True, text=True,
+                           timeout=120, cwd=tree)
+        assert r.returncode == 0 and r.stderr == "", r.stderr
+        doc = json.loads(r.stdout)
+        doc.pop("timing", None)
+        return doc
+
+    from_sources = plan("off")
+    f = tree / "prolog" / "ordering.pl"
+    f.write_text(f.read_text() + "\n% an edit that changes no behaviour\n")
+    assert not list(cache.glob("*/planner.qlf"))
+    assert plan(str(cache)) == from_sources
+    assert len(list(cache.glob("*/" + qlf.MANIFEST))) == 1
+    assert plan(str(cache)) == from_sources
+
+
+def test_no_home_directory_means_no_cache(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.delenv(qlf.ENV, raising=False)
+    monkeypatch.delenv("XDG_CACHE_HOME", raising=False)
+    monkeypatch.setattr(Path, "home", classmethod(lambda cls: (_ for _ in ()).throw(RuntimeError("no home"))))
+    assert qlf.cache_dir() is None
+    monkeypatch.setenv(qlf.ENV, "off")
+    assert qlf.cache_dir() is None

@@ -50,14 +50,17 @@ MANIFEST = "manifest.json"
 
 def cache_dir() -> Path | None:
     """The cache directory (``$SPAR_QLF_CACHE``, ``$XDG_CACHE_HOME/spar-py/qlf`` or
-    ``~/.cache/spar-py/qlf``), or None when ``SPAR_QLF_CACHE=off``."""
+    ``~/.cache/spar-py/qlf``), or None when ``SPAR_QLF_CACHE=off`` (or there is no home)."""
     env = os.environ.get(ENV)
     if env is not None and env.strip().lower() in ("off", "0", "no", "false", ""):
         return None
     if env:
         return Path(env).expanduser()
     xdg = os.environ.get("XDG_CACHE_HOME")
-    base = Path(xdg).expanduser() if xdg else Path.home() / ".cache"
+    try:
+        base = Path(xdg).expanduser() if xdg else Path.home() / ".cache"
+    except (RuntimeError, KeyError):  # no home directory to be found: no cache
+        return None
     return base / "spar-py" / "qlf"
 
 
