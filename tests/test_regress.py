@@ -129,7 +129,7 @@ def test_a_worker_killed_mid_run_loses_no_result(suite: Path, cluster,
     import time
 
     done: dict[str, int] = {}
-    run = threading.Thread(target=lambda: done.update(code=run_regression(suite, client=cluster)))
+    run = threading.Thread(target=lambda: done.update(code=run_regression(suite, client=cluster)), daemon=True)
     run.start()
     victim = None
     deadline = time.monotonic() + 60
@@ -144,7 +144,7 @@ def test_a_worker_killed_mid_run_loses_no_result(suite: Path, cluster,
     worker, keys = victim
     pid = cluster.run(os.getpid, workers=[worker])[worker]
     os.kill(pid, signal.SIGKILL)
-    run.join(timeout=300)
+    run.join(timeout=180)
     assert not run.is_alive()
     assert done["code"] == 0
     out = capsys.readouterr().out

@@ -66,26 +66,14 @@ CLUSTER_RETRIES = 1
 CONNECT_TIMEOUT_S = 10.0
 
 
-def _plan_one(path: str) -> Result:
-    """Plan one problem file; (path, summary or None, error text, seconds)."""
+def _plan_one(path: str, cell: Any = None) -> Result:
+    """Plan one problem file (here, in a -j worker process, or as a cluster task given its
+    loaded ``cell``); (path, summary or None, error text, seconds)."""
     from .planner import Planner
 
     t0 = time.perf_counter()
     try:
-        plan = Planner().plan(Path(path))
-        return path, summarize(plan.to_json()), "", time.perf_counter() - t0
-    except SparError as e:
-        return path, None, str(e).splitlines()[0], time.perf_counter() - t0
-
-
-def _plan_cell(path: str, cell: Any) -> Result:
-    """A cluster task: plan the loaded ``cell`` of problem file ``path`` in this worker
-    (its own embedded Prolog); the row as :func:`_plan_one` gives it."""
-    from .planner import Planner
-
-    t0 = time.perf_counter()
-    try:
-        plan = Planner().plan(cell)
+        plan = Planner().plan(Path(path) if cell is None else cell)
         return path, summarize(plan.to_json()), "", time.perf_counter() - t0
     except SparError as e:
         return path, None, str(e).splitlines()[0], time.perf_counter() - t0
@@ -106,6 +94,7 @@ def run_on_cluster(paths: list[str], client: Any, progress: Any = None) -> list[
 
     rows: dict[str, Result] = {}
     futures: dict[Any, str] = {}
+    load_s: dict[str, float] = {}  # loading here, added to the task's time as -j 1 counts it
 
     def submit(path: str) -> Any:
         """Load ``path`` here and submit its cell as a task (None if it does not load)."""
@@ -115,8 +104,9 @@ def run_on_cluster(paths: list[str], client: Any, progress: Any = None) -> list[
         except SparError as e:
             rows[path] = (path, None, _first_line(e), time.perf_counter() - t0)
             return None
+        load_s[path] = time.perf_counter() - t0
         # pure=False and a fresh key: a suite run twice plans twice; the key names the problem
-        fut = client.submit(_plan_cell, path, cell, pure=False,
+        fut = client.submit(_plan_one, path, cell, pure=False,
                             key=f"spar-regress-{Path(path).stem}-{uuid.uuid4().hex[:12]}")
         futures[fut] = path
         return fut
@@ -126,7 +116,8 @@ def run_on_cluster(paths: list[str], client: Any, progress: Any = None) -> list[
     for fut in queue:
         path = futures.pop(fut)
         try:
-            rows[path] = fut.result()
+            p, summary, err, secs = fut.result()
+            rows[path] = (p, summary, err, secs + load_s[path])
         except KilledWorker as e:
             if tries[path] < CLUSTER_RETRIES:
                 tries[path] += 1
