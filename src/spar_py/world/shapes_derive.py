@@ -1,0 +1,488 @@
+"""Stable poses and parallel-jaw grasps derived from a part's mesh, and the checks of
+hand-written ones against it (issue 14).
+
+Stable poses (Fig. 18): trimesh's ``compute_stable_poses`` (deterministic: no noise, one
+sample) gives the resting orientations of the convex hull with the probability of each;
+those below ``PROB_FLOOR`` are dropped, and every remaining one must pass
+:func:`support_check`, our own quasi-static test (the part rests on a face of its own, not
+an edge or a point, and its centre of mass projects inside the support polygon, the convex
+hull of the mesh's points on the table, by at least STABLE_MARGIN_MM), since that function
+can return poses that are not stable. A pose is kept as R, the least rotation taking the
+resting face's outward normal to world -z (so a pose is written as the paper writes it,
+``tm`` rows and the frame's height above the table), its ``rfaces`` (faces lying on the
+table) and ``ofaces`` (those plus a feature whose mouth or tip is on the table).
+
+Grasps (Fig. 19) for a parallel-jaw gripper (:class:`Gripper`): the tool frame's z axis is
+the approach, y the closing direction, the tool centre the midpoint between the finger tips.
+Candidates: pairs of opposite parallel planar faces (the part between them), and round shafts
+(the peg feature's, a cylinder primitive's) across their diameter at quantised closing
+directions; the width at most the opening; the faces' overlap (projected on their mid-plane)
+at least MIN_CONTACT_MM2, the tool centre at the overlap's centroid (on a shaft: its middle);
+approaches quantised in the plane normal to the closing direction (``step``, 45 deg by
+default), each kept only if the finger pads touch the overlap by MIN_CONTACT_MM2 (a shaft:
+MIN_CONTACT_MM along its side) and neither the closed fingers nor the open gripper (fingers
+at the opening and palm, swept in along the approach) enter the part. ``ofaces``: the gripped
+faces and every face facing the gripper (n . approach < 0) within the gripper's shadow on
+the gripper's side of the tool centre.
+
+Units: lengths in the cell unit, constants in mm (converted with spar_py.units.from_mm);
+angles in radians. Frames: object frame; tool frames T_g are 4x4 in the object frame.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..units import from_mm
+from .shapes import Face, FeatureGeometry, Primitive, axis_basis, clean, minimal_rotation
+
+if TYPE_CHECKING:
+    import trimesh
+
+__all__ = ["DerivedGrasp", "DerivedPose", "Gripper", "derive_grasps", "derive_poses", "euler_zyz_of",
+           "grasp_problem", "support_check"]
+
+#: Poses whose basin of attraction (trimesh's probability) is smaller are dropped.
+PROB_FLOOR = 0.01
+#: The centre of mass must project this far inside the support polygon (mm).
+STABLE_MARGIN_MM = 0.5
+#: Points within this of the table plane support the part (mm).
+SUPPORT_TOL_MM = 0.01
+#: The least contact of each finger pad with a gripped planar face (mm^2).
+MIN_CONTACT_MM2 = 25.0
+#: The least contact length of a finger pad along a shaft's side (mm).
+MIN_CONTACT_MM = 5.0
+#: Fingers touching a face are not inside it: boxes are shrunk by this (mm).
+TOUCH_MM = 0.02
+#: Opposite faces: normals antiparallel within this (deg).
+PARALLEL_DEG = 0.05
+
+
+@dataclass(frozen=True)
+class Gripper:
+    """A parallel-jaw gripper (cell unit): the ``opening`` W_m; each finger ``finger_length``
+    long (tip to palm, along tool z), ``finger_width`` across (tool x), ``finger_thickness``
+    (tool y, outward); the palm ``palm_depth`` deep behind the fingers and as wide as the open
+    fingers. The defaults (:meth:`default`) are in mm, a common industrial jaw."""
+
+    opening: float
+    finger_length: float
+    finger_width: float
+    finger_thickness: float
+    palm_depth: float
+
+    @classmethod
+    def default(cls, unit: str, opening: float) -> "Gripper":
+        """Fingers 60 mm long, 20 mm wide, 10 mm thick, a palm 25 mm deep; ``opening`` in ``unit``."""
+        return cls(opening, from_mm(unit, 60.0), from_mm(unit, 20.0), from_mm(unit, 10.0), from_mm(unit, 25.0))
+
+    def spec(self) -> list:
+        """Plain data for the content hash."""
+        return [round(v, 12) for v in (self.opening, self.finger_length, self.finger_width,
+                                       self.finger_thickness, self.palm_depth)]
+
+
+@dataclass(frozen=True)
+class DerivedPose:
+    """A derived stable pose: R (3x3, object to world, resting face down), the frame's
+    ``height`` above the table (cell unit), the faces it rests on and hides, and trimesh's
+    probability of it."""
+
+    label: str
+    rfaces: tuple[str, ...]
+    ofaces: tuple[str, ...]
+    R: np.ndarray
+    height: float
+    probability: float
+
+
+@dataclass(frozen=True)
+class DerivedGrasp:
+    """A derived grasp: T (4x4, tool frame in the object frame), ``euler`` (X, Y, Z in the cell
+    unit, Z-Y-Z phi, theta, psi in radians: geometry.eulerxyz(*euler) == T), ``width`` W_g,
+    the gripped faces and the faces the gripper covers."""
+
+    label: str
+    gfaces: tuple[str, ...]
+    ofaces: tuple[str, ...]
+    T: np.ndarray
+    euler: tuple[float, float, float, float, float, float]
+    width: float
+
+
+# =========================================================================== stable poses
+
+
+def support_check(mesh: "trimesh.Trimesh", R: np.ndarray, faces: list[Face], unit: str,
+                  com: np.ndarray | None = None) -> tuple[str | None, float, list[int]]:
+    """Is the part at rotation R (object to world) resting quasi-statically on the table?
+
+    Returns (why not or None, height of the object frame above the table, indices of the
+    faces lying on the table). Independent of trimesh's pose search: the lowest points of
+    the mesh are the support, their 2-D convex hull the support polygon, and the centre of
+    mass must project inside it by STABLE_MARGIN_MM; the part must rest on a face.
+    """
+    from ..geometry import convex_hull_2d
+
+    tol = from_mm(unit, SUPPORT_TOL_MM)
+    V = mesh.vertices @ np.asarray(R, float).T
+    zmin = float(V[:, 2].min())
+    low = V[:, 2] < zmin + tol
+    lying = [k for k, f in enumerate(faces) if (V[mesh.faces[f.tris], 2] < zmin + tol).all(1).any()]
+    if not lying:
+        return "it rests on an edge or a point, not on a face", -zmin, []
+    hull = convex_hull_2d(V[low, :2])
+    c = (np.asarray(R, float) @ (mesh.center_mass if com is None else com))[:2]
+    margin = _inside_margin(hull, c)
+    need = from_mm(unit, STABLE_MARGIN_MM)
+    if margin < need:
+        where = "outside" if margin < 0 else "only"
+        return (f"its centre of mass is {where} {abs(margin):.4g} {unit} "
+                f"{'from' if margin < 0 else 'inside'} the support polygon's edge (at least {need:.4g} {unit} "
+                "inside needed)"), -zmin, lying
+    return None, -zmin, lying
+
+
+def _inside_margin(hull: np.ndarray, c: np.ndarray) -> float:
+    """Signed distance of point c inside the convex polygon ``hull`` (CCW, (k, 2)); negative
+    outside; -inf for a degenerate polygon (fewer than 3 corners)."""
+    if len(hull) < 3:
+        return -math.inf
+    a, b = hull, np.roll(hull, -1, axis=0)
+    e = b - a
+    L = np.linalg.norm(e, axis=1)
+    ok = L > 0
+    cross = e[ok, 0] * (c[1] - a[ok, 1]) - e[ok, 1] * (c[0] - a[ok, 0])
+    return float((cross / L[ok]).min())
+
+
+def _hidden(faces: list[Face], lying: list[int], feature: FeatureGeometry | None, R: np.ndarray, height: float,
+            tol: float) -> list[int]:
+    """The faces a pose hides: those lying on the table and the feature's face if its mouth
+    (a hole) or tip (a peg) is on the table."""
+    out = list(lying)
+    if feature is not None:
+        mouth = feature.origin if feature.kind == "hole" else feature.end
+        if abs(float((R @ mouth)[2]) + height) < tol:
+            k = next((i for i, f in enumerate(faces) if f.feature), None)
+            if k is not None and k not in out:
+                out.append(k)
+    return out
+
+
+def derive_poses(mesh: "trimesh.Trimesh", faces: list[Face], feature: FeatureGeometry | None, unit: str,
+                 prefix: str, prob_floor: float = PROB_FLOOR) -> list[DerivedPose]:
+    """The stable poses of the part (module docstring), most probable first, labelled
+    ``{prefix}1, {prefix}2, ...``."""
+    import trimesh
+
+    Ts, probs = trimesh.poses.compute_stable_poses(mesh, center_mass=mesh.center_mass, sigma=0.0, n_samples=1)
+    tol = from_mm(unit, SUPPORT_TOL_MM)
+    found: list[tuple[float, np.ndarray, float, list[int], list[int]]] = []
+    for T, p in zip(Ts, probs):
+        if p < prob_floor:
+            continue
+        down = np.asarray(T, float)[:3, :3].T @ np.array([0.0, 0.0, -1.0])  # object vector pointing down
+        R = clean(minimal_rotation(down, np.array([0.0, 0.0, -1.0])), 1e-9)
+        if any(np.allclose(R[2], f[1][2], atol=1e-6) for f in found):
+            continue
+        why, height, lying = support_check(mesh, R, faces, unit)
+        if why is not None:
+            continue
+        found.append((float(p), R, height, lying, _hidden(faces, lying, feature, R, height, tol)))
+    found.sort(key=lambda f: (-round(f[0], 9), tuple(np.round(f[1][2], 9))))
+    return [DerivedPose(f"{prefix}{i + 1}", tuple(faces[k].name for k in lying),
+                        tuple(faces[k].name for k in hidden), R, float(round(height, 12)), p)
+            for i, (p, R, height, lying, hidden) in enumerate(found)]
+
+
+# =========================================================================== boxes and triangles
+
+
+def _tri_box(tri: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """(n,) bool: triangles (n, 3, 3) that meet the axis-aligned box [lo, hi] (separating axes:
+    the box's 3 axes, the triangle's normal, the 9 edge cross products)."""
+    c = (lo + hi) / 2
+    h = (hi - lo) / 2
+    t = tri - c
+    keep = ((t.min(1) <= h) & (t.max(1) >= -h)).all(1)
+    if not keep.any():
+        return keep
+    idx = np.flatnonzero(keep)
+    t = t[idx]
+    e = np.stack([t[:, 1] - t[:, 0], t[:, 2] - t[:, 1], t[:, 0] - t[:, 2]], axis=1)  # (m, 3, 3)
+    n = np.cross(e[:, 0], e[:, 1])
+    ok = np.abs(np.einsum("ij,ij->i", n, t[:, 0])) <= np.abs(n) @ h + 1e-15
+    for k in range(3):
+        ek = np.eye(3)[k]
+        a = np.cross(ek[None, None, :], e)  # (m, 3 edges, 3)
+        p = np.einsum("mjd,mvd->mjv", a, t)  # (m, edges, vertices)
+        r = np.abs(a) @ h
+        ok &= ~((p.min(2) > r + 1e-15) | (p.max(2) < -r - 1e-15)).any(1)
+    keep[idx] = ok
+    return keep
+
+
+def _gripper_boxes(g: Gripper, width: float, reach: float, shrink: float) -> list[tuple[str, np.ndarray, np.ndarray]]:
+    """(what, lo, hi) boxes in the tool frame: the closed fingers at ``width``, the open fingers
+    and the palm swept in along the approach from ``reach`` away, each shrunk by ``shrink``."""
+    u, L, t, P = g.finger_width / 2, g.finger_length, g.finger_thickness, g.palm_depth
+    o, w = g.opening / 2, width / 2
+    boxes = [
+        ("a finger", np.array([-u, w, -L]), np.array([u, w + t, 0.0])),
+        ("a finger", np.array([-u, -w - t, -L]), np.array([u, -w, 0.0])),
+        ("an open finger on the approach", np.array([-u, o, -reach]), np.array([u, o + t, 0.0])),
+        ("an open finger on the approach", np.array([-u, -o - t, -reach]), np.array([u, -o, 0.0])),
+        ("the palm", np.array([-u, -o - t, -reach]), np.array([u, o + t, -L])),
+    ]
+    return [(what, lo + shrink, hi - shrink) for what, lo, hi in boxes if np.all(hi - lo > 2 * shrink)]
+
+
+def grasp_problem(mesh: "trimesh.Trimesh", T: np.ndarray, width: float, g: Gripper, unit: str) -> str | None:
+    """Why the gripper at tool pose T (object frame) with fingers ``width`` apart cannot hold the
+    part, or None: wider than the opening, or a finger or the palm inside the part."""
+    if width > g.opening * (1 + 1e-9):
+        return f"{width:.4g} {unit} wide, more than the gripper's opening {g.opening:.4g} {unit}"
+    tri = (mesh.triangles - T[:3, 3]) @ T[:3, :3]  # triangles in the tool frame
+    V = (mesh.vertices - T[:3, 3]) @ T[:3, :3]
+    reach = 2 * float(np.linalg.norm(mesh.bounds[1] - mesh.bounds[0])) + g.finger_length + g.palm_depth
+    for what, lo, hi in _gripper_boxes(g, width, reach, from_mm(unit, TOUCH_MM)):
+        if _tri_box(tri, lo, hi).any() or ((V >= lo) & (V <= hi)).all(1).any():
+            return f"{what} enters the part"
+    return None
+
+
+# =========================================================================== polygons
+
+
+def _clip(poly: np.ndarray, a: np.ndarray, b: float) -> np.ndarray:
+    """Sutherland-Hodgman: the part of convex polygon ``poly`` (k, 2) with a . p <= b."""
+    if len(poly) == 0:
+        return poly
+    s = poly @ a - b
+    out = []
+    k = len(poly)
+    for i in range(k):
+        p, q, sp, sq = poly[i], poly[(i + 1) % k], s[i], s[(i + 1) % k]
+        if sp <= 0:
+            out.append(p)
+        if (sp < 0 < sq) or (sq < 0 < sp):
+            out.append(p + (q - p) * (sp / (sp - sq)))
+    return np.array(out) if out else np.zeros((0, 2))
+
+
+def _clip_convex(poly: np.ndarray, clip: np.ndarray) -> np.ndarray:
+    """The intersection of convex polygon ``poly`` with convex CCW polygon ``clip``."""
+    for i in range(len(clip)):
+        p, q = clip[i], clip[(i + 1) % len(clip)]
+        e = q - p
+        n = np.array([e[1], -e[0]])  # outward normal of a CCW edge
+        poly = _clip(poly, n, float(n @ p))
+        if len(poly) == 0:
+            break
+    return poly
+
+
+def _area_centroid(poly: np.ndarray) -> tuple[float, np.ndarray]:
+    if len(poly) < 3:
+        return 0.0, np.zeros(2)
+    x, y = poly[:, 0], poly[:, 1]
+    xn, yn = np.roll(x, -1), np.roll(y, -1)
+    cr = x * yn - xn * y
+    A = cr.sum() / 2
+    if abs(A) < 1e-300:
+        return 0.0, np.zeros(2)
+    return float(abs(A)), np.array([((x + xn) * cr).sum(), ((y + yn) * cr).sum()]) / (6 * A)
+
+
+def _ccw(P: np.ndarray) -> np.ndarray:
+    x, y = P[:, 0], P[:, 1]
+    return P if (x * np.roll(y, -1) - np.roll(x, -1) * y).sum() >= 0 else P[::-1]
+
+
+def _overlap(mesh: "trimesh.Trimesh", fa: Face, fb: Face, e1: np.ndarray, e2: np.ndarray) -> list[np.ndarray]:
+    """The convex pieces (each (k, 2) in the plane basis e1, e2) where the two faces overlap
+    when projected on a plane normal to them."""
+    A = [_ccw(t @ np.array([e1, e2]).T) for t in mesh.triangles[fa.tris]]
+    B = [_ccw(t @ np.array([e1, e2]).T) for t in mesh.triangles[fb.tris]]
+    alo = np.array([a.min(0) for a in A])
+    ahi = np.array([a.max(0) for a in A])
+    pieces = []
+    for b in B:
+        blo, bhi = b.min(0), b.max(0)
+        for i in np.flatnonzero(((alo <= bhi) & (ahi >= blo)).all(1)):
+            p = _clip_convex(A[i], b)
+            if len(p) >= 3 and _area_centroid(p)[0] > 0:
+                pieces.append(p)
+    return pieces
+
+
+# =========================================================================== grasps
+
+
+def euler_zyz_of(T: np.ndarray) -> tuple[float, float, float, float, float, float]:
+    """(X, Y, Z, phi, theta, psi) with geometry.eulerxyz(...) == T (Paul's Z-Y-Z, radians)."""
+    R = T[:3, :3]
+    theta = math.acos(max(-1.0, min(1.0, float(R[2, 2]))))
+    if abs(math.sin(theta)) > 1e-9:
+        phi = math.atan2(R[1, 2], R[0, 2])
+        psi = math.atan2(R[2, 1], -R[2, 0])
+    elif R[2, 2] > 0:
+        phi, psi = 0.0, math.atan2(R[1, 0], R[0, 0])
+    else:
+        phi, psi = 0.0, math.atan2(R[0, 1], R[1, 1])
+
+    def tidy(a: float) -> float:
+        d = round(math.degrees(a), 9)
+        d = 180.0 if d == -180.0 else d
+        return math.radians(d) + 0.0
+
+    x, y, z = (float(v) + 0.0 for v in T[:3, 3])
+    return (x, y, z, tidy(phi), tidy(theta), tidy(psi))
+
+
+def _canonical(c: np.ndarray) -> np.ndarray:
+    """The closing direction with its largest component (the first of equals) positive."""
+    i = int(np.argmax(np.round(np.abs(c), 9) - 1e-12 * np.arange(3)))
+    return c if c[i] > 0 else -c
+
+
+def _tool(p: np.ndarray, c: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """The tool frame at p with y = c (closing) and z = a (approach)."""
+    T = np.eye(4)
+    T[:3, 0], T[:3, 1], T[:3, 2], T[:3, 3] = np.cross(c, a), c, a, p
+    return clean(T, 1e-9)
+
+
+def _approaches(c: np.ndarray, step: float) -> list[np.ndarray]:
+    e1, e2 = axis_basis(c)
+    n = max(1, int(round(2 * math.pi / step)))
+    return [clean(math.cos(2 * math.pi * k / n) * e1 + math.sin(2 * math.pi * k / n) * e2, 1e-12) for k in range(n)]
+
+
+def _covered(mesh: "trimesh.Trimesh", faces: list[Face], T: np.ndarray, g: Gripper, unit: str) -> set[int]:
+    """Faces facing the gripper within its shadow on its side of the tool centre."""
+    a = T[:3, 2]
+    facing = mesh.face_normals @ a < -1e-6
+    tri = (mesh.triangles - T[:3, 3]) @ T[:3, :3]
+    reach = 2 * float(np.linalg.norm(mesh.bounds[1] - mesh.bounds[0])) + g.finger_length + g.palm_depth
+    u, o = g.finger_width / 2, g.opening / 2 + g.finger_thickness
+    s = from_mm(unit, TOUCH_MM)
+    hit = facing & _tri_box(tri, np.array([-u, -o, -reach]), np.array([u, o, -s]))
+    owner = np.empty(len(mesh.faces), int)
+    for k, f in enumerate(faces):
+        owner[f.tris] = k
+    return set(owner[hit].tolist())
+
+
+def _shafts(faces: list[Face], feature: FeatureGeometry | None, prims: tuple[Primitive, ...]
+            ) -> list[tuple[np.ndarray, np.ndarray, float, float, str | None]]:
+    """Round shafts to grasp across: (root, unit axis, radius, length, face name or None)."""
+    out = []
+    if feature is not None and feature.kind == "peg":
+        out.append((feature.origin, feature.direction, feature.radius, feature.length, feature.name))
+    for p in prims:
+        root, d = np.array([0.0, 0.0, p.lo[2]]), np.array([0.0, 0.0, 1.0])
+        same = [np.allclose(root, o) and np.allclose(d, a) and abs(p.radius - r) < 1e-9 for o, a, r, _, _ in out]
+        if p.kind == "cylinder" and not p.subtract and not any(same):
+            out.append((np.array([0.0, 0.0, p.lo[2]]), np.array([0.0, 0.0, 1.0]), p.radius, p.hi[2] - p.lo[2], None))
+    return out
+
+
+def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], feature: FeatureGeometry | None,
+                  prims: tuple[Primitive, ...], g: Gripper, unit: str, prefix: str,
+                  step: float = math.radians(45.0)) -> list[DerivedGrasp]:
+    """The grasps of the part (module docstring), labelled ``{prefix}1, {prefix}2, ...``."""
+    min_area = from_mm(unit, math.sqrt(MIN_CONTACT_MM2)) ** 2
+    cos_par = math.cos(math.radians(PARALLEL_DEG))
+    cands: list[tuple[tuple[str, ...], float, np.ndarray]] = []  # (gfaces, width, T)
+    planar = [k for k, f in enumerate(faces) if f.planar]
+    for i in planar:
+        for j in planar:
+            fa, fb = faces[i], faces[j]
+            if j <= i or fa.normal @ fb.normal > -cos_par:
+                continue
+            width = fa.offset + fb.offset  # n_b = -n_a: the part lies between the planes
+            if width <= 0 or width > g.opening * (1 + 1e-9):
+                continue
+            c = _canonical(fa.normal)
+            e1, e2 = axis_basis(c)
+            pieces = _overlap(mesh, fa, fb, e1, e2)
+            ac = [_area_centroid(p) for p in pieces]
+            area = sum(a for a, _ in ac)
+            if area < min_area:
+                continue
+            cen2 = sum(a * q for a, q in ac) / area
+            mid = (fa.offset - width / 2) * fa.normal
+            p = clean(mid + cen2[0] * e1 + cen2[1] * e2, 1e-9)
+            names = tuple(sorted((fa.name, fb.name), key=lambda n: [f.name for f in faces].index(n)))
+            for a in _approaches(c, step):
+                T = _tool(p, c, a)
+                if _pad_contact(pieces, e1, e2, T, g) >= min_area:
+                    cands.append((names, width, T))
+    min_len = from_mm(unit, MIN_CONTACT_MM)
+    for root, d, r, length, fname in _shafts(faces, feature, prims):
+        name = fname if fname is not None else _face_at(faces, mesh, root + d * length / 2 + axis_basis(d)[0] * r,
+                                                       unit)
+        if name is None or 2 * r > g.opening * (1 + 1e-9):
+            continue
+        p = clean(root + d * length / 2, 1e-9)
+        e1, e2 = axis_basis(d)
+        n_dirs = max(1, int(round(math.pi / step)))
+        for m in range(n_dirs):
+            c = _canonical(clean(math.cos(math.pi * m / n_dirs) * e1 + math.sin(math.pi * m / n_dirs) * e2, 1e-12))
+            for a in _approaches(c, step):
+                T = _tool(p, c, a)
+                if _line_contact(root + c * r, d, length, T, g) >= min_len:
+                    cands.append(((name,), 2 * r, T))
+    out = []
+    for names, width, T in cands:
+        if grasp_problem(mesh, T, width, g, unit) is not None:
+            continue
+        cover = {faces[k].name for k in _covered(mesh, faces, T, g, unit)}
+        order = [f.name for f in faces]
+        ofaces = tuple(names) + tuple(sorted(cover - set(names), key=order.index))
+        out.append(DerivedGrasp(f"{prefix}{len(out) + 1}", names, ofaces, T, euler_zyz_of(T), float(round(width, 12))))
+    return out
+
+
+def _face_at(faces: list[Face], mesh: "trimesh.Trimesh", p: np.ndarray, unit: str) -> str | None:
+    from .shapes import ON_SURFACE_MM, face_of_point
+
+    k = face_of_point(faces, mesh, p, 10 * from_mm(unit, ON_SURFACE_MM) + 1e-3 * float(mesh.scale))
+    return None if k is None else faces[k].name
+
+
+def _pad_contact(pieces: list[np.ndarray], e1: np.ndarray, e2: np.ndarray, T: np.ndarray, g: Gripper) -> float:
+    """Area of the overlap pieces (plane basis e1, e2) under one finger pad (tool x within
+    +-finger_width/2, tool z from -finger_length to 0)."""
+    x, z, o = T[:3, 0], T[:3, 2], T[:3, 3]
+    # plane coordinates (s, t) -> pad coordinates (u, w): affine, the plane's offset drops out
+    M = np.array([[e1 @ x, e2 @ x], [e1 @ z, e2 @ z]])
+    off = -np.array([o @ x, o @ z])
+    u, L = g.finger_width / 2, g.finger_length
+    pad = np.array([[-u, -L], [u, -L], [u, 0.0], [-u, 0.0]])
+    total = 0.0
+    for p in pieces:
+        q = _ccw(p @ M.T + off)
+        total += _area_centroid(_clip_convex(q, pad))[0]
+    return total
+
+
+def _line_contact(start: np.ndarray, d: np.ndarray, length: float, T: np.ndarray, g: Gripper) -> float:
+    """Length of the segment start + d t, t in [0, length], inside a finger pad's (u, w) rectangle."""
+    x, z, o = T[:3, 0], T[:3, 2], T[:3, 3]
+    u0, w0 = float((start - o) @ x), float((start - o) @ z)
+    du, dw = float(d @ x), float(d @ z)
+    lo, hi = 0.0, length
+    for p0, dp, a, b in ((u0, du, -g.finger_width / 2, g.finger_width / 2), (w0, dw, -g.finger_length, 0.0)):
+        if abs(dp) < 1e-12:
+            if not (a <= p0 <= b):
+                return 0.0
+            continue
+        t1, t2 = (a - p0) / dp, (b - p0) / dp
+        lo, hi = max(lo, min(t1, t2)), min(hi, max(t1, t2))
+    return max(0.0, hi - lo)
