@@ -371,7 +371,7 @@ def _covered(mesh: "trimesh.Trimesh", faces: list[Face], T: np.ndarray, g: Gripp
     reach = 2 * float(np.linalg.norm(mesh.bounds[1] - mesh.bounds[0])) + g.finger_length + g.palm_depth
     u, o = g.finger_width / 2, g.opening / 2 + g.finger_thickness
     s = from_mm(unit, TOUCH_MM)
-    hit = facing & _tri_box(tri, np.array([-u, -o, -reach]), np.array([u, o, -s]))
+    hit = facing & _tri_box(tri, np.array([-u + s, -o + s, -reach]), np.array([u - s, o - s, -s]))
     owner = np.empty(len(mesh.faces), int)
     for k, f in enumerate(faces):
         owner[f.tris] = k
@@ -425,6 +425,8 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], feature: FeatureGe
                     cands.append((names, width, T))
     min_len = from_mm(unit, MIN_CONTACT_MM)
     for root, d, r, length, fname in _shafts(faces, feature, prims):
+        if not _round(mesh, faces, root, d, r, length):
+            continue  # a prismatic shaft (a hexagon): its flats are not a cylinder to close on
         name = fname if fname is not None else _face_at(faces, mesh, root + d * length / 2 + axis_basis(d)[0] * r,
                                                        unit)
         if name is None or 2 * r > g.opening * (1 + 1e-9):
@@ -447,6 +449,17 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], feature: FeatureGe
         ofaces = tuple(names) + tuple(sorted(cover - set(names), key=order.index))
         out.append(DerivedGrasp(f"{prefix}{len(out) + 1}", names, ofaces, T, euler_zyz_of(T), float(round(width, 12))))
     return out
+
+
+def _round(mesh: "trimesh.Trimesh", faces: list[Face], root: np.ndarray, d: np.ndarray, r: float,
+           length: float) -> bool:
+    """True if the mesh's side triangles of the shaft (root, d, r, length) lie on its cylinder:
+    their centroids within 1 % of r from the axis (a 64-gon's are within 0.05 %, a hexagon's 6 % off)."""
+    C = mesh.triangles_center - root
+    t = C @ d
+    radial = np.linalg.norm(C - np.outer(t, d), axis=1)
+    side = (t > 1e-9 * length) & (t < length * (1 - 1e-9)) & (radial > 0.5 * r) & (radial < 1.5 * r)
+    return bool(side.any() and (np.abs(radial[side] - r) < 0.01 * r).all())
 
 
 def _face_at(faces: list[Face], mesh: "trimesh.Trimesh", p: np.ndarray, unit: str) -> str | None:
