@@ -626,6 +626,8 @@ def load_object(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, o
     face_names = {k: n.vector(3) * scale for k, n in (root.key("face_names", False) or Node("", "", {})).items()}
     fnode = root.key("feature", required=False)
     feature_geo = _feature_geometry(fnode, scale) if fnode is not None else None
+    if geometry is not None:
+        geometry.face_names = face_names
     missing = [k for k in DERIVABLE if k not in root.value]
     derived = None
     if missing:
@@ -1268,13 +1270,83 @@ def check_file(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> str:
         raise KBError(str(path), "", "a problem, object or robot file", describe(root.value))
     if kind.name == "problem":
         cell = load_problem(path, max_bytes)
+        for oname, model in cell.objects.items():
+            mfile = next((f for f in cell.files if Path(f).suffix == ".yaml" and _object_name(f) == oname), None)
+            if mfile is not None:
+                check_against_shape(mfile, read_yaml(mfile, max_bytes), model, cell.unit, cell.finger_separation)
         return f"{path}: ok (problem {cell.name}: {len(cell.objects)} objects, {len(cell.goals)} goals)"
     if kind.name == "object":
         o = load_object(path, _units(root)[0], max_bytes)
+        check_against_shape(path, root, o, _units(root)[0])
         return (f"{path}: ok (object {o.name}: {len(o.faces)} faces, {len(o.poses)} stable poses, "
                 f"{len(o.grasps)} grasps)")
     r = load_robot(path, max_bytes=max_bytes)
     return f"{path}: ok (robot {r.name})"
+
+
+def derive_text(path: str | Path, max_bytes: int = MAX_INPUT_BYTES, robot: str | Path | None = None,
+                out_dir: str | Path | None = None) -> str:
+    """``spar kb derive``: the object model at ``path`` as a full explicit model file (YAML
+    text): its own keys as written, then every face, stable pose and grasp, derived ones
+    included, in the file's own units (grasps for ``robot``'s gripper, or DEFAULT_OPENING_MM).
+    A ``mesh:`` path is rewritten relative to ``out_dir`` (where the text will be written)."""
+    root = read_kb(path, "object", max_bytes)
+    unit, _, rad_per = _units(root)
+    opening = load_robot(robot, unit=unit, max_bytes=max_bytes).finger_separation if robot is not None else None
+    m = load_object(path, unit, max_bytes, opening=opening)
+    check_against_shape(path, root, m, unit, opening)
+
+    def flow(v: Any) -> str:
+        return yaml.safe_dump(v, default_flow_style=True, width=10**6, sort_keys=False).strip().removesuffix(
+            "\n...").strip()
+
+    def n(v: float) -> float | int:
+        r = round(float(v), 9) + 0.0
+        return int(r) if r.is_integer() and abs(r) < 1e15 else r
+
+    grip = f"{num(opening)} {unit}" if opening is not None else f"{num(from_mm(unit, DEFAULT_OPENING_MM))} {unit}"
+    out = [f"# Derived by `spar kb derive` from {path} (gripper opening {grip}); every entry explicit.",
+           f"object: {m.name}", f"units: {flow(root.value['units'])}"]
+    own = dict(root.value)
+    if "mesh" in own and out_dir is not None and m.geometry is not None and m.geometry.mesh_file:
+        own["mesh"] = os.path.relpath(m.geometry.mesh_file, Path(out_dir).resolve())
+    out += [f"{k}: {flow(own[k])}" for k in ("mesh", "shape", "face_names", "grasp_step", "feature") if k in own]
+    out.append(f"faces: {flow(list(m.faces))}")
+    out.append("stable_poses:")
+    for p in m.poses.values():
+        rows = [[n(v) for v in p.R[:, i]] for i in range(3)] + [[0, 0, n(p.height)]]
+        out.append("  - " + flow({"label": p.label, "rfaces": list(p.rfaces), "ofaces": list(p.ofaces), "tm": rows}))
+    out.append("grasps:")
+    for g in m.grasps.values():
+        e = [n(v) for v in g.euler[:3]] + [n(a / rad_per) for a in g.euler[3:]]
+        out.append("  - " + flow({"label": g.label, "gfaces": list(g.gfaces), "ofaces": list(g.ofaces),
+                                  "eulerxyz": e, "width": n(g.width)}))
+    return "\n".join(out) + "\n"
+
+
+def _object_name(file: str) -> str | None:
+    """The ``object:`` name of a KB file (None if it is not an object model)."""
+    try:
+        data = parse_yaml(file)
+    except KBError:
+        return None
+    return data.get("object") if isinstance(data, dict) else None
+
+
+def check_against_shape(path: str | Path, root: Node, model: ObjectModel, unit: str,
+                        opening: float | None = None) -> None:
+    """``spar kb check``: the hand-written faces, stable poses and grasps of a model that also
+    gives its geometry must agree with it (world.shapes_derive.check_entries); the first
+    disagreement is a KBError naming the entry. ``opening`` is the gripper's (cell unit;
+    DEFAULT_OPENING_MM without a robot)."""
+    hand = tuple(k for k in DERIVABLE if k in root.value)
+    if model.geometry is None or not hand:
+        return
+    from .world.shapes_derive import Gripper, check_entries
+
+    grip = Gripper.default(unit, opening if opening is not None else from_mm(unit, DEFAULT_OPENING_MM))
+    for key, expected, got in check_entries(model, grip, unit, hand):
+        raise KBError(str(path), key, expected, got)
 
 
 def iter_kb_files(paths: Iterable[str | Path]) -> list[Path]:

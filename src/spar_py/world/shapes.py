@@ -115,12 +115,15 @@ class FeatureGeometry:
 @dataclass
 class Geometry:
     """What a model file declares of its shape: ``mesh_file`` (scaled by ``scale`` from the
-    model's unit to the cell ``unit``) or ``primitives``; the built mesh is kept in ``_mesh``."""
+    model's unit to the cell ``unit``) or ``primitives``, and its ``face_names``; the built
+    mesh is kept in ``_mesh``."""
 
     unit: str
     primitives: tuple[Primitive, ...] = ()
     mesh_file: str | None = None
     scale: float = 1.0
+    #: ``face_names:`` of the model: a name -> a point on the face (object frame, cell unit).
+    face_names: dict = field(default_factory=dict)
     _mesh: Any = field(default=None, compare=False, repr=False)
     _digest: str | None = field(default=None, compare=False, repr=False)
 

@@ -499,3 +499,50 @@ def _line_contact(start: np.ndarray, d: np.ndarray, length: float, T: np.ndarray
         t1, t2 = (a - p0) / dp, (b - p0) / dp
         lo, hi = max(lo, min(t1, t2)), min(hi, max(t1, t2))
     return max(0.0, hi - lo)
+
+
+# =========================================================================== checks
+
+
+def check_entries(model: "object", gripper: Gripper, unit: str, which: tuple[str, ...],
+                  step: float = math.radians(45.0)) -> list[tuple[str, str, str]]:
+    """Hand-written entries of ``model`` (an ObjectModel with a geometry) checked against its
+    shape: ``which`` names the lists written by hand ('faces', 'stable_poses', 'grasps').
+    Returns (key, expected, got) for each problem, in file order: a face that is not on the
+    shape, a stable pose that is not stable (or rests at another height, or on other faces),
+    a grasp wider than the opening or whose fingers or palm enter the part."""
+    from .shapes import derive_faces
+
+    geo = model.geometry  # type: ignore[attr-defined]
+    mesh = geo.mesh()
+    fg = model.feature.geometry if model.feature is not None else None  # type: ignore[attr-defined]
+    faces = derive_faces(mesh, fg, geo.face_names, unit)
+    own = {f.name: k for k, f in enumerate(faces)}
+    out: list[tuple[str, str, str]] = []
+    tol = max(from_mm(unit, 0.05), 1e-6)
+    if "faces" in which:
+        for i, f in enumerate(model.faces):  # type: ignore[attr-defined]
+            if f not in own:
+                out.append((f"faces[{i}]", f"a face of the shape ({', '.join(own)}; face_names: names a face by a "
+                            "point on it)", repr(f)))
+    if "stable_poses" in which:
+        for i, p in enumerate(model.poses.values()):  # type: ignore[attr-defined]
+            why, height, lying = support_check(mesh, p.R, faces, unit)
+            key = f"stable_poses[{i}]"
+            if why is not None:
+                out.append((key, "a stable pose of the shape", f"{p.label}: {why}"))
+            elif abs(height - p.height) > tol:
+                out.append((f"{key}.tm", f"the height the shape rests at in {p.label}, {height:.6g} {unit}",
+                            f"{p.height:.6g}"))
+            else:
+                down = {faces[k].name for k in lying}
+                bad = [f for f in p.rfaces if f in own and f not in down]
+                if bad:
+                    out.append((f"{key}.rfaces", f"faces {p.label} rests on ({', '.join(sorted(down))})",
+                                ", ".join(map(str, bad))))
+    if "grasps" in which:
+        for i, g in enumerate(model.grasps.values()):  # type: ignore[attr-defined]
+            why = grasp_problem(mesh, g.T, g.width, gripper, unit)
+            if why is not None:
+                out.append((f"grasps[{i}]", "a grasp the gripper can make", f"{g.label}: {why}"))
+    return out
