@@ -22,8 +22,8 @@ approaches quantised in the plane normal to the closing direction (``step``, 45 
 default), each kept only if the finger pads touch the overlap by MIN_CONTACT_MM2 (a shaft:
 MIN_CONTACT_MM along its side) and neither the closed fingers nor the open gripper (fingers
 at the opening and palm, swept in along the approach) enter the part. ``ofaces``: the gripped
-faces and every face facing the gripper (n . approach < 0) within the gripper's shadow on
-the gripper's side of the tool centre.
+faces, every planar face whose plane the palm or a closed finger reaches beyond (the part
+cannot rest on it while held) and the feature's face if they enter the space its mate needs.
 
 Units: lengths in the cell unit, constants in mm (converted with spar_py.units.from_mm);
 angles in radians. Frames: object frame; tool frames T_g are 4x4 in the object frame.
@@ -363,19 +363,40 @@ def _approaches(c: np.ndarray, step: float) -> list[np.ndarray]:
     return [clean(math.cos(2 * math.pi * k / n) * e1 + math.sin(2 * math.pi * k / n) * e2, 1e-12) for k in range(n)]
 
 
-def _covered(mesh: "trimesh.Trimesh", faces: list[Face], T: np.ndarray, g: Gripper, unit: str) -> set[int]:
-    """Faces facing the gripper within its shadow on its side of the tool centre."""
-    a = T[:3, 2]
-    facing = mesh.face_normals @ a < -1e-6
-    tri = (mesh.triangles - T[:3, 3]) @ T[:3, :3]
-    reach = 2 * float(np.linalg.norm(mesh.bounds[1] - mesh.bounds[0])) + g.finger_length + g.palm_depth
-    u, o = g.finger_width / 2, g.opening / 2 + g.finger_thickness
+def _covered(mesh: "trimesh.Trimesh", faces: list[Face], feature: FeatureGeometry | None, T: np.ndarray,
+             width: float, g: Gripper, unit: str) -> set[int]:
+    """The faces the gripper at T covers: a planar face if the palm or a closed finger reaches
+    beyond its plane (the part could not rest on that face while held); the feature's face if
+    they enter the space the mating part needs (a peg: the prism of half-width r about the shaft
+    from its root outwards; a hole: that about the hole's axis out of its mouth)."""
     s = from_mm(unit, TOUCH_MM)
-    hit = facing & _tri_box(tri, np.array([-u + s, -o + s, -reach]), np.array([u - s, o - s, -s]))
-    owner = np.empty(len(mesh.faces), int)
-    for k, f in enumerate(faces):
-        owner[f.tris] = k
-    return set(owner[hit].tolist())
+    reach = g.finger_length + g.palm_depth
+    boxes = [b for b in _gripper_boxes(g, width, reach, s) if "open" not in b[0]]
+    corners = np.concatenate([np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                                        for z in (lo[2], hi[2])]) for _, lo, hi in boxes])
+    P = corners @ T[:3, :3].T + T[:3, 3]  # gripper corners in the object frame
+    out = {k for k, f in enumerate(faces) if f.planar and (P @ f.normal > f.offset + s).any()}
+    if feature is not None:
+        k = next((i for i, f in enumerate(faces) if f.feature), None)
+        if k is not None:
+            e1, e2 = axis_basis(feature.direction)
+            F = np.eye(4)
+            F[:3, 0], F[:3, 1], F[:3, 2], F[:3, 3] = e1, e2, feature.direction, feature.origin
+            big = 10 * float(np.linalg.norm(mesh.bounds[1] - mesh.bounds[0])) + reach
+            r = feature.radius
+            lo, hi = (np.array([-r, -r, 0.0]), np.array([r, r, big])) if feature.kind == "peg" else (
+                np.array([-r, -r, -big]), np.array([r, r, 0.0]))
+            M = np.linalg.inv(F) @ T  # tool frame in the feature's frame
+            for _, blo, bhi in boxes:
+                c = np.array([[x, y, z] for x in (blo[0], bhi[0]) for y in (blo[1], bhi[1]) for z in (blo[2], bhi[2])])
+                quads = c[[0, 1, 3, 2, 4, 5, 7, 6]] @ M[:3, :3].T + M[:3, 3]
+                tri = quads[np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7], [0, 1, 5], [0, 5, 4],
+                                      [2, 3, 7], [2, 7, 6], [1, 2, 6], [1, 6, 5], [0, 3, 7], [0, 7, 4]])]
+                inside = ((quads > lo) & (quads < hi)).all(1).any()
+                if inside or _tri_box(tri, lo + s, hi - s).any():
+                    out.add(k)
+                    break
+    return out
 
 
 def _shafts(faces: list[Face], feature: FeatureGeometry | None, prims: tuple[Primitive, ...]
@@ -444,7 +465,7 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], feature: FeatureGe
     for names, width, T in cands:
         if grasp_problem(mesh, T, width, g, unit) is not None:
             continue
-        cover = {faces[k].name for k in _covered(mesh, faces, T, g, unit)}
+        cover = {faces[k].name for k in _covered(mesh, faces, feature, T, width, g, unit)}
         order = [f.name for f in faces]
         ofaces = tuple(names) + tuple(sorted(cover - set(names), key=order.index))
         out.append(DerivedGrasp(f"{prefix}{len(out) + 1}", names, ofaces, T, euler_zyz_of(T), float(round(width, 12))))
