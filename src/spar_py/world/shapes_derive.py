@@ -2,7 +2,9 @@
 hand-written ones against it (issue 14).
 
 Stable poses (Fig. 18): trimesh's ``compute_stable_poses`` (deterministic: no noise, one
-sample) gives the resting orientations of the convex hull with the probability of each;
+sample) gives the resting orientations of the convex hull with the probability of each
+(a hull of more than HULL_FACES_MAX triangles thinned first, each pose then snapped to the
+face of the mesh it rests on);
 those below ``PROB_FLOOR`` are dropped, and every remaining one must pass
 :func:`support_check`, our own quasi-static test (the part rests on a face of its own, not
 an edge or a point, and its centre of mass projects inside the support polygon, the convex
@@ -47,6 +49,12 @@ __all__ = ["DerivedGrasp", "DerivedPose", "Gripper", "derive_grasps", "derive_po
 
 #: Poses whose basin of attraction (trimesh's probability) is smaller are dropped.
 PROB_FLOOR = 0.01
+#: A convex hull of more triangles is thinned before trimesh's pose search (see derive_poses).
+HULL_FACES_MAX = 1000
+#: ... on a grid of the part's size over this.
+HULL_GRID = 100
+#: A pose trimesh finds is snapped to a face whose normal is within this (deg).
+SNAP_DEG = 2.0
 #: The centre of mass must project this far inside the support polygon (mm).
 STABLE_MARGIN_MM = 0.5
 #: Points within this of the table plane support the part (mm).
@@ -113,6 +121,35 @@ class DerivedGrasp:
     width: float
 
 
+# =========================================================================== plain arrays
+
+
+@dataclass(frozen=True)
+class _Arrays:
+    """A mesh's arrays read once (trimesh re-checks its content hash on every property read):
+    vertices V, faces F, triangles (n, 3, 3), normals N, centres C, bounding-box diagonal."""
+
+    V: np.ndarray
+    F: np.ndarray
+    tri: np.ndarray
+    N: np.ndarray
+    C: np.ndarray
+    diag: float
+    com: np.ndarray
+
+
+def _arrays(mesh: "trimesh.Trimesh") -> _Arrays:
+    """The arrays of ``mesh``, kept in its metadata (they live and die with the mesh)."""
+    a = mesh.metadata.get("_spar_arrays")
+    if a is None:
+        V = np.asarray(mesh.vertices, float)
+        F = np.asarray(mesh.faces)
+        a = _Arrays(V, F, V[F], np.asarray(mesh.face_normals, float), np.asarray(mesh.triangles_center, float),
+                    float(np.linalg.norm(V.max(0) - V.min(0))), np.asarray(mesh.center_mass, float))
+        mesh.metadata["_spar_arrays"] = a
+    return a
+
+
 # =========================================================================== stable poses
 
 
@@ -128,14 +165,15 @@ def support_check(mesh: "trimesh.Trimesh", R: np.ndarray, faces: list[Face], uni
     from ..geometry import convex_hull_2d
 
     tol = from_mm(unit, SUPPORT_TOL_MM)
-    V = mesh.vertices @ np.asarray(R, float).T
+    A = _arrays(mesh)
+    V = A.V @ np.asarray(R, float).T
     zmin = float(V[:, 2].min())
     low = V[:, 2] < zmin + tol
-    lying = [k for k, f in enumerate(faces) if (V[mesh.faces[f.tris], 2] < zmin + tol).all(1).any()]
+    lying = [k for k, f in enumerate(faces) if (V[A.F[f.tris], 2] < zmin + tol).all(1).any()]
     if not lying:
         return "it rests on an edge or a point, not on a face", -zmin, []
     hull = convex_hull_2d(V[low, :2])
-    c = (np.asarray(R, float) @ (mesh.center_mass if com is None else com))[:2]
+    c = (np.asarray(R, float) @ (A.com if com is None else com))[:2]
     margin = _inside_margin(hull, c)
     need = from_mm(unit, STABLE_MARGIN_MM)
     if margin < need:
@@ -179,13 +217,30 @@ def derive_poses(mesh: "trimesh.Trimesh", faces: list[Face], feature: FeatureGeo
     ``{prefix}1, {prefix}2, ...``."""
     import trimesh
 
-    Ts, probs = trimesh.poses.compute_stable_poses(mesh, center_mass=mesh.center_mass, sigma=0.0, n_samples=1)
+    A = _arrays(mesh)
+    hull = mesh.convex_hull
+    if len(hull.faces) > HULL_FACES_MAX:
+        # thin the hull's vertices on a grid of 1/HULL_GRID of the part's size: the topple
+        # graph of a finely tessellated round part is otherwise most of the derivation; the
+        # poses found are snapped to the real mesh's faces and checked on it below
+        V = np.asarray(hull.vertices, float)
+        h = A.diag / HULL_GRID
+        _, keep = np.unique(np.floor((V - V.min(0)) / h).astype(np.int64), axis=0, return_index=True)
+        hull = trimesh.convex.convex_hull(V[np.sort(keep)])
+    Ts, probs = trimesh.poses.compute_stable_poses(hull, center_mass=A.com, sigma=0.0, n_samples=1)
     tol = from_mm(unit, SUPPORT_TOL_MM)
+    normals = [f.normal for f in faces if f.planar]
+    if feature is not None and feature.kind == "peg":
+        normals.append(feature.direction)  # the tip cap
+    cos_snap = math.cos(math.radians(SNAP_DEG))
     found: list[tuple[float, np.ndarray, float, list[int], list[int]]] = []
     for T, p in zip(Ts, probs):
         if p < prob_floor:
             continue
         down = np.asarray(T, float)[:3, :3].T @ np.array([0.0, 0.0, -1.0])  # object vector pointing down
+        best = max(normals, key=lambda n: float(n @ down), default=None)
+        if best is not None and float(best @ down) > cos_snap:
+            down = best
         R = clean(minimal_rotation(down, np.array([0.0, 0.0, -1.0])), 1e-9)
         if any(np.allclose(R[2], f[1][2], atol=1e-6) for f in found):
             continue
@@ -202,17 +257,19 @@ def derive_poses(mesh: "trimesh.Trimesh", faces: list[Face], feature: FeatureGeo
 # =========================================================================== boxes and triangles
 
 
-def _tri_box(tri: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+def _tri_box(tri: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+             bbox: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """(n,) bool: triangles (n, 3, 3) that meet the axis-aligned box [lo, hi] (separating axes:
-    the box's 3 axes, the triangle's normal, the 9 edge cross products)."""
+    the box's 3 axes, the triangle's normal, the 9 edge cross products); ``bbox`` the
+    triangles' (min, max) corners if already known."""
     c = (lo + hi) / 2
     h = (hi - lo) / 2
-    t = tri - c
-    keep = ((t.min(1) <= h) & (t.max(1) >= -h)).all(1)
+    tmin, tmax = bbox if bbox is not None else (tri.min(1), tri.max(1))
+    keep = ((tmin <= hi) & (tmax >= lo)).all(1)
     if not keep.any():
         return keep
     idx = np.flatnonzero(keep)
-    t = t[idx]
+    t = tri[idx] - c
     e = np.stack([t[:, 1] - t[:, 0], t[:, 2] - t[:, 1], t[:, 0] - t[:, 2]], axis=1)  # (m, 3, 3)
     n = np.cross(e[:, 0], e[:, 1])
     ok = np.abs(np.einsum("ij,ij->i", n, t[:, 0])) <= np.abs(n) @ h + 1e-15
@@ -246,11 +303,13 @@ def grasp_problem(mesh: "trimesh.Trimesh", T: np.ndarray, width: float, g: Gripp
     part, or None: wider than the opening, or a finger or the palm inside the part."""
     if width > g.opening * (1 + 1e-9):
         return f"{width:.4g} {unit} wide, more than the gripper's opening {g.opening:.4g} {unit}"
-    tri = (mesh.triangles - T[:3, 3]) @ T[:3, :3]  # triangles in the tool frame
-    V = (mesh.vertices - T[:3, 3]) @ T[:3, :3]
-    reach = 2 * float(np.linalg.norm(mesh.bounds[1] - mesh.bounds[0])) + g.finger_length + g.palm_depth
+    A = _arrays(mesh)
+    V = (A.V - T[:3, 3]) @ T[:3, :3]  # vertices in the tool frame
+    tri = V[A.F]
+    bbox = (tri.min(1), tri.max(1))
+    reach = 2 * A.diag + g.finger_length + g.palm_depth
     for what, lo, hi in _gripper_boxes(g, width, reach, from_mm(unit, TOUCH_MM)):
-        if _tri_box(tri, lo, hi).any() or ((V >= lo) & (V <= hi)).all(1).any():
+        if _tri_box(tri, lo, hi, bbox).any() or ((V >= lo) & (V <= hi)).all(1).any():
             return f"{what} enters the part"
     return None
 
@@ -306,18 +365,45 @@ def _ccw(P: np.ndarray) -> np.ndarray:
 def _overlap(mesh: "trimesh.Trimesh", fa: Face, fb: Face, e1: np.ndarray, e2: np.ndarray) -> list[np.ndarray]:
     """The convex pieces (each (k, 2) in the plane basis e1, e2) where the two faces overlap
     when projected on a plane normal to them."""
-    A = [_ccw(t @ np.array([e1, e2]).T) for t in mesh.triangles[fa.tris]]
-    B = [_ccw(t @ np.array([e1, e2]).T) for t in mesh.triangles[fb.tris]]
-    alo = np.array([a.min(0) for a in A])
-    ahi = np.array([a.max(0) for a in A])
-    pieces = []
+    arr = _arrays(mesh)
+    E = np.array([e1, e2]).T
+    A, B = _ccw_all(arr.tri[fa.tris] @ E), _ccw_all(arr.tri[fb.tris] @ E)   # (n, 3, 2) each
+    if len(A) < len(B):
+        A, B = B, A  # clip the many against the few
+    alo, ahi = A.min(1), A.max(1)
+    pieces: list[np.ndarray] = []
+    done = np.zeros(len(A), bool)
     for b in B:
         blo, bhi = b.min(0), b.max(0)
-        for i in np.flatnonzero(((alo <= bhi) & (ahi >= blo)).all(1)):
+        near = np.flatnonzero(((alo <= bhi) & (ahi >= blo)).all(1) & ~done)
+        if not len(near):
+            continue
+        inside = _in_triangle(A[near].reshape(-1, 2), b).reshape(-1, 3).all(1)
+        for i in near[inside]:
+            pieces.append(A[i])
+        done[near[inside]] = True
+        for i in near[~inside]:
             p = _clip_convex(A[i], b)
             if len(p) >= 3 and _area_centroid(p)[0] > 0:
                 pieces.append(p)
     return pieces
+
+
+def _ccw_all(T: np.ndarray) -> np.ndarray:
+    """Triangles (n, 3, 2) with their corners counter-clockwise."""
+    d = (T[:, 1, 0] - T[:, 0, 0]) * (T[:, 2, 1] - T[:, 0, 1]) - (T[:, 1, 1] - T[:, 0, 1]) * (T[:, 2, 0] - T[:, 0, 0])
+    out = T.copy()
+    out[d < 0] = T[d < 0][:, ::-1]
+    return out
+
+
+def _in_triangle(P: np.ndarray, t: np.ndarray, eps: float = 1e-12) -> np.ndarray:
+    """(k,) bool: points P (k, 2) in the closed CCW triangle t (3, 2)."""
+    ok = np.ones(len(P), bool)
+    for i in range(3):
+        a, b = t[i], t[(i + 1) % 3]
+        ok &= (b[0] - a[0]) * (P[:, 1] - a[1]) - (b[1] - a[1]) * (P[:, 0] - a[0]) >= -eps
+    return ok
 
 
 # =========================================================================== grasps
@@ -382,7 +468,7 @@ def _covered(mesh: "trimesh.Trimesh", faces: list[Face], feature: FeatureGeometr
             e1, e2 = axis_basis(feature.direction)
             F = np.eye(4)
             F[:3, 0], F[:3, 1], F[:3, 2], F[:3, 3] = e1, e2, feature.direction, feature.origin
-            big = 10 * float(np.linalg.norm(mesh.bounds[1] - mesh.bounds[0])) + reach
+            big = 10 * _arrays(mesh).diag + reach
             r = feature.radius
             lo, hi = (np.array([-r, -r, 0.0]), np.array([r, r, big])) if feature.kind == "peg" else (
                 np.array([-r, -r, -big]), np.array([r, r, 0.0]))
@@ -476,7 +562,7 @@ def _round(mesh: "trimesh.Trimesh", faces: list[Face], root: np.ndarray, d: np.n
            length: float) -> bool:
     """True if the mesh's side triangles of the shaft (root, d, r, length) lie on its cylinder:
     their centroids within 1 % of r from the axis (a 64-gon's are within 0.05 %, a hexagon's 6 % off)."""
-    C = mesh.triangles_center - root
+    C = _arrays(mesh).C - root
     t = C @ d
     radial = np.linalg.norm(C - np.outer(t, d), axis=1)
     side = (t > 1e-9 * length) & (t < length * (1 - 1e-9)) & (radial > 0.5 * r) & (radial < 1.5 * r)
@@ -499,10 +585,19 @@ def _pad_contact(pieces: list[np.ndarray], e1: np.ndarray, e2: np.ndarray, T: np
     off = -np.array([o @ x, o @ z])
     u, L = g.finger_width / 2, g.finger_length
     pad = np.array([[-u, -L], [u, -L], [u, 0.0], [-u, 0.0]])
+    if not pieces:
+        return 0.0
+    sizes = np.array([len(p) for p in pieces])
+    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    Q = np.concatenate(pieces) @ M.T + off
+    qlo, qhi = np.minimum.reduceat(Q, starts), np.maximum.reduceat(Q, starts)
+    lo, hi = pad[0], pad[2]
+    inside = (qlo >= lo).all(1) & (qhi <= hi).all(1)
+    outside = (qhi < lo).any(1) | (qlo > hi).any(1)
     total = 0.0
-    for p in pieces:
-        q = _ccw(p @ M.T + off)
-        total += _area_centroid(_clip_convex(q, pad))[0]
+    for i in np.flatnonzero(inside | ~outside):
+        q = _ccw(Q[starts[i]: starts[i] + sizes[i]])
+        total += _area_centroid(q if inside[i] else _clip_convex(q, pad))[0]
     return total
 
 
