@@ -368,6 +368,13 @@ def _name_key(name: str) -> tuple:
 # =========================================================================== frames
 
 
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The cross product over the last axis (numpy's np.cross costs ~20 us a call on 3-vectors)."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    return np.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1], a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
+                     a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)
+
+
 def axis_basis(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Two unit vectors (e1, e2) completing the unit ``d`` to a right-handed frame: e1 is the
     object axis least aligned with d (the first such), made normal to d; e2 = d x e1."""
@@ -375,7 +382,7 @@ def axis_basis(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     e = np.eye(3)[int(np.argmin(np.abs(d) + 1e-12 * np.arange(3)))]
     e1 = e - (e @ d) * d
     e1 /= np.linalg.norm(e1)
-    return e1, np.cross(d, e1)
+    return e1, cross(d, e1)
 
 
 def minimal_rotation(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -387,7 +394,7 @@ def minimal_rotation(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     if c < -1 + 1e-12:
         k = axis_basis(a)[0]
         return 2 * np.outer(k, k) - np.eye(3)
-    v = np.cross(a, b)
+    v = cross(a, b)
     K = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
     return np.eye(3) + K + K @ K / (1 + c)
 

@@ -87,7 +87,10 @@ def _compute(name: str, geometry: Geometry, feature: FeatureGeometry | None, fac
                     "euler": [float(v) for v in g.euler], "width": g.width} for g in grasps],
     }
     if need_hull:
-        out["hull"] = [[float(v) for v in p] for p in mesh.convex_hull.vertices]
+        from scipy.spatial import ConvexHull
+
+        V = np.asarray(mesh.vertices, float)
+        out["hull"] = [[float(v) for v in p] for p in V[np.sort(ConvexHull(V).vertices)]]
     return out
 
 

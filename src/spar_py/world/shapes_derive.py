@@ -39,7 +39,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..units import from_mm
-from .shapes import Face, FeatureGeometry, Primitive, axis_basis, clean, minimal_rotation
+from .shapes import Face, FeatureGeometry, Primitive, axis_basis, clean, cross, minimal_rotation
 
 if TYPE_CHECKING:
     import trimesh
@@ -50,7 +50,7 @@ __all__ = ["DerivedGrasp", "DerivedPose", "Gripper", "derive_grasps", "derive_po
 #: Poses whose basin of attraction (trimesh's probability) is smaller are dropped.
 PROB_FLOOR = 0.01
 #: A convex hull of more triangles is thinned before trimesh's pose search (see derive_poses).
-HULL_FACES_MAX = 1000
+HULL_FACES_MAX = 64
 #: ... on a grid of the part's size over this.
 HULL_GRID = 100
 #: A pose trimesh finds is snapped to a face whose normal is within this (deg).
@@ -217,8 +217,12 @@ def derive_poses(mesh: "trimesh.Trimesh", faces: list[Face], feature: FeatureGeo
     ``{prefix}1, {prefix}2, ...``."""
     import trimesh
 
+    from scipy.spatial import ConvexHull
+
     A = _arrays(mesh)
-    hull = mesh.convex_hull
+    qh = ConvexHull(A.V)
+    hull = trimesh.Trimesh(A.V[qh.vertices], np.searchsorted(qh.vertices, qh.simplices), process=False)
+    trimesh.repair.fix_normals(hull)
     if len(hull.faces) > HULL_FACES_MAX:
         # thin the hull's vertices on a grid of 1/HULL_GRID of the part's size: the topple
         # graph of a finely tessellated round part is otherwise most of the derivation; the
@@ -271,11 +275,12 @@ def _tri_box(tri: np.ndarray, lo: np.ndarray, hi: np.ndarray,
     idx = np.flatnonzero(keep)
     t = tri[idx] - c
     e = np.stack([t[:, 1] - t[:, 0], t[:, 2] - t[:, 1], t[:, 0] - t[:, 2]], axis=1)  # (m, 3, 3)
-    n = np.cross(e[:, 0], e[:, 1])
+    n = cross(e[:, 0], e[:, 1])
     ok = np.abs(np.einsum("ij,ij->i", n, t[:, 0])) <= np.abs(n) @ h + 1e-15
-    for k in range(3):
-        ek = np.eye(3)[k]
-        a = np.cross(ek[None, None, :], e)  # (m, 3 edges, 3)
+    zero = np.zeros(e.shape[:2])
+    ex, ey, ez = e[..., 0], e[..., 1], e[..., 2]
+    for a in (np.stack([zero, -ez, ey], -1), np.stack([ez, zero, -ex], -1), np.stack([-ey, ex, zero], -1)):
+        # a: (m, 3 edges, 3), the cross product of a box axis with each edge
         p = np.einsum("mjd,mvd->mjv", a, t)  # (m, edges, vertices)
         r = np.abs(a) @ h
         ok &= ~((p.min(2) > r + 1e-15) | (p.max(2) < -r - 1e-15)).any(1)
@@ -317,44 +322,53 @@ def grasp_problem(mesh: "trimesh.Trimesh", T: np.ndarray, width: float, g: Gripp
 # =========================================================================== polygons
 
 
-def _clip(poly: np.ndarray, a: np.ndarray, b: float) -> np.ndarray:
-    """Sutherland-Hodgman: the part of convex polygon ``poly`` (k, 2) with a . p <= b."""
-    if len(poly) == 0:
-        return poly
-    s = poly @ a - b
+def _clip(poly: list, a: tuple, b: float) -> list:
+    """Sutherland-Hodgman: the part of convex polygon ``poly`` (list of (x, y)) with a . p <= b."""
     out = []
     k = len(poly)
+    if not k:
+        return out
+    ax, ay = a
+    sv = [ax * x + ay * y - b for x, y in poly]
     for i in range(k):
-        p, q, sp, sq = poly[i], poly[(i + 1) % k], s[i], s[(i + 1) % k]
+        (px, py), (qx, qy), sp, sq = poly[i], poly[(i + 1) % k], sv[i], sv[(i + 1) % k]
         if sp <= 0:
-            out.append(p)
+            out.append((px, py))
         if (sp < 0 < sq) or (sq < 0 < sp):
-            out.append(p + (q - p) * (sp / (sp - sq)))
-    return np.array(out) if out else np.zeros((0, 2))
+            t = sp / (sp - sq)
+            out.append((px + (qx - px) * t, py + (qy - py) * t))
+    return out
 
 
-def _clip_convex(poly: np.ndarray, clip: np.ndarray) -> np.ndarray:
-    """The intersection of convex polygon ``poly`` with convex CCW polygon ``clip``."""
-    for i in range(len(clip)):
-        p, q = clip[i], clip[(i + 1) % len(clip)]
-        e = q - p
-        n = np.array([e[1], -e[0]])  # outward normal of a CCW edge
-        poly = _clip(poly, n, float(n @ p))
-        if len(poly) == 0:
+def _clip_convex(poly: "np.ndarray | list", clip: "np.ndarray | list") -> list:
+    """The intersection of convex polygon ``poly`` with convex CCW polygon ``clip`` (lists of (x, y))."""
+    P = [(float(x), float(y)) for x, y in poly]
+    C = [(float(x), float(y)) for x, y in clip]
+    for i in range(len(C)):
+        (px, py), (qx, qy) = C[i], C[(i + 1) % len(C)]
+        n = (qy - py, -(qx - px))  # outward normal of a CCW edge
+        P = _clip(P, n, n[0] * px + n[1] * py)
+        if not P:
             break
-    return poly
+    return P
 
 
-def _area_centroid(poly: np.ndarray) -> tuple[float, np.ndarray]:
-    if len(poly) < 3:
+def _area_centroid(poly: "np.ndarray | list") -> tuple[float, np.ndarray]:
+    """|area| and centroid of a simple polygon (list or (k, 2) array of corners)."""
+    k = len(poly)
+    if k < 3:
         return 0.0, np.zeros(2)
-    x, y = poly[:, 0], poly[:, 1]
-    xn, yn = np.roll(x, -1), np.roll(y, -1)
-    cr = x * yn - xn * y
-    A = cr.sum() / 2
+    A = cx = cy = 0.0
+    for i in range(k):
+        x, y = poly[i]
+        xn, yn = poly[(i + 1) % k]
+        c = float(x) * float(yn) - float(xn) * float(y)
+        A += c
+        cx += (float(x) + float(xn)) * c
+        cy += (float(y) + float(yn)) * c
     if abs(A) < 1e-300:
         return 0.0, np.zeros(2)
-    return float(abs(A)), np.array([((x + xn) * cr).sum(), ((y + yn) * cr).sum()]) / (6 * A)
+    return abs(A) / 2, np.array([cx, cy]) / (3 * A)
 
 
 def _ccw(P: np.ndarray) -> np.ndarray:
@@ -385,7 +399,7 @@ def _overlap(mesh: "trimesh.Trimesh", fa: Face, fb: Face, e1: np.ndarray, e2: np
         for i in near[~inside]:
             p = _clip_convex(A[i], b)
             if len(p) >= 3 and _area_centroid(p)[0] > 0:
-                pieces.append(p)
+                pieces.append(np.array(p))
     return pieces
 
 
@@ -439,7 +453,7 @@ def _canonical(c: np.ndarray) -> np.ndarray:
 def _tool(p: np.ndarray, c: np.ndarray, a: np.ndarray) -> np.ndarray:
     """The tool frame at p with y = c (closing) and z = a (approach)."""
     T = np.eye(4)
-    T[:3, 0], T[:3, 1], T[:3, 2], T[:3, 3] = np.cross(c, a), c, a, p
+    T[:3, 0], T[:3, 1], T[:3, 2], T[:3, 3] = cross(c, a), c, a, p
     return clean(T, 1e-9)
 
 
@@ -519,7 +533,8 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], feature: FeatureGe
             e1, e2 = axis_basis(c)
             pieces = _overlap(mesh, fa, fb, e1, e2)
             ac = [_area_centroid(p) for p in pieces]
-            area = sum(a for a, _ in ac)
+            areas = np.array([a for a, _ in ac])
+            area = float(areas.sum())
             if area < min_area:
                 continue
             cen2 = sum(a * q for a, q in ac) / area
@@ -528,7 +543,7 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], feature: FeatureGe
             names = tuple(sorted((fa.name, fb.name), key=lambda n: [f.name for f in faces].index(n)))
             for a in _approaches(c, step):
                 T = _tool(p, c, a)
-                if _pad_contact(pieces, e1, e2, T, g) >= min_area:
+                if _pad_contact(pieces, areas, e1, e2, T, g) >= min_area:
                     cands.append((names, width, T))
     min_len = from_mm(unit, MIN_CONTACT_MM)
     for root, d, r, length, fname in _shafts(faces, feature, prims):
@@ -576,7 +591,8 @@ def _face_at(faces: list[Face], mesh: "trimesh.Trimesh", p: np.ndarray, unit: st
     return None if k is None else faces[k].name
 
 
-def _pad_contact(pieces: list[np.ndarray], e1: np.ndarray, e2: np.ndarray, T: np.ndarray, g: Gripper) -> float:
+def _pad_contact(pieces: list[np.ndarray], areas: np.ndarray, e1: np.ndarray, e2: np.ndarray, T: np.ndarray,
+                 g: Gripper) -> float:
     """Area of the overlap pieces (plane basis e1, e2) under one finger pad (tool x within
     +-finger_width/2, tool z from -finger_length to 0)."""
     x, z, o = T[:3, 0], T[:3, 2], T[:3, 3]
@@ -594,10 +610,10 @@ def _pad_contact(pieces: list[np.ndarray], e1: np.ndarray, e2: np.ndarray, T: np
     lo, hi = pad[0], pad[2]
     inside = (qlo >= lo).all(1) & (qhi <= hi).all(1)
     outside = (qhi < lo).any(1) | (qlo > hi).any(1)
-    total = 0.0
-    for i in np.flatnonzero(inside | ~outside):
+    total = float(areas[inside].sum())
+    for i in np.flatnonzero(~inside & ~outside):
         q = _ccw(Q[starts[i]: starts[i] + sizes[i]])
-        total += _area_centroid(q if inside[i] else _clip_convex(q, pad))[0]
+        total += _area_centroid(_clip_convex(q, pad))[0]
     return total
 
 
