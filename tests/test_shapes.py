@@ -369,3 +369,33 @@ def test_kb_derive_bad_input_is_one_line(tmp_path: Path) -> None:
     r = subprocess.run([*SPAR, "kb", "derive", str(p)], capture_output=True, text=True, cwd=ROOT)
     assert r.returncode == 2
     assert r.stderr.count("\n") == 1 and "faces: expected a value (key missing)" in r.stderr
+
+
+def test_planning_does_not_import_the_geometry_libraries_it_does_not_need(tmp_path: Path) -> None:
+    """The paper's cell (hand-written models) never imports trimesh; a mesh cell whose
+    derivations are cached does not either."""
+    code = ("import sys\nfrom spar_py.kb import load_problem\nload_problem(sys.argv[1])\n"
+            "print(sorted(m for m in ('trimesh', 'scipy', 'networkx', 'manifold3d') if m in sys.modules))\n")
+    env = {**__import__("os").environ, "SPAR_CACHE_DIR": str(tmp_path)}
+    run = [sys.executable, "-c", code]
+    paper = subprocess.run([*run, str(ROOT / "kb/problems/peg_in_block.yaml")], capture_output=True, text=True,
+                           env=env)
+    assert paper.stdout.strip() == "[]", paper.stderr
+    mesh_cell = str(ROOT / "kb/problems/shaft_in_bracket.yaml")
+    first = subprocess.run([*run, mesh_cell], capture_output=True, text=True, env=env)
+    assert "trimesh" in first.stdout, first.stderr
+    again = subprocess.run([*run, mesh_cell], capture_output=True, text=True, env=env)
+    assert again.stdout.strip() == "[]", again.stderr
+
+
+def test_bench_derive_renders() -> None:
+    from bench import derive
+
+    r = {"repeats": 1, "rows": [
+        {"model": "peg (paper, shape)", "triangles": 270, "faces": 7, "poses": 6, "grasps": 36,
+         "derive_ms": 80.0, "cached_ms": 1.0, "hand_ms": 5.0},
+        {"model": "10k-triangle part (mesh)", "triangles": 9998, "faces": 7, "poses": 6, "grasps": 36,
+         "derive_ms": 1500.0, "cached_ms": 5.0, "hand_ms": None}]}
+    text = "\n".join(derive.markdown(r))
+    assert "| peg (paper, shape) | 270 |" in text and "16x" in text
+    assert "80 ms at worst (met)" in text and "1500 ms (9998 triangles) (NOT met)" in text

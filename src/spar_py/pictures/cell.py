@@ -1,5 +1,6 @@
 """The work-cell picture at one step: the table, each part drawn from its object's shape at
-its world pose (a part from a mesh, or with holes, by its mesh's facets: world.shapes), the arm as a polyline through its frames, and the gripper.
+its world pose (a part from a mesh, or with holes, by its mesh's facets: world.shapes), the
+arm as a polyline through its frames, and the gripper.
 
 Three panels per picture: a 3-D view, a top view and a side view, with equal axis scaling
 and the same extents for every step of a plan. What is drawn is a :class:`Scene`

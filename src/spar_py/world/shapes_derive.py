@@ -291,7 +291,7 @@ def _tri_box(tri: np.ndarray, lo: np.ndarray, hi: np.ndarray,
 def _gripper_boxes(g: Gripper, width: float, reach: float, shrink: float) -> list[tuple[str, np.ndarray, np.ndarray]]:
     """(what, lo, hi) boxes in the tool frame: the closed fingers at ``width``, the open fingers
     and the palm swept in along the approach from ``reach`` away, each shrunk by ``shrink``."""
-    u, L, t, P = g.finger_width / 2, g.finger_length, g.finger_thickness, g.palm_depth
+    u, L, t = g.finger_width / 2, g.finger_length, g.finger_thickness
     o, w = g.opening / 2, width / 2
     boxes = [
         ("a finger", np.array([-u, w, -L]), np.array([u, w + t, 0.0])),
