@@ -641,12 +641,10 @@ def load_object(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, o
         try:
             derived = derive(name, geometry, feature_geo, face_names, grip, step, need_hull=geometry.mesh_file
                              is not None, use_cache=use_cache)
-        except ValueError as e:
-            key = "mesh" if geometry.mesh_file is not None else "shape"
-            msg = str(e)
-            if msg.startswith("face_names."):
-                key, _, msg = msg.partition(": ")
-            raise KBError(str(path), key, msg.removeprefix("expected ")) from None
+        except KBError:
+            raise
+        except Exception as e:  # trimesh, manifold3d, scipy: a shape they cannot take is bad input
+            raise _geometry_error(path, geometry, e) from None
         if geometry.mesh_file is not None:
             pts = np.asarray(derived["hull"], float)
             solids = (Solid("hull", pts.min(0), pts.max(0), 0.0, pts),)
@@ -727,6 +725,19 @@ def load_object(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, o
                 fnode.key("vector").vector(3) * scale,
             )
     return ObjectModel(name, faces, poses, grasps, feature, solids, geometry)
+
+
+def _geometry_error(path: str | Path, geometry: Any, e: Exception) -> KBError:
+    """A derivation's failure as one line naming the key: ``face_names.NAME`` for a point off
+    the shape, else ``mesh`` or ``shape`` with what was expected (world.shapes raises
+    ValueError("expected ...") for the cases it knows; any other exception is named)."""
+    key = "mesh" if geometry.mesh_file is not None else "shape"
+    msg = " ".join(str(e).split())
+    if isinstance(e, ValueError) and msg.startswith("face_names."):
+        key, _, msg = msg.partition(": ")
+    elif not isinstance(e, ValueError) or not msg:
+        msg = f"a shape spar can derive a model from ({type(e).__name__}: {msg[:80]})"
+    return KBError(str(path), key, msg.removeprefix("expected "))
 
 
 def _known(root: Node, faces_node: Node | None, label: str, used: list, known: set, what: str) -> None:
@@ -1345,7 +1356,13 @@ def check_against_shape(path: str | Path, root: Node, model: ObjectModel, unit: 
     from .world.shapes_derive import Gripper, check_entries
 
     grip = Gripper.default(unit, opening if opening is not None else from_mm(unit, DEFAULT_OPENING_MM))
-    for key, expected, got in check_entries(model, grip, unit, hand):
+    try:
+        problems = check_entries(model, grip, unit, hand)
+    except KBError:
+        raise
+    except Exception as e:  # the shape itself cannot be built or searched
+        raise _geometry_error(path, model.geometry, e) from None
+    for key, expected, got in problems:
         raise KBError(str(path), key, expected, got)
 
 
