@@ -87,10 +87,10 @@ def _compute(name: str, geometry: Geometry, feature: FeatureGeometry | None, fac
                     "euler": [float(v) for v in g.euler], "width": g.width} for g in grasps],
     }
     if need_hull:
-        from scipy.spatial import ConvexHull
+        from .shapes_derive import hull_vertices
 
         V = np.asarray(mesh.vertices, float)
-        out["hull"] = [[float(v) for v in p] for p in V[np.sort(ConvexHull(V).vertices)]]
+        out["hull"] = [[float(v) for v in p] for p in V[hull_vertices(mesh)]]
     return out
 
 

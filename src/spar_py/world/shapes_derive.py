@@ -150,6 +150,31 @@ def _arrays(mesh: "trimesh.Trimesh") -> _Arrays:
     return a
 
 
+def hull_vertices(mesh: "trimesh.Trimesh") -> np.ndarray:
+    """Indices of the mesh's vertices on its convex hull (sorted; kept in the mesh's metadata)."""
+    h = mesh.metadata.get("_spar_hull")
+    if h is None:
+        from scipy.spatial import ConvexHull
+
+        h = np.sort(ConvexHull(_arrays(mesh).V).vertices)
+        mesh.metadata["_spar_hull"] = h
+    return h
+
+
+def _hull_mesh(P: np.ndarray) -> "trimesh.Trimesh":
+    """The convex hull of points P as a closed, outward-oriented trimesh (qhull's facets,
+    each turned to agree with its outward plane normal)."""
+    import trimesh
+    from scipy.spatial import ConvexHull
+
+    qh = ConvexHull(P)
+    F = qh.simplices.copy()
+    n = cross(P[F[:, 1]] - P[F[:, 0]], P[F[:, 2]] - P[F[:, 0]])
+    flip = np.einsum("ij,ij->i", n, qh.equations[:, :3]) < 0
+    F[flip] = F[flip][:, ::-1]
+    return trimesh.Trimesh(P, F, process=True)
+
+
 # =========================================================================== stable poses
 
 
@@ -217,20 +242,16 @@ def derive_poses(mesh: "trimesh.Trimesh", faces: list[Face], feature: FeatureGeo
     ``{prefix}1, {prefix}2, ...``."""
     import trimesh
 
-    from scipy.spatial import ConvexHull
-
     A = _arrays(mesh)
-    qh = ConvexHull(A.V)
-    hull = trimesh.Trimesh(A.V[qh.vertices], np.searchsorted(qh.vertices, qh.simplices), process=False)
-    trimesh.repair.fix_normals(hull)
-    if len(hull.faces) > HULL_FACES_MAX:
+    hv = A.V[hull_vertices(mesh)]
+    if len(hv) > HULL_FACES_MAX // 2:
         # thin the hull's vertices on a grid of 1/HULL_GRID of the part's size: the topple
         # graph of a finely tessellated round part is otherwise most of the derivation; the
         # poses found are snapped to the real mesh's faces and checked on it below
-        V = np.asarray(hull.vertices, float)
-        h = A.diag / HULL_GRID
-        _, keep = np.unique(np.floor((V - V.min(0)) / h).astype(np.int64), axis=0, return_index=True)
-        hull = trimesh.convex.convex_hull(V[np.sort(keep)])
+        _, keep = np.unique(np.floor((hv - hv.min(0)) / (A.diag / HULL_GRID)).astype(np.int64), axis=0,
+                            return_index=True)
+        hv = hv[np.sort(keep)]
+    hull = _hull_mesh(hv)
     Ts, probs = trimesh.poses.compute_stable_poses(hull, center_mass=A.com, sigma=0.0, n_samples=1)
     tol = from_mm(unit, SUPPORT_TOL_MM)
     normals = [f.normal for f in faces if f.planar]
@@ -543,7 +564,7 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], feature: FeatureGe
             names = tuple(sorted((fa.name, fb.name), key=lambda n: [f.name for f in faces].index(n)))
             for a in _approaches(c, step):
                 T = _tool(p, c, a)
-                if _pad_contact(pieces, areas, e1, e2, T, g) >= min_area:
+                if _pad_contact(pieces, areas, e1, e2, T, g, min_area) >= min_area:
                     cands.append((names, width, T))
     min_len = from_mm(unit, MIN_CONTACT_MM)
     for root, d, r, length, fname in _shafts(faces, feature, prims):
@@ -592,9 +613,10 @@ def _face_at(faces: list[Face], mesh: "trimesh.Trimesh", p: np.ndarray, unit: st
 
 
 def _pad_contact(pieces: list[np.ndarray], areas: np.ndarray, e1: np.ndarray, e2: np.ndarray, T: np.ndarray,
-                 g: Gripper) -> float:
+                 g: Gripper, need: float = math.inf) -> float:
     """Area of the overlap pieces (plane basis e1, e2) under one finger pad (tool x within
-    +-finger_width/2, tool z from -finger_length to 0)."""
+    +-finger_width/2, tool z from -finger_length to 0); once the pieces wholly under it reach
+    ``need`` that lower bound is returned."""
     x, z, o = T[:3, 0], T[:3, 2], T[:3, 3]
     # plane coordinates (s, t) -> pad coordinates (u, w): affine, the plane's offset drops out
     M = np.array([[e1 @ x, e2 @ x], [e1 @ z, e2 @ z]])
@@ -611,6 +633,8 @@ def _pad_contact(pieces: list[np.ndarray], areas: np.ndarray, e1: np.ndarray, e2
     inside = (qlo >= lo).all(1) & (qhi <= hi).all(1)
     outside = (qhi < lo).any(1) | (qlo > hi).any(1)
     total = float(areas[inside].sum())
+    if total >= need:
+        return total  # enough already: the pieces across the pad's edge need no clipping
     for i in np.flatnonzero(~inside & ~outside):
         q = _ccw(Q[starts[i]: starts[i] + sizes[i]])
         total += _area_centroid(_clip_convex(q, pad))[0]
