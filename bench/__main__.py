@@ -1,8 +1,9 @@
 """Run every benchmark and write bench/RESULTS.md: ``python -m bench [--quick] [--out FILE]``.
 
 The benchmarks are bench.ik (closed-form IK against Robotics Toolbox), bench.supinf
-(SUP/INF tightness and time) and bench.planning (the paper's cell warm and cold, the
-generated N-peg problems); each also runs on its own (``python -m bench.ik`` ...).
+(SUP/INF tightness and time), bench.planning (the paper's cell warm and cold, the
+generated N-peg problems) and bench.derive (object models derived from shapes and
+meshes, issue 14); each also runs on its own (``python -m bench.ik`` ...).
 Figures are medians of repeated runs; every ratio compares two figures measured in the
 same run, so machine noise affects both sides alike. ``--quick`` cuts the repeats and
 sizes down to a smoke run of a minute or two (its figures are not for quoting).
@@ -18,7 +19,7 @@ import sys
 import time
 from pathlib import Path
 
-from . import coldstart, ik, memory, planning, supinf
+from . import coldstart, derive, ik, memory, planning, supinf
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "RESULTS.md"
@@ -35,12 +36,12 @@ N10_S = 2.0
 RSS_KB_PER_PLAN = memory.LIMIT_KB
 
 #: Sizes of a full and a quick run.
-FULL = {"ik": {"n": 10_000, "single": 1000, "rtb": 200, "repeats": 5},
+FULL = {"ik": {"n": 10_000, "single": 1000, "rtb": 200, "repeats": 5}, "derive": {"repeats": 7},
         "supinf": {"per_length": 6, "repeats": 5},
         "planning": {"quick": False, "max_n": 10},
         "memory": {"plans": 1000, "warmup": 50},
         "coldstart": {"repeats": 15, "importtime_runs": 5}}
-QUICK = {"ik": {"n": 1000, "single": 100, "rtb": 20, "repeats": 3},
+QUICK = {"ik": {"n": 1000, "single": 100, "rtb": 20, "repeats": 3}, "derive": {"repeats": 2},
          "supinf": {"per_length": 1, "lengths": (1, 4, 8), "repeats": 3},
          "planning": {"quick": True, "max_n": 2, "timeout": 60.0},
          "memory": {"plans": 100, "warmup": 10, "processes": 1},
@@ -117,7 +118,8 @@ def run_all(quick: bool = False, log=None) -> dict:
                      ("supinf", lambda: supinf.run(**sizes["supinf"], progress=say)),
                      ("planning", lambda: planning.run(**sizes["planning"], progress=say)),
                      ("memory", lambda: memory.run(**sizes["memory"])),
-                     ("coldstart", lambda: coldstart.run(**sizes["coldstart"]))):
+                     ("coldstart", lambda: coldstart.run(**sizes["coldstart"])),
+                     ("derive", lambda: derive.run(**sizes["derive"]))):
         say(f"== {name}")
         t = time.perf_counter()
         out[name] = fn()
@@ -320,6 +322,8 @@ def render(r: dict) -> str:
 
     if r.get("coldstart"):
         L += coldstart.render(r["coldstart"])
+    if "derive" in r:
+        L += derive.markdown(r["derive"])
 
     L += ["## Where the time goes (cProfile)", "",
           ("Python's profiler sees SWI-Prolog as one call (`janus_swi._swipl.call`): its internal time "

@@ -55,6 +55,27 @@ def cmd_kb_check(args: argparse.Namespace) -> int:
     return status
 
 
+def cmd_kb_derive(args: argparse.Namespace) -> int:
+    """Write an object model with every face, stable pose and grasp explicit (derived ones too)."""
+    from .kb import derive_text
+
+    out_dir = Path(args.output).parent if args.output is not None else Path(args.model).parent
+    text = derive_text(args.model, _max_input_bytes(args), args.robot, out_dir)
+    if args.output is None:
+        sys.stdout.write(text)
+        return EXIT_OK
+    out = Path(args.output)
+    tmp = out.with_name(f".{out.name}.tmp")
+    try:
+        tmp.write_text(text, encoding="utf-8")
+        os.replace(tmp, out)
+    except OSError as e:
+        tmp.unlink(missing_ok=True)
+        _err(f"{out}: cannot write ({e.strerror or e})")
+        return EXIT_INPUT
+    return EXIT_OK
+
+
 # ---------------------------------------------------------------------- repl
 
 
@@ -202,6 +223,7 @@ def cmd_gen(args: argparse.Namespace) -> int:
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "kb_check": cmd_kb_check,
+    "kb_derive": cmd_kb_derive,
     "repl": cmd_repl,
     "plan": cmd_plan,
     "regress": cmd_regress,
@@ -222,6 +244,14 @@ def build_parser() -> argparse.ArgumentParser:
     check.add_argument("files", nargs="+")
     _add_max_input_bytes(check)
     check.set_defaults(func="kb_check")
+    derive = kbsub.add_parser("derive", help="write an object model with its derived faces, stable poses and "
+                              "grasps explicit (to review and diff)")
+    derive.add_argument("model", help="an object model file, e.g. kb/objects/peg_shape.yaml")
+    derive.add_argument("-o", "--output", help="write the model to this file (atomically) instead of stdout")
+    derive.add_argument("--robot", help="derive grasps for this robot's gripper (default: a 101.6 mm opening, "
+                        "the PUMA 762's)")
+    _add_max_input_bytes(derive)
+    derive.set_defaults(func="kb_derive")
 
     repl = sub.add_parser("repl", help="interactive Prolog toplevel with the planner loaded")
     repl.add_argument("problem", nargs="?", default=DEFAULT_PROBLEM)

@@ -28,6 +28,7 @@ import numpy as np
 import yaml
 
 from . import sanity
+from .units import from_mm
 from .errors import KBError, SparError, SparValueError, UnknownKeyError, WrongKindError
 from .geometry import ORTHO_TOL, eulerxyz, rotation_problem, rpy, same_stable_pose, tm_rows, trans
 from .kinematics import Robot
@@ -117,12 +118,22 @@ BOUNDS_SCHEMA = keys(["dx", "dy", "dz", "dtheta"])
 FRAME_SCHEMA = keys(["xyz"], ["rpy"])
 
 OBJECT_SCHEMA = keys(
-    {"object": LEAF, "units": UNITS_SCHEMA, "faces": LEAF,
+    {"object": LEAF, "units": UNITS_SCHEMA},
+    {"faces": LEAF,
      "stable_poses": Each(keys(["label", "rfaces", "ofaces", "tm"]), 1),
-     "grasps": Each(keys(["label", "gfaces", "ofaces", "eulerxyz", "width"]), 1)},
-    {"feature": keys(["kind", "faces", "radius", "vector"]),
-     "shape": Each(OneOf(MappingProxyType({"box": keys(["min", "max"]), "cylinder": keys(["radius", "z"])})))},
+     "grasps": Each(keys(["label", "gfaces", "ofaces", "eulerxyz", "width"]), 1),
+     # the paper's form {kind, faces, radius, vector} or by geometry {kind, name, radius, axis, length}
+     "feature": keys(["kind", "radius"], {"faces": LEAF, "vector": LEAF, "name": LEAF, "length": LEAF,
+                                          "axis": keys(["origin", "direction"])}),
+     "shape": Each(OneOf(MappingProxyType({"box": keys(["min", "max"], ["subtract"]),
+                                           "cylinder": keys(["radius", "z"], ["subtract"])}))),
+     "mesh": LEAF, "face_names": Named(LEAF), "grasp_step": LEAF},
 )
+#: The entries an object model may leave out when it gives its geometry (derived: world.shapes).
+DERIVABLE = ("faces", "stable_poses", "grasps")
+#: The gripper opening assumed when an object model is derived without a robot (mm: the
+#: PUMA 762's 4 in, kb/robots/puma762.yaml).
+DEFAULT_OPENING_MM = 101.6
 
 ROBOT_SCHEMA = keys(
     {"name": LEAF, "units": UNITS_SCHEMA, "dh": Each(keys(["alpha", "a", "d"], ["offset"])),
@@ -598,59 +609,213 @@ def _faces(node: Node, known: set[Face] | None, min_len: int = 1) -> tuple[Face,
     return tuple(out)
 
 
-def load_object(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES) -> ObjectModel:
-    """Load ``kb/objects/*.yaml`` converting lengths to ``unit``."""
+def load_object(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, opening: float | None = None,
+                use_cache: bool = True) -> ObjectModel:
+    """Load ``kb/objects/*.yaml`` converting lengths to ``unit``.
+
+    ``faces``, ``stable_poses`` and ``grasps`` left out of a model with ``mesh:`` or
+    ``shape:`` are derived from its geometry (world.shapes, cached by content hash:
+    world.shapes_cache) for a gripper opening ``opening`` (cell unit; DEFAULT_OPENING_MM
+    without a robot); hand-written ones take precedence. Only a derivation imports trimesh.
+    """
     root = read_kb(path, "object", max_bytes)
     name = root.key("object").label()
     _, mm_per, rad_per = _units(root)
     scale = mm_per / LENGTH_UNITS[unit]
-    faces_node = root.key("faces")
-    faces = _faces(faces_node, None)
-    if len(set(faces)) != len(faces):
-        raise faces_node.fail("distinct face names")
+    geometry, solids = _geometry(root, Path(path), unit, scale)
+    face_names = {k: n.vector(3) * scale for k, n in (root.key("face_names", False) or Node("", "", {})).items()}
+    fnode = root.key("feature", required=False)
+    feature_geo = _feature_geometry(fnode, scale) if fnode is not None else None
+    if geometry is not None:
+        geometry.face_names = face_names
+    missing = [k for k in DERIVABLE if k not in root.value]
+    derived = None
+    if missing:
+        if geometry is None:
+            root.key(missing[0])  # raises: key missing
+        step = _grasp_step(root, rad_per)
+        from .world.shapes_cache import derive
+        from .world.shapes_derive import Gripper
+
+        grip = Gripper.default(unit, opening if opening is not None else from_mm(unit, DEFAULT_OPENING_MM))
+        try:
+            derived = derive(name, geometry, feature_geo, face_names, grip, step, need_hull=geometry.mesh_file
+                             is not None, use_cache=use_cache)
+        except KBError:
+            raise
+        except Exception as e:  # trimesh, manifold3d, scipy: a shape they cannot take is bad input
+            raise _geometry_error(path, geometry, e) from None
+        if geometry.mesh_file is not None:
+            pts = np.asarray(derived["hull"], float)
+            solids = (Solid("hull", pts.min(0), pts.max(0), 0.0, pts),)
+    elif face_names and geometry is None:
+        raise root.key("face_names").fail("a model with mesh: or shape: (face_names name the faces of its geometry)")
+
+    faces_node = root.key("faces", required=False)
+    if faces_node is not None:
+        faces = _faces(faces_node, None)
+        if len(set(faces)) != len(faces):
+            raise faces_node.fail("distinct face names")
+    else:
+        faces = tuple(derived["faces"])
     known = set(faces)
 
     poses: dict[str, StablePose] = {}
-    for p in root.key("stable_poses").elements(1):
-        label = p.key("label").label()
-        if label in poses:
-            raise p.key("label").fail("a label not used before", show(label))
-        T = tm_node(p.key("tm"), scale)
-        poses[label] = StablePose(
-            label, _faces(p.key("rfaces"), known), _faces(p.key("ofaces"), known, 0),
-            T[:3, :3].copy(), float(T[2, 3]),
-        )
+    if "stable_poses" in root.value:
+        for p in root.key("stable_poses").elements(1):
+            label = p.key("label").label()
+            if label in poses:
+                raise p.key("label").fail("a label not used before", show(label))
+            T = tm_node(p.key("tm"), scale)
+            poses[label] = StablePose(
+                label, _faces(p.key("rfaces"), known), _faces(p.key("ofaces"), known, 0),
+                T[:3, :3].copy(), float(T[2, 3]),
+            )
+    else:
+        for d in derived["poses"]:
+            _known(root, faces_node, d["label"], d["rfaces"] + d["ofaces"], known, "stable pose")
+            poses[d["label"]] = StablePose(d["label"], tuple(d["rfaces"]), tuple(d["ofaces"]),
+                                           np.array(d["R"], float).reshape(3, 3), float(d["height"]))
+        if not poses:
+            raise KBError(str(path), "mesh" if geometry.mesh_file else "shape",
+                          "a part with at least one stable pose (resting on a face, its centre of mass over it)")
 
     grasps: dict[str, Grasp] = {}
-    for g in root.key("grasps").elements(1):
-        label = g.key("label").label()
-        if label in grasps:
-            raise g.key("label").fail("a label not used before", show(label))
-        e = g.key("eulerxyz").vector(6)
-        euler = (e[0] * scale, e[1] * scale, e[2] * scale, e[3] * rad_per, e[4] * rad_per, e[5] * rad_per)
-        grasps[label] = Grasp(
-            label,
-            _faces(g.key("gfaces"), known),
-            _faces(g.key("ofaces"), known, 0),
-            euler,
-            g.key("width").positive() * scale,
-            eulerxyz(*euler),
-        )
+    if "grasps" in root.value:
+        for g in root.key("grasps").elements(1):
+            label = g.key("label").label()
+            if label in grasps:
+                raise g.key("label").fail("a label not used before", show(label))
+            e = g.key("eulerxyz").vector(6)
+            euler = (e[0] * scale, e[1] * scale, e[2] * scale, e[3] * rad_per, e[4] * rad_per, e[5] * rad_per)
+            grasps[label] = Grasp(
+                label,
+                _faces(g.key("gfaces"), known),
+                _faces(g.key("ofaces"), known, 0),
+                euler,
+                g.key("width").positive() * scale,
+                eulerxyz(*euler),
+            )
+    else:
+        for d in derived["grasps"]:
+            _known(root, faces_node, d["label"], d["gfaces"] + d["ofaces"], known, "grasp")
+            euler = tuple(float(v) for v in d["euler"])
+            grasps[d["label"]] = Grasp(d["label"], tuple(d["gfaces"]), tuple(d["ofaces"]), euler,  # type: ignore[arg-type]
+                                       float(d["width"]), eulerxyz(*euler))
+        if not grasps:
+            raise KBError(str(path), "mesh" if geometry.mesh_file else "shape",
+                          "a part the gripper can hold (no pair of opposite faces or shaft within its opening)")
     clash = set(poses) & set(grasps)
     if clash:
         raise root.key("grasps").fail(f"labels distinct from stable pose labels ({', '.join(sorted(clash))})")
 
     feature = None
-    fnode = root.key("feature", required=False)
     if fnode is not None:
-        feature = MatingFeature(
-            fnode.key("kind").choice(("peg", "hole")),
-            _faces(fnode.key("faces"), known),
-            fnode.key("radius").positive() * scale,
-            fnode.key("vector").vector(3) * scale,
-        )
-    shape = tuple(_solid(n, scale) for n in (root.key("shape", required=False) or Node("", "", [])).elements())
-    return ObjectModel(name, faces, poses, grasps, feature, shape)
+        if feature_geo is not None:
+            if feature_geo.name not in known:
+                raise fnode.key("name").fail("the name of a face on the shape at the feature (its axis, radius and "
+                                             "length place it)", show(feature_geo.name))
+            feature = MatingFeature(feature_geo.kind, (feature_geo.name,), feature_geo.radius, feature_geo.end,
+                                    feature_geo)
+        else:
+            feature = MatingFeature(
+                fnode.key("kind").choice(("peg", "hole")),
+                _faces(fnode.key("faces"), known),
+                fnode.key("radius").positive() * scale,
+                fnode.key("vector").vector(3) * scale,
+            )
+    return ObjectModel(name, faces, poses, grasps, feature, solids, geometry)
+
+
+def _geometry_error(path: str | Path, geometry: Any, e: Exception) -> KBError:
+    """A derivation's failure as one line naming the key: ``face_names.NAME`` for a point off
+    the shape, else ``mesh`` or ``shape`` with what was expected (world.shapes raises
+    ValueError("expected ...") for the cases it knows; any other exception is named)."""
+    key = "mesh" if geometry.mesh_file is not None else "shape"
+    msg = " ".join(str(e).split())
+    if isinstance(e, ValueError) and msg.startswith("face_names."):
+        key, _, msg = msg.partition(": ")
+    elif not isinstance(e, ValueError) or not msg:
+        msg = f"a shape spar can derive a model from ({type(e).__name__}: {msg[:80]})"
+    return KBError(str(path), key, msg.removeprefix("expected "))
+
+
+def _known(root: Node, faces_node: Node | None, label: str, used: list, known: set, what: str) -> None:
+    """A derived entry may only use faces the model lists (when it lists them by hand)."""
+    for f in used:
+        if f not in known:
+            raise (faces_node or root).fail(f"every face the derived {what} {label} uses (add {f}, or leave "
+                                            "faces: out to derive them)")
+
+
+def _grasp_step(root: Node, rad_per: float) -> float:
+    """``grasp_step``: the quantum of grasp approaches and assembly turns (file angle unit; 45 deg)."""
+    n = root.key("grasp_step", required=False)
+    if n is None:
+        return math.radians(45.0)
+    step = n.positive() * rad_per
+    if not (math.radians(1.0) - 1e-12 <= step <= 2 * math.pi + 1e-12):
+        raise n.fail("an angle from 1 deg to a full turn", show(n.value))
+    return step
+
+
+def _geometry(root: Node, path: Path, unit: str, scale: float) -> tuple[Any, tuple[Solid, ...]]:
+    """The model's declared geometry (world.shapes.Geometry, or None) and its positive solids."""
+    mnode, snode = root.key("mesh", required=False), root.key("shape", required=False)
+    if mnode is not None and snode is not None:
+        raise mnode.fail("mesh: or shape:, not both")
+    if mnode is None and snode is None:
+        return None, ()
+    from .world.shapes import Geometry, Primitive
+
+    if mnode is not None:
+        ref = path.parent / mnode.text()
+        if ref.suffix.lower() not in (".stl", ".obj", ".ply"):
+            raise mnode.fail("the path of an STL, OBJ or PLY file", show(mnode.value))
+        if not ref.is_file():
+            raise mnode.fail("the path of a mesh file", f"{show(mnode.value)} (no such file)")
+        return Geometry(unit, (), str(ref.resolve()), scale), ()
+    prims = []
+    for n in snode.elements():
+        sol = _solid(n, scale)
+        kind = "box" if "box" in n.value else "cylinder"
+        sub = n.key(kind).key("subtract", required=False)
+        subtract = sub is not None and _flag(sub)
+        prims.append((Primitive(sol.kind, sol.lo, sol.hi, sol.radius, subtract), sol))
+    if prims and all(p.subtract for p, _ in prims):
+        raise snode.fail("at least one primitive that is not subtracted")
+    return (Geometry(unit, tuple(p for p, _ in prims)) if prims else None,
+            tuple(sol for p, sol in prims if not p.subtract))
+
+
+def _flag(node: Node) -> bool:
+    if not isinstance(node.value, bool):
+        raise node.fail("true or false", show(node.value))
+    return node.value
+
+
+def _feature_geometry(fnode: Node, scale: float) -> Any:
+    """The geometric form of ``feature:`` (world.shapes.FeatureGeometry), or None for the
+    paper's form ``{kind, faces, radius, vector}``; mixing the two is an error."""
+    geo_keys = [k for k in ("name", "axis", "length") if k in fnode.value]
+    old_keys = [k for k in ("faces", "vector") if k in fnode.value]
+    if geo_keys and old_keys:
+        raise fnode.fail("either {kind, faces, radius, vector} or {kind, name, radius, axis, length}, "
+                         f"not {', '.join(old_keys)} with {', '.join(geo_keys)}")
+    if not geo_keys:
+        fnode.key("faces")
+        fnode.key("vector")
+        return None
+    from .world.shapes import FeatureGeometry
+
+    kind = fnode.key("kind").choice(("peg", "hole"))
+    name = fnode.key("name").label()
+    axis = fnode.key("axis")
+    d = axis.key("direction").vector(3)
+    if np.linalg.norm(d) < 1e-9:
+        raise axis.key("direction").fail("a non-zero direction", "[0, 0, 0]")
+    return FeatureGeometry(kind, name, fnode.key("radius").positive() * scale, axis.key("origin").vector(3) * scale,
+                           d / np.linalg.norm(d), fnode.key("length").positive() * scale)
 
 
 # --------------------------------------------------------------------------- robots
@@ -831,14 +996,14 @@ def _bounds(node: Node, len_scale: float, rad_per: float) -> Bounds:
     return Bounds(iv("dx", len_scale), iv("dy", len_scale), iv("dz", len_scale), iv("dtheta", rad_per))
 
 
-GOAL_SHAPES: dict[str, int] = {"assembled": 5, "part_location": 2}
+GOAL_SHAPES: dict[str, tuple[int, ...]] = {"assembled": (5, 2), "part_location": (2,)}
 
 
 def _check_goal(node: Node, goal: Any, cell_objects: dict[str, ObjectModel], transforms: dict, vectors: dict,
                 positions: dict[str, Position]) -> None:
     """Validate a parsed goal against the cell (known objects, faces, transforms, positions)."""
-    if not isinstance(goal, tuple) or goal[0] not in GOAL_SHAPES or len(goal) - 1 != GOAL_SHAPES[goal[0]]:
-        raise node.fail("a goal assembled(Peg, Hole, [[PegFaces], [HoleFaces]], Ta, Va) "
+    if not isinstance(goal, tuple) or goal[0] not in GOAL_SHAPES or len(goal) - 1 not in GOAL_SHAPES[goal[0]]:
+        raise node.fail("a goal assembled(Peg, Hole), assembled(Peg, Hole, [[PegFaces], [HoleFaces]], Ta, Va) "
                         "or part_location(Object, InitialPosition)")
     if goal[0] == "part_location":
         _, obj, pos = goal
@@ -905,8 +1070,8 @@ def _positions(onode: Node, oname: str, model: ObjectModel, taken: dict[str, Pos
     return out
 
 
-def _objects(root: Node, base: Path, unit: str, max_bytes: int) -> tuple[dict[str, ObjectModel],
-                                                                           dict[str, Position], list[Path]]:
+def _objects(root: Node, base: Path, unit: str, max_bytes: int, opening: float | None = None
+             ) -> tuple[dict[str, ObjectModel], dict[str, Position], list[Path]]:
     """The problem's objects (models loaded), their initial positions and the model files."""
     objects: dict[str, ObjectModel] = {}
     positions: dict[str, Position] = {}
@@ -915,7 +1080,7 @@ def _objects(root: Node, base: Path, unit: str, max_bytes: int) -> tuple[dict[st
         mnode = onode.key("model")
         mpath = _ref_path(mnode, base, "object")
         with _referenced(mnode, "object"):
-            model = load_object(mpath, unit, max_bytes)
+            model = load_object(mpath, unit, max_bytes, opening=opening)
         if model.name != oname:
             raise mnode.fail(f"the model of {oname}", f"the model of {model.name}")
         objects[oname] = model
@@ -966,9 +1131,37 @@ def _goals(root: Node, objects: dict[str, ObjectModel], transforms: dict, vector
             term = parse_term(text)
         except ValueError as e:
             raise g.fail(f"a Prolog term ({e})", show(text)) from None
+        if isinstance(term, tuple) and term[0] == "assembled" and len(term) == 3:
+            term = _derived_assembly(g, term, objects, transforms, vectors)
         _check_goal(g, term, objects, transforms, vectors, positions)
         goals.append(term_text(term))
     return goals
+
+
+def _derived_assembly(node: Node, goal: tuple, objects: dict[str, ObjectModel], transforms: dict,
+                      vectors: dict) -> tuple:
+    """``assembled(Peg, Hole)`` as the paper's five-argument goal: the mating faces are the two
+    features' faces, T_a and V_a derived from their geometry (world.shapes.assembly_transforms:
+    the first of the quantised turns about the hole's axis) and added to the cell's
+    transforms and vectors as trans_K and vec_K (the first K not taken)."""
+    from .world.shapes import assembly_transforms
+
+    _, peg, hole = goal
+    feats = []
+    for role, obj, kind in (("first", peg, "peg"), ("second", hole, "hole")):
+        if obj not in objects:
+            raise node.fail(f"a known object as {role} argument ({', '.join(sorted(objects))})", show(obj))
+        f = objects[obj].feature
+        if f is None or f.geometry is None or f.kind != kind:
+            raise node.fail(f"{obj} with a {kind} feature declared by geometry (feature: {{kind: {kind}, name, "
+                            "radius, axis, length}) for assembled/2, or the five-argument goal")
+        feats.append(f)
+    Tas, Va, _ = assembly_transforms(feats[0].geometry, feats[1].geometry)
+    k = 1
+    while f"trans_{k}" in transforms or f"vec_{k}" in vectors:
+        k += 1
+    transforms[f"trans_{k}"], vectors[f"vec_{k}"] = Tas[0], Va
+    return ("assembled", peg, hole, [list(feats[0].faces), list(feats[1].faces)], f"trans_{k}", f"vec_{k}")
 
 
 def _regions(root: Node) -> list[dict[str, tuple[float, float]]]:
@@ -991,7 +1184,7 @@ def load_problem(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> Cell:
     rpath = _ref_path(rnode, base, "robot")
     with _referenced(rnode, "robot"):
         robot = load_robot(rpath, unit=unit, max_bytes=max_bytes)
-    objects, positions, model_files = _objects(root, base, unit, max_bytes)
+    objects, positions, model_files = _objects(root, base, unit, max_bytes, robot.finger_separation)
     grip = root.key("gripper").choice(("open", "closed"))
     unc = root.key("uncertainty")
     man = _bounds(unc.key("manipulator"), 1.0, rad_per)
@@ -1001,7 +1194,8 @@ def load_problem(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> Cell:
     vectors = {k: n.vector(3) for k, n in (root.key("vectors", False) or Node("", "", {})).items()}
     goals = _goals(root, objects, transforms, vectors, positions)
     initial = [f"gripper({grip})"] + [f"part_location({p.obj}, {p.name})" for p in positions.values()]
-    files = tuple(dict.fromkeys(str(Path(u).resolve()) for u in [path, rpath, *model_files]))
+    meshes = [m.geometry.mesh_file for m in objects.values() if m.geometry is not None and m.geometry.mesh_file]
+    files = tuple(dict.fromkeys(str(Path(u).resolve()) for u in [path, rpath, *model_files, *meshes]))
     cell = Cell(
         files=files,
         name=name,
@@ -1087,13 +1281,89 @@ def check_file(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> str:
         raise KBError(str(path), "", "a problem, object or robot file", describe(root.value))
     if kind.name == "problem":
         cell = load_problem(path, max_bytes)
+        for oname, model in cell.objects.items():
+            mfile = next((f for f in cell.files if Path(f).suffix == ".yaml" and _object_name(f) == oname), None)
+            if mfile is not None:
+                check_against_shape(mfile, read_yaml(mfile, max_bytes), model, cell.unit, cell.finger_separation)
         return f"{path}: ok (problem {cell.name}: {len(cell.objects)} objects, {len(cell.goals)} goals)"
     if kind.name == "object":
         o = load_object(path, _units(root)[0], max_bytes)
+        check_against_shape(path, root, o, _units(root)[0])
         return (f"{path}: ok (object {o.name}: {len(o.faces)} faces, {len(o.poses)} stable poses, "
                 f"{len(o.grasps)} grasps)")
     r = load_robot(path, max_bytes=max_bytes)
     return f"{path}: ok (robot {r.name})"
+
+
+def derive_text(path: str | Path, max_bytes: int = MAX_INPUT_BYTES, robot: str | Path | None = None,
+                out_dir: str | Path | None = None) -> str:
+    """``spar kb derive``: the object model at ``path`` as a full explicit model file (YAML
+    text): its own keys as written, then every face, stable pose and grasp, derived ones
+    included, in the file's own units (grasps for ``robot``'s gripper, or DEFAULT_OPENING_MM).
+    A ``mesh:`` path is rewritten relative to ``out_dir`` (where the text will be written)."""
+    root = read_kb(path, "object", max_bytes)
+    unit, _, rad_per = _units(root)
+    opening = load_robot(robot, unit=unit, max_bytes=max_bytes).finger_separation if robot is not None else None
+    m = load_object(path, unit, max_bytes, opening=opening)
+    check_against_shape(path, root, m, unit, opening)
+
+    def flow(v: Any) -> str:
+        return yaml.safe_dump(v, default_flow_style=True, width=10**6, sort_keys=False).strip().removesuffix(
+            "\n...").strip()
+
+    def n(v: float) -> float | int:
+        r = round(float(v), 9) + 0.0
+        return int(r) if r.is_integer() and abs(r) < 1e15 else r
+
+    grip = f"{num(opening)} {unit}" if opening is not None else f"{num(from_mm(unit, DEFAULT_OPENING_MM))} {unit}"
+    out = [f"# Derived by `spar kb derive` from {path} (gripper opening {grip}); every entry explicit.",
+           f"object: {m.name}", f"units: {flow(root.value['units'])}"]
+    own = dict(root.value)
+    if "mesh" in own and out_dir is not None and m.geometry is not None and m.geometry.mesh_file:
+        own["mesh"] = os.path.relpath(m.geometry.mesh_file, Path(out_dir).resolve())
+    out += [f"{k}: {flow(own[k])}" for k in ("mesh", "shape", "face_names", "grasp_step", "feature") if k in own]
+    out.append(f"faces: {flow(list(m.faces))}")
+    out.append("stable_poses:")
+    for p in m.poses.values():
+        rows = [[n(v) for v in p.R[:, i]] for i in range(3)] + [[0, 0, n(p.height)]]
+        out.append("  - " + flow({"label": p.label, "rfaces": list(p.rfaces), "ofaces": list(p.ofaces), "tm": rows}))
+    out.append("grasps:")
+    for g in m.grasps.values():
+        e = [n(v) for v in g.euler[:3]] + [n(a / rad_per) for a in g.euler[3:]]
+        out.append("  - " + flow({"label": g.label, "gfaces": list(g.gfaces), "ofaces": list(g.ofaces),
+                                  "eulerxyz": e, "width": n(g.width)}))
+    return "\n".join(out) + "\n"
+
+
+def _object_name(file: str) -> str | None:
+    """The ``object:`` name of a KB file (None if it is not an object model)."""
+    try:
+        data = parse_yaml(file)
+    except KBError:
+        return None
+    return data.get("object") if isinstance(data, dict) else None
+
+
+def check_against_shape(path: str | Path, root: Node, model: ObjectModel, unit: str,
+                        opening: float | None = None) -> None:
+    """``spar kb check``: the hand-written faces, stable poses and grasps of a model that also
+    gives its geometry must agree with it (world.shapes_derive.check_entries); the first
+    disagreement is a KBError naming the entry. ``opening`` is the gripper's (cell unit;
+    DEFAULT_OPENING_MM without a robot)."""
+    hand = tuple(k for k in DERIVABLE if k in root.value)
+    if model.geometry is None or not hand:
+        return
+    from .world.shapes_derive import Gripper, check_entries
+
+    grip = Gripper.default(unit, opening if opening is not None else from_mm(unit, DEFAULT_OPENING_MM))
+    try:
+        problems = check_entries(model, grip, unit, hand)
+    except KBError:
+        raise
+    except Exception as e:  # the shape itself cannot be built or searched
+        raise _geometry_error(path, model.geometry, e) from None
+    for key, expected, got in problems:
+        raise KBError(str(path), key, expected, got)
 
 
 def iter_kb_files(paths: Iterable[str | Path]) -> list[Path]:

@@ -15,6 +15,7 @@ from .memo import Memo
 
 if TYPE_CHECKING:
     from .kinematics import Robot
+    from .world.shapes import FeatureGeometry, Geometry
 
 Face = Union[int, str]
 
@@ -57,18 +58,24 @@ class MatingFeature:
     faces: tuple[Face, ...]
     radius: float
     vector: np.ndarray
+    #: The feature declared by geometry (axis origin, direction, length), or None (the
+    #: paper's form: faces and vector only).
+    geometry: "FeatureGeometry | None" = None
 
 
 @dataclass(frozen=True)
 class Solid:
     """A primitive of an object's shape, in the object frame (cell unit): a box
-    (``lo``, ``hi`` corners) or a z-axis cylinder (``radius``, ``lo``/``hi`` as z range
-    in ``lo[2]``, ``hi[2]``, centred on the z axis). Used for pictures and clearances."""
+    (``lo``, ``hi`` corners), a z-axis cylinder (``radius``, ``lo``/``hi`` as z range
+    in ``lo[2]``, ``hi[2]``, centred on the z axis) or a convex ``hull`` (its vertices
+    ``points`` (k, 3), ``lo``/``hi`` their bounding box: a mesh part). Used for pictures and
+    clearances; subtracted primitives are not among them (world.shapes keeps them)."""
 
     kind: str
     lo: np.ndarray
     hi: np.ndarray
     radius: float = 0.0
+    points: np.ndarray | None = None
 
 
 @dataclass
@@ -81,6 +88,9 @@ class ObjectModel:
     grasps: dict[str, Grasp]
     feature: MatingFeature | None = None
     shape: tuple[Solid, ...] = ()
+    #: The declared geometry (``mesh:`` or ``shape:``) the part's mesh is built from
+    #: (world.shapes.part_mesh), or None.
+    geometry: "Geometry | None" = field(default=None, compare=False, repr=False)
 
     def bounding_radius(self) -> float:
         """Radius of a sphere about the object origin containing the shape (0 without one)."""

@@ -88,10 +88,12 @@ def footprint(model: ObjectModel, R: np.ndarray) -> np.ndarray:
     the convex hull of its shape projected on the table, in world xy about the object
     origin (cell unit), counter-clockwise. Boxes by their 8 corners; a z-cylinder by the
     ARC_SIDES-gons circumscribed about its two rims (a superset of the cylinder's
-    shadow). A model without a shape has the point footprint [[0, 0]]."""
+    shadow); a mesh part's hull by its vertices. A model without a shape has the point footprint [[0, 0]]."""
     pts = [np.zeros((1, 3))]
     for s in model.shape:
-        if s.kind == "cylinder":
+        if s.kind == "hull":
+            pts.append(np.asarray(s.points, float))
+        elif s.kind == "cylinder":
             rim = _disc(np.zeros(2), s.radius)
             pts += [np.column_stack([rim, np.full(len(rim), z)]) for z in (s.lo[2], s.hi[2])]
         else:

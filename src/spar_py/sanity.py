@@ -115,6 +115,8 @@ def reach_box(cell: Cell) -> tuple[np.ndarray, float]:
 def solid_points(s: Solid, sides: int = CYL_SIDES) -> np.ndarray:
     """(k, 3) vertices of a primitive's polytope in the object frame: a box's 8 corners,
     or the prism on the regular ``sides``-gon inscribed in a z-cylinder's rims."""
+    if s.kind == "hull":
+        return np.asarray(s.points, float)
     if s.kind == "cylinder":
         a = 2 * np.pi * np.arange(sides) / sides
         ring = s.radius * np.stack([np.cos(a), np.sin(a)], axis=1)
@@ -125,6 +127,8 @@ def solid_points(s: Solid, sides: int = CYL_SIDES) -> np.ndarray:
 
 def _axes(s: Solid, sides: int = CYL_SIDES) -> tuple[np.ndarray, np.ndarray]:
     """(face normals (f, 3), edge directions (e, 3)) of a primitive's polytope, object frame."""
+    if s.kind == "hull":
+        return _hull_axes(np.asarray(s.points, float))
     if s.kind == "cylinder":
         a = 2 * np.pi * (np.arange(sides) + 0.5) / sides
         normals = np.concatenate([np.stack([np.cos(a), np.sin(a), np.zeros(sides)], axis=1), np.eye(3)[2:]])
@@ -132,6 +136,20 @@ def _axes(s: Solid, sides: int = CYL_SIDES) -> tuple[np.ndarray, np.ndarray]:
         edges = np.concatenate([np.stack([np.cos(b), np.sin(b), np.zeros(sides)], axis=1), np.eye(3)[2:]])
         return normals, edges
     return np.eye(3), np.eye(3)
+
+
+def _hull_axes(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(unique face normals, unique edge directions) of the convex hull of points P (k, 3)."""
+    from scipy.spatial import ConvexHull
+
+    h = ConvexHull(P)
+    normals = np.unique(np.round(h.equations[:, :3], 9), axis=0)
+    tri = P[h.simplices]
+    e = np.concatenate([tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 1], tri[:, 0] - tri[:, 2]])
+    e = e[np.linalg.norm(e, axis=1) > 1e-12]
+    e /= np.linalg.norm(e, axis=1)[:, None]
+    e *= np.where((e @ [1.0, 1e-3, 1e-6]) < 0, -1.0, 1.0)[:, None]  # one sign per direction
+    return normals, np.unique(np.round(e, 9), axis=0)
 
 
 def overlap_depth(s1: Solid, T1: np.ndarray, s2: Solid, T2: np.ndarray) -> float:

@@ -1,5 +1,6 @@
 """The work-cell picture at one step: the table, each part drawn from its object's shape at
-its world pose, the arm as a polyline through its frames, and the gripper.
+its world pose (a part from a mesh, or with holes, by its mesh's facets: world.shapes), the
+arm as a polyline through its frames, and the gripper.
 
 Three panels per picture: a 3-D view, a top view and a side view, with equal axis scaling
 and the same extents for every step of a plan. What is drawn is a :class:`Scene`
@@ -55,9 +56,11 @@ def solid_points(solid: Solid, T: np.ndarray, segments: int = 24) -> np.ndarray:
     """World points (k, 3) outlining a Solid placed by ``T`` (4x4, T_world_obj, cell unit).
 
     A box gives its 8 corners (x slowest, z fastest: lo/hi per axis); a cylinder its two
-    rim circles, ``segments`` points each (bottom rim first).
+    rim circles, ``segments`` points each (bottom rim first); a mesh part's hull its vertices.
     """
-    if solid.kind == "cylinder":
+    if solid.kind == "hull":
+        local = np.asarray(solid.points, float)
+    elif solid.kind == "cylinder":
         a = np.linspace(0.0, 2 * math.pi, segments, endpoint=False)
         rim = np.stack([solid.radius * np.cos(a), solid.radius * np.sin(a)], axis=1)
         local = np.vstack([np.column_stack([rim, np.full(segments, z)]) for z in (solid.lo[2], solid.hi[2])])
@@ -241,6 +244,10 @@ def _paint_list(cell: Cell, s: Scene, eye: Sequence[float]) -> list[tuple[str, n
         o = part_model(key)
         if o not in cell.objects:
             continue
+        facets = _mesh_facets(cell.objects[o], T, eye, _colour(cell, o))
+        if facets is not None:
+            items += facets
+            continue
         for sd in cell.objects[o].shape:
             p = solid_points(sd, T, 24)
             items.append((float(p.mean(axis=0) @ eye), "solid", p, _colour(cell, o)))
@@ -253,6 +260,36 @@ def _paint_list(cell: Cell, s: Scene, eye: Sequence[float]) -> list[tuple[str, n
                 items.append((float(cw @ eye), "hole", _disc(cw, nw, r), HOLE_COLOUR))
     items.sort(key=lambda t: t[0])
     return [(k, p, col) for _, k, p, col in items]
+
+
+#: Where the light comes from when a mesh's facets are shaded (world frame, towards the light).
+LIGHT = np.array([0.3, -0.5, 0.81])
+
+
+def _mesh_facets(model: ObjectModel, T: np.ndarray, eye: np.ndarray, colour: str
+                 ) -> list[tuple[float, str, np.ndarray, str]] | None:
+    """The facets of a part drawn from its real shape (world.shapes.part_mesh) facing the
+    viewer ``eye``, shaded: for a part from a mesh or with subtracted primitives (holes,
+    pockets), whose primitives alone do not show it; None for the others."""
+    geo = model.geometry
+    if geo is None or not (geo.mesh_file or any(p.subtract for p in geo.primitives)):
+        return None
+    from matplotlib.colors import to_hex, to_rgb
+
+    from ..world.shapes import part_mesh
+
+    mesh = part_mesh(model)
+    R = np.asarray(T, float)[:3, :3]
+    W = np.asarray(mesh.vertices, float) @ R.T + np.asarray(T, float)[:3, 3]
+    N = np.asarray(mesh.face_normals, float) @ R.T
+    tris = W[np.asarray(mesh.faces)]
+    base = np.array(to_rgb(colour))
+    light = LIGHT / np.linalg.norm(LIGHT)
+    out = []
+    for k in np.flatnonzero(N @ eye > 1e-9):
+        shade = 0.55 + 0.45 * max(0.0, float(N[k] @ light))
+        out.append((float(tris[k].mean(axis=0) @ eye), "facet", tris[k], to_hex(np.clip(base * shade, 0, 1))))
+    return out
 
 
 def _view_eye(elev_deg: float, azim_deg: float) -> np.ndarray:
@@ -292,9 +329,10 @@ def _draw_3d(ax: Any, cell: Cell, s: Scene, fr: Extent) -> None:
                                          facecolor=TABLE_COLOUR, alpha=0.35, edgecolor="#8a7a5a", zorder=1),
                         autolim=False)
     for k, (kind, p, colour) in enumerate(_paint_list(cell, s, _view_eye(*VIEW_3D))):
-        faces = [p] if kind == "hole" else _faces_of_points(p)
+        faces = [p] if kind in ("hole", "facet") else _faces_of_points(p)
         ax.add_collection3d(Poly3DCollection(faces, facecolor=colour, alpha=0.92 if kind == "solid" else 1.0,
-                                             edgecolor="#222222", linewidths=0.3, zorder=2 + k * 1e-3),
+                                             edgecolor=colour if kind == "facet" else "#222222", linewidths=0.3,
+                                             zorder=2 + k * 1e-3),
                             autolim=False)
     _draw_arm(ax, cell, s, lambda p: (p[:, 0], p[:, 1], p[:, 2]), zorder=3)
     c, h = (fr.lo + fr.hi) / 2, float(max(fr.hi - fr.lo)) / 2

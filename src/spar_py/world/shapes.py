@@ -1,0 +1,443 @@
+"""Object geometry: a part's mesh from ``mesh: FILE`` or ``shape:`` primitives, its faces,
+the mating feature's geometry and the assembly transform T_a (issue 14).
+
+The one door for other modules is :func:`part_mesh`::
+
+    part_mesh(model: ObjectModel) -> trimesh.Trimesh
+
+the part's closed triangle mesh in its **object frame**, lengths in the **cell unit** (the
+unit the model was loaded in). A model with ``mesh:`` gives that file scaled from the
+model's length unit; a model with ``shape:`` gives the union of its boxes and z-cylinders
+less the primitives marked ``subtract: true`` (booleans by manifold3d); a model with
+neither gives None. The mesh is built once per model (kept on the model's
+:class:`Geometry`, freed with it) and must not be modified by callers (copy it first).
+
+Derived faces (:func:`derive_faces`): triangles of the mating feature's surfaces (the
+shaft's side and tip, or the hole's wall and bottom) form the face the feature names;
+the others are joined across edges where coplanar (planar facets) or where the surface
+bends by less than SMOOTH_DEG (a tessellated curved surface), and planar facets on one
+plane are merged. Names, in order of precedence: the feature's ``name``; ``face_names:``
+(a name -> a point on the face); ``px nx py ny pz nz`` for a planar face whose outward
+normal is that axis when no other face has it; ``f1, f2, ...`` for the rest, numbered in
+a deterministic order (by centroid, then normal).
+
+Stable poses, grasps and the checks of hand-written entries are in
+:mod:`spar_py.world.shapes_derive`; the content-hash cache of derivations in
+:mod:`spar_py.world.shapes_cache`.
+
+Frames: object frame as the model file gives it; T_a is the peg's frame in the hole's
+frame (4x4, column vectors). Units: lengths in the cell unit, the tolerances below in mm
+(converted with :func:`spar_py.units.from_mm`), angles in radians unless a name says deg.
+trimesh and manifold3d are imported inside the functions that need them.
+"""
+from __future__ import annotations
+
+import hashlib
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ..units import from_mm
+
+if TYPE_CHECKING:
+    import trimesh
+
+    from ..model import ObjectModel
+
+__all__ = [
+    "Face", "FeatureGeometry", "Geometry", "Primitive", "assembly_transforms", "axis_basis",
+    "derive_faces", "face_of_point", "minimal_rotation", "part_mesh",
+]
+
+#: Sides of the polygon a cylinder primitive is tessellated with.
+CYL_SECTIONS = 64
+#: Adjacent triangles whose normals differ by less than this are coplanar (deg).
+COPLANAR_DEG = 0.05
+#: Adjacent triangles bending by less than this belong to one curved surface (deg).
+SMOOTH_DEG = 20.0
+#: Points closer than this to a surface are on it (mm).
+ON_SURFACE_MM = 0.01
+#: Two unit normals within this of each other name the same axis (no unit).
+AXIS_TOL = 1e-6
+#: The largest mesh file read (bytes): a 10^6-triangle binary STL is 50 MB.
+MAX_MESH_BYTES = 64_000_000
+
+
+# =========================================================================== declarations
+
+
+@dataclass(frozen=True)
+class Primitive:
+    """A ``shape:`` primitive in the object frame (cell unit): a box (``lo``, ``hi`` corners)
+    or a cylinder about the object z axis (``radius``, z from ``lo[2]`` to ``hi[2]``);
+    ``subtract`` removes it from the union of the others (a hole, a pocket)."""
+
+    kind: str
+    lo: np.ndarray
+    hi: np.ndarray
+    radius: float = 0.0
+    subtract: bool = False
+
+    def spec(self) -> list:
+        """Plain data for the content hash."""
+        return [self.kind, [round(float(v), 12) for v in (*self.lo, *self.hi)], round(self.radius, 12),
+                self.subtract]
+
+
+@dataclass(frozen=True)
+class FeatureGeometry:
+    """A mating feature declared by geometry (object frame, cell unit): ``kind`` peg or hole,
+    the face ``name`` its surfaces get, ``radius``, ``origin`` (a peg's root, a hole's mouth
+    centre), unit ``direction`` (to the peg's tip, into the hole) and ``length`` (the shaft's
+    length, the hole's depth)."""
+
+    kind: str
+    name: str
+    radius: float
+    origin: np.ndarray
+    direction: np.ndarray
+    length: float
+
+    @property
+    def end(self) -> np.ndarray:
+        """The peg's tip centre F_p or the hole's bottom centre F_h (object frame)."""
+        return self.origin + self.length * self.direction
+
+    def spec(self) -> list:
+        """Plain data for the content hash."""
+        return [self.kind, self.name, round(self.radius, 12), [round(float(v), 12) for v in self.origin],
+                [round(float(v), 12) for v in self.direction], round(self.length, 12)]
+
+
+@dataclass
+class Geometry:
+    """What a model file declares of its shape: ``mesh_file`` (scaled by ``scale`` from the
+    model's unit to the cell ``unit``) or ``primitives``, and its ``face_names``; the built
+    mesh is kept in ``_mesh``."""
+
+    unit: str
+    primitives: tuple[Primitive, ...] = ()
+    mesh_file: str | None = None
+    scale: float = 1.0
+    #: ``face_names:`` of the model: a name -> a point on the face (object frame, cell unit).
+    face_names: dict = field(default_factory=dict)
+    _mesh: Any = field(default=None, compare=False, repr=False)
+    _digest: str | None = field(default=None, compare=False, repr=False)
+
+    def digest(self) -> str:
+        """SHA-256 of the geometry's content (the mesh file's bytes, or the primitives) and scale."""
+        if self._digest is None:
+            h = hashlib.sha256()
+            if self.mesh_file is not None:
+                h.update(b"mesh:" + Path(self.mesh_file).read_bytes())
+            else:
+                h.update(repr([p.spec() for p in self.primitives]).encode())
+            h.update(f"|scale={self.scale!r}|unit={self.unit}".encode())
+            self._digest = h.hexdigest()
+        return self._digest
+
+    def mesh(self) -> "trimesh.Trimesh":
+        """The part's mesh (object frame, cell unit), built on first use."""
+        if self._mesh is None:
+            self._mesh = _load_mesh(self.mesh_file, self.scale) if self.mesh_file else _primitives_mesh(
+                self.primitives)
+        return self._mesh
+
+
+def part_mesh(model: "ObjectModel") -> "trimesh.Trimesh | None":
+    """The part's closed mesh in its object frame, lengths in the cell unit (see the module
+    docstring); None for a model without ``mesh:`` or ``shape:``. Do not modify it."""
+    geo = getattr(model, "geometry", None)
+    return None if geo is None else geo.mesh()
+
+
+def _load_mesh(path: str, scale: float) -> "trimesh.Trimesh":
+    """Read an STL, OBJ or PLY file as one mesh, scaled by ``scale``. ValueError (one line) if
+    it cannot be read or is not a closed, consistently oriented volume."""
+    import trimesh
+
+    p = Path(path)
+    size = p.stat().st_size
+    if size > MAX_MESH_BYTES:
+        raise ValueError(f"a mesh file of at most {MAX_MESH_BYTES} bytes, not {size} bytes")
+    try:
+        m = trimesh.load(str(p), force="mesh", process=True)
+    except Exception as e:  # trimesh raises many kinds for a bad file
+        raise ValueError(f"a readable STL, OBJ or PLY mesh ({type(e).__name__}: {str(e)[:60]})") from None
+    if not isinstance(m, trimesh.Trimesh) or len(m.faces) == 0:
+        raise ValueError("a mesh with at least one triangle")
+    if scale != 1.0:
+        m.apply_scale(scale)
+    m.merge_vertices()
+    if not m.is_watertight:
+        raise ValueError("a closed (watertight) mesh")
+    if not m.is_winding_consistent:
+        raise ValueError("a mesh with consistently oriented triangles")
+    if m.volume < 0:
+        m.invert()
+    if not m.is_volume:
+        raise ValueError("a mesh that bounds a volume")
+    return m
+
+
+def _primitives_mesh(prims: tuple[Primitive, ...]) -> "trimesh.Trimesh":
+    """The union of the positive primitives less the union of the subtracted ones."""
+    import trimesh
+
+    def solid(p: Primitive) -> trimesh.Trimesh:
+        if p.kind == "box":
+            return trimesh.creation.box(bounds=np.array([p.lo, p.hi], float))
+        return trimesh.creation.cylinder(radius=p.radius, segment=[[0, 0, p.lo[2]], [0, 0, p.hi[2]]],
+                                         sections=CYL_SECTIONS)
+
+    pos = [solid(p) for p in prims if not p.subtract]
+    neg = [solid(p) for p in prims if p.subtract]
+    if not pos:
+        raise ValueError("at least one primitive that is not subtracted")
+    m = pos[0] if len(pos) == 1 else trimesh.boolean.union(pos, engine="manifold")
+    if neg:
+        m = trimesh.boolean.difference([m, *neg], engine="manifold")
+    if len(m.faces) == 0:
+        raise ValueError("primitives that leave some material once the subtracted ones are removed")
+    return m
+
+
+# =========================================================================== faces
+
+
+@dataclass(frozen=True)
+class Face:
+    """A derived face: its ``name``, triangle indices ``tris`` into the part mesh, area-weighted
+    outward unit ``normal``, ``planar`` (and then its plane ``offset`` = normal . p), ``area``,
+    ``centroid`` (object frame, cell unit) and whether it is the mating feature's."""
+
+    name: str
+    tris: np.ndarray
+    normal: np.ndarray
+    planar: bool
+    offset: float
+    area: float
+    centroid: np.ndarray
+    feature: bool = False
+
+
+def _feature_triangles(mesh: "trimesh.Trimesh", f: FeatureGeometry, tol: float) -> np.ndarray:
+    """(n,) bool: the triangles on the feature's surfaces (its cylinder's side between root and
+    end, and the end cap: the peg's tip or the hole's bottom)."""
+    V = mesh.vertices[mesh.faces] - f.origin                        # (n, 3, 3)
+    t = V @ f.direction                                             # axial coordinate
+    radial = np.linalg.norm(V - t[..., None] * f.direction, axis=2)
+    side = (np.abs(radial - f.radius) < tol).all(1) & (t > -tol).all(1) & (t < f.length + tol).all(1)
+    cap = (np.abs(t - f.length) < tol).all(1) & (radial < f.radius + tol).all(1)
+    return side | cap
+
+
+def derive_faces(mesh: "trimesh.Trimesh", feature: FeatureGeometry | None, face_names: dict[str, np.ndarray],
+                 unit: str) -> list[Face]:
+    """The faces of ``mesh`` (module docstring), named. ``face_names`` maps a name to a point
+    on the face (object frame, cell unit); ValueError naming the entry if the point is on no
+    face, on the feature's face under another name, or two names share a face."""
+    tol = from_mm(unit, ON_SURFACE_MM)
+    n = len(mesh.faces)
+    N = mesh.face_normals
+    label = np.full(n, -1)
+    groups: list[np.ndarray] = []
+    if feature is not None:
+        ft = _feature_triangles(mesh, feature, tol)
+        if ft.any():
+            groups.append(np.flatnonzero(ft))
+            label[ft] = 0
+    # union-find over edges between non-feature triangles: coplanar or smoothly bent
+    parent = np.arange(n)
+
+    def find(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    adj = mesh.face_adjacency
+    ang = mesh.face_adjacency_angles
+    join = (ang < math.radians(SMOOTH_DEG)) & (label[adj[:, 0]] < 0) & (label[adj[:, 1]] < 0)
+    for a, b in adj[join]:
+        ra, rb = find(a), find(b)
+        if ra != rb:
+            parent[max(ra, rb)] = min(ra, rb)
+    roots = np.array([find(i) for i in range(n)])
+    free = np.flatnonzero(label < 0)
+    comps: dict[int, list[int]] = {}
+    for i in free:
+        comps.setdefault(int(roots[i]), []).append(int(i))
+    area = mesh.area_faces
+    # planar components on one plane are merged ("merged where coplanar")
+    cos_tol = math.cos(math.radians(COPLANAR_DEG))
+    planes: list[tuple[np.ndarray, float, list[int]]] = []
+    curved: list[list[int]] = []
+    for tris in comps.values():
+        t = np.asarray(tris)
+        nrm = (N[t] * area[t, None]).sum(0)
+        nrm /= max(np.linalg.norm(nrm), 1e-300)
+        if (N[t] @ nrm > cos_tol).all():
+            off = float(np.median(mesh.vertices[mesh.faces[t]].reshape(-1, 3) @ nrm))
+            for k, (pn, po, pt) in enumerate(planes):
+                if pn @ nrm > cos_tol and abs(po - off) < tol:
+                    pt.extend(tris)
+                    break
+            else:
+                planes.append((nrm, off, list(tris)))
+        else:
+            curved.append(tris)
+    groups += [np.asarray(sorted(p[2])) for p in planes] + [np.asarray(sorted(c)) for c in curved]
+    faces = [_face("", g, mesh, feature is not None and k == 0 and label[g[0]] == 0) for k, g in enumerate(groups)]
+    return _name_faces(faces, mesh, feature, face_names, tol)
+
+
+def _face(name: str, tris: np.ndarray, mesh: "trimesh.Trimesh", is_feature: bool) -> Face:
+    area = mesh.area_faces[tris]
+    N = mesh.face_normals[tris]
+    nrm = (N * area[:, None]).sum(0)
+    nrm = nrm / max(np.linalg.norm(nrm), 1e-300)
+    planar = bool((N @ nrm > math.cos(math.radians(COPLANAR_DEG))).all())
+    cen = (mesh.triangles_center[tris] * area[:, None]).sum(0) / max(area.sum(), 1e-300)
+    return Face(name, tris, nrm, planar and not is_feature, float(cen @ nrm), float(area.sum()), cen, is_feature)
+
+
+def face_of_point(faces: list[Face], mesh: "trimesh.Trimesh", p: np.ndarray, tol: float) -> int | None:
+    """The index of the face ``p`` lies on (within ``tol``), or None."""
+    import trimesh
+
+    tri = mesh.triangles
+    closest = trimesh.triangles.closest_point(tri, np.repeat(np.asarray(p, float)[None], len(tri), 0))
+    d = np.linalg.norm(closest - p, axis=1)
+    i = int(np.argmin(d))
+    if d[i] > tol:
+        return None
+    return next(k for k, f in enumerate(faces) if i in set(f.tris.tolist()))
+
+
+_AXES = {"px": (1, 0, 0), "nx": (-1, 0, 0), "py": (0, 1, 0), "ny": (0, -1, 0), "pz": (0, 0, 1), "nz": (0, 0, -1)}
+
+
+def _name_faces(faces: list[Face], mesh: "trimesh.Trimesh", feature: FeatureGeometry | None,
+                face_names: dict[str, np.ndarray], tol: float) -> list[Face]:
+    """Names by precedence: feature, face_names, axis names where unique, then f1, f2, ..."""
+    from dataclasses import replace
+
+    names: dict[int, str] = {}
+    if feature is not None and faces and faces[0].feature:
+        names[0] = feature.name
+    for name, p in face_names.items():
+        k = face_of_point(faces, mesh, p, tol)
+        if k is None:
+            raise ValueError(f"face_names.{name}: expected a point on a face of the shape, not "
+                             f"[{', '.join(f'{v:.6g}' for v in p)}] (on no face)")
+        if k in names:
+            raise ValueError(f"face_names.{name}: expected a point on a face not named before, not one on "
+                             f"{names[k]}")
+        names[k] = name
+    used = set(names.values())
+    for ax, v in _AXES.items():
+        hits = [k for k, f in enumerate(faces) if f.planar and np.abs(f.normal - v).max() < AXIS_TOL]
+        if len(hits) == 1 and hits[0] not in names and ax not in used:
+            names[hits[0]] = ax
+            used.add(ax)
+    order = sorted((k for k in range(len(faces)) if k not in names),
+                   key=lambda k: (*np.round(faces[k].centroid, 6), *np.round(faces[k].normal, 6)))
+    i = 0
+    for k in order:
+        i += 1
+        while f"f{i}" in used:
+            i += 1
+        names[k] = f"f{i}"
+    out = [replace(f, name=names[k]) for k, f in enumerate(faces)]
+    return sorted(out, key=lambda f: _name_key(f.name))
+
+
+def _name_key(name: str) -> tuple:
+    """Axis names first (px, nx, py, ny, pz, nz), then f1, f2, ... numerically, then the rest."""
+    if name in _AXES:
+        return (0, list(_AXES).index(name), "")
+    if name[:1] == "f" and name[1:].isdigit():
+        return (2, int(name[1:]), "")
+    return (1, 0, name)
+
+
+# =========================================================================== frames
+
+
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The cross product over the last axis (numpy's np.cross costs ~20 us a call on 3-vectors)."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    return np.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1], a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
+                     a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)
+
+
+def axis_basis(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors (e1, e2) completing the unit ``d`` to a right-handed frame: e1 is the
+    object axis least aligned with d (the first such), made normal to d; e2 = d x e1."""
+    d = np.asarray(d, float) / np.linalg.norm(d)
+    e = np.eye(3)[int(np.argmin(np.abs(d) + 1e-12 * np.arange(3)))]
+    e1 = e - (e @ d) * d
+    e1 /= np.linalg.norm(e1)
+    return e1, cross(d, e1)
+
+
+def minimal_rotation(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The 3x3 rotation of least angle taking unit ``a`` to unit ``b``; for b = -a, the half
+    turn about :func:`axis_basis`'s e1 of a (so +z to -z is the half turn about x)."""
+    a = np.asarray(a, float) / np.linalg.norm(a)
+    b = np.asarray(b, float) / np.linalg.norm(b)
+    c = float(a @ b)
+    if c < -1 + 1e-12:
+        k = axis_basis(a)[0]
+        return 2 * np.outer(k, k) - np.eye(3)
+    v = cross(a, b)
+    K = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+    return np.eye(3) + K + K @ K / (1 + c)
+
+
+def clean(M: np.ndarray, eps: float = 1e-12) -> np.ndarray:
+    """``M`` with entries within eps of an integer snapped to it (exact axes, exact zeros)."""
+    M = np.asarray(M, float).copy()
+    r = np.round(M)
+    near = np.abs(M - r) < eps
+    M[near] = r[near]
+    M[M == 0] = 0.0
+    return M
+
+
+# =========================================================================== assembly
+
+
+def assembly_transforms(peg: FeatureGeometry, hole: FeatureGeometry,
+                        step_rad: float = math.radians(45.0)) -> tuple[list[np.ndarray], np.ndarray, float]:
+    """T_a candidates, V_a and the insertion depth for ``assembled(peg, hole)``.
+
+    T_a (4x4) is the peg's frame in the hole's frame with the peg's axis on the hole's, its
+    direction into the hole, pushed in by ``min(peg length, hole depth)``: the tip at the
+    hole's bottom, or the shoulder on the hole's face if that comes first. The candidates are
+    the turns about the hole's axis by multiples of ``step_rad`` (first the minimal rotation,
+    :func:`minimal_rotation`). V_a, the mating motion in the hole's frame, is the hole's
+    direction. Lengths in the cell unit.
+    """
+    if peg.kind != "peg" or hole.kind != "hole":
+        raise ValueError(f"a peg feature and a hole feature, not {peg.kind} and {hole.kind}")
+    depth = min(peg.length, hole.length)
+    R0 = minimal_rotation(peg.direction, hole.direction)
+    tip_goal = hole.origin + depth * hole.direction
+    n_turns = max(1, int(round(2 * math.pi / step_rad)))
+    out = []
+    for k in range(n_turns):
+        a = k * 2 * math.pi / n_turns
+        d = hole.direction
+        K = np.array([[0, -d[2], d[1]], [d[2], 0, -d[0]], [-d[1], d[0], 0]])
+        Rk = np.eye(3) + math.sin(a) * K + (1 - math.cos(a)) * K @ K
+        R = clean(Rk @ R0)
+        T = np.eye(4)
+        T[:3, :3] = R
+        T[:3, 3] = tip_goal - R @ peg.end
+        out.append(clean(T))
+    return out, clean(hole.direction.copy()), depth

@@ -1,0 +1,114 @@
+"""Derive a model's faces, stable poses, grasps (and a mesh part's convex hull) once per content.
+
+:func:`derive` returns the derivation as plain data, from a content-hash cache on disk when
+it has one: the key is the SHA-256 of everything the result depends on (the geometry's
+content and scale, the feature, ``face_names``, the gripper, the approach step, the
+labels' prefix and DERIVE_VERSION), so an edited mesh or model is derived again and an
+unchanged one never is, across runs, cells and processes. The cache lives in the user's
+cache directory (``$SPAR_CACHE_DIR``, else ``$XDG_CACHE_HOME/spar-py/derive``, else
+``~/.cache/spar-py/derive``), not per cell, because the same part file serves many cells
+and its derivation does not depend on the cell; it is bounded: at most MAX_ENTRIES files
+(the least recently used are removed when a new one is written). An unreadable or corrupt
+entry is derived again; an unwritable cache directory only costs the derivation.
+
+Units: lengths in the cell unit, angles in radians (as in the models).
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .shapes import FeatureGeometry, Geometry
+
+__all__ = ["DERIVE_VERSION", "MAX_ENTRIES", "cache_dir", "derive"]
+
+#: Bumped whenever the derivation's results change for the same inputs.
+DERIVE_VERSION = 1
+#: Derivations kept on disk at most.
+MAX_ENTRIES = 256
+
+
+def cache_dir() -> Path:
+    """Where derivations are kept (module docstring)."""
+    if os.environ.get("SPAR_CACHE_DIR"):
+        return Path(os.environ["SPAR_CACHE_DIR"])
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "spar-py" / "derive"
+
+
+def derive(name: str, geometry: Geometry, feature: FeatureGeometry | None, face_names: dict[str, np.ndarray],
+           gripper: Any, step: float, need_hull: bool, use_cache: bool = True) -> dict[str, Any]:
+    """The derivation of a part as plain data: ``faces`` (names), ``poses`` (label, rfaces,
+    ofaces, R as 9 numbers row-major, height, probability), ``grasps`` (label, gfaces,
+    ofaces, euler: X, Y, Z, phi, theta, psi in radians, width) and, if ``need_hull``, ``hull``
+    (the convex hull's vertices). ValueError (one line, naming the key) for bad geometry."""
+    key_data = [DERIVE_VERSION, name, geometry.digest(), feature.spec() if feature else None,
+                sorted((k, [round(float(v), 12) for v in p]) for k, p in face_names.items()),
+                gripper.spec(), round(step, 12), need_hull]
+    key = hashlib.sha256(json.dumps(key_data).encode()).hexdigest()
+    path = cache_dir() / f"{key}.json"
+    if use_cache:
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+            if data.get("key") == key:
+                os.utime(path)
+                return data
+        except (OSError, ValueError):
+            pass
+    data = _compute(name, geometry, feature, face_names, gripper, step, need_hull)
+    data["key"] = key
+    if use_cache:
+        _store(path, data)
+    return data
+
+
+def _compute(name: str, geometry: Geometry, feature: FeatureGeometry | None, face_names: dict[str, np.ndarray],
+             gripper: Any, step: float, need_hull: bool) -> dict[str, Any]:
+    from .shapes import derive_faces
+    from .shapes_derive import derive_grasps, derive_poses
+
+    mesh = geometry.mesh()
+    faces = derive_faces(mesh, feature, face_names, geometry.unit)
+    poses = derive_poses(mesh, faces, feature, geometry.unit, f"{name}_p")
+    grasps = derive_grasps(mesh, faces, feature, geometry.primitives, gripper, geometry.unit, f"{name}_g", step)
+    out: dict[str, Any] = {
+        "faces": [f.name for f in faces],
+        "poses": [{"label": p.label, "rfaces": list(p.rfaces), "ofaces": list(p.ofaces),
+                   "R": [float(v) for v in p.R.ravel()], "height": p.height, "probability": p.probability}
+                  for p in poses],
+        "grasps": [{"label": g.label, "gfaces": list(g.gfaces), "ofaces": list(g.ofaces),
+                    "euler": [float(v) for v in g.euler], "width": g.width} for g in grasps],
+    }
+    if need_hull:
+        from .shapes_derive import hull_vertices
+
+        V = np.asarray(mesh.vertices, float)
+        out["hull"] = [[float(v) for v in p] for p in V[hull_vertices(mesh)]]
+    return out
+
+
+def _store(path: Path, data: dict[str, Any]) -> None:
+    """Write atomically, then drop the least recently used entries beyond MAX_ENTRIES."""
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-", suffix=".json")
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            json.dump(data, fh, allow_nan=False)
+        os.replace(tmp, path)
+        entries = sorted(path.parent.glob("*.json"), key=lambda p: p.stat().st_mtime)
+        for old in entries[: max(0, len(entries) - MAX_ENTRIES)]:
+            old.unlink(missing_ok=True)
+    except (OSError, ValueError):
+        pass  # a read-only cache only costs the derivation next time
+
+
+def degrees(euler: list[float]) -> list[float]:
+    """An ``euler`` list with its angles in degrees (for writing a model file)."""
+    return [*euler[:3], *(round(math.degrees(a), 9) + 0.0 for a in euler[3:])]

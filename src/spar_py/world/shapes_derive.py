@@ -1,0 +1,704 @@
+"""Stable poses and parallel-jaw grasps derived from a part's mesh, and the checks of
+hand-written ones against it (issue 14).
+
+Stable poses (Fig. 18): trimesh's ``compute_stable_poses`` (deterministic: no noise, one
+sample) gives the resting orientations of the convex hull with the probability of each
+(a hull of more than HULL_FACES_MAX triangles thinned first, each pose then snapped to the
+face of the mesh it rests on);
+those below ``PROB_FLOOR`` are dropped, and every remaining one must pass
+:func:`support_check`, our own quasi-static test (the part rests on a face of its own, not
+an edge or a point, and its centre of mass projects inside the support polygon, the convex
+hull of the mesh's points on the table, by at least STABLE_MARGIN_MM), since that function
+can return poses that are not stable. A pose is kept as R, the least rotation taking the
+resting face's outward normal to world -z (so a pose is written as the paper writes it,
+``tm`` rows and the frame's height above the table), its ``rfaces`` (faces lying on the
+table) and ``ofaces`` (those plus a feature whose mouth or tip is on the table).
+
+Grasps (Fig. 19) for a parallel-jaw gripper (:class:`Gripper`): the tool frame's z axis is
+the approach, y the closing direction, the tool centre the midpoint between the finger tips.
+Candidates: pairs of opposite parallel planar faces (the part between them), and round shafts
+(the peg feature's, a cylinder primitive's) across their diameter at quantised closing
+directions; the width at most the opening; the faces' overlap (projected on their mid-plane)
+at least MIN_CONTACT_MM2, the tool centre at the overlap's centroid (on a shaft: its middle);
+approaches quantised in the plane normal to the closing direction (``step``, 45 deg by
+default), each kept only if the finger pads touch the overlap by MIN_CONTACT_MM2 (a shaft:
+MIN_CONTACT_MM along its side) and neither the closed fingers nor the open gripper (fingers
+at the opening and palm, swept in along the approach) enter the part. ``ofaces``: the gripped
+faces, every planar face whose plane the palm or a closed finger reaches beyond (the part
+cannot rest on it while held) and the feature's face if they enter the space its mate needs.
+
+Units: lengths in the cell unit, constants in mm (converted with spar_py.units.from_mm);
+angles in radians. Frames: object frame; tool frames T_g are 4x4 in the object frame.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..units import from_mm
+from .shapes import Face, FeatureGeometry, Primitive, axis_basis, clean, cross, minimal_rotation
+
+if TYPE_CHECKING:
+    import trimesh
+
+__all__ = ["DerivedGrasp", "DerivedPose", "Gripper", "derive_grasps", "derive_poses", "euler_zyz_of",
+           "grasp_problem", "support_check"]
+
+#: Poses whose basin of attraction (trimesh's probability) is smaller are dropped.
+PROB_FLOOR = 0.01
+#: A convex hull of more triangles is thinned before trimesh's pose search (see derive_poses).
+HULL_FACES_MAX = 64
+#: ... on a grid of the part's size over this.
+HULL_GRID = 100
+#: A pose trimesh finds is snapped to a face whose normal is within this (deg).
+SNAP_DEG = 2.0
+#: The centre of mass must project this far inside the support polygon (mm).
+STABLE_MARGIN_MM = 0.5
+#: Points within this of the table plane support the part (mm).
+SUPPORT_TOL_MM = 0.01
+#: The least contact of each finger pad with a gripped planar face (mm^2).
+MIN_CONTACT_MM2 = 25.0
+#: The least contact length of a finger pad along a shaft's side (mm).
+MIN_CONTACT_MM = 5.0
+#: Fingers touching a face are not inside it: boxes are shrunk by this (mm).
+TOUCH_MM = 0.02
+#: Opposite faces: normals antiparallel within this (deg).
+PARALLEL_DEG = 0.05
+
+
+@dataclass(frozen=True)
+class Gripper:
+    """A parallel-jaw gripper (cell unit): the ``opening`` W_m; each finger ``finger_length``
+    long (tip to palm, along tool z), ``finger_width`` across (tool x), ``finger_thickness``
+    (tool y, outward); the palm ``palm_depth`` deep behind the fingers and as wide as the open
+    fingers. The defaults (:meth:`default`) are in mm, a common industrial jaw."""
+
+    opening: float
+    finger_length: float
+    finger_width: float
+    finger_thickness: float
+    palm_depth: float
+
+    @classmethod
+    def default(cls, unit: str, opening: float) -> "Gripper":
+        """Fingers 60 mm long, 20 mm wide, 10 mm thick, a palm 25 mm deep; ``opening`` in ``unit``."""
+        return cls(opening, from_mm(unit, 60.0), from_mm(unit, 20.0), from_mm(unit, 10.0), from_mm(unit, 25.0))
+
+    def spec(self) -> list:
+        """Plain data for the content hash."""
+        return [round(v, 12) for v in (self.opening, self.finger_length, self.finger_width,
+                                       self.finger_thickness, self.palm_depth)]
+
+
+@dataclass(frozen=True)
+class DerivedPose:
+    """A derived stable pose: R (3x3, object to world, resting face down), the frame's
+    ``height`` above the table (cell unit), the faces it rests on and hides, and trimesh's
+    probability of it."""
+
+    label: str
+    rfaces: tuple[str, ...]
+    ofaces: tuple[str, ...]
+    R: np.ndarray
+    height: float
+    probability: float
+
+
+@dataclass(frozen=True)
+class DerivedGrasp:
+    """A derived grasp: T (4x4, tool frame in the object frame), ``euler`` (X, Y, Z in the cell
+    unit, Z-Y-Z phi, theta, psi in radians: geometry.eulerxyz(*euler) == T), ``width`` W_g,
+    the gripped faces and the faces the gripper covers."""
+
+    label: str
+    gfaces: tuple[str, ...]
+    ofaces: tuple[str, ...]
+    T: np.ndarray
+    euler: tuple[float, float, float, float, float, float]
+    width: float
+
+
+# =========================================================================== plain arrays
+
+
+@dataclass(frozen=True)
+class _Arrays:
+    """A mesh's arrays read once (trimesh re-checks its content hash on every property read):
+    vertices V, faces F, triangles (n, 3, 3), normals N, centres C, bounding-box diagonal."""
+
+    V: np.ndarray
+    F: np.ndarray
+    tri: np.ndarray
+    N: np.ndarray
+    C: np.ndarray
+    diag: float
+    com: np.ndarray
+
+
+def _arrays(mesh: "trimesh.Trimesh") -> _Arrays:
+    """The arrays of ``mesh``, kept in its metadata (they live and die with the mesh)."""
+    a = mesh.metadata.get("_spar_arrays")
+    if a is None:
+        V = np.asarray(mesh.vertices, float)
+        F = np.asarray(mesh.faces)
+        a = _Arrays(V, F, V[F], np.asarray(mesh.face_normals, float), np.asarray(mesh.triangles_center, float),
+                    float(np.linalg.norm(V.max(0) - V.min(0))), np.asarray(mesh.center_mass, float))
+        mesh.metadata["_spar_arrays"] = a
+    return a
+
+
+def hull_vertices(mesh: "trimesh.Trimesh") -> np.ndarray:
+    """Indices of the mesh's vertices on its convex hull (sorted; kept in the mesh's metadata)."""
+    h = mesh.metadata.get("_spar_hull")
+    if h is None:
+        from scipy.spatial import ConvexHull
+
+        h = np.sort(ConvexHull(_arrays(mesh).V).vertices)
+        mesh.metadata["_spar_hull"] = h
+    return h
+
+
+def _hull_mesh(P: np.ndarray) -> "trimesh.Trimesh":
+    """The convex hull of points P as a closed, outward-oriented trimesh (qhull's facets,
+    each turned to agree with its outward plane normal)."""
+    import trimesh
+    from scipy.spatial import ConvexHull
+
+    qh = ConvexHull(P)
+    F = qh.simplices.copy()
+    n = cross(P[F[:, 1]] - P[F[:, 0]], P[F[:, 2]] - P[F[:, 0]])
+    flip = np.einsum("ij,ij->i", n, qh.equations[:, :3]) < 0
+    F[flip] = F[flip][:, ::-1]
+    return trimesh.Trimesh(P, F, process=True)
+
+
+# =========================================================================== stable poses
+
+
+def support_check(mesh: "trimesh.Trimesh", R: np.ndarray, faces: list[Face], unit: str,
+                  com: np.ndarray | None = None) -> tuple[str | None, float, list[int]]:
+    """Is the part at rotation R (object to world) resting quasi-statically on the table?
+
+    Returns (why not or None, height of the object frame above the table, indices of the
+    faces lying on the table). Independent of trimesh's pose search: the lowest points of
+    the mesh are the support, their 2-D convex hull the support polygon, and the centre of
+    mass must project inside it by STABLE_MARGIN_MM; the part must rest on a face.
+    """
+    from ..geometry import convex_hull_2d
+
+    tol = from_mm(unit, SUPPORT_TOL_MM)
+    A = _arrays(mesh)
+    V = A.V @ np.asarray(R, float).T
+    zmin = float(V[:, 2].min())
+    low = V[:, 2] < zmin + tol
+    lying = [k for k, f in enumerate(faces) if (V[A.F[f.tris], 2] < zmin + tol).all(1).any()]
+    if not lying:
+        return "it rests on an edge or a point, not on a face", -zmin, []
+    hull = convex_hull_2d(V[low, :2])
+    c = (np.asarray(R, float) @ (A.com if com is None else com))[:2]
+    margin = _inside_margin(hull, c)
+    need = from_mm(unit, STABLE_MARGIN_MM)
+    if margin < need:
+        where = "outside" if margin < 0 else "only"
+        return (f"its centre of mass is {where} {abs(margin):.4g} {unit} "
+                f"{'from' if margin < 0 else 'inside'} the support polygon's edge (at least {need:.4g} {unit} "
+                "inside needed)"), -zmin, lying
+    return None, -zmin, lying
+
+
+def _inside_margin(hull: np.ndarray, c: np.ndarray) -> float:
+    """Signed distance of point c inside the convex polygon ``hull`` (CCW, (k, 2)); negative
+    outside; -inf for a degenerate polygon (fewer than 3 corners)."""
+    if len(hull) < 3:
+        return -math.inf
+    a, b = hull, np.roll(hull, -1, axis=0)
+    e = b - a
+    L = np.linalg.norm(e, axis=1)
+    ok = L > 0
+    cross = e[ok, 0] * (c[1] - a[ok, 1]) - e[ok, 1] * (c[0] - a[ok, 0])
+    return float((cross / L[ok]).min())
+
+
+def _hidden(faces: list[Face], lying: list[int], feature: FeatureGeometry | None, R: np.ndarray, height: float,
+            tol: float) -> list[int]:
+    """The faces a pose hides: those lying on the table and the feature's face if its mouth
+    (a hole) or tip (a peg) is on the table."""
+    out = list(lying)
+    if feature is not None:
+        mouth = feature.origin if feature.kind == "hole" else feature.end
+        if abs(float((R @ mouth)[2]) + height) < tol:
+            k = next((i for i, f in enumerate(faces) if f.feature), None)
+            if k is not None and k not in out:
+                out.append(k)
+    return out
+
+
+def derive_poses(mesh: "trimesh.Trimesh", faces: list[Face], feature: FeatureGeometry | None, unit: str,
+                 prefix: str, prob_floor: float = PROB_FLOOR) -> list[DerivedPose]:
+    """The stable poses of the part (module docstring), most probable first, labelled
+    ``{prefix}1, {prefix}2, ...``."""
+    import trimesh
+
+    A = _arrays(mesh)
+    hv = A.V[hull_vertices(mesh)]
+    if len(hv) > HULL_FACES_MAX // 2:
+        # thin the hull's vertices on a grid of 1/HULL_GRID of the part's size: the topple
+        # graph of a finely tessellated round part is otherwise most of the derivation; the
+        # poses found are snapped to the real mesh's faces and checked on it below
+        _, keep = np.unique(np.floor((hv - hv.min(0)) / (A.diag / HULL_GRID)).astype(np.int64), axis=0,
+                            return_index=True)
+        hv = hv[np.sort(keep)]
+    hull = _hull_mesh(hv)
+    Ts, probs = trimesh.poses.compute_stable_poses(hull, center_mass=A.com, sigma=0.0, n_samples=1)
+    tol = from_mm(unit, SUPPORT_TOL_MM)
+    normals = [f.normal for f in faces if f.planar]
+    if feature is not None and feature.kind == "peg":
+        normals.append(feature.direction)  # the tip cap
+    cos_snap = math.cos(math.radians(SNAP_DEG))
+    found: list[tuple[float, np.ndarray, float, list[int], list[int]]] = []
+    for T, p in zip(Ts, probs):
+        if p < prob_floor:
+            continue
+        down = np.asarray(T, float)[:3, :3].T @ np.array([0.0, 0.0, -1.0])  # object vector pointing down
+        best = max(normals, key=lambda n: float(n @ down), default=None)
+        if best is not None and float(best @ down) > cos_snap:
+            down = best
+        R = clean(minimal_rotation(down, np.array([0.0, 0.0, -1.0])), 1e-9)
+        if any(np.allclose(R[2], f[1][2], atol=1e-6) for f in found):
+            continue
+        why, height, lying = support_check(mesh, R, faces, unit)
+        if why is not None:
+            continue
+        found.append((float(p), R, height, lying, _hidden(faces, lying, feature, R, height, tol)))
+    found.sort(key=lambda f: (-round(f[0], 9), tuple(np.round(f[1][2], 9))))
+    return [DerivedPose(f"{prefix}{i + 1}", tuple(faces[k].name for k in lying),
+                        tuple(faces[k].name for k in hidden), R, float(round(height, 12)), p)
+            for i, (p, R, height, lying, hidden) in enumerate(found)]
+
+
+# =========================================================================== boxes and triangles
+
+
+def _tri_box(tri: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+             bbox: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+    """(n,) bool: triangles (n, 3, 3) that meet the axis-aligned box [lo, hi] (separating axes:
+    the box's 3 axes, the triangle's normal, the 9 edge cross products); ``bbox`` the
+    triangles' (min, max) corners if already known."""
+    c = (lo + hi) / 2
+    h = (hi - lo) / 2
+    tmin, tmax = bbox if bbox is not None else (tri.min(1), tri.max(1))
+    keep = ((tmin <= hi) & (tmax >= lo)).all(1)
+    if not keep.any():
+        return keep
+    idx = np.flatnonzero(keep)
+    t = tri[idx] - c
+    e = np.stack([t[:, 1] - t[:, 0], t[:, 2] - t[:, 1], t[:, 0] - t[:, 2]], axis=1)  # (m, 3, 3)
+    n = cross(e[:, 0], e[:, 1])
+    ok = np.abs(np.einsum("ij,ij->i", n, t[:, 0])) <= np.abs(n) @ h + 1e-15
+    zero = np.zeros(e.shape[:2])
+    ex, ey, ez = e[..., 0], e[..., 1], e[..., 2]
+    for a in (np.stack([zero, -ez, ey], -1), np.stack([ez, zero, -ex], -1), np.stack([-ey, ex, zero], -1)):
+        # a: (m, 3 edges, 3), the cross product of a box axis with each edge
+        p = np.einsum("mjd,mvd->mjv", a, t)  # (m, edges, vertices)
+        r = np.abs(a) @ h
+        ok &= ~((p.min(2) > r + 1e-15) | (p.max(2) < -r - 1e-15)).any(1)
+    keep[idx] = ok
+    return keep
+
+
+def _gripper_boxes(g: Gripper, width: float, reach: float, shrink: float) -> list[tuple[str, np.ndarray, np.ndarray]]:
+    """(what, lo, hi) boxes in the tool frame: the closed fingers at ``width``, the open fingers
+    and the palm swept in along the approach from ``reach`` away, each shrunk by ``shrink``."""
+    u, L, t = g.finger_width / 2, g.finger_length, g.finger_thickness
+    o, w = g.opening / 2, width / 2
+    boxes = [
+        ("a finger", np.array([-u, w, -L]), np.array([u, w + t, 0.0])),
+        ("a finger", np.array([-u, -w - t, -L]), np.array([u, -w, 0.0])),
+        ("an open finger on the approach", np.array([-u, o, -reach]), np.array([u, o + t, 0.0])),
+        ("an open finger on the approach", np.array([-u, -o - t, -reach]), np.array([u, -o, 0.0])),
+        ("the palm", np.array([-u, -o - t, -reach]), np.array([u, o + t, -L])),
+    ]
+    return [(what, lo + shrink, hi - shrink) for what, lo, hi in boxes if np.all(hi - lo > 2 * shrink)]
+
+
+def grasp_problem(mesh: "trimesh.Trimesh", T: np.ndarray, width: float, g: Gripper, unit: str) -> str | None:
+    """Why the gripper at tool pose T (object frame) with fingers ``width`` apart cannot hold the
+    part, or None: wider than the opening, or a finger or the palm inside the part."""
+    if width > g.opening * (1 + 1e-9):
+        return f"{width:.4g} {unit} wide, more than the gripper's opening {g.opening:.4g} {unit}"
+    A = _arrays(mesh)
+    V = (A.V - T[:3, 3]) @ T[:3, :3]  # vertices in the tool frame
+    tri = V[A.F]
+    bbox = (tri.min(1), tri.max(1))
+    reach = 2 * A.diag + g.finger_length + g.palm_depth
+    for what, lo, hi in _gripper_boxes(g, width, reach, from_mm(unit, TOUCH_MM)):
+        if _tri_box(tri, lo, hi, bbox).any() or ((V >= lo) & (V <= hi)).all(1).any():
+            return f"{what} enters the part"
+    return None
+
+
+# =========================================================================== polygons
+
+
+def _clip(poly: list, a: tuple, b: float) -> list:
+    """Sutherland-Hodgman: the part of convex polygon ``poly`` (list of (x, y)) with a . p <= b."""
+    out = []
+    k = len(poly)
+    if not k:
+        return out
+    ax, ay = a
+    sv = [ax * x + ay * y - b for x, y in poly]
+    for i in range(k):
+        (px, py), (qx, qy), sp, sq = poly[i], poly[(i + 1) % k], sv[i], sv[(i + 1) % k]
+        if sp <= 0:
+            out.append((px, py))
+        if (sp < 0 < sq) or (sq < 0 < sp):
+            t = sp / (sp - sq)
+            out.append((px + (qx - px) * t, py + (qy - py) * t))
+    return out
+
+
+def _clip_convex(poly: "np.ndarray | list", clip: "np.ndarray | list") -> list:
+    """The intersection of convex polygon ``poly`` with convex CCW polygon ``clip`` (lists of (x, y))."""
+    P = [(float(x), float(y)) for x, y in poly]
+    C = [(float(x), float(y)) for x, y in clip]
+    for i in range(len(C)):
+        (px, py), (qx, qy) = C[i], C[(i + 1) % len(C)]
+        n = (qy - py, -(qx - px))  # outward normal of a CCW edge
+        P = _clip(P, n, n[0] * px + n[1] * py)
+        if not P:
+            break
+    return P
+
+
+def _area_centroid(poly: "np.ndarray | list") -> tuple[float, np.ndarray]:
+    """|area| and centroid of a simple polygon (list or (k, 2) array of corners)."""
+    k = len(poly)
+    if k < 3:
+        return 0.0, np.zeros(2)
+    A = cx = cy = 0.0
+    for i in range(k):
+        x, y = poly[i]
+        xn, yn = poly[(i + 1) % k]
+        c = float(x) * float(yn) - float(xn) * float(y)
+        A += c
+        cx += (float(x) + float(xn)) * c
+        cy += (float(y) + float(yn)) * c
+    if abs(A) < 1e-300:
+        return 0.0, np.zeros(2)
+    return abs(A) / 2, np.array([cx, cy]) / (3 * A)
+
+
+def _ccw(P: np.ndarray) -> np.ndarray:
+    x, y = P[:, 0], P[:, 1]
+    return P if (x * np.roll(y, -1) - np.roll(x, -1) * y).sum() >= 0 else P[::-1]
+
+
+def _overlap(mesh: "trimesh.Trimesh", fa: Face, fb: Face, e1: np.ndarray, e2: np.ndarray) -> list[np.ndarray]:
+    """The convex pieces (each (k, 2) in the plane basis e1, e2) where the two faces overlap
+    when projected on a plane normal to them."""
+    arr = _arrays(mesh)
+    E = np.array([e1, e2]).T
+    A, B = _ccw_all(arr.tri[fa.tris] @ E), _ccw_all(arr.tri[fb.tris] @ E)   # (n, 3, 2) each
+    if len(A) < len(B):
+        A, B = B, A  # clip the many against the few
+    alo, ahi = A.min(1), A.max(1)
+    pieces: list[np.ndarray] = []
+    done = np.zeros(len(A), bool)
+    for b in B:
+        blo, bhi = b.min(0), b.max(0)
+        near = np.flatnonzero(((alo <= bhi) & (ahi >= blo)).all(1) & ~done)
+        if not len(near):
+            continue
+        inside = _in_triangle(A[near].reshape(-1, 2), b).reshape(-1, 3).all(1)
+        for i in near[inside]:
+            pieces.append(A[i])
+        done[near[inside]] = True
+        for i in near[~inside]:
+            p = _clip_convex(A[i], b)
+            if len(p) >= 3 and _area_centroid(p)[0] > 0:
+                pieces.append(np.array(p))
+    return pieces
+
+
+def _ccw_all(T: np.ndarray) -> np.ndarray:
+    """Triangles (n, 3, 2) with their corners counter-clockwise."""
+    d = (T[:, 1, 0] - T[:, 0, 0]) * (T[:, 2, 1] - T[:, 0, 1]) - (T[:, 1, 1] - T[:, 0, 1]) * (T[:, 2, 0] - T[:, 0, 0])
+    out = T.copy()
+    out[d < 0] = T[d < 0][:, ::-1]
+    return out
+
+
+def _in_triangle(P: np.ndarray, t: np.ndarray, eps: float = 1e-12) -> np.ndarray:
+    """(k,) bool: points P (k, 2) in the closed CCW triangle t (3, 2)."""
+    ok = np.ones(len(P), bool)
+    for i in range(3):
+        a, b = t[i], t[(i + 1) % 3]
+        ok &= (b[0] - a[0]) * (P[:, 1] - a[1]) - (b[1] - a[1]) * (P[:, 0] - a[0]) >= -eps
+    return ok
+
+
+# =========================================================================== grasps
+
+
+def euler_zyz_of(T: np.ndarray) -> tuple[float, float, float, float, float, float]:
+    """(X, Y, Z, phi, theta, psi) with geometry.eulerxyz(...) == T (Paul's Z-Y-Z, radians)."""
+    R = T[:3, :3]
+    theta = math.acos(max(-1.0, min(1.0, float(R[2, 2]))))
+    if abs(math.sin(theta)) > 1e-9:
+        phi = math.atan2(R[1, 2], R[0, 2])
+        psi = math.atan2(R[2, 1], -R[2, 0])
+    elif R[2, 2] > 0:
+        phi, psi = 0.0, math.atan2(R[1, 0], R[0, 0])
+    else:
+        phi, psi = 0.0, math.atan2(R[0, 1], R[1, 1])
+
+    def tidy(a: float) -> float:
+        d = round(math.degrees(a), 9)
+        d = 180.0 if d == -180.0 else d
+        return math.radians(d) + 0.0
+
+    x, y, z = (float(v) + 0.0 for v in T[:3, 3])
+    return (x, y, z, tidy(phi), tidy(theta), tidy(psi))
+
+
+def _canonical(c: np.ndarray) -> np.ndarray:
+    """The closing direction with its largest component (the first of equals) positive."""
+    i = int(np.argmax(np.round(np.abs(c), 9) - 1e-12 * np.arange(3)))
+    return c if c[i] > 0 else -c
+
+
+def _tool(p: np.ndarray, c: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """The tool frame at p with y = c (closing) and z = a (approach)."""
+    T = np.eye(4)
+    T[:3, 0], T[:3, 1], T[:3, 2], T[:3, 3] = cross(c, a), c, a, p
+    return clean(T, 1e-9)
+
+
+def _approaches(c: np.ndarray, step: float) -> list[np.ndarray]:
+    e1, e2 = axis_basis(c)
+    n = max(1, int(round(2 * math.pi / step)))
+    return [clean(math.cos(2 * math.pi * k / n) * e1 + math.sin(2 * math.pi * k / n) * e2, 1e-12) for k in range(n)]
+
+
+def _covered(mesh: "trimesh.Trimesh", faces: list[Face], feature: FeatureGeometry | None, T: np.ndarray,
+             width: float, g: Gripper, unit: str) -> set[int]:
+    """The faces the gripper at T covers: a planar face if the palm or a closed finger reaches
+    beyond its plane (the part could not rest on that face while held); the feature's face if
+    they enter the space the mating part needs (a peg: the prism of half-width r about the shaft
+    from its root outwards; a hole: that about the hole's axis out of its mouth)."""
+    s = from_mm(unit, TOUCH_MM)
+    reach = g.finger_length + g.palm_depth
+    boxes = [b for b in _gripper_boxes(g, width, reach, s) if "open" not in b[0]]
+    corners = np.concatenate([np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                                        for z in (lo[2], hi[2])]) for _, lo, hi in boxes])
+    P = corners @ T[:3, :3].T + T[:3, 3]  # gripper corners in the object frame
+    out = {k for k, f in enumerate(faces) if f.planar and (P @ f.normal > f.offset + s).any()}
+    if feature is not None:
+        k = next((i for i, f in enumerate(faces) if f.feature), None)
+        if k is not None:
+            e1, e2 = axis_basis(feature.direction)
+            F = np.eye(4)
+            F[:3, 0], F[:3, 1], F[:3, 2], F[:3, 3] = e1, e2, feature.direction, feature.origin
+            big = 10 * _arrays(mesh).diag + reach
+            r = feature.radius
+            lo, hi = (np.array([-r, -r, 0.0]), np.array([r, r, big])) if feature.kind == "peg" else (
+                np.array([-r, -r, -big]), np.array([r, r, 0.0]))
+            M = np.linalg.inv(F) @ T  # tool frame in the feature's frame
+            for _, blo, bhi in boxes:
+                c = np.array([[x, y, z] for x in (blo[0], bhi[0]) for y in (blo[1], bhi[1]) for z in (blo[2], bhi[2])])
+                quads = c[[0, 1, 3, 2, 4, 5, 7, 6]] @ M[:3, :3].T + M[:3, 3]
+                tri = quads[np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7], [0, 1, 5], [0, 5, 4],
+                                      [2, 3, 7], [2, 7, 6], [1, 2, 6], [1, 6, 5], [0, 3, 7], [0, 7, 4]])]
+                inside = ((quads > lo) & (quads < hi)).all(1).any()
+                if inside or _tri_box(tri, lo + s, hi - s).any():
+                    out.add(k)
+                    break
+    return out
+
+
+def _shafts(faces: list[Face], feature: FeatureGeometry | None, prims: tuple[Primitive, ...]
+            ) -> list[tuple[np.ndarray, np.ndarray, float, float, str | None]]:
+    """Round shafts to grasp across: (root, unit axis, radius, length, face name or None)."""
+    out = []
+    if feature is not None and feature.kind == "peg":
+        out.append((feature.origin, feature.direction, feature.radius, feature.length, feature.name))
+    for p in prims:
+        root, d = np.array([0.0, 0.0, p.lo[2]]), np.array([0.0, 0.0, 1.0])
+        same = [np.allclose(root, o) and np.allclose(d, a) and abs(p.radius - r) < 1e-9 for o, a, r, _, _ in out]
+        if p.kind == "cylinder" and not p.subtract and not any(same):
+            out.append((np.array([0.0, 0.0, p.lo[2]]), np.array([0.0, 0.0, 1.0]), p.radius, p.hi[2] - p.lo[2], None))
+    return out
+
+
+def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], feature: FeatureGeometry | None,
+                  prims: tuple[Primitive, ...], g: Gripper, unit: str, prefix: str,
+                  step: float = math.radians(45.0)) -> list[DerivedGrasp]:
+    """The grasps of the part (module docstring), labelled ``{prefix}1, {prefix}2, ...``."""
+    min_area = from_mm(unit, math.sqrt(MIN_CONTACT_MM2)) ** 2
+    cos_par = math.cos(math.radians(PARALLEL_DEG))
+    cands: list[tuple[tuple[str, ...], float, np.ndarray]] = []  # (gfaces, width, T)
+    planar = [k for k, f in enumerate(faces) if f.planar]
+    for i in planar:
+        for j in planar:
+            fa, fb = faces[i], faces[j]
+            if j <= i or fa.normal @ fb.normal > -cos_par:
+                continue
+            width = fa.offset + fb.offset  # n_b = -n_a: the part lies between the planes
+            if width <= 0 or width > g.opening * (1 + 1e-9):
+                continue
+            c = _canonical(fa.normal)
+            e1, e2 = axis_basis(c)
+            pieces = _overlap(mesh, fa, fb, e1, e2)
+            ac = [_area_centroid(p) for p in pieces]
+            areas = np.array([a for a, _ in ac])
+            area = float(areas.sum())
+            if area < min_area:
+                continue
+            cen2 = sum(a * q for a, q in ac) / area
+            mid = (fa.offset - width / 2) * fa.normal
+            p = clean(mid + cen2[0] * e1 + cen2[1] * e2, 1e-9)
+            names = tuple(sorted((fa.name, fb.name), key=lambda n: [f.name for f in faces].index(n)))
+            for a in _approaches(c, step):
+                T = _tool(p, c, a)
+                if _pad_contact(pieces, areas, e1, e2, T, g, min_area) >= min_area:
+                    cands.append((names, width, T))
+    min_len = from_mm(unit, MIN_CONTACT_MM)
+    for root, d, r, length, fname in _shafts(faces, feature, prims):
+        if not _round(mesh, faces, root, d, r, length):
+            continue  # a prismatic shaft (a hexagon): its flats are not a cylinder to close on
+        name = fname if fname is not None else _face_at(faces, mesh, root + d * length / 2 + axis_basis(d)[0] * r,
+                                                       unit)
+        if name is None or 2 * r > g.opening * (1 + 1e-9):
+            continue
+        p = clean(root + d * length / 2, 1e-9)
+        e1, e2 = axis_basis(d)
+        n_dirs = max(1, int(round(math.pi / step)))
+        for m in range(n_dirs):
+            c = _canonical(clean(math.cos(math.pi * m / n_dirs) * e1 + math.sin(math.pi * m / n_dirs) * e2, 1e-12))
+            for a in _approaches(c, step):
+                T = _tool(p, c, a)
+                if _line_contact(root + c * r, d, length, T, g) >= min_len:
+                    cands.append(((name,), 2 * r, T))
+    out = []
+    for names, width, T in cands:
+        if grasp_problem(mesh, T, width, g, unit) is not None:
+            continue
+        cover = {faces[k].name for k in _covered(mesh, faces, feature, T, width, g, unit)}
+        order = [f.name for f in faces]
+        ofaces = tuple(names) + tuple(sorted(cover - set(names), key=order.index))
+        out.append(DerivedGrasp(f"{prefix}{len(out) + 1}", names, ofaces, T, euler_zyz_of(T), float(round(width, 12))))
+    return out
+
+
+def _round(mesh: "trimesh.Trimesh", faces: list[Face], root: np.ndarray, d: np.ndarray, r: float,
+           length: float) -> bool:
+    """True if the mesh's side triangles of the shaft (root, d, r, length) lie on its cylinder:
+    their centroids within 1 % of r from the axis (a 64-gon's are within 0.05 %, a hexagon's 6 % off)."""
+    C = _arrays(mesh).C - root
+    t = C @ d
+    radial = np.linalg.norm(C - np.outer(t, d), axis=1)
+    side = (t > 1e-9 * length) & (t < length * (1 - 1e-9)) & (radial > 0.5 * r) & (radial < 1.5 * r)
+    return bool(side.any() and (np.abs(radial[side] - r) < 0.01 * r).all())
+
+
+def _face_at(faces: list[Face], mesh: "trimesh.Trimesh", p: np.ndarray, unit: str) -> str | None:
+    from .shapes import ON_SURFACE_MM, face_of_point
+
+    k = face_of_point(faces, mesh, p, 10 * from_mm(unit, ON_SURFACE_MM) + 1e-3 * float(mesh.scale))
+    return None if k is None else faces[k].name
+
+
+def _pad_contact(pieces: list[np.ndarray], areas: np.ndarray, e1: np.ndarray, e2: np.ndarray, T: np.ndarray,
+                 g: Gripper, need: float = math.inf) -> float:
+    """Area of the overlap pieces (plane basis e1, e2) under one finger pad (tool x within
+    +-finger_width/2, tool z from -finger_length to 0); once the pieces wholly under it reach
+    ``need`` that lower bound is returned."""
+    x, z, o = T[:3, 0], T[:3, 2], T[:3, 3]
+    # plane coordinates (s, t) -> pad coordinates (u, w): affine, the plane's offset drops out
+    M = np.array([[e1 @ x, e2 @ x], [e1 @ z, e2 @ z]])
+    off = -np.array([o @ x, o @ z])
+    u, L = g.finger_width / 2, g.finger_length
+    pad = np.array([[-u, -L], [u, -L], [u, 0.0], [-u, 0.0]])
+    if not pieces:
+        return 0.0
+    sizes = np.array([len(p) for p in pieces])
+    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    Q = np.concatenate(pieces) @ M.T + off
+    qlo, qhi = np.minimum.reduceat(Q, starts), np.maximum.reduceat(Q, starts)
+    lo, hi = pad[0], pad[2]
+    inside = (qlo >= lo).all(1) & (qhi <= hi).all(1)
+    outside = (qhi < lo).any(1) | (qlo > hi).any(1)
+    total = float(areas[inside].sum())
+    if total >= need:
+        return total  # enough already: the pieces across the pad's edge need no clipping
+    for i in np.flatnonzero(~inside & ~outside):
+        q = _ccw(Q[starts[i]: starts[i] + sizes[i]])
+        total += _area_centroid(_clip_convex(q, pad))[0]
+    return total
+
+
+def _line_contact(start: np.ndarray, d: np.ndarray, length: float, T: np.ndarray, g: Gripper) -> float:
+    """Length of the segment start + d t, t in [0, length], inside a finger pad's (u, w) rectangle."""
+    x, z, o = T[:3, 0], T[:3, 2], T[:3, 3]
+    u0, w0 = float((start - o) @ x), float((start - o) @ z)
+    du, dw = float(d @ x), float(d @ z)
+    lo, hi = 0.0, length
+    for p0, dp, a, b in ((u0, du, -g.finger_width / 2, g.finger_width / 2), (w0, dw, -g.finger_length, 0.0)):
+        if abs(dp) < 1e-12:
+            if not (a <= p0 <= b):
+                return 0.0
+            continue
+        t1, t2 = (a - p0) / dp, (b - p0) / dp
+        lo, hi = max(lo, min(t1, t2)), min(hi, max(t1, t2))
+    return max(0.0, hi - lo)
+
+
+# =========================================================================== checks
+
+
+def check_entries(model: "object", gripper: Gripper, unit: str, which: tuple[str, ...],
+                  step: float = math.radians(45.0)) -> list[tuple[str, str, str]]:
+    """Hand-written entries of ``model`` (an ObjectModel with a geometry) checked against its
+    shape: ``which`` names the lists written by hand ('faces', 'stable_poses', 'grasps').
+    Returns (key, expected, got) for each problem, in file order: a face that is not on the
+    shape, a stable pose that is not stable (or rests at another height, or on other faces),
+    a grasp wider than the opening or whose fingers or palm enter the part."""
+    from .shapes import derive_faces
+
+    geo = model.geometry  # type: ignore[attr-defined]
+    mesh = geo.mesh()
+    fg = model.feature.geometry if model.feature is not None else None  # type: ignore[attr-defined]
+    faces = derive_faces(mesh, fg, geo.face_names, unit)
+    own = {f.name: k for k, f in enumerate(faces)}
+    out: list[tuple[str, str, str]] = []
+    tol = max(from_mm(unit, 0.05), 1e-6)
+    if "faces" in which:
+        for i, f in enumerate(model.faces):  # type: ignore[attr-defined]
+            if f not in own:
+                out.append((f"faces[{i}]", f"a face of the shape ({', '.join(own)}; face_names: names a face by a "
+                            "point on it)", repr(f)))
+    if "stable_poses" in which:
+        for i, p in enumerate(model.poses.values()):  # type: ignore[attr-defined]
+            why, height, lying = support_check(mesh, p.R, faces, unit)
+            key = f"stable_poses[{i}]"
+            if why is not None:
+                out.append((key, "a stable pose of the shape", f"{p.label}: {why}"))
+            elif abs(height - p.height) > tol:
+                out.append((f"{key}.tm", f"the height the shape rests at in {p.label}, {height:.6g} {unit}",
+                            f"{p.height:.6g}"))
+            else:
+                down = {faces[k].name for k in lying}
+                bad = [f for f in p.rfaces if f in own and f not in down]
+                if bad:
+                    out.append((f"{key}.rfaces", f"faces {p.label} rests on ({', '.join(sorted(down))})",
+                                ", ".join(map(str, bad))))
+    if "grasps" in which:
+        for i, g in enumerate(model.grasps.values()):  # type: ignore[attr-defined]
+            why = grasp_problem(mesh, g.T, g.width, gripper, unit)
+            if why is not None:
+                out.append((f"grasps[{i}]", "a grasp the gripper can make", f"{g.label}: {why}"))
+    return out

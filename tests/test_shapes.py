@@ -1,0 +1,401 @@
+"""Object models from shapes and meshes (issue 14): derived faces, stable poses, grasps and
+T_a; hand-written entries checked against the shape; the derivation cache; `spar kb derive`.
+
+The physics of the derived stable poses is checked here with code of its own (a centre of
+mass by the divergence theorem, a monotone-chain hull, point-in-polygon), not with
+world.shapes_derive's support_check or trimesh's centre of mass."""
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from spar_py.errors import KBError
+from spar_py.geometry import eulerxyz
+from spar_py.kb import check_file, load_object, load_problem
+from spar_py.world import shapes_cache
+from spar_py.world.shapes import part_mesh
+
+from test_problems import PAPER_ACTIONS, PAPER_ORDER, phase1
+
+ROOT = Path(__file__).resolve().parent.parent
+OBJ = ROOT / "kb" / "objects"
+SPAR = [sys.executable, "-m", "spar_py.cli"]
+
+
+@pytest.fixture(autouse=True)
+def _own_cache(tmp_path_factory: pytest.TempPathFactory, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every test derives into a cache of its own (never the user's)."""
+    monkeypatch.setenv("SPAR_CACHE_DIR", str(tmp_path_factory.mktemp("derive-cache")))
+
+
+def _shape_parts() -> list[Path]:
+    """Every kb/objects model that gives a mesh or a shape."""
+    out = []
+    for p in sorted(OBJ.glob("*.yaml")):
+        text = p.read_text(encoding="utf-8")
+        if "\nmesh:" in text or "\nshape:" in text:
+            out.append(p)
+    return out
+
+
+# ---------------------------------------------------------------------- the paper's cell from shapes
+
+
+def test_paper_cell_from_shapes_plans_fig23_with_fig24_orderings() -> None:
+    o = phase1("peg_in_block_shapes")
+    assert o.kind == "plan"
+    assert o.actions == PAPER_ACTIONS
+    assert o.order == PAPER_ORDER  # the white knight prior_to(action_3, action_2) included
+
+
+def test_assembled_2_derives_the_papers_ta_and_va() -> None:
+    """assembled(peg, block) gives T_a = trans_1 and V_a = vec_1 of peg_in_block.yaml."""
+    paper = load_problem(ROOT / "kb" / "problems" / "peg_in_block.yaml")
+    shapes = load_problem(ROOT / "kb" / "problems" / "peg_in_block_shapes.yaml")
+    assert shapes.goals == paper.goals
+    np.testing.assert_allclose(shapes.transforms["trans_1"], paper.transforms["trans_1"], atol=1e-12)
+    np.testing.assert_allclose(shapes.vectors["vec_1"], paper.vectors["vec_1"], atol=1e-12)
+
+
+# the hand-written face names of peg.yaml/block.yaml and the derived names of the same faces
+PEG_FACES = {"base_bottom": "nz", "base_top": "pz", "base_xp": "px", "base_xn": "nx", "base_yp": "py",
+             "base_yn": "ny", "peg_face": "peg_face"}
+BLOCK_FACES = {"b1": "nz", "b2": "px", "block_face": "pz", "b4": "nx", "b5": "py", "b6": "ny"}
+
+
+@pytest.mark.parametrize("hand, derived, names", [("peg.yaml", "peg_shape.yaml", PEG_FACES),
+                                                   ("block.yaml", "block_shape.yaml", BLOCK_FACES)])
+def test_derived_poses_and_grasps_contain_the_hand_written(hand: str, derived: str, names: dict) -> None:
+    h, d = load_object(OBJ / hand, "in"), load_object(OBJ / derived, "in")
+    for p in h.poses.values():
+        same = [q for q in d.poses.values() if np.allclose(q.R, p.R, atol=1e-9) and abs(q.height - p.height) < 1e-9]
+        assert same, f"{p.label} not derived"
+        assert {names[f] for f in p.rfaces} == set(same[0].rfaces)
+    for g in h.grasps.values():
+        same = [q for q in d.grasps.values() if np.allclose(q.T, g.T, atol=1e-9)]
+        assert same, f"{g.label} not derived"
+        assert same[0].width == pytest.approx(g.width)
+        assert {names[f] for f in g.gfaces} == set(same[0].gfaces)
+        # every planar face the hand-written grasp covers is covered (peg.yaml also marks the
+        # shaft covered from the diagonal approaches above the base, which keep clear of it)
+        assert {names[f] for f in g.ofaces if f != "peg_face"} <= set(same[0].ofaces)
+
+
+# ---------------------------------------------------------------------- physics, independently
+
+
+def _com(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Centre of mass of a closed triangle mesh of uniform density (signed tetrahedra)."""
+    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    vol = np.einsum("ij,ij->i", a, np.cross(b, c)) / 6
+    return ((a + b + c) / 4 * vol[:, None]).sum(0) / vol.sum()
+
+
+def _cross2(a: np.ndarray, b: np.ndarray) -> float:
+    return float(a[0] * b[1] - a[1] * b[0])
+
+
+def _hull(P: np.ndarray) -> np.ndarray:
+    """Andrew's monotone chain, counter-clockwise."""
+    P = np.unique(np.round(P, 12), axis=0)
+    if len(P) < 3:
+        return P
+
+    def half(pts: np.ndarray) -> list:
+        h: list = []
+        for p in pts:
+            while len(h) >= 2 and _cross2(h[-1] - h[-2], p - h[-2]) <= 0:
+                h.pop()
+            h.append(p)
+        return h
+
+    lower, upper = half(P), half(P[::-1])
+    return np.array(lower[:-1] + upper[:-1])
+
+
+def _depth_inside(poly: np.ndarray, c: np.ndarray) -> float:
+    """How far c lies inside the CCW polygon (negative outside)."""
+    a, b = poly, np.roll(poly, -1, axis=0)
+    e = b - a
+    return float(((e[:, 0] * (c[1] - a[:, 1]) - e[:, 1] * (c[0] - a[:, 0])) / np.linalg.norm(e, axis=1)).min())
+
+
+@pytest.mark.parametrize("path", _shape_parts(), ids=lambda p: p.stem)
+def test_every_derived_stable_pose_is_physically_stable(path: Path) -> None:
+    """Dropped in each derived pose the part stays: it rests on a flat patch of its own (at
+    least 3 non-collinear lowest points) at the pose's height, with its centre of mass over
+    the support polygon; every other orientation tilted 5 deg off it raises the centre of mass
+    (the pose is a local minimum of potential energy)."""
+    m = load_object(path, "in")
+    mesh = part_mesh(m)
+    V, F = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+    com = _com(V, F)
+    assert m.poses
+    for p in m.poses.values():
+        W = V @ p.R.T
+        low = W[:, 2].min()
+        assert -low == pytest.approx(p.height, abs=1e-6), p.label
+        support = W[W[:, 2] < low + 1e-6, :2]
+        poly = _hull(support)
+        assert len(poly) >= 3, f"{p.label} rests on an edge"
+        c = (p.R @ com)[:2]
+        assert _depth_inside(poly, c) > 0, f"{p.label}: centre of mass outside the support polygon"
+        z0 = (p.R @ com)[2] - low
+        for ang in np.radians(np.arange(0, 360, 30)):
+            axis = np.array([math.cos(ang), math.sin(ang), 0.0])
+            t = math.radians(5)
+            K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+            Rt = (np.eye(3) + math.sin(t) * K + (1 - math.cos(t)) * K @ K) @ p.R
+            Wt = V @ Rt.T
+            assert (Rt @ com)[2] - Wt[:, 2].min() > z0 - 1e-9, f"{p.label} tips over about {axis}"
+
+
+@pytest.mark.parametrize("path", _shape_parts(), ids=lambda p: p.stem)
+def test_derived_grasps_touch_the_part_and_keep_the_fingers_out(path: Path) -> None:
+    """For each derived grasp: the part lies between the fingers (some surface point at tool
+    x = z = 0 on each side of the tool centre along y), the width fits the 4 in opening, and
+    no surface sample lies strictly inside a closed finger."""
+    m = load_object(path, "in")
+    mesh = part_mesh(m)
+    rng = np.random.default_rng(7)
+    pts, _ = __import__("trimesh").sample.sample_surface_even(mesh, 4000, seed=rng)
+    fw, fl, ft = 20 / 25.4, 60 / 25.4, 10 / 25.4
+    for g in m.grasps.values():
+        assert g.width <= 4.0 + 1e-9
+        T = eulerxyz(*g.euler)
+        np.testing.assert_allclose(T, g.T, atol=1e-9)
+        q = (pts - T[:3, 3]) @ T[:3, :3]
+        eps = 0.02
+        for s in (1, -1):
+            inside = ((np.abs(q[:, 0]) < fw / 2 - eps) & (q[:, 2] < -eps) & (q[:, 2] > -fl + eps)
+                      & (s * q[:, 1] > g.width / 2 + eps) & (s * q[:, 1] < g.width / 2 + ft - eps))
+            assert not inside.any(), f"{g.label}: a finger enters the part"
+        extent = np.abs(q[(np.abs(q[:, 0]) < fw / 2) & (q[:, 2] > -fl) & (q[:, 2] < 0), 1])
+        assert extent.max() == pytest.approx(g.width / 2, abs=0.02), f"{g.label}: the fingers do not touch"
+
+
+def test_ofaces_name_the_face_the_gripper_comes_from() -> None:
+    d = load_object(OBJ / "peg_shape.yaml", "in")
+    approach_x = next(g for g in d.grasps.values() if np.allclose(g.T[:3, 2], [1, 0, 0]) and g.gfaces == ("py", "ny"))
+    assert approach_x.ofaces == ("py", "ny", "nx")  # the palm is on the -x side
+
+
+def test_hole_down_hides_the_hole() -> None:
+    d = load_object(OBJ / "block_shape.yaml", "in")
+    down = next(p for p in d.poses.values() if p.rfaces == ("pz",))
+    assert "block_face" in down.ofaces
+    up = next(p for p in d.poses.values() if p.rfaces == ("nz",))
+    assert "block_face" not in up.ofaces
+
+
+def test_mesh_part_faces_poses_and_units() -> None:
+    mm = load_object(OBJ / "hex_shaft.yaml", "mm")
+    inch = load_object(OBJ / "hex_shaft.yaml", "in")
+    assert "shaft" in mm.faces and "nz" in mm.faces
+    assert mm.feature.radius == pytest.approx(12) and inch.feature.radius == pytest.approx(12 / 25.4)
+    assert [p.label for p in mm.poses.values()] == [p.label for p in inch.poses.values()]
+    for a, b in zip(mm.poses.values(), inch.poses.values()):
+        assert a.height == pytest.approx(b.height * 25.4)
+    # the flange is gripped across its flats, never the hexagon as a cylinder
+    assert all(set(g.gfaces) <= {"px", "nx", "py", "ny"} for g in mm.grasps.values())
+
+
+def test_meshes_only_cell_plans_with_no_hand_written_entry() -> None:
+    o = phase1("shaft_in_bracket")
+    assert o.kind == "plan"
+    assert o.actions == ["pickup(hex_shaft,grasp_1)",
+                         "assemble(hex_shaft,bracket,[[shaft],[socket]],trans_1,vec_1)"]
+    text = (ROOT / "kb" / "problems" / "shaft_in_bracket.yaml").read_text()
+    assert "transforms:" not in text and "vectors:" not in text
+    for f in ("hex_shaft.yaml", "bracket.yaml"):
+        t = (OBJ / f).read_text()
+        assert "mesh:" in t and not any(f"\n{k}:" in t for k in ("faces", "stable_poses", "grasps"))
+
+
+# ---------------------------------------------------------------------- checks of hand-written entries
+
+
+def _model(tmp: Path, body: str) -> Path:
+    p = tmp / "part.yaml"
+    p.write_text("object: part\nunits: {length: in, angle: deg}\n"
+                 "shape:\n  - {box: {min: [-1, -1, 0], max: [1, 1, 1]}}\n" + body)
+    return p
+
+
+GRASP = "grasps:\n  - {label: g1, gfaces: [py, ny], ofaces: [py, ny], eulerxyz: [0, 0, 0.5, 0, 90, 0], width: 2}\n"
+POSE = "stable_poses:\n  - {label: s1, rfaces: [nz], ofaces: [nz], tm: [[1, 0, 0], [0, 1, 0], [0, 0, 1], [0, 0, 0]]}\n"
+
+
+def test_check_accepts_entries_that_agree_with_the_shape(tmp_path: Path) -> None:
+    assert ": ok" in check_file(_model(tmp_path, POSE + GRASP))
+
+
+def test_check_names_an_unstable_pose(tmp_path: Path) -> None:
+    tilted = POSE.replace("[[1, 0, 0], [0, 1, 0], [0, 0, 1], [0, 0, 0]]",
+                          "[[1, 0, 0], [0, 0.8, 0.6], [0, -0.6, 0.8], [0, 0, 0]]")
+    with pytest.raises(KBError, match=r"stable_poses\[0\]: expected a stable pose of the shape, not s1: it rests on"):
+        check_file(_model(tmp_path, tilted + GRASP))
+
+
+def test_check_names_a_pose_at_the_wrong_height(tmp_path: Path) -> None:
+    with pytest.raises(KBError, match=r"stable_poses\[0\]\.tm: expected the height"):
+        check_file(_model(tmp_path, POSE.replace("[0, 0, 0]]}", "[0, 0, 0.5]]}") + GRASP))
+
+
+def test_check_names_a_grasp_whose_finger_enters_the_part(tmp_path: Path) -> None:
+    narrow = GRASP.replace("width: 2", "width: 1.5")
+    with pytest.raises(KBError, match=r"grasps\[0\]: expected a grasp the gripper can make, not g1: a finger enters"):
+        check_file(_model(tmp_path, POSE + narrow))
+
+
+def test_check_names_a_grasp_wider_than_the_opening(tmp_path: Path) -> None:
+    with pytest.raises(KBError, match=r"grasps\[0\]: .*more than the gripper's opening 4 in"):
+        check_file(_model(tmp_path, POSE + GRASP.replace("width: 2", "width: 4.5")))
+
+
+def test_check_names_a_face_not_on_the_shape(tmp_path: Path) -> None:
+    body = "faces: [py, ny, nz, top]\n" + POSE + GRASP
+    with pytest.raises(KBError, match=r"faces\[3\]: expected a face of the shape .*, not 'top'"):
+        check_file(_model(tmp_path, body))
+
+
+def test_face_names_take_precedence_and_must_be_on_the_shape(tmp_path: Path) -> None:
+    m = load_object(_model(tmp_path, "face_names: {top: [0, 0, 1]}\n"), "in")
+    assert "top" in m.faces and "pz" not in m.faces
+    with pytest.raises(KBError, match=r"face_names\.top: expected a point on a face of the shape"):
+        load_object(_model(tmp_path, "face_names: {top: [0, 0, 3]}\n"), "in")
+
+
+def test_subtract_makes_a_hole_and_its_wall_a_face(tmp_path: Path) -> None:
+    body = ("  - {cylinder: {radius: 0.5, z: [0.5, 1], subtract: true}}\n"
+            "feature: {kind: hole, name: bore, radius: 0.5, axis: {origin: [0, 0, 1], direction: [0, 0, -1]}, "
+            "length: 0.5}\n")
+    m = load_object(_model(tmp_path, body), "in")
+    assert part_mesh(m).volume == pytest.approx(4 - math.pi * 0.25 * 0.5, rel=2e-3)
+    assert "bore" in m.faces
+    np.testing.assert_allclose(m.feature.vector, [0, 0, 0.5])
+
+
+def test_assembled_2_needs_geometric_features(tmp_path: Path) -> None:
+    src = (ROOT / "kb" / "problems" / "peg_in_block.yaml").read_text()
+    p = tmp_path / "cell.yaml"
+    p.write_text(src.replace("../", f"{ROOT}/kb/").replace(
+        "assembled(peg, block, [[peg_face], [block_face]], trans_1, vec_1)", "assembled(peg, block)"))
+    with pytest.raises(KBError, match=r"goals\[0\]: expected peg with a peg feature declared by geometry"):
+        load_problem(p)
+
+
+def test_mesh_errors_are_one_line(tmp_path: Path) -> None:
+    (tmp_path / "open.stl").write_text("solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\n"
+                                       "vertex 0 1 0\nendloop\nendfacet\nendsolid x\n")
+    p = tmp_path / "m.yaml"
+    p.write_text("object: m\nunits: {length: mm, angle: deg}\nmesh: open.stl\n")
+    with pytest.raises(KBError, match=r"m\.yaml: mesh: expected a closed \(watertight\) mesh$"):
+        load_object(p, "mm")
+    p.write_text("object: m\nunits: {length: mm, angle: deg}\nmesh: none.stl\n")
+    with pytest.raises(KBError, match=r"mesh: expected the path of a mesh file, not 'none.stl' \(no such file\)"):
+        load_object(p, "mm")
+
+
+def test_rotation_message_says_the_tolerance(tmp_path: Path) -> None:
+    pose = ("stable_poses:\n  - {label: s1, rfaces: [nz], ofaces: [nz], "
+            "tm: [[0.7071, 0.7071, 0], [-0.7071, 0.7071, 0], [0, 0, 1], [0, 0, 0]]}\n")
+    with pytest.raises(KBError, match=r"stable_poses\[0\]\.tm: expected an orthonormal .*orthonormal to 1e-06"):
+        load_object(_model(tmp_path, pose + GRASP), "in")
+
+
+# ---------------------------------------------------------------------- cache and `spar kb derive`
+
+
+def test_derivation_is_cached_by_content(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    p = _model(tmp_path, "")
+    first = load_object(p, "in")
+    files = list(shapes_cache.cache_dir().glob("*.json"))
+    assert len(files) == 1
+
+    def boom(*a: object, **k: object) -> None:
+        raise AssertionError("derived twice")
+
+    monkeypatch.setattr(shapes_cache, "_compute", boom)
+    again = load_object(p, "in")
+    assert list(again.grasps) == list(first.grasps)
+    p.write_text(p.read_text().replace("max: [1, 1, 1]", "max: [1, 1, 1.5]"))  # new content: derived again
+    with pytest.raises(KBError, match="derived twice"):  # any failure of a derivation is a KBError
+        load_object(p, "in")
+
+
+def test_cache_is_bounded(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(shapes_cache, "MAX_ENTRIES", 2)
+    for h in (1, 1.25, 1.5, 1.75):
+        p = tmp_path / f"p{h}.yaml"
+        p.write_text(f"object: part\nunits: {{length: in, angle: deg}}\nshape:\n  - {{box: {{min: [-1, -1, 0], "
+                     f"max: [1, 1, {h}]}}}}\n")
+        load_object(p, "in")
+    assert len(list(shapes_cache.cache_dir().glob("*.json"))) == 2
+
+
+def test_a_corrupt_cache_entry_is_derived_again(tmp_path: Path) -> None:
+    p = _model(tmp_path, "")
+    load_object(p, "in")
+    (f,) = shapes_cache.cache_dir().glob("*.json")
+    f.write_text("{not json")
+    assert load_object(p, "in").grasps
+    assert json.loads(f.read_text())["grasps"]
+
+
+def test_kb_derive_writes_a_model_that_loads_to_the_same(tmp_path: Path) -> None:
+    out = tmp_path / "hex_full.yaml"
+    r = subprocess.run([*SPAR, "kb", "derive", str(OBJ / "hex_shaft.yaml"), "-o", str(out)], capture_output=True,
+                       text=True, cwd=ROOT)
+    assert r.returncode == 0, r.stderr
+    a, b = load_object(OBJ / "hex_shaft.yaml", "mm"), load_object(out, "mm")
+    assert a.faces == b.faces and list(a.poses) == list(b.poses) and list(a.grasps) == list(b.grasps)
+    for g in a.grasps:
+        np.testing.assert_allclose(a.grasps[g].T, b.grasps[g].T, atol=1e-8)
+    for p in a.poses:
+        np.testing.assert_allclose(a.poses[p].R, b.poses[p].R, atol=1e-8)
+    assert ": ok" in check_file(out)  # and every entry agrees with the mesh
+
+
+def test_kb_derive_bad_input_is_one_line(tmp_path: Path) -> None:
+    p = tmp_path / "m.yaml"
+    p.write_text("object: m\nunits: {length: mm, angle: deg}\n")
+    r = subprocess.run([*SPAR, "kb", "derive", str(p)], capture_output=True, text=True, cwd=ROOT)
+    assert r.returncode == 2
+    assert r.stderr.count("\n") == 1 and "faces: expected a value (key missing)" in r.stderr
+
+
+def test_planning_does_not_import_the_geometry_libraries_it_does_not_need(tmp_path: Path) -> None:
+    """The paper's cell (hand-written models) never imports trimesh; a mesh cell whose
+    derivations are cached does not either."""
+    code = ("import sys\nfrom spar_py.kb import load_problem\nload_problem(sys.argv[1])\n"
+            "print(sorted(m for m in ('trimesh', 'scipy', 'networkx', 'manifold3d') if m in sys.modules))\n")
+    env = {**__import__("os").environ, "SPAR_CACHE_DIR": str(tmp_path)}
+    run = [sys.executable, "-c", code]
+    paper = subprocess.run([*run, str(ROOT / "kb/problems/peg_in_block.yaml")], capture_output=True, text=True,
+                           env=env)
+    assert paper.stdout.strip() == "[]", paper.stderr
+    mesh_cell = str(ROOT / "kb/problems/shaft_in_bracket.yaml")
+    first = subprocess.run([*run, mesh_cell], capture_output=True, text=True, env=env)
+    assert "trimesh" in first.stdout, first.stderr
+    again = subprocess.run([*run, mesh_cell], capture_output=True, text=True, env=env)
+    assert again.stdout.strip() == "[]", again.stderr
+
+
+def test_bench_derive_renders() -> None:
+    from bench import derive
+
+    r = {"repeats": 1, "rows": [
+        {"model": "peg (paper, shape)", "triangles": 270, "faces": 7, "poses": 6, "grasps": 36,
+         "derive_ms": 80.0, "cached_ms": 1.0, "hand_ms": 5.0},
+        {"model": "10k-triangle part (mesh)", "triangles": 9998, "faces": 7, "poses": 6, "grasps": 36,
+         "derive_ms": 1500.0, "cached_ms": 5.0, "hand_ms": None}]}
+    text = "\n".join(derive.markdown(r))
+    assert "| peg (paper, shape) | 270 |" in text and "16x" in text
+    assert "80 ms at worst (met)" in text and "1500 ms (9998 triangles) (NOT met)" in text
