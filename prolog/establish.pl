@@ -210,24 +210,66 @@ known_declobber_method(white_knight).
 %   Sec. 7.1): each is dealt with by one of the plan's declobbering
 %   methods, tried in order (by separation only, if it necessarily falls
 %   between Establisher and S: see necessarily_between/4). Clobberers are
-%   taken one at a time, the next one computed from the plan as it is
-%   then, so actions added by a white knight are considered too.
+%   taken one at a time, newest first, each the first possible clobberer
+%   of the plan as it is then, so actions added by a white knight are
+%   considered too.
+%
+%   The possible clobberers are found incrementally: the plan's actions
+%   are scanned once, lazily, newest first, and after each remedy only the
+%   actions it added are scanned before the scan goes on where it stopped.
+%   Being a possible clobberer only ever stops on a branch (orderings,
+%   bindings and separations are only added), so an action the scan passed
+%   never becomes one, and the clobberers come in the order a fresh scan of
+%   the whole plan would find them.
 
 declobber(op(_, S, Cond), E, Plan0, Plan) :-
     plan_methods(Plan0, Methods),
-    declobber_(Cond, E, S, Methods, [], Plan0, Plan).
+    plan_actions(Plan0, Actions),
+    declobber_(Actions, Actions, Cond, E, S, Methods, Plan0, Plan).
 
-declobber_(Cond, E, S, Methods, Done, Plan0, Plan) :-
-    (   possible_clobberer(Cond, E, S, Plan0, C),
-        \+ memberchk(C, Done)
+%   declobber_(+Todo, +Seen, +Cond, +E, +S, +Methods, +Plan0, -Plan):
+%   Todo the actions of Seen (the plan's actions when the scan last
+%   looked) not scanned yet; the actions Plan0 has beyond Seen come first.
+
+declobber_(Todo0, Seen, Cond, E, S, Methods, Plan0, Plan) :-
+    plan_actions(Plan0, Actions),
+    added_since(Actions, Seen, New),
+    append(New, Todo0, Todo),
+    plan_order(Plan0, G),
+    (   next_clobberer(Todo, Cond, E, S, G, C, Rest)
     ->  (   necessarily_between(C, E, S, Plan0)
         ->  memberchk(separation, Methods),
             Method = separation
         ;   member(Method, Methods)
         ),
         declobber_by(Method, Cond, E, S, C, Plan0, Plan1),
-        declobber_(Cond, E, S, Methods, [C|Done], Plan1, Plan)
+        declobber_(Rest, Actions, Cond, E, S, Methods, Plan1, Plan)
     ;   Plan = Plan0
+    ).
+
+%   next_clobberer(+Actions, +Cond, +E, +S, +G, -C, -Rest): C the first of
+%   Actions with a delete-list element unifying with Cond that may fall
+%   between E and S in G, Rest the actions after it.
+
+next_clobberer([action(C0, _, _, _, dellist(Dels))|As], Cond, E, S, G, C, Rest) :-
+    (   clobbers(Dels, Cond),
+        possibly_between(C0, E, S, G)
+    ->  C = C0,
+        Rest = As
+    ;   next_clobberer(As, Cond, E, S, G, C, Rest)
+    ).
+
+%   added_since(+Actions, +Seen, -New): the actions of Actions before its
+%   suffix Seen (the plan's actions are kept newest first).
+
+added_since(Actions, Seen, New) :-
+    (   Actions == Seen
+    ->  New = []
+    ;   length(Actions, N),
+        length(Seen, N0),
+        K is N - N0,
+        length(New, K),
+        append(New, _, Actions)
     ).
 
 %   necessarily_between(+C, +E, +S, +Plan): C follows E and precedes S

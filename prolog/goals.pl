@@ -60,6 +60,7 @@
 :- use_module(library(option)).
 :- use_module(library(yall)).
 :- use_module(library(ordsets)).
+:- use_module(library(assoc)).
 :- use_module(kb, []).
 :- use_module(ordering).
 :- use_module(cms).
@@ -301,8 +302,8 @@ forward_check(K, Plan0, Plan) :-
         ->  fail
         ;   throw(backjump(Ks))
         )
-    ;   maplist([geo(Id, _, _, _), Id]>>true, ToCheck, Ids),
-        append(Ids, Checked0, Checked),
+    ;   foldl([geo(Id, _, _, _), C0, C]>>put_assoc(Id, C0, true, C),
+              ToCheck, Checked0, Checked),
         set_checked_of_plan(Checked, Plan0, Plan)
     ).
 
@@ -310,7 +311,7 @@ forward_check(K, Plan0, Plan) :-
 %   network does not change on operational steps (they only add nodes).
 
 unchecked_ground(Checked, Net, geo(Id, _, Constraint, _)) :-
-    \+ memberchk(Id, Checked),
+    \+ get_assoc(Id, Checked, _),
     ground(Constraint),
     constraint_vars(Constraint, Vs),
     forall(member(V, Vs), cms_node(Net, V, _)).
@@ -425,7 +426,8 @@ establisher(Sat, A, Cond, E) :-
 
 plan_partial(Plan, partial(Actions, Order, Net, Satisfied)) :-
     plan_actions(Plan, Actions),
-    plan_order(Plan, Order),
+    plan_order(Plan, Ord),
+    ordering_graph(Ord, Order),
     plan_net(Plan, Net),
     plan_sat(Plan, Sat),
     plan_seps(Plan, Seps0),

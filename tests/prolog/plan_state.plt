@@ -11,6 +11,7 @@
 :- use_module('../../prolog/establish').
 :- use_module('../../prolog/plan_state').
 :- use_module('../../prolog/spar_defaults').
+:- use_module('../../prolog/ordering').
 :- use_module(library(plunit)).
 :- use_module(library(apply)).
 :- use_module(library(lists)).
@@ -35,7 +36,7 @@ field(bound,     4, 5).
 field(methods,   [promotion], [separation]).
 field(trace,     true, false).
 field(history,   [h(1, c, [])], []).
-field(checked,   [goal_2], [goal_3]).
+field(checked,   t(goal_2, true, <, t, t), t(goal_3, true, <, t, t)).
 field(lookahead, false, true).
 field(recorder,  recorder_value, other_recorder).
 field(seps,      [sep(a, b)], []).
@@ -107,15 +108,17 @@ test(writer_untyped_net, Net == anything) :-
 test(reader_fails_on_non_plan, fail) :-
     plan_actions(partial([], [], n, []), _).
 
-test(defaults, [Bound, Methods, Trace, Lookahead, Lists, Steps, Recorder] ==
+test(defaults, [Bound, Methods, Trace, Lookahead, Lists, Order, Checked, Steps, Recorder] ==
                [12, [promotion, separation, white_knight], false, true,
-                [[], [], [], [], [], [], [], [], [], []], 0,
+                [[], [], [], [], [], [], []], Empty, t, 0,
                 failures(none, none, false, 0-steps(0))]) :-
     make_plan([], P),
+    empty_ordering(Empty),
     plan_bound(P, Bound), plan_methods(P, Methods),
     plan_trace(P, Trace), plan_lookahead(P, Lookahead),
-    maplist(read_field(P), [actions, order, ids, ops, geos, sat, history,
-                            checked, seps, checked], Lists),
+    maplist(read_field(P), [actions, ids, ops, geos, sat, history, seps], Lists),
+    plan_order(P, Order),
+    plan_checked(P, Checked),
     plan_steps(P, Steps), plan_recorder(P, Recorder).
 
 test(defaults_from_spar_defaults) :-
