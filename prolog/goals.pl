@@ -72,7 +72,8 @@
 %!  phase1_search(+Options, -Outcome, -Bound) is det.
 %
 %   Iterative deepening over the bound on plan size, from lower_bound/1
-%   to max_actions. Outcome is plan(Partial) for
+%   to max_actions (auto, the default: derived from the lower bound by
+%   spar_defaults:derived_max_actions/2). Outcome is plan(Partial) for
 %   the first plan found, Bound the bound it was found at; otherwise
 %   Outcome is no_plan(Bound, UnmetGoal), UnmetGoal the goal that failed
 %   at the deepest step of the last round searched completely (see
@@ -84,9 +85,13 @@ phase1_search(Options, Outcome, Bound) :-
     must_be(list, Options),
     default_option(max_actions, Max0),
     default_option(max_steps, Budget0),
-    option(max_actions(Max), Options, Max0),
+    option(max_actions(Max1), Options, Max0),
     option(max_steps(Budget), Options, Budget0),
     lower_bound(LB),
+    (   Max1 == auto
+    ->  derived_max_actions(LB, Max)
+    ;   Max = Max1
+    ),
     Lo is min(LB, Max),
     Spent = steps(0),
     rounds(Lo, Max, Budget-Spent, none, Options, Outcome, Bound).
@@ -94,33 +99,46 @@ phase1_search(Options, Outcome, Bound) :-
 %!  lower_bound(-N) is det.
 %
 %   A lower bound on the number of actions any plan needs, where iterative
-%   deepening starts (at least 1): each user goal not true initially
-%   needs at least one action; a goal
-%   assembled(Peg, Hole, [_, HoleFaces], _, _) needs a pickup of Peg and the
-%   assemble, and two more (a pickup and a putdown of Hole) when Hole rests
-%   initially in a stable pose that hides a face of HoleFaces (Sec. 6: the
-%   block on its hole). These actions serve only their own goal, so the sum
-%   never exceeds the size of a smallest plan, and starting there finds the
-%   same first plan as starting from 1, without the rounds that must fail.
+%   deepening starts (at least 1), admissible: each user goal not true
+%   initially needs at least one action of its own (its last); a goal
+%   assembled(Peg, Hole, [_, HoleFaces], _, _) needs the assemble and a
+%   pickup of Peg (a pickup serves one assemble: it is the last pickup
+%   of Peg before it); and each Hole object that rests initially in a
+%   stable pose hiding a face of the HoleFaces of some goal must be
+%   turned over, a pickup and a putdown of it, counted once however many
+%   goals mate with it (Sec. 6: the block on its hole). No action is
+%   counted twice, so the sum never exceeds the size of a smallest plan,
+%   and starting there finds the same first plan as starting from 1,
+%   without the rounds that must fail.
 
 lower_bound(N) :-
     aggregate_all(sum(K), (kb:goal(G), goal_lower_bound(G, K)), N0),
-    N is max(1, N0).
+    aggregate_all(count, hidden_hole(_), N1),
+    N is max(1, N0 + 2 * N1).
 
 goal_lower_bound(G, 0) :-
     kb:initial(G),
     !.
-goal_lower_bound(assembled(_, Hole, [_, HoleFaces], _, _), K) :-
-    !,
-    (   kb:initial(part_location(Hole, Pos)),
-        kb:position(Pos, Hole, Label, _),
-        kb:position_class(Label, Pose),
-        kb:pose(Hole, Pose, _, ofaces(Hidden), _),
-        member(F, HoleFaces), memberchk(F, Hidden)
-    ->  K = 4
-    ;   K = 2
-    ).
+goal_lower_bound(assembled(_, _, _, _, _), 2) :-
+    !.
 goal_lower_bound(_, 1).
+
+%   hidden_hole(-Hole): Hole (each once) is the hole part of a user goal
+%   not true initially and rests in a stable pose that hides one of that
+%   goal's hole faces.
+
+hidden_hole(Hole) :-
+    findall(H, ( kb:goal(G),
+                 \+ kb:initial(G),
+                 G = assembled(_, H, [_, HoleFaces], _, _),
+                 kb:initial(part_location(H, Pos)),
+                 kb:position(Pos, H, Label, _),
+                 kb:position_class(Label, Pose),
+                 kb:pose(H, Pose, _, ofaces(Hidden), _),
+                 once(( member(F, HoleFaces), memberchk(F, Hidden) )) ),
+            Hs),
+    sort(Hs, Holes),
+    member(Hole, Holes).
 
 %   rounds(+B, +Max, +Budget, +Unmet0, +Options, -Outcome, -Bound): search
 %   with bound B, then B+1, ...; stop early when a round failed without

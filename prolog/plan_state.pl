@@ -64,7 +64,7 @@
 %   given have their defaults: [] for the lists, the empty ordering, no
 %   goals checked ahead (an empty assoc), 0 steps, the bound,
 %   methods, trace flag and forward checking of default_option/2
-%   (max_actions, declobber, trace, forward_check), a recorder without a
+%   (max_actions_floor, declobber, trace, forward_check), a recorder without a
 %   step budget (failure_recorder(0-steps(0), R)) and an unbound network.
 %
 %   ==
@@ -85,7 +85,7 @@ default_plan(plan([], Order, _Net, [], [], [], [], 0, Bound, Methods, Trace,
                   [], Checked, Lookahead, Recorder, [])) :-
     empty_ordering(Order),
     empty_assoc(Checked),
-    default_option(max_actions, Bound),
+    default_option(max_actions_floor, Bound),
     default_option(declobber, Methods),
     default_option(trace, Trace),
     default_option(forward_check, Lookahead),

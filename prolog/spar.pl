@@ -93,8 +93,10 @@ plan_phase1(Problem, Partial) :-
 %   unless the step budget ran out first; it is then the largest bound
 %   searched completely. Options:
 %
-%     - max_actions(N)   the largest plan tried (default 12); the bound
-%                        rises from the number of goals to N
+%     - max_actions(N)   the largest plan tried, or auto (the default:
+%                        derived from the problem's lower bound on the
+%                        plan size, spar_defaults:derived_max_actions/2);
+%                        the bound rises from that lower bound to N
 %     - trace(Bool)      print the goal stacks and plan actions at each
 %                        step (Figs. 21-22) to current output (false)
 %     - declobber(Ms)    the declobbering methods, in the order tried
@@ -143,7 +145,10 @@ run_options(Problem, Options0, Options) :-
     ).
 
 check_option(_, max_actions(N), max_actions(N)) :- !,
-    must_be(nonneg, N).
+    (   N == auto
+    ->  true
+    ;   must_be(nonneg, N)
+    ).
 check_option(_, max_steps(N), max_steps(N)) :- !,
     must_be(nonneg, N).
 check_option(_, forward_check(B), forward_check(B)) :- !,
@@ -413,8 +418,9 @@ plan_dict(Problem, Opts, Dict, Text) :-
     ;   with_output_to(string(Text), Run)
     ).
 
-phase1_options(Opts, [max_actions(Opts.max_actions), trace(Trace), declobber(Ms),
+phase1_options(Opts, [max_actions(Max), trace(Trace), declobber(Ms),
                       placements(Rule)]) :-
+    (   string(Opts.max_actions) -> atom_string(Max, Opts.max_actions) ; Max = Opts.max_actions ),
     (   Opts.trace == @(true) -> Trace = true ; Trace = false ),
     atom_string(Rule, Opts.placements),
     (   Opts.separation == @(true), known_declobber_method(separation)
@@ -429,7 +435,8 @@ plan_dict_(Problem, Opts, P1, Dict) :-
     Phase1 is T1 - T0,
     (   Outcome = no_plan(N, Goal)
     ->  format(string(G), "~q", [Goal]),
-        format("NO PLAN within ~w actions: the goal that could not be met: ~s~n", [N, G]),
+        format("NO PLAN within ~w actions (the bound on the plan size; \c
+                --max-actions raises it): the goal that could not be met: ~s~n", [N, G]),
         term_data(Goal, GD),
         Dict = _{outcome: "no_plan", reason: _{max_actions: N, goal: G, goal_data: GD},
                  partial: @(none), instance: @(none), timing: _{phase1_s: Phase1}}

@@ -123,7 +123,7 @@ test(defaults, [Bound, Methods, Trace, Lookahead, Lists, Order, Checked, Steps, 
 
 test(defaults_from_spar_defaults) :-
     make_plan([], P),
-    plan_bound(P, B), default_option(max_actions, B),
+    plan_bound(P, B), default_option(max_actions_floor, B),
     plan_methods(P, Ms), default_option(declobber, Ms),
     plan_trace(P, T), default_option(trace, T),
     plan_lookahead(P, L), default_option(forward_check, L).
@@ -223,7 +223,11 @@ test(note_traces, S == "step 1\n") :-
 
 :- begin_tests(spar_defaults).
 
-test(max_actions, N == 12) :- default_option(max_actions, N).
+test(max_actions, N == auto) :- default_option(max_actions, N).
+test(max_actions_floor, N == 12) :- default_option(max_actions_floor, N).
+test(derived_paper_cell, B == 12) :- derived_max_actions(4, B).
+test(derived_fifty_pairs, B == 400) :- derived_max_actions(200, B).
+test(derived_bad, [error(type_error(nonneg, -1))]) :- derived_max_actions(-1, _).
 test(max_steps, N == 10000) :- default_option(max_steps, N).
 test(max_instances, N == 50) :- default_option(max_instances, N).
 test(declobber, Ms == [promotion, separation, white_knight]) :-
@@ -251,7 +255,7 @@ test(dict_booleans_for_python, [FC, Tr] == [@(true), @(false)]) :-
     get_dict(forward_check, D, FC),
     get_dict(trace, D, Tr).
 
-test(dict_values, [A, I, Ms] == [12, 50, [promotion, separation, white_knight]]) :-
+test(dict_values, [A, I, Ms] == [auto, 50, [promotion, separation, white_knight]]) :-
     default_options(D),
     get_dict(max_actions, D, A),
     get_dict(max_instances, D, I),
