@@ -55,6 +55,8 @@
 :- module(establish,
           [ establish/4,               % +Goal, +Plan0, -Plan, -Establisher
             declobber/4,               % +Goal, +Establisher, +Plan0, -Plan
+            declobber/5,               % +Goal, +Establisher, +Cands, +Plan0, -Plan
+            clobber_candidates/3,      % +Goal, +Plan, -Cands
             new_action/5,              % +Cond, -Id, +Arcs, +Plan0, -Plan
             add_action/5,              % +Action, +Cs, +Arcs, +Plan0, -Plan
             post_prior_to/4,           % +A1, +A2, +Plan0, -Plan
@@ -214,29 +216,70 @@ known_declobber_method(white_knight).
 %   of the plan as it is then, so actions added by a white knight are
 %   considered too.
 %
-%   The possible clobberers are found incrementally: the plan's actions
-%   are scanned once, lazily, newest first, and after each remedy only the
-%   actions it added are scanned before the scan goes on where it stopped.
+%   The possible clobberers are found incrementally: the actions whose
+%   delete lists unify with the condition are listed once per goal
+%   (clobber_candidates/3, shared by all the goal's establishers), then
+%   scanned once, lazily, newest first, each tested against a bitset of
+%   the actions that cannot fall between E and S (ordering:outside_mask/4);
+%   after each remedy only the actions it added are listed before the scan
+%   goes on where it stopped.
 %   Being a possible clobberer only ever stops on a branch (orderings,
 %   bindings and separations are only added), so an action the scan passed
 %   never becomes one, and the clobberers come in the order a fresh scan of
 %   the whole plan would find them.
 
-declobber(op(_, S, Cond), E, Plan0, Plan) :-
+declobber(Goal, E, Plan0, Plan) :-
+    clobber_candidates(Goal, Plan0, Cands),
+    declobber(Goal, E, Cands, Plan0, Plan).
+
+%!  clobber_candidates(+Goal, +Plan, -Cands) is det.
+%
+%   Cands lists, newest first, the actions of Plan that may clobber the
+%   condition of Goal = op(Id, S, Cond) whatever its establisher: those
+%   with a delete-list element unifying with Cond (nothing is bound), each
+%   as c(Id, Bit, Dels), Bit its bit in the ordering (ordering_bit/3).
+%   Computed once for a goal, they serve every establisher tried for it
+%   (declobber/5): the unification test does not depend on the
+%   establisher, and binding Cond or separating only shortens the list.
+
+clobber_candidates(op(_, _, Cond), Plan, Cands) :-
+    plan_actions(Plan, Actions),
+    plan_order(Plan, G),
+    clobber_candidates_(Actions, Cond, G, Cands0),
+    Cands = cands(Actions, Cands0).
+
+clobber_candidates_([], _, _, []).
+clobber_candidates_([action(C, _, _, _, dellist(Dels))|As], Cond, G, Cs) :-
+    (   clobbers(Dels, Cond),
+        ordering_bit(C, G, Bit)
+    ->  Cs = [c(C, Bit, Dels)|Cs1]
+    ;   Cs = Cs1
+    ),
+    clobber_candidates_(As, Cond, G, Cs1).
+
+%!  declobber(+Goal, +Establisher, +Cands, +Plan0, -Plan) is nondet.
+%
+%   declobber/4 with the candidates of clobber_candidates/3, computed from
+%   Plan0 or an earlier plan of the same branch (the actions added since
+%   are examined too).
+
+declobber(op(_, S, Cond), E, cands(Seen, Cands), Plan0, Plan) :-
     plan_methods(Plan0, Methods),
-    plan_actions(Plan0, Actions),
-    declobber_(Actions, Actions, Cond, E, S, Methods, Plan0, Plan).
+    declobber_(Cands, Seen, Cond, E, S, Methods, Plan0, Plan).
 
 %   declobber_(+Todo, +Seen, +Cond, +E, +S, +Methods, +Plan0, -Plan):
-%   Todo the actions of Seen (the plan's actions when the scan last
-%   looked) not scanned yet; the actions Plan0 has beyond Seen come first.
+%   Todo the candidates c(Id, Bit, Dels) from Seen (the plan's actions
+%   when they were listed) not scanned yet; the actions Plan0 has beyond
+%   Seen come first.
 
 declobber_(Todo0, Seen, Cond, E, S, Methods, Plan0, Plan) :-
     plan_actions(Plan0, Actions),
-    added_since(Actions, Seen, New),
-    append(New, Todo0, Todo),
     plan_order(Plan0, G),
-    (   next_clobberer(Todo, Cond, E, S, G, C, Rest)
+    added_since(Actions, Seen, New),
+    clobber_candidates_(New, Cond, G, Todo1),
+    append(Todo1, Todo0, Todo),
+    outside_mask(E, S, G, Mask),
+    (   next_clobberer(Todo, Cond, Mask, C, Rest)
     ->  (   necessarily_between(C, E, S, Plan0)
         ->  memberchk(separation, Methods),
             Method = separation
@@ -247,16 +290,17 @@ declobber_(Todo0, Seen, Cond, E, S, Methods, Plan0, Plan) :-
     ;   Plan = Plan0
     ).
 
-%   next_clobberer(+Actions, +Cond, +E, +S, +G, -C, -Rest): C the first of
-%   Actions with a delete-list element unifying with Cond that may fall
-%   between E and S in G, Rest the actions after it.
+%   next_clobberer(+Cands, +Cond, +Mask, -C, -Rest): C the first of Cands
+%   that may fall between the establisher and S (its bit is outside Mask,
+%   ordering:outside_mask/4) and still has a delete-list element unifying
+%   with Cond; Rest the candidates after it.
 
-next_clobberer([action(C0, _, _, _, dellist(Dels))|As], Cond, E, S, G, C, Rest) :-
-    (   clobbers(Dels, Cond),
-        possibly_between(C0, E, S, G)
+next_clobberer([c(C0, Bit, Dels)|Cs], Cond, Mask, C, Rest) :-
+    (   Bit /\ Mask =:= 0,
+        clobbers(Dels, Cond)
     ->  C = C0,
-        Rest = As
-    ;   next_clobberer(As, Cond, E, S, G, C, Rest)
+        Rest = Cs
+    ;   next_clobberer(Cs, Cond, Mask, C, Rest)
     ).
 
 %   added_since(+Actions, +Seen, -New): the actions of Actions before its

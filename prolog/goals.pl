@@ -385,11 +385,13 @@ mentions_any(Term, Atoms) :-
     !.
 
 %   satisfy_op(+Goal, +Plan0, -Plan): Sec. 4.1, establishment then
-%   declobbering (establish.pl).
+%   declobbering (establish.pl); the possible clobberers of the goal's
+%   condition are listed once for all its establishers.
 
 satisfy_op(Goal, Plan0, Plan) :-
+    clobber_candidates(Goal, Plan0, Cands),
     establish(Goal, Plan0, Plan1, E),
-    declobber(Goal, E, Plan1, Plan2),
+    declobber(Goal, E, Cands, Plan1, Plan2),
     add_satisfied(Goal, E, Plan2, Plan).
 
 add_satisfied(Goal, E, Plan0, Plan) :-

@@ -39,6 +39,8 @@
             prior_to/4,                % +A1, +A2, +G0, -G
             necessarily_before/3,      % +A1, +A2, +G
             possibly_between/4,        % +C, +E, +S, +G
+            ordering_bit/3,            % +Id, +G, -Bit
+            outside_mask/4,            % +E, +S, +G, -Mask
             ordering_graph/2,          % +G, -Ugraph
             ordering_arcs/2,           % +G, -PriorTos
             ordering_actions/2,        % +G, -Ids
@@ -178,6 +180,34 @@ possibly_between(C, E, S, G) :-
     C \== S,
     \+ necessarily_before(C, E, G),
     \+ necessarily_before(S, C, G).
+
+%!  ordering_bit(+Id, +G, -Bit) is semidet.
+%
+%   Bit is the bitset (1 << I) of the action Id of G, numbered I; fails if
+%   Id is not an action of G.
+
+ordering_bit(Id, ord(Nodes, _, _), Bit) :-
+    get_assoc(Id, Nodes, n(I, _, _, _)),
+    Bit is 1 << I.
+
+%!  outside_mask(+E, +S, +G, -Mask) is det.
+%
+%   Mask is the bitset of the actions of G that cannot be executed after E
+%   and before S: E and its ancestors, S and its descendants (the virtual
+%   start and finish add none). An action C of G with ordering_bit(C, G, B)
+%   satisfies possibly_between(C, E, S, G) iff B /\ Mask =:= 0: the test
+%   of possibly_between/4 for many C at the cost of one.
+
+outside_mask(E, S, G, Mask) :-
+    G = ord(Nodes, _, _),
+    (   get_assoc(E, Nodes, n(IE, _, _, AncE))
+    ->  M1 is AncE \/ (1 << IE)
+    ;   M1 = 0
+    ),
+    (   get_assoc(S, Nodes, n(IS, _, DescS, _))
+    ->  Mask is M1 \/ DescS \/ (1 << IS)
+    ;   Mask = M1
+    ).
 
 %!  ordering_graph(+G, -Ugraph) is det.
 %
