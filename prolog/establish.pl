@@ -237,25 +237,32 @@ declobber(Goal, E, Plan0, Plan) :-
 %   Cands lists, newest first, the actions of Plan that may clobber the
 %   condition of Goal = op(Id, S, Cond) whatever its establisher: those
 %   with a delete-list element unifying with Cond (nothing is bound), each
-%   as c(Id, Bit, Dels), Bit its bit in the ordering (ordering_bit/3).
+%   as c(Id, Bit, Dels), Bit its bit in the ordering (ordering_bit/3),
+%   in cands(Actions, List, Bits) with the plan's actions and the union
+%   of the bits. The bits fall along the list: a newer action has a higher
+%   number in the ordering.
 %   Computed once for a goal, they serve every establisher tried for it
 %   (declobber/5): the unification test does not depend on the
 %   establisher, and binding Cond or separating only shortens the list.
 
-clobber_candidates(op(_, _, Cond), Plan, Cands) :-
+clobber_candidates(op(_, _, Cond), Plan, cands(Actions, Cands, Bits)) :-
     plan_actions(Plan, Actions),
     plan_order(Plan, G),
-    clobber_candidates_(Actions, Cond, G, Cands0),
-    Cands = cands(Actions, Cands0).
+    clobber_candidates_(Actions, Cond, G, Cands, 0, Bits).
 
-clobber_candidates_([], _, _, []).
-clobber_candidates_([action(C, _, _, _, dellist(Dels))|As], Cond, G, Cs) :-
+%   clobber_candidates_(+Actions, +Cond, +G, -Cands, +Bits0, -Bits): Bits
+%   is Bits0 with the bits of Cands set.
+
+clobber_candidates_([], _, _, [], Bits, Bits).
+clobber_candidates_([action(C, _, _, _, dellist(Dels))|As], Cond, G, Cs, Bits0, Bits) :-
     (   clobbers(Dels, Cond),
         ordering_bit(C, G, Bit)
-    ->  Cs = [c(C, Bit, Dels)|Cs1]
-    ;   Cs = Cs1
+    ->  Cs = [c(C, Bit, Dels)|Cs1],
+        Bits1 is Bits0 \/ Bit
+    ;   Cs = Cs1,
+        Bits1 = Bits0
     ),
-    clobber_candidates_(As, Cond, G, Cs1).
+    clobber_candidates_(As, Cond, G, Cs1, Bits1, Bits).
 
 %!  declobber(+Goal, +Establisher, +Cands, +Plan0, -Plan) is nondet.
 %
@@ -263,44 +270,60 @@ clobber_candidates_([action(C, _, _, _, dellist(Dels))|As], Cond, G, Cs) :-
 %   Plan0 or an earlier plan of the same branch (the actions added since
 %   are examined too).
 
-declobber(op(_, S, Cond), E, cands(Seen, Cands), Plan0, Plan) :-
+declobber(op(_, S, Cond), E, cands(Seen, Cands, Bits), Plan0, Plan) :-
     plan_methods(Plan0, Methods),
-    declobber_(Cands, Seen, Cond, E, S, Methods, Plan0, Plan).
+    declobber_(Cands, Bits, Seen, Cond, E, S, Methods, Plan0, Plan).
 
-%   declobber_(+Todo, +Seen, +Cond, +E, +S, +Methods, +Plan0, -Plan):
+%   declobber_(+Todo, +Bits, +Seen, +Cond, +E, +S, +Methods, +Plan0, -Plan):
 %   Todo the candidates c(Id, Bit, Dels) from Seen (the plan's actions
-%   when they were listed) not scanned yet; the actions Plan0 has beyond
-%   Seen come first.
+%   when they were listed) not scanned yet, Bits the union of their bits;
+%   the actions Plan0 has beyond Seen come first.
 
-declobber_(Todo0, Seen, Cond, E, S, Methods, Plan0, Plan) :-
+declobber_(Todo0, Bits0, Seen, Cond, E, S, Methods, Plan0, Plan) :-
     plan_actions(Plan0, Actions),
     plan_order(Plan0, G),
     added_since(Actions, Seen, New),
-    clobber_candidates_(New, Cond, G, Todo1),
+    clobber_candidates_(New, Cond, G, Todo1, Bits0, Bits),
     append(Todo1, Todo0, Todo),
     outside_mask(E, S, G, Mask),
-    (   next_clobberer(Todo, Cond, Mask, C, Rest)
+    Possible is Bits /\ \ Mask,
+    (   next_clobberer(Possible, Todo, Cond, C, BitC, Rest)
     ->  (   necessarily_between(C, E, S, Plan0)
         ->  memberchk(separation, Methods),
             Method = separation
         ;   member(Method, Methods)
         ),
         declobber_by(Method, Cond, E, S, C, Plan0, Plan1),
-        declobber_(Rest, Actions, Cond, E, S, Methods, Plan1, Plan)
+        RestBits is Bits /\ (BitC - 1),
+        declobber_(Rest, RestBits, Actions, Cond, E, S, Methods, Plan1, Plan)
     ;   Plan = Plan0
     ).
 
-%   next_clobberer(+Cands, +Cond, +Mask, -C, -Rest): C the first of Cands
-%   that may fall between the establisher and S (its bit is outside Mask,
-%   ordering:outside_mask/4) and still has a delete-list element unifying
-%   with Cond; Rest the candidates after it.
+%   next_clobberer(+Possible, +Cands, +Cond, -C, -Bit, -Rest): C (bit Bit)
+%   the first of Cands whose bit is in Possible (it may fall between the
+%   establisher and S: ordering:outside_mask/4) and that still has a
+%   delete-list element unifying with Cond; Rest the candidates after it.
+%   The candidates' bits decrease along the list, so the next one to test
+%   is the highest bit of Possible, and none is left when it is 0.
 
-next_clobberer([c(C0, Bit, Dels)|Cs], Cond, Mask, C, Rest) :-
-    (   Bit /\ Mask =:= 0,
-        clobbers(Dels, Cond)
+next_clobberer(Possible, Cands, Cond, C, BitC, Rest) :-
+    Possible =\= 0,
+    Top is 1 << msb(Possible),
+    skip_to(Cands, Top, c(C0, _, Dels), Cs),
+    (   clobbers(Dels, Cond)
     ->  C = C0,
+        BitC = Top,
         Rest = Cs
-    ;   next_clobberer(Cs, Cond, Mask, C, Rest)
+    ;   Possible1 is Possible xor Top,
+        next_clobberer(Possible1, Cs, Cond, C, BitC, Rest)
+    ).
+
+skip_to([X|Xs], Top, Y, Rest) :-
+    X = c(_, Bit, _),
+    (   Bit =:= Top
+    ->  Y = X,
+        Rest = Xs
+    ;   skip_to(Xs, Top, Y, Rest)
     ).
 
 %   added_since(+Actions, +Seen, -New): the actions of Actions before its
