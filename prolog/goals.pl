@@ -354,9 +354,12 @@ add_history(K, Goal, Plan0, Plan1, Plan) :-
     (   Goal = op(_, _, Cond)
     ->  plan_actions(Plan0, As0),
         plan_actions(Plan1, As1),
-        length(As0, N0),
-        length(New, N0),
-        append(NewActions, New, As1),
+        (   As1 == As0
+        ->  NewActions = []
+        ;   length(As0, N0),
+            length(New, N0),
+            append(NewActions, New, As1)
+        ),
         plan_history(Plan1, H0),
         set_history_of_plan([h(K, Cond, NewActions)|H0], Plan1, Plan)
     ;   Plan = Plan1

@@ -347,7 +347,8 @@ record_failure(K, Goal, Plan) :-
     (   Goal = geo(_, _, _, _) -> Arg = 2 ; Arg = 1 ),
     arg(Arg, Recorder, Old),
     (   ( Old == none ; Old = K0-_, K > K0 )
-    ->  nb_setarg(Arg, Recorder, K-Goal)
+    ->  copy_term(Goal, Kept, _),       % without the dif/2 constraints, which
+        nb_setarg(Arg, Recorder, K-Kept) % nb_setarg/3 would copy whole
     ;   true
     ).
 
