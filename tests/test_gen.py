@@ -187,3 +187,25 @@ def test_generated_plans_four_actions_per_pair(n: int, tmp_path: Path) -> None:
     for k in range(1, n + 1):
         mine = sorted(a.split("(")[0] for a in actions if f"peg{k}," in a or f"block{k}," in a)
         assert mine == ["assemble", "pickup", "pickup", "putdown"]
+
+
+def test_generated_plans_with_no_flag(tmp_path: Path) -> None:
+    """The default bound is derived from the problem: N = 4 needs 16 actions, more than
+    the fixed default of 12 phase 1 used to have."""
+    from spar_py.planner import Outcome, Planner
+
+    plan = Planner().plan(gen.generate_assembly(4, tmp_path), phase1_only=True)
+    assert plan.outcome is Outcome.PLAN
+    assert len(plan.actions) == 16
+
+
+def test_no_plan_names_the_bound_and_its_flag() -> None:
+    import subprocess
+    import sys
+
+    spar = Path(sys.executable).parent / "spar"
+    r = subprocess.run([str(spar), "plan", "kb/problems/unreachable.yaml"], capture_output=True, text=True,
+                       cwd=Path(__file__).resolve().parent.parent, timeout=120, check=False)
+    assert r.returncode == 1
+    line = next(ln for ln in r.stdout.splitlines() if ln.startswith("NO PLAN"))
+    assert "within 12 actions" in line and "--max-actions" in line
