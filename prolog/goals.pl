@@ -46,6 +46,7 @@
 */
 :- module(goals,
           [ phase1_search/3,         % +Options, -Outcome, -Bound
+            max_action_bound/2,      % +Options, -Max
             initial_plan/3,          % +Bound, +Options, -Plan
             solve/2,                 % +Plan0, -Plan
             satisfy_geo/3,           % +Goal, +Plan0, -Plan
@@ -83,18 +84,29 @@
 
 phase1_search(Options, Outcome, Bound) :-
     must_be(list, Options),
-    default_option(max_actions, Max0),
     default_option(max_steps, Budget0),
-    option(max_actions(Max1), Options, Max0),
     option(max_steps(Budget), Options, Budget0),
+    max_action_bound(Options, Max),
     lower_bound(LB),
-    (   Max1 == auto
-    ->  derived_max_actions(LB, Max)
-    ;   Max = Max1
-    ),
     Lo is min(LB, Max),
     Spent = steps(0),
     rounds(Lo, Max, Budget-Spent, none, Options, Outcome, Bound).
+
+%!  max_action_bound(+Options, -Max) is det.
+%
+%   The largest bound phase1_search/3 tries for the loaded problem with
+%   Options: max_actions(N), or derived from lower_bound/1 for
+%   max_actions(auto) (the default; spar_defaults:derived_max_actions/2).
+
+max_action_bound(Options, Max) :-
+    must_be(list, Options),
+    default_option(max_actions, Max0),
+    option(max_actions(Max1), Options, Max0),
+    (   Max1 == auto
+    ->  lower_bound(LB),
+        derived_max_actions(LB, Max)
+    ;   Max = Max1
+    ).
 
 %!  lower_bound(-N) is det.
 %

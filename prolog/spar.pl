@@ -435,8 +435,14 @@ plan_dict_(Problem, Opts, P1, Dict) :-
     Phase1 is T1 - T0,
     (   Outcome = no_plan(N, Goal)
     ->  format(string(G), "~q", [Goal]),
-        format("NO PLAN within ~w actions (the bound on the plan size; \c
-                --max-actions raises it): the goal that could not be met: ~s~n", [N, G]),
+        goals:max_action_bound(P1, Max),
+        (   N < Max                     % the step budget ran out first
+        ->  format("NO PLAN within ~w actions (the last bound searched completely \c
+                    before the step budget ran out; the bound was ~w): the goal \c
+                    that could not be met: ~s~n", [N, Max, G])
+        ;   format("NO PLAN within ~w actions (the bound on the plan size; \c
+                    --max-actions raises it): the goal that could not be met: ~s~n", [N, G])
+        ),
         term_data(Goal, GD),
         Dict = _{outcome: "no_plan", reason: _{max_actions: N, goal: G, goal_data: GD},
                  partial: @(none), instance: @(none), timing: _{phase1_s: Phase1}}
