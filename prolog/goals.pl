@@ -39,8 +39,8 @@
     failed at the deepest point of the last round (a geometric goal the CMS refused, if any). A
     round that never met the bound ends the search at once. Planning of
     this kind is exponential in the plan size (Sec. 7.2) and undecidable
-    (Sec. 2), so a budget of steps over all rounds (max_steps; the
-    defaults are spar_defaults.pl's) keeps even a hard unsolvable problem
+    (Sec. 2), so a budget of steps over all rounds (max_steps, by default
+    derived from the problem's size; the defaults are spar_defaults.pl's) keeps even a hard unsolvable problem
     short; when it is spent, the outcome names the last bound searched
     completely.
 */
@@ -85,9 +85,13 @@
 phase1_search(Options, Outcome, Bound) :-
     must_be(list, Options),
     default_option(max_steps, Budget0),
-    option(max_steps(Budget), Options, Budget0),
+    option(max_steps(Budget1), Options, Budget0),
     max_action_bound(Options, Max),
     lower_bound(LB),
+    (   Budget1 == auto
+    ->  derived_max_steps(LB, Budget)
+    ;   Budget = Budget1
+    ),
     Lo is min(LB, Max),
     Spent = steps(0),
     rounds(Lo, Max, Budget-Spent, none, Options, Outcome, Bound).

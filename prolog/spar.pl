@@ -106,7 +106,8 @@ plan_phase1(Problem, Partial) :-
 %                        variables are bound, not only at its turn (true);
 %                        the same plan, found sooner; false gives the
 %                        paper's order of events in the trace (Sec. 6)
-%     - max_steps(N)     a budget of goal steps over all rounds (10000; 0
+%     - max_steps(N)     a budget of goal steps over all rounds (auto:
+%                        100 per action of the lower bound, at least 10000; 0
 %                        for none); phase-1 planning is exponential in the
 %                        plan size and undecidable (Secs. 2, 7.2)
 %     - placements(Rule) how a put-down into a stable pose (no X, Y)
@@ -150,7 +151,10 @@ check_option(_, max_actions(N), max_actions(N)) :- !,
     ;   must_be(nonneg, N)
     ).
 check_option(_, max_steps(N), max_steps(N)) :- !,
-    must_be(nonneg, N).
+    (   N == auto
+    ->  true
+    ;   must_be(nonneg, N)
+    ).
 check_option(_, forward_check(B), forward_check(B)) :- !,
     must_be(boolean, B).
 check_option(_, trace(B), trace(B)) :- !,

@@ -9,7 +9,10 @@
                               derives it from the problem, as
                               derived_max_actions/2 says
       max_actions_floor 12    the least bound auto gives
-      max_steps      10000    goal steps over all rounds of phase 1; 0: none
+      max_steps      auto     goal steps over all rounds of phase 1; 0: none;
+                              auto derives it from the problem, as
+                              derived_max_steps/2 says
+      max_steps_floor 10000   the least budget auto gives
       declobber      [promotion, separation, white_knight]
                               declobbering methods in the order tried
                               (Sec. 4.1; [promotion, white_knight] is the
@@ -22,7 +25,8 @@
 :- module(spar_defaults,
           [ default_option/2,        % ?Name, ?Value
             default_options/1,       % -Dict
-            derived_max_actions/2    % +LowerBound, -Bound
+            derived_max_actions/2,   % +LowerBound, -Bound
+            derived_max_steps/2      % +LowerBound, -Steps
           ]).
 :- use_module(library(error)).
 
@@ -32,13 +36,14 @@
 %   header). With Name bound it is semidet.
 %
 %   ==
-%   ?- default_option(max_steps, N).
-%   N = 10000.
+%   ?- default_option(max_instances, N).
+%   N = 50.
 %   ==
 
 default_option(max_actions, auto).
 default_option(max_actions_floor, 12).
-default_option(max_steps, 10000).
+default_option(max_steps, auto).
+default_option(max_steps_floor, 10000).
 default_option(declobber, [promotion, separation, white_knight]).
 default_option(forward_check, true).
 default_option(trace, false).
@@ -89,3 +94,27 @@ derived_max_actions(LB, Bound) :-
     must_be(nonneg, LB),
     default_option(max_actions_floor, Floor),
     Bound is max(Floor, 2 * LB).
+
+%!  derived_max_steps(+LowerBound, -Steps) is det.
+%
+%   The step budget that max_steps(auto) gives a problem whose plans need
+%   at least LowerBound actions: 100 goal steps for each of them (a plan
+%   found without backtracking takes about 4 per action: the action's
+%   operational and geometric goals), and at least max_steps_floor, so
+%   that the budget stops a hopeless search of a small problem as soon as
+%   before and lets a large solvable one finish.
+%
+%   ==
+%   ?- derived_max_steps(4, S).
+%   S = 10000.
+%   ?- derived_max_steps(400, S).
+%   S = 40000.
+%   ==
+%
+%   @error type_error(nonneg, LowerBound) if LowerBound is not a
+%          non-negative integer.
+
+derived_max_steps(LB, Steps) :-
+    must_be(nonneg, LB),
+    default_option(max_steps_floor, Floor),
+    Steps is max(Floor, 100 * LB).

@@ -228,7 +228,10 @@ test(max_actions_floor, N == 12) :- default_option(max_actions_floor, N).
 test(derived_paper_cell, B == 12) :- derived_max_actions(4, B).
 test(derived_fifty_pairs, B == 400) :- derived_max_actions(200, B).
 test(derived_bad, [error(type_error(nonneg, -1))]) :- derived_max_actions(-1, _).
-test(max_steps, N == 10000) :- default_option(max_steps, N).
+test(max_steps, N == auto) :- default_option(max_steps, N).
+test(max_steps_floor, N == 10000) :- default_option(max_steps_floor, N).
+test(derived_steps_small, S == 10000) :- derived_max_steps(4, S).
+test(derived_steps_large, S == 40000) :- derived_max_steps(400, S).
 test(max_instances, N == 50) :- default_option(max_instances, N).
 test(declobber, Ms == [promotion, separation, white_knight]) :-
     default_option(declobber, Ms).
