@@ -31,8 +31,9 @@ of everything. The free table (``placement_regions``) is one rectangle around th
 layout grown by MARGIN, its corner on the placement grid (placement.GRID_STEP_MM) of the
 block centres.
 
-Planning them needs no flag: phase 1's default bound is derived from the problem
-(goals.pl: 4N plus slack), and iterative deepening starts at its lower bound, 4N here.
+Planning them needs no flag: phase 1's default bound and step budget are derived
+from the problem (spar_defaults.pl: the bound twice the lower bound, 8N here; 100 steps
+per action of it), and iterative deepening starts at its lower bound, 4N here.
 
 ``main`` is the body of ``spar gen assembly --parts N [-o DIR]``.
 """
