@@ -2,7 +2,8 @@
 
 The benchmarks are bench.ik (closed-form IK against Robotics Toolbox), bench.supinf
 (SUP/INF tightness and time), bench.planning (the paper's cell warm and cold, the
-generated N-peg problems) and bench.derive (object models derived from shapes and
+generated N-peg problems), bench.fd (phase 1 against Fast Downward on the same
+problems), bench.coldstart and bench.derive (object models derived from shapes and
 meshes, issue 14); each also runs on its own (``python -m bench.ik`` ...).
 Figures are medians of repeated runs; every ratio compares two figures measured in the
 same run, so machine noise affects both sides alike. ``--quick`` cuts the repeats and
@@ -19,7 +20,7 @@ import sys
 import time
 from pathlib import Path
 
-from . import coldstart, derive, ik, memory, planning, supinf
+from . import coldstart, derive, fd, ik, memory, planning, supinf
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "RESULTS.md"
@@ -32,6 +33,11 @@ SUPINF_MS_PER_BOUND = 5.0
 WARM_S = 0.050
 COLD_S = 0.6
 N10_S = 2.0
+#: Issue 18's targets: phase 1 at N = 20 and 50 (s, bench.fd.TARGETS); the whole plan at
+#: N = 50 (s, MB).
+PHASE1_TARGETS = fd.TARGETS
+N50_S = 3.0
+N50_MB = 200.0
 #: Issue 12's target: RSS growth per plan after the warm-up (kB).
 RSS_KB_PER_PLAN = memory.LIMIT_KB
 
@@ -40,12 +46,14 @@ FULL = {"ik": {"n": 10_000, "single": 1000, "rtb": 200, "repeats": 5}, "derive":
         "supinf": {"per_length": 6, "repeats": 5},
         "planning": {"quick": False, "max_n": 10},
         "memory": {"plans": 1000, "warmup": 50},
-        "coldstart": {"repeats": 15, "importtime_runs": 5}}
+        "coldstart": {"repeats": 15, "importtime_runs": 5},
+        "fd": {"ns": fd.NS}}
 QUICK = {"ik": {"n": 1000, "single": 100, "rtb": 20, "repeats": 3}, "derive": {"repeats": 2},
          "supinf": {"per_length": 1, "lengths": (1, 4, 8), "repeats": 3},
          "planning": {"quick": True, "max_n": 2, "timeout": 60.0},
          "memory": {"plans": 100, "warmup": 10, "processes": 1},
-         "coldstart": {"repeats": 3, "importtime_runs": 1}}
+         "coldstart": {"repeats": 3, "importtime_runs": 1},
+         "fd": {"ns": (1, 2)}}
 
 
 # ---------------------------------------------------------------------- where and with what
@@ -119,7 +127,8 @@ def run_all(quick: bool = False, log=None) -> dict:
                      ("planning", lambda: planning.run(**sizes["planning"], progress=say)),
                      ("memory", lambda: memory.run(**sizes["memory"])),
                      ("coldstart", lambda: coldstart.run(**sizes["coldstart"])),
-                     ("derive", lambda: derive.run(**sizes["derive"]))):
+                     ("derive", lambda: derive.run(**sizes["derive"])),
+                     ("fd", lambda: fd.run(**sizes["fd"], progress=say))):
         say(f"== {name}")
         t = time.perf_counter()
         out[name] = fn()
@@ -163,6 +172,18 @@ def verdicts(r: dict) -> dict:
     else:
         ok = n10.get("outcome") == "plan" and n10.get("wall_s", 1e9) < N10_S
         v["n10"] = (ok, f"{n10.get('outcome')} after {_f(n10.get('wall_s'))} s")
+    for n, limit in PHASE1_TARGETS.items():
+        x = next((x for x in r.get("fd", []) if x["n"] == n), None)
+        t = None if x is None else x["ours"].get("first_s")
+        fdp = None if x is None else x["fd"].get("planner_s")
+        v[f"phase1_n{n}"] = (t is not None and t <= limit,
+                             "not run" if t is None else f"{t:.3f} s (FD lama-first {_f(fdp, '.3f')} s, same run)")
+    n50 = next((x for x in p["scaling"] if x["n"] == 50), None)
+    if n50 is not None:
+        ok = (n50.get("outcome") == "plan" and n50.get("wall_s", 1e9) <= N50_S
+              and n50.get("rss_peak_mb", 1e9) <= N50_MB)
+        v["n50"] = (ok, f"{n50.get('outcome')} after {_f(n50.get('wall_s'))} s, "
+                        f"peak RSS {_f(n50.get('rss_peak_mb'), '.0f')} MB")
     for row in r.get("memory", []):
         runs = row.get("runs", [row["kb_per_plan"]])
         v[f"rss_{row['cell']}"] = (row["kb_per_plan"] <= RSS_KB_PER_PLAN,
@@ -202,7 +223,11 @@ def render(r: dict) -> str:
         [f"paper's cell warm < {WARM_S * 1e3:g} ms", v["warm"][1], _met(v["warm"][0])],
         [f"paper's cell cold < {COLD_S:g} s", v["cold"][1], _met(v["cold"][0])],
         [f"N = 10 planned under {N10_S:g} s", v["n10"][1], _met(v["n10"][0])],
-    ] + coldstart.target_rows(r.get("coldstart")) + [
+    ] + [[f"phase 1 at N = {n} <= {limit:g} s (issue 18)", v[f"phase1_n{n}"][1], _met(v[f"phase1_n{n}"][0])]
+         for n, limit in PHASE1_TARGETS.items()
+    ] + ([[f"whole plan at N = 50 <= {N50_S:g} s and {N50_MB:g} MB (issue 18)", v["n50"][1], _met(v["n50"][0])]]
+         if "n50" in v else []
+    ) + coldstart.target_rows(r.get("coldstart")) + [
         [f"RSS growth, {name}, <= {RSS_KB_PER_PLAN:g} kB per plan (issue 12)", v[key][1], _met(v[key][0])]
          for key, name in (("rss_paper", "paper's cell"), ("rss_n3", "generated N = 3"))
          if key in v])
@@ -273,8 +298,8 @@ def render(r: dict) -> str:
 
     L += ["### Generated problems: N pegs into N hole-down blocks (spar_py.gen)", "",
           (f"One subprocess per N, a warm-up plan of the paper's cell first; "
-          f"`Planner(max_actions=5N+2, timeout={p['timeout_s']:g})` (the problem needs 4N actions; phase 1's "
-          "default bound 12 is too small for N > 2). Times: phase 1/2 are Prolog CPU seconds, wall the "
+          f"`Planner(timeout={p['timeout_s']:g})` with phase 1's default bound, derived from the problem "
+          "(the problem needs 4N actions; the bound is max(12, 8N)). Times: phase 1/2 are Prolog CPU seconds, wall the "
           "`plan()` call; RSS (Python and the embedded Prolog share the process): 'before' after the "
           "warm-up, 'peak' sampled every 5 ms while planning (getrusage's maxrss is not used: on Linux "
           "a child keeps its parent's high-water mark across exec). "
@@ -295,6 +320,16 @@ def render(r: dict) -> str:
                      _f(x.get("rss_peak_mb"), ".0f"), _f(x.get("prolog_stack_mb"), ".1f"), why])
     L += _table(["N", "max_actions", "outcome", "phase 1 s", "phase 2 s", "wall s", "actions", "instances",
                  "RSS before MB", "RSS peak MB", "Prolog stacks MB", "note"], rows)
+
+    if r.get("fd"):
+        L += ["## Phase 1 against Fast Downward (bench/fd.py)", "",
+              ("The generated problems again, each planned by our phase 1 (default options; Prolog CPU "
+               "seconds: `first` computes the reachability arcs, `warm` is the median of 3 more runs "
+               "with them memoised) and, in the same run, by Fast Downward `--alias lama-first` on the "
+               "PDDL encoding bench/fd.py writes from the same cell (the arcs as static facts; FD's "
+               "`search` and `planner` times are its own, `planner` includes its translator; `wall` is "
+               "its driver process)."), ""]
+        L += fd.table(r["fd"])
 
     if r.get("memory"):
         L += ["## Memory per plan (bench/memory.py)", "",

@@ -8,10 +8,10 @@ Run from the project root: ``.venv/bin/python -m bench.planning [--quick] [--max
 - cold: ``spar plan kb/problems/peg_in_block.yaml`` as a subprocess, and beside it, in
   the same run and interleaved, the bare cost of a process that starts the engine
   (``python -c "import spar_py.engine as e; e.engine()"``);
-- scaling: ``spar_py.gen.generate_assembly(N)`` for N = 1..10, each planned in its own
-  subprocess (so its peak RSS is its own) after a warm-up plan of the paper's cell, with
-  ``Planner(max_actions=5N+2, timeout=...)``: the generated problem needs 4N actions and
-  phase 1 needs some slack above that (its default bound, 12, is too small for N > 2).
+- scaling: ``spar_py.gen.generate_assembly(N)`` for N = 1..10, 20, 30 and 50, each planned
+  in its own subprocess (so its peak RSS is its own) after a warm-up plan of the paper's
+  cell, with ``Planner(timeout=...)`` and no other option: the generated problem needs 4N
+  actions, and phase 1's default bound is derived from the problem (max_actions_for).
 
 ``python -m bench.planning --one N`` is the child of the scaling run: it prints one JSON
 line with that N's figures.
@@ -42,9 +42,14 @@ ENGINE_ONLY = "import spar_py.engine as e; e.engine()"
 TIMEOUT = 120.0
 
 
+#: The sizes of the scaling run beyond N = 1..max_n (issue 18's targets are at 20 and 50).
+EXTRA_NS = (20, 30, 50)
+
+
 def max_actions_for(n: int) -> int:
-    """Phase 1's plan-size bound for N pairs: the 4N actions they need and some slack."""
-    return 5 * n + 2
+    """Phase 1's default plan-size bound for N pairs, as max_actions(auto) derives it
+    (spar_defaults:derived_max_actions/2 of the lower bound 4N): max(12, 8N)."""
+    return max(12, 2 * 4 * n)
 
 
 def _median(xs: list[float]) -> float | None:
@@ -175,7 +180,7 @@ def one(n: int, timeout: float = TIMEOUT, profile_top: int = 0) -> dict:
     out: dict = {"n": n, "max_actions": max_actions_for(n), "rss_before_mb": rss0}
     with tempfile.TemporaryDirectory(prefix=f"spar-bench-{n}-") as d:
         path = generate_assembly(n, d)
-        p = Planner(max_actions=max_actions_for(n), timeout=timeout)
+        p = Planner(timeout=timeout)  # the default bound: derived from the problem
         if profile_top:  # a separate child: profile the first (unmemoised) plan, no figures
             out["profile"] = profile(lambda: p.plan(path), profile_top)
             return out
@@ -276,14 +281,18 @@ def _child(n: int, timeout: float, profile_top: int) -> dict:
 # ---------------------------------------------------------------------- all of it
 
 
-def run(quick: bool = False, max_n: int = 10, timeout: float = TIMEOUT, progress=None) -> dict:
-    """warm, cold and scaling, with repeats cut down when ``quick``; profiles of the warm
-    paper cell and of the largest N that finished (top 15 entries, 8 when quick)."""
+def run(quick: bool = False, max_n: int = 10, timeout: float = TIMEOUT, progress=None,
+        extra_ns: tuple[int, ...] | None = None) -> dict:
+    """warm, cold and scaling (N = 1..max_n and ``extra_ns``, by default EXTRA_NS unless
+    ``quick``), with repeats cut down when ``quick``; profiles of the warm paper cell and of
+    the largest N that finished (top 15 entries, 8 when quick)."""
     top = 8 if quick else 15
+    extra = (() if quick else EXTRA_NS) if extra_ns is None else extra_ns
+    ns = list(range(1, max_n + 1)) + [n for n in extra if n > max_n]
     return {
         "warm": warm(repeats=3 if quick else 20, profile_top=top),
         "cold": cold(repeats=2 if quick else 7),
-        "scaling": scaling(range(1, max_n + 1), timeout=timeout, profile_top=top, progress=progress),
+        "scaling": scaling(ns, timeout=timeout, profile_top=top, progress=progress),
         "timeout_s": timeout,
     }
 

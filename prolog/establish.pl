@@ -55,6 +55,8 @@
 :- module(establish,
           [ establish/4,               % +Goal, +Plan0, -Plan, -Establisher
             declobber/4,               % +Goal, +Establisher, +Plan0, -Plan
+            declobber/5,               % +Goal, +Establisher, +Cands, +Plan0, -Plan
+            clobber_candidates/3,      % +Goal, +Plan, -Cands
             new_action/5,              % +Cond, -Id, +Arcs, +Plan0, -Plan
             add_action/5,              % +Action, +Cs, +Arcs, +Plan0, -Plan
             post_prior_to/4,           % +A1, +A2, +Plan0, -Plan
@@ -210,24 +212,131 @@ known_declobber_method(white_knight).
 %   Sec. 7.1): each is dealt with by one of the plan's declobbering
 %   methods, tried in order (by separation only, if it necessarily falls
 %   between Establisher and S: see necessarily_between/4). Clobberers are
-%   taken one at a time, the next one computed from the plan as it is
-%   then, so actions added by a white knight are considered too.
+%   taken one at a time, newest first, each the first possible clobberer
+%   of the plan as it is then, so actions added by a white knight are
+%   considered too.
+%
+%   The possible clobberers are found incrementally: the actions whose
+%   delete lists unify with the condition are listed once per goal
+%   (clobber_candidates/3, shared by all the goal's establishers), then
+%   scanned once, lazily, newest first, each tested against a bitset of
+%   the actions that cannot fall between E and S (ordering:outside_mask/4);
+%   after each remedy only the actions it added are listed before the scan
+%   goes on where it stopped.
+%   Being a possible clobberer only ever stops on a branch (orderings,
+%   bindings and separations are only added), so an action the scan passed
+%   never becomes one, and the clobberers come in the order a fresh scan of
+%   the whole plan would find them.
 
-declobber(op(_, S, Cond), E, Plan0, Plan) :-
+declobber(Goal, E, Plan0, Plan) :-
+    clobber_candidates(Goal, Plan0, Cands),
+    declobber(Goal, E, Cands, Plan0, Plan).
+
+%!  clobber_candidates(+Goal, +Plan, -Cands) is det.
+%
+%   Cands lists, newest first, the actions of Plan that may clobber the
+%   condition of Goal = op(Id, S, Cond) whatever its establisher: those
+%   with a delete-list element unifying with Cond (nothing is bound), each
+%   as c(Id, Bit, Dels), Bit its bit in the ordering (ordering_bit/3),
+%   in cands(Actions, List, Bits) with the plan's actions and the union
+%   of the bits. The bits fall along the list: a newer action has a higher
+%   number in the ordering.
+%   Computed once for a goal, they serve every establisher tried for it
+%   (declobber/5): the unification test does not depend on the
+%   establisher, and binding Cond or separating only shortens the list.
+
+clobber_candidates(op(_, _, Cond), Plan, cands(Actions, Cands, Bits)) :-
+    plan_actions(Plan, Actions),
+    plan_order(Plan, G),
+    clobber_candidates_(Actions, Cond, G, Cands, 0, Bits).
+
+%   clobber_candidates_(+Actions, +Cond, +G, -Cands, +Bits0, -Bits): Bits
+%   is Bits0 with the bits of Cands set.
+
+clobber_candidates_([], _, _, [], Bits, Bits).
+clobber_candidates_([action(C, _, _, _, dellist(Dels))|As], Cond, G, Cs, Bits0, Bits) :-
+    (   clobbers(Dels, Cond),
+        ordering_bit(C, G, Bit)
+    ->  Cs = [c(C, Bit, Dels)|Cs1],
+        Bits1 is Bits0 \/ Bit
+    ;   Cs = Cs1,
+        Bits1 = Bits0
+    ),
+    clobber_candidates_(As, Cond, G, Cs1, Bits1, Bits).
+
+%!  declobber(+Goal, +Establisher, +Cands, +Plan0, -Plan) is nondet.
+%
+%   declobber/4 with the candidates of clobber_candidates/3, computed from
+%   Plan0 or an earlier plan of the same branch (the actions added since
+%   are examined too).
+
+declobber(op(_, S, Cond), E, cands(Seen, Cands, Bits), Plan0, Plan) :-
     plan_methods(Plan0, Methods),
-    declobber_(Cond, E, S, Methods, [], Plan0, Plan).
+    declobber_(Cands, Bits, Seen, Cond, E, S, Methods, Plan0, Plan).
 
-declobber_(Cond, E, S, Methods, Done, Plan0, Plan) :-
-    (   possible_clobberer(Cond, E, S, Plan0, C),
-        \+ memberchk(C, Done)
+%   declobber_(+Todo, +Bits, +Seen, +Cond, +E, +S, +Methods, +Plan0, -Plan):
+%   Todo the candidates c(Id, Bit, Dels) from Seen (the plan's actions
+%   when they were listed) not scanned yet, Bits the union of their bits;
+%   the actions Plan0 has beyond Seen come first.
+
+declobber_(Todo0, Bits0, Seen, Cond, E, S, Methods, Plan0, Plan) :-
+    plan_actions(Plan0, Actions),
+    plan_order(Plan0, G),
+    added_since(Actions, Seen, New),
+    clobber_candidates_(New, Cond, G, Todo1, Bits0, Bits),
+    append(Todo1, Todo0, Todo),
+    outside_mask(E, S, G, Mask),
+    Possible is Bits /\ \ Mask,
+    (   next_clobberer(Possible, Todo, Cond, C, BitC, Rest)
     ->  (   necessarily_between(C, E, S, Plan0)
         ->  memberchk(separation, Methods),
             Method = separation
         ;   member(Method, Methods)
         ),
         declobber_by(Method, Cond, E, S, C, Plan0, Plan1),
-        declobber_(Cond, E, S, Methods, [C|Done], Plan1, Plan)
+        RestBits is Bits /\ (BitC - 1),
+        declobber_(Rest, RestBits, Actions, Cond, E, S, Methods, Plan1, Plan)
     ;   Plan = Plan0
+    ).
+
+%   next_clobberer(+Possible, +Cands, +Cond, -C, -Bit, -Rest): C (bit Bit)
+%   the first of Cands whose bit is in Possible (it may fall between the
+%   establisher and S: ordering:outside_mask/4) and that still has a
+%   delete-list element unifying with Cond; Rest the candidates after it.
+%   The candidates' bits decrease along the list, so the next one to test
+%   is the highest bit of Possible, and none is left when it is 0.
+
+next_clobberer(Possible, Cands, Cond, C, BitC, Rest) :-
+    Possible =\= 0,
+    Top is 1 << msb(Possible),
+    skip_to(Cands, Top, c(C0, _, Dels), Cs),
+    (   clobbers(Dels, Cond)
+    ->  C = C0,
+        BitC = Top,
+        Rest = Cs
+    ;   Possible1 is Possible xor Top,
+        next_clobberer(Possible1, Cs, Cond, C, BitC, Rest)
+    ).
+
+skip_to([X|Xs], Top, Y, Rest) :-
+    X = c(_, Bit, _),
+    (   Bit =:= Top
+    ->  Y = X,
+        Rest = Xs
+    ;   skip_to(Xs, Top, Y, Rest)
+    ).
+
+%   added_since(+Actions, +Seen, -New): the actions of Actions before its
+%   suffix Seen (the plan's actions are kept newest first).
+
+added_since(Actions, Seen, New) :-
+    (   Actions == Seen
+    ->  New = []
+    ;   length(Actions, N),
+        length(Seen, N0),
+        K is N - N0,
+        length(New, K),
+        append(New, _, Actions)
     ).
 
 %   necessarily_between(+C, +E, +S, +Plan): C follows E and precedes S

@@ -39,13 +39,14 @@
     failed at the deepest point of the last round (a geometric goal the CMS refused, if any). A
     round that never met the bound ends the search at once. Planning of
     this kind is exponential in the plan size (Sec. 7.2) and undecidable
-    (Sec. 2), so a budget of steps over all rounds (max_steps; the
-    defaults are spar_defaults.pl's) keeps even a hard unsolvable problem
+    (Sec. 2), so a budget of steps over all rounds (max_steps, by default
+    derived from the problem's size; the defaults are spar_defaults.pl's) keeps even a hard unsolvable problem
     short; when it is spent, the outcome names the last bound searched
     completely.
 */
 :- module(goals,
           [ phase1_search/3,         % +Options, -Outcome, -Bound
+            max_action_bound/2,      % +Options, -Max
             initial_plan/3,          % +Bound, +Options, -Plan
             solve/2,                 % +Plan0, -Plan
             satisfy_geo/3,           % +Goal, +Plan0, -Plan
@@ -62,6 +63,7 @@
 :- use_module(library(ordsets)).
 :- use_module(library(aggregate), [aggregate_all/3]).  % imported, not autoloaded: loads with the
 :- use_module(library(occurs), [sub_term/2]).            % planner, not in the first plan (issue 18)
+:- use_module(library(assoc)).
 :- use_module(kb, []).
 :- use_module(ordering).
 :- use_module(cms).
@@ -73,7 +75,8 @@
 %!  phase1_search(+Options, -Outcome, -Bound) is det.
 %
 %   Iterative deepening over the bound on plan size, from lower_bound/1
-%   to max_actions. Outcome is plan(Partial) for
+%   to max_actions (auto, the default: derived from the lower bound by
+%   spar_defaults:derived_max_actions/2). Outcome is plan(Partial) for
 %   the first plan found, Bound the bound it was found at; otherwise
 %   Outcome is no_plan(Bound, UnmetGoal), UnmetGoal the goal that failed
 %   at the deepest step of the last round searched completely (see
@@ -83,45 +86,77 @@
 
 phase1_search(Options, Outcome, Bound) :-
     must_be(list, Options),
-    default_option(max_actions, Max0),
     default_option(max_steps, Budget0),
-    option(max_actions(Max), Options, Max0),
-    option(max_steps(Budget), Options, Budget0),
+    option(max_steps(Budget1), Options, Budget0),
+    max_action_bound(Options, Max),
     lower_bound(LB),
+    (   Budget1 == auto
+    ->  derived_max_steps(LB, Budget)
+    ;   Budget = Budget1
+    ),
     Lo is min(LB, Max),
     Spent = steps(0),
     rounds(Lo, Max, Budget-Spent, none, Options, Outcome, Bound).
 
+%!  max_action_bound(+Options, -Max) is det.
+%
+%   The largest bound phase1_search/3 tries for the loaded problem with
+%   Options: max_actions(N), or derived from lower_bound/1 for
+%   max_actions(auto) (the default; spar_defaults:derived_max_actions/2).
+
+max_action_bound(Options, Max) :-
+    must_be(list, Options),
+    default_option(max_actions, Max0),
+    option(max_actions(Max1), Options, Max0),
+    (   Max1 == auto
+    ->  lower_bound(LB),
+        derived_max_actions(LB, Max)
+    ;   Max = Max1
+    ).
+
 %!  lower_bound(-N) is det.
 %
 %   A lower bound on the number of actions any plan needs, where iterative
-%   deepening starts (at least 1): each user goal not true initially
-%   needs at least one action; a goal
-%   assembled(Peg, Hole, [_, HoleFaces], _, _) needs a pickup of Peg and the
-%   assemble, and two more (a pickup and a putdown of Hole) when Hole rests
-%   initially in a stable pose that hides a face of HoleFaces (Sec. 6: the
-%   block on its hole). These actions serve only their own goal, so the sum
-%   never exceeds the size of a smallest plan, and starting there finds the
-%   same first plan as starting from 1, without the rounds that must fail.
+%   deepening starts (at least 1), admissible: each user goal not true
+%   initially needs at least one action of its own (its last); a goal
+%   assembled(Peg, Hole, [_, HoleFaces], _, _) needs the assemble and a
+%   pickup of Peg (a pickup serves one assemble: it is the last pickup
+%   of Peg before it); and each Hole object that rests initially in a
+%   stable pose hiding a face of the HoleFaces of some goal must be
+%   turned over, a pickup and a putdown of it, counted once however many
+%   goals mate with it (Sec. 6: the block on its hole). No action is
+%   counted twice, so the sum never exceeds the size of a smallest plan,
+%   and starting there finds the same first plan as starting from 1,
+%   without the rounds that must fail.
 
 lower_bound(N) :-
     aggregate_all(sum(K), (kb:goal(G), goal_lower_bound(G, K)), N0),
-    N is max(1, N0).
+    aggregate_all(count, hidden_hole(_), N1),
+    N is max(1, N0 + 2 * N1).
 
 goal_lower_bound(G, 0) :-
     kb:initial(G),
     !.
-goal_lower_bound(assembled(_, Hole, [_, HoleFaces], _, _), K) :-
-    !,
-    (   kb:initial(part_location(Hole, Pos)),
-        kb:position(Pos, Hole, Label, _),
-        kb:position_class(Label, Pose),
-        kb:pose(Hole, Pose, _, ofaces(Hidden), _),
-        member(F, HoleFaces), memberchk(F, Hidden)
-    ->  K = 4
-    ;   K = 2
-    ).
+goal_lower_bound(assembled(_, _, _, _, _), 2) :-
+    !.
 goal_lower_bound(_, 1).
+
+%   hidden_hole(-Hole): Hole (each once) is the hole part of a user goal
+%   not true initially and rests in a stable pose that hides one of that
+%   goal's hole faces.
+
+hidden_hole(Hole) :-
+    findall(H, ( kb:goal(G),
+                 \+ kb:initial(G),
+                 G = assembled(_, H, [_, HoleFaces], _, _),
+                 kb:initial(part_location(H, Pos)),
+                 kb:position(Pos, H, Label, _),
+                 kb:position_class(Label, Pose),
+                 kb:pose(H, Pose, _, ofaces(Hidden), _),
+                 once(( member(F, HoleFaces), memberchk(F, Hidden) )) ),
+            Hs),
+    sort(Hs, Holes),
+    member(Hole, Holes).
 
 %   rounds(+B, +Max, +Budget, +Unmet0, +Options, -Outcome, -Bound): search
 %   with bound B, then B+1, ...; stop early when a round failed without
@@ -303,8 +338,8 @@ forward_check(K, Plan0, Plan) :-
         ->  fail
         ;   throw(backjump(Ks))
         )
-    ;   maplist([geo(Id, _, _, _), Id]>>true, ToCheck, Ids),
-        append(Ids, Checked0, Checked),
+    ;   foldl([geo(Id, _, _, _), C0, C]>>put_assoc(Id, C0, true, C),
+              ToCheck, Checked0, Checked),
         set_checked_of_plan(Checked, Plan0, Plan)
     ).
 
@@ -312,7 +347,7 @@ forward_check(K, Plan0, Plan) :-
 %   network does not change on operational steps (they only add nodes).
 
 unchecked_ground(Checked, Net, geo(Id, _, Constraint, _)) :-
-    \+ memberchk(Id, Checked),
+    \+ get_assoc(Id, Checked, _),
     ground(Constraint),
     constraint_vars(Constraint, Vs),
     forall(member(V, Vs), cms_node(Net, V, _)).
@@ -337,9 +372,12 @@ add_history(K, Goal, Plan0, Plan1, Plan) :-
     (   Goal = op(_, _, Cond)
     ->  plan_actions(Plan0, As0),
         plan_actions(Plan1, As1),
-        length(As0, N0),
-        length(New, N0),
-        append(NewActions, New, As1),
+        (   As1 == As0
+        ->  NewActions = []
+        ;   length(As0, N0),
+            length(New, N0),
+            append(NewActions, New, As1)
+        ),
         plan_history(Plan1, H0),
         set_history_of_plan([h(K, Cond, NewActions)|H0], Plan1, Plan)
     ;   Plan = Plan1
@@ -368,11 +406,13 @@ mentions_any(Term, Atoms) :-
     !.
 
 %   satisfy_op(+Goal, +Plan0, -Plan): Sec. 4.1, establishment then
-%   declobbering (establish.pl).
+%   declobbering (establish.pl); the possible clobberers of the goal's
+%   condition are listed once for all its establishers.
 
 satisfy_op(Goal, Plan0, Plan) :-
+    clobber_candidates(Goal, Plan0, Cands),
     establish(Goal, Plan0, Plan1, E),
-    declobber(Goal, E, Plan1, Plan2),
+    declobber(Goal, E, Cands, Plan1, Plan2),
     add_satisfied(Goal, E, Plan2, Plan).
 
 add_satisfied(Goal, E, Plan0, Plan) :-
@@ -427,7 +467,8 @@ establisher(Sat, A, Cond, E) :-
 
 plan_partial(Plan, partial(Actions, Order, Net, Satisfied)) :-
     plan_actions(Plan, Actions),
-    plan_order(Plan, Order),
+    plan_order(Plan, Ord),
+    ordering_graph(Ord, Order),
     plan_net(Plan, Net),
     plan_sat(Plan, Sat),
     plan_seps(Plan, Seps0),

@@ -1,16 +1,37 @@
 /*  spar-py: the ordering graph of phase 1 (Sec. 5.1, Fig. 14).
 
     Ordering constraints prior_to(Action1, Action2) are the arcs of a directed
-    graph over the plan's action ids, kept as a library(ugraphs) graph and
-    threaded through the planner (G0 -> G). A constraint is refused when it
-    would close a cycle, that is when there is already a path from Action2 to
-    Action1.
+    graph over the plan's action ids, threaded through the planner (G0 -> G).
+    A constraint is refused when it would close a cycle, that is when there
+    is already a path from Action2 to Action1.
+
+    The graph is kept with its transitive closure, so that the questions the
+    planner asks at every step (is there a path A1 -> A2? may C fall between
+    E and S?) cost two O(log n) look-ups, not a search of the graph:
+
+      ord(Nodes, Of, N)
+
+    Nodes is an assoc from each action id to n(I, Succs, Desc, Anc): I its
+    number (0, 1, ...), Succs the ordset of the ids it has posted arcs to,
+    Desc and Anc the sets of its strict descendants and ancestors as
+    bitsets (integers; bit J is the action numbered J). Of maps each number
+    back to its id, and N is the next number. Posting an arc A1 -> A2 not
+    yet implied adds Desc(A2) and A2 to the descendants of A1 and of every
+    ancestor of A1, and Anc(A1) and A1 to the ancestors of A2 and of every
+    descendant of A2: the closure stays exact, at a cost of the sizes of
+    those two sets (each update O(log n)). The posted arcs themselves are
+    kept too (ordering_arcs/2, ordering_graph/2): they are what Fig. 24
+    shows.
 
     Two virtual actions bound every plan and are never stored: `start`, the
     null action whose add list is the initial state (Sec. 7.1), precedes every
     action; `finish`, at which the user's goals must hold, follows every
     action. So prior_to(start, A) and prior_to(A, finish) always hold and add
     no arc, while prior_to(A, start) and prior_to(finish, A) are refused.
+
+    The partial plan of phase 1 gives the graph to its readers as a
+    library(ugraphs) graph (ordering_graph/2); ordering_arcs/2,
+    ordering_actions/2 and linearisation/2 take either form.
 */
 :- module(ordering,
           [ empty_ordering/1,          % -G
@@ -18,11 +39,16 @@
             prior_to/4,                % +A1, +A2, +G0, -G
             necessarily_before/3,      % +A1, +A2, +G
             possibly_between/4,        % +C, +E, +S, +G
+            ordering_bit/3,            % +Id, +G, -Bit
+            outside_mask/4,            % +E, +S, +G, -Mask
+            ordering_graph/2,          % +G, -Ugraph
             ordering_arcs/2,           % +G, -PriorTos
             ordering_actions/2,        % +G, -Ids
             linearisation/2            % +G, -Ids
           ]).
 :- use_module(library(ugraphs)).
+:- use_module(library(assoc)).
+:- use_module(library(ordsets)).
 :- use_module(library(lists)).
 :- use_module(library(apply)).
 :- use_module(library(error)).
@@ -32,25 +58,38 @@
 %
 %   The ordering graph of the null plan: no actions, no arcs.
 
-empty_ordering([]).
+empty_ordering(ord(Nodes, Of, 0)) :-
+    empty_assoc(Nodes),
+    empty_assoc(Of).
 
 %!  ordering_add_action(+Id, +G0, -G) is det.
 %
 %   Add the node of a new action (Sec. 5.1: "a new node is created in the
 %   ordering graph, with the action's action identifier as the node's label").
+%   Adding a node that is already there changes nothing.
 %
 %   @error type_error(atom, Id) if Id is not an atom.
 
 ordering_add_action(Id, G0, G) :-
     must_be(atom, Id),
-    add_vertices(G0, [Id], G).
+    add_node(Id, G0, G).
+
+add_node(Id, G0, G) :-
+    G0 = ord(Nodes0, Of0, N0),
+    (   get_assoc(Id, Nodes0, _)
+    ->  G = G0
+    ;   put_assoc(Id, Nodes0, n(N0, [], 0, 0), Nodes),
+        put_assoc(N0, Of0, Id, Of),
+        N is N0 + 1,
+        G = ord(Nodes, Of, N)
+    ).
 
 %!  prior_to(+A1, +A2, +G0, -G) is semidet.
 %
 %   Post the constraint prior_to(A1, A2): A1 is executed before A2. Fails,
 %   leaving nothing changed, if the constraint is inconsistent with G0, i.e.
 %   if A1 == A2 or there is a path from A2 to A1 (Fig. 14). Posting an arc
-%   that is already in G0 is a no-op.
+%   that is already in G0 is a no-op; an action not yet in G0 is added.
 %
 %   ==
 %   ?- empty_ordering(G0), prior_to(a1, a2, G0, G1), \+ prior_to(a2, a1, G1, _).
@@ -71,42 +110,64 @@ prior_to_(finish, _, _, _) :- !, fail.
 prior_to_(start, _, G, G) :- !.
 prior_to_(_, finish, G, G) :- !.
 prior_to_(A1, A2, G0, G) :-
-    \+ path(A2, A1, G0),
-    add_edges(G0, [A1-A2], G).
-
-%!  path(+From, +To, +G) is semidet.
-%
-%   There is a non-empty path From -> ... -> To in G.
-
-path(From, To, G) :-
-    neighbours_(From, G, Ns),
-    path_dfs(Ns, To, G, [From]).
-
-path_dfs([V|Vs], To, G, Seen) :-
-    (   V == To
-    ->  true
-    ;   memberchk(V, Seen)
-    ->  path_dfs(Vs, To, G, Seen)
-    ;   neighbours_(V, G, Ns),
-        append(Ns, Vs, Stack),
-        path_dfs(Stack, To, G, [V|Seen])
+    add_node(A1, G0, G1),
+    add_node(A2, G1, G2),
+    G2 = ord(Nodes0, Of, N),
+    get_assoc(A1, Nodes0, n(I1, S1, D1, Anc1)),
+    get_assoc(A2, Nodes0, n(I2, _, D2, _)),
+    D2 /\ (1 << I1) =:= 0,                      % no path A2 -> A1
+    (   ord_memberchk(A2, S1)
+    ->  G = G2
+    ;   ord_add_element(S1, A2, S1a),
+        put_assoc(A1, Nodes0, n(I1, S1a, D1, Anc1), Nodes1),
+        (   D1 /\ (1 << I2) =\= 0               % implied already
+        ->  Nodes = Nodes1
+        ;   Up is Anc1 \/ (1 << I1),
+            Down is D2 \/ (1 << I2),
+            foldl_bits(add_desc(Down, Of), Up, Nodes1, Nodes2),
+            foldl_bits(add_anc(Up, Of), Down, Nodes2, Nodes)
+        ),
+        G = ord(Nodes, Of, N)
     ).
 
-neighbours_(V, G, Ns) :-
-    (   memberchk(V-Ns0, G) -> Ns = Ns0 ; Ns = [] ).
+add_desc(Down, Of, I, Nodes0, Nodes) :-
+    get_assoc(I, Of, Id),
+    get_assoc(Id, Nodes0, n(I, S, D0, A)),
+    D is D0 \/ Down,
+    put_assoc(Id, Nodes0, n(I, S, D, A), Nodes).
+
+add_anc(Up, Of, I, Nodes0, Nodes) :-
+    get_assoc(I, Of, Id),
+    get_assoc(Id, Nodes0, n(I, S, D, A0)),
+    A is A0 \/ Up,
+    put_assoc(Id, Nodes0, n(I, S, D, A), Nodes).
+
+%   foldl_bits(:Goal, +Bits, +S0, -S): call(Goal, I, S_k, S_k+1) for every
+%   bit I set in the integer Bits, lowest first.
+
+foldl_bits(Goal, Bits, S0, S) :-
+    (   Bits =:= 0
+    ->  S = S0
+    ;   I is lsb(Bits),
+        call(Goal, I, S0, S1),
+        Bits1 is Bits xor (1 << I),
+        foldl_bits(Goal, Bits1, S1, S)
+    ).
 
 %!  necessarily_before(+A1, +A2, +G) is semidet.
 %
 %   A1 precedes A2 in every linearisation of G (a path A1 -> A2), counting
-%   the virtual start and finish actions.
+%   the virtual start and finish actions. Two look-ups in the closure.
 
 necessarily_before(A1, A2, _) :- A1 == A2, !, fail.
 necessarily_before(start, _, _) :- !.
 necessarily_before(_, finish, _) :- !.
 necessarily_before(_, start, _) :- !, fail.
 necessarily_before(finish, _, _) :- !, fail.
-necessarily_before(A1, A2, G) :-
-    path(A1, A2, G).
+necessarily_before(A1, A2, ord(Nodes, _, _)) :-
+    get_assoc(A1, Nodes, n(_, _, D1, _)),
+    get_assoc(A2, Nodes, n(I2, _, _, _)),
+    D1 /\ (1 << I2) =\= 0.
 
 %!  possibly_between(+C, +E, +S, +G) is semidet.
 %
@@ -120,12 +181,54 @@ possibly_between(C, E, S, G) :-
     \+ necessarily_before(C, E, G),
     \+ necessarily_before(S, C, G).
 
+%!  ordering_bit(+Id, +G, -Bit) is semidet.
+%
+%   Bit is the bitset (1 << I) of the action Id of G, numbered I; fails if
+%   Id is not an action of G.
+
+ordering_bit(Id, ord(Nodes, _, _), Bit) :-
+    get_assoc(Id, Nodes, n(I, _, _, _)),
+    Bit is 1 << I.
+
+%!  outside_mask(+E, +S, +G, -Mask) is det.
+%
+%   Mask is the bitset of the actions of G that cannot be executed after E
+%   and before S: E and its ancestors, S and its descendants (the virtual
+%   start and finish add none). An action C of G with ordering_bit(C, G, B)
+%   satisfies possibly_between(C, E, S, G) iff B /\ Mask =:= 0: the test
+%   of possibly_between/4 for many C at the cost of one.
+
+outside_mask(E, S, G, Mask) :-
+    G = ord(Nodes, _, _),
+    (   get_assoc(E, Nodes, n(IE, _, _, AncE))
+    ->  M1 is AncE \/ (1 << IE)
+    ;   M1 = 0
+    ),
+    (   get_assoc(S, Nodes, n(IS, _, DescS, _))
+    ->  Mask is M1 \/ DescS \/ (1 << IS)
+    ;   Mask = M1
+    ).
+
+%!  ordering_graph(+G, -Ugraph) is det.
+%
+%   The posted arcs of G as a library(ugraphs) graph over its action ids
+%   (every action a vertex, arcs as posted, not the closure). A ugraph is
+%   returned as it is.
+
+ordering_graph(ord(Nodes, _, _), Ugraph) :-
+    !,
+    assoc_to_list(Nodes, Pairs),
+    maplist([Id-n(_, S, _, _), Id-S]>>true, Pairs, Ugraph).
+ordering_graph(Ugraph, Ugraph) :-
+    must_be(list, Ugraph).
+
 %!  ordering_arcs(+G, -PriorTos:list) is det.
 %
 %   The posted arcs of G as prior_to(A1, A2) terms, in standard order.
 
 ordering_arcs(G, PriorTos) :-
-    edges(G, Edges),
+    ordering_graph(G, U),
+    edges(U, Edges),
     maplist([A-B, prior_to(A, B)]>>true, Edges, PriorTos).
 
 %!  ordering_actions(+G, -Ids:list) is det.
@@ -133,7 +236,8 @@ ordering_arcs(G, PriorTos) :-
 %   The action ids of G (its vertices), in standard order.
 
 ordering_actions(G, Ids) :-
-    vertices(G, Ids).
+    ordering_graph(G, U),
+    vertices(U, Ids).
 
 %!  linearisation(+G, -Ids:list) is nondet.
 %
@@ -148,7 +252,8 @@ ordering_actions(G, Ids) :-
 %   ==
 
 linearisation(G, Ids) :-
-    transpose_ugraph(G, Preds),
+    ordering_graph(G, U),
+    transpose_ugraph(U, Preds),
     linearise(Preds, Ids).
 
 linearise([], []) :- !.

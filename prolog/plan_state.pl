@@ -53,15 +53,18 @@
 :- use_module(library(error)).
 :- use_module(library(lists)).
 :- use_module(library(apply)).
+:- use_module(library(assoc)).
 :- use_module(spar_defaults).
+:- use_module(ordering, [empty_ordering/1]).
 
 %!  make_plan(+Fields:list, -Plan) is det.
 %
 %   Plan is a plan state whose fields are given by Fields, a list of
 %   Name(Value) (actions([]), bound(4), ...), in any order; the fields not
-%   given have their defaults: [] for the lists, 0 steps, the bound,
+%   given have their defaults: [] for the lists, the empty ordering, no
+%   goals checked ahead (an empty assoc), 0 steps, the bound,
 %   methods, trace flag and forward checking of default_option/2
-%   (max_actions, declobber, trace, forward_check), a recorder without a
+%   (max_actions_floor, declobber, trace, forward_check), a recorder without a
 %   step budget (failure_recorder(0-steps(0), R)) and an unbound network.
 %
 %   ==
@@ -78,9 +81,11 @@ make_plan(Fields, Plan) :-
     default_plan(Plan0),
     foldl(set_field, Fields, Plan0, Plan).
 
-default_plan(plan([], [], _Net, [], [], [], [], 0, Bound, Methods, Trace,
-                  [], [], Lookahead, Recorder, [])) :-
-    default_option(max_actions, Bound),
+default_plan(plan([], Order, _Net, [], [], [], [], 0, Bound, Methods, Trace,
+                  [], Checked, Lookahead, Recorder, [])) :-
+    empty_ordering(Order),
+    empty_assoc(Checked),
+    default_option(max_actions_floor, Bound),
     default_option(declobber, Methods),
     default_option(trace, Trace),
     default_option(forward_check, Lookahead),
@@ -101,7 +106,7 @@ set_field(Field, Plan0, Plan) :-
 %   plan_field(?Name, ?Argument, ?Type): the fields, in order.
 
 plan_field(actions,   1, list).
-plan_field(order,     2, list).
+plan_field(order,     2, compound).
 plan_field(net,       3, any).
 plan_field(ids,       4, list).
 plan_field(ops,       5, list).
@@ -112,7 +117,7 @@ plan_field(bound,     9, integer).
 plan_field(methods,  10, list).
 plan_field(trace,    11, boolean).
 plan_field(history,  12, list).
-plan_field(checked,  13, list).
+plan_field(checked,  13, assoc).
 plan_field(lookahead, 14, boolean).
 plan_field(recorder, 15, any).
 plan_field(seps,     16, list).
@@ -136,18 +141,19 @@ set_actions_of_plan(Actions, plan(_,A2,A3,A4,A5,A6,A7,A8,A9,A10,A11,A12,A13,A14,
                     plan(Actions,A2,A3,A4,A5,A6,A7,A8,A9,A10,A11,A12,A13,A14,A15,A16)) :-
     must_be(list, Actions).
 
-%!  plan_order(+Plan, -Order:list) is det.
-%!  set_order_of_plan(+Order:list, +Plan0, -Plan) is det.
+%!  plan_order(+Plan, -Order) is det.
+%!  set_order_of_plan(+Order, +Plan0, -Plan) is det.
 %
-%   The ordering graph, a ugraph over action ids (ordering.pl).
+%   The ordering graph with its transitive closure (ordering.pl's
+%   ord/3; empty_ordering/1 by default).
 %
-%   @error type_error(list, Order) from set_order_of_plan/3 if Order is
-%          not a list (instantiation_error if it is unbound or partial).
+%   @error type_error(compound, Order) from set_order_of_plan/3 if Order
+%          is not a compound term (instantiation_error if it is unbound).
 
 plan_order(plan(_,Order,_,_,_,_,_,_,_,_,_,_,_,_,_,_), Order).
 set_order_of_plan(Order, plan(A1,_,A3,A4,A5,A6,A7,A8,A9,A10,A11,A12,A13,A14,A15,A16),
                   plan(A1,Order,A3,A4,A5,A6,A7,A8,A9,A10,A11,A12,A13,A14,A15,A16)) :-
-    must_be(list, Order).
+    must_be(compound, Order).
 
 %!  plan_net(+Plan, -Net) is det.
 %!  set_net_of_plan(+Net, +Plan0, -Plan) is det.
@@ -262,19 +268,21 @@ set_history_of_plan(History, plan(A1,A2,A3,A4,A5,A6,A7,A8,A9,A10,A11,_,A13,A14,A
                     plan(A1,A2,A3,A4,A5,A6,A7,A8,A9,A10,A11,History,A13,A14,A15,A16)) :-
     must_be(list, History).
 
-%!  plan_checked(+Plan, -Checked:list) is det.
-%!  set_checked_of_plan(+Checked:list, +Plan0, -Plan) is det.
+%!  plan_checked(+Plan, -Checked) is det.
+%!  set_checked_of_plan(+Checked, +Plan0, -Plan) is det.
 %
 %   The ids of the geometric goals already checked ahead of their turn
-%   (forward checking).
+%   (forward checking), an assoc from each id to `true` (library(assoc):
+%   the test is made for every pending goal at every step, so it must not
+%   cost the length of the list).
 %
-%   @error type_error(list, Checked) from set_checked_of_plan/3 if Checked is
-%          not a list (instantiation_error if it is unbound or partial).
+%   @error type_error(assoc, Checked) from set_checked_of_plan/3 if
+%          Checked is not an assoc.
 
 plan_checked(plan(_,_,_,_,_,_,_,_,_,_,_,_,Checked,_,_,_), Checked).
 set_checked_of_plan(Checked, plan(A1,A2,A3,A4,A5,A6,A7,A8,A9,A10,A11,A12,_,A14,A15,A16),
                     plan(A1,A2,A3,A4,A5,A6,A7,A8,A9,A10,A11,A12,Checked,A14,A15,A16)) :-
-    must_be(list, Checked).
+    must_be(assoc, Checked).
 
 %!  plan_lookahead(+Plan, -Lookahead:boolean) is det.
 %
@@ -339,7 +347,8 @@ record_failure(K, Goal, Plan) :-
     (   Goal = geo(_, _, _, _) -> Arg = 2 ; Arg = 1 ),
     arg(Arg, Recorder, Old),
     (   ( Old == none ; Old = K0-_, K > K0 )
-    ->  nb_setarg(Arg, Recorder, K-Goal)
+    ->  copy_term(Goal, Kept, _),       % without the dif/2 constraints, which
+        nb_setarg(Arg, Recorder, K-Kept) % nb_setarg/3 would copy whole
     ;   true
     ).
 

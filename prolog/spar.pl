@@ -93,8 +93,10 @@ plan_phase1(Problem, Partial) :-
 %   unless the step budget ran out first; it is then the largest bound
 %   searched completely. Options:
 %
-%     - max_actions(N)   the largest plan tried (default 12); the bound
-%                        rises from the number of goals to N
+%     - max_actions(N)   the largest plan tried, or auto (the default:
+%                        derived from the problem's lower bound on the
+%                        plan size, spar_defaults:derived_max_actions/2);
+%                        the bound rises from that lower bound to N
 %     - trace(Bool)      print the goal stacks and plan actions at each
 %                        step (Figs. 21-22) to current output (false)
 %     - declobber(Ms)    the declobbering methods, in the order tried
@@ -104,7 +106,8 @@ plan_phase1(Problem, Partial) :-
 %                        variables are bound, not only at its turn (true);
 %                        the same plan, found sooner; false gives the
 %                        paper's order of events in the trace (Sec. 6)
-%     - max_steps(N)     a budget of goal steps over all rounds (10000; 0
+%     - max_steps(N)     a budget of goal steps over all rounds (auto:
+%                        100 per action of the lower bound, at least 10000; 0
 %                        for none); phase-1 planning is exponential in the
 %                        plan size and undecidable (Secs. 2, 7.2)
 %     - placements(Rule) how a put-down into a stable pose (no X, Y)
@@ -143,9 +146,15 @@ run_options(Problem, Options0, Options) :-
     ).
 
 check_option(_, max_actions(N), max_actions(N)) :- !,
-    must_be(nonneg, N).
+    (   N == auto
+    ->  true
+    ;   must_be(nonneg, N)
+    ).
 check_option(_, max_steps(N), max_steps(N)) :- !,
-    must_be(nonneg, N).
+    (   N == auto
+    ->  true
+    ;   must_be(nonneg, N)
+    ).
 check_option(_, forward_check(B), forward_check(B)) :- !,
     must_be(boolean, B).
 check_option(_, trace(B), trace(B)) :- !,
@@ -413,8 +422,9 @@ plan_dict(Problem, Opts, Dict, Text) :-
     ;   with_output_to(string(Text), Run)
     ).
 
-phase1_options(Opts, [max_actions(Opts.max_actions), trace(Trace), declobber(Ms),
+phase1_options(Opts, [max_actions(Max), trace(Trace), declobber(Ms),
                       placements(Rule)]) :-
+    (   string(Opts.max_actions) -> atom_string(Max, Opts.max_actions) ; Max = Opts.max_actions ),
     (   Opts.trace == @(true) -> Trace = true ; Trace = false ),
     atom_string(Rule, Opts.placements),
     (   Opts.separation == @(true), known_declobber_method(separation)
@@ -429,7 +439,14 @@ plan_dict_(Problem, Opts, P1, Dict) :-
     Phase1 is T1 - T0,
     (   Outcome = no_plan(N, Goal)
     ->  format(string(G), "~q", [Goal]),
-        format("NO PLAN within ~w actions: the goal that could not be met: ~s~n", [N, G]),
+        goals:max_action_bound(P1, Max),
+        (   N < Max                     % the step budget ran out first
+        ->  format("NO PLAN within ~w actions (the last bound searched completely \c
+                    before the step budget ran out; the bound was ~w): the goal \c
+                    that could not be met: ~s~n", [N, Max, G])
+        ;   format("NO PLAN within ~w actions (the bound on the plan size; \c
+                    --max-actions raises it): the goal that could not be met: ~s~n", [N, G])
+        ),
         term_data(Goal, GD),
         Dict = _{outcome: "no_plan", reason: _{max_actions: N, goal: G, goal_data: GD},
                  partial: @(none), instance: @(none), timing: _{phase1_s: Phase1}}

@@ -12,9 +12,8 @@ from spar_py import gen
 from spar_py.engine import engine
 from spar_py.errors import SparValueError
 from spar_py.kb import check_file, iter_kb_files, load_problem
-from spar_py.placement import CLEARANCE_MM
+from spar_py.placement import CLEARANCE_MM, GRID_STEP_MM
 from spar_py.units import from_mm
-from spar_py.reach import reachable_pairs
 
 
 def test_generated_three_loads_with_three_assembles(tmp_path: Path) -> None:
@@ -57,23 +56,105 @@ def test_bad_part_counts(n: object, tmp_path: Path) -> None:
         gen.generate_assembly(n, tmp_path)  # type: ignore[arg-type]
 
 
-def test_layout_is_clear_and_in_reach(tmp_path: Path) -> None:
-    """Every slot of the largest layout: parts clear of each other (bounding circles plus
-    the placement clearance), blocks reachable by some grasp, pegs by a grasp that leaves
-    the shaft free (phase 1 needs both), all inside the put-down region."""
-    n = gen.MAX_PARTS
-    cell = load_problem(gen.generate_assembly(n, tmp_path))
-    xy = {p.obj: p.T[:2, 3] for p in cell.positions.values()}
-    r = {o: m.bounding_radius() for o, m in cell.objects.items()}
-    for a, b in combinations(xy, 2):
-        assert np.hypot(*(xy[a] - xy[b])) >= r[a] + r[b] + from_mm(cell.unit, CLEARANCE_MM), (a, b)
+def _fk(dh: np.ndarray, base: np.ndarray, tool: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Craig (modified) DH forward kinematics, written here apart from spar_py.kinematics:
+    rows (alpha_{i-1}, a_{i-1}, d_i, offset_i), joint angle theta_i = q_i + offset_i."""
+    T = base.copy()
+    for (alpha, a, d, off), qi in zip(dh, q):
+        th = qi + off
+        ca, sa, ct, st = np.cos(alpha), np.sin(alpha), np.cos(th), np.sin(th)
+        T = T @ np.array([[ct, -st, 0, a], [st * ca, ct * ca, -sa, -sa * d],
+                          [st * sa, ct * sa, ca, ca * d], [0, 0, 0, 1]])
+    return T @ tool
+
+
+def _reached(robot, T: np.ndarray) -> bool:
+    """Some IK solution of tool pose T lies within the limits, puts the flange above the
+    table and reaches T under the FK above (to 1e-6 in)."""
+    for q in np.asarray(robot.ik(T), float).reshape(-1, 6):
+        inside = np.all((q >= robot.limits[:, 0] - 1e-9) & (q <= robot.limits[:, 1] + 1e-9))
+        flange = _fk(robot.dh, robot.base, np.eye(4), q)
+        if inside and flange[2, 3] > 0 and np.allclose(_fk(robot.dh, robot.base, robot.tool, q), T, atol=1e-6):
+            return True
+    return False
+
+
+def _box(model, T: np.ndarray) -> np.ndarray:
+    """(xmin, ymin, xmax, ymax) world xy of the model's shape at T: every box corner, every
+    cylinder's rim extremes (the generated parts stand axis-aligned)."""
+    pts = []
+    for s in model.shape:
+        if s.kind == "cylinder":
+            pts += [[x, y, z] for z in (s.lo[2], s.hi[2])
+                    for x, y in ((s.radius, 0), (-s.radius, 0), (0, s.radius), (0, -s.radius))]
+        else:
+            pts += [[x, y, z] for x in (s.lo[0], s.hi[0]) for y in (s.lo[1], s.hi[1]) for z in (s.lo[2], s.hi[2])]
+    w = (np.asarray(pts) @ T[:3, :3].T + T[:3, 3])[:, :2]
+    return np.concatenate([w.min(0), w.max(0)])
+
+
+def _gap(a: np.ndarray, b: np.ndarray) -> float:
+    """Distance between two axis-aligned boxes (0 if they touch or overlap)."""
+    dx = max(a[0] - b[2], b[0] - a[2], 0.0)
+    dy = max(a[1] - b[3], b[1] - a[3], 0.0)
+    return float(np.hypot(dx, dy))
+
+
+def test_there_are_max_parts_slots() -> None:
+    assert len(gen.slots()) >= gen.MAX_PARTS >= 100
+
+
+@pytest.mark.parametrize("n", [1, 2, 5, 13, 37, 64, gen.MAX_PARTS])
+def test_layout_is_clear_and_in_reach(n: int, tmp_path: Path) -> None:
+    """A sample of N = 1..MAX_PARTS: parts clear of each other by more than the put-down
+    clearance and of the pedestal, on the table, inside the free region, every block
+    centre on the placement grid of that region; and, by the IK checked with the FK above,
+    each block picked up where it lies and put down hole-up there with one grasp, each peg
+    picked up (its mating face free) and mated into its block there with one grasp."""
+    cell = load_problem(gen.generate_assembly(n, tmp_path))  # the sanity checks pass
+    assert len(cell.objects) == 2 * n
+    boxes = {p.obj: _box(cell.objects[p.obj], p.T) for p in cell.positions.values()}
+    clearance = from_mm(cell.unit, CLEARANCE_MM)
+    for a, b in combinations(boxes, 2):
+        assert _gap(boxes[a], boxes[b]) > clearance + 0.5, (a, b)
+    base = cell.robot.base[:2, 3]
     (region,) = cell.placement_regions
-    for x, y in xy.values():
-        assert region["x"][0] <= x <= region["x"][1] and region["y"][0] <= y <= region["y"][1]
-    for p in cell.positions.values():
-        model = cell.objects[p.obj]
-        grasps = [g for g, m in model.grasps.items() if not set(m.ofaces) & set(model.mating_faces)]
-        assert reachable_pairs(cell, p.obj, grasps, [p.label]), p.obj
+    step = from_mm(cell.unit, GRID_STEP_MM)
+    for obj, bx in boxes.items():
+        near = np.clip(base, bx[:2], bx[2:])
+        assert np.hypot(*(near - base)) >= gen.PEDESTAL_RADIUS
+        assert region["x"][0] <= bx[0] and bx[2] <= region["x"][1]
+        assert region["y"][0] <= bx[1] and bx[3] <= region["y"][1]
+    Ta = cell.transforms["trans_1"]
+    for k in range(1, n + 1):
+        peg, block = cell.objects[f"peg{k}"], cell.objects[f"block{k}"]
+        Tp, Tb = cell.positions[f"tr{2 * k - 1}"].T, cell.positions[f"tr{2 * k}"].T
+        for model, T in ((peg, Tp), (block, Tb)):
+            assert abs(_box_z(model, T)) < 1e-9  # resting on the table top
+        off = (Tb[:2, 3] - [region["x"][0], region["y"][0]]) / step
+        assert np.allclose(off, np.round(off)), f"block{k} off the placement grid"
+        up = Tb.copy()
+        up[:3, :3] = block.poses[f"p{2 * k}P1"].R
+        rest = set(block.poses[f"p{2 * k}P3"].rfaces) | set(block.poses[f"p{2 * k}P1"].rfaces)
+        assert any(_reached(cell.robot, Tb @ g.T) and _reached(cell.robot, up @ g.T)
+                   for g in block.grasps.values() if not set(g.gfaces) & rest), f"block{k}"
+        assert any(_reached(cell.robot, Tp @ g.T) and _reached(cell.robot, up @ Ta @ g.T)
+                   for g in peg.grasps.values()
+                   if not set(g.ofaces) & set(peg.mating_faces)
+                   and not set(g.gfaces) & set(peg.poses[f"p{2 * k - 1}P5"].rfaces)), f"peg{k}"
+
+
+def _box_z(model, T: np.ndarray) -> float:
+    """The lowest world z of the model's shape at T (box corners, cylinder rim extremes)."""
+    zs = []
+    for s in model.shape:
+        if s.kind == "cylinder":
+            pts = [[x, y, z] for z in (s.lo[2], s.hi[2])
+                   for x, y in ((s.radius, 0), (-s.radius, 0), (0, s.radius), (0, -s.radius))]
+        else:
+            pts = [[x, y, z] for x in (s.lo[0], s.hi[0]) for y in (s.lo[1], s.hi[1]) for z in (s.lo[2], s.hi[2])]
+        zs.append((np.asarray(pts) @ T[:3, :3].T + T[:3, 3])[:, 2].min())
+    return float(min(zs))
 
 
 def test_main_writes_and_reports(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -106,3 +187,25 @@ def test_generated_plans_four_actions_per_pair(n: int, tmp_path: Path) -> None:
     for k in range(1, n + 1):
         mine = sorted(a.split("(")[0] for a in actions if f"peg{k}," in a or f"block{k}," in a)
         assert mine == ["assemble", "pickup", "pickup", "putdown"]
+
+
+def test_generated_plans_with_no_flag(tmp_path: Path) -> None:
+    """The default bound is derived from the problem: N = 4 needs 16 actions, more than
+    the fixed default of 12 phase 1 used to have."""
+    from spar_py.planner import Outcome, Planner
+
+    plan = Planner().plan(gen.generate_assembly(4, tmp_path), phase1_only=True)
+    assert plan.outcome is Outcome.PLAN
+    assert len(plan.actions) == 16
+
+
+def test_no_plan_names_the_bound_and_its_flag() -> None:
+    import subprocess
+    import sys
+
+    spar = Path(sys.executable).parent / "spar"
+    r = subprocess.run([str(spar), "plan", "kb/problems/unreachable.yaml"], capture_output=True, text=True,
+                       cwd=Path(__file__).resolve().parent.parent, timeout=120, check=False)
+    assert r.returncode == 1
+    line = next(ln for ln in r.stdout.splitlines() if ln.startswith("NO PLAN"))
+    assert "within 12 actions" in line and "--max-actions" in line

@@ -264,7 +264,8 @@ def build_parser() -> argparse.ArgumentParser:
     plan.add_argument("--trace", action="store_true", help="print the goal stacks at each step (Figs. 21-22)")
     plan.add_argument("--phase1-only", action="store_true", help="stop after the partial plan")
     plan.add_argument("--max-actions", type=_positive_int, metavar="N",
-                      help="bound on the plan size (default: prolog/spar_defaults.pl)")
+                      help="bound on the plan size (default: derived from the problem, twice its "
+                           "lower bound on the plan size and at least 12; prolog/spar_defaults.pl)")
     plan.add_argument("--max-instances", type=_positive_int, metavar="N",
                       help="plan instances examined at most in phase 2 (default: prolog/spar_defaults.pl)")
     plan.add_argument("--no-separation", action="store_true",

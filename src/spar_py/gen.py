@@ -1,4 +1,4 @@
-"""Generated problems for scaling runs (issue 7): N pegs into N blocks.
+"""Generated problems for scaling runs (issues 7, 18): N pegs into N blocks, N = 1..MAX_PARTS.
 
 :func:`generate_assembly` writes a self-contained knowledge base: the problem file,
 one object file per part and a copy of the robot file. Every block starts hole-down
@@ -9,37 +9,56 @@ The parts are copies of the paper's models (kb/objects/peg.yaml, block.yaml) und
 new object names with their own label prefixes (``peg3`` gets grasps ``p5G1..``, poses
 ``p5P1..``), so labels in the constraint network say which part they belong to.
 
-Layout (world frame, inches, the table top z = 0, the PUMA 762's waist axis at the
-origin, the arm facing +x): the parts stand in rows across the front of the robot,
-``ROW_X`` in from the waist axis, ``SLOT_Y`` apart along y, each peg beside its block.
-Every slot is well inside the arm's reach for the paper's grasps (about 20 to 45 in);
-the put-down region is the rows' rectangle grown by ``MARGIN`` on each side.
+Layout (world frame, inches, the table top z = 0; the PUMA 762 as kb/robots/puma762.yaml
+places it): the table is divided into pair cells PITCH_X by PITCH_Y, each holding a
+block and, PEG_GAP to its -x side, its peg (lying on its -y base face, p1P5), both
+footprints centred on the cell's row line. :func:`slots` keeps the cells that
 
-Planning them: phase 1 needs ``max_actions(4N)`` at least. Its iterative deepening
-starts at N actions (one per goal), and every round below 4N fails, so those rounds
-dominate: N = 1 plans in a fraction of a second, N = 2 in a few seconds with a step
-budget (``max_steps``) of about 10^5, and from N = 3 on the failing rounds grow about
-thirty-fold per action (N = 3, bound 8 alone: minutes). A single round at bound 4N
-finds the 4N-action plan quickly (N = 10: a few seconds).
+- keep every footprint at least PEDESTAL_RADIUS from the robot's base axis (the
+  pedestal stands there), and
+- the arm can work: some block grasp reaches the block where it starts (hole-down)
+  *and*, with the same grasp, hole-up at the same spot (the put-down: phase 2 puts a
+  part down nearest its previous spot, and every block centre lies on the
+  placement grid, see below); some peg grasp that leaves the peg's mating face free
+  reaches the peg where it lies *and* mates it into the hole-up block there
+  (reachable and mate_reachable, Sec. 5.2.4, by the planner's own IK: workspace.reaches),
 
-``main`` is the body of the future ``spar gen assembly --parts N [-o DIR]`` subcommand.
+and takes the first N of them by distance from the base axis (ties by angle), so the
+parts gather as rings of cells around the robot. Neighbouring cells' footprints are
+CELL_GAP apart and the peg's is PEG_GAP from its block's, both more than the put-down
+clearance (placement.CLEARANCE_MM), so a block put down hole-up where it stood is clear
+of everything. The free table (``placement_regions``) is one rectangle around the
+layout grown by MARGIN, its corner on the placement grid (placement.GRID_STEP_MM) of the
+block centres.
+
+Planning them needs no flag: phase 1's default bound and step budget are derived
+from the problem (spar_defaults.pl: the bound twice the lower bound, 8N here; 100 steps
+per action of it), and iterative deepening starts at its lower bound, 4N here.
+
+``main`` is the body of ``spar gen assembly --parts N [-o DIR]``.
 """
 from __future__ import annotations
 
 import argparse
+import math
 import re
 import shutil
 import sys
+from dataclasses import dataclass
 from pathlib import Path
+
+import numpy as np
 
 from .errors import SparValueError
 
 __all__ = [
     "MAX_PARTS",
+    "Slot",
     "generate_assembly",
     "layout",
     "main",
     "renamed_model",
+    "slots",
 ]
 
 KB_DIR = Path(__file__).resolve().parent.parent.parent / "kb"
@@ -47,27 +66,38 @@ PEG_MODEL = KB_DIR / "objects" / "peg.yaml"
 BLOCK_MODEL = KB_DIR / "objects" / "block.yaml"
 ROBOT = KB_DIR / "robots" / "puma762.yaml"
 
-#: Distances from the waist axis of the rows of parts (in), nearest row first.
-ROW_X: tuple[float, ...] = (22.0, 29.0, 36.0)
-#: Slots of a row along world y (in): 8 slots 6.5 in apart, so two parts' bounding
-#: circles (radius 2.6 in) stay clear of each other, with 1.3 in to spare.
-SLOT_Y: tuple[float, ...] = tuple(-22.75 + 6.5 * i for i in range(8))
-#: Pairs that fit: every row holds len(SLOT_Y) // 2 pairs.
-MAX_PARTS = len(ROW_X) * (len(SLOT_Y) // 2)
-#: Free table around the rows for the put-downs (in).
+#: The most pairs :func:`generate_assembly` accepts: as many cells as :func:`slots` finds
+#: for the PUMA 762 (checked by tests/test_gen.py).
+MAX_PARTS = 100
+#: Gap between the footprints of a peg and its block, and between neighbouring cells (in).
+PEG_GAP = 2.0
+CELL_GAP = 2.0
+#: Pair cells (in): a multiple of the placement grid (2 in) each way, so every block
+#: centre is a grid point of the free region.
+PITCH_X = 10.0
+PITCH_Y = 6.0
+#: No footprint nearer the robot's base axis than this (in): the pedestal.
+PEDESTAL_RADIUS = 12.0
+#: Free table around the layout for the put-downs (in), a multiple of the grid step.
 MARGIN = 6.0
+#: How far out cells are looked for (in): past the PUMA 762's reach (about 54 in here).
+SEARCH_HALF_WIDTH = 70.0
+#: Where the lattice of block centres sits (in, from the grid point nearest the base axis):
+#: the offset of the multiples of 2 in that fits the most cells round the PUMA 762.
+OFFSET = (2.0, 0.0)
 
 # The paper's poses in its row form (Fig. 18): the peg lying on its -y base face
-# (p1P5), the block hole-down (p2P3); the z of d is the resting height.
+# (p1P5), the block hole-down (p2P3) and hole-up (p2P1, after the put-down).
+PEG_POSE, BLOCK_POSE, BLOCK_UP_POSE = "p1P5", "p2P3", "p2P1"
 PEG_TM = [[1, 0, 0], [0, 0, 1], [0, -1, 0]]
-PEG_Z = 1.5
 BLOCK_TM = [[1, 0, 0], [0, -1, 0], [0, 0, -1]]
-BLOCK_Z = 1.5
 
 # Table 2 and Fig. 11 of the paper (in, deg).
 MANIPULATOR_BOUNDS = "{dx: [-0.001, 0.001], dy: [-0.001, 0.001], dz: [-0.001, 0.001], dtheta: [-0.001, 0.001]}"
 OBJECT_BOUNDS = "{dx: [-0.11, 0.11], dy: [-0.11, 0.11], dz: [-0.11, 0.11], dtheta: [-5.5, 5.5]}"
 SCAN_BOUNDS = "{dx: [-0.05, 0.05], dy: [-0.05, 0.05], dz: [-0.05, 0.05], dtheta: [-0.5, 0.5]}"
+# T_a of the paper's cell (in): the peg upside down in the hole, its tip at the bottom.
+TA = [[1, 0, 0], [0, -1, 0], [0, 0, -1], [0, 0, 2.5]]
 
 _LABEL = re.compile(r"\bp(\d+)([GP]\d+)\b")
 
@@ -89,19 +119,102 @@ def renamed_model(text: str, name: str, prefix: int, source: str) -> str:
     return header + text
 
 
+@dataclass(frozen=True)
+class Slot:
+    """One pair cell of the layout (world frame, inches): the object-frame origins of the
+    peg (``peg``, lying, p1P5) and of the block (``block``, hole-down, p2P3), and the
+    axis-aligned box ``(xmin, ymin, xmax, ymax)`` holding both footprints."""
+
+    peg: tuple[float, float]
+    block: tuple[float, float]
+    box: tuple[float, float, float, float]
+
+    @property
+    def distance(self) -> float:
+        """The block centre's distance from the world z axis (in)."""
+        return math.hypot(*self.block)
+
+
+def _models():
+    """The peg and block models and the robot, in inches (kb.load_object, kb.load_robot)."""
+    from .kb import load_object, load_robot
+
+    return load_object(PEG_MODEL, "in"), load_object(BLOCK_MODEL, "in"), load_robot(ROBOT, "in")
+
+
+def _pose_T(R: np.ndarray, x: float, y: float, z: float) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3] = R
+    T[:3, 3] = (x, y, z)
+    return T
+
+
+def _grasp_ok(robot, grasps, first: np.ndarray, second: np.ndarray) -> np.ndarray:
+    """(n,) bool: for each pair i of object poses first[i], second[i] (world, 4x4), some
+    grasp of ``grasps`` (each a 4x4 tool-in-object) reaches both: one batched IK call."""
+    if not grasps:
+        return np.zeros(len(first), dtype=bool)
+    from .workspace import reaches
+
+    G = np.stack(grasps)                                            # (g, 4, 4)
+    A = np.einsum("nij,gjk->ngik", first, G).reshape(-1, 4, 4)
+    B = np.einsum("nij,gjk->ngik", second, G).reshape(-1, 4, 4)
+    ok = reaches(robot, np.concatenate([A, B])).reshape(2, len(first), len(G))
+    return (ok[0] & ok[1]).any(axis=1)
+
+
+def slots() -> list[Slot]:
+    """Every usable pair cell of the layout (see the module docstring), nearest the base
+    axis first (ties by angle about it, from -x round)."""
+    from .placement import footprint
+
+    peg, block, robot = _models()
+    sp_peg, sp_blk, sp_up = peg.poses[PEG_POSE], block.poses[BLOCK_POSE], block.poses[BLOCK_UP_POSE]
+    fp_peg, fp_blk = footprint(peg, sp_peg.R), footprint(block, sp_blk.R)
+    (plo, phi), (blo, bhi) = (fp_peg.min(0), fp_peg.max(0)), (fp_blk.min(0), fp_blk.max(0))
+    width = (phi[0] - plo[0]) + PEG_GAP + (bhi[0] - blo[0]) + CELL_GAP
+    height = max(phi[1] - plo[1], bhi[1] - blo[1]) + CELL_GAP
+    if width > PITCH_X + 1e-9 or height > PITCH_Y + 1e-9:  # pragma: no cover - fixed models
+        raise SparValueError(f"a pair needs {width:g} x {height:g} in, more than the cell")
+    base = robot.base[:2, 3]
+    k = int(SEARCH_HALF_WIDTH // PITCH_X), int(SEARCH_HALF_WIDTH // PITCH_Y)
+    cells = []
+    for i in range(-k[0], k[0] + 1):
+        for j in range(-k[1], k[1] + 1):
+            bx = round(base[0] / 2) * 2 + OFFSET[0] + PITCH_X * i
+            by = round(base[1] / 2) * 2 + OFFSET[1] + PITCH_Y * j
+            bcx, bcy = bx + (blo[0] + bhi[0]) / 2, by + (blo[1] + bhi[1]) / 2
+            px = bx + blo[0] - PEG_GAP - phi[0]                     # peg's box PEG_GAP left of the block's
+            py = bcy - (plo[1] + phi[1]) / 2                        # both boxes centred on one line
+            box = (px + plo[0], min(py + plo[1], by + blo[1]), bx + bhi[0], max(py + phi[1], by + bhi[1]))
+            near = np.clip(base, box[:2], box[2:])                  # the box's point nearest the axis
+            if math.hypot(*(near - base)) >= PEDESTAL_RADIUS and math.hypot(bcx - base[0], bcy - base[1]) > 0:
+                cells.append(Slot((px, py), (bx, by), box))
+    if not cells:  # pragma: no cover
+        return []
+    peg_T = np.stack([_pose_T(sp_peg.R, *c.peg, sp_peg.height) for c in cells])
+    blk_T = np.stack([_pose_T(sp_blk.R, *c.block, sp_blk.height) for c in cells])
+    up_T = np.stack([_pose_T(sp_up.R, *c.block, sp_up.height) for c in cells])
+    free = [g for g in block.grasps.values()
+            if not set(g.gfaces) & (set(sp_blk.rfaces) | set(sp_up.rfaces))]
+    ok = _grasp_ok(robot, [g.T for g in free], blk_T, up_T)
+    Ta = np.asarray(TA[:3], float).T
+    T_a = _pose_T(Ta, *TA[3])
+    mate = [g for g in peg.grasps.values()
+            if not set(g.ofaces) & set(peg.mating_faces) and not set(g.gfaces) & set(sp_peg.rfaces)]
+    ok &= _grasp_ok(robot, [g.T for g in mate], peg_T, up_T @ T_a)
+    good = [c for c, v in zip(cells, ok) if v]
+    return sorted(good, key=lambda c: (round(c.distance, 9), math.atan2(c.block[1] - base[1], c.block[0] - base[0])))
+
+
 def layout(n_parts: int) -> list[tuple[tuple[float, float], tuple[float, float]]]:
-    """The (x, y) of each pair's peg and block (in, world frame), pair k in slots 2k, 2k+1
-    counted row by row from the nearest row, each row centred on the x axis."""
+    """The (x, y) of each pair's peg and block (in, world frame): the first ``n_parts``
+    cells of :func:`slots`, nearest the robot first."""
     _check_n(n_parts)
-    per_row = len(SLOT_Y) // 2
-    out = []
-    for k in range(n_parts):
-        row, col = divmod(k, per_row)
-        in_row = min(per_row, n_parts - row * per_row)  # pairs in this row, centred
-        first = (len(SLOT_Y) - 2 * in_row) // 2
-        x = ROW_X[row]
-        out.append(((x, SLOT_Y[first + 2 * col]), (x, SLOT_Y[first + 2 * col + 1])))
-    return out
+    cells = slots()[:n_parts]
+    if len(cells) < n_parts:  # pragma: no cover - MAX_PARTS is checked against slots()
+        raise SparValueError(f"only {len(cells)} pairs fit within the arm's reach, not {n_parts}")
+    return [(c.peg, c.block) for c in cells]
 
 
 def _check_n(n_parts: int) -> None:
@@ -118,38 +231,51 @@ def _num(v: float) -> str:
     return str(int(v)) if float(v).is_integer() else f"{v:g}"
 
 
+def _region(cells: list[Slot]) -> tuple[tuple[float, float], tuple[float, float]]:
+    """The free table: the layout's box grown by MARGIN, its corner on the placement grid
+    through the block centres (so a block can go down again exactly where it stood)."""
+    from .placement import GRID_STEP_MM
+
+    step = GRID_STEP_MM / 25.4
+    box = np.array([c.box for c in cells])
+    lo, hi = box[:, :2].min(0) - MARGIN, box[:, 2:].max(0) + MARGIN
+    anchor = np.array(cells[0].block)
+    lo = anchor - step * np.ceil((anchor - lo) / step - 1e-9)
+    return (float(lo[0]), float(hi[0])), (float(lo[1]), float(hi[1]))
+
+
 def _problem_text(n_parts: int, robot_rel: str) -> str:
-    pairs = layout(n_parts)
-    xs = [p[0] for pair in pairs for p in pair]
-    ys = [p[1] for pair in pairs for p in pair]
+    cells = slots()[:n_parts]
+    if len(cells) < n_parts:  # pragma: no cover
+        raise SparValueError(f"only {len(cells)} pairs fit within the arm's reach, not {n_parts}")
+    (x0, x1), (y0, y1) = _region(cells)
     lines = [
-        f"# Generated by spar_py.gen: {n_parts} peg(s) into {n_parts} block(s) (issue 7).",
+        f"# Generated by spar_py.gen: {n_parts} peg(s) into {n_parts} block(s) (issues 7, 18).",
         "# Tests: phase 1 at scale. Every block rests hole-down (p2P3 in the paper's",
         "# model), so each pair needs pickup(block), putdown(block), pickup(peg),",
-        f"# assemble: {4 * n_parts} actions in all: run phase 1 with max_actions({4 * n_parts}) or more",
-        "# (and, for N >= 2, a step budget max_steps of 10^5 or more; see spar_py.gen).",
-        "# The parts stand in rows in front of the PUMA 762 (waist axis at the origin,",
-        "# facing +x), each peg lying on its -y base face (p1P5) beside its block.",
+        f"# assemble: {4 * n_parts} actions in all (phase 1's default bound allows them).",
+        "# Pair cells around the PUMA 762 (waist axis at the origin), nearest first: each",
+        "# peg lying on its -y base face (p1P5) beside its block; every cell checked",
+        "# reachable for the pickups, the put-down where the block stands and the mate.",
         f"problem: assembly_{n_parts}",
         "units: {length: in, angle: deg}",
         f"robot: {robot_rel}",
         "objects:",
     ]
-    for k, ((px, py), (bx, by)) in enumerate(pairs, start=1):
+    for k, c in enumerate(cells, start=1):
         lines += [
             f"  peg{k}:",
             f"    model: objects/peg{k}.yaml",
-            f"    initial: {{name: init_pos{2 * k - 1}, label: tr{2 * k - 1}, tm: {_tm(PEG_TM, px, py, PEG_Z)}}}",
+            f"    initial: {{name: init_pos{2 * k - 1}, label: tr{2 * k - 1}, tm: {_tm(PEG_TM, *c.peg, 1.5)}}}",
             f"  block{k}:",
             f"    model: objects/block{k}.yaml",
-            f"    initial: {{name: init_pos{2 * k}, label: tr{2 * k}, tm: {_tm(BLOCK_TM, bx, by, BLOCK_Z)}}}",
+            f"    initial: {{name: init_pos{2 * k}, label: tr{2 * k}, tm: {_tm(BLOCK_TM, *c.block, 1.5)}}}",
         ]
     lines += [
         "gripper: open",
-        "# Free table for the put-downs: the rows' rectangle and a margin all round.",
+        "# Free table for the put-downs: the layout's box and a margin all round.",
         "placement_regions:",
-        (f"  - {{x: [{_num(min(xs) - MARGIN)}, {_num(max(xs) + MARGIN)}], "
-         f"y: [{_num(min(ys) - MARGIN)}, {_num(max(ys) + MARGIN)}]}}"),
+        f"  - {{x: [{_num(x0)}, {_num(x1)}], y: [{_num(y0)}, {_num(y1)}]}}",
         "# Table 2 of the paper for the manipulator and every part.",
         "uncertainty:",
         f"  manipulator: {MANIPULATOR_BOUNDS}",
@@ -165,7 +291,7 @@ def _problem_text(n_parts: int, robot_rel: str) -> str:
         "# T_a and V_a of the paper's cell, shared by every pair: the peg upside down in",
         "# the hole, its tip at the hole's bottom centre; the approach down the hole.",
         "transforms:",
-        "  trans_1: {tm: [[1, 0, 0], [0, -1, 0], [0, 0, -1], [0, 0, 2.5]]}",
+        f"  trans_1: {{tm: {_tm(TA[:3], *TA[3])}}}",
         "vectors:",
         "  vec_1: [0, 0, -1]",
         "goals:",

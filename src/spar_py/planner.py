@@ -217,7 +217,8 @@ class Planner:
     """SPAR's two-phase planner on the embedded SWI-Prolog.
 
     Options (None: the planner's default, prolog/spar_defaults.pl): ``max_actions``
-    (phase-1 plan-size bound), ``max_instances`` (phase-2 cap on plan instances
+    (phase-1 plan-size bound; by default derived from the problem, twice its lower
+    bound on the plan size and at least 12), ``max_instances`` (phase-2 cap on plan instances
     examined), ``separation`` (declobber by separation, dif/2),
     ``paper_placements`` (the paper's rule: a put-down into a stable pose is assumed
     reachable somewhere, Sec. 5.2.4; by default some placement in the free table
@@ -232,10 +233,12 @@ class Planner:
                  paper_placements: bool = False) -> None:
         self.engine = engine()
         defaults = self.engine.query_once("spar_defaults:default_options(D)")["D"]
-        self.max_actions = defaults["max_actions"] if max_actions is None else max_actions
+        #: The bound on the plan size, or "auto" (the default): derived from the problem
+        #: (prolog/spar_defaults.pl, derived_max_actions/2).
+        self.max_actions: int | str = defaults["max_actions"] if max_actions is None else max_actions
         self.max_instances = defaults["max_instances"] if max_instances is None else max_instances
         self.separation = "separation" in defaults["declobber"] if separation is None else separation
-        if self.max_actions < 1 or self.max_instances < 1:
+        if (self.max_actions != "auto" and self.max_actions < 1) or self.max_instances < 1:
             raise SparValueError("max_actions and max_instances must be at least 1")
         if timeout is not None and timeout <= 0:
             raise SparValueError("timeout must be positive")

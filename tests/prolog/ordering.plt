@@ -6,6 +6,10 @@
 :- use_module('../../prolog/ordering').
 :- use_module(library(plunit)).
 :- use_module(library(apply)).
+:- use_module(library(ugraphs)).
+:- use_module(library(lists)).
+:- use_module(library(random)).
+:- use_module(library(yall)).
 
 :- begin_tests(ordering_sec5_1).
 
@@ -76,5 +80,65 @@ test(linearisation_total_order, Ls == [[action_4, action_3, action_2, action_1]]
 test(type_error, [error(type_error(atom, 1))]) :-
     empty_ordering(G),
     prior_to(1, a, G, _).
+
+%   The closure kept incrementally against library(ugraphs)'s
+%   transitive_closure/2 of the posted arcs, on random graphs of 12
+%   actions: every pair, every accepted and refused arc.
+
+random_graph(Seed, G, U) :-
+    set_random(seed(Seed)),
+    numlist(1, 12, Is),
+    maplist([I, A]>>atom_concat(a, I, A), Is, As),
+    empty_ordering(G0),
+    foldl(ordering_add_action, As, G0, G1),
+    numlist(1, 40, Ks),
+    foldl(random_arc(As), Ks, G1, G),
+    ordering_graph(G, U).
+
+random_arc(As, _, G0, G) :-
+    random_member(A1, As),
+    random_member(A2, As),
+    (   prior_to(A1, A2, G0, G1) -> G = G1 ; G = G0 ).
+
+test(closure_matches_ugraphs, Bad == []) :-
+    findall(Seed-A1-A2,
+            ( between(1, 25, Seed),
+              random_graph(Seed, G, U),
+              transitive_closure(U, C),
+              vertices(U, Vs),
+              member(A1, Vs), member(A2, Vs),
+              (   memberchk(A1-Ns, C), memberchk(A2, Ns) -> Want = true ; Want = false ),
+              (   necessarily_before(A1, A2, G) -> Got = true ; Got = false ),
+              Want \== Got ),
+            Bad).
+
+test(refused_iff_cycle, Bad == []) :-
+    findall(Seed-A1-A2,
+            ( between(1, 10, Seed),
+              random_graph(Seed, G, U),
+              transitive_closure(U, C),
+              vertices(U, Vs),
+              member(A1, Vs), member(A2, Vs), A1 \== A2,
+              (   memberchk(A2-Ns, C), memberchk(A1, Ns) -> Want = fail ; Want = ok ),
+              (   prior_to(A1, A2, G, _) -> Got = ok ; Got = fail ),
+              Want \== Got ),
+            Bad).
+
+test(outside_mask_is_possibly_between, Bad == []) :-
+    findall(Seed-C-E-S,
+            ( between(1, 10, Seed),
+              random_graph(Seed, G, U),
+              vertices(U, Vs),
+              member(E, [start|Vs]), member(S, [finish|Vs]), member(C, Vs),
+              outside_mask(E, S, G, Mask),
+              ordering_bit(C, G, B),
+              (   B /\ Mask =:= 0 -> Got = true ; Got = false ),
+              (   possibly_between(C, E, S, G) -> Want = true ; Want = false ),
+              Want \== Got ),
+            Bad).
+
+test(graph_is_a_ugraph, U == [a-[b, c], b-[c], c-[]]) :-
+    graph([a-b, b-c, a-c], G),
+    ordering_graph(G, U).
 
 :- end_tests(ordering_sec5_1).

@@ -11,6 +11,7 @@
 :- use_module('../../prolog/establish').
 :- use_module('../../prolog/plan_state').
 :- use_module('../../prolog/spar_defaults').
+:- use_module('../../prolog/ordering').
 :- use_module(library(plunit)).
 :- use_module(library(apply)).
 :- use_module(library(lists)).
@@ -35,7 +36,7 @@ field(bound,     4, 5).
 field(methods,   [promotion], [separation]).
 field(trace,     true, false).
 field(history,   [h(1, c, [])], []).
-field(checked,   [goal_2], [goal_3]).
+field(checked,   t(goal_2, true, <, t, t), t(goal_3, true, <, t, t)).
 field(lookahead, false, true).
 field(recorder,  recorder_value, other_recorder).
 field(seps,      [sep(a, b)], []).
@@ -107,20 +108,22 @@ test(writer_untyped_net, Net == anything) :-
 test(reader_fails_on_non_plan, fail) :-
     plan_actions(partial([], [], n, []), _).
 
-test(defaults, [Bound, Methods, Trace, Lookahead, Lists, Steps, Recorder] ==
+test(defaults, [Bound, Methods, Trace, Lookahead, Lists, Order, Checked, Steps, Recorder] ==
                [12, [promotion, separation, white_knight], false, true,
-                [[], [], [], [], [], [], [], [], [], []], 0,
+                [[], [], [], [], [], [], []], Empty, t, 0,
                 failures(none, none, false, 0-steps(0))]) :-
     make_plan([], P),
+    empty_ordering(Empty),
     plan_bound(P, Bound), plan_methods(P, Methods),
     plan_trace(P, Trace), plan_lookahead(P, Lookahead),
-    maplist(read_field(P), [actions, order, ids, ops, geos, sat, history,
-                            checked, seps, checked], Lists),
+    maplist(read_field(P), [actions, ids, ops, geos, sat, history, seps], Lists),
+    plan_order(P, Order),
+    plan_checked(P, Checked),
     plan_steps(P, Steps), plan_recorder(P, Recorder).
 
 test(defaults_from_spar_defaults) :-
     make_plan([], P),
-    plan_bound(P, B), default_option(max_actions, B),
+    plan_bound(P, B), default_option(max_actions_floor, B),
     plan_methods(P, Ms), default_option(declobber, Ms),
     plan_trace(P, T), default_option(trace, T),
     plan_lookahead(P, L), default_option(forward_check, L).
@@ -220,8 +223,15 @@ test(note_traces, S == "step 1\n") :-
 
 :- begin_tests(spar_defaults).
 
-test(max_actions, N == 12) :- default_option(max_actions, N).
-test(max_steps, N == 10000) :- default_option(max_steps, N).
+test(max_actions, N == auto) :- default_option(max_actions, N).
+test(max_actions_floor, N == 12) :- default_option(max_actions_floor, N).
+test(derived_paper_cell, B == 12) :- derived_max_actions(4, B).
+test(derived_fifty_pairs, B == 400) :- derived_max_actions(200, B).
+test(derived_bad, [error(type_error(nonneg, -1))]) :- derived_max_actions(-1, _).
+test(max_steps, N == auto) :- default_option(max_steps, N).
+test(max_steps_floor, N == 10000) :- default_option(max_steps_floor, N).
+test(derived_steps_small, S == 10000) :- derived_max_steps(4, S).
+test(derived_steps_large, S == 40000) :- derived_max_steps(400, S).
 test(max_instances, N == 50) :- default_option(max_instances, N).
 test(declobber, Ms == [promotion, separation, white_knight]) :-
     default_option(declobber, Ms).
@@ -248,7 +258,7 @@ test(dict_booleans_for_python, [FC, Tr] == [@(true), @(false)]) :-
     get_dict(forward_check, D, FC),
     get_dict(trace, D, Tr).
 
-test(dict_values, [A, I, Ms] == [12, 50, [promotion, separation, white_knight]]) :-
+test(dict_values, [A, I, Ms] == [auto, 50, [promotion, separation, white_knight]]) :-
     default_options(D),
     get_dict(max_actions, D, A),
     get_dict(max_instances, D, I),
