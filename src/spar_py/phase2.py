@@ -378,7 +378,7 @@ def _reach_verdict(action: str, ok: bool, what: str) -> dict[str, Any]:
 
 def _verdicts(world: World, cs: list[ur.Constraint]) -> list[dict[str, Any]]:
     out = []
-    for v in ur.evaluate_all(cs, world.unc.registry):
+    for v in ur.evaluate_all(cs, world.unc.registry, memo=world.cell.memo):
         d = v.as_dict()
         d["kind"] = "uncertainty"
         out.append(d)
@@ -389,7 +389,7 @@ def _verdicts_until_unsatisfied(world: World, cs: list[ur.Constraint]) -> list[d
     """The verdicts of ``cs`` in order, up to and including the first unsatisfied one."""
     out = []
     for c in cs:
-        d = ur.evaluate(c, world.unc.registry).as_dict()
+        d = ur.evaluate(c, world.unc.registry, memo=world.cell.memo).as_dict()
         d["kind"] = "uncertainty"
         out.append(d)
         if not d["satisfied"]:

@@ -48,13 +48,18 @@ import casadi as ca
 import numpy as np
 
 from .errors import SparValueError
+from .memo import Memo
 
 __all__ = [
     "BoundResult",
     "Bounder",
+    "CompiledIntervalProgram",
     "IntervalProgram",
     "bounds",
+    "cached_bounder",
+    "cached_bounds",
     "compile_bounder",
+    "expression_key",
     "inf",
     "interval",
     "sup",
@@ -66,6 +71,7 @@ REL_TOL = 1e-3
 ABS_TOL = 1e-9
 MAX_BOXES = 5000
 BATCH = 256
+USE_AFFINE = True
 
 _INF = math.inf
 _DIR = np.array([[-np.inf], [np.inf]])
@@ -452,6 +458,283 @@ class IntervalProgram:
             bad = np.isnan(r).any(0)
             r[0][bad] = -_INF
             r[1][bad] = _INF
+        return outs, disc
+
+
+# ================================================================== the compiled interval program
+#
+# The same interval rules as above, written once as a CasADi SX graph over the ends of
+# the input intervals and compiled into one Function: evaluating it on a batch of boxes
+# is one call into CasADi's virtual machine (no Python per instruction). Outward rounding
+# is a relative widening (SX has no nextafter): after an IEEE-exact, correctly rounded
+# operation x is moved by |x| 2^-50 + 1e-300 (at least 4 ulps: with the rounding of the
+# widening itself the result still lies outside the exact one), after a libm function by
+# |x| _LIBM_REL + 1e-300. Every value also feeds a finiteness check, ``z * (lo + hi)`` with
+# ``z`` an input that is always 0 (so CasADi cannot fold it): the sum is 0 while every end
+# is finite and NaN once one is not. The boxes on which some value is infinite or NaN, or
+# some operation leaves its domain (division by an interval holding 0, a tan pole,
+# atan2's branch cut, log of x <= 0, ...), are evaluated again by :class:`IntervalProgram`,
+# whose rules know those cases; the fast path never has to be right about them.
+
+_ULP4 = 2.0 ** -50
+_SX_TINY = 1e-300
+
+
+def _sx_dn(x: ca.SX, rel: float = _ULP4) -> ca.SX:
+    return x - (ca.fabs(x) * rel + _SX_TINY)
+
+
+def _sx_up(x: ca.SX, rel: float = _ULP4) -> ca.SX:
+    return x + (ca.fabs(x) * rel + _SX_TINY)
+
+
+def _sx_hull(vals: list[ca.SX], rel: float = _ULP4) -> tuple[ca.SX, ca.SX]:
+    lo, hi = vals[0], vals[0]
+    for v in vals[1:]:
+        lo, hi = ca.fmin(lo, v), ca.fmax(hi, v)
+    return _sx_dn(lo, rel), _sx_up(hi, rel)
+
+
+def _sx_period_hit(lo: ca.SX, hi: ca.SX, offset: float, period: float) -> ca.SX:
+    """1 where some offset + k*period lies in [lo - s, hi + s] (as :func:`_period_hits`)."""
+    s = 1e-9 * (1.0 + ca.fmax(ca.fabs(lo), ca.fabs(hi)))
+    k = ca.floor((hi + s - offset) / period)
+    return offset + k * period >= lo - s
+
+
+def _sx_trig(a: tuple[ca.SX, ca.SX], f: Callable[[ca.SX], ca.SX], max_at: float,
+             min_at: float) -> tuple[ca.SX, ca.SX]:
+    lo, hi = a
+    v0, v1 = f(lo), f(hi)
+    rlo, rhi = _sx_hull([v0, v1], _LIBM_REL)
+    full = ca.logic_or(hi - lo >= _TWO_PI, ca.fmax(ca.fabs(lo), ca.fabs(hi)) >= _BIG_ANGLE)
+    rhi = ca.if_else(ca.logic_or(full, _sx_period_hit(lo, hi, max_at, _TWO_PI)), 1.0, rhi)
+    rlo = ca.if_else(ca.logic_or(full, _sx_period_hit(lo, hi, min_at, _TWO_PI)), -1.0, rlo)
+    return ca.fmax(rlo, -1.0), ca.fmin(rhi, 1.0)
+
+
+def _sx_mul(a: tuple[ca.SX, ca.SX], b: tuple[ca.SX, ca.SX]) -> tuple[ca.SX, ca.SX]:
+    return _sx_hull([a[0] * b[0], a[0] * b[1], a[1] * b[0], a[1] * b[1]])
+
+
+def _sx_even(a: tuple[ca.SX, ca.SX], f: Callable[[ca.SX], ca.SX], rel: float) -> tuple[ca.SX, ca.SX]:
+    """An even function increasing in |x| (x^2, x^4, cosh): its range from the nearest and farthest |x|."""
+    near = ca.fmax(0.0, ca.fmax(a[0], -a[1]))
+    lo = _sx_dn(f(near), rel)
+    hi = _sx_up(ca.fmax(f(a[0]), f(a[1])), rel)
+    return lo, hi
+
+
+def _sx_monotone(a: tuple[ca.SX, ca.SX], f: Callable[[ca.SX], ca.SX],
+                 increasing: bool = True) -> tuple[ca.SX, ca.SX]:
+    v0, v1 = f(a[0]), f(a[1])
+    if not increasing:
+        v0, v1 = v1, v0
+    return _sx_dn(v0, _LIBM_REL), _sx_up(v1, _LIBM_REL)
+
+
+def _sx_powc(a: tuple[ca.SX, ca.SX], c: float) -> tuple[tuple[ca.SX, ca.SX], ca.SX]:
+    """[a] ** c for a constant c, and the out-of-domain condition."""
+    no = ca.SX(0)
+    if c == 0:
+        return (ca.SX(1.0), ca.SX(1.0)), no
+    if c == 1:
+        return a, no
+    if float(c).is_integer():
+        n = int(c)
+        if n < 0:
+            (p0, p1), bad = _sx_powc(a, -n)
+            return (_sx_dn(1.0 / p1), _sx_up(1.0 / p0)), ca.logic_or(bad, ca.logic_and(p0 <= 0, p1 >= 0))
+        if n % 2:
+            return _sx_monotone(a, lambda x: x ** n), no
+        lo, hi = _sx_even(a, lambda x: x ** n, _LIBM_REL)
+        return (ca.fmax(lo, 0.0), hi), no
+    if c > 0:
+        lo, hi = _sx_monotone((ca.fmax(a[0], 0.0), ca.fmax(a[1], 0.0)), lambda x: x ** c)
+        return (ca.fmax(lo, 0.0), hi), a[1] < 0
+    lo, hi = _sx_monotone(a, lambda x: x ** c, increasing=False)
+    return (ca.fmax(lo, 0.0), hi), a[0] <= 0
+
+
+def _sx_unary(op: int, a: tuple[ca.SX, ca.SX]) -> tuple[tuple[ca.SX, ca.SX], ca.SX, ca.SX]:
+    """(range, out-of-domain condition, discontinuity condition) of a unary operation."""
+    lo, hi = a
+    no = ca.SX(0)
+    if op == ca.OP_NEG:
+        return (-hi, -lo), no, no
+    if op == ca.OP_TWICE:
+        return (2.0 * lo, 2.0 * hi), no, no
+    if op == ca.OP_SQ:
+        r = _sx_even(a, lambda x: x * x, _ULP4)
+        return (ca.fmax(r[0], 0.0), r[1]), no, no
+    if op == ca.OP_FABS:
+        return (ca.fmax(0.0, ca.fmax(lo, -hi)), ca.fmax(-lo, hi)), no, no
+    if op == ca.OP_SQRT:
+        r = (ca.fmax(_sx_dn(ca.sqrt(ca.fmax(lo, 0.0))), 0.0), _sx_up(ca.sqrt(ca.fmax(hi, 0.0))))
+        return r, hi < 0, lo <= 0
+    if op == ca.OP_SIN:
+        return _sx_trig(a, ca.sin, _HALF_PI, -_HALF_PI), no, no
+    if op == ca.OP_COS:
+        return _sx_trig(a, ca.cos, 0.0, _PI), no, no
+    if op == ca.OP_EXP:
+        r = _sx_monotone(a, ca.exp)
+        return (ca.fmax(r[0], 0.0), r[1]), no, no
+    if op == ca.OP_LOG:
+        return _sx_monotone(a, ca.log), lo <= 0, lo <= 0
+    if op == ca.OP_ATAN:
+        return _sx_monotone(a, ca.atan), no, no
+    if op == ca.OP_SINH:
+        return _sx_monotone(a, ca.sinh), no, no
+    if op == ca.OP_TANH:
+        return _sx_monotone(a, ca.tanh), no, no
+    if op == ca.OP_COSH:
+        r = _sx_even(a, ca.cosh, _LIBM_REL)
+        return (ca.fmax(r[0], 1.0), r[1]), no, no
+    if op in (ca.OP_ASIN, ca.OP_ACOS):
+        f = ca.asin if op == ca.OP_ASIN else ca.acos
+        r = _sx_monotone(a, f, op == ca.OP_ASIN)
+        return r, ca.logic_or(lo < -1, hi > 1), ca.logic_or(lo <= -1, hi >= 1)
+    if op == ca.OP_SIGN:
+        return (ca.sign(lo), ca.sign(hi)), no, ca.logic_and(ca.logic_and(lo <= 0, hi >= 0), lo < hi)
+    if op == ca.OP_INV:
+        zero = ca.logic_and(lo <= 0, hi >= 0)
+        return (_sx_dn(1.0 / hi), _sx_up(1.0 / lo)), zero, zero
+    if op == ca.OP_TAN:
+        pole = ca.logic_or(ca.logic_or(hi - lo >= _PI, ca.fmax(ca.fabs(lo), ca.fabs(hi)) >= _BIG_ANGLE),
+                           _sx_period_hit(lo, hi, _HALF_PI, _PI))
+        return _sx_monotone(a, ca.tan), pole, pole
+    raise SparValueError(f"supinf: unsupported operation {_op_name(op)} in expression")
+
+
+def _sx_binary(op: int, a: tuple[ca.SX, ca.SX], b: tuple[ca.SX, ca.SX]) -> tuple[tuple[ca.SX, ca.SX], ca.SX, ca.SX]:
+    """(range, out-of-domain condition, discontinuity condition) of a binary operation."""
+    no = ca.SX(0)
+    if op == ca.OP_ADD:
+        return (_sx_dn(a[0] + b[0]), _sx_up(a[1] + b[1])), no, no
+    if op == ca.OP_SUB:
+        return (_sx_dn(a[0] - b[1]), _sx_up(a[1] - b[0])), no, no
+    if op == ca.OP_MUL:
+        return _sx_mul(a, b), no, no
+    if op == ca.OP_DIV:
+        zero = ca.logic_and(b[0] <= 0, b[1] >= 0)
+        return _sx_hull([a[0] / b[0], a[0] / b[1], a[1] / b[0], a[1] / b[1]]), zero, zero
+    if op == ca.OP_POW:
+        la = _sx_monotone(a, ca.log)
+        m = _sx_mul(b, la)
+        e = _sx_monotone(m, ca.exp)
+        return (ca.fmax(e[0], 0.0), e[1]), a[0] <= 0, a[0] <= 0
+    if op == ca.OP_ATAN2:
+        cut = ca.logic_and(ca.logic_and(b[0] <= 0, a[0] <= 0), a[1] >= 0)
+        r = _sx_hull([ca.atan2(y, x) for y in a for x in b], _LIBM_REL)
+        return (ca.fmax(r[0], -_PI_UP), ca.fmin(r[1], _PI_UP)), cut, cut
+    if op == ca.OP_FMIN:
+        return (ca.fmin(a[0], b[0]), ca.fmin(a[1], b[1])), no, no
+    if op == ca.OP_FMAX:
+        return (ca.fmax(a[0], b[0]), ca.fmax(a[1], b[1])), no, no
+    if op == ca.OP_HYPOT:
+        sa, sb = _sx_unary(ca.OP_SQ, a)[0], _sx_unary(ca.OP_SQ, b)[0]
+        s = (_sx_dn(sa[0] + sb[0]), _sx_up(sa[1] + sb[1]))
+        return (ca.fmax(_sx_dn(ca.sqrt(s[0])), 0.0), _sx_up(ca.sqrt(s[1]))), no, no
+    raise SparValueError(f"supinf: unsupported operation {_op_name(op)} in expression")
+
+
+class CompiledIntervalProgram:
+    """:class:`IntervalProgram`'s rules compiled into one CasADi Function (see the section note).
+
+    Same interface: ``prog(lo, hi)`` with ``lo``, ``hi`` of shape ``(n, n_in)`` returns
+    ``(outs, disc)``. The whole batch is one CasADi call; the boxes on which the fast
+    path meets an infinite value or leaves an operation's domain are redone by the
+    interpreted :class:`IntervalProgram` (built on first need).
+    """
+
+    def __init__(self, fn: ca.Function) -> None:
+        if fn.n_in() != 1:
+            raise SparValueError("IntervalProgram: the Function must have exactly one (vector) input")
+        self._fn = fn
+        self.n_in = int(fn.nnz_in(0))
+        self.out_sizes = [int(fn.nnz_out(k)) for k in range(fn.n_out())]
+        n = self.n_in
+        X = ca.SX.sym("x", 2 * n + 1)
+        z = X[2 * n]
+        w: dict[int, tuple[ca.SX, ca.SX]] = {}
+        consts: dict[int, float] = {}
+        outs = [[(ca.SX(np.nan), ca.SX(np.nan))] * s for s in self.out_sizes]
+        bad = ca.SX(0)
+        disc = ca.SX(0)
+        for op, ins, o_regs, const in _instructions(fn):
+            o = o_regs[0] if o_regs else -1
+            if op == ca.OP_CONST:
+                consts[o] = const
+                w[o] = (ca.SX(const), ca.SX(const))
+                continue
+            if op == ca.OP_INPUT:
+                j = ins[1]
+                w[o] = (X[j], X[n + j])
+            elif op == ca.OP_OUTPUT:
+                outs[o_regs[0]][o_regs[1]] = w[ins[0]]
+                continue
+            elif op == ca.OP_ASSIGN:
+                w[o] = w[ins[0]]
+            else:
+                d_bad = d_disc = ca.SX(0)
+                if op == ca.OP_CONSTPOW:
+                    if ins[1] not in consts:
+                        raise SparValueError("supinf: constpow with a non-constant exponent")
+                    r, d_bad = _sx_powc(w[ins[0]], consts[ins[1]])
+                    d_disc = d_bad
+                elif op == ca.OP_MUL and (ins[0] in consts or ins[1] in consts):
+                    c, a = (consts[ins[0]], ins[1]) if ins[0] in consts else (consts[ins[1]], ins[0])
+                    lo, hi = w[a]
+                    lo, hi = (c * lo, c * hi) if c >= 0 else (c * hi, c * lo)
+                    r = (lo, hi) if abs(c) == 1.0 or c == 0.0 else (_sx_dn(lo), _sx_up(hi))
+                elif op == ca.OP_DIV and ins[1] in consts and consts[ins[1]] != 0:
+                    c = consts[ins[1]]
+                    lo, hi = w[ins[0]]
+                    lo, hi = (lo / c, hi / c) if c > 0 else (hi / c, lo / c)
+                    r = (_sx_dn(lo), _sx_up(hi))
+                elif op in _UNARY:
+                    r, d_bad, d_disc = _sx_unary(op, w[ins[0]])
+                elif op in _BINARY:
+                    r, d_bad, d_disc = _sx_binary(op, w[ins[0]], w[ins[1]])
+                else:
+                    raise SparValueError(f"supinf: unsupported operation {_op_name(op)} in expression")
+                w[o] = r
+                bad = bad + d_bad + z * (r[0] + r[1])
+                disc = disc + d_disc
+            consts.pop(o, None)
+        flat = [e for out in outs for e in (*[lo for lo, _ in out], *[hi for _, hi in out])]
+        self._f = ca.Function("iv", [X], [ca.vertcat(*flat, disc, bad)], {"cse": True})
+        self._fallback: IntervalProgram | None = None
+
+    @property
+    def n_instructions(self) -> int:
+        """Instructions of the compiled interval Function (a size measure)."""
+        return int(self._f.n_instructions())
+
+    def __call__(self, lo: np.ndarray, hi: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
+        lo = np.atleast_2d(np.asarray(lo, float))
+        hi = np.atleast_2d(np.asarray(hi, float))
+        n = lo.shape[0]
+        arg = np.vstack((lo.T, hi.T, np.zeros((1, n))))
+        with np.errstate(all="ignore"):
+            R = np.asarray(self._f(arg)).reshape(-1, n)
+        outs, k = [], 0
+        for s in self.out_sizes:
+            outs.append(np.array((R[k:k + s], R[k + s:k + 2 * s])))
+            k += 2 * s
+        disc = R[k] != 0
+        redo = ~(R[k + 1] == 0) | ~np.isfinite(lo).all(1) | ~np.isfinite(hi).all(1)
+        if redo.any():
+            if self._fallback is None:
+                self._fallback = IntervalProgram(self._fn)
+            fo, fd = self._fallback(lo[redo], hi[redo])
+            for r, f in zip(outs, fo):
+                r[:, :, redo] = f
+            disc[redo] = fd
+        for r in outs:  # an output no instruction wrote: unknown
+            unknown = np.isnan(r).any(0)
+            r[0][unknown] = -_INF
+            r[1][unknown] = _INF
         return outs, disc
 
 
@@ -906,6 +1189,46 @@ def compile_bounder(expr: ca.SX | float) -> Bounder:
     return Bounder(expr)
 
 
+#: Bounds of the memo tables :func:`cached_bounder` and :func:`cached_bounds` keep on a
+#: cell (cell.memo): compiled bounders (each holds a few CasADi Functions, up to about
+#: 1 MB for a plan of 8 actions) and bound results (a few hundred bytes each).
+BOUNDER_LIMIT = 256
+RESULT_LIMIT = 8192
+
+
+def expression_key(expr: ca.SX | float) -> bytes:
+    """A key equal for structurally identical expressions (the same operations, constants
+    and variable *names*, whichever registry made the symbols): CasADi's exact
+    serialisation of the graph. Two runs of a plan build equal keys for equal constraints."""
+    return _as_scalar(expr).serialize().encode()
+
+
+def cached_bounder(expr: ca.SX | float, memo: Memo | None = None, key: bytes | None = None) -> Bounder:
+    """The :class:`Bounder` of ``expr``, compiled once per structure and kept in ``memo``'s
+    table ``supinf.bounders`` (at most :data:`BOUNDER_LIMIT`, least recently used dropped);
+    compiled afresh when ``memo`` is None. A bounder names its variables, so one compiled
+    from another registry's symbols bounds this expression exactly as its own would."""
+    if memo is None:
+        return Bounder(expr)
+    k = expression_key(expr) if key is None else key
+    return memo.table("supinf.bounders", BOUNDER_LIMIT).get_or_compute(k, lambda: Bounder(expr))
+
+
+def cached_bounds(expr: ca.SX | float, box: Box, memo: Memo | None = None, **options: object) -> BoundResult:
+    """``Bounder.bounds(box, **options)`` of ``expr``, remembered in ``memo``'s table
+    ``supinf.results`` (at most :data:`RESULT_LIMIT`) by the expression's structure, the
+    box and the options: the bounding is deterministic, so an equal question gets the
+    equal answer. Without ``memo``, computed afresh."""
+    if memo is None:
+        return Bounder(expr).bounds(box, **options)  # type: ignore[arg-type]
+    k = expression_key(expr)
+    B = cached_bounder(expr, memo, k)
+    lo, hi = _check_box(B.names, box)
+    rkey = (k, tuple(lo.tolist()), tuple(hi.tolist()), tuple(sorted(options.items())))
+    return memo.table("supinf.results", RESULT_LIMIT).get_or_compute(
+        rkey, lambda: B.bounds(box, **options))  # type: ignore[arg-type]
+
+
 # ================================================================== the search
 
 
@@ -1071,16 +1394,19 @@ class _Search:
             return
         # 3. the affine form on the boxes left: a tighter L and its minimising corner
         bl, bh, side, L, infl, neg = bl[sp], bh[sp], side[sp], L[sp], infl[sp], neg[sp]
-        F = B.affine(bl, bh)[:, 0, :]
-        self.evaluated += side.size
-        fa = B.affine.enclosure(F)
-        L = np.maximum(L, np.where(neg, -fa[1], fa[0]))
-        lin = B.affine.linear(F)
-        lin = np.where(neg[None, :], -lin, lin).T  # (m, nv)
-        self.offer_points(np.where(lin >= 0, bl, bh)[np.isfinite(lin).all(1)])
-        keep = self.settle(bl, bh, side, L)
-        if not keep.any():
-            return
+        if USE_AFFINE:
+            F = B.affine(bl, bh)[:, 0, :]
+            self.evaluated += side.size
+            fa = B.affine.enclosure(F)
+            L = np.maximum(L, np.where(neg, -fa[1], fa[0]))
+            lin = B.affine.linear(F)
+            lin = np.where(neg[None, :], -lin, lin).T  # (m, nv)
+            self.offer_points(np.where(lin >= 0, bl, bh)[np.isfinite(lin).all(1)])
+            keep = self.settle(bl, bh, side, L)
+            if not keep.any():
+                return
+        else:
+            keep = np.ones(side.size, bool)
         bl, bh, side, L, infl = bl[keep], bh[keep], side[keep], L[keep], infl[keep]
         # 4. bisect on the most influential variable
         score = np.where(bh > bl, np.nan_to_num(infl, nan=0.0), -1.0)
