@@ -56,7 +56,6 @@ __all__ = [
     "CompiledIntervalProgram",
     "IntervalProgram",
     "bounds",
-    "cached_bounder",
     "cached_bounds",
     "compile_bounder",
     "expression_key",
@@ -1189,44 +1188,55 @@ def compile_bounder(expr: ca.SX | float) -> Bounder:
     return Bounder(expr)
 
 
-#: Bounds of the memo tables :func:`cached_bounder` and :func:`cached_bounds` keep on a
+#: Bounds of the memo tables :func:`cached_bounds` keeps on a
 #: cell (cell.memo): compiled bounders (each holds a few CasADi Functions, up to about
 #: 1 MB for a plan of 8 actions) and bound results (a few hundred bytes each).
 BOUNDER_LIMIT = 256
 RESULT_LIMIT = 8192
 
 
+def _canonical(expr: ca.SX | float) -> tuple[ca.SX, list[str]]:
+    """``expr`` with its free symbols renamed ``v0, v1, ...`` in CasADi's order of appearance,
+    and their original names in that order."""
+    e = _as_scalar(expr)
+    syms = ca.symvar(e)
+    canon = [ca.SX.sym(f"v{i}") for i in range(len(syms))]
+    if syms:
+        e = ca.substitute(e, ca.vertcat(*syms), ca.vertcat(*canon))
+    names = [v.name() for v in syms]
+    if len(set(names)) != len(names):
+        raise SparValueError("supinf: two different symbols share a name in the expression")
+    return e, names
+
+
 def expression_key(expr: ca.SX | float) -> bytes:
-    """A key equal for structurally identical expressions (the same operations, constants
-    and variable *names*, whichever registry made the symbols): CasADi's exact
-    serialisation of the graph. Two runs of a plan build equal keys for equal constraints."""
-    return _as_scalar(expr).serialize().encode()
-
-
-def cached_bounder(expr: ca.SX | float, memo: Memo | None = None, key: bytes | None = None) -> Bounder:
-    """The :class:`Bounder` of ``expr``, compiled once per structure and kept in ``memo``'s
-    table ``supinf.bounders`` (at most :data:`BOUNDER_LIMIT`, least recently used dropped);
-    compiled afresh when ``memo`` is None. A bounder names its variables, so one compiled
-    from another registry's symbols bounds this expression exactly as its own would."""
-    if memo is None:
-        return Bounder(expr)
-    k = expression_key(expr) if key is None else key
-    return memo.table("supinf.bounders", BOUNDER_LIMIT).get_or_compute(k, lambda: Bounder(expr))
+    """A key equal for expressions equal up to the names of their variables (the same
+    operations and constants, the variables met in the same order): CasADi's exact
+    serialisation of the graph with its symbols renamed by order of appearance."""
+    return _canonical(expr)[0].serialize().encode()
 
 
 def cached_bounds(expr: ca.SX | float, box: Box, memo: Memo | None = None, **options: object) -> BoundResult:
-    """``Bounder.bounds(box, **options)`` of ``expr``, remembered in ``memo``'s table
-    ``supinf.results`` (at most :data:`RESULT_LIMIT`) by the expression's structure, the
-    box and the options: the bounding is deterministic, so an equal question gets the
-    equal answer. Without ``memo``, computed afresh."""
+    """``Bounder.bounds(box, **options)`` of ``expr``, with the compiled bounder and the result
+    remembered in ``memo``'s tables ``supinf.bounders`` (at most :data:`BOUNDER_LIMIT`
+    entries) and ``supinf.results`` (at most :data:`RESULT_LIMIT`), least recently used
+    dropped first. Both are keyed by :func:`expression_key`, so a constraint built again
+    in another registry, with other variable names, finds them; the result's key adds
+    the box (by position) and the options: bounding is deterministic, so an equal
+    question gets the equal answer. Without ``memo``, computed afresh."""
     if memo is None:
         return Bounder(expr).bounds(box, **options)  # type: ignore[arg-type]
-    k = expression_key(expr)
-    B = cached_bounder(expr, memo, k)
-    lo, hi = _check_box(B.names, box)
-    rkey = (k, tuple(lo.tolist()), tuple(hi.tolist()), tuple(sorted(options.items())))
-    return memo.table("supinf.results", RESULT_LIMIT).get_or_compute(
-        rkey, lambda: B.bounds(box, **options))  # type: ignore[arg-type]
+    canon, names = _canonical(expr)
+    k = canon.serialize().encode()
+    lo, hi = _check_box(names, box)
+    rkey = (k, lo.tobytes(), hi.tobytes(), tuple(sorted(options.items())))
+    results = memo.table("supinf.results", RESULT_LIMIT)
+    r = results.get(rkey)
+    if r is None:
+        B = memo.table("supinf.bounders", BOUNDER_LIMIT).get_or_compute(k, lambda: Bounder(canon))
+        cbox = {f"v{i}": (float(a), float(b)) for i, (a, b) in enumerate(zip(lo, hi))}
+        r = results[rkey] = B.bounds(cbox, **options)  # type: ignore[arg-type]
+    return r
 
 
 # ================================================================== the search
