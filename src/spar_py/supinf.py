@@ -52,6 +52,7 @@ from .memo import Memo
 
 __all__ = [
     "BoundResult",
+    "AdaptiveProgram",
     "Bounder",
     "CompiledIntervalProgram",
     "IntervalProgram",
@@ -658,8 +659,8 @@ class CompiledIntervalProgram:
         w: dict[int, tuple[ca.SX, ca.SX]] = {}
         consts: dict[int, float] = {}
         outs = [[(ca.SX(np.nan), ca.SX(np.nan))] * s for s in self.out_sizes]
-        bad = ca.SX(0)
-        disc = ca.SX(0)
+        bad: list[ca.SX] = []  # summed once at the end (a running sum re-walks its chain)
+        disc: list[ca.SX] = []
         for op, ins, o_regs, const in _instructions(fn):
             o = o_regs[0] if o_regs else -1
             if op == ca.OP_CONST:
@@ -698,11 +699,12 @@ class CompiledIntervalProgram:
                 else:
                     raise SparValueError(f"supinf: unsupported operation {_op_name(op)} in expression")
                 w[o] = r
-                bad = bad + d_bad + z * (r[0] + r[1])
-                disc = disc + d_disc
+                bad += [d_bad, z * (r[0] + r[1])]
+                disc.append(d_disc)
             consts.pop(o, None)
         flat = [e for out in outs for e in (*[lo for lo, _ in out], *[hi for _, hi in out])]
-        self._f = ca.Function("iv", [X], [ca.vertcat(*flat, disc, bad)], {"cse": True})
+        total = [ca.sum1(ca.vertcat(*t)) if t else ca.SX(0) for t in (disc, bad)]
+        self._f = ca.Function("iv", [X], [ca.vertcat(*flat, *total)])
         self._fallback: IntervalProgram | None = None
 
     @property
@@ -735,6 +737,44 @@ class CompiledIntervalProgram:
             r[0][unknown] = -_INF
             r[1][unknown] = _INF
         return outs, disc
+
+
+#: Batches of at most this many boxes go to the compiled program once there is one (on
+#: deep products it is 4-10x faster there; on large batches numpy's whole-array
+#: operations win: bench/supinf.py).
+COMPILED_MAX_BATCH = 64
+#: Compile once the interpreted program has spent this many seconds per instruction of
+#: its Function on small batches (building the SX graph costs about 250 us per
+#: instruction): an expression bounded once, in a few steps, never pays for compiling;
+#: one the search works hard on, or that is bounded again and again, does.
+COMPILE_AFTER_S_PER_INSTRUCTION = 2.5e-4
+
+
+class AdaptiveProgram:
+    """An :class:`IntervalProgram` that compiles itself (:class:`CompiledIntervalProgram`)
+    once its small-batch evaluations have cost about as much as compiling would; same
+    interface and the same guarantees (both programs are sound)."""
+
+    def __init__(self, fn: ca.Function) -> None:
+        self._fn = fn
+        self.interpreted = IntervalProgram(fn)
+        self.compiled: CompiledIntervalProgram | None = None
+        self._spent = 0.0
+        self._budget = COMPILE_AFTER_S_PER_INSTRUCTION * fn.n_instructions()
+        self.n_in, self.out_sizes = self.interpreted.n_in, self.interpreted.out_sizes
+
+    def __call__(self, lo: np.ndarray, hi: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
+        n = np.shape(lo)[0]
+        if n > COMPILED_MAX_BATCH:
+            return self.interpreted(lo, hi)
+        if self.compiled is not None:
+            return self.compiled(lo, hi)
+        t = time.perf_counter()
+        r = self.interpreted(lo, hi)
+        self._spent += time.perf_counter() - t
+        if self._spent > self._budget:
+            self.compiled = CompiledIntervalProgram(self._fn)
+        return r
 
 
 # ================================================================== affine arithmetic
@@ -1111,12 +1151,12 @@ class Bounder:
         self.expr = e
         x = ca.vertcat(*syms) if syms else ca.SX(0, 1)
         self._x = x
-        self.gradient: IntervalProgram | None = None
+        self.gradient: AdaptiveProgram | None = None
         self._fg: ca.Function | None = None  # value and gradient, when the gradient can be bounded
         if syms:
             fg = ca.Function("fg", [x], [e, ca.densify(ca.jacobian(e, x))], {"cse": True})
             try:
-                self.gradient = IntervalProgram(fg)
+                self.gradient = AdaptiveProgram(fg)
                 self._fg = fg
             except SparValueError:
                 self.gradient = None  # derivative uses operations we cannot bound: bisection only
@@ -1129,9 +1169,9 @@ class Bounder:
         return ca.Function("f", [self._x], [self.expr], {"cse": True})
 
     @functools.cached_property
-    def program(self) -> IntervalProgram:
+    def program(self) -> AdaptiveProgram:
         """The interval program of the expression alone (built on first use)."""
-        return IntervalProgram(self._point)
+        return AdaptiveProgram(self._point)
 
     @functools.cached_property
     def affine(self) -> AffineProgram:
