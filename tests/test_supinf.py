@@ -546,23 +546,23 @@ def test_compiled_program_falls_back_off_its_domain() -> None:
     assert (c[0][fin[0]] <= p[0][fin[0]]).all() and (c[1][fin[1]] >= p[1][fin[1]]).all()
 
 
-def test_adaptive_program_compiles_when_it_pays(monkeypatch: pytest.MonkeyPatch) -> None:
-    """Small batches: interpreted until the time spent passes the budget, compiled after; the
-    bounds are sound either way."""
-    import spar_py.supinf as S
-
-    monkeypatch.setattr(S, "COMPILE_AFTER_S_PER_INSTRUCTION", 0.0)
+def test_compiled_bounder_is_sound_and_agrees() -> None:
+    """Bounder(compiled=True) sends small batches to the compiled program: sound, and within
+    the tolerance of the interpreted bounder's answer."""
     rng = np.random.default_rng(5)
     reg = Registry()
     e = random_chain(rng, 3, reg, big_angles=0.0)
-    B = Bounder(e)
-    assert B.gradient is not None and B.gradient.compiled is None
-    r1 = check_sound(e, reg.box(e), rng, 2000)
-    assert B.gradient.compiled is None  # check_sound builds its own bounder
-    B.bounds(reg.box(e))
-    assert B.gradient.compiled is not None
-    r2 = B.bounds(reg.box(e))
-    assert r2.lo <= r1.lo_found and r2.hi >= r1.hi_found
+    box = reg.box(e)
+    Bc, Bi = Bounder(e, compiled=True), Bounder(e)
+    rc, ri = Bc.bounds(box), Bi.bounds(box)
+    assert Bc.gradient is not None and Bc.gradient.compiled is not None
+    assert Bi.gradient is not None and Bi.gradient.compiled is None
+    assert rc.lo <= ri.lo_found and rc.hi >= ri.hi_found and ri.lo <= rc.lo_found and ri.hi >= rc.hi_found
+    w = ri.hi_found - ri.lo_found
+    assert abs(rc.lo - ri.lo) <= 2e-3 * w and abs(rc.hi - ri.hi) <= 2e-3 * w
+    lo, hi = box_arrays(Bc, box)
+    v = Bc.values(rng.uniform(lo, hi, (5000, lo.size)))
+    assert rc.lo <= v.min() and v.max() <= rc.hi
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -609,3 +609,14 @@ def test_cached_bounds_by_structure_not_names() -> None:
     assert cached_bounds(e1, b1, memo, want="lo").lo == cached_bounds(e1, b1, None, want="lo").lo
     assert memo.table("supinf.results", RESULT_LIMIT).limit == RESULT_LIMIT
     assert memo.table("supinf.bounders", BOUNDER_LIMIT).limit == BOUNDER_LIMIT
+
+
+def test_affine_division_contains_samples() -> None:
+    """Affine arithmetic of a quotient (1/b gets its own noise symbol) encloses sampled values."""
+    x, y = ca.SX.sym("x"), ca.SX.sym("y")
+    A = AffineProgram(ca.Function("f", [ca.vertcat(x, y)], [(x + y) / (y * y + 1.0) - x / y]))
+    lo, hi = np.array([[-1.0, 0.5]]), np.array([[2.0, 1.5]])
+    r = A.enclosure(A(lo, hi)[:, 0, :])
+    P = np.random.default_rng(0).uniform(lo[0], hi[0], (20000, 2))
+    v = (P[:, 0] + P[:, 1]) / (P[:, 1] ** 2 + 1.0) - P[:, 0] / P[:, 1]
+    assert r[0, 0] <= v.min() and v.max() <= r[1, 0]

@@ -71,7 +71,10 @@ REL_TOL = 1e-3
 ABS_TOL = 1e-9
 MAX_BOXES = 5000
 BATCH = 256
+#: The search's affine step (``AffineProgram``) on the expression alone, or (AFFINE_GRADIENT)
+#: on the expression and its gradient, whose enclosures then tighten the interval gradient.
 USE_AFFINE = True
+AFFINE_GRADIENT = True
 
 _INF = math.inf
 _DIR = np.array([[-np.inf], [np.inf]])
@@ -739,42 +742,36 @@ class CompiledIntervalProgram:
         return outs, disc
 
 
-#: Batches of at most this many boxes go to the compiled program once there is one (on
+#: Batches of at most this many boxes go to the compiled program when there is one (on
 #: deep products it is 4-10x faster there; on large batches numpy's whole-array
 #: operations win: bench/supinf.py).
 COMPILED_MAX_BATCH = 64
-#: Compile once the interpreted program has spent this many seconds per instruction of
-#: its Function on small batches (building the SX graph costs about 250 us per
-#: instruction): an expression bounded once, in a few steps, never pays for compiling;
-#: one the search works hard on, or that is bounded again and again, does.
-COMPILE_AFTER_S_PER_INSTRUCTION = 2.5e-4
 
 
 class AdaptiveProgram:
-    """An :class:`IntervalProgram` that compiles itself (:class:`CompiledIntervalProgram`)
-    once its small-batch evaluations have cost about as much as compiling would; same
-    interface and the same guarantees (both programs are sound)."""
+    """An interval program that sends small batches to a :class:`CompiledIntervalProgram`
+    (built on first use) when ``compiled`` is True, and everything else to the interpreted
+    :class:`IntervalProgram`. Same interface and guarantees (both are sound). Which one
+    answers depends only on the batch size, never on timing, so a run is reproducible.
 
-    def __init__(self, fn: ca.Function) -> None:
+    Compiling costs about 250 us per instruction of the Function (building the SX graph
+    in Python: 0.5 s for a product of 8 transforms), so it pays only for an expression
+    bounded many times over; the planner leaves it off (bench/supinf.py measures both).
+    """
+
+    def __init__(self, fn: ca.Function, compiled: bool = False) -> None:
         self._fn = fn
         self.interpreted = IntervalProgram(fn)
+        self.use_compiled = compiled
         self.compiled: CompiledIntervalProgram | None = None
-        self._spent = 0.0
-        self._budget = COMPILE_AFTER_S_PER_INSTRUCTION * fn.n_instructions()
         self.n_in, self.out_sizes = self.interpreted.n_in, self.interpreted.out_sizes
 
     def __call__(self, lo: np.ndarray, hi: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
-        n = np.shape(lo)[0]
-        if n > COMPILED_MAX_BATCH:
+        if not self.use_compiled or np.shape(lo)[0] > COMPILED_MAX_BATCH:
             return self.interpreted(lo, hi)
-        if self.compiled is not None:
-            return self.compiled(lo, hi)
-        t = time.perf_counter()
-        r = self.interpreted(lo, hi)
-        self._spent += time.perf_counter() - t
-        if self._spent > self._budget:
+        if self.compiled is None:
             self.compiled = CompiledIntervalProgram(self._fn)
-        return r
+        return self.compiled(lo, hi)
 
 
 # ================================================================== affine arithmetic
@@ -843,7 +840,7 @@ class AffineProgram:
             elif op in (ca.OP_ADD, ca.OP_SUB, ca.OP_MUL, ca.OP_DIV):
                 f = {ca.OP_ADD: self._add, ca.OP_SUB: self._sub, ca.OP_MUL: self._mul,
                      ca.OP_DIV: self._div}[op]
-                steps.append((f, o, (ins[0], ins[1]), ()))
+                steps.append((f, o, (ins[0], ins[1]), (sym(),) if op == ca.OP_DIV else ()))
             elif op == ca.OP_NEG:
                 steps.append((self._neg, o, (ins[0],), ()))
             elif op == ca.OP_TWICE:
@@ -941,8 +938,8 @@ class AffineProgram:
     def _sq(self, A: np.ndarray) -> np.ndarray:
         return self._mul(A, A)
 
-    def _div(self, A: np.ndarray, B: np.ndarray) -> np.ndarray:
-        return self._mul(A, self._taylor(B, ca.OP_INV))
+    def _div(self, A: np.ndarray, B: np.ndarray, sym: int) -> np.ndarray:
+        return self._mul(A, self._taylor(B, ca.OP_INV, sym))  # 1/B gets its own noise symbol
 
     def _powc(self, A: np.ndarray, c: float, sym: int) -> np.ndarray:
         if c == 0:
@@ -1140,10 +1137,13 @@ class Bounder:
     """A scalar expression compiled for bounding; reuse it to bound the same expression on many boxes.
 
     ``names`` are the expression's free variables (in the order of the compiled input).
+    ``compiled``: evaluate small batches of boxes with the interval rules compiled into a
+    CasADi Function (:class:`AdaptiveProgram`; worth it only for a bounder used many times).
     """
 
-    def __init__(self, expr: ca.SX | float) -> None:
+    def __init__(self, expr: ca.SX | float, compiled: bool = False) -> None:
         e = _as_scalar(expr)
+        self._compiled = compiled
         syms = ca.symvar(e)
         self.names: list[str] = [s.name() for s in syms]
         if len(set(self.names)) != len(self.names):
@@ -1156,7 +1156,7 @@ class Bounder:
         if syms:
             fg = ca.Function("fg", [x], [e, ca.densify(ca.jacobian(e, x))], {"cse": True})
             try:
-                self.gradient = AdaptiveProgram(fg)
+                self.gradient = AdaptiveProgram(fg, compiled)
                 self._fg = fg
             except SparValueError:
                 self.gradient = None  # derivative uses operations we cannot bound: bisection only
@@ -1171,7 +1171,21 @@ class Bounder:
     @functools.cached_property
     def program(self) -> AdaptiveProgram:
         """The interval program of the expression alone (built on first use)."""
-        return AdaptiveProgram(self._point)
+        return AdaptiveProgram(self._point, self._compiled)
+
+    @functools.cached_property
+    def affine_gradient(self) -> AffineProgram | None:
+        """The affine-arithmetic program of the expression and its gradient, one vector
+        ``(f, df/dx_1, ...)`` (built on first use; None when the gradient is not bounded).
+        On deep transform products its gradient enclosures escape the wrapping effect that
+        makes interval gradients too wide to prove monotonicity."""
+        if self.gradient is None:
+            return None
+        jac = ca.densify(ca.jacobian(self.expr, self._x))
+        try:
+            return AffineProgram(ca.Function("fgv", [self._x], [ca.vertcat(self.expr, jac.T)], {"cse": True}))
+        except SparValueError:
+            return None
 
     @functools.cached_property
     def affine(self) -> AffineProgram:
@@ -1408,11 +1422,12 @@ class _Search:
                          self.best[s]) for s in (0, 1) if not self.done[s]]
         G = None
         ok = np.zeros(m, bool)
+        fcv = np.where(neg, -fc[1], fc[0])  # rigorous lower end of g_s at the centres
         if B.gradient is not None:
             G = outs[1][:, :, :m]  # (2, nv, m), for g_s
             G = np.where(neg[None, None, :], -G[::-1], G)
             ok = ~disc[:m] & np.isfinite(G).all((0, 1))
-            Lmv = _mean_value_lower(np.where(neg, -fc[1], fc[0]), G, bl, bh, c)
+            Lmv = _mean_value_lower(fcv, G, bl, bh, c)
             L = np.where(ok & ~np.isnan(Lmv), np.maximum(L, Lmv), L)
             gmid = 0.5 * (G[0] + G[1]).T  # (m, nv)
             cand.append(np.where(gmid >= 0, bl, bh)[np.isfinite(gmid).all(1)])
@@ -1422,6 +1437,7 @@ class _Search:
         if not keep.any():
             return
         bl, bh, side, L, ok = bl[keep], bh[keep], side[keep], L[keep], ok[keep]
+        c, fcv = c[keep], fcv[keep]
         neg = side == 1
         width = bh - bl
         # 2. monotonicity: fix variables whose derivative has one sign over the box
@@ -1444,7 +1460,40 @@ class _Search:
             return
         # 3. the affine form on the boxes left: a tighter L and its minimising corner
         bl, bh, side, L, infl, neg = bl[sp], bh[sp], side[sp], L[sp], infl[sp], neg[sp]
-        if USE_AFFINE:
+        AG = B.affine_gradient if USE_AFFINE and AFFINE_GRADIENT and G is not None else None
+        if AG is not None:
+            # ... of f and its gradient: the gradient enclosure, intersected with the interval
+            # one (both sound), gives a tighter mean-value form and proves more monotonicity
+            k = side.size
+            F = AG(bl, bh)
+            self.evaluated += k
+            enc = AG.enclosure(F.reshape(F.shape[0], -1)).reshape(2, nv + 1, k)
+            L = np.maximum(L, np.where(neg, -enc[1, 0], enc[0, 0]))
+            GA = np.where(neg[None, None, :], -enc[::-1, 1:], enc[:, 1:])
+            Gs = Gk[:, :, sp]
+            Gs = np.array((np.maximum(Gs[0], GA[0]), np.minimum(Gs[1], GA[1])))
+            oks = ok[sp] & np.isfinite(Gs).all((0, 1))
+            Lmv = _mean_value_lower(fcv[sp], Gs, bl, bh, c[sp])
+            L = np.where(oks & ~np.isnan(Lmv), np.maximum(L, Lmv), L)
+            lin = AG.linear(F[:, 0, :])
+            lin = np.where(neg[None, :], -lin, lin).T  # (k, nv)
+            self.offer_points(np.where(lin >= 0, bl, bh)[np.isfinite(lin).all(1)])
+            keep = self.settle(bl, bh, side, L)
+            if not keep.any():
+                return
+            bl, bh, side, L, Gs, oks = bl[keep], bh[keep], side[keep], L[keep], Gs[:, :, keep], oks[keep]
+            width = bh - bl
+            okk = oks[:, None] & (width > 0)
+            up = (Gs[0].T >= 0) & okk
+            dn = (Gs[1].T <= 0) & okk & ~up
+            reduced = (up | dn).any(1)
+            self.push(np.where(dn, bh, bl)[reduced], np.where(up, bl, bh)[reduced], side[reduced], L[reduced])
+            infl = width * np.maximum(np.abs(Gs[0]), np.abs(Gs[1])).T
+            infl = np.where(np.isfinite(infl) & oks[:, None], infl, width)
+            keep = ~reduced
+            if not keep.any():
+                return
+        elif USE_AFFINE:
             F = B.affine(bl, bh)[:, 0, :]
             self.evaluated += side.size
             fa = B.affine.enclosure(F)
