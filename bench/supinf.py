@@ -19,7 +19,9 @@ them; the assemble inequality with and without the dense range scans; the paper'
 Sec. 6 expression, and the same with its constant's sign fixed, which gives the paper's
 3.2793), plan-like expressions (random pickup / putdown / scan / squeeze plans of length
 1..8 on the paper's cell, then a pickup or assemble inequality), and random products of
-homogeneous transforms of plan length 1..8 (small angles, as uncertainty is).
+homogeneous transforms of plan length 1..8 (small angles, as uncertainty is), and products
+of depth 8 with every variable at +-0.1 (in, rad): tolerance reached, box-cap hits, a repeated
+question answered from a cell's memo, the compiled interval program (``Bounder(compiled=True)``).
 """
 from __future__ import annotations
 
@@ -241,12 +243,13 @@ def uniform_chain(rng: np.random.Generator, length: int, half: float = 0.1) -> t
 def deep(rng: np.random.Generator, count: int, length: int = 8, half: float = 0.1, repeats: int = 3) -> dict:
     """Products of ``length`` error transforms at +-``half``: how many reach the tolerance,
     how many hit the box cap, boxes and times (ms, medians), and a repeated question
-    answered from a cell's memo (``t_cached``: supinf.cached_bounds, a hit), beside
-    ``t_ours`` (the bounder already compiled) and ``t_plain`` from the same run."""
+    answered from a cell's memo (``t_cached``: supinf.cached_bounds, a hit) and
+    ``Bounder(compiled=True)`` (``t_compiled`` warm, ``t_compiled_first`` with building its
+    CasADi program), beside ``t_ours`` and ``t_plain`` from the same run."""
     from spar_py.memo import Memo
     from spar_py.supinf import MAX_BOXES, cached_bounds
 
-    ms, boxes, capped, cached = [], [], 0, []
+    ms, boxes, capped, cached, comp, first = [], [], 0, [], [], []
     for _ in range(count):
         e, reg = uniform_chain(rng, length, half)
         box = reg.box(e)
@@ -257,10 +260,16 @@ def deep(rng: np.random.Generator, count: int, length: int = 8, half: float = 0.
         memo = Memo()
         cached_bounds(e, box, memo)
         cached.append(median_time(lambda: cached_bounds(e, box, memo), repeats) * 1e3)
+        Bc = Bounder(e, compiled=True)
+        t = time.perf_counter()
+        Bc.bounds(box)  # builds the compiled program on its first small batch
+        first.append((time.perf_counter() - t) * 1e3)
+        comp.append(median_time(lambda: Bc.bounds(box), repeats) * 1e3)
     out = summarise(f"depth {length} at +-{half:g}", ms)
     out.update({"length": length, "half": half, "boxes_median": statistics.median(boxes),
                 "boxes_max": max(boxes), "capped": capped, "max_boxes": MAX_BOXES,
-                "t_cached": statistics.median(cached), "unsound": sum(not m["sound"] for m in ms)})
+                "t_cached": statistics.median(cached), "t_compiled": statistics.median(comp),
+                "t_compiled_first": statistics.median(first), "unsound": sum(not m["sound"] for m in ms)})
     return out
 
 
@@ -337,7 +346,8 @@ def run(per_length: int = 6, seed: int = 0, lengths: tuple[int, ...] = tuple(ran
         say(f"{d['name']:<26}{d['n_vars']:>5.0f}{d['ours']:>10.1e}{d['plain']:>10.1e}"
             f"{d['reached']:>5}/{d['count']:<3}{d['t_ours']:>9.2f}{d['t_one']:>10.2f}"
             f"{d['t_compile']:>9.2f}{d['t_plain']:>9.2f}   boxes median {d['boxes_median']:.0f} "
-            f"max {d['boxes_max']} (cap {d['max_boxes']}, hit {d['capped']}); cached {d['t_cached']:.3f} ms")
+            f"max {d['boxes_max']} (cap {d['max_boxes']}, hit {d['capped']}); cached {d['t_cached']:.3f} ms; "
+            f"compiled {d['t_compiled']:.1f} ms (first {d['t_compiled_first']:.0f} ms)")
     # the planner's own use: one verdict per constraint (evaluate = compile + one-sided bound)
     w = initial_world(cell)
     g = cell.objects["peg"].grasps["p1G1"]
