@@ -26,12 +26,22 @@ the guarantee and removes most of the looseness:
    interval gradient) and the affine form; a variable whose interval derivative has
    constant sign is fixed at the end that minimises (monotonicity; only on boxes where
    every operation is continuous); other boxes are bisected on the variable with the
-   largest ``width * |derivative|``. Values at points (box centres, rigorously; corners
-   chosen by the gradient or the affine form and single-coordinate flips of the best
-   points, in floating point) steer the search; the search stops when each bound is
+   largest ``width * |derivative|``. Boxes the interval gradient cannot prove monotone
+   get the affine form of the expression *and its gradient*: on long transform products
+   the interval gradient suffers the wrapping effect, the affine one does not, and the
+   intersection of the two proves monotonicity on far more boxes. Values at points (box
+   centres, rigorously; corners chosen by the gradient or the affine form and
+   single-coordinate flips of the best points, in floating point) steer the search; the search stops when each bound is
    within ``max(abs_tol, rel_tol * width)`` of a value the function attains (``width``
    the spread of attained values found; the final claim is re-checked with rigorous
    values) or when ``max_boxes`` / ``max_time`` run out; :class:`BoundResult` says which.
+
+4. **Compiling and caching.** :class:`CompiledIntervalProgram` writes the interval rules
+   once as a CasADi SX graph and evaluates a batch in one call (``Bounder(expr,
+   compiled=True)`` uses it for small batches; building it costs ~250 us per
+   instruction, so it pays only for a bounder used many times). :func:`cached_bounds`
+   keeps bounders and results on a cell's memo tables (bounded LRUs), keyed by the
+   expression's structure up to variable names.
 
 Variables are named by their SX symbol names; a box is ``{name: (lo, hi)}``. Units are
 whatever the expression's are (the planner: cell length unit, radians).
@@ -1242,10 +1252,11 @@ def compile_bounder(expr: ca.SX | float) -> Bounder:
     return Bounder(expr)
 
 
-#: Bounds of the memo tables :func:`cached_bounds` keeps on a
-#: cell (cell.memo): compiled bounders (each holds a few CasADi Functions, up to about
-#: 1 MB for a plan of 8 actions) and bound results (a few hundred bytes each).
-BOUNDER_LIMIT = 256
+#: Bounds of the memo tables :func:`cached_bounds` keeps on a cell (cell.memo): compiled
+#: bounders (CasADi Functions and instruction lists: about 0.2 MB for a pickup constraint,
+#: 1-2 MB for a product of 8 transforms, so at most some 100 MB) and bound results (a few
+#: hundred bytes each).
+BOUNDER_LIMIT = 64
 RESULT_LIMIT = 8192
 
 
