@@ -1351,6 +1351,7 @@ class _Search:
         self.pool = (np.repeat(lo0[None, :], len(sides), 0), np.repeat(hi0[None, :], len(sides), 0),
                      np.array(sides, int), np.full(len(sides), -_INF))
         self.evaluated = 0
+        self.steps = 0  # passes made (steps that have begun)
 
     def tol(self) -> float:
         return max(self.abs_tol, self.rel_tol * max(0.0, -self.U[1] - self.U[0]))
@@ -1418,6 +1419,7 @@ class _Search:
         """One pass over a batch of boxes."""
         B, nv = self.B, self.nv
         bl, bh, side, pL = self.take(BATCH)
+        self.steps += 1
         m = side.size
         neg = side == 1
         self.evaluated += m
@@ -1471,7 +1473,9 @@ class _Search:
             return
         # 3. the affine form on the boxes left: a tighter L and its minimising corner
         bl, bh, side, L, infl, neg = bl[sp], bh[sp], side[sp], L[sp], infl[sp], neg[sp]
-        AG = B.affine_gradient if USE_AFFINE and AFFINE_GRADIENT and G is not None else None
+        # (from the second pass on: most expressions are settled by the first, with the
+        # cheaper affine form of f alone)
+        AG = B.affine_gradient if USE_AFFINE and AFFINE_GRADIENT and G is not None and self.steps > 1 else None
         if AG is not None:
             # ... of f and its gradient: the gradient enclosure, intersected with the interval
             # one (both sound), gives a tighter mean-value form and proves more monotonicity
