@@ -159,7 +159,7 @@ def hopeless(repeats: int = 5) -> dict:
     and gives up on uncertainty reduction) as a fresh process, interleaved in the same run
     with its peers: the same file ``--phase1-only`` and the paper's cell. Keys: medians
     ``plan_s``, ``phase1_only_s``, ``paper_s``, ``phase2_s`` (plan minus phase 1 only),
-    all runs and the return codes (1 expected from nothing: the plan exists, so 0)."""
+    all runs and the return codes (0 expected: the plan exists)."""
     rel = str(HOPELESS.relative_to(ROOT))
     cmds = {"plan": [str(SPAR), "plan", rel], "phase1_only": [str(SPAR), "plan", "--phase1-only", rel],
             "paper": [str(SPAR), "plan", str(CELL.relative_to(ROOT))]}
