@@ -49,7 +49,7 @@ FULL = {"ik": {"n": 10_000, "single": 1000, "rtb": 200, "repeats": 5}, "derive":
         "coldstart": {"repeats": 15, "importtime_runs": 5},
         "fd": {"ns": fd.NS}}
 QUICK = {"ik": {"n": 1000, "single": 100, "rtb": 20, "repeats": 3}, "derive": {"repeats": 2},
-         "supinf": {"per_length": 1, "lengths": (1, 4, 8), "repeats": 3},
+         "supinf": {"per_length": 1, "lengths": (1, 4, 8), "repeats": 3, "deep_count": 2},
          "planning": {"quick": True, "max_n": 2, "timeout": 60.0},
          "memory": {"plans": 100, "warmup": 10, "processes": 1},
          "coldstart": {"repeats": 3, "importtime_runs": 1},
@@ -272,6 +272,16 @@ def render(r: dict) -> str:
                     [[str(x["length"]), f"{x['n_vars']:.0f}", _f(x["ours"], ".1e"), _f(x["plain"], ".1e"),
                       f"{x['reached']}/{x['count']}", _f(x["t_ours"]), _f(x["t_one"]), _f(x["t_compile"]),
                       _f(x["t_plain"], ".3f")] for x in s[g]])
+    if "deep" in s:
+        d = s["deep"]
+        L += [f"### Products of depth 8 at +-0.1 (in, rad), {d['count']} expressions", ""]
+        L += _table(["vars", "ours/w", "plain/w", "reached", "box cap hit", "boxes (median, max)", "ours ms",
+                     "cached ms", "compiled=True ms (first)", "compile ms", "plain ms"],
+                    [[f"{d['n_vars']:.0f}", _f(d["ours"], ".1e"), _f(d["plain"], ".1e"),
+                      f"{d['reached']}/{d['count']}", f"{d['capped']}/{d['count']} (cap {d['max_boxes']})",
+                      f"{d['boxes_median']:.0f}, {d['boxes_max']}", _f(d["t_ours"]), _f(d["t_cached"], ".3f"),
+                      f"{_f(d['t_compiled'])} ({_f(d['t_compiled_first'], '.0f')})",
+                      _f(d["t_compile"]), _f(d["t_plain"], ".3f")]])
     L += [(f"`uncertainty.evaluate` on the first pickup's four constraints: {s['evaluate_ms']:.2f} ms per "
           f"constraint. Unsound bounds (inside the sampled range): {s['unsound']}."), ""]
 
@@ -293,6 +303,14 @@ def render(r: dict) -> str:
         ["cold: engine start only", f"{c['start_s']:.3f} s", "1"],
         ["cold: plan minus start", f"{c['plan_minus_start_s']:.3f} s", ""],
     ])
+    if "hopeless" in p:
+        h = p["hopeless"]
+        L += _table(["hopeless_uncertainty.yaml (cold, interleaved)", "median", "ratio"], [
+            ["`spar plan`", f"{h['plan_s']:.2f} s", f"{h['plan_s'] / h['paper_s']:.1f}x the paper's cell"],
+            ["`spar plan --phase1-only`", f"{h['phase1_only_s']:.2f} s", ""],
+            ["phase 2 (difference)", f"{h['phase2_s']:.2f} s", ""],
+            ["the paper's cell", f"{h['paper_s']:.2f} s", "1"],
+        ]) + [""]
     L += [(f"Outcome {w['outcome']}, {w['actions']} actions, {w['instances_examined']} instance(s) "
           f"examined; process exit codes {c['returncodes']}."), ""]
 

@@ -8,6 +8,8 @@ Run from the project root: ``.venv/bin/python -m bench.planning [--quick] [--max
 - cold: ``spar plan kb/problems/peg_in_block.yaml`` as a subprocess, and beside it, in
   the same run and interleaved, the bare cost of a process that starts the engine
   (``python -c "import spar_py.engine as e; e.engine()"``);
+- hopeless: ``spar plan kb/problems/hopeless_uncertainty.yaml`` as a subprocess, beside the
+  same file ``--phase1-only`` and the paper's cell, interleaved (phase 2 at its worst);
 - scaling: ``spar_py.gen.generate_assembly(N)`` for N = 1..10, 20, 30 and 50, each planned
   in its own subprocess (so its peak RSS is its own) after a warm-up plan of the paper's
   cell, with ``Planner(timeout=...)`` and no other option: the generated problem needs 4N
@@ -154,6 +156,31 @@ def cold(repeats: int = 7) -> dict:
             "returncodes": sorted(codes)}
 
 
+HOPELESS = ROOT / "kb" / "problems" / "hopeless_uncertainty.yaml"
+
+
+def hopeless(repeats: int = 5) -> dict:
+    """``spar plan kb/problems/hopeless_uncertainty.yaml`` (phase 2 examines its 50 instances
+    and gives up on uncertainty reduction) as a fresh process, interleaved in the same run
+    with its peers: the same file ``--phase1-only`` and the paper's cell. Keys: medians
+    ``plan_s``, ``phase1_only_s``, ``paper_s``, ``phase2_s`` (plan minus phase 1 only),
+    all runs and the return codes (0 expected: the plan exists)."""
+    rel = str(HOPELESS.relative_to(ROOT))
+    cmds = {"plan": [str(SPAR), "plan", rel], "phase1_only": [str(SPAR), "plan", "--phase1-only", rel],
+            "paper": [str(SPAR), "plan", str(CELL.relative_to(ROOT))]}
+    runs: dict[str, list[float]] = {k: [] for k in cmds}
+    codes = set()
+    for _ in range(repeats):
+        for k, cmd in cmds.items():
+            t, rc = _time_process(cmd)
+            runs[k].append(t)
+            codes.add(rc)
+    med = {k: _median(v) for k, v in runs.items()}
+    return {"repeats": repeats, "plan_s": med["plan"], "phase1_only_s": med["phase1_only"],
+            "paper_s": med["paper"], "phase2_s": med["plan"] - med["phase1_only"], "runs": runs,
+            "returncodes": sorted(codes)}
+
+
 # ---------------------------------------------------------------------- generated problems
 
 
@@ -292,6 +319,7 @@ def run(quick: bool = False, max_n: int = 10, timeout: float = TIMEOUT, progress
     return {
         "warm": warm(repeats=3 if quick else 20, profile_top=top),
         "cold": cold(repeats=2 if quick else 7),
+        "hopeless": hopeless(repeats=2 if quick else 5),
         "scaling": scaling(ns, timeout=timeout, profile_top=top, progress=progress),
         "timeout_s": timeout,
     }
@@ -315,6 +343,9 @@ def main(argv: list[str] | None = None) -> None:
           f"wall {w['wall_s'] * 1e3:.1f} ms (median of {w['repeats']})")
     print(f"cold spar plan : {c['plan_s']:.3f} s; engine start alone {c['start_s']:.3f} s "
           f"(ratio {c['ratio']:.2f}, median of {c['repeats']})")
+    h = r["hopeless"]
+    print(f"hopeless_uncertainty.yaml: {h['plan_s']:.2f} s (--phase1-only {h['phase1_only_s']:.2f} s, "
+          f"paper's cell {h['paper_s']:.2f} s; median of {h['repeats']})")
     for s in r["scaling"]:
         print(json.dumps({k: v for k, v in s.items() if k != "profile"}))
     print(w["profile"])

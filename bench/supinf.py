@@ -19,7 +19,9 @@ them; the assemble inequality with and without the dense range scans; the paper'
 Sec. 6 expression, and the same with its constant's sign fixed, which gives the paper's
 3.2793), plan-like expressions (random pickup / putdown / scan / squeeze plans of length
 1..8 on the paper's cell, then a pickup or assemble inequality), and random products of
-homogeneous transforms of plan length 1..8 (small angles, as uncertainty is).
+homogeneous transforms of plan length 1..8 (small angles, as uncertainty is), and products
+of depth 8 with every variable at +-0.1 (in, rad): tolerance reached, box-cap hits, a repeated
+question answered from a cell's memo, the compiled interval program (``Bounder(compiled=True)``).
 """
 from __future__ import annotations
 
@@ -219,6 +221,58 @@ def random_chain(rng: np.random.Generator, length: int) -> tuple[ca.SX, Registry
     return ca.sumsqr(apply(T, p) - rng.uniform(-30, 30, 3)), reg
 
 
+def uniform_chain(rng: np.random.Generator, length: int, half: float = 0.1) -> tuple[ca.SX, Registry]:
+    """As :func:`random_chain`, but every error variable bounded by +-``half`` (in and rad):
+    the issue's "products of depth 8 at +-0.1 rad"."""
+    reg = Registry()
+    T = _rigid(rng, 30.0)
+    for _ in range(length):
+        E = compose(trans(reg.new("dx", -half, half), reg.new("dy", -half, half), reg.new("dz", -half, half)),
+                    rotz(reg.new("th", -half, half)))
+        if rng.random() < 0.3:
+            E = inv(E)
+        T = compose(T, E, _rigid(rng, 5.0)) if rng.random() < 0.7 else compose(E, T, _rigid(rng, 5.0))
+    kind, p = int(rng.integers(3)), rng.uniform(-3, 3, 3)
+    if kind == 0:
+        return T[int(rng.integers(3)), 3], reg
+    if kind == 1:
+        return apply(inv(T), p)[int(rng.integers(3))], reg
+    return ca.sumsqr(apply(T, p) - rng.uniform(-30, 30, 3)), reg
+
+
+def deep(rng: np.random.Generator, count: int, length: int = 8, half: float = 0.1, repeats: int = 3) -> dict:
+    """Products of ``length`` error transforms at +-``half``: how many reach the tolerance,
+    how many hit the box cap, boxes and times (ms, medians), and a repeated question
+    answered from a cell's memo (``t_cached``: supinf.cached_bounds, a hit) and
+    ``Bounder(compiled=True)`` (``t_compiled`` warm, ``t_compiled_first`` with building its
+    CasADi program), beside ``t_ours`` and ``t_plain`` from the same run."""
+    from spar_py.memo import Memo
+    from spar_py.supinf import MAX_BOXES, cached_bounds
+
+    ms, boxes, capped, cached, comp, first = [], [], 0, [], [], []
+    for _ in range(count):
+        e, reg = uniform_chain(rng, length, half)
+        box = reg.box(e)
+        m = measure(e, box, rng, repeats=repeats)
+        ms.append(m)
+        boxes.append(m["boxes"])
+        capped += m["boxes"] >= MAX_BOXES
+        memo = Memo()
+        cached_bounds(e, box, memo)
+        cached.append(median_time(lambda: cached_bounds(e, box, memo), repeats) * 1e3)
+        Bc = Bounder(e, compiled=True)
+        t = time.perf_counter()
+        Bc.bounds(box)  # builds the compiled program on its first small batch
+        first.append((time.perf_counter() - t) * 1e3)
+        comp.append(median_time(lambda: Bc.bounds(box), repeats) * 1e3)
+    out = summarise(f"depth {length} at +-{half:g}", ms)
+    out.update({"length": length, "half": half, "boxes_median": statistics.median(boxes),
+                "boxes_max": max(boxes), "capped": capped, "max_boxes": MAX_BOXES,
+                "t_cached": statistics.median(cached), "t_compiled": statistics.median(comp),
+                "t_compiled_first": statistics.median(first), "unsound": sum(not m["sound"] for m in ms)})
+    return out
+
+
 # ------------------------------------------------------------------ report
 
 
@@ -247,7 +301,7 @@ def row(name: str, ms: list[dict]) -> str:
 
 def run(per_length: int = 6, seed: int = 0, lengths: tuple[int, ...] = tuple(range(1, 9)),
         groups: tuple[str, ...] = GROUPS, repeats: int = 5,
-        progress=None) -> dict:
+        progress=None, deep_count: int = 6) -> dict:
     """All the SUP/INF figures as data.
 
     Keys: ``paper`` (one :func:`measure` dict per expression of the paper's cell, with
@@ -255,7 +309,8 @@ def run(per_length: int = 6, seed: int = 0, lengths: tuple[int, ...] = tuple(ran
     plan length in ``lengths`` over ``per_length`` expressions; only the ``groups``
     asked for), ``evaluate_ms`` (``uncertainty.evaluate`` per constraint of the first
     pickup, compile included: the planner's own cost of one verdict) and ``unsound`` (how
-    many bounds fell inside the sampled/optimised range: must be 0). ``progress``, if
+    many bounds fell inside the sampled/optimised range: must be 0), ``deep`` (:func:`deep`
+    over ``deep_count`` products of depth 8 at +-0.1; 0 skips it). ``progress``, if
     given, is called with each printable table line as it is measured.
     """
     say = progress or (lambda line: None)
@@ -284,6 +339,15 @@ def run(per_length: int = 6, seed: int = 0, lengths: tuple[int, ...] = tuple(ran
             out["unsound"] += sum(not m["sound"] for m in ms)
             out[group].append({**summarise(f"plan length {n}", ms), "length": n})
             say(row(f"plan length {n}", ms))
+    if deep_count:
+        say(f"-- products of depth 8 at +-0.1 (in, rad), {deep_count} expressions")
+        d = out["deep"] = deep(rng, deep_count, repeats=min(3, repeats))
+        out["unsound"] += d["unsound"]
+        say(f"{d['name']:<26}{d['n_vars']:>5.0f}{d['ours']:>10.1e}{d['plain']:>10.1e}"
+            f"{d['reached']:>5}/{d['count']:<3}{d['t_ours']:>9.2f}{d['t_one']:>10.2f}"
+            f"{d['t_compile']:>9.2f}{d['t_plain']:>9.2f}   boxes median {d['boxes_median']:.0f} "
+            f"max {d['boxes_max']} (cap {d['max_boxes']}, hit {d['capped']}); cached {d['t_cached']:.3f} ms; "
+            f"compiled {d['t_compiled']:.1f} ms (first {d['t_compiled_first']:.0f} ms)")
     # the planner's own use: one verdict per constraint (evaluate = compile + one-sided bound)
     w = initial_world(cell)
     g = cell.objects["peg"].grasps["p1G1"]

@@ -479,3 +479,144 @@ def test_tight_on_the_paper_cell(capsys: pytest.CaptureFixture[str]) -> None:
         lines.append(f"{name:<22} true [{tmin:.6f}, {tmax:.6f}]  ours {ours:.1e}  plain {gap:.1e} of the width")
     with capsys.disabled():
         print("\n" + "\n".join(lines))
+
+
+# ------------------------------------------------------------------ compiled program, depth 8, caches
+
+
+def _uniform_chain(rng: np.random.Generator, n_actions: int, reg: Registry, half: float = 0.1) -> ca.SX:
+    """A product of n_actions error transforms, every variable within +-half (in, rad)."""
+    T = rand_rigid(rng, 30.0)
+    for _ in range(n_actions):
+        E = compose(trans(reg.new("dx", -half, half), reg.new("dy", -half, half), reg.new("dz", -half, half)),
+                    rotz(reg.new("th", -half, half)))
+        if rng.random() < 0.3:
+            E = inv(E)
+        T = compose(T, E, rand_rigid(rng, 5.0))
+    p = rng.uniform(-3, 3, 3)
+    return apply(inv(T), p)[int(rng.integers(3))] if rng.random() < 0.5 else T[int(rng.integers(3)), 3]
+
+
+@settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.integers(0, 2**32 - 1), st.sampled_from([1, 4, 8]))
+def test_compiled_program_encloses_the_interpreted_one(seed: int, n: int) -> None:
+    """The compiled interval program (value and gradient) contains the interpreted program's
+    enclosure on random sub-boxes, and the sampled values; it is at most a hair wider."""
+    from spar_py.supinf import CompiledIntervalProgram
+
+    rng = np.random.default_rng(seed)
+    reg = Registry()
+    e = random_chain(rng, n, reg)
+    B = Bounder(e)
+    C, P = CompiledIntervalProgram(B._fg), IntervalProgram(B._fg)
+    lo, hi = box_arrays(B, reg.box(e))
+    a, b = rng.uniform(lo, hi, (40, lo.size)), rng.uniform(lo, hi, (40, lo.size))
+    L, H = np.minimum(a, b), np.maximum(a, b)
+    (cf, cg), cd = C(L, H)
+    (pf, pg), pd = P(L, H)
+    for c, p in ((cf, pf), (cg, pg)):
+        assert (c[0] <= p[0]).all() and (c[1] >= p[1]).all()
+        fin = np.isfinite(p)
+        scale = 1.0 + np.abs(p[fin])
+        assert (np.abs(c[fin] - p[fin]) <= 1e-9 * scale).all()
+    assert (cd == pd).all()
+    x = rng.uniform(L[0], H[0], (500, lo.size))  # the first box: values inside its enclosure
+    v = B.values(x)
+    assert cf[0, 0, 0] <= v.min() and v.max() <= cf[1, 0, 0]
+
+
+def test_compiled_program_falls_back_off_its_domain() -> None:
+    """Division by an interval holding 0, log of a box reaching 0, atan2 on its cut: the
+    compiled program hands those boxes to the interpreted rules and agrees with them."""
+    from spar_py.supinf import CompiledIntervalProgram
+
+    x, y = ca.SX.sym("x"), ca.SX.sym("y")
+    v = ca.vertcat(x, y)
+    fn = ca.Function("f", [v], [ca.vertcat(x / y, ca.log(x), ca.atan2(y, x), ca.sin(x) * y)])
+    C, P = CompiledIntervalProgram(fn), IntervalProgram(fn)
+    L = np.array([[1.0, -1.0], [0.0, 0.5], [-2.0, -0.1], [0.5, 1.0]])
+    H = np.array([[2.0, 1.0], [1.0, 1.5], [-1.0, 0.1], [0.6, 2.0]])
+    (c,), cd = C(L, H)
+    (p,), pd = P(L, H)
+    assert np.array_equal(np.isinf(c), np.isinf(p))
+    assert c[0, 0, 0] == -math.inf and c[1, 0, 0] == math.inf  # x / y, y holds 0
+    assert c[0, 1, 1] == -math.inf  # log over [0, 1]
+    assert (cd == pd).all() and cd[0] and cd[2] and not cd[3]
+    fin = np.isfinite(p)
+    assert (c[0][fin[0]] <= p[0][fin[0]]).all() and (c[1][fin[1]] >= p[1][fin[1]]).all()
+
+
+def test_compiled_bounder_is_sound_and_agrees() -> None:
+    """Bounder(compiled=True) sends small batches to the compiled program: sound, and within
+    the tolerance of the interpreted bounder's answer."""
+    rng = np.random.default_rng(5)
+    reg = Registry()
+    e = random_chain(rng, 3, reg, big_angles=0.0)
+    box = reg.box(e)
+    Bc, Bi = Bounder(e, compiled=True), Bounder(e)
+    rc, ri = Bc.bounds(box), Bi.bounds(box)
+    assert Bc.gradient is not None and Bc.gradient.compiled is not None
+    assert Bi.gradient is not None and Bi.gradient.compiled is None
+    assert rc.lo <= ri.lo_found and rc.hi >= ri.hi_found and ri.lo <= rc.lo_found and ri.hi >= rc.hi_found
+    w = ri.hi_found - ri.lo_found
+    assert abs(rc.lo - ri.lo) <= 2e-3 * w and abs(rc.hi - ri.hi) <= 2e-3 * w
+    lo, hi = box_arrays(Bc, box)
+    v = Bc.values(rng.uniform(lo, hi, (5000, lo.size)))
+    assert rc.lo <= v.min() and v.max() <= rc.hi
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_sound_at_depth_8_small_angles(seed: int) -> None:
+    """Products of 8 error transforms at +-0.1 (in, rad), 32 variables: sound however the
+    budget ends, and never looser than plain interval arithmetic."""
+    rng = np.random.default_rng(800 + seed)
+    reg = Registry()
+    e = _uniform_chain(rng, 8, reg)
+    box = reg.box(e)
+    r = check_sound(e, box, rng, 20_000, max_boxes=1500)
+    plain = Bounder(e).interval(box)
+    assert plain[0] <= r.lo + 1e-12 * (1 + abs(r.lo)) and r.hi <= plain[1] + 1e-12 * (1 + abs(r.hi))
+
+
+def test_cached_bounds_by_structure_not_names() -> None:
+    """The same constraint rebuilt in another registry (other variable numbering) is one
+    cache entry with the same answer; another constant or another box is a new one; the
+    tables keep their bounds."""
+    from spar_py.memo import Memo
+    from spar_py.supinf import BOUNDER_LIMIT, RESULT_LIMIT, cached_bounds, expression_key
+
+    def build(skip: int, c: float = 2.0) -> tuple[ca.SX, dict]:
+        reg = Registry()
+        for _ in range(skip):
+            reg.new("th", -1, 1)  # shifts the numbering: th_1, th_2, ...
+        th, d = reg.new("th", -0.1, 0.1), reg.new("d", -0.2, 0.3)
+        e = (c + d) * ca.cos(th) - 30 * ca.sin(th)
+        return e, reg.box(e)
+
+    memo = Memo()
+    e1, b1 = build(0)
+    e2, b2 = build(3)
+    assert sorted(b1) != sorted(b2)
+    assert expression_key(e1) == expression_key(e2) != expression_key(build(0, 2.5)[0])
+    r1 = cached_bounds(e1, b1, memo)
+    r2 = cached_bounds(e2, b2, memo)
+    assert r1 == r2 == Bounder(e1).bounds(b1)
+    assert memo.sizes() == {"supinf.results": 1, "supinf.bounders": 1}
+    wider = {k: (2 * lo, 2 * hi) for k, (lo, hi) in b1.items()}
+    r3 = cached_bounds(e1, wider, memo)
+    assert r3.lo <= r1.lo and r3.hi >= r1.hi
+    assert memo.sizes() == {"supinf.results": 2, "supinf.bounders": 1}
+    assert cached_bounds(e1, b1, memo, want="lo").lo == cached_bounds(e1, b1, None, want="lo").lo
+    assert memo.table("supinf.results", RESULT_LIMIT).limit == RESULT_LIMIT
+    assert memo.table("supinf.bounders", BOUNDER_LIMIT).limit == BOUNDER_LIMIT
+
+
+def test_affine_division_contains_samples() -> None:
+    """Affine arithmetic of a quotient (1/b gets its own noise symbol) encloses sampled values."""
+    x, y = ca.SX.sym("x"), ca.SX.sym("y")
+    A = AffineProgram(ca.Function("f", [ca.vertcat(x, y)], [(x + y) / (y * y + 1.0) - x / y]))
+    lo, hi = np.array([[-1.0, 0.5]]), np.array([[2.0, 1.5]])
+    r = A.enclosure(A(lo, hi)[:, 0, :])
+    P = np.random.default_rng(0).uniform(lo[0], hi[0], (20000, 2))
+    v = (P[:, 0] + P[:, 1]) / (P[:, 1] ** 2 + 1.0) - P[:, 0] / P[:, 1]
+    assert r[0, 0] <= v.min() and v.max() <= r[1, 0]

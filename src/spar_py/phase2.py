@@ -83,7 +83,10 @@ def new_world(cell: Cell, steps: list[Step], sources: Sources | None = None,
     scans = {**(sensing or {}), **{n: sn.leaves for n, sn in cell.sensors.items()}}
     unc = ur.initial_world(cell, Registry(), active=active)
     scan_key = tuple(sorted(scans.items()))
-    return World(cell, unc, placements, sources=src, active=active, scans=scans, key=(key, scan_key))
+    # the key holds what the world depends on before any step; step() adds each step's own
+    # inputs (its placement, its sources), so instances that agree on a prefix share it
+    return World(cell, unc, placements, sources=src, active=active, scans=scans,
+                 key=(tuple(sorted(active.items())), scan_key))
 
 
 def sensing_bounds(cell: Cell, rules: Mapping[str, Mapping[str, Any]] | None) -> dict[str, Bounds]:
@@ -277,7 +280,9 @@ def step(world: World, s: Step) -> tuple[list[dict[str, Any]], World, dict[str, 
     handler = STEPS.get(s["name"])
     if handler is None:
         raise SparValueError(f"phase 2 cannot execute {s['name']!r}")
-    key = world.key + (_step_key(s),)
+    place = world.placements.get(s["id"]) if s["name"] == "putdown" else None
+    key = world.key + ((_step_key(s), _frozen(world.sources.get(s["id"], {})),
+                        None if place is None else (place.pose, place.T.tobytes())),)
 
     def run() -> tuple[list[dict[str, Any]], World, dict[str, Any]]:
         checks, after, geo = handler(_activate(world, s), s)
@@ -285,7 +290,9 @@ def step(world: World, s: Step) -> tuple[list[dict[str, Any]], World, dict[str, 
             geo["from"] = dict(world.sources[s["id"]])
         return checks, replace(after, key=key), geo
 
-    return world.cell.memo.table("phase2.steps", MEMO_LIMIT).get_or_compute(key, run)
+    checks, after, geo = world.cell.memo.table("phase2.steps", MEMO_LIMIT).get_or_compute(key, run)
+    # a world from the memo may come from another instance: keep this instance's plan data
+    return checks, replace(after, placements=world.placements, sources=world.sources), geo
 
 
 def poses(world: World) -> dict[str, list[list[float]]]:
@@ -378,7 +385,7 @@ def _reach_verdict(action: str, ok: bool, what: str) -> dict[str, Any]:
 
 def _verdicts(world: World, cs: list[ur.Constraint]) -> list[dict[str, Any]]:
     out = []
-    for v in ur.evaluate_all(cs, world.unc.registry):
+    for v in ur.evaluate_all(cs, world.unc.registry, memo=world.cell.memo):
         d = v.as_dict()
         d["kind"] = "uncertainty"
         out.append(d)
@@ -389,7 +396,7 @@ def _verdicts_until_unsatisfied(world: World, cs: list[ur.Constraint]) -> list[d
     """The verdicts of ``cs`` in order, up to and including the first unsatisfied one."""
     out = []
     for c in cs:
-        d = ur.evaluate(c, world.unc.registry).as_dict()
+        d = ur.evaluate(c, world.unc.registry, memo=world.cell.memo).as_dict()
         d["kind"] = "uncertainty"
         out.append(d)
         if not d["satisfied"]:

@@ -26,12 +26,22 @@ the guarantee and removes most of the looseness:
    interval gradient) and the affine form; a variable whose interval derivative has
    constant sign is fixed at the end that minimises (monotonicity; only on boxes where
    every operation is continuous); other boxes are bisected on the variable with the
-   largest ``width * |derivative|``. Values at points (box centres, rigorously; corners
-   chosen by the gradient or the affine form and single-coordinate flips of the best
-   points, in floating point) steer the search; the search stops when each bound is
+   largest ``width * |derivative|``. Boxes the interval gradient cannot prove monotone
+   get the affine form of the expression *and its gradient*: on long transform products
+   the interval gradient suffers the wrapping effect, the affine one does not, and the
+   intersection of the two proves monotonicity on far more boxes. Values at points (box
+   centres, rigorously; corners chosen by the gradient or the affine form and
+   single-coordinate flips of the best points, in floating point) steer the search; the search stops when each bound is
    within ``max(abs_tol, rel_tol * width)`` of a value the function attains (``width``
    the spread of attained values found; the final claim is re-checked with rigorous
    values) or when ``max_boxes`` / ``max_time`` run out; :class:`BoundResult` says which.
+
+4. **Compiling and caching.** :class:`CompiledIntervalProgram` writes the interval rules
+   once as a CasADi SX graph and evaluates a batch in one call (``Bounder(expr,
+   compiled=True)`` uses it for small batches; building it costs ~250 us per
+   instruction, so it pays only for a bounder used many times). :func:`cached_bounds`
+   keeps bounders and results on a cell's memo tables (bounded LRUs), keyed by the
+   expression's structure up to variable names.
 
 Variables are named by their SX symbol names; a box is ``{name: (lo, hi)}``. Units are
 whatever the expression's are (the planner: cell length unit, radians).
@@ -48,13 +58,18 @@ import casadi as ca
 import numpy as np
 
 from .errors import SparValueError
+from .memo import Memo
 
 __all__ = [
     "BoundResult",
+    "AdaptiveProgram",
     "Bounder",
+    "CompiledIntervalProgram",
     "IntervalProgram",
     "bounds",
+    "cached_bounds",
     "compile_bounder",
+    "expression_key",
     "inf",
     "interval",
     "sup",
@@ -66,6 +81,10 @@ REL_TOL = 1e-3
 ABS_TOL = 1e-9
 MAX_BOXES = 5000
 BATCH = 256
+#: The search's affine step (``AffineProgram``) on the expression alone, or (AFFINE_GRADIENT)
+#: on the expression and its gradient, whose enclosures then tighten the interval gradient.
+USE_AFFINE = True
+AFFINE_GRADIENT = True
 
 _INF = math.inf
 _DIR = np.array([[-np.inf], [np.inf]])
@@ -455,6 +474,316 @@ class IntervalProgram:
         return outs, disc
 
 
+# ================================================================== the compiled interval program
+#
+# The same interval rules as above, written once as a CasADi SX graph over the ends of
+# the input intervals and compiled into one Function: evaluating it on a batch of boxes
+# is one call into CasADi's virtual machine (no Python per instruction). Outward rounding
+# is a relative widening (SX has no nextafter): after an IEEE-exact, correctly rounded
+# operation x is moved by |x| 2^-50 + 1e-300 (at least 4 ulps: with the rounding of the
+# widening itself the result still lies outside the exact one), after a libm function by
+# |x| _LIBM_REL + 1e-300. Every value also feeds a finiteness check, ``z * (lo + hi)`` with
+# ``z`` an input that is always 0 (so CasADi cannot fold it): the sum is 0 while every end
+# is finite and NaN once one is not. The boxes on which some value is infinite or NaN, or
+# some operation leaves its domain (division by an interval holding 0, a tan pole,
+# atan2's branch cut, log of x <= 0, ...), are evaluated again by :class:`IntervalProgram`,
+# whose rules know those cases; the fast path never has to be right about them.
+
+_ULP4 = 2.0 ** -50
+_SX_TINY = 1e-300
+
+
+def _sx_dn(x: ca.SX, rel: float = _ULP4) -> ca.SX:
+    return x - (ca.fabs(x) * rel + _SX_TINY)
+
+
+def _sx_up(x: ca.SX, rel: float = _ULP4) -> ca.SX:
+    return x + (ca.fabs(x) * rel + _SX_TINY)
+
+
+def _sx_hull(vals: list[ca.SX], rel: float = _ULP4) -> tuple[ca.SX, ca.SX]:
+    lo, hi = vals[0], vals[0]
+    for v in vals[1:]:
+        lo, hi = ca.fmin(lo, v), ca.fmax(hi, v)
+    return _sx_dn(lo, rel), _sx_up(hi, rel)
+
+
+def _sx_period_hit(lo: ca.SX, hi: ca.SX, offset: float, period: float) -> ca.SX:
+    """1 where some offset + k*period lies in [lo - s, hi + s] (as :func:`_period_hits`)."""
+    s = 1e-9 * (1.0 + ca.fmax(ca.fabs(lo), ca.fabs(hi)))
+    k = ca.floor((hi + s - offset) / period)
+    return offset + k * period >= lo - s
+
+
+def _sx_trig(a: tuple[ca.SX, ca.SX], f: Callable[[ca.SX], ca.SX], max_at: float,
+             min_at: float) -> tuple[ca.SX, ca.SX]:
+    lo, hi = a
+    v0, v1 = f(lo), f(hi)
+    rlo, rhi = _sx_hull([v0, v1], _LIBM_REL)
+    full = ca.logic_or(hi - lo >= _TWO_PI, ca.fmax(ca.fabs(lo), ca.fabs(hi)) >= _BIG_ANGLE)
+    rhi = ca.if_else(ca.logic_or(full, _sx_period_hit(lo, hi, max_at, _TWO_PI)), 1.0, rhi)
+    rlo = ca.if_else(ca.logic_or(full, _sx_period_hit(lo, hi, min_at, _TWO_PI)), -1.0, rlo)
+    return ca.fmax(rlo, -1.0), ca.fmin(rhi, 1.0)
+
+
+def _sx_mul(a: tuple[ca.SX, ca.SX], b: tuple[ca.SX, ca.SX]) -> tuple[ca.SX, ca.SX]:
+    return _sx_hull([a[0] * b[0], a[0] * b[1], a[1] * b[0], a[1] * b[1]])
+
+
+def _sx_even(a: tuple[ca.SX, ca.SX], f: Callable[[ca.SX], ca.SX], rel: float) -> tuple[ca.SX, ca.SX]:
+    """An even function increasing in |x| (x^2, x^4, cosh): its range from the nearest and farthest |x|."""
+    near = ca.fmax(0.0, ca.fmax(a[0], -a[1]))
+    lo = _sx_dn(f(near), rel)
+    hi = _sx_up(ca.fmax(f(a[0]), f(a[1])), rel)
+    return lo, hi
+
+
+def _sx_monotone(a: tuple[ca.SX, ca.SX], f: Callable[[ca.SX], ca.SX],
+                 increasing: bool = True) -> tuple[ca.SX, ca.SX]:
+    v0, v1 = f(a[0]), f(a[1])
+    if not increasing:
+        v0, v1 = v1, v0
+    return _sx_dn(v0, _LIBM_REL), _sx_up(v1, _LIBM_REL)
+
+
+def _sx_powc(a: tuple[ca.SX, ca.SX], c: float) -> tuple[tuple[ca.SX, ca.SX], ca.SX]:
+    """[a] ** c for a constant c, and the out-of-domain condition."""
+    no = ca.SX(0)
+    if c == 0:
+        return (ca.SX(1.0), ca.SX(1.0)), no
+    if c == 1:
+        return a, no
+    if float(c).is_integer():
+        n = int(c)
+        if n < 0:
+            (p0, p1), bad = _sx_powc(a, -n)
+            return (_sx_dn(1.0 / p1), _sx_up(1.0 / p0)), ca.logic_or(bad, ca.logic_and(p0 <= 0, p1 >= 0))
+        if n % 2:
+            return _sx_monotone(a, lambda x: x ** n), no
+        lo, hi = _sx_even(a, lambda x: x ** n, _LIBM_REL)
+        return (ca.fmax(lo, 0.0), hi), no
+    if c > 0:
+        lo, hi = _sx_monotone((ca.fmax(a[0], 0.0), ca.fmax(a[1], 0.0)), lambda x: x ** c)
+        return (ca.fmax(lo, 0.0), hi), a[1] < 0
+    lo, hi = _sx_monotone(a, lambda x: x ** c, increasing=False)
+    return (ca.fmax(lo, 0.0), hi), a[0] <= 0
+
+
+def _sx_unary(op: int, a: tuple[ca.SX, ca.SX]) -> tuple[tuple[ca.SX, ca.SX], ca.SX, ca.SX]:
+    """(range, out-of-domain condition, discontinuity condition) of a unary operation."""
+    lo, hi = a
+    no = ca.SX(0)
+    if op == ca.OP_NEG:
+        return (-hi, -lo), no, no
+    if op == ca.OP_TWICE:
+        return (2.0 * lo, 2.0 * hi), no, no
+    if op == ca.OP_SQ:
+        r = _sx_even(a, lambda x: x * x, _ULP4)
+        return (ca.fmax(r[0], 0.0), r[1]), no, no
+    if op == ca.OP_FABS:
+        return (ca.fmax(0.0, ca.fmax(lo, -hi)), ca.fmax(-lo, hi)), no, no
+    if op == ca.OP_SQRT:
+        r = (ca.fmax(_sx_dn(ca.sqrt(ca.fmax(lo, 0.0))), 0.0), _sx_up(ca.sqrt(ca.fmax(hi, 0.0))))
+        return r, hi < 0, lo <= 0
+    if op == ca.OP_SIN:
+        return _sx_trig(a, ca.sin, _HALF_PI, -_HALF_PI), no, no
+    if op == ca.OP_COS:
+        return _sx_trig(a, ca.cos, 0.0, _PI), no, no
+    if op == ca.OP_EXP:
+        r = _sx_monotone(a, ca.exp)
+        return (ca.fmax(r[0], 0.0), r[1]), no, no
+    if op == ca.OP_LOG:
+        return _sx_monotone(a, ca.log), lo <= 0, lo <= 0
+    if op == ca.OP_ATAN:
+        return _sx_monotone(a, ca.atan), no, no
+    if op == ca.OP_SINH:
+        return _sx_monotone(a, ca.sinh), no, no
+    if op == ca.OP_TANH:
+        return _sx_monotone(a, ca.tanh), no, no
+    if op == ca.OP_COSH:
+        r = _sx_even(a, ca.cosh, _LIBM_REL)
+        return (ca.fmax(r[0], 1.0), r[1]), no, no
+    if op in (ca.OP_ASIN, ca.OP_ACOS):
+        f = ca.asin if op == ca.OP_ASIN else ca.acos
+        r = _sx_monotone(a, f, op == ca.OP_ASIN)
+        return r, ca.logic_or(lo < -1, hi > 1), ca.logic_or(lo <= -1, hi >= 1)
+    if op == ca.OP_SIGN:
+        return (ca.sign(lo), ca.sign(hi)), no, ca.logic_and(ca.logic_and(lo <= 0, hi >= 0), lo < hi)
+    if op == ca.OP_INV:
+        zero = ca.logic_and(lo <= 0, hi >= 0)
+        return (_sx_dn(1.0 / hi), _sx_up(1.0 / lo)), zero, zero
+    if op == ca.OP_TAN:
+        pole = ca.logic_or(ca.logic_or(hi - lo >= _PI, ca.fmax(ca.fabs(lo), ca.fabs(hi)) >= _BIG_ANGLE),
+                           _sx_period_hit(lo, hi, _HALF_PI, _PI))
+        return _sx_monotone(a, ca.tan), pole, pole
+    raise SparValueError(f"supinf: unsupported operation {_op_name(op)} in expression")
+
+
+def _sx_binary(op: int, a: tuple[ca.SX, ca.SX], b: tuple[ca.SX, ca.SX]) -> tuple[tuple[ca.SX, ca.SX], ca.SX, ca.SX]:
+    """(range, out-of-domain condition, discontinuity condition) of a binary operation."""
+    no = ca.SX(0)
+    if op == ca.OP_ADD:
+        return (_sx_dn(a[0] + b[0]), _sx_up(a[1] + b[1])), no, no
+    if op == ca.OP_SUB:
+        return (_sx_dn(a[0] - b[1]), _sx_up(a[1] - b[0])), no, no
+    if op == ca.OP_MUL:
+        return _sx_mul(a, b), no, no
+    if op == ca.OP_DIV:
+        zero = ca.logic_and(b[0] <= 0, b[1] >= 0)
+        return _sx_hull([a[0] / b[0], a[0] / b[1], a[1] / b[0], a[1] / b[1]]), zero, zero
+    if op == ca.OP_POW:
+        la = _sx_monotone(a, ca.log)
+        m = _sx_mul(b, la)
+        e = _sx_monotone(m, ca.exp)
+        return (ca.fmax(e[0], 0.0), e[1]), a[0] <= 0, a[0] <= 0
+    if op == ca.OP_ATAN2:
+        cut = ca.logic_and(ca.logic_and(b[0] <= 0, a[0] <= 0), a[1] >= 0)
+        r = _sx_hull([ca.atan2(y, x) for y in a for x in b], _LIBM_REL)
+        return (ca.fmax(r[0], -_PI_UP), ca.fmin(r[1], _PI_UP)), cut, cut
+    if op == ca.OP_FMIN:
+        return (ca.fmin(a[0], b[0]), ca.fmin(a[1], b[1])), no, no
+    if op == ca.OP_FMAX:
+        return (ca.fmax(a[0], b[0]), ca.fmax(a[1], b[1])), no, no
+    if op == ca.OP_HYPOT:
+        sa, sb = _sx_unary(ca.OP_SQ, a)[0], _sx_unary(ca.OP_SQ, b)[0]
+        s = (_sx_dn(sa[0] + sb[0]), _sx_up(sa[1] + sb[1]))
+        return (ca.fmax(_sx_dn(ca.sqrt(s[0])), 0.0), _sx_up(ca.sqrt(s[1]))), no, no
+    raise SparValueError(f"supinf: unsupported operation {_op_name(op)} in expression")
+
+
+class CompiledIntervalProgram:
+    """:class:`IntervalProgram`'s rules compiled into one CasADi Function (see the section note).
+
+    Same interface: ``prog(lo, hi)`` with ``lo``, ``hi`` of shape ``(n, n_in)`` returns
+    ``(outs, disc)``. The whole batch is one CasADi call; the boxes on which the fast
+    path meets an infinite value or leaves an operation's domain are redone by the
+    interpreted :class:`IntervalProgram` (built on first need).
+    """
+
+    def __init__(self, fn: ca.Function) -> None:
+        if fn.n_in() != 1:
+            raise SparValueError("IntervalProgram: the Function must have exactly one (vector) input")
+        self._fn = fn
+        self.n_in = int(fn.nnz_in(0))
+        self.out_sizes = [int(fn.nnz_out(k)) for k in range(fn.n_out())]
+        n = self.n_in
+        X = ca.SX.sym("x", 2 * n + 1)
+        z = X[2 * n]
+        w: dict[int, tuple[ca.SX, ca.SX]] = {}
+        consts: dict[int, float] = {}
+        outs = [[(ca.SX(np.nan), ca.SX(np.nan))] * s for s in self.out_sizes]
+        bad: list[ca.SX] = []  # summed once at the end (a running sum re-walks its chain)
+        disc: list[ca.SX] = []
+        for op, ins, o_regs, const in _instructions(fn):
+            o = o_regs[0] if o_regs else -1
+            if op == ca.OP_CONST:
+                consts[o] = const
+                w[o] = (ca.SX(const), ca.SX(const))
+                continue
+            if op == ca.OP_INPUT:
+                j = ins[1]
+                w[o] = (X[j], X[n + j])
+            elif op == ca.OP_OUTPUT:
+                outs[o_regs[0]][o_regs[1]] = w[ins[0]]
+                continue
+            elif op == ca.OP_ASSIGN:
+                w[o] = w[ins[0]]
+            else:
+                d_bad = d_disc = ca.SX(0)
+                if op == ca.OP_CONSTPOW:
+                    if ins[1] not in consts:
+                        raise SparValueError("supinf: constpow with a non-constant exponent")
+                    r, d_bad = _sx_powc(w[ins[0]], consts[ins[1]])
+                    d_disc = d_bad
+                elif op == ca.OP_MUL and (ins[0] in consts or ins[1] in consts):
+                    c, a = (consts[ins[0]], ins[1]) if ins[0] in consts else (consts[ins[1]], ins[0])
+                    lo, hi = w[a]
+                    lo, hi = (c * lo, c * hi) if c >= 0 else (c * hi, c * lo)
+                    r = (lo, hi) if abs(c) == 1.0 or c == 0.0 else (_sx_dn(lo), _sx_up(hi))
+                elif op == ca.OP_DIV and ins[1] in consts and consts[ins[1]] != 0:
+                    c = consts[ins[1]]
+                    lo, hi = w[ins[0]]
+                    lo, hi = (lo / c, hi / c) if c > 0 else (hi / c, lo / c)
+                    r = (_sx_dn(lo), _sx_up(hi))
+                elif op in _UNARY:
+                    r, d_bad, d_disc = _sx_unary(op, w[ins[0]])
+                elif op in _BINARY:
+                    r, d_bad, d_disc = _sx_binary(op, w[ins[0]], w[ins[1]])
+                else:
+                    raise SparValueError(f"supinf: unsupported operation {_op_name(op)} in expression")
+                w[o] = r
+                bad += [d_bad, z * (r[0] + r[1])]
+                disc.append(d_disc)
+            consts.pop(o, None)
+        flat = [e for out in outs for e in (*[lo for lo, _ in out], *[hi for _, hi in out])]
+        total = [ca.sum1(ca.vertcat(*t)) if t else ca.SX(0) for t in (disc, bad)]
+        self._f = ca.Function("iv", [X], [ca.vertcat(*flat, *total)])
+        self._fallback: IntervalProgram | None = None
+
+    @property
+    def n_instructions(self) -> int:
+        """Instructions of the compiled interval Function (a size measure)."""
+        return int(self._f.n_instructions())
+
+    def __call__(self, lo: np.ndarray, hi: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
+        lo = np.atleast_2d(np.asarray(lo, float))
+        hi = np.atleast_2d(np.asarray(hi, float))
+        n = lo.shape[0]
+        arg = np.vstack((lo.T, hi.T, np.zeros((1, n))))
+        with np.errstate(all="ignore"):
+            R = np.asarray(self._f(arg)).reshape(-1, n)
+        outs, k = [], 0
+        for s in self.out_sizes:
+            outs.append(np.array((R[k:k + s], R[k + s:k + 2 * s])))
+            k += 2 * s
+        disc = R[k] != 0
+        redo = ~(R[k + 1] == 0) | ~np.isfinite(lo).all(1) | ~np.isfinite(hi).all(1)
+        if redo.any():
+            if self._fallback is None:
+                self._fallback = IntervalProgram(self._fn)
+            fo, fd = self._fallback(lo[redo], hi[redo])
+            for r, f in zip(outs, fo):
+                r[:, :, redo] = f
+            disc[redo] = fd
+        for r in outs:  # an output no instruction wrote: unknown
+            unknown = np.isnan(r).any(0)
+            r[0][unknown] = -_INF
+            r[1][unknown] = _INF
+        return outs, disc
+
+
+#: Batches of at most this many boxes go to the compiled program when there is one (on
+#: deep products it is 4-10x faster there; on large batches numpy's whole-array
+#: operations win: bench/supinf.py).
+COMPILED_MAX_BATCH = 64
+
+
+class AdaptiveProgram:
+    """An interval program that sends small batches to a :class:`CompiledIntervalProgram`
+    (built on first use) when ``compiled`` is True, and everything else to the interpreted
+    :class:`IntervalProgram`. Same interface and guarantees (both are sound). Which one
+    answers depends only on the batch size, never on timing, so a run is reproducible.
+
+    Compiling costs about 250 us per instruction of the Function (building the SX graph
+    in Python: 0.5 s for a product of 8 transforms), so it pays only for an expression
+    bounded many times over; the planner leaves it off (bench/supinf.py measures both).
+    """
+
+    def __init__(self, fn: ca.Function, compiled: bool = False) -> None:
+        self._fn = fn
+        self.interpreted = IntervalProgram(fn)
+        self.use_compiled = compiled
+        self.compiled: CompiledIntervalProgram | None = None
+        self.n_in, self.out_sizes = self.interpreted.n_in, self.interpreted.out_sizes
+
+    def __call__(self, lo: np.ndarray, hi: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
+        if not self.use_compiled or np.shape(lo)[0] > COMPILED_MAX_BATCH:
+            return self.interpreted(lo, hi)
+        if self.compiled is None:
+            self.compiled = CompiledIntervalProgram(self._fn)
+        return self.compiled(lo, hi)
+
+
 # ================================================================== affine arithmetic
 #
 # An affine batch is an array of shape (K + J + 2, n) for K input variables and J
@@ -521,7 +850,7 @@ class AffineProgram:
             elif op in (ca.OP_ADD, ca.OP_SUB, ca.OP_MUL, ca.OP_DIV):
                 f = {ca.OP_ADD: self._add, ca.OP_SUB: self._sub, ca.OP_MUL: self._mul,
                      ca.OP_DIV: self._div}[op]
-                steps.append((f, o, (ins[0], ins[1]), ()))
+                steps.append((f, o, (ins[0], ins[1]), (sym(),) if op == ca.OP_DIV else ()))
             elif op == ca.OP_NEG:
                 steps.append((self._neg, o, (ins[0],), ()))
             elif op == ca.OP_TWICE:
@@ -619,8 +948,8 @@ class AffineProgram:
     def _sq(self, A: np.ndarray) -> np.ndarray:
         return self._mul(A, A)
 
-    def _div(self, A: np.ndarray, B: np.ndarray) -> np.ndarray:
-        return self._mul(A, self._taylor(B, ca.OP_INV))
+    def _div(self, A: np.ndarray, B: np.ndarray, sym: int) -> np.ndarray:
+        return self._mul(A, self._taylor(B, ca.OP_INV, sym))  # 1/B gets its own noise symbol
 
     def _powc(self, A: np.ndarray, c: float, sym: int) -> np.ndarray:
         if c == 0:
@@ -818,10 +1147,13 @@ class Bounder:
     """A scalar expression compiled for bounding; reuse it to bound the same expression on many boxes.
 
     ``names`` are the expression's free variables (in the order of the compiled input).
+    ``compiled``: evaluate small batches of boxes with the interval rules compiled into a
+    CasADi Function (:class:`AdaptiveProgram`; worth it only for a bounder used many times).
     """
 
-    def __init__(self, expr: ca.SX | float) -> None:
+    def __init__(self, expr: ca.SX | float, compiled: bool = False) -> None:
         e = _as_scalar(expr)
+        self._compiled = compiled
         syms = ca.symvar(e)
         self.names: list[str] = [s.name() for s in syms]
         if len(set(self.names)) != len(self.names):
@@ -829,12 +1161,12 @@ class Bounder:
         self.expr = e
         x = ca.vertcat(*syms) if syms else ca.SX(0, 1)
         self._x = x
-        self.gradient: IntervalProgram | None = None
+        self.gradient: AdaptiveProgram | None = None
         self._fg: ca.Function | None = None  # value and gradient, when the gradient can be bounded
         if syms:
             fg = ca.Function("fg", [x], [e, ca.densify(ca.jacobian(e, x))], {"cse": True})
             try:
-                self.gradient = IntervalProgram(fg)
+                self.gradient = AdaptiveProgram(fg, compiled)
                 self._fg = fg
             except SparValueError:
                 self.gradient = None  # derivative uses operations we cannot bound: bisection only
@@ -847,9 +1179,23 @@ class Bounder:
         return ca.Function("f", [self._x], [self.expr], {"cse": True})
 
     @functools.cached_property
-    def program(self) -> IntervalProgram:
+    def program(self) -> AdaptiveProgram:
         """The interval program of the expression alone (built on first use)."""
-        return IntervalProgram(self._point)
+        return AdaptiveProgram(self._point, self._compiled)
+
+    @functools.cached_property
+    def affine_gradient(self) -> AffineProgram | None:
+        """The affine-arithmetic program of the expression and its gradient, one vector
+        ``(f, df/dx_1, ...)`` (built on first use; None when the gradient is not bounded).
+        On deep transform products its gradient enclosures escape the wrapping effect that
+        makes interval gradients too wide to prove monotonicity."""
+        if self.gradient is None:
+            return None
+        jac = ca.densify(ca.jacobian(self.expr, self._x))
+        try:
+            return AffineProgram(ca.Function("fgv", [self._x], [ca.vertcat(self.expr, jac.T)], {"cse": True}))
+        except SparValueError:
+            return None
 
     @functools.cached_property
     def affine(self) -> AffineProgram:
@@ -906,6 +1252,58 @@ def compile_bounder(expr: ca.SX | float) -> Bounder:
     return Bounder(expr)
 
 
+#: Bounds of the memo tables :func:`cached_bounds` keeps on a cell (cell.memo): compiled
+#: bounders (CasADi Functions and instruction lists: about 0.2 MB for a pickup constraint,
+#: 1-2 MB for a product of 8 transforms, so at most some 100 MB) and bound results (a few
+#: hundred bytes each).
+BOUNDER_LIMIT = 64
+RESULT_LIMIT = 8192
+
+
+def _canonical(expr: ca.SX | float) -> tuple[ca.SX, list[str]]:
+    """``expr`` with its free symbols renamed ``v0, v1, ...`` in CasADi's order of appearance,
+    and their original names in that order."""
+    e = _as_scalar(expr)
+    syms = ca.symvar(e)
+    canon = [ca.SX.sym(f"v{i}") for i in range(len(syms))]
+    if syms:
+        e = ca.substitute(e, ca.vertcat(*syms), ca.vertcat(*canon))
+    names = [v.name() for v in syms]
+    if len(set(names)) != len(names):
+        raise SparValueError("supinf: two different symbols share a name in the expression")
+    return e, names
+
+
+def expression_key(expr: ca.SX | float) -> bytes:
+    """A key equal for expressions equal up to the names of their variables (the same
+    operations and constants, the variables met in the same order): CasADi's exact
+    serialisation of the graph with its symbols renamed by order of appearance."""
+    return _canonical(expr)[0].serialize().encode()
+
+
+def cached_bounds(expr: ca.SX | float, box: Box, memo: Memo | None = None, **options: object) -> BoundResult:
+    """``Bounder.bounds(box, **options)`` of ``expr``, with the compiled bounder and the result
+    remembered in ``memo``'s tables ``supinf.bounders`` (at most :data:`BOUNDER_LIMIT`
+    entries) and ``supinf.results`` (at most :data:`RESULT_LIMIT`), least recently used
+    dropped first. Both are keyed by :func:`expression_key`, so a constraint built again
+    in another registry, with other variable names, finds them; the result's key adds
+    the box (by position) and the options: bounding is deterministic, so an equal
+    question gets the equal answer. Without ``memo``, computed afresh."""
+    if memo is None:
+        return Bounder(expr).bounds(box, **options)  # type: ignore[arg-type]
+    canon, names = _canonical(expr)
+    k = canon.serialize().encode()
+    lo, hi = _check_box(names, box)
+    rkey = (k, lo.tobytes(), hi.tobytes(), tuple(sorted(options.items())))
+    results = memo.table("supinf.results", RESULT_LIMIT)
+    r = results.get(rkey)
+    if r is None:
+        B = memo.table("supinf.bounders", BOUNDER_LIMIT).get_or_compute(k, lambda: Bounder(canon))
+        cbox = {f"v{i}": (float(a), float(b)) for i, (a, b) in enumerate(zip(lo, hi))}
+        r = results[rkey] = B.bounds(cbox, **options)  # type: ignore[arg-type]
+    return r
+
+
 # ================================================================== the search
 
 
@@ -953,6 +1351,7 @@ class _Search:
         self.pool = (np.repeat(lo0[None, :], len(sides), 0), np.repeat(hi0[None, :], len(sides), 0),
                      np.array(sides, int), np.full(len(sides), -_INF))
         self.evaluated = 0
+        self.steps = 0  # passes made (steps that have begun)
 
     def tol(self) -> float:
         return max(self.abs_tol, self.rel_tol * max(0.0, -self.U[1] - self.U[0]))
@@ -1020,6 +1419,7 @@ class _Search:
         """One pass over a batch of boxes."""
         B, nv = self.B, self.nv
         bl, bh, side, pL = self.take(BATCH)
+        self.steps += 1
         m = side.size
         neg = side == 1
         self.evaluated += m
@@ -1035,11 +1435,12 @@ class _Search:
                          self.best[s]) for s in (0, 1) if not self.done[s]]
         G = None
         ok = np.zeros(m, bool)
+        fcv = np.where(neg, -fc[1], fc[0])  # rigorous lower end of g_s at the centres
         if B.gradient is not None:
             G = outs[1][:, :, :m]  # (2, nv, m), for g_s
             G = np.where(neg[None, None, :], -G[::-1], G)
             ok = ~disc[:m] & np.isfinite(G).all((0, 1))
-            Lmv = _mean_value_lower(np.where(neg, -fc[1], fc[0]), G, bl, bh, c)
+            Lmv = _mean_value_lower(fcv, G, bl, bh, c)
             L = np.where(ok & ~np.isnan(Lmv), np.maximum(L, Lmv), L)
             gmid = 0.5 * (G[0] + G[1]).T  # (m, nv)
             cand.append(np.where(gmid >= 0, bl, bh)[np.isfinite(gmid).all(1)])
@@ -1049,6 +1450,7 @@ class _Search:
         if not keep.any():
             return
         bl, bh, side, L, ok = bl[keep], bh[keep], side[keep], L[keep], ok[keep]
+        c, fcv = c[keep], fcv[keep]
         neg = side == 1
         width = bh - bl
         # 2. monotonicity: fix variables whose derivative has one sign over the box
@@ -1071,16 +1473,54 @@ class _Search:
             return
         # 3. the affine form on the boxes left: a tighter L and its minimising corner
         bl, bh, side, L, infl, neg = bl[sp], bh[sp], side[sp], L[sp], infl[sp], neg[sp]
-        F = B.affine(bl, bh)[:, 0, :]
-        self.evaluated += side.size
-        fa = B.affine.enclosure(F)
-        L = np.maximum(L, np.where(neg, -fa[1], fa[0]))
-        lin = B.affine.linear(F)
-        lin = np.where(neg[None, :], -lin, lin).T  # (m, nv)
-        self.offer_points(np.where(lin >= 0, bl, bh)[np.isfinite(lin).all(1)])
-        keep = self.settle(bl, bh, side, L)
-        if not keep.any():
-            return
+        # (from the second pass on: most expressions are settled by the first, with the
+        # cheaper affine form of f alone)
+        AG = B.affine_gradient if USE_AFFINE and AFFINE_GRADIENT and G is not None and self.steps > 1 else None
+        if AG is not None:
+            # ... of f and its gradient: the gradient enclosure, intersected with the interval
+            # one (both sound), gives a tighter mean-value form and proves more monotonicity
+            k = side.size
+            F = AG(bl, bh)
+            self.evaluated += k
+            enc = AG.enclosure(F.reshape(F.shape[0], -1)).reshape(2, nv + 1, k)
+            L = np.maximum(L, np.where(neg, -enc[1, 0], enc[0, 0]))
+            GA = np.where(neg[None, None, :], -enc[::-1, 1:], enc[:, 1:])
+            Gs = Gk[:, :, sp]
+            Gs = np.array((np.maximum(Gs[0], GA[0]), np.minimum(Gs[1], GA[1])))
+            oks = ok[sp] & np.isfinite(Gs).all((0, 1))
+            Lmv = _mean_value_lower(fcv[sp], Gs, bl, bh, c[sp])
+            L = np.where(oks & ~np.isnan(Lmv), np.maximum(L, Lmv), L)
+            lin = AG.linear(F[:, 0, :])
+            lin = np.where(neg[None, :], -lin, lin).T  # (k, nv)
+            self.offer_points(np.where(lin >= 0, bl, bh)[np.isfinite(lin).all(1)])
+            keep = self.settle(bl, bh, side, L)
+            if not keep.any():
+                return
+            bl, bh, side, L, Gs, oks = bl[keep], bh[keep], side[keep], L[keep], Gs[:, :, keep], oks[keep]
+            width = bh - bl
+            okk = oks[:, None] & (width > 0)
+            up = (Gs[0].T >= 0) & okk
+            dn = (Gs[1].T <= 0) & okk & ~up
+            reduced = (up | dn).any(1)
+            self.push(np.where(dn, bh, bl)[reduced], np.where(up, bl, bh)[reduced], side[reduced], L[reduced])
+            infl = width * np.maximum(np.abs(Gs[0]), np.abs(Gs[1])).T
+            infl = np.where(np.isfinite(infl) & oks[:, None], infl, width)
+            keep = ~reduced
+            if not keep.any():
+                return
+        elif USE_AFFINE:
+            F = B.affine(bl, bh)[:, 0, :]
+            self.evaluated += side.size
+            fa = B.affine.enclosure(F)
+            L = np.maximum(L, np.where(neg, -fa[1], fa[0]))
+            lin = B.affine.linear(F)
+            lin = np.where(neg[None, :], -lin, lin).T  # (m, nv)
+            self.offer_points(np.where(lin >= 0, bl, bh)[np.isfinite(lin).all(1)])
+            keep = self.settle(bl, bh, side, L)
+            if not keep.any():
+                return
+        else:
+            keep = np.ones(side.size, bool)
         bl, bh, side, L, infl = bl[keep], bh[keep], side[keep], L[keep], infl[keep]
         # 4. bisect on the most influential variable
         score = np.where(bh > bl, np.nan_to_num(infl, nan=0.0), -1.0)

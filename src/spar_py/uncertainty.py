@@ -39,7 +39,8 @@ import numpy as np
 
 from .errors import SparValueError
 from .model import Bounds, Cell, MatingFeature
-from .supinf import Bounder
+from .memo import Memo
+from .supinf import cached_bounds
 from .symbolic import Matrix, Registry, Scalar, apply, as_sx, compose, inv, rotz, snap, trans
 
 __all__ = [
@@ -420,16 +421,21 @@ class Verdict:
                 "tolerance_reached": self.tolerance_reached, "description": c.description}
 
 
-def evaluate(constraint: Constraint, registry: Registry, **options: Any) -> Verdict:
-    """Decide ``constraint`` with SUP/INF over its variables' registry bounds (options: Bounder.bounds)."""
+def evaluate(constraint: Constraint, registry: Registry, *, memo: Memo | None = None, **options: Any) -> Verdict:
+    """Decide ``constraint`` with SUP/INF over its variables' registry bounds (options: Bounder.bounds).
+
+    ``memo`` (a cell's memo tables) keeps compiled bounders and results by the
+    expression's structure and box (supinf.cached_bounds): phase 2 meets the same
+    constraint in many plan instances and after every remedy it tries."""
     box = registry.box(constraint.expr)
     want = "lo" if constraint.sense == ">" else "hi"
-    r = Bounder(constraint.expr).bounds(box, want=want, **options)
+    r = cached_bounds(constraint.expr, box, memo, want=want, **options)
     bound = r.lo if want == "lo" else r.hi
     ok = bound > constraint.threshold if want == "lo" else bound < constraint.threshold
     return Verdict(constraint, float(bound), float(constraint.threshold), bool(ok), r.tolerance_reached)
 
 
-def evaluate_all(constraints: Sequence[Constraint], registry: Registry, **options: Any) -> list[Verdict]:
+def evaluate_all(constraints: Sequence[Constraint], registry: Registry, *, memo: Memo | None = None,
+                 **options: Any) -> list[Verdict]:
     """:func:`evaluate` each constraint, in order."""
-    return [evaluate(c, registry, **options) for c in constraints]
+    return [evaluate(c, registry, memo=memo, **options) for c in constraints]
