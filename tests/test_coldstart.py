@@ -25,7 +25,7 @@ PROBE = """
 import json
 from spar_py.engine import Engine
 e = Engine()
-bound = e.query_once("spar_defaults:default_option(max_actions, N)")["N"]
+bound = e.query_once("spar_defaults:default_option(max_actions_floor, N)")["N"]
 probe = e.query_once("catch(spar_defaults:coldstart_probe(X), _, fail)")
 print(json.dumps({"how": e.loaded_from, "bound": bound, "probe": probe.get("X") if probe["truth"] else None}))
 """
@@ -93,7 +93,7 @@ def test_an_edit_to_a_module_loaded_by_another_is_seen(tree: Path, tmp_path: Pat
     """kb/templates/actions.pl is loaded through use_module from prolog/ files; changing it
     (here: a new clause of a predicate the planner reads) gives a new image."""
     cache = tmp_path / "cache"
-    code = PROBE.replace('"spar_defaults:default_option(max_actions, N)"',
+    code = PROBE.replace('"spar_defaults:default_option(max_actions_floor, N)"',
                          '"catch(spar_actions:coldstart_marker(N), _, N = none)"')
     assert _run(tree, cache, code)["bound"] == "none"
     f = tree / "kb" / "templates" / "actions.pl"
@@ -107,9 +107,9 @@ def test_a_changed_default_is_what_the_planner_uses(tree: Path, tmp_path: Path) 
     before = _run(tree, cache)["bound"]
     f = _defaults(tree)
     text = f.read_text()
-    assert f"default_option(max_actions, {before})" in text
-    f.write_text(text.replace(f"default_option(max_actions, {before})",
-                              f"default_option(max_actions, {before + 7})"))
+    assert f"default_option(max_actions_floor, {before})" in text
+    f.write_text(text.replace(f"default_option(max_actions_floor, {before})",
+                              f"default_option(max_actions_floor, {before + 7})"))
     assert _run(tree, cache)["bound"] == before + 7
 
 
@@ -161,7 +161,7 @@ def test_two_checkouts_with_the_same_sources_do_not_share_an_image(tree: Path, t
     cache = tmp_path / "cache"
     other = tmp_path / "other"
     shutil.copytree(tree, other)
-    code = PROBE.replace('"spar_defaults:default_option(max_actions, N)"',
+    code = PROBE.replace('"spar_defaults:default_option(max_actions_floor, N)"',
                          '"module_property(spar_toplevel, file(N))"')
     a, b = _run(tree, cache, code), _run(other, cache, code)
     assert a["how"] == b["how"] == "compiled"
