@@ -270,10 +270,12 @@ def dh_from_axes(points: np.ndarray, dirs: np.ndarray, signs: tuple[int, ...] = 
         dh[i - 1] = (alpha, R[0, 3], -math.sin(alpha) * R[1, 3] + math.cos(alpha) * R[2, 3],
                      math.atan2(-R[0, 1], R[0, 0]))
     # a length within tol of 0 is 0 (a URDF's calibration residue, 2e-11 m, must not cost a closed
-    # form); the twists snap to the nearest multiple of 90 deg within 1e-12 rad likewise
+    # form) and a twist within 1e-9 rad of a multiple of 90 deg is that multiple (URDFs write
+    # pi/2 as 1.570796327): the model is the nearest arm of exact structure, and the FK check
+    # against the URDF (check_against_urdf) bounds what that moves
     dh[:, 1:3][np.abs(dh[:, 1:3]) <= tol] = 0.0
     quarter = np.round(dh[:, 0] / (math.pi / 2)) * (math.pi / 2)
-    dh[:, 0] = np.where(np.abs(dh[:, 0] - quarter) <= 1e-12, quarter, dh[:, 0])
+    dh[:, 0] = np.where(np.abs(dh[:, 0] - quarter) <= 1e-9, quarter, dh[:, 0])
     return dh, F[0], F[6]
 
 
@@ -301,6 +303,8 @@ class UrdfChain:
     tip: np.ndarray
     #: joints between base_link and tip_link whose limits were missing (continuous): +-360 deg used
     unlimited: tuple[str, ...] = ()
+    #: the parsed URDF (a yourdfpy.URDF), for its own FK in check_against_urdf
+    model: object = field(default=None, compare=False, repr=False)
 
     def link_frames(self, q: np.ndarray) -> np.ndarray:
         """(7, 4, 4): each joint's child link frame in base_link, then the tip, for q (6,) rad (m)."""
@@ -346,15 +350,25 @@ def read_urdf_chain(path: str | Path, base_link: str, tip_link: str) -> UrdfChai
         if j.child in by_child:
             raise SparValueError(f"link {j.child!r} has two parent joints: not a tree (not serial)")
         by_child[j.child] = j
+    # base_link may hang off the chain by fixed joints (UR's "base" frame beside base_link):
+    # the fixed links above it, with T_base_link_ancestor for each
+    above = {base_link: np.eye(4)}
+    link, T = base_link, np.eye(4)
+    while link in by_child and by_child[link].type == "fixed":
+        j = by_child[link]
+        T = (np.eye(4) if j.origin is None else np.asarray(j.origin, float)) @ T  # T_parent_base_link
+        link = j.parent
+        above[link] = inv(T)
     chain = []
     link = tip_link
-    while link != base_link:
+    while link not in above:
         if link not in by_child:
             raise SparValueError(f"tip_link {tip_link!r} is not below base_link {base_link!r}: no serial chain "
                                  "between them")
         chain.append(by_child[link])
         link = by_child[link].parent
     chain.reverse()
+    lead = above[link]  # T_base_link_root, root the link where the chain starts
     moving = [j for j in chain if j.type != "fixed"]
     bad = [f"{j.name} ({j.type})" for j in moving if j.type not in ("revolute", "continuous")]
     if bad or len(moving) != 6:
@@ -365,7 +379,7 @@ def read_urdf_chain(path: str | Path, base_link: str, tip_link: str) -> UrdfChai
     if mimic:
         raise SparValueError(f"joint {mimic[0]!r} mimics another: not 6 independent joints")
     names, children, origins, axes, limits, unlimited = [], [], [], [], [], []
-    pending = np.eye(4)  # fixed joints before the next moving one
+    pending = lead  # base_link -> the chain's root, then fixed joints before the next moving one
     for j in chain:
         origin = np.eye(4) if j.origin is None else np.asarray(j.origin, float)
         if j.type == "fixed":
@@ -387,7 +401,7 @@ def read_urdf_chain(path: str | Path, base_link: str, tip_link: str) -> UrdfChai
         limits.append((float(lo), float(hi)))
         pending = np.eye(4)
     return UrdfChain(str(path), str(urdf.robot.name), base_link, tip_link, tuple(names), tuple(children),
-                     np.array(origins), np.array(axes), np.array(limits), pending, tuple(unlimited))
+                     np.array(origins), np.array(axes), np.array(limits), pending, tuple(unlimited), urdf)
 
 
 def robot_from_urdf(chain: UrdfChain, name: str, base: np.ndarray, tool: np.ndarray, finger_separation: float,
@@ -425,7 +439,7 @@ def check_against_urdf(robot: Robot, chain: UrdfChain, base: np.ndarray, tool: n
     in-limit configurations: each joint's child link must sit at a constant offset from Craig's frame
     i, and the tool at base @ T_base_tip @ tool (``tool`` T_tip_tool). SparValueError names the first
     joint that differs."""
-    urdf = _load_urdf(Path(chain.file))
+    urdf = chain.model if chain.model is not None else _load_urdf(Path(chain.file))
     rng = np.random.default_rng(seed)
     qs = np.vstack([np.zeros(6), rng.uniform(robot.limits[:, 0], robot.limits[:, 1], size=(n, 6))])
     actuated = list(urdf.actuated_joint_names)

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from spar_py.errors import SparValueError
 from spar_py.geometry import inv, rotx, rotz, rpy, trans
 from spar_py.kb import load_robot
-from spar_py.kinematics import LIMIT_TOL, Robot
+from spar_py.world.robots import LIMIT_TOL, Robot
 
 ROOT = Path(__file__).resolve().parent.parent
 PUMA = ROOT / "kb" / "robots" / "puma762.yaml"
