@@ -213,8 +213,8 @@ def _unit(v: np.ndarray) -> np.ndarray:
 
 
 def dh_from_axes(points: np.ndarray, dirs: np.ndarray, signs: tuple[int, ...] = (0, 0, 0, 0, 0),
-                 tol: float = 1e-9) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Craig's table of a 6R chain from its joint axes at q = 0: ``(dh (6, 4), F0, F6)``.
+                 tol: float = 1e-9) -> tuple[np.ndarray, np.ndarray]:
+    """Craig's table of a 6R chain from its joint axes at q = 0: ``(dh (6, 4), F (7, 4, 4))``.
 
     ``points`` (6, 3) a point on each axis, ``dirs`` (6, 3) each axis direction (the
     joint's positive sense), in one frame (lengths in any unit, ``tol`` in it). Frame i
@@ -222,7 +222,8 @@ def dh_from_axes(points: np.ndarray, dirs: np.ndarray, signs: tuple[int, ...] = 
     the free choices: x_i's sign makes alpha_i's sign ``signs[i-1]`` where given (the
     family's), else alpha_i >= 0; parallel axes take the origin where x_{i-1} meets axis
     i (d_i = 0); frame 0 is frame 1 at q = 0; frame 6 has x_6 = x_5 (offset_6 = 0) and its
-    origin where x_5 meets axis 6. Returns the table and frames 0 and 6 at q = 0 (4x4).
+    origin where x_5 meets axis 6. Returns the table and Craig's frames 0..6 at q = 0 (in the
+    frame the axes were given in).
     """
     z = np.array([_unit(d) for d in dirs])
     origin = np.zeros((7, 3))
@@ -276,7 +277,7 @@ def dh_from_axes(points: np.ndarray, dirs: np.ndarray, signs: tuple[int, ...] = 
     dh[:, 1:3][np.abs(dh[:, 1:3]) <= tol] = 0.0
     quarter = np.round(dh[:, 0] / (math.pi / 2)) * (math.pi / 2)
     dh[:, 0] = np.where(np.abs(dh[:, 0] - quarter) <= 1e-9, quarter, dh[:, 0])
-    return dh, F[0], F[6]
+    return dh, F
 
 
 # --------------------------------------------------------------------------- URDF
@@ -423,29 +424,34 @@ def robot_from_urdf(chain: UrdfChain, name: str, base: np.ndarray, tool: np.ndar
     robot = None
     tries = [_FAMILY_SIGNS[family]] if family in _FAMILY_SIGNS else list(_FAMILY_SIGNS.values())
     for signs in tries + [(0, 0, 0, 0, 0)]:
-        dh, F0, F6 = dh_from_axes(points, dirs, signs, tol=1e-9 * max(1.0, float(np.abs(points).max())))
-        robot = Robot(name, dh, lim, base @ F0, inv(F6) @ tip0 @ tool, finger_separation, unit,
+        dh, F = dh_from_axes(points, dirs, signs, tol=1e-9 * max(1.0, float(np.abs(points).max())))
+        robot = Robot(name, dh, lim, base @ F[0], inv(F[6]) @ tip0 @ tool, finger_separation, unit,
                       family=family, joint_names=chain.names)
         if robot.solver.complete:
             break
     assert robot is not None
-    check_against_urdf(robot, chain, base, tool, s)
+    # each joint's child link in Craig's frame i, from the conversion's own frames at q = 0
+    child0 = [Fc.copy() for Fc in chain.link_frames(np.zeros(6))[:6]]
+    for Fc in child0:
+        Fc[:3, 3] *= s
+    offsets = np.array([inv(F[i + 1]) @ child0[i] for i in range(6)])
+    check_against_urdf(robot, chain, base, tool, s, offsets)
     return robot
 
 
 def check_against_urdf(robot: Robot, chain: UrdfChain, base: np.ndarray, tool: np.ndarray, unit_per_m: float,
-                       n: int = 50, seed: int = 0) -> None:
+                       offsets: np.ndarray, n: int = 50, seed: int = 0) -> None:
     """Compare the model with the URDF's own FK (yourdfpy's scene graph) at q = 0 and n random
-    in-limit configurations: each joint's child link must sit at a constant offset from Craig's frame
-    i, and the tool at base @ T_base_tip @ tool (``tool`` T_tip_tool). SparValueError names the first
-    joint that differs."""
+    in-limit configurations: joint i's child link must be Craig's frame i @ ``offsets[i]`` (the
+    conversion's, (6, 4, 4)), and the tool base @ T_base_tip @ tool (``tool`` T_tip_tool). SparValueError
+    names the first joint that differs (within 1e-6 of the arm's length)."""
     urdf = chain.model if chain.model is not None else _load_urdf(Path(chain.file))
     rng = np.random.default_rng(seed)
     qs = np.vstack([np.zeros(6), rng.uniform(robot.limits[:, 0], robot.limits[:, 1], size=(n, 6))])
     actuated = list(urdf.actuated_joint_names)
     scale = np.diag([unit_per_m, unit_per_m, unit_per_m, 1.0])
     tol = 1e-6 * (1.0 + float(np.abs(robot.dh[:, 1:3]).sum()))
-    C = None
+    C = offsets
     for q in qs:
         cfg = np.zeros(len(actuated))
         for i, jn in enumerate(chain.names):
@@ -455,8 +461,6 @@ def check_against_urdf(robot: Robot, chain: UrdfChain, base: np.ndarray, tool: n
         own = [base @ _scaled(urdf.get_transform(c, chain.base_link), scale) for c in chain.children]
         own.append(base @ _scaled(urdf.get_transform(chain.tip_link, chain.base_link), scale))
         ours = robot.frames(q)
-        if C is None:  # child link i in Craig's frame i: constant, read at q = 0
-            C = [inv(ours[i + 1]) @ own[i] for i in range(6)]
         for i in range(6):
             err = np.abs(ours[i + 1] @ C[i] - own[i]).max()
             if err > tol:

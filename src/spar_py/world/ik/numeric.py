@@ -5,7 +5,7 @@ arm nobody derived a closed form for) the planner still needs "all the in-limit 
 vectors reaching T". This solver starts Gauss-Newton with damping (Levenberg-Marquardt
 style damped least squares on the geometric Jacobian, Wampler 1986; Buss 2004, eq. 11:
 dq = J^T (J J^T + lambda^2 I)^-1 e) from a fixed set of starts spread over the joint
-ranges, keeps the runs that converge to 1e-10 (position in units of the arm's length
+ranges, keeps the runs that converge to 1e-13 (position in units of the arm's length
 scale, orientation in rad), and returns the distinct solutions, modulo full turns.
 
 It is *not complete*: a solution no start falls towards is missed (a generic 6R arm
@@ -26,7 +26,7 @@ from .common import craig_links
 
 __all__ = ["NumericSolver"]
 
-_TOL = 1e-10  # convergence: |e_pos| / L and |e_rot| (rad)
+_TOL = 1e-13  # convergence: |e_pos| / L and |e_rot| (rad); Gauss-Newton gets there in a step or two
 _SAME = 1e-6  # rad: two converged solutions closer than this (mod 2 pi, every joint) are one
 _MAX_STEP = 0.5  # rad: the largest joint step of one iteration (keeps the linearisation honest)
 
