@@ -1170,7 +1170,7 @@ def check_file(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> str:
         return (f"{path}: ok (object {o.name}: {len(o.faces)} faces, {len(o.poses)} stable poses, "
                 f"{len(o.grasps)} grasps)")
     r = load_robot(path, max_bytes=max_bytes)
-    return f"{path}: ok (robot {r.name})"
+    return f"{path}: ok (robot {r.name}, {r.solver_name} IK)"
 
 
 def iter_kb_files(paths: Iterable[str | Path]) -> list[Path]:
