@@ -161,3 +161,12 @@ def test_prismatic_joint_and_cli_exit(tmp_path: Path) -> None:
     out = subprocess.run([sys.executable, "-m", "spar_py.cli", "plan", str(path)], capture_output=True, text=True)
     assert out.returncode == 2, out.stderr
     assert out.stderr.count("\n") == 1 and "elbow_joint (prismatic)" in out.stderr and "Traceback" not in out.stderr
+
+
+def test_a_dh_cell_does_not_import_the_urdf_reader() -> None:
+    # yourdfpy (and lxml, trimesh) are imported only when a cell names a URDF
+    code = ("import sys; from spar_py.kb import load_problem; "
+            f"load_problem({str(PROBLEMS / 'ur5e_peg_in_block.yaml')!r}); "
+            "print(sorted(m for m in ('yourdfpy', 'trimesh', 'lxml') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]", out.stdout + out.stderr

@@ -749,9 +749,10 @@ def _check_family(robot: Robot, root: Node, path: str | Path, unit: str, file_un
     family = _ik_choice(root)
     if family in ("auto", "numeric") or robot.solver.family == family:
         return
-    own = robot if unit == file_unit or max_bytes < 0 else load_robot(path, file_unit, max_bytes)
+    if unit != file_unit:
+        load_robot(path, file_unit, max_bytes)  # raises this error, said in the file's own unit
     raise KBError(str(path), "dh", f"a {family.upper()}-family arm (ik: {family}; docs/robots.md)",
-                  f"one with {own.not_closed_form[family]}")
+                  f"one with {robot.not_closed_form[family]}")
 
 
 def load_urdf_robot(node: Node, base_dir: Path, unit: str, rad_per: float) -> tuple[Robot, Path]:

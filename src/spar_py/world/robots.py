@@ -27,14 +27,14 @@ import numpy as np
 
 from ..errors import SparValueError
 from ..geometry import check_transform, inv, rotx, trans
-from .ik import LIMIT_TOL, Solver, craig_links, lowest_representation, solver_for, turn_combinations
+from .ik import FAMILY_TWISTS, LIMIT_TOL, Solver, craig_links, lowest_representation, solver_for, turn_combinations
 
 __all__ = ["LIMIT_TOL", "Robot", "UrdfChain", "check_against_urdf", "dh_from_axes", "read_urdf_chain",
            "robot_from_urdf", "standard_to_modified"]
 
-# Craig-table twist signs each family wants for rows 2..6 (alpha_1..alpha_5), used to choose the
-# free sign of a common normal when a URDF chain is converted; 0 = parallel axes
-_FAMILY_SIGNS = {"puma": (-1, 0, -1, 1, -1), "ur": (1, 0, 0, 1, -1)}
+# the twist signs each closed-form family wants for alpha_1..alpha_5 (0: parallel axes), to choose
+# the free sign of a common normal when a URDF chain is converted
+_FAMILY_SIGNS = {name: tuple(int(np.sign(round(a, 9))) for a in tw) for name, tw in FAMILY_TWISTS.items()}
 
 
 @dataclass(eq=False)

@@ -19,10 +19,10 @@ import numpy as np
 
 from .common import LIMIT_TOL, Solver, craig_links, lowest_representation, turn_combinations
 from .numeric import NumericSolver
-from .puma import PumaSolver
-from .ur import URSolver
+from .puma import PUMA_TWISTS, PumaSolver
+from .ur import UR_TWISTS, URSolver
 
-__all__ = ["FAMILIES", "LIMIT_TOL", "NumericSolver", "PumaSolver", "Solver", "URSolver", "craig_links",
+__all__ = ["FAMILIES", "FAMILY_TWISTS", "LIMIT_TOL", "NumericSolver", "PumaSolver", "Solver", "URSolver", "craig_links",
            "lowest_representation", "solver_for", "turn_combinations"]
 
 #: Closed-form families by name, in the order they are tried: each ``make(dh, base, tool, unit)``
@@ -31,6 +31,8 @@ FAMILIES: dict[str, Callable[..., Solver | str]] = {
     "puma": PumaSolver.make,
     "ur": URSolver.make,
 }
+#: Each closed-form family's Craig twists alpha_1..alpha_5 (rad), for converting URDF chains
+FAMILY_TWISTS: dict[str, tuple[float, ...]] = {"puma": PUMA_TWISTS, "ur": UR_TWISTS}
 
 
 def solver_for(dh: np.ndarray, base: np.ndarray, tool: np.ndarray, limits: np.ndarray, unit: str = "",
@@ -38,9 +40,9 @@ def solver_for(dh: np.ndarray, base: np.ndarray, tool: np.ndarray, limits: np.nd
     """The IK solver for a Craig DH table (6, 4) with base, tool (4x4) and limits (6, 2) rad.
 
     ``family`` "auto" tries :data:`FAMILIES` in order and falls back to the numeric
-    solver; a family name forces it (a SparValueError-free contract: the reasons come
-    back instead) and "numeric" forces the fallback. Returns (solver, reasons): why
-    each closed-form family tried did not fit, by family name.
+    solver; a family name tries that family only (the numeric solver if it does not
+    fit: the caller decides whether that is an error) and "numeric" forces the fallback.
+    Returns (solver, reasons): why each closed-form family tried did not fit, by name.
     """
     reasons: dict[str, str] = {}
     names = list(FAMILIES) if family == "auto" else ([family] if family in FAMILIES else [])

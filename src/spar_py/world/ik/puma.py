@@ -20,12 +20,12 @@ import numpy as np
 
 from ...geometry import inv, rotx, trans
 
-__all__ = ["PumaSolver", "puma_structure"]
+__all__ = ["PUMA_TWISTS", "PumaSolver", "puma_structure"]
 
 _EPS = np.finfo(float).eps
 _SING_S5 = 1e-12  # |sin theta5| below this: wrist singular (axes 4 and 6 aligned)
 # Craig's PUMA 560 twists alpha_1..alpha_5 (rows 2..6 of the table), radians.
-_PUMA_ALPHAS = (-math.pi / 2, 0.0, -math.pi / 2, math.pi / 2, -math.pi / 2)
+PUMA_TWISTS = (-math.pi / 2, 0.0, -math.pi / 2, math.pi / 2, -math.pi / 2)
 
 
 @dataclass(frozen=True)
@@ -46,7 +46,7 @@ def puma_structure(dh: np.ndarray, base: np.ndarray, tool: np.ndarray, unit: str
     """Craig's PUMA parameters of a DH table, or the reason the table is not of that family
     (lengths in ``unit``, the table's)."""
     alpha, a, d, off = dh.T
-    for i, want in enumerate(_PUMA_ALPHAS, start=1):
+    for i, want in enumerate(PUMA_TWISTS, start=1):
         if abs(math.remainder(alpha[i] - want, 2 * math.pi)) > 1e-9:
             return (f"alpha_{i} (dh[{i}].alpha) = {math.degrees(alpha[i]):g} deg where the family has "
                     f"{math.degrees(want):g}")

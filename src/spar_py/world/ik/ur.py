@@ -29,13 +29,13 @@ import numpy as np
 
 from ...geometry import inv, rotx, trans
 
-__all__ = ["URSolver", "ur_structure"]
+__all__ = ["UR_TWISTS", "URSolver", "ur_structure"]
 
 _EPS = np.finfo(float).eps
 _SING_S5 = 1e-12  # |sin theta5| below this: wrist singular (axis 6 parallel to axes 2, 3, 4)
 _HALF_PI = math.pi / 2
 # the family's twists alpha_1..alpha_5 (rows 2..6 of Craig's table), radians
-_UR_ALPHAS = (_HALF_PI, 0.0, 0.0, _HALF_PI, -_HALF_PI)
+UR_TWISTS = (_HALF_PI, 0.0, 0.0, _HALF_PI, -_HALF_PI)
 
 
 @dataclass(frozen=True)
@@ -56,7 +56,7 @@ class _UR:
 def ur_structure(dh: np.ndarray, base: np.ndarray, tool: np.ndarray, unit: str = "") -> _UR | str:
     """The UR-family parameters of a Craig DH table, or the reason the table is not of that family."""
     alpha, a, d, off = dh.T
-    for i, want in enumerate(_UR_ALPHAS, start=1):
+    for i, want in enumerate(UR_TWISTS, start=1):
         if abs(math.remainder(alpha[i] - want, 2 * math.pi)) > 1e-9:
             return (f"alpha_{i} (dh[{i}].alpha) = {math.degrees(alpha[i]):g} deg where the UR family has "
                     f"{math.degrees(want):g}")
