@@ -73,6 +73,8 @@ class NumericSolver:
         converged solutions of each pose (S = the number of starts; duplicates ok False)."""
         T = np.asarray(T, float)
         n, S = T.shape[0], len(self.starts)
+        if n == 0:
+            return np.zeros((6, 0, S)), np.zeros((0, S), dtype=bool)
         q = np.tile(self.starts, (n, 1))  # (n S, 6), pose-major
         goal = np.repeat(T, S, axis=0)
         done = np.zeros(n * S, dtype=bool)
@@ -90,8 +92,8 @@ class NumericSolver:
             err = np.abs(e).max(axis=1)
             conv = err < _TOL
             done[active[conv]] = True
-            # stop rows that converged, and rows stuck far from any solution
-            keep = ~conv
+            # stop rows that converged, and rows whose error is not a number (a pose of nan or inf)
+            keep = ~conv & np.isfinite(err)
             if not keep.any():
                 break
             e, z, p, E, qa = e[keep], z[keep], p[keep], E[keep], qa[keep]
@@ -99,7 +101,9 @@ class NumericSolver:
             J = np.empty((len(active), 6, 6))
             J[:, :3, :] = np.cross(z, E[:, None, :3, 3] - p).transpose(0, 2, 1) / self.L
             J[:, 3:, :] = z.transpose(0, 2, 1)
-            lam2 = np.minimum(1e-2, (e * e).sum(axis=1))[:, None, None] * 1e-2  # damping -> 0 near a solution
+            # damping -> 0 near a solution, never below 1e-12 (J J^T + lambda^2 I stays invertible at a
+            # singular configuration; its entries are O(1) with positions in units of L)
+            lam2 = np.clip((e * e).sum(axis=1) * 1e-2, 1e-12, 1e-4)[:, None, None]
             y = np.linalg.solve(J @ J.transpose(0, 2, 1) + lam2 * eye, e[..., None])
             dq = (J.transpose(0, 2, 1) @ y)[..., 0]
             big = np.abs(dq).max(axis=1, keepdims=True)
