@@ -74,6 +74,12 @@ class Robot:
                 raise SparValueError(f"robot {self.name}: {what} must be a finite {shape} array, got {arr.shape}")
         if np.any(self.limits[:, 0] > self.limits[:, 1]):
             raise SparValueError(f"robot {self.name}: limits need lo <= hi")
+        alpha, a = self.dh[:, 0], self.dh[:, 1]
+        for i in range(1, 6):  # Craig row i holds alpha_{i-1}, a_{i-1}: axes i and i+1 (1-based: rows i, i+1)
+            if abs(math.sin(alpha[i])) < 1e-12 and a[i] == 0.0:
+                raise SparValueError(f"robot {self.name}: joints {i} and {i + 1} turn about the same line "
+                                     f"(dh[{i}].alpha = {math.degrees(alpha[i]):g} deg and dh[{i}].a = 0): "
+                                     "not a 6-DOF arm")
         self.joint_names = tuple(self.joint_names) or tuple(f"joint_{i}" for i in range(1, 7))
         self.solver, self.not_closed_form = solver_for(self.dh, self.base, self.tool, self.limits,
                                                        self.unit, self.family)
