@@ -59,11 +59,15 @@ def test_post_init_checks_shapes_and_family() -> None:
     assert generic_robot().solver_name == "closed-form puma"
     # a table outside the PUMA 560 family (and the UR's): the numeric fallback, and why not closed form
     dh = generic_robot().dh.copy()
-    dh[4, 0] = 0.0
+    dh[4, 0] = 0.3  # a skewed wrist
     odd = Robot("odd", dh, [[-3, 3]] * 6, np.eye(4), np.eye(4), 1.0, "mm")
     assert odd.fk(np.zeros(6)).shape == (4, 4)
     assert odd.solver_name == "numeric"
     assert "alpha_4" in odd.not_closed_form["puma"]
+    # two joints about one line is no 6-DOF arm at all
+    dh[4, 0] = 0.0
+    with pytest.raises(SparValueError, match="joints 4 and 5 turn about the same line"):
+        Robot("flat", dh, [[-3, 3]] * 6, np.eye(4), np.eye(4), 1.0, "mm")
 
 
 def craig_fk(robot: Robot, q: np.ndarray) -> np.ndarray:
