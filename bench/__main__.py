@@ -160,6 +160,9 @@ def verdicts(r: dict) -> dict:
     v["ik_us"] = (k["batch_us"] <= IK_US_PER_POSE, f"{k['batch_us']:.2f} us/pose")
     ratio = k["rtb_over_batch"]
     v["ik_ratio"] = (ratio is not None and ratio >= IK_RATIO, f"{_f(ratio, '.0f')}x")
+    if "ur" in k:  # issue 17: the UR closed form, all 8 branches
+        ur_us = k["ur"]["ur5e"]["batch_us"]
+        v["ur_ik_us"] = (ur_us <= IK_US_PER_POSE, f"{ur_us:.2f} us/pose (PUMA same run {k['batch_us']:.2f})")
     worst = max(s["paper"], key=lambda m: m["ours"])
     per_bound = max(m["t_ours"] / 2 for m in s["paper"])
     v["supinf_tight"] = (worst["ours"] <= SUPINF_EXCESS, f"{worst['ours']:.1e} of the width at worst")
@@ -227,6 +230,8 @@ def render(r: dict) -> str:
          for n, limit in PHASE1_TARGETS.items()
     ] + ([[f"whole plan at N = 50 <= {N50_S:g} s and {N50_MB:g} MB (issue 18)", v["n50"][1], _met(v["n50"][0])]]
          if "n50" in v else []
+    ) + ([[f"UR IK, all 8 branches, batch <= {IK_US_PER_POSE:g} us/pose (issue 17)", v["ur_ik_us"][1],
+           _met(v["ur_ik_us"][0])]] if "ur_ik_us" in v else []
     ) + coldstart.target_rows(r.get("coldstart")) + [
         [f"RSS growth, {name}, <= {RSS_KB_PER_PLAN:g} kB per plan (issue 12)", v[key][1], _met(v[key][0])]
          for key, name in (("rss_paper", "paper's cell"), ("rss_n3", "generated N = 3"))
@@ -249,6 +254,27 @@ def render(r: dict) -> str:
           + ("" if k["rtb_us"] is None else
              f"RTB `ikine_a` / spar-py `ik` one call per pose: {k['rtb_over_single']:.1f}x "
              f"(all eight configurations: {k['rtb_all8_over_single']:.1f}x)."), ""]
+
+    if "ur" in k:
+        u = k["ur"]
+        L += ["### UR family and the numeric fallback (issue 17)", "",
+              ("UR closed form (Hawkins 2013) on the UR5e file and on RTB's own UR5 table; RTB has no "
+               "analytic UR solver, so its peer is `UR5().ikine_LM` (numeric, one configuration per call). "
+               f"Microseconds per pose, median of {k['repeats']} runs, same run as the PUMA rows."), ""]
+        rows = [[f"spar-py UR `ik_batch` ({name}, all 8 branches, one call)", str(k["n"]), _f(u[name]["batch_us"]),
+                 _f(u[name]["branches_per_pose"], ".1f")] for name in ("ur5e", "ur5")]
+        rows += [[f"spar-py UR `ik` ({name}, every turn representation, one call per pose)", str(k["n_single"]),
+                  _f(u[name]["single_us"]), _f(u[name]["rows_per_pose"], ".0f")] for name in ("ur5e",)]
+        if u["rtb_lm_us"] is not None:
+            rows.append(["RTB UR5 `ikine_LM` (one configuration per call)", str(max(1, k["n_rtb"] // 4)),
+                         _f(u["rtb_lm_us"]), "1"])
+        m = k["numeric"]
+        rows.append([f"spar-py numeric `ik_batch` (PUMA with d5 = 95 mm; {m['solved']:.0%} solved, own q "
+                     f"found {m['own_found']:.0%})", str(m["n"]), _f(m["batch_us"]),
+                     _f(m["solutions_per_pose"], ".1f")])
+        L += _table(["method", "poses", "us/pose", "solutions/pose"], rows)
+        if u["rtb_lm_over_batch"] is not None:
+            L += [f"RTB UR5 `ikine_LM` / spar-py UR5 `ik_batch`: {u['rtb_lm_over_batch']:.0f}x.", ""]
 
     L += ["## SUP/INF (bench/supinf.py)", "",
           ("Excess of a bound over the true range as a fraction of the true width (the true range: "

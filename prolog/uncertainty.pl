@@ -408,12 +408,13 @@ step_out(Geo, step(Id, Action), D) :-
     geo_value(G, joints_deg, Q),
     geo_value(G, placement, Pl),
     geo_value(G, ik_solutions_deg, Sols),
+    geo_value(G, ik_solver, Solver),
     geo_value(G, from, From),
     geo_value(G, poses, Poses),
     geo_value(G, held, Held),
     D = _{id: IdText, kind: Kind, serves: Serves, term: Term, name: Name, object: Obj,
-          args: Args, tool_pose: TP, joints_deg: Q, ik_solutions_deg: Sols, placement: Pl,
-          from: From, poses: Poses, held: Held}.
+          args: Args, tool_pose: TP, joints_deg: Q, ik_solutions_deg: Sols, ik_solver: Solver,
+          placement: Pl, from: From, poses: Poses, held: Held}.
 
 step_kind(sense(A, _), _, sensing, A) :- !.
 step_kind(squeeze(A), _, squeeze, A) :- !.
@@ -460,7 +461,10 @@ print_step(Geo, I, Id, A) :-
     (   Kind == manipulation -> Mark = "" ; format(string(Mark), "  [~w]", [Kind]) ),
     format("  ~w. ~w: ~q~s~n", [I, T, A, Mark]),
     (   memberchk(T-G, Geo), get_dict(joints_deg, G, Q), is_list(Q)
-    ->  format("       joints (deg): ~w~n", [Q])
+    ->  (   get_dict(ik_solver, G, S), S \== @(none)
+        ->  format("       joints (deg, ~w IK): ~w~n", [S, Q])
+        ;   format("       joints (deg): ~w~n", [Q])
+        )
     ;   true
     ),
     (   memberchk(T-G2, Geo), get_dict(placement, G2, P), is_dict(P)

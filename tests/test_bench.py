@@ -41,6 +41,12 @@ def test_ik_figures(ik_figures: dict) -> None:
     if r["rtb_us"] is not None:  # Robotics Toolbox installed (the bench extra)
         assert _positive(r["rtb_us"]) and _positive(r["rtb_all8_us"])
         assert r["rtb_over_batch"] == pytest.approx(r["rtb_us"] / r["batch_us"])
+    for name in ("ur5e", "ur5"):  # issue 17: the UR closed form, all 8 branches
+        u = r["ur"][name]
+        assert _positive(u["batch_us"]) and _positive(u["single_us"]) and 1 <= u["branches_per_pose"] <= 8
+    if r["ur"]["rtb_lm_us"] is not None:
+        assert r["ur"]["rtb_lm_over_batch"] == pytest.approx(r["ur"]["rtb_lm_us"] / r["ur"]["ur5"]["batch_us"])
+    assert r["numeric"]["solver"] == "numeric" and r["numeric"]["solved"] > 0.9
 
 
 def test_supinf_figures(supinf_figures: dict) -> None:

@@ -131,7 +131,7 @@ def test_load_puma762_in_mm_and_inches() -> None:
     assert r_in.finger_separation == pytest.approx(4.0)
     assert r_in.base[2, 3] == pytest.approx(600 / 25.4) and r_in.tool[2, 3] == pytest.approx(250 / 25.4)
     assert np.allclose(r_in.limits, puma.limits)
-    assert puma.n_candidates == 32  # 8 branches x 2 wrist-roll x 2 swivel turns (532 deg spans)
+    assert puma.n_candidates == 8 and puma.solver_name == "closed-form puma"  # ik_batch: one row per branch
     with pytest.raises(SparValueError, match="unknown length unit"):
         load_robot(PUMA, unit="furlong")
 
@@ -155,7 +155,8 @@ def test_bad_robot_file_one_line_error(tmp_path: Path, old: str, new: str, key: 
     assert msg.count("\n") == 0 and str(bad) in msg and f": {key}: " in msg and expected in msg
 
 
-@pytest.mark.parametrize("module", ["spar_py.kinematics", "spar_py.model", "spar_py.geometry"])
+@pytest.mark.parametrize("module", ["spar_py.world.robots", "spar_py.world.ik.puma", "spar_py.world.ik.ur",
+                                    "spar_py.world.ik.numeric", "spar_py.model", "spar_py.geometry"])
 def test_the_model_does_not_import_the_kb(module: str) -> None:
     # kb -> model -> kinematics -> kb was an import circle: the robot loader lives in kb now
     code = f"import sys, {module}; print(sorted(m for m in ('spar_py.kb', 'yaml') if m in sys.modules))"

@@ -31,7 +31,7 @@ from . import sanity
 from .units import from_mm
 from .errors import KBError, SparError, SparValueError, UnknownKeyError, WrongKindError
 from .geometry import ORTHO_TOL, eulerxyz, rotation_problem, rpy, same_stable_pose, tm_rows, trans
-from .kinematics import Robot
+from .world.robots import Robot, read_urdf_chain, robot_from_urdf, standard_to_modified
 from .model import (
     Bounds,
     Cell,
@@ -138,7 +138,16 @@ DEFAULT_OPENING_MM = 101.6
 ROBOT_SCHEMA = keys(
     {"name": LEAF, "units": UNITS_SCHEMA, "dh": Each(keys(["alpha", "a", "d"], ["offset"])),
      "limits": LEAF, "base": FRAME_SCHEMA, "tool": FRAME_SCHEMA, "gripper": keys(["finger_separation"])},
+    ["convention", "ik"],
 )
+# a problem's `robot:` given inline from a URDF (lengths and angles in the problem's units)
+URDF_ROBOT_SCHEMA = keys(
+    {"urdf": LEAF, "base_link": LEAF, "tip_link": LEAF, "gripper": keys(["finger_separation"])},
+    {"name": LEAF, "base": FRAME_SCHEMA, "tool": FRAME_SCHEMA, "limits": LEAF, "ik": LEAF},
+)
+#: How a robot file's `ik:` may name its solver: auto = the first closed-form family that fits, else
+#: numeric (spar_py.world.ik.FAMILIES)
+IK_CHOICES = ("auto", "puma", "ur", "numeric")
 
 PROBLEM_SCHEMA = keys(
     {"problem": LEAF, "units": UNITS_SCHEMA, "robot": LEAF,
@@ -835,14 +844,18 @@ MAX_JOINT_RAD = 4 * math.pi
 
 
 def load_robot(path: str | Path, unit: str | None = None, max_bytes: int = MAX_INPUT_BYTES) -> Robot:
-    """Load ``kb/robots/*.yaml`` as a :class:`~spar_py.kinematics.Robot`.
+    """Load ``kb/robots/*.yaml`` as a :class:`~spar_py.world.robots.Robot`.
 
     Lengths (DH a and d, base and tool frames, finger separation) are converted to
     ``unit`` (default: the file's own length unit), angles (DH alpha and offset,
     limits, rpy) to radians; ``base`` is T_world_frame0 and ``tool`` T_flange_tool,
-    each ``trans(xyz) @ rpy(r, p, y)``. Malformed files raise :class:`KBError` naming
-    the file, the key path and what was expected (``puma.yaml: dh[2].alpha: a number,
-    not 'x'``); an unknown ``unit`` raises SparValueError.
+    each ``trans(xyz) @ rpy(r, p, y)``. ``convention`` says how ``dh`` reads: Craig's
+    ``modified`` (default) or ``standard`` (UR's published tables; converted to Craig's
+    at load, ``world.robots.standard_to_modified``). ``ik`` picks the solver (IK_CHOICES;
+    default auto: the first closed-form family the table fits, else numeric).
+    Malformed files raise :class:`KBError` naming the file, the key path and what was
+    expected (``puma.yaml: dh[2].alpha: a number, not 'x'``); an unknown ``unit``
+    raises SparValueError.
     """
     if unit is not None and unit not in LENGTH_UNITS:
         raise SparValueError(f"unknown length unit {unit!r} (one of {', '.join(LENGTH_UNITS)})")
@@ -855,12 +868,31 @@ def load_robot(path: str | Path, unit: str | None = None, max_bytes: int = MAX_I
     dh_node = root.key("dh")
     rows = dh_node.elements()
     if len(rows) != 6:
-        raise dh_node.fail("a list of 6 joint rows {alpha, a, d, offset}", f"{len(rows)} rows")
+        raise dh_node.fail("a list of 6 joint rows {alpha, a, d, offset} (spar-py plans with 6R arms)",
+                           f"{len(rows)} rows")
     dh = np.array([[r.key("alpha").number() * rad_per, r.key("a").number() * scale,
                     r.key("d").number() * scale,
                     (o.number() if (o := r.key("offset", required=False)) is not None else 0.0) * rad_per]
                    for r in rows])
-    lim_node = root.key("limits")
+    conv = root.key("convention", required=False)
+    flange = np.eye(4)
+    if conv is not None and conv.choice(("modified", "standard")) == "standard":
+        dh, flange = standard_to_modified(dh)
+    limits = _limits(root.key("limits"), rad_per)
+    base = _robot_frame(root.key("base"), scale, rad_per)
+    tool = flange @ _robot_frame(root.key("tool"), scale, rad_per)
+    wm = root.key("gripper").key("finger_separation").positive() * scale
+    family = _ik_choice(root)
+    try:
+        robot = Robot(name, dh, limits, base, tool, wm, unit, family=family)
+    except SparValueError as e:
+        raise KBError(str(path), "dh", f"a robot the kinematics accepts ({e})") from None
+    _check_family(robot, root, path, unit, file_unit, max_bytes)
+    return robot
+
+
+def _limits(lim_node: Node, rad_per: float) -> np.ndarray:
+    """Six ``[lo, hi]`` joint limits (file angles) as (6, 2) rad, each within +-MAX_JOINT_RAD."""
     lims = lim_node.elements()
     if len(lims) != 6:
         raise lim_node.fail("a list of 6 [lo, hi] joint limits", f"{len(lims)} items")
@@ -869,19 +901,62 @@ def load_robot(path: str | Path, unit: str | None = None, max_bytes: int = MAX_I
         if np.abs(limits[i]).max() > MAX_JOINT_RAD:
             raise lim.fail(f"joint limits within +-{math.degrees(MAX_JOINT_RAD):g} deg",
                            f"[{show(limits[i][0] / rad_per)}, {show(limits[i][1] / rad_per)}]")
+    return limits
 
-    base = _robot_frame(root.key("base"), scale, rad_per)
-    tool = _robot_frame(root.key("tool"), scale, rad_per)
-    wm = root.key("gripper").key("finger_separation").positive() * scale
+
+def _ik_choice(root: Node) -> str:
+    node = root.key("ik", required=False)
+    return "auto" if node is None else node.choice(IK_CHOICES)
+
+
+def _check_family(robot: Robot, root: Node, path: str | Path, unit: str, file_unit: str, max_bytes: int) -> None:
+    """An ``ik:`` family the table does not fit is the table's error, said in the file's unit."""
+    family = _ik_choice(root)
+    if family in ("auto", "numeric") or robot.solver.family == family:
+        return
+    if unit != file_unit:
+        load_robot(path, file_unit, max_bytes)  # raises this error, said in the file's own unit
+    raise KBError(str(path), "dh", f"a {family.upper()}-family arm (ik: {family}; docs/robots.md)",
+                  f"one with {robot.not_closed_form[family]}")
+
+
+def load_urdf_robot(node: Node, base_dir: Path, unit: str, rad_per: float) -> tuple[Robot, Path]:
+    """A problem's inline ``robot: {urdf: FILE, base_link: NAME, tip_link: NAME, ...}`` (lengths in
+    ``unit``, angles ``rad_per`` rad each, as the problem file says): the robot and the URDF's path.
+
+    ``base`` (T_world_base_link, default identity), ``tool`` (T_tip_link_tool, default identity),
+    ``limits`` (override the URDF's), ``name`` (default: the URDF's robot name), ``ik`` as in a robot
+    file. The URDF is read with yourdfpy (lengths in metres) and its chain checked against its own FK.
+    """
+    check_shape(node, URDF_ROBOT_SCHEMA)
+    unode = node.key("urdf")
+    upath = base_dir / unode.text()
+    if not upath.is_file():
+        raise unode.fail("the path of a URDF file", f"{show(unode.value)} (no such file)")
     try:
-        robot = Robot(name, dh, limits, base, tool, wm, unit)
+        chain = read_urdf_chain(upath, node.key("base_link").text(), node.key("tip_link").text())
     except SparValueError as e:
-        raise KBError(str(path), "dh", f"a robot the kinematics accepts ({e})") from None
-    if robot.unsupported is not None:
-        own = robot if unit == file_unit else load_robot(path, file_unit, max_bytes)  # say it in the file's unit
-        raise KBError(str(path), "dh", "a PUMA 560-family arm (6R, spherical wrist: the closed-form IK "
-                      "spar-py has; docs/kb-format.md)", f"one with {own.unsupported}")
-    return robot
+        raise unode.fail(f"a URDF spar-py can plan with ({e})") from None
+    def frame(key: str) -> np.ndarray:
+        n = node.key(key, required=False)
+        return np.eye(4) if n is None else _robot_frame(n, 1.0, rad_per)
+    lnode = node.key("limits", required=False)
+    limits = None if lnode is None else _limits(lnode, rad_per)
+    nnode = node.key("name", required=False)
+    name = nnode.label() if nnode is not None else re.sub(r"[^a-z0-9_]", "_", chain.robot_name.lower())
+    if not LABEL_RE.fullmatch(name):
+        name = "urdf_robot"
+    wm = node.key("gripper").key("finger_separation").positive()
+    try:
+        robot = robot_from_urdf(chain, name, frame("base"), frame("tool"), wm, unit, LENGTH_UNITS[unit], limits,
+                                family=_ik_choice(node))
+    except SparValueError as e:
+        raise unode.fail(f"a URDF whose chain spar-py models exactly ({e})") from None
+    family = _ik_choice(node)
+    if family not in ("auto", "numeric") and robot.solver.family != family:
+        raise KBError(node.file, unode.path, f"a {family.upper()}-family arm (ik: {family}; docs/robots.md)",
+                      f"one with {robot.not_closed_form[family]}")
+    return robot, upath
 
 
 def _solid(node: Node, scale: float) -> Solid:
@@ -1181,9 +1256,12 @@ def load_problem(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> Cell:
     base = path.parent
 
     rnode = root.key("robot")
-    rpath = _ref_path(rnode, base, "robot")
-    with _referenced(rnode, "robot"):
-        robot = load_robot(rpath, unit=unit, max_bytes=max_bytes)
+    if isinstance(rnode.value, dict):  # inline, from a URDF
+        robot, rpath = load_urdf_robot(rnode, base, unit, rad_per)
+    else:
+        rpath = _ref_path(rnode, base, "robot")
+        with _referenced(rnode, "robot"):
+            robot = load_robot(rpath, unit=unit, max_bytes=max_bytes)
     objects, positions, model_files = _objects(root, base, unit, max_bytes, robot.finger_separation)
     grip = root.key("gripper").choice(("open", "closed"))
     unc = root.key("uncertainty")
@@ -1292,7 +1370,7 @@ def check_file(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> str:
         return (f"{path}: ok (object {o.name}: {len(o.faces)} faces, {len(o.poses)} stable poses, "
                 f"{len(o.grasps)} grasps)")
     r = load_robot(path, max_bytes=max_bytes)
-    return f"{path}: ok (robot {r.name})"
+    return f"{path}: ok (robot {r.name}, {r.solver_name} IK)"
 
 
 def derive_text(path: str | Path, max_bytes: int = MAX_INPUT_BYTES, robot: str | Path | None = None,

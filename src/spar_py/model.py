@@ -14,7 +14,7 @@ import numpy as np
 from .memo import Memo
 
 if TYPE_CHECKING:
-    from .kinematics import Robot
+    from .world.robots import Robot
     from .world.shapes import FeatureGeometry, Geometry
 
 Face = Union[int, str]

@@ -373,7 +373,8 @@ def _arm(world: World, T: np.ndarray) -> tuple[np.ndarray | None, dict[str, Any]
         q = sols[int(np.argmin(np.abs(sols - ref).sum(axis=1)))]
     geo = {"tool_pose": np.round(T, 9).tolist(),
            "joints_deg": None if q is None else [round(float(v), 6) for v in np.degrees(q)],
-           "ik_solutions_deg": [[round(float(v), 6) for v in np.degrees(r)] for r in sols] if ok else []}
+           "ik_solutions_deg": [[round(float(v), 6) for v in np.degrees(r)] for r in sols] if ok else [],
+           "ik_solver": world.cell.robot.solver_name}
     return q, geo
 
 

@@ -91,7 +91,8 @@ class Step:
 
     ``kind`` manipulation | sensing | squeeze (``serves``: the action an inserted step
     serves); ``tool_pose`` 4x4 world (cell unit) or None; ``joints_deg`` the joint
-    solution used (deg, the robot file's DH zero convention) or None; ``poses`` every
+    solution used (deg, the robot file's DH zero convention) or None; ``ik_solver`` which
+    solver gave the joints ("closed-form puma", "closed-form ur" or "numeric": not complete); ``poses`` every
     part's 4x4 world pose at the step's end-point (part key: the object name, or
     ``object@initial_position`` for the other parts of a stock); ``held`` the object in
     the hand after the step, or None."""
@@ -106,6 +107,7 @@ class Step:
     tool_pose: list[list[float]] | None
     joints_deg: list[float] | None
     ik_solutions_deg: list[list[float]]
+    ik_solver: str | None
     placement: dict[str, Any] | None
     source: dict[str, str] | None
     poses: dict[str, list[list[float]]]
@@ -183,6 +185,7 @@ def _step(s: dict[str, Any], verdicts: list[Verdict]) -> Step:
     return Step(id=s["id"], kind=s["kind"], serves=s["serves"], name=s["name"], object=s["object"],
                 term=s["term"], args=tuple(s.get("args", ())), tool_pose=s.get("tool_pose"),
                 joints_deg=s.get("joints_deg"), ik_solutions_deg=list(s.get("ik_solutions_deg") or []),
+                ik_solver=s.get("ik_solver"),
                 placement=s.get("placement"), source=s.get("from"), poses=dict(s.get("poses") or {}),
                 held=s.get("held"), verdicts=tuple(v for v in verdicts if v.action == s["id"]))
 

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
-    from .kinematics import Robot
+    from .world.robots import Robot
 
 __all__ = ["reaches", "solutions", "wrist_above_table", "wrist_height"]
 

@@ -31,7 +31,7 @@ from .scene import MIN_SIZE_MM, Scene, part_model, scenes
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
 
-    from ..kinematics import Robot
+    from ..world.robots import Robot
     from ..model import Cell, ObjectModel, Solid
 
 __all__ = ["arm_polyline", "cell_figure", "cell_png", "extent", "gripper_segments", "hole_mouth",

@@ -1,4 +1,7 @@
-"""kinematics.py: the PUMA 762 table, FK, all closed-form IK solutions, singularities, batch = single."""
+"""world/ik/puma.py via Robot: the PUMA 762 table, FK, all closed-form IK solutions, singularities, batch = single.
+
+The round trips check poses with an FK written here from Craig's link transform (eq. 3.6),
+not the code under test."""
 from __future__ import annotations
 
 import math
@@ -12,7 +15,7 @@ from hypothesis import strategies as st
 from spar_py.errors import SparValueError
 from spar_py.geometry import inv, rotx, rotz, rpy, trans
 from spar_py.kb import load_robot
-from spar_py.kinematics import LIMIT_TOL, Robot
+from spar_py.world.robots import LIMIT_TOL, Robot
 
 ROOT = Path(__file__).resolve().parent.parent
 PUMA = ROOT / "kb" / "robots" / "puma762.yaml"
@@ -53,13 +56,29 @@ def test_post_init_checks_shapes_and_family() -> None:
         Robot("r", np.zeros((5, 4)), np.zeros((6, 2)), np.eye(4), np.eye(4), 1.0, "mm")
     with pytest.raises(SparValueError, match="lo <= hi"):
         Robot("r", generic_robot().dh, [[1, 0]] * 6, np.eye(4), np.eye(4), 1.0, "mm")
-    # a table outside the PUMA 560 family: FK still works, IK says why it cannot
+    assert generic_robot().solver_name == "closed-form puma"
+    # a table outside the PUMA 560 family (and the UR's): the numeric fallback, and why not closed form
     dh = generic_robot().dh.copy()
-    dh[4, 0] = 0.0
+    dh[4, 0] = 0.3  # a skewed wrist
     odd = Robot("odd", dh, [[-3, 3]] * 6, np.eye(4), np.eye(4), 1.0, "mm")
     assert odd.fk(np.zeros(6)).shape == (4, 4)
-    with pytest.raises(SparValueError, match="alpha_4"):
-        odd.ik(np.eye(4))
+    assert odd.solver_name == "numeric"
+    assert "alpha_4" in odd.not_closed_form["puma"]
+    # two joints about one line is no 6-DOF arm at all
+    dh[4, 0] = 0.0
+    with pytest.raises(SparValueError, match="joints 4 and 5 turn about the same line"):
+        Robot("flat", dh, [[-3, 3]] * 6, np.eye(4), np.eye(4), 1.0, "mm")
+
+
+def craig_fk(robot: Robot, q: np.ndarray) -> np.ndarray:
+    """World tool poses (n, 4, 4) from Craig's link transform written out (eq. 3.6), one joint at a time."""
+    out = np.empty((len(q), 4, 4))
+    for k, qk in enumerate(q):
+        T = robot.base.copy()
+        for (alpha, a, d, off), qi in zip(robot.dh, qk):
+            T = T @ rotx(alpha) @ trans(a, 0.0, 0.0) @ rotz(qi + off) @ trans(0.0, 0.0, d)
+        out[k] = T @ robot.tool
+    return out
 
 
 # ---------------------------------------------------------------- forward kinematics
@@ -104,20 +123,27 @@ def test_frames_run_from_the_base_to_the_tool(puma: Robot, which: str) -> None:
 # ---------------------------------------------------------------- inverse kinematics
 
 
-def check_round_trip(robot: Robot, q: np.ndarray, tol_len: float) -> None:
-    """Every returned solution is in limits and reproduces fk(q); q itself is among them."""
-    T = robot.fk_batch(q)
+def check_round_trip(robot: Robot, q: np.ndarray, tol_len: float, exact: int = 300) -> None:
+    """Every returned solution is in limits and reproduces fk(q) (Craig's FK written out, above);
+    q is among the branches modulo full turns, and exactly among ik()'s rows (first ``exact``)."""
+    T = craig_fk(robot, q)
+    assert np.abs(T - robot.fk_batch(q)).max() < tol_len
     Q, ok = robot.ik_batch(T)
     assert Q.shape == (len(q), robot.n_candidates, 6) and ok.shape == Q.shape[:2]
+    assert robot.n_candidates == 8
     assert ok.any(axis=1).all()
     sols, which = Q[ok], np.nonzero(ok)[0]
     assert robot.in_limits(sols).all()
     err = np.abs(robot.fk_batch(sols) - T[which]).max(axis=(1, 2))
     assert err.max() < tol_len, f"worst fk(ik(T)) - T: {err.max()}"
-    # the original configuration is a returned row (all in-limit turn representations are listed,
-    # so q matches exactly, not just modulo full turns of the roll and swivel joints)
-    found = ((np.abs(Q - q[:, None, :]).max(axis=2) < 1e-6) & ok).any(axis=1)
+    d = np.abs(np.remainder(Q - q[:, None, :] + np.pi, TWO_PI) - np.pi).max(axis=2)
+    found = ((d < 1e-6) & ok).any(axis=1)
     assert found.all(), f"{(~found).sum()} configurations not recovered, e.g. {q[~found][:3]}"
+    # ik() lists every in-limit turn representation, so q matches exactly, not just modulo turns
+    for qi, Ti in zip(q[:exact], T[:exact]):
+        rows = robot.ik(Ti)
+        assert robot.in_limits(rows).all()
+        assert (np.abs(rows - qi).max(axis=1) < 1e-6).any()
 
 
 def test_round_trip_10000_random(puma: Robot) -> None:
@@ -202,8 +228,13 @@ def test_ik_batch_agrees_with_ik_row_for_row(puma: Robot) -> None:
     Q, ok = puma.ik_batch(T)
     for i in range(len(T)):
         single = puma.ik(T[i])
-        assert single.shape == (ok[i].sum(), 6)
-        assert np.array_equal(single, Q[i][ok[i]])
+        # ik = the in-limit branches of ik_batch (each row of it exactly), each with its other
+        # in-limit turn representations: the same configurations modulo full turns
+        assert len(single) >= ok[i].sum()
+        for row in Q[i][ok[i]]:
+            assert (np.abs(single - row).max(axis=1) < 1e-12).any()
+        wrapped = {tuple(np.round(np.remainder(r, TWO_PI), 7) % round(TWO_PI, 7)) for r in single}
+        assert wrapped == {tuple(np.round(np.remainder(r, TWO_PI), 7) % round(TWO_PI, 7)) for r in Q[i][ok[i]]}
     assert np.array_equal(puma.reachable_mask(T), ok.any(axis=1))
     assert not ok[7].any()
 
