@@ -44,17 +44,23 @@ def bench_spar(n: int, n_single: int, repeats: int) -> tuple[float, float, float
     """(batch us/pose, single us/pose, mean solutions per pose) for the PUMA 762."""
     from spar_py.kb import load_robot
 
-    robot = load_robot(PUMA)
-    rng = np.random.default_rng(1)
+    batch, single, ok, _ = _time_ik(load_robot(PUMA), n, n_single, repeats, seed=1)
+    return batch, single, float(ok.sum(axis=1).mean())
+
+
+def _time_ik(robot, n: int, n_single: int, repeats: int, seed: int):
+    """Time ``robot``'s IK on n in-limit poses (reachable by construction: fk of random joint
+    vectors): (batch us/pose, single us/pose over the first n_single, ok (n, B), those poses)."""
+    rng = np.random.default_rng(seed)
     q = rng.uniform(robot.limits[:, 0], robot.limits[:, 1], size=(n, 6))
-    T = robot.fk_batch(q)  # reachable by construction
+    T = robot.fk_batch(q)
     _, ok = robot.ik_batch(T)
     if not ok.any(axis=1).all():
-        raise SystemExit("bench: a reachable pose got no IK solution")
+        raise SystemExit(f"bench: a reachable pose of {robot.name} got no IK solution")
     batch = median_us(lambda: robot.ik_batch(T), n, repeats)
     Ts = T[:n_single]
     single = median_us(lambda: [robot.ik(t) for t in Ts], n_single, repeats)
-    return batch, single, float(ok.sum(axis=1).mean())
+    return batch, single, ok, Ts
 
 
 def bench_rtb(n: int, repeats: int) -> tuple[float, float, float] | None:
@@ -92,15 +98,7 @@ def bench_ur(n: int, n_single: int, repeats: int) -> dict:
     for name, robot in _ur_robots().items():
         if robot.solver_name != "closed-form ur":
             raise SystemExit(f"bench: {name} is not solved by the UR closed form")
-        rng = np.random.default_rng(3)
-        q = rng.uniform(robot.limits[:, 0], robot.limits[:, 1], size=(n, 6))
-        T = robot.fk_batch(q)
-        _, ok = robot.ik_batch(T)
-        if not ok.any(axis=1).all():
-            raise SystemExit("bench: a reachable UR pose got no IK solution")
-        batch = median_us(lambda: robot.ik_batch(T), n, repeats)
-        Ts = T[:n_single]
-        single = median_us(lambda: [robot.ik(t) for t in Ts], n_single, repeats)
+        batch, single, ok, Ts = _time_ik(robot, n, n_single, repeats, seed=3)
         rows = float(np.mean([len(robot.ik(t)) for t in Ts[:100]]))
         out[name] = {"batch_us": batch, "single_us": single, "branches_per_pose": float(ok.sum(axis=1).mean()),
                      "rows_per_pose": rows}

@@ -30,6 +30,7 @@ import math
 import statistics
 import time
 from pathlib import Path
+from typing import Callable
 
 import casadi as ca
 import numpy as np
@@ -197,18 +198,16 @@ def _rigid(rng: np.random.Generator, scale: float) -> np.ndarray:
     return T
 
 
-def random_chain(rng: np.random.Generator, length: int) -> tuple[ca.SX, Registry]:
-    """A product of ``length`` error transforms (bounded trans + rotz, up to +-0.2 in / rad)
-    between random rigid transforms; then a translation component, a coordinate of T^-1 p
-    or a squared distance (as tests/test_supinf.py builds them)."""
+def _chain(rng: np.random.Generator, length: int,
+           step_bounds: Callable[[], Callable[[], tuple[float, float]]]) -> tuple[ca.SX, Registry]:
+    """A product of ``length`` error transforms (trans + rotz, each variable bounded by the
+    ``b()`` of its step: ``b = step_bounds()`` once per step) between random rigid transforms;
+    then a translation component, a coordinate of T^-1 p or a squared distance (as
+    tests/test_supinf.py builds them)."""
     reg = Registry()
     T = _rigid(rng, 30.0)
     for _ in range(length):
-        w = 10 ** rng.uniform(-3, -0.7)
-
-        def b(w: float = w) -> tuple[float, float]:
-            return float(rng.uniform(-w, 0)), float(rng.uniform(0, w))
-
+        b = step_bounds()
         E = compose(trans(reg.new("dx", *b()), reg.new("dy", *b()), reg.new("dz", *b())), rotz(reg.new("th", *b())))
         if rng.random() < 0.3:
             E = inv(E)
@@ -221,23 +220,20 @@ def random_chain(rng: np.random.Generator, length: int) -> tuple[ca.SX, Registry
     return ca.sumsqr(apply(T, p) - rng.uniform(-30, 30, 3)), reg
 
 
+def random_chain(rng: np.random.Generator, length: int) -> tuple[ca.SX, Registry]:
+    """:func:`_chain` with each step's variables in [-u, 0] x [0, u] draws, ``w`` log-uniform in
+    [1e-3, 0.2] per step (up to +-0.2 in / rad)."""
+    def step() -> Callable[[], tuple[float, float]]:
+        w = 10 ** rng.uniform(-3, -0.7)
+        return lambda: (float(rng.uniform(-w, 0)), float(rng.uniform(0, w)))
+
+    return _chain(rng, length, step)
+
+
 def uniform_chain(rng: np.random.Generator, length: int, half: float = 0.1) -> tuple[ca.SX, Registry]:
     """As :func:`random_chain`, but every error variable bounded by +-``half`` (in and rad):
     the issue's "products of depth 8 at +-0.1 rad"."""
-    reg = Registry()
-    T = _rigid(rng, 30.0)
-    for _ in range(length):
-        E = compose(trans(reg.new("dx", -half, half), reg.new("dy", -half, half), reg.new("dz", -half, half)),
-                    rotz(reg.new("th", -half, half)))
-        if rng.random() < 0.3:
-            E = inv(E)
-        T = compose(T, E, _rigid(rng, 5.0)) if rng.random() < 0.7 else compose(E, T, _rigid(rng, 5.0))
-    kind, p = int(rng.integers(3)), rng.uniform(-3, 3, 3)
-    if kind == 0:
-        return T[int(rng.integers(3)), 3], reg
-    if kind == 1:
-        return apply(inv(T), p)[int(rng.integers(3))], reg
-    return ca.sumsqr(apply(T, p) - rng.uniform(-30, 30, 3)), reg
+    return _chain(rng, length, lambda: lambda: (-half, half))
 
 
 def deep(rng: np.random.Generator, count: int, length: int = 8, half: float = 0.1, repeats: int = 3) -> dict:

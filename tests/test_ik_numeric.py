@@ -12,9 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from spar_py.geometry import rotx, rotz, trans
+from spar_py.geometry import rotx, trans
 from spar_py.kb import load_robot
 from spar_py.world.robots import Robot
+from craig_reference import craig_fk
 
 ROOT = Path(__file__).resolve().parent.parent
 PUMA = ROOT / "kb" / "robots" / "puma762.yaml"
@@ -29,16 +30,6 @@ def offset_puma(tmp_path_factory: pytest.TempPathFactory) -> Robot:
     path = tmp_path_factory.mktemp("robots") / "puma_d5.yaml"
     path.write_text(text.replace(old, old.replace("d: 0,", "d: 95,")))
     return load_robot(path)
-
-
-def craig_fk(robot: Robot, q: np.ndarray) -> np.ndarray:
-    out = np.empty((len(q), 4, 4))
-    for k, qk in enumerate(q):
-        T = robot.base.copy()
-        for (alpha, a, d, off), qi in zip(robot.dh, qk):
-            T = T @ rotx(alpha) @ trans(a, 0.0, 0.0) @ rotz(qi + off) @ trans(0.0, 0.0, d)
-        out[k] = T @ robot.tool
-    return out
 
 
 def test_offset_wrist_gets_the_numeric_solver_and_says_why(offset_puma: Robot) -> None:

@@ -16,6 +16,7 @@ from spar_py.errors import SparValueError
 from spar_py.geometry import inv, rotx, rotz, rpy, trans
 from spar_py.kb import load_robot
 from spar_py.world.robots import LIMIT_TOL, Robot
+from craig_reference import craig_fk
 
 ROOT = Path(__file__).resolve().parent.parent
 PUMA = ROOT / "kb" / "robots" / "puma762.yaml"
@@ -68,17 +69,6 @@ def test_post_init_checks_shapes_and_family() -> None:
     dh[4, 0] = 0.0
     with pytest.raises(SparValueError, match="joints 4 and 5 turn about the same line"):
         Robot("flat", dh, [[-3, 3]] * 6, np.eye(4), np.eye(4), 1.0, "mm")
-
-
-def craig_fk(robot: Robot, q: np.ndarray) -> np.ndarray:
-    """World tool poses (n, 4, 4) from Craig's link transform written out (eq. 3.6), one joint at a time."""
-    out = np.empty((len(q), 4, 4))
-    for k, qk in enumerate(q):
-        T = robot.base.copy()
-        for (alpha, a, d, off), qi in zip(robot.dh, qk):
-            T = T @ rotx(alpha) @ trans(a, 0.0, 0.0) @ rotz(qi + off) @ trans(0.0, 0.0, d)
-        out[k] = T @ robot.tool
-    return out
 
 
 # ---------------------------------------------------------------- forward kinematics
