@@ -12,6 +12,12 @@
       position(Name, Obj, Label, tm(Rows))     absolute initial positions
       position_class(Label, PoseLabel)         Sec. 5.2.3, computed at load
       object/1, face/2, initial/1, goal/1, transform/2, vector/2, problem/1
+      turn(Ta, Turn, HolePoses)   a derived T_a's turns about the hole's axis
+                                  (goal assembled(Peg, Hole)), in order: the
+                                  goal names Ta, an assemble may use any Turn
+                                  (a transform/2), the hole part then resting
+                                  in one of HolePoses (the mated peg clears
+                                  the table in them)
 
     The planner reads them through the accessors of the same names
     (kb:grasp/6, ...), which answer for the problem in scope: a planning
@@ -44,7 +50,7 @@ kb_predicate(face, 2).           kb_predicate(pose, 5).
 kb_predicate(grasp, 6).          kb_predicate(position, 4).
 kb_predicate(position_class, 2). kb_predicate(initial, 1).
 kb_predicate(goal, 1).           kb_predicate(transform, 2).
-kb_predicate(vector, 2).
+kb_predicate(vector, 2).         kb_predicate(turn, 3).
 
 %   stored(?Fact, ?Problem, ?Stored): Stored is Fact as kept for Problem,
 %   '$Name'(Problem, Args...).

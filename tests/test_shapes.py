@@ -21,7 +21,7 @@ from spar_py.kb import check_file, load_object, load_problem
 from spar_py.world import shapes_cache
 from spar_py.world.shapes import part_mesh
 
-from test_problems import PAPER_ACTIONS, PAPER_ORDER, phase1
+from test_problems import PAPER_ACTIONS, PAPER_ORDER, PHASE1, Outcome, phase1
 
 ROOT = Path(__file__).resolve().parent.parent
 OBJ = ROOT / "kb" / "objects"
@@ -218,6 +218,102 @@ def test_meshes_only_cell_plans_with_no_hand_written_entry() -> None:
         assert "mesh:" in t and not any(f"\n{k}:" in t for k in ("faces", "stable_poses", "grasps"))
 
 
+# ---------------------------------------------------------------------- the turns of T_a
+
+
+def _rot(axis: np.ndarray, angle: float) -> np.ndarray:
+    """Rodrigues: the rotation by ``angle`` (rad) about unit ``axis`` (written here, not imported)."""
+    x, y, z = axis / np.linalg.norm(axis)
+    K = np.array([[0, -z, y], [z, 0, -x], [-y, x, 0]])
+    return np.eye(3) + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K
+
+
+def _box_corners(lo: list[float], hi: list[float]) -> np.ndarray:
+    return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])], float)
+
+
+# tab_peg.yaml's solid, from its numbers (mm): flange, tab, and the shaft's two end circles
+TAB_PEG_POINTS = np.vstack([
+    _box_corners([-25, -25, 0], [25, 25, 20]), _box_corners([25, -8, 0], [80, 8, 20]),
+    *[np.column_stack([12 * np.cos(a), 12 * np.sin(a), np.full_like(a, z)])
+      for z in (20.0, 60.0) for a in [np.radians(np.arange(0, 360, 5.0))]]])
+
+
+def _phase1_cell(cell: object, max_actions: int = 6) -> Outcome:
+    from spar_py.engine import engine
+
+    e = engine()
+    e.load_cell(cell)
+    try:
+        a = e.query_once(PHASE1, {"Name": cell.name, "Max": max_actions})  # type: ignore[attr-defined]
+    finally:
+        e.unload(cell.name)  # type: ignore[attr-defined]
+    assert a["truth"], a
+    return Outcome(a["Kind"], list(a["Actions"]), list(a["Order"]), {}, int(a["Bound"]), str(a["Unmet"]))
+
+
+def test_assembled_2_gives_every_turn_about_the_holes_axis() -> None:
+    """Eight turns 45 deg apart; each seats the peg (its axis on the hole's, its tip at the
+    hole's bottom) and is the first turned about the hole's axis."""
+    cell = load_problem(ROOT / "kb" / "problems" / "tab_peg_sideways.yaml")
+    names = [t for t, _ in cell.turns["trans_1"]]
+    assert names == ["trans_1"] + [f"trans_1_t{j}" for j in range(2, 9)]
+    T1 = cell.transforms["trans_1"]
+    for j, name in enumerate(names):
+        T = cell.transforms[name]
+        np.testing.assert_allclose(T[:3, :3] @ [0, 0, 1], [0, 0, -1], atol=1e-12)  # peg axis into the hole
+        np.testing.assert_allclose(T[:3, :3] @ [0, 0, 60] + T[:3, 3], [0, 0, 20], atol=1e-9)  # tip at the bottom
+        np.testing.assert_allclose(T[:3, :3], _rot(np.array([0, 0, -1.0]), j * math.pi / 4) @ T1[:3, :3],
+                                   atol=1e-12)
+
+
+@pytest.mark.parametrize("steps, n", [((90, 90), 4), ((90, None), 8), ((120, 90), 4)])
+def test_grasp_step_sets_the_quantum_of_turns(tmp_path: Path, steps: tuple, n: int) -> None:
+    """The turns are quantised by the finer grasp_step of the two models (45 deg if unsaid)."""
+    cell_src = (ROOT / "kb" / "problems" / "tab_peg_sideways.yaml").read_text().replace(
+        "../robots/", f"{ROOT}/kb/robots/")
+    for f, step in zip(("tab_peg", "socket_block"), steps):
+        src = (OBJ / f"{f}.yaml").read_text()
+        (tmp_path / f"{f}.yaml").write_text(src + (f"grasp_step: {step}\n" if step else ""))
+        cell_src = cell_src.replace(f"../objects/{f}.yaml", str(tmp_path / f"{f}.yaml"))
+    p = tmp_path / "cell.yaml"
+    p.write_text(cell_src)
+    assert [t for t, _ in load_problem(p).turns["trans_1"]] == ["trans_1"] + [f"trans_1_t{j}" for j in range(2, n + 1)]
+
+
+def test_the_planner_chooses_a_turn_that_keeps_the_tab_out_of_the_table() -> None:
+    """tab_peg_sideways: in the first turn (and 45 deg either side of it) the tab would go
+    into the table; the planner backtracks over the turns and assembles with one in which
+    every point of the peg is above the table (checked here from the model's own numbers)."""
+    cell = load_problem(ROOT / "kb" / "problems" / "tab_peg_sideways.yaml")
+    o = _phase1_cell(cell)
+    assert o.kind == "plan"
+    assert len(o.actions) == 2 and o.actions[0] == "pickup(tab_peg,grasp_1)"
+    turn = o.actions[1].split(",")[-2]
+    assert o.actions[1] == f"assemble(tab_peg,socket_block,[[shaft],[socket]],{turn},vec_1)"
+    assert turn != "trans_1"
+    T_block = cell.positions["tr2"].T
+
+    def lowest(name: str) -> float:
+        T = T_block @ cell.transforms[name]
+        return float((TAB_PEG_POINTS @ T[:3, :3].T + T[:3, 3])[:, 2].min())
+
+    assert lowest(turn) > -1e-6
+    assert lowest("trans_1") < -10  # the tab's end 30 mm under the table top
+    assert lowest("trans_1_t2") < 0 and lowest("trans_1_t8") < 0
+
+
+def test_with_the_first_turn_alone_the_block_must_be_turned_over() -> None:
+    """The counterfactual: the same cell offering only the first turn needs the block picked
+    up and put down in a pose where that turn clears the table: four actions, not two."""
+    cell = load_problem(ROOT / "kb" / "problems" / "tab_peg_sideways.yaml")
+    cell.turns["trans_1"] = cell.turns["trans_1"][:1]
+    o = _phase1_cell(cell)
+    assert o.kind == "plan"
+    assert o.actions == ["pickup(socket_block,grasp_2)", "putdown(socket_block,pos_1)", "pickup(tab_peg,grasp_1)",
+                         "assemble(tab_peg,socket_block,[[shaft],[socket]],trans_1,vec_1)"]
+
+
 # ---------------------------------------------------------------------- checks of hand-written entries
 
 
@@ -241,6 +337,18 @@ def test_check_names_an_unstable_pose(tmp_path: Path) -> None:
                           "[[1, 0, 0], [0, 0.8, 0.6], [0, -0.6, 0.8], [0, 0, 0]]")
     with pytest.raises(KBError, match=r"stable_poses\[0\]: expected a stable pose of the shape, not s1: it rests on"):
         check_file(_model(tmp_path, tilted + GRASP))
+
+
+def test_check_names_a_pose_that_tips_over_on_a_small_tilt(tmp_path: Path) -> None:
+    """tab_peg upside down on its shaft's tip: its centre of mass is over the tip (1.2 mm inside
+    its edge) but 44 mm above it, so a 1.6 deg tilt topples it."""
+    src = (OBJ / "tab_peg.yaml").read_text()
+    p = tmp_path / "tab_peg.yaml"
+    p.write_text(src + "stable_poses:\n  - {label: tip, rfaces: [shaft], ofaces: [shaft], "
+                 "tm: [[1, 0, 0], [0, -1, 0], [0, 0, -1], [0, 0, 60]]}\n")
+    with pytest.raises(KBError, match=r"stable_poses\[0\]: expected a stable pose of the shape, not tip: it tips "
+                                      r"over on a tilt of 1\.59 deg"):
+        check_file(p)
 
 
 def test_check_names_a_pose_at_the_wrong_height(tmp_path: Path) -> None:

@@ -29,7 +29,9 @@
             get_all_grasps/2,                   % +Object, -Grasps
             get_all_poses/2,                    % +Object, -Poses
             mating_grasps/3,                    % +Object, +Faces, -Grasps
-            mating_poses/3                      % +Object, +Faces, -Poses
+            mating_poses/3,                     % +Object, +Faces, -Poses
+            assembly_turn/3,                    % +Ta, -Turn, -HolePoses
+            turn_class/2                        % +Turn, -Ta
           ]).
 :- use_module(library(lists)).
 :- use_module(library(apply)).
@@ -65,6 +67,11 @@ establishes(assembled(_, _, _, _, _), assemble).
 %     - assembled(Obj1, Obj2, [M1, M2], Ta, Va): assemble, its GraspList the
 %       grasps of Obj1 whose ofaces avoid M1 and its PositionList the stable
 %       poses of Obj2 whose ofaces avoid M2 (Sec. 6); no initial constraint.
+%       A derived Ta (goal assembled(Peg, Hole)) stands for its turns about
+%       the hole's axis: the assemble uses one Turn of them, a choice tried
+%       in order and taken back on backtracking (assembly_turn/3), and its
+%       PositionList keeps only the poses in which the peg so turned clears
+%       the table. Its add list gives the goal's Ta (turn_class/2).
 %
 %   A variable of the goal that is still unbound (Grasp, Pos) gets a new
 %   symbol; a bound one is kept, so a new action re-establishes exactly the
@@ -89,12 +96,54 @@ instantiate_establishing_action(gripper(closed), Action, Constraints) -->
     instantiate_establishing_action(holding(_, _), Action, Constraints).
 instantiate_establishing_action(assembled(Obj1, Obj2, [M1, M2], Ta, Va),
                                 Action, []) -->
-    action_template(assemble(Obj1, Obj2, [M1, M2], Ta, Va), Action),
+    { assembly_turn(Ta, Turn, Clear),
+      mating_grasps(Obj1, M1, GraspList),
+      mating_poses(Obj2, M2, Poses),
+      clear_poses(Clear, Poses, PositionList),
+      PositionList \== [] },
+    action_template(assemble(Obj1, Obj2, [M1, M2], Turn, Va), Action),
     { action_geo_goals(Action, Geos),
       memberchk(geo(_, _, member(_, GraspList), _), Geos),
-      memberchk(geo(_, _, in_position_class(_, PositionList), _), Geos),
-      mating_grasps(Obj1, M1, GraspList),
-      mating_poses(Obj2, M2, PositionList) }.
+      memberchk(geo(_, _, in_position_class(_, PositionList), _), Geos) }.
+
+%!  assembly_turn(+Ta, -Turn, -HolePoses) is nondet.
+%
+%   Turn is a transform an assemble for a goal naming Ta may use, and
+%   HolePoses the hole part's stable poses it allows (`all`: no limit):
+%   the turns of a derived Ta (kb:turn/3) in order, else Ta itself.
+%
+%   @error instantiation_error if Ta is unbound.
+
+assembly_turn(Ta, Turn, HolePoses) :-
+    must_be(atom, Ta),
+    (   kb:turn(Ta, _, _)
+    ->  kb:turn(Ta, Turn, HolePoses)
+    ;   Turn = Ta,
+        HolePoses = all
+    ).
+
+%!  turn_class(?Turn, -Ta) is det.
+%
+%   Ta is the transform a goal names whose turn Turn is (Turn itself for a
+%   transform that is no derived turn, or an unbound Turn).
+
+turn_class(Turn, Ta) :-
+    (   atom(Turn),
+        kb:turn(Ta0, Turn, _)
+    ->  Ta = Ta0
+    ;   Ta = Turn
+    ).
+
+%   clear_poses(+Clear, +Poses0, -Poses): the poses of Poses0 that Clear
+%   (a list, or `all`) allows. No yall lambda: its free Clear would be
+%   renamed in the compiled body.
+
+clear_poses(all, Poses, Poses) :- !.
+clear_poses(Clear, Poses0, Poses) :-
+    include(in_list(Clear), Poses0, Poses).
+
+in_list(List, X) :-
+    memberchk(X, List).
 
 object_of(Object) :-
     (   atom(Object) -> true ; kb:object(Object) ).
@@ -110,7 +159,9 @@ action_geo_goals(action(_, _, preconditions(_, Geos), _, _), Geos).
 %!  action_template(+Action, -Template)// is det.
 %
 %   The template of Figs. 2-4 for Action (pickup/2, putdown/2, assemble/5)
-%   with a new action id and new goal ids.
+%   with a new action id and new goal ids. An assemble with a turn of a
+%   derived T_a adds the assembled/5 its goal names, with that T_a
+%   (turn_class/2); otherwise its Transform is the goal's.
 
 action_template(pickup(Object, Grasp), Template) -->            % Fig. 2
     gensym(action_, Id),
@@ -137,6 +188,7 @@ action_template(putdown(Object, Pos), Template) -->             % Fig. 3
                dellist([gripper(closed), holding(Object, Grasp)])) }.
 action_template(assemble(Obj1, Obj2, [M1, M2], Transform, Mvector),   % Fig. 4
                 Template) -->
+    { turn_class(Transform, Ta) },
     gensym(action_, Id),
     gensym(goal_, G1), gensym(goal_, G2), gensym(goal_, G3),
     gensym(goal_, G4), gensym(goal_, G5),
@@ -151,7 +203,7 @@ action_template(assemble(Obj1, Obj2, [M1, M2], Transform, Mvector),   % Fig. 4
                          [part_location(Obj2, Pos)]),
                      geo(G5, Id, mate_reachable(Grasp, Pos, Transform),
                          [holding(Obj1, Grasp), part_location(Obj2, Pos)]) ]),
-               addlist([assembled(Obj1, Obj2, [M1, M2], Transform, Mvector),
+               addlist([assembled(Obj1, Obj2, [M1, M2], Ta, Mvector),
                         gripper(open)]),
                dellist([gripper(closed), holding(Obj1, Grasp)])) }.
 

@@ -637,25 +637,27 @@ def load_object(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, o
     feature_geo = _feature_geometry(fnode, scale) if fnode is not None else None
     if geometry is not None:
         geometry.face_names = face_names
+        geometry.step = _grasp_step(root, rad_per)
     missing = [k for k in DERIVABLE if k not in root.value]
     derived = None
     if missing:
         if geometry is None:
             root.key(missing[0])  # raises: key missing
-        step = _grasp_step(root, rad_per)
+        step = geometry.step
         from .world.shapes_cache import derive
         from .world.shapes_derive import Gripper
 
         grip = Gripper.default(unit, opening if opening is not None else from_mm(unit, DEFAULT_OPENING_MM))
         try:
-            derived = derive(name, geometry, feature_geo, face_names, grip, step, need_hull=geometry.mesh_file
-                             is not None, use_cache=use_cache)
+            derived = derive(name, geometry, feature_geo, face_names, grip, step, need_hull=True,
+                             use_cache=use_cache)
         except KBError:
             raise
         except Exception as e:  # trimesh, manifold3d, scipy: a shape they cannot take is bad input
             raise _geometry_error(path, geometry, e) from None
+        geometry.hull = np.asarray(derived["hull"], float)
         if geometry.mesh_file is not None:
-            pts = np.asarray(derived["hull"], float)
+            pts = geometry.hull
             solids = (Solid("hull", pts.min(0), pts.max(0), 0.0, pts),)
     elif face_names and geometry is None:
         raise root.key("face_names").fail("a model with mesh: or shape: (face_names name the faces of its geometry)")
@@ -1197,8 +1199,9 @@ def _sensors(root: Node, rad_per: float) -> dict[str, Sensor]:
 
 
 def _goals(root: Node, objects: dict[str, ObjectModel], transforms: dict, vectors: dict,
-           positions: dict[str, Position]) -> list[str]:
-    """The goals, parsed and checked against the cell, as Prolog text."""
+           positions: dict[str, Position], turns: dict) -> list[str]:
+    """The goals, parsed and checked against the cell, as Prolog text; an ``assembled(Peg,
+    Hole)`` goal adds its derived T_a turns to ``transforms`` and ``turns`` (_derived_assembly)."""
     goals: list[str] = []
     for g in root.key("goals").elements(1):
         text = g.text()  # outside the try: a KBError is a ValueError too, and must not nest
@@ -1207,19 +1210,26 @@ def _goals(root: Node, objects: dict[str, ObjectModel], transforms: dict, vector
         except ValueError as e:
             raise g.fail(f"a Prolog term ({e})", show(text)) from None
         if isinstance(term, tuple) and term[0] == "assembled" and len(term) == 3:
-            term = _derived_assembly(g, term, objects, transforms, vectors)
+            term = _derived_assembly(g, term, objects, transforms, vectors, turns)
         _check_goal(g, term, objects, transforms, vectors, positions)
         goals.append(term_text(term))
     return goals
 
 
 def _derived_assembly(node: Node, goal: tuple, objects: dict[str, ObjectModel], transforms: dict,
-                      vectors: dict) -> tuple:
+                      vectors: dict, turns: dict) -> tuple:
     """``assembled(Peg, Hole)`` as the paper's five-argument goal: the mating faces are the two
-    features' faces, T_a and V_a derived from their geometry (world.shapes.assembly_transforms:
-    the first of the quantised turns about the hole's axis) and added to the cell's
-    transforms and vectors as trans_K and vec_K (the first K not taken)."""
-    from .world.shapes import assembly_transforms
+    features' faces, T_a and V_a derived from their geometry (world.shapes.assembly_transforms).
+
+    T_a is a choice among the turns about the hole's axis, quantised by the finer of the two
+    models' ``grasp_step`` (45 deg by default): the first turn (the least rotation of the
+    peg's axis onto the hole's) is added to the cell's transforms as trans_K, turn J (J = 2,
+    3, ...; turned by (J - 1) steps) as trans_K_tJ, and V_a as vec_K (the first K not taken).
+    The goal names trans_K; ``turns[trans_K]`` lists every turn with the hole part's stable
+    poses in which the mated peg stays clear of the table (world.shapes.poses_clear_of_table;
+    every pose when the peg has no shape). The planner chooses the turn (kb/templates/actions.pl).
+    """
+    from .world.shapes import assembly_transforms, part_mesh, poses_clear_of_table
 
     _, peg, hole = goal
     feats = []
@@ -1231,12 +1241,28 @@ def _derived_assembly(node: Node, goal: tuple, objects: dict[str, ObjectModel], 
             raise node.fail(f"{obj} with a {kind} feature declared by geometry (feature: {{kind: {kind}, name, "
                             "radius, axis, length}) for assembled/2, or the five-argument goal")
         feats.append(f)
-    Tas, Va, _ = assembly_transforms(feats[0].geometry, feats[1].geometry)
+    steps = [m.geometry.step for m in (objects[peg], objects[hole]) if m.geometry is not None]
+    Tas, Va, _ = assembly_transforms(feats[0].geometry, feats[1].geometry, min(steps, default=math.radians(45.0)))
     k = 1
-    while f"trans_{k}" in transforms or f"vec_{k}" in vectors:
+    while f"trans_{k}" in transforms or f"vec_{k}" in vectors or any(
+            f"trans_{k}_t{j}" in transforms for j in range(2, len(Tas) + 1)):
         k += 1
-    transforms[f"trans_{k}"], vectors[f"vec_{k}"] = Tas[0], Va
-    return ("assembled", peg, hole, [list(feats[0].faces), list(feats[1].faces)], f"trans_{k}", f"vec_{k}")
+    name = f"trans_{k}"
+    pgeo = objects[peg].geometry
+    pts = None
+    if pgeo is not None:  # the hull a derivation gave, else (all entries hand-written) the mesh's vertices
+        pts = pgeo.hull if pgeo.hull is not None else np.asarray(part_mesh(objects[peg]).vertices)
+    poses = list(objects[hole].poses.values())
+    alternatives = []
+    for j, T in enumerate(Tas, start=1):
+        tname = name if j == 1 else f"{name}_t{j}"
+        transforms[tname] = T
+        clear = ([True] * len(poses) if pts is None else poses_clear_of_table(
+            pts, T, [(p.R, p.height) for p in poses], pgeo.unit))
+        alternatives.append((tname, tuple(p.label for p, ok in zip(poses, clear) if ok)))
+    vectors[f"vec_{k}"] = Va
+    turns[name] = tuple(alternatives)
+    return ("assembled", peg, hole, [list(feats[0].faces), list(feats[1].faces)], name, f"vec_{k}")
 
 
 def _regions(root: Node) -> list[dict[str, tuple[float, float]]]:
@@ -1270,7 +1296,8 @@ def load_problem(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> Cell:
     sensors = _sensors(root, rad_per)
     transforms = {k: tm_node(n.key("tm"), 1.0) for k, n in (root.key("transforms", False) or Node("", "", {})).items()}
     vectors = {k: n.vector(3) for k, n in (root.key("vectors", False) or Node("", "", {})).items()}
-    goals = _goals(root, objects, transforms, vectors, positions)
+    turns: dict[str, tuple[tuple[str, tuple[str, ...]], ...]] = {}
+    goals = _goals(root, objects, transforms, vectors, positions, turns)
     initial = [f"gripper({grip})"] + [f"part_location({p.obj}, {p.name})" for p in positions.values()]
     meshes = [m.geometry.mesh_file for m in objects.values() if m.geometry is not None and m.geometry.mesh_file]
     files = tuple(dict.fromkeys(str(Path(u).resolve()) for u in [path, rpath, *model_files, *meshes]))
@@ -1285,6 +1312,7 @@ def load_problem(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> Cell:
         positions=positions,
         transforms=transforms,
         vectors=vectors,
+        turns=turns,
         initial=initial,
         goals=goals,
         manipulator_bounds=man,
@@ -1321,7 +1349,9 @@ def facts(cell: Cell) -> list[tuple]:
     """The Prolog facts of a cell (module kb), as term data for the bridge.
 
     Shapes follow Figs. 18-19: pose/5, grasp/6, plus object/1, face/2, position/4,
-    position_class/2, initial/1, goal/1, transform/2, vector/2, problem/1.
+    position_class/2, initial/1, goal/1, transform/2, vector/2, problem/1, and turn/3 for
+    a derived T_a: turn(Ta, Turn, HolePoses), in order, each turn the planner may assemble
+    with and the hole part's stable poses in which the mated peg clears the table.
     """
     out: list[tuple] = [("problem", cell.name)]
     for o in cell.objects.values():
@@ -1343,6 +1373,7 @@ def facts(cell: Cell) -> list[tuple]:
         out.append(("position_class", p.label, position_class(cell, p)))
     out += [("transform", k, _tm(T)) for k, T in cell.transforms.items()]
     out += [("vector", k, [_num(v) for v in vec]) for k, vec in cell.vectors.items()]
+    out += [("turn", ta, t, list(poses)) for ta, alts in cell.turns.items() for t, poses in alts]
     out += [("initial", parse_term(f)) for f in cell.initial]
     out += [("goal", parse_term(g)) for g in cell.goals]
     return out

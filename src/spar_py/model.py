@@ -155,6 +155,9 @@ class Cell:
     object_bounds: dict[str, Bounds]
     sensors: dict[str, Sensor]
     placement_regions: list[dict] = field(default_factory=list)
+    #: Derived T_a (assembled/2 goals): the goal's transform name -> its turns about the hole's
+    #: axis, each (transform name, the hole part's stable poses the mated peg clears the table in).
+    turns: dict[str, tuple[tuple[str, tuple[str, ...]], ...]] = field(default_factory=dict)
     #: The files the cell was loaded from (resolved paths: problem, robot, models).
     files: tuple[str, ...] = ()
     #: The cell's memo tables (bounded; freed with the cell): see memo.py.

@@ -61,6 +61,41 @@ test(index, As == [assemble, pickup, pickup, putdown, putdown]) :-
 
 :- end_tests(templates_figs2_6).
 
+%   The paper's cell with trans_1 as a derived T_a of two turns: the first
+%   allows the block's poses p2P1 and p2P2, the second (trans_1_t2) p2P4.
+load_turn_cell :-
+    cell_facts(hole_down, Facts0),
+    append(Facts0, [ transform(trans_1_t2, tm([[-1,0,0],[0,1,0],[0,0,-1],[0,0,2.5]])),
+                     turn(trans_1, trans_1, [p2P1, p2P2]),
+                     turn(trans_1, trans_1_t2, [p2P4]) ], Facts),
+    kb:replace_facts(Facts).
+
+:- begin_tests(templates_turns, [setup(load_turn_cell), cleanup(load_cell(hole_down))]).
+
+test(turns_in_order, Ts == [trans_1-[p2P1, p2P2], trans_1_t2-[p2P4]]) :-
+    findall(T-H, assembly_turn(trans_1, T, H), Ts).
+
+test(plain_transform_is_its_own_turn, Ts == [trans_9-all]) :-
+    findall(T-H, assembly_turn(trans_9, T, H), Ts).
+
+test(unbound_ta, [error(instantiation_error)]) :-
+    assembly_turn(_, _, _).
+
+test(turn_class, Cs == [trans_1, trans_1, trans_9]) :-
+    maplist(turn_class, [trans_1, trans_1_t2, trans_9], Cs).
+
+test(assemble_per_turn, Alts == [trans_1-[p2P1, p2P2], trans_1_t2-[p2P4]]) :-
+    Goal = assembled(peg, block, [[peg_face], [block_face]], trans_1, vec_1),
+    findall(T-PL, ( phrase(instantiate_establishing_action(Goal, Action, []), [], _),
+                    Action = action(_, assemble(_, _, _, T, _), preconditions(_, Geos),
+                                    addlist(Adds), _),
+                    memberchk(Goal, Adds),
+                    memberchk(geo(_, _, in_position_class(_, PL), _), Geos),
+                    memberchk(geo(_, _, mate_reachable(_, _, T), _), Geos) ),
+            Alts).
+
+:- end_tests(templates_turns).
+
 :- begin_tests(templates_figs11_13).
 
 test(fig11_dense_range_scan, [Vs-NB == 4-8]) :-

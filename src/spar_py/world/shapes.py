@@ -49,7 +49,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "Face", "FeatureGeometry", "Geometry", "Primitive", "assembly_transforms", "axis_basis",
-    "derive_faces", "face_of_point", "minimal_rotation", "part_mesh",
+    "derive_faces", "face_of_point", "minimal_rotation", "part_mesh", "poses_clear_of_table",
 ]
 
 #: Sides of the polygon a cylinder primitive is tessellated with.
@@ -124,6 +124,11 @@ class Geometry:
     scale: float = 1.0
     #: ``face_names:`` of the model: a name -> a point on the face (object frame, cell unit).
     face_names: dict = field(default_factory=dict)
+    #: ``grasp_step:`` of the model, the quantum of grasp approaches and assembly turns (rad).
+    step: float = math.radians(45.0)
+    #: The vertices of the mesh's convex hull (object frame, cell unit) once a derivation gave
+    #: them (enough for the lowest point of the part in any orientation), else None.
+    hull: np.ndarray | None = field(default=None, compare=False, repr=False)
     _mesh: Any = field(default=None, compare=False, repr=False)
     _digest: str | None = field(default=None, compare=False, repr=False)
 
@@ -441,3 +446,26 @@ def assembly_transforms(peg: FeatureGeometry, hole: FeatureGeometry,
         T[:3, 3] = tip_goal - R @ peg.end
         out.append(clean(T))
     return out, clean(hole.direction.copy()), depth
+
+
+#: A mated part may reach this far below the table top and still count as clear of it (mm).
+TABLE_CLEAR_MM = 0.01
+
+
+def poses_clear_of_table(peg_vertices: np.ndarray, T_a: np.ndarray, hole_poses: list[tuple[np.ndarray, float]],
+                         unit: str) -> list[bool]:
+    """For each stable pose (R, height) of the hole part, whether the peg mated by ``T_a``
+    (the peg's frame in the hole's frame, 4x4) stays above the table top (z = 0) with the
+    hole part resting in that pose: its lowest vertex at most TABLE_CLEAR_MM below it.
+
+    ``peg_vertices`` (n, 3) are the peg's mesh vertices in its object frame; R (3x3) takes the
+    hole part's object frame to the world's and ``height`` is its origin's height above the
+    table (the pose's x and y do not matter). Lengths in the cell unit ``unit``.
+    """
+    if not hole_poses:
+        return []
+    V = np.asarray(peg_vertices, float) @ T_a[:3, :3].T + T_a[:3, 3]   # peg in the hole's frame
+    R = np.stack([np.asarray(r, float) for r, _ in hole_poses])       # (k, 3, 3)
+    h = np.array([float(z) for _, z in hole_poses])
+    low = (R[:, 2, :] @ V.T).min(1) + h                                # each pose's lowest peg point
+    return [bool(z > -from_mm(unit, TABLE_CLEAR_MM)) for z in low]
