@@ -9,7 +9,9 @@ those below ``PROB_FLOOR`` are dropped, and every remaining one must pass
 :func:`support_check`, our own quasi-static test (the part rests on a face of its own, not
 an edge or a point, and its centre of mass projects inside the support polygon, the convex
 hull of the mesh's points on the table, by at least STABLE_MARGIN_MM), since that function
-can return poses that are not stable. A pose is kept as R, the least rotation taking the
+can return poses that are not stable; and it must not topple on a tilt of STABLE_TILT_DEG about
+any edge of that polygon (the angle whose tangent is the margin over the centre of mass's
+height). A pose is kept as R, the least rotation taking the
 resting face's outward normal to world -z (so a pose is written as the paper writes it,
 ``tm`` rows and the frame's height above the table), its ``rfaces`` (faces lying on the
 table) and ``ofaces`` (those plus a feature whose mouth or tip is on the table).
@@ -57,6 +59,10 @@ HULL_GRID = 100
 SNAP_DEG = 2.0
 #: The centre of mass must project this far inside the support polygon (mm).
 STABLE_MARGIN_MM = 0.5
+#: ... and the part must stay after a tilt of this much about any edge of it (deg): a part
+#: balanced with its centre of mass high over a narrow face (a peg on a tip off its centre of
+#: mass by a millimetre) passes the margin but is knocked over by the least disturbance.
+STABLE_TILT_DEG = 5.0
 #: Points within this of the table plane support the part (mm).
 SUPPORT_TOL_MM = 0.01
 #: The least contact of each finger pad with a gripped planar face (mm^2).
@@ -198,7 +204,8 @@ def support_check(mesh: "trimesh.Trimesh", R: np.ndarray, faces: list[Face], uni
     if not lying:
         return "it rests on an edge or a point, not on a face", -zmin, []
     hull = convex_hull_2d(V[low, :2])
-    c = (np.asarray(R, float) @ (A.com if com is None else com))[:2]
+    cw = np.asarray(R, float) @ (A.com if com is None else com)
+    c = cw[:2]
     margin = _inside_margin(hull, c)
     need = from_mm(unit, STABLE_MARGIN_MM)
     if margin < need:
@@ -206,6 +213,11 @@ def support_check(mesh: "trimesh.Trimesh", R: np.ndarray, faces: list[Face], uni
         return (f"its centre of mass is {where} {abs(margin):.4g} {unit} "
                 f"{'from' if margin < 0 else 'inside'} the support polygon's edge (at least {need:.4g} {unit} "
                 "inside needed)"), -zmin, lying
+    tilt = math.degrees(math.atan2(margin, max(float(cw[2]) - zmin, 1e-300)))
+    if tilt < STABLE_TILT_DEG:
+        return (f"it tips over on a tilt of {tilt:.3g} deg (its centre of mass {float(cw[2]) - zmin:.4g} {unit} "
+                f"high, {margin:.4g} {unit} inside the support polygon's edge; at least {STABLE_TILT_DEG:g} deg "
+                "needed)"), -zmin, lying
     return None, -zmin, lying
 
 
