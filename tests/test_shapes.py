@@ -414,7 +414,9 @@ def test_mesh_errors_are_one_line(tmp_path: Path) -> None:
 def test_rotation_message_says_the_tolerance(tmp_path: Path) -> None:
     pose = ("stable_poses:\n  - {label: s1, rfaces: [nz], ofaces: [nz], "
             "tm: [[0.7071, 0.7071, 0], [-0.7071, 0.7071, 0], [0, 0, 1], [0, 0, 0]]}\n")
-    with pytest.raises(KBError, match=r"stable_poses\[0\]\.tm: expected an orthonormal .*orthonormal to 1e-06"):
+    with pytest.raises(KBError, match=r"stable_poses\[0\]\.tm: expected an orthonormal .*orthonormal to 1e-06, .*"
+                                      r"off I by 1\.92e-05; write exact values or more digits, e\.g\. "
+                                      r"0\.70710678118655 for sqrt\(1/2\)"):
         load_object(_model(tmp_path, pose + GRASP), "in")
 
 

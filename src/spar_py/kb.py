@@ -596,8 +596,10 @@ def tm_node(node: Node, length_scale: float) -> np.ndarray:
     T = tm_rows(m)
     why = rotation_problem(T[:3, :3])
     if why is not None:
+        hint = ("; write exact values or more digits, e.g. 0.70710678118655 for sqrt(1/2), not 0.7071"
+                if why.startswith("R^T R") else "")
         raise node.fail(f"an orthonormal right-handed rotation in rows 1-3 "
-                        f"(orthonormal to {ORTHO_TOL:g}, det +1; {why})")
+                        f"(orthonormal to {ORTHO_TOL:g}, det +1; {why}{hint})")
     return T
 
 
