@@ -69,6 +69,8 @@ def run(repeats: int = 7) -> dict:
                   ("block (paper, shape)", OBJ / "block_shape.yaml", OBJ / "block.yaml", "in"),
                   ("hex_shaft (mesh)", OBJ / "hex_shaft.yaml", None, "mm"),
                   ("bracket (mesh)", OBJ / "bracket.yaml", None, "mm"),
+                  ("tab_peg (shape)", OBJ / "tab_peg.yaml", None, "mm"),
+                  ("socket_block (shape)", OBJ / "socket_block.yaml", None, "mm"),
                   (f"{BIG_TRIANGLES // 1000}k-triangle part (mesh)", big, None, "mm")]
         for name, path, hand, unit in models:
             m = load_object(path, unit, use_cache=False)

@@ -157,12 +157,23 @@ def _arrays(mesh: "trimesh.Trimesh") -> _Arrays:
 
 
 def hull_vertices(mesh: "trimesh.Trimesh") -> np.ndarray:
-    """Indices of the mesh's vertices on its convex hull (sorted; kept in the mesh's metadata)."""
+    """Indices of the mesh's vertices on its convex hull (sorted; kept in the mesh's metadata).
+
+    qhull with joggled input (``QJ``): a finely tessellated round part has thousands of
+    coplanar and cocircular points, which qhull's default facet merging took 0.25 s over
+    (5,000 points); joggling is 15-50x faster and moves a point by about 1e-11 of the part's
+    size, so it can only keep or drop a point that far from the hull. Qhull's default is
+    the fallback if joggling fails."""
     h = mesh.metadata.get("_spar_hull")
     if h is None:
         from scipy.spatial import ConvexHull
+        from scipy.spatial import QhullError
 
-        h = np.sort(ConvexHull(_arrays(mesh).V).vertices)
+        V = _arrays(mesh).V
+        try:
+            h = np.sort(ConvexHull(V, qhull_options="QJ").vertices)
+        except QhullError:
+            h = np.sort(ConvexHull(V).vertices)
         mesh.metadata["_spar_hull"] = h
     return h
 
