@@ -29,14 +29,24 @@ the guarantee and removes most of the looseness:
    largest ``width * |derivative|``. Boxes the interval gradient cannot prove monotone
    get the affine form of the expression *and its gradient*: on long transform products
    the interval gradient suffers the wrapping effect, the affine one does not, and the
-   intersection of the two proves monotonicity on far more boxes. Values at points (box
+   intersection of the two proves monotonicity on far more boxes. The affine gradient is
+   also used as a first-order model of the gradient valid on every sub-box
+   (:class:`~spar_py.taylor.GradientModel`): iterated monotonicity reduces a box to the
+   faces holding its minimum without another evaluation, and the model integrated from
+   the centre gives a lower bound whose error is third order in the box size (rigorous:
+   a relative margin covers its floating-point sums). Values at points (box
    centres, rigorously; corners chosen by the gradient or the affine form and
    single-coordinate flips of the best points, in floating point) steer the search; the search stops when each bound is
    within ``max(abs_tol, rel_tol * width)`` of a value the function attains (``width``
    the spread of attained values found; the final claim is re-checked with rigorous
    values) or when ``max_boxes`` / ``max_time`` run out; :class:`BoundResult` says which.
 
-4. **Compiling and caching.** :class:`CompiledIntervalProgram` writes the interval rules
+4. **Evaluation.** Both programs run as a levelled, grouped schedule (:class:`_Schedule`):
+   the instructions of one level that apply the same rule are one vectorised numpy
+   operation over all of them and all boxes, so a pass costs a few hundred numpy calls
+   instead of a few per instruction (same rules, same results bit for bit).
+
+5. **Compiling and caching.** :class:`CompiledIntervalProgram` writes the interval rules
    once as a CasADi SX graph and evaluates a batch in one call (``Bounder(expr,
    compiled=True)`` uses it for small batches; building it costs ~250 us per
    instruction, so it pays only for a bounder used many times). :func:`cached_bounds`
