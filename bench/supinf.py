@@ -269,6 +269,33 @@ def deep(rng: np.random.Generator, count: int, length: int = 8, half: float = 0.
     return out
 
 
+def uniform_table(rng: np.random.Generator, count: int, lengths: tuple[int, ...] = tuple(range(1, 9)),
+                  half: float = 0.1, repeats: int = 1, progress=None) -> list[dict]:
+    """Products of 1..8 error transforms with every variable at +-``half`` (in, rad): per depth,
+    medians over ``count`` expressions of ours/w and plain/w (excess over the sampled true range
+    as a fraction of its width), the times (ms) of ours (warm bounder, both ends) and plain,
+    boxes evaluated, and how many reached the tolerance / hit the box cap, all from one run."""
+    from spar_py.supinf import MAX_BOXES
+
+    say = progress or (lambda line: None)
+    say(f"{'depth':<8}{'vars':>5}{'ours/w':>10}{'plain/w':>10}{'reached':>9}{'capped':>8}"
+        f"{'ours ms':>10}{'plain ms':>10}{'compile':>9}{'boxes':>8}")
+    rows = []
+    for n in lengths:
+        ms = [measure(*_box(uniform_chain(rng, n, half)), rng, repeats=repeats) for _ in range(count)]
+        r = summarise(f"depth {n}", ms)
+        r.update({"length": n, "boxes": statistics.median(m["boxes"] for m in ms),
+                  "capped": sum(m["boxes"] >= MAX_BOXES for m in ms)})
+        rows.append(r)
+        say(f"{n:<8}{r['n_vars']:>5.0f}{r['ours']:>10.1e}{r['plain']:>10.1e}{r['reached']:>5}/{r['count']:<3}"
+            f"{r['capped']:>8}{r['t_ours']:>10.2f}{r['t_plain']:>10.2f}{r['t_compile']:>9.1f}{r['boxes']:>8.0f}")
+    return rows
+
+
+def _box(er: tuple[ca.SX, Registry]) -> tuple[ca.SX, dict]:
+    return er[0], er[1].box(er[0])
+
+
 # ------------------------------------------------------------------ report
 
 
@@ -356,7 +383,13 @@ def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(prog="python -m bench.supinf", description=__doc__.split("\n")[0])
     ap.add_argument("--per-length", type=int, default=6, help="expressions per plan length (default 6)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--uniform", type=int, default=0, metavar="N",
+                    help="only the table by depth 1-8 at +-0.1 (N expressions per depth)")
     args = ap.parse_args(argv)
+    if args.uniform:
+        rows = uniform_table(np.random.default_rng(args.seed), args.uniform, progress=print)
+        print(f"unsound bounds: {sum(not r['sound'] for r in rows)} depths with any")
+        return
     print("tightness: max excess of a bound over the true range, as a fraction of the true width "
           "(medians); times in ms (medians)\n")
     r = run(args.per_length, args.seed, progress=print)
