@@ -407,11 +407,12 @@ mentions_any(Term, Atoms) :-
 
 %   satisfy_op(+Goal, +Plan0, -Plan): Sec. 4.1, establishment then
 %   declobbering (establish.pl); the possible clobberers of the goal's
-%   condition are listed once for all its establishers.
+%   condition are listed once for all its establishers, and establishers
+%   whose declobbering must fail are skipped (establish/5).
 
 satisfy_op(Goal, Plan0, Plan) :-
     clobber_candidates(Goal, Plan0, Cands),
-    establish(Goal, Plan0, Plan1, E),
+    establish(Goal, Cands, Plan0, Plan1, E),
     declobber(Goal, E, Cands, Plan1, Plan2),
     add_satisfied(Goal, E, Plan2, Plan).
 

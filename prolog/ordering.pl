@@ -41,6 +41,7 @@
             possibly_between/4,        % +C, +E, +S, +G
             ordering_bit/3,            % +Id, +G, -Bit
             outside_mask/4,            % +E, +S, +G, -Mask
+            between_mask/4,            % +E, +S, +G, -Mask
             ordering_graph/2,          % +G, -Ugraph
             ordering_arcs/2,           % +G, -PriorTos
             ordering_actions/2,        % +G, -Ids
@@ -207,6 +208,38 @@ outside_mask(E, S, G, Mask) :-
     (   get_assoc(S, Nodes, n(IS, _, DescS, _))
     ->  Mask is M1 \/ DescS \/ (1 << IS)
     ;   Mask = M1
+    ).
+
+%!  between_mask(+E, +S, +G, -Mask) is det.
+%
+%   Mask is the bitset of the actions of G that necessarily follow E and
+%   precede S (the descendants of E that are ancestors of S; every action
+%   follows the virtual `start` and precedes `finish`, so
+%   between_mask(start, finish, G, -1)). An action C of G with
+%   ordering_bit(C, G, B) is necessarily between E and S iff
+%   B /\ Mask =\= 0. Mask is 0 if E or S is not an action of G.
+
+between_mask(start, S, G, Mask) :-
+    !,
+    (   S == finish
+    ->  Mask = -1
+    ;   G = ord(Nodes, _, _),
+        (   get_assoc(S, Nodes, n(_, _, _, Mask))
+        ->  true
+        ;   Mask = 0
+        )
+    ).
+between_mask(E, finish, ord(Nodes, _, _), Mask) :-
+    !,
+    (   get_assoc(E, Nodes, n(_, _, Mask, _))
+    ->  true
+    ;   Mask = 0
+    ).
+between_mask(E, S, ord(Nodes, _, _), Mask) :-
+    (   get_assoc(E, Nodes, n(_, _, DescE, _)),
+        get_assoc(S, Nodes, n(_, _, _, AncS))
+    ->  Mask is DescE /\ AncS
+    ;   Mask = 0
     ).
 
 %!  ordering_graph(+G, -Ugraph) is det.
