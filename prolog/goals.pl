@@ -61,8 +61,6 @@
 :- use_module(library(option)).
 :- use_module(library(yall)).
 :- use_module(library(ordsets)).
-:- use_module(library(aggregate), [aggregate_all/3]).  % imported, not autoloaded: loads with the
-:- use_module(library(occurs), [sub_term/2]).            % planner, not in the first plan (issue 18)
 :- use_module(library(assoc)).
 :- use_module(kb, []).
 :- use_module(ordering).
@@ -130,8 +128,10 @@ max_action_bound(Options, Max) :-
 %   without the rounds that must fail.
 
 lower_bound(N) :-
-    aggregate_all(sum(K), (kb:goal(G), goal_lower_bound(G, K)), N0),
-    aggregate_all(count, hidden_hole(_), N1),
+    findall(K, ( kb:goal(G), goal_lower_bound(G, K) ), Ks),
+    sum_list(Ks, N0),
+    findall(H, hidden_hole(H), Hs),
+    length(Hs, N1),
     N is max(1, N0 + 2 * N1).
 
 goal_lower_bound(G, 0) :-
@@ -400,18 +400,30 @@ conflict_steps(Vars, Plan, Ks) :-
             Ks).
 
 mentions_any(Term, Atoms) :-
-    sub_term(X, Term),
-    atom(X),
-    ord_memberchk(X, Atoms),
-    !.
+    (   atom(Term)
+    ->  ord_memberchk(Term, Atoms)
+    ;   compound(Term),
+        compound_name_arity(Term, _, N),
+        mentions_any(1, N, Term, Atoms)
+    ).
+
+mentions_any(I, N, Term, Atoms) :-
+    I =< N,
+    arg(I, Term, A),
+    (   mentions_any(A, Atoms)
+    ->  true
+    ;   I1 is I + 1,
+        mentions_any(I1, N, Term, Atoms)
+    ).
 
 %   satisfy_op(+Goal, +Plan0, -Plan): Sec. 4.1, establishment then
 %   declobbering (establish.pl); the possible clobberers of the goal's
-%   condition are listed once for all its establishers.
+%   condition are listed once for all its establishers, and establishers
+%   whose declobbering must fail are skipped (establish/5).
 
 satisfy_op(Goal, Plan0, Plan) :-
     clobber_candidates(Goal, Plan0, Cands),
-    establish(Goal, Plan0, Plan1, E),
+    establish(Goal, Cands, Plan0, Plan1, E),
     declobber(Goal, E, Cands, Plan1, Plan2),
     add_satisfied(Goal, E, Plan2, Plan).
 
@@ -550,10 +562,10 @@ name_variables(Terms) :-
     foldl(name_variable(Terms), Vs, [], _).
 
 name_variable(Terms, V, Counts0, Counts) :-
-    (   sub_term(S, Terms), compound(S),
+    (   subterm(S, Terms), compound(S),
         ( S = holding(_, W) ; S = reachable(W, _) ), W == V
     ->  Base = 'Grasp'
-    ;   sub_term(S, Terms), compound(S),
+    ;   subterm(S, Terms), compound(S),
         S = part_location(_, W), W == V
     ->  Base = 'Pos'
     ;   Base = 'V'
@@ -563,3 +575,13 @@ name_variable(Terms, V, Counts0, Counts) :-
     Counts = [Base-N|Rest],
     format(atom(Name), "~w_~d", [Base, N]),
     V = '$VAR'(Name).
+
+%   subterm(?Sub, +Term): Sub is Term or a subterm of it, Term first, then
+%   its arguments left to right (library(occurs)'s sub_term/2, which a
+%   cold start would compile from source only for the trace).
+
+subterm(X, X).
+subterm(X, Term) :-
+    compound(Term),
+    arg(_, Term, Arg),
+    subterm(X, Arg).

@@ -41,18 +41,23 @@
             possibly_between/4,        % +C, +E, +S, +G
             ordering_bit/3,            % +Id, +G, -Bit
             outside_mask/4,            % +E, +S, +G, -Mask
+            between_mask/4,            % +E, +S, +G, -Mask
             ordering_graph/2,          % +G, -Ugraph
             ordering_arcs/2,           % +G, -PriorTos
             ordering_actions/2,        % +G, -Ids
             linearisation/2            % +G, -Ids
           ]).
-:- use_module(library(ugraphs)).
 :- use_module(library(assoc)).
 :- use_module(library(ordsets)).
 :- use_module(library(lists)).
 :- use_module(library(apply)).
 :- use_module(library(error)).
 :- use_module(library(yall)).
+:- use_module(library(pairs), [pairs_keys/2]).
+
+%   The graphs handed out are library(ugraphs) graphs (V-Successors pairs in
+%   standard order), built and read here without loading that library: it
+%   is not needed to plan, and a cold start would compile it from source.
 
 %!  empty_ordering(-G) is det.
 %
@@ -209,6 +214,38 @@ outside_mask(E, S, G, Mask) :-
     ;   Mask = M1
     ).
 
+%!  between_mask(+E, +S, +G, -Mask) is det.
+%
+%   Mask is the bitset of the actions of G that necessarily follow E and
+%   precede S (the descendants of E that are ancestors of S; every action
+%   follows the virtual `start` and precedes `finish`, so
+%   between_mask(start, finish, G, -1)). An action C of G with
+%   ordering_bit(C, G, B) is necessarily between E and S iff
+%   B /\ Mask =\= 0. Mask is 0 if E or S is not an action of G.
+
+between_mask(start, S, G, Mask) :-
+    !,
+    (   S == finish
+    ->  Mask = -1
+    ;   G = ord(Nodes, _, _),
+        (   get_assoc(S, Nodes, n(_, _, _, Mask))
+        ->  true
+        ;   Mask = 0
+        )
+    ).
+between_mask(E, finish, ord(Nodes, _, _), Mask) :-
+    !,
+    (   get_assoc(E, Nodes, n(_, _, Mask, _))
+    ->  true
+    ;   Mask = 0
+    ).
+between_mask(E, S, ord(Nodes, _, _), Mask) :-
+    (   get_assoc(E, Nodes, n(_, _, DescE, _)),
+        get_assoc(S, Nodes, n(_, _, _, AncS))
+    ->  Mask is DescE /\ AncS
+    ;   Mask = 0
+    ).
+
 %!  ordering_graph(+G, -Ugraph) is det.
 %
 %   The posted arcs of G as a library(ugraphs) graph over its action ids
@@ -228,8 +265,7 @@ ordering_graph(Ugraph, Ugraph) :-
 
 ordering_arcs(G, PriorTos) :-
     ordering_graph(G, U),
-    edges(U, Edges),
-    maplist([A-B, prior_to(A, B)]>>true, Edges, PriorTos).
+    findall(prior_to(A, B), ( member(A-Bs, U), member(B, Bs) ), PriorTos).
 
 %!  ordering_actions(+G, -Ids:list) is det.
 %
@@ -237,7 +273,7 @@ ordering_arcs(G, PriorTos) :-
 
 ordering_actions(G, Ids) :-
     ordering_graph(G, U),
-    vertices(U, Ids).
+    pairs_keys(U, Ids).
 
 %!  linearisation(+G, -Ids:list) is nondet.
 %
@@ -253,11 +289,43 @@ ordering_actions(G, Ids) :-
 
 linearisation(G, Ids) :-
     ordering_graph(G, U),
-    transpose_ugraph(U, Preds),
+    predecessors(U, Preds),
     linearise(Preds, Ids).
+
+%   predecessors(+Ugraph, -Preds): Preds is Ugraph transposed, V-Ps pairs
+%   in standard order, Ps the ordset of the vertices with an arc to V.
+
+predecessors(U, Preds) :-
+    findall(B-A, ( member(A-Bs, U), member(B, Bs) ), Arcs0),
+    msort(Arcs0, Arcs),
+    pairs_keys(U, Vs),
+    predecessors_(Vs, Arcs, Preds).
+
+predecessors_([], _, []).
+predecessors_([V|Vs], Arcs0, [V-Ps|Preds]) :-
+    take_key(Arcs0, V, Ps, Arcs),
+    predecessors_(Vs, Arcs, Preds).
+
+take_key([K-X|Arcs0], V, [X|Xs], Arcs) :-
+    K == V,
+    !,
+    take_key(Arcs0, V, Xs, Arcs).
+take_key(Arcs, _, [], Arcs).
+
+%   linearise(+Preds, -Ids): a source V (no predecessor left), in standard
+%   order, then a linearisation of Preds without V.
 
 linearise([], []) :- !.
 linearise(Preds, [V|Vs]) :-
     member(V-[], Preds),
-    del_vertices(Preds, [V], Preds1),
+    delete_vertex(Preds, V, Preds1),
     linearise(Preds1, Vs).
+
+delete_vertex([], _, []).
+delete_vertex([W-Ps0|Preds0], V, Preds) :-
+    (   W == V
+    ->  delete_vertex(Preds0, V, Preds)
+    ;   ord_del_element(Ps0, V, Ps),
+        Preds = [W-Ps|Preds1],
+        delete_vertex(Preds0, V, Preds1)
+    ).

@@ -153,8 +153,6 @@ def cmd_plan(args: argparse.Namespace) -> int:
     from .engine import start_engine
 
     start_engine()  # Prolog loads the planner while the imports below run
-    import tempfile
-
     from .kb import load_problem
     from .planner import Outcome, Planner
 
@@ -166,6 +164,8 @@ def cmd_plan(args: argparse.Namespace) -> int:
     if plan.outcome is Outcome.TIMEOUT:
         raise PlanningTimeout(f"{cell.name}: no result within {args.timeout:g} s")
     staged: list[tuple[Path, Path]] = []  # (temporary, final)
+    if picture_dirs or output is not None:
+        import tempfile  # only for outputs: a plain `spar plan` need not import it (cold start)
     for d in picture_dirs:
         from .pictures import write_pictures
 
