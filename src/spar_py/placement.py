@@ -103,12 +103,48 @@ def footprint(model: ObjectModel, R: np.ndarray) -> np.ndarray:
     return convex_hull_2d((P @ np.asarray(R, float).T)[:, :2])
 
 
+#: Bound of the cell's memo table of footprints per (object, rotation): phase 2 asks for
+#: the footprints of the parts on the table at every put-down it places.
+FOOTPRINT_LIMIT = 4096
+
+
+def _shape_key(model: ObjectModel) -> tuple:
+    """What a footprint depends on in ``model``: its shape's primitives (not the object's
+    name: copies of one model share their footprints)."""
+    return tuple((s.kind, np.asarray(s.lo, float).tobytes(), np.asarray(s.hi, float).tobytes(), float(s.radius),
+                  None if s.points is None else np.asarray(s.points, float).tobytes()) for s in model.shape)
+
+
+def _footprint(cell: Cell, obj: str, R: np.ndarray) -> np.ndarray:
+    """:func:`footprint` of ``obj`` turned by R (3x3), memoised in the cell by the shape and
+    the rotation; read-only."""
+    model = cell.objects[obj]
+    R = np.ascontiguousarray(R, dtype=float)
+
+    def compute() -> np.ndarray:
+        f = footprint(model, R)
+        f.setflags(write=False)
+        return f
+
+    key = (_shape_key(model), R.tobytes())
+    return cell.memo.table("placement.footprints", FOOTPRINT_LIMIT).get_or_compute(key, compute)
+
+
 def occupant(cell: Cell, obj: str, T: np.ndarray) -> Occupant:
     """The ``occupied`` entry of a part of ``obj`` at world pose T (4x4): its xy centre,
-    bounding radius and footprint polygon in world xy (cell unit)."""
+    bounding radius and footprint polygon in world xy (cell unit); memoised in the cell
+    by the object's shape and the pose (the arrays are read-only)."""
     model = cell.objects[obj]
-    return (np.asarray(T, float)[:2, 3].copy(), model.bounding_radius(),
-            footprint(model, T[:3, :3]) + T[:2, 3])
+    T = np.ascontiguousarray(T, dtype=float)
+
+    def compute() -> Occupant:
+        c, poly = T[:2, 3].copy(), _footprint(cell, obj, T[:3, :3]) + T[:2, 3]
+        c.setflags(write=False)
+        poly.setflags(write=False)
+        return (c, model.bounding_radius(), poly)
+
+    key = (_shape_key(model), T.tobytes())
+    return cell.memo.table("placement.occupants", FOOTPRINT_LIMIT).get_or_compute(key, compute)
 
 
 def _occupant_polygon(entry: Sequence) -> np.ndarray:
@@ -121,30 +157,130 @@ def _occupant_polygon(entry: Sequence) -> np.ndarray:
 
 def _minkowski(P: np.ndarray, Q: np.ndarray) -> np.ndarray:
     """(k, 2) the Minkowski sum of convex CCW polygons P and Q (edges merged by angle)."""
+    return _minkowski_batch(np.asarray(P, float)[None], np.asarray(Q, float)[None])[0]
+
+
+def _minkowski_batch(P: np.ndarray, Q: np.ndarray) -> np.ndarray:
+    """(b, a + c, 2) the Minkowski sums of b pairs of convex CCW polygons P (b, a, 2) and
+    Q (b, c, 2), each sum as :func:`_minkowski` forms it: both polygons started at their
+    lowest, then leftmost, vertex, their edges merged by angle (P's first on a tie)."""
     def start(V: np.ndarray) -> np.ndarray:
-        i = int(np.lexsort((V[:, 0], V[:, 1]))[0])  # lowest, then leftmost vertex first
-        return np.roll(V, -i, axis=0)
+        first = np.lexsort((V[..., 0], V[..., 1]), axis=-1)[:, :1]  # lowest, then leftmost
+        idx = (first + np.arange(V.shape[1])[None, :]) % V.shape[1]
+        return np.take_along_axis(V, idx[..., None], axis=1)
 
     P, Q = start(P), start(Q)
-    E = np.concatenate([np.roll(P, -1, axis=0) - P, np.roll(Q, -1, axis=0) - Q])
-    ang = np.mod(np.arctan2(E[:, 1], E[:, 0]), 2 * np.pi)
-    steps = E[np.argsort(ang, kind="stable")]
-    return P[0] + Q[0] + np.concatenate([np.zeros((1, 2)), np.cumsum(steps, axis=0)[:-1]])
+    E = np.concatenate([np.roll(P, -1, axis=1) - P, np.roll(Q, -1, axis=1) - Q], axis=1)
+    ang = np.mod(np.arctan2(E[..., 1], E[..., 0]), 2 * np.pi)
+    steps = np.take_along_axis(E, np.argsort(ang, axis=1, kind="stable")[..., None], axis=1)
+    walk = np.concatenate([np.zeros((len(E), 1, 2)), np.cumsum(steps, axis=1)[:, :-1]], axis=1)
+    return (P[:, :1] + Q[:, :1]) + walk
 
 
 def _clear_of(M: np.ndarray, t: np.ndarray, gap: float) -> np.ndarray:
     """(n,) bool: points t (n, 2) lie outside the convex CCW polygon M, at least ``gap``
     from it."""
-    A = M
-    B = np.roll(M, -1, axis=0)
-    E = B - A                                                   # (m, 2)
-    D = t[:, None, :] - A[None, :, :]                           # (n, m, 2)
-    cross = E[None, :, 0] * D[..., 1] - E[None, :, 1] * D[..., 0]
-    inside = np.all(cross >= 0, axis=1)
-    L2 = np.einsum("ij,ij->i", E, E)
-    u = np.clip(np.einsum("nmj,mj->nm", D, E) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
-    d = np.hypot(D[..., 0] - u * E[None, :, 0], D[..., 1] - u * E[None, :, 1]).min(axis=1)
+    return _clear_of_each(np.broadcast_to(M, (len(t),) + np.shape(M)), t, gap)
+
+
+def _clear_of_each(M: np.ndarray, t: np.ndarray, gap: float) -> np.ndarray:
+    """(n,) bool: point t[i] (t (n, 2)) lies outside the convex CCW polygon M[i] (M (n, m, 2)),
+    at least ``gap`` from it: not left of (or on) every edge, and at least ``gap`` from the
+    nearest edge segment."""
+    E = np.roll(M, -1, axis=1) - M                              # (n, m, 2)
+    D = t[:, None, :] - M                                       # (n, m, 2)
+    E0, E1, D0, D1 = E[..., 0], E[..., 1], D[..., 0], D[..., 1]
+    inside = np.all(E0 * D1 - E1 * D0 >= 0, axis=1)
+    L2 = E0 * E0 + E1 * E1
+    u = np.clip((D0 * E0 + D1 * E1) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
+    d = np.hypot(D0 - u * E0, D1 - u * E1).min(axis=1)
     return ~inside & (d >= gap)
+
+
+def _near_pairs(lo: np.ndarray, hi: np.ndarray, xs: np.ndarray, ys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The grid points within boxes: for boxes ``lo``, ``hi`` (b, 2) and the grid xs x ys
+    (points numbered x-major, as meshgrid "ij" ravelled), ``(box, point)`` index arrays of
+    every point inside a box (bounds included), box by box, points in grid order."""
+    ix0 = np.searchsorted(xs, lo[:, 0], side="left")
+    ix1 = np.searchsorted(xs, hi[:, 0], side="right")
+    iy0 = np.searchsorted(ys, lo[:, 1], side="left")
+    iy1 = np.searchsorted(ys, hi[:, 1], side="right")
+    nx, ny = np.maximum(ix1 - ix0, 0), np.maximum(iy1 - iy0, 0)
+    count = nx * ny
+    box = np.repeat(np.arange(len(lo)), count)
+    if not len(box):
+        return box, box
+    # the r-th point of a box: r // ny steps in x, r % ny in y from its corner
+    r = np.arange(len(box)) - np.repeat(np.cumsum(count) - count, count)
+    ny_b = ny[box]
+    point = (ix0[box] + r // ny_b) * len(ys) + iy0[box] + r % ny_b
+    return box, point
+
+
+def _blocks(P: np.ndarray, xs: np.ndarray, ys: np.ndarray, feet: list[np.ndarray],
+            others: list[np.ndarray], gap: float, margin: float) -> list[np.ndarray]:
+    """For each polygon of ``others``, the grid placements it blocks: the flat indices
+    ``i * K + k`` (sorted, int32) of grid point P[i] (the grid xs x ys, x-major) with
+    footprint feet[k] (K of them) closer than ``gap`` to it.
+
+    All grid points x yaws x polygons at once: a point whose distance along x or y to the
+    bounding box of the Minkowski sum of polygon j and the mirrored footprint k exceeds
+    ``gap + margin`` is clear of it without more ado (the box holds the sum, and
+    ``margin`` covers the sum's rounding); the rest are tested exactly
+    (:func:`_clear_of_each`) against the sums, which are formed only for the (k, j) pairs
+    that have such points."""
+    K, J = len(feet), len(others)
+    flo = np.array([f.min(axis=0) for f in feet])               # (K, 2)
+    fhi = np.array([f.max(axis=0) for f in feet])
+    wlo = np.array([W.min(axis=0) for W in others])             # (J, 2)
+    whi = np.array([W.max(axis=0) for W in others])
+    reach = gap + margin
+    lo = (wlo[None, :, :] - fhi[:, None, :] - reach).reshape(-1, 2)  # pair p = k * J + j
+    hi = (whi[None, :, :] - flo[:, None, :] + reach).reshape(-1, 2)
+    pair, point = _near_pairs(lo, hi, xs, ys)
+    if not len(pair):
+        return [np.zeros(0, dtype=np.int32) for _ in others]
+    used, slot = np.unique(pair, return_inverse=True)           # the sums needed, and each test's
+    fail = np.zeros(len(pair), dtype=bool)
+    uk, uj = used // J, used % J
+    # one batch per (polygon size, footprint size): the sums of a batch share a vertex count
+    sizes = np.array([[len(others[j]), len(feet[k])] for j, k in zip(uj, uk)])
+    _, size_of = np.unique(sizes, axis=0, return_inverse=True)
+    size_of = size_of.ravel()
+    where = np.empty(len(used), dtype=np.int64)
+    for g in range(int(size_of.max()) + 1):
+        grp = np.flatnonzero(size_of == g)                      # indices into used
+        M = _minkowski_batch(np.stack([others[j] for j in uj[grp]]), -np.stack([feet[k] for k in uk[grp]]))
+        where[grp] = np.arange(len(grp))
+        tests = np.flatnonzero(size_of[slot] == g)
+        fail[tests] = ~_clear_of_each(M[where[slot[tests]]], P[point[tests]], gap)
+    j_of, flat = pair[fail] % J, (point[fail] * K + pair[fail] // J).astype(np.int32)
+    order = np.lexsort((flat, j_of))
+    j_of, flat = j_of[order], flat[order]
+    cut = np.searchsorted(j_of, np.arange(J + 1))
+    return [flat[cut[j]:cut[j + 1]] for j in range(J)]
+
+
+#: Bound of the cell's memo table of :func:`_blocks` answers per (grid, footprints,
+#: occupant polygon): phase 2 places parts among mostly the same occupants at every
+#: put-down of an instance and in every instance.
+BLOCKS_LIMIT = 4096
+
+
+def _blocked(cell: Cell, P: np.ndarray, xs: np.ndarray, ys: np.ndarray, feet: list[np.ndarray],
+             others: list[np.ndarray], gap: float, margin: float) -> np.ndarray:
+    """The flat indices ``i * K + k`` of the grid placements some polygon of ``others``
+    blocks (:func:`_blocks`), each polygon's answer memoised in the cell by what it
+    depends on: the grid, the footprints, the clearance and the polygon."""
+    memo = cell.memo.table("placement.blocks", BLOCKS_LIMIT)
+    gkey = (xs.tobytes(), ys.tobytes(), tuple(f.tobytes() for f in feet), gap, margin)
+    keys = [(gkey, W.tobytes()) for W in others]
+    todo = {k: W for k, W in zip(keys, others) if k not in memo}  # equal polygons are one
+    if todo:
+        for k, b in zip(todo, _blocks(P, xs, ys, feet, list(todo.values()), gap, margin)):
+            memo[k] = b
+    parts = [memo[k] for k in keys]
+    return np.concatenate(parts) if parts else np.zeros(0, dtype=np.int32)
 
 
 def _grid_arrays(cell: Cell, obj: str, pose: str, occupied: list[Occupant],
@@ -156,19 +292,19 @@ def _grid_arrays(cell: Cell, obj: str, pose: str, occupied: list[Occupant],
     the region of the grid point, and is at least the clearance (CLEARANCE_MM) from the
     footprint of every ``occupied`` entry (exactly, for the polygons: the placement's
     origin outside the Minkowski sum of the other footprint and the mirrored own one, by
-    the clearance). Each yaw's rotation is computed once, by the same expression
-    (``rotz(yaw)[:3, :3] @ R``) a placement at a time would use."""
+    the clearance; every grid point, yaw and occupant at once, :func:`_blocked`).
+    Each yaw's rotation is computed once, by the same expression (``rotz(yaw)[:3, :3] @
+    R``) a placement at a time would use."""
     model = cell.objects[obj]
     sp = model.poses[pose]
     tol = from_mm(cell.unit, ROUND_MM)
     gap = from_mm(cell.unit, CLEARANCE_MM) - tol
     yaws = np.array([2 * np.pi * k / yaw_steps for k in range(yaw_steps)])
     rots = np.stack([rotz(yaw)[:3, :3] @ sp.R for yaw in yaws])  # (yaw_steps, 3, 3)
-    feet = [footprint(model, R) for R in rots]
+    feet = [_footprint(cell, obj, R) for R in rots]
     lo = np.array([f.min(axis=0) for f in feet])                # (yaw_steps, 2)
     hi = np.array([f.max(axis=0) for f in feet])
     others = [_occupant_polygon(e) for e in occupied]
-    mirrored = [[_minkowski(W, -f) for W in others] for f in feet]
     xy_parts, yaw_parts = [], []
     for reg in default_regions(cell):
         (x0, x1), (y0, y1) = reg["x"], reg["y"]
@@ -178,10 +314,8 @@ def _grid_arrays(cell: Cell, obj: str, pose: str, occupied: list[Occupant],
         P = np.stack([X.ravel(), Y.ravel()], axis=1)             # (n, 2)
         ok = ((P[:, None, 0] + lo[None, :, 0] >= x0 - tol) & (P[:, None, 0] + hi[None, :, 0] <= x1 + tol)
               & (P[:, None, 1] + lo[None, :, 1] >= y0 - tol) & (P[:, None, 1] + hi[None, :, 1] <= y1 + tol))
-        for k in range(yaw_steps):
-            for M in mirrored[k]:
-                idx = np.flatnonzero(ok[:, k])
-                ok[idx, k] = _clear_of(M, P[idx], gap)
+        if others:
+            ok.flat[_blocked(cell, P, xs, ys, feet, others, gap, tol + step * 1e-9)] = False
         i, k = np.nonzero(ok)                                    # row-major: grid order, then yaw
         xy_parts.append(P[i])
         yaw_parts.append(k)
@@ -341,7 +475,7 @@ def _grid_key(cell: Cell, obj: str, pose: str) -> tuple:
     pose's rotation and height and the object's footprint in it, not the object's name."""
     model = cell.objects[obj]
     sp = model.poses[pose]
-    return (np.asarray(sp.R, float).tobytes(), float(sp.height), footprint(model, sp.R).tobytes())
+    return (np.asarray(sp.R, float).tobytes(), float(sp.height), _footprint(cell, obj, sp.R).tobytes())
 
 
 def _grid(cell: Cell, obj: str, pose: str) -> np.ndarray:
