@@ -138,12 +138,13 @@ DEFAULT_OPENING_MM = 101.6
 ROBOT_SCHEMA = keys(
     {"name": LEAF, "units": UNITS_SCHEMA, "dh": Each(keys(["alpha", "a", "d"], ["offset"])),
      "limits": LEAF, "base": FRAME_SCHEMA, "tool": FRAME_SCHEMA, "gripper": keys(["finger_separation"])},
-    ["convention", "ik"],
+    ["convention", "ik", *("home", "velocity_limits")],  # motion keys: _robot_motion
 )
 # a problem's `robot:` given inline from a URDF (lengths and angles in the problem's units)
 URDF_ROBOT_SCHEMA = keys(
     {"urdf": LEAF, "base_link": LEAF, "tip_link": LEAF, "gripper": keys(["finger_separation"])},
-    {"name": LEAF, "base": FRAME_SCHEMA, "tool": FRAME_SCHEMA, "limits": LEAF, "ik": LEAF},
+    {"name": LEAF, "base": FRAME_SCHEMA, "tool": FRAME_SCHEMA, "limits": LEAF, "ik": LEAF,
+     **{"home": LEAF, "velocity_limits": LEAF}},  # motion keys: _robot_motion
 )
 #: How a robot file's `ik:` may name its solver: auto = the first closed-form family that fits, else
 #: numeric (spar_py.world.ik.FAMILIES)
@@ -156,7 +157,7 @@ PROBLEM_SCHEMA = keys(
      "uncertainty": keys({"manipulator": BOUNDS_SCHEMA, "objects": Named(BOUNDS_SCHEMA)}),
      "goals": LEAF},
     {"sensors": Named(BOUNDS_SCHEMA), "transforms": Named(keys(["tm"])), "vectors": Named(LEAF),
-     "placement_regions": Each(keys(["x", "y"]))},
+     "placement_regions": Each(keys(["x", "y"])), "home": LEAF},
 )
 
 
@@ -888,7 +889,41 @@ def load_robot(path: str | Path, unit: str | None = None, max_bytes: int = MAX_I
     except SparValueError as e:
         raise KBError(str(path), "dh", f"a robot the kinematics accepts ({e})") from None
     _check_family(robot, root, path, unit, file_unit, max_bytes)
+    _robot_motion(robot, root, rad_per)
     return robot
+
+
+def _joint_vector(node: Node, rad_per: float, what: str) -> np.ndarray:
+    """Six angles (the file's angle unit) as (6,) rad."""
+    items = node.elements()
+    if len(items) != 6:
+        raise node.fail(f"a list of 6 {what}", f"{len(items)} items")
+    return np.array([e.number() for e in items]) * rad_per
+
+
+def _home(node: Node | None, robot: Robot, rad_per: float) -> np.ndarray | None:
+    """``home:``: six joint angles (file angle unit) within the joint limits, as rad; None if absent."""
+    if node is None:
+        return None
+    q = _joint_vector(node, rad_per, "joint angles")
+    if not robot.in_limits(q):
+        lim = ", ".join(f"[{num(lo / rad_per)}, {num(hi / rad_per)}]" for lo, hi in robot.limits)
+        raise node.fail(f"joint angles within the limits {lim}", "[" + ", ".join(num(v / rad_per) for v in q) + "]")
+    return q
+
+
+def _robot_motion(robot: Robot, root: Node, rad_per: float) -> None:
+    """The robot's motion entries (world/motion.py): ``home`` (joint angles, the file's angle
+    unit) and ``velocity_limits`` (six positive joint speeds, angle unit per second), in rad
+    and rad/s on the Robot."""
+    robot.home = _home(root.key("home", required=False), robot, rad_per)
+    vnode = root.key("velocity_limits", required=False)
+    if vnode is not None:
+        v = _joint_vector(vnode, rad_per, "joint speeds (angle unit per second)")
+        if not np.all(v > 0):
+            raise vnode.fail("six positive joint speeds (angle unit per second)",
+                             "[" + ", ".join(num(x / rad_per) for x in v) + "]")
+        robot.velocity_limits = v
 
 
 def _limits(lim_node: Node, rad_per: float) -> np.ndarray:
@@ -956,6 +991,7 @@ def load_urdf_robot(node: Node, base_dir: Path, unit: str, rad_per: float) -> tu
     if family not in ("auto", "numeric") and robot.solver.family != family:
         raise KBError(node.file, unode.path, f"a {family.upper()}-family arm (ik: {family}; docs/robots.md)",
                       f"one with {robot.not_closed_form[family]}")
+    _robot_motion(robot, node, rad_per)
     return robot, upath
 
 
@@ -1291,7 +1327,10 @@ def load_problem(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> Cell:
         object_bounds=obj_bounds,
         sensors=sensors,
         placement_regions=_regions(root),
+        home=_home(root.key("home", required=False), robot, rad_per),
     )
+    if cell.home is None:
+        cell.home = robot.home
     sanity.check_cell(cell)  # physically possible: parts apart, on the table, in reach (sanity.py)
     return cell
 

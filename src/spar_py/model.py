@@ -14,6 +14,7 @@ import numpy as np
 from .memo import Memo
 
 if TYPE_CHECKING:
+    from .world.motion import MotionOptions
     from .world.robots import Robot
     from .world.shapes import FeatureGeometry, Geometry
 
@@ -157,6 +158,12 @@ class Cell:
     placement_regions: list[dict] = field(default_factory=list)
     #: The files the cell was loaded from (resolved paths: problem, robot, models).
     files: tuple[str, ...] = ()
+    #: Home joint vector (6,) rad: the problem's ``home:``, else the robot file's, else None
+    #: (world/motion.py's default).
+    home: np.ndarray | None = None
+    #: How a planning run plans motions (world.motion.MotionOptions), None for end-point
+    #: planning only; set by the Planner for each run.
+    motion: "MotionOptions | None" = field(default=None, compare=False, repr=False)
     #: The cell's memo tables (bounded; freed with the cell): see memo.py.
     memo: Memo = field(default_factory=Memo, compare=False, repr=False)
 

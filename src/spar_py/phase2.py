@@ -325,14 +325,20 @@ def evaluate(cell: Cell, steps: Sequence[Step], sources: Sources | None = None,
     world = new_world(cell, list(steps), sources, sensing_bounds(cell, sensing))
     skip = set(given_up)
     out: list[dict[str, Any]] = []
+    worlds = [world]
     for s in steps:
         checks, world, geo = step(world, s)
+        worlds.append(world)
         out.append({"id": s["id"], "verdicts": checks, "geometry": geo,
                     "poses": poses(world), "held": world.unc.holding})
         if not _all_satisfied(checks, "geometric"):
             return {"status": "infeasible", "at": s["id"], "steps": out}
         if not _all_satisfied(checks, "uncertainty") and s["id"] not in skip:
             return {"status": "failed", "at": s["id"], "steps": out}
+    if cell.motion is not None:  # the end-points are fixed: the motions between them (world/motion.py)
+        from .world.motion import run_motions
+
+        return run_motions(cell, steps, worlds, {"status": "ok", "at": None, "steps": out})
     return {"status": "ok", "at": None, "steps": out}
 
 

@@ -57,6 +57,10 @@ class Robot:
     unit: str
     family: str = "auto"
     joint_names: tuple[str, ...] = ()
+    #: Motion entries (world/motion.py): home joint vector (6,) rad and joint velocity
+    #: limits (6,) rad/s, or None (kb.py's _robot_motion).
+    home: np.ndarray | None = None
+    velocity_limits: np.ndarray | None = None
     solver: Solver = field(init=False, repr=False)
     #: why each closed-form family did not fit (empty when one did)
     not_closed_form: dict[str, str] = field(init=False, repr=False)
