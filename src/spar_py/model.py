@@ -156,6 +156,12 @@ class Cell:
     object_bounds: dict[str, Bounds]
     sensors: dict[str, Sensor]
     placement_regions: list[dict] = field(default_factory=list)
+    #: Obstacles (world.collision.Obstacle: named bodies, world frame), the table top's extent
+    #: (x0, x1, y0, y1) or None (the whole plane), the collision margin or None (the robot's or
+    #: the default): the problem file's ``obstacles:``, ``table:``, ``clearance:`` (cell unit).
+    obstacles: tuple = ()
+    table: tuple[float, float, float, float] | None = None
+    clearance: float | None = None
     #: The files the cell was loaded from (resolved paths: problem, robot, models).
     files: tuple[str, ...] = ()
     #: Home joint vector (6,) rad: the problem's ``home:``, else the robot file's, else None

@@ -156,6 +156,13 @@ def path_length(q: np.ndarray) -> float:
 
 def blocked(state: SceneState, q: np.ndarray) -> tuple[int, tuple[str, str] | None]:
     """The first row of q (n, 6) that is not clear and its closest pair; (-1, None) if all are."""
+    if hasattr(state, "check"):  # collision.SceneState: the first pair closer than the margin, per row
+        ok, why = state.check(q)
+        ok = np.asarray(ok, bool)
+        if ok.all():
+            return -1, None
+        i = int(np.argmin(ok))
+        return i, tuple(why[i]) if why[i] else None
     ok = np.asarray(state.clear(q), bool)
     if ok.all():
         return -1, None
@@ -418,7 +425,7 @@ class Stop:
     world), ``candidates`` (k, 6) rad (phase 2's choice first), the world before and
     after it (``parts`` {key: T_world_part} on the table or assembled, ``held`` (key,
     T_tool_part) or None) and, for an assemble, the insertion direction ``insert``
-    (world unit vector, V_a in the world)."""
+    (world unit vector, V_a in the world) and the part it goes ``onto``."""
 
     id: str
     name: str
@@ -429,6 +436,7 @@ class Stop:
     before: tuple[dict[str, np.ndarray], tuple[str, np.ndarray] | None]
     after: tuple[dict[str, np.ndarray], tuple[str, np.ndarray] | None]
     insert: np.ndarray | None = None
+    onto: str | None = None  # the part an assemble inserts into
 
 
 def _without(parts: Mapping[str, np.ndarray], key: str) -> dict[str, np.ndarray]:
@@ -437,17 +445,20 @@ def _without(parts: Mapping[str, np.ndarray], key: str) -> dict[str, np.ndarray]
 
 def _lines(robot: Any, scene: Any, st: Stop, q: np.ndarray, length: float, res: float,
            margin: float) -> tuple[Segment, Segment] | MotionFailure:
-    """Approach and retreat of stop ``st`` with the end-point at ``q``."""
+    """Approach and retreat of stop ``st`` with the end-point at ``q``. The part in the hand
+    may touch what it leaves or reaches along its own line (``allow``): the table as it is
+    lifted off (pickup's retreat) or set down (put-down's approach), the hole part as it is
+    inserted (the assemble's approach)."""
     z = st.T[:3, 2]
-    (pb, hb), (pa, _) = st.before, st.after
+    (pb, hb), (pa, ha) = st.before, st.after
     if st.name == "pickup":
         a_state, a_dir = scene.at(pb, None, grasped=st.obj), z
-        r_state = scene.at(pa, None)  # the part leaves its support: arm and gripper checked
+        r_state = scene.at(pa, ha, allow=[(f"held:{st.obj}", "table")])
     elif st.name == "putdown":
-        a_state, a_dir = scene.at(pb, None), z  # the part comes down on its support
+        a_state, a_dir = scene.at(pb, hb, allow=[(f"held:{st.obj}", "table")]), z
         r_state = scene.at(pa, None, grasped=st.obj)
     elif st.name == "assemble":
-        a_state, a_dir = scene.at(_without(pb, st.obj), None), st.insert  # the insertion itself
+        a_state, a_dir = scene.at(pb, hb, allow=[(f"held:{st.obj}", str(st.onto))]), st.insert  # the insertion itself
         r_state = scene.at(pa, None, grasped=st.obj)
     else:  # squeeze: the fingers close on the part where it lies and open again
         a_state = r_state = scene.at(pb, hb, grasped=st.obj)
@@ -563,14 +574,15 @@ def stops_of(cell: Any, steps: Sequence[Mapping[str, Any]], worlds: Sequence[Any
         if not len(cands) or np.abs(cands[0] - chosen).max() > 1e-6:
             cands = np.vstack([chosen, cands])
         obj = str(s["args"][0])
-        insert = None
+        insert, onto = None, None
         if s["name"] == "assemble":
+            onto = str(s["args"][1])
             hole, va = str(s["args"][1]), cell.vectors[str(s["args"][4])]
             v = worlds[i].unc.obj(hole).pose[:3, :3] @ np.asarray(va, float)
             insert = v / np.linalg.norm(v)
         args = ", ".join(str(a) for a in s["args"][:2])
         out.append(Stop(str(s["id"]), s["name"], obj, f"{s['name']}({args})", np.asarray(geo["tool_pose"], float),
-                        cands, _world_parts(worlds[i]), _world_parts(worlds[i + 1]), insert))
+                        cands, _world_parts(worlds[i]), _world_parts(worlds[i + 1]), insert, onto))
     return out
 
 
