@@ -175,7 +175,8 @@ PROBLEM_SCHEMA = keys(
      "goals": LEAF},
     {"sensors": Named(BOUNDS_SCHEMA), "transforms": Named(keys(["tm"])), "vectors": Named(LEAF),
      "placement_regions": Each(keys(["x", "y"])),
-     "obstacles": Each(OBSTACLE_SCHEMA), "table": keys(["x", "y"]), "clearance": LEAF, "home": LEAF},
+     "obstacles": Each(OBSTACLE_SCHEMA), "table": keys(["x", "y"]), "clearance": LEAF, "home": LEAF,
+     "motion": LEAF},
 )
 
 
@@ -1488,6 +1489,10 @@ def load_problem(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> Cell:
     )
     if cell.home is None:
         cell.home = robot.home
+    mnode = root.key("motion", required=False)
+    if mnode is not None and not isinstance(mnode.value, bool):
+        raise mnode.fail("true or false (plan the motions between the end-points)", show(mnode.value))
+    cell.plan_motions = bool(mnode is not None and mnode.value)
     sanity.check_cell(cell)  # physically possible: parts apart, on the table, in reach (sanity.py)
     return cell
 

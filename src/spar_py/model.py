@@ -167,6 +167,9 @@ class Cell:
     #: Home joint vector (6,) rad: the problem's ``home:``, else the robot file's, else None
     #: (world/motion.py's default).
     home: np.ndarray | None = None
+    #: The problem file's ``motion: true``: plan motions unless the Planner says otherwise
+    #: (the regression suite plans motions for these cells only).
+    plan_motions: bool = False
     #: How a planning run plans motions (world.motion.MotionOptions), None for end-point
     #: planning only; set by the Planner for each run.
     motion: "MotionOptions | None" = field(default=None, compare=False, repr=False)

@@ -259,10 +259,12 @@ class Planner:
 
     Motions (issue 16, world/motion.py): ``motion`` True plans the joint paths between
     the chosen instance's end-points (home, transit and transfer motions, approach and
-    retreat) and makes an instance whose motions do not exist inexecutable; False (the
-    default of the API, the regression suite's choice: end-point planning as the paper)
-    plans end-points only. ``motion_options`` a :class:`~spar_py.world.motion.MotionOptions`
-    (planner, time budget per motion, seed, approach length, simplification).
+    retreat) and makes an instance whose motions do not exist inexecutable; False plans
+    end-points only (the paper's phase 2); None (the default) follows the problem file's
+    ``motion:`` key (default false: the regression suite plans motions only for the cells
+    that ask, since a motion plan costs seconds where end-points cost milliseconds).
+    ``motion_options`` a :class:`~spar_py.world.motion.MotionOptions` (planner, time budget
+    per motion, seed, approach length, simplification).
 
     A Planner keeps the last few cells it loaded from files (at most ``CELL_CACHE``,
     reloaded when a file changes), so planning a file again reuses their memo tables.
@@ -270,7 +272,7 @@ class Planner:
 
     def __init__(self, max_actions: int | None = None, max_instances: int | None = None,
                  separation: bool | None = None, timeout: float | None = None,
-                 paper_placements: bool = False, motion: bool = False,
+                 paper_placements: bool = False, motion: bool | None = None,
                  motion_options: MotionOptions | None = None) -> None:
         self.engine = engine()
         defaults = self.engine.query_once("spar_defaults:default_options(D)")["D"]
@@ -325,7 +327,8 @@ class Planner:
         cell = problem if isinstance(problem, Cell) else self.load_problem(problem)
         opts = self.options(phase1_only, trace)
         with self.engine.session(cell):
-            cell.motion = self.motion_options if self.motion and not phase1_only else None
+            wanted = cell.plan_motions if self.motion is None else self.motion
+            cell.motion = self.motion_options if wanted and not phase1_only else None
             cell.memo.table("motion.failures", 1).clear()
             t0 = time.perf_counter()
             try:
