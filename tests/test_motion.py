@@ -192,3 +192,131 @@ def test_bad_motion_keys_are_one_line(tmp_path: Path, extra: str, key: str) -> N
         load_robot(_robot_file(tmp_path, extra))
     msg = str(e.value)
     assert "\n" not in msg and "arm.yaml" in msg and key in msg
+
+
+# ---------------------------------------------------------------------- regression plans
+
+
+def _motion_cells() -> list[Path]:
+    """The regression cells that plan motions (problem key ``motion: true``)."""
+    import yaml
+
+    return sorted(p for p in (ROOT / "kb" / "problems").glob("*.yaml")
+                  if (yaml.safe_load(p.read_text()) or {}).get("motion") is True)
+
+
+def _frames(robot, q: np.ndarray) -> np.ndarray:
+    """World frames 0..6 (n, 7, 4, 4) by Craig's link transform written out (not the package's FK)."""
+    from motion_fake import _links
+
+    A = _links(robot.dh, q)
+    out = np.empty((len(q), 7, 4, 4))
+    out[:, 0] = robot.base
+    for i in range(6):
+        out[:, i + 1] = out[:, i] @ A[:, i]
+    return out
+
+
+def _lowest(robot, F: np.ndarray) -> tuple[np.ndarray, list[str]]:
+    """Per row, the lowest height of each link shape (exact: a capsule's lowest end less its
+    radius, a cylinder's lowest rim point, a box's lowest corner), and the shapes' names."""
+    lows, names = [], []
+    for s in robot.links:
+        if s.frame == 0:
+            continue
+        R, t = F[:, s.frame, :3, :3], F[:, s.frame, :3, 3]
+        if s.kind == "box":
+            c = np.array([[x, y, z] for x in (s.a[0], s.b[0]) for y in (s.a[1], s.b[1]) for z in (s.a[2], s.b[2])])
+            z = np.einsum("nj,kj->nk", R[:, 2, :], c) + t[:, 2:3]
+            lows.append(z.min(axis=1))
+        else:
+            za = R[:, 2, :] @ s.a + t[:, 2]
+            zb = R[:, 2, :] @ s.b + t[:, 2]
+            if s.kind == "capsule":
+                lows.append(np.minimum(za, zb) - s.radius)
+            else:
+                u = (s.b - s.a) / max(np.linalg.norm(s.b - s.a), 1e-12)
+                uz = R[:, 2, :] @ u
+                lows.append(np.minimum(za, zb) - s.radius * np.sqrt(np.clip(1 - uz ** 2, 0, 1)))
+        names.append(s.name)
+    return np.array(lows).T, names
+
+
+def _axis_points(robot, F: np.ndarray) -> np.ndarray:
+    """(n, m, 3) points on the links' axes (capsules, cylinders) and the tool point."""
+    pts = []
+    for s in robot.links:
+        if s.frame == 0 or s.kind == "box":
+            continue
+        for t in np.linspace(0, 1, 5):
+            p = s.a * (1 - t) + s.b * t
+            pts.append(np.einsum("nij,j->ni", F[:, s.frame, :3, :3], p) + F[:, s.frame, :3, 3])
+    pts.append((F[:, 6] @ robot.tool)[:, :3, 3])
+    return np.stack(pts, axis=1)
+
+
+def _boxes(path: Path) -> list[tuple[str, np.ndarray, np.ndarray]]:
+    """The problem file's box obstacles, read from the YAML here (world frame, file unit)."""
+    import yaml
+
+    doc = yaml.safe_load(Path(path).read_text())
+    return [(o["name"], np.asarray(o["box"]["min"], float), np.asarray(o["box"]["max"], float))
+            for o in doc.get("obstacles") or [] if "box" in o]
+
+
+@pytest.fixture(scope="module")
+def motion_plans():
+    from spar_py import Planner
+
+    pl = Planner(motion=True)
+    return [(p, pl.load_problem(p), pl.plan(p)) for p in _motion_cells()]
+
+
+def test_every_path_of_every_regression_plan(motion_plans) -> None:
+    """Every path of every regression plan that plans motions, checked on its own: consecutive
+    waypoints within path_resolution_deg in every joint, joint limits, the paths' ends equal
+    to the steps' joints and to each other, home at both ends, and every waypoint clear of the
+    table (each link shape's exact lowest point above z = 0) and of the obstacle boxes (the
+    links' axes and the tool point outside them), computed here, not by world/collision.py."""
+    planned = [(path, cell, plan) for path, cell, plan in motion_plans if plan.ok]
+    assert any(Path(p).stem == "wall_detour" for p, _, _ in planned)
+    for path, cell, plan in planned:
+        inst = plan.instance
+        m = inst["motion"]
+        res = m["path_resolution_deg"]
+        home = np.asarray(m["home_deg"])
+        robot = cell.robot
+        lo, hi = np.degrees(robot.limits[:, 0]), np.degrees(robot.limits[:, 1])
+        prev = home
+        chain = []
+        for st in inst["steps"]:
+            if st.get("path") is None:
+                continue
+            p, a, r = (np.asarray(st[k]) for k in ("path", "approach", "retreat"))
+            assert np.allclose(p[0], prev, atol=2e-4), (path, st["id"])
+            assert np.allclose(p[-1], a[0], atol=2e-4) and np.allclose(a[-1], st["joints_deg"], atol=2e-4)
+            assert np.allclose(r[0], st["joints_deg"], atol=2e-4)
+            chain += [p, a, r]
+            prev = r[-1]
+        back = np.asarray(m["home_path"])
+        assert np.allclose(back[0], prev, atol=2e-4) and np.allclose(back[-1], home, atol=2e-4)
+        chain.append(back)
+        for w in chain:
+            assert np.abs(np.diff(w, axis=0)).max(initial=0.0) <= res + 2e-4, path
+            assert np.all((w >= lo - 1e-6) & (w <= hi + 1e-6)), path
+            F = _frames(robot, np.radians(w))
+            low, names = _lowest(robot, F)
+            assert low.min() > 0.0, (path, names[int(low.min(axis=0).argmin())])
+            pts = _axis_points(robot, F)
+            for name, blo, bhi in _boxes(path):
+                assert not np.all((pts >= blo) & (pts <= bhi), axis=-1).any(), (path, name)
+
+
+def test_no_motion_names_the_motion_and_the_pair(motion_plans) -> None:
+    got = {Path(p).stem: plan for p, _, plan in motion_plans}
+    plan = got["enclosed_part"]
+    assert not plan.ok
+    r = plan.reason["motion"]
+    assert r["pair"] and r["motion"] and r["motion"] in plan.reason["why"]
+    blockers = {n for f in plan.reason["motion_failures"] for n in (f["pair"] or [])}
+    assert blockers & {"wall_n", "wall_s", "wall_e", "wall_w", "lid"}

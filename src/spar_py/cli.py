@@ -169,7 +169,8 @@ def cmd_plan(args: argparse.Namespace) -> int:
     cell = load_problem(args.problem, max_bytes=_max_input_bytes(args))
     planner = Planner(max_actions=args.max_actions, max_instances=args.max_instances,
                       separation=False if args.no_separation else None,
-                      paper_placements=args.paper_placements, motion=not args.no_motion,
+                      paper_placements=args.paper_placements,
+                      motion=False if args.no_motion else (True if args.motion or args.animate else None),
                       motion_options=_motion_options(args))
     plan = planner.plan(cell, phase1_only=args.phase1_only, trace=args.trace)
     if plan.outcome is Outcome.TIMEOUT:
@@ -292,6 +293,8 @@ def build_parser() -> argparse.ArgumentParser:
                       help="assume a put-down into a stable pose is reachable somewhere (the paper's rule)")
     plan.add_argument("--timeout", type=_positive_float, metavar="S", help="give up after S seconds")
     _add_max_input_bytes(plan)
+    plan.add_argument("--motion", action="store_true",
+                      help="plan the joint paths between the end-points (default: as the problem's motion: key)")
     plan.add_argument("--no-motion", action="store_true",
                       help="plan the end-points only (the paper's phase 2), no joint paths between them")
     plan.add_argument("--animate", metavar="FILE.gif", help="write an animation of the plan's motions")

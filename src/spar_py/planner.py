@@ -29,7 +29,7 @@ from .errors import PlanningTimeout, SparValueError
 from .kb import load_problem
 from .memo import LRU
 from .model import Cell
-from .world.motion import MotionFailure, MotionOptions, attach
+from .world.motion import FAILURES_KEPT, MotionFailure, MotionOptions, attach
 
 SCHEMA = 2
 
@@ -219,15 +219,21 @@ def _plan(problem: str, d: dict[str, Any], trace: str) -> Plan:
                 actions=actions, steps=steps)
 
 
-def _motion_reason(d: dict[str, Any], failure: MotionFailure | None) -> None:
+def _motion_reason(d: dict[str, Any], failures: list[MotionFailure]) -> None:
     """A phase-2 no plan whose instances failed for want of a motion says which motion (of
-    the first instance that got that far) and which pair of bodies blocked it."""
+    the first instance that got that far) and which pair of bodies blocked it; ``failures``
+    lists each instance's distinct failure (at most FAILURES_KEPT)."""
     reason = d.get("reason")
-    if failure is None or d.get("outcome") != "no_plan" or not isinstance(reason, dict) or reason.get("phase") != 2:
+    if not failures or d.get("outcome") != "no_plan" or not isinstance(reason, dict) or reason.get("phase") != 2:
         return
-    reason["why"] = failure.text()
-    reason["motion"] = {"motion": failure.motion, "at": failure.at,
-                        "pair": list(failure.pair) if failure.pair else None, "detail": failure.detail}
+
+    def data(f: MotionFailure) -> dict[str, Any]:
+        return {"motion": f.motion, "at": f.at, "pair": list(f.pair) if f.pair else None, "detail": f.detail,
+                "text": f.text()}
+
+    reason["why"] = failures[0].text()
+    reason["motion"] = data(failures[0])
+    reason["motion_failures"] = [data(f) for f in failures]
 
 
 #: Loaded cells a Planner keeps, by file (their memo tables make planning a file again fast).
@@ -329,7 +335,7 @@ class Planner:
         with self.engine.session(cell):
             wanted = cell.plan_motions if self.motion is None else self.motion
             cell.motion = self.motion_options if wanted and not phase1_only else None
-            cell.memo.table("motion.failures", 1).clear()
+            cell.memo.table("motion.failures", FAILURES_KEPT).clear()
             t0 = time.perf_counter()
             try:
                 ans = self.engine.query_once("spar:plan_dict(Problem, Options, Dict, Trace)",
@@ -338,8 +344,8 @@ class Planner:
                 return Plan(problem=cell.name, outcome=Outcome.TIMEOUT,
                             reason={"timeout_s": self.timeout},
                             timing={"total_s": round(time.perf_counter() - t0, 6)})
-            failures = cell.memo.table("motion.failures", 1)
-            first = failures.get(0)
+            failures = cell.memo.table("motion.failures", FAILURES_KEPT)
+            first = [failures[k] for k in range(len(failures))]
             d = ans["Dict"]
             if isinstance(d.get("instance"), dict):
                 attach(cell, d["instance"])

@@ -548,6 +548,8 @@ def default_home(robot: Any, state: SceneState) -> np.ndarray | None:
 ARM_STEPS = ("pickup", "putdown", "assemble", "squeeze")
 #: Bound of the cell's memo table of instance motions (cell.memo "motion.runs").
 MEMO_LIMIT = 256
+#: Distinct motion failures a run keeps for its no-plan reason.
+FAILURES_KEPT = 8
 
 
 def _world_parts(w: Any) -> tuple[dict[str, np.ndarray], tuple[str, np.ndarray] | None]:
@@ -643,9 +645,9 @@ def run_motions(cell: Any, steps: Sequence[Mapping[str, Any]], worlds: Sequence[
 
     got = cell.memo.table("motion.runs", MEMO_LIMIT).get_or_compute(key, numbered)
     if isinstance(got, MotionFailure):
-        failures = cell.memo.table("motion.failures", 1)  # the run's first failure (Planner clears it)
-        if 0 not in failures:
-            failures[0] = got
+        failures = cell.memo.table("motion.failures", FAILURES_KEPT)  # this run's, one per instance (Planner clears)
+        if len(failures) < FAILURES_KEPT and got not in [failures.get(k) for k in range(len(failures))]:
+            failures[len(failures)] = got
         at = next((r for r in result["steps"] if r["id"] == got.at), result["steps"][-1])
         at["verdicts"] = list(at["verdicts"]) + [{
             "action": at["id"], "constraint": "motion", "kind": "geometric", "sense": "", "bound": None,
