@@ -320,3 +320,27 @@ def test_no_motion_names_the_motion_and_the_pair(motion_plans) -> None:
     assert r["pair"] and r["motion"] and r["motion"] in plan.reason["why"]
     blockers = {n for f in plan.reason["motion_failures"] for n in (f["pair"] or [])}
     assert blockers & {"wall_n", "wall_s", "wall_e", "wall_w", "lid"}
+
+
+def test_animation_replays_the_motions(motion_plans, tmp_path: Path) -> None:
+    from PIL import Image
+
+    from spar_py.pictures.animate import frames_of, write_animation
+
+    path, cell, plan = next(x for x in motion_plans if Path(x[0]).stem == "wall_detour")
+    frames = frames_of(cell, plan.to_json(), max_frames=6)
+    assert len(frames) == 6 and all(f.frames is not None for f in frames)
+    assert np.allclose(np.degrees(frames[0].q), plan.instance["motion"]["home_deg"], atol=1e-3)
+    gif = write_animation(cell, plan.to_json(), tmp_path / "plan.gif", max_frames=4)
+    with Image.open(gif) as im:
+        assert im.n_frames == 4
+
+
+def test_animation_needs_motions(motion_plans) -> None:
+    from spar_py.pictures.animate import frames_of
+
+    _, cell, plan = next(x for x in motion_plans if Path(x[0]).stem == "wall_detour")
+    doc = plan.to_json()
+    doc["instance"] = {**doc["instance"], "motion": None}
+    with pytest.raises(SparValueError, match="no-motion"):
+        frames_of(cell, doc)

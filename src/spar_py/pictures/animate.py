@@ -11,7 +11,6 @@ Units: the cell's length unit, joints in degrees in the JSON (radians inside).
 """
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -23,7 +22,7 @@ from ..model import Cell
 from .plandoc import as_doc, instance
 from .scene import Scene, held_grasp, part_model, scenes
 
-__all__ = ["frames_of", "write_animation"]
+__all__ = ["frames_of", "obstacle_faces", "write_animation"]
 
 #: At most this many frames in a GIF (waypoints are sampled evenly beyond it).
 MAX_FRAMES = 120
@@ -75,9 +74,18 @@ def _at(cell: Cell, world: Scene, q: np.ndarray, caption: str, index: int) -> Sc
                    arm_note="")
 
 
-def _obstacles(cell: Cell) -> Sequence[Mapping[str, Any]]:
-    """The cell's obstacles as boxes {name, lo, hi} (world, cell unit) where the cell has them."""
-    return list(getattr(cell, "obstacles", None) or [])
+def obstacle_faces(cell: Cell) -> list[np.ndarray]:
+    """Triangles (each (3, 3) world points, cell unit) of the hulls of the cell's obstacle
+    bodies (world/collision.py's Obstacle: a body's vertices in the world)."""
+    from scipy.spatial import ConvexHull
+
+    faces = []
+    for ob in getattr(cell, "obstacles", None) or ():
+        for b in getattr(ob, "bodies", ()):
+            pts = np.asarray(b.points, float)
+            if len(pts) >= 4:
+                faces += [pts[t] for t in ConvexHull(pts).simplices]
+    return faces
 
 
 def write_animation(cell: Cell, plan: Any, path: str | Path, max_frames: int = MAX_FRAMES) -> Path:
@@ -89,9 +97,10 @@ def write_animation(cell: Cell, plan: Any, path: str | Path, max_frames: int = M
     from matplotlib.animation import PillowWriter
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
-    from .cell import _draw_3d, extent, solid_faces
+    from .cell import _draw_3d, extent
 
     frames = frames_of(cell, plan, max_frames)
+    obstacles = obstacle_faces(cell)
     fr = extent(cell, frames)
     fig = plt.figure(figsize=(6, 6), dpi=80)
     writer = PillowWriter(fps=max(1, round(1000 / FRAME_MS)))
@@ -101,11 +110,9 @@ def write_animation(cell: Cell, plan: Any, path: str | Path, max_frames: int = M
             fig.clf()
             ax = fig.add_subplot(projection="3d")
             _draw_3d(ax, cell, s, fr)
-            for ob in _obstacles(cell):
-                faces = solid_faces(ob["solid"], np.asarray(ob["T"], float)) if "solid" in ob else []
-                if faces:
-                    ax.add_collection3d(Poly3DCollection(faces, facecolor="#9a9a9a", alpha=0.5,
-                                                         edgecolor="#444444", linewidths=0.3), autolim=False)
+            if obstacles:
+                ax.add_collection3d(Poly3DCollection(obstacles, facecolor="#9a9a9a", alpha=0.45,
+                                                     edgecolor="none"), autolim=False)
             ax.set_title(s.title, fontsize=8)
             writer.grab_frame()
     plt.close(fig)
