@@ -1448,6 +1448,8 @@ def load_problem(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> Cell:
         obstacles=tuple(_obstacles(root, base, rad_per)),
         table=_table(root),
         clearance=_clearance(root),
+        collisions=root.key("obstacles", required=False) is not None or root.key("clearance", required=False)
+        is not None,
     )
     sanity.check_cell(cell)  # physically possible: parts apart, on the table, in reach (sanity.py)
     return cell

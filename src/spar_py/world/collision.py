@@ -355,7 +355,8 @@ class CollisionScene:
                 hand = (grasped, "world", np.asarray(parts[grasped], float))
             else:
                 raise SparValueError(f"grasped part {grasped!r} is neither in parts nor attached")
-        return SceneState(self, world, tool, hand, width, frozenset(frozenset(p) for p in allow))
+        return SceneState(self, world, tool, hand, width, frozenset(frozenset(p) for p in allow),
+                          frozenset(attached or ()))
 
 
 def _link_body(s: Any) -> Body:
@@ -370,7 +371,8 @@ class SceneState:
     """The scene with its parts placed: answers "clear?" and "how clear?" for joint vectors."""
 
     def __init__(self, scene: CollisionScene, world: list[Body], tool: list[Body],
-                 hand: tuple[str, str, np.ndarray] | None, width: float | None, allow: frozenset) -> None:
+                 hand: tuple[str, str, np.ndarray] | None, width: float | None, allow: frozenset,
+                 attached: frozenset = frozenset()) -> None:
         self.scene = scene
         self.hand = hand  # (part, "tool" | "world", its pose there) for the grasp rule
         self.width = width
@@ -388,11 +390,16 @@ class SceneState:
         def part_of(b: Body) -> str:
             return b.name[5:] if b.name.startswith("held:") else b.name
 
+        # an attached part is a part of the world that happens to be where the tool is: it is
+        # checked against the arm and the gripper only (not the table it rests on, nor the rest)
+        fixed_in_tool = {i for i, b in enumerate(moving) if b.frame == TOOL and b.name in attached}
         for i, bi in enumerate(moving):
             for j, bj in enumerate(self.bodies):
                 if j <= i and j < len(moving):
                     continue
                 if frozenset((bi.name, bj.name)) in skip or bi.name == bj.name:
+                    continue
+                if i in fixed_in_tool and (bj.frame == WORLD or j in fixed_in_tool):
                     continue
                 if bj.frame == WORLD or bj.frame == 0 and bi.frame >= 2:
                     if bi.name in gripper_names and part_of(bj) == hand_part and bj.frame == WORLD:
@@ -422,7 +429,8 @@ class SceneState:
                     pairs.append((i, j))
         self.pairs = np.array(pairs, dtype=int).reshape(-1, 2)
         self.table_bodies = np.array([i for i, b in enumerate(moving)
-                                      if frozenset((b.name, "table")) not in skip], dtype=int)
+                                      if frozenset((b.name, "table")) not in skip and i not in fixed_in_tool],
+                                     dtype=int)
         both_caps = np.array([self.bodies[i].kind == "capsule" and self.bodies[j].kind == "capsule"
                               for i, j in self.pairs], dtype=bool)
         self.exact_pair = both_caps
