@@ -161,9 +161,9 @@ class Cell:
     obstacles: tuple = ()
     table: tuple[float, float, float, float] | None = None
     clearance: float | None = None
-    #: Whether reach checks ask the collision scene (world.collision) at all: on for a cell
-    #: whose problem file gives ``obstacles:`` or ``clearance:`` (see workspace.reach_clear).
-    collisions: bool = False
+    #: Whether reach checks ask the collision scene (world.collision) at all: on unless the
+    #: problem file says ``collision: false`` (see workspace.reach_clear).
+    collisions: bool = True
     #: The files the cell was loaded from (resolved paths: problem, robot, models).
     files: tuple[str, ...] = ()
     #: The cell's memo tables (bounded; freed with the cell): see memo.py.

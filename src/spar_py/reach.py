@@ -25,7 +25,7 @@ import numpy as np
 from .errors import SparValueError
 from .geometry import same_stable_pose
 from .model import Cell, Face, Grasp, ObjectModel
-from .workspace import Requirement, remember_refusal, requirement_clear
+from .workspace import Requirement, ik_rows, remember_refusal, requirement_clear_ik
 
 __all__ = [
     "ARCS",
@@ -126,12 +126,16 @@ def _clear_pass(cell: Cell, obj: str, pending: list[tuple[Grasp, str, np.ndarray
     (workspace.requirement_clear, one batched call per grasp); a pair with IK solutions that all
     collide is remembered on the cell with its pairs (workspace.refusals)."""
     out = [False] * len(pending)
+    if not pending:
+        return out
+    Q, okb = ik_rows(cell, np.stack([T_O @ g.T if requirement(g).held is None else T_O @ requirement(g).X
+                                     for g, _, T_O in pending]))
     by_grasp: dict[str, list[int]] = {}
     for i, (g, _, _) in enumerate(pending):
         by_grasp.setdefault(g.label, []).append(i)
     for ix in by_grasp.values():
         g = pending[ix[0]][0]
-        r = requirement_clear(cell, obj, np.stack([pending[i][2] for i in ix]), requirement(g))
+        r = requirement_clear_ik(cell, obj, requirement(g), Q[ix], okb[ix])
         for k, i in enumerate(ix):
             out[i] = bool(r.ok[k])
             if r.ik[k] and not r.ok[k]:

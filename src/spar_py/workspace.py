@@ -6,8 +6,8 @@ phase 2's steps (phase2.py) all ask here, so the rule is written once. The paper
 condition 2 of a reachable constraint (Sec. 5.2.4) looks at joint limits only; a tool
 pose whose wrist (the flange origin) would be under the table top (z = 0), e.g. a
 grasp from below, is refused too, so the CMS stays conservative (Sec. 7.1). With the
-cell (:func:`reach_clear`) and its collision check on (``Cell.collisions``: the problem file
-gives ``obstacles:`` or ``clearance:``), an IK solution counts only if the arm, the gripper and the
+cell (:func:`reach_clear`; unless the problem file opts out with ``collision: false``,
+``Cell.collisions``), an IK solution counts only if the arm, the gripper and the
 part in the hand are clear of the table, the obstacles and the parts given, by the
 margin (world.collision); a pose whose every solution collides is refused, and the
 colliding pairs are remembered on the cell (:func:`refusals`) so a "no plan" can say
@@ -29,8 +29,9 @@ if TYPE_CHECKING:
     from .model import Cell
     from .world.robots import Robot
 
-__all__ = ["Reached", "Requirement", "reach_clear", "reaches", "refusals", "remember_refusal", "solutions",
-           "wrist_above_table", "wrist_height"]
+__all__ = ["Reached", "Requirement", "clear_of_world", "ik_rows", "reach_clear", "reaches", "refusals",
+           "remember_refusal", "requirement_clear", "requirement_clear_ik", "solutions", "wrist_above_table",
+           "wrist_height"]
 
 #: Refusals kept per cell (the "no plan" explanation): at most this many distinct ones.
 REFUSALS_LIMIT = 256
@@ -98,17 +99,31 @@ def reach_clear(cell: Cell, T: np.ndarray, *, parts: Mapping[str, np.ndarray] | 
     hand, ``grasped`` closing on, ``attached`` parts where the tool is (T_tool_part, the same
     for every row), ``width`` the fingers' opening, ``allow`` the step's own contacts
     (CollisionScene.at). One batched IK call and one batched clearance check."""
-    from .world.collision import scene_for
 
     T = np.asarray(T, float).reshape(-1, 4, 4)
-    n = len(T)
-    if not n:
+    if not len(T):
         return Reached(np.zeros(0, bool), np.zeros(0, bool), [])
-    robot = cell.robot
-    Q, okb = robot.ik_batch(T)
-    okb = okb & wrist_above_table(robot, T)[:, None]
+    return clear_of_world(cell, *ik_rows(cell, T), parts=parts, held=held, grasped=grasped, attached=attached,
+                          width=width, allow=allow)
+
+
+def ik_rows(cell: Cell, T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Every IK branch of tool poses T (n, 4, 4): (Q (n, B, 6) rad, ok (n, B): in limits, wrist
+    above the table); one batched call (Robot.ik_batch)."""
+    Q, okb = cell.robot.ik_batch(T)
+    return Q, okb & wrist_above_table(cell.robot, T)[:, None]
+
+
+def clear_of_world(cell: Cell, Q: np.ndarray, okb: np.ndarray, *, parts: Mapping[str, np.ndarray] | None = None,
+                   held: tuple[str, np.ndarray] | None = None, grasped: str | None = None,
+                   attached: Mapping[str, np.ndarray] | None = None, width: float | None = None,
+                   allow: Iterable[tuple[str, str]] = ()) -> Reached:
+    """:func:`reach_clear` from the IK branches already solved (:func:`ik_rows`)."""
+    from .world.collision import scene_for
+
+    n = len(Q)
     ik = okb.any(axis=1)
-    if not cell.collisions:  # a cell without obstacles: or clearance: is checked by IK alone (Cell.collisions)
+    if not cell.collisions:  # the problem file opted out (collision: false): IK alone
         return Reached(ik.copy(), ik, [[] for _ in range(n)])
     rows, cols = np.nonzero(okb)
     state = scene_for(cell).at(parts or {}, held, grasped, width=width, allow=allow, attached=attached)
@@ -127,13 +142,19 @@ def requirement_clear(cell: Cell, obj: str, TO: np.ndarray, req: Requirement | n
     and one requirement (a :class:`Requirement`, or a bare X: the object in the hand with the
     fingers open)."""
     req = req if isinstance(req, Requirement) else Requirement(np.asarray(req, float))
-    X = np.asarray(req.X, float)
-    T = np.einsum("nij,jk->nik", np.asarray(TO, float).reshape(-1, 4, 4), X)
-    inv = np.linalg.inv(X)
+    T = np.asarray(TO, float).reshape(-1, 4, 4) @ np.asarray(req.X, float)
+    if not len(T):
+        return Reached(np.zeros(0, bool), np.zeros(0, bool), [])
+    return requirement_clear_ik(cell, obj, req, *ik_rows(cell, T))
+
+
+def requirement_clear_ik(cell: Cell, obj: str, req: Requirement, Q: np.ndarray, okb: np.ndarray) -> Reached:
+    """:func:`requirement_clear` from the IK branches already solved (:func:`ik_rows`)."""
+    inv = np.linalg.inv(np.asarray(req.X, float))
     if req.held is None:
-        return reach_clear(cell, T, grasped=obj, attached={obj: inv}, width=req.width)
-    return reach_clear(cell, T, held=req.held, attached={obj: inv}, width=req.width,
-                       allow=[(f"held:{req.held[0]}", obj)])
+        return clear_of_world(cell, Q, okb, grasped=obj, attached={obj: inv}, width=req.width)
+    return clear_of_world(cell, Q, okb, held=req.held, attached={obj: inv}, width=req.width,
+                          allow=[(f"held:{req.held[0]}", obj)])
 
 
 def _refusal_table(cell: Cell) -> dict[str, list[tuple[str, str]]]:
