@@ -175,6 +175,8 @@ def cmd_plan(args: argparse.Namespace) -> int:
     plan = planner.plan(cell, phase1_only=args.phase1_only, trace=args.trace)
     if plan.outcome is Outcome.TIMEOUT:
         raise PlanningTimeout(f"{cell.name}: no result within {args.timeout:g} s")
+    for line in (plan.reason or {}).get("collisions", []) if plan.outcome is Outcome.NO_PLAN else []:
+        print(line)
     staged: list[tuple[Path, Path]] = []  # (temporary, final)
     for d in picture_dirs:
         from .pictures import write_pictures

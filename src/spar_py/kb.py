@@ -175,8 +175,8 @@ PROBLEM_SCHEMA = keys(
      "goals": LEAF},
     {"sensors": Named(BOUNDS_SCHEMA), "transforms": Named(keys(["tm"])), "vectors": Named(LEAF),
      "placement_regions": Each(keys(["x", "y"])),
-     "obstacles": Each(OBSTACLE_SCHEMA), "table": keys(["x", "y"]), "clearance": LEAF, "home": LEAF,
-     "motion": LEAF},
+     "obstacles": Each(OBSTACLE_SCHEMA), "table": keys(["x", "y"]), "clearance": LEAF, "collision": LEAF,
+     "home": LEAF, "motion": LEAF},
 )
 
 
@@ -1426,6 +1426,17 @@ def _table(root: Node) -> tuple[float, float, float, float] | None:
     return (x0, x1, y0, y1)
 
 
+def _collision_switch(root: Node) -> bool:
+    """``collision: false`` turns the collision check off for a cell (a user's opt-out: every
+    reach is then decided by IK and the wrist height alone); default true."""
+    node = root.key("collision", required=False)
+    if node is None:
+        return True
+    if not isinstance(node.value, bool):
+        raise node.fail("true or false", show(node.value))
+    return node.value
+
+
 def _clearance(root: Node) -> float | None:
     """``clearance:`` the collision margin (cell unit, >= 0), None when not given."""
     cnode = root.key("clearance", required=False)
@@ -1485,6 +1496,7 @@ def load_problem(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> Cell:
         obstacles=tuple(_obstacles(root, base, rad_per)),
         table=_table(root),
         clearance=_clearance(root),
+        collisions=_collision_switch(root),
         home=_home(root.key("home", required=False), robot, rad_per),
     )
     if cell.home is None:

@@ -162,6 +162,9 @@ class Cell:
     obstacles: tuple = ()
     table: tuple[float, float, float, float] | None = None
     clearance: float | None = None
+    #: Whether reach checks ask the collision scene (world.collision) at all: on unless the
+    #: problem file says ``collision: false`` (see workspace.reach_clear).
+    collisions: bool = True
     #: The files the cell was loaded from (resolved paths: problem, robot, models).
     files: tuple[str, ...] = ()
     #: Home joint vector (6,) rad: the problem's ``home:``, else the robot file's, else None

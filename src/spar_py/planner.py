@@ -352,5 +352,11 @@ class Planner:
         d.setdefault("timing", {})["total_s"] = round(time.perf_counter() - t0, 6)
         _motion_reason(d, first)
         plan = _plan(cell.name, d, ans.get("Trace", ""))
+        if plan.outcome is Outcome.NO_PLAN:  # name the colliding pairs that stood in the way (issue 15)
+            from .workspace import refusals
+
+            said = refusals(cell)
+            if said:
+                plan.reason = {**(plan.reason or {}), "collisions": said}
         self.last = plan
         return plan

@@ -128,7 +128,9 @@ class Body:
                 g = fcl.Box(*(2 * np.asarray(self.size)))
             elif self.kind == "capsule":
                 g = fcl.Capsule(self.size[0], 2 * self.size[1])
-            else:  # cylinder (as its circumscribed prism) or convex: a hull of the local vertices
+            elif self.kind == "cylinder":  # the true cylinder (radius: the prism's inscribed one)
+                g = fcl.Cylinder(self.size[0] * math.cos(math.pi / CYL_SIDES), 2 * self.size[1])
+            else:  # convex: a hull of the local vertices
                 Tinv = np.linalg.inv(self.T)
                 local = self.points @ Tinv[:3, :3].T + Tinv[:3, 3]
                 g = _fcl_convex(local)
@@ -247,11 +249,11 @@ def segment_distance(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.ndar
     """(...,) distance between segments p1-q1 and p2-q2 (arrays (..., 3)), vectorised
     (Ericson, Real-Time Collision Detection, Sec. 5.1.9, every branch as np.where)."""
     d1, d2, r = q1 - p1, q2 - p2, p1 - p2
-    a = np.einsum("...i,...i->...", d1, d1)
-    e = np.einsum("...i,...i->...", d2, d2)
-    f = np.einsum("...i,...i->...", d2, r)
-    c = np.einsum("...i,...i->...", d1, r)
-    b = np.einsum("...i,...i->...", d1, d2)
+    a = (d1 * d1).sum(-1)
+    e = (d2 * d2).sum(-1)
+    f = (d2 * r).sum(-1)
+    c = (d1 * r).sum(-1)
+    b = (d1 * d2).sum(-1)
     eps = 1e-12
     pa, pe = a > eps, e > eps
     a_, e_ = np.where(pa, a, 1.0), np.where(pe, e, 1.0)
@@ -266,7 +268,7 @@ def segment_distance(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.ndar
     s = np.where(pa, np.where(pe, s, np.clip(-c / a_, 0.0, 1.0)), 0.0)
     t = np.where(pe, np.where(pa, t, np.clip(f / e_, 0.0, 1.0)), 0.0)
     diff = (p1 + d1 * s[..., None]) - (p2 + d2 * t[..., None])
-    return np.sqrt(np.einsum("...i,...i->...", diff, diff))
+    return np.sqrt((diff * diff).sum(-1))
 
 
 def _fcl_transform(T: np.ndarray) -> Any:
@@ -310,8 +312,16 @@ class CollisionScene:
         self.memo = memo
         self.links = [_link_body(s) for s in robot.links]
         self.allowed = frozenset(frozenset(p) for p in robot.allowed)
-        self._grasp_memo: dict = {}
+        self._grippers: dict = {}  # bounded by the cell's grasp widths
         self.stats = {"pairs": 0, "exact": 0}
+
+    def gripper_bodies(self, width: float | None) -> list[Body]:
+        """The palm and fingers (TOOL frame) with the fingers' contact faces ``width`` apart (default
+        open), made once per width (a handful of widths per cell)."""
+        key = None if width is None else round(float(width), 9)
+        if key not in self._grippers:
+            self._grippers[key] = [box(n, TOOL, lo, hi) for n, lo, hi in self.gripper.boxes(width)]
+        return self._grippers[key]
 
     def shapes_of(self, part: str) -> list[Body]:
         """The bodies of ``part`` (an object, or a stock part ``obj@pos``) in its object frame."""
@@ -355,7 +365,8 @@ class CollisionScene:
                 hand = (grasped, "world", np.asarray(parts[grasped], float))
             else:
                 raise SparValueError(f"grasped part {grasped!r} is neither in parts nor attached")
-        return SceneState(self, world, tool, hand, width, frozenset(frozenset(p) for p in allow))
+        return SceneState(self, world, tool, hand, width, frozenset(frozenset(p) for p in allow),
+                          frozenset(attached or ()))
 
 
 def _link_body(s: Any) -> Body:
@@ -370,11 +381,12 @@ class SceneState:
     """The scene with its parts placed: answers "clear?" and "how clear?" for joint vectors."""
 
     def __init__(self, scene: CollisionScene, world: list[Body], tool: list[Body],
-                 hand: tuple[str, str, np.ndarray] | None, width: float | None, allow: frozenset) -> None:
+                 hand: tuple[str, str, np.ndarray] | None, width: float | None, allow: frozenset,
+                 attached: frozenset = frozenset()) -> None:
         self.scene = scene
         self.hand = hand  # (part, "tool" | "world", its pose there) for the grasp rule
         self.width = width
-        gripper = [box(n, TOOL, lo, hi) for n, lo, hi in scene.gripper.boxes(width)]
+        gripper = scene.gripper_bodies(width)
         links = scene.links
         static = [b for b in links if b.frame == 0]
         moving = [b for b in links if b.frame != 0] + gripper + tool
@@ -388,11 +400,16 @@ class SceneState:
         def part_of(b: Body) -> str:
             return b.name[5:] if b.name.startswith("held:") else b.name
 
+        # an attached part is a part of the world that happens to be where the tool is: it is
+        # checked against the arm and the gripper only (not the table it rests on, nor the rest)
+        fixed_in_tool = {i for i, b in enumerate(moving) if b.frame == TOOL and b.name in attached}
         for i, bi in enumerate(moving):
             for j, bj in enumerate(self.bodies):
                 if j <= i and j < len(moving):
                     continue
                 if frozenset((bi.name, bj.name)) in skip or bi.name == bj.name:
+                    continue
+                if i in fixed_in_tool and (bj.frame == WORLD or j in fixed_in_tool):
                     continue
                 if bj.frame == WORLD or bj.frame == 0 and bi.frame >= 2:
                     if bi.name in gripper_names and part_of(bj) == hand_part and bj.frame == WORLD:
@@ -422,10 +439,15 @@ class SceneState:
                     pairs.append((i, j))
         self.pairs = np.array(pairs, dtype=int).reshape(-1, 2)
         self.table_bodies = np.array([i for i, b in enumerate(moving)
-                                      if frozenset((b.name, "table")) not in skip], dtype=int)
+                                      if frozenset((b.name, "table")) not in skip and i not in fixed_in_tool],
+                                     dtype=int)
         both_caps = np.array([self.bodies[i].kind == "capsule" and self.bodies[j].kind == "capsule"
                               for i, j in self.pairs], dtype=bool)
         self.exact_pair = both_caps
+        hand_frames = (6, TOOL)
+        self._rigid: dict[int, float | None] = {
+            p: None for p, (i, j) in enumerate(self.pairs)
+            if self.bodies[i].frame in hand_frames and self.bodies[j].frame in hand_frames}
         self._cap_a = np.array([b.cap[0] for b in self.bodies]).reshape(-1, 3)
         self._cap_b = np.array([b.cap[1] for b in self.bodies]).reshape(-1, 3)
         self._cap_r = np.array([b.cap[2] for b in self.bodies])
@@ -446,8 +468,9 @@ class SceneState:
         for f in {b.frame for b in self.bodies[:self.n_moving]}:
             idx = [i for i in range(self.n_moving) if self.bodies[i].frame == f]
             R, t = F[:, f, :3, :3], F[:, f, None, :3, 3]
-            A[:, idx] = np.einsum("nij,kj->nki", R, self._cap_a[idx]) + t
-            B[:, idx] = np.einsum("nij,kj->nki", R, self._cap_b[idx]) + t
+            Rt = np.swapaxes(R, 1, 2)
+            A[:, idx] = self._cap_a[idx] @ Rt + t
+            B[:, idx] = self._cap_b[idx] @ Rt + t
         for i in range(self.n_moving, len(self.bodies)):
             f = self.bodies[i].frame
             if f == 0:
@@ -469,7 +492,12 @@ class SceneState:
         ext = self.scene.table
         for k, i in enumerate(self.table_bodies):
             b = self.bodies[i]
-            P = np.einsum("nij,kj->nki", F[:, b.frame, :3, :3], b.points) + F[:, b.frame, None, :3, 3]
+            Fb = F[:, b.frame]
+            if ext is None:  # only the heights: z row of each frame times the vertices
+                h = (b.points @ Fb[:, 2, :3, None])[..., 0].min(axis=1) + Fb[:, 2, 3] - b.radius
+                out[:, k] = h
+                continue
+            P = b.points @ np.swapaxes(Fb[:, :3, :3], 1, 2) + Fb[:, None, :3, 3]
             h = P[..., 2].min(axis=1) - b.radius
             if ext is not None:
                 x0, x1, y0, y1 = ext
@@ -488,10 +516,21 @@ class SceneState:
         return F, lb, self._table(F)
 
     def _exact_cell(self, F: np.ndarray, row: int, p: int) -> float:
+        """The library's distance of pair ``p`` at row ``row``; a pair of two bodies rigid with
+        the flange (frame 6, the tool) is measured once per state (it does not depend on q)."""
+        if p in self._rigid:
+            return self._rigid[p] if self._rigid[p] is not None else self._rigid_once(F, row, p)
         i, j = self.pairs[p]
         bi, bj = self.bodies[i], self.bodies[j]
         self.scene.stats["exact"] += 1
         return _exact(bi, self._frame_pose(F, row, bi), bj, self._frame_pose(F, row, bj))
+
+    def _rigid_once(self, F: np.ndarray, row: int, p: int) -> float:
+        i, j = self.pairs[p]
+        bi, bj = self.bodies[i], self.bodies[j]
+        self.scene.stats["exact"] += 1
+        d = self._rigid[p] = _exact(bi, self._frame_pose(F, row, bi), bj, self._frame_pose(F, row, bj))
+        return d
 
     # ------------------------------------------------------------------ the grasp rule
 
@@ -532,9 +571,11 @@ class SceneState:
         return verdict
 
     def _grasp_rows(self, F: np.ndarray) -> list[tuple[bool, str | None]]:
-        Th = self._hand_in_tool(F)
-        if Th is None:
+        if self.hand is None:
             return [(True, None)] * len(F)
+        if self.hand[1] == "tool":  # the same relative pose on every row: decided once
+            return [self.grasp_ok(self.hand[2])] * len(F)
+        Th = self._hand_in_tool(F)
         return [self.grasp_ok(Th[r]) for r in range(len(F))]
 
     # ------------------------------------------------------------------ answers
