@@ -7,7 +7,9 @@ For the chosen plan instance, a joint path from home through every step and back
   line of the tool (Cartesian interpolation, orientation fixed), of ``approach_length``
   (default 2 in): along the grasp's approach direction (tool z) for pickup, put-down and
   squeeze, along the mating vector V_a for the assemble (the insertion itself); the
-  retreat backs off along tool z. IK at every point of the line, each solution the one
+  retreat backs off along tool z; a part in the hand leaves and reaches the table
+  vertically (the pickup's retreat lifts it straight up, the put-down's approach sets it
+  straight down), whatever the grasp's side. IK at every point of the line, each solution the one
   nearest the previous point's (the same branch, no wrist flips: a line whose joint jump
   stays above the resolution after subdivision is refused);
 - **transit / transfer** (hand empty / holding a part) between one retreat's end and the
@@ -253,9 +255,8 @@ def _ompl(state: SceneState, a: np.ndarray, b: np.ndarray, limits: np.ndarray, r
         return None, 0.0
     path = ss.getSolutionPath()
     raw = np.array([vec(path.getState(i)) for i in range(path.getStateCount())])
-    if opts.simplify:
-        ss.simplifySolution(min(0.2, float(opts.time_budget_s)))
-        path = ss.getSolutionPath()
+    if opts.simplify:  # simplifyMax: a fixed amount of work, not a time budget, so a seed gives one path
+        og.PathSimplifier(si).simplifyMax(path)
     verts = np.array([vec(path.getState(i)) for i in range(path.getStateCount())])
     verts[0], verts[-1] = a, b
     return verts, path_length(raw)
@@ -454,12 +455,14 @@ def _lines(robot: Any, scene: Any, st: Stop, q: np.ndarray, length: float, res: 
     lifted off (pickup's retreat) or set down (put-down's approach), the hole part as it is
     inserted (the assemble's approach)."""
     z = st.T[:3, 2]
+    up = np.array([0.0, 0.0, 1.0])
     (pb, hb), (pa, ha) = st.before, st.after
+    r_dir = -z  # the empty hand backs off along its approach
     if st.name == "pickup":
         a_state, a_dir = scene.at(pb, None, grasped=st.obj), z
-        r_state = scene.at(pa, ha, allow=[(f"held:{st.obj}", "table")])
+        r_state, r_dir = scene.at(pa, ha, allow=[(f"held:{st.obj}", "table")]), up  # lifted off its support
     elif st.name == "putdown":
-        a_state, a_dir = scene.at(pb, hb, allow=[(f"held:{st.obj}", "table")]), z
+        a_state, a_dir = scene.at(pb, hb, allow=[(f"held:{st.obj}", "table")]), -up  # set down onto it
         r_state = scene.at(pa, None, grasped=st.obj)
     elif st.name == "assemble":
         a_state, a_dir = scene.at(pb, hb, allow=[(f"held:{st.obj}", str(st.onto))]), st.insert  # the insertion itself
@@ -471,7 +474,7 @@ def _lines(robot: Any, scene: Any, st: Stop, q: np.ndarray, length: float, res: 
                       f"approach to {st.id} ({st.label})", reverse=True)
     if isinstance(app, MotionFailure):
         return app
-    ret = line_motion(robot, r_state, st.T, q, -z, length, res, margin, "retreat",
+    ret = line_motion(robot, r_state, st.T, q, r_dir, length, res, margin, "retreat",
                       f"retreat from {st.id} ({st.label})", reverse=False)
     if isinstance(ret, MotionFailure):
         return ret
