@@ -192,13 +192,25 @@ run(ctx(Problem, From, Sensing), Steps, GivenUp, Result) :-
 eval_result(ok, Eval, Steps, ok(Verdicts, Geometry)) :-
     foldl(step_record, Eval.steps, Steps, Verdicts0, []),
     exclude([verdict(_, _, [])]>>true, Verdicts0, Verdicts),
-    maplist(step_geometry, Eval.steps, Geometry).
+    maplist(step_geometry, Eval.steps, Geometry0),
+    motion_geometry(Eval, Geometry0, Geometry).
+
 eval_result(failed, Eval, Steps, failed(Step, Before)) :-
     atom_string(At, Eval.at),
     append(Before, [Step|_], Steps),
     Step = step(Id, _),
     step_id_text(Id, At),
     !.
+
+%   motion_geometry(+Eval, +Geometry0, -Geometry): the summary of the run's
+%   motions (Python's world/motion.py, when the run plans them: the
+%   waypoints stay in Python, the Planner adds them to the steps) rides
+%   along with the steps' geometry as the entry '$motion'-Dict; ur_dict/2
+%   puts it in the instance.
+motion_geometry(Eval, G0, ['$motion'-M|G0]) :-
+    get_dict(motion, Eval, M),
+    !.
+motion_geometry(_, G, G).
 
 step_record(Record, step(Id, Action), [verdict(Id, Action, Record.verdicts)|Vs], Vs).
 
@@ -383,14 +395,15 @@ ur_dict(ur(aug(Steps, E, Vs, Rs, Verdicts, Geo, Bindings), N, Cap, Complete), D)
     maplist(term_dict, Vs, VDicts),
     maplist(term_dict, Rs, RDicts),
     json_bool(Complete, C),
+    (   memberchk('$motion'-M, Geo) -> true ; M = @(none) ),
     D = _{bindings: BDict, steps: SDicts, constraints: Cs, verifications: VDicts,
           recoveries: RDicts, error_count: E, instances_examined: N,
-          instance_cap: Cap, complete: C}.
+          instance_cap: Cap, complete: C, motion: M}.
 ur_dict(no_instance(N, Cap, Complete), D) :-
     json_bool(Complete, C),
     D = _{bindings: _{}, steps: [], constraints: [], verifications: [], recoveries: [],
           error_count: @(none), instances_examined: N, instance_cap: Cap, complete: C,
-          reason: "no instance could be executed: a put-down without a reachable placement or a step without a joint solution"}.
+          motion: @(none), reason: "no instance could be executed: a put-down without a reachable placement or a step without a joint solution"}.
 
 json_bool(true, @(true)) :- !.
 json_bool(_, @(false)).

@@ -18,7 +18,9 @@ def _occupied() -> list[tuple[np.ndarray, float]]:
 
 def test_chosen_placement_is_reachable_by_fk() -> None:
     blk, peg = CELL.objects["block"], CELL.objects["peg"]
-    reqs = [blk.grasps["p2G9"].T, CELL.transforms["trans_1"] @ peg.grasps["p1G11"].T]
+    # (p2G9 with p1G11, the pair this test used before the collision check, has no placement
+    # now: p1G11's wrist then passes 0.14 in through the table)
+    reqs = [blk.grasps["p2G1"].T, CELL.transforms["trans_1"] @ peg.grasps["p1G10"].T]
     p = placement.choose(CELL, "block", "p2P5", reqs, _occupied())
     assert p is not None
     assert p.z == blk.poses["p2P5"].height

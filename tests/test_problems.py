@@ -159,12 +159,15 @@ def test_placement_trap_has_no_placement() -> None:
 
 
 def test_regrasp_has_a_placement() -> None:
-    """The regrasp's put-down region has a spot where the arm reaches the peg standing
-    with the shaft-covering grasp and again with a grasp leaving the shaft free."""
+    """The regrasp's put-down region has a spot where the arm reaches the peg lying on its
+    side (p1P2) with the shaft-covering grasp and again with a grasp leaving the shaft free.
+    Standing (p1P1) it has none: the side grasp p1G1 is then 0.5 in above the table and puts
+    the gripper and wrist through it (collision-aware reach, issue 15)."""
     cell = load_problem(ROOT / "kb" / "problems" / "regrasp.yaml")
     peg = cell.objects["peg"]
     occupied = [(cell.positions["tr2"].T[:2, 3], cell.objects["block"].bounding_radius())]
-    p = placement.choose(cell, "peg", "p1P1", [peg.grasps["p1G7"].T, peg.grasps["p1G1"].T], occupied)
+    p = placement.choose(cell, "peg", "p1P2", [peg.grasps["p1G17"].T, peg.grasps["p1G1"].T], occupied)
     assert p is not None
     assert 20 <= p.x <= 40 and -20 <= p.y <= 0
-    assert np.isclose(p.z, 0.0)
+    assert np.isclose(p.z, cell.objects["peg"].poses["p1P2"].height)
+    assert placement.choose(cell, "peg", "p1P1", [peg.grasps["p1G7"].T, peg.grasps["p1G1"].T], occupied) is None

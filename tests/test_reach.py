@@ -140,13 +140,13 @@ def test_pairs_are_sorted_string_lists(cell: Cell) -> None:
 
 def test_all_pairs_in_one_batched_ik_call(cell: Cell, monkeypatch: pytest.MonkeyPatch) -> None:
     calls: list[int] = []
-    real = cell.robot.reachable_mask
+    real = cell.robot.ik_batch
 
-    def counting(T: np.ndarray) -> np.ndarray:
+    def counting(T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         calls.append(len(T))
         return real(T)
 
-    monkeypatch.setattr(cell.robot, "reachable_mask", counting)
+    monkeypatch.setattr(cell.robot, "ik_batch", counting)
     reachable_pairs(cell, "box", GRASPS, ["tr1", "tr_far", "tr_yaw", "box_up"])
     # g2 fails condition 1 at every one of the three absolute positions: 2 grasps x 3 positions
     assert calls == [6]
@@ -188,18 +188,23 @@ def test_arc_dispatch_and_errors(cell: Cell) -> None:
 
 def test_paper_cell_pairs_are_sound() -> None:
     # Sec. 6's cell: every returned absolute pair has a verified joint solution, every
-    # omitted one fails condition 1 or has none (the CMS is exact on its own model).
+    # omitted one fails condition 1, has none, or every one collides and the refusal names
+    # the pair of bodies (the CMS is exact on its own model)
+    from spar_py.workspace import refusals
+
     cell = load_problem(ROOT / "kb" / "problems" / "peg_in_block.yaml")
     for obj, pos in (("peg", "tr1"), ("block", "tr2")):
         model = cell.objects[obj]
         pairs = reachable_pairs(cell, obj, list(model.grasps), [pos])
         assert pairs, f"no grasp of the {obj} is reachable at {pos}"
         rfaces = set(resting_faces(cell, obj, pos))
+        said = refusals(cell)
         for g in model.grasps.values():
             T = cell.positions[pos].T @ g.T
             expected = not (rfaces & set(g.gfaces)) and len(cell.robot.ik(T)) > 0
-            assert ([g.label, pos] in pairs) == expected
-            if expected:
+            refused = any(r.startswith(f"no collision-free IK for pickup({obj}, {g.label}) at {pos}: ") for r in said)
+            assert ([g.label, pos] in pairs) == (expected and not refused)
+            if expected and not refused:
                 sol = np.radians(solutions_for(cell, T)[0])
                 assert np.allclose(cell.robot.fk(sol), T, atol=1e-9)
 

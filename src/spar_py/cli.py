@@ -14,7 +14,8 @@ from pathlib import Path
 from typing import Callable
 
 from . import __version__
-from .errors import InternalError, KBError, PlanningTimeout, PrologError, SparError
+from .errors import InternalError, KBError, PlanningTimeout, PrologError, SparError, SparValueError
+from .world.motion import PLANNERS, MotionOptions
 
 EXIT_OK, EXIT_FAIL, EXIT_INPUT, EXIT_INTERNAL, EXIT_TIMEOUT = 0, 1, 2, 3, 4
 DEFAULT_PROBLEM = "kb/problems/peg_in_block.yaml"
@@ -145,8 +146,15 @@ def cmd_plan(args: argparse.Namespace) -> int:
     so a timeout, Ctrl-C or SIGTERM never leaves part of them."""
     output = Path(args.output) if args.output else None
     picture_dirs = sorted({Path(d) for d in (args.dot, args.png) if d})
+    animate = Path(args.animate) if args.animate else None
     if output is not None:
         _check_output_file("-o", output)
+    if animate is not None:
+        if args.no_motion or args.phase1_only:
+            raise SparValueError("--animate replays the plan's motions: not with --no-motion or --phase1-only")
+        if animate.suffix.lower() != ".gif":
+            raise SparValueError(f"--animate {animate}: expected a .gif file name")
+        _check_output_file("--animate", animate)
     for d in picture_dirs:
         _check_output_dir("--png" if args.png and Path(args.png) == d else "--dot", d)
     guard = args.guard
@@ -156,13 +164,17 @@ def cmd_plan(args: argparse.Namespace) -> int:
     from .kb import load_problem
     from .planner import Outcome, Planner
 
+    cell = load_problem(args.problem, max_bytes=_max_input_bytes(args))
     planner = Planner(max_actions=args.max_actions, max_instances=args.max_instances,
                       separation=False if args.no_separation else None,
-                      paper_placements=args.paper_placements)
-    cell = load_problem(args.problem, max_bytes=_max_input_bytes(args))
+                      paper_placements=args.paper_placements,
+                      motion=False if args.no_motion else (True if args.motion or args.animate else None),
+                      motion_options=_motion_options(args))
     plan = planner.plan(cell, phase1_only=args.phase1_only, trace=args.trace)
     if plan.outcome is Outcome.TIMEOUT:
         raise PlanningTimeout(f"{cell.name}: no result within {args.timeout:g} s")
+    for line in (plan.reason or {}).get("collisions", []) if plan.outcome is Outcome.NO_PLAN else []:
+        print(line)
     staged: list[tuple[Path, Path]] = []  # (temporary, final)
     if picture_dirs or output is not None:
         import tempfile  # only for outputs: a plain `spar plan` need not import it (cold start)
@@ -173,6 +185,15 @@ def cmd_plan(args: argparse.Namespace) -> int:
         tmp = guard.temporary(Path(tempfile.mkdtemp(dir=d.absolute().parent, prefix=f".{d.name}.")))
         for p in write_pictures(cell, plan.to_json(), tmp):
             staged.append((p, d / p.name))
+    if animate is not None:
+        from .pictures.animate import write_animation
+
+        animate.absolute().parent.mkdir(parents=True, exist_ok=True)
+        fd, name = tempfile.mkstemp(dir=animate.absolute().parent, prefix=f".{animate.name}.", suffix=".gif")
+        os.close(fd)
+        tmpgif = guard.temporary(Path(name))
+        write_animation(cell, plan.to_json(), tmpgif)
+        staged.append((tmpgif, animate))
     if output is not None:
         output.absolute().parent.mkdir(parents=True, exist_ok=True)
         fd, name = tempfile.mkstemp(dir=output.absolute().parent, prefix=f".{output.name}.", suffix=".tmp")
@@ -274,6 +295,18 @@ def build_parser() -> argparse.ArgumentParser:
                       help="assume a put-down into a stable pose is reachable somewhere (the paper's rule)")
     plan.add_argument("--timeout", type=_positive_float, metavar="S", help="give up after S seconds")
     _add_max_input_bytes(plan)
+    plan.add_argument("--motion", action="store_true",
+                      help="plan the joint paths between the end-points (default: as the problem's motion: key)")
+    plan.add_argument("--no-motion", action="store_true",
+                      help="plan the end-points only (the paper's phase 2), no joint paths between them")
+    plan.add_argument("--animate", metavar="FILE.gif", help="write an animation of the plan's motions")
+    plan.add_argument("--motion-planner", choices=sorted(PLANNERS), default="rrtconnect",
+                      help="OMPL planner for the free motions (default rrtconnect)")
+    plan.add_argument("--motion-budget", type=_positive_float, default=1.0, metavar="S",
+                      help="OMPL seconds per free motion (default 1)")
+    plan.add_argument("--motion-seed", type=int, default=0, metavar="N", help="OMPL's random seed (default 0)")
+    plan.add_argument("--approach-length", type=_positive_float, metavar="L",
+                      help="approach and retreat length in the problem's length unit (default 2 in)")
     plan.add_argument("--dot", metavar="DIR", help="write the ordering graph, network and cell pictures here")
     plan.add_argument("--png", metavar="DIR", help="same as --dot (both write .dot and .png)")
     plan.set_defaults(func="plan")
@@ -294,6 +327,12 @@ def build_parser() -> argparse.ArgumentParser:
     asm.add_argument("-o", "--output", default="out/gen", metavar="DIR")
     asm.set_defaults(func="gen")
     return p
+
+
+def _motion_options(args: argparse.Namespace) -> MotionOptions:
+    """The plan command's motion options (the approach length in the problem's unit)."""
+    return MotionOptions(planner=args.motion_planner, time_budget_s=args.motion_budget, seed=args.motion_seed,
+                         approach_length=args.approach_length)
 
 
 def _add_max_input_bytes(p: argparse.ArgumentParser) -> None:

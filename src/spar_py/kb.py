@@ -31,7 +31,7 @@ from . import sanity
 from .units import from_mm
 from .errors import KBError, SparError, SparValueError, UnknownKeyError, WrongKindError
 from .geometry import ORTHO_TOL, eulerxyz, rotation_problem, rpy, same_stable_pose, tm_rows, trans
-from .world.robots import Robot, read_urdf_chain, robot_from_urdf, standard_to_modified
+from .world.robots import GripperGeometry, LinkShape, Robot, read_urdf_chain, robot_from_urdf, standard_to_modified
 from .model import (
     Bounds,
     Cell,
@@ -135,16 +135,34 @@ DERIVABLE = ("faces", "stable_poses", "grasps")
 #: PUMA 762's 4 in, kb/robots/puma762.yaml).
 DEFAULT_OPENING_MM = 101.6
 
+#: A gripper box's sizes (robot file ``gripper: finger`` and ``palm``).
+GRIPPER_BOX_SCHEMA = keys(["length", "width", "thickness"])
+GRIPPER_SCHEMA = keys(["finger_separation"], {"finger": GRIPPER_BOX_SCHEMA, "palm": GRIPPER_BOX_SCHEMA})
+#: A link's collision shape (robot file ``collision: links``): a capsule or cylinder from one
+#: point to another, or a box, in one of Craig's frames 0..6.
+AXIS_SHAPE_SCHEMA = keys(["radius", "from", "to"])
+COLLISION_SCHEMA = keys(
+    {},
+    {"margin": LEAF,
+     "links": Each(keys(["name", "frame"], {"capsule": AXIS_SHAPE_SCHEMA, "cylinder": AXIS_SHAPE_SCHEMA,
+                                            "box": keys(["min", "max"])})),
+     "allow": Each(LEAF)},
+)
 ROBOT_SCHEMA = keys(
     {"name": LEAF, "units": UNITS_SCHEMA, "dh": Each(keys(["alpha", "a", "d"], ["offset"])),
-     "limits": LEAF, "base": FRAME_SCHEMA, "tool": FRAME_SCHEMA, "gripper": keys(["finger_separation"])},
-    ["convention", "ik"],
+     "limits": LEAF, "base": FRAME_SCHEMA, "tool": FRAME_SCHEMA, "gripper": GRIPPER_SCHEMA},
+    {"convention": LEAF, "ik": LEAF, "collision": COLLISION_SCHEMA,
+     **{"home": LEAF, "velocity_limits": LEAF}},  # motion keys: _robot_motion
 )
 # a problem's `robot:` given inline from a URDF (lengths and angles in the problem's units)
 URDF_ROBOT_SCHEMA = keys(
-    {"urdf": LEAF, "base_link": LEAF, "tip_link": LEAF, "gripper": keys(["finger_separation"])},
-    {"name": LEAF, "base": FRAME_SCHEMA, "tool": FRAME_SCHEMA, "limits": LEAF, "ik": LEAF},
+    {"urdf": LEAF, "base_link": LEAF, "tip_link": LEAF, "gripper": GRIPPER_SCHEMA},
+    {"name": LEAF, "base": FRAME_SCHEMA, "tool": FRAME_SCHEMA, "limits": LEAF, "ik": LEAF,
+     "collision": COLLISION_SCHEMA, **{"home": LEAF, "velocity_limits": LEAF}},  # motion keys: _robot_motion
 )
+#: A problem's obstacle: a named box, z-cylinder or mesh in the world frame.
+OBSTACLE_SCHEMA = keys(["name"], {"box": keys(["min", "max"]), "cylinder": keys(["radius", "z", "center"]),
+                                  "mesh": LEAF, "xyz": LEAF, "rpy": LEAF})
 #: How a robot file's `ik:` may name its solver: auto = the first closed-form family that fits, else
 #: numeric (spar_py.world.ik.FAMILIES)
 IK_CHOICES = ("auto", "puma", "ur", "numeric")
@@ -156,7 +174,9 @@ PROBLEM_SCHEMA = keys(
      "uncertainty": keys({"manipulator": BOUNDS_SCHEMA, "objects": Named(BOUNDS_SCHEMA)}),
      "goals": LEAF},
     {"sensors": Named(BOUNDS_SCHEMA), "transforms": Named(keys(["tm"])), "vectors": Named(LEAF),
-     "placement_regions": Each(keys(["x", "y"]))},
+     "placement_regions": Each(keys(["x", "y"])),
+     "obstacles": Each(OBSTACLE_SCHEMA), "table": keys(["x", "y"]), "clearance": LEAF, "collision": LEAF,
+     "home": LEAF, "motion": LEAF},
 )
 
 
@@ -892,7 +912,101 @@ def load_robot(path: str | Path, unit: str | None = None, max_bytes: int = MAX_I
     except SparValueError as e:
         raise KBError(str(path), "dh", f"a robot the kinematics accepts ({e})") from None
     _check_family(robot, root, path, unit, file_unit, max_bytes)
+    _collision_shapes(robot, root, scale, LENGTH_UNITS[unit])
+    _robot_motion(robot, root, rad_per)
     return robot
+
+
+def _joint_vector(node: Node, rad_per: float, what: str) -> np.ndarray:
+    """Six angles (the file's angle unit) as (6,) rad."""
+    items = node.elements()
+    if len(items) != 6:
+        raise node.fail(f"a list of 6 {what}", f"{len(items)} items")
+    return np.array([e.number() for e in items]) * rad_per
+
+
+def _home(node: Node | None, robot: Robot, rad_per: float) -> np.ndarray | None:
+    """``home:``: six joint angles (file angle unit) within the joint limits, as rad; None if absent."""
+    if node is None:
+        return None
+    q = _joint_vector(node, rad_per, "joint angles")
+    if not robot.in_limits(q):
+        lim = ", ".join(f"[{num(lo / rad_per)}, {num(hi / rad_per)}]" for lo, hi in robot.limits)
+        raise node.fail(f"joint angles within the limits {lim}", "[" + ", ".join(num(v / rad_per) for v in q) + "]")
+    return q
+
+
+def _robot_motion(robot: Robot, root: Node, rad_per: float) -> None:
+    """The robot's motion entries (world/motion.py): ``home`` (joint angles, the file's angle
+    unit) and ``velocity_limits`` (six positive joint speeds, angle unit per second), in rad
+    and rad/s on the Robot."""
+    robot.home = _home(root.key("home", required=False), robot, rad_per)
+    vnode = root.key("velocity_limits", required=False)
+    if vnode is not None:
+        v = _joint_vector(vnode, rad_per, "joint speeds (angle unit per second)")
+        if not np.all(v > 0):
+            raise vnode.fail("six positive joint speeds (angle unit per second)",
+                             "[" + ", ".join(num(x / rad_per) for x in v) + "]")
+        robot.velocity_limits = v
+
+
+def _gripper(gnode: Node, wm: float, scale: float, mm_per_unit: float) -> GripperGeometry:
+    """The ``gripper:`` section's boxes (robot unit; GripperGeometry's documented defaults where absent)."""
+    def sizes(key: str) -> dict | None:
+        n = gnode.key(key, required=False)
+        return None if n is None else {k: n.key(k).positive() * scale for k in ("length", "width", "thickness")}
+    return GripperGeometry.default(wm, mm_per_unit, sizes("finger"), sizes("palm"))
+
+
+def _collision_shapes(robot: Robot, root: Node, scale: float, mm_per_unit: float) -> None:
+    """Set ``robot``'s gripper boxes and its ``collision:`` section: link shapes (capsule,
+    cylinder: ``{radius, from, to}``; box: ``{min, max}``; lengths in the file's unit, in Craig's
+    frame ``frame`` 0..6), ``allow`` (pairs of body names never checked), ``margin``."""
+    robot.gripper = _gripper(root.key("gripper"), robot.finger_separation, scale, mm_per_unit)
+    cnode = root.key("collision", required=False)
+    if cnode is None:
+        return
+    known = {"palm", "finger_l", "finger_r", "table"}
+    links: list[LinkShape] = []
+    for ln in (cnode.key("links", required=False) or Node(cnode.file, cnode.path, [])).elements():
+        lname = ln.key("name").label()
+        fnode = ln.key("frame")
+        frame = fnode.number()
+        if frame != int(frame) or not 0 <= frame <= 6:
+            raise fnode.fail("one of Craig's frames 0 (base) .. 6 (flange)", show(fnode.value))
+        kinds = [k for k in ("capsule", "cylinder", "box") if ln.key(k, required=False) is not None]
+        if len(kinds) != 1:
+            raise ln.fail("exactly one shape: capsule: {radius, from, to}, cylinder: {radius, from, to} or "
+                          "box: {min, max}", ", ".join(kinds) or "none")
+        sn = ln.key(kinds[0])
+        if kinds[0] == "box":
+            lo, hi = sn.key("min").vector(3) * scale, sn.key("max").vector(3) * scale
+            if np.any(lo > hi):
+                raise sn.fail("min <= max in every coordinate")
+            links.append(LinkShape(lname, int(frame), "box", lo, hi))
+        else:
+            links.append(LinkShape(lname, int(frame), kinds[0], sn.key("from").vector(3) * scale,
+                                   sn.key("to").vector(3) * scale, sn.key("radius").positive() * scale))
+        known.add(lname)
+    allowed = []
+    anode = cnode.key("allow", required=False)
+    for pn in (anode.elements() if anode is not None else []):
+        pair = pn.elements()
+        if len(pair) != 2:
+            raise pn.fail("a pair [body, body] of link or gripper names", show(pn.value))
+        names = [e.label() for e in pair]
+        for e, n in zip(pair, names):
+            if n not in known:
+                raise e.fail(f"a body name ({', '.join(sorted(known))})", show(n))
+        allowed.append(frozenset(names))
+    robot.links = tuple(links)
+    robot.allowed = frozenset(allowed)
+    mnode = cnode.key("margin", required=False)
+    if mnode is not None:
+        m = mnode.number()
+        if m < 0:
+            raise mnode.fail("a clearance margin >= 0", show(mnode.value))
+        robot.margin = m * scale
 
 
 def _limits(lim_node: Node, rad_per: float) -> np.ndarray:
@@ -960,6 +1074,10 @@ def load_urdf_robot(node: Node, base_dir: Path, unit: str, rad_per: float) -> tu
     if family not in ("auto", "numeric") and robot.solver.family != family:
         raise KBError(node.file, unode.path, f"a {family.upper()}-family arm (ik: {family}; docs/robots.md)",
                       f"one with {robot.not_closed_form[family]}")
+    urdf_links = robot.links
+    _collision_shapes(robot, node, 1.0, LENGTH_UNITS[unit])
+    robot.links = robot.links or urdf_links  # the URDF's own collision shapes unless the file gives some
+    _robot_motion(robot, node, rad_per)
     return robot, upath
 
 
@@ -1274,6 +1392,90 @@ def _regions(root: Node) -> list[dict[str, tuple[float, float]]]:
             for r in (rnode.elements() if rnode is not None else [])]
 
 
+def _obstacles(root: Node, base: Path, rad_per: float) -> list:
+    """``obstacles:``: named shapes in the world frame (cell unit): ``box: {min, max}``,
+    ``cylinder: {radius, z: [lo, hi], center: [x, y]}`` (axis along world z) or ``mesh: FILE``
+    placed at ``xyz``, ``rpy`` (its convex hull: a conservative stand-in for a concave fixture)."""
+    from .world.collision import Obstacle, box, convex, cylinder
+
+    onode = root.key("obstacles", required=False)
+    out: list = []
+    seen: set[str] = set()
+    for on in (onode.elements() if onode is not None else []):
+        name = on.key("name").label()
+        if name in seen or name == "table":
+            raise on.key("name").fail("a name no other obstacle (nor the table) has", name)
+        seen.add(name)
+        kinds = [k for k in ("box", "cylinder", "mesh") if on.key(k, required=False) is not None]
+        if len(kinds) != 1:
+            raise on.fail("exactly one of box: {min, max}, cylinder: {radius, z, center}, mesh: FILE",
+                          ", ".join(kinds) or "none")
+        k = kinds[0]
+        if k == "box":
+            b = on.key("box")
+            lo, hi = b.key("min").vector(3), b.key("max").vector(3)
+            if np.any(lo >= hi):
+                raise b.fail("min < max in every coordinate")
+            bodies = (box(name, -1, lo, hi),)
+        elif k == "cylinder":
+            c = on.key("cylinder")
+            r = c.key("radius").positive()
+            z0, z1 = c.key("z").interval()
+            if not z0 < z1:
+                raise c.key("z").fail("[lo, hi] with lo < hi")
+            cx, cy = c.key("center").vector(2)
+            bodies = (cylinder(name, -1, [cx, cy, z0], [cx, cy, z1], r),)
+        else:
+            mnode = on.key("mesh")
+            mpath = base / mnode.text()
+            if not mpath.is_file():
+                raise mnode.fail("the path of a mesh file (STL, OBJ, PLY)", f"{show(mnode.value)} (no such file)")
+            try:
+                import trimesh
+
+                mesh = trimesh.load(str(mpath), force="mesh")
+                pts = np.asarray(mesh.convex_hull.vertices, float)
+            except Exception as e:  # trimesh's many loader errors: one line
+                raise mnode.fail(f"a mesh trimesh can read ({type(e).__name__}: {str(e)[:80]})") from None
+            T = _robot_frame(on, 1.0, rad_per) if on.key("xyz", required=False) is not None else np.eye(4)
+            bodies = (convex(name, -1, pts @ T[:3, :3].T + T[:3, 3]),)
+        out.append(Obstacle(name, bodies))
+    return out
+
+
+def _table(root: Node) -> tuple[float, float, float, float] | None:
+    """``table: {x: [lo, hi], y: [lo, hi]}``: the table top's extent (cell unit), None: the whole plane."""
+    tnode = root.key("table", required=False)
+    if tnode is None:
+        return None
+    (x0, x1), (y0, y1) = tnode.key("x").interval(), tnode.key("y").interval()
+    if not (x0 < x1 and y0 < y1):
+        raise tnode.fail("x: [lo, hi] and y: [lo, hi] with lo < hi")
+    return (x0, x1, y0, y1)
+
+
+def _collision_switch(root: Node) -> bool:
+    """``collision: false`` turns the collision check off for a cell (a user's opt-out: every
+    reach is then decided by IK and the wrist height alone); default true."""
+    node = root.key("collision", required=False)
+    if node is None:
+        return True
+    if not isinstance(node.value, bool):
+        raise node.fail("true or false", show(node.value))
+    return node.value
+
+
+def _clearance(root: Node) -> float | None:
+    """``clearance:`` the collision margin (cell unit, >= 0), None when not given."""
+    cnode = root.key("clearance", required=False)
+    if cnode is None:
+        return None
+    m = cnode.number()
+    if m < 0:
+        raise cnode.fail("a clearance margin >= 0", show(cnode.value))
+    return m
+
+
 def load_problem(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> Cell:
     """Load and validate ``kb/problems/*.yaml`` with the robot and object files it names
     (each file at most ``max_bytes``)."""
@@ -1321,7 +1523,18 @@ def load_problem(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> Cell:
         object_bounds=obj_bounds,
         sensors=sensors,
         placement_regions=_regions(root),
+        obstacles=tuple(_obstacles(root, base, rad_per)),
+        table=_table(root),
+        clearance=_clearance(root),
+        collisions=_collision_switch(root),
+        home=_home(root.key("home", required=False), robot, rad_per),
     )
+    if cell.home is None:
+        cell.home = robot.home
+    mnode = root.key("motion", required=False)
+    if mnode is not None and not isinstance(mnode.value, bool):
+        raise mnode.fail("true or false (plan the motions between the end-points)", show(mnode.value))
+    cell.plan_motions = bool(mnode is not None and mnode.value)
     sanity.check_cell(cell)  # physically possible: parts apart, on the table, in reach (sanity.py)
     return cell
 

@@ -14,6 +14,7 @@ import numpy as np
 from .memo import Memo
 
 if TYPE_CHECKING:
+    from .world.motion import MotionOptions
     from .world.robots import Robot
     from .world.shapes import FeatureGeometry, Geometry
 
@@ -158,8 +159,26 @@ class Cell:
     #: Derived T_a (assembled/2 goals): the goal's transform name -> its turns about the hole's
     #: axis, each (transform name, the hole part's stable poses the mated peg clears the table in).
     turns: dict[str, tuple[tuple[str, tuple[str, ...]], ...]] = field(default_factory=dict)
+    #: Obstacles (world.collision.Obstacle: named bodies, world frame), the table top's extent
+    #: (x0, x1, y0, y1) or None (the whole plane), the collision margin or None (the robot's or
+    #: the default): the problem file's ``obstacles:``, ``table:``, ``clearance:`` (cell unit).
+    obstacles: tuple = ()
+    table: tuple[float, float, float, float] | None = None
+    clearance: float | None = None
+    #: Whether reach checks ask the collision scene (world.collision) at all: on unless the
+    #: problem file says ``collision: false`` (see workspace.reach_clear).
+    collisions: bool = True
     #: The files the cell was loaded from (resolved paths: problem, robot, models).
     files: tuple[str, ...] = ()
+    #: Home joint vector (6,) rad: the problem's ``home:``, else the robot file's, else None
+    #: (world/motion.py's default).
+    home: np.ndarray | None = None
+    #: The problem file's ``motion: true``: plan motions unless the Planner says otherwise
+    #: (the regression suite plans motions for these cells only).
+    plan_motions: bool = False
+    #: How a planning run plans motions (world.motion.MotionOptions), None for end-point
+    #: planning only; set by the Planner for each run.
+    motion: "MotionOptions | None" = field(default=None, compare=False, repr=False)
     #: The cell's memo tables (bounded; freed with the cell): see memo.py.
     memo: Memo = field(default_factory=Memo, compare=False, repr=False)
 

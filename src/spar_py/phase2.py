@@ -325,14 +325,20 @@ def evaluate(cell: Cell, steps: Sequence[Step], sources: Sources | None = None,
     world = new_world(cell, list(steps), sources, sensing_bounds(cell, sensing))
     skip = set(given_up)
     out: list[dict[str, Any]] = []
+    worlds = [world]
     for s in steps:
         checks, world, geo = step(world, s)
+        worlds.append(world)
         out.append({"id": s["id"], "verdicts": checks, "geometry": geo,
                     "poses": poses(world), "held": world.unc.holding})
         if not _all_satisfied(checks, "geometric"):
             return {"status": "infeasible", "at": s["id"], "steps": out}
         if not _all_satisfied(checks, "uncertainty") and s["id"] not in skip:
             return {"status": "failed", "at": s["id"], "steps": out}
+    if cell.motion is not None:  # the end-points are fixed: the motions between them (world/motion.py)
+        from .world.motion import run_motions
+
+        return run_motions(cell, steps, worlds, {"status": "ok", "at": None, "steps": out})
     return {"status": "ok", "at": None, "steps": out}
 
 
@@ -363,19 +369,53 @@ def _part_at(world: World, obj: str, label: str) -> str | None:
                 None)
 
 
-def _arm(world: World, T: np.ndarray) -> tuple[np.ndarray | None, dict[str, Any]]:
-    """The joint vector reaching tool pose T nearest the previous one, and display data."""
-    sols = solutions(world.cell.robot, T)
-    ok = bool(len(sols))
+def _arm(world: World, T: np.ndarray, what: str = "", held: tuple[str, np.ndarray] | None = None,
+         grasped: str | None = None, width: float | None = None,
+         allow: Sequence[tuple[str, str]] = ()) -> tuple[np.ndarray | None, dict[str, Any]]:
+    """The joint vector reaching tool pose T nearest the previous one among those clear of the
+    world at this step (world.collision: every part where it is now, ``held`` in the hand,
+    ``grasped`` being closed on, ``allow`` the step's own contacts), and display data: every IK
+    solution, the chosen one's clearance (cell unit) and closest pair; without a clear
+    solution ``collisions`` lists the pairs and the refusal is remembered (workspace.refusals)."""
+    from .world.collision import scene_for
+    from .workspace import remember_refusal
+
+    cell = world.cell
+    sols = solutions(cell.robot, T)
     q = None
-    if ok:
+    geo: dict[str, Any] = {}
+    if len(sols) and cell.collisions:
+        parts = {k: o.pose for k, o in world.unc.objects.items() if k != world.unc.holding}
+        state = scene_for(cell).at(parts, held, grasped, width=width, allow=allow)
+        clear, why = state.check(sols)
+        good = sols[clear]
+        if len(good):
+            ref = world.joints if world.joints is not None else np.zeros(6)
+            q = good[int(np.argmin(np.abs(good - ref).sum(axis=1)))]
+            d, names = state.clearance(q[None])
+            geo["clearance"] = round(float(d[0]), 6)
+            geo["closest_pair"] = list(names[0])
+        else:
+            pairs = list(dict.fromkeys(w for w in why if w is not None))
+            geo["collisions"] = [list(p) for p in pairs]
+            remember_refusal(cell, what, pairs)
+    elif len(sols):  # no collision check in this cell (Cell.collisions): the nearest solution
         ref = world.joints if world.joints is not None else np.zeros(6)
         q = sols[int(np.argmin(np.abs(sols - ref).sum(axis=1)))]
     geo = {"tool_pose": np.round(T, 9).tolist(),
            "joints_deg": None if q is None else [round(float(v), 6) for v in np.degrees(q)],
-           "ik_solutions_deg": [[round(float(v), 6) for v in np.degrees(r)] for r in sols] if ok else [],
-           "ik_solver": world.cell.robot.solver_name}
+           "ik_solutions_deg": [[round(float(v), 6) for v in np.degrees(r)] for r in sols],
+           "ik_solver": cell.robot.solver_name, **geo}
     return q, geo
+
+
+def _no_arm(what: str, geo: dict[str, Any]) -> str:
+    """Why no joint vector was chosen for ``what``: none at all, or none clear of the world."""
+    if "collisions" not in geo:
+        return f"no joint solution for {what}"
+    from .workspace import _pair_text
+
+    return f"no collision-free IK for {what}: {', '.join(dict.fromkeys(_pair_text(p) for p in geo['collisions']))}"
 
 
 def _reach_verdict(action: str, ok: bool, what: str) -> dict[str, Any]:
@@ -418,9 +458,10 @@ def _pickup(world: World, s: Step) -> tuple[list[dict], World, dict]:
     manip = world.unc.manipulator_error()
     cs = ur.pickup_constraints(world.unc, obj, g.T, g.width, world.cell.finger_separation, manip, action=s["id"])
     checks = _verdicts(world, cs)
-    q, geo = _arm(world, o.pose @ g.T)
+    what = f"pickup({obj}, {label})"
+    q, geo = _arm(world, o.pose @ g.T, what, grasped=obj, width=g.width)
     if q is None:
-        checks.append(_reach_verdict(s["id"], False, f"no joint solution for pickup({obj}, {label})"))
+        checks.append(_reach_verdict(s["id"], False, _no_arm(what, geo)))
     w = replace(world, unc=ur.pickup(world.unc, obj, g.T, manip), grasps={**world.grasps, obj: label},
                 joints=q if q is not None else world.joints, checked=_checked(world, cs, checks))
     return checks, w, geo
@@ -434,9 +475,11 @@ def _putdown(world: World, s: Step) -> tuple[list[dict], World, dict]:
                                  f"reaches {obj} for this put-down and the actions after it")]
         return checks, world, {"tool_pose": None, "joints_deg": None, "placement": None}
     g = _grasp(world.cell, obj, world.grasps[obj])
-    q, geo = _arm(world, place.T @ g.T)
+    what = f"putdown({obj})"
+    q, geo = _arm(world, place.T @ g.T, what, held=(obj, np.linalg.inv(g.T)), width=g.width,
+                  allow=[(f"held:{obj}", "table")])
     geo["placement"] = place.as_dict()
-    checks = [] if q is not None else [_reach_verdict(s["id"], False, f"no joint solution for putdown({obj})")]
+    checks = [] if q is not None else [_reach_verdict(s["id"], False, _no_arm(what, geo))]
     grasps = {k: v for k, v in world.grasps.items() if k != obj}
     w = replace(world, unc=ur.putdown(world.unc, obj, place.T), grasps=grasps,
                 joints=q if q is not None else world.joints)
@@ -453,9 +496,11 @@ def _assemble(world: World, s: Step) -> tuple[list[dict], World, dict]:
     g = _grasp(cell, peg, world.grasps[peg])
     cs = ur.assemble_constraints(world.unc, peg, hole, Ta, fp, fh, action=s["id"])
     checks = _verdicts(world, cs)
-    q, geo = _arm(world, world.unc.obj(hole).pose @ Ta @ g.T)
+    what = f"assemble({peg}, {hole})"
+    q, geo = _arm(world, world.unc.obj(hole).pose @ Ta @ g.T, what, held=(peg, np.linalg.inv(g.T)), width=g.width,
+                  allow=[(f"held:{peg}", hole)])
     if q is None:
-        checks.append(_reach_verdict(s["id"], False, f"no joint solution for assemble({peg}, {hole})"))
+        checks.append(_reach_verdict(s["id"], False, _no_arm(what, geo)))
     grasps = {k: v for k, v in world.grasps.items() if k != peg}
     w = replace(world, unc=ur.assemble(world.unc, peg, hole, Ta), grasps=grasps,
                 joints=q if q is not None else world.joints, checked=_checked(world, cs, checks))
@@ -485,7 +530,7 @@ def _squeeze(world: World, s: Step) -> tuple[list[dict], World, dict]:
     labels = [g for g, _ in reachable_pairs(cell, obj, list(cell.objects[obj].grasps), _position_label(cell, obj, o))]
     for label in labels:
         g = _grasp(cell, obj, label)
-        q, geo = _arm(world, o.pose @ g.T)
+        q, geo = _arm(world, o.pose @ g.T, f"squeeze({obj}) with {label}", grasped=obj, width=g.width)
         if q is None:
             continue
         manip = world.unc.manipulator_error()

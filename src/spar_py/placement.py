@@ -23,7 +23,7 @@ import numpy as np
 from .geometry import convex_hull_2d, rotz
 from .model import Cell, ObjectModel
 from .units import from_mm, mm_per
-from .workspace import reaches, wrist_height
+from .workspace import Requirement, reaches, requirement_clear, wrist_height
 
 #: Grid spacing of candidate placements: 50.8 mm (2 in); number of yaw steps.
 GRID_STEP_MM = 50.8
@@ -341,25 +341,40 @@ def candidates(cell: Cell, obj: str, pose: str, occupied: list[Occupant],
     return [Placement(obj, pose, x, y, height, w, t) for (x, y), w, t in zip(xy.tolist(), yaw.tolist(), T)]
 
 
-def _reach_all(cell: Cell, TO: np.ndarray, X: np.ndarray) -> np.ndarray:
+def _req_X(r: Requirement | np.ndarray) -> np.ndarray:
+    return np.asarray(r.X if isinstance(r, Requirement) else r, float)
+
+
+def _reach_all(cell: Cell, TO: np.ndarray, X: Sequence[Requirement | np.ndarray], obj: str | None = None) -> np.ndarray:
     """(n, m) bool: the arm reaches T_O @ X (wrist above the table) for object poses TO
-    (n, 4, 4) and tool transforms X (m, 4, 4); one batched IK call."""
-    T = np.einsum("nij,mjk->nmik", TO, X).reshape(-1, 4, 4)     # (n*m,4,4)
-    return reaches(cell.robot, T).reshape(len(TO), len(X))
+    (n, 4, 4) and requirements X (m: 4x4 tool transforms, or workspace.Requirement); with the
+    object ``obj`` named, by a solution clear of the table, the obstacles and the object itself
+    (workspace.requirement_clear, one batched call per requirement), else by IK alone."""
+    if obj is None:
+        Xs = np.stack([_req_X(x) for x in X])
+        T = np.einsum("nij,mjk->nmik", TO, Xs).reshape(-1, 4, 4)     # (n*m,4,4)
+        return reaches(cell.robot, T).reshape(len(TO), len(Xs))
+    out = np.zeros((len(TO), len(X)), dtype=bool)
+    for k, x in enumerate(X):
+        out[:, k] = requirement_clear(cell, obj, TO, x).ok
+    return out
 
 
-def feasible(cell: Cell, placements: list[Placement], requirements: list[np.ndarray]) -> np.ndarray:
-    """(n,) bool: placements at which every requirement is reachable.
+def feasible(cell: Cell, placements: list[Placement], requirements: list[np.ndarray | Requirement]) -> np.ndarray:
+    """(n,) bool: placements at which every requirement is reachable, clear of the world.
 
     A requirement is a 4x4 X: the tool must reach T_O @ X (X = T_g for a pickup or
-    put-down with grasp g; X = T_a @ T_g' for mating another object onto this one).
-    One batched IK call for all placements x requirements.
+    put-down with grasp g; X = T_a @ T_g' for mating another object onto this one), or a
+    workspace.Requirement saying what is in the hand. One batched IK and clearance call per
+    requirement for all placements.
     """
     if not placements:
         return np.zeros(0, dtype=bool)
     if not requirements:
         return np.ones(len(placements), dtype=bool)
-    return _reach_all(cell, np.stack([p.T for p in placements]), np.stack(requirements)).all(axis=1)
+    objs = {p.obj for p in placements}
+    obj = objs.pop() if len(objs) == 1 else None
+    return _reach_all(cell, np.stack([p.T for p in placements]), requirements, obj).all(axis=1)
 
 
 #: Placements :func:`choose` checks at a time, nearest first.
@@ -387,10 +402,14 @@ def choose(cell: Cell, obj: str, pose: str, requirements: list[np.ndarray],
     yaws = yaw.tolist()
     digits = -round(math.log10(ROUND_MM))
     order = sorted(range(len(T)), key=lambda i: (round(dist[i], digits), yaws[i]))  # stable: grid order breaks ties
-    X = np.stack(requirements) if requirements else None
     for start in range(0, len(order), CHOOSE_CHUNK):
         idx = order[start:start + CHOOSE_CHUNK]
-        ok = np.ones(len(idx), dtype=bool) if X is None else _reach_all(cell, T[idx], X).all(axis=1)
+        ok = np.ones(len(idx), dtype=bool)
+        for x in requirements or ():  # each requirement by IK and clearance, on the survivors only
+            live = np.flatnonzero(ok)
+            if not len(live):
+                break
+            ok[live] = _reach_all(cell, T[[idx[i] for i in live]], [x], obj)[:, 0]
         hits = np.flatnonzero(ok)
         if len(hits):
             i = idx[hits[0]]
@@ -405,32 +424,52 @@ PHASE1_STEP_MM = 152.4
 PHASE1_YAWS = 6
 
 
-def reachable_somewhere(cell: Cell, obj: str, pose: str, requirements: list[np.ndarray]) -> np.ndarray:
-    """(m,) bool: for each tool transform X (object frame), some placement of ``obj`` in
-    ``pose`` on the phase-1 grid of the free regions where the arm reaches T_O @ X.
+def reachable_somewhere(cell: Cell, obj: str, pose: str,
+                        requirements: Sequence[np.ndarray | Requirement]) -> np.ndarray:
+    """(m,) bool: for each requirement (a tool transform X in the object frame, or a
+    workspace.Requirement), some placement of ``obj`` in ``pose`` on the phase-1 grid of the
+    free regions where the arm reaches T_O @ X by a solution clear of the table, the obstacles
+    and the object (and the part in the hand).
 
     A necessary condition for a put-down or mate at a stable-pose position: it ignores
     the other objects (phase 1 does not know where they will be); phase 2 chooses a real
     placement clear of them that serves every later action at once.
     """
-    if not requirements:
+    if not len(requirements):
         return np.zeros(0, dtype=bool)
-    X = np.stack(requirements)
-    out = np.zeros(len(X), dtype=bool)
+    reqs = [r if isinstance(r, Requirement) else Requirement(np.asarray(r, float)) for r in requirements]
+    out = np.zeros(len(reqs), dtype=bool)
     memo = cell.memo.table("placement.somewhere", SOMEWHERE_LIMIT)
     gkey = _grid_key(cell, obj, pose)
     todo: dict[tuple, list[int]] = {}  # equal requirements are solved once
-    for i, x in enumerate(np.round(X, 12)):
-        key = (gkey, x.tobytes())
+    for i, r in enumerate(reqs):
+        held = None if r.held is None else (r.held[0], np.round(r.held[1], 12).tobytes())
+        key = (gkey, obj, np.round(r.X, 12).tobytes(), held, None if r.width is None else round(r.width, 12))
         if key in memo:
             out[i] = memo[key]
         else:
             todo.setdefault(key, []).append(i)
     if todo:
-        ok = _any_placement(cell, _grid(cell, obj, pose), X[[ix[0] for ix in todo.values()]])
-        for (key, ix), v in zip(todo.items(), ok):
-            memo[key] = out[ix] = bool(v)
+        cands = _grid(cell, obj, pose)
+        for key, ix in todo.items():
+            memo[key] = out[ix] = _some_placement(cell, obj, cands, reqs[ix[0]])
     return out
+
+
+def _some_placement(cell: Cell, obj: str, cands: np.ndarray, req: Requirement, chunk: int = 48) -> bool:
+    """Some object pose of ``cands`` (n,4,4) at which the arm reaches T_O @ req.X clear of the
+    world, a chunk at a time (the usual case is met in the first chunk). The grid's placements
+    differ only by a turn about world z and a shift in x, y, so a wrist below the table at the
+    first one (by more than rounding) is below it at every one: no IK is solved then."""
+    if not len(cands):
+        return False
+    if np.all(cands[:, 2, :] == cands[0, 2, :]):
+        if wrist_height(cell.robot, (cands[0] @ req.X)[None])[0] < -from_mm(cell.unit, ROUND_MM):
+            return False
+    for start in range(0, len(cands), chunk):
+        if requirement_clear(cell, obj, cands[start:start + chunk], req).ok.any():
+            return True
+    return False
 
 
 def _any_placement(cell: Cell, cands: np.ndarray, X: np.ndarray, chunk: int = 48) -> np.ndarray:

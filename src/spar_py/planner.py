@@ -29,6 +29,7 @@ from .errors import PlanningTimeout, SparValueError
 from .kb import load_problem
 from .memo import LRU
 from .model import Cell
+from .world.motion import FAILURES_KEPT, MotionFailure, MotionOptions, attach
 
 SCHEMA = 2
 
@@ -163,8 +164,8 @@ class Plan:
         }
 
     def dumps(self) -> str:
-        """The JSON text, indented."""
-        return json.dumps(self.to_json(), indent=2)
+        """The JSON text, indented; a list of numbers (a waypoint, a matrix row) on one line."""
+        return dumps(self.to_json())
 
     @classmethod
     def from_json(cls, doc: dict[str, Any]) -> Plan:
@@ -172,6 +173,24 @@ class Plan:
         if doc.get("schema") != SCHEMA:
             raise SparValueError(f"plan JSON schema {doc.get('schema')!r}, not {SCHEMA}")
         return _plan(doc["problem"], doc, "")
+
+
+def _flat(v: Any) -> bool:
+    return isinstance(v, list) and all(x is None or isinstance(x, (int, float)) for x in v)
+
+
+def dumps(doc: Any, indent: int = 2, level: int = 0) -> str:
+    """``json.dumps(doc, indent=indent)``, except that lists of numbers are written on one
+    line: a plan's waypoints (thousands of joint vectors) stay a line each."""
+    if _flat(doc):
+        return json.dumps(doc, separators=(",", ":"))
+    if not isinstance(doc, (dict, list)) or not doc:
+        return json.dumps(doc)
+    pad, inner = " " * (indent * level), " " * (indent * (level + 1))
+    if isinstance(doc, dict):
+        body = ",\n".join(f"{inner}{json.dumps(str(k))}: {dumps(v, indent, level + 1)}" for k, v in doc.items())
+        return "{\n" + body + "\n" + pad + "}"
+    return "[\n" + ",\n".join(inner + dumps(v, indent, level + 1) for v in doc) + "\n" + pad + "]"
 
 
 def _verdict(c: dict[str, Any]) -> Verdict:
@@ -198,6 +217,23 @@ def _plan(problem: str, d: dict[str, Any], trace: str) -> Plan:
     return Plan(problem=problem, outcome=Outcome(d["outcome"]), partial=partial, instance=instance,
                 reason=d.get("reason"), timing=dict(d.get("timing") or {}), trace=trace,
                 actions=actions, steps=steps)
+
+
+def _motion_reason(d: dict[str, Any], failures: list[MotionFailure]) -> None:
+    """A phase-2 no plan whose instances failed for want of a motion says which motion (of
+    the first instance that got that far) and which pair of bodies blocked it; ``failures``
+    lists each instance's distinct failure (at most FAILURES_KEPT)."""
+    reason = d.get("reason")
+    if not failures or d.get("outcome") != "no_plan" or not isinstance(reason, dict) or reason.get("phase") != 2:
+        return
+
+    def data(f: MotionFailure) -> dict[str, Any]:
+        return {"motion": f.motion, "at": f.at, "pair": list(f.pair) if f.pair else None, "detail": f.detail,
+                "text": f.text()}
+
+    reason["why"] = failures[0].text()
+    reason["motion"] = data(failures[0])
+    reason["motion_failures"] = [data(f) for f in failures]
 
 
 #: Loaded cells a Planner keeps, by file (their memo tables make planning a file again fast).
@@ -227,13 +263,23 @@ class Planner:
     reachable somewhere, Sec. 5.2.4; by default some placement in the free table
     regions must reach it), ``timeout`` (seconds for the whole query, None for none).
 
+    Motions (issue 16, world/motion.py): ``motion`` True plans the joint paths between
+    the chosen instance's end-points (home, transit and transfer motions, approach and
+    retreat) and makes an instance whose motions do not exist inexecutable; False plans
+    end-points only (the paper's phase 2); None (the default) follows the problem file's
+    ``motion:`` key (default false: the regression suite plans motions only for the cells
+    that ask, since a motion plan costs seconds where end-points cost milliseconds).
+    ``motion_options`` a :class:`~spar_py.world.motion.MotionOptions` (planner, time budget
+    per motion, seed, approach length, simplification).
+
     A Planner keeps the last few cells it loaded from files (at most ``CELL_CACHE``,
     reloaded when a file changes), so planning a file again reuses their memo tables.
     """
 
     def __init__(self, max_actions: int | None = None, max_instances: int | None = None,
                  separation: bool | None = None, timeout: float | None = None,
-                 paper_placements: bool = False) -> None:
+                 paper_placements: bool = False, motion: bool | None = None,
+                 motion_options: MotionOptions | None = None) -> None:
         self.engine = engine()
         defaults = self.engine.query_once("spar_defaults:default_options(D)")["D"]
         #: The bound on the plan size, or "auto" (the default): derived from the problem
@@ -247,6 +293,8 @@ class Planner:
             raise SparValueError("timeout must be positive")
         self.timeout = timeout
         self.paper_placements = paper_placements
+        self.motion = motion
+        self.motion_options = motion_options if motion_options is not None else MotionOptions()
         self._cells: LRU[tuple[tuple, Cell]] = LRU(CELL_CACHE)
         self._cells_lock = threading.Lock()
         #: The last plan this Planner made (None before the first). Keeping it also keeps
@@ -285,6 +333,9 @@ class Planner:
         cell = problem if isinstance(problem, Cell) else self.load_problem(problem)
         opts = self.options(phase1_only, trace)
         with self.engine.session(cell):
+            wanted = cell.plan_motions if self.motion is None else self.motion
+            cell.motion = self.motion_options if wanted and not phase1_only else None
+            cell.memo.table("motion.failures", FAILURES_KEPT).clear()
             t0 = time.perf_counter()
             try:
                 ans = self.engine.query_once("spar:plan_dict(Problem, Options, Dict, Trace)",
@@ -293,8 +344,19 @@ class Planner:
                 return Plan(problem=cell.name, outcome=Outcome.TIMEOUT,
                             reason={"timeout_s": self.timeout},
                             timing={"total_s": round(time.perf_counter() - t0, 6)})
-        d = ans["Dict"]
+            failures = cell.memo.table("motion.failures", FAILURES_KEPT)
+            first = [failures[k] for k in range(len(failures))]
+            d = ans["Dict"]
+            if isinstance(d.get("instance"), dict):
+                attach(cell, d["instance"])
         d.setdefault("timing", {})["total_s"] = round(time.perf_counter() - t0, 6)
+        _motion_reason(d, first)
         plan = _plan(cell.name, d, ans.get("Trace", ""))
+        if plan.outcome is Outcome.NO_PLAN:  # name the colliding pairs that stood in the way (issue 15)
+            from .workspace import refusals
+
+            said = refusals(cell)
+            if said:
+                plan.reason = {**(plan.reason or {}), "collisions": said}
         self.last = plan
         return plan

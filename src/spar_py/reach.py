@@ -25,7 +25,7 @@ import numpy as np
 from .errors import SparValueError
 from .geometry import same_stable_pose
 from .model import Cell, Face, Grasp, ObjectModel
-from .workspace import reaches
+from .workspace import Requirement, ik_rows, remember_refusal, requirement_clear_ik
 
 __all__ = [
     "ARCS",
@@ -108,11 +108,11 @@ def _check_rule(rule: str) -> None:
         raise SparValueError(f"placement rule {rule!r} is not one of {', '.join(RULES)}")
 
 
-def _somewhere(cell: Cell, obj: str, pose: str, grasps: list[Grasp], X: list[np.ndarray],
+def _somewhere(cell: Cell, obj: str, pose: str, grasps: list[Grasp], X: list[Requirement],
                rule: str) -> list[Grasp]:
-    """The grasps whose tool transform X (object frame) the arm reaches at some placement
-    of ``obj`` in stable pose ``pose`` (placement.reachable_somewhere); all of them under
-    the paper's rule."""
+    """The grasps whose requirement X (tool transform in the object frame, and what is in the
+    hand) the arm reaches clear of the world at some placement of ``obj`` in stable pose
+    ``pose`` (placement.reachable_somewhere); all of them under the paper's rule."""
     if rule == "paper" or not grasps:
         return list(grasps)
     from .placement import reachable_somewhere  # placement builds on workspace, not on this module
@@ -120,11 +120,27 @@ def _somewhere(cell: Cell, obj: str, pose: str, grasps: list[Grasp], X: list[np.
     return [g for g, ok in zip(grasps, reachable_somewhere(cell, obj, pose, X)) if ok]
 
 
-def _ik_pass(cell: Cell, poses: list[np.ndarray]) -> np.ndarray:
-    """(k,) bool: which world tool poses (each 4x4) the arm reaches (workspace.reaches)."""
-    if not poses:
-        return np.zeros(0, dtype=bool)
-    return reaches(cell.robot, np.stack(poses))
+def _clear_pass(cell: Cell, obj: str, pending: list[tuple[Grasp, str, np.ndarray]],
+                requirement: Callable[[Grasp], Requirement], what: Callable[[Grasp, str], str]) -> list[bool]:
+    """Which (grasp, position label, T_O) of ``pending`` the arm reaches clear of the world
+    (workspace.requirement_clear, one batched call per grasp); a pair with IK solutions that all
+    collide is remembered on the cell with its pairs (workspace.refusals)."""
+    out = [False] * len(pending)
+    if not pending:
+        return out
+    Q, okb = ik_rows(cell, np.stack([T_O @ g.T if requirement(g).held is None else T_O @ requirement(g).X
+                                     for g, _, T_O in pending]))
+    by_grasp: dict[str, list[int]] = {}
+    for i, (g, _, _) in enumerate(pending):
+        by_grasp.setdefault(g.label, []).append(i)
+    for ix in by_grasp.values():
+        g = pending[ix[0]][0]
+        r = requirement_clear_ik(cell, obj, requirement(g), Q[ix], okb[ix])
+        for k, i in enumerate(ix):
+            out[i] = bool(r.ok[k])
+            if r.ik[k] and not r.ok[k]:
+                remember_refusal(cell, what(g, pending[i][1]), r.pairs[k])
+    return out
 
 
 def reachable_pairs(cell: Cell, obj: str, grasp_labels: Sequence[str],
@@ -132,27 +148,27 @@ def reachable_pairs(cell: Cell, obj: str, grasp_labels: Sequence[str],
     """All [grasp, position] pairs satisfying reachable(Grasp, Position) for ``obj`` (Sec. 5.2.4).
 
     Condition 1 for every pair; condition 2 (IK with T = T_O T_g inside the joint
-    limits) only for absolute positions, and for stable poses as ``rule`` says (RULES).
-    Sorted by natural label order.
+    limits, and one solution with the arm, the gripper closed on ``obj`` and ``obj`` itself
+    clear of the table and the obstacles: workspace.requirement_clear) only for absolute
+    positions, and for stable poses as ``rule`` says (RULES). Sorted by natural label order.
     """
     _check_rule(rule)
     model = _object(cell, obj)
     grasps = _grasps(model, grasp_labels)
     pairs: list[tuple[str, str]] = []
-    pending: list[tuple[str, str]] = []
-    poses: list[np.ndarray] = []
+    pending: list[tuple[Grasp, str, np.ndarray]] = []
     for p in pos_labels:
         T_O = _absolute(cell, model, p)
         rfaces = set(resting_faces(cell, obj, p))
         free = [g for g in grasps if not rfaces & set(g.gfaces)]  # condition 1
         if T_O is None:
-            pairs += [(g.label, p) for g in _somewhere(cell, obj, p, free, [g.T for g in free], rule)]
+            reqs = [Requirement(g.T, None, g.width) for g in free]
+            pairs += [(g.label, p) for g in _somewhere(cell, obj, p, free, reqs, rule)]
             continue
-        for g in free:
-            pending.append((g.label, p))
-            poses.append(T_O @ g.T)
-    ok = _ik_pass(cell, poses)
-    pairs += [gp for gp, reached in zip(pending, ok) if reached]
+        pending += [(g, p, T_O) for g in free]
+    ok = _clear_pass(cell, obj, pending, lambda g: Requirement(g.T, None, g.width),
+                     lambda g, p: f"pickup({obj}, {g.label}) at {p}")
+    pairs += [(g.label, p) for (g, p, _), reached in zip(pending, ok) if reached]
     return _sorted_pairs(pairs)
 
 
@@ -163,8 +179,9 @@ def mate_reachable_pairs(cell: Cell, held_obj: str, fixed_obj: str, grasp_labels
 
     Grasps are of ``held_obj``, positions of ``fixed_obj``; ``Ta`` (4x4, cell unit,
     or the name of a cell transform) is the held object's frame in the fixed
-    object's frame once mated. Condition 2 only, with T = T_O T_a T_g; a stable-pose
-    label as ``rule`` says (RULES).
+    object's frame once mated. Condition 2 only, with T = T_O T_a T_g and one solution with
+    the arm, the gripper and the held object clear of the table, the obstacles and the fixed
+    object (the held and the fixed object may touch); a stable-pose label as ``rule`` says (RULES).
     """
     _check_rule(rule)
     if isinstance(Ta, str):
@@ -176,20 +193,21 @@ def mate_reachable_pairs(cell: Cell, held_obj: str, fixed_obj: str, grasp_labels
         raise SparValueError(f"T_a must be a 4x4 transform, got shape {Ta.shape}")
     grasps = _grasps(_object(cell, held_obj), grasp_labels)
     fixed = _object(cell, fixed_obj)
+
+    def req(g: Grasp) -> Requirement:
+        return Requirement(Ta @ g.T, (held_obj, np.linalg.inv(g.T)), g.width)
+
     pairs: list[tuple[str, str]] = []
-    pending: list[tuple[str, str]] = []
-    poses: list[np.ndarray] = []
+    pending: list[tuple[Grasp, str, np.ndarray]] = []
     for p in pos_labels:
         T_O = _absolute(cell, fixed, p)
         if T_O is None:
-            pairs += [(g.label, p) for g in _somewhere(cell, fixed_obj, p, grasps, [Ta @ g.T for g in grasps], rule)]
+            pairs += [(g.label, p) for g in _somewhere(cell, fixed_obj, p, grasps, [req(g) for g in grasps], rule)]
             continue
-        T_held = T_O @ Ta
-        for g in grasps:
-            pending.append((g.label, p))
-            poses.append(T_held @ g.T)
-    ok = _ik_pass(cell, poses)
-    pairs += [gp for gp, reached in zip(pending, ok) if reached]
+        pending += [(g, p, T_O) for g in grasps]
+    ok = _clear_pass(cell, fixed_obj, pending, req,
+                     lambda g, p: f"assemble({held_obj}, {fixed_obj}) with {g.label} at {p}")
+    pairs += [(g.label, p) for (g, p, _), reached in zip(pending, ok) if reached]
     return _sorted_pairs(pairs)
 
 

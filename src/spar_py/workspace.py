@@ -1,11 +1,17 @@
 """The one place that says whether the arm reaches a tool pose: "the arm has an in-limit
-joint solution for T, with its wrist above the table top".
+joint solution for T, with its wrist above the table top, clear of the world".
 
 Phase 1's reach arcs (reach.py), the put-down placement search (placement.py) and
 phase 2's steps (phase2.py) all ask here, so the rule is written once. The paper's
 condition 2 of a reachable constraint (Sec. 5.2.4) looks at joint limits only; a tool
 pose whose wrist (the flange origin) would be under the table top (z = 0), e.g. a
-grasp from below, is refused too, so the CMS stays conservative (Sec. 7.1).
+grasp from below, is refused too, so the CMS stays conservative (Sec. 7.1). With the
+cell (:func:`reach_clear`; unless the problem file opts out with ``collision: false``,
+``Cell.collisions``), an IK solution counts only if the arm, the gripper and the
+part in the hand are clear of the table, the obstacles and the parts given, by the
+margin (world.collision); a pose whose every solution collides is refused, and the
+colliding pairs are remembered on the cell (:func:`refusals`) so a "no plan" can say
+which pair stood in the way.
 
 Frames and units: ``T`` is ``T_world_tool`` (4x4, or a batch (n, 4, 4)), lengths in the
 robot's unit (the cell's); joint vectors in radians, in the robot file's DH zero
@@ -13,14 +19,22 @@ convention; world Z up, table top z = 0.
 """
 from __future__ import annotations
 
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 if TYPE_CHECKING:
+    from .model import Cell
     from .world.robots import Robot
 
-__all__ = ["reaches", "solutions", "wrist_above_table", "wrist_height"]
+__all__ = ["Reached", "Requirement", "clear_of_world", "ik_rows", "reach_clear", "reaches", "refusals",
+           "remember_refusal", "requirement_clear", "requirement_clear_ik", "solutions", "wrist_above_table",
+           "wrist_height"]
+
+#: Refusals kept per cell (the "no plan" explanation): at most this many distinct ones.
+REFUSALS_LIMIT = 256
 
 
 def wrist_height(robot: Robot, T: np.ndarray) -> np.ndarray:
@@ -36,7 +50,7 @@ def wrist_above_table(robot: Robot, T: np.ndarray) -> np.ndarray:
 
 def reaches(robot: Robot, T: np.ndarray) -> np.ndarray:
     """(n,) bool: the arm reaches each world tool pose of T (n, 4, 4) within its joint
-    limits, wrist above the table; one batched IK call."""
+    limits, wrist above the table; one batched IK call (no collision check: :func:`reach_clear`)."""
     T = np.asarray(T, float)
     if not len(T):
         return np.zeros(0, dtype=bool)
@@ -51,3 +65,126 @@ def solutions(robot: Robot, T: np.ndarray) -> np.ndarray:
         return np.zeros((0, 6))
     sols = np.asarray(robot.ik(T), float)
     return sols.reshape(-1, 6)
+
+
+@dataclass(frozen=True)
+class Requirement:
+    """A tool pose relative to an object lying somewhere: the tool at ``T_O @ X`` (X 4x4, object
+    frame). ``held`` None: the object itself is in the hand (a pickup or put-down with a grasp
+    whose fingers are ``width`` apart, cell unit); else (name, T_tool_part) of the part in the
+    hand being mated onto the object (their contact is allowed)."""
+
+    X: np.ndarray
+    held: tuple[str, np.ndarray] | None = None
+    width: float | None = None
+
+
+@dataclass
+class Reached:
+    """The answer of :func:`reach_clear` for n tool poses: ``ok`` (n,) some in-limit solution
+    clear of the world; ``ik`` (n,) some in-limit solution at all (wrist above the table);
+    ``pairs`` per pose the colliding pairs of its solutions (empty where ok or no IK)."""
+
+    ok: np.ndarray
+    ik: np.ndarray
+    pairs: list[list[tuple[str, str]]] = field(default_factory=list)
+
+
+def reach_clear(cell: Cell, T: np.ndarray, *, parts: Mapping[str, np.ndarray] | None = None,
+                held: tuple[str, np.ndarray] | None = None, grasped: str | None = None,
+                attached: Mapping[str, np.ndarray] | None = None, width: float | None = None,
+                allow: Iterable[tuple[str, str]] = ()) -> Reached:
+    """Which world tool poses T (n, 4, 4) the arm reaches with a solution clear of the world:
+    the scene (world.collision.scene_for) with ``parts`` at their world poses, ``held`` in the
+    hand, ``grasped`` closing on, ``attached`` parts where the tool is (T_tool_part, the same
+    for every row), ``width`` the fingers' opening, ``allow`` the step's own contacts
+    (CollisionScene.at). One batched IK call and one batched clearance check."""
+
+    T = np.asarray(T, float).reshape(-1, 4, 4)
+    if not len(T):
+        return Reached(np.zeros(0, bool), np.zeros(0, bool), [])
+    return clear_of_world(cell, *ik_rows(cell, T), parts=parts, held=held, grasped=grasped, attached=attached,
+                          width=width, allow=allow)
+
+
+def ik_rows(cell: Cell, T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Every IK branch of tool poses T (n, 4, 4): (Q (n, B, 6) rad, ok (n, B): in limits, wrist
+    above the table); one batched call (Robot.ik_batch)."""
+    Q, okb = cell.robot.ik_batch(T)
+    return Q, okb & wrist_above_table(cell.robot, T)[:, None]
+
+
+def clear_of_world(cell: Cell, Q: np.ndarray, okb: np.ndarray, *, parts: Mapping[str, np.ndarray] | None = None,
+                   held: tuple[str, np.ndarray] | None = None, grasped: str | None = None,
+                   attached: Mapping[str, np.ndarray] | None = None, width: float | None = None,
+                   allow: Iterable[tuple[str, str]] = ()) -> Reached:
+    """:func:`reach_clear` from the IK branches already solved (:func:`ik_rows`)."""
+    from .world.collision import scene_for
+
+    n = len(Q)
+    ik = okb.any(axis=1)
+    if not cell.collisions:  # the problem file opted out (collision: false): IK alone
+        return Reached(ik.copy(), ik, [[] for _ in range(n)])
+    rows, cols = np.nonzero(okb)
+    state = scene_for(cell).at(parts or {}, held, grasped, width=width, allow=allow, attached=attached)
+    clear, why = state.check(Q[rows, cols])
+    ok = np.zeros(n, dtype=bool)
+    ok[rows[clear]] = True
+    pairs: list[list[tuple[str, str]]] = [[] for _ in range(n)]
+    for r, c, w in zip(rows.tolist(), clear.tolist(), why):
+        if not c and not ok[r] and w is not None and w not in pairs[r]:
+            pairs[r].append(w)
+    return Reached(ok, ik, pairs)
+
+
+def requirement_clear(cell: Cell, obj: str, TO: np.ndarray, req: Requirement | np.ndarray) -> Reached:
+    """:func:`reach_clear` for the tool at ``TO[i] @ X`` for object poses TO (n, 4, 4) of ``obj``
+    and one requirement (a :class:`Requirement`, or a bare X: the object in the hand with the
+    fingers open)."""
+    req = req if isinstance(req, Requirement) else Requirement(np.asarray(req, float))
+    T = np.asarray(TO, float).reshape(-1, 4, 4) @ np.asarray(req.X, float)
+    if not len(T):
+        return Reached(np.zeros(0, bool), np.zeros(0, bool), [])
+    return requirement_clear_ik(cell, obj, req, *ik_rows(cell, T))
+
+
+def requirement_clear_ik(cell: Cell, obj: str, req: Requirement, Q: np.ndarray, okb: np.ndarray) -> Reached:
+    """:func:`requirement_clear` from the IK branches already solved (:func:`ik_rows`)."""
+    inv = np.linalg.inv(np.asarray(req.X, float))
+    if req.held is None:
+        return clear_of_world(cell, Q, okb, grasped=obj, attached={obj: inv}, width=req.width)
+    return clear_of_world(cell, Q, okb, held=req.held, attached={obj: inv}, width=req.width,
+                          allow=[(f"held:{req.held[0]}", obj)])
+
+
+def _refusal_table(cell: Cell) -> dict[str, list[tuple[str, str]]]:
+    table = cell.memo.table("workspace.refusals", 1)
+    return table.get_or_compute("all", dict)
+
+
+def remember_refusal(cell: Cell, what: str, pairs: Iterable[tuple[str, str]]) -> None:
+    """Keep on the cell that ``what`` (e.g. "pickup(block, p2G3)") had IK solutions but every one
+    collided, and with which pairs (the "no plan" explanation, :func:`refusals`); at most
+    REFUSALS_LIMIT of them."""
+    d = _refusal_table(cell)
+    if what not in d and len(d) >= REFUSALS_LIMIT:
+        return
+    seen = d.setdefault(what, [])
+    for p in pairs:
+        p = tuple(p)
+        if p not in seen:
+            seen.append(p)
+
+
+def _pair_text(p: tuple[str, str]) -> str:
+    return "-".join("fingers" if n in ("finger_l", "finger_r") else n for n in p)
+
+
+def refusals(cell: Cell) -> list[str]:
+    """Every remembered collision refusal as a line: ``no collision-free IK for pickup(block,
+    p2G3): forearm-shelf, fingers-table``."""
+    out = []
+    for what, pairs in _refusal_table(cell).items():
+        texts = list(dict.fromkeys(_pair_text(p) for p in pairs))
+        out.append(f"no collision-free IK for {what}: {', '.join(texts)}")
+    return out

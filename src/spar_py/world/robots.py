@@ -29,12 +29,76 @@ from ..errors import SparValueError
 from ..geometry import check_transform, inv, rotx, trans
 from .ik import FAMILY_TWISTS, LIMIT_TOL, Solver, craig_links, lowest_representation, solver_for, turn_combinations
 
-__all__ = ["LIMIT_TOL", "Robot", "UrdfChain", "check_against_urdf", "dh_from_axes", "read_urdf_chain",
-           "robot_from_urdf", "standard_to_modified"]
+__all__ = ["GripperGeometry", "LIMIT_TOL", "LinkShape", "Robot", "UrdfChain", "check_against_urdf", "dh_from_axes",
+           "read_urdf_chain", "robot_from_urdf", "standard_to_modified"]
 
 # the twist signs each closed-form family wants for alpha_1..alpha_5 (0: parallel axes), to choose
 # the free sign of a common normal when a URDF chain is converted
 _FAMILY_SIGNS = {name: tuple(int(np.sign(round(a, 9))) for a in tw) for name, tw in FAMILY_TWISTS.items()}
+
+#: Collision shape kinds of a link (:class:`LinkShape`).
+LINK_KINDS = ("capsule", "cylinder", "box")
+
+
+@dataclass(frozen=True)
+class LinkShape:
+    """A collision shape fixed to one of the arm's Craig frames (``frame`` 0 = the base frame
+    T_world_frame0, 1..6 = frame i, 6 the flange), in that frame's coordinates, robot unit.
+
+    ``kind`` "capsule" or "cylinder": the segment ``a`` -> ``b`` (its axis) and ``radius``;
+    "box": the corners ``a`` (min) and ``b`` (max), axis-aligned in the frame (radius 0)."""
+
+    name: str
+    frame: int
+    kind: str
+    a: np.ndarray
+    b: np.ndarray
+    radius: float = 0.0
+
+
+@dataclass(frozen=True)
+class GripperGeometry:
+    """A parallel-jaw gripper's boxes in the tool frame (robot unit).
+
+    Tool frame: z the approach, y the closing axis, origin the tool centre point midway between
+    the finger tips. Each finger is a box ``finger_length`` along z (from the TCP plane z = 0 back
+    to z = -finger_length), ``finger_width`` along x (centred), ``finger_thickness`` along y
+    (outward from its contact face at y = +-width/2); the palm a box ``palm_length`` along z behind
+    the fingers (z from -finger_length - palm_length to -finger_length), ``palm_width`` along x,
+    ``palm_thickness`` along y (centred). Defaults (:meth:`default`): fingers 60 x 20 x 10 mm, a palm
+    25 mm deep, as wide as a finger and as thick as the open fingers' span (finger_separation + 2
+    finger thicknesses): the sizes world.shapes_derive's grasp filter has always assumed.
+    """
+
+    finger_separation: float
+    finger_length: float
+    finger_width: float
+    finger_thickness: float
+    palm_length: float
+    palm_width: float
+    palm_thickness: float
+
+    @classmethod
+    def default(cls, finger_separation: float, mm_per_unit: float, finger: dict | None = None,
+                palm: dict | None = None) -> "GripperGeometry":
+        """The gripper of opening ``finger_separation`` (robot unit) with the given ``finger`` /
+        ``palm`` sizes ({length, width, thickness}, robot unit), the documented defaults elsewhere."""
+        mm = 1.0 / mm_per_unit
+        f = {"length": 60.0 * mm, "width": 20.0 * mm, "thickness": 10.0 * mm, **(finger or {})}
+        p = {"length": 25.0 * mm, "width": f["width"], "thickness": finger_separation + 2 * f["thickness"],
+             **(palm or {})}
+        return cls(float(finger_separation), float(f["length"]), float(f["width"]), float(f["thickness"]),
+                   float(p["length"]), float(p["width"]), float(p["thickness"]))
+
+    def boxes(self, width: float | None = None) -> list[tuple[str, np.ndarray, np.ndarray]]:
+        """(name, lo, hi) boxes in the tool frame: "finger_l" (+y), "finger_r" (-y) with their contact
+        faces ``width`` apart (default the open ``finger_separation``), and "palm"."""
+        w = (self.finger_separation if width is None else float(width)) / 2
+        u, L, t = self.finger_width / 2, self.finger_length, self.finger_thickness
+        pu, pt = self.palm_width / 2, self.palm_thickness / 2
+        return [("finger_l", np.array([-u, w, -L]), np.array([u, w + t, 0.0])),
+                ("finger_r", np.array([-u, -w - t, -L]), np.array([u, -w, 0.0])),
+                ("palm", np.array([-pu, -pt, -L - self.palm_length]), np.array([pu, pt, -L]))]
 
 
 @dataclass(eq=False)
@@ -57,6 +121,18 @@ class Robot:
     unit: str
     family: str = "auto"
     joint_names: tuple[str, ...] = ()
+    #: collision shapes of the links (robot file ``collision:``), none when not given
+    links: tuple[LinkShape, ...] = ()
+    #: the gripper's boxes (robot file ``gripper:``); None: GripperGeometry.default at use
+    gripper: GripperGeometry | None = None
+    #: pairs of body names never checked against each other (robot file ``collision: allow``)
+    allowed: frozenset = frozenset()
+    #: the clearance margin the robot file asks for (robot unit), None: the problem's or the default
+    margin: float | None = None
+    #: Motion entries (world/motion.py): home joint vector (6,) rad and joint velocity
+    #: limits (6,) rad/s, or None (kb.py's _robot_motion).
+    home: np.ndarray | None = None
+    velocity_limits: np.ndarray | None = None
     solver: Solver = field(init=False, repr=False)
     #: why each closed-form family did not fit (empty when one did)
     not_closed_form: dict[str, str] = field(init=False, repr=False)
@@ -111,6 +187,17 @@ class Robot:
         for i in range(1, 6):
             T = T @ A[:, i]
         return T @ self.tool
+
+    def frames_batch(self, q: np.ndarray) -> np.ndarray:
+        """World frames (n, 8, 4, 4) for joint vectors q (n, 6) rad, as :meth:`frames` row by row."""
+        q = np.asarray(q, float).reshape(-1, 6)
+        A = craig_links(self.dh, q)
+        out = np.empty((len(q), 8, 4, 4))
+        out[:, 0] = self.base
+        for i in range(6):
+            out[:, i + 1] = out[:, i] @ A[:, i]
+        out[:, 7] = out[:, 6] @ self.tool
+        return out
 
     def tool_inverse(self) -> np.ndarray:
         """inv(tool), T_tool_flange (4x4), computed once per value of ``tool``."""
@@ -442,7 +529,46 @@ def robot_from_urdf(chain: UrdfChain, name: str, base: np.ndarray, tool: np.ndar
         Fc[:3, 3] *= s
     offsets = np.array([inv(F[i + 1]) @ child0[i] for i in range(6)])
     check_against_urdf(robot, chain, base, tool, s, offsets)
+    robot.links = _urdf_link_shapes(chain, robot, base, offsets, s)
     return robot
+
+
+def _urdf_link_shapes(chain: UrdfChain, robot: Robot, base: np.ndarray, offsets: np.ndarray,
+                      s: float) -> tuple[LinkShape, ...]:
+    """The URDF's own collision primitives (cylinders, boxes, spheres; meshes are skipped) of the
+    base link and each joint's child link, as :class:`LinkShape` in Craig's frames (``offsets``
+    (6, 4, 4): child link i in Craig's frame i+1; the base link is ``base`` in the world), in the
+    robot's unit (``s`` unit per metre). A cylinder becomes a cylinder along its own axis, a
+    box an axis-aligned box where its origin has no rotation (else its bounding capsule), a
+    sphere a capsule of zero length."""
+    urdf = chain.model if chain.model is not None else _load_urdf(Path(chain.file))
+    by_name = {lk.name: lk for lk in urdf.robot.links}
+    to_frame0 = inv(robot.base) @ base
+    owners = [(chain.base_link, 0, to_frame0)] + [(c, i + 1, offsets[i]) for i, c in enumerate(chain.children)]
+    out: list[LinkShape] = []
+    for link, frame, T_frame_link in owners:
+        for k, col in enumerate(by_name[link].collisions if link in by_name else []):
+            origin = np.eye(4) if col.origin is None else np.array(col.origin, float)
+            origin[:3, 3] *= s
+            T = T_frame_link @ origin
+            g = col.geometry
+            name = link if k == 0 else f"{link}_{k}"
+            if g.cylinder is not None:
+                h = g.cylinder.length * s / 2
+                a, b = T[:3, 3] - h * T[:3, 2], T[:3, 3] + h * T[:3, 2]
+                out.append(LinkShape(name, frame, "cylinder", a, b, g.cylinder.radius * s))
+            elif g.sphere is not None:
+                out.append(LinkShape(name, frame, "capsule", T[:3, 3], T[:3, 3], g.sphere.radius * s))
+            elif g.box is not None:
+                half = np.asarray(g.box.size, float) * s / 2
+                if np.allclose(T[:3, :3], np.eye(3)):
+                    out.append(LinkShape(name, frame, "box", T[:3, 3] - half, T[:3, 3] + half))
+                else:
+                    i = int(np.argmax(half))
+                    r = float(np.sqrt((half ** 2).sum() - half[i] ** 2))
+                    out.append(LinkShape(name, frame, "capsule", T[:3, 3] - half[i] * T[:3, i],
+                                         T[:3, 3] + half[i] * T[:3, i], r))
+    return tuple(out)
 
 
 def check_against_urdf(robot: Robot, chain: UrdfChain, base: np.ndarray, tool: np.ndarray, unit_per_m: float,

@@ -1,0 +1,119 @@
+"""`spar plan --animate FILE.gif`: the whole plan replayed from its motions.
+
+Read from the plan JSON, not recomputed: each step's ``path``, ``approach`` and
+``retreat`` (waypoints in degrees, world/motion.py) and the instance's ``motion.home_path``
+give the arm's joints frame by frame; the parts stand where the step before left them
+(``poses``), the held part moves with the tool (its grasp). Each frame is the cell
+pictures' 3-D panel (pictures/cell.py: table, parts, the arm's links and gripper), plus
+the cell's obstacles where the collision scene has them.
+
+Units: the cell's length unit, joints in degrees in the JSON (radians inside).
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import SparValueError
+from ..model import Cell
+from .plandoc import as_doc, instance
+from .scene import Scene, held_grasp, part_model, scenes
+
+__all__ = ["frames_of", "obstacle_faces", "write_animation"]
+
+#: At most this many frames in a GIF (waypoints are sampled evenly beyond it).
+MAX_FRAMES = 120
+#: Milliseconds per frame.
+FRAME_MS = 80
+
+
+def frames_of(cell: Cell, plan: Any, max_frames: int = MAX_FRAMES) -> list[Scene]:
+    """The scenes of the animation: for each arm step, its path, approach and retreat
+    waypoints in the world before (path, approach) and after (retreat) the step, then the
+    path home; sampled evenly to at most ``max_frames``. SparValueError if the plan has
+    no motions (planned with --no-motion)."""
+    doc = as_doc(plan)
+    inst = instance(doc)
+    motion = inst.get("motion")
+    if not motion:
+        raise SparValueError("the plan has no motions to animate (it was planned with --no-motion)")
+    steps = list(inst.get("steps") or [])
+    sc = scenes(cell, doc)
+    seq: list[tuple[Scene, np.ndarray, str]] = []  # (world scene, q rad, caption)
+    for k, st in enumerate(steps, start=1):
+        before, after = sc[k - 1], sc[k]
+        for key, world in (("path", before), ("approach", before), ("retreat", after)):
+            for q in np.radians(np.asarray(st.get(key) or [], float)).reshape(-1, 6):
+                seq.append((world, q, f"{st['id']}: {key} ({st['term']})"))
+    for q in np.radians(np.asarray(motion.get("home_path") or [], float)).reshape(-1, 6):
+        seq.append((sc[-1], q, "back home"))
+    if not seq:
+        raise SparValueError("the plan's motions have no waypoints")
+    pick = np.unique(np.linspace(0, len(seq) - 1, min(max_frames, len(seq))).round().astype(int))
+    out = []
+    for i in pick:
+        world, q, caption = seq[i]
+        out.append(_at(cell, world, q, caption, int(i)))
+    return out
+
+
+def _at(cell: Cell, world: Scene, q: np.ndarray, caption: str, index: int) -> Scene:
+    """``world`` with the arm at ``q`` and the held part carried by the tool."""
+    F = cell.robot.frames(q)
+    poses = dict(world.poses)
+    grasp = world.grasp
+    if world.held is not None:
+        grasp = grasp or held_grasp(cell, world.held, poses.get(world.held), world.tool)
+        if grasp is not None:
+            g = cell.objects[part_model(world.held)].grasps[grasp]
+            poses[world.held] = F[-1] @ np.linalg.inv(np.asarray(g.T, float))
+    return replace(world, index=index, title=caption, detail="", poses=poses, grasp=grasp, q=q, frames=F,
+                   arm_note="")
+
+
+def obstacle_faces(cell: Cell) -> list[np.ndarray]:
+    """Triangles (each (3, 3) world points, cell unit) of the hulls of the cell's obstacle
+    bodies (world/collision.py's Obstacle: a body's vertices in the world)."""
+    from scipy.spatial import ConvexHull
+
+    faces = []
+    for ob in getattr(cell, "obstacles", None) or ():
+        for b in getattr(ob, "bodies", ()):
+            pts = np.asarray(b.points, float)
+            if len(pts) >= 4:
+                faces += [pts[t] for t in ConvexHull(pts).simplices]
+    return faces
+
+
+def write_animation(cell: Cell, plan: Any, path: str | Path, max_frames: int = MAX_FRAMES) -> Path:
+    """Write the GIF of the plan's motions to ``path`` (Pillow writer); returns the path."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.animation import PillowWriter
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    from .cell import _draw_3d, extent
+
+    frames = frames_of(cell, plan, max_frames)
+    obstacles = obstacle_faces(cell)
+    fr = extent(cell, frames)
+    fig = plt.figure(figsize=(6, 6), dpi=80)
+    writer = PillowWriter(fps=max(1, round(1000 / FRAME_MS)))
+    path = Path(path)
+    with writer.saving(fig, str(path), dpi=80):
+        for s in frames:
+            fig.clf()
+            ax = fig.add_subplot(projection="3d")
+            _draw_3d(ax, cell, s, fr)
+            if obstacles:
+                ax.add_collection3d(Poly3DCollection(obstacles, facecolor="#9a9a9a", alpha=0.45,
+                                                     edgecolor="none"), autolim=False)
+            ax.set_title(s.title, fontsize=8)
+            writer.grab_frame()
+    plt.close(fig)
+    return path

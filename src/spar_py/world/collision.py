@@ -1,0 +1,665 @@
+"""One collision scene per run: the arm's links, the gripper, the held part, the parts, the
+obstacles and the table; "is this joint vector clear by the margin", the clearance and the
+closest pair.
+
+What is in the scene (:func:`scene_for`, built once per cell and kept on ``cell.memo``):
+
+- the robot's link shapes (robot file ``collision: links``): capsules, cylinders and boxes,
+  each fixed to one of Craig's frames 0..6 (0 is the base: it does not move);
+- the gripper (robot file ``gripper:``, :class:`~spar_py.world.robots.GripperGeometry`): the
+  palm and two fingers whose contact faces are the grasp's width apart (the open
+  finger_separation when no part is in the hand);
+- the parts (each object's ``shape:`` solids: boxes, z-cylinders, convex hulls of meshes),
+  placed by :meth:`CollisionScene.at`;
+- the obstacles (problem file ``obstacles:``), and the table: the half-space z < 0 over its
+  extent (problem file ``table:``; the whole plane when not given).
+
+Which pairs are checked, and with which margin (``margin``: robot file ``collision: margin``,
+problem file ``clearance:``, else DEFAULT_MARGIN_MM):
+
+- every moving body (links 1..6, palm, fingers, held part) against the table, the obstacles
+  and every part in the world, by the margin;
+- links against links whose frames are two or more apart (self-collision of non-adjacent
+  links), the gripper against links 0..5 and the held part against links 0..6, by the margin;
+  the robot file's ``collision: allow`` pairs are never checked (bodies that touch by design);
+- the gripper and the part in the hand (``grasped``: the part the fingers are closing on, or
+  ``held``): not by distance but by the grasp rule, :meth:`SceneState.grasp_ok`: no finger may
+  enter the part beyond its contact face, and the palm may not enter it (contact allowed,
+  within GRASP_TOL_MM); the part is checked against the links like any other;
+- ``allow`` pairs of :meth:`CollisionScene.at`: the step's own contacts, e.g. the held part and
+  the part it is inserted into at an assemble, the held part and the table at a put-down.
+
+How (speed): every body has a bounding capsule in its frame (exact for capsules). One
+vectorised numpy pass over all rows and pairs gives each pair's capsule distance, a lower
+bound of its true distance (exact for capsule pairs), and each body's height over the table
+(exact: the lowest vertex, or the lowest capsule end less its radius). Only the (row, pair)
+cells whose bound is within the margin and whose shapes are not both capsules go to the
+collision library, imported on first use; the grasp rule is decided once per grasp (the part's
+pose in the tool frame) and memoised on the cell.
+
+The library: python-fcl, chosen over coal (bench/collision.py measures both on these
+queries). Coal's GJK/EPA signed distance is robust and its queries about twice as fast, but
+it installs 316 MB (boost headers, assimp, eigenpy; python-fcl: 28 MB, plus Cython 17 MB) and
+takes about 0.6 s to import against python-fcl's 0.3 s, which the paper cell's 0.6 s cold
+budget cannot pay; here the library sees only the few near, non-capsule pairs, so its speed
+matters little. python-fcl's signed distance (libccd EPA) can abort the process on touching
+shapes, so it is never asked for: a near pair is first tested with ``collide`` (penetration:
+clearance 0) and only a separated pair is measured with unsigned ``distance``. Both libraries
+are maintained (coal 3.0.3 and python-fcl 0.7.0.11 released in 2026).
+
+Frames and units: world Z up, table top z = 0; all lengths in the cell's unit (the robot is
+loaded in it); joint vectors in radians; a body's pose is its frame's world pose times its
+fixed local transform.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ..errors import SparValueError
+from ..units import from_mm
+
+if TYPE_CHECKING:
+    from ..model import Cell, Solid
+    from .robots import GripperGeometry, Robot
+
+__all__ = ["CollisionScene", "DEFAULT_MARGIN_MM", "Obstacle", "SceneState", "scene_for", "segment_distance"]
+
+#: The clearance margin when neither the robot nor the problem file gives one: 2 mm.
+DEFAULT_MARGIN_MM = 2.0
+#: Contact between the fingers (or palm) and the part in the hand: allowed up to this overlap
+#: (rounding, not geometry): 0.05 mm.
+GRASP_TOL_MM = 0.05
+#: Sides of the polygon circumscribed about a cylinder (its vertices for the table test and
+#: the hull a cylinder obstacle or part is given to the library as): the polygon contains
+#: the cylinder, so a clearance is never overstated.
+CYL_SIDES = 16
+#: Frame index of the tool (gripper, held part) and of the world (parts, obstacles).
+TOOL, WORLD = 7, -1
+#: Bounds of the cell's memo tables: the grasp rule per (part, grasp pose, width).
+GRASP_LIMIT = 4096
+
+
+# --------------------------------------------------------------------------- bodies
+
+
+@dataclass(frozen=True, eq=False)
+class Body:
+    """A convex collision body fixed to ``frame`` (0..6 Craig's link frames, TOOL, WORLD).
+
+    ``kind`` "capsule" (``size`` = (radius, half length) along the local z axis of ``T``),
+    "cylinder" (same), "box" (``size`` = half extents along ``T``'s axes) or "convex"
+    (``points`` its vertices); ``T`` the shape's pose in the frame (4x4); ``points`` (k, 3)
+    vertices in the frame (a capsule's: its two segment ends; a cylinder's: its circumscribed
+    prism's); ``cap`` the bounding capsule (a, b, r) in the frame."""
+
+    name: str
+    frame: int
+    kind: str
+    T: np.ndarray
+    size: tuple[float, ...]
+    points: np.ndarray
+    cap: tuple[np.ndarray, np.ndarray, float]
+    _fcl: list = field(default_factory=list, repr=False)
+
+    @property
+    def radius(self) -> float:
+        """What the table test subtracts from the lowest vertex (a capsule's radius, else 0)."""
+        return self.size[0] if self.kind == "capsule" else 0.0
+
+    def placed(self, T_frame: np.ndarray, frame: int, name: str | None = None) -> "Body":
+        """This body moved by ``T_frame`` (4x4) into ``frame`` (a part placed in the world or the tool)."""
+        T_frame = np.asarray(T_frame, float)
+        R, t = T_frame[:3, :3], T_frame[:3, 3]
+        a, b, r = self.cap
+        return Body(name or self.name, frame, self.kind, T_frame @ self.T, self.size, self.points @ R.T + t,
+                    (R @ a + t, R @ b + t, r), self._fcl)
+
+    def fcl_geometry(self) -> Any:
+        """The body's python-fcl geometry (made on first use, shared by the placed copies)."""
+        if not self._fcl:
+            import fcl  # lazily: most checks never reach the library
+
+            if self.kind == "box":
+                g = fcl.Box(*(2 * np.asarray(self.size)))
+            elif self.kind == "capsule":
+                g = fcl.Capsule(self.size[0], 2 * self.size[1])
+            elif self.kind == "cylinder":  # the true cylinder (radius: the prism's inscribed one)
+                g = fcl.Cylinder(self.size[0] * math.cos(math.pi / CYL_SIDES), 2 * self.size[1])
+            else:  # convex: a hull of the local vertices
+                Tinv = np.linalg.inv(self.T)
+                local = self.points @ Tinv[:3, :3].T + Tinv[:3, 3]
+                g = _fcl_convex(local)
+            self._fcl.append(g)
+        return self._fcl[0]
+
+
+def _bounding_capsule(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """A capsule containing ``points`` (k, 3): the segment over their extent along their
+    principal axis, the radius their largest distance from it."""
+    c = points.mean(axis=0)
+    P = points - c
+    if len(points) < 2 or not np.any(P):
+        return c.copy(), c.copy(), 0.0
+    _, _, Vt = np.linalg.svd(P, full_matrices=False)
+    u = Vt[0]
+    s = P @ u
+    perp = P - s[:, None] * u
+    return c + s.min() * u, c + s.max() * u, float(np.sqrt((perp ** 2).sum(axis=1).max()))
+
+
+def _frame_of_axis(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, float]:
+    """The pose (4x4) with origin mid-way a-b and z along a -> b, and the half length."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    d = b - a
+    h = float(np.linalg.norm(d)) / 2
+    z = d / (2 * h) if h > 0 else np.array([0.0, 0.0, 1.0])
+    x = np.cross(z, [1.0, 0.0, 0.0] if abs(z[0]) < 0.9 else [0.0, 1.0, 0.0])
+    x /= np.linalg.norm(x)
+    T = np.eye(4)
+    T[:3, 0], T[:3, 1], T[:3, 2], T[:3, 3] = x, np.cross(z, x), z, (a + b) / 2
+    return T, h
+
+
+def capsule(name: str, frame: int, a: np.ndarray, b: np.ndarray, radius: float) -> Body:
+    """A capsule: the points within ``radius`` of the segment a-b (frame coordinates)."""
+    T, h = _frame_of_axis(a, b)
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    return Body(name, frame, "capsule", T, (float(radius), h), np.stack([a, b]), (a, b, float(radius)))
+
+
+def cylinder(name: str, frame: int, a: np.ndarray, b: np.ndarray, radius: float) -> Body:
+    """A solid cylinder of axis a-b and ``radius``, held as its circumscribed CYL_SIDES-prism."""
+    T, h = _frame_of_axis(a, b)
+    k = np.arange(CYL_SIDES) * 2 * math.pi / CYL_SIDES
+    R = radius / math.cos(math.pi / CYL_SIDES)
+    ring = np.stack([R * np.cos(k), R * np.sin(k)], axis=1)
+    local = np.concatenate([np.column_stack([ring, np.full(CYL_SIDES, z)]) for z in (-h, h)])
+    pts = local @ T[:3, :3].T + T[:3, 3]
+    return Body(name, frame, "cylinder", T, (float(R), h), pts,
+                (T[:3, 3] - h * T[:3, 2], T[:3, 3] + h * T[:3, 2], float(R)))
+
+
+def box(name: str, frame: int, lo: np.ndarray, hi: np.ndarray, T: np.ndarray | None = None) -> Body:
+    """An axis-aligned box lo..hi in the coordinates of ``T`` (default the frame's own)."""
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    if np.any(hi < lo):
+        raise SparValueError(f"box {name}: max below min")
+    Tc = np.eye(4) if T is None else np.asarray(T, float).copy()
+    c = (lo + hi) / 2
+    Tc = Tc @ np.block([[np.eye(3), c[:, None]], [np.zeros((1, 3)), np.ones((1, 1))]])
+    half = (hi - lo) / 2
+    corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]) * half
+    pts = corners @ Tc[:3, :3].T + Tc[:3, 3]
+    i = int(np.argmax(half))
+    axis = Tc[:3, i]
+    r = float(np.sqrt((half ** 2).sum() - half[i] ** 2))
+    return Body(name, frame, "box", Tc, tuple(float(v) for v in half), pts,
+                (Tc[:3, 3] - half[i] * axis, Tc[:3, 3] + half[i] * axis, r))
+
+
+def convex(name: str, frame: int, points: np.ndarray) -> Body:
+    """The convex hull of ``points`` (k, 3), frame coordinates."""
+    pts = np.asarray(points, float).reshape(-1, 3)
+    if len(pts) < 4:
+        raise SparValueError(f"convex body {name}: needs at least 4 points")
+    return Body(name, frame, "convex", np.eye(4), (), pts, _bounding_capsule(pts))
+
+
+def _fcl_convex(points: np.ndarray) -> Any:
+    import fcl
+    from scipy.spatial import ConvexHull
+
+    hull = ConvexHull(points)
+    verts = points[hull.vertices]
+    index = {int(v): i for i, v in enumerate(hull.vertices)}
+    faces = np.array([[3, index[int(a)], index[int(b)], index[int(c)]] for a, b, c in hull.simplices])
+    return fcl.Convex(verts, len(faces), faces.ravel())
+
+
+def solid_bodies(name: str, solids: Iterable[Solid]) -> list[Body]:
+    """The bodies of an object's ``shape:`` solids (object frame, frame WORLD until placed)."""
+    out = []
+    for s in solids:
+        if s.kind == "box":
+            out.append(box(name, WORLD, s.lo, s.hi))
+        elif s.kind == "cylinder":
+            out.append(cylinder(name, WORLD, [0, 0, s.lo[2]], [0, 0, s.hi[2]], s.radius))
+        else:
+            out.append(convex(name, WORLD, s.points))
+    return out
+
+
+@dataclass(frozen=True)
+class Obstacle:
+    """A named obstacle of the problem file: its bodies in the world frame (cell unit)."""
+
+    name: str
+    bodies: tuple[Body, ...]
+
+
+# --------------------------------------------------------------------------- distances
+
+
+def segment_distance(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.ndarray) -> np.ndarray:
+    """(...,) distance between segments p1-q1 and p2-q2 (arrays (..., 3)), vectorised
+    (Ericson, Real-Time Collision Detection, Sec. 5.1.9, every branch as np.where)."""
+    d1, d2, r = q1 - p1, q2 - p2, p1 - p2
+    a = (d1 * d1).sum(-1)
+    e = (d2 * d2).sum(-1)
+    f = (d2 * r).sum(-1)
+    c = (d1 * r).sum(-1)
+    b = (d1 * d2).sum(-1)
+    eps = 1e-12
+    pa, pe = a > eps, e > eps
+    a_, e_ = np.where(pa, a, 1.0), np.where(pe, e, 1.0)
+    denom = a * e - b * b
+    s = np.where(denom > eps * np.maximum(a * e, eps), np.clip((b * f - c * e) / np.where(denom > 0, denom, 1.0),
+                                                                0.0, 1.0), 0.0)
+    t = (b * s + f) / e_
+    tc = np.clip(t, 0.0, 1.0)
+    s = np.where(t != tc, np.clip((tc * b - c) / a_, 0.0, 1.0), s)
+    t = tc
+    # degenerate segments: a point on either side
+    s = np.where(pa, np.where(pe, s, np.clip(-c / a_, 0.0, 1.0)), 0.0)
+    t = np.where(pe, np.where(pa, t, np.clip(f / e_, 0.0, 1.0)), 0.0)
+    diff = (p1 + d1 * s[..., None]) - (p2 + d2 * t[..., None])
+    return np.sqrt((diff * diff).sum(-1))
+
+
+def _fcl_transform(T: np.ndarray) -> Any:
+    import fcl
+
+    return fcl.Transform(np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]))
+
+
+def _exact(b1: Body, T1: np.ndarray, b2: Body, T2: np.ndarray) -> float:
+    """The distance of two placed bodies (world poses T1, T2 of their frames): 0 when they
+    touch or overlap (``collide`` first), else python-fcl's unsigned distance."""
+    import fcl
+
+    o1 = fcl.CollisionObject(b1.fcl_geometry(), _fcl_transform(T1 @ b1.T))
+    o2 = fcl.CollisionObject(b2.fcl_geometry(), _fcl_transform(T2 @ b2.T))
+    if fcl.collide(o1, o2, fcl.CollisionRequest(), fcl.CollisionResult()):
+        return 0.0
+    d = fcl.distance(o1, o2, fcl.DistanceRequest(), fcl.DistanceResult())
+    return max(float(d), 0.0)
+
+
+# --------------------------------------------------------------------------- the scene
+
+
+class CollisionScene:
+    """The run's collision world: link and gripper shapes, part shapes, obstacles, the table,
+    the clearance ``margin`` (cell unit). Place the parts with :meth:`at`."""
+
+    def __init__(self, robot: Robot, gripper: GripperGeometry, parts: Mapping[str, list[Body]],
+                 obstacles: Iterable[Obstacle], margin: float, table: tuple[float, float, float, float] | None,
+                 unit: str, memo: Any = None) -> None:
+        self.robot = robot
+        self.gripper = gripper
+        self.parts = dict(parts)
+        self.obstacles = tuple(obstacles)
+        self.margin = float(margin)
+        #: the table's extent (x0, x1, y0, y1) or None: the whole plane
+        self.table = table
+        self.unit = unit
+        self.tol = from_mm(unit, GRASP_TOL_MM)
+        self.memo = memo
+        self.links = [_link_body(s) for s in robot.links]
+        self.allowed = frozenset(frozenset(p) for p in robot.allowed)
+        self._grippers: dict = {}  # bounded by the cell's grasp widths
+        self.stats = {"pairs": 0, "exact": 0}
+
+    def gripper_bodies(self, width: float | None) -> list[Body]:
+        """The palm and fingers (TOOL frame) with the fingers' contact faces ``width`` apart (default
+        open), made once per width (a handful of widths per cell)."""
+        key = None if width is None else round(float(width), 9)
+        if key not in self._grippers:
+            self._grippers[key] = [box(n, TOOL, lo, hi) for n, lo, hi in self.gripper.boxes(width)]
+        return self._grippers[key]
+
+    def shapes_of(self, part: str) -> list[Body]:
+        """The bodies of ``part`` (an object, or a stock part ``obj@pos``) in its object frame."""
+        model = part.split("@", 1)[0]
+        if model not in self.parts:
+            raise SparValueError(f"no shape known for part {part!r}")
+        return self.parts[model]
+
+    def at(self, parts: Mapping[str, np.ndarray], held: tuple[str, np.ndarray] | None = None,
+           grasped: str | None = None, *, width: float | None = None,
+           allow: Iterable[tuple[str, str]] = (), attached: Mapping[str, np.ndarray] | None = None) -> SceneState:
+        """The world at one point of a plan: ``parts`` = {name: T_world_part 4x4} for every part
+        on the table or assembled; ``held`` = (name, T_tool_part) for the part in the hand (it
+        moves with the gripper, body name "held:<name>"); ``grasped`` = the part the fingers are
+        closing on (its contact with the fingers' contact faces is allowed: the grasp rule).
+
+        Added: ``width`` the fingers' contact faces' distance (cell unit; default the open
+        finger separation, or with a part in the hand the rule's own); ``allow`` pairs of body
+        names not checked at this point (the step's own contacts: ("held:peg", "block") at an
+        assemble, ("held:peg", "table") at a put-down); ``attached`` = {name: T_tool_part}
+        parts that are where the tool is (a batch of tool poses with one relative geometry,
+        e.g. the part being grasped at every candidate placement), checked as ``parts``."""
+        held_name = held[0] if held is not None else None
+        world: list[Body] = [b for o in self.obstacles for b in o.bodies]
+        for name, T in parts.items():
+            if name == held_name:
+                continue
+            world += [b.placed(T, WORLD, name) for b in self.shapes_of(name)]
+        tool: list[Body] = []
+        for name, T in (attached or {}).items():
+            tool += [b.placed(T, TOOL, name) for b in self.shapes_of(name)]
+        if held is not None:
+            tool += [b.placed(held[1], TOOL, f"held:{held[0]}") for b in self.shapes_of(held[0])]
+        hand = None
+        if held is not None:
+            hand = (held[0], "tool", np.asarray(held[1], float))
+        elif grasped is not None:
+            if attached and grasped in attached:
+                hand = (grasped, "tool", np.asarray(attached[grasped], float))
+            elif grasped in parts:
+                hand = (grasped, "world", np.asarray(parts[grasped], float))
+            else:
+                raise SparValueError(f"grasped part {grasped!r} is neither in parts nor attached")
+        return SceneState(self, world, tool, hand, width, frozenset(frozenset(p) for p in allow),
+                          frozenset(attached or ()))
+
+
+def _link_body(s: Any) -> Body:
+    if s.kind == "capsule":
+        return capsule(s.name, s.frame, s.a, s.b, s.radius)
+    if s.kind == "cylinder":
+        return cylinder(s.name, s.frame, s.a, s.b, s.radius)
+    return box(s.name, s.frame, s.a, s.b)
+
+
+class SceneState:
+    """The scene with its parts placed: answers "clear?" and "how clear?" for joint vectors."""
+
+    def __init__(self, scene: CollisionScene, world: list[Body], tool: list[Body],
+                 hand: tuple[str, str, np.ndarray] | None, width: float | None, allow: frozenset,
+                 attached: frozenset = frozenset()) -> None:
+        self.scene = scene
+        self.hand = hand  # (part, "tool" | "world", its pose there) for the grasp rule
+        self.width = width
+        gripper = scene.gripper_bodies(width)
+        links = scene.links
+        static = [b for b in links if b.frame == 0]
+        moving = [b for b in links if b.frame != 0] + gripper + tool
+        self.bodies = moving + static + world
+        self.n_moving = len(moving)
+        hand_part = hand[0] if hand is not None else None
+        skip = scene.allowed | allow
+        pairs: list[tuple[int, int]] = []
+        gripper_names = {"palm", "finger_l", "finger_r"}
+
+        def part_of(b: Body) -> str:
+            return b.name[5:] if b.name.startswith("held:") else b.name
+
+        # an attached part is a part of the world that happens to be where the tool is: it is
+        # checked against the arm and the gripper only (not the table it rests on, nor the rest)
+        fixed_in_tool = {i for i, b in enumerate(moving) if b.frame == TOOL and b.name in attached}
+        for i, bi in enumerate(moving):
+            for j, bj in enumerate(self.bodies):
+                if j <= i and j < len(moving):
+                    continue
+                if frozenset((bi.name, bj.name)) in skip or bi.name == bj.name:
+                    continue
+                if i in fixed_in_tool and (bj.frame == WORLD or j in fixed_in_tool):
+                    continue
+                if bj.frame == WORLD or bj.frame == 0 and bi.frame >= 2:
+                    if bi.name in gripper_names and part_of(bj) == hand_part and bj.frame == WORLD:
+                        continue  # the grasp rule decides
+                    pairs.append((i, j))
+                    continue
+                if bj.frame == WORLD or bj.frame == 0:
+                    continue
+                fi, fj = bi.frame, bj.frame
+                ti, tj = bi.frame == TOOL, bj.frame == TOOL
+                if ti and tj:  # in the hand: gripper and the hand's part by the grasp rule
+                    ni, nj = part_of(bi), part_of(bj)
+                    if ni in gripper_names and nj in gripper_names or ni == nj:
+                        continue
+                    if hand_part in (ni, nj) and (ni in gripper_names or nj in gripper_names):
+                        continue
+                    pairs.append((i, j))
+                    continue
+                if ti or tj:
+                    link = bj if ti else bi
+                    other = bi if ti else bj
+                    limit = 5 if other.name in gripper_names else 6
+                    if link.frame <= limit:
+                        pairs.append((i, j))
+                    continue
+                if abs(fi - fj) >= 2:
+                    pairs.append((i, j))
+        self.pairs = np.array(pairs, dtype=int).reshape(-1, 2)
+        self.table_bodies = np.array([i for i, b in enumerate(moving)
+                                      if frozenset((b.name, "table")) not in skip and i not in fixed_in_tool],
+                                     dtype=int)
+        both_caps = np.array([self.bodies[i].kind == "capsule" and self.bodies[j].kind == "capsule"
+                              for i, j in self.pairs], dtype=bool)
+        self.exact_pair = both_caps
+        hand_frames = (6, TOOL)
+        self._rigid: dict[int, float | None] = {
+            p: None for p, (i, j) in enumerate(self.pairs)
+            if self.bodies[i].frame in hand_frames and self.bodies[j].frame in hand_frames}
+        self._cap_a = np.array([b.cap[0] for b in self.bodies]).reshape(-1, 3)
+        self._cap_b = np.array([b.cap[1] for b in self.bodies]).reshape(-1, 3)
+        self._cap_r = np.array([b.cap[2] for b in self.bodies])
+
+    # ------------------------------------------------------------------ frames and bounds
+
+    def _frames(self, q: np.ndarray) -> np.ndarray:
+        q = np.asarray(q, float)
+        if q.ndim != 2 or q.shape[1] != 6:
+            raise SparValueError(f"joint vectors must be of shape (n, 6), got {q.shape}")
+        return self.scene.robot.frames_batch(q)
+
+    def _world_caps(self, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """World ends (n, N, 3) of every body's bounding capsule."""
+        n = len(F)
+        A = np.broadcast_to(self._cap_a, (n,) + self._cap_a.shape).copy()
+        B = np.broadcast_to(self._cap_b, (n,) + self._cap_b.shape).copy()
+        for f in {b.frame for b in self.bodies[:self.n_moving]}:
+            idx = [i for i in range(self.n_moving) if self.bodies[i].frame == f]
+            R, t = F[:, f, :3, :3], F[:, f, None, :3, 3]
+            Rt = np.swapaxes(R, 1, 2)
+            A[:, idx] = self._cap_a[idx] @ Rt + t
+            B[:, idx] = self._cap_b[idx] @ Rt + t
+        for i in range(self.n_moving, len(self.bodies)):
+            f = self.bodies[i].frame
+            if f == 0:
+                A[:, i] = self._cap_a[i] @ self.scene.robot.base[:3, :3].T + self.scene.robot.base[:3, 3]
+                B[:, i] = self._cap_b[i] @ self.scene.robot.base[:3, :3].T + self.scene.robot.base[:3, 3]
+        return A, B
+
+    def _frame_pose(self, F: np.ndarray, row: int, b: Body) -> np.ndarray:
+        if b.frame == WORLD:
+            return np.eye(4)
+        if b.frame == 0:
+            return self.scene.robot.base
+        return F[row, b.frame]
+
+    def _table(self, F: np.ndarray) -> np.ndarray:
+        """(n, m) each table-checked moving body's height above the table (exact, signed)."""
+        n = len(F)
+        out = np.full((n, len(self.table_bodies)), np.inf)
+        ext = self.scene.table
+        for k, i in enumerate(self.table_bodies):
+            b = self.bodies[i]
+            Fb = F[:, b.frame]
+            if ext is None:  # only the heights: z row of each frame times the vertices
+                h = (b.points @ Fb[:, 2, :3, None])[..., 0].min(axis=1) + Fb[:, 2, 3] - b.radius
+                out[:, k] = h
+                continue
+            P = b.points @ np.swapaxes(Fb[:, :3, :3], 1, 2) + Fb[:, None, :3, 3]
+            h = P[..., 2].min(axis=1) - b.radius
+            if ext is not None:
+                x0, x1, y0, y1 = ext
+                r = b.radius
+                over = ((P[..., 0].max(axis=1) + r >= x0) & (P[..., 0].min(axis=1) - r <= x1)
+                        & (P[..., 1].max(axis=1) + r >= y0) & (P[..., 1].min(axis=1) - r <= y1))
+                h = np.where(over, h, np.inf)
+            out[:, k] = h
+        return out
+
+    def _bounds(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        F = self._frames(q)
+        A, B = self._world_caps(F)
+        pi, pj = self.pairs[:, 0], self.pairs[:, 1]
+        lb = segment_distance(A[:, pi], B[:, pi], A[:, pj], B[:, pj]) - self._cap_r[pi] - self._cap_r[pj]
+        return F, lb, self._table(F)
+
+    def _exact_cell(self, F: np.ndarray, row: int, p: int) -> float:
+        """The library's distance of pair ``p`` at row ``row``; a pair of two bodies rigid with
+        the flange (frame 6, the tool) is measured once per state (it does not depend on q)."""
+        if p in self._rigid:
+            return self._rigid[p] if self._rigid[p] is not None else self._rigid_once(F, row, p)
+        i, j = self.pairs[p]
+        bi, bj = self.bodies[i], self.bodies[j]
+        self.scene.stats["exact"] += 1
+        return _exact(bi, self._frame_pose(F, row, bi), bj, self._frame_pose(F, row, bj))
+
+    def _rigid_once(self, F: np.ndarray, row: int, p: int) -> float:
+        i, j = self.pairs[p]
+        bi, bj = self.bodies[i], self.bodies[j]
+        self.scene.stats["exact"] += 1
+        d = self._rigid[p] = _exact(bi, self._frame_pose(F, row, bi), bj, self._frame_pose(F, row, bj))
+        return d
+
+    # ------------------------------------------------------------------ the grasp rule
+
+    def _hand_in_tool(self, F: np.ndarray) -> np.ndarray | None:
+        """(n, 4, 4) T_tool_part of the part in the hand per row, or None."""
+        if self.hand is None:
+            return None
+        part, where, T = self.hand
+        if where == "tool":
+            return np.broadcast_to(T, (len(F), 4, 4))
+        Ti = F[:, 7]
+        R = np.swapaxes(Ti[:, :3, :3], 1, 2)
+        inv = np.zeros_like(Ti)
+        inv[:, :3, :3] = R
+        inv[:, :3, 3] = -np.einsum("nij,nj->ni", R, Ti[:, :3, 3])
+        inv[:, 3, 3] = 1.0
+        return inv @ T
+
+    def grasp_ok(self, T_tool_part: np.ndarray) -> tuple[bool, str | None]:
+        """The grasp rule for the part in the hand at T_tool_part (4x4): no finger enters the
+        part beyond its contact face and the palm does not enter it (each shrunk by GRASP_TOL_MM
+        so touching counts as clear); (ok, the gripper body that enters it or None). Memoised."""
+        part = self.hand[0]
+        key = (part, np.round(T_tool_part, 9).tobytes(), None if self.width is None else round(self.width, 9))
+        table = self.scene.memo.table("collision.grasp", GRASP_LIMIT) if self.scene.memo is not None else None
+        if table is not None and key in table:
+            return table[key]
+        tol = self.scene.tol
+        verdict: tuple[bool, str | None] = (True, None)
+        bodies = [b.placed(T_tool_part, TOOL, part) for b in self.scene.shapes_of(part)]
+        for name, lo, hi in self.scene.gripper.boxes(self.width):
+            g = box(name, TOOL, lo + tol, hi - tol)
+            if any(_exact(g, np.eye(4), b, np.eye(4)) <= 0.0 for b in bodies if _near(g, b, 0.0)):
+                verdict = (False, name)
+                break
+        if table is not None:
+            table[key] = verdict
+        return verdict
+
+    def _grasp_rows(self, F: np.ndarray) -> list[tuple[bool, str | None]]:
+        if self.hand is None:
+            return [(True, None)] * len(F)
+        if self.hand[1] == "tool":  # the same relative pose on every row: decided once
+            return [self.grasp_ok(self.hand[2])] * len(F)
+        Th = self._hand_in_tool(F)
+        return [self.grasp_ok(Th[r]) for r in range(len(F))]
+
+    # ------------------------------------------------------------------ answers
+
+    def clear(self, q: np.ndarray) -> np.ndarray:
+        """q (n, 6) joint vectors, rad -> (n,) bool: arm, gripper and held part clear of the
+        table, obstacles, other parts and each other (non-adjacent links) by the margin."""
+        return self.check(q)[0]
+
+    def check(self, q: np.ndarray) -> tuple[np.ndarray, list[tuple[str, str] | None]]:
+        """As :meth:`clear`, with the first pair found closer than the margin per row (None where clear)."""
+        q = np.asarray(q, float).reshape(-1, 6)
+        n = len(q)
+        ok = np.ones(n, dtype=bool)
+        why: list[tuple[str, str] | None] = [None] * n
+        if not n:
+            return ok, why
+        m = self.scene.margin
+        F, lb, tab = self._bounds(q)
+        self.scene.stats["pairs"] += lb.size + tab.size
+        for r, (g_ok, g_name) in enumerate(self._grasp_rows(F)):
+            if not g_ok:
+                ok[r], why[r] = False, (g_name, self.hand[0])
+        low = tab <= m
+        for r, k in zip(*np.nonzero(low)):
+            if ok[r]:
+                ok[r], why[r] = False, (self.bodies[self.table_bodies[k]].name, "table")
+        near = lb <= m
+        for r, p in zip(*np.nonzero(near)):
+            if not ok[r]:
+                continue
+            d = lb[r, p] if self.exact_pair[p] else self._exact_cell(F, r, p)
+            if d <= m:
+                i, j = self.pairs[p]
+                ok[r], why[r] = False, (self.bodies[i].name, self.bodies[j].name)
+        return ok, why
+
+    def clearance(self, q: np.ndarray) -> tuple[np.ndarray, list[tuple[str, str]]]:
+        """(n,) minimum distance (cell length unit; <= 0 when touching/penetrating) and, per
+        row, the closest pair of named bodies, e.g. ("forearm", "shelf"). The part in the hand
+        and the gripper are not a pair here (their contact is the grasp's: :meth:`grasp_ok`)."""
+        q = np.asarray(q, float).reshape(-1, 6)
+        F, lb, tab = self._bounds(q)
+        out = np.full(len(q), np.inf)
+        names: list[tuple[str, str]] = [("", "")] * len(q)
+        for r in range(len(q)):
+            if tab.shape[1]:
+                k = int(np.argmin(tab[r]))
+                out[r], names[r] = tab[r, k], (self.bodies[self.table_bodies[k]].name, "table")
+            for p in np.argsort(lb[r]):
+                if lb[r, p] >= out[r]:
+                    break
+                d = lb[r, p] if self.exact_pair[p] else self._exact_cell(F, r, p)
+                if d < out[r]:
+                    i, j = self.pairs[p]
+                    out[r], names[r] = d, (self.bodies[i].name, self.bodies[j].name)
+        return out, names
+
+
+def _near(a: Body, b: Body, within: float) -> bool:
+    """Bounding capsules of two bodies (same frame) within ``within`` of each other."""
+    d = segment_distance(a.cap[0], a.cap[1], b.cap[0], b.cap[1]) - a.cap[2] - b.cap[2]
+    return bool(d <= within)
+
+
+# --------------------------------------------------------------------------- the cell's scene
+
+
+def scene_for(cell: Cell) -> CollisionScene:
+    """The run's one collision scene (built once, kept on cell.memo): robot link and gripper
+    shapes, part shapes, obstacles, the table; the clearance margin (cell's length unit)."""
+    table = cell.memo.table("collision.scene", 1)
+    if "scene" in table:
+        return table["scene"]
+    from .robots import GripperGeometry
+    from ..units import mm_per
+
+    robot = cell.robot
+    gripper = robot.gripper or GripperGeometry.default(cell.finger_separation, mm_per(cell.unit))
+    margin = getattr(cell, "clearance", None)
+    if margin is None:
+        margin = robot.margin if robot.margin is not None else from_mm(cell.unit, DEFAULT_MARGIN_MM)
+    parts = {name: solid_bodies(name, m.shape) for name, m in cell.objects.items()}
+    scene = CollisionScene(robot, gripper, parts, getattr(cell, "obstacles", ()), margin,
+                           getattr(cell, "table", None), cell.unit, cell.memo)
+    table["scene"] = scene
+    return scene

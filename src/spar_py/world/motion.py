@@ -1,0 +1,684 @@
+"""Motions between a plan instance's end-points (issue 16; the paper's Secs. 7.3, 8 leave
+gross and fine motion to other planners: this is that planner).
+
+For the chosen plan instance, a joint path from home through every step and back home:
+
+- **approach / retreat** around each pickup, put-down, assemble and squeeze: a straight
+  line of the tool (Cartesian interpolation, orientation fixed), of ``approach_length``
+  (default 2 in): along the grasp's approach direction (tool z) for pickup, put-down and
+  squeeze, along the mating vector V_a for the assemble (the insertion itself); the
+  retreat backs off along tool z; a part in the hand leaves and reaches the table
+  vertically (the pickup's retreat lifts it straight up, the put-down's approach sets it
+  straight down), whatever the grasp's side. IK at every point of the line, each solution the one
+  nearest the previous point's (the same branch, no wrist flips: a line whose joint jump
+  stays above the resolution after subdivision is refused);
+- **transit / transfer** (hand empty / holding a part) between one retreat's end and the
+  next approach's start: first the straight joint-space segment (all its waypoints in one
+  batched collision check), OMPL (RRT-Connect by default) only when that fails, the
+  solution simplified and checked again at the resolution.
+
+Every waypoint of every segment is checked against the world as it is at that point of
+the plan (``collision.SceneState``: parts already moved or assembled, the held part with
+the gripper). Consecutive waypoints differ by at most ``resolution`` in every joint,
+chosen so that no point of the arm, gripper or held part moves more than the scene's
+clearance margin between two checks (:func:`resolution`).
+
+Where the held part touches what it rests on (the retreat after a pickup lifts it off its
+support, the approach of a put-down sets it down, the assemble's approach inserts it),
+the held part is left out of that line's check: it slides along its own contact
+direction; arm and gripper are still checked against everything.
+
+Units: lengths in the cell unit, joint angles in radians inside (degrees in the data
+for JSON), durations in seconds; world frame, table top z = 0.
+"""
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any, Protocol
+
+import numpy as np
+
+from ..errors import SparValueError
+
+__all__ = ["MotionOptions", "Segment", "MotionFailure", "PLANNERS", "resolution", "densify",
+           "free_motion", "line_motion", "durations", "DEFAULT_APPROACH_IN"]
+
+#: The default approach / retreat length, inches (converted to the cell's unit).
+DEFAULT_APPROACH_IN = 2.0
+
+#: OMPL geometric planners by option name.
+PLANNERS = {"rrtconnect": "RRTConnect", "rrt": "RRT", "rrtstar": "RRTstar", "prm": "PRM",
+            "kpiece": "KPIECE1", "bkpiece": "BKPIECE1", "bitstar": "BITstar"}
+
+
+class SceneState(Protocol):
+    """What the motions ask of the world at one point of the plan (world/collision.py)."""
+
+    def clear(self, q: np.ndarray) -> np.ndarray: ...
+
+    def clearance(self, q: np.ndarray) -> tuple[np.ndarray, list[tuple[str, str]]]: ...
+
+
+@dataclass(frozen=True)
+class MotionOptions:
+    """How motions are planned: ``planner`` (a key of :data:`PLANNERS`), ``time_budget_s``
+    (OMPL seconds per free motion), ``seed`` (OMPL's RNG, for reproducible paths),
+    ``approach_length`` (cell unit; None: 2 in), ``simplify`` (OMPL's path simplifier)."""
+
+    planner: str = "rrtconnect"
+    time_budget_s: float = 1.0
+    seed: int = 0
+    approach_length: float | None = None
+    simplify: bool = True
+
+    def __post_init__(self) -> None:
+        if self.planner not in PLANNERS:
+            raise SparValueError(f"motion planner {self.planner!r}: expected one of {', '.join(PLANNERS)}")
+        if not self.time_budget_s > 0:
+            raise SparValueError(f"motion time budget {self.time_budget_s!r}: expected a positive number of seconds")
+        if self.approach_length is not None and not self.approach_length > 0:
+            raise SparValueError(f"approach length {self.approach_length!r}: expected a positive length")
+
+
+@dataclass(frozen=True)
+class Segment:
+    """One motion: ``kind`` transit | transfer | approach | retreat | home; ``waypoints``
+    (n, 6) rad, consecutive rows at most the resolution apart in every joint, first and
+    last the motion's ends; ``how`` "straight" (the joint-space segment), "cartesian"
+    (a tool line) or the OMPL planner's name; ``vertices`` the path's vertices before
+    densification; ``length_raw`` / ``length`` its joint-space length (rad, Euclidean)
+    before / after simplification; ``time_s`` planning time."""
+
+    kind: str
+    waypoints: np.ndarray
+    how: str
+    vertices: int
+    length_raw: float
+    length: float
+    time_s: float
+
+
+@dataclass(frozen=True)
+class MotionFailure:
+    """Why a motion does not exist: ``motion`` names it ("transit to the approach of
+    action_2"), ``pair`` the bodies that blocked it (closest pair at the first blocked
+    waypoint; None when nothing collides, e.g. no continuous IK), ``detail`` one line."""
+
+    motion: str
+    pair: tuple[str, str] | None
+    detail: str
+    at: str | None = None  # the step id whose motion failed (None: home)
+
+    def text(self) -> str:
+        """One line for the user."""
+        by = f", blocked by {self.pair[0]} and {self.pair[1]}" if self.pair else ""
+        return f"no {self.motion}{by}: {self.detail}"
+
+
+# ---------------------------------------------------------------------- resolution
+
+
+def resolution(dh: np.ndarray, tool: np.ndarray, margin: float, extent: float) -> float:
+    """The largest joint step (rad) at which no point of the arm, gripper or held part
+    moves more than ``margin`` (cell unit) between two checked waypoints.
+
+    A point p moves by at most sum_i |dq_i| r_i(p) when the joints move by dq, r_i(p) its
+    distance from joint i's axis; r_i(p) is at most the distance from frame i's origin (on
+    axis i) to p, bounded by the link offsets from frame i to the flange (Craig rows
+    i+1..6: |a_{j-1}| + |d_j|), the tool offset and ``extent`` (the gripper's and held
+    part's reach beyond the tool centre, cell unit). So a step of ``margin / sum_i R_i``
+    in every joint keeps every point within the margin."""
+    if not margin > 0:
+        raise SparValueError(f"clearance margin {margin!r}: expected a positive length")
+    off = np.abs(dh[:, 1]) + np.abs(dh[:, 2])
+    tail = float(np.linalg.norm(tool[:3, 3])) + float(extent)
+    reach = [float(off[i + 1:].sum()) + tail for i in range(6)]
+    return margin / sum(reach)
+
+
+def densify(vertices: np.ndarray, res: float) -> np.ndarray:
+    """The polyline through ``vertices`` (m, 6) rad interpolated linearly in joint space so
+    that consecutive rows differ by at most ``res`` in every joint; ends kept exactly."""
+    v = np.asarray(vertices, float)
+    if len(v) < 2:
+        return v.copy()
+    d = np.diff(v, axis=0)
+    k = np.maximum(1, np.ceil(np.abs(d).max(axis=1) / res - 1e-9).astype(int))
+    parts = [v[i] + np.outer(np.arange(k[i]) / k[i], d[i]) for i in range(len(d))]
+    return np.vstack(parts + [v[-1:]])
+
+
+def path_length(q: np.ndarray) -> float:
+    """Joint-space length (rad) of the polyline q (n, 6)."""
+    return float(np.linalg.norm(np.diff(q, axis=0), axis=1).sum()) if len(q) > 1 else 0.0
+
+
+def blocked(state: SceneState, q: np.ndarray) -> tuple[int, tuple[str, str] | None]:
+    """The first row of q (n, 6) that is not clear and its closest pair; (-1, None) if all are."""
+    if hasattr(state, "check"):  # collision.SceneState: the first pair closer than the margin, per row
+        ok, why = state.check(q)
+        ok = np.asarray(ok, bool)
+        if ok.all():
+            return -1, None
+        i = int(np.argmin(ok))
+        return i, tuple(why[i]) if why[i] else None
+    ok = np.asarray(state.clear(q), bool)
+    if ok.all():
+        return -1, None
+    i = int(np.argmin(ok))
+    _, pairs = state.clearance(q[i:i + 1])
+    return i, tuple(pairs[0]) if pairs else None
+
+
+# ---------------------------------------------------------------------- free motions
+
+
+def free_motion(state: SceneState, a: np.ndarray, b: np.ndarray, limits: np.ndarray, res: float,
+                opts: MotionOptions, kind: str, name: str) -> Segment | MotionFailure:
+    """A clear joint path from ``a`` to ``b`` (6,) rad within ``limits`` (6, 2) rad: the
+    straight segment if it is clear (one batched check), else OMPL's ``opts.planner``
+    within ``opts.time_budget_s``, simplified, densified at ``res`` and checked again.
+    ``kind`` transit | transfer | home, ``name`` the motion as a failure names it."""
+    t0 = time.perf_counter()
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    for end, q in (("start", a), ("end", b)):
+        i, pair = blocked(state, q[None])
+        if i >= 0:
+            return MotionFailure(name, pair, f"its {end} configuration is not clear")
+    line = densify(np.array([a, b]), res)
+    i, pair = blocked(state, line)
+    if i < 0:
+        n = path_length(line)
+        return Segment(kind, line, "straight", 2, n, n, time.perf_counter() - t0)
+    verts, raw = _ompl(state, a, b, limits, res, opts)
+    if verts is None:
+        return MotionFailure(name, pair, f"{PLANNERS[opts.planner]} found no path within "
+                             f"{opts.time_budget_s:g} s (the straight segment is blocked)")
+    dense = densify(verts, res)
+    j, pair2 = blocked(state, dense)
+    if j >= 0:  # OMPL's own checks missed a waypoint: never return an unchecked path
+        return MotionFailure(name, pair2, "the planner's path is blocked at the checking resolution")
+    return Segment(kind, dense, PLANNERS[opts.planner], len(verts), raw, path_length(verts),
+                   time.perf_counter() - t0)
+
+
+def _ompl(state: SceneState, a: np.ndarray, b: np.ndarray, limits: np.ndarray, res: float,
+          opts: MotionOptions) -> tuple[np.ndarray | None, float]:
+    """OMPL's path (vertices (m, 6) rad, simplified if asked) and its length before
+    simplification; (None, 0) when none is found in the budget. States are checked one
+    by one, motions by a validator that checks all of a motion's waypoints at ``res`` in
+    one batched call."""
+    from ompl import base as ob
+    from ompl import geometric as og
+    from ompl import util as ou
+
+    ou.setLogLevel(ou.LOG_NONE)
+    ou.RNG.setSeed(int(opts.seed) + 1)  # OMPL reads seed 0 as "not set"
+    space = ob.RealVectorStateSpace(6)
+    bounds = ob.RealVectorBounds(6)
+    for j in range(6):
+        bounds.setLow(j, float(limits[j, 0]))
+        bounds.setHigh(j, float(limits[j, 1]))
+    space.setBounds(bounds)
+    ss = og.SimpleSetup(space)
+
+    def vec(s: Any) -> np.ndarray:
+        return np.array([s[j] for j in range(6)])
+
+    def valid(s: Any) -> bool:
+        return bool(state.clear(vec(s)[None])[0])
+
+    class Batched(ob.MotionValidator):
+        """All waypoints of a motion at the resolution in one SceneState.clear call."""
+
+        def checkMotion(self, s1: Any, s2: Any) -> bool:  # noqa: N802 (OMPL's name)
+            w = densify(np.array([vec(s1), vec(s2)]), res)
+            # every 16th waypoint first: most rejected motions are rejected there, at 1/16 the cost
+            if len(w) > 32 and not np.all(state.clear(w[::16])):
+                return False
+            return bool(np.all(state.clear(w)))
+
+    ss.setStateValidityChecker(valid)
+    si = ss.getSpaceInformation()
+    validator = Batched(si)
+    si.setMotionValidator(validator)
+    start, goal = space.allocState(), space.allocState()
+    for j in range(6):
+        start[j], goal[j] = float(a[j]), float(b[j])
+    ss.setStartAndGoalStates(start, goal)
+    ss.setPlanner(getattr(og, PLANNERS[opts.planner])(si))
+    solved = ss.solve(float(opts.time_budget_s))
+    if not solved or str(solved) != "Exact solution":
+        return None, 0.0
+    path = ss.getSolutionPath()
+    raw = np.array([vec(path.getState(i)) for i in range(path.getStateCount())])
+    if opts.simplify:  # simplifyMax: a fixed amount of work, not a time budget, so a seed gives one path
+        og.PathSimplifier(si).simplifyMax(path)
+    verts = np.array([vec(path.getState(i)) for i in range(path.getStateCount())])
+    verts[0], verts[-1] = a, b
+    return verts, path_length(raw)
+
+
+# ---------------------------------------------------------------------- tool lines
+
+
+def _nearest(cands: np.ndarray, prev: np.ndarray, limits: np.ndarray) -> np.ndarray | None:
+    """Among IK rows ``cands`` (k, 6) rad, each moved by whole turns toward ``prev`` where
+    the limits allow, the row nearest ``prev`` (max-joint distance); None if k = 0."""
+    if not len(cands):
+        return None
+    turns = np.round((prev - cands) / (2 * math.pi))
+    moved = cands + 2 * math.pi * turns
+    inside = np.all((moved >= limits[:, 0] - 1e-9) & (moved <= limits[:, 1] + 1e-9), axis=1)
+    c = np.where(inside[:, None], moved, cands)
+    return c[int(np.argmin(np.abs(c - prev).max(axis=1)))]
+
+
+def line_motion(robot: Any, state: SceneState, T_anchor: np.ndarray, q_anchor: np.ndarray,
+                direction: np.ndarray, length: float, res: float, margin: float, kind: str,
+                name: str, reverse: bool) -> Segment | MotionFailure:
+    """A straight tool line from ``T_anchor`` (4x4 world tool pose, where the arm is at
+    ``q_anchor``) moving ``length`` (cell unit) along ``direction`` (world, normalised
+    here), orientation fixed; returned reversed (ending at the anchor) when ``reverse``
+    (an approach). IK at points at most ``margin`` apart, each the solution nearest the
+    previous one; an interval whose joint jump exceeds ``res`` is subdivided (up to 6
+    times); a jump that does not shrink is a wrist flip or singularity: refused."""
+    t0 = time.perf_counter()
+    d = np.asarray(direction, float)
+    d = d / np.linalg.norm(d)
+    n = max(2, int(math.ceil(length / margin)) + 1)
+    s = np.linspace(0.0, 1.0, n)
+    q = _line_ik(robot, T_anchor, q_anchor, d, length, s)
+    if q is None:
+        return MotionFailure(name, None, "the tool line leaves the arm's reach or joint limits")
+    for _ in range(6):
+        jump = np.abs(np.diff(q, axis=0)).max(axis=1)
+        if (jump <= res + 1e-12).all():
+            break
+        k = np.maximum(1, np.ceil(jump / res).astype(int))
+        s = np.concatenate([np.linspace(s[i], s[i + 1], k[i] + 1)[:-1] for i in range(len(k))] + [s[-1:]])
+        q = _line_ik(robot, T_anchor, q_anchor, d, length, s)
+        if q is None:
+            return MotionFailure(name, None, "the tool line leaves the arm's reach or joint limits")
+    else:
+        return MotionFailure(name, None, "no continuous IK branch along the tool line (wrist flip or singularity)")
+    if reverse:
+        q = q[::-1].copy()
+    i, pair = blocked(state, q)
+    if i >= 0:
+        return MotionFailure(name, pair, f"the tool line is blocked {length * (s[::-1] if reverse else s)[i]:.3g} "
+                             "along it")
+    n_len = path_length(q)
+    return Segment(kind, q, "cartesian", len(q), n_len, n_len, time.perf_counter() - t0)
+
+
+def _line_ik(robot: Any, T_anchor: np.ndarray, q_anchor: np.ndarray, d: np.ndarray, length: float,
+             s: np.ndarray) -> np.ndarray | None:
+    """IK along the line T_anchor + s * length * d (s (n,) from 0), nearest-previous from
+    ``q_anchor``; None if some point has no in-limit solution (or the wrist goes under
+    the table)."""
+    from ..workspace import wrist_above_table
+
+    T = np.repeat(np.asarray(T_anchor, float)[None], len(s), axis=0)
+    T[:, :3, 3] += np.outer(s * length, d)
+    Q, ok = robot.ik_batch(T)
+    ok = ok & wrist_above_table(robot, T)[:, None]
+    out = np.empty((len(s), 6))
+    prev = np.asarray(q_anchor, float)
+    out[0] = prev
+    for i in range(1, len(s)):
+        q = _nearest(Q[i][ok[i]], prev, robot.limits)
+        if q is None:
+            return None
+        out[i] = prev = q
+    return out
+
+
+# ---------------------------------------------------------------------- durations
+
+
+def durations(q: np.ndarray, velocity: np.ndarray | None) -> float | None:
+    """Seconds to run waypoints q (n, 6) rad at the joint velocity limits ``velocity`` (6,)
+    rad/s, each interval at the pace of its slowest joint (no acceleration phases); None
+    without limits."""
+    if velocity is None or len(q) < 2:
+        return None if velocity is None else 0.0
+    return float((np.abs(np.diff(q, axis=0)) / np.asarray(velocity, float)).max(axis=1).sum())
+
+
+# ---------------------------------------------------------------------- data for JSON
+
+
+def deg_rows(q: np.ndarray) -> list[list[float]]:
+    """Waypoints (n, 6) rad as degrees rounded to 1e-4 deg (JSON)."""
+    return np.round(np.degrees(np.asarray(q, float)), 4).tolist()
+
+
+@dataclass
+class StepMotion:
+    """The motions of one step: ``path`` the free motion into it (from home or the last
+    step's retreat to this step's approach start), ``approach`` and ``retreat`` tool
+    lines (None for a step without arm motion), ``joints`` the end-point used (rad)."""
+
+    path: Segment | None = None
+    approach: Segment | None = None
+    retreat: Segment | None = None
+    joints: np.ndarray | None = None
+
+    def segments(self) -> list[Segment]:
+        return [s for s in (self.path, self.approach, self.retreat) if s is not None]
+
+
+@dataclass
+class InstanceMotion:
+    """Motions of a whole instance: per step (by id), the path home, resolution (rad),
+    home (rad), the options used."""
+
+    steps: dict[str, StepMotion]
+    home: np.ndarray
+    home_path: Segment
+    resolution: float
+    margin: float
+    options: MotionOptions
+    velocity: np.ndarray | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+    token: int = 0  # its key in the cell's memo table motion.tokens (attach)
+
+    def step_data(self, sid: str) -> dict[str, Any]:
+        """``approach``, ``path``, ``retreat`` (degrees) and ``duration_s`` of step ``sid``."""
+        m = self.steps.get(sid)
+        if m is None:
+            return {"approach": None, "path": None, "retreat": None, "duration_s": None}
+        out: dict[str, Any] = {k: None if getattr(m, k) is None else deg_rows(getattr(m, k).waypoints)
+                               for k in ("approach", "path", "retreat")}
+        ds = [durations(s.waypoints, self.velocity) for s in m.segments()]
+        out["duration_s"] = None if self.velocity is None else round(sum(x or 0.0 for x in ds), 4)
+        return out
+
+    def summary(self) -> dict[str, Any]:
+        """The instance's ``motion`` block (docs/json-schema.md)."""
+        segs = [s for m in self.steps.values() for s in m.segments()] + [self.home_path]
+        free = [s for s in segs if s.kind in ("transit", "transfer", "home")]
+        total = None if self.velocity is None else round(sum(durations(s.waypoints, self.velocity) or 0.0
+                                                             for s in segs), 4)
+        return {"path_resolution_deg": round(math.degrees(self.resolution), 6),
+                "clearance_margin": self.margin,
+                "home_deg": [round(float(v), 4) for v in np.degrees(self.home)],
+                "home_path": deg_rows(self.home_path.waypoints),
+                "planner": PLANNERS[self.options.planner], "seed": self.options.seed,
+                "time_budget_s": self.options.time_budget_s,
+                "approach_length": self.extra.get("approach_length"),
+                "duration_s": total,
+                "free_motions": len(free),
+                "ompl_motions": sum(1 for s in free if s.how not in ("straight",)),
+                "length_before_simplification_rad": round(sum(s.length_raw for s in free), 6),
+                "length_after_simplification_rad": round(sum(s.length for s in free), 6),
+                "planning_s": round(sum(s.time_s for s in segs), 6)}
+
+
+
+# ---------------------------------------------------------------------- a whole instance
+
+
+@dataclass(frozen=True)
+class Stop:
+    """A step that moves the arm, as the motions see it: ``id``, ``name`` (pickup, putdown,
+    assemble, squeeze), ``obj``, ``label`` (the step as text), the tool pose ``T`` (4x4
+    world), ``candidates`` (k, 6) rad (phase 2's choice first), the world before and
+    after it (``parts`` {key: T_world_part} on the table or assembled, ``held`` (key,
+    T_tool_part) or None) and, for an assemble, the insertion direction ``insert``
+    (world unit vector, V_a in the world) and the part it goes ``onto``."""
+
+    id: str
+    name: str
+    obj: str
+    label: str
+    T: np.ndarray
+    candidates: np.ndarray
+    before: tuple[dict[str, np.ndarray], tuple[str, np.ndarray] | None]
+    after: tuple[dict[str, np.ndarray], tuple[str, np.ndarray] | None]
+    insert: np.ndarray | None = None
+    onto: str | None = None  # the part an assemble inserts into
+
+
+def _without(parts: Mapping[str, np.ndarray], key: str) -> dict[str, np.ndarray]:
+    return {k: v for k, v in parts.items() if k != key}
+
+
+def _lines(robot: Any, scene: Any, st: Stop, q: np.ndarray, length: float, res: float,
+           margin: float) -> tuple[Segment, Segment] | MotionFailure:
+    """Approach and retreat of stop ``st`` with the end-point at ``q``. The part in the hand
+    may touch what it leaves or reaches along its own line (``allow``): the table as it is
+    lifted off (pickup's retreat) or set down (put-down's approach), the hole part as it is
+    inserted (the assemble's approach)."""
+    z = st.T[:3, 2]
+    up = np.array([0.0, 0.0, 1.0])
+    (pb, hb), (pa, ha) = st.before, st.after
+    r_dir = -z  # the empty hand backs off along its approach
+    if st.name == "pickup":
+        a_state, a_dir = scene.at(pb, None, grasped=st.obj), z
+        r_state, r_dir = scene.at(pa, ha, allow=[(f"held:{st.obj}", "table")]), up  # lifted off its support
+    elif st.name == "putdown":
+        a_state, a_dir = scene.at(pb, hb, allow=[(f"held:{st.obj}", "table")]), -up  # set down onto it
+        r_state = scene.at(pa, None, grasped=st.obj)
+    elif st.name == "assemble":
+        a_state, a_dir = scene.at(pb, hb, allow=[(f"held:{st.obj}", str(st.onto))]), st.insert  # the insertion itself
+        r_state = scene.at(pa, None, grasped=st.obj)
+    else:  # squeeze: the fingers close on the part where it lies and open again
+        a_state = r_state = scene.at(pb, hb, grasped=st.obj)
+        a_dir = z
+    app = line_motion(robot, a_state, st.T, q, -np.asarray(a_dir, float), length, res, margin, "approach",
+                      f"approach to {st.id} ({st.label})", reverse=True)
+    if isinstance(app, MotionFailure):
+        return app
+    ret = line_motion(robot, r_state, st.T, q, r_dir, length, res, margin, "retreat",
+                      f"retreat from {st.id} ({st.label})", reverse=False)
+    if isinstance(ret, MotionFailure):
+        return ret
+    return app, ret
+
+
+def plan_stops(robot: Any, scene: Any, stops: Sequence[Stop], home: np.ndarray | None,
+               initial: Mapping[str, np.ndarray], res: float, length: float,
+               opts: MotionOptions) -> InstanceMotion | MotionFailure:
+    """Motions from ``home`` (rad; None: the default, :func:`default_home`) through every
+    stop and back. Per stop, its IK candidates in order: the first whose approach and
+    retreat exist and whose free motion from the last position is found is used (no
+    backtracking into earlier stops). ``initial`` the parts' poses before the first step
+    (for the home check); ``length`` the approach length (cell unit)."""
+    margin = float(scene.margin)
+    start_state = scene.at(dict(initial), None)
+    if home is None:
+        home = default_home(robot, start_state)
+        if home is None and not stops:
+            home = robot.limits.mean(axis=1)
+    elif blocked(start_state, home[None])[0] >= 0:
+        _, pair = blocked(start_state, home[None])
+        return MotionFailure("home configuration", pair, "the home configuration is not clear of the initial world")
+    out: dict[str, StepMotion] = {}
+    prev = home
+    for st in stops:
+        best: MotionFailure | None = None
+        stage = -1
+        for q in st.candidates:
+            lines = _lines(robot, scene, st, q, length, res, margin)
+            if isinstance(lines, MotionFailure):
+                if stage < 0:
+                    best, stage = lines, 0
+                continue
+            app, ret = lines
+            pb, hb = st.before
+            kind = "transfer" if hb is not None else "transit"
+            if prev is None:  # home is this first approach's start
+                prev = home = app.waypoints[0]
+            path = free_motion(scene.at(pb, hb), prev, app.waypoints[0], robot.limits, res, opts, kind,
+                               f"{kind} motion to the approach of {st.id} ({st.label})")
+            if isinstance(path, MotionFailure):
+                if stage < 1:
+                    best, stage = path, 1
+                continue
+            out[st.id] = StepMotion(path, app, ret, np.asarray(q, float))
+            prev = ret.waypoints[-1]
+            break
+        else:
+            fail = best or MotionFailure(f"motion of {st.id} ({st.label})", None, "no joint solution")
+            return replace(fail, at=st.id)
+    pa, ha = stops[-1].after if stops else (dict(initial), None)
+    back = free_motion(scene.at(pa, ha), prev, home, robot.limits, res, opts,
+                       "home", "motion back home") if prev is not None else None
+    if isinstance(back, MotionFailure):
+        return back
+    if back is None:
+        back = Segment("home", home[None].copy(), "straight", 1, 0.0, 0.0, 0.0)
+    return InstanceMotion(out, np.asarray(home, float), back, res, margin, opts,
+                          getattr(robot, "velocity_limits", None), {"approach_length": length})
+
+
+def default_home(robot: Any, state: SceneState) -> np.ndarray | None:
+    """The documented default home: the middle of the joint ranges where that is clear of
+    the initial world; else None (then the first approach's start, the first step's IK
+    solution lifted clear of the table along its approach, is home)."""
+    mid = robot.limits.mean(axis=1)
+    return mid if blocked(state, mid[None])[0] < 0 else None
+
+
+# ---------------------------------------------------------------------- phase 2's call
+
+#: Steps that move the arm to a tool pose (sensing moves nothing).
+ARM_STEPS = ("pickup", "putdown", "assemble", "squeeze")
+#: Bound of the cell's memo table of instance motions (cell.memo "motion.runs").
+MEMO_LIMIT = 256
+#: Distinct motion failures a run keeps for its no-plan reason.
+FAILURES_KEPT = 8
+
+
+def _world_parts(w: Any) -> tuple[dict[str, np.ndarray], tuple[str, np.ndarray] | None]:
+    """A phase-2 world's parts on the table or assembled, and the held part (key, T_tool_part)."""
+    parts, held = {}, None
+    for k, o in w.unc.objects.items():
+        if o.where == "hand":
+            held = (k, np.linalg.inv(o.grasp))
+        else:
+            parts[k] = np.asarray(o.pose, float)
+    return parts, held
+
+
+def stops_of(cell: Any, steps: Sequence[Mapping[str, Any]], worlds: Sequence[Any],
+             records: Sequence[Mapping[str, Any]]) -> list[Stop]:
+    """The arm-moving steps of a phase-2 run: ``steps`` as phase2.evaluate takes them,
+    ``worlds`` the world before each step and after the last (len(steps) + 1), ``records``
+    the run's step records (their geometry: tool pose, joints, IK solutions, degrees)."""
+    out = []
+    for i, (s, rec) in enumerate(zip(steps, records)):
+        geo = rec["geometry"]
+        if s["name"] not in ARM_STEPS or geo.get("tool_pose") is None or geo.get("joints_deg") is None:
+            continue
+        chosen = np.radians(np.asarray(geo["joints_deg"], float))
+        sols = np.radians(np.asarray(geo.get("ik_solutions_deg") or [geo["joints_deg"]], float)).reshape(-1, 6)
+        order = np.argsort(np.abs(sols - chosen).max(axis=1), kind="stable")
+        cands = sols[order]
+        if not len(cands) or np.abs(cands[0] - chosen).max() > 1e-6:
+            cands = np.vstack([chosen, cands])
+        obj = str(s["args"][0])
+        insert, onto = None, None
+        if s["name"] == "assemble":
+            onto = str(s["args"][1])
+            hole, va = str(s["args"][1]), cell.vectors[str(s["args"][4])]
+            v = worlds[i].unc.obj(hole).pose[:3, :3] @ np.asarray(va, float)
+            insert = v / np.linalg.norm(v)
+        args = ", ".join(str(a) for a in s["args"][:2])
+        out.append(Stop(str(s["id"]), s["name"], obj, f"{s['name']}({args})", np.asarray(geo["tool_pose"], float),
+                        cands, _world_parts(worlds[i]), _world_parts(worlds[i + 1]), insert, onto))
+    return out
+
+
+def extent(cell: Any) -> float:
+    """How far the gripper and a held part reach beyond the tool centre (cell unit): half
+    the finger opening, or a part's bounding radius plus its grasp offset, the larger."""
+    r = cell.finger_separation / 2
+    for m in cell.objects.values():
+        rad = m.bounding_radius()
+        for g in m.grasps.values():
+            r = max(r, float(np.linalg.norm(g.T[:3, 3])) + rad)
+    return r
+
+
+def approach_length(cell: Any, opts: MotionOptions) -> float:
+    """The approach / retreat length in the cell unit (the option, else 2 in)."""
+    from ..kb import LENGTH_UNITS
+
+    if opts.approach_length is not None:
+        return float(opts.approach_length)
+    return DEFAULT_APPROACH_IN * LENGTH_UNITS["in"] / LENGTH_UNITS[cell.unit]
+
+
+def run_motions(cell: Any, steps: Sequence[Mapping[str, Any]], worlds: Sequence[Any],
+                result: dict[str, Any], scene: Any = None) -> dict[str, Any]:
+    """Phase 2's run ``result`` (status ok) with the motions of the instance added: each
+    arm step's geometry gains ``approach``, ``path``, ``retreat`` (degrees) and
+    ``duration_s`` and its ``joints_deg`` becomes the IK solution the motions use; the
+    result gains ``motion`` (:meth:`InstanceMotion.summary`). When no motion exists the
+    run is infeasible at the step whose motion failed, with a geometric verdict
+    ``motion`` naming the motion and the blocking pair (kept in the cell's memo table
+    ``motion.failures`` for the no-plan reason). Memoised per run (cell.memo)."""
+    opts: MotionOptions = cell.motion
+    if scene is None:
+        from .collision import scene_for
+
+        scene = scene_for(cell)
+    home = getattr(cell, "home", None)
+    key = (worlds[-1].key, opts, None if home is None else np.asarray(home).tobytes(), id(scene))
+
+    def compute() -> InstanceMotion | MotionFailure:
+        stops = stops_of(cell, steps, worlds, result["steps"])
+        res = resolution(cell.robot.dh, cell.robot.tool, float(scene.margin), extent(cell))
+        initial, _ = _world_parts(worlds[0])
+        return plan_stops(cell.robot, scene, stops, None if home is None else np.asarray(home, float), initial,
+                          res, approach_length(cell, opts), opts)
+
+    def numbered() -> InstanceMotion | MotionFailure:
+        got = compute()
+        if isinstance(got, InstanceMotion):
+            counter = cell.memo.table("motion.counter", 1)
+            got.token = counter["n"] = counter.get("n", 0) + 1
+        return got
+
+    got = cell.memo.table("motion.runs", MEMO_LIMIT).get_or_compute(key, numbered)
+    if isinstance(got, MotionFailure):
+        failures = cell.memo.table("motion.failures", FAILURES_KEPT)  # this run's, one per instance (Planner clears)
+        if len(failures) < FAILURES_KEPT and got not in [failures.get(k) for k in range(len(failures))]:
+            failures[len(failures)] = got
+        at = next((r for r in result["steps"] if r["id"] == got.at), result["steps"][-1])
+        at["verdicts"] = list(at["verdicts"]) + [{
+            "action": at["id"], "constraint": "motion", "kind": "geometric", "sense": "", "bound": None,
+            "threshold": None, "satisfied": False, "tolerance_reached": True, "description": got.text()}]
+        idx = result["steps"].index(at)
+        return {"status": "infeasible", "at": at["id"], "steps": result["steps"][:idx + 1]}
+    for rec in result["steps"]:
+        m = got.steps.get(rec["id"])
+        if m is not None:
+            rec["geometry"] = {**rec["geometry"], "joints_deg": [round(float(v), 6) for v in np.degrees(m.joints)]}
+    token = cell.memo.table("motion.tokens", MEMO_LIMIT)
+    token[got.token] = got
+    summary = {k: v for k, v in got.summary().items() if k != "home_path"}
+    return {**result, "motion": {**summary, "token": got.token}}
+
+
+def attach(cell: Any, instance: dict[str, Any]) -> None:
+    """Put the waypoints of the chosen instance's motions into its JSON ``instance`` (in
+    place): the waypoints stay in Python while Prolog chooses (they would cost more to
+    carry through it than to plan); ``instance["motion"]["token"]`` names them in the
+    cell's memo table ``motion.tokens``. Every step gains ``approach``, ``path``,
+    ``retreat`` and ``duration_s``; the motion block ``home_path``."""
+    motion = instance.get("motion")
+    if not isinstance(motion, dict) or "token" not in motion:
+        return
+    got = cell.memo.table("motion.tokens", MEMO_LIMIT).get(motion.pop("token"))
+    if got is None:
+        raise SparValueError("the instance's motions are no longer in the cell's memo")
+    for st in instance.get("steps", []):
+        st.update(got.step_data(st["id"]))
+    motion["home_path"] = deg_rows(got.home_path.waypoints)

@@ -1,0 +1,348 @@
+"""Motions between the end-points (issue 16): resolution, free motions (straight and OMPL),
+tool lines, the robot file's motion keys, and the Planner's motion output.
+
+The geometry is checked with code independent of world/motion.py: Craig FK written out
+in tests/craig_reference.py and tests/motion_fake.py (a small scene of points along the
+links, the table and world boxes)."""
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from spar_py.errors import KBError, SparValueError
+from spar_py.kb import load_robot
+from spar_py.world import motion as mo
+
+sys.path.insert(0, str(Path(__file__).parent))
+from craig_reference import craig_fk  # noqa: E402
+from motion_fake import FakeScene, arm_points  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+PUMA = ROOT / "kb" / "robots" / "puma762.yaml"
+MARGIN = 0.1  # in
+
+
+@pytest.fixture(scope="module")
+def puma():
+    return load_robot(PUMA, unit="in")
+
+
+def _stage(puma):
+    """Two configurations whose tool points are well above the table, and the midpoint of
+    their tool positions (a wall there blocks the straight joint segment)."""
+    a = np.radians([0.0, -60.0, 30.0, 0.0, 30.0, 0.0])
+    b = np.radians([90.0, -60.0, 30.0, 0.0, 30.0, 0.0])
+    pa, pb = craig_fk(puma, a[None])[0][:3, 3], craig_fk(puma, b[None])[0][:3, 3]
+    return a, b, (pa + pb) / 2
+
+
+def test_resolution_keeps_every_point_within_the_margin(puma) -> None:
+    """Independent check: random configurations, random joint steps no larger than the
+    resolution in any joint; the tool and points up to ``extent`` beyond it move by at most
+    the margin (Craig FK written out, not the code under test)."""
+    extent = 3.0
+    res = mo.resolution(puma.dh, puma.tool, MARGIN, extent)
+    rng = np.random.default_rng(1)
+    q = rng.uniform(puma.limits[:, 0], puma.limits[:, 1], size=(300, 6))
+    dq = rng.choice([-1.0, 1.0], size=q.shape) * res  # the worst case: every joint at the step
+    T0, T1 = craig_fk(puma, q), craig_fk(puma, q + dq)
+    offsets = extent * np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1], [-1, 0, 0], [0, -1, 0], [0, 0, -1],
+                                 [0.577, 0.577, 0.577]])
+    moved = []
+    for off in np.vstack([np.zeros((1, 3)), offsets]):
+        p0 = np.einsum("nij,j->ni", T0[:, :3, :3], off) + T0[:, :3, 3]
+        p1 = np.einsum("nij,j->ni", T1[:, :3, :3], off) + T1[:, :3, 3]
+        moved.append(np.linalg.norm(p1 - p0, axis=1))
+    assert max(m.max() for m in moved) <= MARGIN
+    # and it is not needlessly fine: ten times the step moves something by more than the margin
+    T2 = craig_fk(puma, q + 10 * dq)
+    assert np.linalg.norm(T2[:, :3, 3] - T0[:, :3, 3], axis=1).max() > MARGIN
+
+
+def test_densify_steps_and_ends() -> None:
+    v = np.radians([[0, 0, 0, 0, 0, 0], [10, -5, 0, 0, 0, 1], [10, -5, 3, 0, 0, 1]])
+    res = math.radians(0.3)
+    d = mo.densify(v, res)
+    assert np.abs(np.diff(d, axis=0)).max() <= res + 1e-12
+    assert np.array_equal(d[0], v[0]) and np.array_equal(d[-1], v[-1])
+    assert any(np.allclose(r, v[1]) for r in d)  # the polyline passes through its vertices
+
+
+def test_straight_segment_first(puma) -> None:
+    a, b, _ = _stage(puma)
+    scene = FakeScene(puma, MARGIN)
+    res = mo.resolution(puma.dh, puma.tool, MARGIN, 3.0)
+    seg = mo.free_motion(scene.at({}), a, b, puma.limits, res, mo.MotionOptions(), "transit", "t")
+    assert isinstance(seg, mo.Segment) and seg.how == "straight"
+    assert scene.calls <= 3  # both ends and the whole segment, each one batched call
+
+
+def _wall(puma, mid):
+    return FakeScene(puma, MARGIN, {"wall": (mid - [4.0, 4.0, 40.0], mid + [4.0, 4.0, 40.0])})
+
+
+def _own_clear(puma, scene, q) -> np.ndarray:
+    """The test's own clearance: every arm point above the table and outside the grown boxes."""
+    p, _ = arm_points(puma, q)
+    ok = p[..., 2].min(axis=1) >= scene.margin
+    for lo, hi in scene.boxes.values():
+        inside = np.all((p >= lo - scene.margin) & (p <= hi + scene.margin), axis=-1)
+        ok &= ~inside.any(axis=1)
+    return ok
+
+
+def test_ompl_detour_around_a_wall_is_clear_and_reproducible(puma) -> None:
+    a, b, mid = _stage(puma)
+    scene = _wall(puma, mid)
+    res = mo.resolution(puma.dh, puma.tool, MARGIN, 3.0)
+    assert not _own_clear(puma, scene, mo.densify(np.array([a, b]), res)).all()  # the straight line is blocked
+    opts = mo.MotionOptions(seed=3, time_budget_s=5.0)
+    seg = mo.free_motion(scene.at({}), a, b, puma.limits, res, opts, "transit", "t")
+    assert isinstance(seg, mo.Segment), seg
+    assert seg.how == "RRTConnect"
+    w = seg.waypoints
+    assert np.array_equal(w[0], a) and np.array_equal(w[-1], b)
+    assert np.abs(np.diff(w, axis=0)).max() <= res + 1e-12
+    assert _own_clear(puma, scene, w).all()
+    assert np.all((w >= puma.limits[:, 0]) & (w <= puma.limits[:, 1]))
+    assert seg.length <= seg.length_raw + 1e-9  # simplification never lengthens
+    again = mo.free_motion(_wall(puma, mid).at({}), a, b, puma.limits, res, opts, "transit", "t")
+    assert np.array_equal(again.waypoints, w)  # same seed, same path
+
+
+def test_no_motion_names_the_blocking_pair(puma) -> None:
+    a, b, mid = _stage(puma)
+    pb = craig_fk(puma, b[None])[0][:3, 3]
+    scene = FakeScene(puma, MARGIN, {"cage": (pb - 1.0, pb + 1.0)})  # the goal's tool point is inside
+    res = mo.resolution(puma.dh, puma.tool, MARGIN, 3.0)
+    got = mo.free_motion(scene.at({}), a, b, puma.limits, res, mo.MotionOptions(time_budget_s=0.2), "transit",
+                         "transit motion to the approach of action_1")
+    assert isinstance(got, mo.MotionFailure)
+    assert got.pair is not None and "cage" in got.pair
+    assert "transit motion to the approach of action_1" in got.text() and "cage" in got.text()
+
+
+def test_tool_line_is_straight_with_fixed_orientation(puma) -> None:
+    q = np.radians([10.0, -50.0, 20.0, 5.0, 40.0, -10.0])
+    T = craig_fk(puma, q[None])[0]
+    scene = FakeScene(puma, MARGIN)
+    res = mo.resolution(puma.dh, puma.tool, MARGIN, 3.0)
+    d = -T[:3, 2]
+    seg = mo.line_motion(puma, scene.at({}), T, q, d, 2.0, res, MARGIN, "approach", "approach", reverse=True)
+    assert isinstance(seg, mo.Segment), seg
+    w = seg.waypoints
+    assert np.allclose(w[-1], q)  # an approach ends at the end-point
+    assert np.abs(np.diff(w, axis=0)).max() <= res + 1e-12
+    Ts = craig_fk(puma, w)
+    assert np.allclose(Ts[:, :3, :3], T[:3, :3], atol=1e-9)  # orientation fixed
+    off = Ts[:, :3, 3] - T[:3, 3]
+    along = off @ d
+    assert np.allclose(off, np.outer(along, d), atol=1e-8)  # on the line
+    assert along[0] == pytest.approx(2.0, abs=1e-9) and along[-1] == pytest.approx(0.0, abs=1e-9)
+    assert np.all(np.diff(along) <= 1e-12)  # monotone towards the end-point
+
+
+def test_tool_line_out_of_reach_fails_with_a_reason(puma) -> None:
+    q = np.radians([0.0, -10.0, -90.0, 0.0, 10.0, 0.0])  # nearly stretched out
+    T = craig_fk(puma, q[None])[0]
+    out = T[:3, 3] - puma.base[:3, 3]
+    got = mo.line_motion(puma, FakeScene(puma, MARGIN).at({}), T, q, out, 40.0, math.radians(0.05), MARGIN,
+                         "retreat", "retreat from action_1", reverse=False)
+    assert isinstance(got, mo.MotionFailure) and "reach" in got.detail
+
+
+def test_durations_from_velocity_limits() -> None:
+    q = np.radians([[0, 0, 0, 0, 0, 0], [10, 0, 0, 0, 0, 0], [10, 20, 0, 0, 0, 0]])
+    v = np.radians([10.0, 40.0, 10, 10, 10, 10])
+    assert mo.durations(q, v) == pytest.approx(1.0 + 0.5)
+    assert mo.durations(q, None) is None
+
+
+def test_options_are_checked() -> None:
+    with pytest.raises(SparValueError, match="planner"):
+        mo.MotionOptions(planner="astar")
+    with pytest.raises(SparValueError, match="budget"):
+        mo.MotionOptions(time_budget_s=0)
+
+
+def _robot_file(tmp_path: Path, extra: str) -> Path:
+    text = PUMA.read_text() + "\n" + extra + "\n"
+    p = tmp_path / "arm.yaml"
+    p.write_text(text)
+    return p
+
+
+def test_robot_home_and_velocity_limits(tmp_path: Path) -> None:
+    r = load_robot(_robot_file(tmp_path, "home: [0, -90, -90, 0, 0, 0]\nvelocity_limits: [90, 90, 90, 180, 180, 180]"))
+    assert np.allclose(np.degrees(r.home), [0, -90, -90, 0, 0, 0])
+    assert np.allclose(np.degrees(r.velocity_limits), [90, 90, 90, 180, 180, 180])
+
+
+@pytest.mark.parametrize("extra, key", [
+    ("home: [0, 0, 0]", "home"),
+    ("home: [0, -90, -90, 0, 0, 999]", "home"),
+    ("velocity_limits: [90, 90, 0, 180, 180, 180]", "velocity_limits"),
+])
+def test_bad_motion_keys_are_one_line(tmp_path: Path, extra: str, key: str) -> None:
+    with pytest.raises(KBError) as e:
+        load_robot(_robot_file(tmp_path, extra))
+    msg = str(e.value)
+    assert "\n" not in msg and "arm.yaml" in msg and key in msg
+
+
+# ---------------------------------------------------------------------- regression plans
+
+
+def _motion_cells() -> list[Path]:
+    """The regression cells that plan motions (problem key ``motion: true``)."""
+    import yaml
+
+    return sorted(p for p in (ROOT / "kb" / "problems").glob("*.yaml")
+                  if (yaml.safe_load(p.read_text()) or {}).get("motion") is True)
+
+
+def _frames(robot, q: np.ndarray) -> np.ndarray:
+    """World frames 0..6 (n, 7, 4, 4) by Craig's link transform written out (not the package's FK)."""
+    from motion_fake import _links
+
+    A = _links(robot.dh, q)
+    out = np.empty((len(q), 7, 4, 4))
+    out[:, 0] = robot.base
+    for i in range(6):
+        out[:, i + 1] = out[:, i] @ A[:, i]
+    return out
+
+
+def _lowest(robot, F: np.ndarray) -> tuple[np.ndarray, list[str]]:
+    """Per row, the lowest height of each link shape (exact: a capsule's lowest end less its
+    radius, a cylinder's lowest rim point, a box's lowest corner), and the shapes' names."""
+    lows, names = [], []
+    for s in robot.links:
+        if s.frame == 0:
+            continue
+        R, t = F[:, s.frame, :3, :3], F[:, s.frame, :3, 3]
+        if s.kind == "box":
+            c = np.array([[x, y, z] for x in (s.a[0], s.b[0]) for y in (s.a[1], s.b[1]) for z in (s.a[2], s.b[2])])
+            z = np.einsum("nj,kj->nk", R[:, 2, :], c) + t[:, 2:3]
+            lows.append(z.min(axis=1))
+        else:
+            za = R[:, 2, :] @ s.a + t[:, 2]
+            zb = R[:, 2, :] @ s.b + t[:, 2]
+            if s.kind == "capsule":
+                lows.append(np.minimum(za, zb) - s.radius)
+            else:
+                u = (s.b - s.a) / max(np.linalg.norm(s.b - s.a), 1e-12)
+                uz = R[:, 2, :] @ u
+                lows.append(np.minimum(za, zb) - s.radius * np.sqrt(np.clip(1 - uz ** 2, 0, 1)))
+        names.append(s.name)
+    return np.array(lows).T, names
+
+
+def _axis_points(robot, F: np.ndarray) -> np.ndarray:
+    """(n, m, 3) points on the links' axes (capsules, cylinders) and the tool point."""
+    pts = []
+    for s in robot.links:
+        if s.frame == 0 or s.kind == "box":
+            continue
+        for t in np.linspace(0, 1, 5):
+            p = s.a * (1 - t) + s.b * t
+            pts.append(np.einsum("nij,j->ni", F[:, s.frame, :3, :3], p) + F[:, s.frame, :3, 3])
+    pts.append((F[:, 6] @ robot.tool)[:, :3, 3])
+    return np.stack(pts, axis=1)
+
+
+def _boxes(path: Path) -> list[tuple[str, np.ndarray, np.ndarray]]:
+    """The problem file's box obstacles, read from the YAML here (world frame, file unit)."""
+    import yaml
+
+    doc = yaml.safe_load(Path(path).read_text())
+    return [(o["name"], np.asarray(o["box"]["min"], float), np.asarray(o["box"]["max"], float))
+            for o in doc.get("obstacles") or [] if "box" in o]
+
+
+@pytest.fixture(scope="module")
+def motion_plans():
+    from spar_py import Planner
+
+    pl = Planner(motion=True)
+    return [(p, pl.load_problem(p), pl.plan(p)) for p in _motion_cells()]
+
+
+def test_every_path_of_every_regression_plan(motion_plans) -> None:
+    """Every path of every regression plan that plans motions, checked on its own: consecutive
+    waypoints within path_resolution_deg in every joint, joint limits, the paths' ends equal
+    to the steps' joints and to each other, home at both ends, and every waypoint clear of the
+    table (each link shape's exact lowest point above z = 0) and of the obstacle boxes (the
+    links' axes and the tool point outside them), computed here, not by world/collision.py."""
+    planned = [(path, cell, plan) for path, cell, plan in motion_plans if plan.ok]
+    assert any(Path(p).stem == "wall_detour" for p, _, _ in planned)
+    for path, cell, plan in planned:
+        inst = plan.instance
+        m = inst["motion"]
+        res = m["path_resolution_deg"]
+        home = np.asarray(m["home_deg"])
+        robot = cell.robot
+        lo, hi = np.degrees(robot.limits[:, 0]), np.degrees(robot.limits[:, 1])
+        prev = home
+        chain = []
+        for st in inst["steps"]:
+            if st.get("path") is None:
+                continue
+            p, a, r = (np.asarray(st[k]) for k in ("path", "approach", "retreat"))
+            assert np.allclose(p[0], prev, atol=2e-4), (path, st["id"])
+            assert np.allclose(p[-1], a[0], atol=2e-4) and np.allclose(a[-1], st["joints_deg"], atol=2e-4)
+            assert np.allclose(r[0], st["joints_deg"], atol=2e-4)
+            chain += [p, a, r]
+            prev = r[-1]
+        back = np.asarray(m["home_path"])
+        assert np.allclose(back[0], prev, atol=2e-4) and np.allclose(back[-1], home, atol=2e-4)
+        chain.append(back)
+        for w in chain:
+            assert np.abs(np.diff(w, axis=0)).max(initial=0.0) <= res + 2e-4, path
+            assert np.all((w >= lo - 1e-6) & (w <= hi + 1e-6)), path
+            F = _frames(robot, np.radians(w))
+            low, names = _lowest(robot, F)
+            assert low.min() > 0.0, (path, names[int(low.min(axis=0).argmin())])
+            pts = _axis_points(robot, F)
+            for name, blo, bhi in _boxes(path):
+                assert not np.all((pts >= blo) & (pts <= bhi), axis=-1).any(), (path, name)
+
+
+def test_enclosed_part_has_no_plan_and_names_the_enclosure(motion_plans) -> None:
+    """The part in a closed box: no plan, and the reason names a body of the box (at the
+    end-points, issue 15's collision-aware reach, or at the motions: reason.motion)."""
+    got = {Path(p).stem: plan for p, _, plan in motion_plans}
+    plan = got["enclosed_part"]
+    assert not plan.ok
+    box = {"wall_n", "wall_s", "wall_e", "wall_w", "lid"}
+    texts = list(plan.reason.get("collisions") or [])
+    texts += [f["text"] for f in plan.reason.get("motion_failures") or []]
+    assert any(n in t for t in texts for n in box), plan.reason
+
+
+def test_animation_replays_the_motions(motion_plans, tmp_path: Path) -> None:
+    from PIL import Image
+
+    from spar_py.pictures.animate import frames_of, write_animation
+
+    path, cell, plan = next(x for x in motion_plans if Path(x[0]).stem == "wall_detour")
+    frames = frames_of(cell, plan.to_json(), max_frames=6)
+    assert len(frames) == 6 and all(f.frames is not None for f in frames)
+    assert np.allclose(np.degrees(frames[0].q), plan.instance["motion"]["home_deg"], atol=1e-3)
+    gif = write_animation(cell, plan.to_json(), tmp_path / "plan.gif", max_frames=4)
+    with Image.open(gif) as im:
+        assert im.n_frames == 4
+
+
+def test_animation_needs_motions(motion_plans) -> None:
+    from spar_py.pictures.animate import frames_of
+
+    _, cell, plan = next(x for x in motion_plans if Path(x[0]).stem == "wall_detour")
+    doc = plan.to_json()
+    doc["instance"] = {**doc["instance"], "motion": None}
+    with pytest.raises(SparValueError, match="no-motion"):
+        frames_of(cell, doc)
