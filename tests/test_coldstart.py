@@ -198,7 +198,9 @@ def test_loader_quotes_paths() -> None:
 
 def test_the_benchmark_measures_plan_and_floor_in_one_run() -> None:
     """bench/coldstart.py at its smallest: every command ran, the figures are positive, the
-    cold plan imports none of the heavy libraries, and the section renders."""
+    cold plan imports none of the heavy libraries but the collision library (python-fcl: the
+    paper's cell's fingers come near its parts, and those pairs are measured exactly; issue
+    15), and the section renders."""
     sys.path.insert(0, str(ROOT))
     try:
         from bench import coldstart
@@ -208,7 +210,7 @@ def test_the_benchmark_measures_plan_and_floor_in_one_run() -> None:
     assert set(r["median"]) == {"floor", "plan", "plan, sources", "engine", "engine, sources"}
     assert all(v > 0 for v in r["median"].values())
     assert r["ratio"] == pytest.approx(r["median"]["plan"] / r["median"]["floor"])
-    assert r["imports"]["heavy"] == []
+    assert set(r["imports"]["heavy"]) <= {"fcl"}
     assert any(g.startswith("spar_py.") for g, _ in r["imports"]["beyond_floor"])
     text = "\n".join(coldstart.render(r))
     assert "## Cold start" in text and "x the floor" in text

@@ -58,8 +58,31 @@ def convert_robot(data: dict, k: float, unit: str) -> dict:
     out["dh"] = [dict(r, a=_len(r["a"], k), d=_len(r["d"], k)) for r in data["dh"]]
     for key in ("base", "tool"):
         out[key] = dict(data[key], xyz=[_len(v, k) for v in data[key]["xyz"]])
-    out["gripper"] = dict(data["gripper"], finger_separation=_len(data["gripper"]["finger_separation"], k))
+    g = data["gripper"]
+    out["gripper"] = dict(g, finger_separation=_len(g["finger_separation"], k))
+    for box in ("finger", "palm"):
+        if box in g:
+            out["gripper"][box] = {key: _len(v, k) for key, v in g[box].items()}
+    if "collision" in data:
+        out["collision"] = _scaled_lengths(data["collision"], k)
     return out
+
+
+_NOT_LENGTHS = {"name", "frame", "allow", "link"}
+
+
+def _scaled_lengths(v: Any, k: float, key: str = "") -> Any:
+    """A collision section with every number scaled by ``k`` (they are all lengths: margins,
+    radii, end-points, box corners), names, frame numbers and allowed pairs kept."""
+    if key in _NOT_LENGTHS:
+        return v
+    if isinstance(v, dict):
+        return {kk: _scaled_lengths(vv, k, kk) for kk, vv in v.items()}
+    if isinstance(v, list):
+        return [_scaled_lengths(x, k, key) for x in v]
+    if isinstance(v, (int, float)) and not isinstance(v, bool):
+        return _len(v, k)
+    return v
 
 
 def convert_problem(data: dict, k: float, unit: str, robot: str, models: dict[str, str]) -> dict:

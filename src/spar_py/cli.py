@@ -173,8 +173,6 @@ def cmd_plan(args: argparse.Namespace) -> int:
     plan = planner.plan(cell, phase1_only=args.phase1_only, trace=args.trace)
     if plan.outcome is Outcome.TIMEOUT:
         raise PlanningTimeout(f"{cell.name}: no result within {args.timeout:g} s")
-    for line in (plan.reason or {}).get("collisions", []) if plan.outcome is Outcome.NO_PLAN else []:
-        print(line)
     staged: list[tuple[Path, Path]] = []  # (temporary, final)
     if picture_dirs or output is not None:
         import tempfile  # only for outputs: a plain `spar plan` need not import it (cold start)
@@ -208,7 +206,9 @@ def cmd_plan(args: argparse.Namespace) -> int:
             os.replace(tmp, final)
     if args.json and output is None:
         sys.stdout.write(plan.dumps() + "\n")
-    elif not args.json:
+    elif not args.json:  # JSON carries the colliding pairs in reason.collisions
+        for line in (plan.reason or {}).get("collisions", []) if plan.outcome is Outcome.NO_PLAN else []:
+            print(line)
         sys.stdout.write(plan.trace)
     for d in picture_dirs:
         n = sum(1 for _, f in staged if f.parent == d)
