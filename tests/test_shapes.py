@@ -513,3 +513,29 @@ def test_bench_derive_renders() -> None:
     text = "\n".join(derive.markdown(r))
     assert "| peg (paper, shape) | 270 |" in text and "16x" in text
     assert "80 ms at worst (met)" in text and "1500 ms (9998 triangles) (NOT met)" in text
+
+
+# ---------------------------------------------------------------------- the robot's own fingers
+
+
+def test_grasps_are_derived_for_the_robots_own_fingers() -> None:
+    """The robot file's finger and palm boxes (not the default jaw) decide which grasps exist:
+    the paper's peg's shaft is 1.5 in long above a 3 in base, so fingers 200 mm wide (along the
+    shaft) meet the base in every grasp of the shaft across its axis; the default 20 mm fingers
+    fit. The default-sized robot gripper derives exactly the default grasps."""
+    from spar_py.world.robots import GripperGeometry
+
+    default = load_object(OBJ / "peg_shape.yaml", "in", opening=4.0)
+    same = load_object(OBJ / "peg_shape.yaml", "in", gripper=GripperGeometry.default(4.0, 25.4))
+    wide = GripperGeometry.default(4.0, 25.4, finger={"length": 60 / 25.4, "width": 200 / 25.4,
+                                                       "thickness": 10 / 25.4})
+    got = load_object(OBJ / "peg_shape.yaml", "in", gripper=wide)
+
+    def shaft_grasps(m) -> set:
+        return {k for k, g in m.grasps.items() if "peg_face" in g.gfaces}
+
+    assert {k: g.T.tolist() for k, g in same.grasps.items()} == {k: g.T.tolist() for k, g in default.grasps.items()}
+    assert shaft_grasps(got) < shaft_grasps(default)
+    assert all(abs(abs(got.grasps[k].T[2, 2]) - 1) < 1e-9 for k in shaft_grasps(got))  # approach along z
+    assert any(abs(default.grasps[k].T[2, 2]) < 1e-9 for k in shaft_grasps(default))  # side grasps there
+    assert 0 < len(got.grasps) < len(default.grasps)

@@ -641,13 +641,15 @@ def _faces(node: Node, known: set[Face] | None, min_len: int = 1) -> tuple[Face,
 
 
 def load_object(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, opening: float | None = None,
-                use_cache: bool = True) -> ObjectModel:
+                use_cache: bool = True, gripper: GripperGeometry | None = None) -> ObjectModel:
     """Load ``kb/objects/*.yaml`` converting lengths to ``unit``.
 
     ``faces``, ``stable_poses`` and ``grasps`` left out of a model with ``mesh:`` or
     ``shape:`` are derived from its geometry (world.shapes, cached by content hash:
-    world.shapes_cache) for a gripper opening ``opening`` (cell unit; DEFAULT_OPENING_MM
-    without a robot); hand-written ones take precedence. Only a derivation imports trimesh.
+    world.shapes_cache) for the robot's ``gripper`` (its opening, fingers and palm, cell unit)
+    or, without one, a gripper of opening ``opening`` (cell unit; DEFAULT_OPENING_MM without a
+    robot) with the default fingers; hand-written ones take precedence. Only a derivation
+    imports trimesh.
     """
     root = read_kb(path, "object", max_bytes)
     name = root.key("object").label()
@@ -669,7 +671,7 @@ def load_object(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, o
         from .world.shapes_cache import derive
         from .world.shapes_derive import Gripper
 
-        grip = Gripper.default(unit, opening if opening is not None else from_mm(unit, DEFAULT_OPENING_MM))
+        grip = _derive_gripper(Gripper, unit, opening, gripper)
         try:
             derived = derive(name, geometry, feature_geo, face_names, grip, step, need_hull=True,
                              use_cache=use_cache)
@@ -1267,7 +1269,16 @@ def _positions(onode: Node, oname: str, model: ObjectModel, taken: dict[str, Pos
     return out
 
 
-def _objects(root: Node, base: Path, unit: str, max_bytes: int, opening: float | None = None
+def _derive_gripper(cls: Any, unit: str, opening: float | None, gripper: GripperGeometry | None) -> Any:
+    """The gripper grasps are derived and checked for (world.shapes_derive.Gripper ``cls``): the
+    robot's own where given, else the default fingers at ``opening`` (or DEFAULT_OPENING_MM)."""
+    if gripper is not None:
+        return cls.of_robot(gripper)
+    return cls.default(unit, opening if opening is not None else from_mm(unit, DEFAULT_OPENING_MM))
+
+
+def _objects(root: Node, base: Path, unit: str, max_bytes: int, opening: float | None = None,
+             gripper: GripperGeometry | None = None
              ) -> tuple[dict[str, ObjectModel], dict[str, Position], list[Path]]:
     """The problem's objects (models loaded), their initial positions and the model files."""
     objects: dict[str, ObjectModel] = {}
@@ -1277,7 +1288,7 @@ def _objects(root: Node, base: Path, unit: str, max_bytes: int, opening: float |
         mnode = onode.key("model")
         mpath = _ref_path(mnode, base, "object")
         with _referenced(mnode, "object"):
-            model = load_object(mpath, unit, max_bytes, opening=opening)
+            model = load_object(mpath, unit, max_bytes, opening=opening, gripper=gripper)
         if model.name != oname:
             raise mnode.fail(f"the model of {oname}", f"the model of {model.name}")
         objects[oname] = model
@@ -1492,7 +1503,8 @@ def load_problem(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> Cell:
         rpath = _ref_path(rnode, base, "robot")
         with _referenced(rnode, "robot"):
             robot = load_robot(rpath, unit=unit, max_bytes=max_bytes)
-    objects, positions, model_files = _objects(root, base, unit, max_bytes, robot.finger_separation)
+    objects, positions, model_files = _objects(root, base, unit, max_bytes, robot.finger_separation,
+                                               getattr(robot, "gripper", None))
     grip = root.key("gripper").choice(("open", "closed"))
     unc = root.key("uncertainty")
     man = _bounds(unc.key("manipulator"), 1.0, rad_per)
@@ -1608,7 +1620,8 @@ def check_file(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> str:
         for oname, model in cell.objects.items():
             mfile = next((f for f in cell.files if Path(f).suffix == ".yaml" and _object_name(f) == oname), None)
             if mfile is not None:
-                check_against_shape(mfile, read_yaml(mfile, max_bytes), model, cell.unit, cell.finger_separation)
+                check_against_shape(mfile, read_yaml(mfile, max_bytes), model, cell.unit, cell.finger_separation,
+                                    cell.robot.gripper)
         return f"{path}: ok (problem {cell.name}: {len(cell.objects)} objects, {len(cell.goals)} goals)"
     if kind.name == "object":
         o = load_object(path, _units(root)[0], max_bytes)
@@ -1627,9 +1640,10 @@ def derive_text(path: str | Path, max_bytes: int = MAX_INPUT_BYTES, robot: str |
     A ``mesh:`` path is rewritten relative to ``out_dir`` (where the text will be written)."""
     root = read_kb(path, "object", max_bytes)
     unit, _, rad_per = _units(root)
-    opening = load_robot(robot, unit=unit, max_bytes=max_bytes).finger_separation if robot is not None else None
-    m = load_object(path, unit, max_bytes, opening=opening)
-    check_against_shape(path, root, m, unit, opening)
+    arm = load_robot(robot, unit=unit, max_bytes=max_bytes) if robot is not None else None
+    opening, gripper = (arm.finger_separation, arm.gripper) if arm is not None else (None, None)
+    m = load_object(path, unit, max_bytes, opening=opening, gripper=gripper)
+    check_against_shape(path, root, m, unit, opening, gripper)
 
     def flow(v: Any) -> str:
         return yaml.safe_dump(v, default_flow_style=True, width=10**6, sort_keys=False).strip().removesuffix(
@@ -1669,17 +1683,17 @@ def _object_name(file: str) -> str | None:
 
 
 def check_against_shape(path: str | Path, root: Node, model: ObjectModel, unit: str,
-                        opening: float | None = None) -> None:
+                        opening: float | None = None, gripper: GripperGeometry | None = None) -> None:
     """``spar kb check``: the hand-written faces, stable poses and grasps of a model that also
     gives its geometry must agree with it (world.shapes_derive.check_entries); the first
-    disagreement is a KBError naming the entry. ``opening`` is the gripper's (cell unit;
-    DEFAULT_OPENING_MM without a robot)."""
+    disagreement is a KBError naming the entry. ``gripper`` is the robot's (cell unit), else the
+    default fingers at ``opening`` (cell unit; DEFAULT_OPENING_MM without a robot)."""
     hand = tuple(k for k in DERIVABLE if k in root.value)
     if model.geometry is None or not hand:
         return
     from .world.shapes_derive import Gripper, check_entries
 
-    grip = Gripper.default(unit, opening if opening is not None else from_mm(unit, DEFAULT_OPENING_MM))
+    grip = _derive_gripper(Gripper, unit, opening, gripper)
     try:
         problems = check_entries(model, grip, unit, hand)
     except KBError:

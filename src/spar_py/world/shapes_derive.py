@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -87,16 +87,39 @@ class Gripper:
     finger_width: float
     finger_thickness: float
     palm_depth: float
+    #: the palm's size across the fingers (tool x) and along the closing axis (tool y); None: a
+    #: finger's width, and the open fingers' span (opening + 2 finger thicknesses)
+    palm_width: float | None = None
+    palm_thickness: float | None = None
 
     @classmethod
     def default(cls, unit: str, opening: float) -> "Gripper":
         """Fingers 60 mm long, 20 mm wide, 10 mm thick, a palm 25 mm deep; ``opening`` in ``unit``."""
         return cls(opening, from_mm(unit, 60.0), from_mm(unit, 20.0), from_mm(unit, 10.0), from_mm(unit, 25.0))
 
+    @classmethod
+    def of_robot(cls, g: Any) -> "Gripper":
+        """The robot file's gripper (world.robots.GripperGeometry, cell unit): its opening, its
+        fingers' and palm's boxes, so grasps are derived for the fingers the arm really has."""
+        return cls(g.finger_separation, g.finger_length, g.finger_width, g.finger_thickness, g.palm_length,
+                   g.palm_width, g.palm_thickness)
+
+    def palm_half(self) -> tuple[float, float]:
+        """The palm's half sizes along tool x and tool y."""
+        x = self.finger_width if self.palm_width is None else self.palm_width
+        y = self.opening + 2 * self.finger_thickness if self.palm_thickness is None else self.palm_thickness
+        return x / 2, y / 2
+
     def spec(self) -> list:
-        """Plain data for the content hash."""
-        return [round(v, 12) for v in (self.opening, self.finger_length, self.finger_width,
+        """Plain data for the content hash (the palm's sizes only where they are not the default,
+        so caches written before the robot's palm was read stay valid)."""
+        base = [round(v, 12) for v in (self.opening, self.finger_length, self.finger_width,
                                        self.finger_thickness, self.palm_depth)]
+        px, py = self.palm_half()
+        if (round(px, 12), round(py, 12)) != (round(self.finger_width / 2, 12),
+                                              round(self.opening / 2 + self.finger_thickness, 12)):
+            base += [round(2 * px, 12), round(2 * py, 12)]
+        return base
 
 
 @dataclass(frozen=True)
@@ -337,12 +360,13 @@ def _gripper_boxes(g: Gripper, width: float, reach: float, shrink: float) -> lis
     and the palm swept in along the approach from ``reach`` away, each shrunk by ``shrink``."""
     u, L, t = g.finger_width / 2, g.finger_length, g.finger_thickness
     o, w = g.opening / 2, width / 2
+    px, py = g.palm_half()
     boxes = [
         ("a finger", np.array([-u, w, -L]), np.array([u, w + t, 0.0])),
         ("a finger", np.array([-u, -w - t, -L]), np.array([u, -w, 0.0])),
         ("an open finger on the approach", np.array([-u, o, -reach]), np.array([u, o + t, 0.0])),
         ("an open finger on the approach", np.array([-u, -o - t, -reach]), np.array([u, -o, 0.0])),
-        ("the palm", np.array([-u, -o - t, -reach]), np.array([u, o + t, -L])),
+        ("the palm", np.array([-px, -py, -reach]), np.array([px, py, -L])),
     ]
     return [(what, lo + shrink, hi - shrink) for what, lo, hi in boxes if np.all(hi - lo > 2 * shrink)]
 
