@@ -151,6 +151,28 @@ def test_urdf_cell_gives_the_same_plan_as_the_dh_cell(tmp_path) -> None:
     assert cell.robot.name == "ur5e" and str(URDF.resolve()) in cell.files
 
 
+def test_urdf_links_fixed_to_the_chain_carry_their_collision_shapes() -> None:
+    # UR's base_link hangs above the chain's base_link (`base`) by a fixed joint, the coupling
+    # below tool0: their cylinders count, placed where the URDF puts them (world mm)
+    robot = load_problem(PROBLEMS / "ur5e_urdf_peg_in_block.yaml").robot
+    shapes = {s.name: s for s in robot.links}
+    assert {"base_link", "coupling"} <= set(shapes)
+    base, coupling = shapes["base_link"], shapes["coupling"]
+    assert base.frame == 0 and coupling.frame == 6
+    ends = sorted((robot.base @ np.append(p, 1.0))[2] * 25.4 for p in (base.a, base.b))
+    assert np.allclose(ends, [0.0, 90.0]) and base.radius * 25.4 == pytest.approx(75.0)
+    q = np.radians([10, -80, 70, -30, 40, 20])  # the coupling: 0..65 mm out of the flange, on its axis
+    T = std_fk("ur5e", q[None])[0]  # the published arm's tool (150 mm out of the flange)
+    F = robot.frames(q)[6]
+    flange, z = T[:3, 3] - 150.0 * T[:3, 2], T[:3, 2]
+    along = []
+    for p in (coupling.a, coupling.b):
+        v = (F @ np.append(p, 1.0))[:3] * 25.4 - flange
+        along.append(v @ z)
+        assert np.linalg.norm(v - (v @ z) * z) < 1e-6  # on the flange's axis
+    assert np.allclose(sorted(along), [0.0, 65.0], atol=1e-6)
+
+
 def write_cell(tmp_path: Path, robot_block: str) -> Path:
     text = (PROBLEMS / "ur5e_urdf_peg_in_block.yaml").read_text()
     start = text.index("robot:\n")
