@@ -189,3 +189,23 @@ def test_side_grasp_at_the_blocks_centre_needs_the_table_edge() -> None:
         for n, s in cylinders(qk).items():
             if n != "base" and lowest(*s) <= 2.0:  # the base stands on the table
                 assert least(*s, axis=1) > edge, n
+
+
+def main() -> None:
+    """Print, for the UR5e cell's side grasps on an edgeless table (the pickups that had no
+    collision-free IK), each shape's lowest point per IK branch: independent | module (mm)."""
+    cell = cell_on_open_table("ur5e_peg_in_block")
+    for obj, label, pos in (("block", "p2G1", "tr2"), ("peg", "p1G11", "tr1")):
+        g = cell.objects[obj].grasps[label]
+        Q, ok = ik_rows(cell, (cell.positions[pos].T @ g.T)[None])
+        Q = Q[0][ok[0]]
+        got = module_heights(cell, Q)
+        print(f"pickup({obj}, {label}) at {pos}: lowest point of each shape, mm (independent | module)")
+        for k, q in enumerate(Q):
+            c = cylinders(q)
+            print(f"  q = {np.round(np.degrees(q)).astype(int).tolist()}: "
+                  + ", ".join(f"{n} {lowest(*c[n]):.1f} | {got[n][k]:.1f}" for n in c if n != "base"))
+
+
+if __name__ == "__main__":
+    main()
