@@ -151,6 +151,15 @@ def test_urdf_cell_gives_the_same_plan_as_the_dh_cell(tmp_path) -> None:
     assert cell.robot.name == "ur5e" and str(URDF.resolve()) in cell.files
 
 
+def test_ur_files_give_urs_published_joint_speeds() -> None:
+    # UR's technical specifications: UR5e 180 deg/s on every joint; UR10e 120 on base and shoulder
+    for name, want in (("ur5e", [180] * 6), ("ur10e", [120, 120, 180, 180, 180, 180])):
+        r = load_robot(ROOT / "kb" / "robots" / f"{name}.yaml")
+        assert np.allclose(np.degrees(r.velocity_limits), want)
+    cell = load_problem(PROBLEMS / "ur5e_urdf_peg_in_block.yaml")
+    assert np.allclose(np.degrees(cell.robot.velocity_limits), [180] * 6)
+
+
 def test_urdf_links_fixed_to_the_chain_carry_their_collision_shapes() -> None:
     # UR's base_link hangs above the chain's base_link (`base`) by a fixed joint, the coupling
     # below tool0: their cylinders count, placed where the URDF puts them (world mm)
