@@ -112,24 +112,13 @@ def _without_collisions(tmp_path, name: str):
     return out
 
 
-def test_urdf_cell_gives_the_same_verdict_with_collisions() -> None:
-    # with its collision shapes the UR5e cannot make the cell's side grasps 1.5 in above the
-    # table (its wrist 2 housing, 45 mm in radius, goes through it): both models say so alike
-    planner = Planner(timeout=60)
-    a = planner.plan(str(PROBLEMS / "ur5e_peg_in_block.yaml"))
-    b = planner.plan(str(PROBLEMS / "ur5e_urdf_peg_in_block.yaml"))
-    assert a.outcome.value == b.outcome.value == "no_plan"
-    for p, wrist in ((a, "wrist_2-table"), (b, "wrist_2_link-table")):
-        said = p.reason["collisions"]
-        assert any(s.startswith("no collision-free IK for pickup(block, p2G1) at tr2: ") and wrist in s for s in said)
+#: The paper's plan (Sec. 6): turn the block over with a side grasp, then pick up the peg and insert it.
+PAPER_STEPS = ["pickup(block,p2G1)", "putdown(block,p2P1)", "pickup(peg,p1G10)",
+               "assemble(peg,block,[[peg_face],[block_face]],trans_1,vec_1)"]
 
 
-def test_urdf_cell_gives_the_same_plan_as_the_dh_cell(tmp_path) -> None:
-    # the kinematics alone (collision: false): the URDF's converted chain plans as the DH table does
-    planner = Planner(timeout=60)
-    a = planner.plan(str(_without_collisions(tmp_path, "ur5e_peg_in_block")))
-    b = planner.plan(str(_without_collisions(tmp_path, "ur5e_urdf_peg_in_block")))
-    assert a.outcome.value == b.outcome.value == "plan"
+def _same_plan(a, b) -> None:
+    assert a.outcome.value == b.outcome.value == "plan", (a.reason, b.reason)
     assert [x.term for x in a.actions] == [x.term for x in b.actions]
     assert [s.term for s in a.steps] == [s.term for s in b.steps]
     assert a.partial["ordering"] == b.partial["ordering"]
@@ -137,8 +126,60 @@ def test_urdf_cell_gives_the_same_plan_as_the_dh_cell(tmp_path) -> None:
         assert sa.ik_solver == sb.ik_solver == "closed-form ur"
         assert np.allclose(sa.joints_deg, sb.joints_deg, atol=1e-6)
         assert sa.placement == sb.placement
+
+
+def test_urdf_cell_gives_the_same_plan_with_collisions() -> None:
+    # collision checking on (the cells' default): the UR5e turns the block over with the paper's
+    # side grasp at the table's edge (the table: key), and the URDF's collision cylinders give the
+    # DH file's plan, step for step, joint for joint
+    planner = Planner(timeout=60)
+    a = planner.plan(str(PROBLEMS / "ur5e_peg_in_block.yaml"))
+    b = planner.plan(str(PROBLEMS / "ur5e_urdf_peg_in_block.yaml"))
+    _same_plan(a, b)
+    assert [s.term for s in a.steps] == PAPER_STEPS
+    put = a.steps[1].placement
+    assert put["y"] == pytest.approx(5.0) and round(put["yaw_deg"]) % 360 == 180  # flush with the +y edge
+
+
+def test_urdf_cell_gives_the_same_plan_as_the_dh_cell(tmp_path) -> None:
+    # the kinematics alone (collision: false): the URDF's converted chain plans as the DH table does
+    planner = Planner(timeout=60)
+    a = planner.plan(str(_without_collisions(tmp_path, "ur5e_peg_in_block")))
+    b = planner.plan(str(_without_collisions(tmp_path, "ur5e_urdf_peg_in_block")))
+    _same_plan(a, b)
     cell = load_problem(PROBLEMS / "ur5e_urdf_peg_in_block.yaml")
     assert cell.robot.name == "ur5e" and str(URDF.resolve()) in cell.files
+
+
+def test_ur_files_give_urs_published_joint_speeds() -> None:
+    # UR's technical specifications: UR5e 180 deg/s on every joint; UR10e 120 on base and shoulder
+    for name, want in (("ur5e", [180] * 6), ("ur10e", [120, 120, 180, 180, 180, 180])):
+        r = load_robot(ROOT / "kb" / "robots" / f"{name}.yaml")
+        assert np.allclose(np.degrees(r.velocity_limits), want)
+    cell = load_problem(PROBLEMS / "ur5e_urdf_peg_in_block.yaml")
+    assert np.allclose(np.degrees(cell.robot.velocity_limits), [180] * 6)
+
+
+def test_urdf_links_fixed_to_the_chain_carry_their_collision_shapes() -> None:
+    # UR's base_link hangs above the chain's base_link (`base`) by a fixed joint, the coupling
+    # below tool0: their cylinders count, placed where the URDF puts them (world mm)
+    robot = load_problem(PROBLEMS / "ur5e_urdf_peg_in_block.yaml").robot
+    shapes = {s.name: s for s in robot.links}
+    assert {"base_link", "coupling"} <= set(shapes)
+    base, coupling = shapes["base_link"], shapes["coupling"]
+    assert base.frame == 0 and coupling.frame == 6
+    ends = sorted((robot.base @ np.append(p, 1.0))[2] * 25.4 for p in (base.a, base.b))
+    assert np.allclose(ends, [0.0, 90.0]) and base.radius * 25.4 == pytest.approx(75.0)
+    q = np.radians([10, -80, 70, -30, 40, 20])  # the coupling: 0..65 mm out of the flange, on its axis
+    T = std_fk("ur5e", q[None])[0]  # the published arm's tool (150 mm out of the flange)
+    F = robot.frames(q)[6]
+    flange, z = T[:3, 3] - 150.0 * T[:3, 2], T[:3, 2]
+    along = []
+    for p in (coupling.a, coupling.b):
+        v = (F @ np.append(p, 1.0))[:3] * 25.4 - flange
+        along.append(v @ z)
+        assert np.linalg.norm(v - (v @ z) * z) < 1e-6  # on the flange's axis
+    assert np.allclose(sorted(along), [0.0, 65.0], atol=1e-6)
 
 
 def write_cell(tmp_path: Path, robot_block: str) -> Path:

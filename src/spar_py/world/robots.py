@@ -399,6 +399,9 @@ class UrdfChain:
     unlimited: tuple[str, ...] = ()
     #: the parsed URDF (a yourdfpy.URDF), for its own FK in check_against_urdf
     model: object = field(default=None, compare=False, repr=False)
+    #: links rigid with a chain link by fixed joints (UR's base_link above ``base``, flange, tool0,
+    #: a tool's links): (link, k, T) with T its pose in base_link (k = 0) or in joint k's child (m)
+    fixed: tuple = field(default=(), compare=False, repr=False)
 
     def link_frames(self, q: np.ndarray) -> np.ndarray:
         """(7, 4, 4): each joint's child link frame in base_link, then the tip, for q (6,) rad (m)."""
@@ -473,11 +476,14 @@ def read_urdf_chain(path: str | Path, base_link: str, tip_link: str) -> UrdfChai
     if mimic:
         raise SparValueError(f"joint {mimic[0]!r} mimics another: not 6 independent joints")
     names, children, origins, axes, limits, unlimited = [], [], [], [], [], []
+    # links rigid with base_link (k = 0) or joint k's child, T their pose there
+    rigid = {name: (0, T_b) for name, T_b in above.items()}
     pending = lead  # base_link -> the chain's root, then fixed joints before the next moving one
     for j in chain:
         origin = np.eye(4) if j.origin is None else np.asarray(j.origin, float)
         if j.type == "fixed":
             pending = pending @ origin
+            rigid[j.child] = (len(names), pending.copy())
             continue
         axis = np.array([1.0, 0.0, 0.0]) if j.axis is None else np.asarray(j.axis, float)
         if not np.linalg.norm(axis) > 0:
@@ -494,8 +500,18 @@ def read_urdf_chain(path: str | Path, base_link: str, tip_link: str) -> UrdfChai
         axes.append(_unit(axis))
         limits.append((float(lo), float(hi)))
         pending = np.eye(4)
+        rigid[j.child] = (len(names), pending)
+    todo = list(rigid)  # and whatever hangs off those links by fixed joints only
+    while todo:
+        parent = todo.pop()
+        for j in urdf.robot.joints:
+            if j.parent == parent and j.type == "fixed" and j.child not in rigid:
+                k, T_p = rigid[parent]
+                rigid[j.child] = (k, T_p @ (np.eye(4) if j.origin is None else np.asarray(j.origin, float)))
+                todo.append(j.child)
+    fixed = tuple((name, k, T_k) for name, (k, T_k) in rigid.items() if name != base_link and name not in children)
     return UrdfChain(str(path), str(urdf.robot.name), base_link, tip_link, tuple(names), tuple(children),
-                     np.array(origins), np.array(axes), np.array(limits), pending, tuple(unlimited), urdf)
+                     np.array(origins), np.array(axes), np.array(limits), pending, tuple(unlimited), urdf, fixed)
 
 
 def robot_from_urdf(chain: UrdfChain, name: str, base: np.ndarray, tool: np.ndarray, finger_separation: float,
@@ -536,15 +552,20 @@ def robot_from_urdf(chain: UrdfChain, name: str, base: np.ndarray, tool: np.ndar
 def _urdf_link_shapes(chain: UrdfChain, robot: Robot, base: np.ndarray, offsets: np.ndarray,
                       s: float) -> tuple[LinkShape, ...]:
     """The URDF's own collision primitives (cylinders, boxes, spheres; meshes are skipped) of the
-    base link and each joint's child link, as :class:`LinkShape` in Craig's frames (``offsets``
-    (6, 4, 4): child link i in Craig's frame i+1; the base link is ``base`` in the world), in the
-    robot's unit (``s`` unit per metre). A cylinder becomes a cylinder along its own axis, a
-    box an axis-aligned box where its origin has no rotation (else its bounding capsule), a
-    sphere a capsule of zero length."""
+    base link, each joint's child link and the links rigid with them by fixed joints
+    (``chain.fixed``: UR's base_link above ``base``, a tool's links), as :class:`LinkShape` in
+    Craig's frames (``offsets`` (6, 4, 4): child link i in Craig's frame i+1; the base link is
+    ``base`` in the world), in the robot's unit (``s`` unit per metre). A cylinder becomes a
+    cylinder along its own axis, a box an axis-aligned box where its origin has no rotation (else
+    its bounding capsule), a sphere a capsule of zero length."""
     urdf = chain.model if chain.model is not None else _load_urdf(Path(chain.file))
     by_name = {lk.name: lk for lk in urdf.robot.links}
     to_frame0 = inv(robot.base) @ base
     owners = [(chain.base_link, 0, to_frame0)] + [(c, i + 1, offsets[i]) for i, c in enumerate(chain.children)]
+    for link, k, T_k in chain.fixed:
+        T = np.array(T_k, float)
+        T[:3, 3] *= s
+        owners.append((link, k, (to_frame0 if k == 0 else offsets[k - 1]) @ T))
     out: list[LinkShape] = []
     for link, frame, T_frame_link in owners:
         for k, col in enumerate(by_name[link].collisions if link in by_name else []):
