@@ -51,3 +51,22 @@ def test_feasible_matches_single_ik_queries() -> None:
         single = len(CELL.robot.ik(T)) > 0
         flange_up = (T @ np.linalg.inv(CELL.robot.tool))[2, 3] > 0
         assert f == (single and flange_up)
+
+
+def test_default_region_stays_on_a_table_with_edges() -> None:
+    """Without placement_regions, the free region grown round the initial positions is cut to
+    the table top (``table:``): a put-down never hangs over the edge. The paper's block sits at
+    y = 8 in; a table ending at y = 10 in leaves a strip beyond it, and the chosen placement's
+    whole footprint (computed here from the block's box, not by the module) is on the table."""
+    edge = 10.0
+    cell = replace(CELL, table=(-100.0, 100.0, -100.0, edge), memo=type(CELL.memo)())
+    (r,) = placement.default_regions(cell)
+    assert r["y"][1] == edge and r["y"][0] == placement.default_regions(CELL)[0]["y"][0]
+    assert placement.default_regions(replace(cell, table=(-100.0, 100.0, 50.0, 60.0))) == []
+    blk = CELL.objects["block"]
+    p = placement.choose(cell, "block", "p2P5", [blk.grasps["p2G1"].T], _occupied())
+    assert p is not None
+    (box,) = [s for s in blk.shape if s.kind == "box"]
+    corners = np.array([[x, y, z, 1.0] for x in (box.lo[0], box.hi[0]) for y in (box.lo[1], box.hi[1])
+                        for z in (box.lo[2], box.hi[2])])
+    assert (corners @ p.T.T)[:, 1].max() <= edge + 1e-9

@@ -67,13 +67,28 @@ class Placement:
 
 def default_regions(cell: Cell) -> list[dict]:
     """The free table regions (cell unit): the problem's ``placement_regions`` or, without
-    any, the rectangle spanned by the initial positions grown by REGION_MARGIN_MM each way."""
+    any, the rectangle spanned by the initial positions grown by REGION_MARGIN_MM each way;
+    either cut to the table top's extent where the problem gives one (``table:``), so no
+    put-down hangs over its edge (a region wholly off the table is dropped)."""
     if cell.placement_regions:
-        return cell.placement_regions
-    xy = np.array([p.T[:2, 3] for p in cell.positions.values()])
-    margin = from_mm(cell.unit, REGION_MARGIN_MM)
-    lo, hi = xy.min(axis=0) - margin, xy.max(axis=0) + margin
-    return [{"x": (float(lo[0]), float(hi[0])), "y": (float(lo[1]), float(hi[1]))}]
+        regions = cell.placement_regions
+    else:
+        xy = np.array([p.T[:2, 3] for p in cell.positions.values()])
+        margin = from_mm(cell.unit, REGION_MARGIN_MM)
+        lo, hi = xy.min(axis=0) - margin, xy.max(axis=0) + margin
+        regions = [{"x": (float(lo[0]), float(hi[0])), "y": (float(lo[1]), float(hi[1]))}]
+    return regions if cell.table is None else _on_table(regions, cell.table)
+
+
+def _on_table(regions: list[dict], table: tuple[float, float, float, float]) -> list[dict]:
+    """``regions`` cut to the table top (xlo, xhi, ylo, yhi); the empty ones dropped."""
+    out = []
+    for r in regions:
+        x = (max(r["x"][0], table[0]), min(r["x"][1], table[1]))
+        y = (max(r["y"][0], table[2]), min(r["y"][1], table[3]))
+        if x[0] < x[1] and y[0] < y[1]:
+            out.append({**r, "x": (float(x[0]), float(x[1])), "y": (float(y[0]), float(y[1]))})
+    return out
 
 
 def _disc(c: np.ndarray, r: float) -> np.ndarray:
