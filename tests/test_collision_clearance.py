@@ -26,10 +26,12 @@ bound outside, so their clearances err on the safe side.
 
 Pairs checked at a step's end-point (as issue 15 states them): the arm's links (frames 1..6),
 the palm and fingers and the part in the hand against the table, every obstacle and every part
-where the step's ``poses`` put it. Not checked, being the step's own contacts: the gripper and
+where the step's ``poses`` put it; and the arm against itself: links two or more frames apart
+(the static pedestal, frame 0, against links 2..6), the gripper against links 0..5, the part in
+the hand against links 0..6. Not checked, being the step's own contacts: the gripper and
 the part the fingers hold (pickup, put-down, assemble, squeeze); that part and the table at a
 put-down; that part and the part it is inserted into at an assemble; the robot file's
-``collision: allow`` pairs. The static pedestal (frame 0) and self-collision are not checked.
+``collision: allow`` pairs; the static pedestal against the world.
 """
 from __future__ import annotations
 
@@ -572,6 +574,22 @@ def check_step(geo: CellGeo, cell: Any, step: dict, q_deg: np.ndarray | None = N
                 if step["name"] == "assemble" and w.name == step["args"][1]:
                     continue
             bounds.append(pair_bound(m, w, geo.margin))
+    # the arm against itself: links two or more frames apart (the pedestal, frame 0, with links
+    # 2..6), the gripper with links 0..5 and the part in the hand with links 0..6
+    arm_bodies = [b.moved(arm.base, 0) for b in arm.links if b.frame == 0] + moving
+    for i, m in enumerate(arm_bodies):
+        for o in arm_bodies[i + 1:]:
+            if frozenset((m.name, o.name)) in skip:
+                continue
+            if m.frame == 7 and o.frame == 7:
+                continue  # the gripper and the part in it: the grasp's contact
+            tool, link = (m, o) if m.frame == 7 else (o, m)
+            if tool.frame == 7:
+                if link.frame > (5 if tool.name in gripper else 6):
+                    continue
+            elif abs(m.frame - o.frame) < 2:
+                continue
+            bounds.append(pair_bound(m, o, geo.margin))
     goal = geo.margin - TOL_MM
     closest = min(bounds, key=lambda b: b.lower)
     return StepCheck(step["id"], closest, [b for b in bounds if b.lower < goal])
