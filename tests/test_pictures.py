@@ -514,3 +514,95 @@ def test_no_matplotlib_import_at_package_import() -> None:
     code = "import sys, spar_py.pictures; print('matplotlib' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+# --------------------------------------------------------------------------- collision shapes and obstacles
+
+SHELF = ROOT / "kb" / "problems" / "shelf.yaml"
+ROBOT_YAML = ROOT / "kb" / "robots" / "puma762.yaml"
+GRIPPER_GIDS = ("gripper:palm", "gripper:finger_l", "gripper:finger_r")
+
+
+def _gids(ax: Any) -> list[str]:
+    return [a.get_gid() for a in [*ax.collections, *ax.patches] if a.get_gid()]
+
+
+def test_each_link_shape_the_gripper_and_each_obstacle_is_drawn_in_every_panel(plan: dict[str, Any]) -> None:
+    """The shelf cell at the peg's pickup: every link shape the robot file lists, the palm and
+    both fingers, and the shelf are one artist each in the 3-D, top and side panels; the shelf's
+    top-view outline is the problem file's box."""
+    import matplotlib.pyplot as plt
+    import yaml
+
+    from spar_py.pictures.cell import draw_figure, extent
+
+    links = [ln["name"] for ln in yaml.safe_load(ROBOT_YAML.read_text())["collision"]["links"]]
+    shelf_box = yaml.safe_load(SHELF.read_text())["obstacles"][0]["box"]
+    shelf = load_problem(SHELF)
+    sc = scenes(shelf, plan)
+    fig = draw_figure(shelf, sc[4], extent(shelf, sc))
+    try:
+        panels = fig.axes[:3]
+        for ax in panels:
+            gids = _gids(ax)
+            assert all(gids.count(f"link:{n}") == 1 for n in links), gids
+            assert all(gids.count(g) == 1 for g in GRIPPER_GIDS), gids
+            assert gids.count("obstacle:shelf") == 1
+        top = next(p for p in panels[1].patches if p.get_gid() == "obstacle:shelf")
+        xy = np.asarray(top.get_xy())
+        assert np.allclose(xy.min(axis=0), shelf_box["min"][:2]) and np.allclose(xy.max(axis=0), shelf_box["max"][:2])
+    finally:
+        plt.close(fig)
+
+
+def test_fingers_at_the_grasp_width_and_links_in_their_frames(plan: dict[str, Any]) -> None:
+    """The drawn fingers, in the tool frame, are the robot file's boxes with their contact faces
+    the held grasp's width apart; the forearm is drawn round its capsule's axis in frame 3."""
+    import yaml
+
+    from spar_py.pictures.cell import robot_shapes
+
+    doc = yaml.safe_load(ROBOT_YAML.read_text())
+    mm = 1 / 25.4  # the cell is in inches, the robot file in mm
+    f = doc["gripper"]["finger"]
+    fore = next(ln for ln in doc["collision"]["links"] if ln["name"] == "forearm")
+    cell_ = load_problem(SHELF)
+    s = scenes(cell_, plan)[4]  # after pickup(peg, p1G11): 3 in wide
+    w = cell_.objects["peg"].grasps[PEG_GRASP].width
+    shapes = {sh.gid: sh for sh in robot_shapes(cell_, s)}
+    T = np.linalg.inv(s.tool)
+    left = shapes["gripper:finger_l"].points @ T[:3, :3].T + T[:3, 3]
+    assert np.allclose(left.min(axis=0), [-f["width"] / 2 * mm, w / 2, -f["length"] * mm])
+    assert np.allclose(left.max(axis=0), [f["width"] / 2 * mm, w / 2 + f["thickness"] * mm, 0])
+    F3 = np.linalg.inv(s.frames[3])
+    p = shapes["link:forearm"].points @ F3[:3, :3].T + F3[:3, 3]
+    a, b = np.multiply(fore["capsule"]["from"], mm), np.multiply(fore["capsule"]["to"], mm)
+    t = np.clip((p - a) @ (b - a) / ((b - a) @ (b - a)), 0, 1)
+    r = np.linalg.norm(p - (a + t[:, None] * (b - a)), axis=1)
+    assert np.allclose(r, fore["capsule"]["radius"] * mm)
+
+
+def test_a_cell_with_an_obstacle_is_drawn_differently(plan: dict[str, Any], tmp_path: Path) -> None:
+    """The same scene and extents with and without the shelf: different pictures, the shelf's
+    artist only in the first."""
+    import dataclasses
+
+    import matplotlib.image as mpimg
+    import matplotlib.pyplot as plt
+
+    from spar_py.pictures.cell import cell_figure, draw_figure, extent
+
+    shelf = load_problem(SHELF)
+    bare = dataclasses.replace(shelf, obstacles=())
+    sc = scenes(shelf, plan)
+    fr = extent(shelf, sc)
+    with_it = mpimg.imread(cell_figure(shelf, sc[4], fr, tmp_path / "shelf.png"))
+    without = mpimg.imread(cell_figure(bare, sc[4], fr, tmp_path / "bare.png"))
+    assert with_it.shape == without.shape
+    assert float(np.abs(with_it - without).max()) > 0.2
+    fig = draw_figure(bare, sc[4], fr)
+    try:
+        assert not any(g.startswith("obstacle:") for ax in fig.axes for g in _gids(ax))
+        assert any(g.startswith("link:") for ax in fig.axes for g in _gids(ax))
+    finally:
+        plt.close(fig)

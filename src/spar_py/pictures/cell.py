@@ -1,6 +1,12 @@
 """The work-cell picture at one step: the table, each part drawn from its object's shape at
 its world pose (a part from a mesh, or with holes, by its mesh's facets: world.shapes), the
-arm as a polyline through its frames, and the gripper.
+obstacles, the arm's collision shapes (each link's capsules, cylinders and boxes, placed in
+its frame), the gripper's palm and fingers at the grasp's width, and the arm's skeleton (a
+polyline through its frames) over them.
+
+The shapes drawn are the collision scene's own bodies (world.collision: ``scene_for(cell)``'s
+link bodies and gripper boxes, ``cell.obstacles``' bodies), so the picture shows what the
+collision check sees: a cylinder as its circumscribed prism, a mesh obstacle as its hull.
 
 Three panels per picture: a 3-D view, a top view and a side view, with equal axis scaling
 and the same extents for every step of a plan. What is drawn is a :class:`Scene`
@@ -31,16 +37,22 @@ from .scene import MIN_SIZE_MM, Scene, part_model, scenes
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
 
+    from ..world.collision import Body
     from ..world.robots import Robot
     from ..model import Cell, ObjectModel, Solid
 
-__all__ = ["arm_polyline", "cell_figure", "cell_png", "extent", "gripper_segments", "hole_mouth",
-           "object_points", "solid_faces", "solid_points"]
+__all__ = ["Shape", "arm_polyline", "body_faces", "cell_figure", "cell_png", "draw_figure", "extent",
+           "gripper_segments", "hole_mouth", "obstacle_shapes", "object_points", "robot_shapes", "solid_faces",
+           "solid_points"]
 
 OBJECT_COLOURS = ("#4c72b0", "#dd8452", "#55a868", "#c44e52", "#8172b3", "#937860", "#da8bc3")
 TABLE_COLOUR = "#c8b48a"
 ARM_COLOUR = "#3a3a3a"
 GRIPPER_COLOUR = "#b22222"
+LINK_COLOUR = "#9aa7b8"
+OBSTACLE_COLOUR = "#7f7f7f"
+#: Sides of the polygons a capsule is drawn with (round its axis), and rings per end cap.
+CAPSULE_SIDES, CAPSULE_RINGS = 16, 4
 HOLE_COLOUR = "#1a1a1a"
 VIEW_3D = (22.0, -58.0)  # elevation, azimuth (deg) of the 3-D panel
 TOP_EYE = (0.0, 0.0, 1.0)  # the top view looks down from +z
@@ -169,6 +181,102 @@ def _disc(centre: np.ndarray, normal: np.ndarray, radius: float, segments: int =
     a = np.linspace(0.0, 2 * math.pi, segments, endpoint=False)
     return centre + radius * (np.outer(np.cos(a), u) + np.outer(np.sin(a), v))
 
+# =========================================================================== collision shapes
+
+
+@dataclass(frozen=True)
+class Shape:
+    """One collision body as drawn: ``gid`` names it (``link:forearm``, ``gripper:palm``,
+    ``obstacle:shelf``; the matplotlib artists carry it), ``faces`` its polygons (each (m, 3)
+    world points, cell unit), ``points`` its outline points (k, 3) (the 2-D views draw their
+    projected hull: the bodies are convex), ``colour`` and ``alpha``."""
+
+    gid: str
+    faces: list[np.ndarray]
+    points: np.ndarray
+    colour: str
+    alpha: float = 1.0
+
+
+def _capsule_mesh(a: np.ndarray, b: np.ndarray, r: float) -> tuple[list[np.ndarray], np.ndarray]:
+    """Faces and points of a capsule (segment a-b grown by r, world): rings of CAPSULE_SIDES
+    points along the axis, CAPSULE_RINGS per hemispherical end, joined by quads."""
+    d = b - a
+    L = float(np.linalg.norm(d))
+    z = d / L if L > 0 else np.array([0.0, 0.0, 1.0])
+    x = np.cross(z, [1.0, 0.0, 0.0] if abs(z[0]) < 0.9 else [0.0, 1.0, 0.0])
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    k = np.linspace(0.0, 2 * math.pi, CAPSULE_SIDES, endpoint=False)
+    circle = np.cos(k)[:, None] * x + np.sin(k)[:, None] * y
+    lat = np.linspace(0.0, math.pi / 2, CAPSULE_RINGS + 1)  # 0 at the equator, pi/2 at the pole
+    rings = [a - r * math.sin(t) * z + r * math.cos(t) * circle for t in lat[::-1]]
+    rings += [b + r * math.sin(t) * z + r * math.cos(t) * circle for t in lat]
+    faces = [np.array([p[i], p[(i + 1) % CAPSULE_SIDES], q[(i + 1) % CAPSULE_SIDES], q[i]])
+             for p, q in zip(rings, rings[1:]) for i in range(CAPSULE_SIDES)]
+    return faces, np.vstack(rings)
+
+
+def body_faces(body: Body, T_frame: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
+    """A collision body (world.collision.Body) placed by its frame's world pose ``T_frame``
+    (4x4): its faces (each (m, 3) world points) and outline points (k, 3). A box gives its 6
+    faces, a cylinder its prism's, a capsule a tube with round ends, a convex body its hull's
+    triangles."""
+    T = np.asarray(T_frame, float)
+    P = np.asarray(body.points, float) @ T[:3, :3].T + T[:3, 3]
+    if body.kind == "capsule":
+        return _capsule_mesh(P[0], P[-1], float(body.size[0]))
+    if body.kind in ("box", "cylinder"):
+        return _faces_of_points(P), P
+    from scipy.spatial import ConvexHull
+
+    try:
+        hull = ConvexHull(P)
+    except Exception:  # flat or degenerate: its points as one polygon
+        return [P], P
+    return [P[list(f)] for f in hull.simplices], P
+
+
+def robot_shapes(cell: Cell, s: Scene) -> list[Shape]:
+    """The arm's collision bodies at scene ``s``: each link shape of the robot file in its
+    frame (the pedestal's frame 0 even without a configuration), and with a configuration the
+    palm and fingers, their contact faces at the held grasp's width (open: finger_separation)."""
+    from ..world.collision import TOOL, scene_for
+
+    scene = scene_for(cell)
+    base = np.asarray(cell.robot.base, float)
+    alpha = 0.9 * _arm_alpha(s)
+    out = []
+    for b in scene.links:
+        if s.frames is None and b.frame != 0:
+            continue
+        T = base if b.frame == 0 else s.frames[b.frame]
+        faces, pts = body_faces(b, T)
+        out.append(Shape(f"link:{b.name}", faces, pts, LINK_COLOUR, alpha))
+    if s.frames is not None:
+        for b in scene.gripper_bodies(_grip_width(cell, s)):
+            faces, pts = body_faces(b, s.frames[TOOL])
+            out.append(Shape(f"gripper:{b.name}", faces, pts, GRIPPER_COLOUR, alpha))
+    return out
+
+
+def obstacle_shapes(cell: Cell) -> list[Shape]:
+    """The problem file's obstacles (``cell.obstacles``), one Shape per body, in the world."""
+    out = []
+    for o in getattr(cell, "obstacles", ()):
+        for b in o.bodies:
+            faces, pts = body_faces(b, np.eye(4))
+            out.append(Shape(f"obstacle:{o.name}", faces, pts, OBSTACLE_COLOUR, 0.55))
+    return out
+
+
+def _grip_width(cell: Cell, s: Scene) -> float:
+    """The fingers' opening at scene ``s``: the held grasp's width, else finger_separation (cell unit)."""
+    if s.held is not None and s.grasp is not None:
+        return float(cell.objects[part_model(s.held)].grasps[s.grasp].width)
+    return float(cell.finger_separation)
+
+
 
 # =========================================================================== extents
 
@@ -213,13 +321,15 @@ def _table(cell: Cell, all_scenes: Sequence[Scene]) -> tuple[float, float, float
 
 
 def extent(cell: Cell, all_scenes: Sequence[Scene]) -> Extent:
-    """Table and axis box shared by all pictures of a plan: parts, table, pedestal and
-    every arm configuration, with a 5 % margin (cell unit)."""
+    """Table and axis box shared by all pictures of a plan: parts, table, pedestal, obstacles
+    and every arm configuration with its link shapes, with a 5 % margin (cell unit)."""
     table = _table(cell, all_scenes)
     base = np.asarray(cell.robot.base, float)[:3, 3]
     pts = [np.array([[table[0], table[2], 0.0], [table[1], table[3], 0.0], base, [base[0], base[1], 0.0]])]
     pts += _part_points(cell, all_scenes)
     pts += [p for s in all_scenes if (p := _arm_points(cell, s)) is not None]
+    pts += [sh.points for sh in obstacle_shapes(cell)]
+    pts += [sh.points for s in all_scenes for sh in robot_shapes(cell, s)]
     allp = np.vstack(pts)
     lo, hi = allp.min(axis=0), allp.max(axis=0)
     m = 0.05 * float(max(hi - lo))
@@ -302,25 +412,44 @@ def _arm_alpha(s: Scene) -> float:
     return 0.35 if s.arm_note == "first configuration" else 1.0
 
 
-def _draw_arm(ax: Any, cell: Cell, s: Scene, proj: Projection, zorder: float = 3) -> None:
-    """The pedestal, the arm skeleton and the gripper on ``ax``."""
+def _draw_arm(ax: Any, cell: Cell, s: Scene, proj: Projection, zorder: float = 3, shapes: bool = False) -> None:
+    """The pedestal (unless its link shape is drawn), the arm skeleton over the link shapes,
+    and the gripper as lines where its boxes are not drawn (``shapes``: they are)."""
     base = np.asarray(cell.robot.base, float)[:3, 3]
-    ax.plot(*proj(np.array([[base[0], base[1], 0.0], base])), color="#888888", lw=7, solid_capstyle="butt",
-            zorder=zorder)
+    if not shapes or not any(b.frame == 0 for b in cell.robot.links):
+        ax.plot(*proj(np.array([[base[0], base[1], 0.0], base])), color="#888888", lw=7, solid_capstyle="butt",
+                zorder=zorder)
     pts = _arm_points(cell, s)
     if pts is None or s.tool is None:
         return
-    ax.plot(*proj(pts), color=ARM_COLOUR, lw=3.5, alpha=_arm_alpha(s), marker="o", ms=4, solid_capstyle="round",
-            zorder=zorder)
-    width = cell.finger_separation
-    if s.held is not None and s.grasp is not None:
-        width = cell.objects[part_model(s.held)].grasps[s.grasp].width
-    for seg in gripper_segments(s.tool, width, _finger_length(cell)):
+    ax.plot(*proj(pts), color=ARM_COLOUR, lw=1.6 if shapes else 3.5, alpha=_arm_alpha(s), marker="o",
+            ms=3 if shapes else 4, solid_capstyle="round", zorder=zorder, gid="skeleton")
+    if shapes:
+        return
+    for seg in gripper_segments(s.tool, _grip_width(cell, s), _finger_length(cell)):
         ax.plot(*proj(seg), color=GRIPPER_COLOUR, lw=2.4, alpha=_arm_alpha(s), zorder=zorder + 0.1)
 
 
+def _items(cell: Cell, s: Scene, eye: Sequence[float]) -> list[tuple[str, list[np.ndarray], np.ndarray, str, float,
+                                                                   str]]:
+    """Everything painted in a view, far to near along ``eye``: the parts (:func:`_paint_list`),
+    the obstacles and the arm's collision shapes, each (kind, faces, outline points, colour,
+    alpha, gid); kinds 'solid' | 'hole' | 'facet' (parts) and 'shape'."""
+    e = np.asarray(eye, float)
+    items: list[tuple[float, tuple[str, list[np.ndarray], np.ndarray, str, float, str]]] = []
+    for kind, p, colour in _paint_list(cell, s, eye):
+        faces = [p] if kind in ("hole", "facet") else _faces_of_points(p)
+        items.append((float(p.mean(axis=0) @ e),
+                      (kind, faces, p, colour, 0.92 if kind == "solid" else 1.0, f"part:{kind}")))
+    for sh in obstacle_shapes(cell) + robot_shapes(cell, s):
+        items.append((float(sh.points.mean(axis=0) @ e), ("shape", sh.faces, sh.points, sh.colour, sh.alpha, sh.gid)))
+    items.sort(key=lambda t: t[0])
+    return [it for _, it in items]
+
+
 def _draw_3d(ax: Any, cell: Cell, s: Scene, fr: Extent) -> None:
-    """The 3-D panel; painted in a fixed order (table, parts far to near, arm on top)."""
+    """The 3-D panel; painted in a fixed order (table, parts, obstacles and the arm's shapes far
+    to near, the skeleton on top)."""
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
     ax.computed_zorder = False
@@ -328,13 +457,13 @@ def _draw_3d(ax: Any, cell: Cell, s: Scene, fr: Extent) -> None:
     ax.add_collection3d(Poly3DCollection([np.array([[x0, y0, 0], [x1, y0, 0], [x1, y1, 0], [x0, y1, 0]])],
                                          facecolor=TABLE_COLOUR, alpha=0.35, edgecolor="#8a7a5a", zorder=1),
                         autolim=False)
-    for k, (kind, p, colour) in enumerate(_paint_list(cell, s, _view_eye(*VIEW_3D))):
-        faces = [p] if kind in ("hole", "facet") else _faces_of_points(p)
-        ax.add_collection3d(Poly3DCollection(faces, facecolor=colour, alpha=0.92 if kind == "solid" else 1.0,
-                                             edgecolor=colour if kind == "facet" else "#222222", linewidths=0.3,
-                                             zorder=2 + k * 1e-3),
+    for k, (kind, faces, _, colour, alpha, gid) in enumerate(_items(cell, s, _view_eye(*VIEW_3D))):
+        edge = colour if kind == "facet" else "#555555" if kind == "shape" else "#222222"
+        ax.add_collection3d(Poly3DCollection(faces, facecolor=colour, alpha=alpha, edgecolor=edge,
+                                             linewidths=0.1 if kind == "shape" else 0.3, zorder=2 + k * 1e-3,
+                                             gid=gid),
                             autolim=False)
-    _draw_arm(ax, cell, s, lambda p: (p[:, 0], p[:, 1], p[:, 2]), zorder=3)
+    _draw_arm(ax, cell, s, lambda p: (p[:, 0], p[:, 1], p[:, 2]), zorder=3, shapes=True)
     c, h = (fr.lo + fr.hi) / 2, float(max(fr.hi - fr.lo)) / 2
     ax.set_xlim(c[0] - h, c[0] + h)
     ax.set_ylim(c[1] - h, c[1] + h)
@@ -359,10 +488,10 @@ def _draw_2d(ax: Axes, cell: Cell, s: Scene, fr: Extent, axes: tuple[int, int], 
     else:
         lo, hi = (x0, x1) if i == 0 else (y0, y1)
         ax.plot([lo, hi], [0, 0], color="#8a7a5a", lw=4, solid_capstyle="butt")
-    for kind, p, colour in _paint_list(cell, s, eye):
+    for kind, _, p, colour, alpha, gid in _items(cell, s, eye):
         ax.add_patch(Polygon(convex_hull_2d(p[:, [i, j]]), closed=True, fc=colour, ec="#222222",
-                             lw=0.6 if kind == "solid" else 0.0, alpha=0.92 if kind == "solid" else 1.0))
-    _draw_arm(ax, cell, s, lambda p: (p[:, i], p[:, j]))
+                             lw=0.6 if kind in ("solid", "shape") else 0.0, alpha=alpha, gid=gid))
+    _draw_arm(ax, cell, s, lambda p: (p[:, i], p[:, j]), shapes=True)
     ax.set_xlim(fr.lo[i], fr.hi[i])
     ax.set_ylim(fr.lo[j], fr.hi[j])
     ax.set_aspect("equal", adjustable="box", anchor="W")
@@ -374,7 +503,7 @@ def _draw_2d(ax: Axes, cell: Cell, s: Scene, fr: Extent, axes: tuple[int, int], 
 
 def _legend(cell: Cell, s: Scene) -> list[Any]:
     """Legend entries: each object present (the held one with its grasp), hole mouths if any
-    is seen, the table, the arm and the gripper."""
+    is seen, the obstacles, the link shapes, the table, the arm's frames and the gripper."""
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 
@@ -386,16 +515,23 @@ def _legend(cell: Cell, s: Scene) -> list[Any]:
     eyes = (_view_eye(*VIEW_3D), TOP_EYE, SIDE_EYE)
     if any(kind == "hole" for e in eyes for kind, *_ in _paint_list(cell, s, e)):
         handles.append(Patch(fc=HOLE_COLOUR, label="hole mouth"))
+    if getattr(cell, "obstacles", ()):
+        handles.append(Patch(fc=OBSTACLE_COLOUR, alpha=0.55, ec="#222222",
+                             label="obstacles: " + ", ".join(o.name for o in cell.obstacles)))
+    if cell.robot.links:
+        handles.append(Patch(fc=LINK_COLOUR, alpha=0.9 * _arm_alpha(s), ec="#222222", label="link shapes"))
     return handles + [
         Patch(fc=TABLE_COLOUR, alpha=0.35, ec="#8a7a5a", label="table (z = 0)"),
-        Line2D([], [], color=ARM_COLOUR, lw=3.5, marker="o", ms=4, alpha=_arm_alpha(s),
+        Line2D([], [], color=ARM_COLOUR, lw=1.6, marker="o", ms=3, alpha=_arm_alpha(s),
                label=f"{cell.robot.name} DH frames" + (f" ({s.arm_note})" if s.arm_note else "")),
-        Line2D([], [], color=GRIPPER_COLOUR, lw=2.4, label="gripper"),
+        Patch(fc=GRIPPER_COLOUR, ec="#222222", label="gripper (palm, fingers)"),
     ]
 
 
-def cell_figure(cell: Cell, s: Scene, fr: Extent, path: str | Path) -> Path:
-    """Draw scene ``s`` within extents ``fr`` into the PNG ``path`` (1200 x 720 px) and return the path."""
+def draw_figure(cell: Cell, s: Scene, fr: Extent) -> Any:
+    """The matplotlib Figure (1200 x 720 px at 100 dpi) of scene ``s`` within extents ``fr``,
+    not saved; the caller closes it (``matplotlib.pyplot.close``). Each drawn collision body's
+    artists carry its ``gid`` (:class:`Shape`): one per panel."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -414,7 +550,19 @@ def cell_figure(cell: Cell, s: Scene, fr: Extent, path: str | Path) -> Path:
         if s.detail:
             fig.text(0.5, 0.935, s.detail, ha="center", va="top", fontsize=9, family="monospace")
         handles = _legend(cell, s)
-        fig.legend(handles=handles, loc="lower center", ncol=len(handles), fontsize=9, frameon=False)
+        fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 6), fontsize=9, frameon=False)
+    except BaseException:
+        plt.close(fig)
+        raise
+    return fig
+
+
+def cell_figure(cell: Cell, s: Scene, fr: Extent, path: str | Path) -> Path:
+    """Draw scene ``s`` within extents ``fr`` into the PNG ``path`` (1200 x 720 px) and return the path."""
+    import matplotlib.pyplot as plt
+
+    fig = draw_figure(cell, s, fr)
+    try:
         fig.savefig(path, dpi=100, facecolor="white")
     finally:
         plt.close(fig)
