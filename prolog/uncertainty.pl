@@ -425,9 +425,12 @@ step_out(Geo, step(Id, Action), D) :-
     geo_value(G, from, From),
     geo_value(G, poses, Poses),
     geo_value(G, held, Held),
+    geo_value(G, clearance, Clear),
+    geo_value(G, closest_pair, Pair),
     D = _{id: IdText, kind: Kind, serves: Serves, term: Term, name: Name, object: Obj,
           args: Args, tool_pose: TP, joints_deg: Q, ik_solutions_deg: Sols, ik_solver: Solver,
-          placement: Pl, from: From, poses: Poses, held: Held}.
+          placement: Pl, from: From, poses: Poses, held: Held, clearance: Clear,
+          closest_pair: Pair}.
 
 step_kind(sense(A, _), _, sensing, A) :- !.
 step_kind(squeeze(A), _, squeeze, A) :- !.

@@ -648,6 +648,10 @@ def test_every_step_is_clear_by_the_margin(planned, stem: str) -> None:
             f"{stem} {s['id']} {s['term']}: closer than the margin {geo.margin:.3g} mm: "
             + ", ".join(f"{b.moving}-{b.other} >= {b.lower:.3f} mm" for b in verdict.violations))
         assert verdict.closest.lower >= geo.margin - TOL_MM
+        # the step's own report (JSON clearance and closest_pair, issue 15 item 3): two named
+        # bodies at least the margin apart
+        assert s["clearance"] is not None and len(s["closest_pair"]) == 2, s["id"]
+        assert s["clearance"] * geo.k >= geo.margin - TOL_MM, s["id"]
 
 
 def test_the_checker_fails_a_step_driven_into_the_table(planned) -> None:

@@ -96,7 +96,10 @@ class Step:
     solver gave the joints ("closed-form puma", "closed-form ur" or "numeric": not complete); ``poses`` every
     part's 4x4 world pose at the step's end-point (part key: the object name, or
     ``object@initial_position`` for the other parts of a stock); ``held`` the object in
-    the hand after the step, or None."""
+    the hand after the step, or None; ``clearance`` the least distance (cell unit) between
+    the arm, gripper or held part and anything else at the joints used, beyond the collision
+    margin's checks (None where the cell has no collision check), ``closest_pair`` the two
+    bodies at that distance."""
 
     id: str
     kind: str
@@ -114,6 +117,8 @@ class Step:
     poses: dict[str, list[list[float]]]
     held: str | None
     verdicts: tuple[Verdict, ...]
+    clearance: float | None = None
+    closest_pair: tuple[str, str] | None = None
 
 
 @dataclass
@@ -206,7 +211,9 @@ def _step(s: dict[str, Any], verdicts: list[Verdict]) -> Step:
                 joints_deg=s.get("joints_deg"), ik_solutions_deg=list(s.get("ik_solutions_deg") or []),
                 ik_solver=s.get("ik_solver"),
                 placement=s.get("placement"), source=s.get("from"), poses=dict(s.get("poses") or {}),
-                held=s.get("held"), verdicts=tuple(v for v in verdicts if v.action == s["id"]))
+                held=s.get("held"), clearance=s.get("clearance"),
+                closest_pair=tuple(s["closest_pair"]) if s.get("closest_pair") else None,
+                verdicts=tuple(v for v in verdicts if v.action == s["id"]))
 
 
 def _plan(problem: str, d: dict[str, Any], trace: str) -> Plan:
