@@ -170,7 +170,9 @@ def test_options_are_checked() -> None:
 
 
 def _robot_file(tmp_path: Path, extra: str) -> Path:
-    text = PUMA.read_text() + "\n" + extra + "\n"
+    own = [ln for ln in PUMA.read_text().splitlines()
+           if not ln.startswith(tuple(k.split(":")[0] + ":" for k in extra.splitlines()))]
+    text = "\n".join(own) + "\n" + extra + "\n"  # the test's keys replace the file's own
     p = tmp_path / "arm.yaml"
     p.write_text(text)
     return p
