@@ -348,3 +348,58 @@ def test_animation_needs_motions(motion_plans) -> None:
     doc["instance"] = {**doc["instance"], "motion": None}
     with pytest.raises(SparValueError, match="no-motion"):
         frames_of(cell, doc)
+
+
+def test_certified_segments_agree_with_checking_every_waypoint() -> None:
+    """certify (clearance bounds, bisection) says a segment is clear exactly when
+    SceneState.check finds every waypoint at the resolution clear, and a blocked index it
+    names is a waypoint the check refuses. Segments of the wall cell: through a blocked
+    configuration (the arm in the table, the wall or a part) with both ends just clear of it,
+    so only the interior decides, and random short segments with clear ends."""
+    from spar_py import Planner
+    from spar_py.world.collision import scene_for
+
+    cell = Planner(motion=True).load_problem(ROOT / "kb" / "problems" / "wall_detour.yaml")
+    scene = scene_for(cell)
+    state = scene.at({p.obj: np.asarray(p.T, float) for p in cell.positions.values()})
+    res = mo.resolution(cell.robot.dh, cell.robot.tool, scene.margin, mo.extent(cell))
+    rng = np.random.default_rng(7)
+    lo, hi = cell.robot.limits[:, 0], cell.robot.limits[:, 1]
+    segments = []
+    t = np.linspace(-1.0, 1.0, 201)
+    while len(segments) < 12:  # grazing chords: the line through a blocked q, shifted until nearly clear
+        q = rng.uniform(lo, hi)
+        if state.clear(q[None])[0]:
+            continue
+        u, v = rng.normal(size=6), rng.normal(size=6)
+        u /= np.linalg.norm(u)
+        v -= (v @ u) * u
+        v /= np.linalg.norm(v)
+        last = None
+        for shift in np.arange(0.0, 1.0, 0.02):
+            line = q + shift * v + np.outer(t, u)
+            if np.any((line < lo) | (line > hi)):
+                break
+            ok = state.clear(line)
+            if ok.all():
+                break
+            last = (line, ok)
+        if last is None or not last[1][0] or not last[1][-1]:
+            continue
+        line, ok = last
+        segments.append([line[0], line[-1]])
+    while len(segments) < 28:
+        a = rng.uniform(lo, hi)
+        b = np.clip(a + rng.normal(0, 0.3, 6), lo, hi)
+        if state.clear(np.array([a, b])).all():
+            segments.append([a, b])
+    verdicts = []
+    for a, b in segments:
+        w = mo.densify(np.array([a, b]), res)
+        every = state.clear(w)
+        k, pair = mo.certify(state, w)
+        assert (k < 0) == bool(every.all())
+        if k >= 0:
+            assert not every[k] and pair is not None
+        verdicts.append(k < 0)
+    assert sum(verdicts) >= 8 and len(verdicts) - sum(verdicts) >= 6  # both answers exercised
