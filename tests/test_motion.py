@@ -315,15 +315,21 @@ def test_every_path_of_every_regression_plan(motion_plans) -> None:
 
 
 def test_enclosed_part_has_no_plan_and_names_the_enclosure(motion_plans) -> None:
-    """The part in a closed box: no plan, and the reason names a body of the box (at the
-    end-points, issue 15's collision-aware reach, or at the motions: reason.motion)."""
+    """The part in a box whose lid's hole passes the gripper's mount but not the gripper: the
+    top grasp's end-point is clear (it is not among the end-point refusals), no motion reaches
+    it, and the reason names that motion (the approach to the pickup) and a gripper body and
+    a lid slab as the pair that blocks it."""
     got = {Path(p).stem: plan for p, _, plan in motion_plans}
     plan = got["enclosed_part"]
     assert not plan.ok
-    box = {"wall_n", "wall_s", "wall_e", "wall_w", "lid"}
-    texts = list(plan.reason.get("collisions") or [])
-    texts += [f["text"] for f in plan.reason.get("motion_failures") or []]
-    assert any(n in t for t in texts for n in box), plan.reason
+    assert not any("p1G10" in t for t in plan.reason.get("collisions") or [])  # its end-point is clear
+    fails = [f for f in plan.reason.get("motion_failures") or [] if "pickup(peg, p1G10)" in f["motion"]]
+    assert fails, plan.reason
+    f = fails[0]
+    assert f["motion"].startswith("approach to ")
+    pair = set(f["pair"])
+    assert pair & {"palm", "finger_l", "finger_r"} and pair & {"lid_w", "lid_e", "lid_n", "lid_s"}, f
+    assert "lid_" in f["text"] and "approach" in f["text"]
 
 
 def test_animation_replays_the_motions(motion_plans, tmp_path: Path) -> None:
