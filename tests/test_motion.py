@@ -409,3 +409,45 @@ def test_certified_segments_agree_with_checking_every_waypoint() -> None:
             assert not every[k] and pair is not None
         verdicts.append(k < 0)
     assert sum(verdicts) >= 8 and len(verdicts) - sum(verdicts) >= 6  # both answers exercised
+
+
+def test_animation_draws_the_link_shapes(motion_plans) -> None:
+    """The animation's link geometry is each robot-file shape where the test's own Craig FK
+    puts it: every drawn vertex of a capsule within its radius of the capsule's axis (and
+    the radius reached), every box corner the robot file's corner moved by that frame."""
+    from spar_py.pictures.animate import arm_faces
+
+    _, cell, _ = next(x for x in motion_plans if Path(x[0]).stem == "wall_detour")
+    robot = cell.robot
+    q = np.radians([20.0, -70.0, 30.0, 10.0, 40.0, -20.0])
+    F = _frames(robot, q[None])[0]
+    faces = dict(arm_faces(cell, q))
+    assert {s.name for s in robot.links} | {"palm", "finger_l", "finger_r"} <= set(faces)
+    for s in robot.links:
+        pts = np.concatenate(faces[s.name])
+        a = F[s.frame, :3, :3] @ s.a + F[s.frame, :3, 3]
+        b = F[s.frame, :3, :3] @ s.b + F[s.frame, :3, 3]
+        if s.kind == "capsule":
+            u = b - a
+            t = np.clip((pts - a) @ u / max(u @ u, 1e-12), 0, 1) if u @ u > 0 else np.zeros(len(pts))
+            d = np.linalg.norm(pts - (a + t[:, None] * u), axis=1)
+            assert d.max() <= s.radius * (1 + 1e-9) and d.max() >= 0.95 * s.radius, s.name
+        elif s.kind == "box":
+            corners = np.array([[x, y, z] for x in (s.a[0], s.b[0]) for y in (s.a[1], s.b[1])
+                                for z in (s.a[2], s.b[2])]) @ F[s.frame, :3, :3].T + F[s.frame, :3, 3]
+            assert all(np.isclose(np.linalg.norm(pts - c, axis=1).min(), 0, atol=1e-9) for c in corners), s.name
+
+
+def test_cli_animate_writes_the_gif(tmp_path: Path, capsys) -> None:
+    """`spar plan CELL --animate FILE.gif` writes a GIF of several frames (and nothing else
+    is needed on the command line: --animate plans the motions)."""
+    from PIL import Image
+
+    from spar_py import cli
+
+    gif = tmp_path / "out" / "wall.gif"
+    with pytest.raises(SystemExit) as e:
+        cli.main(["plan", str(ROOT / "kb" / "problems" / "wall_detour.yaml"), "--animate", str(gif)])
+    assert e.value.code == 0
+    with Image.open(gif) as im:
+        assert im.n_frames > 10
