@@ -2,7 +2,8 @@
 (the cell loaded and planned once with --no-motion first, so phase 1 and the end-points
 are memoised and only the motions are planned again), one run per OMPL seed; the median
 over the seeds, the end-point-only plan as the peer measured in the same run; path length
-(joint space, rad) before and after OMPL's simplification; the plan JSON's size.
+(joint space, rad) before and after OMPL's simplification; the plan JSON's size and its
+waypoints (medians over the seeds).
 
 Goal (issue 16): the paper's cell with motions at most 1 s warm, median over 10 seeds.
 
@@ -33,7 +34,7 @@ def one_cell(path: str, seeds: int, budget: float) -> dict:
     t = time.perf_counter()
     peer.plan(path)
     endpoints_s = time.perf_counter() - t
-    times, outcome, raw, simp, size, why, ompl, points = [], "", [], [], 0, "", [], 0
+    times, outcome, raw, simp, sizes, why, ompl, points = [], "", [], [], [], "", [], []
     pl = Planner(motion=True)
     pl.plan(path, phase1_only=True)  # load the cell, phase 1 memoised
     for seed in range(seeds):
@@ -47,17 +48,17 @@ def one_cell(path: str, seeds: int, budget: float) -> dict:
             raw.append(m["length_before_simplification_rad"])
             simp.append(m["length_after_simplification_rad"])
             ompl.append(m["ompl_motions"])
-            size = len(p.dumps())
+            sizes.append(len(p.dumps()))
             steps = p.instance.get("steps") or []
-            points = sum(len(st.get(k) or []) for st in steps for k in ("path", "approach", "retreat"))
-            points += len(m.get("home_path") or [])
+            points.append(sum(len(st.get(k) or []) for st in steps for k in ("path", "approach", "retreat"))
+                          + len(m.get("home_path") or []))
         else:
             why = (p.reason or {}).get("why", "")
     med = statistics.median
     return {"cell": path, "outcome": outcome, "seeds": seeds, "median_s": med(times), "max_s": max(times),
             "endpoints_s": endpoints_s, "length_raw_rad": med(raw) if raw else None,
             "length_simplified_rad": med(simp) if simp else None, "ompl_motions": med(ompl) if ompl else None,
-            "json_bytes": size, "waypoints": points, "why": why}
+            "json_bytes": med(sizes) if sizes else 0, "waypoints": med(points) if points else 0, "why": why}
 
 
 def run(seeds: int = 10, budget: float = 1.0, cells: tuple[str, ...] = CELLS) -> dict:
