@@ -128,12 +128,13 @@ def resolution(dh: np.ndarray, tool: np.ndarray, margin: float, extent: float) -
     A point p moves by at most sum_i |dq_i| r_i(p) when the joints move by dq, r_i(p) its
     distance from joint i's axis; r_i(p) is at most the distance from frame i's origin (on
     axis i) to p, bounded by the link offsets from frame i to the flange (Craig rows
-    i+1..6: |a_{j-1}| + |d_j|), the tool offset and ``extent`` (the gripper's and held
-    part's reach beyond the tool centre, cell unit). So a step of ``margin / sum_i R_i``
-    in every joint keeps every point within the margin."""
+    i+1..6: frame j's origin is sqrt(a_{j-1}^2 + d_j^2) from frame j-1's, a_{j-1} along
+    x_{j-1} and d_j along z_j, perpendicular), the tool offset and ``extent`` (the
+    gripper's and held part's reach beyond the tool centre, cell unit). So a step of
+    ``margin / sum_i R_i`` in every joint keeps every point within the margin."""
     if not margin > 0:
         raise SparValueError(f"clearance margin {margin!r}: expected a positive length")
-    off = np.abs(dh[:, 1]) + np.abs(dh[:, 2])
+    off = np.hypot(dh[:, 1], dh[:, 2])
     tail = float(np.linalg.norm(tool[:3, 3])) + float(extent)
     reach = [float(off[i + 1:].sum()) + tail for i in range(6)]
     return margin / sum(reach)
