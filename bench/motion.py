@@ -19,10 +19,14 @@ import statistics
 import time
 
 CELLS = ("kb/problems/peg_in_block.yaml", "kb/problems/wall_detour.yaml")
-#: Warm seconds with motions at commit e9a0a9b (per-waypoint checks): the median over the seeds
-#: that were run (paper cell: seeds 0, 1; wall cell: seeds 0-2), the range, and how many seeds.
-BEFORE = {"kb/problems/peg_in_block.yaml": {"median_s": 23.0, "range_s": (19.7, 26.2), "seeds": 2},
-          "kb/problems/wall_detour.yaml": {"median_s": 4.74, "range_s": (4.27, 5.66), "seeds": 3}}
+#: At commit e9a0a9b (per-waypoint checks, simplifyMax): warm seconds with motions, the median
+#: over the seeds that were run (paper cell: seeds 0, 1; wall cell: seeds 0-2) and their range,
+#: and the plan JSON's size (bytes) and simplified length (rad) at seed 0 (the paper cell's from
+#: the first certified-checking commit, whose paths are e9a0a9b's: same seeds, same verdicts).
+BEFORE = {"kb/problems/peg_in_block.yaml": {"median_s": 23.0, "range_s": (19.7, 26.2), "seeds": 2,
+                                            "json_bytes": 2354279, "length_simplified_rad": 18.49},
+          "kb/problems/wall_detour.yaml": {"median_s": 4.74, "range_s": (4.27, 5.66), "seeds": 3,
+                                           "json_bytes": 1419381, "length_simplified_rad": 10.90}}
 
 
 def one_cell(path: str, seeds: int, budget: float) -> dict:
@@ -71,13 +75,15 @@ def render(r: dict) -> list[str]:
           "measured in the same run; path length in joint space before/after simplification (median); "
           "the plan JSON's size. Goal: the paper's cell at most 1 s."), "",
          "| cell | outcome | median s | max s | end-points s | length raw / simplified rad | OMPL motions "
-         "| JSON bytes | waypoints | before: median s (range, seeds) |", "|---|---|---|---|---|---|---|---|---|---|"]
+         "| JSON bytes | waypoints | before: median s (range, seeds), JSON bytes, simplified rad |",
+         "|---|---|---|---|---|---|---|---|---|---|"]
     for c in r["cells"]:
         b = BEFORE.get(c["cell"])
-        was = "-" if b is None else f"{b['median_s']:.2f} ({b['range_s'][0]:.2f}-{b['range_s'][1]:.2f}, {b['seeds']})"
+        was = "-" if b is None else (f"{b['median_s']:.2f} ({b['range_s'][0]:.2f}-{b['range_s'][1]:.2f}, "
+                                     f"{b['seeds']}), {b['json_bytes']}, {b['length_simplified_rad']:.2f}")
         ln = "-" if c["length_raw_rad"] is None else f"{c['length_raw_rad']:.3f} / {c['length_simplified_rad']:.3f}"
         L.append(f"| {c['cell']} | {c['outcome']} | {c['median_s']:.2f} | {c['max_s']:.2f} | {c['endpoints_s']:.3f} "
-                 f"| {ln} | {c['ompl_motions']} | {c['json_bytes']} | {c['waypoints']} | {was} |")
+                 f"| {ln} | {c['ompl_motions']} | {c['json_bytes']:.0f} | {c['waypoints']:.0f} | {was} |")
         if c["why"]:
             L.append(f"|  | why: {c['why'][:150]} | | | | | | | | |")
     return L + [""]

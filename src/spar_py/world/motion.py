@@ -428,6 +428,9 @@ def line_motion(robot: Any, state: SceneState, T_anchor: np.ndarray, q_anchor: n
     if reverse:
         q = q[::-1].copy()
     i, pair = certify(state, q)
+    if i > 0:  # the first blocked waypoint in the motion's order (a line is a few hundred)
+        j, pair_j = blocked(state, q[:i + 1])
+        i, pair = (j, pair_j) if j >= 0 else (i, pair)
     if i >= 0:
         return MotionFailure(name, pair, f"the tool line is blocked {length * (s[::-1] if reverse else s)[i]:.3g} "
                              "along it")
