@@ -13,15 +13,21 @@ For the chosen plan instance, a joint path from home through every step and back
   nearest the previous point's (the same branch, no wrist flips: a line whose joint jump
   stays above the resolution after subdivision is refused);
 - **transit / transfer** (hand empty / holding a part) between one retreat's end and the
-  next approach's start: first the straight joint-space segment (all its waypoints in one
-  batched collision check), OMPL (RRT-Connect by default) only when that fails, the
-  solution simplified and checked again at the resolution.
+  next approach's start: first the straight joint-space segment, OMPL (RRT-Connect by
+  default) only when that is blocked, the solution simplified once (rope shortcut, vertex
+  reduction) and checked again at the resolution.
 
-Every waypoint of every segment is checked against the world as it is at that point of
-the plan (``collision.SceneState``: parts already moved or assembled, the held part with
-the gripper). Consecutive waypoints differ by at most ``resolution`` in every joint,
-chosen so that no point of the arm, gripper or held part moves more than the scene's
-clearance margin between two checks (:func:`resolution`).
+Every waypoint of every segment is clear of the world as it is at that point of the plan
+(``collision.SceneState``: parts already moved or assembled, the held part with the
+gripper). Consecutive waypoints differ by at most ``resolution`` in every joint, chosen so
+that no point of the arm, gripper or held part moves more than the scene's clearance margin
+between two waypoints (:func:`resolution`). A segment is not checked waypoint by waypoint
+(some 10,000 of them per motion at the paper cell's 0.02 deg): :func:`certify` evaluates
+sound lower bounds of every pair's distance at a few waypoints (one batched call per round)
+and lets each certify the waypoints within (bound - margin) / rate of it, the rate being how
+far the pair can move per joint step (:func:`column_rates`); only where the bound cannot
+decide does the scene's own check look at single waypoints, so a segment is accepted exactly
+when checking every waypoint would accept it.
 
 Where the held part touches what it rests on (the retreat after a pickup lifts it off its
 support, the approach of a put-down sets it down, the assemble's approach inserts it),
