@@ -452,3 +452,31 @@ def test_cli_animate_writes_the_gif(tmp_path: Path, capsys) -> None:
     assert e.value.code == 0
     with Image.open(gif) as im:
         assert im.n_frames > 10
+
+
+def test_durations_of_regression_plans_from_the_robot_file(motion_plans) -> None:
+    """Every arm step of every regression plan with motions has a duration: its path,
+    approach and retreat at the robot file's velocity_limits (read from the YAML here), each
+    waypoint interval at its slowest joint's pace; the plan's total is their sum plus home."""
+    import yaml
+
+    for path, cell, plan in motion_plans:
+        if not plan.ok:
+            continue
+        v = np.asarray(yaml.safe_load(PUMA.read_text())["velocity_limits"], float)  # deg/s
+        assert cell.robot.name == "puma762"  # the cells' robot file, the one read above
+
+        def own(w) -> float:
+            w = np.asarray(w or [], float).reshape(-1, 6)
+            return float((np.abs(np.diff(w, axis=0)) / v).max(axis=1, initial=0.0).sum()) if len(w) > 1 else 0.0
+
+        total = 0.0
+        for st in plan.instance["steps"]:
+            if st.get("path") is None:
+                continue
+            want = sum(own(st[k]) for k in ("path", "approach", "retreat"))
+            assert st["duration_s"] is not None and st["duration_s"] == pytest.approx(want, rel=1e-3, abs=1e-3)
+            total += want
+        total += own(plan.instance["motion"]["home_path"])
+        assert plan.instance["motion"]["duration_s"] == pytest.approx(total, rel=1e-3, abs=1e-3)
+        assert total > 0.5  # seconds: a real plan's motions take time
