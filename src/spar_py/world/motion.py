@@ -577,8 +577,32 @@ def _without(parts: Mapping[str, np.ndarray], key: str) -> dict[str, np.ndarray]
     return {k: v for k, v in parts.items() if k != key}
 
 
+#: Bound of the cell's memo table of approach / retreat pairs (cell.memo "motion.lines").
+LINES_LIMIT = 1024
+
+
+def _world_key(world: tuple[dict[str, np.ndarray], tuple[str, np.ndarray] | None]) -> tuple:
+    parts, held = world
+    return (tuple(sorted((k, np.asarray(v, float).tobytes()) for k, v in parts.items())),
+            None if held is None else (held[0], np.asarray(held[1], float).tobytes()))
+
+
 def _lines(robot: Any, scene: Any, st: Stop, q: np.ndarray, length: float, res: float,
            margin: float) -> tuple[Segment, Segment] | MotionFailure:
+    """Approach and retreat of stop ``st`` with the end-point at ``q``, memoised on the
+    scene's memo (cell.memo "motion.lines"): instances that share a step and its world (and
+    runs with another OMPL seed) share its tool lines, which do not depend on the planner."""
+    key = (st.name, st.obj, st.onto, np.asarray(st.T, float).tobytes(), np.asarray(q, float).tobytes(),
+           None if st.insert is None else np.asarray(st.insert, float).tobytes(), _world_key(st.before),
+           _world_key(st.after), float(length), float(res), float(margin), id(robot))
+    if getattr(scene, "memo", None) is None:
+        return _lines_of(robot, scene, st, q, length, res, margin)
+    return scene.memo.table("motion.lines", LINES_LIMIT).get_or_compute(
+        key, lambda: _lines_of(robot, scene, st, q, length, res, margin))
+
+
+def _lines_of(robot: Any, scene: Any, st: Stop, q: np.ndarray, length: float, res: float,
+              margin: float) -> tuple[Segment, Segment] | MotionFailure:
     """Approach and retreat of stop ``st`` with the end-point at ``q``. The part in the hand
     may touch what it leaves or reaches along its own line (``allow``): the table as it is
     lifted off (pickup's retreat) or set down (put-down's approach), the hole part as it is
