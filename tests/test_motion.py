@@ -480,3 +480,32 @@ def test_durations_of_regression_plans_from_the_robot_file(motion_plans) -> None
         total += own(plan.instance["motion"]["home_path"])
         assert plan.instance["motion"]["duration_s"] == pytest.approx(total, rel=1e-3, abs=1e-3)
         assert total > 0.5  # seconds: a real plan's motions take time
+
+
+def test_body_reach_bounds_how_far_a_body_moves(puma) -> None:
+    """body_reach (what certify's rates are made of): a point within ``radius`` of frame f's
+    origin moves by at most sum_i R_i |dq_i| when the joints move by dq, on random
+    configurations and steps (the test's own Craig FK), and the bound is not loose by more
+    than a few times for the tool frame."""
+    rng = np.random.default_rng(3)
+    q = rng.uniform(puma.limits[:, 0], puma.limits[:, 1], size=(200, 6))
+    dq = rng.normal(0, 0.02, size=q.shape)
+    F0, F1 = _frames(puma, q), _frames(puma, q + dq)
+    ratios = []
+    for frame in (2, 3, 5, 6, 7):
+        radius = 4.0
+        R = mo.body_reach(puma.dh, puma.tool, frame, radius)
+        assert np.all(R[min(frame, 6):] == 0)  # joints past the frame do not move it
+        off = rng.normal(size=(200, 3))
+        off *= radius * rng.uniform(0, 1, (200, 1)) / np.linalg.norm(off, axis=1, keepdims=True)
+        if frame == 7:
+            T0, T1 = F0[:, 6] @ puma.tool, F1[:, 6] @ puma.tool
+        else:
+            T0, T1 = F0[:, frame], F1[:, frame]
+        p0 = np.einsum("nij,nj->ni", T0[:, :3, :3], off) + T0[:, :3, 3]
+        p1 = np.einsum("nij,nj->ni", T1[:, :3, :3], off) + T1[:, :3, 3]
+        moved = np.linalg.norm(p1 - p0, axis=1)
+        bound = np.abs(dq) @ R
+        assert np.all(moved <= bound * (1 + 1e-9)), frame
+        ratios.append((moved / bound).max())
+    assert ratios[-1] > 0.2  # the tool's bound is within a factor 5 of the worst move seen
