@@ -170,7 +170,9 @@ def test_options_are_checked() -> None:
 
 
 def _robot_file(tmp_path: Path, extra: str) -> Path:
-    text = PUMA.read_text() + "\n" + extra + "\n"
+    own = [ln for ln in PUMA.read_text().splitlines()
+           if not ln.startswith(tuple(k.split(":")[0] + ":" for k in extra.splitlines()))]
+    text = "\n".join(own) + "\n" + extra + "\n"  # the test's keys replace the file's own
     p = tmp_path / "arm.yaml"
     p.write_text(text)
     return p
@@ -268,8 +270,9 @@ def _boxes(path: Path) -> list[tuple[str, np.ndarray, np.ndarray]]:
 def motion_plans():
     from spar_py import Planner
 
-    pl = Planner(motion=True)
-    return [(p, pl.load_problem(p), pl.plan(p)) for p in _motion_cells()]
+    pl = Planner(motion=True)  # and the paper's cell, planned here with motions (its file does not ask)
+    cells = _motion_cells() + [ROOT / "kb" / "problems" / "peg_in_block.yaml"]
+    return [(p, pl.load_problem(p), pl.plan(p)) for p in cells]
 
 
 def test_every_path_of_every_regression_plan(motion_plans) -> None:
@@ -279,7 +282,7 @@ def test_every_path_of_every_regression_plan(motion_plans) -> None:
     table (each link shape's exact lowest point above z = 0) and of the obstacle boxes (the
     links' axes and the tool point outside them), computed here, not by world/collision.py."""
     planned = [(path, cell, plan) for path, cell, plan in motion_plans if plan.ok]
-    assert any(Path(p).stem == "wall_detour" for p, _, _ in planned)
+    assert {"wall_detour", "peg_in_block"} <= {Path(p).stem for p, _, _ in planned}
     for path, cell, plan in planned:
         inst = plan.instance
         m = inst["motion"]
@@ -313,15 +316,21 @@ def test_every_path_of_every_regression_plan(motion_plans) -> None:
 
 
 def test_enclosed_part_has_no_plan_and_names_the_enclosure(motion_plans) -> None:
-    """The part in a closed box: no plan, and the reason names a body of the box (at the
-    end-points, issue 15's collision-aware reach, or at the motions: reason.motion)."""
+    """The part in a box whose lid's hole passes the gripper's mount but not the gripper: the
+    top grasp's end-point is clear (it is not among the end-point refusals), no motion reaches
+    it, and the reason names that motion (the approach to the pickup) and a gripper body and
+    a lid slab as the pair that blocks it."""
     got = {Path(p).stem: plan for p, _, plan in motion_plans}
     plan = got["enclosed_part"]
     assert not plan.ok
-    box = {"wall_n", "wall_s", "wall_e", "wall_w", "lid"}
-    texts = list(plan.reason.get("collisions") or [])
-    texts += [f["text"] for f in plan.reason.get("motion_failures") or []]
-    assert any(n in t for t in texts for n in box), plan.reason
+    assert not any("p1G10" in t for t in plan.reason.get("collisions") or [])  # its end-point is clear
+    fails = [f for f in plan.reason.get("motion_failures") or [] if "pickup(peg, p1G10)" in f["motion"]]
+    assert fails, plan.reason
+    f = fails[0]
+    assert f["motion"].startswith("approach to ")
+    pair = set(f["pair"])
+    assert pair & {"palm", "finger_l", "finger_r"} and pair & {"lid_w", "lid_e", "lid_n", "lid_s"}, f
+    assert "lid_" in f["text"] and "approach" in f["text"]
 
 
 def test_animation_replays_the_motions(motion_plans, tmp_path: Path) -> None:
@@ -346,3 +355,157 @@ def test_animation_needs_motions(motion_plans) -> None:
     doc["instance"] = {**doc["instance"], "motion": None}
     with pytest.raises(SparValueError, match="no-motion"):
         frames_of(cell, doc)
+
+
+def test_certified_segments_agree_with_checking_every_waypoint() -> None:
+    """certify (clearance bounds, bisection) says a segment is clear exactly when
+    SceneState.check finds every waypoint at the resolution clear, and a blocked index it
+    names is a waypoint the check refuses. Segments of the wall cell: through a blocked
+    configuration (the arm in the table, the wall or a part) with both ends just clear of it,
+    so only the interior decides, and random short segments with clear ends."""
+    from spar_py import Planner
+    from spar_py.world.collision import scene_for
+
+    cell = Planner(motion=True).load_problem(ROOT / "kb" / "problems" / "wall_detour.yaml")
+    scene = scene_for(cell)
+    state = scene.at({p.obj: np.asarray(p.T, float) for p in cell.positions.values()})
+    res = mo.resolution(cell.robot.dh, cell.robot.tool, scene.margin, mo.extent(cell))
+    rng = np.random.default_rng(7)
+    lo, hi = cell.robot.limits[:, 0], cell.robot.limits[:, 1]
+    segments = []
+    t = np.linspace(-1.0, 1.0, 201)
+    while len(segments) < 12:  # grazing chords: the line through a blocked q, shifted until nearly clear
+        q = rng.uniform(lo, hi)
+        if state.clear(q[None])[0]:
+            continue
+        u, v = rng.normal(size=6), rng.normal(size=6)
+        u /= np.linalg.norm(u)
+        v -= (v @ u) * u
+        v /= np.linalg.norm(v)
+        last = None
+        for shift in np.arange(0.0, 1.0, 0.02):
+            line = q + shift * v + np.outer(t, u)
+            if np.any((line < lo) | (line > hi)):
+                break
+            ok = state.clear(line)
+            if ok.all():
+                break
+            last = (line, ok)
+        if last is None or not last[1][0] or not last[1][-1]:
+            continue
+        line, ok = last
+        segments.append([line[0], line[-1]])
+    while len(segments) < 28:
+        a = rng.uniform(lo, hi)
+        b = np.clip(a + rng.normal(0, 0.3, 6), lo, hi)
+        if state.clear(np.array([a, b])).all():
+            segments.append([a, b])
+    verdicts = []
+    for a, b in segments:
+        w = mo.densify(np.array([a, b]), res)
+        every = state.clear(w)
+        k, pair = mo.certify(state, w)
+        assert (k < 0) == bool(every.all())
+        if k >= 0:
+            assert not every[k] and pair is not None
+        verdicts.append(k < 0)
+    assert sum(verdicts) >= 8 and len(verdicts) - sum(verdicts) >= 6  # both answers exercised
+
+
+def test_animation_draws_the_link_shapes(motion_plans) -> None:
+    """The animation's link geometry is each robot-file shape where the test's own Craig FK
+    puts it: every drawn vertex of a capsule within its radius of the capsule's axis (and
+    the radius reached), every box corner the robot file's corner moved by that frame."""
+    from spar_py.pictures.animate import arm_faces
+
+    _, cell, _ = next(x for x in motion_plans if Path(x[0]).stem == "wall_detour")
+    robot = cell.robot
+    q = np.radians([20.0, -70.0, 30.0, 10.0, 40.0, -20.0])
+    F = _frames(robot, q[None])[0]
+    faces = dict(arm_faces(cell, q))
+    assert {s.name for s in robot.links} | {"palm", "finger_l", "finger_r"} <= set(faces)
+    for s in robot.links:
+        pts = np.concatenate(faces[s.name])
+        a = F[s.frame, :3, :3] @ s.a + F[s.frame, :3, 3]
+        b = F[s.frame, :3, :3] @ s.b + F[s.frame, :3, 3]
+        if s.kind == "capsule":
+            u = b - a
+            t = np.clip((pts - a) @ u / max(u @ u, 1e-12), 0, 1) if u @ u > 0 else np.zeros(len(pts))
+            d = np.linalg.norm(pts - (a + t[:, None] * u), axis=1)
+            assert d.max() <= s.radius * (1 + 1e-9) and d.max() >= 0.95 * s.radius, s.name
+        elif s.kind == "box":
+            corners = np.array([[x, y, z] for x in (s.a[0], s.b[0]) for y in (s.a[1], s.b[1])
+                                for z in (s.a[2], s.b[2])]) @ F[s.frame, :3, :3].T + F[s.frame, :3, 3]
+            assert all(np.isclose(np.linalg.norm(pts - c, axis=1).min(), 0, atol=1e-9) for c in corners), s.name
+
+
+def test_cli_animate_writes_the_gif(tmp_path: Path, capsys) -> None:
+    """`spar plan CELL --animate FILE.gif` writes a GIF of several frames (and nothing else
+    is needed on the command line: --animate plans the motions)."""
+    from PIL import Image
+
+    from spar_py import cli
+
+    gif = tmp_path / "out" / "wall.gif"
+    with pytest.raises(SystemExit) as e:
+        cli.main(["plan", str(ROOT / "kb" / "problems" / "wall_detour.yaml"), "--animate", str(gif)])
+    assert e.value.code == 0
+    with Image.open(gif) as im:
+        assert im.n_frames > 10
+
+
+def test_durations_of_regression_plans_from_the_robot_file(motion_plans) -> None:
+    """Every arm step of every regression plan with motions has a duration: its path,
+    approach and retreat at the robot file's velocity_limits (read from the YAML here), each
+    waypoint interval at its slowest joint's pace; the plan's total is their sum plus home."""
+    import yaml
+
+    for path, cell, plan in motion_plans:
+        if not plan.ok:
+            continue
+        v = np.asarray(yaml.safe_load(PUMA.read_text())["velocity_limits"], float)  # deg/s
+        assert cell.robot.name == "puma762"  # the cells' robot file, the one read above
+
+        def own(w) -> float:
+            w = np.asarray(w or [], float).reshape(-1, 6)
+            return float((np.abs(np.diff(w, axis=0)) / v).max(axis=1, initial=0.0).sum()) if len(w) > 1 else 0.0
+
+        total = 0.0
+        for st in plan.instance["steps"]:
+            if st.get("path") is None:
+                continue
+            want = sum(own(st[k]) for k in ("path", "approach", "retreat"))
+            assert st["duration_s"] is not None and st["duration_s"] == pytest.approx(want, rel=1e-3, abs=1e-3)
+            total += want
+        total += own(plan.instance["motion"]["home_path"])
+        assert plan.instance["motion"]["duration_s"] == pytest.approx(total, rel=1e-3, abs=1e-3)
+        assert total > 0.5  # seconds: a real plan's motions take time
+
+
+def test_body_reach_bounds_how_far_a_body_moves(puma) -> None:
+    """body_reach (what certify's rates are made of): a point within ``radius`` of frame f's
+    origin moves by at most sum_i R_i |dq_i| when the joints move by dq, on random
+    configurations and steps (the test's own Craig FK), and the bound is not loose by more
+    than a few times for the tool frame."""
+    rng = np.random.default_rng(3)
+    q = rng.uniform(puma.limits[:, 0], puma.limits[:, 1], size=(200, 6))
+    dq = rng.normal(0, 0.02, size=q.shape)
+    F0, F1 = _frames(puma, q), _frames(puma, q + dq)
+    ratios = []
+    for frame in (2, 3, 5, 6, 7):
+        radius = 4.0
+        R = mo.body_reach(puma.dh, puma.tool, frame, radius)
+        assert np.all(R[min(frame, 6):] == 0)  # joints past the frame do not move it
+        off = rng.normal(size=(200, 3))
+        off *= radius * rng.uniform(0, 1, (200, 1)) / np.linalg.norm(off, axis=1, keepdims=True)
+        if frame == 7:
+            T0, T1 = F0[:, 6] @ puma.tool, F1[:, 6] @ puma.tool
+        else:
+            T0, T1 = F0[:, frame], F1[:, frame]
+        p0 = np.einsum("nij,nj->ni", T0[:, :3, :3], off) + T0[:, :3, 3]
+        p1 = np.einsum("nij,nj->ni", T1[:, :3, :3], off) + T1[:, :3, 3]
+        moved = np.linalg.norm(p1 - p0, axis=1)
+        bound = np.abs(dq) @ R
+        assert np.all(moved <= bound * (1 + 1e-9)), frame
+        ratios.append((moved / bound).max())
+    assert ratios[-1] > 0.2  # the tool's bound is within a factor 5 of the worst move seen

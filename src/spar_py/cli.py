@@ -174,7 +174,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
     if plan.outcome is Outcome.TIMEOUT:
         raise PlanningTimeout(f"{cell.name}: no result within {args.timeout:g} s")
     staged: list[tuple[Path, Path]] = []  # (temporary, final)
-    if picture_dirs or output is not None:
+    if picture_dirs or output is not None or animate is not None:
         import tempfile  # only for outputs: a plain `spar plan` need not import it (cold start)
     for d in picture_dirs:
         from .pictures import write_pictures

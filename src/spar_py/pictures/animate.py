@@ -4,8 +4,10 @@ Read from the plan JSON, not recomputed: each step's ``path``, ``approach`` and
 ``retreat`` (waypoints in degrees, world/motion.py) and the instance's ``motion.home_path``
 give the arm's joints frame by frame; the parts stand where the step before left them
 (``poses``), the held part moves with the tool (its grasp). Each frame is the cell
-pictures' 3-D panel (pictures/cell.py: table, parts, the arm's links and gripper), plus
-the cell's obstacles where the collision scene has them.
+pictures' 3-D panel (pictures/cell.py: table, parts, the arm's skeleton and gripper), the
+arm's link geometry (the collision scene's bodies, world/collision.py: the robot file's
+link capsules, cylinders and boxes, and the gripper's palm and fingers at the frame's
+opening, drawn as their hulls at the frame's joints) and the cell's obstacles.
 
 Units: the cell's length unit, joints in degrees in the JSON (radians inside).
 """
@@ -22,12 +24,17 @@ from ..model import Cell
 from .plandoc import as_doc, instance
 from .scene import Scene, held_grasp, part_model, scenes
 
-__all__ = ["frames_of", "obstacle_faces", "write_animation"]
+__all__ = ["arm_faces", "frames_of", "obstacle_faces", "write_animation"]
 
 #: At most this many frames in a GIF (waypoints are sampled evenly beyond it).
 MAX_FRAMES = 120
 #: Milliseconds per frame.
 FRAME_MS = 80
+#: Points per circle of a capsule's drawn hull (its end spheres sampled on a grid of
+#: this many longitudes and half as many latitudes).
+CAPSULE_SIDES = 12
+#: Colour of the link geometry.
+LINK_COLOUR = "#c8a040"
 
 
 def frames_of(cell: Cell, plan: Any, max_frames: int = MAX_FRAMES) -> list[Scene]:
@@ -74,6 +81,43 @@ def _at(cell: Cell, world: Scene, q: np.ndarray, caption: str, index: int) -> Sc
                    arm_note="")
 
 
+def _local_points(body: Any) -> np.ndarray:
+    """Points (k, 3), in the body's frame, whose hull is the drawn body: a capsule's two end
+    spheres (sampled), a cylinder's circumscribed prism, a box's corners, a hull's vertices."""
+    if body.kind != "capsule":
+        return np.asarray(body.points, float)
+    r = body.size[0]
+    lon = np.linspace(0, 2 * np.pi, CAPSULE_SIDES, endpoint=False)
+    lat = np.linspace(-np.pi / 2, np.pi / 2, CAPSULE_SIDES // 2 + 1)
+    sphere = np.array([[np.cos(b) * np.cos(a), np.cos(b) * np.sin(a), np.sin(b)] for b in lat for a in lon]) * r
+    return np.vstack([c + sphere for c in np.asarray(body.points, float)])
+
+
+def arm_faces(cell: Cell, q: np.ndarray, width: float | None = None) -> list[tuple[str, list[np.ndarray]]]:
+    """The arm's link geometry at joints ``q`` (6,) rad: per collision body (the robot file's
+    links, then the gripper's palm and fingers with their contact faces ``width`` apart, None:
+    open), its name and its hull's triangles (each (3, 3) world points, cell unit). The hull
+    of each body is taken once in its own frame (cell.memo) and moved by the frame's pose."""
+    from scipy.spatial import ConvexHull
+
+    from ..world.collision import TOOL, scene_for
+
+    scene = scene_for(cell)
+    F = cell.robot.frames(np.asarray(q, float))
+    table = cell.memo.table("animate.hulls", 64)
+    out = []
+    for b in list(scene.links) + list(scene.gripper_bodies(width)):
+        key = (b.name, b.frame, np.asarray(b.points).tobytes())
+        if key not in table:
+            pts = _local_points(b)
+            table[key] = (pts, ConvexHull(pts).simplices)
+        pts, tri = table[key]
+        T = F[7] if b.frame == TOOL else F[b.frame]
+        world = pts @ T[:3, :3].T + T[:3, 3]
+        out.append((b.name, [world[t] for t in tri]))
+    return out
+
+
 def obstacle_faces(cell: Cell) -> list[np.ndarray]:
     """Triangles (each (3, 3) world points, cell unit) of the hulls of the cell's obstacle
     bodies (world/collision.py's Obstacle: a body's vertices in the world)."""
@@ -86,6 +130,13 @@ def obstacle_faces(cell: Cell) -> list[np.ndarray]:
             if len(pts) >= 4:
                 faces += [pts[t] for t in ConvexHull(pts).simplices]
     return faces
+
+
+def _width(cell: Cell, s: Scene) -> float | None:
+    """The fingers' opening in scene ``s``: the held part's grasp width, else None (open)."""
+    if s.held is not None and s.grasp is not None:
+        return float(cell.objects[part_model(s.held)].grasps[s.grasp].width)
+    return None
 
 
 def write_animation(cell: Cell, plan: Any, path: str | Path, max_frames: int = MAX_FRAMES) -> Path:
@@ -113,6 +164,10 @@ def write_animation(cell: Cell, plan: Any, path: str | Path, max_frames: int = M
             if obstacles:
                 ax.add_collection3d(Poly3DCollection(obstacles, facecolor="#9a9a9a", alpha=0.45,
                                                      edgecolor="none"), autolim=False)
+            if s.q is not None:
+                links = [t for _, tris in arm_faces(cell, s.q, _width(cell, s)) for t in tris]
+                ax.add_collection3d(Poly3DCollection(links, facecolor=LINK_COLOUR, alpha=0.55, edgecolor="none",
+                                                     zorder=4), autolim=False)
             ax.set_title(s.title, fontsize=8)
             writer.grab_frame()
     plt.close(fig)

@@ -663,3 +663,59 @@ def scene_for(cell: Cell) -> CollisionScene:
                            getattr(cell, "table", None), cell.unit, cell.memo)
     table["scene"] = scene
     return scene
+
+
+# --------------------------------------------------------------------------- bounds for motions
+
+
+def bound_columns(state: SceneState) -> np.ndarray:
+    """The columns of :func:`clearance_bounds` as body indices into ``state.bodies``: (P + T, 2),
+    one row per checked pair (its two bodies), then one per table-checked body (the body, -1)."""
+    tab = np.column_stack([state.table_bodies, np.full(len(state.table_bodies), -1)]).astype(int)
+    return np.vstack([state.pairs.reshape(-1, 2), tab.reshape(-1, 2)])
+
+
+def clearance_bounds(state: SceneState, q: np.ndarray, rate: np.ndarray | None = None,
+                     want: np.ndarray | None = None) -> np.ndarray:
+    """(n, P + T) sound lower bounds (cell unit) of the distance of each checked pair
+    (:func:`bound_columns`) and of each table-checked body's height over the plane z = 0, for
+    joint vectors q (n, 6) rad: the bounding capsules' distance, and the lowest vertex (the
+    table's footprint ignored, so the bound holds wherever the body goes). The gripper and the
+    part in the hand are not a column (the grasp rule decides them: :meth:`SceneState.check`).
+
+    With ``rate`` (P + T,) (cell unit per step) and ``want`` (n,) (steps): per row, the pair
+    columns are replaced by the library's exact distance (0 when touching) lazily, in order
+    of (bound - margin) / rate, while that is below ``want`` and below the smallest
+    (exact - margin) / rate found so far: the row's smallest ratio is then exact (or at least
+    ``want``), with as few library queries as that needs."""
+    q = np.asarray(q, float).reshape(-1, 6)
+    F = state._frames(q)
+    A, B = state._world_caps(F)
+    pi, pj = state.pairs[:, 0], state.pairs[:, 1]
+    lb = segment_distance(A[:, pi], B[:, pi], A[:, pj], B[:, pj]) - state._cap_r[pi] - state._cap_r[pj]
+    heights = np.empty((len(q), len(state.table_bodies)))
+    for k, i in enumerate(state.table_bodies):
+        b = state.bodies[i]
+        Fb = F[:, b.frame]
+        heights[:, k] = (b.points @ Fb[:, 2, :3, None])[..., 0].min(axis=1) + Fb[:, 2, 3] - b.radius
+    out = np.hstack([lb, heights])
+    if rate is None or want is None or not lb.size:
+        return out
+    m = state.scene.margin
+    n_pairs = lb.shape[1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(rate > 0, (out - m) / rate, np.where(out > m, np.inf, -np.inf))
+    for r in range(len(q)):
+        best = min(float(want[r]), float(ratio[r, n_pairs:].min(initial=np.inf)))
+        for p in np.argsort(ratio[r, :n_pairs]):
+            if ratio[r, p] >= best:
+                break
+            if state.exact_pair[p]:
+                best = float(ratio[r, p])
+                continue
+            d = out[r, p] = max(float(out[r, p]), state._exact_cell(F, r, int(p)))
+            x = (d - m) / rate[p] if rate[p] > 0 else (np.inf if d > m else -np.inf)
+            best = min(best, x)
+            if best <= 0:
+                break
+    return out
