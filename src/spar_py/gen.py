@@ -10,26 +10,40 @@ new object names with their own label prefixes (``peg3`` gets grasps ``p5G1..``,
 ``p5P1..``), so labels in the constraint network say which part they belong to.
 
 Layout (world frame, inches, the table top z = 0; the PUMA 762 as kb/robots/puma762.yaml
-places it): the table is divided into pair cells PITCH_X by PITCH_Y, each holding a
-block and, PEG_GAP to its -x side, its peg (lying on its -y base face, p1P5), both
-footprints centred on the cell's row line. :func:`slots` keeps the cells that
+places it): pair cells in columns on either side of the robot (x = +-(COLUMN0 + k PITCH_X)),
+PITCH_Y apart along each column; each holds a block and, PEG_GAP beyond it on the side away
+from the robot, its peg (lying on its -y base face, p1P5), both footprints centred on the
+cell's line. Turning a block over (hole-down p2P3 to hole-up p2P1, a half turn about its x
+axis) needs a grasp whose approach stays horizontal at both ends, i.e. along x (p2G7, p2G8):
+the wrist and forearm then come in level with the parts, from the robot's side, so the aisle
+between columns (PITCH_X less the pair's width) is what makes them usable. :func:`slots`
+keeps the cells that
 
 - keep every footprint at least PEDESTAL_RADIUS from the robot's base axis (the
   pedestal stands there), and
-- the arm can work: some block grasp reaches the block where it starts (hole-down)
-  *and*, with the same grasp, hole-up at the same spot (the put-down: phase 2 puts a
-  part down nearest its previous spot, and every block centre lies on the
-  placement grid, see below); some peg grasp that leaves the peg's mating face free
-  reaches the peg where it lies *and* mates it into the hole-up block there
-  (reachable and mate_reachable, Sec. 5.2.4, by the planner's own IK: workspace.reaches),
+- the arm can work, by the planner's own IK (workspace.reaches) and then the world layer's
+  collision scene (world.collision, as phase 2 checks each step; :func:`_usable`): some block
+  grasp with which the block is picked up where it starts (hole-down) and put down hole-up at
+  the same spot (phase 2 puts a part down nearest its previous spot, and every block centre
+  lies on the placement grid, see below), and some peg grasp that leaves the mating face free
+  with which the peg is picked up where it lies and mated into the hole-up block there, each
+  by a solution clear of the table, of the part in the hand beyond the fingers' contact faces,
+  and of every part any cell may hold at any step (all cells' lying pegs, blocks and
+  assembled pegs at once: conservative for every N and every order of actions),
 
-and takes the first N of them by distance from the base axis (ties by angle), so the
-parts gather as rings of cells around the robot. Neighbouring cells' footprints are
-CELL_GAP apart and the peg's is PEG_GAP from its block's, both more than the put-down
-clearance (placement.CLEARANCE_MM), so a block put down hole-up where it stood is clear
-of everything. The free table (``placement_regions``) is one rectangle around the
-layout grown by MARGIN, its corner on the placement grid (placement.GRID_STEP_MM) of the
-block centres.
+and takes the first N of them by distance from the base axis (ties by angle). Each generated
+part's model keeps only its cell's usable grasps (:func:`keep_grasps`): phase 1 does not know
+where the other parts will be, and phase 2 runs one assignment of the network in every order
+before it tries the next, so one grasp that only collides with a neighbour would exhaust its
+instance cap. Neighbouring footprints are at least CELL_GAP apart and the peg's is PEG_GAP from
+its block's, both more than the put-down clearance (placement.CLEARANCE_MM), so a block put
+down hole-up where it stood is clear of everything. The free table (``placement_regions``)
+is one rectangle around the layout grown by MARGIN, its corner on the placement grid
+(placement.GRID_STEP_MM) of the block centres.
+
+MAX_PARTS is what this check leaves for one PUMA 762: 34 cells (issue 18 asks for 100; denser
+layouts leave no clear horizontal approach to turn the blocks over, see the report of
+branch gencol).
 
 Planning them needs no flag: phase 1's default bound and step budget are derived
 from the problem (spar_defaults.pl: the bound twice the lower bound, 8N here; 100 steps
@@ -44,7 +58,8 @@ import math
 import re
 import shutil
 import sys
-from dataclasses import dataclass
+from collections.abc import Iterable
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -57,6 +72,7 @@ __all__ = [
     "generate_assembly",
     "layout",
     "main",
+    "keep_grasps",
     "renamed_model",
     "slots",
 ]
@@ -67,24 +83,24 @@ BLOCK_MODEL = KB_DIR / "objects" / "block.yaml"
 ROBOT = KB_DIR / "robots" / "puma762.yaml"
 
 #: The most pairs :func:`generate_assembly` accepts: as many cells as :func:`slots` finds
-#: for the PUMA 762 (checked by tests/test_gen.py).
-MAX_PARTS = 100
+#: clear for the PUMA 762 (checked by tests/test_gen.py).
+MAX_PARTS = 34
 #: Gap between the footprints of a peg and its block, and between neighbouring cells (in).
 PEG_GAP = 2.0
 CELL_GAP = 2.0
-#: Pair cells (in): a multiple of the placement grid (2 in) each way, so every block
-#: centre is a grid point of the free region.
-PITCH_X = 10.0
+#: Columns of pair cells (in): PITCH_X apart (a pair is 10 in wide, the rest the aisle that
+#: the block's horizontal turn-over grasp needs: 20 to 22 leave the most cells clear), the first
+#: COLUMN0 from the base axis, cells PITCH_Y apart along a column. Multiples of the placement
+#: grid (2 in), so every block centre is a grid point of the free region.
+PITCH_X = 22.0
 PITCH_Y = 6.0
+COLUMN0 = 12.0
 #: No footprint nearer the robot's base axis than this (in): the pedestal.
 PEDESTAL_RADIUS = 12.0
 #: Free table around the layout for the put-downs (in), a multiple of the grid step.
 MARGIN = 6.0
 #: How far out cells are looked for (in): past the PUMA 762's reach (about 54 in here).
 SEARCH_HALF_WIDTH = 70.0
-#: Where the lattice of block centres sits (in, from the grid point nearest the base axis):
-#: the offset of the multiples of 2 in that fits the most cells round the PUMA 762.
-OFFSET = (2.0, 0.0)
 
 # The paper's poses in its row form (Fig. 18): the peg lying on its -y base face
 # (p1P5), the block hole-down (p2P3) and hole-up (p2P1, after the put-down).
@@ -128,6 +144,10 @@ class Slot:
     peg: tuple[float, float]
     block: tuple[float, float]
     box: tuple[float, float, float, float]
+    #: The template models' grasp labels (p2G*, p1G*) usable in this cell with every other
+    #: cell's parts in place (:func:`_usable`): the generated part models keep only these.
+    block_grasps: tuple[str, ...] = ()
+    peg_grasps: tuple[str, ...] = ()
 
     @property
     def distance(self) -> float:
@@ -173,23 +193,29 @@ def slots() -> list[Slot]:
     fp_peg, fp_blk = footprint(peg, sp_peg.R), footprint(block, sp_blk.R)
     (plo, phi), (blo, bhi) = (fp_peg.min(0), fp_peg.max(0)), (fp_blk.min(0), fp_blk.max(0))
     width = (phi[0] - plo[0]) + PEG_GAP + (bhi[0] - blo[0]) + CELL_GAP
-    height = max(phi[1] - plo[1], bhi[1] - blo[1]) + CELL_GAP
-    if width > PITCH_X + 1e-9 or height > PITCH_Y + 1e-9:  # pragma: no cover - fixed models
-        raise SparValueError(f"a pair needs {width:g} x {height:g} in, more than the cell")
+    depth = max(phi[1] - plo[1], bhi[1] - blo[1]) + CELL_GAP
+    if width > PITCH_X + 1e-9 or depth > PITCH_Y + 1e-9:  # pragma: no cover - fixed models
+        raise SparValueError(f"a pair needs {width:g} x {depth:g} in, more than the cell")
     base = robot.base[:2, 3]
-    k = int(SEARCH_HALF_WIDTH // PITCH_X), int(SEARCH_HALF_WIDTH // PITCH_Y)
     cells = []
-    for i in range(-k[0], k[0] + 1):
-        for j in range(-k[1], k[1] + 1):
-            bx = round(base[0] / 2) * 2 + OFFSET[0] + PITCH_X * i
-            by = round(base[1] / 2) * 2 + OFFSET[1] + PITCH_Y * j
-            bcx, bcy = bx + (blo[0] + bhi[0]) / 2, by + (blo[1] + bhi[1]) / 2
-            px = bx + blo[0] - PEG_GAP - phi[0]                     # peg's box PEG_GAP left of the block's
-            py = bcy - (plo[1] + phi[1]) / 2                        # both boxes centred on one line
-            box = (px + plo[0], min(py + plo[1], by + blo[1]), bx + bhi[0], max(py + phi[1], by + bhi[1]))
-            near = np.clip(base, box[:2], box[2:])                  # the box's point nearest the axis
-            if math.hypot(*(near - base)) >= PEDESTAL_RADIUS and math.hypot(bcx - base[0], bcy - base[1]) > 0:
-                cells.append(Slot((px, py), (bx, by), box))
+    gx, gy = round(base[0] / 2) * 2, round(base[1] / 2) * 2   # the grid point nearest the axis
+    kx, ky = int(SEARCH_HALF_WIDTH // PITCH_X), int(SEARCH_HALF_WIDTH // PITCH_Y)
+    for side in (-1, 1):
+        for i in range(kx + 1):
+            bx = gx + side * (COLUMN0 + PITCH_X * i)
+            for j in range(-ky, ky + 1):
+                by = gy + PITCH_Y * j
+                bcy = by + (blo[1] + bhi[1]) / 2
+                py = bcy - (plo[1] + phi[1]) / 2                        # both boxes centred on one line
+                if side > 0:                                            # the peg on the far side
+                    px = bx + bhi[0] + PEG_GAP - plo[0]
+                else:
+                    px = bx + blo[0] - PEG_GAP - phi[0]
+                box = (min(px + plo[0], bx + blo[0]), min(py + plo[1], by + blo[1]),
+                       max(px + phi[0], bx + bhi[0]), max(py + phi[1], by + bhi[1]))
+                near = np.clip(base, box[:2], box[2:])                  # the box's point nearest the axis
+                if math.hypot(*(near - base)) >= PEDESTAL_RADIUS:
+                    cells.append(Slot((px, py), (bx, by), box))
     if not cells:  # pragma: no cover
         return []
     peg_T = np.stack([_pose_T(sp_peg.R, *c.peg, sp_peg.height) for c in cells])
@@ -204,7 +230,94 @@ def slots() -> list[Slot]:
             if not set(g.ofaces) & set(peg.mating_faces) and not set(g.gfaces) & set(sp_peg.rfaces)]
     ok &= _grasp_ok(robot, [g.T for g in mate], peg_T, up_T @ T_a)
     good = [c for c, v in zip(cells, ok) if v]
+    usable = _usable(peg, block, robot, good, free, mate)
+    good = [replace(c, block_grasps=b, peg_grasps=p) for c, (b, p) in zip(good, usable) if b and p]
     return sorted(good, key=lambda c: (round(c.distance, 9), math.atan2(c.block[1] - base[1], c.block[0] - base[0])))
+
+
+def _cell_parts(c: Slot, k: int, poses: tuple) -> dict[str, np.ndarray]:
+    """What cell ``c`` (index k) may hold at any point of a plan (world poses, in): its peg
+    lying, its block (hole-down and hole-up share one cube), and the peg assembled into it.
+    Names ``peg@<k>``, ``block@<k>``, ``peg@a<k>`` (the collision scene reads the model name
+    before the @)."""
+    sp_peg, sp_blk, sp_up, T_a = poses
+    up = _pose_T(sp_up.R, *c.block, sp_up.height)
+    return {f"peg@{k}": _pose_T(sp_peg.R, *c.peg, sp_peg.height),
+            f"block@{k}": _pose_T(sp_blk.R, *c.block, sp_blk.height), f"peg@a{k}": up @ T_a}
+
+
+def _usable(peg, block, robot, cells: list[Slot], free: list,
+            mate: list) -> list[tuple[tuple[str, ...], tuple[str, ...]]]:
+    """For each cell, the block grasps (of ``free``) with which the arm picks the block up where
+    it lies and puts it down hole-up there, and the peg grasps (of ``mate``) with which it picks
+    the peg up and mates it into the block, each by an IK solution clear of the table, the part
+    in the hand (the grasp rule) and every part any cell may hold at any step (this cell's other
+    part included, every other cell's lying peg, block and assembled peg at once): the collision
+    scene of world.collision, as phase 2 checks each step. The union over every point of a plan
+    is conservative, so any subset of the cells, in any order of actions, stays clear.
+
+    Why prune grasps at all: a side grasp at table height puts the wrist and forearm level with
+    the parts around (the tool mount is 4 to 8 in behind the grasp point, the forearm's axis
+    10 in), so in a layout of many parts most side grasps hit a neighbour. Phase 1 does not know
+    where the other parts will be, so it would keep those grasps, and phase 2 examines the
+    instances of one assignment in every order before it tries another: one bad grasp of one
+    part exhausts the instance cap. A generated part's model lists only what works where it lies.
+    """
+    from .memo import Memo
+    from .units import from_mm
+    from .workspace import wrist_above_table
+    from .world.collision import DEFAULT_MARGIN_MM, CollisionScene, solid_bodies
+
+    margin = robot.margin if robot.margin is not None else from_mm("in", DEFAULT_MARGIN_MM)
+    scene = CollisionScene(robot, robot.gripper, {"peg": solid_bodies("peg", peg.shape),
+                                                  "block": solid_bodies("block", block.shape)},
+                           (), margin, None, "in", Memo())
+    poses = (peg.poses[PEG_POSE], block.poses[BLOCK_POSE], block.poses[BLOCK_UP_POSE],
+             _pose_T(np.asarray(TA[:3], float).T, *TA[3]))
+    contents = [_cell_parts(c, k, poses) for k, c in enumerate(cells)]
+    names = [n for d in contents for n in d]
+    where = {n: T for d in contents for n, T in d.items()}
+    # every part body's bounding sphere, world frame: the broad phase below
+    sph_c, sph_r, owner = [], [], []
+    for n in names:
+        for b in scene.shapes_of(n):
+            bb = b.placed(where[n], -1, n)
+            a, e, r = bb.cap
+            sph_c.append((a + e) / 2)
+            sph_r.append(np.linalg.norm(e - a) / 2 + r)
+            owner.append(n)
+    sph_c, sph_r, owner = np.array(sph_c), np.array(sph_r), np.array(owner)
+
+    def works(TO: np.ndarray, own: str, grasps: list, absent: set[str]) -> np.ndarray:
+        """(g,) bool: some clear IK solution for the tool at TO @ g.T, ``own`` being grasped,
+        every part but ``absent`` (the same peg elsewhere) in place."""
+        out = np.zeros(len(grasps), dtype=bool)
+        for w in sorted({g.width for g in grasps}):
+            idx = [i for i, g in enumerate(grasps) if g.width == w]
+            T = np.stack([TO @ grasps[i].T for i in idx])
+            Q, okb = robot.ik_batch(T)
+            rows, cols = np.nonzero(okb & wrist_above_table(robot, T)[:, None])
+            if not len(rows):
+                continue
+            q = Q[rows, cols]
+            C, R = scene.at({own: TO}, None, own, width=w).moving_spheres(q)
+            gap = (np.sqrt(((C[:, :, None] - sph_c) ** 2).sum(-1)) - R[:, None] - sph_r).min(axis=(0, 1))
+            near = set(owner[gap <= margin].tolist()) - {own} - absent
+            clear = scene.at({own: TO, **{n: where[n] for n in near}}, None, own, width=w).clear(q)
+            out[np.array(idx)[np.unique(rows[clear])]] = True
+        return out
+
+    result = []
+    for k, c in enumerate(cells):
+        own = contents[k]
+        Tp, Tb, Tm = own[f"peg@{k}"], own[f"block@{k}"], own[f"peg@a{k}"]
+        Tu = _pose_T(poses[2].R, *c.block, poses[2].height)
+        lying, fitted = f"peg@{k}", f"peg@a{k}"
+        b_ok = works(Tb, f"block@{k}", free, {fitted}) & works(Tu, f"block@{k}", free, {fitted})
+        p_ok = works(Tp, lying, mate, {fitted}) & works(Tm, fitted, mate, {lying})
+        result.append((tuple(g.label for g, v in zip(free, b_ok) if v),
+                       tuple(g.label for g, v in zip(mate, p_ok) if v)))
+    return result
 
 
 def layout(n_parts: int) -> list[tuple[tuple[float, float], tuple[float, float]]]:
@@ -244,10 +357,25 @@ def _region(cells: list[Slot]) -> tuple[tuple[float, float], tuple[float, float]
     return (float(lo[0]), float(hi[0])), (float(lo[1]), float(hi[1]))
 
 
-def _problem_text(n_parts: int, robot_rel: str) -> str:
-    cells = slots()[:n_parts]
-    if len(cells) < n_parts:  # pragma: no cover
-        raise SparValueError(f"only {len(cells)} pairs fit within the arm's reach, not {n_parts}")
+def keep_grasps(text: str, labels: Iterable[str]) -> str:
+    """An object file's text with only the grasp lines (``- {label: ...}``) whose label is in
+    ``labels``; a comment line says which were dropped and why."""
+    keep, dropped, out = set(labels), [], []
+    for line in text.splitlines(keepends=True):
+        m = re.match(r"\s*- \{label: (p\d+G\d+),", line)
+        if m and m.group(1) not in keep:
+            dropped.append(m.group(1))
+            continue
+        out.append(line)
+    if not dropped:
+        return "".join(out)
+    note = (f"# Grasps {', '.join(dropped)} dropped by spar_py.gen: where this part lies, the arm\n"
+            "# cannot use them clear of the other parts (see spar_py.gen._usable).\n")
+    return note + "".join(out)
+
+
+def _problem_text(cells: list[Slot], robot_rel: str) -> str:
+    n_parts = len(cells)
     (x0, x1), (y0, y1) = _region(cells)
     lines = [
         f"# Generated by spar_py.gen: {n_parts} peg(s) into {n_parts} block(s) (issues 7, 18).",
@@ -315,13 +443,18 @@ def generate_assembly(n_parts: int, out_dir: str | Path) -> Path:
     (out / "robots").mkdir(parents=True, exist_ok=True)
     shutil.copyfile(ROBOT, out / "robots" / ROBOT.name)
     peg_text, block_text = PEG_MODEL.read_text(encoding="utf-8"), BLOCK_MODEL.read_text(encoding="utf-8")
-    for k in range(1, n_parts + 1):
+    cells = slots()[:n_parts]
+    if len(cells) < n_parts:  # pragma: no cover - MAX_PARTS is checked against slots()
+        raise SparValueError(f"only {len(cells)} pairs fit within the arm's reach, not {n_parts}")
+    for k, c in enumerate(cells, start=1):
         (out / "objects" / f"peg{k}.yaml").write_text(
-            renamed_model(peg_text, f"peg{k}", 2 * k - 1, "kb/objects/peg.yaml"), encoding="utf-8")
+            renamed_model(keep_grasps(peg_text, c.peg_grasps), f"peg{k}", 2 * k - 1, "kb/objects/peg.yaml"),
+            encoding="utf-8")
         (out / "objects" / f"block{k}.yaml").write_text(
-            renamed_model(block_text, f"block{k}", 2 * k, "kb/objects/block.yaml"), encoding="utf-8")
+            renamed_model(keep_grasps(block_text, c.block_grasps), f"block{k}", 2 * k, "kb/objects/block.yaml"),
+            encoding="utf-8")
     problem = out / f"assembly_{n_parts}.yaml"
-    problem.write_text(_problem_text(n_parts, f"robots/{ROBOT.name}"), encoding="utf-8")
+    problem.write_text(_problem_text(cells, f"robots/{ROBOT.name}"), encoding="utf-8")
     return problem
 
 
