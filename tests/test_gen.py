@@ -103,7 +103,11 @@ def _gap(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def test_there_are_max_parts_slots() -> None:
-    assert len(gen.slots()) >= gen.MAX_PARTS >= 30
+    assert len(gen.slots("hole-down")) >= gen.MAX_TURNED >= 30
+    assert len(gen.slots("hole-up")) >= gen.MAX_PARTS >= 70
+    assert gen.blocks_for(gen.MAX_TURNED) == "hole-down" and gen.blocks_for(gen.MAX_TURNED + 1) == "hole-up"
+    with pytest.raises(SparValueError):
+        gen.generate_assembly(gen.MAX_TURNED + 1, "/nonexistent", "hole-down")
 
 
 def _footprint_boxes(model, T: np.ndarray) -> list[np.ndarray]:
@@ -120,13 +124,14 @@ def _footprint_boxes(model, T: np.ndarray) -> list[np.ndarray]:
     return out
 
 
-def test_initial_positions_do_not_overlap_and_clear_the_base(tmp_path: Path) -> None:
+@pytest.mark.parametrize("n", [gen.MAX_TURNED, gen.MAX_PARTS])
+def test_initial_positions_do_not_overlap_and_clear_the_base(n: int, tmp_path: Path) -> None:
     """Independent of gen's own boxes: every solid of every part at its initial pose, as a world
     xy box from its corners, is apart from every other part's and outside the pedestal's circle
-    (the robot file's pedestal radius, read from the YAML here)."""
+    (the robot file's pedestal radius, read from the YAML here), for both layouts at their
+    largest."""
     import yaml
 
-    n = gen.MAX_PARTS
     cell = load_problem(gen.generate_assembly(n, tmp_path))
     robot_yaml = yaml.safe_load((tmp_path / "robots" / "puma762.yaml").read_text())
     pedestal = next(lk for lk in robot_yaml["collision"]["links"] if lk["name"] == "pedestal")
@@ -143,20 +148,21 @@ def test_initial_positions_do_not_overlap_and_clear_the_base(tmp_path: Path) -> 
             assert np.hypot(*(near - base)) > r_ped + 1.0, obj
 
 
-@pytest.mark.parametrize("n", [2, 5])
-def test_generated_plans_both_phases_with_collisions(n: int, tmp_path: Path) -> None:
+@pytest.mark.parametrize(("n", "blocks", "per_pair"), [(2, None, 4), (5, None, 4), (3, "hole-up", 2)])
+def test_generated_plans_both_phases_with_collisions(n: int, blocks: str | None, per_pair: int,
+                                                     tmp_path: Path) -> None:
     """Collision checking is on for every cell: a generated problem plans through phase 2 with
     no flag, on the first instance examined, with no error."""
     from spar_py.planner import Outcome, Planner
 
-    plan = Planner().plan(gen.generate_assembly(n, tmp_path))
+    plan = Planner().plan(gen.generate_assembly(n, tmp_path, blocks))
     assert plan.outcome is Outcome.PLAN, plan.reason
-    assert len(plan.actions) == 4 * n
+    assert len(plan.actions) == per_pair * n
     assert plan.instance is not None
     assert plan.instance["instances_examined"] == 1 and plan.instance["error_count"] == 0
 
 
-@pytest.mark.parametrize("n", [1, 2, 5, 13, gen.MAX_PARTS])
+@pytest.mark.parametrize("n", [1, 2, 5, 13, gen.MAX_TURNED, gen.MAX_TURNED + 1, gen.MAX_PARTS])
 def test_layout_is_clear_and_in_reach(n: int, tmp_path: Path) -> None:
     """A sample of N = 1..MAX_PARTS: parts clear of each other by more than the put-down
     clearance and of the pedestal, on the table, inside the free region, every block
@@ -187,9 +193,13 @@ def test_layout_is_clear_and_in_reach(n: int, tmp_path: Path) -> None:
         assert np.allclose(off, np.round(off)), f"block{k} off the placement grid"
         up = Tb.copy()
         up[:3, :3] = block.poses[f"p{2 * k}P1"].R
-        rest = set(block.poses[f"p{2 * k}P3"].rfaces) | set(block.poses[f"p{2 * k}P1"].rfaces)
-        assert any(_reached(cell.robot, Tb @ g.T) and _reached(cell.robot, up @ g.T)
-                   for g in block.grasps.values() if not set(g.gfaces) & rest), f"block{k}"
+        if n <= gen.MAX_TURNED:  # hole-down, to be turned over where it lies
+            assert np.allclose(Tb[:3, :3], block.poses[f"p{2 * k}P3"].R)
+            rest = set(block.poses[f"p{2 * k}P3"].rfaces) | set(block.poses[f"p{2 * k}P1"].rfaces)
+            assert any(_reached(cell.robot, Tb @ g.T) and _reached(cell.robot, up @ g.T)
+                       for g in block.grasps.values() if not set(g.gfaces) & rest), f"block{k}"
+        else:  # hole-up, never moved
+            assert np.allclose(Tb[:3, :3], up[:3, :3])
         assert any(_reached(cell.robot, Tp @ g.T) and _reached(cell.robot, up @ Ta @ g.T)
                    for g in peg.grasps.values()
                    if not set(g.ofaces) & set(peg.mating_faces)

@@ -1,29 +1,33 @@
 """Generated problems for scaling runs (issues 7, 18): N pegs into N blocks, N = 1..MAX_PARTS.
 
 :func:`generate_assembly` writes a self-contained knowledge base: the problem file,
-one object file per part and a copy of the robot file. Every block starts hole-down
-(p2P3 in the paper's model), so each pair needs the paper's four actions (Sec. 6,
-Fig. 23): pickup(block), putdown(block), pickup(peg), assemble; N pairs need 4N.
+one object file per part and a copy of the robot file. Up to MAX_TURNED pairs every block
+starts hole-down (p2P3 in the paper's model), so each pair needs the paper's four actions
+(Sec. 6, Fig. 23): pickup(block), putdown(block), pickup(peg), assemble; N pairs need 4N.
+Above MAX_TURNED (up to MAX_PARTS) every block starts hole-up (p2P1) in a denser layout and
+each pair needs two: pickup(peg), assemble (:func:`blocks_for`; ``blocks=`` chooses).
 
 The parts are copies of the paper's models (kb/objects/peg.yaml, block.yaml) under
 new object names with their own label prefixes (``peg3`` gets grasps ``p5G1..``, poses
 ``p5P1..``), so labels in the constraint network say which part they belong to.
 
 Layout (world frame, inches, the table top z = 0; the PUMA 762 as kb/robots/puma762.yaml
-places it): pair cells in columns on either side of the robot (x = +-(COLUMN0 + k PITCH_X)),
+places it), blocks hole-down: pair cells in columns on either side of the robot
+(x = +-(COLUMN0 + k PITCH_X)),
 PITCH_Y apart along each column; each holds a block and, PEG_GAP beyond it on the side away
 from the robot, its peg (lying on its -y base face, p1P5), both footprints centred on the
 cell's line. Turning a block over (hole-down p2P3 to hole-up p2P1, a half turn about its x
 axis) needs a grasp whose approach stays horizontal at both ends, i.e. along x (p2G7, p2G8):
 the wrist and forearm then come in level with the parts, from the robot's side, so the aisle
-between columns (PITCH_X less the pair's width) is what makes them usable. :func:`slots`
+between columns (PITCH_X less the pair's width) is what makes them usable. Blocks hole-up:
+the same columns DENSE_PITCH_X apart (no aisles: the pegs are taken from above). :func:`slots`
 keeps the cells that
 
 - keep every footprint at least PEDESTAL_RADIUS from the robot's base axis (the
   pedestal stands there), and
 - the arm can work, by the planner's own IK (workspace.reaches) and then the world layer's
   collision scene (world.collision, as phase 2 checks each step; :func:`_usable`): some block
-  grasp with which the block is picked up where it starts (hole-down) and put down hole-up at
+  grasp (hole-down only) with which the block is picked up where it starts and put down hole-up at
   the same spot (phase 2 puts a part down nearest its previous spot, and every block centre
   lies on the placement grid, see below), and some peg grasp that leaves the mating face free
   with which the peg is picked up where it lies and mated into the hole-up block there, each
@@ -41,13 +45,17 @@ down hole-up where it stood is clear of everything. The free table (``placement_
 is one rectangle around the layout grown by MARGIN, its corner on the placement grid
 (placement.GRID_STEP_MM) of the block centres.
 
-MAX_PARTS is what this check leaves for one PUMA 762: 34 cells (issue 18 asks for 100; denser
-layouts leave no clear horizontal approach to turn the blocks over, see the report of
-branch gencol).
+MAX_TURNED (34) and MAX_PARTS (72) are what this check leaves for one PUMA 762. Issue 18 asks
+for 100: with 3 in parts on a 10 x 6 in pitch, the IK alone finds 100 cells within reach and
+the collision check keeps 72 (at the edge of reach the stretched arm's wrist comes down on the
+neighbours). A block started on a side face needs only a quarter turn, made with a 45-degree
+grasp from above and no aisle (70 such cells), but phase 1's lower bound counts such a pair as
+two actions, and its rounds of iterative deepening below 4N exhaust the step budget (N = 2).
 
 Planning them needs no flag: phase 1's default bound and step budget are derived
-from the problem (spar_defaults.pl: the bound twice the lower bound, 8N here; 100 steps
-per action of it), and iterative deepening starts at its lower bound, 4N here.
+from the problem (spar_defaults.pl: the bound twice the lower bound; 100 steps per action of
+it), iterative deepening starts at its lower bound (4N or 2N here, each exact), and phase 2's
+first instance is executable (every grasp left in the models works where its part lies).
 
 ``main`` is the body of ``spar gen assembly --parts N [-o DIR]``.
 """
@@ -67,7 +75,10 @@ import numpy as np
 from .errors import SparValueError
 
 __all__ = [
+    "CAPACITY",
     "MAX_PARTS",
+    "MAX_TURNED",
+    "blocks_for",
     "Slot",
     "generate_assembly",
     "layout",
@@ -84,7 +95,12 @@ ROBOT = KB_DIR / "robots" / "puma762.yaml"
 
 #: The most pairs :func:`generate_assembly` accepts: as many cells as :func:`slots` finds
 #: clear for the PUMA 762 (checked by tests/test_gen.py).
-MAX_PARTS = 34
+MAX_PARTS = 72
+#: The most pairs whose blocks start hole-down (each turned over: 4 actions a pair); above it
+#: the blocks start hole-up (2 actions a pair: pickup(peg), assemble), see :func:`blocks_for`.
+MAX_TURNED = 34
+#: The two layouts and the most pairs each holds (checked by tests/test_gen.py).
+CAPACITY = {"hole-down": MAX_TURNED, "hole-up": MAX_PARTS}
 #: Gap between the footprints of a peg and its block, and between neighbouring cells (in).
 PEG_GAP = 2.0
 CELL_GAP = 2.0
@@ -95,6 +111,9 @@ CELL_GAP = 2.0
 PITCH_X = 22.0
 PITCH_Y = 6.0
 COLUMN0 = 12.0
+#: Blocks hole-up (never moved): no aisles, columns 10 in apart (a pair's width).
+DENSE_PITCH_X = 10.0
+DENSE_COLUMN0 = 4.0
 #: No footprint nearer the robot's base axis than this (in): the pedestal.
 PEDESTAL_RADIUS = 12.0
 #: Free table around the layout for the put-downs (in), a multiple of the grid step.
@@ -104,9 +123,14 @@ SEARCH_HALF_WIDTH = 70.0
 
 # The paper's poses in its row form (Fig. 18): the peg lying on its -y base face
 # (p1P5), the block hole-down (p2P3) and hole-up (p2P1, after the put-down).
-PEG_POSE, BLOCK_POSE, BLOCK_UP_POSE = "p1P5", "p2P3", "p2P1"
+PEG_POSE, BLOCK_UP_POSE = "p1P5", "p2P1"
+#: The block's start pose in a turn-over cell (hole-down: a half turn to hole-up, which only a
+#: horizontal grasp at table height makes, hence the aisles) and in an extra cell (hole-up, the
+#: block never moves). A block started on a side face would need only a quarter turn (a
+#: 45-degree grasp from above at both ends, no aisle), but phase 1's lower bound counts such a
+#: pair as two actions and iterative deepening then spends its step budget below 4N.
+BLOCK_POSE = "p2P3"
 PEG_TM = [[1, 0, 0], [0, 0, 1], [0, -1, 0]]
-BLOCK_TM = [[1, 0, 0], [0, -1, 0], [0, 0, -1]]
 
 # Table 2 and Fig. 11 of the paper (in, deg).
 MANIPULATOR_BOUNDS = "{dx: [-0.001, 0.001], dy: [-0.001, 0.001], dz: [-0.001, 0.001], dtheta: [-0.001, 0.001]}"
@@ -148,6 +172,8 @@ class Slot:
     #: cell's parts in place (:func:`_usable`): the generated part models keep only these.
     block_grasps: tuple[str, ...] = ()
     peg_grasps: tuple[str, ...] = ()
+    #: The block's start pose (a label of the template model: BLOCK_POSE or BLOCK_UP_POSE).
+    pose: str = ""
 
     @property
     def distance(self) -> float:
@@ -183,9 +209,12 @@ def _grasp_ok(robot, grasps, first: np.ndarray, second: np.ndarray) -> np.ndarra
     return (ok[0] & ok[1]).any(axis=1)
 
 
-def slots() -> list[Slot]:
-    """Every usable pair cell of the layout (see the module docstring), nearest the base
-    axis first (ties by angle about it, from -x round)."""
+def slots(blocks: str = "hole-down") -> list[Slot]:
+    """Every usable pair cell of the layout for blocks starting ``blocks`` ("hole-down": a turn
+    over each, "hole-up": never moved; see the module docstring), nearest the base axis first
+    (ties by angle about it, from -x round)."""
+    if blocks not in CAPACITY:
+        raise SparValueError(f"blocks must be one of {', '.join(CAPACITY)}, not {blocks!r}")
     from .placement import footprint
 
     peg, block, robot = _models()
@@ -197,41 +226,51 @@ def slots() -> list[Slot]:
     if width > PITCH_X + 1e-9 or depth > PITCH_Y + 1e-9:  # pragma: no cover - fixed models
         raise SparValueError(f"a pair needs {width:g} x {depth:g} in, more than the cell")
     base = robot.base[:2, 3]
-    cells = []
     gx, gy = round(base[0] / 2) * 2, round(base[1] / 2) * 2   # the grid point nearest the axis
-    kx, ky = int(SEARCH_HALF_WIDTH // PITCH_X), int(SEARCH_HALF_WIDTH // PITCH_Y)
-    for side in (-1, 1):
-        for i in range(kx + 1):
-            bx = gx + side * (COLUMN0 + PITCH_X * i)
-            for j in range(-ky, ky + 1):
-                by = gy + PITCH_Y * j
-                bcy = by + (blo[1] + bhi[1]) / 2
-                py = bcy - (plo[1] + phi[1]) / 2                        # both boxes centred on one line
-                if side > 0:                                            # the peg on the far side
-                    px = bx + bhi[0] + PEG_GAP - plo[0]
-                else:
-                    px = bx + blo[0] - PEG_GAP - phi[0]
-                box = (min(px + plo[0], bx + blo[0]), min(py + plo[1], by + blo[1]),
-                       max(px + phi[0], bx + bhi[0]), max(py + phi[1], by + bhi[1]))
-                near = np.clip(base, box[:2], box[2:])                  # the box's point nearest the axis
-                if math.hypot(*(near - base)) >= PEDESTAL_RADIUS:
-                    cells.append(Slot((px, py), (bx, by), box))
-    if not cells:  # pragma: no cover
-        return []
-    peg_T = np.stack([_pose_T(sp_peg.R, *c.peg, sp_peg.height) for c in cells])
-    blk_T = np.stack([_pose_T(sp_blk.R, *c.block, sp_blk.height) for c in cells])
-    up_T = np.stack([_pose_T(sp_up.R, *c.block, sp_up.height) for c in cells])
-    free = [g for g in block.grasps.values()
-            if not set(g.gfaces) & (set(sp_blk.rfaces) | set(sp_up.rfaces))]
-    ok = _grasp_ok(robot, [g.T for g in free], blk_T, up_T)
-    Ta = np.asarray(TA[:3], float).T
-    T_a = _pose_T(Ta, *TA[3])
+
+    def lattice(pitch_x: float, column0: float) -> list[Slot]:
+        """Cells in columns x = +-(column0 + k pitch_x), PITCH_Y apart, the peg on the far side."""
+        out = []
+        kx, ky = int(SEARCH_HALF_WIDTH // pitch_x), int(SEARCH_HALF_WIDTH // PITCH_Y)
+        for side in (-1, 1):
+            for i in range(kx + 1):
+                bx = gx + side * (column0 + pitch_x * i)
+                for j in range(-ky, ky + 1):
+                    by = gy + PITCH_Y * j
+                    bcy = by + (blo[1] + bhi[1]) / 2
+                    py = bcy - (plo[1] + phi[1]) / 2                    # both boxes centred on one line
+                    px = bx + bhi[0] + PEG_GAP - plo[0] if side > 0 else bx + blo[0] - PEG_GAP - phi[0]
+                    box = (min(px + plo[0], bx + blo[0]), min(py + plo[1], by + blo[1]),
+                           max(px + phi[0], bx + bhi[0]), max(py + phi[1], by + bhi[1]))
+                    near = np.clip(base, box[:2], box[2:])              # the box's point nearest the axis
+                    if math.hypot(*(near - base)) >= PEDESTAL_RADIUS:
+                        out.append(Slot((px, py), (bx, by), box))
+        return out
+
+    T_a = _pose_T(np.asarray(TA[:3], float).T, *TA[3])
     mate = [g for g in peg.grasps.values()
             if not set(g.ofaces) & set(peg.mating_faces) and not set(g.gfaces) & set(sp_peg.rfaces)]
-    ok &= _grasp_ok(robot, [g.T for g in mate], peg_T, up_T @ T_a)
-    good = [c for c, v in zip(cells, ok) if v]
-    usable = _usable(peg, block, robot, good, free, mate)
-    good = [replace(c, block_grasps=b, peg_grasps=p) for c, (b, p) in zip(good, usable) if b and p]
+
+    def peg_reach(cells: list[Slot]) -> list[Slot]:
+        if not cells:
+            return []
+        peg_T = np.stack([_pose_T(sp_peg.R, *c.peg, sp_peg.height) for c in cells])
+        up_T = np.stack([_pose_T(sp_up.R, *c.block, sp_up.height) for c in cells])
+        return [c for c, v in zip(cells, _grasp_ok(robot, [g.T for g in mate], peg_T, up_T @ T_a)) if v]
+
+    free = [g for g in block.grasps.values() if not set(g.gfaces) & (set(sp_blk.rfaces) | set(sp_up.rfaces))]
+    if blocks == "hole-down":  # columns with aisles, a block grasp reaching both ends of the half turn
+        cells = peg_reach(lattice(PITCH_X, COLUMN0))
+        if cells:
+            blk_T = np.stack([_pose_T(sp_blk.R, *c.block, sp_blk.height) for c in cells])
+            up_T = np.stack([_pose_T(sp_up.R, *c.block, sp_up.height) for c in cells])
+            cells = [c for c, v in zip(cells, _grasp_ok(robot, [g.T for g in free], blk_T, up_T)) if v]
+        cells = [replace(c, pose=BLOCK_POSE) for c in cells]
+    else:  # the dense lattice, the blocks never moved
+        cells = [replace(c, pose=BLOCK_UP_POSE) for c in peg_reach(lattice(DENSE_PITCH_X, DENSE_COLUMN0))]
+    usable = _usable(peg, block, robot, cells, free, mate, sp_blk, list(range(len(cells))))
+    good = [replace(c, block_grasps=b, peg_grasps=p) for c, (b, p) in zip(cells, usable)
+            if p and (b or c.pose == BLOCK_UP_POSE)]
     return sorted(good, key=lambda c: (round(c.distance, 9), math.atan2(c.block[1] - base[1], c.block[0] - base[0])))
 
 
@@ -246,10 +285,11 @@ def _cell_parts(c: Slot, k: int, poses: tuple) -> dict[str, np.ndarray]:
             f"block@{k}": _pose_T(sp_blk.R, *c.block, sp_blk.height), f"peg@a{k}": up @ T_a}
 
 
-def _usable(peg, block, robot, cells: list[Slot], free: list,
-            mate: list) -> list[tuple[tuple[str, ...], tuple[str, ...]]]:
-    """For each cell, the block grasps (of ``free``) with which the arm picks the block up where
-    it lies and puts it down hole-up there, and the peg grasps (of ``mate``) with which it picks
+def _usable(peg, block, robot, cells: list[Slot], free: list, mate: list, start, todo: list[int]
+            ) -> list[tuple[tuple[str, ...], tuple[str, ...]]]:
+    """For each cell of ``cells`` whose index is in ``todo``, the block grasps (of ``free``) with
+    which the arm picks the block up where it lies in stable pose ``start`` and puts it down
+    hole-up there, and the peg grasps (of ``mate``) with which it picks
     the peg up and mates it into the block, each by an IK solution clear of the table, the part
     in the hand (the grasp rule) and every part any cell may hold at any step (this cell's other
     part included, every other cell's lying peg, block and assembled peg at once): the collision
@@ -272,7 +312,7 @@ def _usable(peg, block, robot, cells: list[Slot], free: list,
     scene = CollisionScene(robot, robot.gripper, {"peg": solid_bodies("peg", peg.shape),
                                                   "block": solid_bodies("block", block.shape)},
                            (), margin, None, "in", Memo())
-    poses = (peg.poses[PEG_POSE], block.poses[BLOCK_POSE], block.poses[BLOCK_UP_POSE],
+    poses = (peg.poses[PEG_POSE], start, block.poses[BLOCK_UP_POSE],
              _pose_T(np.asarray(TA[:3], float).T, *TA[3]))
     contents = [_cell_parts(c, k, poses) for k, c in enumerate(cells)]
     names = [n for d in contents for n in d]
@@ -308,26 +348,44 @@ def _usable(peg, block, robot, cells: list[Slot], free: list,
         return out
 
     result = []
-    for k, c in enumerate(cells):
-        own = contents[k]
+    for k in todo:
+        c, own = cells[k], contents[k]
         Tp, Tb, Tm = own[f"peg@{k}"], own[f"block@{k}"], own[f"peg@a{k}"]
         Tu = _pose_T(poses[2].R, *c.block, poses[2].height)
         lying, fitted = f"peg@{k}", f"peg@a{k}"
-        b_ok = works(Tb, f"block@{k}", free, {fitted}) & works(Tu, f"block@{k}", free, {fitted})
+        if c.pose == BLOCK_UP_POSE:  # never moved: no block grasp needed
+            b_ok = np.zeros(len(free), dtype=bool)
+        else:
+            b_ok = works(Tb, f"block@{k}", free, {fitted}) & works(Tu, f"block@{k}", free, {fitted})
         p_ok = works(Tp, lying, mate, {fitted}) & works(Tm, fitted, mate, {lying})
         result.append((tuple(g.label for g, v in zip(free, b_ok) if v),
                        tuple(g.label for g, v in zip(mate, p_ok) if v)))
     return result
 
 
-def layout(n_parts: int) -> list[tuple[tuple[float, float], tuple[float, float]]]:
-    """The (x, y) of each pair's peg and block (in, world frame): the first ``n_parts``
-    cells of :func:`slots`, nearest the robot first."""
+def blocks_for(n_parts: int) -> str:
+    """The blocks' start for N pairs: "hole-down" (each turned over) up to MAX_TURNED pairs,
+    "hole-up" above (the layout that holds MAX_PARTS)."""
+    return "hole-down" if n_parts <= MAX_TURNED else "hole-up"
+
+
+def _cells(n_parts: int, blocks: str | None) -> list[Slot]:
     _check_n(n_parts)
-    cells = slots()[:n_parts]
-    if len(cells) < n_parts:  # pragma: no cover - MAX_PARTS is checked against slots()
+    blocks = blocks or blocks_for(n_parts)
+    if blocks not in CAPACITY:
+        raise SparValueError(f"blocks must be one of {', '.join(CAPACITY)}, not {blocks!r}")
+    if n_parts > CAPACITY[blocks]:
+        raise SparValueError(f"at most {CAPACITY[blocks]} pairs with the blocks {blocks}, not {n_parts}")
+    cells = slots(blocks)[:n_parts]
+    if len(cells) < n_parts:  # pragma: no cover - CAPACITY is checked against slots()
         raise SparValueError(f"only {len(cells)} pairs fit within the arm's reach, not {n_parts}")
-    return [(c.peg, c.block) for c in cells]
+    return cells
+
+
+def layout(n_parts: int, blocks: str | None = None) -> list[tuple[tuple[float, float], tuple[float, float]]]:
+    """The (x, y) of each pair's peg and block (in, world frame): the first ``n_parts``
+    cells of :func:`slots` (``blocks`` default :func:`blocks_for`), nearest the robot first."""
+    return [(c.peg, c.block) for c in _cells(n_parts, blocks)]
 
 
 def _check_n(n_parts: int) -> None:
@@ -375,16 +433,25 @@ def keep_grasps(text: str, labels: Iterable[str]) -> str:
 
 
 def _problem_text(cells: list[Slot], robot_rel: str) -> str:
+    from .kb import load_object
+
     n_parts = len(cells)
     (x0, x1), (y0, y1) = _region(cells)
+    block = load_object(BLOCK_MODEL, "in")
+    rows = {lbl: [[int(round(v)) for v in r] for r in block.poses[lbl].R.T] for lbl in (BLOCK_POSE, BLOCK_UP_POSE)}
+    turned = all(c.pose == BLOCK_POSE for c in cells)
     lines = [
         f"# Generated by spar_py.gen: {n_parts} peg(s) into {n_parts} block(s) (issues 7, 18).",
-        "# Tests: phase 1 at scale. Every block rests hole-down (p2P3 in the paper's",
-        "# model), so each pair needs pickup(block), putdown(block), pickup(peg),",
-        f"# assemble: {4 * n_parts} actions in all (phase 1's default bound allows them).",
+        *(["# Tests: phase 1 at scale. Every block rests hole-down (p2P3 in the paper's",
+           "# model), so each pair needs pickup(block), putdown(block) hole-up, pickup(peg),",
+           f"# assemble: {4 * n_parts} actions in all."] if turned else
+          [f"# Tests: phase 1 at scale. More than {MAX_TURNED} pairs: every block rests hole-up",
+           "# (p2P1), so each pair needs pickup(peg), assemble: "
+           f"{2 * n_parts} actions in all (spar_py.gen.blocks_for)."]),
         "# Pair cells around the PUMA 762 (waist axis at the origin), nearest first: each",
-        "# peg lying on its -y base face (p1P5) beside its block; every cell checked",
-        "# reachable for the pickups, the put-down where the block stands and the mate.",
+        "# peg lying on its -y base face (p1P5) beside its block; every cell checked, with",
+        "# the collision scene and every other part in place, for the pickups, the put-down",
+        "# where the block stands and the mate; each part's model keeps the grasps that work.",
         f"problem: assembly_{n_parts}",
         "units: {length: in, angle: deg}",
         f"robot: {robot_rel}",
@@ -397,7 +464,7 @@ def _problem_text(cells: list[Slot], robot_rel: str) -> str:
             f"    initial: {{name: init_pos{2 * k - 1}, label: tr{2 * k - 1}, tm: {_tm(PEG_TM, *c.peg, 1.5)}}}",
             f"  block{k}:",
             f"    model: objects/block{k}.yaml",
-            f"    initial: {{name: init_pos{2 * k}, label: tr{2 * k}, tm: {_tm(BLOCK_TM, *c.block, 1.5)}}}",
+            f"    initial: {{name: init_pos{2 * k}, label: tr{2 * k}, tm: {_tm(rows[c.pose], *c.block, 1.5)}}}",
         ]
     lines += [
         "gripper: open",
@@ -429,30 +496,30 @@ def _problem_text(cells: list[Slot], robot_rel: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def generate_assembly(n_parts: int, out_dir: str | Path) -> Path:
+def generate_assembly(n_parts: int, out_dir: str | Path, blocks: str | None = None) -> Path:
     """Write the N-pegs-into-N-blocks problem into ``out_dir``; return the problem file.
+    ``blocks``: "hole-down" (each block turned over: 4 actions a pair, N <= MAX_TURNED) or
+    "hole-up" (2 actions a pair, N <= MAX_PARTS); default :func:`blocks_for`.
 
     Files: ``assembly_<N>.yaml``, ``objects/peg<k>.yaml`` and ``objects/block<k>.yaml``
     for k = 1..N, ``robots/puma762.yaml`` (a copy, so the directory stands alone).
     Existing files of those names are overwritten. Raises SparValueError for N outside
-    1..MAX_PARTS.
+    1..MAX_PARTS or above the layout's capacity.
     """
-    _check_n(n_parts)
+    cells = _cells(n_parts, blocks)
     out = Path(out_dir)
     (out / "objects").mkdir(parents=True, exist_ok=True)
     (out / "robots").mkdir(parents=True, exist_ok=True)
     shutil.copyfile(ROBOT, out / "robots" / ROBOT.name)
     peg_text, block_text = PEG_MODEL.read_text(encoding="utf-8"), BLOCK_MODEL.read_text(encoding="utf-8")
-    cells = slots()[:n_parts]
-    if len(cells) < n_parts:  # pragma: no cover - MAX_PARTS is checked against slots()
-        raise SparValueError(f"only {len(cells)} pairs fit within the arm's reach, not {n_parts}")
     for k, c in enumerate(cells, start=1):
         (out / "objects" / f"peg{k}.yaml").write_text(
             renamed_model(keep_grasps(peg_text, c.peg_grasps), f"peg{k}", 2 * k - 1, "kb/objects/peg.yaml"),
             encoding="utf-8")
+        # a hole-up block is never moved: its model keeps the template's grasps (none is needed)
+        text = block_text if c.pose == BLOCK_UP_POSE else keep_grasps(block_text, c.block_grasps)
         (out / "objects" / f"block{k}.yaml").write_text(
-            renamed_model(keep_grasps(block_text, c.block_grasps), f"block{k}", 2 * k, "kb/objects/block.yaml"),
-            encoding="utf-8")
+            renamed_model(text, f"block{k}", 2 * k, "kb/objects/block.yaml"), encoding="utf-8")
     problem = out / f"assembly_{n_parts}.yaml"
     problem.write_text(_problem_text(cells, f"robots/{ROBOT.name}"), encoding="utf-8")
     return problem
@@ -466,8 +533,10 @@ def main(argv: list[str]) -> int:
     """
     p = argparse.ArgumentParser(prog="spar gen", description="generate knowledge bases")
     sub = p.add_subparsers(dest="kind", required=True)
-    a = sub.add_parser("assembly", help=f"N pegs into N hole-down blocks (N = 1..{MAX_PARTS})")
+    a = sub.add_parser("assembly", help=f"N pegs into N blocks (N = 1..{MAX_PARTS})")
     a.add_argument("--parts", "-n", type=int, required=True, metavar="N")
+    a.add_argument("--blocks", choices=tuple(CAPACITY), default=None,
+                   help=f"the blocks' start (default: hole-down up to {MAX_TURNED} pairs, else hole-up)")
     a.add_argument("-o", "--out", default=None, metavar="DIR",
                    help="output directory (default: ./assembly_N)")
     try:
@@ -475,7 +544,7 @@ def main(argv: list[str]) -> int:
     except SystemExit as e:  # argparse has printed its message
         return 0 if e.code == 0 else 2
     try:
-        path = generate_assembly(args.parts, args.out or f"assembly_{args.parts}")
+        path = generate_assembly(args.parts, args.out or f"assembly_{args.parts}", args.blocks)
     except SparValueError as e:
         print(f"spar: gen assembly: {e}", file=sys.stderr)
         return 2

@@ -419,6 +419,7 @@ class SceneState:
         self._sph_c = (self._cap_a + self._cap_b) / 2
         self._sph_r = np.linalg.norm(self._cap_b - self._cap_a, axis=1) / 2 + self._cap_r
         self._groups: list[tuple[int, np.ndarray]] | None = None
+        self._body_frames = np.zeros(0, dtype=int)
         self._static: tuple[np.ndarray, np.ndarray] = (np.zeros((0, 3)), np.zeros((0, 3)))
 
     # ------------------------------------------------------------------ frames and bounds
@@ -435,6 +436,7 @@ class SceneState:
         if self._groups is None:  # made on first use: frame groups of the moving, static ends in the world
             frames = [b.frame for b in self.bodies[:m]]
             self._groups = [(f, np.array([i for i in range(m) if frames[i] == f])) for f in sorted(set(frames))]
+            self._body_frames = np.array(frames, dtype=int)
             base = self.scene.robot.base
             sa, sb = self._cap_a[m:].copy(), self._cap_b[m:].copy()
             on_base = np.array([b.frame == 0 for b in self.bodies[m:]], dtype=bool)
@@ -444,11 +446,10 @@ class SceneState:
         A = np.empty((n, len(self.bodies), 3))
         B = np.empty_like(A)
         A[:, m:], B[:, m:] = self._static
-        for f, idx in self._groups:
-            R, t = F[:, f, :3, :3], F[:, f, None, :3, 3]
-            Rt = np.swapaxes(R, 1, 2)
-            A[:, idx] = self._cap_a[idx] @ Rt + t
-            B[:, idx] = self._cap_b[idx] @ Rt + t
+        Fm = F[:, self._body_frames]                                 # (n, m, 4, 4) each body's frame
+        R, t = Fm[..., :3, :3], Fm[..., :3, 3]
+        A[:, :m] = (R @ self._cap_a[:m, :, None])[..., 0] + t
+        B[:, :m] = (R @ self._cap_b[:m, :, None])[..., 0] + t
         return A, B
 
     def moving_spheres(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
