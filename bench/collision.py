@@ -12,8 +12,12 @@ Run from the project root: ``.venv/bin/python -m bench.collision [--repeats 5] [
   to a temporary directory). Goal: at most 50 ms.
 - ``cold``: ``spar plan`` of each as a fresh process (median). Goal: at most 0.6 s.
 
-Coal against python-fcl on these queries is not measured here yet (coal is a 316 MB install;
-see the module notes of spar_py.world.collision for the figures that chose python-fcl).
+- ``libraries`` (with ``--coal-python PY``, a Python with both ``coal`` and ``python-fcl``, e.g.
+  a throwaway venv under /tmp: coal is a 300 MB install and never a project dependency): the
+  exact queries the paper cell's per-solution run sends to the library (recorded from
+  world.collision._exact: the body shapes and their world poses) replayed with python-fcl and
+  with coal in that interpreter, us per query (collide, then distance when apart, as
+  world.collision asks) and the largest difference of their distances.
 """
 from __future__ import annotations
 
@@ -93,6 +97,112 @@ def per_solution(cell, obj: str, repeats: int) -> dict[str, float]:
             "us_no_broad_phase": 1e6 * statistics.median(plain) / max(n, 1)}
 
 
+def record_queries(cell, obj: str, limit: int = 2000) -> list[dict]:
+    """The exact (library) queries of one per-solution run of ``cell``, as plain data: each body's
+    kind, size, local vertices and world pose (4x4 of its shape)."""
+    from spar_py.world import collision as col
+
+    out: list[dict] = []
+    real = col._exact
+
+    def spy(b1, T1, b2, T2):
+        if len(out) < limit:
+            out.append({"a": _body(b1, T1 @ b1.T), "b": _body(b2, T2 @ b2.T)})
+        return real(b1, T1, b2, T2)
+
+    col._exact = spy
+    try:
+        per_solution(cell, obj, 1)
+    finally:
+        col._exact = real
+    return out
+
+
+def _body(b, T: np.ndarray) -> dict:
+    Tinv = np.linalg.inv(b.T)
+    local = b.points @ Tinv[:3, :3].T + Tinv[:3, 3]
+    return {"kind": b.kind, "size": list(b.size), "points": local.tolist(), "T": T.tolist()}
+
+
+# replayed in the --coal-python interpreter: python-fcl and coal on the same queries
+_LIBS = r"""
+import json, math, sys, time
+import numpy as np
+from scipy.spatial import ConvexHull
+import coal, fcl
+Q = json.load(sys.stdin)
+SIDES = 16
+
+def geom(lib, b):
+    k, s = b["kind"], b["size"]
+    if k == "box":
+        return lib.Box(*(2 * np.asarray(s)))
+    if k == "capsule":
+        return lib.Capsule(s[0], 2 * s[1])
+    if k == "cylinder":
+        return lib.Cylinder(s[0] * math.cos(math.pi / SIDES), 2 * s[1])
+    pts = np.asarray(b["points"], float)
+    if lib is coal:
+        return coal.Convex.convexHull(pts, False, None)
+    h = ConvexHull(pts)
+    idx = {int(v): i for i, v in enumerate(h.vertices)}
+    faces = np.array([[3, idx[int(a)], idx[int(c)], idx[int(d)]] for a, c, d in h.simplices])
+    return fcl.Convex(pts[h.vertices], len(faces), faces.ravel())
+
+def run_fcl(pairs):
+    out = []
+    for g1, T1, g2, T2 in pairs:
+        o1 = fcl.CollisionObject(g1, fcl.Transform(T1[:3, :3], T1[:3, 3]))
+        o2 = fcl.CollisionObject(g2, fcl.Transform(T2[:3, :3], T2[:3, 3]))
+        if fcl.collide(o1, o2, fcl.CollisionRequest(), fcl.CollisionResult()):
+            out.append(0.0)
+        else:
+            out.append(max(float(fcl.distance(o1, o2, fcl.DistanceRequest(), fcl.DistanceResult())), 0.0))
+    return out
+
+def run_coal(pairs):
+    out = []
+    for g1, T1, g2, T2 in pairs:
+        t1, t2 = coal.Transform3s(T1[:3, :3], T1[:3, 3]), coal.Transform3s(T2[:3, :3], T2[:3, 3])
+        r = coal.CollisionResult()
+        if coal.collide(g1, t1, g2, t2, coal.CollisionRequest(), r):
+            out.append(0.0)
+        else:
+            d = coal.DistanceResult()
+            out.append(max(float(coal.distance(g1, t1, g2, t2, coal.DistanceRequest(), d)), 0.0))
+    return out
+
+res = {}
+for name, lib, fn in (("python-fcl", fcl, run_fcl), ("coal", coal, run_coal)):
+    pairs = [(geom(lib, q["a"]), np.asarray(q["a"]["T"]), geom(lib, q["b"]), np.asarray(q["b"]["T"])) for q in Q]
+    fn(pairs[:20])
+    best = None
+    for _ in range(3):
+        t = time.perf_counter()
+        d = fn(pairs)
+        dt = time.perf_counter() - t
+        best = dt if best is None or dt < best else best
+    res[name] = {"us": 1e6 * best / max(len(pairs), 1), "d": d}
+t = time.perf_counter(); import importlib; res["queries"] = len(Q)
+a, b = np.array(res["python-fcl"].pop("d")), np.array(res["coal"].pop("d"))
+res["max_abs_diff"] = float(np.abs(a - b).max()) if len(a) else 0.0
+res["verdict_differs"] = int(((a <= 0) != (b <= 0)).sum())
+print(json.dumps(res))
+"""
+
+
+def libraries(coal_python: str) -> dict:
+    """python-fcl against coal on the paper cell's own exact queries (see the module notes)."""
+    from spar_py.kb import load_problem
+
+    qs = record_queries(load_problem(CELL), "block")
+    r = subprocess.run([coal_python, "-c", _LIBS], input=json.dumps(qs), capture_output=True, text=True,
+                       timeout=600, check=False)
+    if r.returncode:
+        return {"error": r.stderr.strip().splitlines()[-1] if r.stderr.strip() else f"exit {r.returncode}"}
+    return json.loads(r.stdout)
+
+
 def warm(path: Path, repeats: int) -> float:
     from spar_py.planner import Planner
 
@@ -115,7 +225,7 @@ def cold(path: Path, repeats: int) -> float:
     return statistics.median(times)
 
 
-def run(repeats: int = 5, quick: bool = False) -> dict:
+def run(repeats: int = 5, quick: bool = False, coal_python: str | None = None) -> dict:
     from spar_py import gen
     from spar_py.kb import load_problem
 
@@ -130,6 +240,8 @@ def run(repeats: int = 5, quick: bool = False) -> dict:
         out["warm_ms"] = {"collision": warm(CELL, repeats), "no collision": warm(nocol, repeats)}
         k = max(1, repeats // 2)
         out["cold_s"] = {"collision": cold(CELL, k), "no collision": cold(nocol, k)}
+    if coal_python:
+        out["libraries"] = libraries(coal_python)
     return out
 
 
@@ -144,6 +256,15 @@ def render(r: dict) -> list[str]:
              f"<= {GOALS['warm_ms']:g} |")
     L.append(f"| paper cell cold spar plan (s) | {c['collision']:.2f} | {c['no collision']:.2f} (collision: false) | "
              f"<= {GOALS['cold_s']:g} |")
+    lib = r.get("libraries")
+    if lib and "error" not in lib:
+        L += ["", f"Exact queries of the paper cell's per-solution run ({lib['queries']}), replayed:", "",
+              "| library | us per query |", "|---|---|",
+              f"| python-fcl | {lib['python-fcl']['us']:.1f} |", f"| coal | {lib['coal']['us']:.1f} |", "",
+              f"Largest distance difference {lib['max_abs_diff']:.2g} (cell unit); touching verdicts that "
+              f"differ: {lib['verdict_differs']}."]
+    elif lib:
+        L += ["", f"Library comparison failed: {lib['error']}"]
     return L + [""]
 
 
@@ -152,8 +273,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--quick", action="store_true")
     p.add_argument("--json", action="store_true")
+    p.add_argument("--coal-python", default=None, metavar="PY",
+                   help="a Python with coal and python-fcl installed (a throwaway venv): compare the libraries")
     a = p.parse_args(argv)
-    r = run(a.repeats, a.quick)
+    r = run(a.repeats, a.quick, a.coal_python)
     print(json.dumps(r, indent=1) if a.json else "\n".join(render(r)))
     return 0
 
