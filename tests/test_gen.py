@@ -104,8 +104,10 @@ def _gap(a: np.ndarray, b: np.ndarray) -> float:
 
 def test_there_are_max_parts_slots() -> None:
     assert len(gen.slots("hole-down")) >= gen.MAX_TURNED >= 30
-    assert len(gen.slots("hole-up")) >= gen.MAX_PARTS >= 70
+    assert len(gen.slots("hole-up")) >= gen.MAX_PARTS_FULL >= 70
+    assert len(gen.slots("hole-up-small")) >= gen.MAX_PARTS >= 100
     assert gen.blocks_for(gen.MAX_TURNED) == "hole-down" and gen.blocks_for(gen.MAX_TURNED + 1) == "hole-up"
+    assert gen.blocks_for(gen.MAX_PARTS_FULL + 1) == "hole-up-small"
     with pytest.raises(SparValueError):
         gen.generate_assembly(gen.MAX_TURNED + 1, "/nonexistent", "hole-down")
 
@@ -124,7 +126,7 @@ def _footprint_boxes(model, T: np.ndarray) -> list[np.ndarray]:
     return out
 
 
-@pytest.mark.parametrize("n", [gen.MAX_TURNED, gen.MAX_PARTS])
+@pytest.mark.parametrize("n", [gen.MAX_TURNED, gen.MAX_PARTS_FULL, gen.MAX_PARTS])
 def test_initial_positions_do_not_overlap_and_clear_the_base(n: int, tmp_path: Path) -> None:
     """Independent of gen's own boxes: every solid of every part at its initial pose, as a world
     xy box from its corners, is apart from every other part's and outside the pedestal's circle
@@ -148,7 +150,8 @@ def test_initial_positions_do_not_overlap_and_clear_the_base(n: int, tmp_path: P
             assert np.hypot(*(near - base)) > r_ped + 1.0, obj
 
 
-@pytest.mark.parametrize(("n", "blocks", "per_pair"), [(2, None, 4), (5, None, 4), (3, "hole-up", 2)])
+@pytest.mark.parametrize(("n", "blocks", "per_pair"), [(2, None, 4), (5, None, 4), (3, "hole-up", 2),
+                                                     (3, "hole-up-small", 2)])
 def test_generated_plans_both_phases_with_collisions(n: int, blocks: str | None, per_pair: int,
                                                      tmp_path: Path) -> None:
     """Collision checking is on for every cell: a generated problem plans through phase 2 with
@@ -162,7 +165,8 @@ def test_generated_plans_both_phases_with_collisions(n: int, blocks: str | None,
     assert plan.instance["instances_examined"] == 1 and plan.instance["error_count"] == 0
 
 
-@pytest.mark.parametrize("n", [1, 2, 5, 13, gen.MAX_TURNED, gen.MAX_TURNED + 1, gen.MAX_PARTS])
+@pytest.mark.parametrize("n", [1, 2, 5, 13, gen.MAX_TURNED, gen.MAX_TURNED + 1, gen.MAX_PARTS_FULL + 1,
+                               gen.MAX_PARTS])
 def test_layout_is_clear_and_in_reach(n: int, tmp_path: Path) -> None:
     """A sample of N = 1..MAX_PARTS: parts clear of each other by more than the put-down
     clearance and of the pedestal, on the table, inside the free region, every block
@@ -271,3 +275,32 @@ def test_no_plan_names_the_bound_and_its_flag() -> None:
     assert r.returncode == 1
     line = next(ln for ln in r.stdout.splitlines() if ln.startswith("NO PLAN"))
     assert "within 12 actions" in line and "--max-actions" in line
+
+
+def test_scaled_models_are_the_templates_times_k(tmp_path: Path) -> None:
+    """The small parts (N above MAX_PARTS_FULL): every length times k, every rotation kept; the
+    robot copy's gripper scaled, its arm not."""
+    import yaml
+
+    from spar_py.kb import load_object
+
+    k = gen.SMALL_SCALE
+    for src in (gen.PEG_MODEL, gen.BLOCK_MODEL):
+        full = load_object(src, "in")
+        path = tmp_path / src.name
+        path.write_text(gen.scaled_model(src.read_text(), k))
+        small = load_object(path, "in")
+        for a, b in zip(full.shape, small.shape):
+            assert np.allclose(b.lo, k * a.lo) and np.allclose(b.hi, k * a.hi) and np.isclose(b.radius, k * a.radius)
+        for lbl, g in full.grasps.items():
+            h = small.grasps[lbl]
+            assert np.allclose(h.T[:3, :3], g.T[:3, :3]) and np.allclose(h.T[:3, 3], k * g.T[:3, 3])
+            assert np.isclose(h.width, k * g.width)
+        for lbl, p in full.poses.items():
+            assert np.allclose(small.poses[lbl].R, p.R) and np.isclose(small.poses[lbl].height, k * p.height)
+        assert np.isclose(small.feature.radius, k * full.feature.radius)
+    full_r = yaml.safe_load(gen.ROBOT.read_text())
+    small_r = yaml.safe_load(gen.robot_text(gen.ROBOT.read_text(), k))
+    assert small_r["gripper"]["finger_separation"] == pytest.approx(k * full_r["gripper"]["finger_separation"])
+    assert small_r["gripper"]["palm"]["thickness"] == pytest.approx(k * full_r["gripper"]["palm"]["thickness"])
+    assert small_r["dh"] == full_r["dh"] and small_r["collision"] == full_r["collision"]

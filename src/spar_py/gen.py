@@ -5,7 +5,8 @@ one object file per part and a copy of the robot file. Up to MAX_TURNED pairs ev
 starts hole-down (p2P3 in the paper's model), so each pair needs the paper's four actions
 (Sec. 6, Fig. 23): pickup(block), putdown(block), pickup(peg), assemble; N pairs need 4N.
 Above MAX_TURNED (up to MAX_PARTS) every block starts hole-up (p2P1) in a denser layout and
-each pair needs two: pickup(peg), assemble (:func:`blocks_for`; ``blocks=`` chooses).
+each pair needs two: pickup(peg), assemble; above MAX_PARTS_FULL the parts are smaller
+(:func:`blocks_for`; ``blocks=`` chooses: "hole-down", "hole-up", "hole-up-small").
 
 The parts are copies of the paper's models (kb/objects/peg.yaml, block.yaml) under
 new object names with their own label prefixes (``peg3`` gets grasps ``p5G1..``, poses
@@ -45,12 +46,17 @@ down hole-up where it stood is clear of everything. The free table (``placement_
 is one rectangle around the layout grown by MARGIN, its corner on the placement grid
 (placement.GRID_STEP_MM) of the block centres.
 
-MAX_TURNED (34) and MAX_PARTS (72) are what this check leaves for one PUMA 762. Issue 18 asks
-for 100: with 3 in parts on a 10 x 6 in pitch, the IK alone finds 100 cells within reach and
-the collision check keeps 72 (at the edge of reach the stretched arm's wrist comes down on the
-neighbours). A block started on a side face needs only a quarter turn, made with a 45-degree
-grasp from above and no aisle (70 such cells), but phase 1's lower bound counts such a pair as
-two actions, and its rounds of iterative deepening below 4N exhaust the step budget (N = 2).
+MAX_TURNED (34) and MAX_PARTS_FULL (72) are what this check leaves for one PUMA 762 and the
+paper's 3 in parts: on a 10 x 6 in pitch the IK alone finds 100 cells within reach and the
+collision check keeps 72 (at the edge of reach the stretched arm's wrist comes down on the
+neighbours). Above MAX_PARTS_FULL, up to MAX_PARTS (100; 130 cells pass), the parts are scaled
+by SMALL_SCALE in every length (:func:`scaled_model`: shapes, pose heights, grasps and widths,
+the features; the problem's T_a and uncertainty alike) and so is the gripper of the robot copy
+(:func:`robot_text`: a full-size finger is wider than a small peg's base and enters the block
+it mates into), on an 8 x 4 in pitch. A block started on a side face needs only a quarter turn
+(a 45-degree grasp from above, no aisle: 70 such full-size cells), but phase 1's lower bound
+counts such a pair as two actions, and its rounds of iterative deepening below 4N exhaust the
+step budget (N = 2); so the turned blocks start hole-down.
 
 Planning them needs no flag: phase 1's default bound and step budget are derived
 from the problem (spar_defaults.pl: the bound twice the lower bound; 100 steps per action of
@@ -64,7 +70,6 @@ from __future__ import annotations
 import argparse
 import math
 import re
-import shutil
 import sys
 from collections.abc import Iterable
 from dataclasses import dataclass, replace
@@ -77,6 +82,7 @@ from .errors import SparValueError
 __all__ = [
     "CAPACITY",
     "MAX_PARTS",
+    "MAX_PARTS_FULL",
     "MAX_TURNED",
     "blocks_for",
     "Slot",
@@ -85,6 +91,8 @@ __all__ = [
     "main",
     "keep_grasps",
     "renamed_model",
+    "robot_text",
+    "scaled_model",
     "slots",
 ]
 
@@ -95,12 +103,14 @@ ROBOT = KB_DIR / "robots" / "puma762.yaml"
 
 #: The most pairs :func:`generate_assembly` accepts: as many cells as :func:`slots` finds
 #: clear for the PUMA 762 (checked by tests/test_gen.py).
-MAX_PARTS = 72
+MAX_PARTS = 100
+#: The most pairs of full-size parts (blocks hole-up); above, the parts are scaled down.
+MAX_PARTS_FULL = 72
 #: The most pairs whose blocks start hole-down (each turned over: 4 actions a pair); above it
 #: the blocks start hole-up (2 actions a pair: pickup(peg), assemble), see :func:`blocks_for`.
 MAX_TURNED = 34
 #: The two layouts and the most pairs each holds (checked by tests/test_gen.py).
-CAPACITY = {"hole-down": MAX_TURNED, "hole-up": MAX_PARTS}
+CAPACITY = {"hole-down": MAX_TURNED, "hole-up": MAX_PARTS_FULL, "hole-up-small": MAX_PARTS}
 #: Gap between the footprints of a peg and its block, and between neighbouring cells (in).
 PEG_GAP = 2.0
 CELL_GAP = 2.0
@@ -114,6 +124,14 @@ COLUMN0 = 12.0
 #: Blocks hole-up (never moved): no aisles, columns 10 in apart (a pair's width).
 DENSE_PITCH_X = 10.0
 DENSE_COLUMN0 = 4.0
+#: Above MAX_PARTS_FULL pairs: the parts scaled by SMALL_SCALE in every length (a 1.5 in block,
+#: the peg's tolerances and the cell's uncertainty alike), columns 8 in apart, cells 4 in.
+SMALL_SCALE = 0.5
+SMALL_PITCH_X, SMALL_PITCH_Y = 8.0, 4.0
+#: Each layout's (column pitch, first column, cell pitch along a column) in inches, and scale.
+LAYOUT = {"hole-down": (PITCH_X, COLUMN0, PITCH_Y), "hole-up": (DENSE_PITCH_X, DENSE_COLUMN0, PITCH_Y),
+          "hole-up-small": (SMALL_PITCH_X, DENSE_COLUMN0, SMALL_PITCH_Y)}
+SCALE = {"hole-down": 1.0, "hole-up": 1.0, "hole-up-small": SMALL_SCALE}
 #: No footprint nearer the robot's base axis than this (in): the pedestal.
 PEDESTAL_RADIUS = 12.0
 #: Free table around the layout for the put-downs (in), a multiple of the grid step.
@@ -181,11 +199,75 @@ class Slot:
         return math.hypot(*self.block)
 
 
-def _models():
-    """The peg and block models and the robot, in inches (kb.load_object, kb.load_robot)."""
+def scaled_model(text: str, k: float) -> str:
+    """An object file's text with every length multiplied by ``k`` (shape, stable-pose heights,
+    grasp positions and widths, the feature's radius and vector, face points); angles and
+    labels kept. The YAML is rewritten (its comments are dropped); ``k`` = 1 returns it as is."""
+    if k == 1:
+        return text
+    import yaml
+
+    d = yaml.safe_load(text)
+
+    def sc(v):
+        return [sc(x) for x in v] if isinstance(v, list) else float(v) * k
+
+    for solid in d.get("shape", []):
+        for kind in solid.values():
+            for key in ("min", "max", "radius", "z", "center"):
+                if key in kind:
+                    kind[key] = sc(kind[key])
+    for pose in d.get("stable_poses", []):
+        pose["tm"][3] = sc(pose["tm"][3])
+    for g in d.get("grasps", []):
+        g["eulerxyz"][:3] = sc(g["eulerxyz"][:3])
+        g["width"] = sc(g["width"])
+    feat = d.get("feature")
+    if feat:
+        for key in ("radius", "vector"):
+            if key in feat:
+                feat[key] = sc(feat[key])
+    if "face_names" in d:
+        d["face_names"] = {f: sc(v) for f, v in d["face_names"].items()}
+    return yaml.safe_dump(d, sort_keys=False, default_flow_style=None, width=200)
+
+
+def robot_text(text: str, k: float) -> str:
+    """The robot file's text with its gripper (finger separation, finger and palm boxes) scaled
+    by ``k``: the tooling for parts scaled by ``k`` (a full-size finger is wider than a small
+    peg's base and would enter the block it is mated into). The arm is unchanged."""
+    if k == 1:
+        return text
+
+    def nums(m: re.Match) -> str:
+        return m.group(1) + re.sub(r"\d+(?:\.\d+)?", lambda v: f"{float(v.group(0)) * k:g}", m.group(2))
+
+    text, n = re.subn(r"(?m)^(  finger_separation: )([\d.]+)", nums, text, count=1)
+    text, n2 = re.subn(r"(?m)^(  (?:finger|palm): )(\{[^}]*\})", nums, text)
+    if n != 1 or n2 != 2:  # pragma: no cover - the fixed robot file
+        raise SparValueError(f"{ROBOT}: no gripper lines to scale")
+    return f"# Generated by spar_py.gen: kb/robots/{ROBOT.name} with its gripper scaled by {k:g}.\n" + text
+
+
+def _models(scale: float = 1.0):
+    """The peg and block models (lengths times ``scale``) and the robot, in inches
+    (kb.load_object, kb.load_robot)."""
+    import tempfile
+
     from .kb import load_object, load_robot
 
-    return load_object(PEG_MODEL, "in"), load_object(BLOCK_MODEL, "in"), load_robot(ROBOT, "in")
+    if scale == 1:
+        return load_object(PEG_MODEL, "in"), load_object(BLOCK_MODEL, "in"), load_robot(ROBOT, "in")
+    with tempfile.TemporaryDirectory(prefix="spar-gen-") as d:
+        out = []
+        for src in (PEG_MODEL, BLOCK_MODEL):
+            path = Path(d) / src.name
+            path.write_text(scaled_model(src.read_text(encoding="utf-8"), scale), encoding="utf-8")
+            out.append(load_object(path, "in"))
+        path = Path(d) / ROBOT.name
+        path.write_text(robot_text(ROBOT.read_text(encoding="utf-8"), scale), encoding="utf-8")
+        robot = load_robot(path, "in")
+    return out[0], out[1], robot
 
 
 def _pose_T(R: np.ndarray, x: float, y: float, z: float) -> np.ndarray:
@@ -217,13 +299,14 @@ def slots(blocks: str = "hole-down") -> list[Slot]:
         raise SparValueError(f"blocks must be one of {', '.join(CAPACITY)}, not {blocks!r}")
     from .placement import footprint
 
-    peg, block, robot = _models()
+    scale, pitch_y = SCALE[blocks], LAYOUT[blocks][2]
+    peg, block, robot = _models(scale)
     sp_peg, sp_blk, sp_up = peg.poses[PEG_POSE], block.poses[BLOCK_POSE], block.poses[BLOCK_UP_POSE]
     fp_peg, fp_blk = footprint(peg, sp_peg.R), footprint(block, sp_blk.R)
     (plo, phi), (blo, bhi) = (fp_peg.min(0), fp_peg.max(0)), (fp_blk.min(0), fp_blk.max(0))
     width = (phi[0] - plo[0]) + PEG_GAP + (bhi[0] - blo[0]) + CELL_GAP
     depth = max(phi[1] - plo[1], bhi[1] - blo[1]) + CELL_GAP
-    if width > PITCH_X + 1e-9 or depth > PITCH_Y + 1e-9:  # pragma: no cover - fixed models
+    if width > LAYOUT[blocks][0] + 1e-9 or depth > pitch_y + 1e-9:  # pragma: no cover - fixed models
         raise SparValueError(f"a pair needs {width:g} x {depth:g} in, more than the cell")
     base = robot.base[:2, 3]
     gx, gy = round(base[0] / 2) * 2, round(base[1] / 2) * 2   # the grid point nearest the axis
@@ -231,12 +314,12 @@ def slots(blocks: str = "hole-down") -> list[Slot]:
     def lattice(pitch_x: float, column0: float) -> list[Slot]:
         """Cells in columns x = +-(column0 + k pitch_x), PITCH_Y apart, the peg on the far side."""
         out = []
-        kx, ky = int(SEARCH_HALF_WIDTH // pitch_x), int(SEARCH_HALF_WIDTH // PITCH_Y)
+        kx, ky = int(SEARCH_HALF_WIDTH // pitch_x), int(SEARCH_HALF_WIDTH // pitch_y)
         for side in (-1, 1):
             for i in range(kx + 1):
                 bx = gx + side * (column0 + pitch_x * i)
                 for j in range(-ky, ky + 1):
-                    by = gy + PITCH_Y * j
+                    by = gy + pitch_y * j
                     bcy = by + (blo[1] + bhi[1]) / 2
                     py = bcy - (plo[1] + phi[1]) / 2                    # both boxes centred on one line
                     px = bx + bhi[0] + PEG_GAP - plo[0] if side > 0 else bx + blo[0] - PEG_GAP - phi[0]
@@ -247,7 +330,7 @@ def slots(blocks: str = "hole-down") -> list[Slot]:
                         out.append(Slot((px, py), (bx, by), box))
         return out
 
-    T_a = _pose_T(np.asarray(TA[:3], float).T, *TA[3])
+    T_a = _pose_T(np.asarray(TA[:3], float).T, *(np.asarray(TA[3], float) * scale))
     mate = [g for g in peg.grasps.values()
             if not set(g.ofaces) & set(peg.mating_faces) and not set(g.gfaces) & set(sp_peg.rfaces)]
 
@@ -260,15 +343,15 @@ def slots(blocks: str = "hole-down") -> list[Slot]:
 
     free = [g for g in block.grasps.values() if not set(g.gfaces) & (set(sp_blk.rfaces) | set(sp_up.rfaces))]
     if blocks == "hole-down":  # columns with aisles, a block grasp reaching both ends of the half turn
-        cells = peg_reach(lattice(PITCH_X, COLUMN0))
+        cells = peg_reach(lattice(*LAYOUT[blocks][:2]))
         if cells:
             blk_T = np.stack([_pose_T(sp_blk.R, *c.block, sp_blk.height) for c in cells])
             up_T = np.stack([_pose_T(sp_up.R, *c.block, sp_up.height) for c in cells])
             cells = [c for c, v in zip(cells, _grasp_ok(robot, [g.T for g in free], blk_T, up_T)) if v]
         cells = [replace(c, pose=BLOCK_POSE) for c in cells]
     else:  # the dense lattice, the blocks never moved
-        cells = [replace(c, pose=BLOCK_UP_POSE) for c in peg_reach(lattice(DENSE_PITCH_X, DENSE_COLUMN0))]
-    usable = _usable(peg, block, robot, cells, free, mate, sp_blk, list(range(len(cells))))
+        cells = [replace(c, pose=BLOCK_UP_POSE) for c in peg_reach(lattice(*LAYOUT[blocks][:2]))]
+    usable = _usable(peg, block, robot, cells, free, mate, sp_blk, list(range(len(cells))), T_a)
     good = [replace(c, block_grasps=b, peg_grasps=p) for c, (b, p) in zip(cells, usable)
             if p and (b or c.pose == BLOCK_UP_POSE)]
     return sorted(good, key=lambda c: (round(c.distance, 9), math.atan2(c.block[1] - base[1], c.block[0] - base[0])))
@@ -285,8 +368,8 @@ def _cell_parts(c: Slot, k: int, poses: tuple) -> dict[str, np.ndarray]:
             f"block@{k}": _pose_T(sp_blk.R, *c.block, sp_blk.height), f"peg@a{k}": up @ T_a}
 
 
-def _usable(peg, block, robot, cells: list[Slot], free: list, mate: list, start, todo: list[int]
-            ) -> list[tuple[tuple[str, ...], tuple[str, ...]]]:
+def _usable(peg, block, robot, cells: list[Slot], free: list, mate: list, start, todo: list[int],
+            T_a: np.ndarray) -> list[tuple[tuple[str, ...], tuple[str, ...]]]:
     """For each cell of ``cells`` whose index is in ``todo``, the block grasps (of ``free``) with
     which the arm picks the block up where it lies in stable pose ``start`` and puts it down
     hole-up there, and the peg grasps (of ``mate``) with which it picks
@@ -312,8 +395,7 @@ def _usable(peg, block, robot, cells: list[Slot], free: list, mate: list, start,
     scene = CollisionScene(robot, robot.gripper, {"peg": solid_bodies("peg", peg.shape),
                                                   "block": solid_bodies("block", block.shape)},
                            (), margin, None, "in", Memo())
-    poses = (peg.poses[PEG_POSE], start, block.poses[BLOCK_UP_POSE],
-             _pose_T(np.asarray(TA[:3], float).T, *TA[3]))
+    poses = (peg.poses[PEG_POSE], start, block.poses[BLOCK_UP_POSE], T_a)
     contents = [_cell_parts(c, k, poses) for k, c in enumerate(cells)]
     names = [n for d in contents for n in d]
     where = {n: T for d in contents for n, T in d.items()}
@@ -366,7 +448,9 @@ def _usable(peg, block, robot, cells: list[Slot], free: list, mate: list, start,
 def blocks_for(n_parts: int) -> str:
     """The blocks' start for N pairs: "hole-down" (each turned over) up to MAX_TURNED pairs,
     "hole-up" above (the layout that holds MAX_PARTS)."""
-    return "hole-down" if n_parts <= MAX_TURNED else "hole-up"
+    if n_parts <= MAX_TURNED:
+        return "hole-down"
+    return "hole-up" if n_parts <= MAX_PARTS_FULL else "hole-up-small"
 
 
 def _cells(n_parts: int, blocks: str | None) -> list[Slot]:
@@ -432,7 +516,16 @@ def keep_grasps(text: str, labels: Iterable[str]) -> str:
     return note + "".join(out)
 
 
-def _problem_text(cells: list[Slot], robot_rel: str) -> str:
+def _bounds(text: str, k: float) -> str:
+    """A bounds line's text with its dx, dy, dz intervals times ``k`` (dtheta kept)."""
+    def one(m: re.Match) -> str:
+        lo, hi = float(m.group(2)) * k, float(m.group(3)) * k
+        return f"{m.group(1)}: [{lo:g}, {hi:g}]"
+
+    return re.sub(r"\b(d[xyz]): \[([-\d.]+), ([-\d.]+)\]", one, text)
+
+
+def _problem_text(cells: list[Slot], robot_rel: str, scale: float = 1.0) -> str:
     from .kb import load_object
 
     n_parts = len(cells)
@@ -448,6 +541,8 @@ def _problem_text(cells: list[Slot], robot_rel: str) -> str:
           [f"# Tests: phase 1 at scale. More than {MAX_TURNED} pairs: every block rests hole-up",
            "# (p2P1), so each pair needs pickup(peg), assemble: "
            f"{2 * n_parts} actions in all (spar_py.gen.blocks_for)."]),
+        *([f"# More than {MAX_PARTS_FULL} pairs: every length of the parts, of T_a, of the uncertainty",
+           f"# and of the gripper (robots/ copy) scaled by {scale:g}."] if scale != 1 else []),
         "# Pair cells around the PUMA 762 (waist axis at the origin), nearest first: each",
         "# peg lying on its -y base face (p1P5) beside its block; every cell checked, with",
         "# the collision scene and every other part in place, for the pickups, the put-down",
@@ -461,10 +556,10 @@ def _problem_text(cells: list[Slot], robot_rel: str) -> str:
         lines += [
             f"  peg{k}:",
             f"    model: objects/peg{k}.yaml",
-            f"    initial: {{name: init_pos{2 * k - 1}, label: tr{2 * k - 1}, tm: {_tm(PEG_TM, *c.peg, 1.5)}}}",
+            f"    initial: {{name: init_pos{2 * k - 1}, label: tr{2 * k - 1}, tm: {_tm(PEG_TM, *c.peg, 1.5 * scale)}}}",
             f"  block{k}:",
             f"    model: objects/block{k}.yaml",
-            f"    initial: {{name: init_pos{2 * k}, label: tr{2 * k}, tm: {_tm(rows[c.pose], *c.block, 1.5)}}}",
+            f"    initial: {{name: init_pos{2 * k}, label: tr{2 * k}, tm: {_tm(rows[c.pose], *c.block, 1.5 * scale)}}}",
         ]
     lines += [
         "gripper: open",
@@ -473,20 +568,20 @@ def _problem_text(cells: list[Slot], robot_rel: str) -> str:
         f"  - {{x: [{_num(x0)}, {_num(x1)}], y: [{_num(y0)}, {_num(y1)}]}}",
         "# Table 2 of the paper for the manipulator and every part.",
         "uncertainty:",
-        f"  manipulator: {MANIPULATOR_BOUNDS}",
+        f"  manipulator: {_bounds(MANIPULATOR_BOUNDS, scale)}",
         "  objects:",
     ]
     for k in range(1, n_parts + 1):
         for obj in (f"peg{k}", f"block{k}"):
-            lines.append(f"    {obj}: {OBJECT_BOUNDS}")
+            lines.append(f"    {obj}: {_bounds(OBJECT_BOUNDS, scale)}")
     lines += [
         "# Fig. 11: a dense range scan leaves +-0.05 in and +-0.5 deg.",
         "sensors:",
-        f"  dense_range_scan: {SCAN_BOUNDS}",
+        f"  dense_range_scan: {_bounds(SCAN_BOUNDS, scale)}",
         "# T_a and V_a of the paper's cell, shared by every pair: the peg upside down in",
         "# the hole, its tip at the hole's bottom centre; the approach down the hole.",
         "transforms:",
-        f"  trans_1: {{tm: {_tm(TA[:3], *TA[3])}}}",
+        f"  trans_1: {{tm: {_tm(TA[:3], *(np.asarray(TA[3], float) * scale))}}}",
         "vectors:",
         "  vec_1: [0, 0, -1]",
         "goals:",
@@ -498,30 +593,33 @@ def _problem_text(cells: list[Slot], robot_rel: str) -> str:
 
 def generate_assembly(n_parts: int, out_dir: str | Path, blocks: str | None = None) -> Path:
     """Write the N-pegs-into-N-blocks problem into ``out_dir``; return the problem file.
-    ``blocks``: "hole-down" (each block turned over: 4 actions a pair, N <= MAX_TURNED) or
-    "hole-up" (2 actions a pair, N <= MAX_PARTS); default :func:`blocks_for`.
+    ``blocks``: "hole-down" (each block turned over: 4 actions a pair, N <= MAX_TURNED),
+    "hole-up" (2 actions a pair, N <= MAX_PARTS_FULL) or "hole-up-small" (the same with parts
+    and gripper scaled by SMALL_SCALE, N <= MAX_PARTS); default :func:`blocks_for`.
 
     Files: ``assembly_<N>.yaml``, ``objects/peg<k>.yaml`` and ``objects/block<k>.yaml``
     for k = 1..N, ``robots/puma762.yaml`` (a copy, so the directory stands alone).
     Existing files of those names are overwritten. Raises SparValueError for N outside
     1..MAX_PARTS or above the layout's capacity.
     """
+    blocks = blocks or blocks_for(n_parts)
     cells = _cells(n_parts, blocks)
+    scale = SCALE[blocks]
     out = Path(out_dir)
     (out / "objects").mkdir(parents=True, exist_ok=True)
     (out / "robots").mkdir(parents=True, exist_ok=True)
-    shutil.copyfile(ROBOT, out / "robots" / ROBOT.name)
+    (out / "robots" / ROBOT.name).write_text(robot_text(ROBOT.read_text(encoding="utf-8"), scale), encoding="utf-8")
     peg_text, block_text = PEG_MODEL.read_text(encoding="utf-8"), BLOCK_MODEL.read_text(encoding="utf-8")
     for k, c in enumerate(cells, start=1):
+        text = scaled_model(keep_grasps(peg_text, c.peg_grasps), scale)
         (out / "objects" / f"peg{k}.yaml").write_text(
-            renamed_model(keep_grasps(peg_text, c.peg_grasps), f"peg{k}", 2 * k - 1, "kb/objects/peg.yaml"),
-            encoding="utf-8")
+            renamed_model(text, f"peg{k}", 2 * k - 1, "kb/objects/peg.yaml"), encoding="utf-8")
         # a hole-up block is never moved: its model keeps the template's grasps (none is needed)
         text = block_text if c.pose == BLOCK_UP_POSE else keep_grasps(block_text, c.block_grasps)
         (out / "objects" / f"block{k}.yaml").write_text(
-            renamed_model(text, f"block{k}", 2 * k, "kb/objects/block.yaml"), encoding="utf-8")
+            renamed_model(scaled_model(text, scale), f"block{k}", 2 * k, "kb/objects/block.yaml"), encoding="utf-8")
     problem = out / f"assembly_{n_parts}.yaml"
-    problem.write_text(_problem_text(cells, f"robots/{ROBOT.name}"), encoding="utf-8")
+    problem.write_text(_problem_text(cells, f"robots/{ROBOT.name}", scale), encoding="utf-8")
     return problem
 
 
@@ -536,7 +634,8 @@ def main(argv: list[str]) -> int:
     a = sub.add_parser("assembly", help=f"N pegs into N blocks (N = 1..{MAX_PARTS})")
     a.add_argument("--parts", "-n", type=int, required=True, metavar="N")
     a.add_argument("--blocks", choices=tuple(CAPACITY), default=None,
-                   help=f"the blocks' start (default: hole-down up to {MAX_TURNED} pairs, else hole-up)")
+                   help=f"the blocks' start (default: hole-down up to {MAX_TURNED} pairs, hole-up up to "
+                        f"{MAX_PARTS_FULL}, else hole-up-small)")
     a.add_argument("-o", "--out", default=None, metavar="DIR",
                    help="output directory (default: ./assembly_N)")
     try:
