@@ -20,7 +20,7 @@ import sys
 import time
 from pathlib import Path
 
-from . import coldstart, derive, fd, ik, memory, motion, planning, supinf
+from . import coldstart, collision, derive, fd, ik, memory, motion, planning, supinf
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "RESULTS.md"
@@ -47,13 +47,14 @@ FULL = {"ik": {"n": 10_000, "single": 1000, "rtb": 200, "repeats": 5}, "derive":
         "planning": {"quick": False, "max_n": 10},
         "memory": {"plans": 1000, "warmup": 50},
         "coldstart": {"repeats": 15, "importtime_runs": 5},
-        "fd": {"ns": fd.NS}, "motion": {"seeds": 10}}
+        "fd": {"ns": fd.NS}, "motion": {"seeds": 10}, "collision": {"repeats": 5}}
 QUICK = {"ik": {"n": 1000, "single": 100, "rtb": 20, "repeats": 3}, "derive": {"repeats": 2},
          "supinf": {"per_length": 1, "lengths": (1, 4, 8), "repeats": 3, "deep_count": 2},
          "planning": {"quick": True, "max_n": 2, "timeout": 60.0},
          "memory": {"plans": 100, "warmup": 10, "processes": 1},
          "coldstart": {"repeats": 3, "importtime_runs": 1},
-         "fd": {"ns": (1, 2)}, "motion": {"seeds": 2, "budget": 0.5}}
+         "fd": {"ns": (1, 2)}, "motion": {"seeds": 2, "budget": 0.5},
+         "collision": {"repeats": 1, "quick": True}}
 
 
 # ---------------------------------------------------------------------- where and with what
@@ -129,7 +130,8 @@ def run_all(quick: bool = False, log=None) -> dict:
                      ("coldstart", lambda: coldstart.run(**sizes["coldstart"])),
                      ("derive", lambda: derive.run(**sizes["derive"])),
                      ("fd", lambda: fd.run(**sizes["fd"], progress=say)),
-                     ("motion", lambda: motion.run(**sizes.get("motion", {})))):
+                     ("motion", lambda: motion.run(**sizes.get("motion", {}))),
+                     ("collision", lambda: collision.run(**sizes.get("collision", {})))):
         say(f"== {name}")
         t = time.perf_counter()
         out[name] = fn()
@@ -406,6 +408,8 @@ def render(r: dict) -> str:
         L += derive.markdown(r["derive"])
     if r.get("motion"):
         L += motion.render(r["motion"])
+    if r.get("collision"):
+        L += collision.render(r["collision"])
 
     L += ["## Where the time goes (cProfile)", "",
           ("Python's profiler sees SWI-Prolog as one call (`janus_swi._swipl.call`): its internal time "

@@ -34,7 +34,9 @@ def test_generated_three_loads_with_three_assembles(tmp_path: Path) -> None:
 def test_models_are_renamed_copies(tmp_path: Path) -> None:
     cell = load_problem(gen.generate_assembly(2, tmp_path))
     peg2, block2 = cell.objects["peg2"], cell.objects["block2"]
-    assert sorted(peg2.grasps) == sorted(g.replace("p1G", "p3G") for g in cell.objects["peg1"].grasps)
+    paper = load_problem(Path("kb/problems/peg_in_block.yaml"))
+    template = {g.replace("p1G", "p3G") for g in paper.objects["peg"].grasps}
+    assert peg2.grasps and set(peg2.grasps) <= template  # the grasps usable where it lies
     assert sorted(block2.poses) == [f"p4P{i}" for i in range(1, 7)]
     labels = [lbl for o in cell.objects.values() for lbl in (*o.grasps, *o.poses)]
     assert len(labels) == len(set(labels))
@@ -101,10 +103,70 @@ def _gap(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def test_there_are_max_parts_slots() -> None:
-    assert len(gen.slots()) >= gen.MAX_PARTS >= 100
+    assert len(gen.slots("hole-down")) >= gen.MAX_TURNED >= 30
+    assert len(gen.slots("hole-up")) >= gen.MAX_PARTS_FULL >= 70
+    assert len(gen.slots("hole-up-small")) >= gen.MAX_PARTS >= 100
+    assert gen.blocks_for(gen.MAX_TURNED) == "hole-down" and gen.blocks_for(gen.MAX_TURNED + 1) == "hole-up"
+    assert gen.blocks_for(gen.MAX_PARTS_FULL + 1) == "hole-up-small"
+    with pytest.raises(SparValueError):
+        gen.generate_assembly(gen.MAX_TURNED + 1, "/nonexistent", "hole-down")
 
 
-@pytest.mark.parametrize("n", [1, 2, 5, 13, 37, 64, gen.MAX_PARTS])
+def _footprint_boxes(model, T: np.ndarray) -> list[np.ndarray]:
+    """Each solid's world xy box (xmin, ymin, xmax, ymax) at T, corners by hand."""
+    out = []
+    for s in model.shape:
+        if s.kind == "cylinder":
+            pts = [[x, y, z] for z in (s.lo[2], s.hi[2])
+                   for x in (-s.radius, s.radius) for y in (-s.radius, s.radius)]
+        else:
+            pts = [[x, y, z] for x in (s.lo[0], s.hi[0]) for y in (s.lo[1], s.hi[1]) for z in (s.lo[2], s.hi[2])]
+        w = (np.asarray(pts, float) @ T[:3, :3].T + T[:3, 3])[:, :2]
+        out.append(np.concatenate([w.min(0), w.max(0)]))
+    return out
+
+
+@pytest.mark.parametrize("n", [gen.MAX_TURNED, gen.MAX_PARTS_FULL, gen.MAX_PARTS])
+def test_initial_positions_do_not_overlap_and_clear_the_base(n: int, tmp_path: Path) -> None:
+    """Independent of gen's own boxes: every solid of every part at its initial pose, as a world
+    xy box from its corners, is apart from every other part's and outside the pedestal's circle
+    (the robot file's pedestal radius, read from the YAML here), for both layouts at their
+    largest."""
+    import yaml
+
+    cell = load_problem(gen.generate_assembly(n, tmp_path))
+    robot_yaml = yaml.safe_load((tmp_path / "robots" / "puma762.yaml").read_text())
+    pedestal = next(lk for lk in robot_yaml["collision"]["links"] if lk["name"] == "pedestal")
+    r_ped = pedestal["cylinder"]["radius"] / 25.4                        # mm -> in
+    base = np.asarray(robot_yaml["base"]["xyz"][:2], float) / 25.4
+    boxes = {p.obj: _footprint_boxes(cell.objects[p.obj], p.T) for p in cell.positions.values()}
+    assert len(boxes) == 2 * n
+    for a, b in combinations(boxes, 2):
+        gap = min(_gap(x, y) for x in boxes[a] for y in boxes[b])
+        assert gap > 0.5, (a, b, gap)
+    for obj, bxs in boxes.items():
+        for bx in bxs:
+            near = np.clip(base, bx[:2], bx[2:])
+            assert np.hypot(*(near - base)) > r_ped + 1.0, obj
+
+
+@pytest.mark.parametrize(("n", "blocks", "per_pair"), [(2, None, 4), (5, None, 4), (3, "hole-up", 2),
+                                                     (3, "hole-up-small", 2)])
+def test_generated_plans_both_phases_with_collisions(n: int, blocks: str | None, per_pair: int,
+                                                     tmp_path: Path) -> None:
+    """Collision checking is on for every cell: a generated problem plans through phase 2 with
+    no flag, on the first instance examined, with no error."""
+    from spar_py.planner import Outcome, Planner
+
+    plan = Planner().plan(gen.generate_assembly(n, tmp_path, blocks))
+    assert plan.outcome is Outcome.PLAN, plan.reason
+    assert len(plan.actions) == per_pair * n
+    assert plan.instance is not None
+    assert plan.instance["instances_examined"] == 1 and plan.instance["error_count"] == 0
+
+
+@pytest.mark.parametrize("n", [1, 2, 5, 13, gen.MAX_TURNED, gen.MAX_TURNED + 1, gen.MAX_PARTS_FULL + 1,
+                               gen.MAX_PARTS])
 def test_layout_is_clear_and_in_reach(n: int, tmp_path: Path) -> None:
     """A sample of N = 1..MAX_PARTS: parts clear of each other by more than the put-down
     clearance and of the pedestal, on the table, inside the free region, every block
@@ -135,9 +197,13 @@ def test_layout_is_clear_and_in_reach(n: int, tmp_path: Path) -> None:
         assert np.allclose(off, np.round(off)), f"block{k} off the placement grid"
         up = Tb.copy()
         up[:3, :3] = block.poses[f"p{2 * k}P1"].R
-        rest = set(block.poses[f"p{2 * k}P3"].rfaces) | set(block.poses[f"p{2 * k}P1"].rfaces)
-        assert any(_reached(cell.robot, Tb @ g.T) and _reached(cell.robot, up @ g.T)
-                   for g in block.grasps.values() if not set(g.gfaces) & rest), f"block{k}"
+        if n <= gen.MAX_TURNED:  # hole-down, to be turned over where it lies
+            assert np.allclose(Tb[:3, :3], block.poses[f"p{2 * k}P3"].R)
+            rest = set(block.poses[f"p{2 * k}P3"].rfaces) | set(block.poses[f"p{2 * k}P1"].rfaces)
+            assert any(_reached(cell.robot, Tb @ g.T) and _reached(cell.robot, up @ g.T)
+                       for g in block.grasps.values() if not set(g.gfaces) & rest), f"block{k}"
+        else:  # hole-up, never moved
+            assert np.allclose(Tb[:3, :3], up[:3, :3])
         assert any(_reached(cell.robot, Tp @ g.T) and _reached(cell.robot, up @ Ta @ g.T)
                    for g in peg.grasps.values()
                    if not set(g.ofaces) & set(peg.mating_faces)
@@ -209,3 +275,32 @@ def test_no_plan_names_the_bound_and_its_flag() -> None:
     assert r.returncode == 1
     line = next(ln for ln in r.stdout.splitlines() if ln.startswith("NO PLAN"))
     assert "within 12 actions" in line and "--max-actions" in line
+
+
+def test_scaled_models_are_the_templates_times_k(tmp_path: Path) -> None:
+    """The small parts (N above MAX_PARTS_FULL): every length times k, every rotation kept; the
+    robot copy's gripper scaled, its arm not."""
+    import yaml
+
+    from spar_py.kb import load_object
+
+    k = gen.SMALL_SCALE
+    for src in (gen.PEG_MODEL, gen.BLOCK_MODEL):
+        full = load_object(src, "in")
+        path = tmp_path / src.name
+        path.write_text(gen.scaled_model(src.read_text(), k))
+        small = load_object(path, "in")
+        for a, b in zip(full.shape, small.shape):
+            assert np.allclose(b.lo, k * a.lo) and np.allclose(b.hi, k * a.hi) and np.isclose(b.radius, k * a.radius)
+        for lbl, g in full.grasps.items():
+            h = small.grasps[lbl]
+            assert np.allclose(h.T[:3, :3], g.T[:3, :3]) and np.allclose(h.T[:3, 3], k * g.T[:3, 3])
+            assert np.isclose(h.width, k * g.width)
+        for lbl, p in full.poses.items():
+            assert np.allclose(small.poses[lbl].R, p.R) and np.isclose(small.poses[lbl].height, k * p.height)
+        assert np.isclose(small.feature.radius, k * full.feature.radius)
+    full_r = yaml.safe_load(gen.ROBOT.read_text())
+    small_r = yaml.safe_load(gen.robot_text(gen.ROBOT.read_text(), k))
+    assert small_r["gripper"]["finger_separation"] == pytest.approx(k * full_r["gripper"]["finger_separation"])
+    assert small_r["gripper"]["palm"]["thickness"] == pytest.approx(k * full_r["gripper"]["palm"]["thickness"])
+    assert small_r["dh"] == full_r["dh"] and small_r["collision"] == full_r["collision"]

@@ -1,39 +1,67 @@
 """Generated problems for scaling runs (issues 7, 18): N pegs into N blocks, N = 1..MAX_PARTS.
 
 :func:`generate_assembly` writes a self-contained knowledge base: the problem file,
-one object file per part and a copy of the robot file. Every block starts hole-down
-(p2P3 in the paper's model), so each pair needs the paper's four actions (Sec. 6,
-Fig. 23): pickup(block), putdown(block), pickup(peg), assemble; N pairs need 4N.
+one object file per part and a copy of the robot file. Up to MAX_TURNED pairs every block
+starts hole-down (p2P3 in the paper's model), so each pair needs the paper's four actions
+(Sec. 6, Fig. 23): pickup(block), putdown(block), pickup(peg), assemble; N pairs need 4N.
+Above MAX_TURNED (up to MAX_PARTS) every block starts hole-up (p2P1) in a denser layout and
+each pair needs two: pickup(peg), assemble; above MAX_PARTS_FULL the parts are smaller
+(:func:`blocks_for`; ``blocks=`` chooses: "hole-down", "hole-up", "hole-up-small").
 
 The parts are copies of the paper's models (kb/objects/peg.yaml, block.yaml) under
 new object names with their own label prefixes (``peg3`` gets grasps ``p5G1..``, poses
 ``p5P1..``), so labels in the constraint network say which part they belong to.
 
 Layout (world frame, inches, the table top z = 0; the PUMA 762 as kb/robots/puma762.yaml
-places it): the table is divided into pair cells PITCH_X by PITCH_Y, each holding a
-block and, PEG_GAP to its -x side, its peg (lying on its -y base face, p1P5), both
-footprints centred on the cell's row line. :func:`slots` keeps the cells that
+places it), blocks hole-down: pair cells in columns on either side of the robot
+(x = +-(COLUMN0 + k PITCH_X)),
+PITCH_Y apart along each column; each holds a block and, PEG_GAP beyond it on the side away
+from the robot, its peg (lying on its -y base face, p1P5), both footprints centred on the
+cell's line. Turning a block over (hole-down p2P3 to hole-up p2P1, a half turn about its x
+axis) needs a grasp whose approach stays horizontal at both ends, i.e. along x (p2G7, p2G8):
+the wrist and forearm then come in level with the parts, from the robot's side, so the aisle
+between columns (PITCH_X less the pair's width) is what makes them usable. Blocks hole-up:
+the same columns DENSE_PITCH_X apart (no aisles: the pegs are taken from above). :func:`slots`
+keeps the cells that
 
 - keep every footprint at least PEDESTAL_RADIUS from the robot's base axis (the
   pedestal stands there), and
-- the arm can work: some block grasp reaches the block where it starts (hole-down)
-  *and*, with the same grasp, hole-up at the same spot (the put-down: phase 2 puts a
-  part down nearest its previous spot, and every block centre lies on the
-  placement grid, see below); some peg grasp that leaves the peg's mating face free
-  reaches the peg where it lies *and* mates it into the hole-up block there
-  (reachable and mate_reachable, Sec. 5.2.4, by the planner's own IK: workspace.reaches),
+- the arm can work, by the planner's own IK (workspace.reaches) and then the world layer's
+  collision scene (world.collision, as phase 2 checks each step; :func:`_usable`): some block
+  grasp (hole-down only) with which the block is picked up where it starts and put down hole-up at
+  the same spot (phase 2 puts a part down nearest its previous spot, and every block centre
+  lies on the placement grid, see below), and some peg grasp that leaves the mating face free
+  with which the peg is picked up where it lies and mated into the hole-up block there, each
+  by a solution clear of the table, of the part in the hand beyond the fingers' contact faces,
+  and of every part any cell may hold at any step (all cells' lying pegs, blocks and
+  assembled pegs at once: conservative for every N and every order of actions),
 
-and takes the first N of them by distance from the base axis (ties by angle), so the
-parts gather as rings of cells around the robot. Neighbouring cells' footprints are
-CELL_GAP apart and the peg's is PEG_GAP from its block's, both more than the put-down
-clearance (placement.CLEARANCE_MM), so a block put down hole-up where it stood is clear
-of everything. The free table (``placement_regions``) is one rectangle around the
-layout grown by MARGIN, its corner on the placement grid (placement.GRID_STEP_MM) of the
-block centres.
+and takes the first N of them by distance from the base axis (ties by angle). Each generated
+part's model keeps only its cell's usable grasps (:func:`keep_grasps`): phase 1 does not know
+where the other parts will be, and phase 2 runs one assignment of the network in every order
+before it tries the next, so one grasp that only collides with a neighbour would exhaust its
+instance cap. Neighbouring footprints are at least CELL_GAP apart and the peg's is PEG_GAP from
+its block's, both more than the put-down clearance (placement.CLEARANCE_MM), so a block put
+down hole-up where it stood is clear of everything. The free table (``placement_regions``)
+is one rectangle around the layout grown by MARGIN, its corner on the placement grid
+(placement.GRID_STEP_MM) of the block centres.
+
+MAX_TURNED (34) and MAX_PARTS_FULL (72) are what this check leaves for one PUMA 762 and the
+paper's 3 in parts: on a 10 x 6 in pitch the IK alone finds 100 cells within reach and the
+collision check keeps 72 (at the edge of reach the stretched arm's wrist comes down on the
+neighbours). Above MAX_PARTS_FULL, up to MAX_PARTS (100; 130 cells pass), the parts are scaled
+by SMALL_SCALE in every length (:func:`scaled_model`: shapes, pose heights, grasps and widths,
+the features; the problem's T_a and uncertainty alike) and so is the gripper of the robot copy
+(:func:`robot_text`: a full-size finger is wider than a small peg's base and enters the block
+it mates into), on an 8 x 4 in pitch. A block started on a side face needs only a quarter turn
+(a 45-degree grasp from above, no aisle: 70 such full-size cells), but phase 1's lower bound
+counts such a pair as two actions, and its rounds of iterative deepening below 4N exhaust the
+step budget (N = 2); so the turned blocks start hole-down.
 
 Planning them needs no flag: phase 1's default bound and step budget are derived
-from the problem (spar_defaults.pl: the bound twice the lower bound, 8N here; 100 steps
-per action of it), and iterative deepening starts at its lower bound, 4N here.
+from the problem (spar_defaults.pl: the bound twice the lower bound; 100 steps per action of
+it), iterative deepening starts at its lower bound (4N or 2N here, each exact), and phase 2's
+first instance is executable (every grasp left in the models works where its part lies).
 
 ``main`` is the body of ``spar gen assembly --parts N [-o DIR]``.
 """
@@ -42,9 +70,9 @@ from __future__ import annotations
 import argparse
 import math
 import re
-import shutil
 import sys
-from dataclasses import dataclass
+from collections.abc import Iterable
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -52,12 +80,19 @@ import numpy as np
 from .errors import SparValueError
 
 __all__ = [
+    "CAPACITY",
     "MAX_PARTS",
+    "MAX_PARTS_FULL",
+    "MAX_TURNED",
+    "blocks_for",
     "Slot",
     "generate_assembly",
     "layout",
     "main",
+    "keep_grasps",
     "renamed_model",
+    "robot_text",
+    "scaled_model",
     "slots",
 ]
 
@@ -67,30 +102,53 @@ BLOCK_MODEL = KB_DIR / "objects" / "block.yaml"
 ROBOT = KB_DIR / "robots" / "puma762.yaml"
 
 #: The most pairs :func:`generate_assembly` accepts: as many cells as :func:`slots` finds
-#: for the PUMA 762 (checked by tests/test_gen.py).
+#: clear for the PUMA 762 (checked by tests/test_gen.py).
 MAX_PARTS = 100
+#: The most pairs of full-size parts (blocks hole-up); above, the parts are scaled down.
+MAX_PARTS_FULL = 72
+#: The most pairs whose blocks start hole-down (each turned over: 4 actions a pair); above it
+#: the blocks start hole-up (2 actions a pair: pickup(peg), assemble), see :func:`blocks_for`.
+MAX_TURNED = 34
+#: The two layouts and the most pairs each holds (checked by tests/test_gen.py).
+CAPACITY = {"hole-down": MAX_TURNED, "hole-up": MAX_PARTS_FULL, "hole-up-small": MAX_PARTS}
 #: Gap between the footprints of a peg and its block, and between neighbouring cells (in).
 PEG_GAP = 2.0
 CELL_GAP = 2.0
-#: Pair cells (in): a multiple of the placement grid (2 in) each way, so every block
-#: centre is a grid point of the free region.
-PITCH_X = 10.0
+#: Columns of pair cells (in): PITCH_X apart (a pair is 10 in wide, the rest the aisle that
+#: the block's horizontal turn-over grasp needs: 20 to 22 leave the most cells clear), the first
+#: COLUMN0 from the base axis, cells PITCH_Y apart along a column. Multiples of the placement
+#: grid (2 in), so every block centre is a grid point of the free region.
+PITCH_X = 22.0
 PITCH_Y = 6.0
+COLUMN0 = 12.0
+#: Blocks hole-up (never moved): no aisles, columns 10 in apart (a pair's width).
+DENSE_PITCH_X = 10.0
+DENSE_COLUMN0 = 4.0
+#: Above MAX_PARTS_FULL pairs: the parts scaled by SMALL_SCALE in every length (a 1.5 in block,
+#: the peg's tolerances and the cell's uncertainty alike), columns 8 in apart, cells 4 in.
+SMALL_SCALE = 0.5
+SMALL_PITCH_X, SMALL_PITCH_Y = 8.0, 4.0
+#: Each layout's (column pitch, first column, cell pitch along a column) in inches, and scale.
+LAYOUT = {"hole-down": (PITCH_X, COLUMN0, PITCH_Y), "hole-up": (DENSE_PITCH_X, DENSE_COLUMN0, PITCH_Y),
+          "hole-up-small": (SMALL_PITCH_X, DENSE_COLUMN0, SMALL_PITCH_Y)}
+SCALE = {"hole-down": 1.0, "hole-up": 1.0, "hole-up-small": SMALL_SCALE}
 #: No footprint nearer the robot's base axis than this (in): the pedestal.
 PEDESTAL_RADIUS = 12.0
 #: Free table around the layout for the put-downs (in), a multiple of the grid step.
 MARGIN = 6.0
 #: How far out cells are looked for (in): past the PUMA 762's reach (about 54 in here).
 SEARCH_HALF_WIDTH = 70.0
-#: Where the lattice of block centres sits (in, from the grid point nearest the base axis):
-#: the offset of the multiples of 2 in that fits the most cells round the PUMA 762.
-OFFSET = (2.0, 0.0)
 
 # The paper's poses in its row form (Fig. 18): the peg lying on its -y base face
 # (p1P5), the block hole-down (p2P3) and hole-up (p2P1, after the put-down).
-PEG_POSE, BLOCK_POSE, BLOCK_UP_POSE = "p1P5", "p2P3", "p2P1"
+PEG_POSE, BLOCK_UP_POSE = "p1P5", "p2P1"
+#: The block's start pose in a turn-over cell (hole-down: a half turn to hole-up, which only a
+#: horizontal grasp at table height makes, hence the aisles) and in an extra cell (hole-up, the
+#: block never moves). A block started on a side face would need only a quarter turn (a
+#: 45-degree grasp from above at both ends, no aisle), but phase 1's lower bound counts such a
+#: pair as two actions and iterative deepening then spends its step budget below 4N.
+BLOCK_POSE = "p2P3"
 PEG_TM = [[1, 0, 0], [0, 0, 1], [0, -1, 0]]
-BLOCK_TM = [[1, 0, 0], [0, -1, 0], [0, 0, -1]]
 
 # Table 2 and Fig. 11 of the paper (in, deg).
 MANIPULATOR_BOUNDS = "{dx: [-0.001, 0.001], dy: [-0.001, 0.001], dz: [-0.001, 0.001], dtheta: [-0.001, 0.001]}"
@@ -128,6 +186,12 @@ class Slot:
     peg: tuple[float, float]
     block: tuple[float, float]
     box: tuple[float, float, float, float]
+    #: The template models' grasp labels (p2G*, p1G*) usable in this cell with every other
+    #: cell's parts in place (:func:`_usable`): the generated part models keep only these.
+    block_grasps: tuple[str, ...] = ()
+    peg_grasps: tuple[str, ...] = ()
+    #: The block's start pose (a label of the template model: BLOCK_POSE or BLOCK_UP_POSE).
+    pose: str = ""
 
     @property
     def distance(self) -> float:
@@ -135,11 +199,75 @@ class Slot:
         return math.hypot(*self.block)
 
 
-def _models():
-    """The peg and block models and the robot, in inches (kb.load_object, kb.load_robot)."""
+def scaled_model(text: str, k: float) -> str:
+    """An object file's text with every length multiplied by ``k`` (shape, stable-pose heights,
+    grasp positions and widths, the feature's radius and vector, face points); angles and
+    labels kept. The YAML is rewritten (its comments are dropped); ``k`` = 1 returns it as is."""
+    if k == 1:
+        return text
+    import yaml
+
+    d = yaml.safe_load(text)
+
+    def sc(v):
+        return [sc(x) for x in v] if isinstance(v, list) else float(v) * k
+
+    for solid in d.get("shape", []):
+        for kind in solid.values():
+            for key in ("min", "max", "radius", "z", "center"):
+                if key in kind:
+                    kind[key] = sc(kind[key])
+    for pose in d.get("stable_poses", []):
+        pose["tm"][3] = sc(pose["tm"][3])
+    for g in d.get("grasps", []):
+        g["eulerxyz"][:3] = sc(g["eulerxyz"][:3])
+        g["width"] = sc(g["width"])
+    feat = d.get("feature")
+    if feat:
+        for key in ("radius", "vector"):
+            if key in feat:
+                feat[key] = sc(feat[key])
+    if "face_names" in d:
+        d["face_names"] = {f: sc(v) for f, v in d["face_names"].items()}
+    return yaml.safe_dump(d, sort_keys=False, default_flow_style=None, width=200)
+
+
+def robot_text(text: str, k: float) -> str:
+    """The robot file's text with its gripper (finger separation, finger and palm boxes) scaled
+    by ``k``: the tooling for parts scaled by ``k`` (a full-size finger is wider than a small
+    peg's base and would enter the block it is mated into). The arm is unchanged."""
+    if k == 1:
+        return text
+
+    def nums(m: re.Match) -> str:
+        return m.group(1) + re.sub(r"\d+(?:\.\d+)?", lambda v: f"{float(v.group(0)) * k:g}", m.group(2))
+
+    text, n = re.subn(r"(?m)^(  finger_separation: )([\d.]+)", nums, text, count=1)
+    text, n2 = re.subn(r"(?m)^(  (?:finger|palm): )(\{[^}]*\})", nums, text)
+    if n != 1 or n2 != 2:  # pragma: no cover - the fixed robot file
+        raise SparValueError(f"{ROBOT}: no gripper lines to scale")
+    return f"# Generated by spar_py.gen: kb/robots/{ROBOT.name} with its gripper scaled by {k:g}.\n" + text
+
+
+def _models(scale: float = 1.0):
+    """The peg and block models (lengths times ``scale``) and the robot, in inches
+    (kb.load_object, kb.load_robot)."""
+    import tempfile
+
     from .kb import load_object, load_robot
 
-    return load_object(PEG_MODEL, "in"), load_object(BLOCK_MODEL, "in"), load_robot(ROBOT, "in")
+    if scale == 1:
+        return load_object(PEG_MODEL, "in"), load_object(BLOCK_MODEL, "in"), load_robot(ROBOT, "in")
+    with tempfile.TemporaryDirectory(prefix="spar-gen-") as d:
+        out = []
+        for src in (PEG_MODEL, BLOCK_MODEL):
+            path = Path(d) / src.name
+            path.write_text(scaled_model(src.read_text(encoding="utf-8"), scale), encoding="utf-8")
+            out.append(load_object(path, "in"))
+        path = Path(d) / ROBOT.name
+        path.write_text(robot_text(ROBOT.read_text(encoding="utf-8"), scale), encoding="utf-8")
+        robot = load_robot(path, "in")
+    return out[0], out[1], robot
 
 
 def _pose_T(R: np.ndarray, x: float, y: float, z: float) -> np.ndarray:
@@ -163,58 +291,185 @@ def _grasp_ok(robot, grasps, first: np.ndarray, second: np.ndarray) -> np.ndarra
     return (ok[0] & ok[1]).any(axis=1)
 
 
-def slots() -> list[Slot]:
-    """Every usable pair cell of the layout (see the module docstring), nearest the base
-    axis first (ties by angle about it, from -x round)."""
+def slots(blocks: str = "hole-down") -> list[Slot]:
+    """Every usable pair cell of the layout for blocks starting ``blocks`` ("hole-down": a turn
+    over each, "hole-up": never moved; see the module docstring), nearest the base axis first
+    (ties by angle about it, from -x round)."""
+    if blocks not in CAPACITY:
+        raise SparValueError(f"blocks must be one of {', '.join(CAPACITY)}, not {blocks!r}")
     from .placement import footprint
 
-    peg, block, robot = _models()
+    scale, pitch_y = SCALE[blocks], LAYOUT[blocks][2]
+    peg, block, robot = _models(scale)
     sp_peg, sp_blk, sp_up = peg.poses[PEG_POSE], block.poses[BLOCK_POSE], block.poses[BLOCK_UP_POSE]
     fp_peg, fp_blk = footprint(peg, sp_peg.R), footprint(block, sp_blk.R)
     (plo, phi), (blo, bhi) = (fp_peg.min(0), fp_peg.max(0)), (fp_blk.min(0), fp_blk.max(0))
     width = (phi[0] - plo[0]) + PEG_GAP + (bhi[0] - blo[0]) + CELL_GAP
-    height = max(phi[1] - plo[1], bhi[1] - blo[1]) + CELL_GAP
-    if width > PITCH_X + 1e-9 or height > PITCH_Y + 1e-9:  # pragma: no cover - fixed models
-        raise SparValueError(f"a pair needs {width:g} x {height:g} in, more than the cell")
+    depth = max(phi[1] - plo[1], bhi[1] - blo[1]) + CELL_GAP
+    if width > LAYOUT[blocks][0] + 1e-9 or depth > pitch_y + 1e-9:  # pragma: no cover - fixed models
+        raise SparValueError(f"a pair needs {width:g} x {depth:g} in, more than the cell")
     base = robot.base[:2, 3]
-    k = int(SEARCH_HALF_WIDTH // PITCH_X), int(SEARCH_HALF_WIDTH // PITCH_Y)
-    cells = []
-    for i in range(-k[0], k[0] + 1):
-        for j in range(-k[1], k[1] + 1):
-            bx = round(base[0] / 2) * 2 + OFFSET[0] + PITCH_X * i
-            by = round(base[1] / 2) * 2 + OFFSET[1] + PITCH_Y * j
-            bcx, bcy = bx + (blo[0] + bhi[0]) / 2, by + (blo[1] + bhi[1]) / 2
-            px = bx + blo[0] - PEG_GAP - phi[0]                     # peg's box PEG_GAP left of the block's
-            py = bcy - (plo[1] + phi[1]) / 2                        # both boxes centred on one line
-            box = (px + plo[0], min(py + plo[1], by + blo[1]), bx + bhi[0], max(py + phi[1], by + bhi[1]))
-            near = np.clip(base, box[:2], box[2:])                  # the box's point nearest the axis
-            if math.hypot(*(near - base)) >= PEDESTAL_RADIUS and math.hypot(bcx - base[0], bcy - base[1]) > 0:
-                cells.append(Slot((px, py), (bx, by), box))
-    if not cells:  # pragma: no cover
-        return []
-    peg_T = np.stack([_pose_T(sp_peg.R, *c.peg, sp_peg.height) for c in cells])
-    blk_T = np.stack([_pose_T(sp_blk.R, *c.block, sp_blk.height) for c in cells])
-    up_T = np.stack([_pose_T(sp_up.R, *c.block, sp_up.height) for c in cells])
-    free = [g for g in block.grasps.values()
-            if not set(g.gfaces) & (set(sp_blk.rfaces) | set(sp_up.rfaces))]
-    ok = _grasp_ok(robot, [g.T for g in free], blk_T, up_T)
-    Ta = np.asarray(TA[:3], float).T
-    T_a = _pose_T(Ta, *TA[3])
+    gx, gy = round(base[0] / 2) * 2, round(base[1] / 2) * 2   # the grid point nearest the axis
+
+    def lattice(pitch_x: float, column0: float) -> list[Slot]:
+        """Cells in columns x = +-(column0 + k pitch_x), PITCH_Y apart, the peg on the far side."""
+        out = []
+        kx, ky = int(SEARCH_HALF_WIDTH // pitch_x), int(SEARCH_HALF_WIDTH // pitch_y)
+        for side in (-1, 1):
+            for i in range(kx + 1):
+                bx = gx + side * (column0 + pitch_x * i)
+                for j in range(-ky, ky + 1):
+                    by = gy + pitch_y * j
+                    bcy = by + (blo[1] + bhi[1]) / 2
+                    py = bcy - (plo[1] + phi[1]) / 2                    # both boxes centred on one line
+                    px = bx + bhi[0] + PEG_GAP - plo[0] if side > 0 else bx + blo[0] - PEG_GAP - phi[0]
+                    box = (min(px + plo[0], bx + blo[0]), min(py + plo[1], by + blo[1]),
+                           max(px + phi[0], bx + bhi[0]), max(py + phi[1], by + bhi[1]))
+                    near = np.clip(base, box[:2], box[2:])              # the box's point nearest the axis
+                    if math.hypot(*(near - base)) >= PEDESTAL_RADIUS:
+                        out.append(Slot((px, py), (bx, by), box))
+        return out
+
+    T_a = _pose_T(np.asarray(TA[:3], float).T, *(np.asarray(TA[3], float) * scale))
     mate = [g for g in peg.grasps.values()
             if not set(g.ofaces) & set(peg.mating_faces) and not set(g.gfaces) & set(sp_peg.rfaces)]
-    ok &= _grasp_ok(robot, [g.T for g in mate], peg_T, up_T @ T_a)
-    good = [c for c, v in zip(cells, ok) if v]
+
+    def peg_reach(cells: list[Slot]) -> list[Slot]:
+        if not cells:
+            return []
+        peg_T = np.stack([_pose_T(sp_peg.R, *c.peg, sp_peg.height) for c in cells])
+        up_T = np.stack([_pose_T(sp_up.R, *c.block, sp_up.height) for c in cells])
+        return [c for c, v in zip(cells, _grasp_ok(robot, [g.T for g in mate], peg_T, up_T @ T_a)) if v]
+
+    free = [g for g in block.grasps.values() if not set(g.gfaces) & (set(sp_blk.rfaces) | set(sp_up.rfaces))]
+    if blocks == "hole-down":  # columns with aisles, a block grasp reaching both ends of the half turn
+        cells = peg_reach(lattice(*LAYOUT[blocks][:2]))
+        if cells:
+            blk_T = np.stack([_pose_T(sp_blk.R, *c.block, sp_blk.height) for c in cells])
+            up_T = np.stack([_pose_T(sp_up.R, *c.block, sp_up.height) for c in cells])
+            cells = [c for c, v in zip(cells, _grasp_ok(robot, [g.T for g in free], blk_T, up_T)) if v]
+        cells = [replace(c, pose=BLOCK_POSE) for c in cells]
+    else:  # the dense lattice, the blocks never moved
+        cells = [replace(c, pose=BLOCK_UP_POSE) for c in peg_reach(lattice(*LAYOUT[blocks][:2]))]
+    usable = _usable(peg, block, robot, cells, free, mate, sp_blk, list(range(len(cells))), T_a)
+    good = [replace(c, block_grasps=b, peg_grasps=p) for c, (b, p) in zip(cells, usable)
+            if p and (b or c.pose == BLOCK_UP_POSE)]
     return sorted(good, key=lambda c: (round(c.distance, 9), math.atan2(c.block[1] - base[1], c.block[0] - base[0])))
 
 
-def layout(n_parts: int) -> list[tuple[tuple[float, float], tuple[float, float]]]:
-    """The (x, y) of each pair's peg and block (in, world frame): the first ``n_parts``
-    cells of :func:`slots`, nearest the robot first."""
+def _cell_parts(c: Slot, k: int, poses: tuple) -> dict[str, np.ndarray]:
+    """What cell ``c`` (index k) may hold at any point of a plan (world poses, in): its peg
+    lying, its block (hole-down and hole-up share one cube), and the peg assembled into it.
+    Names ``peg@<k>``, ``block@<k>``, ``peg@a<k>`` (the collision scene reads the model name
+    before the @)."""
+    sp_peg, sp_blk, sp_up, T_a = poses
+    up = _pose_T(sp_up.R, *c.block, sp_up.height)
+    return {f"peg@{k}": _pose_T(sp_peg.R, *c.peg, sp_peg.height),
+            f"block@{k}": _pose_T(sp_blk.R, *c.block, sp_blk.height), f"peg@a{k}": up @ T_a}
+
+
+def _usable(peg, block, robot, cells: list[Slot], free: list, mate: list, start, todo: list[int],
+            T_a: np.ndarray) -> list[tuple[tuple[str, ...], tuple[str, ...]]]:
+    """For each cell of ``cells`` whose index is in ``todo``, the block grasps (of ``free``) with
+    which the arm picks the block up where it lies in stable pose ``start`` and puts it down
+    hole-up there, and the peg grasps (of ``mate``) with which it picks
+    the peg up and mates it into the block, each by an IK solution clear of the table, the part
+    in the hand (the grasp rule) and every part any cell may hold at any step (this cell's other
+    part included, every other cell's lying peg, block and assembled peg at once): the collision
+    scene of world.collision, as phase 2 checks each step. The union over every point of a plan
+    is conservative, so any subset of the cells, in any order of actions, stays clear.
+
+    Why prune grasps at all: a side grasp at table height puts the wrist and forearm level with
+    the parts around (the tool mount is 4 to 8 in behind the grasp point, the forearm's axis
+    10 in), so in a layout of many parts most side grasps hit a neighbour. Phase 1 does not know
+    where the other parts will be, so it would keep those grasps, and phase 2 examines the
+    instances of one assignment in every order before it tries another: one bad grasp of one
+    part exhausts the instance cap. A generated part's model lists only what works where it lies.
+    """
+    from .memo import Memo
+    from .units import from_mm
+    from .workspace import wrist_above_table
+    from .world.collision import DEFAULT_MARGIN_MM, CollisionScene, solid_bodies
+
+    margin = robot.margin if robot.margin is not None else from_mm("in", DEFAULT_MARGIN_MM)
+    scene = CollisionScene(robot, robot.gripper, {"peg": solid_bodies("peg", peg.shape),
+                                                  "block": solid_bodies("block", block.shape)},
+                           (), margin, None, "in", Memo())
+    poses = (peg.poses[PEG_POSE], start, block.poses[BLOCK_UP_POSE], T_a)
+    contents = [_cell_parts(c, k, poses) for k, c in enumerate(cells)]
+    names = [n for d in contents for n in d]
+    where = {n: T for d in contents for n, T in d.items()}
+    # every part body's bounding sphere, world frame: the broad phase below
+    sph_c, sph_r, owner = [], [], []
+    for n in names:
+        for b in scene.shapes_of(n):
+            bb = b.placed(where[n], -1, n)
+            a, e, r = bb.cap
+            sph_c.append((a + e) / 2)
+            sph_r.append(np.linalg.norm(e - a) / 2 + r)
+            owner.append(n)
+    sph_c, sph_r, owner = np.array(sph_c), np.array(sph_r), np.array(owner)
+
+    def works(TO: np.ndarray, own: str, grasps: list, absent: set[str]) -> np.ndarray:
+        """(g,) bool: some clear IK solution for the tool at TO @ g.T, ``own`` being grasped,
+        every part but ``absent`` (the same peg elsewhere) in place."""
+        out = np.zeros(len(grasps), dtype=bool)
+        for w in sorted({g.width for g in grasps}):
+            idx = [i for i, g in enumerate(grasps) if g.width == w]
+            T = np.stack([TO @ grasps[i].T for i in idx])
+            Q, okb = robot.ik_batch(T)
+            rows, cols = np.nonzero(okb & wrist_above_table(robot, T)[:, None])
+            if not len(rows):
+                continue
+            q = Q[rows, cols]
+            C, R = scene.at({own: TO}, None, own, width=w).moving_spheres(q)
+            gap = (np.sqrt(((C[:, :, None] - sph_c) ** 2).sum(-1)) - R[:, None] - sph_r).min(axis=(0, 1))
+            near = set(owner[gap <= margin].tolist()) - {own} - absent
+            clear = scene.at({own: TO, **{n: where[n] for n in near}}, None, own, width=w).clear(q)
+            out[np.array(idx)[np.unique(rows[clear])]] = True
+        return out
+
+    result = []
+    for k in todo:
+        c, own = cells[k], contents[k]
+        Tp, Tb, Tm = own[f"peg@{k}"], own[f"block@{k}"], own[f"peg@a{k}"]
+        Tu = _pose_T(poses[2].R, *c.block, poses[2].height)
+        lying, fitted = f"peg@{k}", f"peg@a{k}"
+        if c.pose == BLOCK_UP_POSE:  # never moved: no block grasp needed
+            b_ok = np.zeros(len(free), dtype=bool)
+        else:
+            b_ok = works(Tb, f"block@{k}", free, {fitted}) & works(Tu, f"block@{k}", free, {fitted})
+        p_ok = works(Tp, lying, mate, {fitted}) & works(Tm, fitted, mate, {lying})
+        result.append((tuple(g.label for g, v in zip(free, b_ok) if v),
+                       tuple(g.label for g, v in zip(mate, p_ok) if v)))
+    return result
+
+
+def blocks_for(n_parts: int) -> str:
+    """The blocks' start for N pairs: "hole-down" (each turned over) up to MAX_TURNED pairs,
+    "hole-up" above (the layout that holds MAX_PARTS)."""
+    if n_parts <= MAX_TURNED:
+        return "hole-down"
+    return "hole-up" if n_parts <= MAX_PARTS_FULL else "hole-up-small"
+
+
+def _cells(n_parts: int, blocks: str | None) -> list[Slot]:
     _check_n(n_parts)
-    cells = slots()[:n_parts]
-    if len(cells) < n_parts:  # pragma: no cover - MAX_PARTS is checked against slots()
+    blocks = blocks or blocks_for(n_parts)
+    if blocks not in CAPACITY:
+        raise SparValueError(f"blocks must be one of {', '.join(CAPACITY)}, not {blocks!r}")
+    if n_parts > CAPACITY[blocks]:
+        raise SparValueError(f"at most {CAPACITY[blocks]} pairs with the blocks {blocks}, not {n_parts}")
+    cells = slots(blocks)[:n_parts]
+    if len(cells) < n_parts:  # pragma: no cover - CAPACITY is checked against slots()
         raise SparValueError(f"only {len(cells)} pairs fit within the arm's reach, not {n_parts}")
-    return [(c.peg, c.block) for c in cells]
+    return cells
+
+
+def layout(n_parts: int, blocks: str | None = None) -> list[tuple[tuple[float, float], tuple[float, float]]]:
+    """The (x, y) of each pair's peg and block (in, world frame): the first ``n_parts``
+    cells of :func:`slots` (``blocks`` default :func:`blocks_for`), nearest the robot first."""
+    return [(c.peg, c.block) for c in _cells(n_parts, blocks)]
 
 
 def _check_n(n_parts: int) -> None:
@@ -244,19 +499,54 @@ def _region(cells: list[Slot]) -> tuple[tuple[float, float], tuple[float, float]
     return (float(lo[0]), float(hi[0])), (float(lo[1]), float(hi[1]))
 
 
-def _problem_text(n_parts: int, robot_rel: str) -> str:
-    cells = slots()[:n_parts]
-    if len(cells) < n_parts:  # pragma: no cover
-        raise SparValueError(f"only {len(cells)} pairs fit within the arm's reach, not {n_parts}")
+def keep_grasps(text: str, labels: Iterable[str]) -> str:
+    """An object file's text with only the grasp lines (``- {label: ...}``) whose label is in
+    ``labels``; a comment line says which were dropped and why."""
+    keep, dropped, out = set(labels), [], []
+    for line in text.splitlines(keepends=True):
+        m = re.match(r"\s*- \{label: (p\d+G\d+),", line)
+        if m and m.group(1) not in keep:
+            dropped.append(m.group(1))
+            continue
+        out.append(line)
+    if not dropped:
+        return "".join(out)
+    note = (f"# Grasps {', '.join(dropped)} dropped by spar_py.gen: where this part lies, the arm\n"
+            "# cannot use them clear of the other parts (see spar_py.gen._usable).\n")
+    return note + "".join(out)
+
+
+def _bounds(text: str, k: float) -> str:
+    """A bounds line's text with its dx, dy, dz intervals times ``k`` (dtheta kept)."""
+    def one(m: re.Match) -> str:
+        lo, hi = float(m.group(2)) * k, float(m.group(3)) * k
+        return f"{m.group(1)}: [{lo:g}, {hi:g}]"
+
+    return re.sub(r"\b(d[xyz]): \[([-\d.]+), ([-\d.]+)\]", one, text)
+
+
+def _problem_text(cells: list[Slot], robot_rel: str, scale: float = 1.0) -> str:
+    from .kb import load_object
+
+    n_parts = len(cells)
     (x0, x1), (y0, y1) = _region(cells)
+    block = load_object(BLOCK_MODEL, "in")
+    rows = {lbl: [[int(round(v)) for v in r] for r in block.poses[lbl].R.T] for lbl in (BLOCK_POSE, BLOCK_UP_POSE)}
+    turned = all(c.pose == BLOCK_POSE for c in cells)
     lines = [
         f"# Generated by spar_py.gen: {n_parts} peg(s) into {n_parts} block(s) (issues 7, 18).",
-        "# Tests: phase 1 at scale. Every block rests hole-down (p2P3 in the paper's",
-        "# model), so each pair needs pickup(block), putdown(block), pickup(peg),",
-        f"# assemble: {4 * n_parts} actions in all (phase 1's default bound allows them).",
+        *(["# Tests: phase 1 at scale. Every block rests hole-down (p2P3 in the paper's",
+           "# model), so each pair needs pickup(block), putdown(block) hole-up, pickup(peg),",
+           f"# assemble: {4 * n_parts} actions in all."] if turned else
+          [f"# Tests: phase 1 at scale. More than {MAX_TURNED} pairs: every block rests hole-up",
+           "# (p2P1), so each pair needs pickup(peg), assemble: "
+           f"{2 * n_parts} actions in all (spar_py.gen.blocks_for)."]),
+        *([f"# More than {MAX_PARTS_FULL} pairs: every length of the parts, of T_a, of the uncertainty",
+           f"# and of the gripper (robots/ copy) scaled by {scale:g}."] if scale != 1 else []),
         "# Pair cells around the PUMA 762 (waist axis at the origin), nearest first: each",
-        "# peg lying on its -y base face (p1P5) beside its block; every cell checked",
-        "# reachable for the pickups, the put-down where the block stands and the mate.",
+        "# peg lying on its -y base face (p1P5) beside its block; every cell checked, with",
+        "# the collision scene and every other part in place, for the pickups, the put-down",
+        "# where the block stands and the mate; each part's model keeps the grasps that work.",
         f"problem: assembly_{n_parts}",
         "units: {length: in, angle: deg}",
         f"robot: {robot_rel}",
@@ -266,10 +556,10 @@ def _problem_text(n_parts: int, robot_rel: str) -> str:
         lines += [
             f"  peg{k}:",
             f"    model: objects/peg{k}.yaml",
-            f"    initial: {{name: init_pos{2 * k - 1}, label: tr{2 * k - 1}, tm: {_tm(PEG_TM, *c.peg, 1.5)}}}",
+            f"    initial: {{name: init_pos{2 * k - 1}, label: tr{2 * k - 1}, tm: {_tm(PEG_TM, *c.peg, 1.5 * scale)}}}",
             f"  block{k}:",
             f"    model: objects/block{k}.yaml",
-            f"    initial: {{name: init_pos{2 * k}, label: tr{2 * k}, tm: {_tm(BLOCK_TM, *c.block, 1.5)}}}",
+            f"    initial: {{name: init_pos{2 * k}, label: tr{2 * k}, tm: {_tm(rows[c.pose], *c.block, 1.5 * scale)}}}",
         ]
     lines += [
         "gripper: open",
@@ -278,20 +568,20 @@ def _problem_text(n_parts: int, robot_rel: str) -> str:
         f"  - {{x: [{_num(x0)}, {_num(x1)}], y: [{_num(y0)}, {_num(y1)}]}}",
         "# Table 2 of the paper for the manipulator and every part.",
         "uncertainty:",
-        f"  manipulator: {MANIPULATOR_BOUNDS}",
+        f"  manipulator: {_bounds(MANIPULATOR_BOUNDS, scale)}",
         "  objects:",
     ]
     for k in range(1, n_parts + 1):
         for obj in (f"peg{k}", f"block{k}"):
-            lines.append(f"    {obj}: {OBJECT_BOUNDS}")
+            lines.append(f"    {obj}: {_bounds(OBJECT_BOUNDS, scale)}")
     lines += [
         "# Fig. 11: a dense range scan leaves +-0.05 in and +-0.5 deg.",
         "sensors:",
-        f"  dense_range_scan: {SCAN_BOUNDS}",
+        f"  dense_range_scan: {_bounds(SCAN_BOUNDS, scale)}",
         "# T_a and V_a of the paper's cell, shared by every pair: the peg upside down in",
         "# the hole, its tip at the hole's bottom centre; the approach down the hole.",
         "transforms:",
-        f"  trans_1: {{tm: {_tm(TA[:3], *TA[3])}}}",
+        f"  trans_1: {{tm: {_tm(TA[:3], *(np.asarray(TA[3], float) * scale))}}}",
         "vectors:",
         "  vec_1: [0, 0, -1]",
         "goals:",
@@ -301,27 +591,35 @@ def _problem_text(n_parts: int, robot_rel: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def generate_assembly(n_parts: int, out_dir: str | Path) -> Path:
+def generate_assembly(n_parts: int, out_dir: str | Path, blocks: str | None = None) -> Path:
     """Write the N-pegs-into-N-blocks problem into ``out_dir``; return the problem file.
+    ``blocks``: "hole-down" (each block turned over: 4 actions a pair, N <= MAX_TURNED),
+    "hole-up" (2 actions a pair, N <= MAX_PARTS_FULL) or "hole-up-small" (the same with parts
+    and gripper scaled by SMALL_SCALE, N <= MAX_PARTS); default :func:`blocks_for`.
 
     Files: ``assembly_<N>.yaml``, ``objects/peg<k>.yaml`` and ``objects/block<k>.yaml``
     for k = 1..N, ``robots/puma762.yaml`` (a copy, so the directory stands alone).
     Existing files of those names are overwritten. Raises SparValueError for N outside
-    1..MAX_PARTS.
+    1..MAX_PARTS or above the layout's capacity.
     """
-    _check_n(n_parts)
+    blocks = blocks or blocks_for(n_parts)
+    cells = _cells(n_parts, blocks)
+    scale = SCALE[blocks]
     out = Path(out_dir)
     (out / "objects").mkdir(parents=True, exist_ok=True)
     (out / "robots").mkdir(parents=True, exist_ok=True)
-    shutil.copyfile(ROBOT, out / "robots" / ROBOT.name)
+    (out / "robots" / ROBOT.name).write_text(robot_text(ROBOT.read_text(encoding="utf-8"), scale), encoding="utf-8")
     peg_text, block_text = PEG_MODEL.read_text(encoding="utf-8"), BLOCK_MODEL.read_text(encoding="utf-8")
-    for k in range(1, n_parts + 1):
+    for k, c in enumerate(cells, start=1):
+        text = scaled_model(keep_grasps(peg_text, c.peg_grasps), scale)
         (out / "objects" / f"peg{k}.yaml").write_text(
-            renamed_model(peg_text, f"peg{k}", 2 * k - 1, "kb/objects/peg.yaml"), encoding="utf-8")
+            renamed_model(text, f"peg{k}", 2 * k - 1, "kb/objects/peg.yaml"), encoding="utf-8")
+        # a hole-up block is never moved: its model keeps the template's grasps (none is needed)
+        text = block_text if c.pose == BLOCK_UP_POSE else keep_grasps(block_text, c.block_grasps)
         (out / "objects" / f"block{k}.yaml").write_text(
-            renamed_model(block_text, f"block{k}", 2 * k, "kb/objects/block.yaml"), encoding="utf-8")
+            renamed_model(scaled_model(text, scale), f"block{k}", 2 * k, "kb/objects/block.yaml"), encoding="utf-8")
     problem = out / f"assembly_{n_parts}.yaml"
-    problem.write_text(_problem_text(n_parts, f"robots/{ROBOT.name}"), encoding="utf-8")
+    problem.write_text(_problem_text(cells, f"robots/{ROBOT.name}", scale), encoding="utf-8")
     return problem
 
 
@@ -333,8 +631,11 @@ def main(argv: list[str]) -> int:
     """
     p = argparse.ArgumentParser(prog="spar gen", description="generate knowledge bases")
     sub = p.add_subparsers(dest="kind", required=True)
-    a = sub.add_parser("assembly", help=f"N pegs into N hole-down blocks (N = 1..{MAX_PARTS})")
+    a = sub.add_parser("assembly", help=f"N pegs into N blocks (N = 1..{MAX_PARTS})")
     a.add_argument("--parts", "-n", type=int, required=True, metavar="N")
+    a.add_argument("--blocks", choices=tuple(CAPACITY), default=None,
+                   help=f"the blocks' start (default: hole-down up to {MAX_TURNED} pairs, hole-up up to "
+                        f"{MAX_PARTS_FULL}, else hole-up-small)")
     a.add_argument("-o", "--out", default=None, metavar="DIR",
                    help="output directory (default: ./assembly_N)")
     try:
@@ -342,7 +643,7 @@ def main(argv: list[str]) -> int:
     except SystemExit as e:  # argparse has printed its message
         return 0 if e.code == 0 else 2
     try:
-        path = generate_assembly(args.parts, args.out or f"assembly_{args.parts}")
+        path = generate_assembly(args.parts, args.out or f"assembly_{args.parts}", args.blocks)
     except SparValueError as e:
         print(f"spar: gen assembly: {e}", file=sys.stderr)
         return 2

@@ -35,6 +35,10 @@ __all__ = ["Reached", "Requirement", "clear_of_world", "ik_rows", "reach_clear",
 
 #: Refusals kept per cell (the "no plan" explanation): at most this many distinct ones.
 REFUSALS_LIMIT = 256
+#: Bounds of the cell's memo tables: requirement answers by geometry (:func:`requirement_clear`),
+#: objects' shape keys.
+REQUIREMENT_LIMIT = 2048
+SHAPE_KEY_LIMIT = 1024
 
 
 def wrist_height(robot: Robot, T: np.ndarray) -> np.ndarray:
@@ -142,10 +146,42 @@ def requirement_clear(cell: Cell, obj: str, TO: np.ndarray, req: Requirement | n
     and one requirement (a :class:`Requirement`, or a bare X: the object in the hand with the
     fingers open)."""
     req = req if isinstance(req, Requirement) else Requirement(np.asarray(req, float))
-    T = np.asarray(TO, float).reshape(-1, 4, 4) @ np.asarray(req.X, float)
+    TO = np.asarray(TO, float).reshape(-1, 4, 4)
+    T = TO @ np.asarray(req.X, float)
     if not len(T):
         return Reached(np.zeros(0, bool), np.zeros(0, bool), [])
-    return requirement_clear_ik(cell, obj, req, *ik_rows(cell, T))
+    if not cell.collisions:
+        return requirement_clear_ik(cell, obj, req, *ik_rows(cell, T))
+    # the answer depends on the geometry only (no other part is in this world): renamed copies
+    # of one model (generated cells: N identical blocks) asked the same poses share it
+    held = req.held[0] if req.held is not None else None
+    hand = None if held is None else (_shape_key(cell, held), np.round(req.held[1], 12).tobytes())
+    width = None if req.width is None else round(float(req.width), 12)
+    key = (_shape_key(cell, obj), hand, np.round(req.X, 12).tobytes(), width, np.round(TO, 12).tobytes())
+    table = cell.memo.table("workspace.requirement", REQUIREMENT_LIMIT)
+    names = {obj: "\0obj"} | ({f"held:{held}": "\0held"} if held is not None else {})
+    back = {v: k for k, v in names.items()}
+    if key in table:
+        ok, ik, pairs = table[key]
+        return Reached(ok.copy(), ik.copy(), [[tuple(back.get(n, n) for n in p) for p in row] for row in pairs])
+    r = requirement_clear_ik(cell, obj, req, *ik_rows(cell, T))
+    table[key] = (r.ok.copy(), r.ik.copy(), [[tuple(names.get(n, n) for n in p) for p in row] for row in r.pairs])
+    return r
+
+
+def _shape_key(cell: Cell, obj: str) -> bytes:
+    """The collision geometry of ``obj`` (its bodies' kinds, sizes, vertices), as bytes: equal
+    for renamed copies of one model."""
+    from .world.collision import scene_for
+
+    table = cell.memo.table("workspace.shape_key", SHAPE_KEY_LIMIT)
+    if obj not in table:
+        parts = []
+        for b in scene_for(cell).shapes_of(obj):
+            parts += [b.kind.encode(), np.asarray(b.size, float).tobytes(), np.round(b.points, 12).tobytes(),
+                      np.round(b.T, 12).tobytes()]
+        table[obj] = b"|".join(parts)
+    return table[obj]
 
 
 def requirement_clear_ik(cell: Cell, obj: str, req: Requirement, Q: np.ndarray, okb: np.ndarray) -> Reached:

@@ -80,8 +80,10 @@ GRASP_TOL_MM = 0.05
 CYL_SIDES = 16
 #: Frame index of the tool (gripper, held part) and of the world (parts, obstacles).
 TOOL, WORLD = 7, -1
-#: Bounds of the cell's memo tables: the grasp rule per (part, grasp pose, width).
+#: Bounds of the cell's memo tables: the grasp rule per (part, grasp pose, width); the checked
+#: pairs per arrangement of body names (a state's bodies, allowed contacts, attached parts).
 GRASP_LIMIT = 4096
+PAIRS_LIMIT = 256
 
 
 # --------------------------------------------------------------------------- bodies
@@ -323,6 +325,14 @@ class CollisionScene:
             self._grippers[key] = [box(n, TOOL, lo, hi) for n, lo, hi in self.gripper.boxes(width)]
         return self._grippers[key]
 
+    def shrunk_gripper(self, width: float | None, tol: float) -> list[Body]:
+        """The palm and fingers as :meth:`gripper_bodies`, each box shrunk by ``tol`` on every side
+        (the grasp rule's: touching counts as clear), made once per width and tolerance."""
+        key = ("shrunk", None if width is None else round(float(width), 9), round(float(tol), 12))
+        if key not in self._grippers:
+            self._grippers[key] = [box(n, TOOL, lo + tol, hi - tol) for n, lo, hi in self.gripper.boxes(width)]
+        return self._grippers[key]
+
     def shapes_of(self, part: str) -> list[Body]:
         """The bodies of ``part`` (an object, or a stock part ``obj@pos``) in its object frame."""
         model = part.split("@", 1)[0]
@@ -393,64 +403,24 @@ class SceneState:
         self.bodies = moving + static + world
         self.n_moving = len(moving)
         hand_part = hand[0] if hand is not None else None
-        skip = scene.allowed | allow
-        pairs: list[tuple[int, int]] = []
-        gripper_names = {"palm", "finger_l", "finger_r"}
-
-        def part_of(b: Body) -> str:
-            return b.name[5:] if b.name.startswith("held:") else b.name
-
-        # an attached part is a part of the world that happens to be where the tool is: it is
-        # checked against the arm and the gripper only (not the table it rests on, nor the rest)
-        fixed_in_tool = {i for i, b in enumerate(moving) if b.frame == TOOL and b.name in attached}
-        for i, bi in enumerate(moving):
-            for j, bj in enumerate(self.bodies):
-                if j <= i and j < len(moving):
-                    continue
-                if frozenset((bi.name, bj.name)) in skip or bi.name == bj.name:
-                    continue
-                if i in fixed_in_tool and (bj.frame == WORLD or j in fixed_in_tool):
-                    continue
-                if bj.frame == WORLD or bj.frame == 0 and bi.frame >= 2:
-                    if bi.name in gripper_names and part_of(bj) == hand_part and bj.frame == WORLD:
-                        continue  # the grasp rule decides
-                    pairs.append((i, j))
-                    continue
-                if bj.frame == WORLD or bj.frame == 0:
-                    continue
-                fi, fj = bi.frame, bj.frame
-                ti, tj = bi.frame == TOOL, bj.frame == TOOL
-                if ti and tj:  # in the hand: gripper and the hand's part by the grasp rule
-                    ni, nj = part_of(bi), part_of(bj)
-                    if ni in gripper_names and nj in gripper_names or ni == nj:
-                        continue
-                    if hand_part in (ni, nj) and (ni in gripper_names or nj in gripper_names):
-                        continue
-                    pairs.append((i, j))
-                    continue
-                if ti or tj:
-                    link = bj if ti else bi
-                    other = bi if ti else bj
-                    limit = 5 if other.name in gripper_names else 6
-                    if link.frame <= limit:
-                        pairs.append((i, j))
-                    continue
-                if abs(fi - fj) >= 2:
-                    pairs.append((i, j))
-        self.pairs = np.array(pairs, dtype=int).reshape(-1, 2)
-        self.table_bodies = np.array([i for i, b in enumerate(moving)
-                                      if frozenset((b.name, "table")) not in skip and i not in fixed_in_tool],
-                                     dtype=int)
-        both_caps = np.array([self.bodies[i].kind == "capsule" and self.bodies[j].kind == "capsule"
-                              for i, j in self.pairs], dtype=bool)
-        self.exact_pair = both_caps
-        hand_frames = (6, TOOL)
-        self._rigid: dict[int, float | None] = {
-            p: None for p, (i, j) in enumerate(self.pairs)
-            if self.bodies[i].frame in hand_frames and self.bodies[j].frame in hand_frames}
+        key = (tuple((b.name, b.frame, b.kind) for b in self.bodies), self.n_moving, hand_part, allow, attached)
+        table = scene.memo.table("collision.pairs", PAIRS_LIMIT) if scene.memo is not None else None
+        struct = table.get(key) if table is not None else None
+        if struct is None:
+            struct = _pair_structure(scene, self.bodies, len(moving), hand_part, allow, attached)
+            if table is not None:
+                table[key] = struct
+        self.pairs, self.table_bodies, self.exact_pair, rigid = struct
+        self._rigid: dict[int, float | None] = dict.fromkeys(rigid)
         self._cap_a = np.array([b.cap[0] for b in self.bodies]).reshape(-1, 3)
         self._cap_b = np.array([b.cap[1] for b in self.bodies]).reshape(-1, 3)
         self._cap_r = np.array([b.cap[2] for b in self.bodies])
+        # the broad phase of check(): each body's bounding sphere (centre in its frame, radius)
+        self._sph_c = (self._cap_a + self._cap_b) / 2
+        self._sph_r = np.linalg.norm(self._cap_b - self._cap_a, axis=1) / 2 + self._cap_r
+        self._groups: list[tuple[int, np.ndarray]] | None = None
+        self._body_frames = np.zeros(0, dtype=int)
+        self._static: tuple[np.ndarray, np.ndarray] = (np.zeros((0, 3)), np.zeros((0, 3)))
 
     # ------------------------------------------------------------------ frames and bounds
 
@@ -462,21 +432,34 @@ class SceneState:
 
     def _world_caps(self, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """World ends (n, N, 3) of every body's bounding capsule."""
-        n = len(F)
-        A = np.broadcast_to(self._cap_a, (n,) + self._cap_a.shape).copy()
-        B = np.broadcast_to(self._cap_b, (n,) + self._cap_b.shape).copy()
-        for f in {b.frame for b in self.bodies[:self.n_moving]}:
-            idx = [i for i in range(self.n_moving) if self.bodies[i].frame == f]
-            R, t = F[:, f, :3, :3], F[:, f, None, :3, 3]
-            Rt = np.swapaxes(R, 1, 2)
-            A[:, idx] = self._cap_a[idx] @ Rt + t
-            B[:, idx] = self._cap_b[idx] @ Rt + t
-        for i in range(self.n_moving, len(self.bodies)):
-            f = self.bodies[i].frame
-            if f == 0:
-                A[:, i] = self._cap_a[i] @ self.scene.robot.base[:3, :3].T + self.scene.robot.base[:3, 3]
-                B[:, i] = self._cap_b[i] @ self.scene.robot.base[:3, :3].T + self.scene.robot.base[:3, 3]
+        n, m = len(F), self.n_moving
+        if self._groups is None:  # made on first use: frame groups of the moving, static ends in the world
+            frames = [b.frame for b in self.bodies[:m]]
+            self._groups = [(f, np.array([i for i in range(m) if frames[i] == f])) for f in sorted(set(frames))]
+            self._body_frames = np.array(frames, dtype=int)
+            base = self.scene.robot.base
+            sa, sb = self._cap_a[m:].copy(), self._cap_b[m:].copy()
+            on_base = np.array([b.frame == 0 for b in self.bodies[m:]], dtype=bool)
+            sa[on_base] = sa[on_base] @ base[:3, :3].T + base[:3, 3]
+            sb[on_base] = sb[on_base] @ base[:3, :3].T + base[:3, 3]
+            self._static = (sa, sb)
+        A = np.empty((n, len(self.bodies), 3))
+        B = np.empty_like(A)
+        A[:, m:], B[:, m:] = self._static
+        Fm = F[:, self._body_frames]                                 # (n, m, 4, 4) each body's frame
+        R, t = Fm[..., :3, :3], Fm[..., :3, 3]
+        A[:, :m] = (R @ self._cap_a[:m, :, None])[..., 0] + t
+        B[:, :m] = (R @ self._cap_b[:m, :, None])[..., 0] + t
         return A, B
+
+    def moving_spheres(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Bounding spheres of the moving bodies (links 1..6, gripper, tool parts) for joint
+        vectors q (n, 6) rad: centres (n, M, 3), world frame, and radii (M,), cell unit. A
+        caller's broad phase: a body farther than every sphere plus the margin is never near."""
+        F = self._frames(q)
+        A, B = self._world_caps(F)
+        m = self.n_moving
+        return (A[:, :m] + B[:, :m]) / 2, self._sph_r[:m]
 
     def _frame_pose(self, F: np.ndarray, row: int, b: Body) -> np.ndarray:
         if b.frame == WORLD:
@@ -513,6 +496,24 @@ class SceneState:
         A, B = self._world_caps(F)
         pi, pj = self.pairs[:, 0], self.pairs[:, 1]
         lb = segment_distance(A[:, pi], B[:, pi], A[:, pj], B[:, pj]) - self._cap_r[pi] - self._cap_r[pj]
+        return F, lb, self._table(F)
+
+    def _near_bounds(self, q: np.ndarray, m: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """As :meth:`_bounds`, but the capsule bound is computed only for the (row, pair) cells
+        whose bounding spheres come within ``m``; the others are +inf (their capsule bound, which
+        the spheres' contain, is beyond ``m`` too). Same answers as :meth:`_bounds` wherever a bound
+        is <= m, at a few flops per cell instead of the segment distance's tens, which pays in
+        scenes of many parts (generated cells: hundreds of part bodies, most far from the arm)."""
+        F = self._frames(q)
+        A, B = self._world_caps(F)
+        pi, pj = self.pairs[:, 0], self.pairs[:, 1]
+        C = (A + B) / 2                                          # (n, N, 3) sphere centres, world
+        gap = np.sqrt(((C[:, pi] - C[:, pj]) ** 2).sum(-1)) - self._sph_r[pi] - self._sph_r[pj]
+        lb = np.full(gap.shape, np.inf)
+        r, p = np.nonzero(gap <= m)
+        if len(r):
+            i, j = pi[p], pj[p]
+            lb[r, p] = segment_distance(A[r, i], B[r, i], A[r, j], B[r, j]) - self._cap_r[i] - self._cap_r[j]
         return F, lb, self._table(F)
 
     def _exact_cell(self, F: np.ndarray, row: int, p: int) -> float:
@@ -561,10 +562,9 @@ class SceneState:
         tol = self.scene.tol
         verdict: tuple[bool, str | None] = (True, None)
         bodies = [b.placed(T_tool_part, TOOL, part) for b in self.scene.shapes_of(part)]
-        for name, lo, hi in self.scene.gripper.boxes(self.width):
-            g = box(name, TOOL, lo + tol, hi - tol)
+        for g in self.scene.shrunk_gripper(self.width, tol):
             if any(_exact(g, np.eye(4), b, np.eye(4)) <= 0.0 for b in bodies if _near(g, b, 0.0)):
-                verdict = (False, name)
+                verdict = (False, g.name)
                 break
         if table is not None:
             table[key] = verdict
@@ -594,7 +594,7 @@ class SceneState:
         if not n:
             return ok, why
         m = self.scene.margin
-        F, lb, tab = self._bounds(q)
+        F, lb, tab = self._near_bounds(q, m)
         self.scene.stats["pairs"] += lb.size + tab.size
         for r, (g_ok, g_name) in enumerate(self._grasp_rows(F)):
             if not g_ok:
@@ -633,6 +633,67 @@ class SceneState:
                     i, j = self.pairs[p]
                     out[r], names[r] = d, (self.bodies[i].name, self.bodies[j].name)
         return out, names
+
+
+def _pair_structure(scene: CollisionScene, bodies: list[Body], n_moving: int, hand_part: str | None,
+                    allow: frozenset, attached: frozenset) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple]:
+    """Which body pairs a state checks (see the module notes), from the bodies' names, frames and
+    kinds alone (``bodies`` moving first, ``n_moving`` of them): (pairs (p, 2), table-checked
+    moving bodies, pairs of two capsules (their bound is exact), pairs rigid with the flange)."""
+    moving = bodies[:n_moving]
+    skip = scene.allowed | allow
+    pairs: list[tuple[int, int]] = []
+    gripper_names = {"palm", "finger_l", "finger_r"}
+
+    def part_of(b: Body) -> str:
+        return b.name[5:] if b.name.startswith("held:") else b.name
+
+    # an attached part is a part of the world that happens to be where the tool is: it is
+    # checked against the arm and the gripper only (not the table it rests on, nor the rest)
+    fixed_in_tool = {i for i, b in enumerate(moving) if b.frame == TOOL and b.name in attached}
+    for i, bi in enumerate(moving):
+        for j, bj in enumerate(bodies):
+            if j <= i and j < len(moving):
+                continue
+            if frozenset((bi.name, bj.name)) in skip or bi.name == bj.name:
+                continue
+            if i in fixed_in_tool and (bj.frame == WORLD or j in fixed_in_tool):
+                continue
+            if bj.frame == WORLD or bj.frame == 0 and bi.frame >= 2:
+                if bi.name in gripper_names and part_of(bj) == hand_part and bj.frame == WORLD:
+                    continue  # the grasp rule decides
+                pairs.append((i, j))
+                continue
+            if bj.frame == WORLD or bj.frame == 0:
+                continue
+            fi, fj = bi.frame, bj.frame
+            ti, tj = bi.frame == TOOL, bj.frame == TOOL
+            if ti and tj:  # in the hand: gripper and the hand's part by the grasp rule
+                ni, nj = part_of(bi), part_of(bj)
+                if ni in gripper_names and nj in gripper_names or ni == nj:
+                    continue
+                if hand_part in (ni, nj) and (ni in gripper_names or nj in gripper_names):
+                    continue
+                pairs.append((i, j))
+                continue
+            if ti or tj:
+                link = bj if ti else bi
+                other = bi if ti else bj
+                limit = 5 if other.name in gripper_names else 6
+                if link.frame <= limit:
+                    pairs.append((i, j))
+                continue
+            if abs(fi - fj) >= 2:
+                pairs.append((i, j))
+    pairs_arr = np.array(pairs, dtype=int).reshape(-1, 2)
+    table_bodies = np.array([i for i, b in enumerate(moving)
+                             if frozenset((b.name, "table")) not in skip and i not in fixed_in_tool], dtype=int)
+    exact_pair = np.array([bodies[i].kind == "capsule" and bodies[j].kind == "capsule"
+                           for i, j in pairs_arr], dtype=bool)
+    hand_frames = (6, TOOL)
+    rigid = [p for p, (i, j) in enumerate(pairs_arr.tolist())
+             if bodies[i].frame in hand_frames and bodies[j].frame in hand_frames]
+    return pairs_arr, table_bodies, exact_pair, tuple(rigid)
 
 
 def _near(a: Body, b: Body, within: float) -> bool:
