@@ -1,6 +1,8 @@
 """SUP/INF tightness and speed: spar-py's bounds against plain interval evaluation and the true range.
 
-Run from the project root: ``.venv/bin/python -m bench.supinf [--per-length 10] [--seed 0]``.
+Run from the project root: ``.venv/bin/python -m bench.supinf [--per-length 10] [--seed 0]``;
+``--uniform N`` only the table by depth at +-0.1, ``--model N`` only the gradient model's
+remainder by depth (why deep products need many boxes), ``--depths 6,8`` to choose depths.
 
 For each expression it reports, as medians over a group of expressions:
 
@@ -296,6 +298,49 @@ def _box(er: tuple[ca.SX, Registry]) -> tuple[ca.SX, dict]:
     return er[0], er[1].box(er[0])
 
 
+def model_table(rng: np.random.Generator, count: int, lengths: tuple[int, ...] = tuple(range(1, 9)),
+                half: float = 0.1, fracs: tuple[float, ...] = (1.0, 0.5, 0.25, 0.1), progress=None) -> list[dict]:
+    """Why deep products need many boxes: the gradient model's remainder (taylor.GradientModel,
+    ``sum_i rd_i rho_i``: the term of its lower bound that no curvature can recover) on the
+    box of a product of ``length`` error transforms at +-``half`` and on centred sub-boxes
+    of ``fracs`` of its size, as fractions of the sampled range width (medians over
+    ``count`` expressions); ``radius``: the share of rho that is the affine forms' radius
+    row (the lumped quadratic terms of products), the rest being nonlinear operations'
+    noise symbols. No search is run."""
+    from spar_py.taylor import GradientModel
+
+    say = progress or (lambda line: None)
+    say(f"{'depth':<8}{'vars':>5}" + "".join(f"{'rem/w @' + format(f, 'g'):>12}" for f in fracs) + f"{'radius':>9}")
+    rows = []
+    for n in lengths:
+        rem: dict[float, list[float]] = {f: [] for f in fracs}
+        share, nv = [], []
+        for _ in range(count):
+            e, box = _box(uniform_chain(rng, n, half))
+            B = Bounder(e)
+            lo = np.array([[box[v][0] for v in B.names]])
+            hi = np.array([[box[v][1] for v in B.names]])
+            v = B.values(rng.uniform(lo[0], hi[0], (20000, lo.size)))
+            w = max(float(np.nanmax(v) - np.nanmin(v)), 1e-300)
+            AG = B.affine_gradient
+            nv.append(lo.size)
+            for f in fracs:
+                c = 0.5 * (lo + hi)
+                L, H = c - f * (c - lo), c + f * (hi - c)
+                F = AG(L, H)
+                M = GradientModel.from_affine(F, AG.K, L, H, np.array([False]))
+                rem[f].append(float((M.rd * M.rho).sum()) / w)
+                if f == fracs[0]:
+                    G = F[:, 1:, 0]
+                    share.append(float(G[-1].sum() / (np.abs(G[AG.K + 1:-1]).sum() + G[-1].sum())))
+        r = {"length": n, "n_vars": statistics.median(nv), "radius_share": statistics.median(share),
+             **{f"rem_{f:g}": statistics.median(rem[f]) for f in fracs}}
+        rows.append(r)
+        say(f"{n:<8}{r['n_vars']:>5.0f}" + "".join(f"{r[f'rem_{f:g}']:>12.2e}" for f in fracs)
+            + f"{r['radius_share']:>9.3f}")
+    return rows
+
+
 # ------------------------------------------------------------------ report
 
 
@@ -385,9 +430,17 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--uniform", type=int, default=0, metavar="N",
                     help="only the table by depth 1-8 at +-0.1 (N expressions per depth)")
+    ap.add_argument("--model", type=int, default=0, metavar="N",
+                    help="only the gradient model's remainder by depth 1-8 at +-0.1 (N expressions per depth)")
+    ap.add_argument("--depths", type=str, default="1-8", help="with --uniform or --model: e.g. 1-8 or 6,8")
     args = ap.parse_args(argv)
+    a, _, b = args.depths.partition("-")
+    lengths = tuple(range(int(a), int(b) + 1)) if b else tuple(int(v) for v in args.depths.split(","))
+    if args.model:
+        model_table(np.random.default_rng(args.seed), args.model, lengths=lengths, progress=print)
+        return
     if args.uniform:
-        rows = uniform_table(np.random.default_rng(args.seed), args.uniform, progress=print)
+        rows = uniform_table(np.random.default_rng(args.seed), args.uniform, lengths=lengths, progress=print)
         print(f"unsound bounds: {sum(not r['sound'] for r in rows)} depths with any")
         return
     print("tightness: max excess of a bound over the true range, as a fraction of the true width "
