@@ -304,3 +304,19 @@ def test_scaled_models_are_the_templates_times_k(tmp_path: Path) -> None:
     assert small_r["gripper"]["finger_separation"] == pytest.approx(k * full_r["gripper"]["finger_separation"])
     assert small_r["gripper"]["palm"]["thickness"] == pytest.approx(k * full_r["gripper"]["palm"]["thickness"])
     assert small_r["dh"] == full_r["dh"] and small_r["collision"] == full_r["collision"]
+
+
+def test_cli_blocks_option(tmp_path: Path) -> None:
+    """`spar gen assembly --blocks` picks the layout; above its capacity one line and exit 2."""
+    import subprocess
+    import sys
+
+    spar = [sys.executable, "-m", "spar_py.cli"]
+    ok = subprocess.run(spar + ["gen", "assembly", "--parts", "3", "--blocks", "hole-up", "-o", str(tmp_path)],
+                        capture_output=True, text=True)
+    assert ok.returncode == 0, ok.stderr
+    text = (tmp_path / "assembly_3.yaml").read_text()
+    assert "p2P1" in text or "hole-up" in text
+    bad = subprocess.run(spar + ["gen", "assembly", "--parts", "40", "--blocks", "hole-down", "-o", str(tmp_path)],
+                         capture_output=True, text=True)
+    assert bad.returncode == 2 and bad.stderr.strip().count("\n") == 0 and "34" in bad.stderr

@@ -235,7 +235,7 @@ def cmd_gen(args: argparse.Namespace) -> int:
     """Generate a problem (``spar gen assembly --parts N``)."""
     from .gen import generate_assembly
 
-    path = generate_assembly(args.parts, Path(args.output))
+    path = generate_assembly(args.parts, Path(args.output), blocks=args.blocks)
     print(path)
     return EXIT_OK
 
@@ -322,8 +322,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     gen = sub.add_parser("gen", help="generate problems")
     gensub = gen.add_subparsers(dest="gen_command", required=True)
-    asm = gensub.add_parser("assembly", help="N pegs into N blocks, each block to be turned over")
+    asm = gensub.add_parser("assembly", help="N pegs into N blocks (N <= 100)")
     asm.add_argument("--parts", type=_positive_int, required=True, metavar="N")
+    asm.add_argument("--blocks", choices=("hole-down", "hole-up", "hole-up-small"), default=None,
+                     help="how the blocks start: hole-down (each turned over, 4 actions a pair, N <= 34), "
+                          "hole-up (2 actions a pair, N <= 72), hole-up-small (half-size parts, N <= 100); "
+                          "default: the first that holds N")
     asm.add_argument("-o", "--output", default="out/gen", metavar="DIR")
     asm.set_defaults(func="gen")
     return p
