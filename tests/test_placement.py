@@ -70,3 +70,28 @@ def test_default_region_stays_on_a_table_with_edges() -> None:
     corners = np.array([[x, y, z, 1.0] for x in (box.lo[0], box.hi[0]) for y in (box.lo[1], box.hi[1])
                         for z in (box.lo[2], box.hi[2])])
     assert (corners @ p.T.T)[:, 1].max() <= edge + 1e-9
+
+
+def test_tool_on_table_prune_refuses_only_what_the_full_check_refuses() -> None:
+    """The grid prune (workspace.tool_on_table): where the gripper, tool mount or part in the
+    hand meets the (unbounded) table at the grid's first placement, the full check, IK and
+    every solution, refuses every placement of the grid too. Some grasps are pruned, some not."""
+    from spar_py.workspace import Requirement, requirement_clear, tool_on_table
+
+    cell = replace(CELL, memo=type(CELL.memo)())
+    pruned = kept = 0
+    for obj in ("peg", "block"):
+        m = cell.objects[obj]
+        for pose in m.poses:
+            grid = placement._grid(cell, obj, pose)
+            for g in m.grasps.values():
+                req = Requirement(g.T, width=g.width)
+                if tool_on_table(cell, obj, grid[0] @ g.T, req) is not None:
+                    pruned += 1
+                    assert not requirement_clear(cell, obj, grid, req).ok.any(), (obj, pose, g.label)
+                else:
+                    kept += 1
+    assert pruned and kept
+    assert tool_on_table(replace(cell, table=(-100.0, 100.0, -100.0, 100.0)), "peg",
+                         placement._grid(cell, "peg", "p1P1")[0] @ CELL.objects["peg"].grasps["p1G17"].T,
+                         Requirement(CELL.objects["peg"].grasps["p1G17"].T)) is None

@@ -23,7 +23,7 @@ import numpy as np
 from .geometry import convex_hull_2d, rotz
 from .model import Cell, ObjectModel
 from .units import from_mm, mm_per
-from .workspace import Requirement, reaches, requirement_clear, wrist_height
+from .workspace import Requirement, reaches, requirement_clear, tool_on_table, wrist_height
 
 #: Grid spacing of candidate placements: 50.8 mm (2 in); number of yaw steps.
 GRID_STEP_MM = 50.8
@@ -480,6 +480,10 @@ def _some_placement(cell: Cell, obj: str, cands: np.ndarray, req: Requirement, c
         return False
     if np.all(cands[:, 2, :] == cands[0, 2, :]):
         if wrist_height(cell.robot, (cands[0] @ req.X)[None])[0] < -from_mm(cell.unit, ROUND_MM):
+            return False
+        # the same for the gripper, tool mount and the part in the hand against the table
+        # (unbounded): their heights are the grid's, whatever the arm's joints
+        if tool_on_table(cell, obj, cands[0] @ req.X, req) is not None:
             return False
     for start in range(0, len(cands), chunk):
         if requirement_clear(cell, obj, cands[start:start + chunk], req).ok.any():

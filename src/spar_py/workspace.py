@@ -30,7 +30,7 @@ if TYPE_CHECKING:
     from .world.robots import Robot
 
 __all__ = ["Reached", "Requirement", "clear_of_world", "ik_rows", "reach_clear", "reaches", "refusals",
-           "remember_refusal", "requirement_clear", "requirement_clear_ik", "solutions", "wrist_above_table",
+           "remember_refusal", "requirement_clear", "requirement_clear_ik", "solutions", "tool_on_table", "wrist_above_table",
            "wrist_height"]
 
 #: Refusals kept per cell (the "no plan" explanation): at most this many distinct ones.
@@ -191,6 +191,23 @@ def requirement_clear_ik(cell: Cell, obj: str, req: Requirement, Q: np.ndarray, 
         return clear_of_world(cell, Q, okb, grasped=obj, attached={obj: inv}, width=req.width)
     return clear_of_world(cell, Q, okb, held=req.held, attached={obj: inv}, width=req.width,
                           allow=[(f"held:{req.held[0]}", obj)])
+
+
+def tool_on_table(cell: Cell, obj: str, T: np.ndarray, req: Requirement) -> tuple[str, str] | None:
+    """The body rigid with the tool that meets an unbounded table when the tool is at world pose
+    T (4x4) for ``req`` on ``obj`` (the world of :func:`requirement_clear_ik`), or None
+    (SceneState.tool_rigid_on_table): a refusal for every pose turned about z or shifted in x, y."""
+    if not cell.collisions or cell.table is not None:
+        return None
+    from .world.collision import scene_for
+
+    inv = np.linalg.inv(np.asarray(req.X, float))
+    if req.held is None:
+        state = scene_for(cell).at({}, None, obj, width=req.width, attached={obj: inv})
+    else:
+        state = scene_for(cell).at({}, req.held, None, width=req.width, attached={obj: inv},
+                                   allow=[(f"held:{req.held[0]}", obj)])
+    return state.tool_rigid_on_table(np.asarray(T, float))
 
 
 def _refusal_table(cell: Cell) -> dict[str, list[tuple[str, str]]]:

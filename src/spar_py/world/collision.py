@@ -491,6 +491,22 @@ class SceneState:
             out[:, k] = h
         return out
 
+    def tool_rigid_on_table(self, T_tool: np.ndarray) -> tuple[str, str] | None:
+        """The first body rigid with the flange (frames 6 and 7: gripper, tool mount, the part
+        attached to the tool) within the margin of an unbounded table at world tool pose T_tool
+        (4x4), as (body, "table"), or None; None whenever the table has an extent. Its height does
+        not change when the tool pose turns about world z or shifts in x, y, so a refusal here
+        refuses every such pose (a placement grid's) before any IK is solved."""
+        if self.scene.table is not None or not len(self.table_bodies):
+            return None
+        F = np.full((1, 8, 4, 4), np.nan)
+        F[0, TOOL] = T_tool
+        F[0, 6] = np.asarray(T_tool, float) @ self.scene.robot.tool_inverse()
+        with np.errstate(invalid="ignore"):
+            low = self._table(F)[0] <= self.scene.margin  # NaN (a body on another frame): False
+        k = np.flatnonzero(low)
+        return None if not len(k) else (self.bodies[self.table_bodies[k[0]]].name, "table")
+
     def _bounds(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         F = self._frames(q)
         A, B = self._world_caps(F)
