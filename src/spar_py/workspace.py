@@ -30,7 +30,8 @@ if TYPE_CHECKING:
     from .world.robots import Robot
 
 __all__ = ["Reached", "Requirement", "clear_of_world", "ik_rows", "reach_clear", "reaches", "refusals",
-           "remember_refusal", "requirement_clear", "requirement_clear_ik", "solutions", "tool_on_table", "wrist_above_table",
+           "remember_refusal", "requirement_clear", "requirement_clear_ik", "solutions", "tool_on_table",
+           "wrist_above_table",
            "wrist_height"]
 
 #: Refusals kept per cell (the "no plan" explanation): at most this many distinct ones.
