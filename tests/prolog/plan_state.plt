@@ -40,6 +40,7 @@ field(checked,   t(goal_2, true, <, t, t), t(goal_3, true, <, t, t)).
 field(lookahead, false, true).
 field(recorder,  recorder_value, other_recorder).
 field(seps,      [sep(a, b)], []).
+field(index,     index(t, t), index(t(k(f, 1), [], <, t, t), t)).
 
 read_field(Plan, Name, Value) :-
     atom_concat(plan_, Name, Reader),
@@ -60,7 +61,7 @@ full_plan(Plan) :-
 
 :- begin_tests(plan_state_record).
 
-test(sixteen_fields, N == 16) :-
+test(seventeen_fields, N == 17) :-
     make_plan([], P),
     functor(P, plan, N).
 
@@ -85,7 +86,7 @@ test(writer_sets_only_its_field, Bad == []) :-
             Bad).
 
 test(writers, Names == [actions, order, net, ids, ops, geos, sat, steps,
-                        history, checked, recorder, seps]) :-
+                        history, checked, recorder, seps, index]) :-
     findall(Name, ( field(Name, _, _), settable(Name) ), Names).
 
 test(writer_type_list, [error(type_error(list, x))]) :-
