@@ -135,17 +135,26 @@ prior_to_(A1, A2, G0, G) :-
         G = ord(Nodes, Of, N)
     ).
 
+%   A node whose set holds the new bits already is left as it is (its
+%   assoc path not copied).
+
 add_desc(Down, Of, I, Nodes0, Nodes) :-
     get_assoc(I, Of, Id),
     get_assoc(Id, Nodes0, n(I, S, D0, A)),
-    D is D0 \/ Down,
-    put_assoc(Id, Nodes0, n(I, S, D, A), Nodes).
+    (   D0 /\ Down =:= Down
+    ->  Nodes = Nodes0
+    ;   D is D0 \/ Down,
+        put_assoc(Id, Nodes0, n(I, S, D, A), Nodes)
+    ).
 
 add_anc(Up, Of, I, Nodes0, Nodes) :-
     get_assoc(I, Of, Id),
     get_assoc(Id, Nodes0, n(I, S, D, A0)),
-    A is A0 \/ Up,
-    put_assoc(Id, Nodes0, n(I, S, D, A), Nodes).
+    (   A0 /\ Up =:= Up
+    ->  Nodes = Nodes0
+    ;   A is A0 \/ Up,
+        put_assoc(Id, Nodes0, n(I, S, D, A), Nodes)
+    ).
 
 %   foldl_bits(:Goal, +Bits, +S0, -S): call(Goal, I, S_k, S_k+1) for every
 %   bit I set in the integer Bits, lowest first.
