@@ -325,7 +325,7 @@ forward_check(K, Plan0, Plan) :-
     plan_geos(Plan0, Geos),
     plan_net(Plan0, Net),
     plan_checked(Plan0, Checked0),
-    include(unchecked_ground(Checked0, Net), Geos, ToCheck),
+    unchecked_ground(Geos, Checked0, Net, ToCheck),
     (   member(Goal, ToCheck),
         Goal = geo(_, _, Constraint, Conds),
         geo_objects(Constraint, Conds, Objects),
@@ -346,11 +346,22 @@ forward_check(K, Plan0, Plan) :-
 %   A goal is checked ahead once, as soon as its variables are bound: the
 %   network does not change on operational steps (they only add nodes).
 
-unchecked_ground(Checked, Net, geo(Id, _, Constraint, _)) :-
-    \+ get_assoc(Id, Checked, _),
-    ground(Constraint),
-    constraint_vars(Constraint, Vs),
-    forall(member(V, Vs), cms_node(Net, V, _)).
+%   unchecked_ground(+Geos, +Checked, +Net, -ToCheck): the goals of Geos
+%   not checked yet whose constraint is ground, on variables with nodes
+%   (a plain recursion: include/3 would make a meta-call per pending goal
+%   at every step).
+
+unchecked_ground([], _, _, []).
+unchecked_ground([G|Gs], Checked, Net, ToCheck) :-
+    G = geo(Id, _, Constraint, _),
+    (   \+ get_assoc(Id, Checked, _),
+        ground(Constraint),
+        constraint_vars(Constraint, Vs),
+        forall(member(V, Vs), cms_node(Net, V, _))
+    ->  ToCheck = [G|ToCheck1]
+    ;   ToCheck = ToCheck1
+    ),
+    unchecked_ground(Gs, Checked, Net, ToCheck1).
 
 constraint_vars(member(V, _), [V]).
 constraint_vars(in_position_class(V, _), [V]).
