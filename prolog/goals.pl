@@ -389,8 +389,7 @@ add_history(K, Goal, Plan0, Plan1, Plan) :-
             length(New, N0),
             append(NewActions, New, As1)
         ),
-        plan_history(Plan1, H0),
-        set_history_of_plan([h(K, Cond, NewActions)|H0], Plan1, Plan)
+        push_history_of_plan(h(K, Cond, NewActions), Plan1, Plan)
     ;   Plan = Plan1
     ).
 

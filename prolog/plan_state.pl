@@ -42,6 +42,7 @@
             set_sat_of_plan/3, set_steps_of_plan/3, set_history_of_plan/3,
             set_checked_of_plan/3, set_recorder_of_plan/3,
             set_seps_of_plan/3, set_index_of_plan/3,
+            push_history_of_plan/3,
             % the search recorder
             failure_recorder/2,       % +Budget, -Recorder
             record_failure/3,         % +K, +Goal, +Plan
@@ -272,6 +273,16 @@ plan_history(plan(_,_,_,_,_,_,_,_,_,_,_,History,_,_,_,_,_), History).
 set_history_of_plan(History, plan(A1,A2,A3,A4,A5,A6,A7,A8,A9,A10,A11,_,A13,A14,A15,A16,A17),
                     plan(A1,A2,A3,A4,A5,A6,A7,A8,A9,A10,A11,History,A13,A14,A15,A16,A17)) :-
     must_be(list, History).
+
+%!  push_history_of_plan(+Entry, +Plan0, -Plan) is det.
+%
+%   Plan is Plan0 with Entry on top of its history. The history is a list
+%   already, so nothing is walked: set_history_of_plan/3's check of the
+%   whole list at every step would cost the length of the history each
+%   time (quadratic over a search of thousands of steps).
+
+push_history_of_plan(Entry, plan(A1,A2,A3,A4,A5,A6,A7,A8,A9,A10,A11,H0,A13,A14,A15,A16,A17),
+                     plan(A1,A2,A3,A4,A5,A6,A7,A8,A9,A10,A11,[Entry|H0],A13,A14,A15,A16,A17)).
 
 %!  plan_checked(+Plan, -Checked) is det.
 %!  set_checked_of_plan(+Checked, +Plan0, -Plan) is det.

@@ -89,6 +89,16 @@ test(writers, Names == [actions, order, net, ids, ops, geos, sat, steps,
                         history, checked, recorder, seps, index]) :-
     findall(Name, ( field(Name, _, _), settable(Name) ), Names).
 
+test(push_history, [H-Same == [h(2, c2, []), h(1, c, [])]-true]) :-
+    full_plan(P0),
+    push_history_of_plan(h(2, c2, []), P0, P),
+    plan_history(P, H),
+    (   forall(( field(Name, _, _), Name \== history ),
+               ( read_field(P0, Name, V0), read_field(P, Name, V), V0 == V ))
+    ->  Same = true
+    ;   Same = false
+    ).
+
 test(writer_type_list, [error(type_error(list, x))]) :-
     make_plan([], P),
     set_actions_of_plan(x, P, _).
