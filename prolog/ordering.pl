@@ -115,11 +115,17 @@ prior_to_(finish, _, _, _) :- !, fail.
 prior_to_(start, _, G, G) :- !.
 prior_to_(_, finish, G, G) :- !.
 prior_to_(A1, A2, G0, G) :-
-    add_node(A1, G0, G1),
-    add_node(A2, G1, G2),
+    G0 = ord(Nodes00, _, _),
+    (   get_assoc(A1, Nodes00, n(I1, S1, D1, Anc1)),   % both nodes there:
+        get_assoc(A2, Nodes00, n(I2, _, D2, _))         % no add_node/3
+    ->  G2 = G0
+    ;   add_node(A1, G0, G1),
+        add_node(A2, G1, G2),
+        G2 = ord(Nodes02, _, _),
+        get_assoc(A1, Nodes02, n(I1, S1, D1, Anc1)),
+        get_assoc(A2, Nodes02, n(I2, _, D2, _))
+    ),
     G2 = ord(Nodes0, Of, N),
-    get_assoc(A1, Nodes0, n(I1, S1, D1, Anc1)),
-    get_assoc(A2, Nodes0, n(I2, _, D2, _)),
     D2 /\ (1 << I1) =:= 0,                      % no path A2 -> A1
     (   ord_memberchk(A2, S1)
     ->  G = G2
