@@ -325,7 +325,9 @@ forward_check(K, Plan0, Plan) :-
     plan_geos(Plan0, Geos),
     plan_net(Plan0, Net),
     plan_checked(Plan0, Checked0),
-    unchecked_ground(Geos, Checked0, Net, ToCheck),
+    plan_pending(Plan0, Pending),
+    to_scan(Pending, Geos, Scan),
+    unchecked_ground(Scan, Checked0, Net, ToCheck, Left),
     (   member(Goal, ToCheck),
         Goal = geo(_, _, Constraint, Conds),
         geo_objects(Constraint, Conds, Objects),
@@ -340,28 +342,51 @@ forward_check(K, Plan0, Plan) :-
         )
     ;   foldl([geo(Id, _, _, _), C0, C]>>put_assoc(Id, C0, true, C),
               ToCheck, Checked0, Checked),
-        set_checked_of_plan(Checked, Plan0, Plan)
+        set_checked_of_plan(Checked, Plan0, Plan1),
+        set_pending_of_plan(seen(Geos, Left), Plan1, Plan)
+    ).
+
+%   to_scan(+Pending, +Geos, -Scan): the goals of Geos that may be due a
+%   forward check, in stack order: those pushed on top of the stack the
+%   last check saw and the goals it left (plan_state:plan_pending/2), or
+%   the whole stack if it is not that stack with goals pushed on top.
+
+to_scan(seen(Seen, Left), Geos, Scan) :-
+    pushed_on(Geos, Seen, Scan, Left),
+    !.
+to_scan(_, Geos, Geos).
+
+pushed_on(Geos, Seen, Scan, Left) :-
+    (   Geos == Seen
+    ->  Scan = Left
+    ;   Geos = [G|Geos1],
+        Scan = [G|Scan1],
+        pushed_on(Geos1, Seen, Scan1, Left)
     ).
 
 %   A goal is checked ahead once, as soon as its variables are bound: the
 %   network does not change on operational steps (they only add nodes).
 
-%   unchecked_ground(+Geos, +Checked, +Net, -ToCheck): the goals of Geos
-%   not checked yet whose constraint is ground, on variables with nodes
+%   unchecked_ground(+Geos, +Checked, +Net, -ToCheck, -Left): the goals of
+%   Geos not checked yet whose constraint is ground, on variables with
+%   nodes, and the others (ToCheck once checked goes into Checked, so Left
+%   is all of Geos not in Checked then)
 %   (a plain recursion: include/3 would make a meta-call per pending goal
 %   at every step).
 
-unchecked_ground([], _, _, []).
-unchecked_ground([G|Gs], Checked, Net, ToCheck) :-
+unchecked_ground([], _, _, [], []).
+unchecked_ground([G|Gs], Checked, Net, ToCheck, Left) :-
     G = geo(Id, _, Constraint, _),
     (   \+ get_assoc(Id, Checked, _),
         ground(Constraint),
         constraint_vars(Constraint, Vs),
         forall(member(V, Vs), cms_node(Net, V, _))
-    ->  ToCheck = [G|ToCheck1]
-    ;   ToCheck = ToCheck1
+    ->  ToCheck = [G|ToCheck1],
+        Left = Left1
+    ;   ToCheck = ToCheck1,
+        Left = [G|Left1]
     ),
-    unchecked_ground(Gs, Checked, Net, ToCheck1).
+    unchecked_ground(Gs, Checked, Net, ToCheck1, Left1).
 
 constraint_vars(member(V, _), [V]).
 constraint_vars(in_position_class(V, _), [V]).

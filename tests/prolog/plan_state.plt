@@ -41,6 +41,7 @@ field(lookahead, false, true).
 field(recorder,  recorder_value, other_recorder).
 field(seps,      [sep(a, b)], []).
 field(index,     index(t, t), index(t(k(f, 1), [], <, t, t), t)).
+field(pending,   none, seen([], [])).
 
 read_field(Plan, Name, Value) :-
     atom_concat(plan_, Name, Reader),
@@ -61,7 +62,7 @@ full_plan(Plan) :-
 
 :- begin_tests(plan_state_record).
 
-test(seventeen_fields, N == 17) :-
+test(eighteen_fields, N == 18) :-
     make_plan([], P),
     functor(P, plan, N).
 
@@ -86,7 +87,7 @@ test(writer_sets_only_its_field, Bad == []) :-
             Bad).
 
 test(writers, Names == [actions, order, net, ids, ops, geos, sat, steps,
-                        history, checked, recorder, seps, index]) :-
+                        history, checked, recorder, seps, index, pending]) :-
     findall(Name, ( field(Name, _, _), settable(Name) ), Names).
 
 test(push_history, [H-Same == [h(2, c2, []), h(1, c, [])]-true]) :-
