@@ -402,7 +402,8 @@ jump(K, Ks, Plan) :-
 
 %   add_history(+K, +Goal, +Plan0, +Plan1, -Plan): remember what step K
 %   decided for an operational goal: its condition as bound and the
-%   actions it added.
+%   actions it added, h(K, Cond, NewActions, Memo), Memo the memo of
+%   conflict_steps/3.
 
 add_history(K, Goal, Plan0, Plan1, Plan) :-
     (   Goal = op(_, _, Cond)
@@ -414,7 +415,7 @@ add_history(K, Goal, Plan0, Plan1, Plan) :-
             length(New, N0),
             append(NewActions, New, As1)
         ),
-        push_history_of_plan(h(K, Cond, NewActions), Plan1, Plan)
+        push_history_of_plan(h(K, Cond, NewActions, atoms(none)), Plan1, Plan)
     ;   Plan = Plan1
     ).
 
@@ -430,9 +431,53 @@ add_history(K, Goal, Plan0, Plan1, Plan) :-
 
 conflict_steps(Vars, Plan, Ks) :-
     plan_history(Plan, History),
-    findall(K, ( member(h(K, Cond, New), History),
-                 mentions_any(Cond-New, Vars) ),
+    findall(K, ( member(h(K, Cond, New, Memo), History),
+                 step_mentions_any(Cond-New, Memo, Vars) ),
             Ks).
+
+%   step_mentions_any(+Term, +Memo, +Vars): the step's Term mentions one
+%   of Vars. A step that added actions has a big term, walked again at
+%   every refusal: once it is ground, its atoms are kept in Memo,
+%   atoms(Copy-Atoms) (nb_setarg/3: the test is made inside findall/3),
+%   with a copy of the term they are the atoms of; they serve while the
+%   term is still == that copy (a comparison in C, not a walk in Prolog),
+%   and are found again when backtracking and other bindings have changed
+%   it.
+
+step_mentions_any(Term, Memo, Vars) :-
+    (   arg(2, Term, New),
+        New == []
+    ->  mentions_any(Term, Vars)
+    ;   arg(1, Memo, Copy-Atoms),
+        Copy == Term
+    ->  \+ ord_disjoint(Atoms, Vars)
+    ;   ground(Term)
+    ->  term_atoms(Term, Atoms0, []),
+        sort(Atoms0, Atoms),
+        nb_setarg(1, Memo, Term-Atoms),
+        \+ ord_disjoint(Atoms, Vars)
+    ;   mentions_any(Term, Vars)
+    ).
+
+%   term_atoms(+Term, -Atoms, ?Tail): the atoms of Term, a difference list.
+
+term_atoms(T, As0, As) :-
+    (   atom(T)
+    ->  As0 = [T|As]
+    ;   compound(T)
+    ->  compound_name_arity(T, _, N),
+        term_atoms(1, N, T, As0, As)
+    ;   As0 = As
+    ).
+
+term_atoms(I, N, T, As0, As) :-
+    (   I > N
+    ->  As0 = As
+    ;   arg(I, T, A),
+        term_atoms(A, As0, As1),
+        I1 is I + 1,
+        term_atoms(I1, N, T, As1, As)
+    ).
 
 mentions_any(Term, Atoms) :-
     (   atom(Term)

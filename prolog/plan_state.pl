@@ -265,9 +265,10 @@ plan_trace(plan(_,_,_,_,_,_,_,_,_,_,Trace,_,_,_,_,_,_,_), Trace).
 %!  plan_history(+Plan, -History:list) is det.
 %!  set_history_of_plan(+History:list, +Plan0, -Plan) is det.
 %
-%   One h(K, Condition, NewActions) per operational step K on this branch,
-%   newest first: the condition as bound and the actions the step added
-%   (for conflict-directed backjumping, goals:conflict_steps/3).
+%   One h(K, Condition, NewActions, Memo) per operational step K on this
+%   branch, newest first: the condition as bound, the actions the step
+%   added and a memo of their atoms (for conflict-directed backjumping,
+%   goals:conflict_steps/3).
 %
 %   @error type_error(list, History) from set_history_of_plan/3 if History is
 %          not a list (instantiation_error if it is unbound or partial).

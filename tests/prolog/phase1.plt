@@ -303,3 +303,27 @@ test(first_check_scans_whole, Scan == [g2, g1]) :-
     goals:to_scan(none, [g2, g1], Scan).
 
 :- end_tests(forward_check_pending).
+
+%   The atoms a step's term is remembered to mention (for backjumping)
+%   follow the term when backtracking undoes the bindings it had and
+%   others are made.
+
+:- begin_tests(conflict_steps_memo).
+
+test(memo_follows_rebinding, [Before-After-Other == true-false-true]) :-
+    Memo = atoms(none),
+    Term = holding(peg, G)-[action(a1, pickup(peg, G), p, a, d)],
+    (   G = grasp_1,
+        ( goals:step_mentions_any(Term, Memo, [grasp_1]) -> Before = true ; Before = false ),
+        nb_setval(p1b_before, Before),
+        fail
+    ;   nb_getval(p1b_before, Before)
+    ),
+    G = grasp_2,
+    ( goals:step_mentions_any(Term, Memo, [grasp_1]) -> After = true ; After = false ),
+    ( goals:step_mentions_any(Term, Memo, [grasp_2, pos_1]) -> Other = true ; Other = false ).
+
+test(unground_step_walked, true) :-
+    goals:step_mentions_any(c(_)-[x(pos_3, _)], atoms(none), [pos_3]).
+
+:- end_tests(conflict_steps_memo).
