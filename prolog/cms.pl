@@ -30,8 +30,8 @@
     Memo its answers so far (a hash table, oracle_pairs/6, kept with nb_setarg/3 across
     backtracking: the oracle is a function of its arguments, and the search
     asks the same question many times). With the plan's search recorder
-    (plan_state.pl) this memo is the only Prolog state of phase 1 that
-    backtracking does not undo. The planner uses foreign:arc_pairs
+    (plan_state.pl) and the history's atoms memo (goals.pl) this memo is
+    the only Prolog state of phase 1 that backtracking does not undo. The planner uses foreign:arc_pairs
     (the Python kinematics) unless it is given another oracle; Prolog-only
     tests give a table-driven test double.
 */

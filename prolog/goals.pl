@@ -15,10 +15,13 @@
     goal stacks, the satisfied list of sat(Goal, Establisher) entries, the
     separations and the rest, described there. Every planner choice is a
     Prolog choice point; backtracking undoes it completely, symbol numbers
-    included. Two things outlive backtracking, on purpose: the search
+    included. Three things outlive backtracking, on purpose: the search
     recorder in the plan (plan_state.pl: the deepest failures, whether the
-    bound refused an action, the step budget; nb_setarg/3), and the memo of
-    arc pairs in the CMS network (cms.pl; nb_setarg/3).
+    bound refused an action, the step budget; nb_setarg/3), the memo of
+    arc pairs in the CMS network (cms.pl; nb_setarg/3), and the atoms a
+    history entry mentions (conflict_steps/3; nb_setarg/3, kept with a
+    copy of the term they were found in and used only while the entry is
+    still == that copy, so that backtracking cannot make them stale).
 
     The loop (Sec. 2): take the first goal of the operational stack, else of
     the geometric stack; satisfy it (establish.pl for operational goals,

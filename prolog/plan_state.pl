@@ -26,7 +26,9 @@
     failures(DeepestOp, DeepestGeo, BoundHit, Budget-steps(Spent)), which
     record_failure/3, bound_hit/1 and spend_step/1 update with nb_setarg/3
     because it must outlive the failures it records. (The CMS network's
-    oracle memo is the other non-backtrackable state of phase 1: cms.pl.)
+    oracle memo, cms.pl, and the atoms memo of a history entry,
+    goals:conflict_steps/3, are the other non-backtrackable state of
+    phase 1.)
 
     goals.pl and establish.pl both use this module, and it uses neither.
 */
