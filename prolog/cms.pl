@@ -27,11 +27,11 @@
     called as call(Oracle, Kind, Objects, GraspLabels, PosLabels, Pairs)
     with the arguments of foreign:arc_pairs/5 (Kind is reachable or
     mate_reachable(Ta), the constraint without its two variables), and
-    Memo its answers so far (memo(Assoc), kept with nb_setarg/3 across
+    Memo its answers so far (a hash table, oracle_pairs/6, kept with nb_setarg/3 across
     backtracking: the oracle is a function of its arguments, and the search
     asks the same question many times). With the plan's search recorder
-    (plan_state.pl) this memo is the only Prolog state of phase 1 that
-    backtracking does not undo. The planner uses foreign:arc_pairs
+    (plan_state.pl) and the history's atoms memo (goals.pl) this memo is
+    the only Prolog state of phase 1 that backtracking does not undo. The planner uses foreign:arc_pairs
     (the Python kinematics) unless it is given another oracle; Prolog-only
     tests give a table-driven test double.
 */
@@ -73,10 +73,12 @@
 cms_empty(Net) :-
     cms_empty(foreign:arc_pairs, Net).
 
-cms_empty(Oracle, cms(Nodes, Arcs, [], oracle(Oracle, memo(Memo)))) :-
+cms_empty(Oracle, cms(Nodes, Arcs, [], oracle(Oracle, Memo))) :-
     empty_assoc(Nodes),
     empty_assoc(Arcs),
-    empty_assoc(Memo).
+    memo_buckets(N),
+    compound_name_arity(Memo, memo, N),
+    forall(between(1, N, I), nb_setarg(I, Memo, end)).
 
 %!  cms_initial(+Constraint, +Net0, -Net) is semidet.
 %
@@ -296,15 +298,45 @@ add_arc(Kind, Objects, G, P, Net0, Result) :-
         checked(cms(Nodes, Arcs, Order, Oracle), [G, P], Result)
     ).
 
+%   The memo is memo(B1, ..., Bn), a hash table of n buckets (the key's
+%   term_hash/2; a key that is not ground goes to the first), each a chain
+%   e(Key, Pairs, Next) ending in `end`. An answer is added by nb_setarg/3
+%   on the chain's last link, which copies the new entry only: an assoc
+%   put back with nb_setarg/3 would be copied whole at every miss (at
+%   N = 50 generated parts, 250 misses of a growing memo).
+
+memo_buckets(64).
+
 oracle_pairs(oracle(Closure, Memo), Kind, Objects, Gs, Ps, Pairs) :-
     Key = q(Kind, Objects, Gs, Ps),
-    arg(1, Memo, Assoc0),
-    (   get_assoc(Key, Assoc0, Pairs)
-    ->  true
-    ;   call(Closure, Kind, Objects, Gs, Ps, Pairs),
+    term_hash(Key, H),
+    (   integer(H)
+    ->  functor(Memo, _, N),
+        I is H mod N + 1
+    ;   I = 1
+    ),
+    memo_get(Memo, I, Key, Found),
+    (   Found = found(Pairs0)
+    ->  Pairs = Pairs0
+    ;   Found = last(Link, Arg),
+        call(Closure, Kind, Objects, Gs, Ps, Pairs),
         must_be(list, Pairs),
-        put_assoc(Key, Assoc0, Pairs, Assoc),
-        nb_setarg(1, Memo, Assoc)
+        nb_setarg(Arg, Link, e(Key, Pairs, end))
+    ).
+
+%   memo_get(+Link, +Arg, +Key, -Found): Found is found(Pairs), Pairs Key's
+%   answer in the chain from argument Arg of Link, or last(L, A) if the
+%   chain has none, L and A the link and argument that end it.
+
+memo_get(Link, Arg, Key, Found) :-
+    arg(Arg, Link, Next),
+    (   Next == end
+    ->  Found = last(Link, Arg)
+    ;   Next = e(K, P, _),
+        (   K == Key
+        ->  Found = found(P)
+        ;   memo_get(Next, 3, Key, Found)
+        )
     ).
 
 node_labels(Net, V, Labels) :-

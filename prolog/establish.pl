@@ -67,6 +67,8 @@
 :- use_module(library(lists)).
 :- use_module(library(apply)).
 :- use_module(library(error)).
+:- use_module(library(assoc)).
+
 :- use_module(kb, []).
 :- use_module(ordering).
 :- use_module(cms).
@@ -121,8 +123,7 @@ establish_(Cond, S, Doom, Plan0, Plan, E) :-
     note(Plan, "  ~q established by ~q~n", [Cond, E]).
 
 existing_establisher(Cond, S, Doom, Plan0, Plan, E) :-
-    plan_actions(Plan0, Actions),
-    member(action(E, _, _, addlist(Adds), _), Actions),
+    plan_adder(Cond, Plan0, E, Adds),
     E \== S,
     member(Cond, Adds),
     \+ doomed(Doom, Cond, E, S, Plan0),
@@ -234,7 +235,8 @@ add_action(Action, Constraints, Arcs, Plan0, Plan) :-
     set_actions_of_plan([Action|Actions], Plan0, Plan1),
     plan_order(Plan1, G0),
     ordering_add_action(Id, G0, G1),
-    set_order_of_plan(G1, Plan1, Plan2),
+    index_action(Action, G1, Plan1, Plan1a),
+    set_order_of_plan(G1, Plan1a, Plan2),
     foldl([A1-A2, P0, P]>>post_prior_to(A1, A2, P0, P), Arcs, Plan2, Plan3),
     plan_net(Plan3, Net0),
     foldl(cms_initial, Constraints, Net0, Net),
@@ -250,6 +252,122 @@ add_action(Action, Constraints, Arcs, Plan0, Plan) :-
     plan_geos(Plan6, Geos0),
     append(Geos, Geos0, Geos1),
     set_geos_of_plan(Geos1, Plan6, Plan).
+
+                 /*******************************
+                 *   THE ADD AND DELETE INDEX   *
+                 *******************************/
+
+%   The plan state indexes its actions by the terms of their add and
+%   delete lists (plan_state:plan_index/2): index(Adds, Dels), each an
+%   assoc from a term key to the actions with a term of that key,
+%   c(Id, Bit, Terms) newest first (Terms the whole add or delete list).
+%   A term's key is k(F, A, X) for a compound F/A whose first argument X
+%   is atomic, k(F, A) for one whose first argument is not (a variable
+%   now, which may be bound later, or a compound), k(T, 0) for an atomic
+%   term T and `any` for a variable. A term unifying with a condition
+%   whose first argument X is atomic (or an atomic condition) is under
+%   the condition's own key, under k(F, A) or under `any`: the actions
+%   under those three keys, merged newest first, are a superset of the
+%   actions with a term unifying with the condition, in the order of the
+%   plan's action list. A condition of another shape is looked up in the
+%   whole list. Keys only ever get more precise by binding (a variable
+%   first argument bound later leaves its action under k(F, A), which is
+%   still looked at), so the index stays a superset on every extension.
+
+term_key(T, Key) :-
+    (   var(T)
+    ->  Key = any
+    ;   compound(T)
+    ->  compound_name_arity(T, F, A),
+        (   A > 0, arg(1, T, X), atomic(X)
+        ->  Key = k(F, A, X)
+        ;   Key = k(F, A)
+        )
+    ;   Key = k(T, 0)
+    ).
+
+%   index_action(+Action, +G, +Plan0, -Plan): Action (numbered in the
+%   ordering G) entered in the index under the keys of its add and delete
+%   lists, once per key.
+
+index_action(action(Id, _, _, addlist(Adds), dellist(Dels)), G, Plan0, Plan) :-
+    ordering_bit(Id, G, Bit),
+    plan_index(Plan0, index(AddIx0, DelIx0)),
+    index_terms(Adds, c(Id, Bit, Adds), AddIx0, AddIx),
+    index_terms(Dels, c(Id, Bit, Dels), DelIx0, DelIx),
+    set_index_of_plan(index(AddIx, DelIx), Plan0, Plan).
+
+index_terms(Terms, Entry, Ix0, Ix) :-
+    maplist(term_key, Terms, Keys0),
+    sort(Keys0, Keys),
+    foldl(index_entry(Entry), Keys, Ix0, Ix).
+
+index_entry(Entry, Key, Ix0, Ix) :-
+    (   get_assoc(Key, Ix0, Es)
+    ->  true
+    ;   Es = []
+    ),
+    put_assoc(Key, Ix0, [Entry|Es], Ix).
+
+%   indexed(+Cond, +Which, +Plan, -Entries) is semidet: the entries
+%   c(Id, Bit, Terms), newest first, of the actions whose add (Which =
+%   adds) or delete (dels) list may have a term unifying with Cond; fails
+%   if Cond's shape is not one the index answers (see above).
+
+indexed(Cond, Which, Plan, Entries) :-
+    nonvar(Cond),
+    (   compound(Cond)
+    ->  compound_name_arity(Cond, F, A),
+        A > 0,
+        arg(1, Cond, X),
+        atomic(X),
+        Key = k(F, A, X),
+        Wide = k(F, A)
+    ;   Key = k(Cond, 0),
+        Wide = none
+    ),
+    plan_index(Plan, Index),
+    (   Which == adds -> arg(1, Index, Ix) ; arg(2, Index, Ix) ),
+    bucket(Key, Ix, Es1),
+    bucket(Wide, Ix, Es2),
+    bucket(any, Ix, Es3),
+    merge_entries(Es1, Es2, Es12),
+    merge_entries(Es12, Es3, Entries).
+
+bucket(Key, Ix, Es) :-
+    (   get_assoc(Key, Ix, Es0)
+    ->  Es = Es0
+    ;   Es = []
+    ).
+
+%   merge_entries(+Es1, +Es2, -Es): two lists of entries by decreasing
+%   bit merged, an entry in both kept once.
+
+merge_entries([], Es, Es) :- !.
+merge_entries(Es, [], Es) :- !.
+merge_entries([E1|Es1], [E2|Es2], Es) :-
+    E1 = c(_, B1, _),
+    E2 = c(_, B2, _),
+    (   B1 > B2
+    ->  Es = [E1|Es0],
+        merge_entries(Es1, [E2|Es2], Es0)
+    ;   B2 > B1
+    ->  Es = [E2|Es0],
+        merge_entries([E1|Es1], Es2, Es0)
+    ;   Es = [E1|Es0],
+        merge_entries(Es1, Es2, Es0)
+    ).
+
+%   plan_adder(+Cond, +Plan, -Id, -Adds) is nondet: the actions of Plan,
+%   newest first, that may establish Cond (Adds their add lists): those
+%   the index lists for Cond, or all of them.
+
+plan_adder(Cond, Plan, Id, Adds) :-
+    (   indexed(Cond, adds, Plan, Entries)
+    ->  member(c(Id, _, Adds), Entries)
+    ;   plan_actions(Plan, Actions),
+        member(action(Id, _, _, addlist(Adds), _), Actions)
+    ).
 
 %   undone_goals(+Action, +Plan, -Undone, -Sat): the satisfied operational
 %   goals Action could clobber, and the satisfied list without them.
@@ -332,8 +450,27 @@ declobber(Goal, E, Plan0, Plan) :-
 
 clobber_candidates(op(_, _, Cond), Plan, cands(Actions, Cands, Bits)) :-
     plan_actions(Plan, Actions),
-    plan_order(Plan, G),
-    clobber_candidates_(Actions, Cond, G, Cands, 0, Bits).
+    (   indexed(Cond, dels, Plan, Entries)
+    ->  indexed_candidates(Entries, Cond, Cands, 0, Bits)
+    ;   plan_order(Plan, G),
+        clobber_candidates_(Actions, Cond, G, Cands, 0, Bits)
+    ).
+
+%   indexed_candidates(+Entries, +Cond, -Cands, +Bits0, -Bits): the
+%   entries c(Id, Bit, Dels) of Entries (from the index, newest first)
+%   with a delete-list element unifying with Cond; Bits is Bits0 with
+%   their bits set.
+
+indexed_candidates([], _, [], Bits, Bits).
+indexed_candidates([E|Es], Cond, Cs, Bits0, Bits) :-
+    E = c(_, Bit, Dels),
+    (   clobbers(Dels, Cond)
+    ->  Cs = [E|Cs1],
+        Bits1 is Bits0 \/ Bit
+    ;   Cs = Cs1,
+        Bits1 = Bits0
+    ),
+    indexed_candidates(Es, Cond, Cs1, Bits1, Bits).
 
 %   clobber_candidates_(+Actions, +Cond, +G, -Cands, +Bits0, -Bits): Bits
 %   is Bits0 with the bits of Cands set.
@@ -454,8 +591,7 @@ declobber_by(separation, Cond, _, _, C, Plan0, Plan) :-
     set_seps_of_plan(Seps, Plan0, Plan),
     note(Plan, "  ~q may clobber ~q: separation ~q~n", [C, Cond, Unifying]).
 declobber_by(white_knight, Cond, _, S, C, Plan0, Plan) :-
-    (   plan_actions(Plan0, Actions),
-        member(action(W, _, _, addlist(Adds), _), Actions),
+    (   plan_adder(Cond, Plan0, W, Adds),
         W \== C, W \== S,
         member(Cond, Adds),
         post_prior_to(C, W, Plan0, Plan1),

@@ -15,10 +15,13 @@
     goal stacks, the satisfied list of sat(Goal, Establisher) entries, the
     separations and the rest, described there. Every planner choice is a
     Prolog choice point; backtracking undoes it completely, symbol numbers
-    included. Two things outlive backtracking, on purpose: the search
+    included. Three things outlive backtracking, on purpose: the search
     recorder in the plan (plan_state.pl: the deepest failures, whether the
-    bound refused an action, the step budget; nb_setarg/3), and the memo of
-    arc pairs in the CMS network (cms.pl; nb_setarg/3).
+    bound refused an action, the step budget; nb_setarg/3), the memo of
+    arc pairs in the CMS network (cms.pl; nb_setarg/3), and the atoms a
+    history entry mentions (conflict_steps/3; nb_setarg/3, kept with a
+    copy of the term they were found in and used only while the entry is
+    still == that copy, so that backtracking cannot make them stale).
 
     The loop (Sec. 2): take the first goal of the operational stack, else of
     the geometric stack; satisfy it (establish.pl for operational goals,
@@ -325,7 +328,9 @@ forward_check(K, Plan0, Plan) :-
     plan_geos(Plan0, Geos),
     plan_net(Plan0, Net),
     plan_checked(Plan0, Checked0),
-    include(unchecked_ground(Checked0, Net), Geos, ToCheck),
+    plan_pending(Plan0, Pending),
+    to_scan(Pending, Geos, Scan),
+    unchecked_ground(Scan, Checked0, Net, ToCheck, Left),
     (   member(Goal, ToCheck),
         Goal = geo(_, _, Constraint, Conds),
         geo_objects(Constraint, Conds, Objects),
@@ -340,17 +345,51 @@ forward_check(K, Plan0, Plan) :-
         )
     ;   foldl([geo(Id, _, _, _), C0, C]>>put_assoc(Id, C0, true, C),
               ToCheck, Checked0, Checked),
-        set_checked_of_plan(Checked, Plan0, Plan)
+        set_checked_of_plan(Checked, Plan0, Plan1),
+        set_pending_of_plan(seen(Geos, Left), Plan1, Plan)
+    ).
+
+%   to_scan(+Pending, +Geos, -Scan): the goals of Geos that may be due a
+%   forward check, in stack order: those pushed on top of the stack the
+%   last check saw and the goals it left (plan_state:plan_pending/2), or
+%   the whole stack if it is not that stack with goals pushed on top.
+
+to_scan(seen(Seen, Left), Geos, Scan) :-
+    pushed_on(Geos, Seen, Scan, Left),
+    !.
+to_scan(_, Geos, Geos).
+
+pushed_on(Geos, Seen, Scan, Left) :-
+    (   Geos == Seen
+    ->  Scan = Left
+    ;   Geos = [G|Geos1],
+        Scan = [G|Scan1],
+        pushed_on(Geos1, Seen, Scan1, Left)
     ).
 
 %   A goal is checked ahead once, as soon as its variables are bound: the
 %   network does not change on operational steps (they only add nodes).
 
-unchecked_ground(Checked, Net, geo(Id, _, Constraint, _)) :-
-    \+ get_assoc(Id, Checked, _),
-    ground(Constraint),
-    constraint_vars(Constraint, Vs),
-    forall(member(V, Vs), cms_node(Net, V, _)).
+%   unchecked_ground(+Geos, +Checked, +Net, -ToCheck, -Left): the goals of
+%   Geos not checked yet whose constraint is ground, on variables with
+%   nodes, and the others (ToCheck once checked goes into Checked, so Left
+%   is all of Geos not in Checked then)
+%   (a plain recursion: include/3 would make a meta-call per pending goal
+%   at every step).
+
+unchecked_ground([], _, _, [], []).
+unchecked_ground([G|Gs], Checked, Net, ToCheck, Left) :-
+    G = geo(Id, _, Constraint, _),
+    (   \+ get_assoc(Id, Checked, _),
+        ground(Constraint),
+        constraint_vars(Constraint, Vs),
+        forall(member(V, Vs), cms_node(Net, V, _))
+    ->  ToCheck = [G|ToCheck1],
+        Left = Left1
+    ;   ToCheck = ToCheck1,
+        Left = [G|Left1]
+    ),
+    unchecked_ground(Gs, Checked, Net, ToCheck1, Left1).
 
 constraint_vars(member(V, _), [V]).
 constraint_vars(in_position_class(V, _), [V]).
@@ -366,7 +405,8 @@ jump(K, Ks, Plan) :-
 
 %   add_history(+K, +Goal, +Plan0, +Plan1, -Plan): remember what step K
 %   decided for an operational goal: its condition as bound and the
-%   actions it added.
+%   actions it added, h(K, Cond, NewActions, Memo), Memo the memo of
+%   conflict_steps/3.
 
 add_history(K, Goal, Plan0, Plan1, Plan) :-
     (   Goal = op(_, _, Cond)
@@ -378,8 +418,7 @@ add_history(K, Goal, Plan0, Plan1, Plan) :-
             length(New, N0),
             append(NewActions, New, As1)
         ),
-        plan_history(Plan1, H0),
-        set_history_of_plan([h(K, Cond, NewActions)|H0], Plan1, Plan)
+        push_history_of_plan(h(K, Cond, NewActions, atoms(none)), Plan1, Plan)
     ;   Plan = Plan1
     ).
 
@@ -395,9 +434,53 @@ add_history(K, Goal, Plan0, Plan1, Plan) :-
 
 conflict_steps(Vars, Plan, Ks) :-
     plan_history(Plan, History),
-    findall(K, ( member(h(K, Cond, New), History),
-                 mentions_any(Cond-New, Vars) ),
+    findall(K, ( member(h(K, Cond, New, Memo), History),
+                 step_mentions_any(Cond-New, Memo, Vars) ),
             Ks).
+
+%   step_mentions_any(+Term, +Memo, +Vars): the step's Term mentions one
+%   of Vars. A step that added actions has a big term, walked again at
+%   every refusal: once it is ground, its atoms are kept in Memo,
+%   atoms(Copy-Atoms) (nb_setarg/3: the test is made inside findall/3),
+%   with a copy of the term they are the atoms of; they serve while the
+%   term is still == that copy (a comparison in C, not a walk in Prolog),
+%   and are found again when backtracking and other bindings have changed
+%   it.
+
+step_mentions_any(Term, Memo, Vars) :-
+    (   arg(2, Term, New),
+        New == []
+    ->  mentions_any(Term, Vars)
+    ;   arg(1, Memo, Copy-Atoms),
+        Copy == Term
+    ->  \+ ord_disjoint(Atoms, Vars)
+    ;   ground(Term)
+    ->  term_atoms(Term, Atoms0, []),
+        sort(Atoms0, Atoms),
+        nb_setarg(1, Memo, Term-Atoms),
+        \+ ord_disjoint(Atoms, Vars)
+    ;   mentions_any(Term, Vars)
+    ).
+
+%   term_atoms(+Term, -Atoms, ?Tail): the atoms of Term, a difference list.
+
+term_atoms(T, As0, As) :-
+    (   atom(T)
+    ->  As0 = [T|As]
+    ;   compound(T)
+    ->  compound_name_arity(T, _, N),
+        term_atoms(1, N, T, As0, As)
+    ;   As0 = As
+    ).
+
+term_atoms(I, N, T, As0, As) :-
+    (   I > N
+    ->  As0 = As
+    ;   arg(I, T, A),
+        term_atoms(A, As0, As1),
+        I1 is I + 1,
+        term_atoms(I1, N, T, As1, As)
+    ).
 
 mentions_any(Term, Atoms) :-
     (   atom(Term)

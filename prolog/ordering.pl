@@ -115,11 +115,17 @@ prior_to_(finish, _, _, _) :- !, fail.
 prior_to_(start, _, G, G) :- !.
 prior_to_(_, finish, G, G) :- !.
 prior_to_(A1, A2, G0, G) :-
-    add_node(A1, G0, G1),
-    add_node(A2, G1, G2),
+    G0 = ord(Nodes00, _, _),
+    (   get_assoc(A1, Nodes00, n(I1, S1, D1, Anc1)),   % both nodes there:
+        get_assoc(A2, Nodes00, n(I2, _, D2, _))         % no add_node/3
+    ->  G2 = G0
+    ;   add_node(A1, G0, G1),
+        add_node(A2, G1, G2),
+        G2 = ord(Nodes02, _, _),
+        get_assoc(A1, Nodes02, n(I1, S1, D1, Anc1)),
+        get_assoc(A2, Nodes02, n(I2, _, D2, _))
+    ),
     G2 = ord(Nodes0, Of, N),
-    get_assoc(A1, Nodes0, n(I1, S1, D1, Anc1)),
-    get_assoc(A2, Nodes0, n(I2, _, D2, _)),
     D2 /\ (1 << I1) =:= 0,                      % no path A2 -> A1
     (   ord_memberchk(A2, S1)
     ->  G = G2
@@ -129,34 +135,47 @@ prior_to_(A1, A2, G0, G) :-
         ->  Nodes = Nodes1
         ;   Up is Anc1 \/ (1 << I1),
             Down is D2 \/ (1 << I2),
-            foldl_bits(add_desc(Down, Of), Up, Nodes1, Nodes2),
-            foldl_bits(add_anc(Up, Of), Down, Nodes2, Nodes)
+            add_descs(Up, Down, Of, Nodes1, Nodes2),
+            add_ancs(Down, Up, Of, Nodes2, Nodes)
         ),
         G = ord(Nodes, Of, N)
     ).
 
-add_desc(Down, Of, I, Nodes0, Nodes) :-
-    get_assoc(I, Of, Id),
-    get_assoc(Id, Nodes0, n(I, S, D0, A)),
-    D is D0 \/ Down,
-    put_assoc(Id, Nodes0, n(I, S, D, A), Nodes).
+%   add_descs(+Bits, +Down, +Of, +Nodes0, -Nodes): Down added to the
+%   descendants of every action whose bit is in Bits, lowest first;
+%   add_ancs/5 the same for ancestors. (A plain recursion over the bits,
+%   not a foldl with a closure: a meta-call per node updated.) A node
+%   whose set holds the new bits already is left as it is (its assoc path
+%   not copied).
 
-add_anc(Up, Of, I, Nodes0, Nodes) :-
-    get_assoc(I, Of, Id),
-    get_assoc(Id, Nodes0, n(I, S, D, A0)),
-    A is A0 \/ Up,
-    put_assoc(Id, Nodes0, n(I, S, D, A), Nodes).
-
-%   foldl_bits(:Goal, +Bits, +S0, -S): call(Goal, I, S_k, S_k+1) for every
-%   bit I set in the integer Bits, lowest first.
-
-foldl_bits(Goal, Bits, S0, S) :-
+add_descs(Bits, Down, Of, Nodes0, Nodes) :-
     (   Bits =:= 0
-    ->  S = S0
+    ->  Nodes = Nodes0
     ;   I is lsb(Bits),
-        call(Goal, I, S0, S1),
+        get_assoc(I, Of, Id),
+        get_assoc(Id, Nodes0, n(I, S, D0, A)),
+        (   D0 /\ Down =:= Down
+        ->  Nodes1 = Nodes0
+        ;   D is D0 \/ Down,
+            put_assoc(Id, Nodes0, n(I, S, D, A), Nodes1)
+        ),
         Bits1 is Bits xor (1 << I),
-        foldl_bits(Goal, Bits1, S1, S)
+        add_descs(Bits1, Down, Of, Nodes1, Nodes)
+    ).
+
+add_ancs(Bits, Up, Of, Nodes0, Nodes) :-
+    (   Bits =:= 0
+    ->  Nodes = Nodes0
+    ;   I is lsb(Bits),
+        get_assoc(I, Of, Id),
+        get_assoc(Id, Nodes0, n(I, S, D, A0)),
+        (   A0 /\ Up =:= Up
+        ->  Nodes1 = Nodes0
+        ;   A is A0 \/ Up,
+            put_assoc(Id, Nodes0, n(I, S, D, A), Nodes1)
+        ),
+        Bits1 is Bits xor (1 << I),
+        add_ancs(Bits1, Up, Of, Nodes1, Nodes)
     ).
 
 %!  necessarily_before(+A1, +A2, +G) is semidet.

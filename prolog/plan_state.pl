@@ -1,10 +1,11 @@
 /*  spar-py: the phase-1 plan state (Secs. 2, 4): the record the goal loop
     threads through the search, Plan0 -> Plan, and the search recorder.
 
-    A plan state is a term with 16 fields,
+    A plan state is a term with 18 fields,
 
       plan(Actions, Order, Net, Ids, Ops, Geos, Sat, Steps, Bound, Methods,
-           Trace, History, Checked, Lookahead, Recorder, Seps)
+           Trace, History, Checked, Lookahead, Recorder, Seps, Index,
+           Pending)
 
     each with a reader plan_F(+Plan, -Value) and, for those the search
     changes, a writer set_F_of_plan(+Value, +Plan0, -Plan) that checks the
@@ -15,7 +16,9 @@
     satisfied list, the step count, the bound on the number of actions,
     the declobbering methods, the trace flag, the history of the
     operational steps, the geometric goals checked ahead of their turn,
-    whether to check them so, the search recorder and the separations.
+    whether to check them so, the search recorder, the separations and the
+    index of the actions' add and delete lists, and the geometric goals
+    forward checking left pending.
 
     Backtracking undoes every change to a plan state but one: goals.pl and
     establish.pl only build new plan terms (and dif/2 constraints, for the
@@ -23,7 +26,9 @@
     failures(DeepestOp, DeepestGeo, BoundHit, Budget-steps(Spent)), which
     record_failure/3, bound_hit/1 and spend_step/1 update with nb_setarg/3
     because it must outlive the failures it records. (The CMS network's
-    oracle memo is the other non-backtrackable state of phase 1: cms.pl.)
+    oracle memo, cms.pl, and the atoms memo of a history entry,
+    goals:conflict_steps/3, are the other non-backtrackable state of
+    phase 1.)
 
     goals.pl and establish.pl both use this module, and it uses neither.
 */
@@ -34,12 +39,14 @@
             plan_ops/2, plan_geos/2, plan_sat/2, plan_steps/2,
             plan_bound/2, plan_methods/2, plan_trace/2, plan_history/2,
             plan_checked/2, plan_lookahead/2, plan_recorder/2, plan_seps/2,
+            plan_index/2, plan_pending/2,
             % writers
             set_actions_of_plan/3, set_order_of_plan/3, set_net_of_plan/3,
             set_ids_of_plan/3, set_ops_of_plan/3, set_geos_of_plan/3,
             set_sat_of_plan/3, set_steps_of_plan/3, set_history_of_plan/3,
             set_checked_of_plan/3, set_recorder_of_plan/3,
-            set_seps_of_plan/3,
+            set_seps_of_plan/3, set_index_of_plan/3,
+            push_history_of_plan/3, set_pending_of_plan/3,
             % the search recorder
             failure_recorder/2,       % +Budget, -Recorder
             record_failure/3,         % +K, +Goal, +Plan
@@ -82,9 +89,11 @@ make_plan(Fields, Plan) :-
     foldl(set_field, Fields, Plan0, Plan).
 
 default_plan(plan([], Order, _Net, [], [], [], [], 0, Bound, Methods, Trace,
-                  [], Checked, Lookahead, Recorder, [])) :-
+                  [], Checked, Lookahead, Recorder, [], index(Adds, Dels), none)) :-
     empty_ordering(Order),
     empty_assoc(Checked),
+    empty_assoc(Adds),
+    empty_assoc(Dels),
     default_option(max_actions_floor, Bound),
     default_option(declobber, Methods),
     default_option(trace, Trace),
@@ -121,6 +130,8 @@ plan_field(checked,  13, assoc).
 plan_field(lookahead, 14, boolean).
 plan_field(recorder, 15, any).
 plan_field(seps,     16, list).
+plan_field(index,    17, compound).
+plan_field(pending,  18, any).
 
                  /*******************************
                  *          ACCESSORS           *
@@ -136,9 +147,9 @@ plan_field(seps,     16, list).
 %   @error type_error(list, Actions) from set_actions_of_plan/3 if Actions is
 %          not a list (instantiation_error if it is unbound or partial).
 
-plan_actions(plan(Actions,_,_,_,_,_,_,_,_,_,_,_,_,_,_,_), Actions).
-set_actions_of_plan(Actions, plan(_,A2,A3,A4,A5,A6,A7,A8,A9,A10,A11,A12,A13,A14,A15,A16),
-                    plan(Actions,A2,A3,A4,A5,A6,A7,A8,A9,A10,A11,A12,A13,A14,A15,A16)) :-
+plan_actions(plan(Actions,_,_,_,_,_,_,_,_,_,_,_,_,_,_,_,_,_), Actions).
+set_actions_of_plan(Actions, plan(_,A2,A3,A4,A5,A6,A7,A8,A9,A10,A11,A12,A13,A14,A15,A16,A17,A18),
+                    plan(Actions,A2,A3,A4,A5,A6,A7,A8,A9,A10,A11,A12,A13,A14,A15,A16,A17,A18)) :-
     must_be(list, Actions).
 
 %!  plan_order(+Plan, -Order) is det.
@@ -150,9 +161,9 @@ set_actions_of_plan(Actions, plan(_,A2,A3,A4,A5,A6,A7,A8,A9,A10,A11,A12,A13,A14,
 %   @error type_error(compound, Order) from set_order_of_plan/3 if Order
 %          is not a compound term (instantiation_error if it is unbound).
 
-plan_order(plan(_,Order,_,_,_,_,_,_,_,_,_,_,_,_,_,_), Order).
-set_order_of_plan(Order, plan(A1,_,A3,A4,A5,A6,A7,A8,A9,A10,A11,A12,A13,A14,A15,A16),
-                  plan(A1,Order,A3,A4,A5,A6,A7,A8,A9,A10,A11,A12,A13,A14,A15,A16)) :-
+plan_order(plan(_,Order,_,_,_,_,_,_,_,_,_,_,_,_,_,_,_,_), Order).
+set_order_of_plan(Order, plan(A1,_,A3,A4,A5,A6,A7,A8,A9,A10,A11,A12,A13,A14,A15,A16,A17,A18),
+                  plan(A1,Order,A3,A4,A5,A6,A7,A8,A9,A10,A11,A12,A13,A14,A15,A16,A17,A18)) :-
     must_be(compound, Order).
 
 %!  plan_net(+Plan, -Net) is det.
@@ -160,9 +171,9 @@ set_order_of_plan(Order, plan(A1,_,A3,A4,A5,A6,A7,A8,A9,A10,A11,A12,A13,A14,A15,
 %
 %   The geometric constraint network (cms.pl).
 
-plan_net(plan(_,_,Net,_,_,_,_,_,_,_,_,_,_,_,_,_), Net).
-set_net_of_plan(Net, plan(A1,A2,_,A4,A5,A6,A7,A8,A9,A10,A11,A12,A13,A14,A15,A16),
-                plan(A1,A2,Net,A4,A5,A6,A7,A8,A9,A10,A11,A12,A13,A14,A15,A16)).
+plan_net(plan(_,_,Net,_,_,_,_,_,_,_,_,_,_,_,_,_,_,_), Net).
+set_net_of_plan(Net, plan(A1,A2,_,A4,A5,A6,A7,A8,A9,A10,A11,A12,A13,A14,A15,A16,A17,A18),
+                plan(A1,A2,Net,A4,A5,A6,A7,A8,A9,A10,A11,A12,A13,A14,A15,A16,A17,A18)).
 
 %!  plan_ids(+Plan, -Ids:list) is det.
 %!  set_ids_of_plan(+Ids:list, +Plan0, -Plan) is det.
@@ -173,9 +184,9 @@ set_net_of_plan(Net, plan(A1,A2,_,A4,A5,A6,A7,A8,A9,A10,A11,A12,A13,A14,A15,A16)
 %   @error type_error(list, Ids) from set_ids_of_plan/3 if Ids is
 %          not a list (instantiation_error if it is unbound or partial).
 
-plan_ids(plan(_,_,_,Ids,_,_,_,_,_,_,_,_,_,_,_,_), Ids).
-set_ids_of_plan(Ids, plan(A1,A2,A3,_,A5,A6,A7,A8,A9,A10,A11,A12,A13,A14,A15,A16),
-                plan(A1,A2,A3,Ids,A5,A6,A7,A8,A9,A10,A11,A12,A13,A14,A15,A16)) :-
+plan_ids(plan(_,_,_,Ids,_,_,_,_,_,_,_,_,_,_,_,_,_,_), Ids).
+set_ids_of_plan(Ids, plan(A1,A2,A3,_,A5,A6,A7,A8,A9,A10,A11,A12,A13,A14,A15,A16,A17,A18),
+                plan(A1,A2,A3,Ids,A5,A6,A7,A8,A9,A10,A11,A12,A13,A14,A15,A16,A17,A18)) :-
     must_be(list, Ids).
 
 %!  plan_ops(+Plan, -Ops:list) is det.
@@ -187,9 +198,9 @@ set_ids_of_plan(Ids, plan(A1,A2,A3,_,A5,A6,A7,A8,A9,A10,A11,A12,A13,A14,A15,A16)
 %   @error type_error(list, Ops) from set_ops_of_plan/3 if Ops is
 %          not a list (instantiation_error if it is unbound or partial).
 
-plan_ops(plan(_,_,_,_,Ops,_,_,_,_,_,_,_,_,_,_,_), Ops).
-set_ops_of_plan(Ops, plan(A1,A2,A3,A4,_,A6,A7,A8,A9,A10,A11,A12,A13,A14,A15,A16),
-                plan(A1,A2,A3,A4,Ops,A6,A7,A8,A9,A10,A11,A12,A13,A14,A15,A16)) :-
+plan_ops(plan(_,_,_,_,Ops,_,_,_,_,_,_,_,_,_,_,_,_,_), Ops).
+set_ops_of_plan(Ops, plan(A1,A2,A3,A4,_,A6,A7,A8,A9,A10,A11,A12,A13,A14,A15,A16,A17,A18),
+                plan(A1,A2,A3,A4,Ops,A6,A7,A8,A9,A10,A11,A12,A13,A14,A15,A16,A17,A18)) :-
     must_be(list, Ops).
 
 %!  plan_geos(+Plan, -Geos:list) is det.
@@ -201,9 +212,9 @@ set_ops_of_plan(Ops, plan(A1,A2,A3,A4,_,A6,A7,A8,A9,A10,A11,A12,A13,A14,A15,A16)
 %   @error type_error(list, Geos) from set_geos_of_plan/3 if Geos is
 %          not a list (instantiation_error if it is unbound or partial).
 
-plan_geos(plan(_,_,_,_,_,Geos,_,_,_,_,_,_,_,_,_,_), Geos).
-set_geos_of_plan(Geos, plan(A1,A2,A3,A4,A5,_,A7,A8,A9,A10,A11,A12,A13,A14,A15,A16),
-                 plan(A1,A2,A3,A4,A5,Geos,A7,A8,A9,A10,A11,A12,A13,A14,A15,A16)) :-
+plan_geos(plan(_,_,_,_,_,Geos,_,_,_,_,_,_,_,_,_,_,_,_), Geos).
+set_geos_of_plan(Geos, plan(A1,A2,A3,A4,A5,_,A7,A8,A9,A10,A11,A12,A13,A14,A15,A16,A17,A18),
+                 plan(A1,A2,A3,A4,A5,Geos,A7,A8,A9,A10,A11,A12,A13,A14,A15,A16,A17,A18)) :-
     must_be(list, Geos).
 
 %!  plan_sat(+Plan, -Sat:list) is det.
@@ -216,9 +227,9 @@ set_geos_of_plan(Geos, plan(A1,A2,A3,A4,A5,_,A7,A8,A9,A10,A11,A12,A13,A14,A15,A1
 %   @error type_error(list, Sat) from set_sat_of_plan/3 if Sat is
 %          not a list (instantiation_error if it is unbound or partial).
 
-plan_sat(plan(_,_,_,_,_,_,Sat,_,_,_,_,_,_,_,_,_), Sat).
-set_sat_of_plan(Sat, plan(A1,A2,A3,A4,A5,A6,_,A8,A9,A10,A11,A12,A13,A14,A15,A16),
-                plan(A1,A2,A3,A4,A5,A6,Sat,A8,A9,A10,A11,A12,A13,A14,A15,A16)) :-
+plan_sat(plan(_,_,_,_,_,_,Sat,_,_,_,_,_,_,_,_,_,_,_), Sat).
+set_sat_of_plan(Sat, plan(A1,A2,A3,A4,A5,A6,_,A8,A9,A10,A11,A12,A13,A14,A15,A16,A17,A18),
+                plan(A1,A2,A3,A4,A5,A6,Sat,A8,A9,A10,A11,A12,A13,A14,A15,A16,A17,A18)) :-
     must_be(list, Sat).
 
 %!  plan_steps(+Plan, -Steps:integer) is det.
@@ -229,9 +240,9 @@ set_sat_of_plan(Sat, plan(A1,A2,A3,A4,A5,A6,_,A8,A9,A10,A11,A12,A13,A14,A15,A16)
 %   @error type_error(integer, Steps) from set_steps_of_plan/3 if Steps is
 %          not an integer (instantiation_error if it is unbound or partial).
 
-plan_steps(plan(_,_,_,_,_,_,_,Steps,_,_,_,_,_,_,_,_), Steps).
-set_steps_of_plan(Steps, plan(A1,A2,A3,A4,A5,A6,A7,_,A9,A10,A11,A12,A13,A14,A15,A16),
-                  plan(A1,A2,A3,A4,A5,A6,A7,Steps,A9,A10,A11,A12,A13,A14,A15,A16)) :-
+plan_steps(plan(_,_,_,_,_,_,_,Steps,_,_,_,_,_,_,_,_,_,_), Steps).
+set_steps_of_plan(Steps, plan(A1,A2,A3,A4,A5,A6,A7,_,A9,A10,A11,A12,A13,A14,A15,A16,A17,A18),
+                  plan(A1,A2,A3,A4,A5,A6,A7,Steps,A9,A10,A11,A12,A13,A14,A15,A16,A17,A18)) :-
     must_be(integer, Steps).
 
 %!  plan_bound(+Plan, -Bound:integer) is det.
@@ -239,34 +250,45 @@ set_steps_of_plan(Steps, plan(A1,A2,A3,A4,A5,A6,A7,_,A9,A10,A11,A12,A13,A14,A15,
 %   The largest number of plan actions allowed in this round of
 %   iterative deepening.
 
-plan_bound(plan(_,_,_,_,_,_,_,_,Bound,_,_,_,_,_,_,_), Bound).
+plan_bound(plan(_,_,_,_,_,_,_,_,Bound,_,_,_,_,_,_,_,_,_), Bound).
 
 %!  plan_methods(+Plan, -Methods:list) is det.
 %
 %   The declobbering methods, in the order tried (establish.pl).
 
-plan_methods(plan(_,_,_,_,_,_,_,_,_,Methods,_,_,_,_,_,_), Methods).
+plan_methods(plan(_,_,_,_,_,_,_,_,_,Methods,_,_,_,_,_,_,_,_), Methods).
 
 %!  plan_trace(+Plan, -Trace:boolean) is det.
 %
 %   Whether the search prints its steps (note/3).
 
-plan_trace(plan(_,_,_,_,_,_,_,_,_,_,Trace,_,_,_,_,_), Trace).
+plan_trace(plan(_,_,_,_,_,_,_,_,_,_,Trace,_,_,_,_,_,_,_), Trace).
 
 %!  plan_history(+Plan, -History:list) is det.
 %!  set_history_of_plan(+History:list, +Plan0, -Plan) is det.
 %
-%   One h(K, Condition, NewActions) per operational step K on this branch,
-%   newest first: the condition as bound and the actions the step added
-%   (for conflict-directed backjumping, goals:conflict_steps/3).
+%   One h(K, Condition, NewActions, Memo) per operational step K on this
+%   branch, newest first: the condition as bound, the actions the step
+%   added and a memo of their atoms (for conflict-directed backjumping,
+%   goals:conflict_steps/3).
 %
 %   @error type_error(list, History) from set_history_of_plan/3 if History is
 %          not a list (instantiation_error if it is unbound or partial).
 
-plan_history(plan(_,_,_,_,_,_,_,_,_,_,_,History,_,_,_,_), History).
-set_history_of_plan(History, plan(A1,A2,A3,A4,A5,A6,A7,A8,A9,A10,A11,_,A13,A14,A15,A16),
-                    plan(A1,A2,A3,A4,A5,A6,A7,A8,A9,A10,A11,History,A13,A14,A15,A16)) :-
+plan_history(plan(_,_,_,_,_,_,_,_,_,_,_,History,_,_,_,_,_,_), History).
+set_history_of_plan(History, plan(A1,A2,A3,A4,A5,A6,A7,A8,A9,A10,A11,_,A13,A14,A15,A16,A17,A18),
+                    plan(A1,A2,A3,A4,A5,A6,A7,A8,A9,A10,A11,History,A13,A14,A15,A16,A17,A18)) :-
     must_be(list, History).
+
+%!  push_history_of_plan(+Entry, +Plan0, -Plan) is det.
+%
+%   Plan is Plan0 with Entry on top of its history. The history is a list
+%   already, so nothing is walked: set_history_of_plan/3's check of the
+%   whole list at every step would cost the length of the history each
+%   time (quadratic over a search of thousands of steps).
+
+push_history_of_plan(Entry, plan(A1,A2,A3,A4,A5,A6,A7,A8,A9,A10,A11,H0,A13,A14,A15,A16,A17,A18),
+                     plan(A1,A2,A3,A4,A5,A6,A7,A8,A9,A10,A11,[Entry|H0],A13,A14,A15,A16,A17,A18)).
 
 %!  plan_checked(+Plan, -Checked) is det.
 %!  set_checked_of_plan(+Checked, +Plan0, -Plan) is det.
@@ -279,9 +301,9 @@ set_history_of_plan(History, plan(A1,A2,A3,A4,A5,A6,A7,A8,A9,A10,A11,_,A13,A14,A
 %   @error type_error(assoc, Checked) from set_checked_of_plan/3 if
 %          Checked is not an assoc.
 
-plan_checked(plan(_,_,_,_,_,_,_,_,_,_,_,_,Checked,_,_,_), Checked).
-set_checked_of_plan(Checked, plan(A1,A2,A3,A4,A5,A6,A7,A8,A9,A10,A11,A12,_,A14,A15,A16),
-                    plan(A1,A2,A3,A4,A5,A6,A7,A8,A9,A10,A11,A12,Checked,A14,A15,A16)) :-
+plan_checked(plan(_,_,_,_,_,_,_,_,_,_,_,_,Checked,_,_,_,_,_), Checked).
+set_checked_of_plan(Checked, plan(A1,A2,A3,A4,A5,A6,A7,A8,A9,A10,A11,A12,_,A14,A15,A16,A17,A18),
+                    plan(A1,A2,A3,A4,A5,A6,A7,A8,A9,A10,A11,A12,Checked,A14,A15,A16,A17,A18)) :-
     must_be(assoc, Checked).
 
 %!  plan_lookahead(+Plan, -Lookahead:boolean) is det.
@@ -289,7 +311,7 @@ set_checked_of_plan(Checked, plan(A1,A2,A3,A4,A5,A6,A7,A8,A9,A10,A11,A12,_,A14,A
 %   Whether geometric goals are checked ahead of their turn (option
 %   forward_check).
 
-plan_lookahead(plan(_,_,_,_,_,_,_,_,_,_,_,_,_,Lookahead,_,_), Lookahead).
+plan_lookahead(plan(_,_,_,_,_,_,_,_,_,_,_,_,_,Lookahead,_,_,_,_), Lookahead).
 
 %!  plan_recorder(+Plan, -Recorder) is det.
 %!  set_recorder_of_plan(+Recorder, +Plan0, -Plan) is det.
@@ -297,9 +319,9 @@ plan_lookahead(plan(_,_,_,_,_,_,_,_,_,_,_,_,_,Lookahead,_,_), Lookahead).
 %   The search recorder shared by every branch of a phase-1 call (see
 %   failure_recorder/2): not undone on backtracking.
 
-plan_recorder(plan(_,_,_,_,_,_,_,_,_,_,_,_,_,_,Recorder,_), Recorder).
-set_recorder_of_plan(Recorder, plan(A1,A2,A3,A4,A5,A6,A7,A8,A9,A10,A11,A12,A13,A14,_,A16),
-                     plan(A1,A2,A3,A4,A5,A6,A7,A8,A9,A10,A11,A12,A13,A14,Recorder,A16)).
+plan_recorder(plan(_,_,_,_,_,_,_,_,_,_,_,_,_,_,Recorder,_,_,_), Recorder).
+set_recorder_of_plan(Recorder, plan(A1,A2,A3,A4,A5,A6,A7,A8,A9,A10,A11,A12,A13,A14,_,A16,A17,A18),
+                     plan(A1,A2,A3,A4,A5,A6,A7,A8,A9,A10,A11,A12,A13,A14,Recorder,A16,A17,A18)).
 
 %!  plan_seps(+Plan, -Seps:list) is det.
 %!  set_seps_of_plan(+Seps:list, +Plan0, -Plan) is det.
@@ -310,10 +332,44 @@ set_recorder_of_plan(Recorder, plan(A1,A2,A3,A4,A5,A6,A7,A8,A9,A10,A11,A12,A13,A
 %   @error type_error(list, Seps) from set_seps_of_plan/3 if Seps is
 %          not a list (instantiation_error if it is unbound or partial).
 
-plan_seps(plan(_,_,_,_,_,_,_,_,_,_,_,_,_,_,_,Seps), Seps).
-set_seps_of_plan(Seps, plan(A1,A2,A3,A4,A5,A6,A7,A8,A9,A10,A11,A12,A13,A14,A15,_),
-                 plan(A1,A2,A3,A4,A5,A6,A7,A8,A9,A10,A11,A12,A13,A14,A15,Seps)) :-
+plan_seps(plan(_,_,_,_,_,_,_,_,_,_,_,_,_,_,_,Seps,_,_), Seps).
+set_seps_of_plan(Seps, plan(A1,A2,A3,A4,A5,A6,A7,A8,A9,A10,A11,A12,A13,A14,A15,_,A17,A18),
+                 plan(A1,A2,A3,A4,A5,A6,A7,A8,A9,A10,A11,A12,A13,A14,A15,Seps,A17,A18)) :-
     must_be(list, Seps).
+
+%!  plan_index(+Plan, -Index) is det.
+%!  set_index_of_plan(+Index, +Plan0, -Plan) is det.
+%
+%   The plan actions by the terms of their add and delete lists,
+%   index(Adds, Dels), two assocs from a term key (establish.pl's
+%   term_key/2) to the actions with such a term, c(Id, Bit, Terms) newest
+%   first (Bit the action's bit in the ordering, Terms its add or delete
+%   list): establish.pl finds an establisher or a possible clobberer of a
+%   condition among the actions under its key, not among all of them.
+%   Kept by establish:add_action/5, the one place an action enters the
+%   plan.
+%
+%   @error type_error(compound, Index) from set_index_of_plan/3 if Index
+%          is not a compound term.
+
+plan_index(plan(_,_,_,_,_,_,_,_,_,_,_,_,_,_,_,_,Index,_), Index).
+set_index_of_plan(Index, plan(A1,A2,A3,A4,A5,A6,A7,A8,A9,A10,A11,A12,A13,A14,A15,A16,_,A18),
+                  plan(A1,A2,A3,A4,A5,A6,A7,A8,A9,A10,A11,A12,A13,A14,A15,A16,Index,A18)) :-
+    must_be(compound, Index).
+
+%!  plan_pending(+Plan, -Pending) is det.
+%!  set_pending_of_plan(+Pending, +Plan0, -Plan) is det.
+%
+%   What the last forward check on this branch left for the next
+%   (goals.pl): `none`, or seen(Geos, Left), Geos the geometric stack it
+%   scanned and Left the goals of Geos it did not check (not ground yet,
+%   or on a variable without a node), in stack order. Every other goal of
+%   Geos is in the checked assoc, so the next check need only scan what
+%   was pushed on top of Geos since, and Left.
+
+plan_pending(plan(_,_,_,_,_,_,_,_,_,_,_,_,_,_,_,_,_,Pending), Pending).
+set_pending_of_plan(Pending, plan(A1,A2,A3,A4,A5,A6,A7,A8,A9,A10,A11,A12,A13,A14,A15,A16,A17,_),
+                    plan(A1,A2,A3,A4,A5,A6,A7,A8,A9,A10,A11,A12,A13,A14,A15,A16,A17,Pending)).
 
                  /*******************************
                  *       THE SEARCH RECORDER    *

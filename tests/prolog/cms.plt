@@ -167,4 +167,27 @@ test(oracle_asked_once, N == 1) :-
     cms_add(reachable(grasp_1, init_pos1), peg, N2, _),
     arg(1, Count, N).
 
+%   More questions than the memo has buckets (chains of several entries),
+%   a non-ground one among them, each asked twice: each reaches the oracle
+%   once and gets its own answer back, after backtracking too.
+
+echo_oracle(Count, K, O, Gs, Ps, [K/O/Gs/Ps]) :-
+    arg(1, Count, C0),
+    C is C0 + 1,
+    nb_setarg(1, Count, C).
+
+test(memo_many_questions, [N-Bad == 201-[]]) :-
+    Count = count(0),
+    cms_empty(echo_oracle(Count), Net),
+    Net = cms(_, _, _, Oracle),
+    numlist(1, 200, Is),
+    Qs = [q(k(_), o, [g], [p])|Qs0],
+    findall(q(k(I), o, [g], [p]), member(I, Is), Qs0),
+    forall(member(q(K, O, Gs, Ps), Qs),
+           \+ \+ cms:oracle_pairs(Oracle, K, O, Gs, Ps, _)),
+    findall(K, ( member(q(K, O, Gs, Ps), Qs0),
+                 cms:oracle_pairs(Oracle, K, O, Gs, Ps, Pairs),
+                 Pairs \== [K/O/Gs/Ps] ), Bad),
+    arg(1, Count, N).
+
 :- end_tests(cms_sec5_2).

@@ -147,4 +147,36 @@ test(no_binding_by_clobber_test, [C == action_1, true(var(State))]) :-
     new_actions([holding(peg, _)], P0, P),
     once(possible_clobberer(gripper(State), start, finish, P, C)).
 
+%   The candidates clobber_candidates/3 finds through the plan's add and
+%   delete index are those a plain scan of every action finds, in the same
+%   order (newest first), whatever the condition's shape: a ground first
+%   argument, an unbound one (no index), an atomic condition, a first
+%   argument the actions bound after they were indexed.
+
+scan_clobberers(Cond, P, Ids) :-
+    plan_actions(P, As),
+    findall(Id, ( member(action(Id, _, _, _, dellist(Ds)), As),
+                  once(( member(D, Ds), \+ D \= Cond )) ),
+            Ids).
+
+test(indexed_candidates_as_scan, true(Got =@= Want)) :-
+    plan0([promotion, white_knight], P0),
+    new_actions([ holding(peg, _), holding(block, _), part_location(block, _),
+                  part_location(peg, _), holding(_, _) ], P0, P),
+    Conds = [ gripper(open), gripper(closed), gripper(_), part_location(peg, _),
+              part_location(block, _), part_location(_, _), holding(peg, _),
+              holding(block, _), holding(_, _), nothing_deletes_this ],
+    findall(Cond-Ids, ( member(Cond, Conds),
+                        clobber_candidates(op(g, finish, Cond), P, cands(_, Cs, _)),
+                        findall(Id, member(c(Id, _, _), Cs), Ids) ), Got),
+    findall(Cond-Ids, ( member(Cond, Conds), scan_clobberers(Cond, P, Ids) ), Want),
+    Want = [_-[_, _|_]|_].          % the plan has several clobberers to order
+
+test(indexed_after_binding, Ids == [action_1]) :-
+    plan0([promotion, white_knight], P0),
+    new_actions([holding(Obj, _)], P0, P),  % a pickup: deletes part_location(Obj, _)
+    Obj = peg,                           % bound after the action was indexed
+    clobber_candidates(op(g, finish, part_location(peg, p1)), P, cands(_, Cs, _)),
+    findall(Id, member(c(Id, _, _), Cs), Ids).
+
 :- end_tests(establish_sec4_1).

@@ -279,3 +279,51 @@ test(options_not_list, [error(type_error(list, foo))]) :-
     phase1(peg_in_block, foo, _).
 
 :- end_tests(phase1_errors).
+
+%   Forward checking scans only the goals pushed since its last check and
+%   those it left then (goals:to_scan/3), in stack order; a stack that is
+%   not the last one with goals pushed on top is scanned whole.
+
+:- begin_tests(forward_check_pending).
+
+test(pushed_and_left, Scan == [g3, g2, g1a]) :-
+    Seen = [g1, g1a, g0],
+    goals:to_scan(seen(Seen, [g1a]), [g3, g2|Seen], Scan).
+
+test(nothing_pushed, Scan == [g1a]) :-
+    Seen = [g1, g1a, g0],
+    goals:to_scan(seen(Seen, [g1a]), Seen, Scan).
+
+test(popped_scans_whole, Scan == [g1a, g0]) :-
+    Seen = [g1, g1a, g0],
+    Seen = [_|Popped],
+    goals:to_scan(seen(Seen, [g1a]), Popped, Scan).
+
+test(first_check_scans_whole, Scan == [g2, g1]) :-
+    goals:to_scan(none, [g2, g1], Scan).
+
+:- end_tests(forward_check_pending).
+
+%   The atoms a step's term is remembered to mention (for backjumping)
+%   follow the term when backtracking undoes the bindings it had and
+%   others are made.
+
+:- begin_tests(conflict_steps_memo).
+
+test(memo_follows_rebinding, [Before-After-Other == true-false-true]) :-
+    Memo = atoms(none),
+    Term = holding(peg, G)-[action(a1, pickup(peg, G), p, a, d)],
+    (   G = grasp_1,
+        ( goals:step_mentions_any(Term, Memo, [grasp_1]) -> Before = true ; Before = false ),
+        nb_setval(p1b_before, Before),
+        fail
+    ;   nb_getval(p1b_before, Before)
+    ),
+    G = grasp_2,
+    ( goals:step_mentions_any(Term, Memo, [grasp_1]) -> After = true ; After = false ),
+    ( goals:step_mentions_any(Term, Memo, [grasp_2, pos_1]) -> Other = true ; Other = false ).
+
+test(unground_step_walked, true) :-
+    goals:step_mentions_any(c(_)-[x(pos_3, _)], atoms(none), [pos_3]).
+
+:- end_tests(conflict_steps_memo).

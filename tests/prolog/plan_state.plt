@@ -40,6 +40,8 @@ field(checked,   t(goal_2, true, <, t, t), t(goal_3, true, <, t, t)).
 field(lookahead, false, true).
 field(recorder,  recorder_value, other_recorder).
 field(seps,      [sep(a, b)], []).
+field(index,     index(t, t), index(t(k(f, 1), [], <, t, t), t)).
+field(pending,   none, seen([], [])).
 
 read_field(Plan, Name, Value) :-
     atom_concat(plan_, Name, Reader),
@@ -60,7 +62,7 @@ full_plan(Plan) :-
 
 :- begin_tests(plan_state_record).
 
-test(sixteen_fields, N == 16) :-
+test(eighteen_fields, N == 18) :-
     make_plan([], P),
     functor(P, plan, N).
 
@@ -85,8 +87,18 @@ test(writer_sets_only_its_field, Bad == []) :-
             Bad).
 
 test(writers, Names == [actions, order, net, ids, ops, geos, sat, steps,
-                        history, checked, recorder, seps]) :-
+                        history, checked, recorder, seps, index, pending]) :-
     findall(Name, ( field(Name, _, _), settable(Name) ), Names).
+
+test(push_history, [H-Same == [h(2, c2, []), h(1, c, [])]-true]) :-
+    full_plan(P0),
+    push_history_of_plan(h(2, c2, []), P0, P),
+    plan_history(P, H),
+    (   forall(( field(Name, _, _), Name \== history ),
+               ( read_field(P0, Name, V0), read_field(P, Name, V), V0 == V ))
+    ->  Same = true
+    ;   Same = false
+    ).
 
 test(writer_type_list, [error(type_error(list, x))]) :-
     make_plan([], P),
