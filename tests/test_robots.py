@@ -232,3 +232,50 @@ def test_a_dh_cell_does_not_import_the_urdf_reader() -> None:
             "print(sorted(m for m in ('yourdfpy', 'trimesh', 'lxml') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]", out.stdout + out.stderr
+
+
+def _urdf_with_forearm_mesh(tmp_path: Path, filename: str, write_mesh: bool = True) -> Path:
+    """kb/robots/ur5e.urdf with the forearm's collision cylinder replaced by a mesh of that
+    cylinder (a 64-sided trimesh cylinder, STL, in the collision element's frame, metres)."""
+    import trimesh
+
+    text = URDF.read_text()
+    old = '<cylinder radius="0.04" length="0.3922"/>'
+    assert text.count(old) == 1
+    out = tmp_path / "ur5e_mesh.urdf"
+    out.write_text(text.replace(old, f'<mesh filename="{filename}"/>'))
+    if write_mesh:
+        (tmp_path / "meshes").mkdir(exist_ok=True)
+        trimesh.creation.cylinder(radius=0.04, height=0.3922, sections=64).export(tmp_path / "meshes" / "forearm.stl")
+    return out
+
+
+@pytest.mark.parametrize("filename", ["meshes/forearm.stl", "package://ur_description/meshes/forearm.stl"])
+def test_urdf_collision_meshes_are_their_convex_hulls(tmp_path: Path, filename: str) -> None:
+    """A URDF link whose collision geometry is a mesh (as UR's and most vendors' are) gets the
+    mesh's convex hull, placed where the URDF's cylinder of the same size is: every hull vertex
+    within the cylinder's radius of its axis, the hull spanning it; relative and package:// names."""
+    urdf = _urdf_with_forearm_mesh(tmp_path, filename)
+    chain = read_urdf_chain(urdf, "base", "tool0")
+    tool = np.eye(4)
+    tool[2, 3] = 150.0
+    mesh_robot = robot_from_urdf(chain, "ur5e", np.eye(4), tool, 85.0, "mm", 1.0)
+    (hull,) = [s for s in mesh_robot.links if s.name == "forearm_link"]
+    (cyl,) = [s for s in urdf_robot().links if s.name == "forearm_link"]
+    assert hull.kind == "hull" and cyl.kind == "cylinder" and hull.frame == cyl.frame
+    axis = (cyl.b - cyl.a) / np.linalg.norm(cyl.b - cyl.a)
+    t = (hull.points - cyl.a) @ axis
+    radial = np.linalg.norm((hull.points - cyl.a) - t[:, None] * axis, axis=1)
+    tol = 1e-4  # mm: STL stores single-precision vertices
+    assert radial.max() <= cyl.radius + tol and radial.max() > 0.99 * cyl.radius
+    assert t.min() == pytest.approx(0.0, abs=tol) and t.max() == pytest.approx(np.linalg.norm(cyl.b - cyl.a), abs=tol)
+
+
+def test_urdf_collision_mesh_not_found_is_one_line(tmp_path: Path) -> None:
+    urdf = _urdf_with_forearm_mesh(tmp_path, "package://ur_description/meshes/missing.stl", write_mesh=False)
+    path = write_cell(tmp_path, f"robot: {{urdf: {urdf}, base_link: base, tip_link: tool0, "
+                                "gripper: {finger_separation: 3}}\n")
+    with pytest.raises(KBError) as exc:
+        load_problem(path)
+    msg = str(exc.value)
+    assert "\n" not in msg and "forearm_link" in msg and "missing.stl" in msg and "not found" in msg, msg

@@ -31,7 +31,15 @@ from . import sanity
 from .units import from_mm
 from .errors import KBError, SparError, SparValueError, UnknownKeyError, WrongKindError
 from .geometry import ORTHO_TOL, eulerxyz, rotation_problem, rpy, same_stable_pose, tm_rows, trans
-from .world.robots import GripperGeometry, LinkShape, Robot, read_urdf_chain, robot_from_urdf, standard_to_modified
+from .world.robots import (
+    GripperGeometry,
+    LinkShape,
+    Robot,
+    UrdfMeshError,
+    read_urdf_chain,
+    robot_from_urdf,
+    standard_to_modified,
+)
 from .model import (
     Bounds,
     Cell,
@@ -1070,6 +1078,8 @@ def load_urdf_robot(node: Node, base_dir: Path, unit: str, rad_per: float) -> tu
     try:
         robot = robot_from_urdf(chain, name, frame("base"), frame("tool"), wm, unit, LENGTH_UNITS[unit], limits,
                                 family=_ik_choice(node))
+    except UrdfMeshError as e:
+        raise unode.fail(f"a URDF whose collision meshes spar-py can read (STL, OBJ or PLY beside it; {e})") from None
     except SparValueError as e:
         raise unode.fail(f"a URDF whose chain spar-py models exactly ({e})") from None
     family = _ik_choice(node)

@@ -384,6 +384,8 @@ def _link_body(s: Any) -> Body:
         return capsule(s.name, s.frame, s.a, s.b, s.radius)
     if s.kind == "cylinder":
         return cylinder(s.name, s.frame, s.a, s.b, s.radius)
+    if s.kind == "hull":
+        return convex(s.name, s.frame, s.points)
     return box(s.name, s.frame, s.a, s.b)
 
 

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 from pathlib import Path
 
 import numpy as np
@@ -46,7 +47,9 @@ class LinkShape:
     T_world_frame0, 1..6 = frame i, 6 the flange), in that frame's coordinates, robot unit.
 
     ``kind`` "capsule" or "cylinder": the segment ``a`` -> ``b`` (its axis) and ``radius``;
-    "box": the corners ``a`` (min) and ``b`` (max), axis-aligned in the frame (radius 0)."""
+    "box": the corners ``a`` (min) and ``b`` (max), axis-aligned in the frame (radius 0);
+    "hull": the convex hull of ``points`` (k, 3) (a URDF's collision mesh; ``a``, ``b`` their
+    bounding box)."""
 
     name: str
     frame: int
@@ -54,6 +57,7 @@ class LinkShape:
     a: np.ndarray
     b: np.ndarray
     radius: float = 0.0
+    points: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -551,7 +555,8 @@ def robot_from_urdf(chain: UrdfChain, name: str, base: np.ndarray, tool: np.ndar
 
 def _urdf_link_shapes(chain: UrdfChain, robot: Robot, base: np.ndarray, offsets: np.ndarray,
                       s: float) -> tuple[LinkShape, ...]:
-    """The URDF's own collision primitives (cylinders, boxes, spheres; meshes are skipped) of the
+    """The URDF's own collision geometry (cylinders, boxes, spheres, and meshes as the convex hulls
+    of their vertices: :func:`_urdf_mesh_points`) of the
     base link, each joint's child link and the links rigid with them by fixed joints
     (``chain.fixed``: UR's base_link above ``base``, a tool's links), as :class:`LinkShape` in
     Craig's frames (``offsets`` (6, 4, 4): child link i in Craig's frame i+1; the base link is
@@ -589,7 +594,53 @@ def _urdf_link_shapes(chain: UrdfChain, robot: Robot, base: np.ndarray, offsets:
                     r = float(np.sqrt((half ** 2).sum() - half[i] ** 2))
                     out.append(LinkShape(name, frame, "capsule", T[:3, 3] - half[i] * T[:3, i],
                                          T[:3, 3] + half[i] * T[:3, i], r))
+            elif g.mesh is not None:
+                P = _urdf_mesh_points(Path(chain.file), link, g.mesh) * s
+                P = P @ T[:3, :3].T + T[:3, 3]
+                out.append(LinkShape(name, frame, "hull", P.min(0), P.max(0), 0.0, P))
     return tuple(out)
+
+
+class UrdfMeshError(SparValueError):
+    """A URDF collision mesh that cannot be found or read (the message names the link)."""
+
+
+def _urdf_mesh_points(urdf_file: Path, link: str, mesh: Any) -> np.ndarray:
+    """The vertices (k, 3), metres, in the collision element's frame, of the convex hull of a
+    URDF collision mesh (``<mesh filename=... scale=...>``: STL, OBJ or PLY, read by trimesh).
+    The file is found relative to the URDF; a ``package://PKG/rest`` name as ``rest`` under the
+    URDF's folder or one of its parents, or PKG/rest beside them. A mesh that cannot be found
+    or read is an error naming the link: a link silently without its shape would plan through
+    the table."""
+    name = str(mesh.filename)
+    candidates: list[Path] = []
+    if name.startswith("package://"):
+        pkg, _, rest = name[len("package://"):].partition("/")
+        for d in [urdf_file.parent, *urdf_file.parent.parents]:
+            candidates += [d / rest, d / pkg / rest]
+    elif name.startswith("file://"):
+        candidates.append(Path(name[len("file://"):]))
+    else:
+        candidates.append(urdf_file.parent / name)
+    found = next((c for c in candidates if c.is_file()), None)
+    if found is None:
+        raise UrdfMeshError(f"link {link!r}: collision mesh {name!r} not found "
+                             f"(expected a file relative to the URDF)")
+    import trimesh  # lazily: only a URDF with collision meshes pays for it
+
+    try:
+        m = trimesh.load(str(found), force="mesh")
+        P = np.asarray(m.convex_hull.vertices, float)
+    except Exception as e:  # a format trimesh cannot read (e.g. .dae without pycollada)
+        raise UrdfMeshError(f"link {link!r}: collision mesh {found.name!r} cannot be read "
+                             f"({type(e).__name__}: {str(e).splitlines()[0] if str(e) else 'no detail'}); "
+                             f"expected STL, OBJ or PLY") from None
+    if len(P) < 4:
+        raise UrdfMeshError(f"link {link!r}: collision mesh {found.name!r} has no volume")
+    scale = getattr(mesh, "scale", None)
+    if scale is not None:
+        P = P * np.broadcast_to(np.asarray(scale, float), (3,))
+    return P
 
 
 def check_against_urdf(robot: Robot, chain: UrdfChain, base: np.ndarray, tool: np.ndarray, unit_per_m: float,
