@@ -343,10 +343,13 @@ def render(r: dict) -> str:
     L += [(f"Outcome {w['outcome']}, {w['actions']} actions, {w['instances_examined']} instance(s) "
           f"examined; process exit codes {c['returncodes']}."), ""]
 
-    L += ["### Generated problems: N pegs into N hole-down blocks (spar_py.gen)", "",
+    L += ["### Generated problems: N pegs into N blocks (spar_py.gen)", "",
           (f"One subprocess per N, a warm-up plan of the paper's cell first; "
           f"`Planner(timeout={p['timeout_s']:g})` with phase 1's default bound, derived from the problem "
-          "(the problem needs 4N actions; the bound is max(12, 8N)). Times: phase 1/2 are Prolog CPU seconds, wall the "
+          "(up to 34 pairs the blocks start hole-down and each is turned over: 4N actions; above, the "
+          "arm's reach holds no aisles for the turn-over, so the blocks start hole-up: 2N actions, see "
+          "spar_py.gen.blocks_for; the bound is derived from the problem). "
+          "Times: phase 1/2 are Prolog CPU seconds, wall the "
           "`plan()` call; RSS (Python and the embedded Prolog share the process): 'before' after the "
           "warm-up, 'peak' sampled every 5 ms while planning (getrusage's maxrss is not used: on Linux "
           "a child keeps its parent's high-water mark across exec). "
