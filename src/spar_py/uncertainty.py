@@ -149,6 +149,24 @@ class ObjectState:
         T_G = self.grasp
         return compose(self.pose, T_G, self.error.matrix(), inv(T_G))
 
+    def possible_rel(self) -> Matrix:
+        """:meth:`possible` with the ideal pose's translation ``t_O`` taken out (4x4 SX):
+        ``trans(-t_O) @ T_{O+d}``, built so that ``t_O`` never enters the expression
+        (translations commute: on the table ``trans(d) Tr_O X = Tr_O trans(d) X``).
+
+        Differences and relative poses of points of this object and of frames given
+        relative to its ideal pose are then free of where the object stands, so two
+        objects alike up to their places give equal expressions (and share SUP/INF
+        results by supinf.cached_bounds), and no large world constant cancels in floats.
+        """
+        if self.where == TABLE:
+            e = self.error
+            R_O = snap(self.pose).copy()
+            R_O[:3, 3] = 0.0
+            return compose(trans(e.dx, e.dy, e.dz), rotz(e.theta), R_O)
+        T_G = self.grasp
+        return compose(_rotation_only(self.pose), T_G, self.error.matrix(), inv(T_G))
+
 
 @dataclass(frozen=True)
 class WorldState:
@@ -228,6 +246,13 @@ def _in_hand(state: WorldState, obj: str, action: str) -> ObjectState:
     if o.where != HAND:
         raise SparValueError(f"{action}({obj}): the object must be held, it is {o.where}")
     return o
+
+
+def _rotation_only(T: np.ndarray) -> np.ndarray:
+    """A copy of the 4x4 transform ``T`` with its translation set to zero."""
+    A = np.array(T, float)
+    A[:3, 3] = 0.0
+    return A
 
 
 def _vec(R: np.ndarray, v: Matrix) -> list[Scalar]:
@@ -340,9 +365,11 @@ def pickup_constraints(state: WorldState, obj: str, grasp_T: np.ndarray, width: 
     o = _on_table(state, obj, "pickup")
     T_G = _pose(grasp_T, f"pickup({obj}) grasp")
     Wg, Wm = _positive(width, "grasp width W_g"), _positive(finger_separation, "finger separation W_m")
-    T_M = snap(o.pose @ T_G)
+    # both the contacts and the finger frames are taken relative to the object's ideal
+    # position t_O (trans(-t_O) on the left of each), which cancels in P_k^-1 C_i
+    T_M = snap(_rotation_only(o.pose) @ T_G)
     dM_inv = inv(manip.matrix())
-    contact = compose(o.possible(), T_G)
+    contact = compose(o.possible_rel(), T_G)
     C = {1: apply(contact, [0.0, Wg / 2, 0.0]), 2: apply(contact, [0.0, -Wg / 2, 0.0])}
     out = []
     for k, (ysign, sense) in {1: (-1.0, ">"), 2: (1.0, "<")}.items():
@@ -376,12 +403,14 @@ def assemble_constraints(state: WorldState, peg: str, hole: str, T_a: np.ndarray
                              f"{peg_feature.kind} and {hole_feature.kind}")
     Ta = _pose(T_a, f"assemble({peg}, {hole}) T_a")
     T_G = p.grasp
-    chain: list[Matrix] = [snap(h.pose @ Ta @ T_G)]
+    # both centres relative to the hole's ideal position t_H, which cancels in C_h - C_p:
+    # the expression depends on the pair only through the hole's orientation, T_a and T_G
+    chain: list[Matrix] = [snap(_rotation_only(h.pose) @ Ta @ T_G)]
     if motion is not None:
         chain.append(motion.matrix())
     chain += [p.error.matrix(), inv(T_G)]
     C_p = apply(compose(*chain), np.asarray(peg_feature.vector, float))
-    C_h = apply(h.possible(), np.asarray(hole_feature.vector, float))
+    C_h = apply(h.possible_rel(), np.asarray(hole_feature.vector, float))
     d = C_h - C_p
     d2 = ca.cse(ca.sumsqr(d))
     margin = float(hole_feature.radius) - float(peg_feature.radius)
