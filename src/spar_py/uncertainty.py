@@ -338,7 +338,10 @@ class Constraint:
     """An uncertainty-reduction precondition ``expr <sense> threshold`` (Sec. 4.3).
 
     ``sense`` is '>' (needs INF(expr) > threshold) or '<' (needs SUP(expr) < threshold);
-    ``action`` names the action it belongs to, ``name`` the inequality.
+    ``action`` names the action it belongs to, ``name`` the inequality. ``bounding``
+    (optional) is an expression with the same SUP (sense '<') or INF (sense '>') as
+    ``expr`` over the registry box, in fewer variables, with its box: SUP/INF bounds it
+    instead for the side its sense needs (see :func:`_sup_sumsqr`).
     """
 
     action: str
@@ -347,6 +350,7 @@ class Constraint:
     sense: str
     threshold: float
     description: str
+    bounding: tuple[ca.SX, Mapping[str, tuple[float, float]]] | None = None
 
     def __post_init__(self) -> None:
         if self.sense not in (">", "<"):
@@ -413,12 +417,78 @@ def assemble_constraints(state: WorldState, peg: str, hole: str, T_a: np.ndarray
     C_h = apply(h.possible_rel(), np.asarray(hole_feature.vector, float))
     d = C_h - C_p
     d2 = ca.cse(ca.sumsqr(d))
+    sup = _sup_sumsqr(d, state.registry)
+    bounding = None if sup is None else (sup, state.registry.box(sup))
     margin = float(hole_feature.radius) - float(peg_feature.radius)
     threshold = margin * margin if margin > 0 else 0.0
     note = "" if margin > 0 else f" (impossible: hole radius {hole_feature.radius} <= peg radius {peg_feature.radius})"
     return [Constraint(action, "centres", d2, "<", threshold,
                        f"|C_h - C_p|^2 < (R_h - R_p)^2: {peg}'s tip centre within {margin:g} "
-                       f"of {hole}'s hole centre{note}")]
+                       f"of {hole}'s hole centre{note}", bounding)]
+
+
+def _axis_offsets(d: Matrix, registry: Registry) -> tuple[ca.SX, dict[int, tuple[float, float]]] | None:
+    """``d`` (an SX 3-column) split as ``d0 + w``: the variables that move it along one axis.
+
+    A variable ``s`` whose Jacobian column ``∂d/∂s`` is a constant with one nonzero
+    entry ``c`` (row r) enters ``d`` only as ``c s e_r``: the offsets of the assemble
+    centres (the hole's world-frame dx, dy, dz, the held part's tool-frame offset mapped
+    by an axis-aligned rotation). Those of axis r sum to ``w_r = sum_j c_j s_j``, whose
+    range over the registry box is exactly the sum of the terms' ranges (the terms are
+    independent), here rounded outwards; the ``w_r`` of different axes are independent
+    of each other and of the rest. Returns ``d0`` (``d`` with those variables set to 0)
+    and ``{r: (lo, hi)}`` of each ``w_r``, or None if no variable is of that kind.
+    """
+    syms = ca.symvar(as_sx(d))
+    if not syms:
+        return None
+    allv = ca.vertcat(*syms)
+    axes: dict[int, list[tuple[ca.SX, float]]] = {}
+    for v in syms:
+        J = ca.jacobian(d, v)
+        if ca.depends_on(J, allv):
+            continue
+        c = np.asarray(ca.evalf(J), float).ravel()
+        nz = np.flatnonzero(c)
+        if len(nz) == 1 and np.isfinite(c[nz[0]]):
+            axes.setdefault(int(nz[0]), []).append((v, float(c[nz[0]])))
+    if not axes:
+        return None
+    gone = [v for members in axes.values() for v, _ in members]
+    d0 = ca.substitute(as_sx(d), ca.vertcat(*gone), ca.SX.zeros(len(gone)))
+    ranges: dict[int, tuple[float, float]] = {}
+    for r, members in axes.items():
+        los, his = [], []
+        for v, c in members:
+            lo, hi = registry.bounds(v.name())
+            a, b = c * lo, c * hi  # each product rounded: one ulp outwards covers it
+            los.append(math.nextafter(min(a, b), -math.inf))
+            his.append(math.nextafter(max(a, b), math.inf))
+        ranges[r] = (math.nextafter(math.fsum(los), -math.inf), math.nextafter(math.fsum(his), math.inf))
+    return d0, ranges
+
+
+def _sup_sumsqr(d: Matrix, registry: Registry) -> ca.SX | None:
+    """An expression whose SUP over the registry box is SUP ``|d|^2`` (d a 3-column), in
+    fewer variables, or None. With ``d = d0 + w`` (:func:`_axis_offsets`), the axis sums
+    ``w_r`` in ``[m_r - rho_r, m_r + rho_r]`` free and independent, the supremum over
+    them is in closed form: ``sup_w (d0_r + w_r)^2 = (|d0_r + m_r| + rho_r)^2``, so
+    ``SUP |d|^2 = SUP sum_r (|d0_r + m_r| + rho_r)^2`` over the other variables (m_r
+    and rho_r rounded so that the interval covers w_r's range; the bound stays sound)."""
+    split = _axis_offsets(d, registry)
+    if split is None:
+        return None
+    d0, ranges = split
+    terms = []
+    for r in range(3):
+        if r in ranges:
+            lo, hi = ranges[r]
+            m = 0.5 * (lo + hi)
+            rho = math.nextafter(max(hi - m, m - lo), math.inf)
+            terms.append(ca.power(ca.fabs(d0[r] + m) + rho, 2))
+        else:
+            terms.append(ca.power(d0[r], 2))
+    return ca.cse(terms[0] + terms[1] + terms[2])
 
 
 def _positive(v: float, what: str) -> float:
@@ -456,9 +526,12 @@ def evaluate(constraint: Constraint, registry: Registry, *, memo: Memo | None = 
     ``memo`` (a cell's memo tables) keeps compiled bounders and results by the
     expression's structure and box (supinf.cached_bounds): phase 2 meets the same
     constraint in many plan instances and after every remedy it tries."""
-    box = registry.box(constraint.expr)
+    if constraint.bounding is not None:
+        expr, box = constraint.bounding[0], dict(constraint.bounding[1])
+    else:
+        expr, box = constraint.expr, registry.box(constraint.expr)
     want = "lo" if constraint.sense == ">" else "hi"
-    r = cached_bounds(constraint.expr, box, memo, want=want, **options)
+    r = cached_bounds(expr, box, memo, want=want, **options)
     bound = r.lo if want == "lo" else r.hi
     ok = bound > constraint.threshold if want == "lo" else bound < constraint.threshold
     return Verdict(constraint, float(bound), float(constraint.threshold), bool(ok), r.tolerance_reached)
