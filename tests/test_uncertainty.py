@@ -389,6 +389,36 @@ def test_assemble_impossible_when_peg_is_wider() -> None:
         assemble_constraints(w, "peg", "block", np.eye(4), hole, peg)
 
 
+def test_assemble_bounding_form_keeps_the_sup(cell: Cell) -> None:
+    """The assemble constraint's SUP is taken of a closed form in fewer variables (the
+    centre offsets along each axis eliminated): it must still cover every sampled and
+    corner value of the full expression, and be no looser than the full bound."""
+    for scans in (False, True):
+        w, (c,) = _peg_in_block(cell, scans=scans)
+        assert c.bounding is not None
+        form, box = c.bounding
+        assert len(box) < len(w.registry.box(c.expr))
+        v = evaluate(c, w.registry)
+        full = Bounder(c.expr).bounds(w.registry.box(c.expr), want="hi")
+        smin, smax = sampled_range(c.expr, w.registry)
+        assert smax <= v.bound <= full.hi + 1e-9 * (1 + abs(full.hi))
+        assert v.bound - smax <= 0.01 * (smax - smin)
+
+
+def test_assemble_constraint_free_of_where_the_pair_stands() -> None:
+    """Two pairs alike up to a shift on the table give the same expressions (so SUP/INF's
+    memo serves both), and a shifted pair's SUP is the unshifted one's."""
+    hole = MatingFeature("hole", ("top",), 0.6, np.zeros(3))
+    peg = MatingFeature("peg", ("tip",), 0.5, np.array([0.0, 0.0, 2.0]))
+    out = []
+    for shift in (0.0, 37.25):
+        w = world({"block": geometry.trans(20 + shift, 0, 1), "peg": geometry.trans(20 + shift, 10, 1)})
+        w = pickup(w, "peg", geometry.rotx(math.pi), w.manipulator_error())
+        (c,) = assemble_constraints(w, "peg", "block", geometry.trans(0, 0, -2), peg, hole)
+        out.append((str(c.expr), evaluate(c, w.registry).bound))
+    assert out[0] == out[1]
+
+
 def test_assemble_motion_error_option_widens(cell: Cell) -> None:
     w, (c,) = _peg_in_block(cell, scans=True)
     peg, block = cell.objects["peg"], cell.objects["block"]

@@ -149,6 +149,24 @@ class ObjectState:
         T_G = self.grasp
         return compose(self.pose, T_G, self.error.matrix(), inv(T_G))
 
+    def possible_rel(self) -> Matrix:
+        """:meth:`possible` with the ideal pose's translation ``t_O`` taken out (4x4 SX):
+        ``trans(-t_O) @ T_{O+d}``, built so that ``t_O`` never enters the expression
+        (translations commute: on the table ``trans(d) Tr_O X = Tr_O trans(d) X``).
+
+        Differences and relative poses of points of this object and of frames given
+        relative to its ideal pose are then free of where the object stands, so two
+        objects alike up to their places give equal expressions (and share SUP/INF
+        results by supinf.cached_bounds), and no large world constant cancels in floats.
+        """
+        if self.where == TABLE:
+            e = self.error
+            R_O = snap(self.pose).copy()
+            R_O[:3, 3] = 0.0
+            return compose(trans(e.dx, e.dy, e.dz), rotz(e.theta), R_O)
+        T_G = self.grasp
+        return compose(_rotation_only(self.pose), T_G, self.error.matrix(), inv(T_G))
+
 
 @dataclass(frozen=True)
 class WorldState:
@@ -228,6 +246,13 @@ def _in_hand(state: WorldState, obj: str, action: str) -> ObjectState:
     if o.where != HAND:
         raise SparValueError(f"{action}({obj}): the object must be held, it is {o.where}")
     return o
+
+
+def _rotation_only(T: np.ndarray) -> np.ndarray:
+    """A copy of the 4x4 transform ``T`` with its translation set to zero."""
+    A = np.array(T, float)
+    A[:3, 3] = 0.0
+    return A
 
 
 def _vec(R: np.ndarray, v: Matrix) -> list[Scalar]:
@@ -313,7 +338,10 @@ class Constraint:
     """An uncertainty-reduction precondition ``expr <sense> threshold`` (Sec. 4.3).
 
     ``sense`` is '>' (needs INF(expr) > threshold) or '<' (needs SUP(expr) < threshold);
-    ``action`` names the action it belongs to, ``name`` the inequality.
+    ``action`` names the action it belongs to, ``name`` the inequality. ``bounding``
+    (optional) is an expression with the same SUP (sense '<') or INF (sense '>') as
+    ``expr`` over the registry box, in fewer variables, with its box: SUP/INF bounds it
+    instead for the side its sense needs (see :func:`_sup_sumsqr`).
     """
 
     action: str
@@ -322,6 +350,7 @@ class Constraint:
     sense: str
     threshold: float
     description: str
+    bounding: tuple[ca.SX, Mapping[str, tuple[float, float]]] | None = None
 
     def __post_init__(self) -> None:
         if self.sense not in (">", "<"):
@@ -340,9 +369,11 @@ def pickup_constraints(state: WorldState, obj: str, grasp_T: np.ndarray, width: 
     o = _on_table(state, obj, "pickup")
     T_G = _pose(grasp_T, f"pickup({obj}) grasp")
     Wg, Wm = _positive(width, "grasp width W_g"), _positive(finger_separation, "finger separation W_m")
-    T_M = snap(o.pose @ T_G)
+    # both the contacts and the finger frames are taken relative to the object's ideal
+    # position t_O (trans(-t_O) on the left of each), which cancels in P_k^-1 C_i
+    T_M = snap(_rotation_only(o.pose) @ T_G)
     dM_inv = inv(manip.matrix())
-    contact = compose(o.possible(), T_G)
+    contact = compose(o.possible_rel(), T_G)
     C = {1: apply(contact, [0.0, Wg / 2, 0.0]), 2: apply(contact, [0.0, -Wg / 2, 0.0])}
     out = []
     for k, (ysign, sense) in {1: (-1.0, ">"), 2: (1.0, "<")}.items():
@@ -376,20 +407,88 @@ def assemble_constraints(state: WorldState, peg: str, hole: str, T_a: np.ndarray
                              f"{peg_feature.kind} and {hole_feature.kind}")
     Ta = _pose(T_a, f"assemble({peg}, {hole}) T_a")
     T_G = p.grasp
-    chain: list[Matrix] = [snap(h.pose @ Ta @ T_G)]
+    # both centres relative to the hole's ideal position t_H, which cancels in C_h - C_p:
+    # the expression depends on the pair only through the hole's orientation, T_a and T_G
+    chain: list[Matrix] = [snap(_rotation_only(h.pose) @ Ta @ T_G)]
     if motion is not None:
         chain.append(motion.matrix())
     chain += [p.error.matrix(), inv(T_G)]
     C_p = apply(compose(*chain), np.asarray(peg_feature.vector, float))
-    C_h = apply(h.possible(), np.asarray(hole_feature.vector, float))
+    C_h = apply(h.possible_rel(), np.asarray(hole_feature.vector, float))
     d = C_h - C_p
     d2 = ca.cse(ca.sumsqr(d))
+    sup = _sup_sumsqr(d, state.registry)
+    bounding = None if sup is None else (sup, state.registry.box(sup))
     margin = float(hole_feature.radius) - float(peg_feature.radius)
     threshold = margin * margin if margin > 0 else 0.0
     note = "" if margin > 0 else f" (impossible: hole radius {hole_feature.radius} <= peg radius {peg_feature.radius})"
     return [Constraint(action, "centres", d2, "<", threshold,
                        f"|C_h - C_p|^2 < (R_h - R_p)^2: {peg}'s tip centre within {margin:g} "
-                       f"of {hole}'s hole centre{note}")]
+                       f"of {hole}'s hole centre{note}", bounding)]
+
+
+def _axis_offsets(d: Matrix, registry: Registry) -> tuple[ca.SX, dict[int, tuple[float, float]]] | None:
+    """``d`` (an SX 3-column) split as ``d0 + w``: the variables that move it along one axis.
+
+    A variable ``s`` whose Jacobian column ``∂d/∂s`` is a constant with one nonzero
+    entry ``c`` (row r) enters ``d`` only as ``c s e_r``: the offsets of the assemble
+    centres (the hole's world-frame dx, dy, dz, the held part's tool-frame offset mapped
+    by an axis-aligned rotation). Those of axis r sum to ``w_r = sum_j c_j s_j``, whose
+    range over the registry box is exactly the sum of the terms' ranges (the terms are
+    independent), here rounded outwards; the ``w_r`` of different axes are independent
+    of each other and of the rest. Returns ``d0`` (``d`` with those variables set to 0)
+    and ``{r: (lo, hi)}`` of each ``w_r``, or None if no variable is of that kind.
+    """
+    syms = ca.symvar(as_sx(d))
+    if not syms:
+        return None
+    allv = ca.vertcat(*syms)
+    axes: dict[int, list[tuple[ca.SX, float]]] = {}
+    for v in syms:
+        J = ca.jacobian(d, v)
+        if ca.depends_on(J, allv):
+            continue
+        c = np.asarray(ca.evalf(J), float).ravel()
+        nz = np.flatnonzero(c)
+        if len(nz) == 1 and np.isfinite(c[nz[0]]):
+            axes.setdefault(int(nz[0]), []).append((v, float(c[nz[0]])))
+    if not axes:
+        return None
+    gone = [v for members in axes.values() for v, _ in members]
+    d0 = ca.substitute(as_sx(d), ca.vertcat(*gone), ca.SX.zeros(len(gone)))
+    ranges: dict[int, tuple[float, float]] = {}
+    for r, members in axes.items():
+        los, his = [], []
+        for v, c in members:
+            lo, hi = registry.bounds(v.name())
+            a, b = c * lo, c * hi  # each product rounded: one ulp outwards covers it
+            los.append(math.nextafter(min(a, b), -math.inf))
+            his.append(math.nextafter(max(a, b), math.inf))
+        ranges[r] = (math.nextafter(math.fsum(los), -math.inf), math.nextafter(math.fsum(his), math.inf))
+    return d0, ranges
+
+
+def _sup_sumsqr(d: Matrix, registry: Registry) -> ca.SX | None:
+    """An expression whose SUP over the registry box is SUP ``|d|^2`` (d a 3-column), in
+    fewer variables, or None. With ``d = d0 + w`` (:func:`_axis_offsets`), the axis sums
+    ``w_r`` in ``[m_r - rho_r, m_r + rho_r]`` free and independent, the supremum over
+    them is in closed form: ``sup_w (d0_r + w_r)^2 = (|d0_r + m_r| + rho_r)^2``, so
+    ``SUP |d|^2 = SUP sum_r (|d0_r + m_r| + rho_r)^2`` over the other variables (m_r
+    and rho_r rounded so that the interval covers w_r's range; the bound stays sound)."""
+    split = _axis_offsets(d, registry)
+    if split is None:
+        return None
+    d0, ranges = split
+    terms = []
+    for r in range(3):
+        if r in ranges:
+            lo, hi = ranges[r]
+            m = 0.5 * (lo + hi)
+            rho = math.nextafter(max(hi - m, m - lo), math.inf)
+            terms.append(ca.power(ca.fabs(d0[r] + m) + rho, 2))
+        else:
+            terms.append(ca.power(d0[r], 2))
+    return ca.cse(terms[0] + terms[1] + terms[2])
 
 
 def _positive(v: float, what: str) -> float:
@@ -427,9 +526,12 @@ def evaluate(constraint: Constraint, registry: Registry, *, memo: Memo | None = 
     ``memo`` (a cell's memo tables) keeps compiled bounders and results by the
     expression's structure and box (supinf.cached_bounds): phase 2 meets the same
     constraint in many plan instances and after every remedy it tries."""
-    box = registry.box(constraint.expr)
+    if constraint.bounding is not None:
+        expr, box = constraint.bounding[0], dict(constraint.bounding[1])
+    else:
+        expr, box = constraint.expr, registry.box(constraint.expr)
     want = "lo" if constraint.sense == ">" else "hi"
-    r = cached_bounds(constraint.expr, box, memo, want=want, **options)
+    r = cached_bounds(expr, box, memo, want=want, **options)
     bound = r.lo if want == "lo" else r.hi
     ok = bound > constraint.threshold if want == "lo" else bound < constraint.threshold
     return Verdict(constraint, float(bound), float(constraint.threshold), bool(ok), r.tolerance_reached)
