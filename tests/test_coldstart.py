@@ -212,6 +212,9 @@ def test_the_benchmark_measures_plan_and_floor_in_one_run() -> None:
     assert r["ratio"] == pytest.approx(r["median"]["plan"] / r["median"]["floor"])
     assert set(r["imports"]["heavy"]) <= {"fcl"}
     assert any(g.startswith("spar_py.") for g, _ in r["imports"]["beyond_floor"])
+    steps = r["breakdown"]["steps"]
+    again = [k for k in steps if k.startswith("Planner.plan again")]
+    assert len(again) == 1 and steps[again[0]] > 0  # the warm plan, apart from the cold run's steps
     text = "\n".join(coldstart.render(r))
     assert "## Cold start" in text and "x the floor" in text
     assert coldstart.target_rows(r)[0][2] in ("met", "NOT met") and coldstart.target_rows(None) == []

@@ -13,7 +13,6 @@ The formats are documented in docs/kb-format.md.
 """
 from __future__ import annotations
 
-import difflib
 import math
 import os
 import re
@@ -259,6 +258,8 @@ def _cut(s: str) -> str:
 
 
 def _did_you_mean(name: str, choices: Iterable[str]) -> str | None:
+    import difflib  # only for an unknown name's message: a cold plan of a good file never needs it
+
     close = difflib.get_close_matches(name, list(choices), n=1, cutoff=0.6)
     return close[0] if close else None
 
