@@ -95,3 +95,13 @@ def test_unwritable_outputs_are_bad_input_before_planning(tmp_path: Path) -> Non
         assert r.returncode == 2, (args, r.stderr)
         assert r.stderr.count("\n") == 1 and what in r.stderr and "Traceback" not in r.stderr
         assert r.stdout == ""  # nothing planned, nothing printed
+
+
+@pytest.mark.parametrize("cmd", [SPAR, [str(Path(sys.executable).parent / "spar")]], ids=["-m", "script"])
+@pytest.mark.parametrize("delay", [0.15, 0.25])
+def test_a_signal_during_start_up_is_one_line(cmd: list[str], delay: float) -> None:
+    """Ctrl-C while the command is still importing numpy and the engine (before the run's guard
+    exists): one line and exit 130, not a KeyboardInterrupt traceback (spar_py/entry.py)."""
+    rc, took, err = _signal_after(cmd + ["plan", str(PAPER)], signal.SIGINT, delay)
+    assert rc == 130 and took < 0.5, (rc, took, err)
+    assert err == "spar: interrupted\n"

@@ -7,6 +7,11 @@ Errors are one line on stderr, never a traceback.
 """
 from __future__ import annotations
 
+if __name__ == "__main__":  # python -m spar_py.cli: a signal during the imports below is one line too
+    from spar_py.entry import early_signals
+
+    early_signals()
+
 import argparse
 import os
 import sys
