@@ -135,48 +135,38 @@ prior_to_(A1, A2, G0, G) :-
         ->  Nodes = Nodes1
         ;   Up is Anc1 \/ (1 << I1),
             Down is D2 \/ (1 << I2),
-            add_descs(Up, Down, Of, Nodes1, Nodes2),
-            add_ancs(Down, Up, Of, Nodes2, Nodes)
+            add_bits(3, Up, Down, Of, Nodes1, Nodes2),
+            add_bits(4, Down, Up, Of, Nodes2, Nodes)
         ),
         G = ord(Nodes, Of, N)
     ).
 
-%   add_descs(+Bits, +Down, +Of, +Nodes0, -Nodes): Down added to the
-%   descendants of every action whose bit is in Bits, lowest first;
-%   add_ancs/5 the same for ancestors. (A plain recursion over the bits,
-%   not a foldl with a closure: a meta-call per node updated.) A node
-%   whose set holds the new bits already is left as it is (its assoc path
-%   not copied).
+%   add_bits(+Field, +Bits, +New, +Of, +Nodes0, -Nodes): New added to the
+%   descendants (Field 3 of n(Bit, Succs, Descs, Ancs)) or ancestors (Field
+%   4) of every action whose bit is in Bits, lowest first. (A plain
+%   recursion over the bits, not a foldl with a closure: a meta-call per
+%   node updated.) A node whose set holds the new bits already is left as
+%   it is (its assoc path not copied).
 
-add_descs(Bits, Down, Of, Nodes0, Nodes) :-
+add_bits(Field, Bits, New, Of, Nodes0, Nodes) :-
     (   Bits =:= 0
     ->  Nodes = Nodes0
     ;   I is lsb(Bits),
         get_assoc(I, Of, Id),
-        get_assoc(Id, Nodes0, n(I, S, D0, A)),
-        (   D0 /\ Down =:= Down
+        get_assoc(Id, Nodes0, Node0),
+        arg(Field, Node0, Old),
+        (   Old /\ New =:= New
         ->  Nodes1 = Nodes0
-        ;   D is D0 \/ Down,
-            put_assoc(Id, Nodes0, n(I, S, D, A), Nodes1)
+        ;   Set is Old \/ New,
+            with_field(Field, Node0, Set, Node),
+            put_assoc(Id, Nodes0, Node, Nodes1)
         ),
         Bits1 is Bits xor (1 << I),
-        add_descs(Bits1, Down, Of, Nodes1, Nodes)
+        add_bits(Field, Bits1, New, Of, Nodes1, Nodes)
     ).
 
-add_ancs(Bits, Up, Of, Nodes0, Nodes) :-
-    (   Bits =:= 0
-    ->  Nodes = Nodes0
-    ;   I is lsb(Bits),
-        get_assoc(I, Of, Id),
-        get_assoc(Id, Nodes0, n(I, S, D, A0)),
-        (   A0 /\ Up =:= Up
-        ->  Nodes1 = Nodes0
-        ;   A is A0 \/ Up,
-            put_assoc(Id, Nodes0, n(I, S, D, A), Nodes1)
-        ),
-        Bits1 is Bits xor (1 << I),
-        add_ancs(Bits1, Up, Of, Nodes1, Nodes)
-    ).
+with_field(3, n(I, S, _, A), D, n(I, S, D, A)).
+with_field(4, n(I, S, D, _), A, n(I, S, D, A)).
 
 %!  necessarily_before(+A1, +A2, +G) is semidet.
 %

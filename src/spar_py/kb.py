@@ -678,9 +678,8 @@ def load_object(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, o
             root.key(missing[0])  # raises: key missing
         step = geometry.step
         from .world.shapes_cache import derive
-        from .world.shapes_derive import Gripper
 
-        grip = _derive_gripper(Gripper, unit, opening, gripper)
+        grip = _derive_gripper(unit, opening, gripper)
         try:
             derived = derive(name, geometry, feature_geo, face_names, grip, step, need_hull=True,
                              use_cache=use_cache)
@@ -1280,12 +1279,14 @@ def _positions(onode: Node, oname: str, model: ObjectModel, taken: dict[str, Pos
     return out
 
 
-def _derive_gripper(cls: Any, unit: str, opening: float | None, gripper: GripperGeometry | None) -> Any:
-    """The gripper grasps are derived and checked for (world.shapes_derive.Gripper ``cls``): the
-    robot's own where given, else the default fingers at ``opening`` (or DEFAULT_OPENING_MM)."""
+def _derive_gripper(unit: str, opening: float | None, gripper: GripperGeometry | None) -> Any:
+    """The gripper grasps are derived and checked for (world.shapes_derive.Gripper): the robot's
+    own where given, else the default fingers at ``opening`` (or DEFAULT_OPENING_MM)."""
+    from .world.shapes_derive import Gripper
+
     if gripper is not None:
-        return cls.of_robot(gripper)
-    return cls.default(unit, opening if opening is not None else from_mm(unit, DEFAULT_OPENING_MM))
+        return Gripper.of_robot(gripper)
+    return Gripper.default(unit, opening if opening is not None else from_mm(unit, DEFAULT_OPENING_MM))
 
 
 def _objects(root: Node, base: Path, unit: str, max_bytes: int, opening: float | None = None,
@@ -1514,8 +1515,7 @@ def load_problem(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> Cell:
         rpath = _ref_path(rnode, base, "robot")
         with _referenced(rnode, "robot"):
             robot = load_robot(rpath, unit=unit, max_bytes=max_bytes)
-    objects, positions, model_files = _objects(root, base, unit, max_bytes, robot.finger_separation,
-                                               getattr(robot, "gripper", None))
+    objects, positions, model_files = _objects(root, base, unit, max_bytes, robot.finger_separation, robot.gripper)
     grip = root.key("gripper").choice(("open", "closed"))
     unc = root.key("uncertainty")
     man = _bounds(unc.key("manipulator"), 1.0, rad_per)
@@ -1702,9 +1702,9 @@ def check_against_shape(path: str | Path, root: Node, model: ObjectModel, unit: 
     hand = tuple(k for k in DERIVABLE if k in root.value)
     if model.geometry is None or not hand:
         return
-    from .world.shapes_derive import Gripper, check_entries
+    from .world.shapes_derive import check_entries
 
-    grip = _derive_gripper(Gripper, unit, opening, gripper)
+    grip = _derive_gripper(unit, opening, gripper)
     try:
         problems = check_entries(model, grip, unit, hand)
     except KBError:

@@ -97,9 +97,9 @@ class Step:
     part's 4x4 world pose at the step's end-point (part key: the object name, or
     ``object@initial_position`` for the other parts of a stock); ``held`` the object in
     the hand after the step, or None; ``clearance`` the least distance (cell unit) between
-    the arm, gripper or held part and anything else at the joints used, beyond the collision
-    margin's checks (None where the cell has no collision check), ``closest_pair`` the two
-    bodies at that distance."""
+    the arm, gripper or held part and anything else at the joints used (at least the collision
+    margin; None where the cell has no collision check), ``closest_pair`` the two bodies at
+    that distance."""
 
     id: str
     kind: str

@@ -187,11 +187,17 @@ def _shape_key(cell: Cell, obj: str) -> bytes:
 
 def requirement_clear_ik(cell: Cell, obj: str, req: Requirement, Q: np.ndarray, okb: np.ndarray) -> Reached:
     """:func:`requirement_clear` from the IK branches already solved (:func:`ik_rows`)."""
+    return clear_of_world(cell, Q, okb, **_requirement_world(obj, req))
+
+
+def _requirement_world(obj: str, req: Requirement) -> dict:
+    """The world of a requirement on ``obj`` (CollisionScene.at's arguments): ``obj`` where the
+    tool is (T_tool_obj = X^-1), closing on it or, with a part in the hand, in contact with it."""
     inv = np.linalg.inv(np.asarray(req.X, float))
     if req.held is None:
-        return clear_of_world(cell, Q, okb, grasped=obj, attached={obj: inv}, width=req.width)
-    return clear_of_world(cell, Q, okb, held=req.held, attached={obj: inv}, width=req.width,
-                          allow=[(f"held:{req.held[0]}", obj)])
+        return {"grasped": obj, "attached": {obj: inv}, "width": req.width}
+    return {"held": req.held, "attached": {obj: inv}, "width": req.width,
+            "allow": [(f"held:{req.held[0]}", obj)]}
 
 
 def tool_on_table(cell: Cell, obj: str, T: np.ndarray, req: Requirement) -> tuple[str, str] | None:
@@ -202,12 +208,7 @@ def tool_on_table(cell: Cell, obj: str, T: np.ndarray, req: Requirement) -> tupl
         return None
     from .world.collision import scene_for
 
-    inv = np.linalg.inv(np.asarray(req.X, float))
-    if req.held is None:
-        state = scene_for(cell).at({}, None, obj, width=req.width, attached={obj: inv})
-    else:
-        state = scene_for(cell).at({}, req.held, None, width=req.width, attached={obj: inv},
-                                   allow=[(f"held:{req.held[0]}", obj)])
+    state = scene_for(cell).at({}, **_requirement_world(obj, req))
     return state.tool_rigid_on_table(np.asarray(T, float))
 
 

@@ -417,12 +417,12 @@ class SceneState:
         self._cap_a = np.array([b.cap[0] for b in self.bodies]).reshape(-1, 3)
         self._cap_b = np.array([b.cap[1] for b in self.bodies]).reshape(-1, 3)
         self._cap_r = np.array([b.cap[2] for b in self.bodies])
-        # the broad phase of check(): each body's bounding sphere (centre in its frame, radius)
-        self._sph_c = (self._cap_a + self._cap_b) / 2
+        # the broad phase of check(): each body's bounding sphere radius (its centre: the
+        # middle of its capsule's axis)
         self._sph_r = np.linalg.norm(self._cap_b - self._cap_a, axis=1) / 2 + self._cap_r
-        self._groups: list[tuple[int, np.ndarray]] | None = None
+        # made on first use by _world_caps: each moving body's frame, the static ends in the world
         self._body_frames = np.zeros(0, dtype=int)
-        self._static: tuple[np.ndarray, np.ndarray] = (np.zeros((0, 3)), np.zeros((0, 3)))
+        self._static: tuple[np.ndarray, np.ndarray] | None = None
 
     # ------------------------------------------------------------------ frames and bounds
 
@@ -435,10 +435,8 @@ class SceneState:
     def _world_caps(self, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """World ends (n, N, 3) of every body's bounding capsule."""
         n, m = len(F), self.n_moving
-        if self._groups is None:  # made on first use: frame groups of the moving, static ends in the world
-            frames = [b.frame for b in self.bodies[:m]]
-            self._groups = [(f, np.array([i for i in range(m) if frames[i] == f])) for f in sorted(set(frames))]
-            self._body_frames = np.array(frames, dtype=int)
+        if self._static is None:
+            self._body_frames = np.array([b.frame for b in self.bodies[:m]], dtype=int)
             base = self.scene.robot.base
             sa, sb = self._cap_a[m:].copy(), self._cap_b[m:].copy()
             on_base = np.array([b.frame == 0 for b in self.bodies[m:]], dtype=bool)
@@ -470,27 +468,34 @@ class SceneState:
             return self.scene.robot.base
         return F[row, b.frame]
 
-    def _table(self, F: np.ndarray) -> np.ndarray:
-        """(n, m) each table-checked moving body's height above the table (exact, signed)."""
-        n = len(F)
-        out = np.full((n, len(self.table_bodies)), np.inf)
-        ext = self.scene.table
+    def _plane_heights(self, F: np.ndarray) -> np.ndarray:
+        """(n, m) each table-checked moving body's height above the plane z = 0 (exact, signed):
+        the z row of its frame times its vertices, less its radius."""
+        out = np.empty((len(F), len(self.table_bodies)))
         for k, i in enumerate(self.table_bodies):
             b = self.bodies[i]
             Fb = F[:, b.frame]
-            if ext is None:  # only the heights: z row of each frame times the vertices
-                h = (b.points @ Fb[:, 2, :3, None])[..., 0].min(axis=1) + Fb[:, 2, 3] - b.radius
-                out[:, k] = h
-                continue
+            out[:, k] = (b.points @ Fb[:, 2, :3, None])[..., 0].min(axis=1) + Fb[:, 2, 3] - b.radius
+        return out
+
+    def _table(self, F: np.ndarray) -> np.ndarray:
+        """(n, m) each table-checked moving body's height above the table (exact, signed; +inf
+        for a body wholly off a table with an extent)."""
+        ext = self.scene.table
+        if ext is None:
+            return self._plane_heights(F)
+        n = len(F)
+        out = np.full((n, len(self.table_bodies)), np.inf)
+        for k, i in enumerate(self.table_bodies):
+            b = self.bodies[i]
+            Fb = F[:, b.frame]
             P = b.points @ np.swapaxes(Fb[:, :3, :3], 1, 2) + Fb[:, None, :3, 3]
             h = P[..., 2].min(axis=1) - b.radius
-            if ext is not None:
-                x0, x1, y0, y1 = ext
-                r = b.radius
-                over = ((P[..., 0].max(axis=1) + r >= x0) & (P[..., 0].min(axis=1) - r <= x1)
-                        & (P[..., 1].max(axis=1) + r >= y0) & (P[..., 1].min(axis=1) - r <= y1))
-                h = np.where(over, h, np.inf)
-            out[:, k] = h
+            x0, x1, y0, y1 = ext
+            r = b.radius
+            over = ((P[..., 0].max(axis=1) + r >= x0) & (P[..., 0].min(axis=1) - r <= x1)
+                    & (P[..., 1].max(axis=1) + r >= y0) & (P[..., 1].min(axis=1) - r <= y1))
+            out[:, k] = np.where(over, h, np.inf)
         return out
 
     def tool_rigid_on_table(self, T_tool: np.ndarray) -> tuple[str, str] | None:
@@ -505,7 +510,7 @@ class SceneState:
         F[0, TOOL] = T_tool
         F[0, 6] = np.asarray(T_tool, float) @ self.scene.robot.tool_inverse()
         with np.errstate(invalid="ignore"):
-            low = self._table(F)[0] <= self.scene.margin  # NaN (a body on another frame): False
+            low = self._plane_heights(F)[0] <= self.scene.margin  # NaN (a body on another frame): False
         k = np.flatnonzero(low)
         return None if not len(k) else (self.bodies[self.table_bodies[k[0]]].name, "table")
 
@@ -772,12 +777,7 @@ def clearance_bounds(state: SceneState, q: np.ndarray, rate: np.ndarray | None =
     A, B = state._world_caps(F)
     pi, pj = state.pairs[:, 0], state.pairs[:, 1]
     lb = segment_distance(A[:, pi], B[:, pi], A[:, pj], B[:, pj]) - state._cap_r[pi] - state._cap_r[pj]
-    heights = np.empty((len(q), len(state.table_bodies)))
-    for k, i in enumerate(state.table_bodies):
-        b = state.bodies[i]
-        Fb = F[:, b.frame]
-        heights[:, k] = (b.points @ Fb[:, 2, :3, None])[..., 0].min(axis=1) + Fb[:, 2, 3] - b.radius
-    out = np.hstack([lb, heights])
+    out = np.hstack([lb, state._plane_heights(F)])
     if rate is None or want is None or not lb.size:
         return out
     m = state.scene.margin
