@@ -457,3 +457,80 @@ def test_sec6_printed_expression_reproduces_with_the_constant_sign_fixed() -> No
     assert float(value(e)) == pytest.approx(3.5)
     r = Bounder(e).bounds(reg.box(e))
     assert round(r.lo, 4) == 3.2793 and r.lo <= r.lo_found and r.tolerance_reached
+
+
+# ------------------------------------------------------------------ built once per structure
+
+
+def _two_pairs(bounds: tuple[Bounds, Bounds] = (TABLE2_OBJ, TABLE2_OBJ)) -> tuple[WorldState, list[str]]:
+    """Two peg/block pairs alike but for where they stand (and the bounds given per pair),
+    both pegs picked up in turn: peg1 first, then putdown and the same for peg2."""
+    reg = Registry()
+    objs = {}
+    for k, b in zip((1, 2), bounds):
+        for name, T in ((f"peg{k}", geometry.trans(20 * k, 10, 1)), (f"block{k}", geometry.trans(20 * k, 0, 1))):
+            objs[name] = ObjectState(name, "table", T, table_error(reg, name, b))
+    return WorldState(reg, TABLE2_MANIP, objs), ["peg1", "peg2"]
+
+
+HOLE = MatingFeature("hole", ("top",), 0.6, np.zeros(3))
+PEG = MatingFeature("peg", ("tip",), 0.5, np.array([0.0, 0.0, 2.0]))
+
+
+def _build_all(w: WorldState, memo: object) -> list[list[Constraint]]:
+    """Pickup constraints of each peg, then (peg in hand) its assemble constraint."""
+    out = []
+    G = geometry.rotx(math.pi)
+    for k in (1, 2):
+        m = w.manipulator_error()
+        out.append(pickup_constraints(w, f"peg{k}", G, 0.5, 4.0, m, action=f"a{k}", memo=memo))
+        w = pickup(w, f"peg{k}", G, m)
+        out.append(assemble_constraints(w, f"peg{k}", f"block{k}", geometry.trans(0, 0, -2), PEG, HOLE,
+                                        action=f"b{k}", memo=memo))
+        w = assemble(w, f"peg{k}", f"block{k}", geometry.trans(0, 0, -2))
+    return out
+
+
+def test_constraints_built_once_per_structure_are_the_direct_builds() -> None:
+    """The second pair's constraints come from the first's by renaming variables: node for
+    node the expressions a direct build gives (SUP/INF's key of the graph, the variables
+    in the same order), each in the second pair's own variables, with equal verdicts."""
+    from spar_py.memo import Memo
+    from spar_py.supinf import expression_key
+
+    memo = Memo()
+    w, _ = _two_pairs()
+    built = _build_all(w, memo)
+    w2, _ = _two_pairs()
+    direct = _build_all(w2, None)
+    assert memo.sizes()["uncertainty.built"] == 2  # one pickup and one assemble structure
+    for cs_m, cs_d in zip(built, direct):
+        for a, b in zip(cs_m, cs_d, strict=True):
+            assert a.key is not None and b.key is None
+            assert expression_key(a.expr) == expression_key(b.expr)
+            assert list(w.registry.box(a.expr)) == list(w2.registry.box(b.expr))
+            if a.bounding is not None:
+                assert expression_key(a.bounding[0]) == expression_key(b.bounding[0])
+                assert list(a.bounding[1].items()) == list(b.bounding[1].items())
+            assert (a.name, a.sense, a.threshold, a.description) == (b.name, b.sense, b.threshold, b.description)
+            va, vb = evaluate(a, w.registry, memo=memo), evaluate(b, w2.registry)
+            assert (va.bound, va.satisfied, va.tolerance_reached) == (vb.bound, vb.satisfied, vb.tolerance_reached)
+    # the second peg's expressions are in its own variables, not the first's
+    names = set(w.registry.box(built[2][0].expr))
+    assert "dx_peg2" in names and "dx_peg1" not in names
+
+
+def test_structure_key_holds_the_bounds_the_closed_form_uses() -> None:
+    """The assemble constraint's closed form holds its variables' bounds: a pair with wider
+    bounds is another structure (built anew, a larger SUP), not a renamed copy."""
+    from spar_py.memo import Memo
+
+    wide = Bounds((-0.2, 0.2), (-0.2, 0.2), (-0.2, 0.2), (-5.5 * DEG, 5.5 * DEG))
+    memo = Memo()
+    w, _ = _two_pairs((TABLE2_OBJ, wide))
+    built = _build_all(w, memo)
+    assert memo.sizes()["uncertainty.built"] == 3  # the pickups share one structure, the assembles not
+    narrow, broad = (evaluate(built[i][0], w.registry, memo=memo).bound for i in (1, 3))
+    w_ref, _ = _two_pairs((wide, wide))
+    ref = evaluate(_build_all(w_ref, None)[1][0], w_ref.registry).bound
+    assert broad > narrow and broad == ref

@@ -295,11 +295,24 @@ def step(world: World, s: Step) -> tuple[list[dict[str, Any]], World, dict[str, 
     return checks, replace(after, placements=world.placements, sources=world.sources), geo
 
 
-def poses(world: World) -> dict[str, list[list[float]]]:
+def poses(world: World, seen: dict[int, tuple[ur.ObjectState, list[list[float]]]] | None = None
+          ) -> dict[str, list[list[float]]]:
     """Every part's ideal 4x4 world pose (cell unit) in ``world``, keyed by object name or
     ``"<object>@<initial position name>"`` for the other parts of a stock. A held part's
-    pose is where it was grasped, an assembled one's where it was inserted."""
-    return {k: np.round(o.pose, 9).tolist() for k, o in sorted(world.unc.objects.items())}
+    pose is where it was grasped, an assembled one's where it was inserted.
+
+    ``seen`` (one run's, by the state's id; the state is kept with its rows so the id
+    stays its own) reuses the rows of a part whose state a step left as it was: a step
+    moves one part, so a run of n steps over m parts rounds n poses, not n * m."""
+    if seen is None:
+        return {k: np.round(o.pose, 9).tolist() for k, o in sorted(world.unc.objects.items())}
+    out = {}
+    for k, o in sorted(world.unc.objects.items()):
+        hit = seen.get(id(o))
+        if hit is None or hit[0] is not o:
+            hit = seen[id(o)] = (o, np.round(o.pose, 9).tolist())
+        out[k] = hit[1]
+    return out
 
 
 def _all_satisfied(checks: list[dict[str, Any]], kind: str) -> bool:
@@ -326,11 +339,12 @@ def evaluate(cell: Cell, steps: Sequence[Step], sources: Sources | None = None,
     skip = set(given_up)
     out: list[dict[str, Any]] = []
     worlds = [world]
+    seen: dict[int, tuple[ur.ObjectState, list[list[float]]]] = {}
     for s in steps:
         checks, world, geo = step(world, s)
         worlds.append(world)
         out.append({"id": s["id"], "verdicts": checks, "geometry": geo,
-                    "poses": poses(world), "held": world.unc.holding})
+                    "poses": poses(world, seen), "held": world.unc.holding})
         if not _all_satisfied(checks, "geometric"):
             return {"status": "infeasible", "at": s["id"], "steps": out}
         if not _all_satisfied(checks, "uncertainty") and s["id"] not in skip:
@@ -456,7 +470,8 @@ def _pickup(world: World, s: Step) -> tuple[list[dict], World, dict]:
     g = _grasp(world.cell, obj, label)
     o = world.unc.obj(obj)
     manip = world.unc.manipulator_error()
-    cs = ur.pickup_constraints(world.unc, obj, g.T, g.width, world.cell.finger_separation, manip, action=s["id"])
+    cs = ur.pickup_constraints(world.unc, obj, g.T, g.width, world.cell.finger_separation, manip, action=s["id"],
+                               memo=world.cell.memo)
     checks = _verdicts(world, cs)
     what = f"pickup({obj}, {label})"
     q, geo = _arm(world, o.pose @ g.T, what, grasped=obj, width=g.width)
@@ -494,7 +509,7 @@ def _assemble(world: World, s: Step) -> tuple[list[dict], World, dict]:
     if fp is None or fh is None:
         raise SparValueError(f"assemble({peg}, {hole}): both objects need a mating feature")
     g = _grasp(cell, peg, world.grasps[peg])
-    cs = ur.assemble_constraints(world.unc, peg, hole, Ta, fp, fh, action=s["id"])
+    cs = ur.assemble_constraints(world.unc, peg, hole, Ta, fp, fh, action=s["id"], memo=cell.memo)
     checks = _verdicts(world, cs)
     what = f"assemble({peg}, {hole})"
     q, geo = _arm(world, world.unc.obj(hole).pose @ Ta @ g.T, what, held=(peg, np.linalg.inv(g.T)), width=g.width,
@@ -534,7 +549,8 @@ def _squeeze(world: World, s: Step) -> tuple[list[dict], World, dict]:
         if q is None:
             continue
         manip = world.unc.manipulator_error()
-        cs = ur.pickup_constraints(world.unc, obj, g.T, g.width, cell.finger_separation, manip, action=s["id"])
+        cs = ur.pickup_constraints(world.unc, obj, g.T, g.width, cell.finger_separation, manip, action=s["id"],
+                                   memo=cell.memo)
         checks = _verdicts_until_unsatisfied(world, cs)
         if len(checks) == len(cs) and all(c["satisfied"] for c in checks):
             geo["grasp"] = label

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from types import MappingProxyType
 from typing import Any
@@ -82,6 +82,12 @@ class ErrorTm:
     dx: Scalar
     dy: Scalar
     dz: Scalar
+    #: How the entries were made from ``vars`` (nested tuples of plain data; () unknown):
+    #: two errors of equal ``shape`` are the same expressions up to a one-to-one renaming
+    #: of their ``vars``, so what is built from them can be built once (:class:`_Recipes`).
+    shape: tuple = field(default=(), compare=False, repr=False)
+    #: The distinct variables (SX symbols) the entries are made of, in a fixed order.
+    vars: tuple = field(default=(), compare=False, repr=False)
 
     def matrix(self) -> Matrix:
         """The 4x4 transform ``trans(dx, dy, dz) @ rotz(theta)``."""
@@ -105,18 +111,19 @@ def _hint(obj: str) -> str:
 def table_error(registry: Registry, obj: str, bounds: Bounds) -> ErrorTm:
     """Fresh world-frame error variables ``dx_<obj>, dy_<obj>, dz_<obj>, theta_<obj>`` with ``bounds``."""
     h = _hint(obj)
-    return ErrorTm(theta=registry.new(f"theta_{h}", *bounds.dtheta),
-                   dx=registry.new(f"dx_{h}", *bounds.dx),
-                   dy=registry.new(f"dy_{h}", *bounds.dy),
-                   dz=registry.new(f"dz_{h}", *bounds.dz))
+    return _fresh(registry.new(f"theta_{h}", *bounds.dtheta), registry.new(f"dx_{h}", *bounds.dx),
+                  registry.new(f"dy_{h}", *bounds.dy), registry.new(f"dz_{h}", *bounds.dz))
 
 
 def manipulator_error(registry: Registry, bounds: Bounds) -> ErrorTm:
     """Fresh manipulator error variables ``dxgr, dygr, dzgr, thetagr`` (Table 2's names): T_dM."""
-    return ErrorTm(theta=registry.new("thetagr", *bounds.dtheta),
-                   dx=registry.new("dxgr", *bounds.dx),
-                   dy=registry.new("dygr", *bounds.dy),
-                   dz=registry.new("dzgr", *bounds.dz))
+    return _fresh(registry.new("thetagr", *bounds.dtheta), registry.new("dxgr", *bounds.dx),
+                  registry.new("dygr", *bounds.dy), registry.new("dzgr", *bounds.dz))
+
+
+def _fresh(theta: ca.SX, dx: ca.SX, dy: ca.SX, dz: ca.SX) -> ErrorTm:
+    """An error transform whose entries are four fresh variables."""
+    return ErrorTm(theta, dx, dy, dz, shape=("fresh",), vars=(theta, dx, dy, dz))
 
 
 # ------------------------------------------------------------------ world state
@@ -182,6 +189,8 @@ class WorldState:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "objects", MappingProxyType(dict(self.objects)))
+        # asked at every step of a run: found once per state, not by a scan per question
+        object.__setattr__(self, "_holding", next((n for n, o in self.objects.items() if o.where == HAND), None))
 
     def obj(self, name: str) -> ObjectState:
         """The state of object ``name`` (SparValueError if unknown)."""
@@ -202,7 +211,7 @@ class WorldState:
     @property
     def holding(self) -> str | None:
         """The name of the object in the hand, or None."""
-        return next((n for n, o in self.objects.items() if o.where == HAND), None)
+        return self._holding  # type: ignore[attr-defined]
 
 
 def initial_world(cell: Cell, registry: Registry | None = None,
@@ -281,7 +290,8 @@ def pickup(state: WorldState, obj: str, grasp_T: np.ndarray, manip: ErrorTm) -> 
     T_G = _pose(grasp_T, f"pickup({obj}) grasp")
     R = snap(o.pose[:3, :3] @ T_G[:3, :3])
     D = _vec(R.T, o.error.offset())
-    err = ErrorTm(theta=manip.theta, dx=D[0] + manip.dx, dy=manip.dy, dz=D[2] + manip.dz)
+    err = ErrorTm(theta=manip.theta, dx=D[0] + manip.dx, dy=manip.dy, dz=D[2] + manip.dz,
+                  **_derived(("pickup", R.tobytes()), o.error, manip))
     return state.with_object(ObjectState(obj, HAND, o.pose, err, T_G))
 
 
@@ -298,7 +308,7 @@ def putdown(state: WorldState, obj: str, pose: np.ndarray) -> WorldState:
     R = snap(T[:3, :3] @ o.grasp[:3, :3])
     D = _vec(R, o.error.offset())
     Z = float(R[2, 2])
-    err = ErrorTm(theta=Z * o.error.theta, dx=D[0], dy=D[1], dz=D[2])
+    err = ErrorTm(theta=Z * o.error.theta, dx=D[0], dy=D[1], dz=D[2], **_derived(("putdown", R.tobytes()), o.error))
     return state.with_object(ObjectState(obj, TABLE, T, err, None))
 
 
@@ -351,6 +361,9 @@ class Constraint:
     threshold: float
     description: str
     bounding: tuple[ca.SX, Mapping[str, tuple[float, float]]] | None = None
+    #: What determines ``expr`` and ``bounding`` up to a renaming of their variables, and
+    #: those variables' bounds in order (None: unknown): equal keys, equal SUP/INF answers.
+    key: tuple | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self) -> None:
         if self.sense not in (">", "<"):
@@ -358,38 +371,53 @@ class Constraint:
 
 
 def pickup_constraints(state: WorldState, obj: str, grasp_T: np.ndarray, width: float,
-                       finger_separation: float, manip: ErrorTm, action: str = "pickup") -> list[Constraint]:
+                       finger_separation: float, manip: ErrorTm, action: str = "pickup",
+                       memo: Memo | None = None) -> list[Constraint]:
     """The four pickup inequalities of Sec. 3.2.2: both contact points between the fingers.
 
     Finger frames ``P_1,2 = T_O T_G T_dM trans(0, -+W_m/2, 0)`` (T_O the ideal pose, the
     arm is sent there); contact points ``C_1,2 = T_{O+d} T_G trans(0, +-W_g/2, 0) [0,0,0,1]^t``
     (Eq. 2). Needs ``y(P_1^-1 C_i) > 0`` and ``y(P_2^-1 C_i) < 0``. ``width`` is W_g,
-    ``finger_separation`` W_m (cell unit); ``manip`` the pickup motion's T_dM.
+    ``finger_separation`` W_m (cell unit); ``manip`` the pickup motion's T_dM. ``memo``
+    (a cell's memo tables): the expressions are built once per structure (:func:`_built`).
     """
     o = _on_table(state, obj, "pickup")
     T_G = _pose(grasp_T, f"pickup({obj}) grasp")
     Wg, Wm = _positive(width, "grasp width W_g"), _positive(finger_separation, "finger separation W_m")
-    # both the contacts and the finger frames are taken relative to the object's ideal
-    # position t_O (trans(-t_O) on the left of each), which cancels in P_k^-1 C_i
-    T_M = snap(_rotation_only(o.pose) @ T_G)
-    dM_inv = inv(manip.matrix())
-    contact = compose(o.possible_rel(), T_G)
-    C = {1: apply(contact, [0.0, Wg / 2, 0.0]), 2: apply(contact, [0.0, -Wg / 2, 0.0])}
+    R_O = _rotation_only(o.pose)
+    names = [(k, i) for k in (1, 2) for i in (1, 2)]
+
+    def build() -> list[ca.SX]:
+        # both the contacts and the finger frames are taken relative to the object's ideal
+        # position t_O (trans(-t_O) on the left of each), which cancels in P_k^-1 C_i
+        T_M = snap(R_O @ T_G)
+        dM_inv = inv(manip.matrix())
+        contact = compose(o.possible_rel(), T_G)
+        C = {1: apply(contact, [0.0, Wg / 2, 0.0]), 2: apply(contact, [0.0, -Wg / 2, 0.0])}
+        out = []
+        for k, i in names:
+            # P_k^-1 = trans(0, -+W_m/2, 0)^-1 T_dM^-1 (T_O T_G)^-1, inverted factor by factor
+            ysign = -1.0 if k == 1 else 1.0
+            P_inv = compose(trans(0.0, -ysign * Wm / 2, 0.0), dM_inv, inv(T_M))
+            out.append(ca.cse(apply(P_inv, C[i])[1]))
+        return out
+
+    key = ("pickup", o.where, R_O.tobytes(), T_G.tobytes(), Wg, Wm)
+    exprs, ckey = _built(state.registry, memo, key, (o.error, manip), build)
     out = []
-    for k, (ysign, sense) in {1: (-1.0, ">"), 2: (1.0, "<")}.items():
-        # P_k^-1 = trans(0, -+W_m/2, 0)^-1 T_dM^-1 (T_O T_G)^-1, inverted factor by factor
-        P_inv = compose(trans(0.0, -ysign * Wm / 2, 0.0), dM_inv, inv(T_M))
-        for i in (1, 2):
-            y = apply(P_inv, C[i])[1]
-            side = "positive" if sense == ">" else "negative"
-            out.append(Constraint(action, f"p{k}_c{i}", ca.cse(y), sense, 0.0,
-                                  f"contact C{i} of {obj} on the {side} y side of finger frame P{k}"))
+    for (k, i), y in zip(names, exprs):
+        sense = ">" if k == 1 else "<"
+        side = "positive" if sense == ">" else "negative"
+        out.append(Constraint(action, f"p{k}_c{i}", y, sense, 0.0,
+                              f"contact C{i} of {obj} on the {side} y side of finger frame P{k}",
+                              key=None if ckey is None else (ckey, f"p{k}_c{i}")))
     return out
 
 
 def assemble_constraints(state: WorldState, peg: str, hole: str, T_a: np.ndarray,
                          peg_feature: MatingFeature, hole_feature: MatingFeature,
-                         action: str = "assemble", motion: ErrorTm | None = None) -> list[Constraint]:
+                         action: str = "assemble", motion: ErrorTm | None = None,
+                         memo: Memo | None = None) -> list[Constraint]:
     """The assemble inequality of Sec. 3.2.2: the peg tip centre within R_h - R_p of the hole's.
 
     ``C_h = T_{H+d} F_h`` (Eq. 2), ``C_p = T_H T_a T_G T_dP T_G^-1 F_p`` (Eqs. 5, 6).
@@ -399,6 +427,8 @@ def assemble_constraints(state: WorldState, peg: str, hole: str, T_a: np.ndarray
     If R_h <= R_p no position fits: the threshold is 0, which SUP of a square never
     beats. ``motion`` (optional, not in the paper) is the assemble motion's own T_dM,
     inserted after T_G to account for the arm's error when it goes to T_H T_a T_G.
+    ``memo`` (a cell's memo tables): the expressions are built once per structure
+    (:func:`_built`).
     """
     p = _in_hand(state, peg, "assemble")
     h = _on_table(state, hole, "assemble")
@@ -407,24 +437,77 @@ def assemble_constraints(state: WorldState, peg: str, hole: str, T_a: np.ndarray
                              f"{peg_feature.kind} and {hole_feature.kind}")
     Ta = _pose(T_a, f"assemble({peg}, {hole}) T_a")
     T_G = p.grasp
-    # both centres relative to the hole's ideal position t_H, which cancels in C_h - C_p:
-    # the expression depends on the pair only through the hole's orientation, T_a and T_G
-    chain: list[Matrix] = [snap(_rotation_only(h.pose) @ Ta @ T_G)]
-    if motion is not None:
-        chain.append(motion.matrix())
-    chain += [p.error.matrix(), inv(T_G)]
-    C_p = apply(compose(*chain), np.asarray(peg_feature.vector, float))
-    C_h = apply(h.possible_rel(), np.asarray(hole_feature.vector, float))
-    d = C_h - C_p
-    d2 = ca.cse(ca.sumsqr(d))
-    sup = _sup_sumsqr(d, state.registry)
-    bounding = None if sup is None else (sup, state.registry.box(sup))
+    F_p, F_h = np.asarray(peg_feature.vector, float), np.asarray(hole_feature.vector, float)
+
+    def build() -> list[ca.SX]:
+        # both centres relative to the hole's ideal position t_H, which cancels in C_h - C_p:
+        # the expression depends on the pair only through the hole's orientation, T_a and T_G
+        chain: list[Matrix] = [snap(_rotation_only(h.pose) @ Ta @ T_G)]
+        if motion is not None:
+            chain.append(motion.matrix())
+        chain += [p.error.matrix(), inv(T_G)]
+        C_p = apply(compose(*chain), F_p)
+        C_h = apply(h.possible_rel(), F_h)
+        d = C_h - C_p
+        sup = _sup_sumsqr(d, state.registry)
+        return [ca.cse(ca.sumsqr(d))] + ([] if sup is None else [sup])
+
+    errors = (p.error, h.error) + (() if motion is None else (motion,))
+    # _sup_sumsqr's closed form holds the variables' bounds: they are part of the structure
+    bounds = tuple(state.registry.bounds(v.name()) for e in errors for v in e.vars)
+    key = ("assemble", h.where, _rotation_only(h.pose).tobytes(), Ta.tobytes(), T_G.tobytes(),
+           F_p.tobytes(), F_h.tobytes(), motion is not None, bounds)
+    exprs, ckey = _built(state.registry, memo, key, errors, build)
+    d2 = exprs[0]
+    bounding = None if len(exprs) == 1 else (exprs[1], state.registry.box(exprs[1]))
     margin = float(hole_feature.radius) - float(peg_feature.radius)
     threshold = margin * margin if margin > 0 else 0.0
     note = "" if margin > 0 else f" (impossible: hole radius {hole_feature.radius} <= peg radius {peg_feature.radius})"
     return [Constraint(action, "centres", d2, "<", threshold,
                        f"|C_h - C_p|^2 < (R_h - R_p)^2: {peg}'s tip centre within {margin:g} "
-                       f"of {hole}'s hole centre{note}", bounding)]
+                       f"of {hole}'s hole centre{note}", bounding, key=ckey)]
+
+
+#: Entries of a cell's memo table ``uncertainty.built`` (:func:`_built`) and
+#: ``uncertainty.verdicts`` (:func:`evaluate`).
+BUILT_LIMIT = 1024
+VERDICT_LIMIT = 4096
+
+
+def _built(registry: Registry, memo: Memo | None, key: tuple, errors: Sequence[ErrorTm],
+           build: Callable[[], list[ca.SX]]) -> tuple[list[ca.SX], tuple | None]:
+    """``build()``'s expressions, made once per structure: ``key`` (the numbers the build
+    uses) and the ``shape`` of each error transform it reads determine them up to a
+    one-to-one renaming of the errors' ``vars``, so a later build of an equal structure
+    (the same action on a part alike in how its error came about, e.g. the next of many
+    identical pegs) renames the first build's variables instead of repeating its CasADi
+    products. The renamed graph is the build's own, node for node, so SUP/INF sees the
+    same expression. Also returns the constraints' key (:attr:`Constraint.key`: the
+    structure and the variables' bounds in order), or None when an error's structure is
+    unknown or no memo is given (then built directly)."""
+    vs = tuple(v for e in errors for v in e.vars)
+    if memo is None or not all(e.shape for e in errors) or len({v.element_hash() for v in vs}) != len(vs):
+        return build(), None
+    skey = key + tuple(e.shape for e in errors)
+    table = memo.table("uncertainty.built", BUILT_LIMIT)
+    hit = table.get(skey)
+    if hit is None:
+        exprs = build()
+        table[skey] = (exprs, vs)
+    else:
+        exprs, old = hit
+        if any(a.element_hash() != b.element_hash() for a, b in zip(old, vs)):
+            exprs = ca.substitute(exprs, list(old), list(vs))
+    return exprs, (skey, tuple(registry.bounds(v.name()) for v in vs))
+
+
+def _derived(step: tuple, *parents: ErrorTm) -> dict[str, tuple]:
+    """The ``shape`` and ``vars`` of an error transform made by ``step`` (plain data: the
+    step's name and the numbers it uses) from ``parents``' entries; none if a parent's
+    structure is unknown."""
+    if not all(e.shape for e in parents):
+        return {}
+    return {"shape": (step, *(e.shape for e in parents)), "vars": tuple(v for e in parents for v in e.vars)}
 
 
 def _axis_offsets(d: Matrix, registry: Registry) -> tuple[ca.SX, dict[int, tuple[float, float]]] | None:
@@ -526,6 +609,14 @@ def evaluate(constraint: Constraint, registry: Registry, *, memo: Memo | None = 
     ``memo`` (a cell's memo tables) keeps compiled bounders and results by the
     expression's structure and box (supinf.cached_bounds): phase 2 meets the same
     constraint in many plan instances and after every remedy it tries."""
+    vkey = None
+    if memo is not None and constraint.key is not None:
+        # an equal key is the same expression and box up to the variables' names: the
+        # answer cached_bounds would give (it is deterministic), without canonicalising
+        vkey = (constraint.key, tuple(sorted(options.items())))
+        hit = memo.table("uncertainty.verdicts", VERDICT_LIMIT).get(vkey)
+        if hit is not None:
+            return _verdict(constraint, *hit)
     if constraint.bounding is not None:
         expr, box = constraint.bounding[0], dict(constraint.bounding[1])
     else:
@@ -533,8 +624,14 @@ def evaluate(constraint: Constraint, registry: Registry, *, memo: Memo | None = 
     want = "lo" if constraint.sense == ">" else "hi"
     r = cached_bounds(expr, box, memo, want=want, **options)
     bound = r.lo if want == "lo" else r.hi
-    ok = bound > constraint.threshold if want == "lo" else bound < constraint.threshold
-    return Verdict(constraint, float(bound), float(constraint.threshold), bool(ok), r.tolerance_reached)
+    if vkey is not None:
+        memo.table("uncertainty.verdicts", VERDICT_LIMIT)[vkey] = (float(bound), r.tolerance_reached)  # type: ignore[union-attr]
+    return _verdict(constraint, float(bound), r.tolerance_reached)
+
+
+def _verdict(constraint: Constraint, bound: float, tolerance_reached: bool) -> Verdict:
+    ok = bound > constraint.threshold if constraint.sense == ">" else bound < constraint.threshold
+    return Verdict(constraint, bound, float(constraint.threshold), bool(ok), tolerance_reached)
 
 
 def evaluate_all(constraints: Sequence[Constraint], registry: Registry, *, memo: Memo | None = None,
