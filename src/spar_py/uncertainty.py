@@ -493,11 +493,13 @@ def _built(registry: Registry, memo: Memo | None, key: tuple, errors: Sequence[E
     hit = table.get(skey)
     if hit is None:
         exprs = build()
-        table[skey] = (exprs, vs)
+        table[skey] = [exprs, vs, None]
     else:
-        exprs, old = hit
+        exprs, old, f = hit
         if any(a.element_hash() != b.element_hash() for a, b in zip(old, vs)):
-            exprs = ca.substitute(exprs, list(old), list(vs))
+            if f is None:  # the build as a function of its variables, evaluated on the new ones
+                f = hit[2] = ca.Function("built", [ca.vertcat(*old)], exprs)
+            exprs = list(f.call([ca.vertcat(*vs)]))
     return exprs, (skey, tuple(registry.bounds(v.name()) for v in vs))
 
 
