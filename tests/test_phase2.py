@@ -297,3 +297,27 @@ def test_stock_spare_keeps_its_own_key_in_poses(planner: Planner) -> None:
         np.testing.assert_allclose(np.array(s["poses"]["peg@init_pos1"]), cell.positions["tr1"].T, atol=1e-9)
     pick = next(s for s in inst["steps"] if s["name"] == "pickup")
     np.testing.assert_allclose(np.array(pick["poses"]["peg"]), cell.positions["tr5"].T, atol=1e-9)
+
+
+# ---------------------------------------------------------------------- runs that stop at a failing step
+
+
+def test_a_run_stops_bounding_at_its_failing_precondition(planner: Planner) -> None:
+    """A run that stops at a step (an unmet precondition, the step not given up) bounds its
+    constraints only up to the first unsatisfied one; when a later run gives that step up
+    and goes on, the memoised step is computed whole: its verdicts are those of a fresh
+    cell's, every constraint of the action bounded."""
+    inst = planner.plan(PROBLEMS / "hopeless_uncertainty.yaml").to_json()["instance"]
+    bare = [s for s in _steps(inst) if s["name"] in ("pickup", "putdown", "assemble")]
+    cell = load_problem(PROBLEMS / "hopeless_uncertainty.yaml")
+    first = phase2.evaluate(cell, bare)
+    assert first["status"] == "failed"
+    at = first["at"]
+    cut = next(r["verdicts"] for r in first["steps"] if r["id"] == at)
+    assert not cut[-1]["satisfied"] and all(v["satisfied"] for v in cut[:-1])
+    later = phase2.evaluate(cell, bare, given_up=[at])
+    fresh = phase2.evaluate(load_problem(PROBLEMS / "hopeless_uncertainty.yaml"), bare, given_up=[at])
+    whole = next(r["verdicts"] for r in later["steps"] if r["id"] == at)
+    assert whole == next(r["verdicts"] for r in fresh["steps"] if r["id"] == at)
+    assert len(whole) > len(cut) and whole[:len(cut)] == cut  # it was cut short, and is whole now
+    assert later["status"] == fresh["status"] and later["at"] == fresh["at"]

@@ -64,6 +64,7 @@ class World:
     scans: Mapping[str, Bounds] = field(default_factory=dict)  # sensing action -> the bounds it leaves (cell units)
     key: tuple = ()  # what determines this world: the placements' key and the steps so far
     checked: tuple = ()  # (Constraint, satisfied) of every UR precondition checked so far
+    complete: bool = True  # False: the last step's verdicts stop at its first unsatisfied one (step's early)
 
 
 # ---------------------------------------------------------------------- set-up
@@ -274,9 +275,15 @@ def _later_requirements(cell: Cell, rest: list[Step], obj: str, held: dict[str, 
 # ---------------------------------------------------------------------- one step
 
 
-def step(world: World, s: Step) -> tuple[list[dict[str, Any]], World, dict[str, Any]]:
+def step(world: World, s: Step, early: bool = False) -> tuple[list[dict[str, Any]], World, dict[str, Any]]:
     """The verdicts of step ``s``'s preconditions in ``world``, the world after it, and its
-    geometry for display (tool pose, joint angles in degrees, placement)."""
+    geometry for display (tool pose, joint angles in degrees, placement).
+
+    ``early``: the caller stops at this step if one of its uncertainty-reduction
+    preconditions fails (:func:`evaluate` unless the step is given up), so its verdicts
+    may end at the first unsatisfied one (in order): the run's outcome is the same and
+    the rest are never bounded. A memoised step so cut short is computed again, whole,
+    when a later run needs every verdict (the step given up)."""
     handler = STEPS.get(s["name"])
     if handler is None:
         raise SparValueError(f"phase 2 cannot execute {s['name']!r}")
@@ -284,15 +291,19 @@ def step(world: World, s: Step) -> tuple[list[dict[str, Any]], World, dict[str, 
     key = world.key + ((_step_key(s), _frozen(world.sources.get(s["id"], {})),
                         None if place is None else (place.pose, place.T.tobytes())),)
 
-    def run() -> tuple[list[dict[str, Any]], World, dict[str, Any]]:
-        checks, after, geo = handler(_activate(world, s), s)
+    def run() -> tuple[list[dict[str, Any]], World, dict[str, Any], bool]:
+        checks, after, geo = handler(_activate(world, s), s, early)
         if s["id"] in world.sources:
             geo["from"] = dict(world.sources[s["id"]])
-        return checks, replace(after, key=key), geo
+        return checks, replace(after, key=key), geo, not (early and not after.complete)
 
-    checks, after, geo = world.cell.memo.table("phase2.steps", MEMO_LIMIT).get_or_compute(key, run)
+    table = world.cell.memo.table("phase2.steps", MEMO_LIMIT)
+    hit = table.get(key)
+    if hit is None or not (early or hit[3]):
+        hit = table[key] = run()
+    checks, after, geo, _ = hit
     # a world from the memo may come from another instance: keep this instance's plan data
-    return checks, replace(after, placements=world.placements, sources=world.sources), geo
+    return checks, replace(after, placements=world.placements, sources=world.sources, complete=True), geo
 
 
 def poses(world: World, seen: dict[int, tuple[ur.ObjectState, list[list[float]]]] | None = None
@@ -341,7 +352,7 @@ def evaluate(cell: Cell, steps: Sequence[Step], sources: Sources | None = None,
     worlds = [world]
     seen: dict[int, tuple[ur.ObjectState, list[list[float]]]] = {}
     for s in steps:
-        checks, world, geo = step(world, s)
+        checks, world, geo = step(world, s, early=s["id"] not in skip)
         worlds.append(world)
         out.append({"id": s["id"], "verdicts": checks, "geometry": geo,
                     "poses": poses(world, seen), "held": world.unc.holding})
@@ -438,7 +449,10 @@ def _reach_verdict(action: str, ok: bool, what: str) -> dict[str, Any]:
             "description": what}
 
 
-def _verdicts(world: World, cs: list[ur.Constraint]) -> list[dict[str, Any]]:
+def _verdicts(world: World, cs: list[ur.Constraint], early: bool = False) -> list[dict[str, Any]]:
+    """The verdicts of ``cs`` in order; with ``early`` up to the first unsatisfied one."""
+    if early:
+        return _verdicts_until_unsatisfied(world, cs)
     out = []
     for v in ur.evaluate_all(cs, world.unc.registry, memo=world.cell.memo):
         d = v.as_dict()
@@ -465,24 +479,25 @@ def _checked(world: World, cs: list[ur.Constraint], checks: list[dict[str, Any]]
     return world.checked + tuple((c, v["satisfied"]) for c, v in zip(cs, ur_checks))
 
 
-def _pickup(world: World, s: Step) -> tuple[list[dict], World, dict]:
+def _pickup(world: World, s: Step, early: bool = False) -> tuple[list[dict], World, dict]:
     obj, label = s["args"][0], s["args"][1]
     g = _grasp(world.cell, obj, label)
     o = world.unc.obj(obj)
     manip = world.unc.manipulator_error()
     cs = ur.pickup_constraints(world.unc, obj, g.T, g.width, world.cell.finger_separation, manip, action=s["id"],
                                memo=world.cell.memo)
-    checks = _verdicts(world, cs)
+    checks = _verdicts(world, cs, early)
     what = f"pickup({obj}, {label})"
     q, geo = _arm(world, o.pose @ g.T, what, grasped=obj, width=g.width)
     if q is None:
         checks.append(_reach_verdict(s["id"], False, _no_arm(what, geo)))
     w = replace(world, unc=ur.pickup(world.unc, obj, g.T, manip), grasps={**world.grasps, obj: label},
-                joints=q if q is not None else world.joints, checked=_checked(world, cs, checks))
+                joints=q if q is not None else world.joints, checked=_checked(world, cs, checks),
+                complete=sum(c["kind"] == "uncertainty" for c in checks) == len(cs))
     return checks, w, geo
 
 
-def _putdown(world: World, s: Step) -> tuple[list[dict], World, dict]:
+def _putdown(world: World, s: Step, early: bool = False) -> tuple[list[dict], World, dict]:
     obj = s["args"][0]
     place = world.placements.get(s["id"])
     if place is None:
@@ -501,7 +516,7 @@ def _putdown(world: World, s: Step) -> tuple[list[dict], World, dict]:
     return checks, w, geo
 
 
-def _assemble(world: World, s: Step) -> tuple[list[dict], World, dict]:
+def _assemble(world: World, s: Step, early: bool = False) -> tuple[list[dict], World, dict]:
     peg, hole, ta = s["args"][0], s["args"][1], s["args"][3]
     cell = world.cell
     Ta = cell.transforms[ta]
@@ -510,7 +525,7 @@ def _assemble(world: World, s: Step) -> tuple[list[dict], World, dict]:
         raise SparValueError(f"assemble({peg}, {hole}): both objects need a mating feature")
     g = _grasp(cell, peg, world.grasps[peg])
     cs = ur.assemble_constraints(world.unc, peg, hole, Ta, fp, fh, action=s["id"], memo=cell.memo)
-    checks = _verdicts(world, cs)
+    checks = _verdicts(world, cs, early)
     what = f"assemble({peg}, {hole})"
     q, geo = _arm(world, world.unc.obj(hole).pose @ Ta @ g.T, what, held=(peg, np.linalg.inv(g.T)), width=g.width,
                   allow=[(f"held:{peg}", hole)])
@@ -518,11 +533,12 @@ def _assemble(world: World, s: Step) -> tuple[list[dict], World, dict]:
         checks.append(_reach_verdict(s["id"], False, _no_arm(what, geo)))
     grasps = {k: v for k, v in world.grasps.items() if k != peg}
     w = replace(world, unc=ur.assemble(world.unc, peg, hole, Ta), grasps=grasps,
-                joints=q if q is not None else world.joints, checked=_checked(world, cs, checks))
+                joints=q if q is not None else world.joints, checked=_checked(world, cs, checks),
+                complete=sum(c["kind"] == "uncertainty" for c in checks) == len(cs))
     return checks, w, geo
 
 
-def _scan(world: World, s: Step) -> tuple[list[dict], World, dict]:
+def _scan(world: World, s: Step, early: bool = False) -> tuple[list[dict], World, dict]:
     obj = s["args"][0]
     leaves = world.scans.get(s["name"])
     geo = {"tool_pose": None, "joints_deg": None}
@@ -532,7 +548,7 @@ def _scan(world: World, s: Step) -> tuple[list[dict], World, dict]:
     return [], replace(world, unc=ur.dense_range_scan(world.unc, obj, leaves)), geo
 
 
-def _squeeze(world: World, s: Step) -> tuple[list[dict], World, dict]:
+def _squeeze(world: World, s: Step, early: bool = False) -> tuple[list[dict], World, dict]:
     """Squeeze ``obj`` in place with the first of its grasps the arm reaches there whose pickup
     preconditions hold (Sec. 4.3: the squeeze must meet the pickup's own preconditions).
     A grasp is checked for a joint solution first and its constraints one by one, up to
