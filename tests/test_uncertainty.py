@@ -477,14 +477,17 @@ HOLE = MatingFeature("hole", ("top",), 0.6, np.zeros(3))
 PEG = MatingFeature("peg", ("tip",), 0.5, np.array([0.0, 0.0, 2.0]))
 
 
-def _build_all(w: WorldState, memo: object) -> list[list[Constraint]]:
-    """Pickup constraints of each peg, then (peg in hand) its assemble constraint."""
+def _build_all(w: WorldState, memo: object, errors: list | None = None) -> list[list[Constraint]]:
+    """Pickup constraints of each peg, then (peg in hand) its assemble constraint; each
+    peg's error in the hand appended to ``errors``."""
     out = []
     G = geometry.rotx(math.pi)
     for k in (1, 2):
         m = w.manipulator_error()
         out.append(pickup_constraints(w, f"peg{k}", G, 0.5, 4.0, m, action=f"a{k}", memo=memo))
-        w = pickup(w, f"peg{k}", G, m)
+        w = pickup(w, f"peg{k}", G, m, memo=memo)
+        if errors is not None:
+            errors.append(w.obj(f"peg{k}").error)
         out.append(assemble_constraints(w, f"peg{k}", f"block{k}", geometry.trans(0, 0, -2), PEG, HOLE,
                                         action=f"b{k}", memo=memo))
         w = assemble(w, f"peg{k}", f"block{k}", geometry.trans(0, 0, -2))
@@ -500,10 +503,16 @@ def test_constraints_built_once_per_structure_are_the_direct_builds() -> None:
 
     memo = Memo()
     w, _ = _two_pairs()
-    built = _build_all(w, memo)
+    held: list[ErrorTm] = []
+    built = _build_all(w, memo, held)
     w2, _ = _two_pairs()
-    direct = _build_all(w2, None)
-    assert memo.sizes()["uncertainty.built"] == 2  # one pickup and one assemble structure
+    held2: list[ErrorTm] = []
+    direct = _build_all(w2, None, held2)
+    assert memo.sizes()["uncertainty.built"] == 3  # the pickup's constraints and effect, the assemble's
+    for a, b in zip(held, held2, strict=True):  # the pickup's effect alike
+        for x, y in zip((a.theta, a.dx, a.dy, a.dz), (b.theta, b.dx, b.dy, b.dz)):
+            assert expression_key(x) == expression_key(y)
+    assert "dx_peg2" in w.registry.box(held[1].dx) and "dx_peg1" not in w.registry.box(held[1].dx)
     for cs_m, cs_d in zip(built, direct):
         for a, b in zip(cs_m, cs_d, strict=True):
             assert a.key is not None and b.key is None
@@ -529,7 +538,7 @@ def test_structure_key_holds_the_bounds_the_closed_form_uses() -> None:
     memo = Memo()
     w, _ = _two_pairs((TABLE2_OBJ, wide))
     built = _build_all(w, memo)
-    assert memo.sizes()["uncertainty.built"] == 3  # the pickups share one structure, the assembles not
+    assert memo.sizes()["uncertainty.built"] == 4  # the pickups share theirs, the assembles not
     narrow, broad = (evaluate(built[i][0], w.registry, memo=memo).bound for i in (1, 3))
     w_ref, _ = _two_pairs((wide, wide))
     ref = evaluate(_build_all(w_ref, None)[1][0], w_ref.registry).bound

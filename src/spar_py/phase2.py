@@ -491,7 +491,7 @@ def _pickup(world: World, s: Step, early: bool = False) -> tuple[list[dict], Wor
     q, geo = _arm(world, o.pose @ g.T, what, grasped=obj, width=g.width)
     if q is None:
         checks.append(_reach_verdict(s["id"], False, _no_arm(what, geo)))
-    w = replace(world, unc=ur.pickup(world.unc, obj, g.T, manip), grasps={**world.grasps, obj: label},
+    w = replace(world, unc=ur.pickup(world.unc, obj, g.T, manip, world.cell.memo), grasps={**world.grasps, obj: label},
                 joints=q if q is not None else world.joints, checked=_checked(world, cs, checks),
                 complete=sum(c["kind"] == "uncertainty" for c in checks) == len(cs))
     return checks, w, geo
@@ -511,7 +511,7 @@ def _putdown(world: World, s: Step, early: bool = False) -> tuple[list[dict], Wo
     geo["placement"] = place.as_dict()
     checks = [] if q is not None else [_reach_verdict(s["id"], False, _no_arm(what, geo))]
     grasps = {k: v for k, v in world.grasps.items() if k != obj}
-    w = replace(world, unc=ur.putdown(world.unc, obj, place.T), grasps=grasps,
+    w = replace(world, unc=ur.putdown(world.unc, obj, place.T, world.cell.memo), grasps=grasps,
                 joints=q if q is not None else world.joints)
     return checks, w, geo
 
@@ -570,7 +570,7 @@ def _squeeze(world: World, s: Step, early: bool = False) -> tuple[list[dict], Wo
         checks = _verdicts_until_unsatisfied(world, cs)
         if len(checks) == len(cs) and all(c["satisfied"] for c in checks):
             geo["grasp"] = label
-            w = replace(world, unc=ur.squeeze(world.unc, obj, g.T, manip), joints=q,
+            w = replace(world, unc=ur.squeeze(world.unc, obj, g.T, manip, cell.memo), joints=q,
                         checked=_checked(world, cs, checks))
             return checks, w, geo
     return ([_reach_verdict(s["id"], False, f"no grasp of {obj} both reachable and sure to succeed for a squeeze")],

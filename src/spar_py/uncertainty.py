@@ -280,7 +280,7 @@ def _vec(R: np.ndarray, v: Matrix) -> list[Scalar]:
 # ------------------------------------------------------------------ propagation (Sec. 3.2.3)
 
 
-def pickup(state: WorldState, obj: str, grasp_T: np.ndarray, manip: ErrorTm) -> WorldState:
+def pickup(state: WorldState, obj: str, grasp_T: np.ndarray, manip: ErrorTm, memo: Memo | None = None) -> WorldState:
     """The world after ``pickup(obj, grasp)`` with T_G ``grasp_T`` and the motion's error ``manip``.
 
     Sec. 3.2.3: the world displacement error is taken into the tool frame,
@@ -290,43 +290,56 @@ def pickup(state: WorldState, obj: str, grasp_T: np.ndarray, manip: ErrorTm) -> 
     rotation block as [[cos, sin], [sin, cos]], which is no rotation (a typo); we use
     the proper rotation [[cos, -sin], [sin, cos]], the same as its T_dM. As in the paper,
     the object's own angle error and its lever arm are dropped (the grasp re-seats it).
+    ``memo`` (a cell's memo tables): the entries are built once per structure (:func:`_built`).
     """
     o = _on_table(state, obj, "pickup")
     if state.holding is not None:
         raise SparValueError(f"pickup({obj}): the hand already holds {state.holding}")
     T_G = _pose(grasp_T, f"pickup({obj}) grasp")
     R = snap(o.pose[:3, :3] @ T_G[:3, :3])
-    D = _vec(R.T, o.error.offset())
-    err = ErrorTm(theta=manip.theta, dx=D[0] + manip.dx, dy=manip.dy, dz=D[2] + manip.dz,
-                  **_derived(("pickup", R.tobytes()), o.error, manip))
+
+    def build() -> list[ca.SX]:
+        D = _vec(R.T, o.error.offset())
+        return [manip.theta, D[0] + manip.dx, manip.dy, D[2] + manip.dz]
+
+    step = ("pickup", R.tobytes())
+    (theta, dx, dy, dz), _ = _built(state.registry, memo, ("effect", *step), (o.error, manip), build, key_out=False)
+    err = ErrorTm(theta=theta, dx=dx, dy=dy, dz=dz, **_derived(step, o.error, manip))
     return state.with_object(ObjectState(obj, HAND, o.pose, err, T_G))
 
 
-def putdown(state: WorldState, obj: str, pose: np.ndarray) -> WorldState:
+def putdown(state: WorldState, obj: str, pose: np.ndarray, memo: Memo | None = None) -> WorldState:
     """The world after ``putdown(obj, position)``, ``pose`` the position's ideal T_world_obj.
 
     Sec. 3.2.3: the held (tool-frame) displacement error goes to the world frame,
     ``D = (R_O R_G) [dx, dy, dz]`` with R_O the new orientation; the rotation error
     about tool z becomes one about world z, ``dtheta = Z * thetagr`` with Z the world-z
-    component of the tool z axis, ``(R_O R_G)[2, 2]``.
+    component of the tool z axis, ``(R_O R_G)[2, 2]``. ``memo`` as :func:`pickup`.
     """
     o = _in_hand(state, obj, "putdown")
     T = _pose(pose, f"putdown({obj}) position")
     R = snap(T[:3, :3] @ o.grasp[:3, :3])
-    D = _vec(R, o.error.offset())
-    Z = float(R[2, 2])
-    err = ErrorTm(theta=Z * o.error.theta, dx=D[0], dy=D[1], dz=D[2], **_derived(("putdown", R.tobytes()), o.error))
+
+    def build() -> list[ca.SX]:
+        D = _vec(R, o.error.offset())
+        Z = float(R[2, 2])
+        return [Z * o.error.theta, D[0], D[1], D[2]]
+
+    step = ("putdown", R.tobytes())
+    (theta, dx, dy, dz), _ = _built(state.registry, memo, ("effect", *step), (o.error,), build, key_out=False)
+    err = ErrorTm(theta=theta, dx=dx, dy=dy, dz=dz, **_derived(step, o.error))
     return state.with_object(ObjectState(obj, TABLE, T, err, None))
 
 
-def squeeze(state: WorldState, obj: str, grasp_T: np.ndarray, manip: ErrorTm) -> WorldState:
+def squeeze(state: WorldState, obj: str, grasp_T: np.ndarray, manip: ErrorTm, memo: Memo | None = None) -> WorldState:
     """The world after squeezing ``obj`` between the fingers in place (grasp, then release).
 
     Sec. 4.3: the reduction is the pickup's; the object stays at its ideal pose on the
-    table, with the reduced error mapped back to the world as a putdown does.
+    table, with the reduced error mapped back to the world as a putdown does. ``memo`` as
+    :func:`pickup`.
     """
     o = _on_table(state, obj, "squeeze")
-    return putdown(pickup(state, obj, grasp_T, manip), obj, o.pose)
+    return putdown(pickup(state, obj, grasp_T, manip, memo), obj, o.pose, memo)
 
 
 def dense_range_scan(state: WorldState, obj: str, leaves: Bounds) -> WorldState:
@@ -482,7 +495,7 @@ VERDICT_LIMIT = 4096
 
 
 def _built(registry: Registry, memo: Memo | None, key: tuple, errors: Sequence[ErrorTm],
-           build: Callable[[], list[ca.SX]]) -> tuple[list[ca.SX], tuple | None]:
+           build: Callable[[], list[ca.SX]], *, key_out: bool = True) -> tuple[list[ca.SX], tuple | None]:
     """``build()``'s expressions, made once per structure: ``key`` (the numbers the build
     uses) and the ``shape`` of each error transform it reads determine them up to a
     one-to-one renaming of the errors' ``vars``, so a later build of an equal structure
@@ -491,7 +504,7 @@ def _built(registry: Registry, memo: Memo | None, key: tuple, errors: Sequence[E
     products. The renamed graph is the build's own, node for node, so SUP/INF sees the
     same expression. Also returns the constraints' key (:attr:`Constraint.key`: the
     structure and the variables' bounds in order), or None when an error's structure is
-    unknown or no memo is given (then built directly)."""
+    unknown or no memo is given (then built directly), or if not ``key_out``."""
     vs = tuple(v for e in errors for v in e.vars)
     if memo is None or not all(e.shape for e in errors) or len({v.element_hash() for v in vs}) != len(vs):
         return build(), None
@@ -507,7 +520,7 @@ def _built(registry: Registry, memo: Memo | None, key: tuple, errors: Sequence[E
             if f is None:  # the build as a function of its variables, evaluated on the new ones
                 f = hit[2] = ca.Function("built", [ca.vertcat(*old)], exprs)
             exprs = list(f.call([ca.vertcat(*vs)]))
-    return exprs, (skey, tuple(registry.bounds(v.name()) for v in vs))
+    return exprs, (skey, tuple(registry.bounds(v.name()) for v in vs)) if key_out else None
 
 
 def _derived(step: tuple, *parents: ErrorTm) -> dict[str, tuple]:
