@@ -20,7 +20,13 @@ from the robot, its peg (lying on its -y base face, p1P5), both footprints centr
 cell's line. Turning a block over (hole-down p2P3 to hole-up p2P1, a half turn about its x
 axis) needs a grasp whose approach stays horizontal at both ends, i.e. along x (p2G7, p2G8):
 the wrist and forearm then come in level with the parts, from the robot's side, so the aisle
-between columns (PITCH_X less the pair's width) is what makes them usable. Blocks hole-up:
+between columns (PITCH_X less the pair's width) is what makes them usable. The columns stop at
+|y| <= COLUMNS_Y (the inner pair sooner); beyond them, rows at y = +-ROWS_Y along x (ROW_PITCH
+apart, |x| <= ROWS_X) hold the same cells turned a quarter turn about the robot: the peg beyond
+the block in y, the block hole-down yawed 180 deg (tm rows [-1 0 0; 0 1 0; 0 0 -1]), so that
+a half turn about world y, by a grasp approaching along y from the robot's side (p2G1, p2G2),
+leaves it hole-up at yaw 0 where it stood, exactly as a column's half turn about x does (phase
+2 puts it down at the least yaw first). Blocks hole-up:
 the same columns DENSE_PITCH_X apart (no aisles: the pegs are taken from above). :func:`slots`
 keeps the cells that
 
@@ -46,8 +52,16 @@ down hole-up where it stood is clear of everything. The free table (``placement_
 is one rectangle around the layout grown by MARGIN, its corner on the placement grid
 (placement.GRID_STEP_MM) of the block centres.
 
-MAX_TURNED (34) and MAX_PARTS_FULL (72) are what this check leaves for one PUMA 762 and the
-paper's 3 in parts: on a 10 x 6 in pitch the IK alone finds 100 cells within reach and the
+MAX_TURNED (42) and MAX_PARTS_FULL (72) are what this check leaves for one PUMA 762 and the
+paper's 3 in parts. Turn-over cells: 84 candidates, 46 within reach of the peg's grasps (its
+pickup beyond the block and its mate, the limit), 42 clear (columns alone gave 34; no other
+pitch, first column, row distance, mirrored columns sharing an aisle, or raised or lowered
+pedestal tried gave more than 42: each cell needs its 10 x 6 in and an aisle of about 12 in on
+the robot's side, and the ring the pegs are reached in holds about 45 such). Scaled parts cannot
+be turned over: a horizontal grasp at a small block's centre (0.75 in up at half size, 1.2 in at
+0.8) brings the wrist into the table (the collision scene refuses every IK solution, the block
+alone). Hole-up cells: on a 10 x 6 in pitch the IK
+alone finds 100 cells within reach and the
 collision check keeps 72 (at the edge of reach the stretched arm's wrist comes down on the
 neighbours). Above MAX_PARTS_FULL, up to MAX_PARTS (100; 130 cells pass), the parts are scaled
 by SMALL_SCALE in every length (:func:`scaled_model`: shapes, pose heights, grasps and widths,
@@ -108,7 +122,7 @@ MAX_PARTS = 100
 MAX_PARTS_FULL = 72
 #: The most pairs whose blocks start hole-down (each turned over: 4 actions a pair); above it
 #: the blocks start hole-up (2 actions a pair: pickup(peg), assemble), see :func:`blocks_for`.
-MAX_TURNED = 34
+MAX_TURNED = 42
 #: The two layouts and the most pairs each holds (checked by tests/test_gen.py).
 CAPACITY = {"hole-down": MAX_TURNED, "hole-up": MAX_PARTS_FULL, "hole-up-small": MAX_PARTS}
 #: Gap between the footprints of a peg and its block, and between neighbouring cells (in).
@@ -131,6 +145,15 @@ SMALL_PITCH_X, SMALL_PITCH_Y = 8.0, 4.0
 #: Each layout's (column pitch, first column, cell pitch along a column) in inches, and scale.
 LAYOUT = {"hole-down": (PITCH_X, COLUMN0, PITCH_Y), "hole-up": (DENSE_PITCH_X, DENSE_COLUMN0, PITCH_Y),
           "hole-up-small": (SMALL_PITCH_X, DENSE_COLUMN0, SMALL_PITCH_Y)}
+#: Blocks hole-down, beyond the columns' ends: ROWS_Y[k] is the |y| (in) of a row of cells along
+#: x (ROW_PITCH apart, |x| at most ROWS_X) whose blocks start hole-down turned 180 degrees about
+#: z, so a half turn about world y (a grasp approaching along y, from the robot's side: p2G1,
+#: p2G2) leaves them hole-up at yaw 0, as the columns' half turn about x does; the columns keep
+#: |y| <= COLUMNS_Y, so each row's aisle (towards the robot) is clear of their cells.
+ROWS_Y: tuple[float, ...] = (32.0,)
+ROWS_X = 30.0
+ROW_PITCH = 6.0
+COLUMNS_Y: tuple[float, ...] = (18.0, 24.0)
 SCALE = {"hole-down": 1.0, "hole-up": 1.0, "hole-up-small": SMALL_SCALE}
 #: No footprint nearer the robot's base axis than this (in): the pedestal.
 PEDESTAL_RADIUS = 12.0
@@ -192,6 +215,8 @@ class Slot:
     peg_grasps: tuple[str, ...] = ()
     #: The block's start pose (a label of the template model: BLOCK_POSE or BLOCK_UP_POSE).
     pose: str = ""
+    #: The block's start turned this much about world z (deg): 0 in a column, 180 in a row.
+    yaw: int = 0
 
     @property
     def distance(self) -> float:
@@ -311,8 +336,9 @@ def slots(blocks: str = "hole-down") -> list[Slot]:
     base = robot.base[:2, 3]
     gx, gy = round(base[0] / 2) * 2, round(base[1] / 2) * 2   # the grid point nearest the axis
 
-    def lattice(pitch_x: float, column0: float) -> list[Slot]:
-        """Cells in columns x = +-(column0 + k pitch_x), PITCH_Y apart, the peg on the far side."""
+    def lattice(pitch_x: float, column0: float, ymax: tuple[float, ...] = (math.inf,)) -> list[Slot]:
+        """Cells in columns x = +-(column0 + k pitch_x), PITCH_Y apart, the peg on the far side,
+        column k's blocks within ymax[k] (the last for the rest) of the base axis in y."""
         out = []
         kx, ky = int(SEARCH_HALF_WIDTH // pitch_x), int(SEARCH_HALF_WIDTH // pitch_y)
         for side in (-1, 1):
@@ -326,8 +352,26 @@ def slots(blocks: str = "hole-down") -> list[Slot]:
                     box = (min(px + plo[0], bx + blo[0]), min(py + plo[1], by + blo[1]),
                            max(px + phi[0], bx + bhi[0]), max(py + phi[1], by + bhi[1]))
                     near = np.clip(base, box[:2], box[2:])              # the box's point nearest the axis
-                    if math.hypot(*(near - base)) >= PEDESTAL_RADIUS:
+                    if (math.hypot(*(near - base)) >= PEDESTAL_RADIUS
+                            and abs(by - gy) <= ymax[min(i, len(ymax) - 1)]):
                         out.append(Slot((px, py), (bx, by), box))
+        return out
+
+    def rows() -> list[Slot]:
+        """Cells in rows y = +-ROWS_Y[k] along x, ROW_PITCH apart, the peg beyond the block
+        (further from the base axis), centred on the block's x; the block turned 180 deg."""
+        out = []
+        kx = int(ROWS_X // ROW_PITCH)
+        for side in (-1, 1):
+            for ry in ROWS_Y:
+                by = gy + side * ry
+                for i in range(-kx, kx + 1):
+                    bx = gx + ROW_PITCH * i
+                    px = bx + (blo[0] + bhi[0]) / 2 - (plo[0] + phi[0]) / 2
+                    py = by + bhi[1] + PEG_GAP - plo[1] if side > 0 else by + blo[1] - PEG_GAP - phi[1]
+                    box = (min(px + plo[0], bx + blo[0]), min(py + plo[1], by + blo[1]),
+                           max(px + phi[0], bx + bhi[0]), max(py + phi[1], by + bhi[1]))
+                    out.append(Slot((px, py), (bx, by), box, yaw=180))
         return out
 
     T_a = _pose_T(np.asarray(TA[:3], float).T, *(np.asarray(TA[3], float) * scale))
@@ -343,9 +387,9 @@ def slots(blocks: str = "hole-down") -> list[Slot]:
 
     free = [g for g in block.grasps.values() if not set(g.gfaces) & (set(sp_blk.rfaces) | set(sp_up.rfaces))]
     if blocks == "hole-down":  # columns with aisles, a block grasp reaching both ends of the half turn
-        cells = peg_reach(lattice(*LAYOUT[blocks][:2]))
+        cells = peg_reach(lattice(*LAYOUT[blocks][:2], COLUMNS_Y) + rows())
         if cells:
-            blk_T = np.stack([_pose_T(sp_blk.R, *c.block, sp_blk.height) for c in cells])
+            blk_T = np.stack([_pose_T(_rotz(c.yaw) @ sp_blk.R, *c.block, sp_blk.height) for c in cells])
             up_T = np.stack([_pose_T(sp_up.R, *c.block, sp_up.height) for c in cells])
             cells = [c for c, v in zip(cells, _grasp_ok(robot, [g.T for g in free], blk_T, up_T)) if v]
         cells = [replace(c, pose=BLOCK_POSE) for c in cells]
@@ -357,6 +401,12 @@ def slots(blocks: str = "hole-down") -> list[Slot]:
     return sorted(good, key=lambda c: (round(c.distance, 9), math.atan2(c.block[1] - base[1], c.block[0] - base[0])))
 
 
+def _rotz(deg: int) -> np.ndarray:
+    """3x3 rotation by ``deg`` (a multiple of 90) degrees about z, exact."""
+    c, s = {0: (1, 0), 90: (0, 1), 180: (-1, 0), 270: (0, -1)}[deg % 360]
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]], float)
+
+
 def _cell_parts(c: Slot, k: int, poses: tuple) -> dict[str, np.ndarray]:
     """What cell ``c`` (index k) may hold at any point of a plan (world poses, in): its peg
     lying, its block (hole-down and hole-up share one cube), and the peg assembled into it.
@@ -365,7 +415,7 @@ def _cell_parts(c: Slot, k: int, poses: tuple) -> dict[str, np.ndarray]:
     sp_peg, sp_blk, sp_up, T_a = poses
     up = _pose_T(sp_up.R, *c.block, sp_up.height)
     return {f"peg@{k}": _pose_T(sp_peg.R, *c.peg, sp_peg.height),
-            f"block@{k}": _pose_T(sp_blk.R, *c.block, sp_blk.height), f"peg@a{k}": up @ T_a}
+            f"block@{k}": _pose_T(_rotz(c.yaw) @ sp_blk.R, *c.block, sp_blk.height), f"peg@a{k}": up @ T_a}
 
 
 def _usable(peg, block, robot, cells: list[Slot], free: list, mate: list, start, todo: list[int],
@@ -531,7 +581,9 @@ def _problem_text(cells: list[Slot], robot_rel: str, scale: float = 1.0) -> str:
     n_parts = len(cells)
     (x0, x1), (y0, y1) = _region(cells)
     block = load_object(BLOCK_MODEL, "in")
-    rows = {lbl: [[int(round(v)) for v in r] for r in block.poses[lbl].R.T] for lbl in (BLOCK_POSE, BLOCK_UP_POSE)}
+
+    def rows(c: Slot) -> list[list[int]]:  # the block's start rotation in the tm's row form
+        return [[int(round(v)) for v in r] for r in (_rotz(c.yaw) @ block.poses[c.pose].R).T]
     turned = all(c.pose == BLOCK_POSE for c in cells)
     lines = [
         f"# Generated by spar_py.gen: {n_parts} peg(s) into {n_parts} block(s) (issues 7, 18).",
@@ -559,7 +611,7 @@ def _problem_text(cells: list[Slot], robot_rel: str, scale: float = 1.0) -> str:
             f"    initial: {{name: init_pos{2 * k - 1}, label: tr{2 * k - 1}, tm: {_tm(PEG_TM, *c.peg, 1.5 * scale)}}}",
             f"  block{k}:",
             f"    model: objects/block{k}.yaml",
-            f"    initial: {{name: init_pos{2 * k}, label: tr{2 * k}, tm: {_tm(rows[c.pose], *c.block, 1.5 * scale)}}}",
+            f"    initial: {{name: init_pos{2 * k}, label: tr{2 * k}, tm: {_tm(rows(c), *c.block, 1.5 * scale)}}}",
         ]
     lines += [
         "gripper: open",
