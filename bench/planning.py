@@ -10,11 +10,12 @@ Run from the project root: ``.venv/bin/python -m bench.planning [--quick] [--max
   (``python -c "import spar_py.engine as e; e.engine()"``);
 - hopeless: ``spar plan kb/problems/hopeless_uncertainty.yaml`` as a subprocess, beside the
   same file ``--phase1-only`` and the paper's cell, interleaved (phase 2 at its worst);
-- scaling: ``spar_py.gen.generate_assembly(N)`` for N = 1..10, 20, 30, 40, 42 and 50, each planned
+- scaling: ``spar_py.gen.generate_assembly(N)`` for N = 1..10, 20, 30, 40, 42, 43 and 50, each planned
   in its own subprocess (so its peak RSS is its own) after a warm-up plan of the paper's
   cell, with ``Planner(timeout=...)`` and no other option: the generated problem needs 4N
-  actions up to N = 42 (its blocks turned over; ``blocks`` says which) and 2N above (hole-up),
-  and phase 1's default bound is derived from the problem (max_actions_for).
+  actions up to N = 70 (its blocks turned over up to 42, turned a quarter turn from a side face
+  above; ``blocks`` says which) and 2N above (hole-up), and phase 1's default bound is derived
+  from the problem (max_actions_for).
 
 ``python -m bench.planning --one N`` is the child of the scaling run: it prints one JSON
 line with that N's figures.
@@ -45,19 +46,20 @@ ENGINE_ONLY = "import spar_py.engine as e; e.engine()"
 TIMEOUT = 120.0
 
 
-#: The sizes of the scaling run beyond N = 1..max_n (issue 18's targets are at 20 and 50; 42 is
-#: spar_py.gen.MAX_TURNED, the largest problem whose blocks are all turned over: 4N actions;
-#: 50 is a hole-up one, 2N).
-EXTRA_NS = (20, 30, 40, 42, 50)
+#: The sizes of the scaling run beyond N = 1..max_n (issue 18's targets are at 20 and 50): all
+#: 4N problems (spar_py.gen: blocks turned over up to 42 pairs, turned a quarter turn from a side
+#: face up to 70), 42 the largest of the half turn, 43 the first of the quarter turn.
+EXTRA_NS = (20, 30, 40, 42, 43, 50)
 
 
 def max_actions_for(n: int) -> int:
     """Phase 1's default plan-size bound for N pairs, as max_actions(auto) derives it
     (spar_defaults:derived_max_actions/2, twice the lower bound, at least 12): the lower bound
-    is 4N for blocks turned over (N <= spar_py.gen.MAX_TURNED), 2N for blocks hole-up."""
+    is 4N for blocks turned over (hole-down or on-side: N <= spar_py.gen.MAX_SIDE), 2N for blocks
+    hole-up."""
     from spar_py.gen import blocks_for
 
-    per_pair = 4 if blocks_for(n) == "hole-down" else 2
+    per_pair = 2 if blocks_for(n).startswith("hole-up") else 4
     return max(12, 2 * per_pair * n)
 
 
