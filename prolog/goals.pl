@@ -89,8 +89,8 @@ phase1_search(Options, Outcome, Bound) :-
     must_be(list, Options),
     default_option(max_steps, Budget0),
     option(max_steps(Budget1), Options, Budget0),
-    max_action_bound(Options, Max),
-    lower_bound(Options, LB),
+    lower_bound(Options, LB),           % once: it may ask the oracle
+    max_action_bound(Options, LB, Max),
     (   Budget1 == auto
     ->  derived_max_steps(LB, Budget)
     ;   Budget = Budget1
@@ -112,6 +112,17 @@ max_action_bound(Options, Max) :-
     (   Max1 == auto
     ->  lower_bound(Options, LB),
         derived_max_actions(LB, Max)
+    ;   Max = Max1
+    ).
+
+%   max_action_bound(+Options, +LB, -Max): max_action_bound/2 given the
+%   lower bound LB (phase1_search/3 has computed it).
+
+max_action_bound(Options, LB, Max) :-
+    default_option(max_actions, Max0),
+    option(max_actions(Max1), Options, Max0),
+    (   Max1 == auto
+    ->  derived_max_actions(LB, Max)
     ;   Max = Max1
     ).
 
