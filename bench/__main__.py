@@ -346,8 +346,8 @@ def render(r: dict) -> str:
     L += ["### Generated problems: N pegs into N blocks (spar_py.gen)", "",
           (f"One subprocess per N, a warm-up plan of the paper's cell first; "
           f"`Planner(timeout={p['timeout_s']:g})` with phase 1's default bound, derived from the problem "
-          "(up to 34 pairs the blocks start hole-down and each is turned over: 4N actions; above, the "
-          "arm's reach holds no aisles for the turn-over, so the blocks start hole-up: 2N actions, see "
+          "(up to 42 pairs the blocks start hole-down and each is turned over, up to 70 on a side face "
+          "and each is turned a quarter turn: 4N actions; above, the blocks start hole-up: 2N actions, see "
           "spar_py.gen.blocks_for; the bound is derived from the problem). "
           "Times: phase 1/2 are Prolog CPU seconds, wall the "
           "`plan()` call; RSS (Python and the embedded Prolog share the process): 'before' after the "

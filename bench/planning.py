@@ -10,10 +10,12 @@ Run from the project root: ``.venv/bin/python -m bench.planning [--quick] [--max
   (``python -c "import spar_py.engine as e; e.engine()"``);
 - hopeless: ``spar plan kb/problems/hopeless_uncertainty.yaml`` as a subprocess, beside the
   same file ``--phase1-only`` and the paper's cell, interleaved (phase 2 at its worst);
-- scaling: ``spar_py.gen.generate_assembly(N)`` for N = 1..10, 20, 30 and 50, each planned
+- scaling: ``spar_py.gen.generate_assembly(N)`` for N = 1..10, 20, 30, 40, 42, 43 and 50, each planned
   in its own subprocess (so its peak RSS is its own) after a warm-up plan of the paper's
   cell, with ``Planner(timeout=...)`` and no other option: the generated problem needs 4N
-  actions, and phase 1's default bound is derived from the problem (max_actions_for).
+  actions up to N = 70 (its blocks turned over up to 42, turned a quarter turn from a side face
+  above; ``blocks`` says which) and 2N above (hole-up), and phase 1's default bound is derived
+  from the problem (max_actions_for).
 
 ``python -m bench.planning --one N`` is the child of the scaling run: it prints one JSON
 line with that N's figures.
@@ -44,14 +46,21 @@ ENGINE_ONLY = "import spar_py.engine as e; e.engine()"
 TIMEOUT = 120.0
 
 
-#: The sizes of the scaling run beyond N = 1..max_n (issue 18's targets are at 20 and 50).
-EXTRA_NS = (20, 30, 50)
+#: The sizes of the scaling run beyond N = 1..max_n (issue 18's targets are at 20 and 50): all
+#: 4N problems (spar_py.gen: blocks turned over up to 42 pairs, turned a quarter turn from a side
+#: face up to 70), 42 the largest of the half turn, 43 the first of the quarter turn.
+EXTRA_NS = (20, 30, 40, 42, 43, 50)
 
 
 def max_actions_for(n: int) -> int:
     """Phase 1's default plan-size bound for N pairs, as max_actions(auto) derives it
-    (spar_defaults:derived_max_actions/2 of the lower bound 4N): max(12, 8N)."""
-    return max(12, 2 * 4 * n)
+    (spar_defaults:derived_max_actions/2, twice the lower bound, at least 12): the lower bound
+    is 4N for blocks turned over (hole-down or on-side: N <= spar_py.gen.MAX_SIDE), 2N for blocks
+    hole-up."""
+    from spar_py.gen import blocks_for
+
+    per_pair = 2 if blocks_for(n).startswith("hole-up") else 4
+    return max(12, 2 * per_pair * n)
 
 
 def _median(xs: list[float]) -> float | None:
@@ -199,12 +208,12 @@ def one(n: int, timeout: float = TIMEOUT, profile_top: int = 0) -> dict:
     """
     from spar_py.engine import engine
     from spar_py.errors import PlanningTimeout
-    from spar_py.gen import generate_assembly
+    from spar_py.gen import blocks_for, generate_assembly
     from spar_py.planner import Planner
 
     Planner().plan(CELL)
     rss0 = _rss_mb()
-    out: dict = {"n": n, "max_actions": max_actions_for(n), "rss_before_mb": rss0}
+    out: dict = {"n": n, "blocks": blocks_for(n), "max_actions": max_actions_for(n), "rss_before_mb": rss0}
     with tempfile.TemporaryDirectory(prefix=f"spar-bench-{n}-") as d:
         path = generate_assembly(n, d)
         p = Planner(timeout=timeout)  # the default bound: derived from the problem

@@ -36,7 +36,7 @@
     keep the search of unsolvable problems short.
 
     Depth first search with a bound on the number of plan actions, raised
-    from a lower bound on the plan size (lower_bound/1) to max_actions one
+    from a lower bound on the plan size (lower_bound/2) to max_actions one
     step at a time (iterative deepening): the first plan found is a
     smallest one, and an unsolvable problem ends, reporting the goal that
     failed at the deepest point of the last round (a geometric goal the CMS refused, if any). A
@@ -75,7 +75,7 @@
 
 %!  phase1_search(+Options, -Outcome, -Bound) is det.
 %
-%   Iterative deepening over the bound on plan size, from lower_bound/1
+%   Iterative deepening over the bound on plan size, from lower_bound/2
 %   to max_actions (auto, the default: derived from the lower bound by
 %   spar_defaults:derived_max_actions/2). Outcome is plan(Partial) for
 %   the first plan found, Bound the bound it was found at; otherwise
@@ -89,8 +89,8 @@ phase1_search(Options, Outcome, Bound) :-
     must_be(list, Options),
     default_option(max_steps, Budget0),
     option(max_steps(Budget1), Options, Budget0),
-    max_action_bound(Options, Max),
-    lower_bound(LB),
+    lower_bound(Options, LB),           % once: it may ask the oracle
+    max_action_bound(Options, LB, Max),
     (   Budget1 == auto
     ->  derived_max_steps(LB, Budget)
     ;   Budget = Budget1
@@ -102,7 +102,7 @@ phase1_search(Options, Outcome, Bound) :-
 %!  max_action_bound(+Options, -Max) is det.
 %
 %   The largest bound phase1_search/3 tries for the loaded problem with
-%   Options: max_actions(N), or derived from lower_bound/1 for
+%   Options: max_actions(N), or derived from lower_bound/2 for
 %   max_actions(auto) (the default; spar_defaults:derived_max_actions/2).
 
 max_action_bound(Options, Max) :-
@@ -110,30 +110,49 @@ max_action_bound(Options, Max) :-
     default_option(max_actions, Max0),
     option(max_actions(Max1), Options, Max0),
     (   Max1 == auto
-    ->  lower_bound(LB),
+    ->  lower_bound(Options, LB),
         derived_max_actions(LB, Max)
     ;   Max = Max1
     ).
 
-%!  lower_bound(-N) is det.
+%   max_action_bound(+Options, +LB, -Max): max_action_bound/2 given the
+%   lower bound LB (phase1_search/3 has computed it).
+
+max_action_bound(Options, LB, Max) :-
+    default_option(max_actions, Max0),
+    option(max_actions(Max1), Options, Max0),
+    (   Max1 == auto
+    ->  derived_max_actions(LB, Max)
+    ;   Max = Max1
+    ).
+
+%!  lower_bound(+Options, -N) is det.
 %
 %   A lower bound on the number of actions any plan needs, where iterative
 %   deepening starts (at least 1), admissible: each user goal not true
 %   initially needs at least one action of its own (its last); a goal
-%   assembled(Peg, Hole, [_, HoleFaces], _, _) needs the assemble and a
+%   assembled(Peg, Hole, [_, HoleFaces], Ta, _) needs the assemble and a
 %   pickup of Peg (a pickup serves one assemble: it is the last pickup
-%   of Peg before it); and each Hole object that rests initially in a
-%   stable pose hiding a face of the HoleFaces of some goal must be
-%   turned over, a pickup and a putdown of it, counted once however many
-%   goals mate with it (Sec. 6: the block on its hole). No action is
-%   counted twice, so the sum never exceeds the size of a smallest plan,
+%   of Peg before it); and each Hole object that must leave its initial
+%   position before it can be mated needs a pickup and a putdown of it,
+%   counted once however many goals mate with it: it rests there in a
+%   stable pose hiding a face of the HoleFaces of some goal (Sec. 6: the
+%   block on its hole), or no grasp of that goal's Peg mates with it there
+%   (the oracle's mate_reachable(Ta) pairs at that position are none: a
+%   block on its side, whose mated peg would enter the table). No action
+%   is counted twice, so the sum never exceeds the size of a smallest plan,
 %   and starting there finds the same first plan as starting from 1,
-%   without the rounds that must fail.
+%   without the rounds that must fail. Options give the oracle (as
+%   initial_plan/3: oracle(Closure), else foreign:arc_pairs/5).
 
-lower_bound(N) :-
+lower_bound(Options, N) :-
     findall(K, ( kb:goal(G), goal_lower_bound(G, K) ), Ks),
     sum_list(Ks, N0),
-    findall(H, hidden_hole(H), Hs),
+    (   option(oracle(Oracle), Options)
+    ->  true
+    ;   Oracle = foreign:arc_pairs
+    ),
+    findall(H, moved_hole(Oracle, H), Hs),
     length(Hs, N1),
     N is max(1, N0 + 2 * N1).
 
@@ -144,22 +163,59 @@ goal_lower_bound(assembled(_, _, _, _, _), 2) :-
     !.
 goal_lower_bound(_, 1).
 
-%   hidden_hole(-Hole): Hole (each once) is the hole part of a user goal
-%   not true initially and rests in a stable pose that hides one of that
-%   goal's hole faces.
+%   moved_hole(+Oracle, -Hole): Hole (each once) is the hole part of a user
+%   goal not true initially that must leave its initial position before
+%   the assemble (see lower_bound/2). The oracle (the kinematics) is asked
+%   only about a hole whose pose hides none of the goal's faces and whose
+%   approach (the goal's V_a, in the hole's frame) does not point down
+%   there: the usual hole-up start is not probed, so its arcs (and the
+%   refusals a no-plan reports) are the search's own.
 
-hidden_hole(Hole) :-
+moved_hole(Oracle, Hole) :-
     findall(H, ( kb:goal(G),
                  \+ kb:initial(G),
-                 G = assembled(_, H, [_, HoleFaces], _, _),
+                 G = assembled(Peg, H, [PegFaces, HoleFaces], Ta, Va),
                  kb:initial(part_location(H, Pos)),
-                 kb:position(Pos, H, Label, _),
+                 kb:position(Pos, H, Label, tm(Rows)),
                  kb:position_class(Label, Pose),
                  kb:pose(H, Pose, _, ofaces(Hidden), _),
-                 once(( member(F, HoleFaces), memberchk(F, Hidden) )) ),
+                 (   once(( member(F, HoleFaces), memberchk(F, Hidden) ))
+                 ->  true
+                 ;   \+ approach_down(Va, Rows),
+                     no_mate_at(Oracle, Peg-PegFaces, H, Ta, Pose, Label)
+                 ) ),
             Hs),
     sort(Hs, Holes),
     member(Hole, Holes).
+
+%   approach_down(+Va, +Rows): the vector named Va (hole frame), turned by
+%   the rotation of the position's tm Rows (the paper's row form: the
+%   images of the object's axes), points down (z below -0.7 of its length).
+
+approach_down(Va, [Rx, Ry, Rz|_]) :-
+    atom(Va),
+    kb:vector(Va, [X, Y, Z]),
+    Rx = [_, _, Zx], Ry = [_, _, Zy], Rz = [_, _, Zz],
+    W is X * Zx + Y * Zy + Z * Zz,
+    L is sqrt(X * X + Y * Y + Z * Z),
+    L > 0,
+    W < -0.7 * L.
+
+%   no_mate_at(+Oracle, +Peg-PegFaces, +Hole, +Ta, +Pose, +Label): the
+%   assemble for the goal could not happen with Hole at its absolute
+%   position Label (in stable pose Pose): for every turn of Ta that allows
+%   Pose (actions:assembly_turn/3), the oracle's mate_reachable pairs of
+%   Peg's mating grasps at Label are none.
+
+no_mate_at(Oracle, Peg-PegFaces, Hole, Ta, Pose, Label) :-
+    atom(Ta),
+    actions:mating_grasps(Peg, PegFaces, Gs0),
+    sort(Gs0, Gs),
+    Gs \== [],
+    \+ ( actions:assembly_turn(Ta, Turn, Allowed),
+         ( Allowed == all -> true ; memberchk(Pose, Allowed) ),
+         call(Oracle, mate_reachable(Turn), Peg-Hole, Gs, [Label], Pairs),
+         Pairs \== [] ).
 
 %   rounds(+B, +Max, +Budget, +Unmet0, +Options, -Outcome, -Bound): search
 %   with bound B, then B+1, ...; stop early when a round failed without

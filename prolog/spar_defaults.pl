@@ -73,7 +73,7 @@ janus_value(V, V).
 %!  derived_max_actions(+LowerBound, -Bound) is det.
 %
 %   The bound on the plan size that max_actions(auto) gives a problem
-%   whose plans need at least LowerBound actions (goals:lower_bound/1,
+%   whose plans need at least LowerBound actions (goals:lower_bound/2,
 %   admissible): twice that, so that every action counted may need one
 %   more (a regrasp: a put-down and a pickup for every two), and at least
 %   max_actions_floor. The step budget (max_steps) and the caller's

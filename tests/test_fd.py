@@ -44,3 +44,22 @@ def test_fast_downward_finds_four_actions_per_pair(tmp_path: Path) -> None:
     assert r.get("plan_length") == 8, r
     steps = (tmp_path / "sas_plan").read_text().splitlines()
     assert sum(s.startswith("(assemble ") for s in steps) == 2
+
+
+def test_hole_up_block_is_mated_where_it_stands(tmp_path: Path) -> None:
+    """A block that starts hole-up gets mate facts at its initial position (phase 1 mates it there);
+    one that starts hole-down gets none there (its hole is on the table)."""
+    up = fd.pddl(load_problem(gen.generate_assembly(2, tmp_path / "up", "hole-up")))
+    assert re.search(r"\(mate peg1 block1 p1-g\d+ tr2\)", up)
+    down = fd.pddl(load_problem(gen.generate_assembly(2, tmp_path / "down", "hole-down")))
+    assert not re.search(r"\(mate peg1 block1 \S+ tr2\)", down)
+    assert re.search(r"\(mate peg1 block1 p1-g\d+ p2-p1\)", down)
+
+
+@pytest.mark.skipif(fd.fd_driver() is None, reason="Fast Downward (bench extra) not installed")
+def test_fast_downward_finds_two_actions_per_hole_up_pair(tmp_path: Path) -> None:
+    cell = load_problem(gen.generate_assembly(3, tmp_path / "kb", "hole-up"))
+    (tmp_path / "d.pddl").write_text(fd.DOMAIN)
+    (tmp_path / "p.pddl").write_text(fd.pddl(cell))
+    r = fd.run_fd(tmp_path / "d.pddl", tmp_path / "p.pddl", tmp_path, timeout=120)
+    assert r.get("plan_length") == 6, r

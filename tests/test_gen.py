@@ -103,10 +103,12 @@ def _gap(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def test_there_are_max_parts_slots() -> None:
-    assert len(gen.slots("hole-down")) >= gen.MAX_TURNED >= 30
+    assert len(gen.slots("hole-down")) >= gen.MAX_TURNED >= 42
     assert len(gen.slots("hole-up")) >= gen.MAX_PARTS_FULL >= 70
     assert len(gen.slots("hole-up-small")) >= gen.MAX_PARTS >= 100
-    assert gen.blocks_for(gen.MAX_TURNED) == "hole-down" and gen.blocks_for(gen.MAX_TURNED + 1) == "hole-up"
+    assert len(gen.slots("on-side")) >= gen.MAX_SIDE >= 50
+    assert gen.blocks_for(gen.MAX_TURNED) == "hole-down" and gen.blocks_for(gen.MAX_TURNED + 1) == "on-side"
+    assert gen.blocks_for(gen.MAX_SIDE) == "on-side" and gen.blocks_for(gen.MAX_SIDE + 1) == "hole-up"
     assert gen.blocks_for(gen.MAX_PARTS_FULL + 1) == "hole-up-small"
     with pytest.raises(SparValueError):
         gen.generate_assembly(gen.MAX_TURNED + 1, "/nonexistent", "hole-down")
@@ -126,7 +128,7 @@ def _footprint_boxes(model, T: np.ndarray) -> list[np.ndarray]:
     return out
 
 
-@pytest.mark.parametrize("n", [gen.MAX_TURNED, gen.MAX_PARTS_FULL, gen.MAX_PARTS])
+@pytest.mark.parametrize("n", [gen.MAX_TURNED, gen.MAX_SIDE, gen.MAX_PARTS_FULL, gen.MAX_PARTS])
 def test_initial_positions_do_not_overlap_and_clear_the_base(n: int, tmp_path: Path) -> None:
     """Independent of gen's own boxes: every solid of every part at its initial pose, as a world
     xy box from its corners, is apart from every other part's and outside the pedestal's circle
@@ -150,8 +152,8 @@ def test_initial_positions_do_not_overlap_and_clear_the_base(n: int, tmp_path: P
             assert np.hypot(*(near - base)) > r_ped + 1.0, obj
 
 
-@pytest.mark.parametrize(("n", "blocks", "per_pair"), [(2, None, 4), (5, None, 4), (3, "hole-up", 2),
-                                                     (3, "hole-up-small", 2)])
+@pytest.mark.parametrize(("n", "blocks", "per_pair"), [(2, None, 4), (5, None, 4), (3, "on-side", 4),
+                                                     (3, "hole-up", 2), (3, "hole-up-small", 2)])
 def test_generated_plans_both_phases_with_collisions(n: int, blocks: str | None, per_pair: int,
                                                      tmp_path: Path) -> None:
     """Collision checking is on for every cell: a generated problem plans through phase 2 with
@@ -165,7 +167,8 @@ def test_generated_plans_both_phases_with_collisions(n: int, blocks: str | None,
     assert plan.instance["instances_examined"] == 1 and plan.instance["error_count"] == 0
 
 
-@pytest.mark.parametrize("n", [1, 2, 5, 13, gen.MAX_TURNED, gen.MAX_TURNED + 1, gen.MAX_PARTS_FULL + 1,
+@pytest.mark.parametrize("n", [1, 2, 5, 13, gen.MAX_TURNED, gen.MAX_TURNED + 1, gen.MAX_SIDE, gen.MAX_SIDE + 1,
+                               gen.MAX_PARTS_FULL + 1,
                                gen.MAX_PARTS])
 def test_layout_is_clear_and_in_reach(n: int, tmp_path: Path) -> None:
     """A sample of N = 1..MAX_PARTS: parts clear of each other by more than the put-down
@@ -197,9 +200,17 @@ def test_layout_is_clear_and_in_reach(n: int, tmp_path: Path) -> None:
         assert np.allclose(off, np.round(off)), f"block{k} off the placement grid"
         up = Tb.copy()
         up[:3, :3] = block.poses[f"p{2 * k}P1"].R
-        if n <= gen.MAX_TURNED:  # hole-down, to be turned over where it lies
-            assert np.allclose(Tb[:3, :3], block.poses[f"p{2 * k}P3"].R)
+        if n <= gen.MAX_TURNED:  # hole-down (yawed 0 or 180 deg), to be turned over where it lies
+            assert np.allclose(Tb[:3, 2], [0, 0, -1])  # the hole's axis (object z) points down
             rest = set(block.poses[f"p{2 * k}P3"].rfaces) | set(block.poses[f"p{2 * k}P1"].rfaces)
+            # a grasp reaching both ends whose approach (the tool's z) is horizontal and the same
+            # at both: the hand turns the block half a turn about that axis, nothing else
+            assert any(_reached(cell.robot, Tb @ g.T) and _reached(cell.robot, up @ g.T)
+                       and abs((Tb @ g.T)[2, 2]) < 1e-9 and np.allclose((Tb @ g.T)[:3, 2], (up @ g.T)[:3, 2])
+                       for g in block.grasps.values() if not set(g.gfaces) & rest), f"block{k}"
+        elif n <= gen.MAX_SIDE:  # on a side face, the hole's axis horizontal: a quarter turn
+            assert abs(Tb[2, 2]) < 1e-9 and np.allclose(Tb[:3, :3], block.poses[f"p{2 * k}P5"].R)
+            rest = set(block.poses[f"p{2 * k}P5"].rfaces) | set(block.poses[f"p{2 * k}P1"].rfaces)
             assert any(_reached(cell.robot, Tb @ g.T) and _reached(cell.robot, up @ g.T)
                        for g in block.grasps.values() if not set(g.gfaces) & rest), f"block{k}"
         else:  # hole-up, never moved
@@ -317,6 +328,6 @@ def test_cli_blocks_option(tmp_path: Path) -> None:
     assert ok.returncode == 0, ok.stderr
     text = (tmp_path / "assembly_3.yaml").read_text()
     assert "p2P1" in text or "hole-up" in text
-    bad = subprocess.run(spar + ["gen", "assembly", "--parts", "40", "--blocks", "hole-down", "-o", str(tmp_path)],
-                         capture_output=True, text=True)
-    assert bad.returncode == 2 and bad.stderr.strip().count("\n") == 0 and "34" in bad.stderr
+    bad = subprocess.run(spar + ["gen", "assembly", "--parts", str(gen.MAX_TURNED + 1), "--blocks", "hole-down",
+                                 "-o", str(tmp_path)], capture_output=True, text=True)
+    assert bad.returncode == 2 and bad.stderr.strip().count("\n") == 0 and str(gen.MAX_TURNED) in bad.stderr

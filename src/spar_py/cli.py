@@ -329,8 +329,9 @@ def build_parser() -> argparse.ArgumentParser:
     gensub = gen.add_subparsers(dest="gen_command", required=True)
     asm = gensub.add_parser("assembly", help="N pegs into N blocks (N <= 100)")
     asm.add_argument("--parts", type=_positive_int, required=True, metavar="N")
-    asm.add_argument("--blocks", choices=("hole-down", "hole-up", "hole-up-small"), default=None,
-                     help="how the blocks start: hole-down (each turned over, 4 actions a pair, N <= 34), "
+    asm.add_argument("--blocks", choices=("hole-down", "on-side", "hole-up", "hole-up-small"), default=None,
+                     help="how the blocks start: hole-down (each turned over, 4 actions a pair, N <= 42), "
+                          "on-side (each turned a quarter turn, 4 actions a pair, N <= 70), "
                           "hole-up (2 actions a pair, N <= 72), hole-up-small (half-size parts, N <= 100); "
                           "default: the first that holds N")
     asm.add_argument("-o", "--output", default="out/gen", metavar="DIR")

@@ -4,9 +4,11 @@
 one object file per part and a copy of the robot file. Up to MAX_TURNED pairs every block
 starts hole-down (p2P3 in the paper's model), so each pair needs the paper's four actions
 (Sec. 6, Fig. 23): pickup(block), putdown(block), pickup(peg), assemble; N pairs need 4N.
-Above MAX_TURNED (up to MAX_PARTS) every block starts hole-up (p2P1) in a denser layout and
-each pair needs two: pickup(peg), assemble; above MAX_PARTS_FULL the parts are smaller
-(:func:`blocks_for`; ``blocks=`` chooses: "hole-down", "hole-up", "hole-up-small").
+Above MAX_TURNED, up to MAX_SIDE, every block starts on its side (p2P5, the hole facing
+sideways) in a dense layout and is turned a quarter turn to hole-up: the same four actions a
+pair, 4N. Above MAX_SIDE (up to MAX_PARTS) every block starts hole-up (p2P1) and each pair needs
+two: pickup(peg), assemble; above MAX_PARTS_FULL the parts are smaller (:func:`blocks_for`;
+``blocks=`` chooses: "hole-down", "on-side", "hole-up", "hole-up-small").
 
 The parts are copies of the paper's models (kb/objects/peg.yaml, block.yaml) under
 new object names with their own label prefixes (``peg3`` gets grasps ``p5G1..``, poses
@@ -20,7 +22,13 @@ from the robot, its peg (lying on its -y base face, p1P5), both footprints centr
 cell's line. Turning a block over (hole-down p2P3 to hole-up p2P1, a half turn about its x
 axis) needs a grasp whose approach stays horizontal at both ends, i.e. along x (p2G7, p2G8):
 the wrist and forearm then come in level with the parts, from the robot's side, so the aisle
-between columns (PITCH_X less the pair's width) is what makes them usable. Blocks hole-up:
+between columns (PITCH_X less the pair's width) is what makes them usable. The columns stop at
+|y| <= COLUMNS_Y (the inner pair sooner); beyond them, rows at y = +-ROWS_Y along x (ROW_PITCH
+apart, |x| <= ROWS_X) hold the same cells turned a quarter turn about the robot: the peg beyond
+the block in y, the block hole-down yawed 180 deg (tm rows [-1 0 0; 0 1 0; 0 0 -1]), so that
+a half turn about world y, by a grasp approaching along y from the robot's side (p2G1, p2G2),
+leaves it hole-up at yaw 0 where it stood, exactly as a column's half turn about x does (phase
+2 puts it down at the least yaw first). Blocks hole-up:
 the same columns DENSE_PITCH_X apart (no aisles: the pegs are taken from above). :func:`slots`
 keeps the cells that
 
@@ -46,17 +54,27 @@ down hole-up where it stood is clear of everything. The free table (``placement_
 is one rectangle around the layout grown by MARGIN, its corner on the placement grid
 (placement.GRID_STEP_MM) of the block centres.
 
-MAX_TURNED (34) and MAX_PARTS_FULL (72) are what this check leaves for one PUMA 762 and the
-paper's 3 in parts: on a 10 x 6 in pitch the IK alone finds 100 cells within reach and the
+MAX_TURNED (42) and MAX_PARTS_FULL (72) are what this check leaves for one PUMA 762 and the
+paper's 3 in parts. Turn-over cells: 84 candidates, 46 within reach of the peg's grasps (its
+pickup beyond the block and its mate, the limit), 42 clear (columns alone gave 34; no other
+pitch, first column, row distance, mirrored columns sharing an aisle, or raised or lowered
+pedestal tried gave more than 42: each cell needs its 10 x 6 in and an aisle of about 12 in on
+the robot's side, and the ring the pegs are reached in holds about 45 such). Scaled parts cannot
+be turned over: a horizontal grasp at a small block's centre (0.75 in up at half size, 1.2 in at
+0.8) brings the wrist into the table (the collision scene refuses every IK solution, the block
+alone). Hole-up cells: on a 10 x 6 in pitch the IK
+alone finds 100 cells within reach and the
 collision check keeps 72 (at the edge of reach the stretched arm's wrist comes down on the
 neighbours). Above MAX_PARTS_FULL, up to MAX_PARTS (100; 130 cells pass), the parts are scaled
 by SMALL_SCALE in every length (:func:`scaled_model`: shapes, pose heights, grasps and widths,
 the features; the problem's T_a and uncertainty alike) and so is the gripper of the robot copy
 (:func:`robot_text`: a full-size finger is wider than a small peg's base and enters the block
-it mates into), on an 8 x 4 in pitch. A block started on a side face needs only a quarter turn
-(a 45-degree grasp from above, no aisle: 70 such full-size cells), but phase 1's lower bound
-counts such a pair as two actions, and its rounds of iterative deepening below 4N exhaust the
-step budget (N = 2); so the turned blocks start hole-down.
+it mates into), on an 8 x 4 in pitch. A block started on a side face (on-side) needs only a
+quarter turn, by a 45-degree grasp from above, so its cells need no aisle: the hole-up lattice
+(10 x 6 in) keeps 70 of them (MAX_SIDE). Phase 1's lower bound counts such a pair as 4 actions
+since it asks the oracle whether the peg can be mated into the block where it lies (it cannot:
+the mated peg would enter the table; goals.pl, lower_bound/2); before, it counted 2 and the
+rounds of iterative deepening below 4N spent the step budget (no plan at N = 2).
 
 Planning them needs no flag: phase 1's default bound and step budget are derived
 from the problem (spar_defaults.pl: the bound twice the lower bound; 100 steps per action of
@@ -83,6 +101,7 @@ __all__ = [
     "CAPACITY",
     "MAX_PARTS",
     "MAX_PARTS_FULL",
+    "MAX_SIDE",
     "MAX_TURNED",
     "blocks_for",
     "Slot",
@@ -108,9 +127,13 @@ MAX_PARTS = 100
 MAX_PARTS_FULL = 72
 #: The most pairs whose blocks start hole-down (each turned over: 4 actions a pair); above it
 #: the blocks start hole-up (2 actions a pair: pickup(peg), assemble), see :func:`blocks_for`.
-MAX_TURNED = 34
+MAX_TURNED = 42
+#: The most pairs whose blocks start on a side face (each turned a quarter turn to hole-up by a
+#: 45-degree grasp from above: 4 actions a pair as well, no aisles), see :func:`blocks_for`.
+MAX_SIDE = 70
+SIDE = "on-side"
 #: The two layouts and the most pairs each holds (checked by tests/test_gen.py).
-CAPACITY = {"hole-down": MAX_TURNED, "hole-up": MAX_PARTS_FULL, "hole-up-small": MAX_PARTS}
+CAPACITY = {"hole-down": MAX_TURNED, SIDE: MAX_SIDE, "hole-up": MAX_PARTS_FULL, "hole-up-small": MAX_PARTS}
 #: Gap between the footprints of a peg and its block, and between neighbouring cells (in).
 PEG_GAP = 2.0
 CELL_GAP = 2.0
@@ -129,9 +152,19 @@ DENSE_COLUMN0 = 4.0
 SMALL_SCALE = 0.5
 SMALL_PITCH_X, SMALL_PITCH_Y = 8.0, 4.0
 #: Each layout's (column pitch, first column, cell pitch along a column) in inches, and scale.
-LAYOUT = {"hole-down": (PITCH_X, COLUMN0, PITCH_Y), "hole-up": (DENSE_PITCH_X, DENSE_COLUMN0, PITCH_Y),
+LAYOUT = {"hole-down": (PITCH_X, COLUMN0, PITCH_Y), SIDE: (DENSE_PITCH_X, DENSE_COLUMN0, PITCH_Y),
+          "hole-up": (DENSE_PITCH_X, DENSE_COLUMN0, PITCH_Y),
           "hole-up-small": (SMALL_PITCH_X, DENSE_COLUMN0, SMALL_PITCH_Y)}
-SCALE = {"hole-down": 1.0, "hole-up": 1.0, "hole-up-small": SMALL_SCALE}
+#: Blocks hole-down, beyond the columns' ends: ROWS_Y[k] is the |y| (in) of a row of cells along
+#: x (ROW_PITCH apart, |x| at most ROWS_X) whose blocks start hole-down turned 180 degrees about
+#: z, so a half turn about world y (a grasp approaching along y, from the robot's side: p2G1,
+#: p2G2) leaves them hole-up at yaw 0, as the columns' half turn about x does; the columns keep
+#: |y| <= COLUMNS_Y, so each row's aisle (towards the robot) is clear of their cells.
+ROWS_Y: tuple[float, ...] = (32.0,)
+ROWS_X = 30.0
+ROW_PITCH = 6.0
+COLUMNS_Y: tuple[float, ...] = (18.0, 24.0)
+SCALE = {"hole-down": 1.0, SIDE: 1.0, "hole-up": 1.0, "hole-up-small": SMALL_SCALE}
 #: No footprint nearer the robot's base axis than this (in): the pedestal.
 PEDESTAL_RADIUS = 12.0
 #: Free table around the layout for the put-downs (in), a multiple of the grid step.
@@ -148,6 +181,8 @@ PEG_POSE, BLOCK_UP_POSE = "p1P5", "p2P1"
 #: 45-degree grasp from above at both ends, no aisle), but phase 1's lower bound counts such a
 #: pair as two actions and iterative deepening then spends its step budget below 4N.
 BLOCK_POSE = "p2P3"
+#: The block's start pose in an on-side cell: resting on b5 (its +y face), the hole facing -y.
+SIDE_POSE = "p2P5"
 PEG_TM = [[1, 0, 0], [0, 0, 1], [0, -1, 0]]
 
 # Table 2 and Fig. 11 of the paper (in, deg).
@@ -192,6 +227,8 @@ class Slot:
     peg_grasps: tuple[str, ...] = ()
     #: The block's start pose (a label of the template model: BLOCK_POSE or BLOCK_UP_POSE).
     pose: str = ""
+    #: The block's start turned this much about world z (deg): 0 in a column, 180 in a row.
+    yaw: int = 0
 
     @property
     def distance(self) -> float:
@@ -311,8 +348,9 @@ def slots(blocks: str = "hole-down") -> list[Slot]:
     base = robot.base[:2, 3]
     gx, gy = round(base[0] / 2) * 2, round(base[1] / 2) * 2   # the grid point nearest the axis
 
-    def lattice(pitch_x: float, column0: float) -> list[Slot]:
-        """Cells in columns x = +-(column0 + k pitch_x), PITCH_Y apart, the peg on the far side."""
+    def lattice(pitch_x: float, column0: float, ymax: tuple[float, ...] = (math.inf,)) -> list[Slot]:
+        """Cells in columns x = +-(column0 + k pitch_x), PITCH_Y apart, the peg on the far side,
+        column k's blocks within ymax[k] (the last for the rest) of the base axis in y."""
         out = []
         kx, ky = int(SEARCH_HALF_WIDTH // pitch_x), int(SEARCH_HALF_WIDTH // pitch_y)
         for side in (-1, 1):
@@ -326,8 +364,26 @@ def slots(blocks: str = "hole-down") -> list[Slot]:
                     box = (min(px + plo[0], bx + blo[0]), min(py + plo[1], by + blo[1]),
                            max(px + phi[0], bx + bhi[0]), max(py + phi[1], by + bhi[1]))
                     near = np.clip(base, box[:2], box[2:])              # the box's point nearest the axis
-                    if math.hypot(*(near - base)) >= PEDESTAL_RADIUS:
+                    if (math.hypot(*(near - base)) >= PEDESTAL_RADIUS
+                            and abs(by - gy) <= ymax[min(i, len(ymax) - 1)]):
                         out.append(Slot((px, py), (bx, by), box))
+        return out
+
+    def rows() -> list[Slot]:
+        """Cells in rows y = +-ROWS_Y[k] along x, ROW_PITCH apart, the peg beyond the block
+        (further from the base axis), centred on the block's x; the block turned 180 deg."""
+        out = []
+        kx = int(ROWS_X // ROW_PITCH)
+        for side in (-1, 1):
+            for ry in ROWS_Y:
+                by = gy + side * ry
+                for i in range(-kx, kx + 1):
+                    bx = gx + ROW_PITCH * i
+                    px = bx + (blo[0] + bhi[0]) / 2 - (plo[0] + phi[0]) / 2
+                    py = by + bhi[1] + PEG_GAP - plo[1] if side > 0 else by + blo[1] - PEG_GAP - phi[1]
+                    box = (min(px + plo[0], bx + blo[0]), min(py + plo[1], by + blo[1]),
+                           max(px + phi[0], bx + bhi[0]), max(py + phi[1], by + bhi[1]))
+                    out.append(Slot((px, py), (bx, by), box, yaw=180))
         return out
 
     T_a = _pose_T(np.asarray(TA[:3], float).T, *(np.asarray(TA[3], float) * scale))
@@ -342,19 +398,31 @@ def slots(blocks: str = "hole-down") -> list[Slot]:
         return [c for c, v in zip(cells, _grasp_ok(robot, [g.T for g in mate], peg_T, up_T @ T_a)) if v]
 
     free = [g for g in block.grasps.values() if not set(g.gfaces) & (set(sp_blk.rfaces) | set(sp_up.rfaces))]
-    if blocks == "hole-down":  # columns with aisles, a block grasp reaching both ends of the half turn
-        cells = peg_reach(lattice(*LAYOUT[blocks][:2]))
+    if blocks in ("hole-down", SIDE):  # each block turned where it lies: a grasp reaching both ends
+        if blocks == SIDE:  # a quarter turn: the dense lattice (grasps from above, no aisles)
+            sp_blk = block.poses[SIDE_POSE]
+            free = [g for g in block.grasps.values()
+                    if not set(g.gfaces) & (set(sp_blk.rfaces) | set(sp_up.rfaces))]
+            cells = peg_reach(lattice(*LAYOUT[blocks][:2]))
+        else:  # columns with aisles and rows beyond them, for the half turn's horizontal grasp
+            cells = peg_reach(lattice(*LAYOUT[blocks][:2], COLUMNS_Y) + rows())
         if cells:
-            blk_T = np.stack([_pose_T(sp_blk.R, *c.block, sp_blk.height) for c in cells])
+            blk_T = np.stack([_pose_T(_rotz(c.yaw) @ sp_blk.R, *c.block, sp_blk.height) for c in cells])
             up_T = np.stack([_pose_T(sp_up.R, *c.block, sp_up.height) for c in cells])
             cells = [c for c, v in zip(cells, _grasp_ok(robot, [g.T for g in free], blk_T, up_T)) if v]
-        cells = [replace(c, pose=BLOCK_POSE) for c in cells]
+        cells = [replace(c, pose=sp_blk.label) for c in cells]
     else:  # the dense lattice, the blocks never moved
         cells = [replace(c, pose=BLOCK_UP_POSE) for c in peg_reach(lattice(*LAYOUT[blocks][:2]))]
     usable = _usable(peg, block, robot, cells, free, mate, sp_blk, list(range(len(cells))), T_a)
     good = [replace(c, block_grasps=b, peg_grasps=p) for c, (b, p) in zip(cells, usable)
             if p and (b or c.pose == BLOCK_UP_POSE)]
     return sorted(good, key=lambda c: (round(c.distance, 9), math.atan2(c.block[1] - base[1], c.block[0] - base[0])))
+
+
+def _rotz(deg: int) -> np.ndarray:
+    """3x3 rotation by ``deg`` (a multiple of 90) degrees about z, exact."""
+    c, s = {0: (1, 0), 90: (0, 1), 180: (-1, 0), 270: (0, -1)}[deg % 360]
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]], float)
 
 
 def _cell_parts(c: Slot, k: int, poses: tuple) -> dict[str, np.ndarray]:
@@ -365,7 +433,7 @@ def _cell_parts(c: Slot, k: int, poses: tuple) -> dict[str, np.ndarray]:
     sp_peg, sp_blk, sp_up, T_a = poses
     up = _pose_T(sp_up.R, *c.block, sp_up.height)
     return {f"peg@{k}": _pose_T(sp_peg.R, *c.peg, sp_peg.height),
-            f"block@{k}": _pose_T(sp_blk.R, *c.block, sp_blk.height), f"peg@a{k}": up @ T_a}
+            f"block@{k}": _pose_T(_rotz(c.yaw) @ sp_blk.R, *c.block, sp_blk.height), f"peg@a{k}": up @ T_a}
 
 
 def _usable(peg, block, robot, cells: list[Slot], free: list, mate: list, start, todo: list[int],
@@ -447,9 +515,12 @@ def _usable(peg, block, robot, cells: list[Slot], free: list, mate: list, start,
 
 def blocks_for(n_parts: int) -> str:
     """The blocks' start for N pairs: "hole-down" (each turned over) up to MAX_TURNED pairs,
-    "hole-up" above (the layout that holds MAX_PARTS)."""
+    "on-side" (each turned a quarter turn; 4 actions a pair too) up to MAX_SIDE, "hole-up" up to
+    MAX_PARTS_FULL, "hole-up-small" above (the layout that holds MAX_PARTS)."""
     if n_parts <= MAX_TURNED:
         return "hole-down"
+    if n_parts <= MAX_SIDE:
+        return SIDE
     return "hole-up" if n_parts <= MAX_PARTS_FULL else "hole-up-small"
 
 
@@ -531,13 +602,19 @@ def _problem_text(cells: list[Slot], robot_rel: str, scale: float = 1.0) -> str:
     n_parts = len(cells)
     (x0, x1), (y0, y1) = _region(cells)
     block = load_object(BLOCK_MODEL, "in")
-    rows = {lbl: [[int(round(v)) for v in r] for r in block.poses[lbl].R.T] for lbl in (BLOCK_POSE, BLOCK_UP_POSE)}
+
+    def rows(c: Slot) -> list[list[int]]:  # the block's start rotation in the tm's row form
+        return [[int(round(v)) for v in r] for r in (_rotz(c.yaw) @ block.poses[c.pose].R).T]
     turned = all(c.pose == BLOCK_POSE for c in cells)
+    side = all(c.pose == SIDE_POSE for c in cells)
     lines = [
         f"# Generated by spar_py.gen: {n_parts} peg(s) into {n_parts} block(s) (issues 7, 18).",
         *(["# Tests: phase 1 at scale. Every block rests hole-down (p2P3 in the paper's",
            "# model), so each pair needs pickup(block), putdown(block) hole-up, pickup(peg),",
            f"# assemble: {4 * n_parts} actions in all."] if turned else
+          ["# Tests: phase 1 at scale. Every block rests on its side b5 (p2P5: the hole's axis",
+           "# horizontal), so each pair needs pickup(block), putdown(block) hole-up (a quarter",
+           f"# turn), pickup(peg), assemble: {4 * n_parts} actions in all."] if side else
           [f"# Tests: phase 1 at scale. More than {MAX_TURNED} pairs: every block rests hole-up",
            "# (p2P1), so each pair needs pickup(peg), assemble: "
            f"{2 * n_parts} actions in all (spar_py.gen.blocks_for)."]),
@@ -559,7 +636,7 @@ def _problem_text(cells: list[Slot], robot_rel: str, scale: float = 1.0) -> str:
             f"    initial: {{name: init_pos{2 * k - 1}, label: tr{2 * k - 1}, tm: {_tm(PEG_TM, *c.peg, 1.5 * scale)}}}",
             f"  block{k}:",
             f"    model: objects/block{k}.yaml",
-            f"    initial: {{name: init_pos{2 * k}, label: tr{2 * k}, tm: {_tm(rows[c.pose], *c.block, 1.5 * scale)}}}",
+            f"    initial: {{name: init_pos{2 * k}, label: tr{2 * k}, tm: {_tm(rows(c), *c.block, 1.5 * scale)}}}",
         ]
     lines += [
         "gripper: open",
@@ -593,7 +670,8 @@ def _problem_text(cells: list[Slot], robot_rel: str, scale: float = 1.0) -> str:
 
 def generate_assembly(n_parts: int, out_dir: str | Path, blocks: str | None = None) -> Path:
     """Write the N-pegs-into-N-blocks problem into ``out_dir``; return the problem file.
-    ``blocks``: "hole-down" (each block turned over: 4 actions a pair, N <= MAX_TURNED),
+    ``blocks``: "hole-down" (each block turned over: 4 actions a pair, N <= MAX_TURNED), "on-side"
+    (each turned a quarter turn: 4 actions a pair, N <= MAX_SIDE),
     "hole-up" (2 actions a pair, N <= MAX_PARTS_FULL) or "hole-up-small" (the same with parts
     and gripper scaled by SMALL_SCALE, N <= MAX_PARTS); default :func:`blocks_for`.
 
@@ -634,8 +712,8 @@ def main(argv: list[str]) -> int:
     a = sub.add_parser("assembly", help=f"N pegs into N blocks (N = 1..{MAX_PARTS})")
     a.add_argument("--parts", "-n", type=int, required=True, metavar="N")
     a.add_argument("--blocks", choices=tuple(CAPACITY), default=None,
-                   help=f"the blocks' start (default: hole-down up to {MAX_TURNED} pairs, hole-up up to "
-                        f"{MAX_PARTS_FULL}, else hole-up-small)")
+                   help=f"the blocks' start (default: hole-down up to {MAX_TURNED} pairs, {SIDE} up to "
+                        f"{MAX_SIDE}, hole-up up to {MAX_PARTS_FULL}, else hole-up-small)")
     a.add_argument("-o", "--out", default=None, metavar="DIR",
                    help="output directory (default: ./assembly_N)")
     try:

@@ -221,6 +221,43 @@ test(block_stays, L == [tr2]) :-
 
 :- end_tests(sec6_hole_up).
 
+:- begin_tests(lower_bound).
+
+%   goals:lower_bound/2: 2 per assemble goal, 2 more for a hole part that must
+%   leave its start (its pose hides the hole, or, the hole's approach not
+%   pointing down there, the oracle mates no peg grasp there).
+
+test(hole_down, [setup(load_cell(hole_down)), LB == 4]) :-
+    goals:lower_bound([oracle(fixture_paper_cell:table_oracle(hole_down))], LB).
+
+test(hole_up_not_probed, [setup(load_cell(hole_up)), LB == 2]) :-
+    % the approach points down at the start: the oracle is not asked (it would throw)
+    context_module(M),
+    goals:lower_bound([oracle(M:no_oracle)], LB).
+
+test(on_side_unmatable, [setup(load_cell(on_side)), LB == 4]) :-
+    goals:lower_bound([oracle(fixture_paper_cell:table_oracle(on_side))], LB).
+
+test(on_side_matable, [setup(load_cell(on_side)), LB == 2]) :-
+    context_module(M),
+    goals:lower_bound([oracle(M:side_mates)], LB).
+
+test(on_side_plans_from_four, [setup(load_cell(on_side)), N-B == 4-4]) :-
+    % the first round searched is the one that finds the plan
+    goals:phase1_search([oracle(fixture_paper_cell:table_oracle(on_side))], plan(P), B),
+    partial_actions(P, As),
+    length(As, N).
+
+no_oracle(_, _, _, _, _) :-
+    throw(error(oracle_asked, _)).
+
+side_mates(mate_reachable(trans_1), peg-block, Gs, [tr2], Pairs) :- !,
+    findall(G/tr2, member(G, Gs), Pairs).
+side_mates(C, O, Gs, Ps, Pairs) :-
+    table_oracle(on_side, C, O, Gs, Ps, Pairs).
+
+:- end_tests(lower_bound).
+
 :- begin_tests(phase1_unsolvable).
 
 test(no_mating_grasp,
