@@ -99,6 +99,12 @@ AFFINE_GRADIENT = True
 #: Bisect boxes that have a gradient model on the variable whose share of the model's
 #: remainder is largest (otherwise on the largest width * |derivative|).
 SPLIT_BY_REMAINDER = True
+#: While the pool holds fewer than SPLIT_TARGET / 2 boxes, a box is split on its d most
+#: influential variables at once (2^d children, d <= MAX_SPLIT) so that the next pass has
+#: about SPLIT_TARGET boxes: a pass over a few boxes costs nearly what one over 64 does,
+#: so small searches take fewer passes (0: always bisect, the old search).
+SPLIT_TARGET = 0
+MAX_SPLIT = 4
 
 _INF = math.inf
 _DIR = np.array([[-np.inf], [np.inf]])
@@ -554,11 +560,16 @@ class IntervalProgram:
     box, ``disc`` (n,) True where some operation may be discontinuous on the box (then
     derivative-based reasoning does not apply there). Evaluated by a :class:`_Schedule`:
     one vectorised rule per group of like instructions of one level, over all boxes.
+
+    ``sign_continuous``: ``sign`` never marks a box discontinuous. Only for the gradient
+    program of an expression that has no ``sign`` of its own, where every ``sign`` is the
+    derivative of a ``fabs`` (see :class:`Bounder`).
     """
 
-    def __init__(self, fn: ca.Function) -> None:
+    def __init__(self, fn: ca.Function, sign_continuous: bool = False) -> None:
         S = _Schedule(fn, _interval_classify)
         self._S = S
+        self.sign_continuous = sign_continuous
         self.n_in, self.out_sizes = S.n_in, S.out_sizes
         self.n_work = S.n_regs
 
@@ -588,7 +599,7 @@ class IntervalProgram:
                     R = np.where(np.abs(c) == 1.0, R, _rnd(R))
                 elif kind == "unary":
                     f, dfn = _UNARY[g.key[1]]
-                    if dfn is not None:
+                    if dfn is not None and not (self.sign_continuous and g.key[1] == ca.OP_SIGN):
                         disc |= dfn(A.reshape(2, -1)).reshape(A.shape[1:]).any(0)
                     R = _flat(f, A)
                 elif kind == "div_c":
@@ -794,10 +805,11 @@ class CompiledIntervalProgram:
     interpreted :class:`IntervalProgram` (built on first need).
     """
 
-    def __init__(self, fn: ca.Function) -> None:
+    def __init__(self, fn: ca.Function, sign_continuous: bool = False) -> None:
         if fn.n_in() != 1:
             raise SparValueError("IntervalProgram: the Function must have exactly one (vector) input")
         self._fn = fn
+        self.sign_continuous = sign_continuous
         self.n_in = int(fn.nnz_in(0))
         self.out_sizes = [int(fn.nnz_out(k)) for k in range(fn.n_out())]
         n = self.n_in
@@ -841,6 +853,8 @@ class CompiledIntervalProgram:
                     r = (_sx_dn(lo), _sx_up(hi))
                 elif op in _UNARY:
                     r, d_bad, d_disc = _sx_unary(op, w[ins[0]])
+                    if sign_continuous and op == ca.OP_SIGN:
+                        d_disc = ca.SX(0)
                 elif op in _BINARY:
                     r, d_bad, d_disc = _sx_binary(op, w[ins[0]], w[ins[1]])
                 else:
@@ -874,7 +888,7 @@ class CompiledIntervalProgram:
         redo = ~(R[k + 1] == 0) | ~np.isfinite(lo).all(1) | ~np.isfinite(hi).all(1)
         if redo.any():
             if self._fallback is None:
-                self._fallback = IntervalProgram(self._fn)
+                self._fallback = IntervalProgram(self._fn, self.sign_continuous)
             fo, fd = self._fallback(lo[redo], hi[redo])
             for r, f in zip(outs, fo):
                 r[:, :, redo] = f
@@ -903,9 +917,10 @@ class AdaptiveProgram:
     bounded many times over; the planner leaves it off (bench/supinf.py measures both).
     """
 
-    def __init__(self, fn: ca.Function, compiled: bool = False) -> None:
+    def __init__(self, fn: ca.Function, compiled: bool = False, sign_continuous: bool = False) -> None:
         self._fn = fn
-        self.interpreted = IntervalProgram(fn)
+        self.sign_continuous = sign_continuous
+        self.interpreted = IntervalProgram(fn, sign_continuous)
         self.use_compiled = compiled
         self.compiled: CompiledIntervalProgram | None = None
         self.n_in, self.out_sizes = self.interpreted.n_in, self.interpreted.out_sizes
@@ -914,7 +929,7 @@ class AdaptiveProgram:
         if not self.use_compiled or np.shape(lo)[0] > COMPILED_MAX_BATCH:
             return self.interpreted(lo, hi)
         if self.compiled is None:
-            self.compiled = CompiledIntervalProgram(self._fn)
+            self.compiled = CompiledIntervalProgram(self._fn, self.sign_continuous)
         return self.compiled(lo, hi)
 
 
@@ -1316,12 +1331,33 @@ class Bounder:
         if syms:
             fg = ca.Function("fg", [x], [e, ca.densify(ca.jacobian(e, x))], {"cse": True})
             try:
-                self.gradient = AdaptiveProgram(fg, compiled)
+                self.gradient = AdaptiveProgram(fg, compiled, self._kinks_only(fg))
                 self._fg = fg
             except SparValueError:
                 self.gradient = None  # derivative uses operations we cannot bound: bisection only
         if self.gradient is None:
             _ = self.program  # compile now, so unsupported operations fail here
+
+    def _kinks_only(self, fg: ca.Function) -> bool:
+        """True if every ``sign`` in the value-and-gradient Function ``fg`` is the derivative
+        of a ``fabs`` (the expression itself has none): then the expression is continuous
+        where its other operations are, and Lipschitz where its gradient enclosure is
+        finite.
+
+        Why derivative reasoning stays sound across the kinks of ``fabs``: the interval
+        (or affine) value of ``sign`` over an argument that straddles 0 is [-1, 1], which
+        holds the Clarke generalised gradient of |.| there, and interval evaluation of the
+        chain rule then encloses the Clarke gradient of the whole expression (Clarke's
+        sum, product and chain rules are inclusions). Lebourg's mean-value theorem, f(x) -
+        f(c) = <z, x - c> with z in the Clarke gradient at a point of the segment, gives
+        the mean-value form and monotonicity; along a segment a Lipschitz f is the integral
+        of its derivative, which lies in the Clarke gradient's projection, which gives the
+        gradient model's bound (taylor.py). Where the argument's enclosure has one sign,
+        say [0, b], |a| = a on the whole box and the true factor 1 lies in [0, 1]."""
+        if not any(fg.instruction_id(k) == ca.OP_SIGN for k in range(fg.n_instructions())):
+            return False
+        p = self._point
+        return not any(p.instruction_id(k) == ca.OP_SIGN for k in range(p.n_instructions()))
 
     @functools.cached_property
     def _point(self) -> ca.Function:
@@ -1684,16 +1720,24 @@ class _Search:
         else:
             keep = np.ones(side.size, bool)
         bl, bh, side, L, infl = bl[keep], bh[keep], side[keep], L[keep], infl[keep]
-        # 4. bisect on the most influential variable
+        # 4. bisect on the most influential variable; while the pool is small (a pass costs
+        # about the same for 4 boxes as for 64), on the d most influential ones at once
         score = np.where(bh > bl, np.nan_to_num(infl, nan=0.0), -1.0)
-        j = np.argmax(score, axis=1)
-        r = np.arange(j.size)
-        mid = 0.5 * (bl[r, j] + bh[r, j])
-        left_h, right_l = bh.copy(), bl.copy()
-        left_h[r, j] = mid
-        right_l[r, j] = mid
-        self.push(np.vstack((bl, right_l)), np.vstack((left_h, bh)), np.concatenate((side, side)),
-                  np.concatenate((L, L)))
+        d = 1
+        if SPLIT_TARGET:
+            room = SPLIT_TARGET // max(1, side.size + self.pool[2].size)
+            d = max(1, min(MAX_SPLIT, int(room).bit_length() - 1, int((score > 0).sum(1).min(initial=nv))))
+        jj = np.argsort(-score, axis=1)[:, :d] if d > 1 else np.argmax(score, axis=1)[:, None]
+        for t in range(d):
+            j = jj[:, t]
+            r = np.arange(j.size)
+            mid = 0.5 * (bl[r, j] + bh[r, j])
+            left_h, right_l = bh.copy(), bl.copy()
+            left_h[r, j] = mid
+            right_l[r, j] = mid
+            bl, bh, jj = np.vstack((bl, right_l)), np.vstack((left_h, bh)), np.vstack((jj, jj))
+            side, L = np.concatenate((side, side)), np.concatenate((L, L))
+        self.push(bl, bh, side, L)
 
     def result(self, plain: tuple[float, float]) -> BoundResult:
         _, _, ps, pL = self.pool
