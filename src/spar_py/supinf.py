@@ -434,7 +434,8 @@ class _Schedule:
     """
 
     def __init__(self, fn: ca.Function, classify: Callable[[int, tuple[int, ...], dict[int, float]],
-                                                           tuple[tuple, tuple[int, ...], float]]) -> None:
+                                                           tuple[tuple, tuple[int, ...], float]],
+                 instructions: list[tuple[int, list[int], list[int], float]] | None = None) -> None:
         if fn.n_in() != 1:
             raise SparValueError("supinf: the Function must have exactly one (vector) input")
         self.n_in = int(fn.nnz_in(0))
@@ -445,7 +446,7 @@ class _Schedule:
         ops: list[tuple[tuple, tuple[int, ...], int, float]] = []  # (key, arg slots, out slot, payload)
         outputs: list[tuple[int, int, int]] = []  # (output, nonzero, slot)
         n = 0
-        for op, ins, outs, const in _instructions(fn):
+        for op, ins, outs, const in (_instructions(fn) if instructions is None else instructions):
             if op == ca.OP_OUTPUT:
                 outputs.append((outs[0], outs[1], reg[ins[0]]))
                 continue
@@ -566,8 +567,9 @@ class IntervalProgram:
     derivative of a ``fabs`` (see :class:`Bounder`).
     """
 
-    def __init__(self, fn: ca.Function, sign_continuous: bool = False) -> None:
-        S = _Schedule(fn, _interval_classify)
+    def __init__(self, fn: ca.Function, sign_continuous: bool = False,
+                 instructions: list[tuple[int, list[int], list[int], float]] | None = None) -> None:
+        S = _Schedule(fn, _interval_classify, instructions)
         self._S = S
         self.sign_continuous = sign_continuous
         self.n_in, self.out_sizes = S.n_in, S.out_sizes
@@ -917,10 +919,11 @@ class AdaptiveProgram:
     bounded many times over; the planner leaves it off (bench/supinf.py measures both).
     """
 
-    def __init__(self, fn: ca.Function, compiled: bool = False, sign_continuous: bool = False) -> None:
+    def __init__(self, fn: ca.Function, compiled: bool = False, sign_continuous: bool = False,
+                 instructions: list[tuple[int, list[int], list[int], float]] | None = None) -> None:
         self._fn = fn
         self.sign_continuous = sign_continuous
-        self.interpreted = IntervalProgram(fn, sign_continuous)
+        self.interpreted = IntervalProgram(fn, sign_continuous, instructions)
         self.use_compiled = compiled
         self.compiled: CompiledIntervalProgram | None = None
         self.n_in, self.out_sizes = self.interpreted.n_in, self.interpreted.out_sizes
@@ -957,12 +960,15 @@ class AffineProgram:
     """A CasADi Function's instruction list evaluated in affine arithmetic on batches of boxes.
 
     Same input convention as :class:`IntervalProgram`; ``prog(lo, hi)`` returns the affine
-    forms of output 0, shape ``(K + J + 2, nnz_0, n)``. Operations without an affine rule
+    forms of output 0, shape ``(K + J + 2, nnz_0, n)`` (``stack_outputs``: of all outputs,
+    their nonzeros one after another; ``instructions``: ``fn``'s instruction list, if the
+    caller has it already). Operations without an affine rule
     (atan2, fabs, tan, ...) fall back to interval arithmetic on the ranges of their inputs
     (the result gets its own noise symbol).
     """
 
-    def __init__(self, fn: ca.Function) -> None:
+    def __init__(self, fn: ca.Function, stack_outputs: bool = False,
+                 instructions: list[tuple[int, list[int], list[int], float]] | None = None) -> None:
         nsym = int(fn.nnz_in(0))  # rows 1..K: the inputs; each nonlinear operation gets the next row
 
         def sym() -> int:
@@ -998,10 +1004,12 @@ class AffineProgram:
                 return ("fb2", op), args, sym()
             raise SparValueError(f"supinf: unsupported operation {_op_name(op)} in expression")
 
-        S = _Schedule(fn, classify)
+        S = _Schedule(fn, classify, instructions)
         self._S = S
         self.K = S.n_in
-        self.out_size = S.out_sizes[0] if S.out_sizes else 0
+        sizes = S.out_sizes if stack_outputs else S.out_sizes[:1]
+        self._offset = np.concatenate(([0], np.cumsum(sizes))).astype(int)
+        self.out_size = int(self._offset[-1])
         self.n_work = S.n_regs
         self.rows = nsym + 2
         self._up = 1.0 + (nsym + 16) * 2.0 ** -52
@@ -1180,8 +1188,8 @@ class AffineProgram:
                     R = self._fallback2(A, W[:, g.args[1]], _BINARY[g.key[1]][0], g.payload.astype(int))
                 W[:, g.out] = R
         for k, j, r in S.outputs:
-            if k == 0:
-                out[:, j, :] = W[:, r]
+            if k < self._offset.size - 1:
+                out[:, self._offset[k] + j, :] = W[:, r]
         return out
 
     def linear(self, F: np.ndarray) -> np.ndarray:
@@ -1328,10 +1336,12 @@ class Bounder:
         self._x = x
         self.gradient: AdaptiveProgram | None = None
         self._fg: ca.Function | None = None  # value and gradient, when the gradient can be bounded
+        self._fg_instructions: list[tuple[int, list[int], list[int], float]] | None = None
         if syms:
             fg = ca.Function("fg", [x], [e, ca.densify(ca.jacobian(e, x))], {"cse": True})
+            self._fg_instructions = _instructions(fg)
             try:
-                self.gradient = AdaptiveProgram(fg, compiled, self._kinks_only(fg))
+                self.gradient = AdaptiveProgram(fg, compiled, self._kinks_only(fg), self._fg_instructions)
                 self._fg = fg
             except SparValueError:
                 self.gradient = None  # derivative uses operations we cannot bound: bisection only
@@ -1354,7 +1364,7 @@ class Bounder:
         of its derivative, which lies in the Clarke gradient's projection, which gives the
         gradient model's bound (taylor.py). Where the argument's enclosure has one sign,
         say [0, b], |a| = a on the whole box and the true factor 1 lies in [0, 1]."""
-        if not any(fg.instruction_id(k) == ca.OP_SIGN for k in range(fg.n_instructions())):
+        if not any(op == ca.OP_SIGN for op, _, _, _ in self._fg_instructions or ()):
             return False
         p = self._point
         return not any(p.instruction_id(k) == ca.OP_SIGN for k in range(p.n_instructions()))
@@ -1375,11 +1385,10 @@ class Bounder:
         ``(f, df/dx_1, ...)`` (built on first use; None when the gradient is not bounded).
         On deep transform products its gradient enclosures escape the wrapping effect that
         makes interval gradients too wide to prove monotonicity."""
-        if self.gradient is None:
+        if self.gradient is None or self._fg is None:
             return None
-        jac = ca.densify(ca.jacobian(self.expr, self._x))
-        try:
-            return AffineProgram(ca.Function("fgv", [self._x], [ca.vertcat(self.expr, jac.T)], {"cse": True}))
+        try:  # the value-and-gradient Function's outputs stacked: (f, df/dx_1, ...)
+            return AffineProgram(self._fg, stack_outputs=True, instructions=self._fg_instructions)
         except SparValueError:
             return None
 
