@@ -1547,6 +1547,7 @@ class _Search:
                      np.array(sides, int), np.full(len(sides), -_INF))
         self.evaluated = 0
         self.steps = 0  # passes made (steps that have begun)
+        self.plain: tuple[float, float] | None = None  # the interval value on the whole box
 
     def tol(self) -> float:
         return max(self.abs_tol, self.rel_tol * max(0.0, -self.U[1] - self.U[0]))
@@ -1624,6 +1625,8 @@ class _Search:
         outs, disc = prog(np.vstack((bl, c)), np.vstack((bh, c)))
         f = outs[0][:, 0, :]
         fb, fc = f[:, :m], f[:, m:]
+        if self.plain is None:  # the first batch is the whole box (once per side)
+            self.plain = (float(fb[0, 0]), float(fb[1, 0]))
         self.offer(c, fc[1], fc[0])
         L = np.where(neg, -fb[1], fb[0])
         cand = [np.where(np.eye(nv, dtype=bool), np.where(self.best[s] == self.lo0, self.hi0, self.lo0),
@@ -1687,7 +1690,7 @@ class _Search:
             L = np.where(oks & ~np.isnan(Lmv), np.maximum(L, Lmv), L)
             lin = AG.linear(F[:, 0, :])
             lin = np.where(neg[None, :], -lin, lin).T  # (k, nv)
-            self.offer_points(np.where(lin >= 0, bl, bh)[np.isfinite(lin).all(1)])
+            lin_corners = np.where(lin >= 0, bl, bh)[np.isfinite(lin).all(1)]
             # the affine gradient as a model valid on every sub-box (taylor.py): iterated
             # monotonicity reduces each box to the faces holding its minimum, and the model
             # integrated from the centre gives a third-order lower bound on what is left
@@ -1698,7 +1701,7 @@ class _Search:
             L = np.where(usable & ~np.isnan(LQ), np.maximum(L, LQ), L)
             gl, gh = model.gradient(*model.coords(nl, nh))
             corner = np.where(0.5 * (gl + gh) >= 0, nl, nh)
-            self.offer_points(corner[usable & np.isfinite(corner).all(1)])
+            self.offer_points(np.vstack((lin_corners, corner[usable & np.isfinite(corner).all(1)])))
             keep = self.settle(bl, bh, side, L)
             if not keep.any():
                 return
@@ -1748,7 +1751,11 @@ class _Search:
             side, L = np.concatenate((side, side)), np.concatenate((L, L))
         self.push(bl, bh, side, L)
 
-    def result(self, plain: tuple[float, float]) -> BoundResult:
+    def result(self) -> BoundResult:
+        if self.plain is None:
+            f0 = self.B.enclose(self.lo0[None, :], self.hi0[None, :])
+            self.plain = (float(f0[0, 0]), float(f0[1, 0]))
+        plain = self.plain
         _, _, ps, pL = self.pool
         for s in (0, 1):  # boxes still in the pool (the budget ran out) bound the minimum too
             if not self.done[s] and (ps == s).any():
@@ -1769,9 +1776,9 @@ class _Search:
 
 def _branch_and_bound(B: Bounder, lo0: np.ndarray, hi0: np.ndarray, rel_tol: float, abs_tol: float,
                       max_boxes: int, max_time: float | None, want: str) -> BoundResult:
-    f0 = B.enclose(lo0[None, :], hi0[None, :])
-    plain = (float(f0[0, 0]), float(f0[1, 0]))
     if lo0.size == 0 or np.all(lo0 == hi0):  # a constant or a point: one evaluation is all
+        f0 = B.enclose(lo0[None, :], hi0[None, :])
+        plain = (float(f0[0, 0]), float(f0[1, 0]))
         exact = math.isfinite(plain[0]) and math.isfinite(plain[1])
         return BoundResult(plain[0], plain[1], exact, 1, plain[1], plain[0])
     t_end = None if max_time is None else time.perf_counter() + max_time
@@ -1779,7 +1786,7 @@ def _branch_and_bound(B: Bounder, lo0: np.ndarray, hi0: np.ndarray, rel_tol: flo
     S = _Search(B, lo0, hi0, sides, rel_tol, abs_tol)
     while S.pool[2].size and S.evaluated < max_boxes and (t_end is None or time.perf_counter() < t_end):
         S.step()
-    return S.result(plain)
+    return S.result()
 
 
 # ================================================================== plain functions
