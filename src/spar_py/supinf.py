@@ -572,6 +572,14 @@ class IntervalProgram:
         S = _Schedule(fn, _interval_classify, instructions)
         self._S = S
         self.sign_continuous = sign_continuous
+        # per "scale" group: where the constant is negative (None: nowhere) and where it is
+        # +-1, so exact (None: nowhere, True: everywhere)
+        self._scale_masks: list[tuple] = []
+        for g in S.groups:
+            c = g.payload[:, None]
+            neg, unit = c < 0, np.abs(c) == 1.0
+            self._scale_masks.append((neg if neg.any() else None,
+                                      True if unit.all() else (unit if unit.any() else None)))
         self.n_in, self.out_sizes = S.n_in, S.out_sizes
         self.n_work = S.n_regs
 
@@ -585,7 +593,7 @@ class IntervalProgram:
         outs = [np.full((2, s, n), np.nan) for s in self.out_sizes]
         disc = np.zeros(n, bool)
         with np.errstate(all="ignore"):
-            for g in S.groups:
+            for g, masks in zip(S.groups, self._scale_masks):
                 kind = g.key[0]
                 A = W[:, g.args[0]]  # (2, k, n)
                 if kind == "binary":
@@ -597,13 +605,19 @@ class IntervalProgram:
                 elif kind == "scale":
                     c = g.payload[:, None]
                     R = A * c
-                    R = np.where(c < 0, R[::-1], R)
-                    R = np.where(np.abs(c) == 1.0, R, _rnd(R))
+                    neg, unit = masks
+                    if neg is not None:
+                        R = np.where(neg, R[::-1], R)
+                    if unit is None:
+                        R = _rnd(R)
+                    elif unit is not True:
+                        R = np.where(unit, R, _rnd(R))
                 elif kind == "unary":
                     f, dfn = _UNARY[g.key[1]]
+                    A2 = A.reshape(2, -1)
                     if dfn is not None and not (self.sign_continuous and g.key[1] == ca.OP_SIGN):
-                        disc |= dfn(A.reshape(2, -1)).reshape(A.shape[1:]).any(0)
-                    R = _flat(f, A)
+                        disc |= dfn(A2).reshape(A.shape[1:]).any(0)
+                    R = f(A2).reshape(A.shape)
                 elif kind == "div_c":
                     c = g.payload[:, None]
                     R = A / c
