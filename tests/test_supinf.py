@@ -787,3 +787,16 @@ def test_sign_of_its_own_keeps_the_discontinuity() -> None:
     assert B.gradient is not None and not B.gradient.sign_continuous
     r = check_sound(e, reg.box(e), np.random.default_rng(2), 20000)
     assert r.lo <= -1.01 + 1e-9 and r.hi >= 1.51 - 1e-9
+
+
+def test_clarke_fabs_off_restores_the_bisection_only_search(monkeypatch: pytest.MonkeyPatch) -> None:
+    import spar_py.supinf as supinf
+
+    reg = Registry()
+    a, b = reg.new("a", -0.05, 0.05), reg.new("b", -0.05, 0.05)
+    e = (ca.fabs(a - b) + 3.0) ** 2 + (ca.fabs(a + b) + 3.6) ** 2
+    on = check_sound(e, reg.box(e), np.random.default_rng(3), 20000, want="hi")
+    monkeypatch.setattr(supinf, "CLARKE_FABS", False)
+    assert not Bounder(e).gradient.sign_continuous
+    off = check_sound(e, reg.box(e), np.random.default_rng(3), 20000, want="hi")
+    assert on.boxes < off.boxes

@@ -99,12 +99,10 @@ AFFINE_GRADIENT = True
 #: Bisect boxes that have a gradient model on the variable whose share of the model's
 #: remainder is largest (otherwise on the largest width * |derivative|).
 SPLIT_BY_REMAINDER = True
-#: While the pool holds fewer than SPLIT_TARGET / 2 boxes, a box is split on its d most
-#: influential variables at once (2^d children, d <= MAX_SPLIT) so that the next pass has
-#: about SPLIT_TARGET boxes: a pass over a few boxes costs nearly what one over 64 does,
-#: so small searches take fewer passes (0: always bisect, the old search).
-SPLIT_TARGET = 0
-MAX_SPLIT = 4
+#: Derivative reasoning (mean value, monotonicity, gradient model) also on boxes where a
+#: ``fabs`` has its kink, through the Clarke gradient (Bounder._kinks_only); False: such
+#: boxes are bisected only, the search before this change (bench/supinf.py compares).
+CLARKE_FABS = True
 
 _INF = math.inf
 _DIR = np.array([[-np.inf], [np.inf]])
@@ -1355,7 +1353,8 @@ class Bounder:
             fg = ca.Function("fg", [x], [e, ca.densify(ca.jacobian(e, x))], {"cse": True})
             self._fg_instructions = _instructions(fg)
             try:
-                self.gradient = AdaptiveProgram(fg, compiled, self._kinks_only(fg), self._fg_instructions)
+                kinks = CLARKE_FABS and self._kinks_only(fg)
+                self.gradient = AdaptiveProgram(fg, compiled, kinks, self._fg_instructions)
                 self._fg = fg
             except SparValueError:
                 self.gradient = None  # derivative uses operations we cannot bound: bisection only
@@ -1746,24 +1745,16 @@ class _Search:
         else:
             keep = np.ones(side.size, bool)
         bl, bh, side, L, infl = bl[keep], bh[keep], side[keep], L[keep], infl[keep]
-        # 4. bisect on the most influential variable; while the pool is small (a pass costs
-        # about the same for 4 boxes as for 64), on the d most influential ones at once
+        # 4. bisect on the most influential variable
         score = np.where(bh > bl, np.nan_to_num(infl, nan=0.0), -1.0)
-        d = 1
-        if SPLIT_TARGET:
-            room = SPLIT_TARGET // max(1, side.size + self.pool[2].size)
-            d = max(1, min(MAX_SPLIT, int(room).bit_length() - 1, int((score > 0).sum(1).min(initial=nv))))
-        jj = np.argsort(-score, axis=1)[:, :d] if d > 1 else np.argmax(score, axis=1)[:, None]
-        for t in range(d):
-            j = jj[:, t]
-            r = np.arange(j.size)
-            mid = 0.5 * (bl[r, j] + bh[r, j])
-            left_h, right_l = bh.copy(), bl.copy()
-            left_h[r, j] = mid
-            right_l[r, j] = mid
-            bl, bh, jj = np.vstack((bl, right_l)), np.vstack((left_h, bh)), np.vstack((jj, jj))
-            side, L = np.concatenate((side, side)), np.concatenate((L, L))
-        self.push(bl, bh, side, L)
+        j = np.argmax(score, axis=1)
+        r = np.arange(j.size)
+        mid = 0.5 * (bl[r, j] + bh[r, j])
+        left_h, right_l = bh.copy(), bl.copy()
+        left_h[r, j] = mid
+        right_l[r, j] = mid
+        self.push(np.vstack((bl, right_l)), np.vstack((left_h, bh)), np.concatenate((side, side)),
+                  np.concatenate((L, L)))
 
     def result(self) -> BoundResult:
         if self.plain is None:
