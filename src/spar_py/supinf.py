@@ -40,6 +40,11 @@ the guarantee and removes most of the looseness:
    within ``max(abs_tol, rel_tol * width)`` of a value the function attains (``width``
    the spread of attained values found; the final claim is re-checked with rigorous
    values) or when ``max_boxes`` / ``max_time`` run out; :class:`BoundResult` says which.
+   Kinks of ``fabs`` do not stop this derivative reasoning: the interval ``sign`` of an
+   argument that straddles 0 is [-1, 1], so the gradient enclosures hold the Clarke
+   generalised gradient and Lebourg's mean-value theorem keeps every step sound
+   (:meth:`Bounder._kinks_only`; an expression with a ``sign`` of its own is still treated
+   as discontinuous).
 
 4. **Evaluation.** Both programs run as a levelled, grouped schedule (:class:`_Schedule`):
    the instructions of one level that apply the same rule are one vectorised numpy
