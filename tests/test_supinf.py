@@ -800,3 +800,18 @@ def test_clarke_fabs_off_restores_the_bisection_only_search(monkeypatch: pytest.
     assert not Bounder(e).gradient.sign_continuous
     off = check_sound(e, reg.box(e), np.random.default_rng(3), 20000, want="hi")
     assert on.boxes < off.boxes
+
+
+@pytest.mark.parametrize("lo,hi", [(0.0, 1.0), (0.3, 1.0), (-1.0, 0.3), (-0.5, 0.5)])
+def test_fabs_extremum_on_the_kink_is_enclosed(lo: float, hi: float) -> None:
+    # minimum and maximum exactly at kinks (also at a face of the box): known values
+    reg = Registry()
+    x, y = reg.new("x", lo, hi), reg.new("y", -0.5, 0.5)
+    for e, want_lo, want_hi in (
+            (ca.fabs(x - 0.3) + ca.fabs(y + 0.2), min(abs(v - 0.3) for v in (lo, hi, min(max(0.3, lo), hi))),
+             max(abs(lo - 0.3), abs(hi - 0.3)) + 0.7),
+            (-ca.fabs(x - 0.3) - ca.fabs(y + 0.2), -(max(abs(lo - 0.3), abs(hi - 0.3)) + 0.7),
+             -min(abs(v - 0.3) for v in (lo, hi, min(max(0.3, lo), hi))))):
+        r = Bounder(e).bounds(reg.box(e))
+        assert r.lo <= want_lo + 1e-15 and want_hi - 1e-15 <= r.hi
+        assert r.tolerance_reached and want_lo - r.lo <= 1e-3 and r.hi - want_hi <= 1e-3
