@@ -567,7 +567,9 @@ class IntervalProgram:
 
     ``sign_continuous``: ``sign`` never marks a box discontinuous. Only for the gradient
     program of an expression that has no ``sign`` of its own, where every ``sign`` is the
-    derivative of a ``fabs`` (see :class:`Bounder`).
+    derivative of a ``fabs`` (see :class:`Bounder`). ``prog(lo, hi, with_kinks=True)``
+    returns ``(outs, disc, kink)``, ``kink`` (n,) True where such a ``sign``'s argument
+    straddles 0 (a kink of the expression may lie in the box).
     """
 
     def __init__(self, fn: ca.Function, sign_continuous: bool = False,
@@ -586,7 +588,7 @@ class IntervalProgram:
         self.n_in, self.out_sizes = S.n_in, S.out_sizes
         self.n_work = S.n_regs
 
-    def __call__(self, lo: np.ndarray, hi: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
+    def __call__(self, lo: np.ndarray, hi: np.ndarray, with_kinks: bool = False) -> tuple:
         lo = np.asarray(lo, float)
         hi = np.asarray(hi, float)
         n = lo.shape[0]
@@ -595,6 +597,7 @@ class IntervalProgram:
         S.load(W, np.array((lo.T, hi.T)), lambda c: c[None, :, None])
         outs = [np.full((2, s, n), np.nan) for s in self.out_sizes]
         disc = np.zeros(n, bool)
+        kink = np.zeros(n, bool)
         with np.errstate(all="ignore"):
             for g, masks in zip(S.groups, self._scale_masks):
                 kind = g.key[0]
@@ -618,8 +621,12 @@ class IntervalProgram:
                 elif kind == "unary":
                     f, dfn = _UNARY[g.key[1]]
                     A2 = A.reshape(2, -1)
-                    if dfn is not None and not (self.sign_continuous and g.key[1] == ca.OP_SIGN):
-                        disc |= dfn(A2).reshape(A.shape[1:]).any(0)
+                    if dfn is not None:
+                        d = dfn(A2).reshape(A.shape[1:]).any(0)
+                        if self.sign_continuous and g.key[1] == ca.OP_SIGN:
+                            kink |= d
+                        else:
+                            disc |= d
                     R = f(A2).reshape(A.shape)
                 elif kind == "div_c":
                     c = g.payload[:, None]
@@ -635,7 +642,7 @@ class IntervalProgram:
             bad = np.isnan(r).any(0)
             r[0][bad] = -_INF
             r[1][bad] = _INF
-        return outs, disc
+        return (outs, disc, kink) if with_kinks else (outs, disc)
 
 
 # ================================================================== the compiled interval program
@@ -839,6 +846,7 @@ class CompiledIntervalProgram:
         outs = [[(ca.SX(np.nan), ca.SX(np.nan))] * s for s in self.out_sizes]
         bad: list[ca.SX] = []  # summed once at the end (a running sum re-walks its chain)
         disc: list[ca.SX] = []
+        kink: list[ca.SX] = []
         for op, ins, o_regs, const in _instructions(fn):
             o = o_regs[0] if o_regs else -1
             if op == ca.OP_CONST:
@@ -873,6 +881,7 @@ class CompiledIntervalProgram:
                 elif op in _UNARY:
                     r, d_bad, d_disc = _sx_unary(op, w[ins[0]])
                     if sign_continuous and op == ca.OP_SIGN:
+                        kink.append(d_disc)
                         d_disc = ca.SX(0)
                 elif op in _BINARY:
                     r, d_bad, d_disc = _sx_binary(op, w[ins[0]], w[ins[1]])
@@ -883,7 +892,7 @@ class CompiledIntervalProgram:
                 disc.append(d_disc)
             consts.pop(o, None)
         flat = [e for out in outs for e in (*[lo for lo, _ in out], *[hi for _, hi in out])]
-        total = [ca.sum1(ca.vertcat(*t)) if t else ca.SX(0) for t in (disc, bad)]
+        total = [ca.sum1(ca.vertcat(*t)) if t else ca.SX(0) for t in (disc, bad, kink)]
         self._f = ca.Function("iv", [X], [ca.vertcat(*flat, *total)])
         self._fallback: IntervalProgram | None = None
 
@@ -892,7 +901,7 @@ class CompiledIntervalProgram:
         """Instructions of the compiled interval Function (a size measure)."""
         return int(self._f.n_instructions())
 
-    def __call__(self, lo: np.ndarray, hi: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
+    def __call__(self, lo: np.ndarray, hi: np.ndarray, with_kinks: bool = False) -> tuple:
         lo = np.atleast_2d(np.asarray(lo, float))
         hi = np.atleast_2d(np.asarray(hi, float))
         n = lo.shape[0]
@@ -904,19 +913,21 @@ class CompiledIntervalProgram:
             outs.append(np.array((R[k:k + s], R[k + s:k + 2 * s])))
             k += 2 * s
         disc = R[k] != 0
+        kink = R[k + 2] != 0
         redo = ~(R[k + 1] == 0) | ~np.isfinite(lo).all(1) | ~np.isfinite(hi).all(1)
         if redo.any():
             if self._fallback is None:
                 self._fallback = IntervalProgram(self._fn, self.sign_continuous)
-            fo, fd = self._fallback(lo[redo], hi[redo])
+            fo, fd, fk = self._fallback(lo[redo], hi[redo], with_kinks=True)
             for r, f in zip(outs, fo):
                 r[:, :, redo] = f
             disc[redo] = fd
+            kink[redo] = fk
         for r in outs:  # an output no instruction wrote: unknown
             unknown = np.isnan(r).any(0)
             r[0][unknown] = -_INF
             r[1][unknown] = _INF
-        return outs, disc
+        return (outs, disc, kink) if with_kinks else (outs, disc)
 
 
 #: Batches of at most this many boxes go to the compiled program when there is one (on
@@ -945,12 +956,12 @@ class AdaptiveProgram:
         self.compiled: CompiledIntervalProgram | None = None
         self.n_in, self.out_sizes = self.interpreted.n_in, self.interpreted.out_sizes
 
-    def __call__(self, lo: np.ndarray, hi: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
+    def __call__(self, lo: np.ndarray, hi: np.ndarray, with_kinks: bool = False) -> tuple:
         if not self.use_compiled or np.shape(lo)[0] > COMPILED_MAX_BATCH:
-            return self.interpreted(lo, hi)
+            return self.interpreted(lo, hi, with_kinks)
         if self.compiled is None:
             self.compiled = CompiledIntervalProgram(self._fn, self.sign_continuous)
-        return self.compiled(lo, hi)
+        return self.compiled(lo, hi, with_kinks)
 
 
 # ================================================================== affine arithmetic
@@ -1640,7 +1651,7 @@ class _Search:
         # 1. interval value and gradient on the boxes and their centres
         c = np.minimum(np.maximum(0.5 * (bl + bh), bl), bh)
         prog = B.gradient if B.gradient is not None else B.program
-        outs, disc = prog(np.vstack((bl, c)), np.vstack((bh, c)))
+        outs, disc, kink = prog(np.vstack((bl, c)), np.vstack((bh, c)), with_kinks=True)
         f = outs[0][:, 0, :]
         fb, fc = f[:, :m], f[:, m:]
         if self.plain is None:  # the first batch is the whole box (once per side)
@@ -1651,13 +1662,16 @@ class _Search:
                          self.best[s]) for s in (0, 1) if not self.done[s]]
         G = None
         ok = np.zeros(m, bool)
+        # no kink of a fabs in the box: the mean-value and model bounds apply there (they are
+        # sound across kinks too, but loose, and bisecting at the kink is exact)
+        smooth = ~kink[:m]
         fcv = np.where(neg, -fc[1], fc[0])  # rigorous lower end of g_s at the centres
         if B.gradient is not None:
             G = outs[1][:, :, :m]  # (2, nv, m), for g_s
             G = np.where(neg[None, None, :], -G[::-1], G)
             ok = ~disc[:m] & np.isfinite(G).all((0, 1))
             Lmv = _mean_value_lower(fcv, G, bl, bh, c)
-            L = np.where(ok & ~np.isnan(Lmv), np.maximum(L, Lmv), L)
+            L = np.where(ok & smooth & ~np.isnan(Lmv), np.maximum(L, Lmv), L)
             gmid = 0.5 * (G[0] + G[1]).T  # (m, nv)
             cand.append(np.where(gmid >= 0, bl, bh)[np.isfinite(gmid).all(1)])
         self.offer_points(np.vstack(cand))
@@ -1666,7 +1680,7 @@ class _Search:
         if not keep.any():
             return
         bl, bh, side, L, ok = bl[keep], bh[keep], side[keep], L[keep], ok[keep]
-        c, fcv = c[keep], fcv[keep]
+        c, fcv, smooth = c[keep], fcv[keep], smooth[keep]
         neg = side == 1
         width = bh - bl
         # 2. monotonicity: fix variables whose derivative has one sign over the box
@@ -1705,7 +1719,7 @@ class _Search:
             Gs = np.array((np.maximum(Gs[0], GA[0]), np.minimum(Gs[1], GA[1])))
             oks = ok[sp] & np.isfinite(Gs).all((0, 1))
             Lmv = _mean_value_lower(fcv[sp], Gs, bl, bh, c[sp])
-            L = np.where(oks & ~np.isnan(Lmv), np.maximum(L, Lmv), L)
+            L = np.where(oks & smooth[sp] & ~np.isnan(Lmv), np.maximum(L, Lmv), L)
             lin = AG.linear(F[:, 0, :])
             lin = np.where(neg[None, :], -lin, lin).T  # (k, nv)
             lin_corners = np.where(lin >= 0, bl, bh)[np.isfinite(lin).all(1)]
@@ -1716,7 +1730,7 @@ class _Search:
             usable = oks & model.finite
             nl, nh, fixed = model.fix_monotone(bl, bh, usable, (Gs[0].T, Gs[1].T))
             LQ = model.lower(fcv[sp], nl, nh)
-            L = np.where(usable & ~np.isnan(LQ), np.maximum(L, LQ), L)
+            L = np.where(usable & smooth[sp] & ~np.isnan(LQ), np.maximum(L, LQ), L)
             gl, gh = model.gradient(*model.coords(nl, nh))
             corner = np.where(0.5 * (gl + gh) >= 0, nl, nh)
             self.offer_points(np.vstack((lin_corners, corner[usable & np.isfinite(corner).all(1)])))
