@@ -2,7 +2,9 @@
 
 Run from the project root: ``.venv/bin/python -m bench.supinf [--per-length 10] [--seed 0]``;
 ``--uniform N`` only the table by depth at +-0.1, ``--model N`` only the gradient model's
-remainder by depth (why deep products need many boxes), ``--depths 6,8`` to choose depths.
+remainder by depth (why deep products need many boxes), ``--depths 6,8`` to choose depths,
+``--kinks R`` only hopeless_uncertainty.yaml's own questions with ``supinf.CLARKE_FABS`` off
+and on (R interleaved rounds).
 
 For each expression it reports, as medians over a group of expressions:
 
@@ -341,6 +343,82 @@ def model_table(rng: np.random.Generator, count: int, lengths: tuple[int, ...] =
     return rows
 
 
+# ------------------------------------------------------------------ the planner's own questions
+
+
+HOPELESS = ROOT / "kb" / "problems" / "hopeless_uncertainty.yaml"
+
+
+def planner_questions(problem: Path = HOPELESS) -> list[tuple[ca.SX, dict, dict]]:
+    """The distinct SUP/INF questions (expression, box, options) ``spar plan problem`` asks
+    (recorded around ``uncertainty.cached_bounds`` during one in-process run; its output
+    is discarded), each with its variables renamed as the planner's cache keys them."""
+    import contextlib
+    import io
+
+    from spar_py import cli, supinf, uncertainty
+
+    asked: list[tuple[ca.SX, dict, dict]] = []
+    real = uncertainty.cached_bounds
+
+    def record(expr, box, memo=None, **options):
+        asked.append((expr, dict(box), dict(options)))
+        return real(expr, box, memo, **options)
+
+    uncertainty.cached_bounds = record
+    try:
+        with contextlib.redirect_stdout(io.StringIO()), contextlib.suppress(SystemExit):
+            cli.main(["plan", str(problem)])
+    finally:
+        uncertainty.cached_bounds = real
+    out, seen = [], set()
+    for expr, box, options in asked:
+        canon, names = supinf._canonical(expr)
+        cbox = {f"v{i}": tuple(box[n]) for i, n in enumerate(names)}
+        key = (canon.serialize(), tuple(sorted(cbox.items())), tuple(sorted(options.items())))
+        if key not in seen:
+            seen.add(key)
+            out.append((canon, cbox, options))
+    return out
+
+
+def kinks_table(rounds: int = 3, problem: Path = HOPELESS, progress=None) -> dict:
+    """``problem``'s distinct SUP/INF questions answered cold (Bounder built, then bounded),
+    with ``supinf.CLARKE_FABS`` off (the search before the Clarke-gradient change: boxes
+    holding a kink of fabs are only bisected) and on, interleaved over ``rounds``: total
+    time (ms, median over rounds), boxes, tolerance reached, and the largest change of a
+    bound the planner reads (INF for '>' , SUP for '<')."""
+    from spar_py import supinf
+
+    say = progress or (lambda line: None)
+    qs = planner_questions(problem)
+    times: dict[bool, list[float]] = {False: [], True: []}
+    res: dict[bool, list] = {}
+    for _ in range(rounds):
+        for flag in (False, True):
+            supinf.CLARKE_FABS = flag
+            t = time.perf_counter()
+            res[flag] = [Bounder(e).bounds(box, **opt) for e, box, opt in qs]
+            times[flag].append((time.perf_counter() - t) * 1e3)
+    supinf.CLARKE_FABS = True
+    read = [(r.lo if opt.get("want") == "lo" else r.hi) for r, (_, _, opt) in zip(res[True], qs)]
+    old = [(r.lo if opt.get("want") == "lo" else r.hi) for r, (_, _, opt) in zip(res[False], qs)]
+    out = {"questions": len(qs), "problem": problem.name,
+           **{f"{k}_{'new' if f else 'old'}": v for f in (False, True) for k, v in
+              (("ms", statistics.median(times[f])), ("boxes", sum(r.boxes for r in res[f])),
+               ("reached", sum(r.tolerance_reached for r in res[f])))},
+           "max_change": max(abs(a - b) for a, b in zip(read, old)),
+           "changed": sum(a != b for a, b in zip(read, old))}
+    say(f"{problem.name}: {out['questions']} distinct SUP/INF questions, cold (compile + bound), "
+        f"median of {rounds} interleaved rounds")
+    say(f"{'':<22}{'ms':>8}{'boxes':>8}{'reached':>9}")
+    for f, name in ((False, "CLARKE_FABS off (old)"), (True, "CLARKE_FABS on")):
+        tag = "new" if f else "old"
+        say(f"{name:<22}{out['ms_' + tag]:>8.0f}{out['boxes_' + tag]:>8}{out['reached_' + tag]:>5}/{out['questions']}")
+    say(f"bounds read by the planner changed: {out['changed']}, by at most {out['max_change']:.2e}")
+    return out
+
+
 # ------------------------------------------------------------------ report
 
 
@@ -432,10 +510,15 @@ def main(argv: list[str] | None = None) -> None:
                     help="only the table by depth 1-8 at +-0.1 (N expressions per depth)")
     ap.add_argument("--model", type=int, default=0, metavar="N",
                     help="only the gradient model's remainder by depth 1-8 at +-0.1 (N expressions per depth)")
+    ap.add_argument("--kinks", type=int, default=0, metavar="R",
+                    help="only hopeless_uncertainty.yaml's SUP/INF questions, CLARKE_FABS off vs on (R rounds)")
     ap.add_argument("--depths", type=str, default="1-8", help="with --uniform or --model: e.g. 1-8 or 6,8")
     args = ap.parse_args(argv)
     a, _, b = args.depths.partition("-")
     lengths = tuple(range(int(a), int(b) + 1)) if b else tuple(int(v) for v in args.depths.split(","))
+    if args.kinks:
+        kinks_table(args.kinks, progress=print)
+        return
     if args.model:
         model_table(np.random.default_rng(args.seed), args.model, lengths=lengths, progress=print)
         return

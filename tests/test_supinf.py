@@ -734,3 +734,84 @@ def test_gradient_model_is_exact_on_a_quadratic() -> None:
     P = np.random.default_rng(0).uniform(L[0], H[0], (20000, 2))
     assert B.values(P).min() >= true_min - 1e-12
     assert LQ >= true_min - 1.5
+
+
+# ------------------------------------------------------------------ kinks of fabs (Clarke gradient)
+
+
+def _kinked(rng: np.random.Generator, reg: Registry) -> ca.SX:
+    """A random sum of squares of |linear + trig| + c, the shape of the planner's 'centres'
+    constraint: kinks along planes and curves that cross the box, often through a corner."""
+    v = [reg.new(f"k{i}", *rand_bounds(rng, 0.3)) for i in range(4)]
+    e = ca.SX(0)
+    for _ in range(3):
+        a = sum(float(rng.uniform(-1, 1)) * x for x in v) + float(rng.uniform(-0.2, 0.2)) * ca.cos(v[0])
+        e = e + (ca.fabs(a + float(rng.uniform(-0.05, 0.05))) + float(rng.uniform(0, 2))) ** 2
+    return e + 0.3 * ca.sin(v[1]) * ca.fabs(v[2] - v[3])
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_fabs_kinks_bounds_sound_against_dense_sampling(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    reg = Registry()
+    e = _kinked(rng, reg)
+    box = reg.box(e)
+    check_sound(e, box, rng, 40000)
+    B = Bounder(e)
+    lo, hi = box_arrays(B, box)
+    for _ in range(4):  # random sub-boxes too: kinks at their faces and corners
+        a, b = np.sort(rng.uniform(lo, hi, (2, lo.size)), axis=0)
+        sub = {n: (float(x), float(y)) for n, x, y in zip(B.names, a, b)}
+        check_sound(e, sub, rng, 20000)
+
+
+def test_fabs_kinks_keep_the_gradient_and_need_few_boxes() -> None:
+    # the planner's assemble 'centres' shape: the maximum sits on a kink of |v1 - v2|
+    reg = Registry()
+    th = reg.new("th", -math.pi / 180, math.pi / 180)
+    a, b = reg.new("a", -0.05, 0.05), reg.new("b", -0.05, 0.05)
+    s = 0.5 ** 0.5
+    e = ((ca.fabs(-1.41421 * ca.sin(th)) + 0.1) ** 2 + (ca.fabs(s * a + s * b + 1.5 * (1 - ca.cos(th))) + 3.6) ** 2
+         + (ca.fabs(s * a - s * b + 0.25 * (ca.cos(th) - 1)) + 3.05) ** 2)
+    B = Bounder(e)
+    assert B.gradient is not None and B.gradient.sign_continuous
+    r = check_sound(e, reg.box(e), np.random.default_rng(1), 40000, want="hi")
+    assert r.tolerance_reached and r.boxes < 500  # 2,500 boxes when every kink blocked the gradient
+
+
+def test_sign_of_its_own_keeps_the_discontinuity() -> None:
+    reg = Registry()
+    x, y = reg.new("x", -1.0, 1.0), reg.new("y", 0.0, 1.0)
+    e = ca.sign(x) + 0.01 * x + ca.fabs(y - 0.5)  # a jump at x = 0: no derivative reasoning there
+    B = Bounder(e)
+    assert B.gradient is not None and not B.gradient.sign_continuous
+    r = check_sound(e, reg.box(e), np.random.default_rng(2), 20000)
+    assert r.lo <= -1.01 + 1e-9 and r.hi >= 1.51 - 1e-9
+
+
+def test_clarke_fabs_off_restores_the_bisection_only_search(monkeypatch: pytest.MonkeyPatch) -> None:
+    import spar_py.supinf as supinf
+
+    reg = Registry()
+    a, b = reg.new("a", -0.05, 0.05), reg.new("b", -0.05, 0.05)
+    e = (ca.fabs(a - b) + 3.0) ** 2 + (ca.fabs(a + b) + 3.6) ** 2
+    on = check_sound(e, reg.box(e), np.random.default_rng(3), 20000, want="hi")
+    monkeypatch.setattr(supinf, "CLARKE_FABS", False)
+    assert not Bounder(e).gradient.sign_continuous
+    off = check_sound(e, reg.box(e), np.random.default_rng(3), 20000, want="hi")
+    assert on.boxes < off.boxes
+
+
+@pytest.mark.parametrize("lo,hi", [(0.0, 1.0), (0.3, 1.0), (-1.0, 0.3), (-0.5, 0.5)])
+def test_fabs_extremum_on_the_kink_is_enclosed(lo: float, hi: float) -> None:
+    # minimum and maximum exactly at kinks (also at a face of the box): known values
+    reg = Registry()
+    x, y = reg.new("x", lo, hi), reg.new("y", -0.5, 0.5)
+    for e, want_lo, want_hi in (
+            (ca.fabs(x - 0.3) + ca.fabs(y + 0.2), min(abs(v - 0.3) for v in (lo, hi, min(max(0.3, lo), hi))),
+             max(abs(lo - 0.3), abs(hi - 0.3)) + 0.7),
+            (-ca.fabs(x - 0.3) - ca.fabs(y + 0.2), -(max(abs(lo - 0.3), abs(hi - 0.3)) + 0.7),
+             -min(abs(v - 0.3) for v in (lo, hi, min(max(0.3, lo), hi))))):
+        r = Bounder(e).bounds(reg.box(e))
+        assert r.lo <= want_lo + 1e-15 and want_hi - 1e-15 <= r.hi
+        assert r.tolerance_reached and want_lo - r.lo <= 1e-3 and r.hi - want_hi <= 1e-3

@@ -40,6 +40,11 @@ the guarantee and removes most of the looseness:
    within ``max(abs_tol, rel_tol * width)`` of a value the function attains (``width``
    the spread of attained values found; the final claim is re-checked with rigorous
    values) or when ``max_boxes`` / ``max_time`` run out; :class:`BoundResult` says which.
+   Kinks of ``fabs`` do not stop this derivative reasoning: the interval ``sign`` of an
+   argument that straddles 0 is [-1, 1], so the gradient enclosures hold the Clarke
+   generalised gradient and Lebourg's mean-value theorem keeps every step sound
+   (:meth:`Bounder._kinks_only`; an expression with a ``sign`` of its own is still treated
+   as discontinuous).
 
 4. **Evaluation.** Both programs run as a levelled, grouped schedule (:class:`_Schedule`):
    the instructions of one level that apply the same rule are one vectorised numpy
@@ -99,6 +104,10 @@ AFFINE_GRADIENT = True
 #: Bisect boxes that have a gradient model on the variable whose share of the model's
 #: remainder is largest (otherwise on the largest width * |derivative|).
 SPLIT_BY_REMAINDER = True
+#: Derivative reasoning (mean value, monotonicity, gradient model) also on boxes where a
+#: ``fabs`` has its kink, through the Clarke gradient (Bounder._kinks_only); False: such
+#: boxes are bisected only, the search before this change (bench/supinf.py compares).
+CLARKE_FABS = True
 
 _INF = math.inf
 _DIR = np.array([[-np.inf], [np.inf]])
@@ -428,7 +437,8 @@ class _Schedule:
     """
 
     def __init__(self, fn: ca.Function, classify: Callable[[int, tuple[int, ...], dict[int, float]],
-                                                           tuple[tuple, tuple[int, ...], float]]) -> None:
+                                                           tuple[tuple, tuple[int, ...], float]],
+                 instructions: list[tuple[int, list[int], list[int], float]] | None = None) -> None:
         if fn.n_in() != 1:
             raise SparValueError("supinf: the Function must have exactly one (vector) input")
         self.n_in = int(fn.nnz_in(0))
@@ -439,7 +449,7 @@ class _Schedule:
         ops: list[tuple[tuple, tuple[int, ...], int, float]] = []  # (key, arg slots, out slot, payload)
         outputs: list[tuple[int, int, int]] = []  # (output, nonzero, slot)
         n = 0
-        for op, ins, outs, const in _instructions(fn):
+        for op, ins, outs, const in (_instructions(fn) if instructions is None else instructions):
             if op == ca.OP_OUTPUT:
                 outputs.append((outs[0], outs[1], reg[ins[0]]))
                 continue
@@ -554,15 +564,31 @@ class IntervalProgram:
     box, ``disc`` (n,) True where some operation may be discontinuous on the box (then
     derivative-based reasoning does not apply there). Evaluated by a :class:`_Schedule`:
     one vectorised rule per group of like instructions of one level, over all boxes.
+
+    ``sign_continuous``: ``sign`` never marks a box discontinuous. Only for the gradient
+    program of an expression that has no ``sign`` of its own, where every ``sign`` is the
+    derivative of a ``fabs`` (see :class:`Bounder`). ``prog(lo, hi, with_kinks=True)``
+    returns ``(outs, disc, kink)``, ``kink`` (n,) True where such a ``sign``'s argument
+    straddles 0 (a kink of the expression may lie in the box).
     """
 
-    def __init__(self, fn: ca.Function) -> None:
-        S = _Schedule(fn, _interval_classify)
+    def __init__(self, fn: ca.Function, sign_continuous: bool = False,
+                 instructions: list[tuple[int, list[int], list[int], float]] | None = None) -> None:
+        S = _Schedule(fn, _interval_classify, instructions)
         self._S = S
+        self.sign_continuous = sign_continuous
+        # per "scale" group: where the constant is negative (None: nowhere) and where it is
+        # +-1, so exact (None: nowhere, True: everywhere)
+        self._scale_masks: list[tuple] = []
+        for g in S.groups:
+            c = g.payload[:, None]
+            neg, unit = c < 0, np.abs(c) == 1.0
+            self._scale_masks.append((neg if neg.any() else None,
+                                      True if unit.all() else (unit if unit.any() else None)))
         self.n_in, self.out_sizes = S.n_in, S.out_sizes
         self.n_work = S.n_regs
 
-    def __call__(self, lo: np.ndarray, hi: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
+    def __call__(self, lo: np.ndarray, hi: np.ndarray, with_kinks: bool = False) -> tuple:
         lo = np.asarray(lo, float)
         hi = np.asarray(hi, float)
         n = lo.shape[0]
@@ -571,8 +597,9 @@ class IntervalProgram:
         S.load(W, np.array((lo.T, hi.T)), lambda c: c[None, :, None])
         outs = [np.full((2, s, n), np.nan) for s in self.out_sizes]
         disc = np.zeros(n, bool)
+        kink = np.zeros(n, bool)
         with np.errstate(all="ignore"):
-            for g in S.groups:
+            for g, masks in zip(S.groups, self._scale_masks):
                 kind = g.key[0]
                 A = W[:, g.args[0]]  # (2, k, n)
                 if kind == "binary":
@@ -584,13 +611,23 @@ class IntervalProgram:
                 elif kind == "scale":
                     c = g.payload[:, None]
                     R = A * c
-                    R = np.where(c < 0, R[::-1], R)
-                    R = np.where(np.abs(c) == 1.0, R, _rnd(R))
+                    neg, unit = masks
+                    if neg is not None:
+                        R = np.where(neg, R[::-1], R)
+                    if unit is None:
+                        R = _rnd(R)
+                    elif unit is not True:
+                        R = np.where(unit, R, _rnd(R))
                 elif kind == "unary":
                     f, dfn = _UNARY[g.key[1]]
+                    A2 = A.reshape(2, -1)
                     if dfn is not None:
-                        disc |= dfn(A.reshape(2, -1)).reshape(A.shape[1:]).any(0)
-                    R = _flat(f, A)
+                        d = dfn(A2).reshape(A.shape[1:]).any(0)
+                        if self.sign_continuous and g.key[1] == ca.OP_SIGN:
+                            kink |= d
+                        else:
+                            disc |= d
+                    R = f(A2).reshape(A.shape)
                 elif kind == "div_c":
                     c = g.payload[:, None]
                     R = A / c
@@ -605,7 +642,7 @@ class IntervalProgram:
             bad = np.isnan(r).any(0)
             r[0][bad] = -_INF
             r[1][bad] = _INF
-        return outs, disc
+        return (outs, disc, kink) if with_kinks else (outs, disc)
 
 
 # ================================================================== the compiled interval program
@@ -794,10 +831,11 @@ class CompiledIntervalProgram:
     interpreted :class:`IntervalProgram` (built on first need).
     """
 
-    def __init__(self, fn: ca.Function) -> None:
+    def __init__(self, fn: ca.Function, sign_continuous: bool = False) -> None:
         if fn.n_in() != 1:
             raise SparValueError("IntervalProgram: the Function must have exactly one (vector) input")
         self._fn = fn
+        self.sign_continuous = sign_continuous
         self.n_in = int(fn.nnz_in(0))
         self.out_sizes = [int(fn.nnz_out(k)) for k in range(fn.n_out())]
         n = self.n_in
@@ -808,6 +846,7 @@ class CompiledIntervalProgram:
         outs = [[(ca.SX(np.nan), ca.SX(np.nan))] * s for s in self.out_sizes]
         bad: list[ca.SX] = []  # summed once at the end (a running sum re-walks its chain)
         disc: list[ca.SX] = []
+        kink: list[ca.SX] = []
         for op, ins, o_regs, const in _instructions(fn):
             o = o_regs[0] if o_regs else -1
             if op == ca.OP_CONST:
@@ -841,6 +880,9 @@ class CompiledIntervalProgram:
                     r = (_sx_dn(lo), _sx_up(hi))
                 elif op in _UNARY:
                     r, d_bad, d_disc = _sx_unary(op, w[ins[0]])
+                    if sign_continuous and op == ca.OP_SIGN:
+                        kink.append(d_disc)
+                        d_disc = ca.SX(0)
                 elif op in _BINARY:
                     r, d_bad, d_disc = _sx_binary(op, w[ins[0]], w[ins[1]])
                 else:
@@ -850,7 +892,7 @@ class CompiledIntervalProgram:
                 disc.append(d_disc)
             consts.pop(o, None)
         flat = [e for out in outs for e in (*[lo for lo, _ in out], *[hi for _, hi in out])]
-        total = [ca.sum1(ca.vertcat(*t)) if t else ca.SX(0) for t in (disc, bad)]
+        total = [ca.sum1(ca.vertcat(*t)) if t else ca.SX(0) for t in (disc, bad, kink)]
         self._f = ca.Function("iv", [X], [ca.vertcat(*flat, *total)])
         self._fallback: IntervalProgram | None = None
 
@@ -859,7 +901,7 @@ class CompiledIntervalProgram:
         """Instructions of the compiled interval Function (a size measure)."""
         return int(self._f.n_instructions())
 
-    def __call__(self, lo: np.ndarray, hi: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
+    def __call__(self, lo: np.ndarray, hi: np.ndarray, with_kinks: bool = False) -> tuple:
         lo = np.atleast_2d(np.asarray(lo, float))
         hi = np.atleast_2d(np.asarray(hi, float))
         n = lo.shape[0]
@@ -871,19 +913,21 @@ class CompiledIntervalProgram:
             outs.append(np.array((R[k:k + s], R[k + s:k + 2 * s])))
             k += 2 * s
         disc = R[k] != 0
+        kink = R[k + 2] != 0
         redo = ~(R[k + 1] == 0) | ~np.isfinite(lo).all(1) | ~np.isfinite(hi).all(1)
         if redo.any():
             if self._fallback is None:
-                self._fallback = IntervalProgram(self._fn)
-            fo, fd = self._fallback(lo[redo], hi[redo])
+                self._fallback = IntervalProgram(self._fn, self.sign_continuous)
+            fo, fd, fk = self._fallback(lo[redo], hi[redo], with_kinks=True)
             for r, f in zip(outs, fo):
                 r[:, :, redo] = f
             disc[redo] = fd
+            kink[redo] = fk
         for r in outs:  # an output no instruction wrote: unknown
             unknown = np.isnan(r).any(0)
             r[0][unknown] = -_INF
             r[1][unknown] = _INF
-        return outs, disc
+        return (outs, disc, kink) if with_kinks else (outs, disc)
 
 
 #: Batches of at most this many boxes go to the compiled program when there is one (on
@@ -903,19 +947,21 @@ class AdaptiveProgram:
     bounded many times over; the planner leaves it off (bench/supinf.py measures both).
     """
 
-    def __init__(self, fn: ca.Function, compiled: bool = False) -> None:
+    def __init__(self, fn: ca.Function, compiled: bool = False, sign_continuous: bool = False,
+                 instructions: list[tuple[int, list[int], list[int], float]] | None = None) -> None:
         self._fn = fn
-        self.interpreted = IntervalProgram(fn)
+        self.sign_continuous = sign_continuous
+        self.interpreted = IntervalProgram(fn, sign_continuous, instructions)
         self.use_compiled = compiled
         self.compiled: CompiledIntervalProgram | None = None
         self.n_in, self.out_sizes = self.interpreted.n_in, self.interpreted.out_sizes
 
-    def __call__(self, lo: np.ndarray, hi: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
+    def __call__(self, lo: np.ndarray, hi: np.ndarray, with_kinks: bool = False) -> tuple:
         if not self.use_compiled or np.shape(lo)[0] > COMPILED_MAX_BATCH:
-            return self.interpreted(lo, hi)
+            return self.interpreted(lo, hi, with_kinks)
         if self.compiled is None:
-            self.compiled = CompiledIntervalProgram(self._fn)
-        return self.compiled(lo, hi)
+            self.compiled = CompiledIntervalProgram(self._fn, self.sign_continuous)
+        return self.compiled(lo, hi, with_kinks)
 
 
 # ================================================================== affine arithmetic
@@ -942,12 +988,15 @@ class AffineProgram:
     """A CasADi Function's instruction list evaluated in affine arithmetic on batches of boxes.
 
     Same input convention as :class:`IntervalProgram`; ``prog(lo, hi)`` returns the affine
-    forms of output 0, shape ``(K + J + 2, nnz_0, n)``. Operations without an affine rule
+    forms of output 0, shape ``(K + J + 2, nnz_0, n)`` (``stack_outputs``: of all outputs,
+    their nonzeros one after another; ``instructions``: ``fn``'s instruction list, if the
+    caller has it already). Operations without an affine rule
     (atan2, fabs, tan, ...) fall back to interval arithmetic on the ranges of their inputs
     (the result gets its own noise symbol).
     """
 
-    def __init__(self, fn: ca.Function) -> None:
+    def __init__(self, fn: ca.Function, stack_outputs: bool = False,
+                 instructions: list[tuple[int, list[int], list[int], float]] | None = None) -> None:
         nsym = int(fn.nnz_in(0))  # rows 1..K: the inputs; each nonlinear operation gets the next row
 
         def sym() -> int:
@@ -983,10 +1032,12 @@ class AffineProgram:
                 return ("fb2", op), args, sym()
             raise SparValueError(f"supinf: unsupported operation {_op_name(op)} in expression")
 
-        S = _Schedule(fn, classify)
+        S = _Schedule(fn, classify, instructions)
         self._S = S
         self.K = S.n_in
-        self.out_size = S.out_sizes[0] if S.out_sizes else 0
+        sizes = S.out_sizes if stack_outputs else S.out_sizes[:1]
+        self._offset = np.concatenate(([0], np.cumsum(sizes))).astype(int)
+        self.out_size = int(self._offset[-1])
         self.n_work = S.n_regs
         self.rows = nsym + 2
         self._up = 1.0 + (nsym + 16) * 2.0 ** -52
@@ -1165,8 +1216,8 @@ class AffineProgram:
                     R = self._fallback2(A, W[:, g.args[1]], _BINARY[g.key[1]][0], g.payload.astype(int))
                 W[:, g.out] = R
         for k, j, r in S.outputs:
-            if k == 0:
-                out[:, j, :] = W[:, r]
+            if k < self._offset.size - 1:
+                out[:, self._offset[k] + j, :] = W[:, r]
         return out
 
     def linear(self, F: np.ndarray) -> np.ndarray:
@@ -1313,15 +1364,39 @@ class Bounder:
         self._x = x
         self.gradient: AdaptiveProgram | None = None
         self._fg: ca.Function | None = None  # value and gradient, when the gradient can be bounded
+        self._fg_instructions: list[tuple[int, list[int], list[int], float]] | None = None
         if syms:
             fg = ca.Function("fg", [x], [e, ca.densify(ca.jacobian(e, x))], {"cse": True})
+            self._fg_instructions = _instructions(fg)
             try:
-                self.gradient = AdaptiveProgram(fg, compiled)
+                kinks = CLARKE_FABS and self._kinks_only(fg)
+                self.gradient = AdaptiveProgram(fg, compiled, kinks, self._fg_instructions)
                 self._fg = fg
             except SparValueError:
                 self.gradient = None  # derivative uses operations we cannot bound: bisection only
         if self.gradient is None:
             _ = self.program  # compile now, so unsupported operations fail here
+
+    def _kinks_only(self, fg: ca.Function) -> bool:
+        """True if every ``sign`` in the value-and-gradient Function ``fg`` is the derivative
+        of a ``fabs`` (the expression itself has none): then the expression is continuous
+        where its other operations are, and Lipschitz where its gradient enclosure is
+        finite.
+
+        Why derivative reasoning stays sound across the kinks of ``fabs``: the interval
+        (or affine) value of ``sign`` over an argument that straddles 0 is [-1, 1], which
+        holds the Clarke generalised gradient of |.| there, and interval evaluation of the
+        chain rule then encloses the Clarke gradient of the whole expression (Clarke's
+        sum, product and chain rules are inclusions). Lebourg's mean-value theorem, f(x) -
+        f(c) = <z, x - c> with z in the Clarke gradient at a point of the segment, gives
+        the mean-value form and monotonicity; along a segment a Lipschitz f is the integral
+        of its derivative, which lies in the Clarke gradient's projection, which gives the
+        gradient model's bound (taylor.py). Where the argument's enclosure has one sign,
+        say [0, b], |a| = a on the whole box and the true factor 1 lies in [0, 1]."""
+        if not any(op == ca.OP_SIGN for op, _, _, _ in self._fg_instructions or ()):
+            return False
+        p = self._point
+        return not any(p.instruction_id(k) == ca.OP_SIGN for k in range(p.n_instructions()))
 
     @functools.cached_property
     def _point(self) -> ca.Function:
@@ -1339,11 +1414,10 @@ class Bounder:
         ``(f, df/dx_1, ...)`` (built on first use; None when the gradient is not bounded).
         On deep transform products its gradient enclosures escape the wrapping effect that
         makes interval gradients too wide to prove monotonicity."""
-        if self.gradient is None:
+        if self.gradient is None or self._fg is None:
             return None
-        jac = ca.densify(ca.jacobian(self.expr, self._x))
-        try:
-            return AffineProgram(ca.Function("fgv", [self._x], [ca.vertcat(self.expr, jac.T)], {"cse": True}))
+        try:  # the value-and-gradient Function's outputs stacked: (f, df/dx_1, ...)
+            return AffineProgram(self._fg, stack_outputs=True, instructions=self._fg_instructions)
         except SparValueError:
             return None
 
@@ -1502,6 +1576,7 @@ class _Search:
                      np.array(sides, int), np.full(len(sides), -_INF))
         self.evaluated = 0
         self.steps = 0  # passes made (steps that have begun)
+        self.plain: tuple[float, float] | None = None  # the interval value on the whole box
 
     def tol(self) -> float:
         return max(self.abs_tol, self.rel_tol * max(0.0, -self.U[1] - self.U[0]))
@@ -1576,22 +1651,27 @@ class _Search:
         # 1. interval value and gradient on the boxes and their centres
         c = np.minimum(np.maximum(0.5 * (bl + bh), bl), bh)
         prog = B.gradient if B.gradient is not None else B.program
-        outs, disc = prog(np.vstack((bl, c)), np.vstack((bh, c)))
+        outs, disc, kink = prog(np.vstack((bl, c)), np.vstack((bh, c)), with_kinks=True)
         f = outs[0][:, 0, :]
         fb, fc = f[:, :m], f[:, m:]
+        if self.plain is None:  # the first batch is the whole box (once per side)
+            self.plain = (float(fb[0, 0]), float(fb[1, 0]))
         self.offer(c, fc[1], fc[0])
         L = np.where(neg, -fb[1], fb[0])
         cand = [np.where(np.eye(nv, dtype=bool), np.where(self.best[s] == self.lo0, self.hi0, self.lo0),
                          self.best[s]) for s in (0, 1) if not self.done[s]]
         G = None
         ok = np.zeros(m, bool)
+        # no kink of a fabs in the box: the mean-value and model bounds apply there (they are
+        # sound across kinks too, but loose, and bisecting at the kink is exact)
+        smooth = ~kink[:m]
         fcv = np.where(neg, -fc[1], fc[0])  # rigorous lower end of g_s at the centres
         if B.gradient is not None:
             G = outs[1][:, :, :m]  # (2, nv, m), for g_s
             G = np.where(neg[None, None, :], -G[::-1], G)
             ok = ~disc[:m] & np.isfinite(G).all((0, 1))
             Lmv = _mean_value_lower(fcv, G, bl, bh, c)
-            L = np.where(ok & ~np.isnan(Lmv), np.maximum(L, Lmv), L)
+            L = np.where(ok & smooth & ~np.isnan(Lmv), np.maximum(L, Lmv), L)
             gmid = 0.5 * (G[0] + G[1]).T  # (m, nv)
             cand.append(np.where(gmid >= 0, bl, bh)[np.isfinite(gmid).all(1)])
         self.offer_points(np.vstack(cand))
@@ -1600,7 +1680,7 @@ class _Search:
         if not keep.any():
             return
         bl, bh, side, L, ok = bl[keep], bh[keep], side[keep], L[keep], ok[keep]
-        c, fcv = c[keep], fcv[keep]
+        c, fcv, smooth = c[keep], fcv[keep], smooth[keep]
         neg = side == 1
         width = bh - bl
         # 2. monotonicity: fix variables whose derivative has one sign over the box
@@ -1639,10 +1719,10 @@ class _Search:
             Gs = np.array((np.maximum(Gs[0], GA[0]), np.minimum(Gs[1], GA[1])))
             oks = ok[sp] & np.isfinite(Gs).all((0, 1))
             Lmv = _mean_value_lower(fcv[sp], Gs, bl, bh, c[sp])
-            L = np.where(oks & ~np.isnan(Lmv), np.maximum(L, Lmv), L)
+            L = np.where(oks & smooth[sp] & ~np.isnan(Lmv), np.maximum(L, Lmv), L)
             lin = AG.linear(F[:, 0, :])
             lin = np.where(neg[None, :], -lin, lin).T  # (k, nv)
-            self.offer_points(np.where(lin >= 0, bl, bh)[np.isfinite(lin).all(1)])
+            lin_corners = np.where(lin >= 0, bl, bh)[np.isfinite(lin).all(1)]
             # the affine gradient as a model valid on every sub-box (taylor.py): iterated
             # monotonicity reduces each box to the faces holding its minimum, and the model
             # integrated from the centre gives a third-order lower bound on what is left
@@ -1650,10 +1730,10 @@ class _Search:
             usable = oks & model.finite
             nl, nh, fixed = model.fix_monotone(bl, bh, usable, (Gs[0].T, Gs[1].T))
             LQ = model.lower(fcv[sp], nl, nh)
-            L = np.where(usable & ~np.isnan(LQ), np.maximum(L, LQ), L)
+            L = np.where(usable & smooth[sp] & ~np.isnan(LQ), np.maximum(L, LQ), L)
             gl, gh = model.gradient(*model.coords(nl, nh))
             corner = np.where(0.5 * (gl + gh) >= 0, nl, nh)
-            self.offer_points(corner[usable & np.isfinite(corner).all(1)])
+            self.offer_points(np.vstack((lin_corners, corner[usable & np.isfinite(corner).all(1)])))
             keep = self.settle(bl, bh, side, L)
             if not keep.any():
                 return
@@ -1695,7 +1775,11 @@ class _Search:
         self.push(np.vstack((bl, right_l)), np.vstack((left_h, bh)), np.concatenate((side, side)),
                   np.concatenate((L, L)))
 
-    def result(self, plain: tuple[float, float]) -> BoundResult:
+    def result(self) -> BoundResult:
+        if self.plain is None:
+            f0 = self.B.enclose(self.lo0[None, :], self.hi0[None, :])
+            self.plain = (float(f0[0, 0]), float(f0[1, 0]))
+        plain = self.plain
         _, _, ps, pL = self.pool
         for s in (0, 1):  # boxes still in the pool (the budget ran out) bound the minimum too
             if not self.done[s] and (ps == s).any():
@@ -1716,9 +1800,9 @@ class _Search:
 
 def _branch_and_bound(B: Bounder, lo0: np.ndarray, hi0: np.ndarray, rel_tol: float, abs_tol: float,
                       max_boxes: int, max_time: float | None, want: str) -> BoundResult:
-    f0 = B.enclose(lo0[None, :], hi0[None, :])
-    plain = (float(f0[0, 0]), float(f0[1, 0]))
     if lo0.size == 0 or np.all(lo0 == hi0):  # a constant or a point: one evaluation is all
+        f0 = B.enclose(lo0[None, :], hi0[None, :])
+        plain = (float(f0[0, 0]), float(f0[1, 0]))
         exact = math.isfinite(plain[0]) and math.isfinite(plain[1])
         return BoundResult(plain[0], plain[1], exact, 1, plain[1], plain[0])
     t_end = None if max_time is None else time.perf_counter() + max_time
@@ -1726,7 +1810,7 @@ def _branch_and_bound(B: Bounder, lo0: np.ndarray, hi0: np.ndarray, rel_tol: flo
     S = _Search(B, lo0, hi0, sides, rel_tol, abs_tol)
     while S.pool[2].size and S.evaluated < max_boxes and (t_end is None or time.perf_counter() < t_end):
         S.step()
-    return S.result(plain)
+    return S.result()
 
 
 # ================================================================== plain functions

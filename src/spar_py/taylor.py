@@ -27,6 +27,12 @@ Two things follow without evaluating the expression again:
    t^T P t >= sum_i (P_ii - sum_{j != i} |P_ij| tau_j / tau_i) t_i^2 (weighted AM-GM), and
    each coordinate's quadratic is minimised exactly on its interval.
 
+"C^1" may be relaxed to "Lipschitz, with the model enclosing the Clarke gradient" (how
+supinf uses it across the kinks of ``fabs``): along a segment a Lipschitz g is the integral
+of its derivative, which exists almost everywhere and lies in the Clarke gradient's
+projection, so the integral bound holds; and a Clarke gradient component of one sign on a
+box makes g monotone in that variable there (Lebourg's mean-value theorem).
+
 Units: ``mid``, ``rd`` and boxes are in the variables' units; ``G0``, ``A``, ``rho`` in units
 of g per unit of the variable; ``b``, ``P``, ``gamma`` and the bounds in units of g.
 Floating point: every enclosure and bound computed here is widened by a relative margin
