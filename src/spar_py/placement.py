@@ -23,7 +23,7 @@ import numpy as np
 from .geometry import convex_hull_2d, rotz
 from .model import Cell, ObjectModel
 from .units import from_mm, mm_per
-from .workspace import Requirement, reaches, requirement_clear, tool_on_table, wrist_height
+from .workspace import Requirement, reaches, requirement_clear, requirement_state, tool_refusal, wrist_height
 
 #: Grid spacing of candidate placements: 50.8 mm (2 in); number of yaw steps.
 GRID_STEP_MM = 50.8
@@ -473,20 +473,25 @@ def reachable_somewhere(cell: Cell, obj: str, pose: str,
 
 def _some_placement(cell: Cell, obj: str, cands: np.ndarray, req: Requirement, chunk: int = 48) -> bool:
     """Some object pose of ``cands`` (n,4,4) at which the arm reaches T_O @ req.X clear of the
-    world, a chunk at a time (the usual case is met in the first chunk). The grid's placements
-    differ only by a turn about world z and a shift in x, y, so a wrist below the table at the
-    first one (by more than rounding) is below it at every one: no IK is solved then."""
+    world: the first placement alone, then ``chunk`` at a time (the usual case is met at the
+    first placement, so the whole first chunk's IK and clearance are seldom needed).
+
+    Refused before any IK (workspace.tool_refusal): the grasp rule, or two bodies rigid with
+    the flange (gripper, held part, the object where the tool is) closer than the margin, which
+    refuse every placement alike; and, the grid's placements differing only by a turn about
+    world z and a shift in x, y, a wrist below the table at the first one (by more than
+    rounding) or a body rigid with the tool on an unbounded table, which are so at every one."""
     if not len(cands):
         return False
-    if np.all(cands[:, 2, :] == cands[0, 2, :]):
-        if wrist_height(cell.robot, (cands[0] @ req.X)[None])[0] < -from_mm(cell.unit, ROUND_MM):
-            return False
-        # the same for the gripper, tool mount and the part in the hand against the table
-        # (unbounded): their heights are the grid's, whatever the arm's joints
-        if tool_on_table(cell, obj, cands[0] @ req.X, req) is not None:
-            return False
-    for start in range(0, len(cands), chunk):
-        if requirement_clear(cell, obj, cands[start:start + chunk], req).ok.any():
+    z_row = bool(np.all(cands[:, 2, :] == cands[0, 2, :]))
+    if z_row and wrist_height(cell.robot, (cands[0] @ req.X)[None])[0] < -from_mm(cell.unit, ROUND_MM):
+        return False
+    state = requirement_state(cell, obj, req)  # one scene state for the prune and every batch
+    if tool_refusal(cell, obj, cands[0] @ req.X, req, table=z_row, state=state) is not None:
+        return False
+    starts = [0, *range(1, len(cands), chunk)]
+    for start, end in zip(starts, [*starts[1:], len(cands)]):
+        if requirement_clear(cell, obj, cands[start:end], req, state=state).ok.any():
             return True
     return False
 

@@ -514,6 +514,37 @@ class SceneState:
         k = np.flatnonzero(low)
         return None if not len(k) else (self.bodies[self.table_bodies[k[0]]].name, "table")
 
+    def tool_rigid_refusal(self, T_tool: np.ndarray) -> tuple[str, str] | None:
+        """What refuses every joint vector of this state whatever the tool pose, as the pair
+        :meth:`check` would name, or None: the grasp rule when the part in the hand is given in
+        the tool frame, else the first checked pair of two bodies rigid with the flange (frames 6
+        and 7) within the margin. Their relative pose does not depend on q, so :meth:`check`
+        refuses every row for it; ``T_tool`` (4x4, world) is any tool pose (the distances are the
+        same at all of them)."""
+        if self.hand is not None and self.hand[1] == "tool":
+            g_ok, g_name = self.grasp_ok(self.hand[2])
+            if not g_ok:
+                return (g_name, self.hand[0])
+        if not self._rigid:
+            return None
+        F = np.full((1, 8, 4, 4), np.nan)
+        F[0, TOOL] = T_tool
+        F[0, 6] = np.asarray(T_tool, float) @ self.scene.robot.tool_inverse()
+        with np.errstate(invalid="ignore"):
+            A, B = self._world_caps(F)
+        m = self.scene.margin
+        rigid = list(self._rigid)
+        i, j = self.pairs[rigid, 0], self.pairs[rigid, 1]
+        lbs = segment_distance(A[0, i], B[0, i], A[0, j], B[0, j]) - self._cap_r[i] - self._cap_r[j]
+        for p, lb in zip(rigid, lbs.tolist()):
+            if lb > m:
+                continue
+            d = lb if self.exact_pair[p] else self._exact_cell(F, 0, p)
+            if d <= m:
+                a, b = self.pairs[p]
+                return (self.bodies[a].name, self.bodies[b].name)
+        return None
+
     def _bounds(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         F = self._frames(q)
         A, B = self._world_caps(F)
