@@ -249,7 +249,9 @@ class Obstacle:
 
 def segment_distance(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.ndarray) -> np.ndarray:
     """(...,) distance between segments p1-q1 and p2-q2 (arrays (..., 3)), vectorised
-    (Ericson, Real-Time Collision Detection, Sec. 5.1.9, every branch as np.where)."""
+    (Ericson, Real-Time Collision Detection, Sec. 5.1.9, every branch as np.where; clamps as
+    np.minimum/np.maximum, the same values as np.clip at a fraction of its call overhead on
+    the small arrays of one check)."""
     d1, d2, r = q1 - p1, q2 - p2, p1 - p2
     a = (d1 * d1).sum(-1)
     e = (d2 * d2).sum(-1)
@@ -257,18 +259,19 @@ def segment_distance(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.ndar
     c = (d1 * r).sum(-1)
     b = (d1 * d2).sum(-1)
     eps = 1e-12
+    lo, hi = np.maximum, np.minimum
     pa, pe = a > eps, e > eps
     a_, e_ = np.where(pa, a, 1.0), np.where(pe, e, 1.0)
     denom = a * e - b * b
-    s = np.where(denom > eps * np.maximum(a * e, eps), np.clip((b * f - c * e) / np.where(denom > 0, denom, 1.0),
-                                                                0.0, 1.0), 0.0)
+    s = np.where(denom > eps * lo(a * e, eps), hi(lo((b * f - c * e) / np.where(denom > 0, denom, 1.0), 0.0), 1.0),
+                 0.0)
     t = (b * s + f) / e_
-    tc = np.clip(t, 0.0, 1.0)
-    s = np.where(t != tc, np.clip((tc * b - c) / a_, 0.0, 1.0), s)
+    tc = hi(lo(t, 0.0), 1.0)
+    s = np.where(t != tc, hi(lo((tc * b - c) / a_, 0.0), 1.0), s)
     t = tc
     # degenerate segments: a point on either side
-    s = np.where(pa, np.where(pe, s, np.clip(-c / a_, 0.0, 1.0)), 0.0)
-    t = np.where(pe, np.where(pa, t, np.clip(f / e_, 0.0, 1.0)), 0.0)
+    s = np.where(pa, np.where(pe, s, hi(lo(-c / a_, 0.0), 1.0)), 0.0)
+    t = np.where(pe, np.where(pa, t, hi(lo(f / e_, 0.0), 1.0)), 0.0)
     diff = (p1 + d1 * s[..., None]) - (p2 + d2 * t[..., None])
     return np.sqrt((diff * diff).sum(-1))
 
