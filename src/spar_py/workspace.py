@@ -39,6 +39,8 @@ REFUSALS_LIMIT = 256
 #: Bounds of the cell's memo tables: requirement answers by geometry (:func:`requirement_clear`),
 #: objects' shape keys.
 REQUIREMENT_LIMIT = 2048
+#: Scene states kept per cell by requirement (:func:`requirement_state`).
+STATE_LIMIT = 512
 SHAPE_KEY_LIMIT = 1024
 
 
@@ -196,13 +198,22 @@ def requirement_clear_ik(cell: Cell, obj: str, req: Requirement, Q: np.ndarray, 
 
 def requirement_state(cell: Cell, obj: str, req: Requirement) -> SceneState | None:
     """The scene state (CollisionScene.at) of a requirement on ``obj`` (:func:`requirement_clear`'s
-    world), or None when the cell has no collision check: made once, it serves
-    :func:`tool_refusal` and every batch of poses of that requirement."""
+    world), or None when the cell has no collision check. Kept on the cell (at most STATE_LIMIT):
+    it depends on the requirement only, not on where the object is, so one state serves
+    :func:`tool_refusal` and every batch of poses of that requirement, in every stable pose
+    (phase 1 asks each grasp's requirement once per pose)."""
     if not cell.collisions:
         return None
     from .world.collision import scene_for
 
-    return scene_for(cell).at({}, **_requirement_world(obj, req))
+    held = None if req.held is None else (req.held[0], np.round(req.held[1], 12).tobytes())
+    width = None if req.width is None else round(float(req.width), 12)
+    key = (obj, np.round(req.X, 12).tobytes(), held, width)
+    table = cell.memo.table("workspace.requirement_state", STATE_LIMIT)
+    state = table.get(key)
+    if state is None:
+        state = table[key] = scene_for(cell).at({}, **_requirement_world(obj, req))
+    return state
 
 
 def _requirement_world(obj: str, req: Requirement) -> dict:

@@ -417,6 +417,7 @@ class SceneState:
                 table[key] = struct
         self.pairs, self.table_bodies, self.exact_pair, rigid = struct
         self._rigid: dict[int, float | None] = dict.fromkeys(rigid)
+        self._refusal: tuple[tuple[str, str] | None] | None = None  # tool_rigid_refusal's answer
         self._cap_a = np.array([b.cap[0] for b in self.bodies]).reshape(-1, 3)
         self._cap_b = np.array([b.cap[1] for b in self.bodies]).reshape(-1, 3)
         self._cap_r = np.array([b.cap[2] for b in self.bodies])
@@ -509,13 +510,14 @@ class SceneState:
         refuses every such pose (a placement grid's) before any IK is solved."""
         if self.scene.table is not None or not len(self.table_bodies):
             return None
-        F = np.full((1, 8, 4, 4), np.nan)
-        F[0, TOOL] = T_tool
-        F[0, 6] = np.asarray(T_tool, float) @ self.scene.robot.tool_inverse()
-        with np.errstate(invalid="ignore"):
-            low = self._plane_heights(F)[0] <= self.scene.margin  # NaN (a body on another frame): False
-        k = np.flatnonzero(low)
-        return None if not len(k) else (self.bodies[self.table_bodies[k[0]]].name, "table")
+        T_tool = np.asarray(T_tool, float)
+        frames = {TOOL: T_tool, 6: T_tool @ self.scene.robot.tool_inverse()}
+        for i in self.table_bodies.tolist():  # as _plane_heights, for the bodies on frames 6 and 7
+            b = self.bodies[i]
+            Fb = frames.get(b.frame)
+            if Fb is not None and (b.points @ Fb[2, :3]).min() + Fb[2, 3] - b.radius <= self.scene.margin:
+                return (b.name, "table")
+        return None
 
     def tool_rigid_refusal(self, T_tool: np.ndarray) -> tuple[str, str] | None:
         """What refuses every joint vector of this state whatever the tool pose, as the pair
@@ -523,7 +525,12 @@ class SceneState:
         the tool frame, else the first checked pair of two bodies rigid with the flange (frames 6
         and 7) within the margin. Their relative pose does not depend on q, so :meth:`check`
         refuses every row for it; ``T_tool`` (4x4, world) is any tool pose (the distances are the
-        same at all of them)."""
+        same at all of them): the answer is kept with the state."""
+        if self._refusal is None:
+            self._refusal = (self._tool_rigid_refusal(T_tool),)
+        return self._refusal[0]
+
+    def _tool_rigid_refusal(self, T_tool: np.ndarray) -> tuple[str, str] | None:
         if self.hand is not None and self.hand[1] == "tool":
             g_ok, g_name = self.grasp_ok(self.hand[2])
             if not g_ok:
