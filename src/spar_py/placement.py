@@ -16,14 +16,18 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
 from .geometry import convex_hull_2d, rotz
 from .model import Cell, ObjectModel
 from .units import from_mm, mm_per
-from .workspace import Requirement, reaches, requirement_clear, requirement_state, tool_refusal, wrist_height
+from .workspace import (Requirement, ik_rows, reaches, requirement_clear, requirement_state, tool_refusal,
+                        wrist_height)
+
+if TYPE_CHECKING:
+    from .world.collision import SceneState
 
 #: Grid spacing of candidate placements: 50.8 mm (2 in); number of yaw steps.
 GRID_STEP_MM = 50.8
@@ -466,34 +470,49 @@ def reachable_somewhere(cell: Cell, obj: str, pose: str,
             todo.setdefault(key, []).append(i)
     if todo:
         cands = _grid(cell, obj, pose)
-        for key, ix in todo.items():
-            memo[key] = out[ix] = _some_placement(cell, obj, cands, reqs[ix[0]])
+        got = _some_placement(cell, obj, cands, [reqs[ix[0]] for ix in todo.values()])
+        for (key, ix), ok in zip(todo.items(), got):
+            memo[key] = out[ix] = ok
     return out
 
 
-def _some_placement(cell: Cell, obj: str, cands: np.ndarray, req: Requirement, chunk: int = 48) -> bool:
-    """Some object pose of ``cands`` (n,4,4) at which the arm reaches T_O @ req.X clear of the
-    world: the first placement alone, then ``chunk`` at a time (the usual case is met at the
-    first placement, so the whole first chunk's IK and clearance are seldom needed).
+def _some_placement(cell: Cell, obj: str, cands: np.ndarray, reqs: list[Requirement],
+                    chunk: int = 48) -> list[bool]:
+    """For each requirement, some object pose of ``cands`` (n,4,4) at which the arm reaches
+    T_O @ req.X clear of the world: the first placement alone (one IK batch for every
+    requirement), then ``chunk`` at a time (the usual case is met at the first placement, so
+    the whole first chunk's IK and clearance are seldom needed).
 
     Refused before any IK (workspace.tool_refusal): the grasp rule, or two bodies rigid with
     the flange (gripper, held part, the object where the tool is) closer than the margin, which
     refuse every placement alike; and, the grid's placements differing only by a turn about
     world z and a shift in x, y, a wrist below the table at the first one (by more than
     rounding) or a body rigid with the tool on an unbounded table, which are so at every one."""
-    if not len(cands):
-        return False
+    out = [False] * len(reqs)
+    if not len(cands) or not reqs:
+        return out
     z_row = bool(np.all(cands[:, 2, :] == cands[0, 2, :]))
-    if z_row and wrist_height(cell.robot, (cands[0] @ req.X)[None])[0] < -from_mm(cell.unit, ROUND_MM):
-        return False
-    state = requirement_state(cell, obj, req)  # one scene state for the prune and every batch
-    if tool_refusal(cell, obj, cands[0] @ req.X, req, table=z_row, state=state) is not None:
-        return False
-    starts = [0, *range(1, len(cands), chunk)]
-    for start, end in zip(starts, [*starts[1:], len(cands)]):
-        if requirement_clear(cell, obj, cands[start:end], req, state=state).ok.any():
-            return True
-    return False
+    T0 = cands[0] @ np.stack([np.asarray(r.X, float) for r in reqs])  # (m, 4, 4) tool poses at the first
+    below = wrist_height(cell.robot, T0) < -from_mm(cell.unit, ROUND_MM) if z_row else np.zeros(len(reqs), bool)
+    live: list[tuple[int, SceneState | None]] = []  # (requirement, its scene state: one for the prune and every batch)
+    for k, req in enumerate(reqs):
+        if below[k]:
+            continue
+        state = requirement_state(cell, obj, req)
+        if tool_refusal(cell, obj, T0[k], req, table=z_row, state=state) is None:
+            live.append((k, state))
+    if not live:
+        return out
+    Q, okb = ik_rows(cell, T0[[k for k, _ in live]])
+    starts = [1, *range(1 + chunk, len(cands), chunk)]
+    for row, (k, state) in enumerate(live):
+        first = requirement_clear(cell, obj, cands[:1], reqs[k], state=state, ik=(Q[row:row + 1], okb[row:row + 1]))
+        if first.ok.any():
+            out[k] = True
+            continue
+        out[k] = any(requirement_clear(cell, obj, cands[start:start + chunk], reqs[k], state=state).ok.any()
+                     for start in starts if start < len(cands))
+    return out
 
 
 def _any_placement(cell: Cell, cands: np.ndarray, X: np.ndarray, chunk: int = 48) -> np.ndarray:

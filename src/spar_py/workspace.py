@@ -147,17 +147,19 @@ def clear_of_world(cell: Cell, Q: np.ndarray, okb: np.ndarray, *, parts: Mapping
 
 
 def requirement_clear(cell: Cell, obj: str, TO: np.ndarray, req: Requirement | np.ndarray,
-                      state: SceneState | None = None) -> Reached:
+                      state: SceneState | None = None,
+                      ik: tuple[np.ndarray, np.ndarray] | None = None) -> Reached:
     """:func:`reach_clear` for the tool at ``TO[i] @ X`` for object poses TO (n, 4, 4) of ``obj``
     and one requirement (a :class:`Requirement`, or a bare X: the object in the hand with the
-    fingers open); ``state`` its :func:`requirement_state` when the caller has it."""
+    fingers open); ``state`` its :func:`requirement_state` and ``ik`` the :func:`ik_rows` of
+    those tool poses when the caller has them (a batch solved for several requirements)."""
     req = req if isinstance(req, Requirement) else Requirement(np.asarray(req, float))
     TO = np.asarray(TO, float).reshape(-1, 4, 4)
     T = TO @ np.asarray(req.X, float)
     if not len(T):
         return Reached(np.zeros(0, bool), np.zeros(0, bool), [])
     if not cell.collisions:
-        return requirement_clear_ik(cell, obj, req, *ik_rows(cell, T))
+        return requirement_clear_ik(cell, obj, req, *(ik if ik is not None else ik_rows(cell, T)))
     # the answer depends on the geometry only (no other part is in this world): renamed copies
     # of one model (generated cells: N identical blocks) asked the same poses share it
     held = req.held[0] if req.held is not None else None
@@ -170,7 +172,7 @@ def requirement_clear(cell: Cell, obj: str, TO: np.ndarray, req: Requirement | n
     if key in table:
         ok, ik, pairs = table[key]
         return Reached(ok.copy(), ik.copy(), [[tuple(back.get(n, n) for n in p) for p in row] for row in pairs])
-    r = requirement_clear_ik(cell, obj, req, *ik_rows(cell, T), state=state)
+    r = requirement_clear_ik(cell, obj, req, *(ik if ik is not None else ik_rows(cell, T)), state=state)
     table[key] = (r.ok.copy(), r.ik.copy(), [[tuple(names.get(n, n) for n in p) for p in row] for row in r.pairs])
     return r
 
