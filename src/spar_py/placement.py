@@ -407,8 +407,9 @@ def choose(cell: Cell, obj: str, pose: str, requirements: list[np.ndarray],
     clear of the ``occupied`` parts' footprints by the clearance.
 
     Nearest: least distance rounded to ROUND_MM, then least yaw, then first in grid order.
-    The candidates are checked in that order a chunk at a time, so the search stops
-    at the first chunk holding a feasible one instead of solving IK for the whole grid.
+    The candidates are checked in that order, the nearest alone and then a chunk at a time,
+    so the search stops at the first chunk holding a feasible one instead of solving IK for
+    the whole grid.
     """
     xy, yaw, T = _grid_arrays(cell, obj, pose, occupied, from_mm(cell.unit, GRID_STEP_MM), YAW_STEPS)
     if not len(T):
@@ -421,8 +422,9 @@ def choose(cell: Cell, obj: str, pose: str, requirements: list[np.ndarray],
     yaws = yaw.tolist()
     digits = -round(math.log10(ROUND_MM))
     order = sorted(range(len(T)), key=lambda i: (round(dist[i], digits), yaws[i]))  # stable: grid order breaks ties
-    for start in range(0, len(order), CHOOSE_CHUNK):
-        idx = order[start:start + CHOOSE_CHUNK]
+    starts = [0, *range(1, len(order), CHOOSE_CHUNK)]  # the nearest alone first: it usually serves
+    for start, end in zip(starts, [*starts[1:], len(order)]):
+        idx = order[start:end]
         ok = np.ones(len(idx), dtype=bool)
         for x in requirements or ():  # each requirement by IK and clearance, on the survivors only
             live = np.flatnonzero(ok)
