@@ -427,6 +427,7 @@ class SceneState:
         # made on first use by _world_caps: each moving body's frame, the static ends in the world
         self._body_frames = np.zeros(0, dtype=int)
         self._static: tuple[np.ndarray, np.ndarray] | None = None
+        self._table_pts: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # by _plane_heights
 
     # ------------------------------------------------------------------ frames and bounds
 
@@ -475,12 +476,17 @@ class SceneState:
     def _plane_heights(self, F: np.ndarray) -> np.ndarray:
         """(n, m) each table-checked moving body's height above the plane z = 0 (exact, signed):
         the z row of its frame times its vertices, less its radius."""
-        out = np.empty((len(F), len(self.table_bodies)))
-        for k, i in enumerate(self.table_bodies):
-            b = self.bodies[i]
-            Fb = F[:, b.frame]
-            out[:, k] = (b.points @ Fb[:, 2, :3, None])[..., 0].min(axis=1) + Fb[:, 2, 3] - b.radius
-        return out
+        if self._table_pts is None:  # every table-checked body's vertices, padded by repeating one
+            bodies = [self.bodies[i] for i in self.table_bodies]
+            k = max((len(b.points) for b in bodies), default=1)
+            pts = np.zeros((len(bodies), k, 3))
+            for j, b in enumerate(bodies):
+                pts[j] = np.concatenate([b.points, np.repeat(b.points[:1], k - len(b.points), axis=0)])
+            self._table_pts = (pts, np.array([b.frame for b in bodies], dtype=int),
+                               np.array([b.radius for b in bodies]))
+        pts, frames, radius = self._table_pts
+        Fb = F[:, frames]                                             # (n, m, 4, 4)
+        return (pts @ Fb[:, :, 2, :3, None])[..., 0].min(axis=2) + Fb[:, :, 2, 3] - radius
 
     def _table(self, F: np.ndarray) -> np.ndarray:
         """(n, m) each table-checked moving body's height above the table (exact, signed; +inf
