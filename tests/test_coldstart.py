@@ -207,9 +207,10 @@ def test_the_benchmark_measures_plan_and_floor_in_one_run() -> None:
     finally:
         sys.path.remove(str(ROOT))
     r = coldstart.run(repeats=1, importtime_runs=1)
-    assert set(r["median"]) == {"floor", "plan", "plan, sources", "engine", "engine, sources"}
+    assert set(r["median"]) == {"floor", "floor, frozen exit", "plan", "plan, sources", "engine", "engine, sources"}
     assert all(v > 0 for v in r["median"].values())
     assert r["ratio"] == pytest.approx(r["median"]["plan"] / r["median"]["floor"])
+    assert r["ratio_frozen"] == pytest.approx(r["median"]["plan"] / r["median"]["floor, frozen exit"])
     assert set(r["imports"]["heavy"]) <= {"fcl"}
     assert any(g.startswith("spar_py.") for g, _ in r["imports"]["beyond_floor"])
     steps = r["breakdown"]["steps"]
