@@ -632,8 +632,10 @@ class SceneState:
         tol = self.scene.tol
         verdict: tuple[bool, str | None] = (True, None)
         bodies = [b.placed(T_tool_part, TOOL, part) for b in self.scene.shapes_of(part)]
-        for g in self.scene.shrunk_gripper(self.width, tol):
-            if any(_exact(g, np.eye(4), b, np.eye(4)) <= 0.0 for b in bodies if _near(g, b, 0.0)):
+        gripper = self.scene.shrunk_gripper(self.width, tol)
+        near = _near_all(gripper, bodies, 0.0)  # (gripper box, part body): bounding capsules touch
+        for gi, g in enumerate(gripper):
+            if any(_exact(g, np.eye(4), b, np.eye(4)) <= 0.0 for bi, b in enumerate(bodies) if near[gi, bi]):
                 verdict = (False, g.name)
                 break
         if table is not None:
@@ -766,10 +768,17 @@ def _pair_structure(scene: CollisionScene, bodies: list[Body], n_moving: int, ha
     return pairs_arr, table_bodies, exact_pair, tuple(rigid)
 
 
-def _near(a: Body, b: Body, within: float) -> bool:
-    """Bounding capsules of two bodies (same frame) within ``within`` of each other."""
-    d = segment_distance(a.cap[0], a.cap[1], b.cap[0], b.cap[1]) - a.cap[2] - b.cap[2]
-    return bool(d <= within)
+def _near_all(A: list[Body], B: list[Body], within: float) -> np.ndarray:
+    """(len(A), len(B)) bool: the bounding capsules of each pair (bodies in one frame) within
+    ``within`` of each other, in one vectorised call."""
+    if not A or not B:
+        return np.zeros((len(A), len(B)), dtype=bool)
+    a0, a1 = np.array([a.cap[0] for a in A])[:, None], np.array([a.cap[1] for a in A])[:, None]
+    b0, b1 = np.array([b.cap[0] for b in B])[None], np.array([b.cap[1] for b in B])[None]
+    ra, rb = np.array([a.cap[2] for a in A])[:, None], np.array([b.cap[2] for b in B])[None]
+    shape = (len(A), len(B), 3)
+    d = segment_distance(*(np.broadcast_to(x, shape) for x in (a0, a1, b0, b1))) - ra - rb
+    return d <= within
 
 
 # --------------------------------------------------------------------------- the cell's scene
