@@ -253,3 +253,13 @@ def test_no_home_directory_means_no_cache(monkeypatch: pytest.MonkeyPatch) -> No
     assert qlf.cache_dir() is None
     monkeypatch.setenv(qlf.ENV, "off")
     assert qlf.cache_dir() is None
+
+
+def test_a_plan_with_motions_ends_without_a_word_on_stderr() -> None:
+    """`spar` ends with the shutdown collections skipped (cli.exiting, gc.freeze) only when no
+    library that reports live objects at exit as leaks is loaded: a plan with motions loads OMPL
+    (nanobind), and its run still ends with nothing on stderr and exit code 0."""
+    problem = str(ROOT / "kb" / "problems" / "wall_detour.yaml")
+    r = subprocess.run([sys.executable, "-m", "spar_py.cli", "plan", problem], capture_output=True, text=True,
+                       timeout=300, cwd=ROOT)
+    assert r.returncode == 0 and r.stderr == "", r.stderr[-500:]
