@@ -25,7 +25,7 @@ import numpy as np
 from .errors import SparValueError
 from .geometry import same_stable_pose
 from .model import Cell, Face, Grasp, ObjectModel
-from .workspace import Requirement, ik_rows, remember_refusal, requirement_clear_ik
+from .workspace import Requirement, ik_rows, remember_refusal, requirement_clear_ik, requirement_state
 
 __all__ = [
     "ARCS",
@@ -135,7 +135,8 @@ def _clear_pass(cell: Cell, obj: str, pending: list[tuple[Grasp, str, np.ndarray
         by_grasp.setdefault(g.label, []).append(i)
     for ix in by_grasp.values():
         g = pending[ix[0]][0]
-        r = requirement_clear_ik(cell, obj, requirement(g), Q[ix], okb[ix])
+        req = requirement(g)
+        r = requirement_clear_ik(cell, obj, req, Q[ix], okb[ix], state=requirement_state(cell, obj, req))
         for k, i in enumerate(ix):
             out[i] = bool(r.ok[k])
             if r.ik[k] and not r.ok[k]:
