@@ -32,7 +32,7 @@ if TYPE_CHECKING:
 
 __all__ = ["Reached", "Requirement", "clear_of_world", "ik_rows", "reach_clear", "reaches", "refusals",
            "remember_refusal", "requirement_clear", "requirement_clear_ik", "solutions", "tool_on_table",
-           "requirement_state", "tool_refusal", "wrist_above_table", "wrist_height"]
+           "requirement_clear_each", "requirement_state", "tool_refusal", "wrist_above_table", "wrist_height"]
 
 #: Refusals kept per cell (the "no plan" explanation): at most this many distinct ones.
 REFUSALS_LIMIT = 256
@@ -175,6 +175,38 @@ def requirement_clear(cell: Cell, obj: str, TO: np.ndarray, req: Requirement | n
     r = requirement_clear_ik(cell, obj, req, *(ik if ik is not None else ik_rows(cell, T)), state=state)
     table[key] = (r.ok.copy(), r.ik.copy(), [[tuple(names.get(n, n) for n in p) for p in row] for row in r.pairs])
     return r
+
+
+def requirement_clear_each(cell: Cell, obj: str, TO: np.ndarray, req: Requirement,
+                           state: SceneState | None, ik: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+    """(k,) bool: :func:`requirement_clear` of each object pose TO[i] (k, 4, 4) alone, ``ik`` the
+    :func:`ik_rows` of TO @ req.X: the same answers and memo entries as k calls with one pose
+    each (rows are independent), the poses the memo lacks checked in one batch."""
+    TO = np.asarray(TO, float).reshape(-1, 4, 4)
+    Q, okb = ik
+    if not cell.collisions:
+        return requirement_clear_ik(cell, obj, req, Q, okb).ok.copy()
+    held = req.held[0] if req.held is not None else None
+    hand = None if held is None else (_shape_key(cell, held), np.round(req.held[1], 12).tobytes())
+    width = None if req.width is None else round(float(req.width), 12)
+    base = (_shape_key(cell, obj), hand, np.round(req.X, 12).tobytes(), width)
+    keys = [(*base, np.round(TO[i:i + 1], 12).tobytes()) for i in range(len(TO))]
+    table = cell.memo.table("workspace.requirement", REQUIREMENT_LIMIT)
+    out = np.zeros(len(TO), dtype=bool)
+    miss = []
+    for i, key in enumerate(keys):
+        if key in table:
+            out[i] = bool(table[key][0][0])
+        else:
+            miss.append(i)
+    if miss:
+        names = {obj: "\0obj"} | ({f"held:{held}": "\0held"} if held is not None else {})
+        r = requirement_clear_ik(cell, obj, req, Q[miss], okb[miss], state=state)
+        for k, i in enumerate(miss):
+            out[i] = bool(r.ok[k])
+            table[keys[i]] = (r.ok[k:k + 1].copy(), r.ik[k:k + 1].copy(),
+                              [[tuple(names.get(n, n) for n in p) for p in r.pairs[k]]])
+    return out
 
 
 def _shape_key(cell: Cell, obj: str) -> bytes:
