@@ -479,9 +479,10 @@ class SceneState:
         if self._table_pts is None:  # every table-checked body's vertices, padded by repeating one
             bodies = [self.bodies[i] for i in self.table_bodies]
             k = max((len(b.points) for b in bodies), default=1)
-            pts = np.zeros((len(bodies), k, 3))
+            pts = np.empty((len(bodies), k, 3))
             for j, b in enumerate(bodies):
-                pts[j] = np.concatenate([b.points, np.repeat(b.points[:1], k - len(b.points), axis=0)])
+                pts[j, :len(b.points)] = b.points
+                pts[j, len(b.points):] = b.points[0]
             self._table_pts = (pts, np.array([b.frame for b in bodies], dtype=int),
                                np.array([b.radius for b in bodies]))
         pts, frames, radius = self._table_pts
