@@ -197,8 +197,10 @@ def mate_reachable_pairs(cell: Cell, held_obj: str, fixed_obj: str, grasp_labels
     grasps = _grasps(_object(cell, held_obj), grasp_labels)
     fixed = _object(cell, fixed_obj)
 
-    def req(g: Grasp) -> Requirement:
-        return Requirement(Ta @ g.T, (held_obj, np.linalg.inv(g.T)), g.width)
+    reqs = {g.label: Requirement(Ta @ g.T, (held_obj, np.linalg.inv(g.T)), g.width) for g in grasps}
+
+    def req(g: Grasp) -> Requirement:  # one per grasp, whatever the position
+        return reqs[g.label]
 
     pending: list[tuple[Grasp, str, np.ndarray]] = []
     asks: list[tuple[str, list[Grasp], list[Requirement]]] = []
