@@ -8,11 +8,18 @@ load (the order rotates from round to round); the figures are medians over the r
 - ``floor``: ``python -c "import numpy, casadi, janus_swi"`` (importing janus starts
   the embedded SWI-Prolog): what any process of this design pays before planning;
 - ``plan``: ``spar plan kb/problems/peg_in_block.yaml``, the planner's Prolog loaded
-  from its compiled image (spar_py/qlf.py; the cache is filled first);
+  from its compiled image (spar_py/qlf.py; the cache is filled first, and the package's
+  bytecode brought up to date, so no process compiles an edited module);
 - ``plan, sources``: the same with ``SPAR_QLF_CACHE=off``: the Prolog consulted from
   prolog/*.pl and kb/templates/*.pl at every start, as before the image;
+- ``floor, frozen exit``: the floor ending with ``gc.freeze()`` as ``spar`` does (cli.exiting:
+  the shutdown collections skip the heap), the like-for-like floor of a process that exits so;
 - ``engine`` and ``engine, sources``: ``python -c "import spar_py.engine as e; e.engine()"``,
-  the engine start alone, both ways.
+  the engine start alone, both ways;
+- with ``--peer DIR`` (another checkout of spar-py, e.g. ``git archive`` of an older commit
+  unpacked there): ``plan, peer``, the same ``spar plan`` with ``DIR/src`` first on
+  PYTHONPATH (this venv's libraries, that checkout's spar_py, prolog/ and kb/templates/),
+  so a change is measured against its base in the same rounds.
 
 Beside them, from ``python -X importtime`` of cold plans: what the plan imports beyond
 the floor (self time by top-level package, medians), and which heavy libraries a cold
@@ -45,16 +52,26 @@ HEAVY = ("trimesh", "fcl", "coal", "hppfcl", "ompl", "yourdfpy", "scipy", "matpl
          "manifold3d", "distributed", "dask", "roboticstoolbox", "spatialmath", "PIL", "pandas", "sympy")
 
 
-def _commands() -> dict[str, tuple[list[str], dict[str, str]]]:
+def _peer_env(peer: str | Path) -> dict[str, str]:
+    """The environment that runs checkout ``peer``'s spar_py with this venv."""
+    return {"PYTHONPATH": os.pathsep.join([str(Path(peer).resolve() / "src"), *filter(None, [
+        os.environ.get("PYTHONPATH")])])}
+
+
+def _commands(peer: str | Path | None = None) -> dict[str, tuple[list[str], dict[str, str]]]:
     """Name -> (argv, extra environment) of each timed process."""
     py = sys.executable
     off = {"SPAR_QLF_CACHE": "off"}
     plan = [str(BIN / "spar"), "plan", CELL]
-    return {"floor": ([py, "-c", FLOOR], {}),
+    cmds = {"floor": ([py, "-c", FLOOR], {}),
+            "floor, frozen exit": ([py, "-c", FLOOR + "; import gc; gc.freeze()"], {}),
             "plan": (plan, {}),
             "plan, sources": (plan, off),
             "engine": ([py, "-c", ENGINE], {}),
             "engine, sources": ([py, "-c", ENGINE], off)}
+    if peer is not None:
+        cmds["plan, peer"] = (plan, _peer_env(peer))
+    return cmds
 
 
 def _time(argv: list[str], env: dict[str, str]) -> tuple[float, float]:
@@ -70,10 +87,19 @@ def _time(argv: list[str], env: dict[str, str]) -> tuple[float, float]:
     return dt, (c1.ru_utime - c0.ru_utime) + (c1.ru_stime - c0.ru_stime)
 
 
-def _fill_cache() -> str:
+def _compile_bytecode(src: Path) -> None:
+    """Bring the package's bytecode (__pycache__) up to date, as an installed package has it:
+    with PYTHONDONTWRITEBYTECODE set, a module edited since set-up would otherwise be compiled
+    again by every timed process (tens of ms on the figures)."""
+    import compileall
+
+    compileall.compile_dir(str(src), quiet=1)
+
+
+def _fill_cache(env: dict[str, str] | None = None) -> str:
     """Make sure the planner's image is in the cache (as set-up does); how it was loaded."""
     out = subprocess.run([sys.executable, "-c", "from spar_py.engine import Engine; print(Engine().loaded_from)"],
-                         cwd=ROOT, capture_output=True, text=True, check=True)
+                         cwd=ROOT, capture_output=True, text=True, check=True, env={**os.environ, **(env or {})})
     return out.stdout.strip()
 
 
@@ -168,6 +194,8 @@ Planner().plan(cell)
 again = time.perf_counter() - t
 out.write(json.dumps({"marks": kept, "total": total, "load_s": eng.load_s, "loaded_from": eng.loaded_from,
                       "again": again, "elapsed": time.perf_counter() - t0}) + "\n")
+out.flush()
+cli.exiting()  # as the spar script ends
 """
 
 
@@ -197,13 +225,18 @@ def breakdown(runs: int = 5) -> dict:
     return {"runs": runs, "steps": {k: statistics.median(v) for k, v in per.items()}, "loaded_from": sorted(loaded)}
 
 
-def run(repeats: int = 15, importtime_runs: int = 5) -> dict:
+def run(repeats: int = 15, importtime_runs: int = 5, peer: str | Path | None = None) -> dict:
     """The cold-start figures: medians (s) by command name in ``median`` (wall) and ``cpu``
     (user + system), every wall time in ``runs``, ``ratio`` plan/floor (wall), ``ratio_cpu``,
     ``ratio_sources`` plan from sources/floor, ``engine_saving_s``, ``plan_saving_s``, the
-    import breakdown in ``imports``."""
+    import breakdown in ``imports``; with ``peer`` (a checkout), ``peer`` its directory and
+    ``ratio_peer`` its plan over the floor."""
+    _compile_bytecode(ROOT / "src")
     first = _fill_cache()
-    cmds = _commands()
+    if peer is not None:
+        _compile_bytecode(Path(peer) / "src")
+        _fill_cache(_peer_env(peer))
+    cmds = _commands(peer)
     names = list(cmds)
     runs: dict[str, list[float]] = {n: [] for n in names}
     cpu: dict[str, list[float]] = {n: [] for n in names}
@@ -216,9 +249,11 @@ def run(repeats: int = 15, importtime_runs: int = 5) -> dict:
             cpu[n].append(c)
     med = {n: statistics.median(v) for n, v in runs.items()}
     med_cpu = {n: statistics.median(v) for n, v in cpu.items()}
-    return {"repeats": repeats, "cache_before": first, "median": med, "runs": runs, "cpu": med_cpu,
+    extra = {} if peer is None else {"peer": str(peer), "ratio_peer": med["plan, peer"] / med["floor"]}
+    return {**extra, "repeats": repeats, "cache_before": first, "median": med, "runs": runs, "cpu": med_cpu,
             "ratio_cpu": med_cpu["plan"] / med_cpu["floor"],
             "ratio": med["plan"] / med["floor"], "ratio_sources": med["plan, sources"] / med["floor"],
+            "ratio_frozen": med["plan"] / med["floor, frozen exit"],
             "engine_saving_s": med["engine, sources"] - med["engine"],
             "plan_saving_s": med["plan, sources"] - med["plan"],
             "target": TARGET_RATIO, "imports": importtime(importtime_runs),
@@ -245,7 +280,9 @@ def render(r: dict) -> list[str]:
           "`SPAR_QLF_CACHE=off` (the Prolog consulted at every start instead of loaded from its .qlf "
           "image); `engine` = `python -c \"import spar_py.engine as e; e.engine()\"`."), ""]
     rows = []
-    for name in ("floor", "plan", "plan, sources", "engine", "engine, sources"):
+    for name in [n for n in ("floor", "floor, frozen exit", "plan", "plan, sources", "engine", "engine, sources",
+                             "plan, peer")
+                 if n in m]:
         c = r["cpu"][name]
         rows.append([name, f"{m[name] * 1e3:.0f} ms", f"{m[name] / f:.2f}",
                      f"{min(r['runs'][name]) * 1e3:.0f}-{max(r['runs'][name]) * 1e3:.0f} ms",
@@ -256,10 +293,15 @@ def render(r: dict) -> list[str]:
     ok = r["ratio"] <= r["target"]
     L += [(f"Cold `spar plan` is {r['ratio']:.2f}x the floor in wall time (target <= {r['target']:g}x: "
            f"{'met' if ok else 'NOT met'}) and {r['ratio_cpu']:.2f}x in CPU time; from sources it is "
-           f"{r['ratio_sources']:.2f}x. Loading the "
+           f"{r['ratio_sources']:.2f}x; against the floor ending as `spar` does (gc.freeze() before exit) "
+           f"{r['ratio_frozen']:.2f}x. Loading the "
            f"image instead of the sources changes the engine start by {-r['engine_saving_s'] * 1e3:+.0f} ms "
            f"and the whole plan by {-r['plan_saving_s'] * 1e3:+.0f} ms (differences of medians; `spar plan` "
            "loads the Prolog in a thread while Python imports numpy and reads the problem)."), ""]
+    if "ratio_peer" in r:
+        L += [(f"`plan, peer` = the same `spar plan` running the spar_py of {r['peer']} (its src/ first on "
+               f"PYTHONPATH) in the same rounds: {r['ratio_peer']:.2f}x the floor, against {r['ratio']:.2f}x "
+               f"here ({(m['plan'] - m['plan, peer']) * 1e3:+.0f} ms)."), ""]
     b = r.get("breakdown")
     if b:
         L += [(f"Where a cold `spar plan` spends its wall time ({b['runs']} runs of `cli.main` with its steps "
@@ -278,8 +320,9 @@ def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(prog="python -m bench.coldstart", description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=15)
     ap.add_argument("--quick", action="store_true", help="3 rounds, 1 importtime run")
+    ap.add_argument("--peer", metavar="DIR", help="another checkout of spar-py: time its `spar plan` too")
     a = ap.parse_args(argv)
-    r = run(3, 1) if a.quick else run(a.repeats)
+    r = run(3, 1, a.peer) if a.quick else run(a.repeats, peer=a.peer)
     print("\n".join(render(r)))
 
 

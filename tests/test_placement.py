@@ -95,3 +95,59 @@ def test_tool_on_table_prune_refuses_only_what_the_full_check_refuses() -> None:
     assert tool_on_table(replace(cell, table=(-100.0, 100.0, -100.0, 100.0)), "peg",
                          placement._grid(cell, "peg", "p1P1")[0] @ CELL.objects["peg"].grasps["p1G17"].T,
                          Requirement(CELL.objects["peg"].grasps["p1G17"].T)) is None
+
+
+def _mate_requirements(cell):  # the mate_reachable arc's: the peg held by each grasp, onto the block
+    from spar_py.workspace import Requirement
+
+    Ta = cell.transforms["trans_1"]
+    return [(g.label, Requirement(Ta @ g.T, ("peg", np.linalg.inv(g.T)), g.width))
+            for g in cell.objects["peg"].grasps.values()]
+
+
+def test_rigid_refusal_refuses_only_what_the_full_check_refuses() -> None:
+    """The prune before IK (workspace.tool_refusal, table=False): where two bodies rigid with the
+    flange clash (a finger or the tool mount in the block the held peg is mated onto) or the grasp
+    rule fails, the full check, IK and every solution, refuses every placement of the grid. Some
+    mate requirements are pruned, some not."""
+    from spar_py.workspace import requirement_clear, requirement_state, tool_refusal
+
+    cell = replace(CELL, memo=type(CELL.memo)())
+    pruned = kept = 0
+    for pose in cell.objects["block"].poses:
+        grid = placement._grid(cell, "block", pose)
+        for label, req in _mate_requirements(cell):
+            why = tool_refusal(cell, "block", grid[0] @ req.X, req, table=False)
+            if why is None:
+                kept += 1
+                continue
+            pruned += 1
+            full = requirement_clear(cell, "block", grid, req, state=requirement_state(cell, "block", req))
+            assert not full.ok.any(), (pose, label, why)
+    assert pruned and kept
+
+
+def test_somewhere_is_the_whole_grid_answer() -> None:
+    """reachable_somewhere (first placement alone, then chunks; prunes before IK), a pose at a time
+    and every pose at once (reachable_somewhere_each), answers, for every grasp of either object
+    and every mate requirement, what one check of the whole grid answers."""
+    from spar_py.workspace import Requirement, requirement_clear
+
+    cell = replace(CELL, memo=type(CELL.memo)())
+    reqs = {"block": [Requirement(g.T, None, g.width) for g in cell.objects["block"].grasps.values()]
+            + [r for _, r in _mate_requirements(cell)],
+            "peg": [Requirement(g.T, None, g.width) for g in cell.objects["peg"].grasps.values()]}
+    answers = set()
+    for obj, rs in reqs.items():
+        poses = list(cell.objects[obj].poses)
+        # every pose at once, as an arc asks (one batch per requirement), on a cell of its own
+        each = placement.reachable_somewhere_each(replace(cell, memo=type(CELL.memo)()), obj, [(p, rs) for p in poses])
+        for pose, together in zip(poses, each):
+            got = placement.reachable_somewhere(cell, obj, pose, rs)
+            grid = placement._grid(cell, obj, pose)
+            fresh = replace(cell, memo=type(CELL.memo)())
+            want = [requirement_clear(fresh, obj, grid, r).ok.any() for r in rs]
+            assert got.tolist() == want, (obj, pose)
+            assert together.tolist() == want, (obj, pose)
+            answers |= set(want)
+    assert answers == {True, False}

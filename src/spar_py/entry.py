@@ -32,6 +32,9 @@ def early_signals() -> None:
 def main() -> None:
     """``spar``: early handlers, then :func:`spar_py.cli.main`."""
     early_signals()
-    from .cli import main as cli_main
+    from .cli import exiting, main as cli_main
 
-    cli_main(sys.argv[1:])
+    try:
+        cli_main(sys.argv[1:])
+    finally:
+        exiting()  # the process ends here: a shutdown without the full heap's collections

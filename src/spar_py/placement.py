@@ -16,14 +16,18 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
 from .geometry import convex_hull_2d, rotz
 from .model import Cell, ObjectModel
 from .units import from_mm, mm_per
-from .workspace import Requirement, reaches, requirement_clear, tool_on_table, wrist_height
+from .workspace import (Requirement, ik_rows, reaches, requirement_clear, requirement_clear_each, requirement_state,
+                        tool_refusal, wrist_height)
+
+if TYPE_CHECKING:
+    from .world.collision import SceneState
 
 #: Grid spacing of candidate placements: 50.8 mm (2 in); number of yaw steps.
 GRID_STEP_MM = 50.8
@@ -403,8 +407,9 @@ def choose(cell: Cell, obj: str, pose: str, requirements: list[np.ndarray],
     clear of the ``occupied`` parts' footprints by the clearance.
 
     Nearest: least distance rounded to ROUND_MM, then least yaw, then first in grid order.
-    The candidates are checked in that order a chunk at a time, so the search stops
-    at the first chunk holding a feasible one instead of solving IK for the whole grid.
+    The candidates are checked in that order, the nearest alone and then a chunk at a time,
+    so the search stops at the first chunk holding a feasible one instead of solving IK for
+    the whole grid.
     """
     xy, yaw, T = _grid_arrays(cell, obj, pose, occupied, from_mm(cell.unit, GRID_STEP_MM), YAW_STEPS)
     if not len(T):
@@ -417,8 +422,9 @@ def choose(cell: Cell, obj: str, pose: str, requirements: list[np.ndarray],
     yaws = yaw.tolist()
     digits = -round(math.log10(ROUND_MM))
     order = sorted(range(len(T)), key=lambda i: (round(dist[i], digits), yaws[i]))  # stable: grid order breaks ties
-    for start in range(0, len(order), CHOOSE_CHUNK):
-        idx = order[start:start + CHOOSE_CHUNK]
+    starts = [0, *range(1, len(order), CHOOSE_CHUNK)]  # the nearest alone first: it usually serves
+    for start, end in zip(starts, [*starts[1:], len(order)]):
+        idx = order[start:end]
         ok = np.ones(len(idx), dtype=bool)
         for x in requirements or ():  # each requirement by IK and clearance, on the survivors only
             live = np.flatnonzero(ok)
@@ -450,45 +456,82 @@ def reachable_somewhere(cell: Cell, obj: str, pose: str,
     the other objects (phase 1 does not know where they will be); phase 2 chooses a real
     placement clear of them that serves every later action at once.
     """
-    if not len(requirements):
-        return np.zeros(0, dtype=bool)
-    reqs = [r if isinstance(r, Requirement) else Requirement(np.asarray(r, float)) for r in requirements]
-    out = np.zeros(len(reqs), dtype=bool)
+    return reachable_somewhere_each(cell, obj, [(pose, requirements)])[0]
+
+
+def reachable_somewhere_each(cell: Cell, obj: str,
+                             asks: Sequence[tuple[str, Sequence[np.ndarray | Requirement]]]) -> list[np.ndarray]:
+    """:func:`reachable_somewhere` for each (stable pose, requirements) of ``asks`` (one arc's
+    positions), solved together: a requirement asked in several poses is checked at all their
+    first placements in one batch (one scene state, one IK call, one clearance check)."""
     memo = cell.memo.table("placement.somewhere", SOMEWHERE_LIMIT)
-    gkey = _grid_key(cell, obj, pose)
-    todo: dict[tuple, list[int]] = {}  # equal requirements are solved once
-    for i, r in enumerate(reqs):
-        held = None if r.held is None else (r.held[0], np.round(r.held[1], 12).tobytes())
-        key = (gkey, obj, np.round(r.X, 12).tobytes(), held, None if r.width is None else round(r.width, 12))
-        if key in memo:
-            out[i] = memo[key]
-        else:
-            todo.setdefault(key, []).append(i)
+    outs: list[np.ndarray] = []
+    todo: dict[tuple, list[tuple[int, int]]] = {}  # equal (pose, requirement) asks are solved once
+    items: dict[tuple, tuple[str, Requirement]] = {}
+    for a, (pose, requirements) in enumerate(asks):
+        reqs = [r if isinstance(r, Requirement) else Requirement(np.asarray(r, float)) for r in requirements]
+        out = np.zeros(len(reqs), dtype=bool)
+        gkey = _grid_key(cell, obj, pose) if reqs else None
+        for i, r in enumerate(reqs):
+            held = None if r.held is None else (r.held[0], np.round(r.held[1], 12).tobytes())
+            key = (gkey, obj, np.round(r.X, 12).tobytes(), held, None if r.width is None else round(r.width, 12))
+            if key in memo:
+                out[i] = memo[key]
+            else:
+                todo.setdefault(key, []).append((a, i))
+                items.setdefault(key, (pose, r))
+        outs.append(out)
     if todo:
-        cands = _grid(cell, obj, pose)
-        for key, ix in todo.items():
-            memo[key] = out[ix] = _some_placement(cell, obj, cands, reqs[ix[0]])
+        got = _some_placement(cell, obj, [(_grid(cell, obj, pose), r) for pose, r in items.values()])
+        for (key, where), ok in zip(todo.items(), got):
+            memo[key] = ok
+            for a, i in where:
+                outs[a][i] = ok
+    return outs
+
+
+def _some_placement(cell: Cell, obj: str, items: list[tuple[np.ndarray, Requirement]],
+                    chunk: int = 48) -> list[bool]:
+    """For each (object poses ``cands`` (n,4,4), requirement) of ``items``, some pose of ``cands``
+    at which the arm reaches T_O @ req.X clear of the world: the first placement alone (one IK
+    batch for every item; one clearance check per requirement for the first placements of all
+    its items), then ``chunk`` at a time (the usual case is met at the first placement, so the
+    whole first chunk's IK and clearance are seldom needed).
+
+    Refused before any IK (workspace.tool_refusal): the grasp rule, or two bodies rigid with
+    the flange (gripper, held part, the object where the tool is) closer than the margin, which
+    refuse every placement alike; and, the grid's placements differing only by a turn about
+    world z and a shift in x, y, a wrist below the table at the first one (by more than
+    rounding) or a body rigid with the tool on an unbounded table, which are so at every one."""
+    out = [False] * len(items)
+    live: list[tuple[int, SceneState | None]] = []  # (item, its requirement's scene state)
+    T0 = [cands[0] @ np.asarray(req.X, float) if len(cands) else None for cands, req in items]
+    for k, (cands, req) in enumerate(items):
+        if not len(cands):
+            continue
+        z_row = bool(np.all(cands[:, 2, :] == cands[0, 2, :]))
+        if z_row and wrist_height(cell.robot, T0[k][None])[0] < -from_mm(cell.unit, ROUND_MM):
+            continue
+        state = requirement_state(cell, obj, req)
+        if tool_refusal(cell, obj, T0[k], req, table=z_row, state=state) is None:
+            live.append((k, state))
+    if not live:
+        return out
+    Q, okb = ik_rows(cell, np.stack([T0[k] for k, _ in live]))
+    groups: dict[int, list[int]] = {}  # rows of live by requirement state (None: no collision check)
+    for row, (k, state) in enumerate(live):
+        groups.setdefault(id(state) if state is not None else -1 - row, []).append(row)
+    first = np.zeros(len(live), dtype=bool)
+    for rows in groups.values():
+        k, state = live[rows[0]]
+        first[rows] = requirement_clear_each(cell, obj, np.stack([items[live[r][0]][0][0] for r in rows]),
+                                             items[k][1], state, (Q[rows], okb[rows]))
+    for row, (k, state) in enumerate(live):
+        cands, req = items[k]
+        out[k] = bool(first[row]) or any(
+            requirement_clear(cell, obj, cands[start:start + chunk], req, state=state).ok.any()
+            for start in [1, *range(1 + chunk, len(cands), chunk)] if start < len(cands))
     return out
-
-
-def _some_placement(cell: Cell, obj: str, cands: np.ndarray, req: Requirement, chunk: int = 48) -> bool:
-    """Some object pose of ``cands`` (n,4,4) at which the arm reaches T_O @ req.X clear of the
-    world, a chunk at a time (the usual case is met in the first chunk). The grid's placements
-    differ only by a turn about world z and a shift in x, y, so a wrist below the table at the
-    first one (by more than rounding) is below it at every one: no IK is solved then."""
-    if not len(cands):
-        return False
-    if np.all(cands[:, 2, :] == cands[0, 2, :]):
-        if wrist_height(cell.robot, (cands[0] @ req.X)[None])[0] < -from_mm(cell.unit, ROUND_MM):
-            return False
-        # the same for the gripper, tool mount and the part in the hand against the table
-        # (unbounded): their heights are the grid's, whatever the arm's joints
-        if tool_on_table(cell, obj, cands[0] @ req.X, req) is not None:
-            return False
-    for start in range(0, len(cands), chunk):
-        if requirement_clear(cell, obj, cands[start:start + chunk], req).ok.any():
-            return True
-    return False
 
 
 def _any_placement(cell: Cell, cands: np.ndarray, X: np.ndarray, chunk: int = 48) -> np.ndarray:

@@ -25,7 +25,7 @@ import numpy as np
 from .errors import SparValueError
 from .geometry import same_stable_pose
 from .model import Cell, Face, Grasp, ObjectModel
-from .workspace import Requirement, ik_rows, remember_refusal, requirement_clear_ik
+from .workspace import Requirement, ik_rows, remember_refusal, requirement_clear_ik, requirement_state
 
 __all__ = [
     "ARCS",
@@ -108,16 +108,18 @@ def _check_rule(rule: str) -> None:
         raise SparValueError(f"placement rule {rule!r} is not one of {', '.join(RULES)}")
 
 
-def _somewhere(cell: Cell, obj: str, pose: str, grasps: list[Grasp], X: list[Requirement],
-               rule: str) -> list[Grasp]:
-    """The grasps whose requirement X (tool transform in the object frame, and what is in the
-    hand) the arm reaches clear of the world at some placement of ``obj`` in stable pose
-    ``pose`` (placement.reachable_somewhere); all of them under the paper's rule."""
-    if rule == "paper" or not grasps:
-        return list(grasps)
-    from .placement import reachable_somewhere  # placement builds on workspace, not on this module
+def _somewhere(cell: Cell, obj: str, asks: list[tuple[str, list[Grasp], list[Requirement]]],
+               rule: str) -> list[tuple[str, str]]:
+    """The (grasp label, pose) pairs of ``asks`` (stable pose, grasps, their requirements X: tool
+    transform in the object frame, and what is in the hand) whose requirement the arm reaches
+    clear of the world at some placement of ``obj`` in that pose (placement.reachable_somewhere,
+    every pose of the arc at once); all of them under the paper's rule."""
+    if rule == "paper":
+        return [(g.label, p) for p, grasps, _ in asks for g in grasps]
+    from .placement import reachable_somewhere_each  # placement builds on workspace, not on this module
 
-    return [g for g, ok in zip(grasps, reachable_somewhere(cell, obj, pose, X)) if ok]
+    oks = reachable_somewhere_each(cell, obj, [(p, X) for p, _, X in asks])
+    return [(g.label, p) for (p, grasps, _), ok in zip(asks, oks) for g, reached in zip(grasps, ok) if reached]
 
 
 def _clear_pass(cell: Cell, obj: str, pending: list[tuple[Grasp, str, np.ndarray]],
@@ -135,7 +137,8 @@ def _clear_pass(cell: Cell, obj: str, pending: list[tuple[Grasp, str, np.ndarray
         by_grasp.setdefault(g.label, []).append(i)
     for ix in by_grasp.values():
         g = pending[ix[0]][0]
-        r = requirement_clear_ik(cell, obj, requirement(g), Q[ix], okb[ix])
+        req = requirement(g)
+        r = requirement_clear_ik(cell, obj, req, Q[ix], okb[ix], state=requirement_state(cell, obj, req))
         for k, i in enumerate(ix):
             out[i] = bool(r.ok[k])
             if r.ik[k] and not r.ok[k]:
@@ -155,17 +158,17 @@ def reachable_pairs(cell: Cell, obj: str, grasp_labels: Sequence[str],
     _check_rule(rule)
     model = _object(cell, obj)
     grasps = _grasps(model, grasp_labels)
-    pairs: list[tuple[str, str]] = []
     pending: list[tuple[Grasp, str, np.ndarray]] = []
+    asks: list[tuple[str, list[Grasp], list[Requirement]]] = []
     for p in pos_labels:
         T_O = _absolute(cell, model, p)
         rfaces = set(resting_faces(cell, obj, p))
         free = [g for g in grasps if not rfaces & set(g.gfaces)]  # condition 1
         if T_O is None:
-            reqs = [Requirement(g.T, None, g.width) for g in free]
-            pairs += [(g.label, p) for g in _somewhere(cell, obj, p, free, reqs, rule)]
+            asks.append((p, free, [Requirement(g.T, None, g.width) for g in free]))
             continue
         pending += [(g, p, T_O) for g in free]
+    pairs = _somewhere(cell, obj, asks, rule)
     ok = _clear_pass(cell, obj, pending, lambda g: Requirement(g.T, None, g.width),
                      lambda g, p: f"pickup({obj}, {g.label}) at {p}")
     pairs += [(g.label, p) for (g, p, _), reached in zip(pending, ok) if reached]
@@ -194,17 +197,20 @@ def mate_reachable_pairs(cell: Cell, held_obj: str, fixed_obj: str, grasp_labels
     grasps = _grasps(_object(cell, held_obj), grasp_labels)
     fixed = _object(cell, fixed_obj)
 
-    def req(g: Grasp) -> Requirement:
-        return Requirement(Ta @ g.T, (held_obj, np.linalg.inv(g.T)), g.width)
+    reqs = {g.label: Requirement(Ta @ g.T, (held_obj, np.linalg.inv(g.T)), g.width) for g in grasps}
 
-    pairs: list[tuple[str, str]] = []
+    def req(g: Grasp) -> Requirement:  # one per grasp, whatever the position
+        return reqs[g.label]
+
     pending: list[tuple[Grasp, str, np.ndarray]] = []
+    asks: list[tuple[str, list[Grasp], list[Requirement]]] = []
     for p in pos_labels:
         T_O = _absolute(cell, fixed, p)
         if T_O is None:
-            pairs += [(g.label, p) for g in _somewhere(cell, fixed_obj, p, grasps, [req(g) for g in grasps], rule)]
+            asks.append((p, grasps, [req(g) for g in grasps]))
             continue
         pending += [(g, p, T_O) for g in grasps]
+    pairs = _somewhere(cell, fixed_obj, asks, rule)
     ok = _clear_pass(cell, fixed_obj, pending, req,
                      lambda g, p: f"assemble({held_obj}, {fixed_obj}) with {g.label} at {p}")
     pairs += [(g.label, p) for (g, p, _), reached in zip(pending, ok) if reached]

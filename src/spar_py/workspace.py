@@ -27,18 +27,20 @@ import numpy as np
 
 if TYPE_CHECKING:
     from .model import Cell
+    from .world.collision import SceneState
     from .world.robots import Robot
 
 __all__ = ["Reached", "Requirement", "clear_of_world", "ik_rows", "reach_clear", "reaches", "refusals",
            "remember_refusal", "requirement_clear", "requirement_clear_ik", "solutions", "tool_on_table",
-           "wrist_above_table",
-           "wrist_height"]
+           "requirement_clear_each", "requirement_state", "tool_refusal", "wrist_above_table", "wrist_height"]
 
 #: Refusals kept per cell (the "no plan" explanation): at most this many distinct ones.
 REFUSALS_LIMIT = 256
 #: Bounds of the cell's memo tables: requirement answers by geometry (:func:`requirement_clear`),
 #: objects' shape keys.
 REQUIREMENT_LIMIT = 2048
+#: Scene states kept per cell by requirement (:func:`requirement_state`).
+STATE_LIMIT = 512
 SHAPE_KEY_LIMIT = 1024
 
 
@@ -122,8 +124,9 @@ def ik_rows(cell: Cell, T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def clear_of_world(cell: Cell, Q: np.ndarray, okb: np.ndarray, *, parts: Mapping[str, np.ndarray] | None = None,
                    held: tuple[str, np.ndarray] | None = None, grasped: str | None = None,
                    attached: Mapping[str, np.ndarray] | None = None, width: float | None = None,
-                   allow: Iterable[tuple[str, str]] = ()) -> Reached:
-    """:func:`reach_clear` from the IK branches already solved (:func:`ik_rows`)."""
+                   allow: Iterable[tuple[str, str]] = (), state: SceneState | None = None) -> Reached:
+    """:func:`reach_clear` from the IK branches already solved (:func:`ik_rows`); ``state`` the
+    scene state of those arguments when the caller has it already (CollisionScene.at)."""
     from .world.collision import scene_for
 
     n = len(Q)
@@ -131,7 +134,8 @@ def clear_of_world(cell: Cell, Q: np.ndarray, okb: np.ndarray, *, parts: Mapping
     if not cell.collisions:  # the problem file opted out (collision: false): IK alone
         return Reached(ik.copy(), ik, [[] for _ in range(n)])
     rows, cols = np.nonzero(okb)
-    state = scene_for(cell).at(parts or {}, held, grasped, width=width, allow=allow, attached=attached)
+    if state is None:
+        state = scene_for(cell).at(parts or {}, held, grasped, width=width, allow=allow, attached=attached)
     clear, why = state.check(Q[rows, cols])
     ok = np.zeros(n, dtype=bool)
     ok[rows[clear]] = True
@@ -142,17 +146,20 @@ def clear_of_world(cell: Cell, Q: np.ndarray, okb: np.ndarray, *, parts: Mapping
     return Reached(ok, ik, pairs)
 
 
-def requirement_clear(cell: Cell, obj: str, TO: np.ndarray, req: Requirement | np.ndarray) -> Reached:
+def requirement_clear(cell: Cell, obj: str, TO: np.ndarray, req: Requirement | np.ndarray,
+                      state: SceneState | None = None,
+                      ik: tuple[np.ndarray, np.ndarray] | None = None) -> Reached:
     """:func:`reach_clear` for the tool at ``TO[i] @ X`` for object poses TO (n, 4, 4) of ``obj``
     and one requirement (a :class:`Requirement`, or a bare X: the object in the hand with the
-    fingers open)."""
+    fingers open); ``state`` its :func:`requirement_state` and ``ik`` the :func:`ik_rows` of
+    those tool poses when the caller has them (a batch solved for several requirements)."""
     req = req if isinstance(req, Requirement) else Requirement(np.asarray(req, float))
     TO = np.asarray(TO, float).reshape(-1, 4, 4)
     T = TO @ np.asarray(req.X, float)
     if not len(T):
         return Reached(np.zeros(0, bool), np.zeros(0, bool), [])
     if not cell.collisions:
-        return requirement_clear_ik(cell, obj, req, *ik_rows(cell, T))
+        return requirement_clear_ik(cell, obj, req, *(ik if ik is not None else ik_rows(cell, T)))
     # the answer depends on the geometry only (no other part is in this world): renamed copies
     # of one model (generated cells: N identical blocks) asked the same poses share it
     held = req.held[0] if req.held is not None else None
@@ -165,9 +172,41 @@ def requirement_clear(cell: Cell, obj: str, TO: np.ndarray, req: Requirement | n
     if key in table:
         ok, ik, pairs = table[key]
         return Reached(ok.copy(), ik.copy(), [[tuple(back.get(n, n) for n in p) for p in row] for row in pairs])
-    r = requirement_clear_ik(cell, obj, req, *ik_rows(cell, T))
+    r = requirement_clear_ik(cell, obj, req, *(ik if ik is not None else ik_rows(cell, T)), state=state)
     table[key] = (r.ok.copy(), r.ik.copy(), [[tuple(names.get(n, n) for n in p) for p in row] for row in r.pairs])
     return r
+
+
+def requirement_clear_each(cell: Cell, obj: str, TO: np.ndarray, req: Requirement,
+                           state: SceneState | None, ik: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+    """(k,) bool: :func:`requirement_clear` of each object pose TO[i] (k, 4, 4) alone, ``ik`` the
+    :func:`ik_rows` of TO @ req.X: the same answers and memo entries as k calls with one pose
+    each (rows are independent), the poses the memo lacks checked in one batch."""
+    TO = np.asarray(TO, float).reshape(-1, 4, 4)
+    Q, okb = ik
+    if not cell.collisions:
+        return requirement_clear_ik(cell, obj, req, Q, okb).ok.copy()
+    held = req.held[0] if req.held is not None else None
+    hand = None if held is None else (_shape_key(cell, held), np.round(req.held[1], 12).tobytes())
+    width = None if req.width is None else round(float(req.width), 12)
+    base = (_shape_key(cell, obj), hand, np.round(req.X, 12).tobytes(), width)
+    keys = [(*base, np.round(TO[i:i + 1], 12).tobytes()) for i in range(len(TO))]
+    table = cell.memo.table("workspace.requirement", REQUIREMENT_LIMIT)
+    out = np.zeros(len(TO), dtype=bool)
+    miss = []
+    for i, key in enumerate(keys):
+        if key in table:
+            out[i] = bool(table[key][0][0])
+        else:
+            miss.append(i)
+    if miss:
+        names = {obj: "\0obj"} | ({f"held:{held}": "\0held"} if held is not None else {})
+        r = requirement_clear_ik(cell, obj, req, Q[miss], okb[miss], state=state)
+        for k, i in enumerate(miss):
+            out[i] = bool(r.ok[k])
+            table[keys[i]] = (r.ok[k:k + 1].copy(), r.ik[k:k + 1].copy(),
+                              [[tuple(names.get(n, n) for n in p) for p in r.pairs[k]]])
+    return out
 
 
 def _shape_key(cell: Cell, obj: str) -> bytes:
@@ -185,9 +224,30 @@ def _shape_key(cell: Cell, obj: str) -> bytes:
     return table[obj]
 
 
-def requirement_clear_ik(cell: Cell, obj: str, req: Requirement, Q: np.ndarray, okb: np.ndarray) -> Reached:
+def requirement_clear_ik(cell: Cell, obj: str, req: Requirement, Q: np.ndarray, okb: np.ndarray,
+                         state: SceneState | None = None) -> Reached:
     """:func:`requirement_clear` from the IK branches already solved (:func:`ik_rows`)."""
-    return clear_of_world(cell, Q, okb, **_requirement_world(obj, req))
+    return clear_of_world(cell, Q, okb, **_requirement_world(obj, req), state=state)
+
+
+def requirement_state(cell: Cell, obj: str, req: Requirement) -> SceneState | None:
+    """The scene state (CollisionScene.at) of a requirement on ``obj`` (:func:`requirement_clear`'s
+    world), or None when the cell has no collision check. Kept on the cell (at most STATE_LIMIT):
+    it depends on the requirement only, not on where the object is, so one state serves
+    :func:`tool_refusal` and every batch of poses of that requirement, in every stable pose
+    (phase 1 asks each grasp's requirement once per pose)."""
+    if not cell.collisions:
+        return None
+    from .world.collision import scene_for
+
+    held = None if req.held is None else (req.held[0], np.round(req.held[1], 12).tobytes())
+    width = None if req.width is None else round(float(req.width), 12)
+    key = (obj, np.round(req.X, 12).tobytes(), held, width)
+    table = cell.memo.table("workspace.requirement_state", STATE_LIMIT)
+    state = table.get(key)
+    if state is None:
+        state = table[key] = scene_for(cell).at({}, **_requirement_world(obj, req))
+    return state
 
 
 def _requirement_world(obj: str, req: Requirement) -> dict:
@@ -210,6 +270,27 @@ def tool_on_table(cell: Cell, obj: str, T: np.ndarray, req: Requirement) -> tupl
 
     state = scene_for(cell).at({}, **_requirement_world(obj, req))
     return state.tool_rigid_on_table(np.asarray(T, float))
+
+
+def tool_refusal(cell: Cell, obj: str, T: np.ndarray, req: Requirement, *, table: bool = True,
+                 state: SceneState | None = None) -> tuple[str, str] | None:
+    """A pair that refuses ``req`` on ``obj`` at every tool pose of a batch, before any IK, or None:
+    the grasp rule or two bodies rigid with the flange closer than the margin
+    (SceneState.tool_rigid_refusal: true at every tool pose), and with ``table`` the body
+    rigid with the tool that meets an unbounded table at world tool pose T (4x4)
+    (:func:`tool_on_table`: true at every pose turned about z or shifted in x, y from T).
+    One scene state for both (``state``: the :func:`requirement_state` when the caller has it);
+    None without collision checks."""
+    if not cell.collisions:
+        return None
+    if state is None:
+        state = requirement_state(cell, obj, req)
+    T = np.asarray(T, float)
+    if table and cell.table is None:
+        hit = state.tool_rigid_on_table(T)
+        if hit is not None:
+            return hit
+    return state.tool_rigid_refusal(T)
 
 
 def _refusal_table(cell: Cell) -> dict[str, list[tuple[str, str]]]:

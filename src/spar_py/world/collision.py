@@ -249,7 +249,9 @@ class Obstacle:
 
 def segment_distance(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.ndarray) -> np.ndarray:
     """(...,) distance between segments p1-q1 and p2-q2 (arrays (..., 3)), vectorised
-    (Ericson, Real-Time Collision Detection, Sec. 5.1.9, every branch as np.where)."""
+    (Ericson, Real-Time Collision Detection, Sec. 5.1.9, every branch as np.where; clamps as
+    np.minimum/np.maximum, the same values as np.clip at a fraction of its call overhead on
+    the small arrays of one check)."""
     d1, d2, r = q1 - p1, q2 - p2, p1 - p2
     a = (d1 * d1).sum(-1)
     e = (d2 * d2).sum(-1)
@@ -257,18 +259,19 @@ def segment_distance(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.ndar
     c = (d1 * r).sum(-1)
     b = (d1 * d2).sum(-1)
     eps = 1e-12
+    lo, hi = np.maximum, np.minimum
     pa, pe = a > eps, e > eps
     a_, e_ = np.where(pa, a, 1.0), np.where(pe, e, 1.0)
     denom = a * e - b * b
-    s = np.where(denom > eps * np.maximum(a * e, eps), np.clip((b * f - c * e) / np.where(denom > 0, denom, 1.0),
-                                                                0.0, 1.0), 0.0)
+    s = np.where(denom > eps * lo(a * e, eps), hi(lo((b * f - c * e) / np.where(denom > 0, denom, 1.0), 0.0), 1.0),
+                 0.0)
     t = (b * s + f) / e_
-    tc = np.clip(t, 0.0, 1.0)
-    s = np.where(t != tc, np.clip((tc * b - c) / a_, 0.0, 1.0), s)
+    tc = hi(lo(t, 0.0), 1.0)
+    s = np.where(t != tc, hi(lo((tc * b - c) / a_, 0.0), 1.0), s)
     t = tc
     # degenerate segments: a point on either side
-    s = np.where(pa, np.where(pe, s, np.clip(-c / a_, 0.0, 1.0)), 0.0)
-    t = np.where(pe, np.where(pa, t, np.clip(f / e_, 0.0, 1.0)), 0.0)
+    s = np.where(pa, np.where(pe, s, hi(lo(-c / a_, 0.0), 1.0)), 0.0)
+    t = np.where(pe, np.where(pa, t, hi(lo(f / e_, 0.0), 1.0)), 0.0)
     diff = (p1 + d1 * s[..., None]) - (p2 + d2 * t[..., None])
     return np.sqrt((diff * diff).sum(-1))
 
@@ -414,6 +417,7 @@ class SceneState:
                 table[key] = struct
         self.pairs, self.table_bodies, self.exact_pair, rigid = struct
         self._rigid: dict[int, float | None] = dict.fromkeys(rigid)
+        self._refusal: tuple[tuple[str, str] | None] | None = None  # tool_rigid_refusal's answer
         self._cap_a = np.array([b.cap[0] for b in self.bodies]).reshape(-1, 3)
         self._cap_b = np.array([b.cap[1] for b in self.bodies]).reshape(-1, 3)
         self._cap_r = np.array([b.cap[2] for b in self.bodies])
@@ -423,6 +427,7 @@ class SceneState:
         # made on first use by _world_caps: each moving body's frame, the static ends in the world
         self._body_frames = np.zeros(0, dtype=int)
         self._static: tuple[np.ndarray, np.ndarray] | None = None
+        self._table_pts: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # by _plane_heights
 
     # ------------------------------------------------------------------ frames and bounds
 
@@ -471,12 +476,18 @@ class SceneState:
     def _plane_heights(self, F: np.ndarray) -> np.ndarray:
         """(n, m) each table-checked moving body's height above the plane z = 0 (exact, signed):
         the z row of its frame times its vertices, less its radius."""
-        out = np.empty((len(F), len(self.table_bodies)))
-        for k, i in enumerate(self.table_bodies):
-            b = self.bodies[i]
-            Fb = F[:, b.frame]
-            out[:, k] = (b.points @ Fb[:, 2, :3, None])[..., 0].min(axis=1) + Fb[:, 2, 3] - b.radius
-        return out
+        if self._table_pts is None:  # every table-checked body's vertices, padded by repeating one
+            bodies = [self.bodies[i] for i in self.table_bodies]
+            k = max((len(b.points) for b in bodies), default=1)
+            pts = np.empty((len(bodies), k, 3))
+            for j, b in enumerate(bodies):
+                pts[j, :len(b.points)] = b.points
+                pts[j, len(b.points):] = b.points[0]
+            self._table_pts = (pts, np.array([b.frame for b in bodies], dtype=int),
+                               np.array([b.radius for b in bodies]))
+        pts, frames, radius = self._table_pts
+        Fb = F[:, frames]                                             # (n, m, 4, 4)
+        return (pts @ Fb[:, :, 2, :3, None])[..., 0].min(axis=2) + Fb[:, :, 2, 3] - radius
 
     def _table(self, F: np.ndarray) -> np.ndarray:
         """(n, m) each table-checked moving body's height above the table (exact, signed; +inf
@@ -506,13 +517,50 @@ class SceneState:
         refuses every such pose (a placement grid's) before any IK is solved."""
         if self.scene.table is not None or not len(self.table_bodies):
             return None
+        T_tool = np.asarray(T_tool, float)
+        frames = {TOOL: T_tool, 6: T_tool @ self.scene.robot.tool_inverse()}
+        for i in self.table_bodies.tolist():  # as _plane_heights, for the bodies on frames 6 and 7
+            b = self.bodies[i]
+            Fb = frames.get(b.frame)
+            if Fb is not None and (b.points @ Fb[2, :3]).min() + Fb[2, 3] - b.radius <= self.scene.margin:
+                return (b.name, "table")
+        return None
+
+    def tool_rigid_refusal(self, T_tool: np.ndarray) -> tuple[str, str] | None:
+        """What refuses every joint vector of this state whatever the tool pose, as the pair
+        :meth:`check` would name, or None: the grasp rule when the part in the hand is given in
+        the tool frame, else the first checked pair of two bodies rigid with the flange (frames 6
+        and 7) within the margin. Their relative pose does not depend on q, so :meth:`check`
+        refuses every row for it; ``T_tool`` (4x4, world) is any tool pose (the distances are the
+        same at all of them): the answer is kept with the state."""
+        if self._refusal is None:
+            self._refusal = (self._tool_rigid_refusal(T_tool),)
+        return self._refusal[0]
+
+    def _tool_rigid_refusal(self, T_tool: np.ndarray) -> tuple[str, str] | None:
+        if self.hand is not None and self.hand[1] == "tool":
+            g_ok, g_name = self.grasp_ok(self.hand[2])
+            if not g_ok:
+                return (g_name, self.hand[0])
+        if not self._rigid:
+            return None
         F = np.full((1, 8, 4, 4), np.nan)
         F[0, TOOL] = T_tool
         F[0, 6] = np.asarray(T_tool, float) @ self.scene.robot.tool_inverse()
         with np.errstate(invalid="ignore"):
-            low = self._plane_heights(F)[0] <= self.scene.margin  # NaN (a body on another frame): False
-        k = np.flatnonzero(low)
-        return None if not len(k) else (self.bodies[self.table_bodies[k[0]]].name, "table")
+            A, B = self._world_caps(F)
+        m = self.scene.margin
+        rigid = list(self._rigid)
+        i, j = self.pairs[rigid, 0], self.pairs[rigid, 1]
+        lbs = segment_distance(A[0, i], B[0, i], A[0, j], B[0, j]) - self._cap_r[i] - self._cap_r[j]
+        for p, lb in zip(rigid, lbs.tolist()):
+            if lb > m:
+                continue
+            d = lb if self.exact_pair[p] else self._exact_cell(F, 0, p)
+            if d <= m:
+                a, b = self.pairs[p]
+                return (self.bodies[a].name, self.bodies[b].name)
+        return None
 
     def _bounds(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         F = self._frames(q)
@@ -585,8 +633,10 @@ class SceneState:
         tol = self.scene.tol
         verdict: tuple[bool, str | None] = (True, None)
         bodies = [b.placed(T_tool_part, TOOL, part) for b in self.scene.shapes_of(part)]
-        for g in self.scene.shrunk_gripper(self.width, tol):
-            if any(_exact(g, np.eye(4), b, np.eye(4)) <= 0.0 for b in bodies if _near(g, b, 0.0)):
+        gripper = self.scene.shrunk_gripper(self.width, tol)
+        near = _near_all(gripper, bodies, 0.0)  # (gripper box, part body): bounding capsules touch
+        for gi, g in enumerate(gripper):
+            if any(_exact(g, np.eye(4), b, np.eye(4)) <= 0.0 for bi, b in enumerate(bodies) if near[gi, bi]):
                 verdict = (False, g.name)
                 break
         if table is not None:
@@ -719,10 +769,17 @@ def _pair_structure(scene: CollisionScene, bodies: list[Body], n_moving: int, ha
     return pairs_arr, table_bodies, exact_pair, tuple(rigid)
 
 
-def _near(a: Body, b: Body, within: float) -> bool:
-    """Bounding capsules of two bodies (same frame) within ``within`` of each other."""
-    d = segment_distance(a.cap[0], a.cap[1], b.cap[0], b.cap[1]) - a.cap[2] - b.cap[2]
-    return bool(d <= within)
+def _near_all(A: list[Body], B: list[Body], within: float) -> np.ndarray:
+    """(len(A), len(B)) bool: the bounding capsules of each pair (bodies in one frame) within
+    ``within`` of each other, in one vectorised call."""
+    if not A or not B:
+        return np.zeros((len(A), len(B)), dtype=bool)
+    a0, a1 = np.array([a.cap[0] for a in A])[:, None], np.array([a.cap[1] for a in A])[:, None]
+    b0, b1 = np.array([b.cap[0] for b in B])[None], np.array([b.cap[1] for b in B])[None]
+    ra, rb = np.array([a.cap[2] for a in A])[:, None], np.array([b.cap[2] for b in B])[None]
+    shape = (len(A), len(B), 3)
+    d = segment_distance(*(np.broadcast_to(x, shape) for x in (a0, a1, b0, b1))) - ra - rb
+    return d <= within
 
 
 # --------------------------------------------------------------------------- the cell's scene
