@@ -509,3 +509,36 @@ def test_body_reach_bounds_how_far_a_body_moves(puma) -> None:
         assert np.all(moved <= bound * (1 + 1e-9)), frame
         ratios.append((moved / bound).max())
     assert ratios[-1] > 0.2  # the tool's bound is within a factor 5 of the worst move seen
+
+
+def test_certify_keeps_what_it_learns_in_the_motion_memo_not_on_the_state() -> None:
+    """certify's rates and its "some row is clear" live in the motion's CertifyMemo (one per
+    scene state), not stored behind the state's back: the state's attributes are the same
+    after certify as before, a memo passed in is filled and gives the same verdicts when
+    reused, and a memo of another state is refused."""
+    from spar_py import Planner
+    from spar_py.world.collision import scene_for
+
+    cell = Planner(motion=True).load_problem(ROOT / "kb" / "problems" / "wall_detour.yaml")
+    scene = scene_for(cell)
+    parts = {p.obj: np.asarray(p.T, float) for p in cell.positions.values()}
+    state = scene.at(parts)
+    res = mo.resolution(cell.robot.dh, cell.robot.tool, scene.margin, mo.extent(cell))
+    rng = np.random.default_rng(3)
+    lo, hi = cell.robot.limits[:, 0], cell.robot.limits[:, 1]
+    segs = []
+    while len(segs) < 6:
+        a = rng.uniform(lo, hi)
+        b = np.clip(a + rng.normal(0, 0.2, 6), lo, hi)
+        if state.clear(np.array([a, b])).all():
+            segs.append(mo.densify(np.array([a, b]), res))
+    before = set(vars(state))
+    fresh = [mo.certify(state, w)[0] for w in segs]
+    assert set(vars(state)) == before
+    memo = mo.CertifyMemo(state)
+    assert [mo.certify(state, w, memo)[0] for w in segs] == fresh
+    assert memo.rates is not None and memo.some_clear
+    assert [mo.certify(state, w, memo)[0] for w in segs] == fresh
+    assert set(vars(state)) == before
+    with pytest.raises(ValueError, match="another scene state"):
+        mo.certify(scene.at(parts), segs[0], memo)

@@ -230,7 +230,21 @@ def column_rates(state: Any) -> np.ndarray:
     return out
 
 
-def certify(state: Any, w: np.ndarray) -> tuple[int, tuple[str, str] | None]:
+@dataclass
+class CertifyMemo:
+    """What :func:`certify` learns of one ``collision.SceneState`` and keeps for its next calls on
+    that state (one motion's straight segment, OMPL's motion checks, the densified path): the
+    bound columns' rates (:func:`column_rates`, (C, 6) cell unit per rad, None until first
+    needed) and whether some row was found clear (the grasp rule and the rigid pairs, the same on
+    every row, then need no check). Made by the motion that owns the state; never shared
+    between states."""
+
+    state: Any
+    rates: np.ndarray | None = None
+    some_clear: bool = False
+
+
+def certify(state: Any, w: np.ndarray, memo: CertifyMemo | None = None) -> tuple[int, tuple[str, str] | None]:
     """Is the polyline through waypoints ``w`` (n, 6) rad (consecutive rows at most the
     resolution apart) clear? (-1, None) if so, else a blocked waypoint's index and its pair.
 
@@ -242,7 +256,8 @@ def certify(state: Any, w: np.ndarray) -> tuple[int, tuple[str, str] | None]:
     certified, each round one batched call; a waypoint whose bound does not exceed the margin
     is decided by :meth:`SceneState.check` itself (so the answer is never less strict than
     checking every waypoint). Needs a ``collision.SceneState`` whose hand is empty or holds
-    its part (the grasp rule then the same on every row); others: :func:`blocked`."""
+    its part (the grasp rule then the same on every row); others: :func:`blocked`. ``memo``
+    (of this ``state``) carries what one call learns to the next; None: nothing is kept."""
     from .collision import SceneState as Exact
     from .collision import clearance_bounds
 
@@ -252,18 +267,21 @@ def certify(state: Any, w: np.ndarray) -> tuple[int, tuple[str, str] | None]:
     n = len(w)
     if n == 0:
         return -1, None
-    cache = state.__dict__.setdefault("_motion_rates", {})
-    if n == 1 or not cache.get("some_clear"):
+    if memo is None:
+        memo = CertifyMemo(state)
+    elif memo.state is not state:
+        raise ValueError("certify: the memo belongs to another scene state")
+    if n == 1 or not memo.some_clear:
         # the grasp rule and the rigid pairs are the same on every row: one clear row decides them
         i, pair = blocked(state, w[:1])
         if i >= 0 or n == 1:
             return i, pair
-        cache["some_clear"] = True
+        memo.some_clear = True
     m = float(state.scene.margin)
-    if "rates" not in cache:
-        cache["rates"] = column_rates(state)
+    if memo.rates is None:
+        memo.rates = column_rates(state)
     step = np.abs(np.diff(w, axis=0)).max(axis=0)
-    rate = cache["rates"] @ step  # (C,) cell unit per waypoint index
+    rate = memo.rates @ step  # (C,) cell unit per waypoint index
     rad = np.zeros(n)  # certified radius (waypoint indices) of each evaluated waypoint
     done = np.zeros(n, bool)
 
@@ -313,17 +331,18 @@ def free_motion(state: SceneState, a: np.ndarray, b: np.ndarray, limits: np.ndar
         i, pair = blocked(state, q[None])
         if i >= 0:
             return MotionFailure(name, pair, f"its {end} configuration is not clear")
+    memo = CertifyMemo(state)  # this motion's: the straight segment, OMPL's checks, the final path
     line = densify(np.array([a, b]), res)
-    i, pair = certify(state, line)
+    i, pair = certify(state, line, memo)
     if i < 0:
         n = path_length(line)
         return Segment(kind, line, "straight", 2, n, n, time.perf_counter() - t0)
-    verts, raw = _ompl(state, a, b, limits, res, opts)
+    verts, raw = _ompl(state, a, b, limits, res, opts, memo)
     if verts is None:
         return MotionFailure(name, pair, f"{PLANNERS[opts.planner]} found no path within "
                              f"{opts.time_budget_s:g} s (the straight segment is blocked)")
     dense = densify(verts, res)
-    j, pair2 = certify(state, dense)
+    j, pair2 = certify(state, dense, memo)
     if j >= 0:  # OMPL's own checks missed a waypoint: never return an unchecked path
         return MotionFailure(name, pair2, "the planner's path is blocked at the checking resolution")
     return Segment(kind, dense, PLANNERS[opts.planner], len(verts), raw, path_length(verts),
@@ -331,11 +350,11 @@ def free_motion(state: SceneState, a: np.ndarray, b: np.ndarray, limits: np.ndar
 
 
 def _ompl(state: SceneState, a: np.ndarray, b: np.ndarray, limits: np.ndarray, res: float,
-          opts: MotionOptions) -> tuple[np.ndarray | None, float]:
+          opts: MotionOptions, memo: CertifyMemo | None = None) -> tuple[np.ndarray | None, float]:
     """OMPL's path (vertices (m, 6) rad, simplified if asked) and its length before
     simplification; (None, 0) when none is found in the budget. States are checked one
     by one, motions by a validator that checks all of a motion's waypoints at ``res`` in
-    one batched call."""
+    one batched call (``memo``: the motion's :class:`CertifyMemo` of ``state``)."""
     from ompl import base as ob
     from ompl import geometric as og
     from ompl import util as ou
@@ -360,7 +379,7 @@ def _ompl(state: SceneState, a: np.ndarray, b: np.ndarray, limits: np.ndarray, r
         """A motion's waypoints at the resolution, certified by clearance (:func:`certify`)."""
 
         def checkMotion(self, s1: Any, s2: Any) -> bool:  # noqa: N802 (OMPL's name)
-            return certify(state, densify(np.array([vec(s1), vec(s2)]), res))[0] < 0
+            return certify(state, densify(np.array([vec(s1), vec(s2)]), res), memo)[0] < 0
 
     ss.setStateValidityChecker(valid)
     si = ss.getSpaceInformation()
