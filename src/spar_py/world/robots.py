@@ -561,8 +561,8 @@ def _urdf_link_shapes(chain: UrdfChain, robot: Robot, base: np.ndarray, offsets:
     (``chain.fixed``: UR's base_link above ``base``, a tool's links), as :class:`LinkShape` in
     Craig's frames (``offsets`` (6, 4, 4): child link i in Craig's frame i+1; the base link is
     ``base`` in the world), in the robot's unit (``s`` unit per metre). A cylinder becomes a
-    cylinder along its own axis, a box an axis-aligned box where its origin has no rotation (else
-    its bounding capsule), a sphere a capsule of zero length."""
+    cylinder along its own axis, a box an axis-aligned box where its axes are the frame's (else
+    the hull of its eight corners: exact either way), a sphere a capsule of zero length."""
     urdf = chain.model if chain.model is not None else _load_urdf(Path(chain.file))
     by_name = {lk.name: lk for lk in urdf.robot.links}
     to_frame0 = inv(robot.base) @ base
@@ -587,13 +587,15 @@ def _urdf_link_shapes(chain: UrdfChain, robot: Robot, base: np.ndarray, offsets:
                 out.append(LinkShape(name, frame, "capsule", T[:3, 3], T[:3, 3], g.sphere.radius * s))
             elif g.box is not None:
                 half = np.asarray(g.box.size, float) * s / 2
-                if np.allclose(T[:3, :3], np.eye(3)):
-                    out.append(LinkShape(name, frame, "box", T[:3, 3] - half, T[:3, 3] + half))
-                else:
-                    i = int(np.argmax(half))
-                    r = float(np.sqrt((half ** 2).sum() - half[i] ** 2))
-                    out.append(LinkShape(name, frame, "capsule", T[:3, 3] - half[i] * T[:3, i],
-                                         T[:3, 3] + half[i] * T[:3, i], r))
+                corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]) * half
+                P = corners @ T[:3, :3].T + T[:3, 3]  # the box's corners in Craig's frame
+                R = T[:3, :3]
+                if np.allclose(np.abs(R).round(), np.abs(R), atol=1e-9):
+                    # axes along the frame's (any turn by quarter turns, e.g. UR's base turned by
+                    # pi): the same box, axis-aligned in the frame
+                    out.append(LinkShape(name, frame, "box", P.min(0), P.max(0)))
+                else:  # turned otherwise: the exact box as the hull of its corners
+                    out.append(LinkShape(name, frame, "hull", P.min(0), P.max(0), 0.0, P))
             elif g.mesh is not None:
                 P = _urdf_mesh_points(Path(chain.file), link, g.mesh) * s
                 P = P @ T[:3, :3].T + T[:3, 3]

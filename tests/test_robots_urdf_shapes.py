@@ -1,0 +1,110 @@
+"""A URDF arm's box collision elements become the same boxes in spar-py's model, wherever the
+converted Craig frames put them (issue 15: link shapes from the URDF's <collision>).
+
+The arm: a KUKA KR 6 R900-like chain written as URDF from its standard DH lengths (a1 25, d1 400,
+a2 455, a3 35, d4 420, d6 80 mm: a shoulder offset, so the numeric solver), each link a box.
+Its Craig frame 1 is the URDF's link_1 turned by pi about z, and one box's origin is turned by
+0.3 rad. Each box's eight corners in the world come from yourdfpy's own FK (link pose @ the
+collision origin @ the corner), not from spar_py, and must be the model's shape's corners.
+A box turned to the bounding capsule used to leave the first link's capsule 110 mm under the
+base (``link_1-table`` refused every pickup of a cell with this arm)."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+DH = [(25, 400, -90), (455, 0, 0), (35, 0, -90), (0, 420, 90), (0, 0, -90), (0, 80, 0)]  # a, d (mm), alpha (deg)
+LIMITS = [(-170, 170), (-190, 45), (-120, 156), (-185, 185), (-120, 120), (-350, 350)]
+RADII = [75, 65, 55, 45, 40, 35]
+
+
+def _origin(a: float, d: float, al: float) -> str:
+    return f'<origin xyz="{a / 1000} 0 {d / 1000}" rpy="{math.radians(al)} 0 0"/>'
+
+
+def write_urdf(path: Path) -> Path:
+    lines = ['<?xml version="1.0"?>', '<robot name="kr6_like">', '  <link name="base_link"/>']
+    for i, ((a, d, _al), r) in enumerate(zip(DH, RADII)):
+        cz = d / 2000 if i else (d + r + 5) / 2000
+        sz = (abs(d) + 2 * r) / 1000 if i else (d + r - 5) / 1000
+        rpy = ' rpy="0 0 0.3"' if i == 2 else ""
+        lines.append(f'  <link name="link_{i + 1}"><collision><origin xyz="{a / 2000} 0 {cz}"{rpy}/><geometry>'
+                     f'<box size="{(abs(a) + 2 * r) / 1000} {2 * r / 1000} {sz}"/></geometry></collision></link>')
+        parent = "base_link" if i == 0 else f"link_{i}"
+        o = '<origin xyz="0 0 0"/>' if i == 0 else _origin(*DH[i - 1])
+        lo, hi = (math.radians(v) for v in LIMITS[i])
+        lines.append(f'  <joint name="a{i + 1}" type="revolute"><parent link="{parent}"/><child link="link_{i + 1}"/>'
+                     f'{o}<axis xyz="0 0 1"/><limit lower="{lo}" upper="{hi}" effort="1" velocity="6"/></joint>')
+    lines += ['  <link name="tool0"/>',
+              '  <joint name="flange" type="fixed"><parent link="link_6"/><child link="tool0"/>'
+              f'{_origin(*DH[5])}</joint>',
+              '</robot>']
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+@pytest.fixture(scope="module")
+def arm(tmp_path_factory):
+    from spar_py.world.robots import read_urdf_chain, robot_from_urdf
+
+    f = write_urdf(tmp_path_factory.mktemp("urdf") / "kr6_like.urdf")
+    chain = read_urdf_chain(f, "base_link", "tool0")
+    robot = robot_from_urdf(chain, "kr6_like", np.eye(4), np.eye(4), 100.0, "mm", 1.0)
+    return f, robot
+
+
+def _own_corners(urdf, q: np.ndarray) -> dict[str, np.ndarray]:
+    """Each link's box corners (8, 3) in the world (mm) by yourdfpy's FK."""
+    cfg = np.zeros(len(urdf.actuated_joint_names))
+    for i in range(6):
+        cfg[urdf.actuated_joint_names.index(f"a{i + 1}")] = q[i]
+    urdf.update_cfg(cfg)
+    out = {}
+    for lk in urdf.robot.links:
+        for c in lk.collisions:
+            T = np.asarray(urdf.get_transform(lk.name, "base_link"), float) @ np.asarray(c.origin, float)
+            half = np.asarray(c.geometry.box.size, float) / 2
+            P = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]) * half
+            out[lk.name] = (P @ T[:3, :3].T + T[:3, 3]) * 1000.0
+    return out
+
+
+def _model_corners(robot, q: np.ndarray) -> dict[str, np.ndarray]:
+    F = robot.frames(q)
+    out = {}
+    for s in robot.links:
+        assert s.kind in ("box", "hull"), f"{s.name}: a URDF box became a {s.kind}"
+        if s.kind == "box":
+            P = np.array([[x, y, z] for x in (s.a[0], s.b[0]) for y in (s.a[1], s.b[1]) for z in (s.a[2], s.b[2])])
+        else:
+            P = np.asarray(s.points, float)
+        T = F[s.frame]
+        out[s.name] = P @ T[:3, :3].T + T[:3, 3]
+    return out
+
+
+def test_urdf_boxes_are_the_same_boxes_in_the_model(arm) -> None:
+    import yourdfpy
+
+    f, robot = arm
+    urdf = yourdfpy.URDF.load(str(f), build_scene_graph=True, load_meshes=False, load_collision_meshes=False)
+    rng = np.random.default_rng(11)
+    for q in np.vstack([np.zeros(6), rng.uniform(robot.limits[:, 0], robot.limits[:, 1], size=(20, 6))]):
+        own, model = _own_corners(urdf, q), _model_corners(robot, q)
+        assert set(own) == set(model)
+        for name, P in own.items():
+            M = model[name]
+            assert len(M) == 8, name
+            # the same eight points, in any order
+            d = np.linalg.norm(P[:, None] - M[None], axis=2)
+            assert d.min(axis=1).max() < 1e-6 and d.min(axis=0).max() < 1e-6, (name, d.min(axis=1).max())
+
+
+def test_the_first_link_stays_above_the_base_plane(arm) -> None:
+    """The first box starts 5 mm above base_link's plane: so does the model's shape."""
+    _f, robot = arm
+    M = _model_corners(robot, np.zeros(6))["link_1"]
+    assert M[:, 2].min() == pytest.approx(5.0, abs=1e-6)
