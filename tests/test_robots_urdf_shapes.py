@@ -108,3 +108,46 @@ def test_the_first_link_stays_above_the_base_plane(arm) -> None:
     _f, robot = arm
     M = _model_corners(robot, np.zeros(6))["link_1"]
     assert M[:, 2].min() == pytest.approx(5.0, abs=1e-6)
+
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _urdf_cell_with(tmp_path: Path, collision: dict) -> Path:
+    """kb/problems/ur5e_urdf_peg_in_block.yaml with ``robot: collision:`` added (paths absolute)."""
+    import yaml
+
+    src = ROOT / "kb" / "problems" / "ur5e_urdf_peg_in_block.yaml"
+    doc = yaml.safe_load(src.read_text())
+    doc["robot"]["urdf"] = str((src.parent / doc["robot"]["urdf"]).resolve())
+    doc["robot"]["collision"] = collision
+    for o in doc["objects"].values():
+        o["model"] = str((src.parent / o["model"]).resolve())
+    out = tmp_path / "cell.yaml"
+    out.write_text(yaml.safe_dump(doc, sort_keys=False))
+    return out
+
+
+def test_a_urdf_arm_may_allow_pairs_of_its_own_links(tmp_path: Path) -> None:
+    """``collision: {allow: [[wrist_1_link, wrist_3_link]]}`` in a URDF robot keeps the URDF's
+    shapes and allows that pair (UR's own collision matrix does, as kb/robots/ur5e.yaml); before,
+    the URDF's link names were refused as unknown bodies, so a URDF arm whose envelopes touch two
+    frames apart (a short elbow link) could not plan at all."""
+    from spar_py.kb import load_problem
+
+    cell = load_problem(_urdf_cell_with(tmp_path, {"allow": [["wrist_1_link", "wrist_3_link"]], "margin": 0.1}))
+    names = [s.name for s in cell.robot.links]
+    assert "wrist_1_link" in names and "forearm_link" in names  # the URDF's shapes stay
+    assert frozenset(("wrist_1_link", "wrist_3_link")) in cell.robot.allowed
+    assert cell.robot.margin == pytest.approx(0.1)
+
+
+def test_an_unknown_body_in_a_urdf_allow_is_one_line(tmp_path: Path) -> None:
+    from spar_py.errors import KBError
+    from spar_py.kb import load_problem
+
+    path = _urdf_cell_with(tmp_path, {"allow": [["wrist_1_link", "elbow"]]})
+    with pytest.raises(KBError) as e:
+        load_problem(path)
+    msg = str(e.value)
+    assert "\n" not in msg and "robot.collision.allow[0][1]" in msg and "'elbow'" in msg and "wrist_3_link" in msg
