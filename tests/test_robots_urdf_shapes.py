@@ -11,6 +11,8 @@ base (``link_1-table`` refused every pickup of a cell with this arm)."""
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -151,3 +153,34 @@ def test_an_unknown_body_in_a_urdf_allow_is_one_line(tmp_path: Path) -> None:
         load_problem(path)
     msg = str(e.value)
     assert "\n" not in msg and "robot.collision.allow[0][1]" in msg and "'elbow'" in msg and "wrist_3_link" in msg
+
+
+@pytest.mark.parametrize("damage", ["truncated", "box_without_size"])
+def test_a_broken_urdf_is_one_line_on_stderr(tmp_path: Path, damage: str) -> None:
+    """A URDF cut short (not well-formed XML) or with a <box> lacking its size: `spar kb check`
+    writes one line naming the problem file and key and what is wrong (lxml's line and column
+    for a syntax error); yourdfpy's own log lines ("Using different parsing approach.") used to
+    come first, and a cut-short file ended in "KeyError: 'size'"."""
+    text = write_urdf(tmp_path / "arm.urdf").read_text()
+    if damage == "truncated":
+        text = text[:500]
+    else:
+        text = text.replace('<box size="', '<box sighs="', 1)
+    (tmp_path / "arm.urdf").write_text(text)
+    cell = _urdf_cell_with(tmp_path, {})
+    import yaml
+
+    doc = yaml.safe_load(cell.read_text())
+    doc["robot"] = {"urdf": str(tmp_path / "arm.urdf"), "base_link": "base_link", "tip_link": "tool0",
+                    "gripper": {"finger_separation": 4.0}}
+    cell.write_text(yaml.safe_dump(doc, sort_keys=False))
+    # a process of its own: logging's last-resort handler writes to the real stderr there, as
+    # for a user (under pytest, pytest's handler would take yourdfpy's lines)
+    ran = subprocess.run([sys.executable, "-m", "spar_py.cli", "kb", "check", str(cell)], capture_output=True,
+                         text=True, timeout=120)
+    assert ran.returncode != 0
+    err = [ln for ln in ran.stderr.splitlines() if ln.strip()]
+    assert len(err) == 1, err
+    assert str(cell) in err[0] and "robot.urdf" in err[0]
+    if damage == "truncated":
+        assert "well-formed" in err[0] and "line 6" in err[0]

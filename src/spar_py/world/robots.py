@@ -428,13 +428,29 @@ def _axis_rotation(axis: np.ndarray, angle: float) -> np.ndarray:
 
 
 def _load_urdf(path: Path):  # -> yourdfpy.URDF
-    import yourdfpy  # lazily: only a URDF robot pays for it (and for lxml, trimesh)
+    """yourdfpy's model of the file; SparValueError (one line) when it is not well-formed XML
+    (lxml's message, with its line and column) or yourdfpy cannot read it. yourdfpy's own log
+    lines (it retries a broken file with a recovering parser and logs each attempt) are kept
+    off stderr while it reads: the error says it once."""
+    import logging
 
+    import yourdfpy  # lazily: only a URDF robot pays for it (and for lxml, trimesh)
+    from lxml import etree
+
+    try:
+        etree.parse(str(path))
+    except etree.XMLSyntaxError as e:
+        raise SparValueError(f"a well-formed URDF (XML) file ({e})") from None
+    log = logging.getLogger(yourdfpy.urdf.__name__)
+    was = log.disabled
+    log.disabled = True
     try:
         return yourdfpy.URDF.load(str(path), build_scene_graph=True, load_meshes=False,
                                   load_collision_meshes=False)
     except Exception as e:  # yourdfpy raises lxml, ValueError, its own URDFError...: one line
         raise SparValueError(f"a URDF yourdfpy can read ({type(e).__name__}: {e})") from None
+    finally:
+        log.disabled = was
 
 
 def read_urdf_chain(path: str | Path, base_link: str, tip_link: str) -> UrdfChain:
