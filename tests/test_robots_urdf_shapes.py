@@ -184,3 +184,18 @@ def test_a_broken_urdf_is_one_line_on_stderr(tmp_path: Path, damage: str) -> Non
     assert str(cell) in err[0] and "robot.urdf" in err[0]
     if damage == "truncated":
         assert "well-formed" in err[0] and "line 6" in err[0]
+
+
+def test_tool_inverse_is_a_field_of_the_robot_and_follows_its_tool() -> None:
+    """Robot.tool_inverse keeps inv(tool) in a declared field (not written into the instance's
+    __dict__ behind the dataclass), and a new tool gives its own inverse."""
+    import dataclasses
+
+    from spar_py.kb import load_robot
+
+    robot = load_robot(ROOT / "kb" / "robots" / "ur5e.yaml", "mm")
+    assert "_tool_inv" in {f.name for f in dataclasses.fields(robot)}
+    assert np.allclose(robot.tool_inverse() @ robot.tool, np.eye(4))
+    robot.tool = robot.tool.copy()
+    robot.tool[:3, 3] += [0.0, 0.0, 25.0]
+    assert np.allclose(robot.tool_inverse() @ robot.tool, np.eye(4))

@@ -141,6 +141,8 @@ class Robot:
     #: why each closed-form family did not fit (empty when one did)
     not_closed_form: dict[str, str] = field(init=False, repr=False)
     _shift: np.ndarray = field(init=False, repr=False)
+    #: inv(tool) and the tool it was computed from (:meth:`tool_inverse`)
+    _tool_inv: tuple[bytes, np.ndarray] | None = field(init=False, repr=False, default=None)
 
     def __post_init__(self) -> None:
         """Check shapes, choose the IK solver, precompute the per-joint turn combinations."""
@@ -206,10 +208,9 @@ class Robot:
     def tool_inverse(self) -> np.ndarray:
         """inv(tool), T_tool_flange (4x4), computed once per value of ``tool``."""
         key = self.tool.tobytes()
-        cached = self.__dict__.get("_tool_inv")
-        if cached is None or cached[0] != key:
-            cached = self.__dict__["_tool_inv"] = (key, np.linalg.inv(self.tool))
-        return cached[1]
+        if self._tool_inv is None or self._tool_inv[0] != key:
+            self._tool_inv = (key, np.linalg.inv(self.tool))
+        return self._tool_inv[1]
 
     def frames(self, q: np.ndarray) -> np.ndarray:
         """World frames (8, 4, 4) (``unit``) of the arm at joint vector q (6,) rad.
