@@ -7,7 +7,10 @@ PyYAML; the arm's frames come from our own forward kinematics of the robot file'
 collision shape is placed in its frame from the YAML; the gripper's boxes are built from the
 robot file's ``gripper:`` sizes (docs/kb-format.md, defaults written out below); the distances
 are our own analytic signed distance functions (SDFs) of boxes, cylinders, capsules, convex
-hulls and the table half-space. From the planner only the plan JSON is read (each step's
+hulls and the table half-space. A URDF arm (a problem's ``robot: {urdf: ...}``) is read with
+yourdfpy instead: its own FK places each link, and each ``<collision>`` element (cylinder,
+sphere, box; a mesh as the convex hull of its vertices, read with trimesh) is placed from the
+URDF's origins, with no spar_py conversion to DH in between. From the planner only the plan JSON is read (each step's
 ``joints_deg``, ``tool_pose``, ``poses``, ``held``, ``args``), and from the KB loader only grasp
 widths (data, for the fingers' opening).
 
@@ -225,6 +228,107 @@ def load_arm(path: Path) -> Arm:
                tuple(float(p[k]) * mm for k in ("length", "width", "thickness")))
 
 
+@dataclass
+class UrdfArm(Arm):
+    """A URDF arm (mm, rad): frame 0 is the problem's ``base_link`` in the world, frame i
+    (1..6) the child link of the chain's i-th moving joint, frame 7 the tool (tip link @ the
+    problem's ``tool``), all from yourdfpy's own FK. Each collision body is in the coordinates
+    of the frame it rides with (a link fixed to a frame's link is moved there once, by the
+    URDF's fixed joints). ``dh`` is unused (empty)."""
+
+    urdf: Any = None
+    base_link: str = ""
+    tip_link: str = ""
+    joints: tuple[str, ...] = ()
+    owners: tuple[str, ...] = ()  # the link of frames 0..6
+
+    def frames(self, q: np.ndarray) -> np.ndarray:
+        q = np.atleast_2d(q)
+        names = list(self.urdf.actuated_joint_names)
+        out = np.empty((len(q), 8, 4, 4))
+        for k, qk in enumerate(q):
+            cfg = np.zeros(len(names))
+            for j, qj in zip(self.joints, qk):
+                cfg[names.index(j)] = qj
+            self.urdf.update_cfg(cfg)
+            for i, link in enumerate(self.owners):
+                out[k, i] = self.base @ _metres_to_mm(self.urdf.get_transform(link, self.base_link))
+            out[k, 7] = self.base @ _metres_to_mm(self.urdf.get_transform(self.tip_link, self.base_link)) @ self.tool
+        return out
+
+
+def _metres_to_mm(T: Any) -> np.ndarray:
+    T = np.array(T, float)
+    T[:3, 3] *= 1000.0
+    return T
+
+
+def load_urdf_arm(node: dict, problem_dir: Path, mm: float, deg: float) -> UrdfArm:
+    """The problem's ``robot: {urdf, base_link, tip_link, base, tool, gripper, collision}``
+    (lengths of base, tool and gripper in the problem's unit; the URDF's in metres)."""
+    import yourdfpy
+
+    path = (problem_dir / node["urdf"]).resolve()
+    urdf = yourdfpy.URDF.load(str(path), build_scene_graph=True, load_meshes=False, load_collision_meshes=False)
+    by_child = {j.child: j for j in urdf.robot.joints}
+    chain, link = [], node["tip_link"]
+    while link in by_child:  # up to the root: base_link may hang beside the chain by fixed joints
+        chain.append(by_child[link])
+        link = by_child[link].parent
+    chain.reverse()
+    moving = [j for j in chain if j.type != "fixed"]
+    assert len(moving) == 6, "a 6R chain"
+    owners = (node["base_link"], *(j.child for j in moving))
+    # every link rides with frame k: the moving joints above it (0: none), through fixed joints
+    frame_of = {link: 0}
+    changed = True
+    while changed:
+        changed = False
+        for j in urdf.robot.joints:
+            if j.parent in frame_of and j.child not in frame_of:
+                frame_of[j.child] = frame_of[j.parent] + (0 if j.type == "fixed" else 1)
+                changed = True
+    urdf.update_cfg(np.zeros(len(urdf.actuated_joint_names)))
+    links = []
+    for lk in urdf.robot.links:
+        if lk.name not in frame_of:
+            continue
+        f = frame_of[lk.name]
+        T_frame_link = _metres_to_mm(urdf.get_transform(lk.name, owners[f]))  # fixed: the same at every q
+        for n, c in enumerate(lk.collisions):
+            T = T_frame_link @ _metres_to_mm(np.eye(4) if c.origin is None else c.origin)
+            g, name = c.geometry, lk.name if n == 0 else f"{lk.name}_{n}"
+            if g.cylinder is not None:
+                h = g.cylinder.length * 500.0
+                links.append(Body(name, f, "cylinder", a=T[:3, 3] - h * T[:3, 2], b=T[:3, 3] + h * T[:3, 2],
+                                  r=g.cylinder.radius * 1000.0))
+            elif g.sphere is not None:
+                links.append(Body(name, f, "capsule", a=T[:3, 3].copy(), b=T[:3, 3].copy(), r=g.sphere.radius * 1000.0))
+            elif g.box is not None:
+                half = np.asarray(g.box.size, float) * 500.0
+                links.append(Body(name, f, "box", T=T, half=half))
+            else:
+                import trimesh
+
+                mesh = trimesh.load(str(path.parent / g.mesh.filename), force="mesh")
+                P = np.asarray(mesh.vertices, float) * 1000.0
+                if g.mesh.scale is not None:
+                    P = P * np.broadcast_to(np.asarray(g.mesh.scale, float), (3,))
+                links.append(hull_body(name, f, P @ T[:3, :3].T + T[:3, 3]))
+    col = node.get("collision") or {}
+    g = node["gripper"]
+    opening = float(g["finger_separation"]) * mm
+    fs = {"length": 60 / mm, "width": 20 / mm, "thickness": 10 / mm, **(g.get("finger") or {})}
+    ps = {"length": 25 / mm, "width": fs["width"], "thickness": opening / mm + 2 * fs["thickness"],
+          **(g.get("palm") or {})}
+    return UrdfArm(np.zeros((0, 4)), False, xyz_rpy(node.get("base"), mm, deg), xyz_rpy(node.get("tool"), mm, deg),
+                   links, {frozenset(a) for a in col.get("allow", [])},
+                   None if col.get("margin") is None else float(col["margin"]) * mm, opening,
+                   tuple(float(fs[k]) * mm for k in ("length", "width", "thickness")),
+                   tuple(float(ps[k]) * mm for k in ("length", "width", "thickness")),
+                   urdf, node["base_link"], node["tip_link"], tuple(j.name for j in moving), owners)
+
+
 # =========================================================================== parts, obstacles, cells
 
 
@@ -290,15 +394,14 @@ def load_cell(path: Path) -> CellGeo:
     mm = MM[doc["units"]["length"]]
     deg = math.pi / 180 if doc["units"].get("angle", "deg") == "deg" else 1.0
     robot = doc["robot"]
-    if isinstance(robot, dict):  # a URDF arm given inline: no DH table to check against
-        return CellGeo(None, {}, [], None, 0.0, mm, urdf=True)  # type: ignore[arg-type]
-    arm = load_arm((path.parent / robot).resolve())
+    urdf = isinstance(robot, dict)
+    arm = load_urdf_arm(robot, path.parent, mm, deg) if urdf else load_arm((path.parent / robot).resolve())
     parts = {name: load_part((path.parent / o["model"]).resolve()) for name, o in doc["objects"].items()}
     table = doc.get("table")
     ext = None if table is None else tuple(float(v) * mm for v in (*table["x"], *table["y"]))
     margin = (float(doc["clearance"]) * mm if doc.get("clearance") is not None
               else arm.margin if arm.margin is not None else DEFAULT_MARGIN_MM)
-    return CellGeo(arm, parts, obstacle_bodies(doc, path.parent, mm, deg), ext, margin, mm)  # type: ignore[arg-type]
+    return CellGeo(arm, parts, obstacle_bodies(doc, path.parent, mm, deg), ext, margin, mm, urdf)  # type: ignore[arg-type]
 
 
 # =========================================================================== signed distances
@@ -633,8 +736,6 @@ def _steps(doc: dict) -> list[dict]:
 def test_every_step_is_clear_by_the_margin(planned, stem: str) -> None:
     doc, cell, geo = planned[stem]
     assert doc["outcome"] == "plan"
-    if geo.urdf:
-        pytest.skip("a URDF arm: no DH table in the robot file to compute frames from")
     steps = _steps(doc)
     assert steps, "a plan with no arm configuration"
     for s in steps:
@@ -773,3 +874,53 @@ def test_collision_no_plan_names_the_shelf(planned, capsys: pytest.CaptureFixtur
     assert any("forearm-shelf" in s for s in said) and any("tool_mount-shelf" in s for s in said)
     # not reach: the same cell without the shelf plans (hole_up.yaml)
     assert planned["hole_up"][0]["outcome"] == "plan"
+
+
+# =========================================================================== URDF arms
+
+
+def test_the_urdf_checker_places_the_arm_as_its_yaml_twin(planned) -> None:
+    """The URDF arm's frames come from yourdfpy, the YAML twin's from our DH FK. kb/robots/ur5e.urdf
+    carries the same cylinders as kb/robots/ur5e.yaml: at every step of the URDF cell's plan and
+    at 20 random configurations, each URDF link body lies where its twin's does (axis ends to
+    1e-6 mm, the same radius), and both put the tool at the step's tool pose."""
+    doc, cell, geo = planned["ur5e_urdf_peg_in_block"]
+    twin = load_cell(PROBLEMS / "ur5e_peg_in_block.yaml")
+    assert geo.urdf and isinstance(geo.arm, UrdfArm) and len(geo.arm.links) == len(twin.arm.links) == 8
+    steps = _steps(doc)
+    qs = np.vstack([np.radians([s["joints_deg"] for s in steps]),
+                    np.random.default_rng(5).uniform(-2 * math.pi, 2 * math.pi, size=(20, 6))])
+    for k, q in enumerate(qs):
+        Fu, Fy = geo.arm.frames(q[None])[0], twin.arm.frames(q[None])[0]
+        if k < len(steps):
+            T = np.asarray(steps[k]["tool_pose"], float)
+            T[:3, 3] *= geo.k
+            assert np.abs(Fu[7] - T).max() < 1e-3 and np.abs(Fy[7] - T).max() < 1e-3, steps[k]["id"]
+        placed = [b.moved(Fy[b.frame], b.frame) for b in twin.arm.links]
+        for b in geo.arm.links:
+            w = b.moved(Fu[b.frame], b.frame)
+            err = min(min(max(np.abs(t.a - w.a).max(), np.abs(t.b - w.b).max()),
+                          max(np.abs(t.a - w.b).max(), np.abs(t.b - w.a).max())) if t.r == w.r else math.inf
+                      for t in placed)
+            assert err < 1e-6, (b.name, err, q)
+
+
+def test_the_checker_fails_a_urdf_step_driven_into_the_table(planned) -> None:
+    """As for the DH arms: the URDF cell's first step with its shoulder turned down until
+    yourdfpy's FK puts the tool 20 mm under the table top is refused, naming the table."""
+    doc, cell, geo = planned["ur5e_urdf_peg_in_block"]
+    s = _steps(doc)[0]
+    assert not check_step(geo, cell, s).violations
+    q = np.asarray(s["joints_deg"], float)
+    for sign in (1.0, -1.0):
+        for dq in np.arange(1.0, 90.0, 1.0):
+            moved = q + sign * np.array([0, dq, 0, 0, 0, 0])
+            if geo.arm.frames(np.radians(moved)[None])[0, 7, 2, 3] < -20.0:
+                break
+        else:
+            continue
+        break
+    else:
+        pytest.fail("turning the shoulder never brought the tool under the table")
+    verdict = check_step(geo, cell, s, q_deg=moved)
+    assert any(b.other == "table" and b.upper < 0 for b in verdict.violations)

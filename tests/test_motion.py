@@ -509,3 +509,95 @@ def test_body_reach_bounds_how_far_a_body_moves(puma) -> None:
         assert np.all(moved <= bound * (1 + 1e-9)), frame
         ratios.append((moved / bound).max())
     assert ratios[-1] > 0.2  # the tool's bound is within a factor 5 of the worst move seen
+
+
+def test_certify_keeps_what_it_learns_in_the_motion_memo_not_on_the_state() -> None:
+    """certify's rates and its "some row is clear" live in the motion's CertifyMemo (one per
+    scene state), not stored behind the state's back: the state's attributes are the same
+    after certify as before, a memo passed in is filled and gives the same verdicts when
+    reused, and a memo of another state is refused."""
+    from spar_py import Planner
+    from spar_py.world.collision import scene_for
+
+    cell = Planner(motion=True).load_problem(ROOT / "kb" / "problems" / "wall_detour.yaml")
+    scene = scene_for(cell)
+    parts = {p.obj: np.asarray(p.T, float) for p in cell.positions.values()}
+    state = scene.at(parts)
+    res = mo.resolution(cell.robot.dh, cell.robot.tool, scene.margin, mo.extent(cell))
+    rng = np.random.default_rng(3)
+    lo, hi = cell.robot.limits[:, 0], cell.robot.limits[:, 1]
+    segs = []
+    while len(segs) < 6:
+        a = rng.uniform(lo, hi)
+        b = np.clip(a + rng.normal(0, 0.2, 6), lo, hi)
+        if state.clear(np.array([a, b])).all():
+            segs.append(mo.densify(np.array([a, b]), res))
+    before = set(vars(state))
+    fresh = [mo.certify(state, w)[0] for w in segs]
+    assert set(vars(state)) == before
+    memo = mo.CertifyMemo(state)
+    assert [mo.certify(state, w, memo)[0] for w in segs] == fresh
+    assert memo.rates is not None and memo.some_clear
+    assert [mo.certify(state, w, memo)[0] for w in segs] == fresh
+    assert set(vars(state)) == before
+    with pytest.raises(ValueError, match="another scene state"):
+        mo.certify(scene.at(parts), segs[0], memo)
+
+
+@pytest.mark.parametrize("robot_file", ["puma762.yaml", "ur5e.yaml"])
+def test_the_fast_line_walk_is_the_exact_nearest_previous_walk(robot_file: str, monkeypatch) -> None:
+    """_walk (the tool lines' IK continuity, branch choice by integer lookups) returns exactly
+    what the point-by-point nearest-previous rule (_walk_exact) returns, bit for bit, on random
+    tool lines from random configurations (some with the wrist or elbow nearly straight, where
+    branches meet), sampled densely and coarsely; and it walks point by point on few of them."""
+    from spar_py.workspace import wrist_above_table
+
+    robot = load_robot(ROOT / "kb" / "robots" / robot_file, "in")
+    rng = np.random.default_rng(17)
+    exact_lengths: list[int] = []
+    real_exact = mo._walk_exact
+
+    def counted(Q, ok, q0, limits):
+        exact_lengths.append(len(Q))
+        return real_exact(Q, ok, q0, limits)
+
+    cases = by_point = 0
+    for k in range(60):
+        q0 = rng.uniform(robot.limits[:, 0], robot.limits[:, 1])
+        if k % 3 == 1:
+            q0[4] = rng.normal(0, 1e-3)  # wrist nearly straight
+        if k % 3 == 2:
+            q0[2] = rng.normal(0, 1e-3) + (-math.pi / 2 if robot_file.startswith("puma") else 0.0)
+        T0 = robot.fk(q0)
+        d = rng.normal(size=3)
+        d /= np.linalg.norm(d)
+        s = np.linspace(0.0, 1.0, int(rng.choice([5, 50, 400])))
+        T = np.repeat(T0[None], len(s), axis=0)
+        T[:, :3, 3] += np.outer(s * rng.uniform(0.5, 4.0), d)
+        Q, ok = robot.ik_batch(T)
+        ok = ok & wrist_above_table(robot, T)[:, None]
+        monkeypatch.setattr(mo, "_walk_exact", counted)
+        exact_lengths.clear()
+        fast = mo._walk(Q, ok, q0, robot.limits)
+        walked = bool(exact_lengths)
+        monkeypatch.setattr(mo, "_walk_exact", real_exact)
+        ref = real_exact(Q, ok, q0, robot.limits)
+        assert (fast is None) == (ref is None), k
+        if ref is not None:
+            assert np.array_equal(fast, ref), (k, np.abs(fast - ref).max())
+            cases += 1
+            by_point += walked
+    assert cases >= 20
+    # the fast path (no point-by-point walk) on most lines that exist
+    assert by_point <= cases // 4, (by_point, cases)
+
+
+def test_subdivide_is_linspace_per_interval() -> None:
+    """The tool lines' vectorised subdivision gives linspace's values bit for bit."""
+    rng = np.random.default_rng(4)
+    for _ in range(50):
+        s = np.concatenate([[0.0], np.sort(rng.uniform(0, 1, rng.integers(1, 30))), [1.0]])
+        k = rng.integers(1, 40, len(s) - 1)
+        k[rng.uniform(size=len(k)) < 0.3] = 1
+        ref = np.concatenate([np.linspace(s[i], s[i + 1], k[i] + 1)[:-1] for i in range(len(k))] + [s[-1:]])
+        assert np.array_equal(mo._subdivide(s, k), ref)

@@ -977,8 +977,11 @@ def _collision_shapes(robot: Robot, root: Node, scale: float, mm_per_unit: float
     if cnode is None:
         return
     known = {"palm", "finger_l", "finger_r", "table"}
+    lnode = cnode.key("links", required=False)
+    if lnode is None:  # the shapes the robot already has (a URDF's own) stay: their names may be allowed
+        known |= {s.name for s in robot.links}
     links: list[LinkShape] = []
-    for ln in (cnode.key("links", required=False) or Node(cnode.file, cnode.path, [])).elements():
+    for ln in (lnode or Node(cnode.file, cnode.path, [])).elements():
         lname = ln.key("name").label()
         fnode = ln.key("frame")
         frame = fnode.number()

@@ -141,6 +141,8 @@ class Robot:
     #: why each closed-form family did not fit (empty when one did)
     not_closed_form: dict[str, str] = field(init=False, repr=False)
     _shift: np.ndarray = field(init=False, repr=False)
+    #: inv(tool) and the tool it was computed from (:meth:`tool_inverse`)
+    _tool_inv: tuple[bytes, np.ndarray] | None = field(init=False, repr=False, default=None)
 
     def __post_init__(self) -> None:
         """Check shapes, choose the IK solver, precompute the per-joint turn combinations."""
@@ -206,10 +208,9 @@ class Robot:
     def tool_inverse(self) -> np.ndarray:
         """inv(tool), T_tool_flange (4x4), computed once per value of ``tool``."""
         key = self.tool.tobytes()
-        cached = self.__dict__.get("_tool_inv")
-        if cached is None or cached[0] != key:
-            cached = self.__dict__["_tool_inv"] = (key, np.linalg.inv(self.tool))
-        return cached[1]
+        if self._tool_inv is None or self._tool_inv[0] != key:
+            self._tool_inv = (key, np.linalg.inv(self.tool))
+        return self._tool_inv[1]
 
     def frames(self, q: np.ndarray) -> np.ndarray:
         """World frames (8, 4, 4) (``unit``) of the arm at joint vector q (6,) rad.
@@ -428,13 +429,29 @@ def _axis_rotation(axis: np.ndarray, angle: float) -> np.ndarray:
 
 
 def _load_urdf(path: Path):  # -> yourdfpy.URDF
-    import yourdfpy  # lazily: only a URDF robot pays for it (and for lxml, trimesh)
+    """yourdfpy's model of the file; SparValueError (one line) when it is not well-formed XML
+    (lxml's message, with its line and column) or yourdfpy cannot read it. yourdfpy's own log
+    lines (it retries a broken file with a recovering parser and logs each attempt) are kept
+    off stderr while it reads: the error says it once."""
+    import logging
 
+    import yourdfpy  # lazily: only a URDF robot pays for it (and for lxml, trimesh)
+    from lxml import etree
+
+    try:
+        etree.parse(str(path))
+    except etree.XMLSyntaxError as e:
+        raise SparValueError(f"a well-formed URDF (XML) file ({e})") from None
+    log = logging.getLogger(yourdfpy.urdf.__name__)
+    was = log.disabled
+    log.disabled = True
     try:
         return yourdfpy.URDF.load(str(path), build_scene_graph=True, load_meshes=False,
                                   load_collision_meshes=False)
     except Exception as e:  # yourdfpy raises lxml, ValueError, its own URDFError...: one line
         raise SparValueError(f"a URDF yourdfpy can read ({type(e).__name__}: {e})") from None
+    finally:
+        log.disabled = was
 
 
 def read_urdf_chain(path: str | Path, base_link: str, tip_link: str) -> UrdfChain:
@@ -561,8 +578,8 @@ def _urdf_link_shapes(chain: UrdfChain, robot: Robot, base: np.ndarray, offsets:
     (``chain.fixed``: UR's base_link above ``base``, a tool's links), as :class:`LinkShape` in
     Craig's frames (``offsets`` (6, 4, 4): child link i in Craig's frame i+1; the base link is
     ``base`` in the world), in the robot's unit (``s`` unit per metre). A cylinder becomes a
-    cylinder along its own axis, a box an axis-aligned box where its origin has no rotation (else
-    its bounding capsule), a sphere a capsule of zero length."""
+    cylinder along its own axis, a box an axis-aligned box where its axes are the frame's (else
+    the hull of its eight corners: exact either way), a sphere a capsule of zero length."""
     urdf = chain.model if chain.model is not None else _load_urdf(Path(chain.file))
     by_name = {lk.name: lk for lk in urdf.robot.links}
     to_frame0 = inv(robot.base) @ base
@@ -587,13 +604,15 @@ def _urdf_link_shapes(chain: UrdfChain, robot: Robot, base: np.ndarray, offsets:
                 out.append(LinkShape(name, frame, "capsule", T[:3, 3], T[:3, 3], g.sphere.radius * s))
             elif g.box is not None:
                 half = np.asarray(g.box.size, float) * s / 2
-                if np.allclose(T[:3, :3], np.eye(3)):
-                    out.append(LinkShape(name, frame, "box", T[:3, 3] - half, T[:3, 3] + half))
-                else:
-                    i = int(np.argmax(half))
-                    r = float(np.sqrt((half ** 2).sum() - half[i] ** 2))
-                    out.append(LinkShape(name, frame, "capsule", T[:3, 3] - half[i] * T[:3, i],
-                                         T[:3, 3] + half[i] * T[:3, i], r))
+                corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]) * half
+                P = corners @ T[:3, :3].T + T[:3, 3]  # the box's corners in Craig's frame
+                R = T[:3, :3]
+                if np.allclose(np.abs(R).round(), np.abs(R), atol=1e-9):
+                    # axes along the frame's (any turn by quarter turns, e.g. UR's base turned by
+                    # pi): the same box, axis-aligned in the frame
+                    out.append(LinkShape(name, frame, "box", P.min(0), P.max(0)))
+                else:  # turned otherwise: the exact box as the hull of its corners
+                    out.append(LinkShape(name, frame, "hull", P.min(0), P.max(0), 0.0, P))
             elif g.mesh is not None:
                 P = _urdf_mesh_points(Path(chain.file), link, g.mesh) * s
                 P = P @ T[:3, :3].T + T[:3, 3]
