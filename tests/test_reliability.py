@@ -51,6 +51,7 @@ def test_timeout_is_a_clean_exit(tmp_path: Path) -> None:
 @pytest.mark.parametrize("args, what", [
     (["plan", "kb/problems/peg_in_block.yaml", "--max-actions", "0"], "positive integer"),
     (["plan", "kb/problems/peg_in_block.yaml", "--timeout", "nan"], "positive number of seconds"),
+    (["plan", "kb/problems/peg_in_block.yaml", "--approach-length", "-1"], "positive number of the cell's length unit"),
     (["plan", "no/such/file.yaml"], "a readable file"),
 ])
 def test_bad_arguments(args: list[str], what: str) -> None:

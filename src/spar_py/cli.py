@@ -310,7 +310,7 @@ def build_parser() -> argparse.ArgumentParser:
     plan.add_argument("--motion-budget", type=_positive_float, default=1.0, metavar="S",
                       help="OMPL seconds per free motion (default 1)")
     plan.add_argument("--motion-seed", type=int, default=0, metavar="N", help="OMPL's random seed (default 0)")
-    plan.add_argument("--approach-length", type=_positive_float, metavar="L",
+    plan.add_argument("--approach-length", type=_positive_length, metavar="L",
                       help="approach and retreat length in the problem's length unit (default 2 in)")
     plan.add_argument("--dot", metavar="DIR", help="write the ordering graph, network and cell pictures here")
     plan.add_argument("--png", metavar="DIR", help="same as --dot (both write .dot and .png)")
@@ -369,14 +369,21 @@ def _positive_int(text: str) -> int:
     return v
 
 
-def _positive_float(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number of seconds, not {text!r}") from None
-    if not v > 0 or v != v:
-        raise argparse.ArgumentTypeError(f"expected a positive number of seconds, not {text}")
-    return v
+def _positive(what: str):
+    """An argparse type: a positive finite number, the message naming ``what`` it measures."""
+    def parse(text: str) -> float:
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number of {what}, not {text!r}") from None
+        if not v > 0 or v != v:
+            raise argparse.ArgumentTypeError(f"expected a positive number of {what}, not {text}")
+        return v
+    return parse
+
+
+_positive_float = _positive("seconds")
+_positive_length = _positive("the cell's length unit")
 
 
 EXIT_CODES = """\
