@@ -298,6 +298,39 @@ def _exact(b1: Body, T1: np.ndarray, b2: Body, T2: np.ndarray) -> float:
 # --------------------------------------------------------------------------- the scene
 
 
+def _over(P: np.ndarray, r: float, ext: tuple[float, float, float, float]) -> np.ndarray:
+    """(n,) whether each row's body (vertices ``P`` (n, k, 3), world, swept by radius ``r``)
+    reaches over the table's footprint ``ext`` = (x0, x1, y0, y1) in x and in y."""
+    x0, x1, y0, y1 = ext
+    return ((P[..., 0].max(axis=1) + r >= x0) & (P[..., 0].min(axis=1) - r <= x1)
+            & (P[..., 1].max(axis=1) + r >= y0) & (P[..., 1].min(axis=1) - r <= y1))
+
+
+def _slab_directions(n_az: int = 32, n_el: int = 9) -> np.ndarray:
+    """Unit vectors (k, 3) with z >= 0: ``n_az`` azimuths at ``n_el`` elevations 0..90 deg."""
+    az = np.linspace(0.0, 2.0 * np.pi, n_az, endpoint=False)
+    el = np.linspace(0.0, 0.5 * np.pi, n_el)[:-1]
+    U = np.stack([np.outer(np.cos(el), np.cos(az)).ravel(), np.outer(np.cos(el), np.sin(az)).ravel(),
+                  np.repeat(np.sin(el), n_az)], axis=1)
+    U[np.abs(U) < 1e-12] = 0.0
+    return np.vstack([U, [0.0, 0.0, 1.0]])
+
+
+_SLAB_U = _slab_directions()
+
+
+def _slab_gap(P: np.ndarray, r: float, ext: tuple[float, float, float, float]) -> np.ndarray:
+    """(n,) a lower bound of each row's body's distance (cell unit) to the table's slab (the
+    footprint ``ext`` = (x0, x1, y0, y1) from the top z = 0 down), for bodies beside its edge:
+    for convex sets the distance is the largest gap between their supports over unit directions
+    u, here the best of :data:`_SLAB_U` (never above the distance, so never too optimistic).
+    ``P`` (n, k, 3) are the bodies' world vertices, ``r`` their sweep radius."""
+    x0, x1, y0, y1 = ext
+    U = _SLAB_U
+    support = np.where(U[:, 0] > 0, x1, x0) * U[:, 0] + np.where(U[:, 1] > 0, y1, y0) * U[:, 1]
+    return ((P @ U.T).min(axis=1) - support).max(axis=1) - r
+
+
 class CollisionScene:
     """The run's collision world: link and gripper shapes, part shapes, obstacles, the table,
     the clearance ``margin`` (cell unit). Place the parts with :meth:`at`."""
@@ -318,7 +351,17 @@ class CollisionScene:
         self.links = [_link_body(s) for s in robot.links]
         self.allowed = frozenset(frozenset(p) for p in robot.allowed)
         self._grippers: dict = {}  # bounded by the cell's grasp widths
+        self._slab: Body | None = None
         self.stats = {"pairs": 0, "exact": 0}
+
+    def slab(self) -> Body:
+        """The table of a table with an extent as a box (world): its footprint, from the top
+        z = 0 down as deep as the footprint is wide (for exact distances beside its edge)."""
+        if self._slab is None:
+            x0, x1, y0, y1 = self.table
+            depth = max(x1 - x0, y1 - y0, 1.0)
+            self._slab = box("table", WORLD, np.array([x0, y0, -depth]), np.array([x1, y1, 0.0]))
+        return self._slab
 
     def gripper_bodies(self, width: float | None) -> list[Body]:
         """The palm and fingers (TOOL frame) with the fingers' contact faces ``width`` apart (default
@@ -490,8 +533,10 @@ class SceneState:
         return (pts @ Fb[:, :, 2, :3, None])[..., 0].min(axis=2) + Fb[:, :, 2, 3] - radius
 
     def _table(self, F: np.ndarray) -> np.ndarray:
-        """(n, m) each table-checked moving body's height above the table (exact, signed; +inf
-        for a body wholly off a table with an extent)."""
+        """(n, m) each table-checked moving body's height above the table (exact, signed); for a
+        body wholly off a table with an extent but within the margin of its footprint, its
+        distance to the slab (a lower bound, :func:`_slab_gap`, made exact where it is within the
+        margin), else +inf."""
         ext = self.scene.table
         if ext is None:
             return self._plane_heights(F)
@@ -502,11 +547,15 @@ class SceneState:
             Fb = F[:, b.frame]
             P = b.points @ np.swapaxes(Fb[:, :3, :3], 1, 2) + Fb[:, None, :3, 3]
             h = P[..., 2].min(axis=1) - b.radius
-            x0, x1, y0, y1 = ext
-            r = b.radius
-            over = ((P[..., 0].max(axis=1) + r >= x0) & (P[..., 0].min(axis=1) - r <= x1)
-                    & (P[..., 1].max(axis=1) + r >= y0) & (P[..., 1].min(axis=1) - r <= y1))
-            out[:, k] = np.where(over, h, np.inf)
+            out[:, k] = np.where(_over(P, b.radius, ext), h, np.inf)
+            # off the footprint but within the margin of it: the distance to the slab's edge
+            band = np.isinf(out[:, k]) & _over(P, b.radius + self.scene.margin, ext)
+            if band.any():
+                rows = np.nonzero(band)[0]
+                g = _slab_gap(P[rows], b.radius, ext)
+                for j in np.nonzero(g <= self.scene.margin)[0].tolist():  # within it: the exact distance
+                    g[j] = _exact(b, self._frame_pose(F, int(rows[j]), b), self.scene.slab(), np.eye(4))
+                out[rows, k] = g
         return out
 
     def tool_rigid_on_table(self, T_tool: np.ndarray) -> tuple[str, str] | None:
