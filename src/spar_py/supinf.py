@@ -1192,23 +1192,26 @@ class AffineProgram:
         S = self._S
         n = lo.shape[0]
         mid, rd = (v.T for v in affine_centres(lo, hi))  # (K, n): input j is mid_j + rd_j e_j
-        # every other register is written (all rows) before it is read: only the inputs and
-        # constants need zeros (np.zeros of the whole work array costs ~7% of a pass)
-        W = np.empty((self.rows, S.n_regs, n))
+        # The work array is register-major, (n_regs, rows, n): a register's forms are one
+        # contiguous block, so gathering and scattering registers are block copies; the rules
+        # see (rows, k, n) views and allocate their results in the same memory order
+        # (np.empty_like, elementwise ops keep it). Every register but the inputs and
+        # constants is written (all rows) before it is read, so only those are zeroed.
+        W = np.empty((S.n_regs, self.rows, n))
         if S.input_regs.size:  # input j is mid_j + rd_j e_j
-            W[:, S.input_regs] = 0.0
-            W[0, S.input_regs] = mid[S.input_nz]
-            W[1 + S.input_nz, S.input_regs] = rd[S.input_nz]
+            W[S.input_regs] = 0.0
+            W[S.input_regs, 0] = mid[S.input_nz]
+            W[S.input_regs, 1 + S.input_nz] = rd[S.input_nz]
         if S.const_regs.size:
-            W[:, S.const_regs] = 0.0
-            W[0, S.const_regs] = S.const_vals[:, None]
+            W[S.const_regs] = 0.0
+            W[S.const_regs, 0] = S.const_vals[:, None]
         out = np.full((self.rows, self.out_size, n), np.nan)
         with np.errstate(all="ignore"):
             for g in S.groups:
                 kind = g.key[0]
-                A = np.take(W, g.args[0], axis=1)
+                A = W[g.args[0]].transpose(1, 0, 2)
                 if kind in (ca.OP_ADD, ca.OP_SUB, ca.OP_MUL, ca.OP_DIV):
-                    Bv = np.take(W, g.args[1], axis=1)
+                    Bv = W[g.args[1]].transpose(1, 0, 2)
                     if kind == ca.OP_ADD:
                         R = self._add(A, Bv)
                     elif kind == ca.OP_SUB:
@@ -1230,11 +1233,12 @@ class AffineProgram:
                 elif kind == "fb1":
                     R = self._fallback1(A, _UNARY[g.key[1]][0], g.payload.astype(int))
                 else:  # fb2
-                    R = self._fallback2(A, W[:, g.args[1]], _BINARY[g.key[1]][0], g.payload.astype(int))
-                W[:, g.out] = R
+                    R = self._fallback2(A, W[g.args[1]].transpose(1, 0, 2), _BINARY[g.key[1]][0],
+                                        g.payload.astype(int))
+                W[g.out] = R.transpose(1, 0, 2)
         for k, j, r in S.outputs:
             if k < self._offset.size - 1:
-                out[:, self._offset[k] + j, :] = W[:, r]
+                out[:, self._offset[k] + j, :] = W[r]
         return out
 
     def linear(self, F: np.ndarray) -> np.ndarray:
