@@ -108,10 +108,6 @@ SPLIT_BY_REMAINDER = True
 #: ``fabs`` has its kink, through the Clarke gradient (Bounder._kinks_only); False: such
 #: boxes are bisected only, the search before this change (bench/supinf.py compares).
 CLARKE_FABS = True
-#: Bound the two halves of a bisected box with its gradient model before they go back to the
-#: pool (the model holds on every sub-box: iterated monotonicity and the third-order lower
-#: bound on each half, no evaluation); halves it settles are never evaluated.
-CHILD_MODEL = False
 
 _INF = math.inf
 _DIR = np.array([[-np.inf], [np.inf]])
@@ -1682,7 +1678,6 @@ class _Search:
         cand = [np.where(np.eye(nv, dtype=bool), np.where(self.best[s] == self.lo0, self.hi0, self.lo0),
                          self.best[s]) for s in (0, 1) if not self.done[s]]
         G = None
-        parent = None  # (gradient model, masks, centre values) of the boxes to bisect, if any
         ok = np.zeros(m, bool)
         # no kink of a fabs in the box: the mean-value and model bounds apply there (they are
         # sound across kinks too, but loose, and bisecting at the kink is exact)
@@ -1769,13 +1764,9 @@ class _Search:
             if SPLIT_BY_REMAINDER:  # split where the model's remainder (its error) is largest
                 gam = (model.rd * model.rho)[keep]
                 infl = np.where((usable[keep] & np.isfinite(gam).all(1))[:, None], gam, infl)
-            idx = np.flatnonzero(keep)[~reduced]  # the boxes left, as rows of the model
             keep = ~reduced
             if not keep.any():
                 return
-            if CHILD_MODEL:
-                parent = (GradientModel(model.mid[idx], model.rd[idx], model.G0[idx], model.A[idx],
-                                        model.rho[idx]), usable[idx], (usable & smooth[sp])[idx], fcv[sp][idx])
         elif USE_AFFINE:
             F = B.affine(bl, bh)[:, 0, :]
             self.evaluated += side.size
@@ -1798,26 +1789,8 @@ class _Search:
         left_h, right_l = bh.copy(), bl.copy()
         left_h[r, j] = mid
         right_l[r, j] = mid
-        cl, ch = np.vstack((bl, right_l)), np.vstack((left_h, bh))
-        cs, cL = np.concatenate((side, side)), np.concatenate((L, L))
-        if parent is not None:
-            cl, ch, cs, cL = self._halves(parent, cl, ch, cs, cL)
-        self.push(cl, ch, cs, cL)
-
-    def _halves(self, parent: tuple, cl: np.ndarray, ch: np.ndarray, side: np.ndarray,
-                L: np.ndarray) -> tuple[np.ndarray, ...]:
-        """The two halves (cl, ch) (2k, nv) of k bisected boxes bounded with their parent's
-        gradient model (valid on every sub-box, taylor.py): iterated monotonicity reduces each
-        half to the faces holding its minimum, the model's lower bound on what is left raises
-        L, and halves that cannot improve a bound are settled. Returns what goes to the pool."""
-        model, usable, bounded, fc = parent
-        two = lambda v: np.concatenate((v, v))  # noqa: E731
-        M = GradientModel(*(two(v) for v in (model.mid, model.rd, model.G0, model.A, model.rho)))
-        nl, nh, _ = M.fix_monotone(cl, ch, two(usable))
-        LQ = M.lower(two(fc), nl, nh)
-        L = np.where(two(bounded) & ~np.isnan(LQ), np.maximum(L, LQ), L)
-        keep = self.settle(nl, nh, side, L)
-        return nl[keep], nh[keep], side[keep], L[keep]
+        self.push(np.vstack((bl, right_l)), np.vstack((left_h, bh)), np.concatenate((side, side)),
+                  np.concatenate((L, L)))
 
     def result(self) -> BoundResult:
         if self.plain is None:
