@@ -670,6 +670,34 @@ def test_grouped_programs_enclose_every_output_at_samples(seed: int, n: int) -> 
     assert (fp[1, 0] - fp[0, 0] <= 1e-9 * (1 + np.abs(vf))).all()
 
 
+@settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.integers(0, 2**32 - 1), st.sampled_from([2, 8]))
+def test_affine_forms_of_a_box_do_not_depend_on_its_batch(seed: int, n: int) -> None:
+    """The affine program's register-major work array keeps boxes apart: each box's forms
+    (f and gradient) evaluated alone, in a batch of 7 and at the other end of a batch of 2
+    agree (to the few ulps the SIMD libm may differ by between batch sizes), and the
+    zeroed input registers hold no noise symbol but their own."""
+    rng = np.random.default_rng(seed)
+    reg = Registry()
+    e = _uniform_chain(rng, n, reg)
+    B = Bounder(e)
+    lo, hi = box_arrays(B, reg.box(e))
+    L, H = _sub_boxes(rng, lo, hi, 7)
+    AG = B.affine_gradient
+    F7 = AG(L, H)
+    for b in (0, 3, 6):
+        F1 = AG(L[b:b + 1], H[b:b + 1])[:, :, 0]
+        F2 = AG(np.vstack((L[b - 1], L[b])), np.vstack((H[b - 1], H[b])))[:, :, 1]
+        scale = 1e-12 * (1.0 + np.abs(F1).max(0))
+        assert (np.abs(F7[:, :, b] - F1) <= scale).all() and (np.abs(F2 - F1) <= scale).all()
+    x = ca.SX.sym("x", 3)  # the inputs' own forms, x_j = mid_j + rd_j e_j, nothing else
+    F = AffineProgram(ca.Function("id", [x], [x]))(L[:, :3], H[:, :3])  # (rows, 3, 7)
+    mid = np.minimum(np.maximum(0.5 * (L[:, :3] + H[:, :3]), L[:, :3]), H[:, :3])
+    rd = np.maximum(np.nextafter(H[:, :3] - mid, np.inf), np.nextafter(mid - L[:, :3], np.inf))
+    assert np.array_equal(F[0], mid.T) and (F[-1] == 0).all()
+    assert np.array_equal(F[1:4], np.eye(3)[:, :, None] * rd.T[None, :, :])
+
+
 @settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.integers(0, 2**32 - 1), st.sampled_from([1, 3, 6]), st.booleans())
 def test_gradient_model_bound_and_monotone_faces_are_sound(seed: int, n: int, upper: bool) -> None:

@@ -1047,12 +1047,18 @@ class AffineProgram:
     def _fin(self, Z: np.ndarray, e: np.ndarray, extra_ops: int = 1) -> np.ndarray:
         """Set the radius row: propagated error e plus the rounding of the computed entries."""
         s = np.abs(Z[:-1]).sum(0)
-        Z[-1] = (e + s * (extra_ops * _U)) * self._up + _TINY
+        s *= extra_ops * _U
+        s += e
+        s *= self._up
+        s += _TINY
+        Z[-1] = s
         return Z
 
     def _rad(self, A: np.ndarray) -> np.ndarray:
         """Sum of |coefficients| (rounded up)."""
-        return np.abs(A[1:-1]).sum(0) * self._up
+        r = np.abs(A[1:-1]).sum(0)
+        r *= self._up
+        return r
 
     def range(self, A: np.ndarray) -> np.ndarray:
         """The interval (2, n) an affine batch encloses (rounded outward)."""
@@ -1095,10 +1101,13 @@ class AffineProgram:
         ea, eb = A[-1], B[-1]
         prod = ca_ * cb
         q = prod.sum(0)
-        qa = np.abs(prod).sum(0)
+        qa = np.abs(prod, out=prod).sum(0)
         Z = np.empty_like(A)
         Z[0] = a0 * b0 + 0.5 * q  # the e_i^2 terms have mean 1/2
-        Z[1:-1] = a0 * cb + b0 * ca_
+        lin = Z[1:-1]
+        np.multiply(a0, cb, out=lin)
+        np.multiply(b0, ca_, out=prod)
+        lin += prod
         aa0, ab0 = np.abs(a0), np.abs(b0)
         e = ((Ra * Rb - 0.5 * qa) + ea * (ab0 + Rb + eb) + eb * (aa0 + Ra)
              + (2 * _U) * (aa0 * Rb + ab0 * Ra) + self.rows * _U * qa)
@@ -1179,19 +1188,26 @@ class AffineProgram:
         S = self._S
         n = lo.shape[0]
         mid, rd = (v.T for v in affine_centres(lo, hi))  # (K, n): input j is mid_j + rd_j e_j
-        W = np.zeros((self.rows, S.n_regs, n))
+        # The work array is register-major, (n_regs, rows, n): a register's forms are one
+        # contiguous block, so gathering and scattering registers are block copies; the rules
+        # see (rows, k, n) views and allocate their results in the same memory order
+        # (np.empty_like, elementwise ops keep it). Every register but the inputs and
+        # constants is written (all rows) before it is read, so only those are zeroed.
+        W = np.empty((S.n_regs, self.rows, n))
         if S.input_regs.size:  # input j is mid_j + rd_j e_j
-            W[0, S.input_regs] = mid[S.input_nz]
-            W[1 + S.input_nz, S.input_regs] = rd[S.input_nz]
+            W[S.input_regs] = 0.0
+            W[S.input_regs, 0] = mid[S.input_nz]
+            W[S.input_regs, 1 + S.input_nz] = rd[S.input_nz]
         if S.const_regs.size:
-            W[0, S.const_regs] = S.const_vals[:, None]
+            W[S.const_regs] = 0.0
+            W[S.const_regs, 0] = S.const_vals[:, None]
         out = np.full((self.rows, self.out_size, n), np.nan)
         with np.errstate(all="ignore"):
             for g in S.groups:
                 kind = g.key[0]
-                A = W[:, g.args[0]]
+                A = W[g.args[0]].transpose(1, 0, 2)
                 if kind in (ca.OP_ADD, ca.OP_SUB, ca.OP_MUL, ca.OP_DIV):
-                    Bv = W[:, g.args[1]]
+                    Bv = W[g.args[1]].transpose(1, 0, 2)
                     if kind == ca.OP_ADD:
                         R = self._add(A, Bv)
                     elif kind == ca.OP_SUB:
@@ -1213,11 +1229,12 @@ class AffineProgram:
                 elif kind == "fb1":
                     R = self._fallback1(A, _UNARY[g.key[1]][0], g.payload.astype(int))
                 else:  # fb2
-                    R = self._fallback2(A, W[:, g.args[1]], _BINARY[g.key[1]][0], g.payload.astype(int))
-                W[:, g.out] = R
+                    R = self._fallback2(A, W[g.args[1]].transpose(1, 0, 2), _BINARY[g.key[1]][0],
+                                        g.payload.astype(int))
+                W[g.out] = R.transpose(1, 0, 2)
         for k, j, r in S.outputs:
             if k < self._offset.size - 1:
-                out[:, self._offset[k] + j, :] = W[:, r]
+                out[:, self._offset[k] + j, :] = W[r]
         return out
 
     def linear(self, F: np.ndarray) -> np.ndarray:
