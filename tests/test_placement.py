@@ -151,3 +151,17 @@ def test_somewhere_is_the_whole_grid_answer() -> None:
             assert together.tolist() == want, (obj, pose)
             answers |= set(want)
     assert answers == {True, False}
+
+
+def test_placements_do_not_keep_the_grid_alive() -> None:
+    """A placement owns its pose: a view into the grid's (n, 4, 4) poses would keep the whole
+    grid alive wherever the placement is kept (phase 2's memo tables held 62 MB so at N = 50)."""
+    blk, peg = CELL.objects["block"], CELL.objects["peg"]
+    reqs = [blk.grasps["p2G1"].T, CELL.transforms["trans_1"] @ peg.grasps["p1G10"].T]
+    chosen = placement.choose(CELL, "block", "p2P5", reqs, _occupied())
+    assert chosen is not None
+    cands = placement.candidates(CELL, "block", "p2P5", _occupied())
+    assert len(cands) > 1
+    for p in [chosen, *cands[:3]]:
+        assert p.T.shape == (4, 4)
+        assert p.T.base is None or p.T.base.nbytes <= p.T.nbytes

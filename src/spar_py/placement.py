@@ -357,7 +357,8 @@ def candidates(cell: Cell, obj: str, pose: str, occupied: list[Occupant],
     height = cell.objects[obj].poses[pose].height
     step = from_mm(cell.unit, GRID_STEP_MM) if step is None else step
     xy, yaw, T = _grid_arrays(cell, obj, pose, occupied, step, yaw_steps)
-    return [Placement(obj, pose, x, y, height, w, t) for (x, y), w, t in zip(xy.tolist(), yaw.tolist(), T)]
+    # copies, not views of T: a kept placement must not keep the whole grid's poses alive
+    return [Placement(obj, pose, x, y, height, w, t.copy()) for (x, y), w, t in zip(xy.tolist(), yaw.tolist(), T)]
 
 
 def _req_X(r: Requirement | np.ndarray) -> np.ndarray:
@@ -435,7 +436,9 @@ def choose(cell: Cell, obj: str, pose: str, requirements: list[np.ndarray],
         if len(hits):
             i = idx[hits[0]]
             height = cell.objects[obj].poses[pose].height
-            return Placement(obj, pose, float(xy[i, 0]), float(xy[i, 1]), height, yaws[i], T[i])
+            # a copy: a view of T[i] would keep the whole grid's poses alive wherever the
+            # placement is kept (phase 2's memo tables: 62 MB at N = 50)
+            return Placement(obj, pose, float(xy[i, 0]), float(xy[i, 1]), height, yaws[i], T[i].copy())
     return None
 
 
