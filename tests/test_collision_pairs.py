@@ -150,3 +150,24 @@ def test_placed_bodies_are_placed_afresh_per_pose(frame: int) -> None:
             assert all(np.array_equal(x, y) for x, y in zip(g.cap, f.cap))
     held = scene.placed("peg", T, TOOL, "held:peg")
     assert {b.name for b in held} == {"held:peg"} and held is not first
+
+
+def test_near_bounds_keep_every_bound_within_the_margin(tmp_path: Path) -> None:
+    """_near_bounds (the pairs' boxes over all rows first, then the rows' spheres) gives the
+    capsule bound of _bounds wherever that is within the margin (and so never misses a near
+    pair), and +inf or that same bound elsewhere; on random arm configurations, in cells with
+    obstacles and many parts, and with a large margin so that many pairs are near."""
+    rng = np.random.default_rng(3)
+    near_cells = 0
+    for cell in _cells(tmp_path):
+        for state, *_ in _states(cell)[:4]:
+            q = rng.uniform(-np.pi, np.pi, (40, 6))
+            for m in (state.scene.margin, 10 * state.scene.margin, 1e9):
+                _, full, tab = state._bounds(q)
+                _, near, tab2 = state._near_bounds(q, m)
+                assert np.array_equal(tab, tab2)
+                within = full <= m
+                assert np.array_equal(near[within], full[within])
+                assert np.all(np.isinf(near[~within]) | (near[~within] == full[~within]))
+                near_cells += int(within.sum())
+    assert near_cells > 1000

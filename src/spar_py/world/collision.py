@@ -636,10 +636,20 @@ class SceneState:
         A, B = self._world_caps(F)
         pi, pj = self.pairs[:, 0], self.pairs[:, 1]
         C = (A + B) / 2                                          # (n, N, 3) sphere centres, world
-        gap = np.sqrt(((C[:, pi] - C[:, pj]) ** 2).sum(-1)) - self._sph_r[pi] - self._sph_r[pj]
-        lb = np.full(gap.shape, np.inf)
-        r, p = np.nonzero(gap <= m)
+        lb = np.full((len(q), len(pi)), np.inf)
+        # first per pair over all rows at once: each body's spheres lie in their box over the rows
+        # (``box_lo``, ``box_hi``), so two boxes apart by more than m (and rounding) along an axis
+        # have every row's gap beyond m; only the other pairs' gaps are computed, row by row
+        sr = self._sph_r
+        box_lo, box_hi = C.min(axis=0) - sr[:, None], C.max(axis=0) + sr[:, None]
+        reach = m + 1e-9 * (1.0 + float(np.abs(C).max(initial=0.0)) + float(sr.max(initial=0.0)))
+        maybe = np.flatnonzero(np.all((box_lo[pi] <= box_hi[pj] + reach) & (box_lo[pj] <= box_hi[pi] + reach),
+                                      axis=1))
+        si, sj = pi[maybe], pj[maybe]
+        gap = np.sqrt(((C[:, si] - C[:, sj]) ** 2).sum(-1)) - sr[si] - sr[sj]
+        r, k = np.nonzero(gap <= m)
         if len(r):
+            p = maybe[k]
             i, j = pi[p], pj[p]
             lb[r, p] = segment_distance(A[r, i], B[r, i], A[r, j], B[r, j]) - self._cap_r[i] - self._cap_r[j]
         return F, lb, self._table(F)
