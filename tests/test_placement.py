@@ -151,3 +151,36 @@ def test_somewhere_is_the_whole_grid_answer() -> None:
             assert together.tolist() == want, (obj, pose)
             answers |= set(want)
     assert answers == {True, False}
+
+
+def test_placements_do_not_keep_the_grid_alive() -> None:
+    """A placement owns its pose: a view into the grid's (n, 4, 4) poses would keep the whole
+    grid alive wherever the placement is kept (phase 2's memo tables held 62 MB so at N = 50)."""
+    blk, peg = CELL.objects["block"], CELL.objects["peg"]
+    reqs = [blk.grasps["p2G1"].T, CELL.transforms["trans_1"] @ peg.grasps["p1G10"].T]
+    chosen = placement.choose(CELL, "block", "p2P5", reqs, _occupied())
+    assert chosen is not None
+    cands = placement.candidates(CELL, "block", "p2P5", _occupied())
+    assert len(cands) > 1
+    for p in [chosen, *cands[:3]]:
+        assert p.T.shape == (4, 4)
+        assert p.T.base is None or p.T.base.nbytes <= p.T.nbytes
+
+
+def test_nearest_order_is_the_sorted_python_round_order() -> None:
+    """choose's order (least distance rounded to ROUND_MM, then yaw, then grid order) computed
+    on arrays is the order of Python's sorted with ``round``, on distances at and next to
+    halves of the last digit (where ``np.round`` alone differs from ``round``: 1022.2729595
+    and many more below), exact halves (multiples of 1/128) and many ties."""
+    rng = np.random.default_rng(7)
+    k = rng.integers(0, 2_000_000_000, 3000)
+    half = (k + 0.5) / 1e6
+    d = np.concatenate([half, np.nextafter(half, 0), np.nextafter(half, np.inf), rng.integers(0, 40, 3000) / 128,
+                        np.round(rng.uniform(0, 5, 3000), 3), [1022.2729595, 0.0, 2.0 ** 60]])
+    yaw = rng.integers(0, 4, len(d)) * (np.pi / 2)
+    dl, yl = d.tolist(), yaw.tolist()
+    assert any(float(np.round(v, 6)) != round(v, 6) for v in dl)  # the case the fix-up is for
+    assert placement.round_like_python(d, 6).tolist() == [round(v, 6) for v in dl]
+    ref = sorted(range(len(dl)), key=lambda i: (round(dl[i], 6), yl[i]))
+    assert placement.nearest_order(d, yaw, 6).tolist() == ref
+    assert placement.nearest_order(np.zeros(0), np.zeros(0), 6).tolist() == []

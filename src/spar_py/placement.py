@@ -357,7 +357,8 @@ def candidates(cell: Cell, obj: str, pose: str, occupied: list[Occupant],
     height = cell.objects[obj].poses[pose].height
     step = from_mm(cell.unit, GRID_STEP_MM) if step is None else step
     xy, yaw, T = _grid_arrays(cell, obj, pose, occupied, step, yaw_steps)
-    return [Placement(obj, pose, x, y, height, w, t) for (x, y), w, t in zip(xy.tolist(), yaw.tolist(), T)]
+    # copies, not views of T: a kept placement must not keep the whole grid's poses alive
+    return [Placement(obj, pose, x, y, height, w, t.copy()) for (x, y), w, t in zip(xy.tolist(), yaw.tolist(), T)]
 
 
 def _req_X(r: Requirement | np.ndarray) -> np.ndarray:
@@ -400,6 +401,34 @@ def feasible(cell: Cell, placements: list[Placement], requirements: list[np.ndar
 CHOOSE_CHUNK = 96
 
 
+def round_like_python(x: np.ndarray, digits: int) -> np.ndarray:
+    """(n,) ``round(v, digits)`` of each v of ``x`` (float64, digits >= 0), exactly as Python's
+    correctly rounded ``round`` gives it, for a whole array at once.
+
+    ``rint(v * 10**digits) / 10**digits`` (what ``np.round`` does) is the same double as
+    Python's answer whenever it picks the same integer k (both then give the double nearest
+    k / 10**digits: the division is correctly rounded); it can pick another only where the
+    product's rounding moved it across a half (or onto one). Those few values, the product
+    within 1e-3 of a half, and any too large for the product to hold a fraction, are
+    rounded by Python's ``round`` itself."""
+    x = np.asarray(x, dtype=float)
+    f = 10.0 ** digits
+    y = x * f
+    out = np.rint(y) / f
+    doubt = ~(np.abs(y) < 2.0 ** 52) | (np.abs(np.abs(y - np.floor(y)) - 0.5) < 1e-3)
+    for i in np.flatnonzero(doubt):
+        out[i] = round(float(x[i]), digits)
+    return out
+
+
+def nearest_order(dist: np.ndarray, yaw: np.ndarray, digits: int) -> np.ndarray:
+    """(n,) int indices of the candidates ordered as ``sorted(range(n), key=lambda i:
+    (round(dist[i], digits), yaw[i]))`` orders them: least rounded distance, then least
+    yaw, then first in grid order (a stable sort), computed on the arrays."""
+    dist, yaw = np.asarray(dist, dtype=float), np.asarray(yaw, dtype=float)
+    return np.lexsort((np.arange(len(dist)), yaw, round_like_python(dist, digits)))
+
+
 def choose(cell: Cell, obj: str, pose: str, requirements: list[np.ndarray],
            occupied: list[Occupant], near: np.ndarray | None = None) -> Placement | None:
     """The feasible placement nearest ``near`` (xy, cell unit; default the regions'
@@ -418,10 +447,9 @@ def choose(cell: Cell, obj: str, pose: str, requirements: list[np.ndarray],
         regs = default_regions(cell)
         near = np.mean([[(r["x"][0] + r["x"][1]) / 2, (r["y"][0] + r["y"][1]) / 2] for r in regs], axis=0)
     # distances in mm, so ties are broken alike whatever the cell's unit
-    dist = (np.hypot(xy[:, 0] - near[0], xy[:, 1] - near[1]) * mm_per(cell.unit)).tolist()
+    dist = np.hypot(xy[:, 0] - near[0], xy[:, 1] - near[1]) * mm_per(cell.unit)
     yaws = yaw.tolist()
-    digits = -round(math.log10(ROUND_MM))
-    order = sorted(range(len(T)), key=lambda i: (round(dist[i], digits), yaws[i]))  # stable: grid order breaks ties
+    order = nearest_order(dist, yaw, -round(math.log10(ROUND_MM))).tolist()
     starts = [0, *range(1, len(order), CHOOSE_CHUNK)]  # the nearest alone first: it usually serves
     for start, end in zip(starts, [*starts[1:], len(order)]):
         idx = order[start:end]
@@ -435,7 +463,9 @@ def choose(cell: Cell, obj: str, pose: str, requirements: list[np.ndarray],
         if len(hits):
             i = idx[hits[0]]
             height = cell.objects[obj].poses[pose].height
-            return Placement(obj, pose, float(xy[i, 0]), float(xy[i, 1]), height, yaws[i], T[i])
+            # a copy: a view of T[i] would keep the whole grid's poses alive wherever the
+            # placement is kept (phase 2's memo tables: 62 MB at N = 50)
+            return Placement(obj, pose, float(xy[i, 0]), float(xy[i, 1]), height, yaws[i], T[i].copy())
     return None
 
 

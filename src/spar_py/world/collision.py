@@ -84,6 +84,9 @@ TOOL, WORLD = 7, -1
 #: pairs per arrangement of body names (a state's bodies, allowed contacts, attached parts).
 GRASP_LIMIT = 4096
 PAIRS_LIMIT = 256
+#: Bound of the cell's memo table of placed part bodies per (part, frame, pose): phase 2 places
+#: every part on the table at every step, most of them where they were at the step before.
+PLACED_LIMIT = 2048
 
 
 # --------------------------------------------------------------------------- bodies
@@ -386,6 +389,17 @@ class CollisionScene:
             raise SparValueError(f"no shape known for part {part!r}")
         return self.parts[model]
 
+    def placed(self, part: str, T: np.ndarray, frame: int, name: str | None = None) -> list[Body]:
+        """The bodies of ``part`` (:meth:`shapes_of`) moved by T (4x4, the part's pose in
+        ``frame``: the world or the tool) and named ``name`` (default the part's), memoised on
+        the cell by (part, name, frame, pose): the same Body objects each time (read-only)."""
+        T = np.ascontiguousarray(T, dtype=float)
+        label = part if name is None else name
+        if self.memo is None:
+            return [b.placed(T, frame, label) for b in self.shapes_of(part)]
+        return self.memo.table("collision.placed", PLACED_LIMIT).get_or_compute(
+            (part, label, frame, T.tobytes()), lambda: [b.placed(T, frame, label) for b in self.shapes_of(part)])
+
     def at(self, parts: Mapping[str, np.ndarray], held: tuple[str, np.ndarray] | None = None,
            grasped: str | None = None, *, width: float | None = None,
            allow: Iterable[tuple[str, str]] = (), attached: Mapping[str, np.ndarray] | None = None) -> SceneState:
@@ -405,12 +419,12 @@ class CollisionScene:
         for name, T in parts.items():
             if name == held_name:
                 continue
-            world += [b.placed(T, WORLD, name) for b in self.shapes_of(name)]
+            world += self.placed(name, T, WORLD)
         tool: list[Body] = []
         for name, T in (attached or {}).items():
-            tool += [b.placed(T, TOOL, name) for b in self.shapes_of(name)]
+            tool += self.placed(name, T, TOOL)
         if held is not None:
-            tool += [b.placed(held[1], TOOL, f"held:{held[0]}") for b in self.shapes_of(held[0])]
+            tool += self.placed(held[0], held[1], TOOL, f"held:{held[0]}")
         hand = None
         if held is not None:
             hand = (held[0], "tool", np.asarray(held[1], float))
@@ -451,13 +465,7 @@ class SceneState:
         self.bodies = moving + static + world
         self.n_moving = len(moving)
         hand_part = hand[0] if hand is not None else None
-        key = (tuple((b.name, b.frame, b.kind) for b in self.bodies), self.n_moving, hand_part, allow, attached)
-        table = scene.memo.table("collision.pairs", PAIRS_LIMIT) if scene.memo is not None else None
-        struct = table.get(key) if table is not None else None
-        if struct is None:
-            struct = _pair_structure(scene, self.bodies, len(moving), hand_part, allow, attached)
-            if table is not None:
-                table[key] = struct
+        struct = _pair_structure(scene, self.bodies, len(moving), hand_part, allow, attached)
         self.pairs, self.table_bodies, self.exact_pair, rigid = struct
         self._rigid: dict[int, float | None] = dict.fromkeys(rigid)
         self._refusal: tuple[tuple[str, str] | None] | None = None  # tool_rigid_refusal's answer
@@ -628,10 +636,20 @@ class SceneState:
         A, B = self._world_caps(F)
         pi, pj = self.pairs[:, 0], self.pairs[:, 1]
         C = (A + B) / 2                                          # (n, N, 3) sphere centres, world
-        gap = np.sqrt(((C[:, pi] - C[:, pj]) ** 2).sum(-1)) - self._sph_r[pi] - self._sph_r[pj]
-        lb = np.full(gap.shape, np.inf)
-        r, p = np.nonzero(gap <= m)
+        lb = np.full((len(q), len(pi)), np.inf)
+        # first per pair over all rows at once: each body's spheres lie in their box over the rows
+        # (``box_lo``, ``box_hi``), so two boxes apart by more than m (and rounding) along an axis
+        # have every row's gap beyond m; only the other pairs' gaps are computed, row by row
+        sr = self._sph_r
+        box_lo, box_hi = C.min(axis=0) - sr[:, None], C.max(axis=0) + sr[:, None]
+        reach = m + 1e-9 * (1.0 + float(np.abs(C).max(initial=0.0)) + float(sr.max(initial=0.0)))
+        maybe = np.flatnonzero(np.all((box_lo[pi] <= box_hi[pj] + reach) & (box_lo[pj] <= box_hi[pi] + reach),
+                                      axis=1))
+        si, sj = pi[maybe], pj[maybe]
+        gap = np.sqrt(((C[:, si] - C[:, sj]) ** 2).sum(-1)) - sr[si] - sr[sj]
+        r, k = np.nonzero(gap <= m)
         if len(r):
+            p = maybe[k]
             i, j = pi[p], pj[p]
             lb[r, p] = segment_distance(A[r, i], B[r, i], A[r, j], B[r, j]) - self._cap_r[i] - self._cap_r[j]
         return F, lb, self._table(F)
@@ -761,61 +779,118 @@ def _pair_structure(scene: CollisionScene, bodies: list[Body], n_moving: int, ha
                     allow: frozenset, attached: frozenset) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple]:
     """Which body pairs a state checks (see the module notes), from the bodies' names, frames and
     kinds alone (``bodies`` moving first, ``n_moving`` of them): (pairs (p, 2), table-checked
-    moving bodies, pairs of two capsules (their bound is exact), pairs rigid with the flange)."""
-    moving = bodies[:n_moving]
+    moving bodies, pairs of two capsules (their bound is exact), pairs rigid with the flange).
+
+    Pairs in the order of a loop over the moving bodies i and, within, all bodies j > i (a
+    (moving, body) bool matrix read row by row). The columns of the world's bodies (frame WORLD,
+    after the moving ones: obstacles and parts, most of a generated cell's bodies) depend only
+    on the moving body and the world body's name, and are set a name at a time for all of them;
+    the rest (links, gripper, tool parts: the same at most steps) come from
+    :func:`_head_structure`, memoised on the cell."""
+    names = [b.name for b in bodies]
+    frames = np.array([b.frame for b in bodies], dtype=int)
+    world_col = frames == WORLD
+    world_col[:n_moving] = False
+    head_cols = np.flatnonzero(~world_col)
     skip = scene.allowed | allow
-    pairs: list[tuple[int, int]] = []
-    gripper_names = {"palm", "finger_l", "finger_r"}
+    hkey = (tuple((names[j], int(frames[j]), bodies[j].kind) for j in head_cols.tolist()), head_cols.tobytes(),
+            n_moving, hand_part, skip, attached)
+    table = scene.memo.table("collision.pairs", PAIRS_LIMIT) if scene.memo is not None else None
+    head = table.get(hkey) if table is not None else None
+    if head is None:
+        head = _head_structure([bodies[j] for j in head_cols.tolist()], n_moving, hand_part, skip, attached)
+        if table is not None:
+            table[hkey] = head
+    block, table_bodies, fixed_in_tool, excluded = head
+    M = np.zeros((n_moving, len(bodies)), dtype=bool)
+    M[:, head_cols] = block
+    wcols = np.flatnonzero(world_col)
+    if len(wcols) and n_moving:
+        index: dict[str, int] = {}
+        ids = np.array([index.setdefault(names[j], len(index)) for j in wcols.tolist()], dtype=int)
+        ok = np.ones((n_moving, len(index)), dtype=bool)   # (moving body, world name) checked
+        ok[fixed_in_tool] = False
+        for i, ex in enumerate(excluded):
+            for n in ex:
+                if n in index:
+                    ok[i, index[n]] = False
+        if hand_part is not None:  # the gripper against the part it closes on: the grasp rule
+            grip = [i for i in range(n_moving) if names[i] in _GRIPPER_NAMES]
+            hand_ids = [k for n, k in index.items() if _part_of(n) == hand_part]
+            ok[np.ix_(grip, hand_ids)] = False
+        M[:, wcols] = ok[:, ids]
+    pairs_arr = np.argwhere(M).astype(int).reshape(-1, 2)
+    is_cap = np.array([b.kind == "capsule" for b in bodies], dtype=bool)
+    in_hand = (frames == 6) | (frames == TOOL)
+    pi, pj = pairs_arr[:, 0], pairs_arr[:, 1]
+    exact_pair = is_cap[pi] & is_cap[pj]
+    rigid = tuple(np.flatnonzero(in_hand[pi] & in_hand[pj]).tolist())
+    return pairs_arr, table_bodies, exact_pair, rigid
 
-    def part_of(b: Body) -> str:
-        return b.name[5:] if b.name.startswith("held:") else b.name
 
+_GRIPPER_NAMES = frozenset({"palm", "finger_l", "finger_r"})
+
+
+def _part_of(name: str) -> str:
+    """The part a body belongs to: its name, less the "held:" of the part in the hand."""
+    return name[5:] if name.startswith("held:") else name
+
+
+def _head_structure(head: list[Body], n_moving: int, hand_part: str | None, skip: frozenset,
+                    attached: frozenset) -> tuple[np.ndarray, np.ndarray, list[int], list[frozenset]]:
+    """The part of :func:`_pair_structure` that does not depend on the world's bodies: for the
+    bodies ``head`` (the moving ones first, ``n_moving`` of them, then the others that are not
+    the world's: links on the base), the (moving, head body) matrix of checked pairs, the
+    table-checked moving bodies, the moving bodies fixed in the tool (attached parts: checked
+    against the arm and the gripper only, not the table they rest on nor the world) and, per
+    moving body, the names of world bodies it is not checked against (itself, and its
+    ``skip`` partners: the robot's allowed pairs and the state's ``allow``)."""
+    moving = head[:n_moving]
+    gripper_names = _GRIPPER_NAMES
+    part_of = _part_of
+    block = np.zeros((n_moving, len(head)), dtype=bool)
     # an attached part is a part of the world that happens to be where the tool is: it is
     # checked against the arm and the gripper only (not the table it rests on, nor the rest)
-    fixed_in_tool = {i for i, b in enumerate(moving) if b.frame == TOOL and b.name in attached}
+    fixed_in_tool = [i for i, b in enumerate(moving) if b.frame == TOOL and b.name in attached]
+    fixed = set(fixed_in_tool)
     for i, bi in enumerate(moving):
-        for j, bj in enumerate(bodies):
-            if j <= i and j < len(moving):
+        for j, bj in enumerate(head):
+            if j <= i and j < n_moving:
                 continue
             if frozenset((bi.name, bj.name)) in skip or bi.name == bj.name:
                 continue
-            if i in fixed_in_tool and (bj.frame == WORLD or j in fixed_in_tool):
+            if i in fixed and (bj.frame == WORLD or j in fixed):
                 continue
             if bj.frame == WORLD or bj.frame == 0 and bi.frame >= 2:
-                if bi.name in gripper_names and part_of(bj) == hand_part and bj.frame == WORLD:
+                if bi.name in gripper_names and part_of(bj.name) == hand_part and bj.frame == WORLD:
                     continue  # the grasp rule decides
-                pairs.append((i, j))
+                block[i, j] = True
                 continue
             if bj.frame == WORLD or bj.frame == 0:
                 continue
             fi, fj = bi.frame, bj.frame
             ti, tj = bi.frame == TOOL, bj.frame == TOOL
             if ti and tj:  # in the hand: gripper and the hand's part by the grasp rule
-                ni, nj = part_of(bi), part_of(bj)
+                ni, nj = part_of(bi.name), part_of(bj.name)
                 if ni in gripper_names and nj in gripper_names or ni == nj:
                     continue
                 if hand_part in (ni, nj) and (ni in gripper_names or nj in gripper_names):
                     continue
-                pairs.append((i, j))
+                block[i, j] = True
                 continue
             if ti or tj:
                 link = bj if ti else bi
                 other = bi if ti else bj
                 limit = 5 if other.name in gripper_names else 6
                 if link.frame <= limit:
-                    pairs.append((i, j))
+                    block[i, j] = True
                 continue
             if abs(fi - fj) >= 2:
-                pairs.append((i, j))
-    pairs_arr = np.array(pairs, dtype=int).reshape(-1, 2)
+                block[i, j] = True
     table_bodies = np.array([i for i, b in enumerate(moving)
-                             if frozenset((b.name, "table")) not in skip and i not in fixed_in_tool], dtype=int)
-    exact_pair = np.array([bodies[i].kind == "capsule" and bodies[j].kind == "capsule"
-                           for i, j in pairs_arr], dtype=bool)
-    hand_frames = (6, TOOL)
-    rigid = [p for p, (i, j) in enumerate(pairs_arr.tolist())
-             if bodies[i].frame in hand_frames and bodies[j].frame in hand_frames]
-    return pairs_arr, table_bodies, exact_pair, tuple(rigid)
+                             if frozenset((b.name, "table")) not in skip and i not in fixed], dtype=int)
+    excluded = [frozenset({b.name} | {n for p in skip if len(p) == 2 and b.name in p for n in p}) for b in moving]
+    return block, table_bodies, fixed_in_tool, excluded
 
 
 def _near_all(A: list[Body], B: list[Body], within: float) -> np.ndarray:
