@@ -263,3 +263,21 @@ def test_a_plan_with_motions_ends_without_a_word_on_stderr() -> None:
     r = subprocess.run([sys.executable, "-m", "spar_py.cli", "plan", problem], capture_output=True, text=True,
                        timeout=300, cwd=ROOT)
     assert r.returncode == 0 and r.stderr == "", r.stderr[-500:]
+
+
+#: Modules a plain `spar plan` of the paper's cell has no use for (each was once imported by
+#: it, costing its cold start a few ms): hashlib loads OpenSSL's libcrypto and _blake2 (the
+#: planner image's key needs SHA-256 only: qlf.py takes _sha256 itself).
+NOT_FOR_A_PLAIN_PLAN = ("hashlib", "_hashlib", "_blake2")
+
+
+def test_a_plain_plan_does_not_import_what_it_does_not_use() -> None:
+    code = ("import contextlib, io, json, sys\nfrom spar_py import cli\n"
+            "with contextlib.redirect_stdout(io.StringIO()) as out:\n"
+            "    try:\n        cli.main(['plan', 'kb/problems/peg_in_block.yaml', '--json'])\n"
+            "    except SystemExit as e:\n        code = e.code\n"
+            f"print(json.dumps([code, json.loads(out.getvalue())['outcome'], "
+            f"sorted(m for m in {NOT_FOR_A_PLAIN_PLAN!r} if m in sys.modules)]))\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert r.returncode == 0, r.stderr[-500:]
+    assert json.loads(r.stdout.strip().splitlines()[-1]) == [0, "plan", []]
