@@ -263,3 +263,41 @@ def test_a_plan_with_motions_ends_without_a_word_on_stderr() -> None:
     r = subprocess.run([sys.executable, "-m", "spar_py.cli", "plan", problem], capture_output=True, text=True,
                        timeout=300, cwd=ROOT)
     assert r.returncode == 0 and r.stderr == "", r.stderr[-500:]
+
+
+#: Modules a plain `spar plan` of the paper's cell has no use for (each was once imported by
+#: it, costing its cold start a few ms): hashlib loads OpenSSL's libcrypto and _blake2 (the
+#: planner image's key needs SHA-256 only: qlf.py takes _sha256 itself).
+NOT_FOR_A_PLAIN_PLAN = ("hashlib", "_hashlib", "_blake2")
+
+
+def test_a_plain_plan_does_not_import_what_it_does_not_use() -> None:
+    code = ("import contextlib, io, json, sys\nfrom spar_py import cli\n"
+            "with contextlib.redirect_stdout(io.StringIO()) as out:\n"
+            "    try:\n        cli.main(['plan', 'kb/problems/peg_in_block.yaml', '--json'])\n"
+            "    except SystemExit as e:\n        code = e.code\n"
+            f"print(json.dumps([code, json.loads(out.getvalue())['outcome'], "
+            f"sorted(m for m in {NOT_FOR_A_PLAIN_PLAN!r} if m in sys.modules)]))\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert r.returncode == 0, r.stderr[-500:]
+    assert json.loads(r.stdout.strip().splitlines()[-1]) == [0, "plan", []]
+
+
+def test_collections_are_held_until_the_problem_is_read() -> None:
+    """The console script holds the cyclic collector off while it imports and reads the
+    problem (entry.hold_collections) and resumes it before planning; `cli.main` called from
+    Python leaves the collector as it found it (never disabled, nothing frozen)."""
+    code = ("import contextlib, gc, io, json, sys\nfrom spar_py import cli, entry, planner\n"
+            "seen = {}\nplan = planner.Planner.plan\n"
+            "def spy(self, *a, **k):\n    seen.setdefault('enabled', gc.isenabled()); return plan(self, *a, **k)\n"
+            "planner.Planner.plan = spy\n"
+            "def run():\n    with contextlib.redirect_stdout(io.StringIO()):\n        try:\n"
+            "            cli.main(['plan', 'kb/problems/peg_in_block.yaml'])\n"
+            "        except SystemExit as e:\n            return e.code\n"
+            "api = [run(), seen.pop('enabled'), gc.isenabled(), gc.get_freeze_count()]\n"
+            "entry.hold_collections()\nheld = gc.isenabled()\n"
+            "script = [run(), seen.pop('enabled'), gc.isenabled(), gc.get_freeze_count() > 0]\n"
+            "print(json.dumps([api, held, script]))\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert r.returncode == 0, r.stderr[-500:]
+    assert json.loads(r.stdout.strip().splitlines()[-1]) == [[0, True, True, 0], False, [0, True, True, True]]

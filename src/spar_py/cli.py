@@ -8,9 +8,10 @@ Errors are one line on stderr, never a traceback.
 from __future__ import annotations
 
 if __name__ == "__main__":  # python -m spar_py.cli: a signal during the imports below is one line too
-    from spar_py.entry import early_signals
+    from spar_py.entry import early_signals, hold_collections
 
     early_signals()
+    hold_collections()  # as the spar script (entry.main): until resume_collections
 
 import argparse
 import os
@@ -19,6 +20,7 @@ from pathlib import Path
 from typing import Callable
 
 from . import __version__
+from .entry import resume_collections
 from .errors import InternalError, KBError, PlanningTimeout, PrologError, SparError, SparValueError
 from .world.motion import PLANNERS, MotionOptions
 
@@ -170,6 +172,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
     from .planner import Outcome, Planner
 
     cell = load_problem(args.problem, max_bytes=_max_input_bytes(args))
+    resume_collections()  # the planning run allocates (and frees) as it goes
     planner = Planner(max_actions=args.max_actions, max_instances=args.max_instances,
                       separation=False if args.no_separation else None,
                       paper_placements=args.paper_placements,
@@ -404,6 +407,8 @@ def main(argv: list[str] | None = None) -> None:
 
     parser = build_parser()
     args = parser.parse_args(argv)
+    if args.func != "plan":  # `spar plan` resumes them once its problem is read
+        resume_collections()
     try:
         # the guard alone enforces --timeout: Prolog's own time limit, landing inside a
         # foreign predicate, can make SWI-Prolog print a second line on stderr

@@ -29,7 +29,6 @@ This module does the file work only; engine.py does the Prolog side (compile, lo
 """
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import sys
@@ -37,6 +36,15 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
+
+try:  # hashlib.sha256 without hashlib: its import loads OpenSSL's libcrypto and _blake2,
+    # some 5 ms of every cold start for a few dozen small files (the digests are the same)
+    from _sha256 import sha256  # CPython 3.11
+except ImportError:  # pragma: no cover - other versions and implementations
+    try:
+        from _sha2 import sha256  # CPython 3.12+
+    except ImportError:
+        from hashlib import sha256
 
 #: Layout version of a cache entry; part of every key.
 FORMAT = 1
@@ -66,7 +74,7 @@ def cache_dir() -> Path | None:
 
 def file_digest(path: Path) -> str:
     """SHA-256 of the bytes of ``path`` (hex)."""
-    return hashlib.sha256(path.read_bytes()).hexdigest()
+    return sha256(path.read_bytes()).hexdigest()
 
 
 @dataclass(frozen=True)
@@ -96,7 +104,7 @@ def key(sources: Sources, swi_version: int, swi_home: str) -> str:
     """The cache key of ``sources`` compiled by SWI-Prolog ``swi_version`` at ``swi_home``."""
     doc = {"format": FORMAT, "swi": [swi_version, swi_home],
            "roots": [str(p) for p in sources.roots], "files": sorted(sources.hashes.items())}
-    return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:32]
+    return sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:32]
 
 
 def loader_text(roots: tuple[Path, ...]) -> str:

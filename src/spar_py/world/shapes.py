@@ -32,7 +32,6 @@ trimesh and manifold3d are imported inside the functions that need them.
 """
 from __future__ import annotations
 
-import hashlib
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -135,6 +134,8 @@ class Geometry:
     def digest(self) -> str:
         """SHA-256 of the geometry's content (the mesh file's bytes, or the primitives) and scale."""
         if self._digest is None:
+            import hashlib  # here: its import (OpenSSL, _blake2) is ms of a cold plan that never asks
+
             h = hashlib.sha256()
             if self.mesh_file is not None:
                 h.update(b"mesh:" + Path(self.mesh_file).read_bytes())
