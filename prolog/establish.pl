@@ -382,10 +382,11 @@ undone_by(C, Dels, G, sat(op(_, S, Cond), E)) :-
     clobbers(Dels, Cond),
     possibly_between(C, E, S, G).
 
-clobbers(Dels, Cond) :-
-    member(D, Dels),
-    \+ \+ D = Cond,
-    !.
+clobbers([D|Ds], Cond) :-               % a loop, not member/2: no choice
+    (   \+ D \= Cond                      % point left at each element
+    ->  true
+    ;   clobbers(Ds, Cond)
+    ).
 
 %!  possible_clobberer(+Cond, +E, +S, +Plan, -C) is nondet.
 %
