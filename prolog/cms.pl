@@ -38,6 +38,9 @@
 :- module(cms,
           [ cms_empty/1,             % -Net
             cms_empty/2,             % +Oracle, -Net
+            cms_oracle/2,            % +Closure, -Oracle
+            cms_empty_with/2,        % +Oracle, -Net
+            cms_ask/6,               % +Oracle, +Kind, +Objects, +GLabels, +PLabels, -Pairs
             cms_initial/3,           % +Constraint, +Net0, -Net
             cms_add/4,               % +Constraint, +Objects, +Net0, -Net
             cms_try/4,               % +Constraint, +Objects, +Net0, -Result
@@ -62,23 +65,62 @@
 :- use_module(foreign, []).
 :- use_module(kb, []).
 
-:- meta_predicate cms_empty(5, -).
+:- meta_predicate cms_empty(5, -), cms_oracle(5, -).
 
 %!  cms_empty(-Net) is det.
 %!  cms_empty(:Oracle, -Net) is det.
 %
 %   The empty network. Arc pairs come from Oracle, by default
-%   foreign:arc_pairs/5 (Python); see the module header.
+%   foreign:arc_pairs/5 (Python), memoised for this network (and the
+%   networks made from it) only; see the module header.
 
 cms_empty(Net) :-
     cms_empty(foreign:arc_pairs, Net).
 
-cms_empty(Oracle, cms(Nodes, Arcs, [], oracle(Oracle, Memo))) :-
-    empty_assoc(Nodes),
-    empty_assoc(Arcs),
+cms_empty(Closure, Net) :-
+    cms_oracle(Closure, Oracle),
+    cms_empty_with(Oracle, Net).
+
+%!  cms_oracle(:Closure, -Oracle) is det.
+%
+%   A memoised oracle: Closure's answers kept (in a memo of its own, see
+%   the module header) as they are asked through cms_ask/6 or by the
+%   networks of cms_empty_with/2. One planning run makes one and shares it
+%   between its lower bound and every round of its search: the oracle is
+%   a function of its arguments, so an answer is computed once per run.
+%
+%   ==
+%   ?- cms_oracle([_, _, _, _, [a/b]]>>true, O), cms_ask(O, reachable, x, [a], [b], Ps).
+%   Ps = [a/b].
+%   ==
+
+cms_oracle(Closure, oracle(Closure, Memo)) :-
     memo_buckets(N),
     compound_name_arity(Memo, memo, N),
     forall(between(1, N, I), nb_setarg(I, Memo, end)).
+
+%!  cms_empty_with(+Oracle, -Net) is det.
+%
+%   The empty network whose arcs come from Oracle (cms_oracle/2), sharing
+%   its memo.
+%
+%   @error type_error(cms_oracle, Oracle) if Oracle is not one.
+
+cms_empty_with(Oracle, cms(Nodes, Arcs, [], Oracle)) :-
+    (   nonvar(Oracle), Oracle = oracle(_, Memo), compound(Memo), functor(Memo, memo, _)
+    ->  true
+    ;   type_error(cms_oracle, Oracle)
+    ),
+    empty_assoc(Nodes),
+    empty_assoc(Arcs).
+
+%!  cms_ask(+Oracle, +Kind, +Objects, +GraspLabels, +PosLabels, -Pairs) is det.
+%
+%   Pairs is Oracle's answer (cms_oracle/2) for the arguments of
+%   foreign:arc_pairs/5, from its memo if it was asked before.
+
+cms_ask(Oracle, Kind, Objects, Gs, Ps, Pairs) :-
+    oracle_pairs(Oracle, Kind, Objects, Gs, Ps, Pairs).
 
 %!  cms_initial(+Constraint, +Net0, -Net) is semidet.
 %

@@ -315,6 +315,18 @@ index_entry(Entry, Key, Ix0, Ix) :-
 %   if Cond's shape is not one the index answers (see above).
 
 indexed(Cond, Which, Plan, Entries) :-
+    indexed(Cond, Which, Plan, Own, Others, _),
+    merge_entries(Own, Others, Entries).
+
+%   indexed(+Cond, +Which, +Plan, -Own, -Others, -Decides) is semidet:
+%   indexed/4's entries in two lists, newest first: Own those under
+%   Cond's own key, Others those under k(F, A) or `any` (an action under
+%   both is in both). Decides is true if Cond's key decides unification:
+%   Cond is an atom, or F(X) with X atomic, so every term under its key
+%   (k(T, 0) is T, k(F, 1, X) is F(X): keys only get more precise by
+%   binding) is Cond itself; else false.
+
+indexed(Cond, Which, Plan, Own, Others, Decides) :-
     nonvar(Cond),
     (   compound(Cond)
     ->  compound_name_arity(Cond, F, A),
@@ -322,17 +334,18 @@ indexed(Cond, Which, Plan, Entries) :-
         arg(1, Cond, X),
         atomic(X),
         Key = k(F, A, X),
-        Wide = k(F, A)
+        Wide = k(F, A),
+        (   A =:= 1 -> Decides = true ; Decides = false )
     ;   Key = k(Cond, 0),
-        Wide = none
+        Wide = none,
+        Decides = true
     ),
     plan_index(Plan, Index),
     (   Which == adds -> arg(1, Index, Ix) ; arg(2, Index, Ix) ),
-    bucket(Key, Ix, Es1),
+    bucket(Key, Ix, Own),
     bucket(Wide, Ix, Es2),
     bucket(any, Ix, Es3),
-    merge_entries(Es1, Es2, Es12),
-    merge_entries(Es12, Es3, Entries).
+    merge_entries(Es2, Es3, Others).
 
 bucket(Key, Ix, Es) :-
     (   get_assoc(Key, Ix, Es0)
@@ -382,10 +395,11 @@ undone_by(C, Dels, G, sat(op(_, S, Cond), E)) :-
     clobbers(Dels, Cond),
     possibly_between(C, E, S, G).
 
-clobbers(Dels, Cond) :-
-    member(D, Dels),
-    \+ \+ D = Cond,
-    !.
+clobbers([D|Ds], Cond) :-               % a loop, not member/2: no choice
+    (   \+ D \= Cond                      % point left at each element
+    ->  true
+    ;   clobbers(Ds, Cond)
+    ).
 
 %!  possible_clobberer(+Cond, +E, +S, +Plan, -C) is nondet.
 %
@@ -450,8 +464,14 @@ declobber(Goal, E, Plan0, Plan) :-
 
 clobber_candidates(op(_, _, Cond), Plan, cands(Actions, Cands, Bits)) :-
     plan_actions(Plan, Actions),
-    (   indexed(Cond, dels, Plan, Entries)
-    ->  indexed_candidates(Entries, Cond, Cands, 0, Bits)
+    (   indexed(Cond, dels, Plan, Own, Others, Decides)
+    ->  (   Decides == true             % each of Own deletes Cond itself:
+        ->  entry_bits(Own, 0, Bits1),  % no unification to try
+            indexed_candidates(Others, Cond, Cands2, Bits1, Bits),
+            merge_entries(Own, Cands2, Cands)
+        ;   merge_entries(Own, Others, Entries),
+            indexed_candidates(Entries, Cond, Cands, 0, Bits)
+        )
     ;   plan_order(Plan, G),
         clobber_candidates_(Actions, Cond, G, Cands, 0, Bits)
     ).
@@ -471,6 +491,13 @@ indexed_candidates([E|Es], Cond, Cs, Bits0, Bits) :-
         Bits1 = Bits0
     ),
     indexed_candidates(Es, Cond, Cs1, Bits1, Bits).
+
+%   entry_bits(+Entries, +Bits0, -Bits): Bits0 with the bits of Entries set.
+
+entry_bits([], Bits, Bits).
+entry_bits([c(_, Bit, _)|Es], Bits0, Bits) :-
+    Bits1 is Bits0 \/ Bit,
+    entry_bits(Es, Bits1, Bits).
 
 %   clobber_candidates_(+Actions, +Cond, +G, -Cands, +Bits0, -Bits): Bits
 %   is Bits0 with the bits of Cands set.

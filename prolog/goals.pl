@@ -89,7 +89,8 @@ phase1_search(Options, Outcome, Bound) :-
     must_be(list, Options),
     default_option(max_steps, Budget0),
     option(max_steps(Budget1), Options, Budget0),
-    lower_bound(Options, LB),           % once: it may ask the oracle
+    run_oracle(Options, Oracle),        % one memo for the run: the lower
+    lower_bound_(Oracle, LB),           % bound's arcs are the search's too
     max_action_bound(Options, LB, Max),
     (   Budget1 == auto
     ->  derived_max_steps(LB, Budget)
@@ -97,7 +98,18 @@ phase1_search(Options, Outcome, Bound) :-
     ),
     Lo is min(LB, Max),
     Spent = steps(0),
-    rounds(Lo, Max, Budget-Spent, none, Options, Outcome, Bound).
+    rounds(Lo, Max, Budget-Spent, none, [run_oracle(Oracle)|Options], Outcome, Bound).
+
+%   run_oracle(+Options, -Oracle): the memoised oracle (cms_oracle/2) of
+%   a run with Options: of their oracle(Closure), else of
+%   foreign:arc_pairs/5.
+
+run_oracle(Options, Oracle) :-
+    (   option(oracle(Closure), Options)
+    ->  true
+    ;   Closure = foreign:arc_pairs
+    ),
+    cms_oracle(Closure, Oracle).
 
 %!  max_action_bound(+Options, -Max) is det.
 %
@@ -146,12 +158,14 @@ max_action_bound(Options, LB, Max) :-
 %   initial_plan/3: oracle(Closure), else foreign:arc_pairs/5).
 
 lower_bound(Options, N) :-
+    run_oracle(Options, Oracle),
+    lower_bound_(Oracle, N).
+
+%   lower_bound_(+Oracle, -N): lower_bound/2 asking Oracle (cms_oracle/2).
+
+lower_bound_(Oracle, N) :-
     findall(K, ( kb:goal(G), goal_lower_bound(G, K) ), Ks),
     sum_list(Ks, N0),
-    (   option(oracle(Oracle), Options)
-    ->  true
-    ;   Oracle = foreign:arc_pairs
-    ),
     findall(H, moved_hole(Oracle, H), Hs),
     length(Hs, N1),
     N is max(1, N0 + 2 * N1).
@@ -163,7 +177,7 @@ goal_lower_bound(assembled(_, _, _, _, _), 2) :-
     !.
 goal_lower_bound(_, 1).
 
-%   moved_hole(+Oracle, -Hole): Hole (each once) is the hole part of a user
+%   moved_hole(+Oracle, -Hole): (Oracle a cms_oracle/2) Hole (each once) is the hole part of a user
 %   goal not true initially that must leave its initial position before
 %   the assemble (see lower_bound/2). The oracle (the kinematics) is asked
 %   only about a hole whose pose hides none of the goal's faces and whose
@@ -214,7 +228,7 @@ no_mate_at(Oracle, Peg-PegFaces, Hole, Ta, Pose, Label) :-
     Gs \== [],
     \+ ( actions:assembly_turn(Ta, Turn, Allowed),
          ( Allowed == all -> true ; memberchk(Pose, Allowed) ),
-         call(Oracle, mate_reachable(Turn), Peg-Hole, Gs, [Label], Pairs),
+         cms_ask(Oracle, mate_reachable(Turn), Peg-Hole, Gs, [Label], Pairs),
          Pairs \== [] ).
 
 %   rounds(+B, +Max, +Budget, +Unmet0, +Options, -Outcome, -Bound): search
@@ -272,9 +286,12 @@ unmet_goal(Recorder, Unmet) :-
 %   The null plan: no actions, the user's goals (kb:goal/1, in order) on
 %   the operational stack as op(top_N, finish, Goal), at most Bound
 %   actions, and a recorder without a step budget (phase1_search/3 gives
-%   each round its own). Options (spar:phase1/3's; the defaults are
+%   each round its own recorder). Options (spar:phase1/3's; the defaults are
 %   spar_defaults.pl's): declobber(Methods), trace(Bool),
-%   forward_check(Bool) and oracle(Closure) for the CMS (cms_empty/2).
+%   forward_check(Bool) and oracle(Closure) for the CMS (cms_empty/2),
+%   or run_oracle(Oracle), a memoised oracle (cms_oracle/2) the network
+%   shares with the rest of the run (phase1_search/3 gives all its rounds
+%   and its lower bound one).
 %
 %   @error type_error(nonneg, Bound), type_error(list, Options).
 
@@ -287,8 +304,10 @@ initial_plan(Bound, Options, Plan) :-
     option(declobber(Methods), Options, Methods0),
     option(trace(Trace), Options, Trace0),
     option(forward_check(Lookahead), Options, Lookahead0),
-    (   option(oracle(Oracle), Options)
-    ->  cms_empty(Oracle, Net)
+    (   option(run_oracle(Oracle), Options)
+    ->  cms_empty_with(Oracle, Net)
+    ;   option(oracle(Closure), Options)
+    ->  cms_empty(Closure, Net)
     ;   cms_empty(Net)
     ),
     findall(G, kb:goal(G), Goals),

@@ -92,3 +92,23 @@ def test_the_package_imports_cheaply_and_exports_the_api() -> None:
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
     assert r.stdout.split("\n")[:2] == ["[]", "Planner Plan load_problem plan"]
+
+
+def test_a_run_asks_python_each_arc_question_once(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """One oracle memo per phase-1 run (goals:run_oracle/2): the mate_reachable questions the
+    lower bound asks about blocks on their side are the search's own, and are not asked again."""
+    import spar_py.engine as bridge
+    from spar_py.gen import generate_assembly
+
+    asked: list[tuple] = []
+    real = bridge.arc_pairs
+
+    def logging(*args):  # called by Prolog through py_call, looked up at each call
+        asked.append(tuple(tuple(a) if isinstance(a, list) else a for a in args))
+        return real(*args)
+
+    monkeypatch.setattr(bridge, "arc_pairs", logging)
+    plan = Planner().plan(generate_assembly(2, tmp_path / "kb", blocks="on-side"), phase1_only=True)
+    assert plan.ok and len(plan.actions) == 8
+    assert any(a[2] == "mate_reachable" and len(a[5]) == 1 and a[5][0].startswith("tr") for a in asked)
+    assert len(asked) == len(set(asked)), [a for a in set(asked) if asked.count(a) > 1]

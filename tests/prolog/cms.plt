@@ -8,6 +8,7 @@
 :- use_module(fixtures/paper_cell).
 :- use_module(library(plunit)).
 :- use_module(library(apply)).
+:- use_module(library(yall)).
 
 :- begin_tests(cms_sec5_2, [setup(load_cell(hole_down))]).
 
@@ -189,5 +190,29 @@ test(memo_many_questions, [N-Bad == 201-[]]) :-
                  cms:oracle_pairs(Oracle, K, O, Gs, Ps, Pairs),
                  Pairs \== [K/O/Gs/Ps] ), Bad),
     arg(1, Count, N).
+
+%   cms_oracle/2: one memo shared by cms_ask/6 and the networks made with
+%   cms_empty_with/2 (a run's lower bound and its rounds).
+
+test(shared_oracle_asked_once, N-Pairs == 1-[p1G12/tr1, p1G3/tr1, p1G7/tr1, p1G8/tr1]) :-
+    Count = count(0),
+    cms_oracle(counting_oracle(Count), Oracle),
+    spar_actions:get_all_grasps(peg, Gs0),
+    sort(Gs0, Gs),
+    cms_ask(Oracle, reachable, peg, Gs, [tr1], Pairs0),
+    cms_empty_with(Oracle, N0),
+    cms_initial(member(grasp_1, Gs), N0, N1),
+    cms_initial_state(part_location(peg, init_pos1), N1, N2),
+    cms_add(reachable(grasp_1, init_pos1), peg, N2, N3),
+    cms_arcs(N3, [arc(grasp_1, init_pos1, Pairs)]),
+    Pairs0 == Pairs,
+    arg(1, Count, N).
+
+test(shared_oracle_doc_example, Ps == [a/b]) :-
+    cms_oracle([_, _, _, _, [a/b]]>>true, O),
+    cms_ask(O, reachable, x, [a], [b], Ps).
+
+test(empty_with_not_an_oracle, [error(type_error(cms_oracle, foo))]) :-
+    cms_empty_with(foo, _).
 
 :- end_tests(cms_sec5_2).

@@ -172,6 +172,28 @@ test(indexed_candidates_as_scan, true(Got =@= Want)) :-
     findall(Cond-Ids, ( member(Cond, Conds), scan_clobberers(Cond, P, Ids) ), Want),
     Want = [_-[_, _|_]|_].          % the plan has several clobberers to order
 
+%   ... and their bits are those of the scan's actions (gripper(open) and the
+%   atomic condition take the index's own key as the answer: every action under
+%   it deletes the condition itself; the others are tested).
+
+test(indexed_candidate_bits, true(Got =@= Want)) :-
+    plan0([promotion, white_knight], P0),
+    new_actions([ holding(peg, _), holding(block, _), part_location(block, _),
+                  holding(_, _) ], P0, P),
+    plan_order(P, G),
+    Conds = [ gripper(open), gripper(closed), gripper(_), part_location(peg, _),
+              part_location(_, _), holding(_, _), nothing_deletes_this ],
+    findall(Cond-Bits, ( member(Cond, Conds),
+                         clobber_candidates(op(g, finish, Cond), P, cands(_, _, Bits)) ), Got),
+    findall(Cond-Bits, ( member(Cond, Conds), scan_clobberers(Cond, P, Ids),
+                         foldl(or_bit(G), Ids, 0, Bits) ),
+            Want),
+    memberchk(gripper(open)-B1, Got), B1 =\= 0.
+
+or_bit(G, Id, B0, B) :-
+    ordering_bit(Id, G, Bit),
+    B is B0 \/ Bit.
+
 test(indexed_after_binding, Ids == [action_1]) :-
     plan0([promotion, white_knight], P0),
     new_actions([holding(Obj, _)], P0, P),  % a pickup: deletes part_location(Obj, _)
