@@ -305,11 +305,10 @@ initial_plan(Bound, Options, Plan) :-
     option(trace(Trace), Options, Trace0),
     option(forward_check(Lookahead), Options, Lookahead0),
     (   option(run_oracle(Oracle), Options)
-    ->  cms_empty_with(Oracle, Net)
-    ;   option(oracle(Closure), Options)
-    ->  cms_empty(Closure, Net)
-    ;   cms_empty(Net)
+    ->  true
+    ;   run_oracle(Options, Oracle)
     ),
+    cms_empty_with(Oracle, Net),
     findall(G, kb:goal(G), Goals),
     foldl(top_goal, Goals, Tops, [], Ids),
     make_plan([ net(Net), ids(Ids), ops(Tops), bound(Bound),

@@ -87,6 +87,9 @@ PAIRS_LIMIT = 256
 #: Bound of the cell's memo table of placed part bodies per (part, frame, pose): phase 2 places
 #: every part on the table at every step, most of them where they were at the step before.
 PLACED_LIMIT = 2048
+#: The gripper's bodies (robots.py's palm and finger boxes), checked against the part it closes on
+#: by the grasp rule, not by a pair.
+_GRIPPER_NAMES = frozenset({"palm", "finger_l", "finger_r"})
 
 
 # --------------------------------------------------------------------------- bodies
@@ -395,10 +398,14 @@ class CollisionScene:
         the cell by (part, name, frame, pose): the same Body objects each time (read-only)."""
         T = np.ascontiguousarray(T, dtype=float)
         label = part if name is None else name
-        if self.memo is None:
+
+        def place() -> list[Body]:
             return [b.placed(T, frame, label) for b in self.shapes_of(part)]
-        return self.memo.table("collision.placed", PLACED_LIMIT).get_or_compute(
-            (part, label, frame, T.tobytes()), lambda: [b.placed(T, frame, label) for b in self.shapes_of(part)])
+
+        if self.memo is None:
+            return place()
+        table = self.memo.table("collision.placed", PLACED_LIMIT)
+        return table.get_or_compute((part, label, frame, T.tobytes()), place)
 
     def at(self, parts: Mapping[str, np.ndarray], held: tuple[str, np.ndarray] | None = None,
            grasped: str | None = None, *, width: float | None = None,
@@ -828,8 +835,6 @@ def _pair_structure(scene: CollisionScene, bodies: list[Body], n_moving: int, ha
     return pairs_arr, table_bodies, exact_pair, rigid
 
 
-_GRIPPER_NAMES = frozenset({"palm", "finger_l", "finger_r"})
-
 
 def _part_of(name: str) -> str:
     """The part a body belongs to: its name, less the "held:" of the part in the hand."""
@@ -846,8 +851,6 @@ def _head_structure(head: list[Body], n_moving: int, hand_part: str | None, skip
     moving body, the names of world bodies it is not checked against (itself, and its
     ``skip`` partners: the robot's allowed pairs and the state's ``allow``)."""
     moving = head[:n_moving]
-    gripper_names = _GRIPPER_NAMES
-    part_of = _part_of
     block = np.zeros((n_moving, len(head)), dtype=bool)
     # an attached part is a part of the world that happens to be where the tool is: it is
     # checked against the arm and the gripper only (not the table it rests on, nor the rest)
@@ -862,7 +865,7 @@ def _head_structure(head: list[Body], n_moving: int, hand_part: str | None, skip
             if i in fixed and (bj.frame == WORLD or j in fixed):
                 continue
             if bj.frame == WORLD or bj.frame == 0 and bi.frame >= 2:
-                if bi.name in gripper_names and part_of(bj.name) == hand_part and bj.frame == WORLD:
+                if bi.name in _GRIPPER_NAMES and _part_of(bj.name) == hand_part and bj.frame == WORLD:
                     continue  # the grasp rule decides
                 block[i, j] = True
                 continue
@@ -871,17 +874,17 @@ def _head_structure(head: list[Body], n_moving: int, hand_part: str | None, skip
             fi, fj = bi.frame, bj.frame
             ti, tj = bi.frame == TOOL, bj.frame == TOOL
             if ti and tj:  # in the hand: gripper and the hand's part by the grasp rule
-                ni, nj = part_of(bi.name), part_of(bj.name)
-                if ni in gripper_names and nj in gripper_names or ni == nj:
+                ni, nj = _part_of(bi.name), _part_of(bj.name)
+                if ni in _GRIPPER_NAMES and nj in _GRIPPER_NAMES or ni == nj:
                     continue
-                if hand_part in (ni, nj) and (ni in gripper_names or nj in gripper_names):
+                if hand_part in (ni, nj) and (ni in _GRIPPER_NAMES or nj in _GRIPPER_NAMES):
                     continue
                 block[i, j] = True
                 continue
             if ti or tj:
                 link = bj if ti else bi
                 other = bi if ti else bj
-                limit = 5 if other.name in gripper_names else 6
+                limit = 5 if other.name in _GRIPPER_NAMES else 6
                 if link.frame <= limit:
                     block[i, j] = True
                 continue
