@@ -42,6 +42,7 @@
             ordering_bit/3,            % +Id, +G, -Bit
             outside_mask/4,            % +E, +S, +G, -Mask
             between_mask/4,            % +E, +S, +G, -Mask
+            ancestors_mask/3,          % +Bits, +G, -Mask
             ordering_graph/2,          % +G, -Ugraph
             ordering_arcs/2,           % +G, -PriorTos
             ordering_actions/2,        % +G, -Ids
@@ -253,6 +254,32 @@ between_mask(E, S, ord(Nodes, _, _), Mask) :-
         get_assoc(S, Nodes, n(_, _, _, AncS))
     ->  Mask is DescE /\ AncS
     ;   Mask = 0
+    ).
+
+%!  ancestors_mask(+Bits, +G, -Mask) is det.
+%
+%   Mask is the bitset of the actions of G that necessarily precede some
+%   action whose bit is in Bits (the union of their ancestors; Bits 0
+%   gives 0). An action whose ancestors are in Mask already adds nothing
+%   (the ancestors of an ancestor are ancestors), so those are skipped:
+%   the cost is one look-up per action of Bits that no other of them
+%   follows, at most.
+%
+%   @error type_error(integer, Bits) if Bits is not an integer.
+
+ancestors_mask(Bits, ord(Nodes, Of, _), Mask) :-
+    must_be(integer, Bits),
+    ancestors_mask_(Bits, Nodes, Of, 0, Mask).
+
+ancestors_mask_(Bits, Nodes, Of, Mask0, Mask) :-
+    (   Bits =:= 0
+    ->  Mask = Mask0
+    ;   I is lsb(Bits),
+        get_assoc(I, Of, Id),
+        get_assoc(Id, Nodes, n(_, _, _, Anc)),
+        Mask1 is Mask0 \/ Anc,
+        Bits1 is Bits /\ \ (Anc \/ (1 << I)),
+        ancestors_mask_(Bits1, Nodes, Of, Mask1, Mask)
     ).
 
 %!  ordering_graph(+G, -Ugraph) is det.

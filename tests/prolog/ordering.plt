@@ -137,6 +137,34 @@ test(outside_mask_is_possibly_between, Bad == []) :-
               Want \== Got ),
             Bad).
 
+%   ancestors_mask/3 is the union of the ancestors of the actions of a
+%   set, whichever set (its skipping of ancestors already covered must not
+%   drop one that is not): random graphs, random subsets of their actions.
+
+test(ancestors_mask_is_union, Bad == []) :-
+    findall(Seed-K,
+            ( between(1, 10, Seed),
+              random_graph(Seed, G, U),
+              vertices(U, Vs),
+              between(1, 8, K),
+              findall(V, ( member(V, Vs), random(0, 3, R), R =:= 0 ), Set),
+              foldl(or_bit(G), Set, 0, Bits),
+              ancestors_mask(Bits, G, Got),
+              findall(A, ( member(A, Vs), member(D, Set), necessarily_before(A, D, G) ), As0),
+              sort(As0, As),
+              foldl(or_bit(G), As, 0, Want),
+              Got =\= Want ),
+            Bad).
+
+or_bit(G, V, B0, B) :-
+    ordering_bit(V, G, X),
+    B is B0 \/ X.
+
+test(ancestors_mask_empty, M == 0) :-
+    empty_ordering(G0),
+    prior_to(a, b, G0, G),
+    ancestors_mask(0, G, M).
+
 test(graph_is_a_ugraph, U == [a-[b, c], b-[c], c-[]]) :-
     graph([a-b, b-c, a-c], G),
     ordering_graph(G, U).
