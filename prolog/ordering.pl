@@ -136,10 +136,40 @@ prior_to_(A1, A2, G0, G) :-
         ->  Nodes = Nodes1
         ;   Up is Anc1 \/ (1 << I1),
             Down is D2 \/ (1 << I2),
-            add_bits(3, Up, Down, Of, Nodes1, Nodes2),
-            add_bits(4, Down, Up, Of, Nodes2, Nodes)
+            close_arc(Up, Down, Of, N, Nodes1, Nodes)
         ),
         G = ord(Nodes, Of, N)
+    ).
+
+%   close_arc(+Up, +Down, +Of, +N, +Nodes0, -Nodes): the closure after an
+%   arc from the actions Up (the arc's tail and its ancestors) to the
+%   actions Down (its head and its descendants): Down added to the
+%   descendants of each of Up, Up to the ancestors of each of Down. When
+%   they are many (more than an eighth of the N nodes), in one pass over
+%   every node (map_assoc/3: each node visited once, the tree rebuilt
+%   once), else node by node (add_bits/6: a look-up and an update each).
+
+close_arc(Up, Down, Of, N, Nodes0, Nodes) :-
+    (   8 * (popcount(Up) + popcount(Down)) > N
+    ->  map_assoc(close_node(Up, Down), Nodes0, Nodes)
+    ;   add_bits(3, Up, Down, Of, Nodes0, Nodes1),
+        add_bits(4, Down, Up, Of, Nodes1, Nodes)
+    ).
+
+close_node(Up, Down, Node0, Node) :-
+    Node0 = n(I, S, D0, A0),
+    Bit is 1 << I,
+    (   Bit /\ Up =\= 0
+    ->  D is D0 \/ Down
+    ;   D = D0
+    ),
+    (   Bit /\ Down =\= 0
+    ->  A is A0 \/ Up
+    ;   A = A0
+    ),
+    (   D =:= D0, A =:= A0
+    ->  Node = Node0
+    ;   Node = n(I, S, D, A)
     ).
 
 %   add_bits(+Field, +Bits, +New, +Of, +Nodes0, -Nodes): New added to the
