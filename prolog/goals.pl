@@ -513,19 +513,16 @@ conflict_steps(Vars, Plan, Ks) :-
             Ks).
 
 %   step_mentions_any(+Term, +Memo, +Vars): the step's Term mentions one
-%   of Vars. A step that added actions has a big term, walked again at
-%   every refusal: once it is ground, its atoms are kept in Memo,
-%   atoms(Copy-Atoms) (nb_setarg/3: the test is made inside findall/3),
-%   with a copy of the term they are the atoms of; they serve while the
-%   term is still == that copy (a comparison in C, not a walk in Prolog),
-%   and are found again when backtracking and other bindings have changed
-%   it.
+%   of Vars. Every refusal walks the whole history (thousands of steps at
+%   N = 50 generated parts), so once a step's term is ground, its atoms
+%   are kept in Memo, atoms(Copy-Atoms) (nb_setarg/3: the test is made
+%   inside findall/3), with a copy of the term they are the atoms of; they
+%   serve while the term is still == that copy (a comparison in C, not a
+%   walk in Prolog), and are found again when backtracking and other
+%   bindings have changed it.
 
 step_mentions_any(Term, Memo, Vars) :-
-    (   arg(2, Term, New),
-        New == []
-    ->  mentions_any(Term, Vars)
-    ;   arg(1, Memo, Copy-Atoms),
+    (   arg(1, Memo, Copy-Atoms),
         Copy == Term
     ->  \+ ord_disjoint(Atoms, Vars)
     ;   ground(Term)
