@@ -431,8 +431,22 @@ next_adder([c(Id0, Bit, Adds0)|Es], S, Skip, Id, Adds) :-
 undone_goals(action(Id, _, _, _, dellist(Dels)), Plan, Undone, Sat) :-
     plan_sat(Plan, Sat0),
     plan_order(Plan, G),
-    partition(undone_by(Id, Dels, G), Sat0, Moved, Sat),
-    maplist([sat(Goal, _), Goal]>>true, Moved, Undone).
+    undone_goals_(Sat0, Id, Dels, G, Undone, Sat).
+
+%   undone_goals_(+Sat0, +C, +Dels, +G, -Undone, -Sat): a plain recursion
+%   (partition/4 would make a meta-call per satisfied goal for every new
+%   action), the order of Sat0 kept in both lists.
+
+undone_goals_([], _, _, _, [], []).
+undone_goals_([Entry|Sat0], C, Dels, G, Undone, Sat) :-
+    (   undone_by(C, Dels, G, Entry)
+    ->  Entry = sat(Goal, _),
+        Undone = [Goal|Undone1],
+        Sat = Sat1
+    ;   Undone = Undone1,
+        Sat = [Entry|Sat1]
+    ),
+    undone_goals_(Sat0, C, Dels, G, Undone1, Sat1).
 
 undone_by(C, Dels, G, sat(op(_, S, Cond), E)) :-
     clobbers(Dels, Cond),

@@ -508,9 +508,19 @@ add_history(K, Goal, Plan0, Plan1, Plan) :-
 
 conflict_steps(Vars, Plan, Ks) :-
     plan_history(Plan, History),
-    findall(K, ( member(h(K, Cond, New, Memo), History),
-                 step_mentions_any(Cond-New, Memo, Vars) ),
-            Ks).
+    conflict_steps_(History, Vars, Ks).
+
+%   conflict_steps_(+History, +Vars, -Ks): a plain recursion (the tests
+%   bind nothing), not findall/3 over member/2: a redo per step of a
+%   history of thousands.
+
+conflict_steps_([], _, []).
+conflict_steps_([h(K, Cond, New, Memo)|Hs], Vars, Ks) :-
+    (   step_mentions_any(Cond-New, Memo, Vars)
+    ->  Ks = [K|Ks1]
+    ;   Ks = Ks1
+    ),
+    conflict_steps_(Hs, Vars, Ks1).
 
 %   step_mentions_any(+Term, +Memo, +Vars): the step's Term mentions one
 %   of Vars. Every refusal walks the whole history (thousands of steps at
@@ -524,13 +534,23 @@ conflict_steps(Vars, Plan, Ks) :-
 step_mentions_any(Term, Memo, Vars) :-
     (   arg(1, Memo, Copy-Atoms),
         Copy == Term
-    ->  \+ ord_disjoint(Atoms, Vars)
+    ->  some_in(Vars, Atoms)
     ;   ground(Term)
     ->  term_atoms(Term, Atoms0, []),
         sort(Atoms0, Atoms),
         nb_setarg(1, Memo, Term-Atoms),
-        \+ ord_disjoint(Atoms, Vars)
+        some_in(Vars, Atoms)
     ;   mentions_any(Term, Vars)
+    ).
+
+%   some_in(+Vars, +Atoms): one of Vars (a few network variables) is in
+%   the ordset Atoms (ord_memberchk/2 is a built-in: no merge of the two
+%   lists in Prolog).
+
+some_in([V|Vs], Atoms) :-
+    (   ord_memberchk(V, Atoms)
+    ->  true
+    ;   some_in(Vs, Atoms)
     ).
 
 %   term_atoms(+Term, -Atoms, ?Tail): the atoms of Term, a difference list.

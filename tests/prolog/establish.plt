@@ -267,4 +267,21 @@ test(doomed_establishers_skipped, true(Es5-Sols5 =@= Es5-Sols4)) :-
     \+ memberchk(start, Es5),
     Sols4 \== [].
 
+%   A new action moves back the satisfied goals it may clobber, in the
+%   order of the satisfied list, and keeps the others in their order (a
+%   geometric goal is never moved): a pickup deleting gripper(open) and
+%   part_location(peg, _).
+
+test(undone_goals_in_order, Undone-Sat == [G1, G3]-[S2, S4, S5]) :-
+    plan0([promotion, white_knight], P0),
+    new_actions([holding(peg, _)], P0, P1),
+    G1 = op(g1, finish, gripper(open)),
+    G3 = op(g3, finish, part_location(peg, p1)),
+    S2 = sat(op(g2, finish, holding(block, grasp_1)), start),
+    S4 = sat(geo(g4, finish, member(grasp_1, [a]), []), [start]),
+    S5 = sat(op(g5, finish, gripper(closed)), start),
+    set_sat_of_plan([sat(G1, start), S2, sat(G3, start), S4, S5], P1, P),
+    plan_actions(P, [Action|_]),
+    establish:undone_goals(Action, P, Undone, Sat).
+
 :- end_tests(establish_sec4_1).
