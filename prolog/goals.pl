@@ -516,7 +516,7 @@ conflict_steps(Vars, Plan, Ks) :-
 
 conflict_steps_([], _, []).
 conflict_steps_([h(K, Cond, New, Memo)|Hs], Vars, Ks) :-
-    (   step_mentions_any(Cond-New, Memo, Vars)
+    (   step_mentions_any(Cond, New, Memo, Vars)
     ->  Ks = [K|Ks1]
     ;   Ks = Ks1
     ),
@@ -531,16 +531,24 @@ conflict_steps_([h(K, Cond, New, Memo)|Hs], Vars, Ks) :-
 %   walk in Prolog), and are found again when backtracking and other
 %   bindings have changed it.
 
-step_mentions_any(Term, Memo, Vars) :-
-    (   arg(1, Memo, Copy-Atoms),
-        Copy == Term
+step_mentions_any(Cond-New, Memo, Vars) :-
+    step_mentions_any(Cond, New, Memo, Vars).
+
+%   step_mentions_any(+Cond, +New, +Memo, +Vars): as step_mentions_any/3
+%   for the term Cond-New, without building it when the memo answers.
+
+step_mentions_any(Cond, New, Memo, Vars) :-
+    (   arg(1, Memo, (Cond0-New0)-Atoms),
+        Cond0 == Cond,
+        New0 == New
     ->  some_in(Vars, Atoms)
-    ;   ground(Term)
+    ;   Term = Cond-New,
+        ground(Term)
     ->  term_atoms(Term, Atoms0, []),
         sort(Atoms0, Atoms),
         nb_setarg(1, Memo, Term-Atoms),
         some_in(Vars, Atoms)
-    ;   mentions_any(Term, Vars)
+    ;   mentions_any(Cond-New, Vars)
     ).
 
 %   some_in(+Vars, +Atoms): one of Vars (a few network variables) is in
