@@ -333,10 +333,11 @@ indexed(Cond, Which, Plan, Entries) :-
 %   indexed(+Cond, +Which, +Plan, -OwnBits-Own, -Others, -Decides) is
 %   semidet: indexed/4's entries in two lists, newest first: Own those
 %   under Cond's own key (OwnBits the union of their bits), Others those
-%   under k(F, A) or `any` (an action under both is in both). Decides is true if Cond's key decides unification:
-%   Cond is an atom, or F(X) with X atomic, so every term under its key
-%   (k(T, 0) is T, k(F, 1, X) is F(X): keys only get more precise by
-%   binding) is Cond itself; else false.
+%   under k(F, A) or `any` (an action under both is in both). Decides is
+%   true if Cond's key decides unification: Cond is an atom, or F(X) with
+%   X atomic, so every term under its key (k(T, 0) is T, k(F, 1, X) is
+%   F(X): keys only get more precise by binding) is Cond itself; else
+%   false.
 
 indexed(Cond, Which, Plan, OwnBits-Own, Others, Decides) :-
     nonvar(Cond),
@@ -565,13 +566,6 @@ indexed_candidates([E|Es], Cond, Cs, Bits0, Bits) :-
         Bits1 = Bits0
     ),
     indexed_candidates(Es, Cond, Cs1, Bits1, Bits).
-
-%   entry_bits(+Entries, +Bits0, -Bits): Bits0 with the bits of Entries set.
-
-entry_bits([], Bits, Bits).
-entry_bits([c(_, Bit, _)|Es], Bits0, Bits) :-
-    Bits1 is Bits0 \/ Bit,
-    entry_bits(Es, Bits1, Bits).
 
 %   clobber_candidates_(+Actions, +Cond, +G, -Cands, +Bits0, -Bits): Bits
 %   is Bits0 with the bits of Cands set.
