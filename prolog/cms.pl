@@ -21,9 +21,14 @@
     (Net0 -> Net), leaves the old network in force: "the old network is
     restored" costs nothing.
 
-    The network term is cms(Nodes, Arcs, ArcOrder, oracle(Oracle, Memo)):
-    Nodes and Arcs as net/2 of csp.pl, ArcOrder the arc keys newest first
-    (for display), Oracle the closure that computes an arc's allowed pairs,
+    The network term is cms(Nodes, Arcs, ArcOrder, oracle(Oracle, Memo),
+    links(Adj, Empty)): Nodes and Arcs as net/2 of csp.pl, ArcOrder the
+    arc keys newest first (for display), Adj an assoc from each variable
+    with an arc to the ordset of the variables it has arcs with (so that
+    the component of a check, its arcs and the arcs at a restricted node
+    are found without a walk of every arc), Empty `true` once some node
+    has an empty label set (only an unchecked initial constraint makes
+    one), else `false`; Oracle the closure that computes an arc's allowed pairs,
     called as call(Oracle, Kind, Objects, GraspLabels, PosLabels, Pairs)
     with the arguments of foreign:arc_pairs/5 (Kind is reachable or
     mate_reachable(Ta), the constraint without its two variables), and
@@ -106,13 +111,14 @@ cms_oracle(Closure, oracle(Closure, Memo)) :-
 %
 %   @error type_error(cms_oracle, Oracle) if Oracle is not one.
 
-cms_empty_with(Oracle, cms(Nodes, Arcs, [], Oracle)) :-
+cms_empty_with(Oracle, cms(Nodes, Arcs, [], Oracle, links(Adj, false))) :-
     (   nonvar(Oracle), Oracle = oracle(_, Memo), compound(Memo), functor(Memo, memo, _)
     ->  true
     ;   type_error(cms_oracle, Oracle)
     ),
     empty_assoc(Nodes),
-    empty_assoc(Arcs).
+    empty_assoc(Arcs),
+    empty_assoc(Adj).
 
 %!  cms_ask(+Oracle, +Kind, +Objects, +GraspLabels, +PosLabels, -Pairs) is det.
 %
@@ -148,7 +154,12 @@ cms_initial(C, Net0, Net) :-
     ->  initial_node(V, Net0, Net1),
         cms_add(C, none, Net1, Net)
     ;   sort(Ls, Labels),
-        put_node(V, Labels, Net0, Net)
+        put_node(V, Labels, Net0, Net1),
+        (   Labels == []
+        ->  Net1 = cms(Nodes, Arcs, Order, O, links(Adj, _)),
+            Net = cms(Nodes, Arcs, Order, O, links(Adj, true))
+        ;   Net = Net1
+        )
     ).
 cms_initial(C, _, _) :-
     domain_error(initial_constraint, C).
@@ -273,41 +284,51 @@ checked(Net, Vars, Result) :-
     ;   Result = refused(network, Component)
     ).
 
-no_empty_node(cms(Nodes, _, _, _)) :-
-    \+ ( gen_assoc(_, Nodes, Labels), Labels == [] ).
+%   no_empty_node(+Net): no node of Net has an empty label set. Only an
+%   initial constraint puts a node unchecked (cms_initial/3, which notes
+%   an empty one in links(_, Empty)); a checked one is refused before its
+%   node becomes empty, and a node is never removed.
+
+no_empty_node(cms(_, _, _, _, links(_, false))).
 
 %   component_consistent(+Net, +Component): the sub-network of the
 %   variables Component (an ordset) and the arcs between them has a
 %   solution (csp:consistent/1).
 
-component_consistent(cms(Nodes, Arcs, Order, _), Component) :-
+component_consistent(cms(Nodes, Arcs, _, _, links(Adj, _)), Component) :-
     findall(V-Ls, ( member(V, Component), get_assoc(V, Nodes, Ls) ), VLs),
     list_to_assoc(VLs, SubNodes),
-    findall(K-Ps, ( member(K, Order), K = V1-V2,
-                    ord_memberchk(V1, Component), ord_memberchk(V2, Component),
+    findall(K-Ps, ( member(V1, Component),      % each arc under its key:
+                    get_assoc(V1, Adj, Ws),     % one of V1-V2, V2-V1
+                    member(V2, Ws),
+                    K = V1-V2,
                     get_assoc(K, Arcs, Ps) ),
             KPs0),
     sort(KPs0, KPs),
     list_to_assoc(KPs, SubArcs),
     consistent(net(SubNodes, SubArcs)).
 
-put_node(V, Labels, cms(Nodes0, Arcs, Order, O), cms(Nodes, Arcs, Order, O)) :-
+put_node(V, Labels, cms(Nodes0, Arcs, Order, O, L), cms(Nodes, Arcs, Order, O, L)) :-
     put_assoc(V, Nodes0, Labels, Nodes).
 
-prune_arcs(V, Labels, cms(Nodes, Arcs0, Order, O),
-           cms(Nodes, Arcs, Order, O)) :-
-    foldl(prune_arc(V, Labels), Order, Arcs0, Arcs).
+%   prune_arcs(+V, +Labels, +Net0, -Net): the pairs of every arc at V
+%   whose V label is not in Labels dropped (the arcs at V are those to
+%   its neighbours in Adj, each under its key V-W or W-V).
 
-prune_arc(V, Labels, V1-V2, Arcs0, Arcs) :-
-    (   V1 == V
-    ->  get_assoc(V1-V2, Arcs0, Ps0),
-        include(first_in(Labels), Ps0, Ps),
-        put_assoc(V1-V2, Arcs0, Ps, Arcs)
-    ;   V2 == V
-    ->  get_assoc(V1-V2, Arcs0, Ps0),
-        include(second_in(Labels), Ps0, Ps),
-        put_assoc(V1-V2, Arcs0, Ps, Arcs)
+prune_arcs(V, Labels, cms(Nodes, Arcs0, Order, O, links(Adj, E)),
+           cms(Nodes, Arcs, Order, O, links(Adj, E))) :-
+    (   get_assoc(V, Adj, Ws)
+    ->  foldl(prune_arc(V, Labels), Ws, Arcs0, Arcs)
     ;   Arcs = Arcs0
+    ).
+
+prune_arc(V, Labels, W, Arcs0, Arcs) :-
+    (   get_assoc(V-W, Arcs0, Ps0)
+    ->  include(first_in(Labels), Ps0, Ps),
+        put_assoc(V-W, Arcs0, Ps, Arcs)
+    ;   get_assoc(W-V, Arcs0, Ps0),
+        include(second_in(Labels), Ps0, Ps),
+        put_assoc(W-V, Arcs0, Ps, Arcs)
     ).
 
 first_in(Labels, A/_) :- ord_memberchk(A, Labels).
@@ -322,7 +343,7 @@ add_arc(Kind, Objects, G, P, Net0, Result) :-
     must_be(atom, P),
     node_labels(Net0, G, Gs),
     node_labels(Net0, P, Ps),
-    Net0 = cms(Nodes, Arcs0, Order0, Oracle),
+    Net0 = cms(Nodes, Arcs0, Order0, Oracle, Links0),
     oracle_pairs(Oracle, Kind, Objects, Gs, Ps, Pairs0),
     include(pair_in(Gs, Ps), Pairs0, Pairs1),
     sort(Pairs1, Pairs2),
@@ -337,8 +358,26 @@ add_arc(Kind, Objects, G, P, Net0, Result) :-
     (   Pairs == []
     ->  Result = refused(arc, [G, P])
     ;   put_assoc(Key, Arcs0, Pairs, Arcs),
-        checked(cms(Nodes, Arcs, Order, Oracle), [G, P], Result)
+        (   Order == Order0
+        ->  Links = Links0
+        ;   link(G, P, Links0, Links)
+        ),
+        checked(cms(Nodes, Arcs, Order, Oracle, Links), [G, P], Result)
     ).
+
+%   link(+V1, +V2, +Links0, -Links): V1 and V2 neighbours in the
+%   adjacency of links(Adj, Empty).
+
+link(V1, V2, links(Adj0, E), links(Adj, E)) :-
+    add_neighbour(V1, V2, Adj0, Adj1),
+    add_neighbour(V2, V1, Adj1, Adj).
+
+add_neighbour(V, W, Adj0, Adj) :-
+    (   get_assoc(V, Adj0, Ws0)
+    ->  ord_add_element(Ws0, W, Ws)
+    ;   Ws = [W]
+    ),
+    put_assoc(V, Adj0, Ws, Adj).
 
 %   The memo is memo(B1, ..., Bn), a hash table of n buckets (the key's
 %   term_hash/2; a key that is not ground goes to the first), each a chain
@@ -421,7 +460,7 @@ geo_objects(C, Conds, _) :-
 %
 %   Var has a node with label set Labels (an ordset).
 
-cms_node(cms(Nodes, _, _, _), V, Labels) :-
+cms_node(cms(Nodes, _, _, _, _), V, Labels) :-
     (   atom(V)
     ->  get_assoc(V, Nodes, Labels)
     ;   gen_assoc(V, Nodes, Labels)
@@ -432,14 +471,14 @@ cms_node(cms(Nodes, _, _, _), V, Labels) :-
 %   All nodes as Var-Labels, in standard order of Var (the raw label sets,
 %   restricted only by unary constraints, as the paper's Fig. 25 shows them).
 
-cms_nodes(cms(Nodes, _, _, _), VarLabels) :-
+cms_nodes(cms(Nodes, _, _, _, _), VarLabels) :-
     assoc_to_list(Nodes, VarLabels).
 
 %!  cms_arcs(+Net, -Arcs:list) is det.
 %
 %   All arcs as arc(V1, V2, Pairs), oldest first; Pairs are V1Label/V2Label.
 
-cms_arcs(cms(_, Arcs, Order, _), List) :-
+cms_arcs(cms(_, Arcs, Order, _, _), List) :-
     reverse(Order, Keys),
     maplist(arc_of(Arcs), Keys, List).
 
@@ -450,7 +489,7 @@ arc_of(Arcs, V1-V2, arc(V1, V2, Pairs)) :-
 %
 %   The net(Nodes, Arcs) term csp.pl works on.
 
-cms_network(cms(Nodes, Arcs, _, _), net(Nodes, Arcs)).
+cms_network(cms(Nodes, Arcs, _, _, _), net(Nodes, Arcs)).
 
 %!  cms_consistent(+Net) is semidet.
 %
@@ -484,19 +523,22 @@ cms_solution(Net, Assignment) :-
 %   Component is the ordset of Vars and every variable joined to one of
 %   them by a path of arcs (whether or not it has a node yet).
 
-cms_component(cms(_, _, Order, _), Vars, Component) :-
+cms_component(cms(_, _, _, _, links(Adj, _)), Vars, Component) :-
     sort(Vars, Start),
-    grow_component(Start, Order, Component).
+    grow_component(Start, Start, Adj, Component).
 
-grow_component(C0, Keys, C) :-
-    findall(W, ( member(V1-V2, Keys),
-                 (   ord_memberchk(V1, C0) -> W = V2
-                 ;   ord_memberchk(V2, C0) -> W = V1
-                 ) ),
-            Ws),
-    sort(Ws, New),
-    ord_union(C0, New, C1),
-    (   C1 == C0
+%   grow_component(+Frontier, +C0, +Adj, -C): C is C0 (an ordset holding
+%   Frontier) and every variable reached from Frontier through Adj.
+
+grow_component(Frontier, C0, Adj, C) :-
+    findall(W, ( member(V, Frontier),
+                 get_assoc(V, Adj, Ws),
+                 member(W, Ws),
+                 \+ ord_memberchk(W, C0) ),
+            New0),
+    (   New0 == []
     ->  C = C0
-    ;   grow_component(C1, Keys, C)
+    ;   sort(New0, New),
+        ord_union(C0, New, C1),
+        grow_component(New, C1, Adj, C)
     ).

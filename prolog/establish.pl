@@ -100,12 +100,13 @@ establish(op(_, S, Cond), Plan0, Plan, E) :-
 %   plan). Cands are the goal's candidates (clobber_candidates/3, from
 %   Plan0).
 
-establish(op(_, S, Cond), cands(_, Cs, _), Plan0, Plan, E) :-
+establish(op(_, S, Cond), cands(_, Cs, _, Ident), Plan0, Plan, E) :-
     (   ground(Cond)
-    ->  identical_bits(Cs, Cond, 0, Ident),
-        plan_order(Plan0, G),
+    ->  plan_order(Plan0, G),
         between_mask(start, S, G, Before),
-        Doom is Ident /\ Before           % the identical ones before S
+        Bits is Ident /\ Before,          % the identical ones before S
+        ancestors_mask(Bits, G, Anc),     % the actions before one of them
+        Doom = bits(Bits, Anc)
     ;   Doom = doom(Cs)
     ),
     establish_(Cond, S, Doom, Plan0, Plan, E).
@@ -123,8 +124,11 @@ establish_(Cond, S, Doom, Plan0, Plan, E) :-
     note(Plan, "  ~q established by ~q~n", [Cond, E]).
 
 existing_establisher(Cond, S, Doom, Plan0, Plan, E) :-
-    plan_adder(Cond, Plan0, E, Adds),
-    E \== S,
+    (   Doom = bits(_, Skip)            % doomed iff its bit is in Skip
+    ->  true
+    ;   Skip = 0
+    ),
+    plan_adder(Cond, Plan0, S, Skip, E, Adds),
     member(Cond, Adds),
     \+ doomed(Doom, Cond, E, S, Plan0),
     post_prior_to(E, S, Plan0, Plan).
@@ -139,25 +143,29 @@ initial_establisher(Cond, S, Doom, Plan0, Plan) :-
 %   doomed(+Doom, +Cond, +E, +S, +Plan): a candidate necessarily between
 %   E and S deletes a term identical to Cond (see establish/5). Doom is
 %   none (nothing is doomed), or, for a Cond ground as listed (it cannot
-%   change then), the bitset of the candidates with such a term that
-%   necessarily precede S: E is doomed iff one of them is a descendant of
-%   E; else doom(Cs), and the candidates of Cs between E and S are looked
-%   at. Posting E -> S leaves the actions between E and S as they were
-%   (a new path through E -> S from E to some C would go on to S's
-%   descendants, after S), so the test may come before the arc.
+%   change then), bits(Bits, Anc), Bits the bitset of the candidates with
+%   such a term that necessarily precede S and Anc the actions that
+%   necessarily precede one of them (ordering:ancestors_mask/3): E is
+%   doomed iff it is `start` and Bits is not empty, or its bit is in Anc
+%   (one of them is a descendant of E); else doom(Cs), and the candidates
+%   of Cs between E and S are looked at. Posting E -> S leaves the actions
+%   between E and S as they were (a new path through E -> S from E to some
+%   C would go on to S's descendants, after S), so the test may come
+%   before the arc. existing_establisher/6 skips the plan actions doomed
+%   by bits(_, Anc) before trying their add lists (plan_adder/6): the test
+%   does not depend on what the add list binds.
 
 doomed(none, _, _, _, _) :-
     !,
     fail.
-doomed(Doom, _, E, _, Plan) :-
-    integer(Doom),
+doomed(bits(Bits, Anc), _, E, _, Plan) :-
     !,
-    Doom =\= 0,
+    Bits =\= 0,
     (   E == start
     ->  true
     ;   plan_order(Plan, G),
-        between_mask(E, finish, G, DescE),
-        DescE /\ Doom =\= 0
+        ordering_bit(E, G, Bit),
+        Bit /\ Anc =\= 0
     ).
 doomed(doom(Cs), Cond, E, S, Plan) :-
     plan_order(Plan, G),
@@ -259,8 +267,10 @@ add_action(Action, Constraints, Arcs, Plan0, Plan) :-
 
 %   The plan state indexes its actions by the terms of their add and
 %   delete lists (plan_state:plan_index/2): index(Adds, Dels), each an
-%   assoc from a term key to the actions with a term of that key,
-%   c(Id, Bit, Terms) newest first (Terms the whole add or delete list).
+%   assoc from a term key to b(Bits, Entries): Entries the actions with a
+%   term of that key, c(Id, Bit, Terms) newest first (Terms the whole add
+%   or delete list), Bits the union of their bits (so that the bits of a
+%   key's actions cost no walk of its list).
 %   A term's key is k(F, A, X) for a compound F/A whose first argument X
 %   is atomic, k(F, A) for one whose first argument is not (a variable
 %   now, which may be bound later, or a compound), k(T, 0) for an atomic
@@ -303,11 +313,13 @@ index_terms(Terms, Entry, Ix0, Ix) :-
     foldl(index_entry(Entry), Keys, Ix0, Ix).
 
 index_entry(Entry, Key, Ix0, Ix) :-
-    (   get_assoc(Key, Ix0, Es)
-    ->  true
-    ;   Es = []
+    Entry = c(_, Bit, _),
+    (   get_assoc(Key, Ix0, b(Bits0, Es))
+    ->  Bits is Bits0 \/ Bit
+    ;   Bits = Bit,
+        Es = []
     ),
-    put_assoc(Key, Ix0, [Entry|Es], Ix).
+    put_assoc(Key, Ix0, b(Bits, [Entry|Es]), Ix).
 
 %   indexed(+Cond, +Which, +Plan, -Entries) is semidet: the entries
 %   c(Id, Bit, Terms), newest first, of the actions whose add (Which =
@@ -315,18 +327,19 @@ index_entry(Entry, Key, Ix0, Ix) :-
 %   if Cond's shape is not one the index answers (see above).
 
 indexed(Cond, Which, Plan, Entries) :-
-    indexed(Cond, Which, Plan, Own, Others, _),
+    indexed(Cond, Which, Plan, _-Own, Others, _),
     merge_entries(Own, Others, Entries).
 
-%   indexed(+Cond, +Which, +Plan, -Own, -Others, -Decides) is semidet:
-%   indexed/4's entries in two lists, newest first: Own those under
-%   Cond's own key, Others those under k(F, A) or `any` (an action under
-%   both is in both). Decides is true if Cond's key decides unification:
-%   Cond is an atom, or F(X) with X atomic, so every term under its key
-%   (k(T, 0) is T, k(F, 1, X) is F(X): keys only get more precise by
-%   binding) is Cond itself; else false.
+%   indexed(+Cond, +Which, +Plan, -OwnBits-Own, -Others, -Decides) is
+%   semidet: indexed/4's entries in two lists, newest first: Own those
+%   under Cond's own key (OwnBits the union of their bits), Others those
+%   under k(F, A) or `any` (an action under both is in both). Decides is
+%   true if Cond's key decides unification: Cond is an atom, or F(X) with
+%   X atomic, so every term under its key (k(T, 0) is T, k(F, 1, X) is
+%   F(X): keys only get more precise by binding) is Cond itself; else
+%   false.
 
-indexed(Cond, Which, Plan, Own, Others, Decides) :-
+indexed(Cond, Which, Plan, OwnBits-Own, Others, Decides) :-
     nonvar(Cond),
     (   compound(Cond)
     ->  compound_name_arity(Cond, F, A),
@@ -342,15 +355,20 @@ indexed(Cond, Which, Plan, Own, Others, Decides) :-
     ),
     plan_index(Plan, Index),
     (   Which == adds -> arg(1, Index, Ix) ; arg(2, Index, Ix) ),
-    bucket(Key, Ix, Own),
-    bucket(Wide, Ix, Es2),
-    bucket(any, Ix, Es3),
+    bucket(Key, Ix, OwnBits, Own),
+    bucket(Wide, Ix, _, Es2),
+    bucket(any, Ix, _, Es3),
     merge_entries(Es2, Es3, Others).
 
-bucket(Key, Ix, Es) :-
-    (   get_assoc(Key, Ix, Es0)
-    ->  Es = Es0
-    ;   Es = []
+%   bucket(+Key, +Ix, -Bits, -Entries): the entries of the index Ix under
+%   Key, newest first, and the union of their bits (0 and [] if none).
+
+bucket(Key, Ix, Bits, Es) :-
+    (   get_assoc(Key, Ix, b(Bits0, Es0))
+    ->  Bits = Bits0,
+        Es = Es0
+    ;   Bits = 0,
+        Es = []
     ).
 
 %   merge_entries(+Es1, +Es2, -Es): two lists of entries by decreasing
@@ -382,14 +400,54 @@ plan_adder(Cond, Plan, Id, Adds) :-
         member(action(Id, _, _, addlist(Adds), _), Actions)
     ).
 
+%   plan_adder(+Cond, +Plan, +S, +Skip, -Id, -Adds) is nondet:
+%   plan_adder/4's actions but S and those whose bit is in the bitset
+%   Skip, in the same order; the skipped ones are passed over without a
+%   choice point each.
+
+plan_adder(Cond, Plan, S, Skip, Id, Adds) :-
+    (   indexed(Cond, adds, Plan, Entries)
+    ->  next_adder(Entries, S, Skip, Id, Adds)
+    ;   plan_actions(Plan, Actions),
+        plan_order(Plan, G),
+        member(action(Id, _, _, addlist(Adds), _), Actions),
+        Id \== S,
+        \+ ( Skip =\= 0,
+             ordering_bit(Id, G, Bit),
+             Bit /\ Skip =\= 0 )
+    ).
+
+next_adder([c(Id0, Bit, Adds0)|Es], S, Skip, Id, Adds) :-
+    (   ( Id0 == S ; Bit /\ Skip =\= 0 )
+    ->  next_adder(Es, S, Skip, Id, Adds)
+    ;   (   Id = Id0,
+            Adds = Adds0
+        ;   next_adder(Es, S, Skip, Id, Adds)
+        )
+    ).
+
 %   undone_goals(+Action, +Plan, -Undone, -Sat): the satisfied operational
 %   goals Action could clobber, and the satisfied list without them.
 
 undone_goals(action(Id, _, _, _, dellist(Dels)), Plan, Undone, Sat) :-
     plan_sat(Plan, Sat0),
     plan_order(Plan, G),
-    partition(undone_by(Id, Dels, G), Sat0, Moved, Sat),
-    maplist([sat(Goal, _), Goal]>>true, Moved, Undone).
+    undone_goals_(Sat0, Id, Dels, G, Undone, Sat).
+
+%   undone_goals_(+Sat0, +C, +Dels, +G, -Undone, -Sat): a plain recursion
+%   (partition/4 would make a meta-call per satisfied goal for every new
+%   action), the order of Sat0 kept in both lists.
+
+undone_goals_([], _, _, _, [], []).
+undone_goals_([Entry|Sat0], C, Dels, G, Undone, Sat) :-
+    (   undone_by(C, Dels, G, Entry)
+    ->  Entry = sat(Goal, _),
+        Undone = [Goal|Undone1],
+        Sat = Sat1
+    ;   Undone = Undone1,
+        Sat = [Entry|Sat1]
+    ),
+    undone_goals_(Sat0, C, Dels, G, Undone1, Sat1).
 
 undone_by(C, Dels, G, sat(op(_, S, Cond), E)) :-
     clobbers(Dels, Cond),
@@ -455,25 +513,42 @@ declobber(Goal, E, Plan0, Plan) :-
 %   condition of Goal = op(Id, S, Cond) whatever its establisher: those
 %   with a delete-list element unifying with Cond (nothing is bound), each
 %   as c(Id, Bit, Dels), Bit its bit in the ordering (ordering_bit/3),
-%   in cands(Actions, List, Bits) with the plan's actions and the union
-%   of the bits. The bits fall along the list: a newer action has a higher
-%   number in the ordering.
+%   in cands(Actions, List, Bits, Ident) with the plan's actions, the
+%   union of the bits and, for a ground Cond, the union of the bits of
+%   those with a delete-list element == Cond (`none` for a Cond not
+%   ground; establish/5 skips the establishers they doom). The bits fall
+%   along the list: a newer action has a higher number in the ordering.
 %   Computed once for a goal, they serve every establisher tried for it
 %   (declobber/5): the unification test does not depend on the
 %   establisher, and binding Cond or separating only shortens the list.
+%   Under a key that decides unification (indexed/6) every action deletes
+%   Cond itself: the key's bits are both Bits and Ident, with no walk of
+%   its actions.
 
-clobber_candidates(op(_, _, Cond), Plan, cands(Actions, Cands, Bits)) :-
+clobber_candidates(op(_, _, Cond), Plan, cands(Actions, Cands, Bits, Ident)) :-
     plan_actions(Plan, Actions),
-    (   indexed(Cond, dels, Plan, Own, Others, Decides)
+    (   indexed(Cond, dels, Plan, OwnBits-Own, Others, Decides)
     ->  (   Decides == true             % each of Own deletes Cond itself:
-        ->  entry_bits(Own, 0, Bits1),  % no unification to try
-            indexed_candidates(Others, Cond, Cands2, Bits1, Bits),
-            merge_entries(Own, Cands2, Cands)
+        ->  indexed_candidates(Others, Cond, Cands2, OwnBits, Bits),
+            merge_entries(Own, Cands2, Cands),
+            identical_bits(Cands2, Cond, OwnBits, Ident)
         ;   merge_entries(Own, Others, Entries),
-            indexed_candidates(Entries, Cond, Cands, 0, Bits)
+            indexed_candidates(Entries, Cond, Cands, 0, Bits),
+            ground_identical_bits(Cond, Cands, Ident)
         )
     ;   plan_order(Plan, G),
-        clobber_candidates_(Actions, Cond, G, Cands, 0, Bits)
+        clobber_candidates_(Actions, Cond, G, Cands, 0, Bits),
+        ground_identical_bits(Cond, Cands, Ident)
+    ).
+
+%   ground_identical_bits(+Cond, +Cands, -Ident): the bits of the
+%   candidates with a delete-list element == Cond if Cond is ground, else
+%   `none`.
+
+ground_identical_bits(Cond, Cands, Ident) :-
+    (   ground(Cond)
+    ->  identical_bits(Cands, Cond, 0, Ident)
+    ;   Ident = none
     ).
 
 %   indexed_candidates(+Entries, +Cond, -Cands, +Bits0, -Bits): the
@@ -491,13 +566,6 @@ indexed_candidates([E|Es], Cond, Cs, Bits0, Bits) :-
         Bits1 = Bits0
     ),
     indexed_candidates(Es, Cond, Cs1, Bits1, Bits).
-
-%   entry_bits(+Entries, +Bits0, -Bits): Bits0 with the bits of Entries set.
-
-entry_bits([], Bits, Bits).
-entry_bits([c(_, Bit, _)|Es], Bits0, Bits) :-
-    Bits1 is Bits0 \/ Bit,
-    entry_bits(Es, Bits1, Bits).
 
 %   clobber_candidates_(+Actions, +Cond, +G, -Cands, +Bits0, -Bits): Bits
 %   is Bits0 with the bits of Cands set.
@@ -519,7 +587,7 @@ clobber_candidates_([action(C, _, _, _, dellist(Dels))|As], Cond, G, Cs, Bits0, 
 %   Plan0 or an earlier plan of the same branch (the actions added since
 %   are examined too).
 
-declobber(op(_, S, Cond), E, cands(Seen, Cands, Bits), Plan0, Plan) :-
+declobber(op(_, S, Cond), E, cands(Seen, Cands, Bits, _), Plan0, Plan) :-
     plan_methods(Plan0, Methods),
     declobber_(Cands, Bits, Seen, Cond, E, S, Methods, Plan0, Plan).
 

@@ -508,32 +508,57 @@ add_history(K, Goal, Plan0, Plan1, Plan) :-
 
 conflict_steps(Vars, Plan, Ks) :-
     plan_history(Plan, History),
-    findall(K, ( member(h(K, Cond, New, Memo), History),
-                 step_mentions_any(Cond-New, Memo, Vars) ),
-            Ks).
+    conflict_steps_(History, Vars, Ks).
+
+%   conflict_steps_(+History, +Vars, -Ks): a plain recursion (the tests
+%   bind nothing), not findall/3 over member/2: a redo per step of a
+%   history of thousands.
+
+conflict_steps_([], _, []).
+conflict_steps_([h(K, Cond, New, Memo)|Hs], Vars, Ks) :-
+    (   step_mentions_any(Cond, New, Memo, Vars)
+    ->  Ks = [K|Ks1]
+    ;   Ks = Ks1
+    ),
+    conflict_steps_(Hs, Vars, Ks1).
 
 %   step_mentions_any(+Term, +Memo, +Vars): the step's Term mentions one
-%   of Vars. A step that added actions has a big term, walked again at
-%   every refusal: once it is ground, its atoms are kept in Memo,
-%   atoms(Copy-Atoms) (nb_setarg/3: the test is made inside findall/3),
-%   with a copy of the term they are the atoms of; they serve while the
-%   term is still == that copy (a comparison in C, not a walk in Prolog),
-%   and are found again when backtracking and other bindings have changed
-%   it.
+%   of Vars. Every refusal walks the whole history (thousands of steps at
+%   N = 50 generated parts), so once a step's term is ground, its atoms
+%   are kept in Memo, atoms(Copy-Atoms) (nb_setarg/3: the test is made
+%   inside findall/3), with a copy of the term they are the atoms of; they
+%   serve while the term is still == that copy (a comparison in C, not a
+%   walk in Prolog), and are found again when backtracking and other
+%   bindings have changed it.
 
-step_mentions_any(Term, Memo, Vars) :-
-    (   arg(2, Term, New),
-        New == []
-    ->  mentions_any(Term, Vars)
-    ;   arg(1, Memo, Copy-Atoms),
-        Copy == Term
-    ->  \+ ord_disjoint(Atoms, Vars)
-    ;   ground(Term)
+step_mentions_any(Cond-New, Memo, Vars) :-
+    step_mentions_any(Cond, New, Memo, Vars).
+
+%   step_mentions_any(+Cond, +New, +Memo, +Vars): as step_mentions_any/3
+%   for the term Cond-New, without building it when the memo answers.
+
+step_mentions_any(Cond, New, Memo, Vars) :-
+    (   arg(1, Memo, (Cond0-New0)-Atoms),
+        Cond0 == Cond,
+        New0 == New
+    ->  some_in(Vars, Atoms)
+    ;   Term = Cond-New,
+        ground(Term)
     ->  term_atoms(Term, Atoms0, []),
         sort(Atoms0, Atoms),
         nb_setarg(1, Memo, Term-Atoms),
-        \+ ord_disjoint(Atoms, Vars)
-    ;   mentions_any(Term, Vars)
+        some_in(Vars, Atoms)
+    ;   mentions_any(Cond-New, Vars)
+    ).
+
+%   some_in(+Vars, +Atoms): one of Vars (a few network variables) is in
+%   the ordset Atoms (ord_memberchk/2 is a built-in: no merge of the two
+%   lists in Prolog).
+
+some_in([V|Vs], Atoms) :-
+    (   ord_memberchk(V, Atoms)
+    ->  true
+    ;   some_in(Vs, Atoms)
     ).
 
 %   term_atoms(+Term, -Atoms, ?Tail): the atoms of Term, a difference list.
@@ -619,11 +644,17 @@ geo_step(Goal, Plan0, Result) :-
         Result = refused(Vars)
     ).
 
-establisher(Sat, A, Cond, E) :-
-    (   member(sat(op(_, A1, C1), E0), Sat),
+%   establisher(+Sat, +A, +Cond, -E): E the establisher of the first
+%   goal of Sat whose condition Cond holds before A, else `unknown` (a
+%   plain recursion over the satisfied list, hundreds long at N = 50: no
+%   redo of member/2 per entry).
+
+establisher([], _, _, unknown).
+establisher([Entry|Sat], A, Cond, E) :-
+    (   Entry = sat(op(_, A1, C1), E0),
         A1 == A, C1 == Cond
     ->  E = E0
-    ;   E = unknown
+    ;   establisher(Sat, A, Cond, E)
     ).
 
 %!  plan_partial(+Plan, -Partial) is det.

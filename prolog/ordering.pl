@@ -42,6 +42,7 @@
             ordering_bit/3,            % +Id, +G, -Bit
             outside_mask/4,            % +E, +S, +G, -Mask
             between_mask/4,            % +E, +S, +G, -Mask
+            ancestors_mask/3,          % +Bits, +G, -Mask
             ordering_graph/2,          % +G, -Ugraph
             ordering_arcs/2,           % +G, -PriorTos
             ordering_actions/2,        % +G, -Ids
@@ -135,10 +136,40 @@ prior_to_(A1, A2, G0, G) :-
         ->  Nodes = Nodes1
         ;   Up is Anc1 \/ (1 << I1),
             Down is D2 \/ (1 << I2),
-            add_bits(3, Up, Down, Of, Nodes1, Nodes2),
-            add_bits(4, Down, Up, Of, Nodes2, Nodes)
+            close_arc(Up, Down, Of, N, Nodes1, Nodes)
         ),
         G = ord(Nodes, Of, N)
+    ).
+
+%   close_arc(+Up, +Down, +Of, +N, +Nodes0, -Nodes): the closure after an
+%   arc from the actions Up (the arc's tail and its ancestors) to the
+%   actions Down (its head and its descendants): Down added to the
+%   descendants of each of Up, Up to the ancestors of each of Down. When
+%   they are many (more than an eighth of the N nodes), in one pass over
+%   every node (map_assoc/3: each node visited once, the tree rebuilt
+%   once), else node by node (add_bits/6: a look-up and an update each).
+
+close_arc(Up, Down, Of, N, Nodes0, Nodes) :-
+    (   8 * (popcount(Up) + popcount(Down)) > N
+    ->  map_assoc(close_node(Up, Down), Nodes0, Nodes)
+    ;   add_bits(3, Up, Down, Of, Nodes0, Nodes1),
+        add_bits(4, Down, Up, Of, Nodes1, Nodes)
+    ).
+
+close_node(Up, Down, Node0, Node) :-
+    Node0 = n(I, S, D0, A0),
+    Bit is 1 << I,
+    (   Bit /\ Up =\= 0
+    ->  D is D0 \/ Down
+    ;   D = D0
+    ),
+    (   Bit /\ Down =\= 0
+    ->  A is A0 \/ Up
+    ;   A = A0
+    ),
+    (   D =:= D0, A =:= A0
+    ->  Node = Node0
+    ;   Node = n(I, S, D, A)
     ).
 
 %   add_bits(+Field, +Bits, +New, +Of, +Nodes0, -Nodes): New added to the
@@ -253,6 +284,32 @@ between_mask(E, S, ord(Nodes, _, _), Mask) :-
         get_assoc(S, Nodes, n(_, _, _, AncS))
     ->  Mask is DescE /\ AncS
     ;   Mask = 0
+    ).
+
+%!  ancestors_mask(+Bits, +G, -Mask) is det.
+%
+%   Mask is the bitset of the actions of G that necessarily precede some
+%   action whose bit is in Bits (the union of their ancestors; Bits 0
+%   gives 0). An action whose ancestors are in Mask already adds nothing
+%   (the ancestors of an ancestor are ancestors), so those are skipped:
+%   the cost is one look-up per action of Bits that no other of them
+%   follows, at most.
+%
+%   @error type_error(integer, Bits) if Bits is not an integer.
+
+ancestors_mask(Bits, ord(Nodes, Of, _), Mask) :-
+    must_be(integer, Bits),
+    ancestors_mask_(Bits, Nodes, Of, 0, Mask).
+
+ancestors_mask_(Bits, Nodes, Of, Mask0, Mask) :-
+    (   Bits =:= 0
+    ->  Mask = Mask0
+    ;   I is lsb(Bits),
+        get_assoc(I, Of, Id),
+        get_assoc(Id, Nodes, n(_, _, _, Anc)),
+        Mask1 is Mask0 \/ Anc,
+        Bits1 is Bits /\ \ (Anc \/ (1 << I)),
+        ancestors_mask_(Bits1, Nodes, Of, Mask1, Mask)
     ).
 
 %!  ordering_graph(+G, -Ugraph) is det.

@@ -342,9 +342,10 @@ set_seps_of_plan(Seps, plan(A1,A2,A3,A4,A5,A6,A7,A8,A9,A10,A11,A12,A13,A14,A15,_
 %
 %   The plan actions by the terms of their add and delete lists,
 %   index(Adds, Dels), two assocs from a term key (establish.pl's
-%   term_key/2) to the actions with such a term, c(Id, Bit, Terms) newest
-%   first (Bit the action's bit in the ordering, Terms its add or delete
-%   list): establish.pl finds an establisher or a possible clobberer of a
+%   term_key/2) to b(Bits, Entries), Entries the actions with such a
+%   term, c(Id, Bit, Terms) newest first (Bit the action's bit in the
+%   ordering, Terms its add or delete list), Bits the union of their
+%   bits: establish.pl finds an establisher or a possible clobberer of a
 %   condition among the actions under its key, not among all of them.
 %   Kept by establish:add_action/5, the one place an action enters the
 %   plan.

@@ -94,7 +94,7 @@ is_partial(P) :-
     P = partial(Actions, _, Net, _),
     is_list(Actions),
     nonvar(Net),
-    Net = cms(_, _, _, _).
+    Net = cms(_, _, _, _, _).
 
 		 /*******************************
 		 *        SCRIPTED SESSIONS     *

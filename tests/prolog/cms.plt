@@ -24,7 +24,7 @@ peg_net(Net) :-
     cms_initial_state(part_location(peg, init_pos1), N1, Net).
 
 test(default_oracle_is_python, O == foreign:arc_pairs) :-
-    cms_empty(cms(_, _, _, oracle(O, _))).
+    cms_empty(cms(_, _, _, oracle(O, _), _)).
 
 test(initial_constraint_creates_node, L == [p2P1, p2P2]) :-
     cms_empty(N0),
@@ -124,9 +124,9 @@ test(position_class_pose, L == [p2P1, p2P2, p2P4, p2P5, p2P6]) :-
 test(second_arc_intersects, Arcs == [arc(grasp_1, init_pos1, [p1G3/tr1])]) :-
     peg_net(N0),
     cms_add(reachable(grasp_1, init_pos1), peg, N0, N1),
-    N1 = cms(Nodes, As, Order, _),
-    cms_empty([_, _, _, _, [p1G3/tr1]]>>true, cms(_, _, _, Oracle)),
-    cms_add(reachable(grasp_1, init_pos1), peg, cms(Nodes, As, Order, Oracle), N),
+    N1 = cms(Nodes, As, Order, _, Links),
+    cms_empty([_, _, _, _, [p1G3/tr1]]>>true, cms(_, _, _, Oracle, _)),
+    cms_add(reachable(grasp_1, init_pos1), peg, cms(Nodes, As, Order, Oracle, Links), N),
     cms_arcs(N, Arcs).
 
 test(component, C == [grasp_1, init_pos1]) :-
@@ -180,7 +180,7 @@ echo_oracle(Count, K, O, Gs, Ps, [K/O/Gs/Ps]) :-
 test(memo_many_questions, [N-Bad == 201-[]]) :-
     Count = count(0),
     cms_empty(echo_oracle(Count), Net),
-    Net = cms(_, _, _, Oracle),
+    Net = cms(_, _, _, Oracle, _),
     numlist(1, 200, Is),
     Qs = [q(k(_), o, [g], [p])|Qs0],
     findall(q(k(I), o, [g], [p]), member(I, Is), Qs0),
@@ -214,5 +214,84 @@ test(shared_oracle_doc_example, Ps == [a/b]) :-
 
 test(empty_with_not_an_oracle, [error(type_error(cms_oracle, foo))]) :-
     cms_empty_with(foo, _).
+
+
+%   Random networks (a hashing oracle over made-up labels): after every
+%   accepted constraint the component of each variable (found through the
+%   adjacency) is the one the listed arcs give, the arcs at a restricted
+%   node keep only its labels, and the whole network is consistent.
+%   Fails if the adjacency misses an arc, or a check skips a part of the
+%   network it should have searched.
+
+hash_oracle(Kind, _, Gs, Ps, Pairs) :-
+    findall(G/P, ( member(G, Gs), member(P, Ps),
+                   term_hash(Kind-G-P, H), H mod 3 =\= 0 ),
+            Pairs).
+
+random_step(Vars, Net0, Net) :-
+    random_member(Which, [arc, arc, member]),
+    (   Which == arc
+    ->  random_member(G, Vars), random_member(P, Vars), G \== P,
+        C = reachable(G, P)
+    ;   random_member(V, Vars),
+        random_member(L1, [a1, a2, a3, a4, a5]),
+        random_member(L2, [a1, a2, a3, a4, a5]),
+        C = member(V, [L1, L2, a6])
+    ),
+    (   cms_try(C, obj, Net0, ok(Net1))
+    ->  Net = Net1
+    ;   Net = Net0
+    ).
+
+arcs_component(Net, V, C) :-
+    cms_arcs(Net, Arcs),
+    arcs_closure([V], Arcs, C).
+
+arcs_closure(C0, Arcs, C) :-
+    findall(W, ( member(arc(A, B, _), Arcs),
+                 ( memberchk(A, C0) -> W = B ; memberchk(B, C0), W = A ) ),
+            Ws),
+    append(C0, Ws, C1s),
+    sort(C1s, C1),
+    (   C1 == C0 -> C = C0 ; arcs_closure(C1, Arcs, C) ).
+
+arc_labels_in(Net, arc(A, B, Pairs)) :-
+    cms_node(Net, A, LA), cms_node(Net, B, LB),
+    forall(member(X/Y, Pairs), ( memberchk(X, LA), memberchk(Y, LB) )).
+
+network_invariants(Vars, Net) :-
+    forall(member(V, Vars),
+           ( cms_component(Net, [V], C1), arcs_component(Net, V, C2), C1 == C2 )),
+    cms_arcs(Net, Arcs),
+    forall(member(A, Arcs), arc_labels_in(Net, A)),
+    cms_consistent(Net).
+
+test(random_networks_adjacency, Bad == []) :-
+    Vars = [v1, v2, v3, v4, v5, v6, v7, v8],
+    findall(Seed-K,
+            ( between(1, 15, Seed),
+              set_random(seed(Seed)),
+              cms_empty(hash_oracle, N0),
+              foldl(initial_labels, Vars, N0, N1),
+              numlist(1, 25, Ks),
+              foldl(checked_step(Vars), Ks, N1-[], _-Bs),
+              member(K, Bs) ),
+            Bad).
+
+initial_labels(V, Net0, Net) :-
+    cms_initial(member(V, [a1, a2, a3, a4, a5, a6]), Net0, Net).
+
+checked_step(Vars, K, Net0-Bad0, Net-Bad) :-
+    random_step(Vars, Net0, Net),
+    (   network_invariants(Vars, Net) -> Bad = Bad0 ; Bad = [K|Bad0] ).
+
+%   An initial constraint with no label leaves an empty node: every later
+%   check is refused, as a search of the whole network would find.
+
+test(empty_initial_node_refuses, R = refused(network, _)) :-
+    peg_net(N0),
+    cms_initial(member(grasp_9, []), N0, N1),
+    \+ cms_consistent(N1),
+    cms_try(member(grasp_1, [p1G3, p1G7]), none, N1, R).
 
 :- end_tests(cms_sec5_2).

@@ -86,12 +86,18 @@ test(type_error, [error(type_error(atom, 1))]) :-
 %   actions: every pair, every accepted and refused arc.
 
 random_graph(Seed, G, U) :-
+    random_graph(Seed, 12, 40, G, U).
+
+%   random_graph(+Seed, +Actions, +Arcs, -G, -U): Actions actions, Arcs
+%   random arcs tried (those closing a cycle refused).
+
+random_graph(Seed, NA, NArcs, G, U) :-
     set_random(seed(Seed)),
-    numlist(1, 12, Is),
+    numlist(1, NA, Is),
     maplist([I, A]>>atom_concat(a, I, A), Is, As),
     empty_ordering(G0),
     foldl(ordering_add_action, As, G0, G1),
-    numlist(1, 40, Ks),
+    numlist(1, NArcs, Ks),
     foldl(random_arc(As), Ks, G1, G),
     ordering_graph(G, U).
 
@@ -104,6 +110,23 @@ test(closure_matches_ugraphs, Bad == []) :-
     findall(Seed-A1-A2,
             ( between(1, 25, Seed),
               random_graph(Seed, G, U),
+              transitive_closure(U, C),
+              vertices(U, Vs),
+              member(A1, Vs), member(A2, Vs),
+              (   memberchk(A1-Ns, C), memberchk(A2, Ns) -> Want = true ; Want = false ),
+              (   necessarily_before(A1, A2, G) -> Got = true ; Got = false ),
+              Want \== Got ),
+            Bad).
+
+%   ... and on sparser graphs of 40 actions, where an arc joins few
+%   actions (the closure updated node by node) as well as many (in one
+%   pass over all nodes): every graph after each of its arcs.
+
+test(closure_matches_ugraphs_both_updates, Bad == []) :-
+    findall(Seed-NArcs-A1-A2,
+            ( between(1, 4, Seed),
+              member(NArcs, [5, 15, 30, 60]),
+              random_graph(Seed, 40, NArcs, G, U),
               transitive_closure(U, C),
               vertices(U, Vs),
               member(A1, Vs), member(A2, Vs),
@@ -136,6 +159,34 @@ test(outside_mask_is_possibly_between, Bad == []) :-
               (   possibly_between(C, E, S, G) -> Want = true ; Want = false ),
               Want \== Got ),
             Bad).
+
+%   ancestors_mask/3 is the union of the ancestors of the actions of a
+%   set, whichever set (its skipping of ancestors already covered must not
+%   drop one that is not): random graphs, random subsets of their actions.
+
+test(ancestors_mask_is_union, Bad == []) :-
+    findall(Seed-K,
+            ( between(1, 10, Seed),
+              random_graph(Seed, G, U),
+              vertices(U, Vs),
+              between(1, 8, K),
+              findall(V, ( member(V, Vs), random(0, 3, R), R =:= 0 ), Set),
+              foldl(or_bit(G), Set, 0, Bits),
+              ancestors_mask(Bits, G, Got),
+              findall(A, ( member(A, Vs), member(D, Set), necessarily_before(A, D, G) ), As0),
+              sort(As0, As),
+              foldl(or_bit(G), As, 0, Want),
+              Got =\= Want ),
+            Bad).
+
+or_bit(G, V, B0, B) :-
+    ordering_bit(V, G, X),
+    B is B0 \/ X.
+
+test(ancestors_mask_empty, M == 0) :-
+    empty_ordering(G0),
+    prior_to(a, b, G0, G),
+    ancestors_mask(0, G, M).
 
 test(graph_is_a_ugraph, U == [a-[b, c], b-[c], c-[]]) :-
     graph([a-b, b-c, a-c], G),

@@ -360,6 +360,40 @@ test(memo_follows_rebinding, [Before-After-Other == true-false-true]) :-
     ( goals:step_mentions_any(Term, Memo, [grasp_1]) -> After = true ; After = false ),
     ( goals:step_mentions_any(Term, Memo, [grasp_2, pos_1]) -> Other = true ; Other = false ).
 
+test(memo_follows_rebinding_no_new_actions, [Before-After == true-false]) :-
+    Memo = atoms(none),
+    Term = part_location(block, P)-[],
+    (   P = pos_1,
+        ( goals:step_mentions_any(Term, Memo, [pos_1]) -> Before = true ; Before = false ),
+        nb_setval(p1b_before2, Before),
+        fail
+    ;   nb_getval(p1b_before2, Before)
+    ),
+    P = pos_2,
+    ( goals:step_mentions_any(Term, Memo, [pos_1]) -> After = true ; After = false ).
+
+%   conflict_steps/3, asked twice (the second time from the memo), names
+%   the steps a walk of each step's terms finds mentioning the variables,
+%   steps with and without new actions, ground or not.
+
+mentions_atom(Term, Vars) :-
+    sub_term(A, Term), atom(A), memberchk(A, Vars), !.
+
+test(conflict_steps_as_walk, [K1-K2 == Want-Want]) :-
+    History = [ h(6, holding(peg, _)-[], [], atoms(none)),
+                h(5, part_location(block, pos_2), [], atoms(none)),
+                h(4, gripper(open), [action(a2, putdown(block, pos_2), p, a, d)], atoms(none)),
+                h(3, holding(peg, grasp_1), [], atoms(none)),
+                h(2, gripper(open), [], atoms(none)),
+                h(1, part_location(peg, X), [action(a1, pickup(peg, grasp_1), p, a, d)], atoms(none)) ],
+    X = init_pos1,
+    make_plan([history(History)], Plan),
+    Vars = [grasp_1, pos_2],
+    conflict_steps(Vars, Plan, K1),
+    conflict_steps(Vars, Plan, K2),
+    findall(K, ( member(h(K, C, N, _), History), mentions_atom(C-N, Vars) ), Want),
+    Want == [5, 4, 3, 1].
+
 test(unground_step_walked, true) :-
     goals:step_mentions_any(c(_)-[x(pos_3, _)], atoms(none), [pos_3]).
 
