@@ -174,6 +174,9 @@ class Patcher(importlib.abc.MetaPathFinder):
         spec.loader.exec_module = exec_module
         return spec
 sys.meta_path.insert(0, Patcher())
+from spar_py.entry import hold_collections, keep_compiled_methods  # as the spar script (entry.main)
+hold_collections()
+keep_compiled_methods()
 import spar_py.cli as cli
 marks["import spar_py.cli"] = time.perf_counter() - t0
 out = sys.stdout

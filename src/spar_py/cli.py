@@ -8,10 +8,11 @@ Errors are one line on stderr, never a traceback.
 from __future__ import annotations
 
 if __name__ == "__main__":  # python -m spar_py.cli: a signal during the imports below is one line too
-    from spar_py.entry import early_signals, hold_collections
+    from spar_py.entry import early_signals, hold_collections, keep_compiled_methods
 
     early_signals()
     hold_collections()  # as the spar script (entry.main): until resume_collections
+    _image = keep_compiled_methods()
 
 import argparse
 import os
@@ -459,8 +460,11 @@ def exiting() -> None:
 
 
 if __name__ == "__main__":
+    from spar_py.entry import save_compiled_methods
+
     try:
         main(sys.argv[1:])
     finally:
+        save_compiled_methods(_image)
         exiting()
 

@@ -13,6 +13,10 @@ import os
 import signal
 import sys
 from types import FrameType
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from .dcimage import CodeImage
 
 #: Exit code and line per signal (cli.py's EXIT_CODES).
 _EARLY = {signal.SIGINT: (130, b"spar: interrupted\n"), signal.SIGTERM: (143, b"spar: terminated\n")}
@@ -59,13 +63,30 @@ def resume_collections() -> None:
         gc.enable()
 
 
+def keep_compiled_methods() -> CodeImage | None:
+    """Dataclasses defined from now on take their generated methods' code from the cache
+    (dcimage.py: compiling their source is the largest cost of importing the planner); the
+    image to save at the end, or None (cache off). Console script only, never the Python API."""
+    from .dcimage import install
+
+    return install()
+
+
+def save_compiled_methods(image: CodeImage | None) -> None:
+    """Write what this process compiled into the image (only if it compiled anything new)."""
+    if image is not None:
+        image.save()
+
+
 def main() -> None:
     """``spar``: early handlers, then :func:`spar_py.cli.main`."""
     early_signals()
     hold_collections()
+    image = keep_compiled_methods()
     from .cli import exiting, main as cli_main
 
     try:
         cli_main(sys.argv[1:])
     finally:
+        save_compiled_methods(image)
         exiting()  # the process ends here: a shutdown without the full heap's collections

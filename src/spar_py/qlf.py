@@ -225,8 +225,15 @@ def evict(base: Path, keep: int = KEEP, spare: str | None = None) -> list[Path]:
 def main() -> None:
     """``python -m spar_py.qlf``: compile the planner into the cache now (set-up runs it);
     prints where the image is, or that the cache is off."""
+    from . import dcimage
+
+    image = dcimage.install()  # the spar command's dataclass methods, compiled now too
+    from . import cli, phase2, planner  # noqa: F401 - imported for their dataclasses
     from .engine import Engine
 
+    if image is not None:
+        image.save()
+        dcimage.uninstall(image)
     eng = Engine()
     base = cache_dir()
     where = "the cache is off" if base is None else f"cache {base}"
