@@ -550,8 +550,129 @@ def read_yaml(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> Node:
     return Node(str(path), "", data)
 
 
+class _NotFast(Exception):
+    """:func:`_fast_load` cannot vouch for a document: BoundedLoader's full path decides."""
+
+
+_TAG = "tag:yaml.org,2002:"
+_FAST_INT = re.compile(r"[-+]?(?:0|[1-9][0-9]*)")  # decimal, no '_': int() reads it as YAML 1.1 does
+_FAST_FLOAT = re.compile(r"[-+]?[0-9]*\.?[0-9]*(?:[eE][-+]?[0-9]+)?")  # no '_', ':', inf or nan
+
+
+_NOT_YET = object()  # a plain scalar not constructed yet
+
+
+def _fast_scalar(loader: Any, value: str, implicit: tuple[bool, bool]) -> Any:
+    """A plain (untagged, unquoted) scalar as BoundedLoader constructs it, for the tags whose
+    construction is one builtin call: str, null, bool, decimal int, decimal float; any other
+    tag or form (0x1, 012, 1_000, 1:30, .inf, a timestamp, ``<<``, an int too long) is _NotFast."""
+    tag = loader.resolve(yaml.ScalarNode, value, implicit)
+    if tag == _TAG + "str":
+        return value
+    if tag == _TAG + "int" and _FAST_INT.fullmatch(value):
+        try:
+            return int(value)
+        except ValueError:  # more digits than int() reads: construct_bounded_int's message
+            raise _NotFast from None
+    if tag == _TAG + "float" and _FAST_FLOAT.fullmatch(value):
+        return float(value)  # == construct_yaml_float's sign * float(unsigned), bit for bit
+    if tag == _TAG + "bool":
+        return BoundedLoader.bool_values[value.lower()]
+    if tag == _TAG + "null":
+        return None
+    raise _NotFast
+
+
+def _fast_load(text: str) -> Any:
+    """The document of ``text`` built straight from libyaml's events, or _NotFast.
+
+    The data is what BoundedLoader builds (equal, same types, same key order) for the
+    documents this reader takes: one document, no anchor, alias or explicit tag, scalar keys
+    each once in its mapping, nesting at most MAX_DEPTH, scalars as :func:`_fast_scalar`
+    takes them. Anything else, and every error, is _NotFast, and the caller reads the text
+    again with the full loader, whose message (or data) stands: so the fast path can only
+    ever agree with it. It skips building the node graph and constructing every key twice
+    (the full loader's duplicate check), and resolves each distinct plain scalar once.
+    """
+    if BoundedLoader.yaml_path_resolvers:
+        raise _NotFast  # a resolver by path would see nodes this reader never builds
+    loader = BoundedLoader(text)
+    plain: dict[str, Any] = {}  # this text's plain scalars, constructed (immutable values)
+    not_yet = _NOT_YET
+    scalar_event, seq_start, map_start = yaml.ScalarEvent, yaml.SequenceStartEvent, yaml.MappingStartEvent
+    seq_end, map_end = yaml.SequenceEndEvent, yaml.MappingEndEvent
+    try:
+        get = loader.get_event
+        if type(get()) is not yaml.StreamStartEvent:
+            raise _NotFast
+        ev = get()
+        if type(ev) is yaml.StreamEndEvent:
+            return None
+        if type(ev) is not yaml.DocumentStartEvent:
+            raise _NotFast
+        root: list[Any] = []
+        no_key: Any = root  # sentinel: the open mapping awaits a key
+        top: Any = root  # the open collection (a list or a dict)
+        in_map = False  # top is a dict
+        key: Any = no_key  # the open mapping's key awaiting its value
+        stack: list[tuple[Any, bool, Any]] = []  # the enclosing collections with their pending keys
+        while True:
+            ev = get()
+            cls = type(ev)
+            if cls is scalar_event:
+                if ev.tag is not None or ev.anchor is not None:
+                    raise _NotFast
+                value = ev.value
+                if ev.implicit[0]:  # plain: resolved by the loader's own implicit resolvers
+                    v = plain.get(value, not_yet)
+                    if v is not_yet:
+                        v = plain[value] = _fast_scalar(loader, value, ev.implicit)
+                    value = v
+            elif cls is map_start or cls is seq_start:
+                if ev.tag is not None or ev.anchor is not None or len(stack) >= MAX_DEPTH or (in_map and key is no_key):
+                    raise _NotFast  # ... or a collection as a key
+                stack.append((top, in_map, key))
+                in_map = cls is map_start
+                top, key = ({} if in_map else []), no_key
+                continue
+            elif (cls is map_end or cls is seq_end) and stack:
+                value = top
+                top, in_map, key = stack.pop()
+            elif cls is yaml.DocumentEndEvent and not stack and len(root) == 1:
+                break
+            else:
+                raise _NotFast
+            if not in_map:
+                top.append(value)
+            elif key is no_key:
+                key = value
+            elif key in top:  # a duplicate (1, 1.0 and true are one key): the full loader's message
+                raise _NotFast
+            else:
+                top[key] = value
+                key = no_key
+        if type(get()) is not yaml.StreamEndEvent:
+            raise _NotFast  # a second document
+        return root[0]
+    except _NotFast:
+        raise
+    except Exception:  # a syntax or reader error, anything unforeseen: the full loader says it
+        raise _NotFast from None
+    finally:
+        loader.dispose()
+
+
 def _load(text: str) -> Any:
-    """``yaml.load(text)`` with :class:`BoundedLoader`; the alias-graph check only where an
+    """``yaml.load(text)`` with :class:`BoundedLoader`: by :func:`_fast_load` where it can
+    vouch for the document (every KB file the project writes), else :func:`_full_load`."""
+    try:
+        return _fast_load(text)
+    except _NotFast:
+        return _full_load(text)
+
+
+def _full_load(text: str) -> Any:
+    """``yaml.load(text)`` with :class:`BoundedLoader`, the alias-graph check only where an
     alias can be (an anchor ``&`` in the text): it costs a third of a load."""
     loader = BoundedLoader(text)
     loader.has_anchors = "&" in text
