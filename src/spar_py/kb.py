@@ -360,18 +360,69 @@ class Node:
 
 def check_shape(node: Node, spec: Spec) -> None:
     """Check ``node`` against a schema: mappings, lists, no unknown key (with a did-you-mean),
-    every required key present, user names are labels. Leaves are left to the loaders."""
+    every required key present, user names are labels. Leaves are left to the loaders.
+
+    A value :func:`conforms` to passes at once; any other is walked by :func:`_check_shape`,
+    which raises the first problem's error."""
+    if not conforms(node.value, spec):
+        _check_shape(node, spec)
+
+
+def conforms(value: Any, spec: Spec) -> bool:
+    """True only if :func:`check_shape` passes ``value`` against ``spec`` (it may be False
+    where check_shape passes: a dict or list subclass, a key that is no str), without the
+    Nodes, paths and messages check_shape builds for its errors."""
+    t = type(spec)
+    if t is Leaf:
+        return True
+    if t is Keys:
+        if type(value) is not dict:
+            return False
+        req, opt = spec.required, spec.optional  # type: ignore[union-attr]
+        for k, child in value.items():
+            if type(k) is not str:
+                return False
+            sub = opt.get(k)  # optional first: _check_keys's {**required, **optional}
+            if sub is None:
+                sub = req.get(k)
+                if sub is None:
+                    return False
+            if type(sub) is not Leaf and not conforms(child, sub):
+                return False
+        return all(k in value for k in req)
+    if t is Each:
+        return (type(value) is list and len(value) >= spec.min_len  # type: ignore[union-attr]
+                and all(conforms(e, spec.item) for e in value))  # type: ignore[union-attr]
+    if t is OneOrMany:
+        if type(value) is list:
+            return len(value) >= 1 and all(conforms(e, spec.item) for e in value)  # type: ignore[union-attr]
+        return not isinstance(value, list) and conforms(value, spec.item)  # type: ignore[union-attr]
+    if t is Named:
+        return type(value) is dict and all(
+            type(k) is str and LABEL_RE.fullmatch(k) is not None and conforms(c, spec.value)  # type: ignore[union-attr]
+            for k, c in value.items())
+    if t is OneOf:
+        if type(value) is not dict or len(value) != 1:
+            return False
+        (k, child), = value.items()
+        sub = spec.choices.get(k) if type(k) is str else None  # type: ignore[union-attr]
+        return sub is not None and conforms(child, sub)
+    return False
+
+
+def _check_shape(node: Node, spec: Spec) -> None:
+    """check_shape's walk: raises the first problem's error (KBError, UnknownKeyError)."""
     if isinstance(spec, Keys):
         _check_keys(node, spec)
     elif isinstance(spec, Each):
         for e in node.elements(spec.min_len):
-            check_shape(e, spec.item)
+            _check_shape(e, spec.item)
     elif isinstance(spec, OneOrMany):
-        check_shape(node, Each(spec.item, 1) if isinstance(node.value, list) else spec.item)
+        _check_shape(node, Each(spec.item, 1) if isinstance(node.value, list) else spec.item)
     elif isinstance(spec, Named):
         for k, child in node.items():
             Node(node.file, child.path, k).label()
-            check_shape(child, spec.value)
+            _check_shape(child, spec.value)
     elif isinstance(spec, OneOf):
         children = node.items()
         if len(children) != 1:
@@ -379,7 +430,7 @@ def check_shape(node: Node, spec: Spec) -> None:
         (k, child), = children
         if k not in spec.choices:
             raise UnknownKeyError(node.file, child.path, _did_you_mean(k, spec.choices))
-        check_shape(child, spec.choices[k])
+        _check_shape(child, spec.choices[k])
 
 
 def _check_keys(node: Node, spec: Keys) -> None:
@@ -393,7 +444,7 @@ def _check_keys(node: Node, spec: Keys) -> None:
         if k not in present:
             node.key(k)  # raises: key missing
     for k, child in children:
-        check_shape(child, allowed[k])
+        _check_shape(child, allowed[k])
 
 
 _FILE_TYPES = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a character device"),
