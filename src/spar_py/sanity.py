@@ -159,12 +159,23 @@ def overlap_depth(s1: Solid, T1: np.ndarray, s2: Solid, T2: np.ndarray) -> float
     return _depth(_placed(s1, T1), _placed(s2, T2))
 
 
-def _placed(s: Solid, T: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _placed(s: Solid, T: np.ndarray, local: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A primitive at world pose T (4x4): its polytope's vertices (k, 3), face normals (f, 3)
-    and edge directions (e, 3) in the world frame (cell unit)."""
-    P = solid_points(s) @ T[:3, :3].T + T[:3, 3]
-    n, e = (m @ T[:3, :3].T for m in _axes(s))
-    return P, n, e
+    and edge directions (e, 3) in the world frame (cell unit); ``local``: the same three in
+    the object frame (:func:`_local`), when the caller has them already."""
+    pts, normals, edges = _local(s) if local is None else local
+    return pts @ T[:3, :3].T + T[:3, 3], normals @ T[:3, :3].T, edges @ T[:3, :3].T
+
+
+def _local(s: Solid) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A primitive's polytope in the object frame: vertices, face normals, edge directions."""
+    return (solid_points(s), *_axes(s))
+
+
+def _solid_key(s: Solid) -> tuple:
+    """What a primitive's polytope depends on (two equal keys: the same polytope, bit for bit)."""
+    return (s.kind, s.lo.tobytes(), s.hi.tobytes(), s.radius, None if s.points is None else s.points.tobytes())
 
 
 def _depth(a: tuple[np.ndarray, np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray, np.ndarray]) -> float:
@@ -305,11 +316,16 @@ def _overlaps(cell: Cell) -> Iterator[KBError]:
     gap = np.sqrt(((centres[:, None, :] - centres[None, :, :]) ** 2).sum(axis=2))
     near = gap <= (r[:, None] + r[None, :] + tol) * (1 + 1e-9) + 1e-9 * (1 + gap)
     placed: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+    local: dict[tuple, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}  # by _solid_key: parts share models
 
     def at(k: int, m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Part k's primitive m, placed (once; in the order the pairs first need them)."""
         if (k, m) not in placed:
-            placed[k, m] = _placed(shapes[k][m], pos[k].T)
+            s = shapes[k][m]
+            key = _solid_key(s)
+            if key not in local:
+                local[key] = _local(s)
+            placed[k, m] = _placed(s, pos[k].T, local[key])
         return placed[k, m]
 
     for i, j in zip(*(ix.tolist() for ix in np.nonzero(np.triu(near, 1)))):  # row-major: (i, j) order
