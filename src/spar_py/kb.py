@@ -650,6 +650,7 @@ def _fast_load(text: str) -> Any:
     loader = BoundedLoader(text)
     plain: dict[str, Any] = {}  # this text's plain scalars, constructed (immutable values)
     not_yet = _NOT_YET
+    props = "!" in text or "&" in text  # a tag or an anchor is possible (each starts so)
     scalar_event, seq_start, map_start = yaml.ScalarEvent, yaml.SequenceStartEvent, yaml.MappingStartEvent
     seq_end, map_end = yaml.SequenceEndEvent, yaml.MappingEndEvent
     try:
@@ -671,7 +672,7 @@ def _fast_load(text: str) -> Any:
             ev = get()
             cls = type(ev)
             if cls is scalar_event:
-                if ev.tag is not None or ev.anchor is not None:
+                if props and (ev.tag is not None or ev.anchor is not None):
                     raise _NotFast
                 value = ev.value
                 if ev.implicit[0]:  # plain: resolved by the loader's own implicit resolvers
@@ -680,7 +681,8 @@ def _fast_load(text: str) -> Any:
                         v = plain[value] = _fast_scalar(loader, value, ev.implicit)
                     value = v
             elif cls is map_start or cls is seq_start:
-                if ev.tag is not None or ev.anchor is not None or len(stack) >= MAX_DEPTH or (in_map and key is no_key):
+                if (props and (ev.tag is not None or ev.anchor is not None)) or len(stack) >= MAX_DEPTH or (
+                        in_map and key is no_key):
                     raise _NotFast  # ... or a collection as a key
                 stack.append((top, in_map, key))
                 in_map = cls is map_start
