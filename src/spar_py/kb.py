@@ -341,7 +341,12 @@ class Node:
         return self.value
 
     def vector(self, n: int) -> np.ndarray:
-        """A list of ``n`` numbers."""
+        """A list of ``n`` numbers (each as :meth:`number` takes it), as an (n,) float array."""
+        v = self.value
+        if type(v) is list and len(v) == n:  # every item an int or float number() takes: no Nodes
+            xs = [float(x) for x in v if (type(x) is float or type(x) is int) and abs(x) <= MAX_MAGNITUDE]
+            if len(xs) == n:
+                return np.array(xs)
         items = self.elements()
         if len(items) != n:
             raise self.fail(f"a list of {n} numbers", f"{len(items)} items")
