@@ -815,6 +815,13 @@ def tm_node(node: Node, length_scale: float) -> np.ndarray:
 
 
 def _faces(node: Node, known: set[Face] | None, min_len: int = 1) -> tuple[Face, ...]:
+    """A list of at least ``min_len`` face names (labels) or numbers, each one of ``known``
+    (when given)."""
+    v = node.value
+    if type(v) is list and len(v) >= min_len and all(
+            (LABEL_RE.fullmatch(f) is not None if type(f) is str else type(f) is int and abs(f) <= MAX_MAGNITUDE)
+            and (known is None or f in known) for f in v):
+        return tuple(v)  # every face as the loop below takes it: no Nodes
     out = []
     for e in node.elements(min_len):
         f = e.value
