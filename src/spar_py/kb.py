@@ -27,6 +27,7 @@ import numpy as np
 import yaml
 
 from . import sanity
+from .memo import Memo
 from .units import from_mm
 from .errors import KBError, SparError, SparValueError, UnknownKeyError, WrongKindError
 from .geometry import ORTHO_TOL, eulerxyz, rotation_problem, rpy, same_stable_pose, tm_rows, trans
@@ -62,6 +63,9 @@ MAX_MAGNITUDE = 1e9  # any number in a KB file, in the file's units
 # The sensing actions kb/templates/sensing.pl defines: the names `sensors:` may use.
 SENSOR_NAMES = ("dense_range_scan",)
 SHOW_CHARS = 40  # a value quoted in a message is cut to this many characters
+#: Entries of each memo table one problem's load keeps (load_problem: transforms by their
+#: tm rows, stable-pose tests by their rotations), the least recently used dropped first.
+LOAD_MEMO_LIMIT = 4096
 
 
 # --------------------------------------------------------------------------- schemas
@@ -788,19 +792,33 @@ def _units(root: Node) -> tuple[str, float, float]:
     return length, LENGTH_UNITS[length], ANGLE_UNITS[angle]
 
 
-def tm_node(node: Node, length_scale: float) -> np.ndarray:
+def tm_node(node: Node, length_scale: float, memo: Memo | None = None) -> np.ndarray:
     """A 4x4 transform from the paper's row form ``[[r1], [r2], [r3], [d]]`` (Fig. 18).
 
     The rows r1..r3 are the images of the frame's x, y, z axes (row-vector
     convention, as the paper prints its matrices), d the displacement, in the file's
     length unit (multiplied by ``length_scale``). The rotation must pass geometry's
-    check (orthonormal to ``ORTHO_TOL``, det +1).
+    check (orthonormal to ``ORTHO_TOL``, det +1). With ``memo`` (one load's tables,
+    :func:`load_problem`) the transform of rows already read is a copy of the one built
+    then: the same numbers, the same transform.
     """
-    rows = node.elements()
-    if len(rows) != 4:
-        raise node.fail("tm rows [[r1], [r2], [r3], [d]] (4 rows of 3 numbers)", f"{len(rows)} rows")
-    m = np.array([r.vector(3) for r in rows])
+    v = node.value
+    flat = [float(x) for r in v if type(r) is list and len(r) == 3
+            for x in r if (type(x) is float or type(x) is int) and abs(x) <= MAX_MAGNITUDE
+            ] if type(v) is list and len(v) == 4 else []
+    if len(flat) == 12:  # 4 rows of 3 numbers as Node.vector takes them: no Nodes
+        m = np.array(flat).reshape(4, 3)
+    else:
+        rows = node.elements()
+        if len(rows) != 4:
+            raise node.fail("tm rows [[r1], [r2], [r3], [d]] (4 rows of 3 numbers)", f"{len(rows)} rows")
+        m = np.array([r.vector(3) for r in rows])
     m[3] *= length_scale
+    table = memo.table("tm_node", LOAD_MEMO_LIMIT) if memo is not None else None
+    if table is not None:
+        known = table.get(m.tobytes())
+        if known is not None:
+            return known.copy()
     T = tm_rows(m)
     why = rotation_problem(T[:3, :3])
     if why is not None:
@@ -808,6 +826,8 @@ def tm_node(node: Node, length_scale: float) -> np.ndarray:
                 if why.startswith("R^T R") else "")
         raise node.fail(f"an orthonormal right-handed rotation in rows 1-3 "
                         f"(orthonormal to {ORTHO_TOL:g}, det +1; {why}{hint})")
+    if table is not None:
+        table[m.tobytes()] = T.copy()
     return T
 
 
@@ -836,7 +856,8 @@ def _faces(node: Node, known: set[Face] | None, min_len: int = 1) -> tuple[Face,
 
 
 def load_object(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, opening: float | None = None,
-                use_cache: bool = True, gripper: GripperGeometry | None = None) -> ObjectModel:
+                use_cache: bool = True, gripper: GripperGeometry | None = None,
+                memo: Memo | None = None) -> ObjectModel:
     """Load ``kb/objects/*.yaml`` converting lengths to ``unit``.
 
     ``faces``, ``stable_poses`` and ``grasps`` left out of a model with ``mesh:`` or
@@ -844,7 +865,8 @@ def load_object(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, o
     world.shapes_cache) for the robot's ``gripper`` (its opening, fingers and palm, cell unit)
     or, without one, a gripper of opening ``opening`` (cell unit; DEFAULT_OPENING_MM without a
     robot) with the default fingers; hand-written ones take precedence. Only a derivation
-    imports trimesh.
+    imports trimesh. ``memo``: the tables of a load reading many files (:func:`tm_node`);
+    the model is the same without.
     """
     root = read_kb(path, "object", max_bytes)
     name = root.key("object").label()
@@ -895,7 +917,7 @@ def load_object(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, o
             label = p.key("label").label()
             if label in poses:
                 raise p.key("label").fail("a label not used before", show(label))
-            T = tm_node(p.key("tm"), scale)
+            T = tm_node(p.key("tm"), scale, memo)
             poses[label] = StablePose(
                 label, _faces(p.key("rfaces"), known), _faces(p.key("ofaces"), known, 0),
                 T[:3, :3].copy(), float(T[2, 3]),
@@ -1450,9 +1472,11 @@ def _referenced(node: Node, kind: str) -> Iterator[None]:
         raise node.fail(f"the path of {KINDS[kind].wanted}", f"{show(node.value)}, {e.got}") from None
 
 
-def _positions(onode: Node, oname: str, model: ObjectModel, taken: dict[str, Position]) -> list[Position]:
+def _positions(onode: Node, oname: str, model: ObjectModel, taken: dict[str, Position],
+               memo: Memo | None = None) -> list[Position]:
     """An object's initial position, or the list of them (a stock of identical parts:
-    part_location(Obj, Pos) holds for each; "the peg" is whichever is taken)."""
+    part_location(Obj, Pos) holds for each; "the peg" is whichever is taken). ``memo``:
+    the load's tables (:func:`tm_node`, :func:`_same_stable_pose`)."""
     inode = onode.key("initial")
     inits = inode.elements(1) if isinstance(inode.value, list) else [inode]
     out: list[Position] = []
@@ -1461,11 +1485,20 @@ def _positions(onode: Node, oname: str, model: ObjectModel, taken: dict[str, Pos
         pname, plabel = init.key("name").label(), init.key("label").label()
         if plabel in taken or pname in names or any(plabel == p.label or pname == p.name for p in out):
             raise init.fail("a position name and label not used before", f"{pname}, {plabel}")
-        T = tm_node(init.key("tm"), 1.0)
-        if not any(same_stable_pose(T[:3, :3], p.R) for p in model.poses.values()):
+        T = tm_node(init.key("tm"), 1.0, memo)
+        if not any(_same_stable_pose(T[:3, :3], p.R, memo) for p in model.poses.values()):
             raise init.key("tm").fail(f"an orientation of one of {oname}'s stable poses")
         out.append(Position(pname, plabel, oname, T))
     return out
+
+
+def _same_stable_pose(R_abs: np.ndarray, R_pose: np.ndarray, memo: Memo | None) -> bool:
+    """geometry.same_stable_pose of two (3, 3) float rotations, kept in ``memo`` (the load's
+    tables) by their bytes: the same rotations, the same answer."""
+    if memo is None:
+        return same_stable_pose(R_abs, R_pose)
+    return memo.table("same_stable_pose", LOAD_MEMO_LIMIT).get_or_compute(
+        (R_abs.tobytes(), R_pose.tobytes()), lambda: same_stable_pose(R_abs, R_pose))
 
 
 def _derive_gripper(unit: str, opening: float | None, gripper: GripperGeometry | None) -> Any:
@@ -1479,9 +1512,10 @@ def _derive_gripper(unit: str, opening: float | None, gripper: GripperGeometry |
 
 
 def _objects(root: Node, base: Path, unit: str, max_bytes: int, opening: float | None = None,
-             gripper: GripperGeometry | None = None
+             gripper: GripperGeometry | None = None, memo: Memo | None = None
              ) -> tuple[dict[str, ObjectModel], dict[str, Position], list[Path]]:
-    """The problem's objects (models loaded), their initial positions and the model files."""
+    """The problem's objects (models loaded), their initial positions and the model files
+    (``memo``: the load's tables, :func:`load_object`)."""
     objects: dict[str, ObjectModel] = {}
     positions: dict[str, Position] = {}
     files: list[Path] = []
@@ -1489,12 +1523,12 @@ def _objects(root: Node, base: Path, unit: str, max_bytes: int, opening: float |
         mnode = onode.key("model")
         mpath = _ref_path(mnode, base, "object")
         with _referenced(mnode, "object"):
-            model = load_object(mpath, unit, max_bytes, opening=opening, gripper=gripper)
+            model = load_object(mpath, unit, max_bytes, opening=opening, gripper=gripper, memo=memo)
         if model.name != oname:
             raise mnode.fail(f"the model of {oname}", f"the model of {model.name}")
         objects[oname] = model
         files.append(mpath)
-        for pos in _positions(onode, oname, model, positions):
+        for pos in _positions(onode, oname, model, positions, memo):
             positions[pos.label] = pos
     if not objects:
         raise root.key("objects").fail("at least one object", "none")
@@ -1704,13 +1738,16 @@ def load_problem(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> Cell:
         rpath = _ref_path(rnode, base, "robot")
         with _referenced(rnode, "robot"):
             robot = load_robot(rpath, unit=unit, max_bytes=max_bytes)
-    objects, positions, model_files = _objects(root, base, unit, max_bytes, robot.finger_separation, robot.gripper)
+    memo = Memo()  # this load's tables: the object files of a problem repeat their transforms
+    objects, positions, model_files = _objects(root, base, unit, max_bytes, robot.finger_separation, robot.gripper,
+                                               memo)
     grip = root.key("gripper").choice(("open", "closed"))
     unc = root.key("uncertainty")
     man = _bounds(unc.key("manipulator"), 1.0, rad_per)
     obj_bounds = _object_bounds(unc, objects, rad_per)
     sensors = _sensors(root, rad_per)
-    transforms = {k: tm_node(n.key("tm"), 1.0) for k, n in (root.key("transforms", False) or Node("", "", {})).items()}
+    transforms = {k: tm_node(n.key("tm"), 1.0, memo)
+                  for k, n in (root.key("transforms", False) or Node("", "", {})).items()}
     vectors = {k: n.vector(3) for k, n in (root.key("vectors", False) or Node("", "", {})).items()}
     turns: dict[str, tuple[tuple[str, tuple[str, ...]], ...]] = {}
     goals = _goals(root, objects, transforms, vectors, positions, turns)
