@@ -17,6 +17,7 @@ import math
 import os
 import re
 import stat
+import struct
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -806,6 +807,12 @@ def tm_node(node: Node, length_scale: float, memo: Memo | None = None) -> np.nda
     flat = [float(x) for r in v if type(r) is list and len(r) == 3
             for x in r if (type(x) is float or type(x) is int) and abs(x) <= MAX_MAGNITUDE
             ] if type(v) is list and len(v) == 4 else []
+    table = memo.table("tm_node", LOAD_MEMO_LIMIT) if memo is not None and len(flat) == 12 else None
+    if table is not None:  # the key: the 12 numbers' and the scale's bits (-0.0 is not 0.0)
+        key = struct.pack("13d", *flat, length_scale)
+        known = table.get(key)
+        if known is not None:
+            return known.copy()
     if len(flat) == 12:  # 4 rows of 3 numbers as Node.vector takes them: no Nodes
         m = np.array(flat).reshape(4, 3)
     else:
@@ -814,11 +821,6 @@ def tm_node(node: Node, length_scale: float, memo: Memo | None = None) -> np.nda
             raise node.fail("tm rows [[r1], [r2], [r3], [d]] (4 rows of 3 numbers)", f"{len(rows)} rows")
         m = np.array([r.vector(3) for r in rows])
     m[3] *= length_scale
-    table = memo.table("tm_node", LOAD_MEMO_LIMIT) if memo is not None else None
-    if table is not None:
-        known = table.get(m.tobytes())
-        if known is not None:
-            return known.copy()
     T = tm_rows(m)
     why = rotation_problem(T[:3, :3])
     if why is not None:
@@ -827,7 +829,7 @@ def tm_node(node: Node, length_scale: float, memo: Memo | None = None) -> np.nda
         raise node.fail(f"an orthonormal right-handed rotation in rows 1-3 "
                         f"(orthonormal to {ORTHO_TOL:g}, det +1; {why}{hint})")
     if table is not None:
-        table[m.tobytes()] = T.copy()
+        table[key] = T.copy()
     return T
 
 
