@@ -310,7 +310,13 @@ def _overlaps(cell: Cell) -> Iterator[KBError]:
     if len(pos) < 2:
         return
     shapes = [cell.objects[p.obj].shape for p in pos]
-    radii = [cell.objects[p.obj].bounding_radius() for p in pos]
+    by_shape: dict[tuple, float] = {}  # bounding radii by the shapes' _solid_keys: parts share models
+    radii = []
+    for p in pos:
+        key = tuple(_solid_key(s) for s in cell.objects[p.obj].shape)
+        if key not in by_shape:
+            by_shape[key] = cell.objects[p.obj].bounding_radius()
+        radii.append(by_shape[key])
     centres = np.array([p.T[:3, 3] for p in pos])
     r = np.array(radii)
     gap = np.sqrt(((centres[:, None, :] - centres[None, :, :]) ** 2).sum(axis=2))
