@@ -365,6 +365,21 @@ def test_tm_node_memo_tells_minus_zero_from_zero() -> None:
     assert math.copysign(1, a[0, 3]) == 1 and math.copysign(1, b[0, 3]) == -1
 
 
+def test_grasp_frame_memo_gives_eulerxyz_bit_for_bit() -> None:
+    """The load's memo of grasp frames: eulerxyz's own array each time (a copy; -0.0 kept apart)."""
+    from spar_py.geometry import eulerxyz
+
+    memo = Memo()
+    for euler in [(0.0, 0.0, 0.5, -1.5707963267948966, 1.5707963267948966, 0.0),
+                  (-0.0, 0.0, 0.5, -1.5707963267948966, 1.5707963267948966, -0.0), (1.0, 2.0, 3.0, 0.1, 0.2, 0.3)]:
+        want = eulerxyz(*euler)
+        first, again = kb._grasp_frame(euler, memo), kb._grasp_frame(euler, memo)
+        assert first.tobytes() == again.tobytes() == want.tobytes() == kb._grasp_frame(euler, None).tobytes()
+        first[0, 0] = 99.0
+        assert kb._grasp_frame(euler, memo).tobytes() == want.tobytes()
+    assert len(memo.table("eulerxyz", kb.LOAD_MEMO_LIMIT)) == 3
+
+
 @pytest.mark.parametrize("faces, known, min_len", [
     (["b1", "b2"], None, 1), (["b1", "b2"], {"b1", "b2"}, 1), (["b1", "b3"], {"b1", "b2"}, 1), ([], None, 1),
     ([], None, 0), ([1, 2], None, 1), ([1, 2], {1, 2}, 1), ([True], None, 1), ([True], {1}, 1), ([1.0], None, 1),

@@ -947,7 +947,7 @@ def load_object(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, o
                 _faces(g.key("ofaces"), known, 0),
                 euler,
                 g.key("width").positive() * scale,
-                eulerxyz(*euler),
+                _grasp_frame(euler, memo),
             )
     else:
         for d in derived["grasps"]:
@@ -978,6 +978,19 @@ def load_object(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, o
                 fnode.key("vector").vector(3) * scale,
             )
     return ObjectModel(name, faces, poses, grasps, feature, solids, geometry)
+
+
+def _grasp_frame(euler: tuple[float, ...], memo: Memo | None) -> np.ndarray:
+    """geometry.eulerxyz of a grasp's (X, Y, Z, phi, theta, psi) (cell unit, rad), kept in
+    ``memo`` (one load's tables) by the six numbers' bits; a hit is a copy."""
+    if memo is None:
+        return eulerxyz(*euler)
+    table = memo.table("eulerxyz", LOAD_MEMO_LIMIT)
+    key = struct.pack("6d", *euler)
+    T = table.get(key)
+    if T is None:
+        T = table[key] = eulerxyz(*euler)
+    return T.copy()
 
 
 def _geometry_error(path: str | Path, geometry: Any, e: Exception) -> KBError:
