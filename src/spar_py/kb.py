@@ -4,7 +4,9 @@ Every malformed input raises :class:`~spar_py.errors.KBError`, whose message is 
 line: ``FILE: KEY.PATH: expected ..., not ...``. Reading is bounded before anything
 is parsed: a file must be a regular file (never a FIFO or a device), at most
 ``max_bytes`` (MAX_INPUT_BYTES by default), UTF-8, and its YAML at most MAX_NODES
-nodes once aliases are expanded, without duplicate keys. Each file kind (problem,
+nodes once aliases are expanded, without duplicate keys (a document with no anchor, tag or
+duplicate is built straight from libyaml's events, :func:`_fast_load`; any other goes to the
+full loader, whose data and messages stand). Each file kind (problem,
 object, robot) has one schema (PROBLEM_SCHEMA, OBJECT_SCHEMA, ROBOT_SCHEMA): unknown
 keys are errors with a did-you-mean. Units are converted once, here: lengths to the
 problem file's length unit, angles to radians.
@@ -685,7 +687,7 @@ def _fast_load(text: str) -> Any:
                 if props and (ev.tag is not None or ev.anchor is not None):
                     raise _NotFast
                 value = ev.value
-                if ev.implicit[0]:  # plain: resolved by the loader's own implicit resolvers
+                if ev.implicit[0]:  # plain: resolved by the loader's own resolvers (by the text alone)
                     v = plain.get(value, not_yet)
                     if v is not_yet:
                         v = plain[value] = _fast_scalar(loader, value, ev.implicit)
@@ -867,8 +869,8 @@ def load_object(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, o
     world.shapes_cache) for the robot's ``gripper`` (its opening, fingers and palm, cell unit)
     or, without one, a gripper of opening ``opening`` (cell unit; DEFAULT_OPENING_MM without a
     robot) with the default fingers; hand-written ones take precedence. Only a derivation
-    imports trimesh. ``memo``: the tables of a load reading many files (:func:`tm_node`);
-    the model is the same without.
+    imports trimesh. ``memo``: the tables of a load reading many files (:func:`tm_node`,
+    :func:`_grasp_frame`); the model is the same without.
     """
     root = read_kb(path, "object", max_bytes)
     name = root.key("object").label()
