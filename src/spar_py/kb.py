@@ -4,7 +4,9 @@ Every malformed input raises :class:`~spar_py.errors.KBError`, whose message is 
 line: ``FILE: KEY.PATH: expected ..., not ...``. Reading is bounded before anything
 is parsed: a file must be a regular file (never a FIFO or a device), at most
 ``max_bytes`` (MAX_INPUT_BYTES by default), UTF-8, and its YAML at most MAX_NODES
-nodes once aliases are expanded, without duplicate keys. Each file kind (problem,
+nodes once aliases are expanded, without duplicate keys (a document with no anchor, tag or
+duplicate is built straight from libyaml's events, :func:`_fast_load`; any other goes to the
+full loader, whose data and messages stand). Each file kind (problem,
 object, robot) has one schema (PROBLEM_SCHEMA, OBJECT_SCHEMA, ROBOT_SCHEMA): unknown
 keys are errors with a did-you-mean. Units are converted once, here: lengths to the
 problem file's length unit, angles to radians.
@@ -17,6 +19,7 @@ import math
 import os
 import re
 import stat
+import struct
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,6 +30,7 @@ import numpy as np
 import yaml
 
 from . import sanity
+from .memo import Memo
 from .units import from_mm
 from .errors import KBError, SparError, SparValueError, UnknownKeyError, WrongKindError
 from .geometry import ORTHO_TOL, eulerxyz, rotation_problem, rpy, same_stable_pose, tm_rows, trans
@@ -62,6 +66,9 @@ MAX_MAGNITUDE = 1e9  # any number in a KB file, in the file's units
 # The sensing actions kb/templates/sensing.pl defines: the names `sensors:` may use.
 SENSOR_NAMES = ("dense_range_scan",)
 SHOW_CHARS = 40  # a value quoted in a message is cut to this many characters
+#: Entries of each memo table one problem's load keeps (load_problem: transforms by their
+#: tm rows, stable-pose tests by their rotations), the least recently used dropped first.
+LOAD_MEMO_LIMIT = 4096
 
 
 # --------------------------------------------------------------------------- schemas
@@ -341,7 +348,12 @@ class Node:
         return self.value
 
     def vector(self, n: int) -> np.ndarray:
-        """A list of ``n`` numbers."""
+        """A list of ``n`` numbers (each as :meth:`number` takes it), as an (n,) float array."""
+        v = self.value
+        if type(v) is list and len(v) == n:  # every item an int or float number() takes: no Nodes
+            xs = [float(x) for x in v if (type(x) is float or type(x) is int) and abs(x) <= MAX_MAGNITUDE]
+            if len(xs) == n:
+                return np.array(xs)
         items = self.elements()
         if len(items) != n:
             raise self.fail(f"a list of {n} numbers", f"{len(items)} items")
@@ -360,18 +372,69 @@ class Node:
 
 def check_shape(node: Node, spec: Spec) -> None:
     """Check ``node`` against a schema: mappings, lists, no unknown key (with a did-you-mean),
-    every required key present, user names are labels. Leaves are left to the loaders."""
+    every required key present, user names are labels. Leaves are left to the loaders.
+
+    A value :func:`conforms` to passes at once; any other is walked by :func:`_check_shape`,
+    which raises the first problem's error."""
+    if not conforms(node.value, spec):
+        _check_shape(node, spec)
+
+
+def conforms(value: Any, spec: Spec) -> bool:
+    """True only if :func:`check_shape` passes ``value`` against ``spec`` (it may be False
+    where check_shape passes: a dict or list subclass, a key that is no str), without the
+    Nodes, paths and messages check_shape builds for its errors."""
+    t = type(spec)
+    if t is Leaf:
+        return True
+    if t is Keys:
+        if type(value) is not dict:
+            return False
+        req, opt = spec.required, spec.optional  # type: ignore[union-attr]
+        for k, child in value.items():
+            if type(k) is not str:
+                return False
+            sub = opt.get(k)  # optional first: _check_keys's {**required, **optional}
+            if sub is None:
+                sub = req.get(k)
+                if sub is None:
+                    return False
+            if type(sub) is not Leaf and not conforms(child, sub):
+                return False
+        return all(k in value for k in req)
+    if t is Each:
+        return (type(value) is list and len(value) >= spec.min_len  # type: ignore[union-attr]
+                and all(conforms(e, spec.item) for e in value))  # type: ignore[union-attr]
+    if t is OneOrMany:
+        if type(value) is list:
+            return len(value) >= 1 and all(conforms(e, spec.item) for e in value)  # type: ignore[union-attr]
+        return not isinstance(value, list) and conforms(value, spec.item)  # type: ignore[union-attr]
+    if t is Named:
+        return type(value) is dict and all(
+            type(k) is str and LABEL_RE.fullmatch(k) is not None and conforms(c, spec.value)  # type: ignore[union-attr]
+            for k, c in value.items())
+    if t is OneOf:
+        if type(value) is not dict or len(value) != 1:
+            return False
+        (k, child), = value.items()
+        sub = spec.choices.get(k) if type(k) is str else None  # type: ignore[union-attr]
+        return sub is not None and conforms(child, sub)
+    return False
+
+
+def _check_shape(node: Node, spec: Spec) -> None:
+    """check_shape's walk: raises the first problem's error (KBError, UnknownKeyError)."""
     if isinstance(spec, Keys):
         _check_keys(node, spec)
     elif isinstance(spec, Each):
         for e in node.elements(spec.min_len):
-            check_shape(e, spec.item)
+            _check_shape(e, spec.item)
     elif isinstance(spec, OneOrMany):
-        check_shape(node, Each(spec.item, 1) if isinstance(node.value, list) else spec.item)
+        _check_shape(node, Each(spec.item, 1) if isinstance(node.value, list) else spec.item)
     elif isinstance(spec, Named):
         for k, child in node.items():
             Node(node.file, child.path, k).label()
-            check_shape(child, spec.value)
+            _check_shape(child, spec.value)
     elif isinstance(spec, OneOf):
         children = node.items()
         if len(children) != 1:
@@ -379,7 +442,7 @@ def check_shape(node: Node, spec: Spec) -> None:
         (k, child), = children
         if k not in spec.choices:
             raise UnknownKeyError(node.file, child.path, _did_you_mean(k, spec.choices))
-        check_shape(child, spec.choices[k])
+        _check_shape(child, spec.choices[k])
 
 
 def _check_keys(node: Node, spec: Keys) -> None:
@@ -393,7 +456,7 @@ def _check_keys(node: Node, spec: Keys) -> None:
         if k not in present:
             node.key(k)  # raises: key missing
     for k, child in children:
-        check_shape(child, allowed[k])
+        _check_shape(child, allowed[k])
 
 
 _FILE_TYPES = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a character device"),
@@ -550,8 +613,131 @@ def read_yaml(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> Node:
     return Node(str(path), "", data)
 
 
+class _NotFast(Exception):
+    """:func:`_fast_load` cannot vouch for a document: BoundedLoader's full path decides."""
+
+
+_TAG = "tag:yaml.org,2002:"
+_FAST_INT = re.compile(r"[-+]?(?:0|[1-9][0-9]*)")  # decimal, no '_': int() reads it as YAML 1.1 does
+_FAST_FLOAT = re.compile(r"[-+]?[0-9]*\.?[0-9]*(?:[eE][-+]?[0-9]+)?")  # no '_', ':', inf or nan
+
+
+_NOT_YET = object()  # a plain scalar not constructed yet
+
+
+def _fast_scalar(loader: Any, value: str, implicit: tuple[bool, bool]) -> Any:
+    """A plain (untagged, unquoted) scalar as BoundedLoader constructs it, for the tags whose
+    construction is one builtin call: str, null, bool, decimal int, decimal float; any other
+    tag or form (0x1, 012, 1_000, 1:30, .inf, a timestamp, ``<<``, an int too long) is _NotFast."""
+    tag = loader.resolve(yaml.ScalarNode, value, implicit)
+    if tag == _TAG + "str":
+        return value
+    if tag == _TAG + "int" and _FAST_INT.fullmatch(value):
+        try:
+            return int(value)
+        except ValueError:  # more digits than int() reads: construct_bounded_int's message
+            raise _NotFast from None
+    if tag == _TAG + "float" and _FAST_FLOAT.fullmatch(value):
+        return float(value)  # == construct_yaml_float's sign * float(unsigned), bit for bit
+    if tag == _TAG + "bool":
+        return BoundedLoader.bool_values[value.lower()]
+    if tag == _TAG + "null":
+        return None
+    raise _NotFast
+
+
+def _fast_load(text: str) -> Any:
+    """The document of ``text`` built straight from libyaml's events, or _NotFast.
+
+    The data is what BoundedLoader builds (equal, same types, same key order) for the
+    documents this reader takes: one document, no anchor, alias or explicit tag, scalar keys
+    each once in its mapping, nesting at most MAX_DEPTH, scalars as :func:`_fast_scalar`
+    takes them. Anything else, and every error, is _NotFast, and the caller reads the text
+    again with the full loader, whose message (or data) stands: so the fast path can only
+    ever agree with it. It skips building the node graph and constructing every key twice
+    (the full loader's duplicate check), and resolves each distinct plain scalar once.
+    """
+    if BoundedLoader.yaml_path_resolvers:
+        raise _NotFast  # a resolver by path would see nodes this reader never builds
+    loader = BoundedLoader(text)
+    plain: dict[str, Any] = {}  # this text's plain scalars, constructed (immutable values)
+    not_yet = _NOT_YET
+    props = "!" in text or "&" in text  # a tag or an anchor is possible (each starts so)
+    scalar_event, seq_start, map_start = yaml.ScalarEvent, yaml.SequenceStartEvent, yaml.MappingStartEvent
+    seq_end, map_end = yaml.SequenceEndEvent, yaml.MappingEndEvent
+    try:
+        get = loader.get_event
+        if type(get()) is not yaml.StreamStartEvent:
+            raise _NotFast
+        ev = get()
+        if type(ev) is yaml.StreamEndEvent:
+            return None
+        if type(ev) is not yaml.DocumentStartEvent:
+            raise _NotFast
+        root: list[Any] = []
+        no_key: Any = root  # sentinel: the open mapping awaits a key
+        top: Any = root  # the open collection (a list or a dict)
+        in_map = False  # top is a dict
+        key: Any = no_key  # the open mapping's key awaiting its value
+        stack: list[tuple[Any, bool, Any]] = []  # the enclosing collections with their pending keys
+        while True:
+            ev = get()
+            cls = type(ev)
+            if cls is scalar_event:
+                if props and (ev.tag is not None or ev.anchor is not None):
+                    raise _NotFast
+                value = ev.value
+                if ev.implicit[0]:  # plain: resolved by the loader's own resolvers (by the text alone)
+                    v = plain.get(value, not_yet)
+                    if v is not_yet:
+                        v = plain[value] = _fast_scalar(loader, value, ev.implicit)
+                    value = v
+            elif cls is map_start or cls is seq_start:
+                if (props and (ev.tag is not None or ev.anchor is not None)) or len(stack) >= MAX_DEPTH or (
+                        in_map and key is no_key):
+                    raise _NotFast  # ... or a collection as a key
+                stack.append((top, in_map, key))
+                in_map = cls is map_start
+                top, key = ({} if in_map else []), no_key
+                continue
+            elif (cls is map_end or cls is seq_end) and stack:
+                value = top
+                top, in_map, key = stack.pop()
+            elif cls is yaml.DocumentEndEvent and not stack and len(root) == 1:
+                break
+            else:
+                raise _NotFast
+            if not in_map:
+                top.append(value)
+            elif key is no_key:
+                key = value
+            elif key in top:  # a duplicate (1, 1.0 and true are one key): the full loader's message
+                raise _NotFast
+            else:
+                top[key] = value
+                key = no_key
+        if type(get()) is not yaml.StreamEndEvent:
+            raise _NotFast  # a second document
+        return root[0]
+    except _NotFast:
+        raise
+    except Exception:  # a syntax or reader error, anything unforeseen: the full loader says it
+        raise _NotFast from None
+    finally:
+        loader.dispose()
+
+
 def _load(text: str) -> Any:
-    """``yaml.load(text)`` with :class:`BoundedLoader`; the alias-graph check only where an
+    """``yaml.load(text)`` with :class:`BoundedLoader`: by :func:`_fast_load` where it can
+    vouch for the document (every KB file the project writes), else :func:`_full_load`."""
+    try:
+        return _fast_load(text)
+    except _NotFast:
+        return _full_load(text)
+
+
+def _full_load(text: str) -> Any:
+    """``yaml.load(text)`` with :class:`BoundedLoader`, the alias-graph check only where an
     alias can be (an anchor ``&`` in the text): it costs a third of a load."""
     loader = BoundedLoader(text)
     loader.has_anchors = "&" in text
@@ -609,18 +795,33 @@ def _units(root: Node) -> tuple[str, float, float]:
     return length, LENGTH_UNITS[length], ANGLE_UNITS[angle]
 
 
-def tm_node(node: Node, length_scale: float) -> np.ndarray:
+def tm_node(node: Node, length_scale: float, memo: Memo | None = None) -> np.ndarray:
     """A 4x4 transform from the paper's row form ``[[r1], [r2], [r3], [d]]`` (Fig. 18).
 
     The rows r1..r3 are the images of the frame's x, y, z axes (row-vector
     convention, as the paper prints its matrices), d the displacement, in the file's
     length unit (multiplied by ``length_scale``). The rotation must pass geometry's
-    check (orthonormal to ``ORTHO_TOL``, det +1).
+    check (orthonormal to ``ORTHO_TOL``, det +1). With ``memo`` (one load's tables,
+    :func:`load_problem`) the transform of rows already read is a copy of the one built
+    then: the same numbers, the same transform.
     """
-    rows = node.elements()
-    if len(rows) != 4:
-        raise node.fail("tm rows [[r1], [r2], [r3], [d]] (4 rows of 3 numbers)", f"{len(rows)} rows")
-    m = np.array([r.vector(3) for r in rows])
+    v = node.value
+    flat = [float(x) for r in v if type(r) is list and len(r) == 3
+            for x in r if (type(x) is float or type(x) is int) and abs(x) <= MAX_MAGNITUDE
+            ] if type(v) is list and len(v) == 4 else []
+    table = memo.table("tm_node", LOAD_MEMO_LIMIT) if memo is not None and len(flat) == 12 else None
+    if table is not None:  # the key: the 12 numbers' and the scale's bits (-0.0 is not 0.0)
+        key = struct.pack("13d", *flat, length_scale)
+        known = table.get(key)
+        if known is not None:
+            return known.copy()
+    if len(flat) == 12:  # 4 rows of 3 numbers as Node.vector takes them: no Nodes
+        m = np.array(flat).reshape(4, 3)
+    else:
+        rows = node.elements()
+        if len(rows) != 4:
+            raise node.fail("tm rows [[r1], [r2], [r3], [d]] (4 rows of 3 numbers)", f"{len(rows)} rows")
+        m = np.array([r.vector(3) for r in rows])
     m[3] *= length_scale
     T = tm_rows(m)
     why = rotation_problem(T[:3, :3])
@@ -629,6 +830,8 @@ def tm_node(node: Node, length_scale: float) -> np.ndarray:
                 if why.startswith("R^T R") else "")
         raise node.fail(f"an orthonormal right-handed rotation in rows 1-3 "
                         f"(orthonormal to {ORTHO_TOL:g}, det +1; {why}{hint})")
+    if table is not None:
+        table[key] = T.copy()
     return T
 
 
@@ -636,6 +839,13 @@ def tm_node(node: Node, length_scale: float) -> np.ndarray:
 
 
 def _faces(node: Node, known: set[Face] | None, min_len: int = 1) -> tuple[Face, ...]:
+    """A list of at least ``min_len`` face names (labels) or numbers, each one of ``known``
+    (when given)."""
+    v = node.value
+    if type(v) is list and len(v) >= min_len and all(
+            (LABEL_RE.fullmatch(f) is not None if type(f) is str else type(f) is int and abs(f) <= MAX_MAGNITUDE)
+            and (known is None or f in known) for f in v):
+        return tuple(v)  # every face as the loop below takes it: no Nodes
     out = []
     for e in node.elements(min_len):
         f = e.value
@@ -650,7 +860,8 @@ def _faces(node: Node, known: set[Face] | None, min_len: int = 1) -> tuple[Face,
 
 
 def load_object(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, opening: float | None = None,
-                use_cache: bool = True, gripper: GripperGeometry | None = None) -> ObjectModel:
+                use_cache: bool = True, gripper: GripperGeometry | None = None,
+                memo: Memo | None = None) -> ObjectModel:
     """Load ``kb/objects/*.yaml`` converting lengths to ``unit``.
 
     ``faces``, ``stable_poses`` and ``grasps`` left out of a model with ``mesh:`` or
@@ -658,7 +869,8 @@ def load_object(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, o
     world.shapes_cache) for the robot's ``gripper`` (its opening, fingers and palm, cell unit)
     or, without one, a gripper of opening ``opening`` (cell unit; DEFAULT_OPENING_MM without a
     robot) with the default fingers; hand-written ones take precedence. Only a derivation
-    imports trimesh.
+    imports trimesh. ``memo``: the tables of a load reading many files (:func:`tm_node`,
+    :func:`_grasp_frame`); the model is the same without.
     """
     root = read_kb(path, "object", max_bytes)
     name = root.key("object").label()
@@ -709,7 +921,7 @@ def load_object(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, o
             label = p.key("label").label()
             if label in poses:
                 raise p.key("label").fail("a label not used before", show(label))
-            T = tm_node(p.key("tm"), scale)
+            T = tm_node(p.key("tm"), scale, memo)
             poses[label] = StablePose(
                 label, _faces(p.key("rfaces"), known), _faces(p.key("ofaces"), known, 0),
                 T[:3, :3].copy(), float(T[2, 3]),
@@ -737,7 +949,7 @@ def load_object(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, o
                 _faces(g.key("ofaces"), known, 0),
                 euler,
                 g.key("width").positive() * scale,
-                eulerxyz(*euler),
+                _grasp_frame(euler, memo),
             )
     else:
         for d in derived["grasps"]:
@@ -768,6 +980,19 @@ def load_object(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, o
                 fnode.key("vector").vector(3) * scale,
             )
     return ObjectModel(name, faces, poses, grasps, feature, solids, geometry)
+
+
+def _grasp_frame(euler: tuple[float, ...], memo: Memo | None) -> np.ndarray:
+    """geometry.eulerxyz of a grasp's (X, Y, Z, phi, theta, psi) (cell unit, rad), kept in
+    ``memo`` (one load's tables) by the six numbers' bits; a hit is a copy."""
+    if memo is None:
+        return eulerxyz(*euler)
+    table = memo.table("eulerxyz", LOAD_MEMO_LIMIT)
+    key = struct.pack("6d", *euler)
+    T = table.get(key)
+    if T is None:
+        T = table[key] = eulerxyz(*euler)
+    return T.copy()
 
 
 def _geometry_error(path: str | Path, geometry: Any, e: Exception) -> KBError:
@@ -1264,9 +1489,11 @@ def _referenced(node: Node, kind: str) -> Iterator[None]:
         raise node.fail(f"the path of {KINDS[kind].wanted}", f"{show(node.value)}, {e.got}") from None
 
 
-def _positions(onode: Node, oname: str, model: ObjectModel, taken: dict[str, Position]) -> list[Position]:
+def _positions(onode: Node, oname: str, model: ObjectModel, taken: dict[str, Position],
+               memo: Memo | None = None) -> list[Position]:
     """An object's initial position, or the list of them (a stock of identical parts:
-    part_location(Obj, Pos) holds for each; "the peg" is whichever is taken)."""
+    part_location(Obj, Pos) holds for each; "the peg" is whichever is taken). ``memo``:
+    the load's tables (:func:`tm_node`, :func:`_same_stable_pose`)."""
     inode = onode.key("initial")
     inits = inode.elements(1) if isinstance(inode.value, list) else [inode]
     out: list[Position] = []
@@ -1275,11 +1502,20 @@ def _positions(onode: Node, oname: str, model: ObjectModel, taken: dict[str, Pos
         pname, plabel = init.key("name").label(), init.key("label").label()
         if plabel in taken or pname in names or any(plabel == p.label or pname == p.name for p in out):
             raise init.fail("a position name and label not used before", f"{pname}, {plabel}")
-        T = tm_node(init.key("tm"), 1.0)
-        if not any(same_stable_pose(T[:3, :3], p.R) for p in model.poses.values()):
+        T = tm_node(init.key("tm"), 1.0, memo)
+        if not any(_same_stable_pose(T[:3, :3], p.R, memo) for p in model.poses.values()):
             raise init.key("tm").fail(f"an orientation of one of {oname}'s stable poses")
         out.append(Position(pname, plabel, oname, T))
     return out
+
+
+def _same_stable_pose(R_abs: np.ndarray, R_pose: np.ndarray, memo: Memo | None) -> bool:
+    """geometry.same_stable_pose of two (3, 3) float rotations, kept in ``memo`` (the load's
+    tables) by their bytes: the same rotations, the same answer."""
+    if memo is None:
+        return same_stable_pose(R_abs, R_pose)
+    return memo.table("same_stable_pose", LOAD_MEMO_LIMIT).get_or_compute(
+        (R_abs.tobytes(), R_pose.tobytes()), lambda: same_stable_pose(R_abs, R_pose))
 
 
 def _derive_gripper(unit: str, opening: float | None, gripper: GripperGeometry | None) -> Any:
@@ -1293,9 +1529,10 @@ def _derive_gripper(unit: str, opening: float | None, gripper: GripperGeometry |
 
 
 def _objects(root: Node, base: Path, unit: str, max_bytes: int, opening: float | None = None,
-             gripper: GripperGeometry | None = None
+             gripper: GripperGeometry | None = None, memo: Memo | None = None
              ) -> tuple[dict[str, ObjectModel], dict[str, Position], list[Path]]:
-    """The problem's objects (models loaded), their initial positions and the model files."""
+    """The problem's objects (models loaded), their initial positions and the model files
+    (``memo``: the load's tables, :func:`load_object`)."""
     objects: dict[str, ObjectModel] = {}
     positions: dict[str, Position] = {}
     files: list[Path] = []
@@ -1303,12 +1540,12 @@ def _objects(root: Node, base: Path, unit: str, max_bytes: int, opening: float |
         mnode = onode.key("model")
         mpath = _ref_path(mnode, base, "object")
         with _referenced(mnode, "object"):
-            model = load_object(mpath, unit, max_bytes, opening=opening, gripper=gripper)
+            model = load_object(mpath, unit, max_bytes, opening=opening, gripper=gripper, memo=memo)
         if model.name != oname:
             raise mnode.fail(f"the model of {oname}", f"the model of {model.name}")
         objects[oname] = model
         files.append(mpath)
-        for pos in _positions(onode, oname, model, positions):
+        for pos in _positions(onode, oname, model, positions, memo):
             positions[pos.label] = pos
     if not objects:
         raise root.key("objects").fail("at least one object", "none")
@@ -1518,13 +1755,16 @@ def load_problem(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> Cell:
         rpath = _ref_path(rnode, base, "robot")
         with _referenced(rnode, "robot"):
             robot = load_robot(rpath, unit=unit, max_bytes=max_bytes)
-    objects, positions, model_files = _objects(root, base, unit, max_bytes, robot.finger_separation, robot.gripper)
+    memo = Memo()  # this load's tables: the object files of a problem repeat their transforms
+    objects, positions, model_files = _objects(root, base, unit, max_bytes, robot.finger_separation, robot.gripper,
+                                               memo)
     grip = root.key("gripper").choice(("open", "closed"))
     unc = root.key("uncertainty")
     man = _bounds(unc.key("manipulator"), 1.0, rad_per)
     obj_bounds = _object_bounds(unc, objects, rad_per)
     sensors = _sensors(root, rad_per)
-    transforms = {k: tm_node(n.key("tm"), 1.0) for k, n in (root.key("transforms", False) or Node("", "", {})).items()}
+    transforms = {k: tm_node(n.key("tm"), 1.0, memo)
+                  for k, n in (root.key("transforms", False) or Node("", "", {})).items()}
     vectors = {k: n.vector(3) for k, n in (root.key("vectors", False) or Node("", "", {})).items()}
     turns: dict[str, tuple[tuple[str, tuple[str, ...]], ...]] = {}
     goals = _goals(root, objects, transforms, vectors, positions, turns)

@@ -156,11 +156,34 @@ def overlap_depth(s1: Solid, T1: np.ndarray, s2: Solid, T2: np.ndarray) -> float
     """How deep two primitives at world poses T1, T2 (4x4) overlap (cell unit): the
     least overlap of their projections over the separating-axis candidates (face
     normals of each, cross products of their edges); <= 0 when an axis separates them."""
-    P1 = solid_points(s1) @ T1[:3, :3].T + T1[:3, 3]
-    P2 = solid_points(s2) @ T2[:3, :3].T + T2[:3, 3]
-    n1, e1 = (m @ T1[:3, :3].T for m in _axes(s1))
-    n2, e2 = (m @ T2[:3, :3].T for m in _axes(s2))
-    cross = np.cross(e1[:, None, :], e2[None, :, :]).reshape(-1, 3)
+    return _depth(_placed(s1, T1), _placed(s2, T2))
+
+
+def _placed(s: Solid, T: np.ndarray, local: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A primitive at world pose T (4x4): its polytope's vertices (k, 3), face normals (f, 3)
+    and edge directions (e, 3) in the world frame (cell unit); ``local``: the same three in
+    the object frame (:func:`_local`), when the caller has them already."""
+    pts, normals, edges = _local(s) if local is None else local
+    return pts @ T[:3, :3].T + T[:3, 3], normals @ T[:3, :3].T, edges @ T[:3, :3].T
+
+
+def _local(s: Solid) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A primitive's polytope in the object frame: vertices, face normals, edge directions."""
+    return (solid_points(s), *_axes(s))
+
+
+def _solid_key(s: Solid) -> tuple:
+    """What a primitive's polytope depends on (two equal keys: the same polytope, bit for bit)."""
+    return (s.kind, s.lo.tobytes(), s.hi.tobytes(), s.radius, None if s.points is None else s.points.tobytes())
+
+
+def _depth(a: tuple[np.ndarray, np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray, np.ndarray]) -> float:
+    """:func:`overlap_depth` of two primitives already :func:`_placed` (cell unit)."""
+    (P1, n1, e1), (P2, n2, e2) = a, b
+    u, v = e1[:, None, :], e2[None, :, :]  # every edge of one with every edge of the other
+    cross = np.stack([u[..., 1] * v[..., 2] - u[..., 2] * v[..., 1], u[..., 2] * v[..., 0] - u[..., 0] * v[..., 2],
+                      u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]], axis=-1).reshape(-1, 3)  # np.cross's terms
     A = np.concatenate([n1, n2, cross])
     norm = np.linalg.norm(A, axis=1)
     A = A[norm > 1e-9] / norm[norm > 1e-9, None]            # parallel edges give no axis
@@ -276,18 +299,48 @@ def _on_table(cell: Cell) -> Iterator[KBError]:
 
 
 def _overlaps(cell: Cell) -> Iterator[KBError]:
-    """No two initial parts overlap (separating axes over their primitives' polytopes)."""
+    """No two initial parts overlap (separating axes over their primitives' polytopes).
+
+    Pairs whose bounding spheres are apart are skipped; all pairs' centre distances are
+    computed at once only to pick the pairs that get the exact per-pair test (with slack
+    for rounding, so every pair the exact test keeps is picked), and each part's
+    primitives are placed once."""
     tol, u = from_mm(cell.unit, OVERLAP_TOL_MM), cell.unit
     pos = list(cell.positions.values())
+    if len(pos) < 2:
+        return
     shapes = [cell.objects[p.obj].shape for p in pos]
-    radii = [cell.objects[p.obj].bounding_radius() for p in pos]
-    for i in range(len(pos)):
-        for j in range(i + 1, len(pos)):
-            a, b = pos[i], pos[j]
-            if np.linalg.norm(a.T[:3, 3] - b.T[:3, 3]) > radii[i] + radii[j] + tol:
-                continue  # bounding spheres apart
-            depth = max((overlap_depth(s1, a.T, s2, b.T) for s1 in shapes[i] for s2 in shapes[j]), default=0.0)
-            if depth > tol:
-                yield KBError(cell.file, _position_key(cell, a),
-                              f"expected a part clear of {b.obj} at {b.name}, "
-                              f"not overlapping it by {_fmt(depth, u)}")
+    by_shape: dict[tuple, float] = {}  # bounding radii by the shapes' _solid_keys: parts share models
+    radii = []
+    for p in pos:
+        key = tuple(_solid_key(s) for s in cell.objects[p.obj].shape)
+        if key not in by_shape:
+            by_shape[key] = cell.objects[p.obj].bounding_radius()
+        radii.append(by_shape[key])
+    centres = np.array([p.T[:3, 3] for p in pos])
+    r = np.array(radii)
+    gap = np.sqrt(((centres[:, None, :] - centres[None, :, :]) ** 2).sum(axis=2))
+    near = gap <= (r[:, None] + r[None, :] + tol) * (1 + 1e-9) + 1e-9 * (1 + gap)
+    placed: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+    local: dict[tuple, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}  # by _solid_key: parts share models
+
+    def at(k: int, m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Part k's primitive m, placed (once; in the order the pairs first need them)."""
+        if (k, m) not in placed:
+            s = shapes[k][m]
+            key = _solid_key(s)
+            if key not in local:
+                local[key] = _local(s)
+            placed[k, m] = _placed(s, pos[k].T, local[key])
+        return placed[k, m]
+
+    for i, j in zip(*(ix.tolist() for ix in np.nonzero(np.triu(near, 1)))):  # row-major: (i, j) order
+        a, b = pos[i], pos[j]
+        if np.linalg.norm(a.T[:3, 3] - b.T[:3, 3]) > radii[i] + radii[j] + tol:
+            continue  # bounding spheres apart
+        depth = max((_depth(at(i, m), at(j, n)) for m in range(len(shapes[i])) for n in range(len(shapes[j]))),
+                    default=0.0)
+        if depth > tol:
+            yield KBError(cell.file, _position_key(cell, a),
+                          f"expected a part clear of {b.obj} at {b.name}, "
+                          f"not overlapping it by {_fmt(depth, u)}")
