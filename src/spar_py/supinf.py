@@ -466,24 +466,27 @@ class _Schedule:
                 key, args, payload = classify(op, tuple(reg[i] for i in ins[:arity]), const_of)
                 ops.append((key, args, s, payload))
             reg[outs[0]] = s
-        level = np.zeros(n, int)
+        # plain lists below: the loops touch every instruction a few times, and numpy's
+        # per-element indexing would cost more than the work (the result is the same arrays)
+        level = [0] * n
         for _, args, s, _ in ops:
-            level[s] = 1 + max(level[a] for a in args)
+            level[s] = 1 + max([level[a] for a in args])
         buckets: dict[tuple, list[tuple[tuple[int, ...], int, float]]] = {}
         for key, args, s, payload in ops:
-            buckets.setdefault((int(level[s]), key), []).append((args, s, payload))
+            buckets.setdefault((level[s], key), []).append((args, s, payload))
         order = sorted(buckets, key=lambda lk: lk[0])  # stable: keys of one level in first-met order
         # liveness: the last group reading each slot (outputs are read at the very end)
-        last = np.full(n, -1)
+        last = [-1] * n
         for g, lk in enumerate(order):
             for args, _, _ in buckets[lk]:
-                last[list(args)] = g
+                for a in args:
+                    last[a] = g
         end = len(order)
         for _, _, s in outputs:
             last[s] = end
         # registers: inputs and constants first, then each group's outputs in rows freed by
         # slots whose last reader has already run (an instruction reads before it writes)
-        where = np.full(n, -1)
+        where = [-1] * n
         free: list[int] = []
         size = 0
 
@@ -499,20 +502,21 @@ class _Schedule:
             alloc(s)
         readers: dict[int, list[int]] = {}
         for s in range(n):
-            if last[s] >= 0 and last[s] < end:
-                readers.setdefault(int(last[s]), []).append(s)
+            if 0 <= last[s] < end:
+                readers.setdefault(last[s], []).append(s)
         groups: list[_Group] = []
         for g, lk in enumerate(order):
             items = buckets[lk]
             for s in readers.get(g, []):
-                free.append(int(where[s]))
+                free.append(where[s])
             outs_g = [s for _, s, _ in items]
             for s in outs_g:
                 alloc(s)
             dead = [s for s in outs_g if last[s] < 0]  # computed, never read (CasADi keeps few)
             args = np.array([[where[a] for a in args] for args, _, _ in items], int).T
-            groups.append(_Group(lk[1], args, where[outs_g].astype(int), np.array([p for _, _, p in items])))
-            free.extend(int(where[s]) for s in dead)
+            groups.append(_Group(lk[1], args, np.array([where[s] for s in outs_g], int),
+                                 np.array([p for _, _, p in items])))
+            free.extend(where[s] for s in dead)
         self.n_regs = max(size, 1)
         self.groups = groups
         self.input_regs = np.array([where[s] for s, _ in inputs], int)
@@ -520,7 +524,7 @@ class _Schedule:
         cs = sorted(c for c in const_of if last[c] >= 0)
         self.const_regs = np.array([where[s] for s in cs], int)
         self.const_vals = np.array([const_of[s] for s in cs], float)
-        self.outputs = [(k, j, int(where[s])) for k, j, s in outputs]
+        self.outputs = [(k, j, where[s]) for k, j, s in outputs]
         self.n_instructions = len(ops)
 
     def load(self, W: np.ndarray, X: np.ndarray, const: Callable[[np.ndarray], np.ndarray]) -> None:
