@@ -111,7 +111,8 @@ def test_a_text_is_compiled_without_this_modules_future_flags() -> None:
 
 def test_a_damaged_or_foreign_file_is_ignored_and_rewritten(tmp_path: Path) -> None:
     path = tmp_path / "img.marshal"
-    for junk in (b"not marshal at all", marshal.dumps([1, 2, 3]), marshal.dumps({"def f(): pass": 3}), b""):
+    for junk in (b"not marshal at all", marshal.dumps([1, 2, 3]), marshal.dumps({"def f(): pass": 3}), b"",
+                 marshal.dumps({"def f(): pass": compile("pass", "<string>", "exec")})):  # format 1
         path.write_bytes(junk)
         image = dcimage.CodeImage(path)
         assert image.codes == {}
@@ -176,3 +177,15 @@ def test_the_python_api_leaves_dataclasses_alone() -> None:
     r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
     assert json.loads(r.stdout) is False
+
+
+def test_an_entry_that_is_not_code_is_compiled_again(tmp_path: Path) -> None:
+    path = tmp_path / "img.marshal"
+    src = "x = 1\n"
+    path.write_bytes(marshal.dumps({src: b"\x00junk", "y = 2\n": marshal.dumps(7)}))
+    image = dcimage.CodeImage(path)
+    assert len(image.codes) == 2
+    ns: dict[str, Any] = {}
+    image.exec(src, {}, ns)
+    assert ns["x"] == 1 and image.added == 1 and image.save()
+    assert marshal.loads(dcimage.CodeImage(path).codes[src]) == compile(src, "<string>", "exec", dont_inherit=True)

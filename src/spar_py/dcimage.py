@@ -37,7 +37,7 @@ from typing import Any
 from . import qlf
 
 #: Layout version of the file; part of its name.
-FORMAT = 1
+FORMAT = 2
 #: Most source texts kept (a plan uses about 300; other commands add their own).
 MAX_ENTRIES = 4096
 #: Files larger than this are not read (a plan's file is about 0.3 MB).
@@ -51,16 +51,19 @@ class CodeImage:
 
     def __init__(self, path: Path | None) -> None:
         self.path = path
-        self.codes: dict[str, CodeType] = _read(path) if path is not None else {}
+        #: source text -> its code object, marshalled: unmarshalled only when a class asks
+        #: (the file also holds other commands' and other checkouts' methods)
+        self.codes: dict[str, bytes] = _read(path) if path is not None else {}
         self.used: set[str] = set()
         self.added = 0
 
     def code(self, source: str) -> CodeType:
         """The code object of ``source`` as ``exec(source)`` in the dataclasses module compiles it."""
-        code = self.codes.get(source)
+        data = self.codes.get(source)
+        code = _code(data) if data is not None else None
         if code is None:
             code = compile(source, _FILENAME, "exec", dont_inherit=True)
-            self.codes[source] = code
+            self.codes[source] = marshal.dumps(code)
             self.added += 1
         self.used.add(source)
         return code
@@ -76,7 +79,7 @@ class CodeImage:
         to :data:`MAX_ENTRIES`); True if written. Never raises for a file-system problem."""
         if self.path is None or not self.added:
             return False
-        keep: dict[str, CodeType] = {}
+        keep: dict[str, bytes] = {}
         for s in [*self.used, *self.codes]:
             if len(keep) >= MAX_ENTRIES:
                 break
@@ -97,7 +100,16 @@ class CodeImage:
         return True
 
 
-def _read(path: Path) -> dict[str, CodeType]:
+def _code(data: bytes) -> CodeType | None:
+    """A kept code object (None if ``data`` is not one: then it is compiled again)."""
+    try:
+        code = marshal.loads(data)
+    except (EOFError, ValueError, TypeError):
+        return None
+    return code if isinstance(code, CodeType) else None
+
+
+def _read(path: Path) -> dict[str, bytes]:
     """The image at ``path``; empty if it is missing, unreadable, too large or not an image."""
     try:
         if path.stat().st_size > MAX_BYTES:
@@ -107,7 +119,7 @@ def _read(path: Path) -> dict[str, CodeType]:
     except (OSError, EOFError, ValueError, TypeError):
         return {}
     if not isinstance(data, dict) or not all(
-            isinstance(k, str) and isinstance(v, CodeType) for k, v in data.items()):
+            isinstance(k, str) and isinstance(v, bytes) for k, v in data.items()):
         return {}
     return data
 
