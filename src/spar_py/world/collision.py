@@ -301,6 +301,36 @@ def _exact(b1: Body, T1: np.ndarray, b2: Body, T2: np.ndarray) -> float:
     return max(float(d), 0.0)
 
 
+def support_gap(Pa: np.ndarray, ra: np.ndarray, Ua: np.ndarray, Pb: np.ndarray, rb: np.ndarray,
+                Ub: np.ndarray) -> np.ndarray:
+    """(c,) a lower bound of the distance (length unit of the inputs) between each of c pairs of
+    convex bodies a and b, in one vectorised pass: the largest gap between their supports over
+    16 unit directions u (each body's three axes, their nine cross products, the line between
+    the vertices' means), less a rounding allowance of 1e-9 * (1 + the largest coordinate).
+
+    ``Pa`` (c, ka, 3) a's vertices (world; a capsule's: the two ends of its segment; repeated
+    vertices are fine), ``ra`` (c,) the radius they are swept by (a capsule's, else 0), ``Ua``
+    (c, 3, 3) a's axes as columns (any rotation gives a sound bound; a box's face normals make
+    it the separating-axis bound); the same for b. For convex sets the distance is at least
+    min over b of u.y - max over a of u.x for every unit u (and with a and b swapped), so the
+    answer never exceeds the distance: a pair it puts beyond the margin is clear by it.
+    A non-positive answer says nothing (the bodies may touch)."""
+    A, B = np.swapaxes(Ua, 1, 2), np.swapaxes(Ub, 1, 2)            # (c, 3, 3) axes as rows
+    c = len(A)
+    X = np.cross(A[:, :, None, :], B[:, None, :, :]).reshape(c, 9, 3)
+    line = (Pb.mean(axis=1) - Pa.mean(axis=1))[:, None, :]
+    U = np.concatenate([A, B, X, line], axis=1)                     # (c, 16, 3)
+    norm = np.sqrt((U * U).sum(-1))
+    valid = norm > 1e-12
+    U = U / np.where(valid, norm, 1.0)[..., None]
+    pa = Pa @ np.swapaxes(U, 1, 2)                                  # (c, ka, 16)
+    pb = Pb @ np.swapaxes(U, 1, 2)
+    gap = np.maximum(pb.min(axis=1) - pa.max(axis=1), pa.min(axis=1) - pb.max(axis=1))
+    best = np.where(valid, gap, -np.inf).max(axis=1) - ra - rb
+    scale = np.maximum(np.abs(Pa).max(axis=(1, 2)), np.abs(Pb).max(axis=(1, 2))) + np.maximum(ra, rb)
+    return best - 1e-9 * (1.0 + scale)
+
+
 # --------------------------------------------------------------------------- the scene
 
 
@@ -475,6 +505,11 @@ class SceneState:
         struct = _pair_structure(scene, self.bodies, len(moving), hand_part, allow, attached)
         self.pairs, self.table_bodies, self.exact_pair, rigid = struct
         self._rigid: dict[int, float | None] = dict.fromkeys(rigid)
+        self._is_rigid = np.zeros(len(self.pairs), dtype=bool)
+        self._is_rigid[list(rigid)] = True
+        # the library's distances of the last check(), by (pair, that row's frames): clearance()
+        # of a row check() measured reads them instead of asking the library again
+        self._measured: dict[tuple[int, bytes], float] = {}
         self._refusal: tuple[tuple[str, str] | None] | None = None  # tool_rigid_refusal's answer
         self._cap_a = np.array([b.cap[0] for b in self.bodies]).reshape(-1, 3)
         self._cap_b = np.array([b.cap[1] for b in self.bodies]).reshape(-1, 3)
@@ -671,6 +706,28 @@ class SceneState:
         self.scene.stats["exact"] += 1
         return _exact(bi, self._frame_pose(F, row, bi), bj, self._frame_pose(F, row, bj))
 
+    def _support_bounds(self, F: np.ndarray, rows: np.ndarray, ps: np.ndarray) -> np.ndarray:
+        """(c,) :func:`support_gap` of pair ps[k] at row rows[k] (frames F (n, 8, 4, 4)): a lower
+        bound of the distance the library would measure there, all c cells in one pass."""
+        i, j = self.pairs[ps, 0], self.pairs[ps, 1]
+        ub, inv = np.unique(np.concatenate([i, j]), return_inverse=True)
+        used = [self.bodies[u] for u in ub.tolist()]
+        k = max(len(b.points) for b in used)
+        V = np.empty((len(used), k, 3))
+        for n, b in enumerate(used):  # padded by repeating a vertex (the supports stay the same)
+            V[n, :len(b.points)] = b.points
+            V[n, len(b.points):] = b.points[0]
+        axes = np.stack([b.T[:3, :3] for b in used])
+        radius = np.array([b.radius for b in used])
+        frame = np.array([8 if b.frame == WORLD else b.frame for b in used], dtype=int)
+        Fx = np.concatenate([F, np.broadcast_to(np.eye(4), (len(F), 1, 4, 4))], axis=1)  # 8: the world
+        ia, ib = inv[:len(i)], inv[len(i):]
+        Ga, Gb = Fx[rows, frame[ia]], Fx[rows, frame[ib]]           # (c, 4, 4) the frames' poses
+        Ra, Rb = Ga[:, :3, :3], Gb[:, :3, :3]
+        Pa = V[ia] @ np.swapaxes(Ra, 1, 2) + Ga[:, None, :3, 3]
+        Pb = V[ib] @ np.swapaxes(Rb, 1, 2) + Gb[:, None, :3, 3]
+        return support_gap(Pa, radius[ia], Ra @ axes[ia], Pb, radius[ib], Rb @ axes[ib])
+
     def _rigid_once(self, F: np.ndarray, row: int, p: int) -> float:
         i, j = self.pairs[p]
         bi, bj = self.bodies[i], self.bodies[j]
@@ -700,7 +757,10 @@ class SceneState:
         part beyond its contact face and the palm does not enter it (each shrunk by GRASP_TOL_MM
         so touching counts as clear); (ok, the gripper body that enters it or None). Memoised."""
         part = self.hand[0]
-        key = (part, np.round(T_tool_part, 9).tobytes(), None if self.width is None else round(self.width, 9))
+        # rounded to 1e-9 and signed zeros made one (+ 0.0): a part grasped on the table, whose
+        # pose in the tool each IK solution's frames give with its own rounding, finds the
+        # verdict of the same grasp decided before (a -0.0 would otherwise make another key)
+        key = (part, (np.round(T_tool_part, 9) + 0.0).tobytes(), None if self.width is None else round(self.width, 9))
         table = self.scene.memo.table("collision.grasp", GRASP_LIMIT) if self.scene.memo is not None else None
         if table is not None and key in table:
             return table[key]
@@ -709,8 +769,12 @@ class SceneState:
         bodies = [b.placed(T_tool_part, TOOL, part) for b in self.scene.shapes_of(part)]
         gripper = self.scene.shrunk_gripper(self.width, tol)
         near = _near_all(gripper, bodies, 0.0)  # (gripper box, part body): bounding capsules touch
+        gi, bi = np.nonzero(near)
+        # apart by the support bound (a lower bound of the distance): no need to ask the library
+        ask = np.zeros_like(near)
+        ask[gi, bi] = _gaps_in_one_frame([gripper[i] for i in gi.tolist()], [bodies[j] for j in bi.tolist()]) <= 0.0
         for gi, g in enumerate(gripper):
-            if any(_exact(g, np.eye(4), b, np.eye(4)) <= 0.0 for bi, b in enumerate(bodies) if near[gi, bi]):
+            if any(_exact(g, np.eye(4), b, np.eye(4)) <= 0.0 for bi, b in enumerate(bodies) if ask[gi, bi]):
                 verdict = (False, g.name)
                 break
         if table is not None:
@@ -750,14 +814,34 @@ class SceneState:
         for r, k in zip(*np.nonzero(low)):
             if ok[r]:
                 ok[r], why[r] = False, (self.bodies[self.table_bodies[k]].name, "table")
-        near = lb <= m
-        for r, p in zip(*np.nonzero(near)):
+        rows, ps = np.nonzero(lb <= m)
+        # the library is asked only where the support bound does not already put the pair beyond
+        # the margin (its distance is at least that bound: the same verdict); a pair rigid with the
+        # flange is measured as before, once per state
+        ask = ~self.exact_pair[ps] & ~self._is_rigid[ps] & ok[rows]
+        if ask.any():
+            at = np.flatnonzero(ask)
+            ask[at] = self._support_bounds(F, rows[at], ps[at]) <= m
+        measured: dict[tuple[int, bytes], float] = {}
+        keys: dict[int, bytes] = {}
+        for r, p, a in zip(rows.tolist(), ps.tolist(), ask.tolist()):
             if not ok[r]:
                 continue
-            d = lb[r, p] if self.exact_pair[p] else self._exact_cell(F, r, p)
+            if self.exact_pair[p]:
+                d = lb[r, p]
+            elif a or self._is_rigid[p]:
+                d = self._exact_cell(F, r, p)
+                if a:
+                    key = keys.get(r)
+                    if key is None:
+                        key = keys[r] = F[r].tobytes()
+                    measured[(p, key)] = d
+            else:
+                continue
             if d <= m:
                 i, j = self.pairs[p]
                 ok[r], why[r] = False, (self.bodies[i].name, self.bodies[j].name)
+        self._measured = measured
         return ok, why
 
     def clearance(self, q: np.ndarray) -> tuple[np.ndarray, list[tuple[str, str]]]:
@@ -765,21 +849,88 @@ class SceneState:
         row, the closest pair of named bodies, e.g. ("forearm", "shelf"). The part in the hand
         and the gripper are not a pair here (their contact is the grasp's: :meth:`grasp_ok`)."""
         q = np.asarray(q, float).reshape(-1, 6)
-        F, lb, tab = self._bounds(q)
+        F = self._frames(q)
+        A, B = self._world_caps(F)
+        tab = self._table(F)
         out = np.full(len(q), np.inf)
         names: list[tuple[str, str]] = [("", "")] * len(q)
         for r in range(len(q)):
             if tab.shape[1]:
                 k = int(np.argmin(tab[r]))
                 out[r], names[r] = tab[r, k], (self.bodies[self.table_bodies[k]].name, "table")
-            for p in np.argsort(lb[r]):
-                if lb[r, p] >= out[r]:
-                    break
-                d = lb[r, p] if self.exact_pair[p] else self._exact_cell(F, r, p)
-                if d < out[r]:
-                    i, j = self.pairs[p]
-                    out[r], names[r] = d, (self.bodies[i].name, self.bodies[j].name)
+            got = self._closest_pair(F, A, B, r, float(out[r]))
+            if got is not None:
+                out[r], names[r] = got
         return out, names
+
+    def _closest_pair(self, F: np.ndarray, A: np.ndarray, B: np.ndarray, r: int,
+                      best: float) -> tuple[float, tuple[str, str]] | None:
+        """Row ``r``'s checked pair of least distance if below ``best`` (the table's), as (its
+        distance, its names), else None: the pairs visited in order of their capsule bound
+        (world capsule ends A, B (n, N, 3)) while that is below the least distance found, the
+        library asked for the pairs that are not two capsules (its answers of the last
+        :meth:`check` at these frames reused); the first pair visited at the least distance wins.
+
+        Only the pairs whose bounding spheres come within ``best`` (and rounding) can be visited (a
+        capsule bound is at least its spheres' gap), so only theirs are computed; where two of those visited
+        (or the one the visit stops at) have equal bounds, the order of the whole row's sort
+        decides which comes first, and the row is visited as the whole sort has it."""
+        pi, pj = self.pairs[:, 0], self.pairs[:, 1]
+        if np.isfinite(best):
+            C = (A[r] + B[r]) / 2
+            d = C[pi] - C[pj]
+            reach = best + 1e-9 * (1.0 + float(np.abs(C).max(initial=0.0)) + float(self._sph_r.max(initial=0.0)))
+            sub = np.flatnonzero(np.sqrt((d * d).sum(-1)) - self._sph_r[pi] - self._sph_r[pj] < reach)
+        else:
+            sub = np.arange(len(pi))
+        i, j = pi[sub], pj[sub]
+        lb = segment_distance(A[r, i], B[r, i], A[r, j], B[r, j]) - self._cap_r[i] - self._cap_r[j]
+        done: dict[int, float] = {}  # the library's distances at this row, for a second visit
+        visit = self._visit(F, r, sub, lb, best, done)
+        if visit is None:  # a tie the order of equal bounds decides: the whole row's order
+            i, j = pi, pj
+            lb = segment_distance(A[r, i], B[r, i], A[r, j], B[r, j]) - self._cap_r[i] - self._cap_r[j]
+            visit = self._visit(F, r, np.arange(len(pi)), lb, best, done, ties=True)
+        return visit
+
+    def _visit(self, F: np.ndarray, r: int, sub: np.ndarray, lb: np.ndarray, best: float,
+               done: dict[int, float], ties: bool = False) -> tuple[float, tuple[str, str]] | None:
+        """:meth:`_closest_pair`'s visit of pairs ``sub`` (their capsule bounds ``lb``) at row r.
+
+        The least distance it finds is the row's whatever the order of equal bounds; only which
+        pair is named can depend on it, where another pair with the winner's bound is at the
+        winner's distance too: then None (unless ``ties``: ``sub`` is then every pair, in the
+        whole row's order)."""
+        order = np.argsort(lb)
+        lbs = lb[order].tolist()
+        key = F[r].tobytes()
+        found = None
+        win = -1
+        for n, p in enumerate(sub[order].tolist()):
+            if lbs[n] >= best:
+                break
+            d = self._pair_distance(F, r, p, lbs[n], key, done)
+            if d < best:
+                i, j = self.pairs[p]
+                best, found, win = d, (d, (self.bodies[i].name, self.bodies[j].name)), n
+        if not ties and found is not None:
+            p_win = int(sub[order[win]])
+            for k in np.flatnonzero(lb == lbs[win]).tolist():
+                p = int(sub[k])
+                if p != p_win and self._pair_distance(F, r, p, float(lb[k]), key, done) == found[0]:
+                    return None
+        return found
+
+    def _pair_distance(self, F: np.ndarray, r: int, p: int, lb: float, key: bytes, done: dict[int, float]) -> float:
+        """Pair p's distance at row r (frames F, ``key`` their bytes): its capsule bound ``lb``
+        for two capsules, else the library's (its answer of the last :meth:`check` at these
+        frames, or of this row's visits ``done``, reused)."""
+        if self.exact_pair[p]:
+            return lb
+        d = self._measured.get((p, key), done.get(p))
+        if d is None:
+            d = done[p] = self._exact_cell(F, r, p)
+        return d
 
 
 def _pair_structure(scene: CollisionScene, bodies: list[Body], n_moving: int, hand_part: str | None,
@@ -894,6 +1045,27 @@ def _head_structure(head: list[Body], n_moving: int, hand_part: str | None, skip
                              if frozenset((b.name, "table")) not in skip and i not in fixed], dtype=int)
     excluded = [frozenset({b.name} | {n for p in skip if len(p) == 2 and b.name in p for n in p}) for b in moving]
     return block, table_bodies, fixed_in_tool, excluded
+
+
+def _gaps_in_one_frame(A: list[Body], B: list[Body]) -> np.ndarray:
+    """(k,) :func:`support_gap` of bodies A[k] and B[k] (k pairs, all bodies in one frame, whose
+    coordinates the answer is in)."""
+    if not A:
+        return np.zeros(0)
+    k = max(len(b.points) for b in (*A, *B))
+
+    def verts(bs: list[Body]) -> np.ndarray:
+        V = np.empty((len(bs), k, 3))
+        for n, b in enumerate(bs):  # padded by repeating a vertex (the supports stay the same)
+            V[n, :len(b.points)] = b.points
+            V[n, len(b.points):] = b.points[0]
+        return V
+
+    def axes(bs: list[Body]) -> np.ndarray:
+        return np.stack([b.T[:3, :3] for b in bs])
+
+    return support_gap(verts(A), np.array([b.radius for b in A]), axes(A), verts(B), np.array([b.radius for b in B]),
+                       axes(B))
 
 
 def _near_all(A: list[Body], B: list[Body], within: float) -> np.ndarray:
