@@ -886,20 +886,21 @@ class SceneState:
         i, j = pi[sub], pj[sub]
         lb = segment_distance(A[r, i], B[r, i], A[r, j], B[r, j]) - self._cap_r[i] - self._cap_r[j]
         done: dict[int, float] = {}  # the library's distances at this row, for a second visit
-        visit = self._visit(F, r, sub, lb, best, done)
-        if visit is None:  # a tie the order of equal bounds decides: the whole row's order
+        tie, found = self._visit(F, r, sub, lb, best, done)
+        if tie:  # a tie the order of equal bounds decides: the whole row's order
             i, j = pi, pj
             lb = segment_distance(A[r, i], B[r, i], A[r, j], B[r, j]) - self._cap_r[i] - self._cap_r[j]
-            visit = self._visit(F, r, np.arange(len(pi)), lb, best, done, ties=True)
-        return visit
+            _, found = self._visit(F, r, np.arange(len(pi)), lb, best, done, ties=True)
+        return found
 
     def _visit(self, F: np.ndarray, r: int, sub: np.ndarray, lb: np.ndarray, best: float,
-               done: dict[int, float], ties: bool = False) -> tuple[float, tuple[str, str]] | None:
-        """:meth:`_closest_pair`'s visit of pairs ``sub`` (their capsule bounds ``lb``) at row r.
+               done: dict[int, float], ties: bool = False) -> tuple[bool, tuple[float, tuple[str, str]] | None]:
+        """:meth:`_closest_pair`'s visit of pairs ``sub`` (their capsule bounds ``lb``) at row r:
+        (a tie, the pair found below ``best`` or None).
 
         The least distance it finds is the row's whatever the order of equal bounds; only which
         pair is named can depend on it, where another pair with the winner's bound is at the
-        winner's distance too: then None (unless ``ties``: ``sub`` is then every pair, in the
+        winner's distance too: a tie (never with ``ties``: ``sub`` is then every pair, in the
         whole row's order)."""
         order = np.argsort(lb)
         lbs = lb[order].tolist()
@@ -918,8 +919,8 @@ class SceneState:
             for k in np.flatnonzero(lb == lbs[win]).tolist():
                 p = int(sub[k])
                 if p != p_win and self._pair_distance(F, r, p, float(lb[k]), key, done) == found[0]:
-                    return None
-        return found
+                    return True, found
+        return False, found
 
     def _pair_distance(self, F: np.ndarray, r: int, p: int, lb: float, key: bytes, done: dict[int, float]) -> float:
         """Pair p's distance at row r (frames F, ``key`` their bytes): its capsule bound ``lb``
