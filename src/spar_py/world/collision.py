@@ -242,6 +242,30 @@ def solid_bodies(name: str, solids: Iterable[Solid]) -> list[Body]:
     return out
 
 
+class Placed(list):
+    """A list of bodies (read-only by convention) with the columns a scene state reads of them
+    made once: their bounding capsules' ends ``cap_a``, ``cap_b`` (k, 3) and radii ``cap_r`` (k,)
+    in their frames, ``names``, ``frames`` (k,) and ``is_cap`` (k,) (capsules)."""
+
+    def __init__(self, bodies: Iterable[Body]) -> None:
+        super().__init__(bodies)
+        self.cap_a = np.array([b.cap[0] for b in self], dtype=float).reshape(-1, 3)
+        self.cap_b = np.array([b.cap[1] for b in self], dtype=float).reshape(-1, 3)
+        self.cap_r = np.array([b.cap[2] for b in self], dtype=float)
+        self.names = [b.name for b in self]
+        self.frames = np.array([b.frame for b in self], dtype=int)
+        self.is_cap = np.array([b.kind == "capsule" for b in self], dtype=bool)
+
+
+def _columns(groups: list[Placed]) -> tuple:
+    """The columns of :class:`Placed` groups end to end: (cap_a, cap_b, cap_r, names, frames, is_cap)."""
+    if not groups:
+        return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), [], np.zeros(0, dtype=int), np.zeros(0, dtype=bool)
+    return (np.concatenate([g.cap_a for g in groups]), np.concatenate([g.cap_b for g in groups]),
+            np.concatenate([g.cap_r for g in groups]), [n for g in groups for n in g.names],
+            np.concatenate([g.frames for g in groups]), np.concatenate([g.is_cap for g in groups]))
+
+
 @dataclass(frozen=True)
 class Obstacle:
     """A named obstacle of the problem file: its bodies in the world frame (cell unit)."""
@@ -388,6 +412,7 @@ class CollisionScene:
         self.allowed = frozenset(frozenset(p) for p in robot.allowed)
         self._grippers: dict = {}  # bounded by the cell's grasp widths
         self._slab: Body | None = None
+        self._obstacle_bodies: Placed | None = None  # made on first use by at()
         self.stats = {"pairs": 0, "exact": 0}
 
     def slab(self) -> Body:
@@ -422,15 +447,15 @@ class CollisionScene:
             raise SparValueError(f"no shape known for part {part!r}")
         return self.parts[model]
 
-    def placed(self, part: str, T: np.ndarray, frame: int, name: str | None = None) -> list[Body]:
+    def placed(self, part: str, T: np.ndarray, frame: int, name: str | None = None) -> Placed:
         """The bodies of ``part`` (:meth:`shapes_of`) moved by T (4x4, the part's pose in
         ``frame``: the world or the tool) and named ``name`` (default the part's), memoised on
         the cell by (part, name, frame, pose): the same Body objects each time (read-only)."""
         T = np.ascontiguousarray(T, dtype=float)
         label = part if name is None else name
 
-        def place() -> list[Body]:
-            return [b.placed(T, frame, label) for b in self.shapes_of(part)]
+        def place() -> Placed:
+            return Placed(b.placed(T, frame, label) for b in self.shapes_of(part))
 
         if self.memo is None:
             return place()
@@ -452,11 +477,11 @@ class CollisionScene:
         parts that are where the tool is (a batch of tool poses with one relative geometry,
         e.g. the part being grasped at every candidate placement), checked as ``parts``."""
         held_name = held[0] if held is not None else None
-        world: list[Body] = [b for o in self.obstacles for b in o.bodies]
-        for name, T in parts.items():
-            if name == held_name:
-                continue
-            world += self.placed(name, T, WORLD)
+        if self._obstacle_bodies is None:
+            self._obstacle_bodies = Placed(b for o in self.obstacles for b in o.bodies)
+        groups: list[Placed] = [self._obstacle_bodies] + [self.placed(name, T, WORLD) for name, T in parts.items()
+                                                          if name != held_name]
+        world: list[Body] = [b for g in groups for b in g]
         tool: list[Body] = []
         for name, T in (attached or {}).items():
             tool += self.placed(name, T, TOOL)
@@ -473,7 +498,7 @@ class CollisionScene:
             else:
                 raise SparValueError(f"grasped part {grasped!r} is neither in parts nor attached")
         return SceneState(self, world, tool, hand, width, frozenset(frozenset(p) for p in allow),
-                          frozenset(attached or ()))
+                          frozenset(attached or ()), _columns(groups))
 
 
 def _link_body(s: Any) -> Body:
@@ -491,7 +516,8 @@ class SceneState:
 
     def __init__(self, scene: CollisionScene, world: list[Body], tool: list[Body],
                  hand: tuple[str, str, np.ndarray] | None, width: float | None, allow: frozenset,
-                 attached: frozenset = frozenset()) -> None:
+                 attached: frozenset = frozenset(), world_columns: tuple | None = None) -> None:
+        """``world_columns``: the :func:`_columns` of ``world`` when the caller has them (at())."""
         self.scene = scene
         self.hand = hand  # (part, "tool" | "world", its pose there) for the grasp rule
         self.width = width
@@ -502,7 +528,15 @@ class SceneState:
         self.bodies = moving + static + world
         self.n_moving = len(moving)
         hand_part = hand[0] if hand is not None else None
-        struct = _pair_structure(scene, self.bodies, len(moving), hand_part, allow, attached)
+        head = Placed(moving + static)
+        wc = _columns([Placed(world)]) if world_columns is None else world_columns
+        cap_a, cap_b, cap_r, names, frames, is_cap = (np.concatenate([head.cap_a, wc[0]]),
+                                                      np.concatenate([head.cap_b, wc[1]]),
+                                                      np.concatenate([head.cap_r, wc[2]]), head.names + wc[3],
+                                                      np.concatenate([head.frames, wc[4]]),
+                                                      np.concatenate([head.is_cap, wc[5]]))
+        struct = _pair_structure(scene, self.bodies, len(moving), hand_part, allow, attached,
+                                 columns=(names, frames, is_cap))
         self.pairs, self.table_bodies, self.exact_pair, rigid = struct
         self._rigid: dict[int, float | None] = dict.fromkeys(rigid)
         self._is_rigid = np.zeros(len(self.pairs), dtype=bool)
@@ -511,9 +545,7 @@ class SceneState:
         # of a row check() measured reads them instead of asking the library again
         self._measured: dict[tuple[int, bytes], float] = {}
         self._refusal: tuple[tuple[str, str] | None] | None = None  # tool_rigid_refusal's answer
-        self._cap_a = np.array([b.cap[0] for b in self.bodies]).reshape(-1, 3)
-        self._cap_b = np.array([b.cap[1] for b in self.bodies]).reshape(-1, 3)
-        self._cap_r = np.array([b.cap[2] for b in self.bodies])
+        self._cap_a, self._cap_b, self._cap_r = cap_a, cap_b, cap_r
         # the broad phase of check(): each body's bounding sphere radius (its centre: the
         # middle of its capsule's axis)
         self._sph_r = np.linalg.norm(self._cap_b - self._cap_a, axis=1) / 2 + self._cap_r
@@ -769,12 +801,8 @@ class SceneState:
         bodies = [b.placed(T_tool_part, TOOL, part) for b in self.scene.shapes_of(part)]
         gripper = self.scene.shrunk_gripper(self.width, tol)
         near = _near_all(gripper, bodies, 0.0)  # (gripper box, part body): bounding capsules touch
-        gi, bi = np.nonzero(near)
-        # apart by the support bound (a lower bound of the distance): no need to ask the library
-        ask = np.zeros_like(near)
-        ask[gi, bi] = _gaps_in_one_frame([gripper[i] for i in gi.tolist()], [bodies[j] for j in bi.tolist()]) <= 0.0
         for gi, g in enumerate(gripper):
-            if any(_exact(g, np.eye(4), b, np.eye(4)) <= 0.0 for bi, b in enumerate(bodies) if ask[gi, bi]):
+            if any(_exact(g, np.eye(4), b, np.eye(4)) <= 0.0 for bi, b in enumerate(bodies) if near[gi, bi]):
                 verdict = (False, g.name)
                 break
         if table is not None:
@@ -935,7 +963,9 @@ class SceneState:
 
 
 def _pair_structure(scene: CollisionScene, bodies: list[Body], n_moving: int, hand_part: str | None,
-                    allow: frozenset, attached: frozenset) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple]:
+                    allow: frozenset, attached: frozenset,
+                    columns: tuple[list[str], np.ndarray, np.ndarray] | None = None
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple]:
     """Which body pairs a state checks (see the module notes), from the bodies' names, frames and
     kinds alone (``bodies`` moving first, ``n_moving`` of them): (pairs (p, 2), table-checked
     moving bodies, pairs of two capsules (their bound is exact), pairs rigid with the flange).
@@ -946,8 +976,10 @@ def _pair_structure(scene: CollisionScene, bodies: list[Body], n_moving: int, ha
     on the moving body and the world body's name, and are set a name at a time for all of them;
     the rest (links, gripper, tool parts: the same at most steps) come from
     :func:`_head_structure`, memoised on the cell."""
-    names = [b.name for b in bodies]
-    frames = np.array([b.frame for b in bodies], dtype=int)
+    if columns is None:
+        columns = ([b.name for b in bodies], np.array([b.frame for b in bodies], dtype=int),
+                   np.array([b.kind == "capsule" for b in bodies], dtype=bool))
+    names, frames, is_cap = columns
     world_col = frames == WORLD
     world_col[:n_moving] = False
     head_cols = np.flatnonzero(~world_col)
@@ -975,11 +1007,11 @@ def _pair_structure(scene: CollisionScene, bodies: list[Body], n_moving: int, ha
                     ok[i, index[n]] = False
         if hand_part is not None:  # the gripper against the part it closes on: the grasp rule
             grip = [i for i in range(n_moving) if names[i] in _GRIPPER_NAMES]
-            hand_ids = [k for n, k in index.items() if _part_of(n) == hand_part]
+            # the world's bodies are named by their part (only the tool's have "held:")
+            hand_ids = [index[n] for n in (hand_part, f"held:{hand_part}") if n in index]
             ok[np.ix_(grip, hand_ids)] = False
         M[:, wcols] = ok[:, ids]
     pairs_arr = np.argwhere(M).astype(int).reshape(-1, 2)
-    is_cap = np.array([b.kind == "capsule" for b in bodies], dtype=bool)
     in_hand = (frames == 6) | (frames == TOOL)
     pi, pj = pairs_arr[:, 0], pairs_arr[:, 1]
     exact_pair = is_cap[pi] & is_cap[pj]
@@ -1046,27 +1078,6 @@ def _head_structure(head: list[Body], n_moving: int, hand_part: str | None, skip
                              if frozenset((b.name, "table")) not in skip and i not in fixed], dtype=int)
     excluded = [frozenset({b.name} | {n for p in skip if len(p) == 2 and b.name in p for n in p}) for b in moving]
     return block, table_bodies, fixed_in_tool, excluded
-
-
-def _gaps_in_one_frame(A: list[Body], B: list[Body]) -> np.ndarray:
-    """(k,) :func:`support_gap` of bodies A[k] and B[k] (k pairs, all bodies in one frame, whose
-    coordinates the answer is in)."""
-    if not A:
-        return np.zeros(0)
-    k = max(len(b.points) for b in (*A, *B))
-
-    def verts(bs: list[Body]) -> np.ndarray:
-        V = np.empty((len(bs), k, 3))
-        for n, b in enumerate(bs):  # padded by repeating a vertex (the supports stay the same)
-            V[n, :len(b.points)] = b.points
-            V[n, len(b.points):] = b.points[0]
-        return V
-
-    def axes(bs: list[Body]) -> np.ndarray:
-        return np.stack([b.T[:3, :3] for b in bs])
-
-    return support_gap(verts(A), np.array([b.radius for b in A]), axes(A), verts(B), np.array([b.radius for b in B]),
-                       axes(B))
 
 
 def _near_all(A: list[Body], B: list[Body], within: float) -> np.ndarray:
