@@ -479,8 +479,14 @@ class CollisionScene:
         held_name = held[0] if held is not None else None
         if self._obstacle_bodies is None:
             self._obstacle_bodies = Placed(b for o in self.obstacles for b in o.bodies)
-        groups: list[Placed] = [self._obstacle_bodies] + [self.placed(name, T, WORLD) for name, T in parts.items()
-                                                          if name != held_name]
+        groups: list[Placed] = [self._obstacle_bodies]
+        table = self.memo.table("collision.placed", PLACED_LIMIT) if self.memo is not None else None
+        for name, T in parts.items():  # placed() inlined: the table looked up once, a hit read directly
+            if name == held_name:
+                continue
+            T = np.ascontiguousarray(T, dtype=float)
+            g = table.get((name, name, WORLD, T.tobytes())) if table is not None else None
+            groups.append(g if g is not None else self.placed(name, T, WORLD))
         world: list[Body] = [b for g in groups for b in g]
         tool: list[Body] = []
         for name, T in (attached or {}).items():
