@@ -243,27 +243,35 @@ def solid_bodies(name: str, solids: Iterable[Solid]) -> list[Body]:
 
 
 class Placed(list):
-    """A list of bodies (read-only by convention) with the columns a scene state reads of them
-    made once: their bounding capsules' ends ``cap_a``, ``cap_b`` (k, 3) and radii ``cap_r`` (k,)
-    in their frames, ``names``, ``frames`` (k,) and ``is_cap`` (k,) (capsules)."""
+    """A list of bodies (read-only by convention) whose columns a scene state reads
+    (:meth:`columns`) are made once, on first use."""
 
-    def __init__(self, bodies: Iterable[Body]) -> None:
-        super().__init__(bodies)
-        self.cap_a = np.array([b.cap[0] for b in self], dtype=float).reshape(-1, 3)
-        self.cap_b = np.array([b.cap[1] for b in self], dtype=float).reshape(-1, 3)
-        self.cap_r = np.array([b.cap[2] for b in self], dtype=float)
-        self.names = [b.name for b in self]
-        self.frames = np.array([b.frame for b in self], dtype=int)
-        self.is_cap = np.array([b.kind == "capsule" for b in self], dtype=bool)
+    _columns: tuple | None = None
+
+    def columns(self) -> tuple:
+        """(cap_a, cap_b (k, 3) the bounding capsules' ends in the bodies' frames, cap_r (k,) their
+        radii, names, frames (k,), is_cap (k,): capsules), made on the first call."""
+        if self._columns is None:
+            self._columns = _body_columns(self)
+        return self._columns
+
+
+def _body_columns(bodies: list[Body]) -> tuple:
+    """The :meth:`Placed.columns` of ``bodies``."""
+    return (np.array([b.cap[0] for b in bodies], dtype=float).reshape(-1, 3),
+            np.array([b.cap[1] for b in bodies], dtype=float).reshape(-1, 3),
+            np.array([b.cap[2] for b in bodies], dtype=float), [b.name for b in bodies],
+            np.array([b.frame for b in bodies], dtype=int), np.array([b.kind == "capsule" for b in bodies], dtype=bool))
 
 
 def _columns(groups: list[Placed]) -> tuple:
-    """The columns of :class:`Placed` groups end to end: (cap_a, cap_b, cap_r, names, frames, is_cap)."""
-    if not groups:
-        return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), [], np.zeros(0, dtype=int), np.zeros(0, dtype=bool)
-    return (np.concatenate([g.cap_a for g in groups]), np.concatenate([g.cap_b for g in groups]),
-            np.concatenate([g.cap_r for g in groups]), [n for g in groups for n in g.names],
-            np.concatenate([g.frames for g in groups]), np.concatenate([g.is_cap for g in groups]))
+    """The columns of :class:`Placed` groups end to end (:meth:`Placed.columns`)."""
+    cols = [g.columns() for g in groups]
+    if not cols:
+        return _body_columns([])
+    return (np.concatenate([c[0] for c in cols]), np.concatenate([c[1] for c in cols]),
+            np.concatenate([c[2] for c in cols]), [n for c in cols for n in c[3]],
+            np.concatenate([c[4] for c in cols]), np.concatenate([c[5] for c in cols]))
 
 
 @dataclass(frozen=True)
@@ -534,13 +542,11 @@ class SceneState:
         self.bodies = moving + static + world
         self.n_moving = len(moving)
         hand_part = hand[0] if hand is not None else None
-        head = Placed(moving + static)
-        wc = _columns([Placed(world)]) if world_columns is None else world_columns
-        cap_a, cap_b, cap_r, names, frames, is_cap = (np.concatenate([head.cap_a, wc[0]]),
-                                                      np.concatenate([head.cap_b, wc[1]]),
-                                                      np.concatenate([head.cap_r, wc[2]]), head.names + wc[3],
-                                                      np.concatenate([head.frames, wc[4]]),
-                                                      np.concatenate([head.is_cap, wc[5]]))
+        hc = _body_columns(moving + static)
+        wc = _body_columns(world) if world_columns is None else world_columns
+        cap_a, cap_b, cap_r, names, frames, is_cap = (np.concatenate([hc[0], wc[0]]), np.concatenate([hc[1], wc[1]]),
+                                                      np.concatenate([hc[2], wc[2]]), hc[3] + wc[3],
+                                                      np.concatenate([hc[4], wc[4]]), np.concatenate([hc[5], wc[5]]))
         struct = _pair_structure(scene, self.bodies, len(moving), hand_part, allow, attached,
                                  columns=(names, frames, is_cap))
         self.pairs, self.table_bodies, self.exact_pair, rigid = struct
