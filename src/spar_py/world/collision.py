@@ -32,10 +32,14 @@ problem file ``clearance:``, else DEFAULT_MARGIN_MM):
 How (speed): every body has a bounding capsule in its frame (exact for capsules). One
 vectorised numpy pass over all rows and pairs gives each pair's capsule distance, a lower
 bound of its true distance (exact for capsule pairs), and each body's height over the table
-(exact: the lowest vertex, or the lowest capsule end less its radius). Only the (row, pair)
-cells whose bound is within the margin and whose shapes are not both capsules go to the
-collision library, imported on first use; the grasp rule is decided once per grasp (the part's
-pose in the tool frame) and memoised on the cell.
+(exact: the lowest vertex, or the lowest capsule end less its radius). Of the (row, pair)
+cells whose bound is within the margin and whose shapes are not both capsules, only those a
+second lower bound (:func:`support_gap`: the bodies' supports over their axes and the axes'
+cross products, the separating-axis bound of two boxes) does not already put beyond the margin
+go to the collision library, imported on first use; the grasp rule is decided once per grasp
+(the part's pose in the tool frame) and memoised on the cell. The closest pair of a clear row
+(:meth:`SceneState.clearance`) is sought among the pairs whose bounding spheres come within the
+table's distance, in order of their capsule bounds.
 
 The library: python-fcl, chosen over coal (bench/collision.py measures both on these
 queries). Coal's GJK/EPA signed distance is robust and its queries about twice as fast, but
