@@ -353,9 +353,15 @@ def support_gap(Pa: np.ndarray, ra: np.ndarray, Ua: np.ndarray, Pb: np.ndarray, 
     A non-positive answer says nothing (the bodies may touch)."""
     A, B = np.swapaxes(Ua, 1, 2), np.swapaxes(Ub, 1, 2)            # (c, 3, 3) axes as rows
     c = len(A)
-    X = np.cross(A[:, :, None, :], B[:, None, :, :]).reshape(c, 9, 3)
-    line = (Pb.mean(axis=1) - Pa.mean(axis=1))[:, None, :]
-    U = np.concatenate([A, B, X, line], axis=1)                     # (c, 16, 3)
+    U = np.empty((c, 16, 3))                                        # A's 3, B's 3, their 9 crosses, the line
+    U[:, :3], U[:, 3:6] = A, B
+    a0, a1, a2 = A[:, :, None, 0], A[:, :, None, 1], A[:, :, None, 2]   # (c, 3, 1)
+    b0, b1, b2 = B[:, None, :, 0], B[:, None, :, 1], B[:, None, :, 2]   # (c, 1, 3)
+    X = U[:, 6:15].reshape(c, 3, 3, 3)                              # a view: the crosses written in place
+    X[..., 0] = a1 * b2 - a2 * b1
+    X[..., 1] = a2 * b0 - a0 * b2
+    X[..., 2] = a0 * b1 - a1 * b0
+    U[:, 15] = Pb.mean(axis=1) - Pa.mean(axis=1)
     norm = np.sqrt((U * U).sum(-1))
     valid = norm > 1e-12
     U = U / np.where(valid, norm, 1.0)[..., None]
