@@ -184,3 +184,16 @@ def test_nearest_order_is_the_sorted_python_round_order() -> None:
     ref = sorted(range(len(dl)), key=lambda i: (round(dl[i], 6), yl[i]))
     assert placement.nearest_order(d, yaw, 6).tolist() == ref
     assert placement.nearest_order(np.zeros(0), np.zeros(0), 6).tolist() == []
+
+
+def test_nearest_head_is_the_start_of_the_sorted_order() -> None:
+    """choose reads the order's first chunks from _nearest_head: at least the first m entries of
+    Python's sorted order (rounded distance, yaw, index), on keys with many ties (the m-th
+    least shared by several candidates) and fewer candidates than m."""
+    rng = np.random.default_rng(8)
+    for n, m in ((3000, 97), (500, 97), (60, 97), (1, 1), (200, 1)):
+        key = rng.integers(0, 40, n) / 8.0
+        yaw = rng.integers(0, 3, n) * (np.pi / 6)
+        ref = sorted(range(n), key=lambda i: (key[i], yaw[i]))
+        head = placement._nearest_head(key, yaw, m).tolist()
+        assert len(head) >= min(m, n) and head == ref[:len(head)]

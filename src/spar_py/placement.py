@@ -134,6 +134,21 @@ def _shape_key(model: ObjectModel) -> tuple:
                   None if s.points is None else np.asarray(s.points, float).tobytes()) for s in model.shape)
 
 
+#: Bound of the cell's memo table of shape keys per object name.
+SHAPE_KEY_LIMIT = 1024
+
+
+def _model_key(cell: Cell, obj: str) -> tuple:
+    """:func:`_shape_key` of ``obj``'s model, memoised in the cell by the object's name (and
+    made again should the name stand for another model)."""
+    model = cell.objects[obj]
+    table = cell.memo.table("placement.shape_key", SHAPE_KEY_LIMIT)
+    hit = table.get(obj)
+    if hit is None or hit[0] is not model:
+        hit = table[obj] = (model, _shape_key(model))
+    return hit[1]
+
+
 def _footprint(cell: Cell, obj: str, R: np.ndarray) -> np.ndarray:
     """:func:`footprint` of ``obj`` turned by R (3x3), memoised in the cell by the shape and
     the rotation; read-only."""
@@ -145,7 +160,7 @@ def _footprint(cell: Cell, obj: str, R: np.ndarray) -> np.ndarray:
         f.setflags(write=False)
         return f
 
-    key = (_shape_key(model), R.tobytes())
+    key = (_model_key(cell, obj), R.tobytes())
     return cell.memo.table("placement.footprints", FOOTPRINT_LIMIT).get_or_compute(key, compute)
 
 
@@ -162,7 +177,7 @@ def occupant(cell: Cell, obj: str, T: np.ndarray) -> Occupant:
         poly.setflags(write=False)
         return (c, model.bounding_radius(), poly)
 
-    key = (_shape_key(model), T.tobytes())
+    key = (_model_key(cell, obj), T.tobytes())
     return cell.memo.table("placement.occupants", FOOTPRINT_LIMIT).get_or_compute(key, compute)
 
 
@@ -305,7 +320,17 @@ def _blocked(cell: Cell, P: np.ndarray, xs: np.ndarray, ys: np.ndarray, feet: li
 def _grid_arrays(cell: Cell, obj: str, pose: str, occupied: list[Occupant],
                  step: float, yaw_steps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The grid placements of :func:`candidates` as arrays, in the same order (regions, x,
-    y, yaw): ``(xy (n, 2), yaw (n,), T (n, 4, 4))``, lengths in the cell unit.
+    y, yaw): ``(xy (n, 2), yaw (n,), T (n, 4, 4))``, lengths in the cell unit
+    (:func:`_grid_points`, their poses made for all)."""
+    xy, k, yaws, rots, height = _grid_points(cell, obj, pose, occupied, step, yaw_steps)
+    return xy, yaws[k], _grid_poses(xy, rots[k], height)
+
+
+def _grid_points(cell: Cell, obj: str, pose: str, occupied: list[Occupant], step: float,
+                 yaw_steps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+    """The grid placements of :func:`candidates`, in its order (regions, x, y, yaw), without
+    their poses: ``(xy (n, 2), k (n,) each one's yaw step, yaws (yaw_steps,) rad, rots
+    (yaw_steps, 3, 3) each yaw's object rotation, the pose's height)``, lengths in the cell unit.
 
     Kept: the placements whose footprint (:func:`footprint`, turned by the yaw) lies in
     the region of the grid point, and is at least the clearance (CLEARANCE_MM) from the
@@ -340,13 +365,19 @@ def _grid_arrays(cell: Cell, obj: str, pose: str, occupied: list[Occupant],
         yaw_parts.append(k)
     xy = np.concatenate(xy_parts) if xy_parts else np.zeros((0, 2))
     k = np.concatenate(yaw_parts) if yaw_parts else np.zeros(0, dtype=int)
+    return xy, k, yaws, rots, float(sp.height)
+
+
+def _grid_poses(xy: np.ndarray, R: np.ndarray, height: float) -> np.ndarray:
+    """(n, 4, 4) the object poses of grid placements at ``xy`` (n, 2) turned by R (n, 3, 3), at
+    the stable pose's ``height`` (cell unit)."""
     T = np.zeros((len(xy), 4, 4))
-    T[:, :3, :3] = rots[k]
+    T[:, :3, :3] = R
     T[:, 0, 3] = xy[:, 0]
     T[:, 1, 3] = xy[:, 1]
-    T[:, 2, 3] = sp.height
+    T[:, 2, 3] = height
     T[:, 3, 3] = 1.0
-    return xy, yaws[k], T
+    return T
 
 
 def candidates(cell: Cell, obj: str, pose: str, occupied: list[Occupant],
@@ -440,33 +471,54 @@ def choose(cell: Cell, obj: str, pose: str, requirements: list[np.ndarray],
     so the search stops at the first chunk holding a feasible one instead of solving IK for
     the whole grid.
     """
-    xy, yaw, T = _grid_arrays(cell, obj, pose, occupied, from_mm(cell.unit, GRID_STEP_MM), YAW_STEPS)
-    if not len(T):
+    xy, kyaw, yaw_of, rots, height = _grid_points(cell, obj, pose, occupied, from_mm(cell.unit, GRID_STEP_MM),
+                                                  YAW_STEPS)
+    n = len(xy)
+    if not n:
         return None
     if near is None:
         regs = default_regions(cell)
         near = np.mean([[(r["x"][0] + r["x"][1]) / 2, (r["y"][0] + r["y"][1]) / 2] for r in regs], axis=0)
     # distances in mm, so ties are broken alike whatever the cell's unit
     dist = np.hypot(xy[:, 0] - near[0], xy[:, 1] - near[1]) * mm_per(cell.unit)
-    yaws = yaw.tolist()
-    order = nearest_order(dist, yaw, -round(math.log10(ROUND_MM))).tolist()
-    starts = [0, *range(1, len(order), CHOOSE_CHUNK)]  # the nearest alone first: it usually serves
-    for start, end in zip(starts, [*starts[1:], len(order)]):
+    yaw = yaw_of[kyaw]
+    digits = -round(math.log10(ROUND_MM))
+    # the first two chunks' worth of the order (what the search usually reads), the whole of it
+    # only if the search goes on
+    order = _nearest_head(round_like_python(dist, digits), yaw, 1 + CHOOSE_CHUNK).tolist()
+    starts = [0, *range(1, n, CHOOSE_CHUNK)]  # the nearest alone first: it usually serves
+    for start, end in zip(starts, [*starts[1:], n]):
+        if end > len(order):
+            order = nearest_order(dist, yaw, digits).tolist()
         idx = order[start:end]
         ok = np.ones(len(idx), dtype=bool)
         for x in requirements or ():  # each requirement by IK and clearance, on the survivors only
             live = np.flatnonzero(ok)
             if not len(live):
                 break
-            ok[live] = _reach_all(cell, T[[idx[i] for i in live]], [x], obj)[:, 0]
+            at = np.array([idx[i] for i in live], dtype=int)
+            ok[live] = _reach_all(cell, _grid_poses(xy[at], rots[kyaw[at]], height), [x], obj)[:, 0]
         hits = np.flatnonzero(ok)
         if len(hits):
             i = idx[hits[0]]
-            height = cell.objects[obj].poses[pose].height
-            # a copy: a view of T[i] would keep the whole grid's poses alive wherever the
-            # placement is kept (phase 2's memo tables: 62 MB at N = 50)
-            return Placement(obj, pose, float(xy[i, 0]), float(xy[i, 1]), height, yaws[i], T[i].copy())
+            # the pose made for this placement alone: no view keeps a grid's poses alive wherever
+            # the placement is kept (phase 2's memo tables)
+            T = _grid_poses(xy[i:i + 1], rots[kyaw[i:i + 1]], height)[0]
+            return Placement(obj, pose, float(xy[i, 0]), float(xy[i, 1]), cell.objects[obj].poses[pose].height,
+                             float(yaw[i]), T)
     return None
+
+
+def _nearest_head(key: np.ndarray, yaw: np.ndarray, m: int) -> np.ndarray:
+    """The first min(m, n) or more entries of :func:`nearest_order`'s order, from the rounded
+    distances ``key`` (n,): every candidate whose key is at most the m-th least, ordered by
+    (key, yaw, index); the others' keys are larger, so they all come after these."""
+    n = len(key)
+    if n <= m:
+        return np.lexsort((np.arange(n), yaw, key))
+    v = np.partition(key, m - 1)[m - 1]
+    cand = np.flatnonzero(key <= v)
+    return cand[np.lexsort((cand, yaw[cand], key[cand]))]
 
 
 #: The coarser grid phase 1 uses to decide whether a stable pose is reachable at all:

@@ -32,10 +32,14 @@ problem file ``clearance:``, else DEFAULT_MARGIN_MM):
 How (speed): every body has a bounding capsule in its frame (exact for capsules). One
 vectorised numpy pass over all rows and pairs gives each pair's capsule distance, a lower
 bound of its true distance (exact for capsule pairs), and each body's height over the table
-(exact: the lowest vertex, or the lowest capsule end less its radius). Only the (row, pair)
-cells whose bound is within the margin and whose shapes are not both capsules go to the
-collision library, imported on first use; the grasp rule is decided once per grasp (the part's
-pose in the tool frame) and memoised on the cell.
+(exact: the lowest vertex, or the lowest capsule end less its radius). Of the (row, pair)
+cells whose bound is within the margin and whose shapes are not both capsules, only those a
+second lower bound (:func:`support_gap`: the bodies' supports over their axes and the axes'
+cross products, the separating-axis bound of two boxes) does not already put beyond the margin
+go to the collision library, imported on first use; the grasp rule is decided once per grasp
+(the part's pose in the tool frame) and memoised on the cell. The closest pair of a clear row
+(:meth:`SceneState.clearance`) is sought among the pairs whose bounding spheres come within the
+table's distance, in order of their capsule bounds.
 
 The library: python-fcl, chosen over coal (bench/collision.py measures both on these
 queries). Coal's GJK/EPA signed distance is robust and its queries about twice as fast, but
@@ -242,6 +246,38 @@ def solid_bodies(name: str, solids: Iterable[Solid]) -> list[Body]:
     return out
 
 
+class Placed(list):
+    """A list of bodies (read-only by convention) whose columns a scene state reads
+    (:meth:`columns`) are made once, on first use."""
+
+    _columns: tuple | None = None
+
+    def columns(self) -> tuple:
+        """(cap_a, cap_b (k, 3) the bounding capsules' ends in the bodies' frames, cap_r (k,) their
+        radii, names, frames (k,), is_cap (k,): capsules), made on the first call."""
+        if self._columns is None:
+            self._columns = _body_columns(self)
+        return self._columns
+
+
+def _body_columns(bodies: list[Body]) -> tuple:
+    """The :meth:`Placed.columns` of ``bodies``."""
+    return (np.array([b.cap[0] for b in bodies], dtype=float).reshape(-1, 3),
+            np.array([b.cap[1] for b in bodies], dtype=float).reshape(-1, 3),
+            np.array([b.cap[2] for b in bodies], dtype=float), [b.name for b in bodies],
+            np.array([b.frame for b in bodies], dtype=int), np.array([b.kind == "capsule" for b in bodies], dtype=bool))
+
+
+def _columns(groups: list[Placed]) -> tuple:
+    """The columns of :class:`Placed` groups end to end (:meth:`Placed.columns`)."""
+    cols = [g.columns() for g in groups]
+    if not cols:
+        return _body_columns([])
+    return (np.concatenate([c[0] for c in cols]), np.concatenate([c[1] for c in cols]),
+            np.concatenate([c[2] for c in cols]), [n for c in cols for n in c[3]],
+            np.concatenate([c[4] for c in cols]), np.concatenate([c[5] for c in cols]))
+
+
 @dataclass(frozen=True)
 class Obstacle:
     """A named obstacle of the problem file: its bodies in the world frame (cell unit)."""
@@ -301,6 +337,42 @@ def _exact(b1: Body, T1: np.ndarray, b2: Body, T2: np.ndarray) -> float:
     return max(float(d), 0.0)
 
 
+def support_gap(Pa: np.ndarray, ra: np.ndarray, Ua: np.ndarray, Pb: np.ndarray, rb: np.ndarray,
+                Ub: np.ndarray) -> np.ndarray:
+    """(c,) a lower bound of the distance (length unit of the inputs) between each of c pairs of
+    convex bodies a and b, in one vectorised pass: the largest gap between their supports over
+    16 unit directions u (each body's three axes, their nine cross products, the line between
+    the vertices' means), less a rounding allowance of 1e-9 * (1 + the largest coordinate).
+
+    ``Pa`` (c, ka, 3) a's vertices (world; a capsule's: the two ends of its segment; repeated
+    vertices are fine), ``ra`` (c,) the radius they are swept by (a capsule's, else 0), ``Ua``
+    (c, 3, 3) a's axes as columns (any rotation gives a sound bound; a box's face normals make
+    it the separating-axis bound); the same for b. For convex sets the distance is at least
+    min over b of u.y - max over a of u.x for every unit u (and with a and b swapped), so the
+    answer never exceeds the distance: a pair it puts beyond the margin is clear by it.
+    A non-positive answer says nothing (the bodies may touch)."""
+    A, B = np.swapaxes(Ua, 1, 2), np.swapaxes(Ub, 1, 2)            # (c, 3, 3) axes as rows
+    c = len(A)
+    U = np.empty((c, 16, 3))                                        # A's 3, B's 3, their 9 crosses, the line
+    U[:, :3], U[:, 3:6] = A, B
+    a0, a1, a2 = A[:, :, None, 0], A[:, :, None, 1], A[:, :, None, 2]   # (c, 3, 1)
+    b0, b1, b2 = B[:, None, :, 0], B[:, None, :, 1], B[:, None, :, 2]   # (c, 1, 3)
+    X = U[:, 6:15].reshape(c, 3, 3, 3)                              # a view: the crosses written in place
+    X[..., 0] = a1 * b2 - a2 * b1
+    X[..., 1] = a2 * b0 - a0 * b2
+    X[..., 2] = a0 * b1 - a1 * b0
+    U[:, 15] = Pb.mean(axis=1) - Pa.mean(axis=1)
+    norm = np.sqrt((U * U).sum(-1))
+    valid = norm > 1e-12
+    U = U / np.where(valid, norm, 1.0)[..., None]
+    pa = Pa @ np.swapaxes(U, 1, 2)                                  # (c, ka, 16)
+    pb = Pb @ np.swapaxes(U, 1, 2)
+    gap = np.maximum(pb.min(axis=1) - pa.max(axis=1), pa.min(axis=1) - pb.max(axis=1))
+    best = np.where(valid, gap, -np.inf).max(axis=1) - ra - rb
+    scale = np.maximum(np.abs(Pa).max(axis=(1, 2)), np.abs(Pb).max(axis=(1, 2))) + np.maximum(ra, rb)
+    return best - 1e-9 * (1.0 + scale)
+
+
 # --------------------------------------------------------------------------- the scene
 
 
@@ -358,6 +430,7 @@ class CollisionScene:
         self.allowed = frozenset(frozenset(p) for p in robot.allowed)
         self._grippers: dict = {}  # bounded by the cell's grasp widths
         self._slab: Body | None = None
+        self._obstacle_bodies: Placed | None = None  # made on first use by at()
         self.stats = {"pairs": 0, "exact": 0}
 
     def slab(self) -> Body:
@@ -392,15 +465,15 @@ class CollisionScene:
             raise SparValueError(f"no shape known for part {part!r}")
         return self.parts[model]
 
-    def placed(self, part: str, T: np.ndarray, frame: int, name: str | None = None) -> list[Body]:
+    def placed(self, part: str, T: np.ndarray, frame: int, name: str | None = None) -> Placed:
         """The bodies of ``part`` (:meth:`shapes_of`) moved by T (4x4, the part's pose in
         ``frame``: the world or the tool) and named ``name`` (default the part's), memoised on
         the cell by (part, name, frame, pose): the same Body objects each time (read-only)."""
         T = np.ascontiguousarray(T, dtype=float)
         label = part if name is None else name
 
-        def place() -> list[Body]:
-            return [b.placed(T, frame, label) for b in self.shapes_of(part)]
+        def place() -> Placed:
+            return Placed(b.placed(T, frame, label) for b in self.shapes_of(part))
 
         if self.memo is None:
             return place()
@@ -422,11 +495,17 @@ class CollisionScene:
         parts that are where the tool is (a batch of tool poses with one relative geometry,
         e.g. the part being grasped at every candidate placement), checked as ``parts``."""
         held_name = held[0] if held is not None else None
-        world: list[Body] = [b for o in self.obstacles for b in o.bodies]
-        for name, T in parts.items():
+        if self._obstacle_bodies is None:
+            self._obstacle_bodies = Placed(b for o in self.obstacles for b in o.bodies)
+        groups: list[Placed] = [self._obstacle_bodies]
+        table = self.memo.table("collision.placed", PLACED_LIMIT) if self.memo is not None else None
+        for name, T in parts.items():  # placed() inlined: the table looked up once, a hit read directly
             if name == held_name:
                 continue
-            world += self.placed(name, T, WORLD)
+            T = np.ascontiguousarray(T, dtype=float)
+            g = table.get((name, name, WORLD, T.tobytes())) if table is not None else None
+            groups.append(g if g is not None else self.placed(name, T, WORLD))
+        world: list[Body] = [b for g in groups for b in g]
         tool: list[Body] = []
         for name, T in (attached or {}).items():
             tool += self.placed(name, T, TOOL)
@@ -443,7 +522,7 @@ class CollisionScene:
             else:
                 raise SparValueError(f"grasped part {grasped!r} is neither in parts nor attached")
         return SceneState(self, world, tool, hand, width, frozenset(frozenset(p) for p in allow),
-                          frozenset(attached or ()))
+                          frozenset(attached or ()), _columns(groups))
 
 
 def _link_body(s: Any) -> Body:
@@ -461,7 +540,8 @@ class SceneState:
 
     def __init__(self, scene: CollisionScene, world: list[Body], tool: list[Body],
                  hand: tuple[str, str, np.ndarray] | None, width: float | None, allow: frozenset,
-                 attached: frozenset = frozenset()) -> None:
+                 attached: frozenset = frozenset(), world_columns: tuple | None = None) -> None:
+        """``world_columns``: the :func:`_columns` of ``world`` when the caller has them (at())."""
         self.scene = scene
         self.hand = hand  # (part, "tool" | "world", its pose there) for the grasp rule
         self.width = width
@@ -472,13 +552,22 @@ class SceneState:
         self.bodies = moving + static + world
         self.n_moving = len(moving)
         hand_part = hand[0] if hand is not None else None
-        struct = _pair_structure(scene, self.bodies, len(moving), hand_part, allow, attached)
+        hc = _body_columns(moving + static)
+        wc = _body_columns(world) if world_columns is None else world_columns
+        cap_a, cap_b, cap_r, names, frames, is_cap = (np.concatenate([hc[0], wc[0]]), np.concatenate([hc[1], wc[1]]),
+                                                      np.concatenate([hc[2], wc[2]]), hc[3] + wc[3],
+                                                      np.concatenate([hc[4], wc[4]]), np.concatenate([hc[5], wc[5]]))
+        struct = _pair_structure(scene, self.bodies, len(moving), hand_part, allow, attached,
+                                 columns=(names, frames, is_cap))
         self.pairs, self.table_bodies, self.exact_pair, rigid = struct
         self._rigid: dict[int, float | None] = dict.fromkeys(rigid)
+        self._is_rigid = np.zeros(len(self.pairs), dtype=bool)
+        self._is_rigid[list(rigid)] = True
+        # the library's distances of the last check(), by (pair, that row's frames): clearance()
+        # of a row check() measured reads them instead of asking the library again
+        self._measured: dict[tuple[int, bytes], float] = {}
         self._refusal: tuple[tuple[str, str] | None] | None = None  # tool_rigid_refusal's answer
-        self._cap_a = np.array([b.cap[0] for b in self.bodies]).reshape(-1, 3)
-        self._cap_b = np.array([b.cap[1] for b in self.bodies]).reshape(-1, 3)
-        self._cap_r = np.array([b.cap[2] for b in self.bodies])
+        self._cap_a, self._cap_b, self._cap_r = cap_a, cap_b, cap_r
         # the broad phase of check(): each body's bounding sphere radius (its centre: the
         # middle of its capsule's axis)
         self._sph_r = np.linalg.norm(self._cap_b - self._cap_a, axis=1) / 2 + self._cap_r
@@ -671,6 +760,28 @@ class SceneState:
         self.scene.stats["exact"] += 1
         return _exact(bi, self._frame_pose(F, row, bi), bj, self._frame_pose(F, row, bj))
 
+    def _support_bounds(self, F: np.ndarray, rows: np.ndarray, ps: np.ndarray) -> np.ndarray:
+        """(c,) :func:`support_gap` of pair ps[k] at row rows[k] (frames F (n, 8, 4, 4)): a lower
+        bound of the distance the library would measure there, all c cells in one pass."""
+        i, j = self.pairs[ps, 0], self.pairs[ps, 1]
+        ub, inv = np.unique(np.concatenate([i, j]), return_inverse=True)
+        used = [self.bodies[u] for u in ub.tolist()]
+        k = max(len(b.points) for b in used)
+        V = np.empty((len(used), k, 3))
+        for n, b in enumerate(used):  # padded by repeating a vertex (the supports stay the same)
+            V[n, :len(b.points)] = b.points
+            V[n, len(b.points):] = b.points[0]
+        axes = np.stack([b.T[:3, :3] for b in used])
+        radius = np.array([b.radius for b in used])
+        frame = np.array([8 if b.frame == WORLD else b.frame for b in used], dtype=int)
+        Fx = np.concatenate([F, np.broadcast_to(np.eye(4), (len(F), 1, 4, 4))], axis=1)  # 8: the world
+        ia, ib = inv[:len(i)], inv[len(i):]
+        Ga, Gb = Fx[rows, frame[ia]], Fx[rows, frame[ib]]           # (c, 4, 4) the frames' poses
+        Ra, Rb = Ga[:, :3, :3], Gb[:, :3, :3]
+        Pa = V[ia] @ np.swapaxes(Ra, 1, 2) + Ga[:, None, :3, 3]
+        Pb = V[ib] @ np.swapaxes(Rb, 1, 2) + Gb[:, None, :3, 3]
+        return support_gap(Pa, radius[ia], Ra @ axes[ia], Pb, radius[ib], Rb @ axes[ib])
+
     def _rigid_once(self, F: np.ndarray, row: int, p: int) -> float:
         i, j = self.pairs[p]
         bi, bj = self.bodies[i], self.bodies[j]
@@ -700,7 +811,10 @@ class SceneState:
         part beyond its contact face and the palm does not enter it (each shrunk by GRASP_TOL_MM
         so touching counts as clear); (ok, the gripper body that enters it or None). Memoised."""
         part = self.hand[0]
-        key = (part, np.round(T_tool_part, 9).tobytes(), None if self.width is None else round(self.width, 9))
+        # rounded to 1e-9 and signed zeros made one (+ 0.0): a part grasped on the table, whose
+        # pose in the tool each IK solution's frames give with its own rounding, finds the
+        # verdict of the same grasp decided before (a -0.0 would otherwise make another key)
+        key = (part, (np.round(T_tool_part, 9) + 0.0).tobytes(), None if self.width is None else round(self.width, 9))
         table = self.scene.memo.table("collision.grasp", GRASP_LIMIT) if self.scene.memo is not None else None
         if table is not None and key in table:
             return table[key]
@@ -750,14 +864,34 @@ class SceneState:
         for r, k in zip(*np.nonzero(low)):
             if ok[r]:
                 ok[r], why[r] = False, (self.bodies[self.table_bodies[k]].name, "table")
-        near = lb <= m
-        for r, p in zip(*np.nonzero(near)):
+        rows, ps = np.nonzero(lb <= m)
+        # the library is asked only where the support bound does not already put the pair beyond
+        # the margin (its distance is at least that bound: the same verdict); a pair rigid with the
+        # flange is measured as before, once per state
+        ask = ~self.exact_pair[ps] & ~self._is_rigid[ps] & ok[rows]
+        if ask.any():
+            at = np.flatnonzero(ask)
+            ask[at] = self._support_bounds(F, rows[at], ps[at]) <= m
+        measured: dict[tuple[int, bytes], float] = {}
+        keys: dict[int, bytes] = {}
+        for r, p, a in zip(rows.tolist(), ps.tolist(), ask.tolist()):
             if not ok[r]:
                 continue
-            d = lb[r, p] if self.exact_pair[p] else self._exact_cell(F, r, p)
+            if self.exact_pair[p]:
+                d = lb[r, p]
+            elif a or self._is_rigid[p]:
+                d = self._exact_cell(F, r, p)
+                if a:
+                    key = keys.get(r)
+                    if key is None:
+                        key = keys[r] = F[r].tobytes()
+                    measured[(p, key)] = d
+            else:
+                continue
             if d <= m:
                 i, j = self.pairs[p]
                 ok[r], why[r] = False, (self.bodies[i].name, self.bodies[j].name)
+        self._measured = measured
         return ok, why
 
     def clearance(self, q: np.ndarray) -> tuple[np.ndarray, list[tuple[str, str]]]:
@@ -765,25 +899,95 @@ class SceneState:
         row, the closest pair of named bodies, e.g. ("forearm", "shelf"). The part in the hand
         and the gripper are not a pair here (their contact is the grasp's: :meth:`grasp_ok`)."""
         q = np.asarray(q, float).reshape(-1, 6)
-        F, lb, tab = self._bounds(q)
+        F = self._frames(q)
+        A, B = self._world_caps(F)
+        tab = self._table(F)
         out = np.full(len(q), np.inf)
         names: list[tuple[str, str]] = [("", "")] * len(q)
         for r in range(len(q)):
             if tab.shape[1]:
                 k = int(np.argmin(tab[r]))
                 out[r], names[r] = tab[r, k], (self.bodies[self.table_bodies[k]].name, "table")
-            for p in np.argsort(lb[r]):
-                if lb[r, p] >= out[r]:
-                    break
-                d = lb[r, p] if self.exact_pair[p] else self._exact_cell(F, r, p)
-                if d < out[r]:
-                    i, j = self.pairs[p]
-                    out[r], names[r] = d, (self.bodies[i].name, self.bodies[j].name)
+            got = self._closest_pair(F, A, B, r, float(out[r]))
+            if got is not None:
+                out[r], names[r] = got
         return out, names
+
+    def _closest_pair(self, F: np.ndarray, A: np.ndarray, B: np.ndarray, r: int,
+                      best: float) -> tuple[float, tuple[str, str]] | None:
+        """Row ``r``'s checked pair of least distance if below ``best`` (the table's), as (its
+        distance, its names), else None: the pairs visited in order of their capsule bound
+        (world capsule ends A, B (n, N, 3)) while that is below the least distance found, the
+        library asked for the pairs that are not two capsules (its answers of the last
+        :meth:`check` at these frames reused); the first pair visited at the least distance wins.
+
+        Only the pairs whose bounding spheres come within ``best`` (and rounding) can be visited (a
+        capsule bound is at least its spheres' gap), so only theirs are computed; where two of those visited
+        (or the one the visit stops at) have equal bounds, the order of the whole row's sort
+        decides which comes first, and the row is visited as the whole sort has it."""
+        pi, pj = self.pairs[:, 0], self.pairs[:, 1]
+        if np.isfinite(best):
+            C = (A[r] + B[r]) / 2
+            d = C[pi] - C[pj]
+            reach = best + 1e-9 * (1.0 + float(np.abs(C).max(initial=0.0)) + float(self._sph_r.max(initial=0.0)))
+            sub = np.flatnonzero(np.sqrt((d * d).sum(-1)) - self._sph_r[pi] - self._sph_r[pj] < reach)
+        else:
+            sub = np.arange(len(pi))
+        i, j = pi[sub], pj[sub]
+        lb = segment_distance(A[r, i], B[r, i], A[r, j], B[r, j]) - self._cap_r[i] - self._cap_r[j]
+        done: dict[int, float] = {}  # the library's distances at this row, for a second visit
+        tie, found = self._visit(F, r, sub, lb, best, done)
+        if tie:  # a tie the order of equal bounds decides: the whole row's order
+            i, j = pi, pj
+            lb = segment_distance(A[r, i], B[r, i], A[r, j], B[r, j]) - self._cap_r[i] - self._cap_r[j]
+            _, found = self._visit(F, r, np.arange(len(pi)), lb, best, done, ties=True)
+        return found
+
+    def _visit(self, F: np.ndarray, r: int, sub: np.ndarray, lb: np.ndarray, best: float,
+               done: dict[int, float], ties: bool = False) -> tuple[bool, tuple[float, tuple[str, str]] | None]:
+        """:meth:`_closest_pair`'s visit of pairs ``sub`` (their capsule bounds ``lb``) at row r:
+        (a tie, the pair found below ``best`` or None).
+
+        The least distance it finds is the row's whatever the order of equal bounds; only which
+        pair is named can depend on it, where another pair with the winner's bound is at the
+        winner's distance too: a tie (never with ``ties``: ``sub`` is then every pair, in the
+        whole row's order)."""
+        order = np.argsort(lb)
+        lbs = lb[order].tolist()
+        key = F[r].tobytes()
+        found = None
+        win = -1
+        for n, p in enumerate(sub[order].tolist()):
+            if lbs[n] >= best:
+                break
+            d = self._pair_distance(F, r, p, lbs[n], key, done)
+            if d < best:
+                i, j = self.pairs[p]
+                best, found, win = d, (d, (self.bodies[i].name, self.bodies[j].name)), n
+        if not ties and found is not None:
+            p_win = int(sub[order[win]])
+            for k in np.flatnonzero(lb == lbs[win]).tolist():
+                p = int(sub[k])
+                if p != p_win and self._pair_distance(F, r, p, float(lb[k]), key, done) == found[0]:
+                    return True, found
+        return False, found
+
+    def _pair_distance(self, F: np.ndarray, r: int, p: int, lb: float, key: bytes, done: dict[int, float]) -> float:
+        """Pair p's distance at row r (frames F, ``key`` their bytes): its capsule bound ``lb``
+        for two capsules, else the library's (its answer of the last :meth:`check` at these
+        frames, or of this row's visits ``done``, reused)."""
+        if self.exact_pair[p]:
+            return lb
+        d = self._measured.get((p, key), done.get(p))
+        if d is None:
+            d = done[p] = self._exact_cell(F, r, p)
+        return d
 
 
 def _pair_structure(scene: CollisionScene, bodies: list[Body], n_moving: int, hand_part: str | None,
-                    allow: frozenset, attached: frozenset) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple]:
+                    allow: frozenset, attached: frozenset,
+                    columns: tuple[list[str], np.ndarray, np.ndarray] | None = None
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple]:
     """Which body pairs a state checks (see the module notes), from the bodies' names, frames and
     kinds alone (``bodies`` moving first, ``n_moving`` of them): (pairs (p, 2), table-checked
     moving bodies, pairs of two capsules (their bound is exact), pairs rigid with the flange).
@@ -794,8 +998,10 @@ def _pair_structure(scene: CollisionScene, bodies: list[Body], n_moving: int, ha
     on the moving body and the world body's name, and are set a name at a time for all of them;
     the rest (links, gripper, tool parts: the same at most steps) come from
     :func:`_head_structure`, memoised on the cell."""
-    names = [b.name for b in bodies]
-    frames = np.array([b.frame for b in bodies], dtype=int)
+    if columns is None:
+        columns = ([b.name for b in bodies], np.array([b.frame for b in bodies], dtype=int),
+                   np.array([b.kind == "capsule" for b in bodies], dtype=bool))
+    names, frames, is_cap = columns
     world_col = frames == WORLD
     world_col[:n_moving] = False
     head_cols = np.flatnonzero(~world_col)
@@ -823,11 +1029,11 @@ def _pair_structure(scene: CollisionScene, bodies: list[Body], n_moving: int, ha
                     ok[i, index[n]] = False
         if hand_part is not None:  # the gripper against the part it closes on: the grasp rule
             grip = [i for i in range(n_moving) if names[i] in _GRIPPER_NAMES]
-            hand_ids = [k for n, k in index.items() if _part_of(n) == hand_part]
+            # the world's bodies are named by their part (only the tool's have "held:")
+            hand_ids = [index[n] for n in (hand_part, f"held:{hand_part}") if n in index]
             ok[np.ix_(grip, hand_ids)] = False
         M[:, wcols] = ok[:, ids]
     pairs_arr = np.argwhere(M).astype(int).reshape(-1, 2)
-    is_cap = np.array([b.kind == "capsule" for b in bodies], dtype=bool)
     in_hand = (frames == 6) | (frames == TOOL)
     pi, pj = pairs_arr[:, 0], pairs_arr[:, 1]
     exact_pair = is_cap[pi] & is_cap[pj]
