@@ -24,7 +24,8 @@ def slow_problem(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
 
 
 #: Runs of several seconds: phase 1 in Prolog (N = 70, 280 actions: phase 1 from about 0.4 s to
-#: about 2 s, then phase 2; N = 10 with a bound of 39, tried before, is now refused by the
+#: about 1.5 s on a 2-core EPYC, then some seconds of phase 2, so a late signal that misses phase 1
+#: on a faster machine still ends a running plan; N = 10 with a bound of 39, tried before, is now refused by the
 #: admissible lower bound within 2 s), and phase 2 in Python (N = 100: phase 1 takes about 1 s,
 #: phase 2 about 4 s of SUP/INF bounds and collision checks for the 100 pairs).
 def _long_runs(slow: tuple[Path, Path]) -> dict[str, list[str]]:
