@@ -622,6 +622,9 @@ class IntervalProgram:
         # +-1, so exact (None: nowhere, True: everywhere)
         self._scale_masks: list[tuple] = []
         for g in S.groups:
+            if g.key[0] != "scale":  # read by the "scale" rule only
+                self._scale_masks.append((None, None))
+                continue
             c = g.payload[:, None]
             neg, unit = c < 0, np.abs(c) == 1.0
             self._scale_masks.append((neg if neg.any() else None,
