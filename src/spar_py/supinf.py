@@ -396,12 +396,49 @@ def _op_name(op: int) -> str:
 
 def _instructions(fn: ca.Function) -> list[tuple[int, list[int], list[int], float]]:
     """A Function's instruction list: (operation, input registers, output registers, constant)."""
+    op_of, ins_of, outs_of, const_of = (fn.instruction_id, fn.instruction_input, fn.instruction_output,
+                                        fn.instruction_constant)
     out = []
     for k in range(fn.n_instructions()):
-        op = fn.instruction_id(k)
-        out.append((op, list(fn.instruction_input(k)), list(fn.instruction_output(k)),
-                    float(fn.instruction_constant(k)) if op == ca.OP_CONST else 0.0))
+        op = op_of(k)
+        out.append((op, list(ins_of(k)), list(outs_of(k)), float(const_of(k)) if op == ca.OP_CONST else 0.0))
     return out
+
+
+def _cone(instructions: list[tuple[int, list[int], list[int], float]],
+          output: int = 0) -> list[tuple[int, list[int], list[int], float]]:
+    """The instructions (in their order) that output ``output`` of a Function depends on, and
+    that output's own OP_OUTPUT instructions: the instruction list of the Function of that
+    output alone, without building it. (CasADi sorts an SX Function's algorithm depth first
+    from its outputs in order, so for output 0 this is, instruction for instruction, the
+    list a Function of that output alone would have, up to register numbers, which
+    :class:`_Schedule` does not read; tests/test_supinf.py checks it.)
+
+    Registers are reused in the list, so each read is resolved to the latest write before
+    it; an instruction is kept iff the output reads it, directly or through kept ones."""
+    writer: dict[int, int] = {}  # register -> index of the instruction that last wrote it
+    deps: list[tuple[int, ...]] = []
+    wanted: list[int] = []
+    for k, (op, ins, outs, _) in enumerate(instructions):
+        if op == ca.OP_OUTPUT:
+            deps.append((writer[ins[0]],))
+            if outs[0] == output:
+                wanted.append(k)
+            continue
+        if op in (ca.OP_CONST, ca.OP_INPUT):
+            deps.append(())
+        else:
+            arity = 1 if op in _UNARY or op == ca.OP_ASSIGN else 2
+            deps.append(tuple(writer[i] for i in ins[:arity] if i in writer))
+        writer[outs[0]] = k
+    keep = [False] * len(instructions)
+    todo = wanted
+    while todo:
+        k = todo.pop()
+        if not keep[k]:
+            keep[k] = True
+            todo.extend(deps[k])
+    return [ins for k, ins in enumerate(instructions) if keep[k]]
 
 
 # ================================================================== the grouped schedule
@@ -585,6 +622,9 @@ class IntervalProgram:
         # +-1, so exact (None: nowhere, True: everywhere)
         self._scale_masks: list[tuple] = []
         for g in S.groups:
+            if g.key[0] != "scale":  # read by the "scale" rule only
+                self._scale_masks.append((None, None))
+                continue
             c = g.payload[:, None]
             neg, unit = c < 0, np.abs(c) == 1.0
             self._scale_masks.append((neg if neg.any() else None,
@@ -1416,8 +1456,13 @@ class Bounder:
         say [0, b], |a| = a on the whole box and the true factor 1 lies in [0, 1]."""
         if not any(op == ca.OP_SIGN for op, _, _, _ in self._fg_instructions or ()):
             return False
-        p = self._point
-        return not any(p.instruction_id(k) == ca.OP_SIGN for k in range(p.n_instructions()))
+        return not any(op == ca.OP_SIGN for op, _, _, _ in self._value_instructions)
+
+    @functools.cached_property
+    def _value_instructions(self) -> list[tuple[int, list[int], list[int], float]]:
+        """The instruction list of the expression alone, cut from the value-and-gradient
+        Function's (:func:`_cone`): the same list ``_point`` would give, without building it."""
+        return _cone(self._fg_instructions or [])
 
     @functools.cached_property
     def _point(self) -> ca.Function:
@@ -1444,7 +1489,11 @@ class Bounder:
 
     @functools.cached_property
     def affine(self) -> AffineProgram:
-        """The affine-arithmetic program of the expression (built on first use)."""
+        """The affine-arithmetic program of the expression (built on first use): from the
+        value-and-gradient Function's instructions for the value when there is one (the
+        program ``_point`` would give, without a second Function)."""
+        if self._fg is not None:
+            return AffineProgram(self._fg, instructions=self._value_instructions)
         return AffineProgram(self._point)
 
     def enclose(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
