@@ -301,3 +301,18 @@ def test_collections_are_held_until_the_problem_is_read() -> None:
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT)
     assert r.returncode == 0, r.stderr[-500:]
     assert json.loads(r.stdout.strip().splitlines()[-1]) == [[0, True, True, 0], False, [0, True, True, True]]
+
+
+def test_the_plan_json_is_the_same_text_however_the_planner_was_loaded(tmp_path: Path) -> None:
+    """SWI-Prolog dicts keep their keys in atom-handle order, which depends on what the process
+    created first; the image (.qlf) and the sources create atoms in another order. The JSON
+    text must not depend on it (planner._canonical)."""
+    def plan(env: dict[str, str]) -> str:
+        r = subprocess.run([sys.executable, "-m", "spar_py.cli", "plan", "kb/problems/peg_in_block.yaml", "--json"],
+                           cwd=ROOT, env={**os.environ, **env}, capture_output=True, text=True, timeout=300)
+        assert r.returncode == 0, r.stderr
+        doc = json.loads(r.stdout)
+        doc.pop("timing")
+        return json.dumps(doc)  # the keys in the order the plan gave them
+
+    assert plan({}) == plan({qlf.ENV: "off"})

@@ -198,6 +198,19 @@ def dumps(doc: Any, indent: int = 2, level: int = 0) -> str:
     return "[\n" + ",\n".join(inner + dumps(v, indent, level + 1) for v in doc) + "\n" + pad + "]"
 
 
+def _canonical(v: Any) -> Any:
+    """``v`` with every dict's keys in sorted order, recursively. A SWI-Prolog dict keeps its
+    keys in the order of their atoms' handles, and janus hands them over in that order: it
+    depends on which atoms the process happened to create first (the planner's image loads in
+    a thread while Python reads the problem), so the same plan could be written with its keys
+    in another order from one run to the next."""
+    if isinstance(v, dict):
+        return {k: _canonical(v[k]) for k in sorted(v, key=str)}
+    if isinstance(v, list):
+        return [_canonical(x) for x in v]
+    return v
+
+
 def _verdict(c: dict[str, Any]) -> Verdict:
     return Verdict(action=c["action"], constraint=c["constraint"], kind=c["kind"], sense=c.get("sense", ""),
                    bound=c.get("bound"), threshold=c.get("threshold"), satisfied=bool(c["satisfied"]),
@@ -353,7 +366,7 @@ class Planner:
                             timing={"total_s": round(time.perf_counter() - t0, 6)})
             failures = cell.memo.table("motion.failures", FAILURES_KEPT)
             first = [failures[k] for k in range(len(failures))]
-            d = ans["Dict"]
+            d = _canonical(ans["Dict"])
             if isinstance(d.get("instance"), dict):
                 attach(cell, d["instance"])
         d.setdefault("timing", {})["total_s"] = round(time.perf_counter() - t0, 6)
