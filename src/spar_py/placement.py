@@ -24,7 +24,7 @@ from .geometry import convex_hull_2d, rotz
 from .model import Cell, ObjectModel
 from .units import from_mm, mm_per
 from .workspace import (Requirement, ik_rows, reaches, requirement_clear, requirement_clear_each, requirement_state,
-                        tool_refusal, wrist_height)
+                        shape_key, tool_refusal, wrist_height)
 
 if TYPE_CHECKING:
     from .world.collision import SceneState
@@ -128,10 +128,11 @@ FOOTPRINT_LIMIT = 4096
 
 
 def _shape_key(model: ObjectModel) -> tuple:
-    """What a footprint depends on in ``model``: its shape's primitives (not the object's
-    name: copies of one model share their footprints)."""
-    return tuple((s.kind, np.asarray(s.lo, float).tobytes(), np.asarray(s.hi, float).tobytes(), float(s.radius),
-                  None if s.points is None else np.asarray(s.points, float).tobytes()) for s in model.shape)
+    """What a footprint depends on in ``model``: its shape's primitives (world.collision.solids_key;
+    not the object's name: copies of one model share their footprints)."""
+    from .world.collision import solids_key  # on first use: the collision layer loads lazily
+
+    return solids_key(model.shape)
 
 
 #: Bound of the cell's memo table of shape keys per object name.
@@ -547,6 +548,10 @@ def reachable_somewhere_each(cell: Cell, obj: str,
     positions), solved together: a requirement asked in several poses is checked at all their
     first placements in one batch (one scene state, one IK call, one clearance check)."""
     memo = cell.memo.table("placement.somewhere", SOMEWHERE_LIMIT)
+    # the answer depends on the geometry only (the world holds no other part): renamed copies
+    # of one model (generated cells: N identical blocks and pegs) share it
+    shape = shape_key if cell.collisions else _name_key
+    okey = shape(cell, obj)
     outs: list[np.ndarray] = []
     todo: dict[tuple, list[tuple[int, int]]] = {}  # equal (pose, requirement) asks are solved once
     items: dict[tuple, tuple[str, Requirement]] = {}
@@ -555,8 +560,8 @@ def reachable_somewhere_each(cell: Cell, obj: str,
         out = np.zeros(len(reqs), dtype=bool)
         gkey = _grid_key(cell, obj, pose) if reqs else None
         for i, r in enumerate(reqs):
-            held = None if r.held is None else (r.held[0], np.round(r.held[1], 12).tobytes())
-            key = (gkey, obj, np.round(r.X, 12).tobytes(), held, None if r.width is None else round(r.width, 12))
+            held = None if r.held is None else (shape(cell, r.held[0]), np.round(r.held[1], 12).tobytes())
+            key = (gkey, okey, np.round(r.X, 12).tobytes(), held, None if r.width is None else round(r.width, 12))
             if key in memo:
                 out[i] = memo[key]
             else:
@@ -570,6 +575,12 @@ def reachable_somewhere_each(cell: Cell, obj: str,
             for a, i in where:
                 outs[a][i] = ok
     return outs
+
+
+def _name_key(cell: Cell, obj: str) -> str:
+    """The memo key of ``obj`` in a cell without collision checks: its name (IK alone does not
+    look at the object, so any key serves; the name keeps such cells' tables as they were)."""
+    return obj
 
 
 def _some_placement(cell: Cell, obj: str, items: list[tuple[np.ndarray, Requirement]],

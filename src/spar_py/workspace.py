@@ -32,16 +32,16 @@ if TYPE_CHECKING:
 
 __all__ = ["Reached", "Requirement", "clear_of_world", "ik_rows", "reach_clear", "reaches", "refusals",
            "remember_refusal", "requirement_clear", "requirement_clear_ik", "solutions", "tool_on_table",
-           "requirement_clear_each", "requirement_state", "tool_refusal", "wrist_above_table", "wrist_height"]
+           "requirement_clear_each", "requirement_state", "shape_key", "tool_refusal", "wrist_above_table",
+           "wrist_height"]
 
 #: Refusals kept per cell (the "no plan" explanation): at most this many distinct ones.
 REFUSALS_LIMIT = 256
-#: Bounds of the cell's memo tables: requirement answers by geometry (:func:`requirement_clear`),
-#: objects' shape keys.
+#: Bound of the cell's memo table of requirement answers by geometry (:func:`requirement_clear`).
 REQUIREMENT_LIMIT = 2048
-#: Scene states kept per cell by requirement (:func:`requirement_state`).
+#: Scene states kept per cell by requirement (:func:`requirement_state`), and by the requirement's
+#: geometry (the state a renamed copy's is made from).
 STATE_LIMIT = 512
-SHAPE_KEY_LIMIT = 1024
 
 
 def wrist_height(robot: Robot, T: np.ndarray) -> np.ndarray:
@@ -163,9 +163,9 @@ def requirement_clear(cell: Cell, obj: str, TO: np.ndarray, req: Requirement | n
     # the answer depends on the geometry only (no other part is in this world): renamed copies
     # of one model (generated cells: N identical blocks) asked the same poses share it
     held = req.held[0] if req.held is not None else None
-    hand = None if held is None else (_shape_key(cell, held), np.round(req.held[1], 12).tobytes())
+    hand = None if held is None else (shape_key(cell, held), np.round(req.held[1], 12).tobytes())
     width = None if req.width is None else round(float(req.width), 12)
-    key = (_shape_key(cell, obj), hand, np.round(req.X, 12).tobytes(), width, np.round(TO, 12).tobytes())
+    key = (shape_key(cell, obj), hand, np.round(req.X, 12).tobytes(), width, np.round(TO, 12).tobytes())
     table = cell.memo.table("workspace.requirement", REQUIREMENT_LIMIT)
     names = {obj: "\0obj"} | ({f"held:{held}": "\0held"} if held is not None else {})
     back = {v: k for k, v in names.items()}
@@ -187,9 +187,9 @@ def requirement_clear_each(cell: Cell, obj: str, TO: np.ndarray, req: Requiremen
     if not cell.collisions:
         return requirement_clear_ik(cell, obj, req, Q, okb).ok.copy()
     held = req.held[0] if req.held is not None else None
-    hand = None if held is None else (_shape_key(cell, held), np.round(req.held[1], 12).tobytes())
+    hand = None if held is None else (shape_key(cell, held), np.round(req.held[1], 12).tobytes())
     width = None if req.width is None else round(float(req.width), 12)
-    base = (_shape_key(cell, obj), hand, np.round(req.X, 12).tobytes(), width)
+    base = (shape_key(cell, obj), hand, np.round(req.X, 12).tobytes(), width)
     keys = [(*base, np.round(TO[i:i + 1], 12).tobytes()) for i in range(len(TO))]
     table = cell.memo.table("workspace.requirement", REQUIREMENT_LIMIT)
     out = np.zeros(len(TO), dtype=bool)
@@ -209,19 +209,12 @@ def requirement_clear_each(cell: Cell, obj: str, TO: np.ndarray, req: Requiremen
     return out
 
 
-def _shape_key(cell: Cell, obj: str) -> bytes:
-    """The collision geometry of ``obj`` (its bodies' kinds, sizes, vertices), as bytes: equal
-    for renamed copies of one model."""
+def shape_key(cell: Cell, obj: str) -> tuple:
+    """The collision geometry of ``obj`` (world.collision.CollisionScene.shape_key): equal for
+    renamed copies of one model."""
     from .world.collision import scene_for
 
-    table = cell.memo.table("workspace.shape_key", SHAPE_KEY_LIMIT)
-    if obj not in table:
-        parts = []
-        for b in scene_for(cell).shapes_of(obj):
-            parts += [b.kind.encode(), np.asarray(b.size, float).tobytes(), np.round(b.points, 12).tobytes(),
-                      np.round(b.T, 12).tobytes()]
-        table[obj] = b"|".join(parts)
-    return table[obj]
+    return scene_for(cell).shape_key(obj)
 
 
 def requirement_clear_ik(cell: Cell, obj: str, req: Requirement, Q: np.ndarray, okb: np.ndarray,
@@ -238,15 +231,39 @@ def requirement_state(cell: Cell, obj: str, req: Requirement) -> SceneState | No
     (phase 1 asks each grasp's requirement once per pose)."""
     if not cell.collisions:
         return None
-    from .world.collision import scene_for
-
     held = None if req.held is None else (req.held[0], np.round(req.held[1], 12).tobytes())
     width = None if req.width is None else round(float(req.width), 12)
     key = (obj, np.round(req.X, 12).tobytes(), held, width)
     table = cell.memo.table("workspace.requirement_state", STATE_LIMIT)
     state = table.get(key)
     if state is None:
-        state = table[key] = scene_for(cell).at({}, **_requirement_world(obj, req))
+        state = table[key] = _renamed_or_new(cell, obj, req)
+    return state
+
+
+def _renamed_or_new(cell: Cell, obj: str, req: Requirement) -> SceneState:
+    """A new scene state of a requirement on ``obj``: the state of the same requirement on a
+    renamed copy of ``obj`` (the same geometry exactly: shape, X, the part in the hand and its
+    pose, the width) renamed (SceneState.renamed: the state at() would make, without placing or
+    pairing again), else at()'s. Generated cells ask one requirement of each of N copies."""
+    from .world.collision import scene_for
+
+    scene = scene_for(cell)
+    held = None if req.held is None else req.held[0]
+    hand = None if held is None else (scene.shape_key(held), np.ascontiguousarray(req.held[1], float).tobytes())
+    width = None if req.width is None else float(req.width)
+    key = (scene.shape_key(obj), hand, np.ascontiguousarray(req.X, float).tobytes(), width)
+    table = cell.memo.table("workspace.requirement_proto", STATE_LIMIT)
+    proto = table.get(key)
+    if proto is not None:
+        state, p_obj, p_held = proto
+        names = {p_obj: obj} | ({} if held is None else {p_held: held, f"held:{p_held}": f"held:{held}"})
+        copy = state.renamed({a: b for a, b in names.items() if a != b})
+        if copy is not None:
+            return copy
+    state = scene.at({}, **_requirement_world(obj, req))
+    if proto is None:
+        table[key] = (state, obj, held)
     return state
 
 

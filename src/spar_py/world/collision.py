@@ -37,7 +37,7 @@ cells whose bound is within the margin and whose shapes are not both capsules, o
 second lower bound (:func:`support_gap`: the bodies' supports over their axes and the axes'
 cross products, the separating-axis bound of two boxes) does not already put beyond the margin
 go to the collision library, imported on first use; the grasp rule is decided once per grasp
-(the part's pose in the tool frame) and memoised on the cell. The closest pair of a clear row
+(the part's geometry and pose in the tool frame) and memoised on the cell. The closest pair of a clear row
 (:meth:`SceneState.clearance`) is sought among the pairs whose bounding spheres come within the
 table's distance, in order of their capsule bounds.
 
@@ -59,7 +59,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -71,7 +71,8 @@ if TYPE_CHECKING:
     from ..model import Cell, Solid
     from .robots import GripperGeometry, Robot
 
-__all__ = ["CollisionScene", "DEFAULT_MARGIN_MM", "Obstacle", "SceneState", "scene_for", "segment_distance"]
+__all__ = ["CollisionScene", "DEFAULT_MARGIN_MM", "Obstacle", "SceneState", "scene_for", "segment_distance",
+           "solids_key"]
 
 #: The clearance margin when neither the robot nor the problem file gives one: 2 mm.
 DEFAULT_MARGIN_MM = 2.0
@@ -431,6 +432,7 @@ class CollisionScene:
         self._grippers: dict = {}  # bounded by the cell's grasp widths
         self._slab: Body | None = None
         self._obstacle_bodies: Placed | None = None  # made on first use by at()
+        self._shape_keys: dict[str, tuple] = {}  # by model name: bounded by the cell's parts
         self.stats = {"pairs": 0, "exact": 0}
 
     def slab(self) -> Body:
@@ -464,6 +466,18 @@ class CollisionScene:
         if model not in self.parts:
             raise SparValueError(f"no shape known for part {part!r}")
         return self.parts[model]
+
+    def shape_key(self, part: str) -> tuple:
+        """The collision geometry of ``part`` (:meth:`shapes_of`: each body's kind, size, pose in
+        the object frame and vertices, exactly), not its name: equal for renamed copies of one
+        model, so answers that depend on the geometry alone can be shared by them."""
+        model = part.split("@", 1)[0]
+        key = self._shape_keys.get(model)
+        if key is None:
+            key = self._shape_keys[model] = tuple(
+                (b.kind, np.asarray(b.size, float).tobytes(), np.ascontiguousarray(b.T, float).tobytes(),
+                 np.ascontiguousarray(b.points, float).tobytes()) for b in self.shapes_of(part))
+        return key
 
     def placed(self, part: str, T: np.ndarray, frame: int, name: str | None = None) -> Placed:
         """The bodies of ``part`` (:meth:`shapes_of`) moved by T (4x4, the part's pose in
@@ -575,6 +589,44 @@ class SceneState:
         self._body_frames = np.zeros(0, dtype=int)
         self._static: tuple[np.ndarray, np.ndarray] | None = None
         self._table_pts: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # by _plane_heights
+
+    def renamed(self, names: Mapping[str, str]) -> SceneState | None:
+        """The state :meth:`CollisionScene.at` makes for this state's world with every part name n
+        read as ``names.get(n, n)`` (the parts, ``held``, ``grasped``, ``attached`` and ``allow``
+        of its call renamed alike; a held part's bodies are "held:<name>", so both are mapped),
+        made without placing anything or deciding the pairs again: the same bodies renamed, the
+        same pairs, and the library's distances measured anew where the copy first asks (none
+        are shared). None where a renaming could change which pairs are checked: ``names`` not
+        one to one, or an old or a new name that is also another body's, the table's, a gripper
+        body's or in the robot's allowed pairs, or a held part's two names not mapped alike."""
+        olds, news = set(names), set(names.values())
+        if len(olds) != len(news):
+            return None
+        touched = olds | news
+        reserved = {"table"} | set(_GRIPPER_NAMES) | {n for p in self.scene.allowed for n in p}
+        if touched & reserved:
+            return None
+        for old, new in names.items():  # "held:a" -> "held:b" exactly where a -> b
+            if old.startswith("held:") != new.startswith("held:"):
+                return None
+            if old.startswith("held:") and names.get(_part_of(old), _part_of(old)) != _part_of(new):
+                return None
+            if not old.startswith("held:") and f"held:{old}" in names and names[f"held:{old}"] != f"held:{new}":
+                return None
+        for b in self.bodies:
+            if b.name not in names and (b.name in touched or _part_of(b.name) in touched):
+                return None
+        if self.hand is not None and self.hand[0] not in names and self.hand[0] in touched:
+            return None
+        new = object.__new__(SceneState)
+        new.__dict__.update(self.__dict__)
+        new.bodies = [replace(b, name=names[b.name]) if b.name in names else b for b in self.bodies]
+        if self.hand is not None:
+            new.hand = (names.get(self.hand[0], self.hand[0]), *self.hand[1:])
+        new._rigid = dict.fromkeys(self._rigid)
+        new._measured = {}
+        new._refusal = None
+        return new
 
     # ------------------------------------------------------------------ frames and bounds
 
@@ -813,8 +865,11 @@ class SceneState:
         part = self.hand[0]
         # rounded to 1e-9 and signed zeros made one (+ 0.0): a part grasped on the table, whose
         # pose in the tool each IK solution's frames give with its own rounding, finds the
-        # verdict of the same grasp decided before (a -0.0 would otherwise make another key)
-        key = (part, (np.round(T_tool_part, 9) + 0.0).tobytes(), None if self.width is None else round(self.width, 9))
+        # verdict of the same grasp decided before (a -0.0 would otherwise make another key); the
+        # part by its geometry (the verdict names a gripper body, never the part): renamed copies
+        # of one model share it
+        key = (self.scene.shape_key(part), (np.round(T_tool_part, 9) + 0.0).tobytes(),
+               None if self.width is None else round(self.width, 9))
         table = self.scene.memo.table("collision.grasp", GRASP_LIMIT) if self.scene.memo is not None else None
         if table is not None and key in table:
             return table[key]
@@ -1132,11 +1187,34 @@ def scene_for(cell: Cell) -> CollisionScene:
     margin = getattr(cell, "clearance", None)
     if margin is None:
         margin = robot.margin if robot.margin is not None else from_mm(cell.unit, DEFAULT_MARGIN_MM)
-    parts = {name: solid_bodies(name, m.shape) for name, m in cell.objects.items()}
+    parts = _part_bodies(cell.objects)
     scene = CollisionScene(robot, gripper, parts, getattr(cell, "obstacles", ()), margin,
                            getattr(cell, "table", None), cell.unit, cell.memo)
     table["scene"] = scene
     return scene
+
+
+def solids_key(solids: Iterable[Solid]) -> tuple:
+    """What bodies made from an object's ``shape:`` solids depend on: the primitives, exactly (not
+    the object's name)."""
+    return tuple((s.kind, np.asarray(s.lo, float).tobytes(), np.asarray(s.hi, float).tobytes(), float(s.radius),
+                  None if s.points is None else np.asarray(s.points, float).tobytes()) for s in solids)
+
+
+def _part_bodies(objects: Mapping[str, Any]) -> dict[str, list[Body]]:
+    """Each object's :func:`solid_bodies`, made once per distinct shape: the objects of one shape
+    (generated cells: N copies of one peg and one block) get copies renamed, sharing the arrays and
+    the library's geometry (bodies are read-only)."""
+    made: dict[tuple, list[Body]] = {}
+    out: dict[str, list[Body]] = {}
+    for name, m in objects.items():
+        key = solids_key(m.shape)
+        first = made.get(key)
+        if first is None:
+            out[name] = made[key] = solid_bodies(name, m.shape)
+        else:
+            out[name] = [replace(b, name=name) for b in first]
+    return out
 
 
 # --------------------------------------------------------------------------- bounds for motions
