@@ -172,25 +172,25 @@ def test_somewhere_answers_a_copy_from_its_twin_as_a_fresh_cell_would(g3: Path) 
 
 
 def test_stable_poses_at_once_are_same_stable_pose_one_by_one() -> None:
-    from types import SimpleNamespace
+    from spar_py.geometry import ORTHO_TOL, same_stable_pose, same_stable_poses
 
-    from spar_py.geometry import ORTHO_TOL, same_stable_pose
-    from spar_py.reach import _same_stable_poses
+    def rule(R_abs: np.ndarray, R_pose: np.ndarray) -> bool:  # Sec. 5.2.3: the third rows agree
+        return bool(np.allclose(R_abs[2, :3], R_pose[2, :3], rtol=0.0, atol=ORTHO_TOL))
 
     rng = np.random.default_rng(11)
     cell = load_problem(PROBLEMS / "peg_in_block.yaml")
-    poses = [p for m in cell.objects.values() for p in m.poses.values()]
+    poses = np.stack([p.R for m in cell.objects.values() for p in m.poses.values()])
     seen = set()
     for _ in range(300):
         T = np.eye(4)
-        R = np.asarray(poses[rng.integers(len(poses))].R, float).copy()
+        R = np.asarray(poses[rng.integers(len(poses))], float).copy()
         # nudged by about the tolerance, some inside it and some beyond
         R[2] += rng.choice([0.0, 1.0]) * rng.uniform(-2, 2, 3) * ORTHO_TOL
         T[:3, :3] = R
-        got = _same_stable_poses(T, poses)
-        ref = [same_stable_pose(T[:3, :3], p.R) for p in poses]
-        assert got == ref
+        got = same_stable_poses(T, poses).tolist()
+        ref = [rule(R, P) for P in poses]
+        assert got == ref == [same_stable_pose(T, P) for P in poses]
         seen.update(ref)
     assert seen == {True, False}
-    assert _same_stable_poses(np.eye(4), []) == []
-    assert _same_stable_poses(np.eye(4), [SimpleNamespace(R=np.eye(3))]) == [True]
+    assert same_stable_poses(np.eye(4), np.zeros((0, 3, 3))).tolist() == []
+    assert same_stable_poses(np.eye(4), np.eye(3)[None]).tolist() == [True]

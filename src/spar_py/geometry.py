@@ -549,9 +549,15 @@ def same_stable_pose(R_abs: ArrayLike, R_pose: ArrayLike, tol: float = ORTHO_TOL
     straight up, i.e. ``R_abs.T @ ez == R_pose.T @ ez`` (their third rows agree)
     within ``tol``. Accepts 3x3 or 4x4 (the rotation part is used).
     """
-    a = np.asarray(R_abs, float)[:3, :3]
-    b = np.asarray(R_pose, float)[:3, :3]
-    return bool(np.allclose(a[2], b[2], rtol=0.0, atol=tol))
+    return bool(same_stable_poses(R_abs, np.asarray(R_pose, float)[None], tol)[0])
+
+
+def same_stable_poses(R_abs: ArrayLike, R_poses: ArrayLike, tol: float = ORTHO_TOL) -> np.ndarray:
+    """(k,) :func:`same_stable_pose` of R_abs (3x3 or 4x4) against each of the stable poses
+    R_poses (k, 3, 3) or (k, 4, 4), in one comparison."""
+    a = up_vectors(np.asarray(R_abs, float)[:3, :3])
+    b = up_vectors(np.asarray(R_poses, float)[:, :3, :3])
+    return np.isclose(a, b, rtol=0.0, atol=tol).all(axis=-1)
 
 
 def up_vectors(Rs: ArrayLike) -> np.ndarray:

@@ -78,6 +78,12 @@ class Solid:
     radius: float = 0.0
     points: np.ndarray | None = None
 
+    def key(self) -> tuple:
+        """What the primitive is, exactly (kind and numbers' bits): equal keys, the same primitive
+        (renamed copies of one model share what is made from it)."""
+        return (self.kind, np.asarray(self.lo, float).tobytes(), np.asarray(self.hi, float).tobytes(),
+                float(self.radius), None if self.points is None else np.asarray(self.points, float).tobytes())
+
 
 @dataclass
 class ObjectModel:

@@ -23,7 +23,7 @@ from collections.abc import Callable, Iterable, Sequence
 import numpy as np
 
 from .errors import SparValueError
-from .geometry import ORTHO_TOL, up_vectors
+from .geometry import same_stable_poses
 from .model import Cell, Face, Grasp, ObjectModel
 from .workspace import Requirement, ik_rows, remember_refusal, requirement_clear_ik, requirement_state
 
@@ -89,22 +89,14 @@ def resting_faces(cell: Cell, obj: str, label: str) -> tuple[Face, ...]:
         return model.poses[label].rfaces
     faces: list[Face] = []
     poses = list(model.poses.values())
-    for pose, same in zip(poses, _same_stable_poses(T, poses)):
-        if same:
+    same = same_stable_poses(T, np.stack([p.R for p in poses])) if poses else []
+    for pose, s in zip(poses, same):
+        if s:
             faces += [f for f in pose.rfaces if f not in faces]
     if not faces:
         pos = cell.positions[label]
         raise SparValueError(f"position {label} ({pos.name}) of {obj} is in none of its stable poses")
     return tuple(faces)
-
-
-def _same_stable_poses(T: np.ndarray, poses: Sequence) -> list[bool]:
-    """geometry.same_stable_pose(T, pose.R) for every pose at once: the third rows of the
-    rotations agree within ORTHO_TOL (np.isclose with rtol 0, as its np.allclose, row by row)."""
-    if not poses:
-        return []
-    up = up_vectors(np.stack([np.asarray(p.R, float)[:3, :3] for p in poses]))
-    return np.isclose(up_vectors(np.asarray(T, float)[:3, :3]), up, rtol=0.0, atol=ORTHO_TOL).all(axis=1).tolist()
 
 
 #: How a stable-pose label (a put-down position with no X, Y) counts for condition 2:

@@ -173,11 +173,6 @@ def _local(s: Solid) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return (solid_points(s), *_axes(s))
 
 
-def _solid_key(s: Solid) -> tuple:
-    """What a primitive's polytope depends on (two equal keys: the same polytope, bit for bit)."""
-    return (s.kind, s.lo.tobytes(), s.hi.tobytes(), s.radius, None if s.points is None else s.points.tobytes())
-
-
 def _depth(a: tuple[np.ndarray, np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray, np.ndarray]) -> float:
     """:func:`overlap_depth` of two primitives already :func:`_placed` (cell unit)."""
     (P1, n1, e1), (P2, n2, e2) = a, b
@@ -310,10 +305,10 @@ def _overlaps(cell: Cell) -> Iterator[KBError]:
     if len(pos) < 2:
         return
     shapes = [cell.objects[p.obj].shape for p in pos]
-    by_shape: dict[tuple, float] = {}  # bounding radii by the shapes' _solid_keys: parts share models
+    by_shape: dict[tuple, float] = {}  # bounding radii by the shapes' Solid.keys: parts share models
     radii = []
     for p in pos:
-        key = tuple(_solid_key(s) for s in cell.objects[p.obj].shape)
+        key = tuple(s.key() for s in cell.objects[p.obj].shape)
         if key not in by_shape:
             by_shape[key] = cell.objects[p.obj].bounding_radius()
         radii.append(by_shape[key])
@@ -322,13 +317,13 @@ def _overlaps(cell: Cell) -> Iterator[KBError]:
     gap = np.sqrt(((centres[:, None, :] - centres[None, :, :]) ** 2).sum(axis=2))
     near = gap <= (r[:, None] + r[None, :] + tol) * (1 + 1e-9) + 1e-9 * (1 + gap)
     placed: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
-    local: dict[tuple, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}  # by _solid_key: parts share models
+    local: dict[tuple, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}  # by Solid.key: parts share models
 
     def at(k: int, m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Part k's primitive m, placed (once; in the order the pairs first need them)."""
         if (k, m) not in placed:
             s = shapes[k][m]
-            key = _solid_key(s)
+            key = s.key()
             if key not in local:
                 local[key] = _local(s)
             placed[k, m] = _placed(s, pos[k].T, local[key])

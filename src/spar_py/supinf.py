@@ -412,7 +412,7 @@ def _cone(instructions: list[tuple[int, list[int], list[int], float]],
     output alone, without building it. (CasADi sorts an SX Function's algorithm depth first
     from its outputs in order, so for output 0 this is, instruction for instruction, the
     list a Function of that output alone would have, up to register numbers, which
-    :class:`_Schedule` does not read; tests/test_supinf.py checks it.)
+    :class:`_Schedule` does not read; tests/test_supinf_cone.py checks it.)
 
     Registers are reused in the list, so each read is resolved to the latest write before
     it; an instruction is kept iff the output reads it, directly or through kept ones."""

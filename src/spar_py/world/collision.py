@@ -271,7 +271,11 @@ def _body_columns(bodies: list[Body]) -> tuple:
 
 def _columns(groups: list[Placed]) -> tuple:
     """The columns of :class:`Placed` groups end to end (:meth:`Placed.columns`)."""
-    cols = [g.columns() for g in groups]
+    return _joined([g.columns() for g in groups])
+
+
+def _joined(cols: list[tuple]) -> tuple:
+    """Column tuples (:func:`_body_columns`) of body lists, as one of their concatenation."""
     if not cols:
         return _body_columns([])
     return (np.concatenate([c[0] for c in cols]), np.concatenate([c[1] for c in cols]),
@@ -566,11 +570,8 @@ class SceneState:
         self.bodies = moving + static + world
         self.n_moving = len(moving)
         hand_part = hand[0] if hand is not None else None
-        hc = _body_columns(moving + static)
         wc = _body_columns(world) if world_columns is None else world_columns
-        cap_a, cap_b, cap_r, names, frames, is_cap = (np.concatenate([hc[0], wc[0]]), np.concatenate([hc[1], wc[1]]),
-                                                      np.concatenate([hc[2], wc[2]]), hc[3] + wc[3],
-                                                      np.concatenate([hc[4], wc[4]]), np.concatenate([hc[5], wc[5]]))
+        cap_a, cap_b, cap_r, names, frames, is_cap = _joined([_body_columns(moving + static), wc])
         struct = _pair_structure(scene, self.bodies, len(moving), hand_part, allow, attached,
                                  columns=(names, frames, is_cap))
         self.pairs, self.table_bodies, self.exact_pair, rigid = struct
@@ -1053,10 +1054,7 @@ def _pair_structure(scene: CollisionScene, bodies: list[Body], n_moving: int, ha
     on the moving body and the world body's name, and are set a name at a time for all of them;
     the rest (links, gripper, tool parts: the same at most steps) come from
     :func:`_head_structure`, memoised on the cell."""
-    if columns is None:
-        columns = ([b.name for b in bodies], np.array([b.frame for b in bodies], dtype=int),
-                   np.array([b.kind == "capsule" for b in bodies], dtype=bool))
-    names, frames, is_cap = columns
+    names, frames, is_cap = _body_columns(bodies)[3:] if columns is None else columns
     world_col = frames == WORLD
     world_col[:n_moving] = False
     head_cols = np.flatnonzero(~world_col)
@@ -1197,8 +1195,7 @@ def scene_for(cell: Cell) -> CollisionScene:
 def solids_key(solids: Iterable[Solid]) -> tuple:
     """What bodies made from an object's ``shape:`` solids depend on: the primitives, exactly (not
     the object's name)."""
-    return tuple((s.kind, np.asarray(s.lo, float).tobytes(), np.asarray(s.hi, float).tobytes(), float(s.radius),
-                  None if s.points is None else np.asarray(s.points, float).tobytes()) for s in solids)
+    return tuple(s.key() for s in solids)
 
 
 def _part_bodies(objects: Mapping[str, Any]) -> dict[str, list[Body]]:
