@@ -110,3 +110,57 @@ def test_a_signal_during_start_up_is_one_line(cmd: list[str], delay: float) -> N
     rc, took, err = _signal_after(cmd + ["plan", str(PAPER)], signal.SIGINT, delay)
     assert rc == 130 and took < 0.5, (rc, took, err)
     assert err == "spar: interrupted\n"
+
+
+def test_a_stop_leaves_no_staging_behind_while_writers_still_run(tmp_path: Path) -> None:
+    """The watchdog stops the run while the main thread (or a `dot` child) keeps making files
+    by path in a staging directory: nothing of it may be left, however the two interleave.
+    (Removing the directory in place raced with the writer: CI once found a `.pics.*` left.)"""
+    import threading
+
+    from spar_py.guard import RunGuard
+
+    for round_ in range(20):
+        parent = tmp_path / f"r{round_}"
+        exits: list[int] = []
+        with RunGuard(exit=exits.append) as guard:
+            staging = guard.staging(parent / "pics")
+            go, stop = threading.Event(), threading.Event()
+
+            def writer(where: Path = staging) -> None:
+                i = 0
+                go.set()
+                while not stop.is_set():
+                    try:
+                        (where / f"{i}.png").write_bytes(b"x" * 64)
+                    except OSError:
+                        pass
+                    i += 1
+
+            t = threading.Thread(target=writer)
+            for i in range(200):
+                (staging / f"old{i}.png").write_bytes(b"x")
+            t.start()
+            go.wait()
+            guard._stop(130, "interrupted")
+            time.sleep(0.01)  # the writer goes on after the stop, as the main thread does
+            stop.set()
+            t.join()
+        assert exits == [130]
+        assert sorted(p.name for p in parent.iterdir()) == [], round_
+
+
+def test_after_the_commit_a_stop_changes_nothing(tmp_path: Path) -> None:
+    """Outputs in place means the run is done: a late Ctrl-C must not end it with 130 (which
+    says "no outputs") nor remove anything."""
+    from spar_py.guard import RunGuard
+
+    exits: list[int] = []
+    with RunGuard(exit=exits.append) as guard:
+        staging = guard.staging(tmp_path / "plan.json")
+        (staging / "plan.json").write_text("{}")
+        with guard.commit():
+            (staging / "plan.json").replace(tmp_path / "plan.json")
+        guard._stop(130, "interrupted")
+    assert exits == [] and (tmp_path / "plan.json").read_text() == "{}"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["plan.json"]

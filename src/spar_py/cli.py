@@ -150,8 +150,9 @@ def cmd_plan(args: argparse.Namespace) -> int:
     """Plan a problem; print the plan (or its JSON) and write pictures if asked.
 
     Every output is checked before planning (exit 2 if one cannot be written), made in a
-    temporary file or directory, and moved into place at the end under the run guard,
-    so a timeout, Ctrl-C or SIGTERM never leaves part of them."""
+    staging directory beside it (RunGuard.staging), and moved into place at the end under
+    the run guard, so a timeout, Ctrl-C or SIGTERM never leaves part of them, nor any
+    temporary. After the commit the run is done: a late signal changes nothing."""
     output = Path(args.output) if args.output else None
     picture_dirs = sorted({Path(d) for d in (args.dot, args.png) if d})
     animate = Path(args.animate) if args.animate else None
@@ -183,30 +184,20 @@ def cmd_plan(args: argparse.Namespace) -> int:
     if plan.outcome is Outcome.TIMEOUT:
         raise PlanningTimeout(f"{cell.name}: no result within {args.timeout:g} s")
     staged: list[tuple[Path, Path]] = []  # (temporary, final)
-    if picture_dirs or output is not None or animate is not None:
-        import tempfile  # only for outputs: a plain `spar plan` need not import it (cold start)
     for d in picture_dirs:
         from .pictures import write_pictures
 
-        d.absolute().parent.mkdir(parents=True, exist_ok=True)
-        tmp = guard.temporary(Path(tempfile.mkdtemp(dir=d.absolute().parent, prefix=f".{d.name}.")))
-        for p in write_pictures(cell, plan.to_json(), tmp):
+        for p in write_pictures(cell, plan.to_json(), guard.staging(d)):
             staged.append((p, d / p.name))
     if animate is not None:
         from .pictures.animate import write_animation
 
-        animate.absolute().parent.mkdir(parents=True, exist_ok=True)
-        fd, name = tempfile.mkstemp(dir=animate.absolute().parent, prefix=f".{animate.name}.", suffix=".gif")
-        os.close(fd)
-        tmpgif = guard.temporary(Path(name))
+        tmpgif = guard.staging(animate) / animate.name
         write_animation(cell, plan.to_json(), tmpgif)
         staged.append((tmpgif, animate))
     if output is not None:
-        output.absolute().parent.mkdir(parents=True, exist_ok=True)
-        fd, name = tempfile.mkstemp(dir=output.absolute().parent, prefix=f".{output.name}.", suffix=".tmp")
-        tmpfile = guard.temporary(Path(name))
-        with os.fdopen(fd, "w") as f:
-            f.write(plan.dumps() + "\n")
+        tmpfile = guard.staging(output) / output.name
+        tmpfile.write_text(plan.dumps() + "\n", encoding="utf-8")
         staged.append((tmpfile, output))
     with guard.commit():
         for d in picture_dirs:

@@ -51,6 +51,7 @@ class RunGuard:
         self.timeout = timeout
         self.lock = threading.Lock()
         self._temporaries: list[Path] = []
+        self._committed = False
         self._exit = exit
         self._old_fd = -1
         self._r = self._w = -1
@@ -93,24 +94,46 @@ class RunGuard:
 
     # ------------------------------------------------------------------ outputs
 
-    def temporary(self, path: Path) -> Path:
-        """Register ``path`` (a file or directory) to be removed if the run is cut short."""
+    def staging(self, final: Path) -> Path:
+        """A new, registered directory beside ``final`` (``.<name>.XXXXXXXX``, same file
+        system, so a rename moves its contents into place) in which to make ``final``.
+
+        Made and registered under the lock, so a stop can never fall between the two;
+        removed by :meth:`cleanup` (a stop, or the end of the command)."""
+        import tempfile  # only for commands with outputs (cold start)
+
+        parent = final.absolute().parent
+        parent.mkdir(parents=True, exist_ok=True)
         with self.lock:
+            path = Path(tempfile.mkdtemp(dir=parent, prefix=f".{final.name}."))
             self._temporaries.append(path)
         return path
 
     @contextmanager
     def commit(self) -> Iterator[None]:
-        """Hold off the watchdog while outputs move into place (a few renames)."""
+        """Hold off the watchdog while outputs move into place (a few renames). Once they
+        are in place the command's work is done: a later signal or deadline is ignored,
+        so a stop's exit code always means "no outputs"."""
         with self.lock:
             yield
+            self._committed = True
 
     def cleanup(self) -> None:
-        """Remove every registered temporary that is still there."""
+        """Remove every registered temporary that is still there.
+
+        A directory is first renamed to a name nobody else knows, then removed: writers
+        that are still running (the main thread, a ``dot`` child) make their files by
+        path, and after the rename no such path leads into it, so the removal cannot race
+        with them and leave a half-emptied directory behind."""
         for p in self._temporaries:
             try:
                 if p.is_dir() and not p.is_symlink():
-                    shutil.rmtree(p, ignore_errors=True)
+                    gone = p.with_name(f"{p.name}.{os.getpid()}.gone")
+                    try:
+                        os.rename(p, gone)
+                    except OSError:
+                        gone = p
+                    shutil.rmtree(gone, ignore_errors=True)
                 else:
                     p.unlink(missing_ok=True)
             except OSError:
@@ -139,7 +162,7 @@ class RunGuard:
 
     def _stop(self, code: int, message: str) -> None:
         with self.lock:  # never in the middle of a commit
-            if self._done.is_set():
+            if self._done.is_set() or self._committed:
                 return
             self.cleanup()
             try:
