@@ -843,3 +843,54 @@ def test_fabs_extremum_on_the_kink_is_enclosed(lo: float, hi: float) -> None:
         r = Bounder(e).bounds(reg.box(e))
         assert r.lo <= want_lo + 1e-15 and want_hi - 1e-15 <= r.hi
         assert r.tolerance_reached and want_lo - r.lo <= 1e-3 and r.hi - want_hi <= 1e-3
+
+
+# ------------------------------------------------------------------ deciding a threshold (beat)
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.integers(0, 2**32 - 1), st.integers(1, 5), st.floats(0.0, 1.0), st.sampled_from(["lo", "hi"]))
+def test_beat_gives_the_verdict_of_the_full_refinement(seed: int, n: int, q: float, want: str) -> None:
+    """``beat`` stops SUP/INF once ``INF > beat`` (``SUP < beat``) is settled: the verdict is the
+    one the full refinement gives, the bound stays sound against sampled values, and on
+    thresholds well away from the range's end it does stop early. Thresholds are drawn across
+    the true range, ends included, so both "proved" and "refuted" are met."""
+    rng = np.random.default_rng(seed)
+    reg = Registry()
+    e = random_chain(rng, n, reg)
+    box = reg.box(e)
+    B = Bounder(e)
+    full = B.bounds(box, want=want, max_boxes=MAX_BOXES)
+    lo_s, hi_s = full.lo, full.hi
+    t = float(lo_s + q * (hi_s - lo_s)) if math.isfinite(hi_s - lo_s) else 0.0
+    fast = B.bounds(box, want=want, max_boxes=MAX_BOXES, beat=t)
+    if want == "lo":
+        assert (fast.lo > t) == (full.lo > t), (t, fast, full)
+        assert fast.lo <= full.lo
+    else:
+        assert (fast.hi < t) == (full.hi < t), (t, fast, full)
+        assert fast.hi >= full.hi
+    assert fast.boxes <= full.boxes
+    names = list(box)
+    lo = np.array([box[k][0] for k in names])
+    hi = np.array([box[k][1] for k in names])
+    v = B.values(lo + rng.random((500, len(names))) * (hi - lo))
+    assert fast.lo <= v.min() + 1e-9 and fast.hi >= v.max() - 1e-9
+
+
+def test_beat_stops_at_once_when_the_question_is_easy() -> None:
+    """A threshold far below the minimum (or a centre far above it) is settled by the first
+    pass; the full refinement needs more boxes."""
+    x, y = ca.SX.sym("x"), ca.SX.sym("y")
+    e = ca.sin(3 * x) * ca.cos(2 * y) + x * y
+    box = {"x": (-1.0, 1.0), "y": (-1.0, 1.0)}
+    B = Bounder(e)
+    full = B.bounds(box, want="lo")
+    assert full.boxes > 3 and not full.decided
+    for t in (-10.0, 5.0):  # proved (the whole box's bound is above -10); refuted (f(0, 0) = 0 <= 5)
+        r = B.bounds(box, want="lo", beat=t)
+        assert r.decided and r.boxes <= 3 and (r.lo > t) == (full.lo > t)
+    with pytest.raises(SparValueError):
+        B.bounds(box, beat=0.0)  # want 'both' has no single question
+    with pytest.raises(SparValueError):
+        B.bounds(box, want="hi", beat=math.inf)

@@ -360,11 +360,42 @@ def evaluate(cell: Cell, steps: Sequence[Step], sources: Sources | None = None,
             return {"status": "infeasible", "at": s["id"], "steps": out}
         if not _all_satisfied(checks, "uncertainty") and s["id"] not in skip:
             return {"status": "failed", "at": s["id"], "steps": out}
+    out = _refined(cell, out, worlds)
     if cell.motion is not None:  # the end-points are fixed: the motions between them (world/motion.py)
         from .world.motion import run_motions
 
         return run_motions(cell, steps, worlds, {"status": "ok", "at": None, "steps": out})
     return {"status": "ok", "at": None, "steps": out}
+
+
+def _refined(cell: Cell, out: list[dict[str, Any]], worlds: list[World]) -> list[dict[str, Any]]:
+    """The step records of a run that went through, with each uncertainty-reduction
+    verdict's bound refined to SUP/INF's tolerance.
+
+    The steps decide their constraints with ``decide`` (uncertainty.evaluate): SUP/INF
+    stops once the verdict is settled. A run that went through is one Prolog may report,
+    so its bounds are refined here, as they would have been without ``decide`` (the
+    verdicts do not change). Step i's constraints are the last entries of the world after
+    it, ``worlds[i + 1].checked`` (phase2._checked), in the order of its verdicts, and are
+    bounded in that world's registry (variables' bounds never change)."""
+    records = []
+    for i, rec in enumerate(out):
+        k = sum(1 for v in rec["verdicts"] if v["kind"] == "uncertainty")
+        if not k:
+            records.append(rec)
+            continue
+        after = worlds[i + 1]
+        pairs = iter(after.checked[len(after.checked) - k:])
+        verdicts = []
+        for v in rec["verdicts"]:
+            if v["kind"] == "uncertainty":
+                c, satisfied = next(pairs)
+                v = {**ur.evaluate(c, after.unc.registry, memo=cell.memo).as_dict(), "kind": "uncertainty"}
+                if v["satisfied"] != satisfied:  # cannot happen (Bounder.bounds' beat): say so if it does
+                    raise AssertionError(f"phase 2: {c.action} {c.name}: the refined verdict differs")
+            verdicts.append(v)
+        records.append({**rec, "verdicts": verdicts})
+    return records
 
 
 def _activate(world: World, s: Step) -> World:
@@ -454,7 +485,7 @@ def _verdicts(world: World, cs: list[ur.Constraint], early: bool = False) -> lis
     if early:
         return _verdicts_until_unsatisfied(world, cs)
     out = []
-    for v in ur.evaluate_all(cs, world.unc.registry, memo=world.cell.memo):
+    for v in ur.evaluate_all(cs, world.unc.registry, memo=world.cell.memo, decide=True):
         d = v.as_dict()
         d["kind"] = "uncertainty"
         out.append(d)
@@ -465,7 +496,7 @@ def _verdicts_until_unsatisfied(world: World, cs: list[ur.Constraint]) -> list[d
     """The verdicts of ``cs`` in order, up to and including the first unsatisfied one."""
     out = []
     for c in cs:
-        d = ur.evaluate(c, world.unc.registry, memo=world.cell.memo).as_dict()
+        d = ur.evaluate(c, world.unc.registry, memo=world.cell.memo, decide=True).as_dict()
         d["kind"] = "uncertainty"
         out.append(d)
         if not d["satisfied"]:

@@ -67,7 +67,7 @@ import functools
 import math
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import casadi as ca
 import numpy as np
@@ -1370,6 +1370,9 @@ class BoundResult:
     boxes: int
     lo_found: float = _INF
     hi_found: float = -_INF
+    #: The search stopped because it had decided the question ``beat`` asked (see
+    #: :meth:`Bounder.bounds`): the bound it was asked for is sound but not refined further.
+    decided: bool = False
 
     @property
     def gap(self) -> float:
@@ -1525,20 +1528,29 @@ class Bounder:
 
     def bounds(self, box: Box, *, rel_tol: float = REL_TOL, abs_tol: float = ABS_TOL,
                max_boxes: int = MAX_BOXES, max_time: float | None = None,
-               want: str = "both") -> BoundResult:
+               want: str = "both", beat: float | None = None) -> BoundResult:
         """Sound bounds (INF, SUP) of the expression over ``box``, refined to the tolerance.
 
         ``want`` is 'both', 'lo' (only INF is refined; ``hi`` is the plain interval end)
         or 'hi'. Tolerance: each bound within ``max(abs_tol, rel_tol * w)`` of an attained
         value, ``w`` the spread of attained values found; the budget is ``max_boxes``
         boxes evaluated and ``max_time`` seconds (None: no time limit).
+
+        ``beat`` (with ``want`` 'lo' or 'hi') asks only whether INF > beat (SUP < beat):
+        the search also stops as soon as that is decided, either way: its bound beats
+        ``beat``, or a point where the expression is, rigorously, at most (at least)
+        ``beat`` shows that no sound bound can (``decided`` is then True). The answer to
+        the question is the one the full refinement would give, which continues from
+        the same state: its bound only improves, and the point stays.
         """
         if want not in ("both", "lo", "hi"):
             raise SparValueError(f"supinf: want must be 'both', 'lo' or 'hi', got {want!r}")
+        if beat is not None and (want == "both" or not math.isfinite(beat)):
+            raise SparValueError("supinf: beat needs want 'lo' or 'hi' and a finite number")
         if not (rel_tol >= 0 and abs_tol >= 0) or (rel_tol == 0 and abs_tol == 0):
             raise SparValueError("supinf: tolerances must be >= 0 and not both 0")
         lo, hi = _check_box(self.names, box)
-        return _branch_and_bound(self, lo, hi, rel_tol, abs_tol, max_boxes, max_time, want)
+        return _branch_and_bound(self, lo, hi, rel_tol, abs_tol, max_boxes, max_time, want, beat)
 
 
 def compile_bounder(expr: ca.SX | float) -> Bounder:
@@ -1639,6 +1651,7 @@ class _Search:
         self.rel_tol, self.abs_tol = rel_tol, abs_tol
         self.nv = lo0.size
         self.U = [_INF, _INF]  # best values of g_0 = f and g_1 = -f found at points
+        self.R = [_INF, _INF]  # the same, from rigorous values only (box centres)
         self.best = [0.5 * (lo0 + hi0), 0.5 * (lo0 + hi0)]
         self.settled = [_INF, _INF]  # min L over the boxes taken out of the search
         self.done = [s not in sides for s in (0, 1)]
@@ -1651,14 +1664,29 @@ class _Search:
     def tol(self) -> float:
         return max(self.abs_tol, self.rel_tol * max(0.0, -self.U[1] - self.U[0]))
 
-    def offer(self, points: np.ndarray, f_hi: np.ndarray, f_lo: np.ndarray) -> None:
-        """Record values at points: ``f_hi`` >= f there (for side 0), ``f_lo`` <= f (side 1)."""
+    def offer(self, points: np.ndarray, f_hi: np.ndarray, f_lo: np.ndarray, rigorous: bool = False) -> None:
+        """Record values at points: ``f_hi`` >= f there (for side 0), ``f_lo`` <= f (side 1);
+        ``rigorous``: they are (interval ends), not just floating-point values."""
         for s, g in ((0, f_hi), (1, -f_lo)):
             g = np.where(np.isnan(g), _INF, g)
             j = int(np.argmin(g))
             if g[j] < self.U[s]:
                 self.U[s] = float(g[j])
                 self.best[s] = points[j].copy()
+            if rigorous and g[j] < self.R[s]:
+                self.R[s] = float(g[j])
+
+    def decided(self, beat: float) -> bool:
+        """Whether the one side searched has settled ``beat`` (Bounder.bounds): its lowest
+        box bound is above it, or a rigorous value at a point is at or below it (in the
+        side's own terms: g_0 = f against beat, g_1 = -f against -beat)."""
+        s = self.sides[0]
+        t = beat if s == 0 else -beat
+        if self.R[s] <= t:
+            return True
+        _, _, ps, pL = self.pool
+        waiting = pL[ps == s]
+        return min(self.settled[s], float(waiting.min()) if waiting.size else _INF) > t
 
     def offer_points(self, points: np.ndarray) -> None:
         if points.size:
@@ -1726,7 +1754,7 @@ class _Search:
         fb, fc = f[:, :m], f[:, m:]
         if self.plain is None:  # the first batch is the whole box (once per side)
             self.plain = (float(fb[0, 0]), float(fb[1, 0]))
-        self.offer(c, fc[1], fc[0])
+        self.offer(c, fc[1], fc[0], rigorous=True)
         L = np.where(neg, -fb[1], fb[0])
         cand = [np.where(np.eye(nv, dtype=bool), np.where(self.best[s] == self.lo0, self.hi0, self.lo0),
                          self.best[s]) for s in (0, 1) if not self.done[s]]
@@ -1869,7 +1897,7 @@ class _Search:
 
 
 def _branch_and_bound(B: Bounder, lo0: np.ndarray, hi0: np.ndarray, rel_tol: float, abs_tol: float,
-                      max_boxes: int, max_time: float | None, want: str) -> BoundResult:
+                      max_boxes: int, max_time: float | None, want: str, beat: float | None = None) -> BoundResult:
     if lo0.size == 0 or np.all(lo0 == hi0):  # a constant or a point: one evaluation is all
         f0 = B.enclose(lo0[None, :], hi0[None, :])
         plain = (float(f0[0, 0]), float(f0[1, 0]))
@@ -1878,9 +1906,14 @@ def _branch_and_bound(B: Bounder, lo0: np.ndarray, hi0: np.ndarray, rel_tol: flo
     t_end = None if max_time is None else time.perf_counter() + max_time
     sides = [s for s, w in ((0, "lo"), (1, "hi")) if want in ("both", w)]
     S = _Search(B, lo0, hi0, sides, rel_tol, abs_tol)
+    decided = False
     while S.pool[2].size and S.evaluated < max_boxes and (t_end is None or time.perf_counter() < t_end):
         S.step()
-    return S.result()
+        if beat is not None and S.pool[2].size and S.decided(beat):
+            decided = True
+            break
+    r = S.result()
+    return replace(r, decided=True) if decided else r
 
 
 # ================================================================== plain functions

@@ -625,12 +625,20 @@ class Verdict:
                 "tolerance_reached": self.tolerance_reached, "description": c.description}
 
 
-def evaluate(constraint: Constraint, registry: Registry, *, memo: Memo | None = None, **options: Any) -> Verdict:
+def evaluate(constraint: Constraint, registry: Registry, *, memo: Memo | None = None, decide: bool = False,
+             **options: Any) -> Verdict:
     """Decide ``constraint`` with SUP/INF over its variables' registry bounds (options: Bounder.bounds).
 
     ``memo`` (a cell's memo tables) keeps compiled bounders and results by the
     expression's structure and box (supinf.cached_bounds): phase 2 meets the same
-    constraint in many plan instances and after every remedy it tries."""
+    constraint in many plan instances and after every remedy it tries.
+
+    ``decide``: only the verdict is wanted, and SUP/INF stops as soon as it is settled
+    (Bounder.bounds' ``beat``, the threshold). ``satisfied`` is the one the full
+    refinement gives; ``bound`` is sound but may be looser than that refinement's (phase
+    2 refines the verdicts it reports: phase2.evaluate)."""
+    if decide:
+        options = {**options, "beat": float(constraint.threshold)}
     vkey = None
     if memo is not None and constraint.key is not None:
         # an equal key is the same expression and box up to the variables' names: the
