@@ -9,6 +9,7 @@ optimisation (CasADi's bundled IPOPT) started from many points.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from fractions import Fraction
 from pathlib import Path
 
@@ -21,11 +22,13 @@ from hypothesis import strategies as st
 from spar_py import geometry
 from spar_py.errors import SparValueError
 from spar_py.kb import load_problem
+from spar_py.memo import Memo
 from spar_py.supinf import (
     AffineProgram,
     Bounder,
     BoundResult,
     IntervalProgram,
+    cached_bounds,
     bounds,
     inf,
     interval,
@@ -582,7 +585,6 @@ def test_cached_bounds_by_structure_not_names() -> None:
     """The same constraint rebuilt in another registry (other variable numbering) is one
     cache entry with the same answer; another constant or another box is a new one; the
     tables keep their bounds."""
-    from spar_py.memo import Memo
     from spar_py.supinf import BOUNDER_LIMIT, RESULT_LIMIT, cached_bounds, expression_key
 
     def build(skip: int, c: float = 2.0) -> tuple[ca.SX, dict]:
@@ -894,3 +896,23 @@ def test_beat_stops_at_once_when_the_question_is_easy() -> None:
         B.bounds(box, beat=0.0)  # want 'both' has no single question
     with pytest.raises(SparValueError):
         B.bounds(box, want="hi", beat=math.inf)
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_a_search_stopped_on_beat_goes_on_to_the_full_answer(seed: int) -> None:
+    """cached_bounds keeps a search that stopped on ``beat`` and resumes it: the full refinement
+    asked afterwards is, field for field, the one made from the start (the same boxes in the
+    same order), whatever questions came before it."""
+    rng = np.random.default_rng(700 + seed)
+    reg = Registry()
+    e = random_chain(rng, 1 + seed % 4, reg)
+    box = reg.box(e)
+    want = "lo" if seed % 2 else "hi"
+    fresh = Bounder(e).bounds(box, want=want)
+    end = fresh.lo if want == "lo" else fresh.hi
+    memo = Memo()
+    for t in (end - 10.0, end + 10.0, end - 1e-3, end + 1e-3):  # proved, refuted, and two close calls
+        r = cached_bounds(e, box, memo, want=want, beat=t)
+        assert ((r.lo > t) if want == "lo" else (r.hi < t)) == ((fresh.lo > t) if want == "lo" else (fresh.hi < t))
+    assert replace(cached_bounds(e, box, memo, want=want), decided=False) == fresh
+    assert cached_bounds(e, box, memo, want=want, beat=end - 20.0).boxes == fresh.boxes  # answered by the full one

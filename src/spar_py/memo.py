@@ -52,6 +52,10 @@ class LRU(Generic[V]):
         while len(self._d) > self.limit:
             self._d.popitem(last=False)
 
+    def pop(self, key: Hashable, default: V | None = None) -> V | None:
+        """Remove ``key`` and return its value, or ``default`` if it is not there."""
+        return self._d.pop(key, default)
+
     def get_or_compute(self, key: Hashable, compute: Callable[[], V]) -> V:
         """The value of ``key``, computed with ``compute()`` and kept on a miss."""
         if key in self._d:
@@ -79,6 +83,10 @@ class Memo:
         if t is None:
             t = self._tables[name] = LRU(limit)
         return t
+
+    def existing(self, name: str) -> LRU | None:
+        """The table ``name`` if it has been made, else None (none is made)."""
+        return self._tables.get(name)
 
     def sizes(self) -> dict[str, int]:
         """Entries per table (for tests and benchmarks)."""

@@ -1543,14 +1543,19 @@ class Bounder:
         the question is the one the full refinement would give, which continues from
         the same state: its bound only improves, and the point stays.
         """
-        if want not in ("both", "lo", "hi"):
-            raise SparValueError(f"supinf: want must be 'both', 'lo' or 'hi', got {want!r}")
-        if beat is not None and (want == "both" or not math.isfinite(beat)):
-            raise SparValueError("supinf: beat needs want 'lo' or 'hi' and a finite number")
-        if not (rel_tol >= 0 and abs_tol >= 0) or (rel_tol == 0 and abs_tol == 0):
-            raise SparValueError("supinf: tolerances must be >= 0 and not both 0")
+        _check_options(want, rel_tol, abs_tol, beat)
         lo, hi = _check_box(self.names, box)
-        return _branch_and_bound(self, lo, hi, rel_tol, abs_tol, max_boxes, max_time, want, beat)
+        return _branch_and_bound(self, lo, hi, rel_tol, abs_tol, max_boxes, max_time, want, beat)[0]
+
+
+def _check_options(want: str, rel_tol: float, abs_tol: float, beat: float | None) -> None:
+    """SparValueError unless these are options Bounder.bounds can take."""
+    if want not in ("both", "lo", "hi"):
+        raise SparValueError(f"supinf: want must be 'both', 'lo' or 'hi', got {want!r}")
+    if beat is not None and (want == "both" or not math.isfinite(beat)):
+        raise SparValueError("supinf: beat needs want 'lo' or 'hi' and a finite number")
+    if not (rel_tol >= 0 and abs_tol >= 0) or (rel_tol == 0 and abs_tol == 0):
+        raise SparValueError("supinf: tolerances must be >= 0 and not both 0")
 
 
 def compile_bounder(expr: ca.SX | float) -> Bounder:
@@ -1594,20 +1599,53 @@ def cached_bounds(expr: ca.SX | float, box: Box, memo: Memo | None = None, **opt
     dropped first. Both are keyed by :func:`expression_key`, so a constraint built again
     in another registry, with other variable names, finds them; the result's key adds
     the box (by position) and the options: bounding is deterministic, so an equal
-    question gets the equal answer. Without ``memo``, computed afresh."""
+    question gets the equal answer. Without ``memo``, computed afresh.
+
+    A search that stopped on ``beat`` is kept (``supinf.searches``, at most
+    :data:`SEARCH_LIMIT`) and resumed by the next question on the same expression, box
+    and other options: the full refinement asked later goes on from where the decision
+    stopped (the same steps, so the same result as one made from the start), and a
+    search that ran to its end answers the full refinement too."""
     if memo is None:
         return Bounder(expr).bounds(box, **options)  # type: ignore[arg-type]
     canon, names = _canonical(expr)
     k = canon.serialize().encode()
     lo, hi = _check_box(names, box)
-    rkey = (k, lo.tobytes(), hi.tobytes(), tuple(sorted(options.items())))
+    beat = options.pop("beat", None)
+    full_key = (k, lo.tobytes(), hi.tobytes(), tuple(sorted(options.items())))
+    rkey = full_key if beat is None else full_key + (("beat", beat),)
     results = memo.table("supinf.results", RESULT_LIMIT)
     r = results.get(rkey)
+    if r is None and beat is not None:
+        r = results.get(full_key)  # the full refinement answers every beat
     if r is None:
+        o = _search_options(options)
+        _check_options(o["want"], o["rel_tol"], o["abs_tol"], beat)  # type: ignore[arg-type]
         B = memo.table("supinf.bounders", BOUNDER_LIMIT).get_or_compute(k, lambda: Bounder(canon))
-        cbox = {f"v{i}": (float(a), float(b)) for i, (a, b) in enumerate(zip(lo, hi))}
-        r = results[rkey] = B.bounds(cbox, **options)  # type: ignore[arg-type]
+        # (made by the first search with a beat: bounding without one never needs it)
+        searches = memo.table("supinf.searches", SEARCH_LIMIT) if beat is not None else memo.existing("supinf.searches")
+        S0 = searches.pop(full_key, None) if searches is not None else None
+        r, S = _branch_and_bound(B, lo, hi, beat=beat, search=S0, **o)  # type: ignore[arg-type]
+        if r.decided and searches is not None:
+            searches[full_key] = S
+        else:  # the search ran to its end: the full answer
+            results[full_key] = r
+        results[rkey] = r
     return r
+
+
+#: Bound of the table of searches stopped on ``beat`` (:func:`cached_bounds`): each holds
+#: its pool of boxes (a few kB).
+SEARCH_LIMIT = 512
+
+
+def _search_options(options: Mapping[str, object]) -> dict[str, object]:
+    """Bounder.bounds' options (without beat) with their defaults, checked as it checks them."""
+    o = {"rel_tol": REL_TOL, "abs_tol": ABS_TOL, "max_boxes": MAX_BOXES, "max_time": None, "want": "both", **options}
+    unknown = sorted(set(o) - {"rel_tol", "abs_tol", "max_boxes", "max_time", "want"})
+    if unknown:
+        raise SparValueError(f"supinf: unknown bounding options {unknown}")
+    return o
 
 
 # ================================================================== the search
@@ -1879,11 +1917,12 @@ class _Search:
             self.plain = (float(f0[0, 0]), float(f0[1, 0]))
         plain = self.plain
         _, _, ps, pL = self.pool
+        settled = list(self.settled)  # (not the search's own: a search stopped on beat goes on)
         for s in (0, 1):  # boxes still in the pool (the budget ran out) bound the minimum too
             if not self.done[s] and (ps == s).any():
-                self.settled[s] = min(self.settled[s], float(pL[ps == s].min()))
-        lo = self.settled[0] if 0 in self.sides else plain[0]
-        hi = -self.settled[1] if 1 in self.sides else plain[1]
+                settled[s] = min(settled[s], float(pL[ps == s].min()))
+        lo = settled[0] if 0 in self.sides else plain[0]
+        hi = -settled[1] if 1 in self.sides else plain[1]
         lo, hi = max(lo, plain[0]), min(hi, plain[1])  # the plain enclosure is valid too
         # rigorous values at the best points found; the tolerance claim is made with them
         P = np.vstack(self.best)
@@ -1897,23 +1936,27 @@ class _Search:
 
 
 def _branch_and_bound(B: Bounder, lo0: np.ndarray, hi0: np.ndarray, rel_tol: float, abs_tol: float,
-                      max_boxes: int, max_time: float | None, want: str, beat: float | None = None) -> BoundResult:
+                      max_boxes: int, max_time: float | None, want: str, beat: float | None = None,
+                      search: _Search | None = None) -> tuple[BoundResult, _Search | None]:
+    """The search's result and the search itself (None for a constant or a point).
+
+    ``search``: a search of the same bounder, box and options that stopped on a ``beat``,
+    to go on with (its boxes-evaluated budget carries over; ``max_time`` counts anew)."""
     if lo0.size == 0 or np.all(lo0 == hi0):  # a constant or a point: one evaluation is all
         f0 = B.enclose(lo0[None, :], hi0[None, :])
         plain = (float(f0[0, 0]), float(f0[1, 0]))
         exact = math.isfinite(plain[0]) and math.isfinite(plain[1])
-        return BoundResult(plain[0], plain[1], exact, 1, plain[1], plain[0])
+        return BoundResult(plain[0], plain[1], exact, 1, plain[1], plain[0]), None
     t_end = None if max_time is None else time.perf_counter() + max_time
     sides = [s for s, w in ((0, "lo"), (1, "hi")) if want in ("both", w)]
-    S = _Search(B, lo0, hi0, sides, rel_tol, abs_tol)
-    decided = False
-    while S.pool[2].size and S.evaluated < max_boxes and (t_end is None or time.perf_counter() < t_end):
+    S = search if search is not None else _Search(B, lo0, hi0, sides, rel_tol, abs_tol)
+    decided = beat is not None and S.steps > 0 and bool(S.pool[2].size) and S.decided(beat)
+    while not decided and S.pool[2].size and S.evaluated < max_boxes and (
+            t_end is None or time.perf_counter() < t_end):
         S.step()
-        if beat is not None and S.pool[2].size and S.decided(beat):
-            decided = True
-            break
+        decided = beat is not None and bool(S.pool[2].size) and S.decided(beat)
     r = S.result()
-    return replace(r, decided=True) if decided else r
+    return (replace(r, decided=True) if decided else r), S
 
 
 # ================================================================== plain functions
