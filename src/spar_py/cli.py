@@ -74,12 +74,9 @@ def cmd_kb_derive(args: argparse.Namespace) -> int:
         sys.stdout.write(text)
         return EXIT_OK
     out = Path(args.output)
-    tmp = out.with_name(f".{out.name}.tmp")
     try:
-        tmp.write_text(text, encoding="utf-8")
-        os.replace(tmp, out)
+        args.guard.write_text(out, text)  # whole or not at all, even on Ctrl-C
     except OSError as e:
-        tmp.unlink(missing_ok=True)
         _err(f"{out}: cannot write ({e.strerror or e})")
         return EXIT_INPUT
     return EXIT_OK
@@ -225,7 +222,8 @@ def cmd_regress(args: argparse.Namespace) -> int:
 
     if args.scheduler is not None and args.jobs != 1:
         raise SparError("regress: -j N runs processes on this machine, --scheduler on a cluster: give one")
-    return run_regression(Path(args.dir), jobs=args.jobs, update=args.update, scheduler=args.scheduler)
+    return run_regression(Path(args.dir), jobs=args.jobs, update=args.update, scheduler=args.scheduler,
+                          write=args.guard.write_text)
 
 
 # ---------------------------------------------------------------------- gen
@@ -235,8 +233,11 @@ def cmd_gen(args: argparse.Namespace) -> int:
     """Generate a problem (``spar gen assembly --parts N``)."""
     from .gen import generate_assembly
 
-    path = generate_assembly(args.parts, Path(args.output), blocks=args.blocks)
-    print(path)
+    out = Path(args.output)
+    stage = args.guard.staging(out)  # beside it: the whole tree, or nothing, even on Ctrl-C
+    path = generate_assembly(args.parts, stage, blocks=args.blocks)
+    args.guard.move_tree(stage, out)
+    print(out / path.relative_to(stage))
     return EXIT_OK
 
 

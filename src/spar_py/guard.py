@@ -118,6 +118,32 @@ class RunGuard:
             yield
             self._committed = True
 
+    def write_text(self, final: Path, text: str) -> None:
+        """Write ``final`` whole or not at all: made in a staging directory and moved into
+        place under the lock (a stop before that leaves nothing; the run goes on after)."""
+        stage = self.staging(final)
+        (stage / final.name).write_text(text, encoding="utf-8")
+        with self.lock:
+            os.replace(stage / final.name, final)
+        self._discard(stage)
+
+    def move_tree(self, stage: Path, root: Path) -> None:
+        """Move every file under the staging directory ``stage`` (:meth:`staging`) to the same
+        place under ``root``, all under the lock: a stop sees all of them moved or none."""
+        files = [p for p in sorted(stage.rglob("*")) if p.is_file()]
+        with self.lock:
+            for p in files:
+                dest = root / p.relative_to(stage)
+                dest.parent.mkdir(parents=True, exist_ok=True)
+                os.replace(p, dest)
+        self._discard(stage)
+
+    def _discard(self, stage: Path) -> None:
+        """Remove the (emptied) staging directory ``stage`` and forget it."""
+        with self.lock:
+            self._temporaries = [p for p in self._temporaries if p != stage]
+        shutil.rmtree(stage, ignore_errors=True)
+
     def cleanup(self) -> None:
         """Remove every registered temporary that is still there.
 

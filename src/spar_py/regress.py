@@ -27,6 +27,7 @@ import multiprocessing
 import sys
 import time
 import uuid
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -211,8 +212,11 @@ def _row_name(directory: Path, problem: Path) -> str:
 
 
 def run_regression(directory: Path, jobs: int = 1, update: bool = False, scheduler: str | None = None,
-                   client: Any = None) -> int:
+                   client: Any = None, write: Callable[[Path, str], None] | None = None) -> int:
     """Run every problem under ``directory``; print the table; return the exit code (0/1).
+
+    ``write(path, text)`` writes an expected result with ``--update`` (the ``spar`` command
+    passes its run guard's, so Ctrl-C never leaves one half written); default: a plain write.
 
     ``jobs`` > 1: that many worker processes here. ``scheduler`` (an address such as
     ``tcp://host:8786``) or ``client`` (a ``distributed.Client``): the problems run as
@@ -261,7 +265,11 @@ def run_regression(directory: Path, jobs: int = 1, update: bool = False, schedul
             failed += 1
         elif update:
             expected_dir.mkdir(exist_ok=True)
-            exp_path.write_text(json.dumps(got, indent=1, sort_keys=True) + "\n")
+            text = json.dumps(got, indent=1, sort_keys=True) + "\n"
+            if write is not None:
+                write(exp_path, text)
+            else:
+                exp_path.write_text(text)
             status, note = "UPDATED", got["outcome"]
         elif not exp_path.exists():
             status, note = "NEW", f"no {exp_path} (run with --update to accept)"
