@@ -321,3 +321,27 @@ def test_a_run_stops_bounding_at_its_failing_precondition(planner: Planner) -> N
     assert whole == next(r["verdicts"] for r in fresh["steps"] if r["id"] == at)
     assert len(whole) > len(cut) and whole[:len(cut)] == cut  # it was cut short, and is whole now
     assert later["status"] == fresh["status"] and later["at"] == fresh["at"]
+
+
+@pytest.mark.parametrize("problem", ["peg_in_block", "hopeless_uncertainty", "large_uncertainty", "squeeze"])
+def test_deciding_verdicts_changes_no_plan(problem: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Phase 2 decides each constraint with SUP/INF's ``beat`` (it stops once the verdict is
+    settled) and refines the bounds of the runs that go through: the plan, every reported
+    bound included, is the one bounding everything to the tolerance gives, and each
+    reported bound reached it."""
+    from spar_py import uncertainty as ur
+
+    def strip(d: dict) -> dict:
+        return {k: v for k, v in d.items() if k != "timing"}
+
+    fast = Planner(max_instances=5).plan(PROBLEMS / f"{problem}.yaml").to_json()
+    full_evaluate = ur.evaluate
+
+    def never_decide(c: Any, registry: Any, *, memo: Any = None, decide: bool = False, **options: Any) -> Any:
+        return full_evaluate(c, registry, memo=memo, **options)
+
+    monkeypatch.setattr(ur, "evaluate", never_decide)
+    full = Planner(max_instances=5).plan(PROBLEMS / f"{problem}.yaml").to_json()
+    assert strip(fast) == strip(full)
+    reported = [c for c in fast["instance"]["constraints"] if c["kind"] == "uncertainty"]
+    assert reported and all(c["tolerance_reached"] for c in reported)
