@@ -1625,8 +1625,11 @@ def cached_bounds(expr: ca.SX | float, box: Box, memo: Memo | None = None, **opt
         # (made by the first search with a beat: bounding without one never needs it)
         searches = memo.table("supinf.searches", SEARCH_LIMIT) if beat is not None else memo.existing("supinf.searches")
         S0 = searches.pop(full_key, None) if searches is not None else None
+        if S0 is not None:
+            S0.B = B  # (kept without it: the table of bounders alone bounds what they hold)
         r, S = _branch_and_bound(B, lo, hi, beat=beat, search=S0, **o)  # type: ignore[arg-type]
-        if r.decided and searches is not None:
+        if r.decided and searches is not None and S is not None:
+            S.B = None  # type: ignore[assignment]  # the same bounder again on resuming: it is deterministic
             searches[full_key] = S
         else:  # the search ran to its end: the full answer
             results[full_key] = r
@@ -1635,7 +1638,7 @@ def cached_bounds(expr: ca.SX | float, box: Box, memo: Memo | None = None, **opt
 
 
 #: Bound of the table of searches stopped on ``beat`` (:func:`cached_bounds`): each holds
-#: its pool of boxes (a few kB).
+#: its pool of boxes (a few kB), not its bounder.
 SEARCH_LIMIT = 512
 
 
