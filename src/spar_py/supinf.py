@@ -1643,7 +1643,8 @@ SEARCH_LIMIT = 512
 
 
 def _search_options(options: Mapping[str, object]) -> dict[str, object]:
-    """Bounder.bounds' options (without beat) with their defaults, checked as it checks them."""
+    """Bounder.bounds' options (without beat) with their defaults; SparValueError for an
+    option it does not take (their values: :func:`_check_options`)."""
     o = {"rel_tol": REL_TOL, "abs_tol": ABS_TOL, "max_boxes": MAX_BOXES, "max_time": None, "want": "both", **options}
     unknown = sorted(set(o) - {"rel_tol", "abs_tol", "max_boxes", "max_time", "want"})
     if unknown:
