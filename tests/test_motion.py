@@ -270,8 +270,10 @@ def _boxes(path: Path) -> list[tuple[str, np.ndarray, np.ndarray]]:
 def motion_plans():
     from spar_py import Planner
 
-    pl = Planner(motion=True)  # and the paper's cell, planned here with motions (its file does not ask)
-    cells = _motion_cells() + [ROOT / "kb" / "problems" / "peg_in_block.yaml"]
+    # and the paper's cell, planned here with motions (its file does not ask), and the arm on its
+    # second base, whose put-down is at the edge of reach (the placement must leave its retreat reachable)
+    pl = Planner(motion=True)
+    cells = _motion_cells() + [ROOT / "kb" / "problems" / f"{n}.yaml" for n in ("peg_in_block", "second_base")]
     return [(p, pl.load_problem(p), pl.plan(p)) for p in cells]
 
 
@@ -282,7 +284,7 @@ def test_every_path_of_every_regression_plan(motion_plans) -> None:
     table (each link shape's exact lowest point above z = 0) and of the obstacle boxes (the
     links' axes and the tool point outside them), computed here, not by world/collision.py."""
     planned = [(path, cell, plan) for path, cell, plan in motion_plans if plan.ok]
-    assert {"wall_detour", "peg_in_block"} <= {Path(p).stem for p, _, _ in planned}
+    assert {"wall_detour", "peg_in_block", "second_base"} <= {Path(p).stem for p, _, _ in planned}
     for path, cell, plan in planned:
         inst = plan.instance
         m = inst["motion"]
@@ -463,8 +465,10 @@ def test_durations_of_regression_plans_from_the_robot_file(motion_plans) -> None
     for path, cell, plan in motion_plans:
         if not plan.ok:
             continue
-        v = np.asarray(yaml.safe_load(PUMA.read_text())["velocity_limits"], float)  # deg/s
-        assert cell.robot.name == "puma762"  # the cells' robot file, the one read above
+        robot_file = ROOT / "kb" / "robots" / f"{cell.robot.name}.yaml"  # the cell's robot file (name = stem)
+        doc = yaml.safe_load(robot_file.read_text())
+        assert doc["name"] == cell.robot.name
+        v = np.asarray(doc["velocity_limits"], float)  # deg/s
 
         def own(w) -> float:
             w = np.asarray(w or [], float).reshape(-1, 6)
@@ -601,3 +605,37 @@ def test_subdivide_is_linspace_per_interval() -> None:
         k[rng.uniform(size=len(k)) < 0.3] = 1
         ref = np.concatenate([np.linspace(s[i], s[i + 1], k[i] + 1)[:-1] for i in range(len(k))] + [s[-1:]])
         assert np.array_equal(mo._subdivide(s, k), ref)
+
+
+@pytest.mark.parametrize("kind", ["pickup", "putdown", "assemble"])
+def test_line_ends_are_where_the_tool_lines_end(kind: str) -> None:
+    """line_ends (what phase 2's placements ask the arm to reach) in the world: the far ends of
+    the lines the motions take (module doc), written out here: a pickup approaches along the
+    tool's z and lifts the part straight up; a put-down sets it down from straight above and
+    backs off along tool z; an assemble inserts along V_a and backs off."""
+    from spar_py.geometry import rotz
+
+    rng = np.random.default_rng(3)
+
+    def rotation() -> np.ndarray:
+        Q = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+        return Q if np.linalg.det(Q) > 0 else -Q
+
+    R_pose, X = np.eye(4), np.eye(4)
+    R_pose[:3, :3], X[:3, :3] = rotation(), rotation()
+    X[:3, 3] = rng.normal(size=3)
+    v_obj = rng.normal(size=3)
+    L = 2.5
+    up_obj = R_pose[:3, :3].T @ np.array([0.0, 0.0, 1.0])
+    ends = mo.line_ends(kind, X, up_obj, L, v_obj if kind == "assemble" else None)
+    for yaw in (0.0, 1.1, -2.7):  # any placement of the pose: a turn about world z and a shift
+        T_O = rotz(yaw) @ R_pose
+        T_O[:3, 3] = (rng.normal(), rng.normal(), 1.5)
+        T = T_O @ X
+        z, up = T[:3, 2], np.array([0.0, 0.0, 1.0])
+        insert = T_O[:3, :3] @ v_obj / np.linalg.norm(v_obj)
+        want = {"pickup": (T[:3, 3] - L * z, T[:3, 3] + L * up), "putdown": (T[:3, 3] + L * up, T[:3, 3] - L * z),
+                "assemble": (T[:3, 3] - L * insert, T[:3, 3] - L * z)}[kind]
+        for E, p in zip(ends, want):
+            W = T_O @ E
+            assert np.allclose(W[:3, :3], T[:3, :3]) and np.allclose(W[:3, 3], p), (kind, yaw)

@@ -176,11 +176,16 @@ def _step_key(s: Step) -> tuple:
 
 def _placements(cell: Cell, steps: list[Step],
                 src: dict[str, dict[str, str]]) -> tuple[tuple, dict[str, pl.Placement | None]]:
-    """choose_placements memoised per cell, manipulation sequence (sensing moves nothing)
-    and the parts those manipulations take."""
+    """choose_placements memoised per cell, manipulation sequence (sensing moves nothing),
+    the parts those manipulations take and the motions' approach length (None without them)."""
     manip = [s for s in steps if s["name"] in ("pickup", "putdown", "assemble")]
+    length = None
+    if cell.motion is not None:
+        from .world.motion import approach_length
+
+        length = approach_length(cell, cell.motion)
     key = (tuple(_step_key(s) for s in manip),
-           tuple(sorted((k, tuple(sorted(v.items()))) for k, v in src.items())))
+           tuple(sorted((k, tuple(sorted(v.items()))) for k, v in src.items())), length)
     memo = cell.memo.table("phase2.placements", MEMO_LIMIT)
     return key, memo.get_or_compute(key, lambda: choose_placements(cell, manip, src))
 
@@ -200,6 +205,11 @@ def choose_placements(cell: Cell, steps: list[Step],
     in the free regions works. ``sources`` (see :func:`new_world`) says which part of a
     stock a pickup takes."""
     src = sources or {}
+    length = None  # with motions: the approach length, and each put-down's lines reachable too
+    if cell.motion is not None:
+        from .world.motion import approach_length
+
+        length = approach_length(cell, cell.motion)
     # parts on the table: initial position name or putdown id -> (object, pose)
     on_table: dict[str, tuple[str, np.ndarray]] = {p.name: (p.obj, p.T) for p in cell.positions.values()}
     last: dict[str, np.ndarray] = {}  # object -> where the part in the hand was picked from
@@ -219,10 +229,12 @@ def choose_placements(cell: Cell, steps: list[Step],
                 T = cell.positions[pos].T
                 out[s["id"]] = pl.Placement(obj, cell.positions[pos].label, *T[:3, 3], 0.0, T)
             else:
-                reqs = [_grasp(cell, obj, held[obj]).T] + _later_requirements(cell, steps[i + 1:], obj, held)
+                uses = [("putdown", _grasp(cell, obj, held[obj]).T, None),
+                        *_later_requirements(cell, steps[i + 1:], obj, held)]
                 occupied = [pl.occupant(cell, o, T) for o, T in on_table.values()]
                 near = prev[:2, 3] if prev is not None else None
-                out[s["id"]] = pl.choose(cell, obj, pos, reqs, occupied, near)
+                out[s["id"]] = pl.choose(cell, obj, pos, [X for _, X, _ in uses], occupied, near,
+                                         reach=[] if length is None else _line_ends(cell, obj, pos, uses, length))
             held.pop(obj, None)
             if out[s["id"]] is not None:
                 on_table[s["id"]] = (obj, out[s["id"]].T)
@@ -256,20 +268,34 @@ def _taken(cell: Cell, on_table: dict[str, tuple[str, np.ndarray]], obj: str, la
     return keys[0] if keys else None
 
 
-def _later_requirements(cell: Cell, rest: list[Step], obj: str, held: dict[str, str]) -> list[np.ndarray]:
-    """The tool transforms relative to ``obj``'s frame that later steps need while it stays put."""
-    reqs: list[np.ndarray] = []
+def _later_requirements(cell: Cell, rest: list[Step], obj: str,
+                        held: dict[str, str]) -> list[tuple[str, np.ndarray, np.ndarray | None]]:
+    """What later steps need of ``obj`` while it stays put: (step name, the tool transform
+    relative to ``obj``'s frame, for an assemble onto it the insertion direction V_a in it)."""
+    reqs: list[tuple[str, np.ndarray, np.ndarray | None]] = []
     grasps = dict(held)
     for s in rest:
         name, args = s["name"], s["args"]
         if name == "pickup":
             grasps[args[0]] = args[1]
             if args[0] == obj:
-                reqs.append(_grasp(cell, obj, args[1]).T)
+                reqs.append(("pickup", _grasp(cell, obj, args[1]).T, None))
                 break
         elif name == "assemble" and args[1] == obj and args[0] in grasps:
-            reqs.append(cell.transforms[args[3]] @ _grasp(cell, args[0], grasps[args[0]]).T)
+            reqs.append(("assemble", cell.transforms[args[3]] @ _grasp(cell, args[0], grasps[args[0]]).T,
+                         np.asarray(cell.vectors[args[4]], float)))
     return reqs
+
+
+def _line_ends(cell: Cell, obj: str, pose: str, uses: list[tuple[str, np.ndarray, np.ndarray | None]],
+               length: float) -> list[np.ndarray]:
+    """The far ends of the approach and retreat lines of each use of ``obj`` put down in stable
+    pose ``pose`` (world/motion.py's line_ends), relative to its frame: world z in that frame
+    is the same at every placement of the pose (they differ by a turn about world z)."""
+    from .world.motion import line_ends
+
+    up = cell.objects[obj].poses[pose].R.T @ np.array([0.0, 0.0, 1.0])
+    return [T for kind, X, v in uses for T in line_ends(kind, X, up, length, v)]
 
 
 # ---------------------------------------------------------------------- one step

@@ -462,10 +462,14 @@ def nearest_order(dist: np.ndarray, yaw: np.ndarray, digits: int) -> np.ndarray:
 
 
 def choose(cell: Cell, obj: str, pose: str, requirements: list[np.ndarray],
-           occupied: list[Occupant], near: np.ndarray | None = None) -> Placement | None:
+           occupied: list[Occupant], near: np.ndarray | None = None,
+           reach: Sequence[np.ndarray] = ()) -> Placement | None:
     """The feasible placement nearest ``near`` (xy, cell unit; default the regions'
     centre), or None. Candidates as :func:`candidates`: the footprint in a free region,
-    clear of the ``occupied`` parts' footprints by the clearance.
+    clear of the ``occupied`` parts' footprints by the clearance. Feasible: every
+    requirement reached clear of the world, and every tool pose of ``reach`` (relative to
+    the object, as requirements are) reached by IK alone (the far ends of the motions' tool
+    lines: the motion planner checks the lines' clearance itself).
 
     Nearest: least distance rounded to ROUND_MM, then least yaw, then first in grid order.
     The candidates are checked in that order, the nearest alone and then a chunk at a time,
@@ -499,6 +503,10 @@ def choose(cell: Cell, obj: str, pose: str, requirements: list[np.ndarray],
                 break
             at = np.array([idx[i] for i in live], dtype=int)
             ok[live] = _reach_all(cell, _grid_poses(xy[at], rots[kyaw[at]], height), [x], obj)[:, 0]
+        live = np.flatnonzero(ok)
+        if len(reach) and len(live):
+            at = np.array([idx[i] for i in live], dtype=int)
+            ok[live] = _reach_all(cell, _grid_poses(xy[at], rots[kyaw[at]], height), list(reach)).all(axis=1)
         hits = np.flatnonzero(ok)
         if len(hits):
             i = idx[hits[0]]

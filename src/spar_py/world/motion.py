@@ -736,6 +736,32 @@ def _lines_of(robot: Any, scene: Any, st: Stop, q: np.ndarray, length: float, re
     return app, ret
 
 
+def line_ends(kind: str, X: np.ndarray, up: np.ndarray, length: float,
+              insert: np.ndarray | None = None) -> list[np.ndarray]:
+    """The far ends of the approach and retreat tool lines (:func:`_lines_of`'s directions)
+    of a step whose tool is at ``T_O @ X``, as tool poses relative to the object's frame too:
+    ``kind`` pickup, putdown or assemble (onto the object), ``up`` world z in the object's
+    frame, ``insert`` (assemble) the insertion direction V_a in it, ``length`` the
+    approach length (cell unit). A placement whose line ends the arm cannot reach has no
+    motions: phase 2's placements ask for them (phase2.choose_placements)."""
+    def moved(v: np.ndarray) -> np.ndarray:  # the tool moved by v (object frame)
+        T = np.eye(4)
+        T[:3, 3] = v
+        return T @ X
+
+    backed = X.copy()  # the tool moved back along its own z (its approach direction)
+    backed[:3, 3] -= length * X[:3, 2]
+    u = np.asarray(up, float) / np.linalg.norm(up)
+    if kind == "pickup":  # approach along tool z; the part lifted straight up off its support
+        return [backed, moved(length * u)]
+    if kind == "putdown":  # set down from straight above; the empty hand backs off
+        return [moved(length * u), backed]
+    if kind == "assemble":  # the insertion itself; the empty hand backs off
+        v = np.asarray(insert, float)
+        return [moved(-length * v / np.linalg.norm(v)), backed]
+    raise SparValueError(f"line_ends: no tool lines for {kind!r}")
+
+
 def plan_stops(robot: Any, scene: Any, stops: Sequence[Stop], home: np.ndarray | None,
                initial: Mapping[str, np.ndarray], res: float, length: float,
                opts: MotionOptions) -> InstanceMotion | MotionFailure:
