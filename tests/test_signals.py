@@ -238,3 +238,18 @@ def test_a_stop_during_a_tree_move_sees_all_or_none(tmp_path: Path, monkeypatch:
                 assert len(list((root / "sub").iterdir())) == 50
         assert exits == [130]
         assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+
+
+def test_gen_and_kb_derive_outputs_are_checked_first(tmp_path: Path) -> None:
+    """A file where `spar gen` wants a directory, a directory or a path under a file where
+    `spar kb derive` wants a file: one line naming the path and the option, exit 2, nothing written."""
+    afile = tmp_path / "afile"
+    afile.write_text("x")
+    for args, what in ((["gen", "assembly", "--parts", "2", "-o", str(afile)], "expected a directory"),
+                       (["kb", "derive", str(ROOT / "kb/objects/peg.yaml"), "-o", str(tmp_path)], "not a directory"),
+                       (["kb", "derive", str(ROOT / "kb/objects/peg.yaml"), "-o", str(afile / "x.yaml")],
+                        "under the file")):
+        r = subprocess.run(SPAR + args, capture_output=True, text=True, cwd=ROOT)
+        assert r.returncode == 2 and r.stderr.count("\n") == 1, (args, r.stderr)
+        assert what in r.stderr and "-o" in r.stderr, (args, r.stderr)
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["afile"] and afile.read_text() == "x"

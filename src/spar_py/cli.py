@@ -68,6 +68,8 @@ def cmd_kb_derive(args: argparse.Namespace) -> int:
     """Write an object model with every face, stable pose and grasp explicit (derived ones too)."""
     from .kb import derive_text
 
+    if args.output is not None:
+        _check_output_file("-o", Path(args.output))  # before the work, as spar plan does
     out_dir = Path(args.output).parent if args.output is not None else Path(args.model).parent
     text = derive_text(args.model, _max_input_bytes(args), args.robot, out_dir)
     if args.output is None:
@@ -130,10 +132,10 @@ def _check_output_file(option: str, path: Path) -> None:
         raise SparError(f"{path}: {option}: expected a writable directory, not {parent} (permission denied)")
 
 
-def _check_output_dir(option: str, path: Path) -> None:
-    """A picture directory must be a directory (or creatable) in a writable place (exit 2)."""
+def _check_output_dir(option: str, path: Path, what: str = "the pictures") -> None:
+    """An output directory (for ``what``) must be a directory (or creatable) in a writable place (exit 2)."""
     if path.exists() and not path.is_dir():
-        raise SparError(f"{path}: {option}: expected a directory for the pictures, not a file")
+        raise SparError(f"{path}: {option}: expected a directory for {what}, not a file")
     target = path if path.is_dir() else _existing_parent(path)
     if not target.is_dir():
         raise SparError(f"{path}: {option}: expected a path in a directory, not under the file {target}")
@@ -234,6 +236,7 @@ def cmd_gen(args: argparse.Namespace) -> int:
     from .gen import generate_assembly
 
     out = Path(args.output)
+    _check_output_dir("-o", out, "the generated problem")
     stage = args.guard.staging(out)  # beside it: the whole tree, or nothing, even on Ctrl-C
     path = generate_assembly(args.parts, stage, blocks=args.blocks)
     args.guard.move_tree(stage, out)
