@@ -179,14 +179,29 @@ def test_after_the_commit_a_stop_changes_nothing(tmp_path: Path) -> None:
 
 
 def test_gen_and_kb_derive_write_all_or_nothing(tmp_path: Path) -> None:
-    """`spar gen` writes a whole tree (202 files at N = 100, some seconds) and `spar kb derive`
-    one file: Ctrl-C during either leaves none of it and no temporary, and the output
-    directory's parent holds nothing new but what a finished run made."""
-    for i, delay in enumerate([0.5, 2.5]):
+    """`spar gen` writes a whole tree (202 files at N = 100, a few seconds) and `spar kb derive`
+    one file: Ctrl-C during gen leaves none of it and no temporary (a run that ended first
+    left all of it), and the output directory's parent holds nothing but what a finished
+    run made."""
+    gen100 = ["gen", "assembly", "--parts", "100", "-o"]
+    t = time.monotonic()
+    r = subprocess.run(SPAR + gen100 + [str(tmp_path / "all" / "g")], capture_output=True, cwd=ROOT)
+    took = time.monotonic() - t  # the delays below are fractions of it: the same share of the work anywhere
+    files = sorted(str(p.relative_to(tmp_path / "all")) for p in (tmp_path / "all").rglob("*") if p.is_file())
+    assert r.returncode == 0 and len(files) == 202, (r.returncode, len(files))
+    seen = set()
+    for i, delay in enumerate([0.3, 0.5 * took, 0.8 * took]):
         out = tmp_path / f"gen{i}" / "g"
-        rc, _, err = _signal_after(SPAR + ["gen", "assembly", "--parts", "100", "-o", str(out)], signal.SIGINT, delay)
-        assert rc == 130 and err == "spar: interrupted\n", (rc, err)
-        assert not out.exists() and list(out.parent.iterdir()) == [], list(out.parent.rglob("*"))
+        rc, _, err = _signal_after(SPAR + gen100 + [str(out)], signal.SIGINT, delay)
+        made = sorted(str(p.relative_to(out.parent)) for p in out.parent.rglob("*") if p.is_file())
+        if rc == 0:  # it ended before the signal: then all of it
+            assert made == files, (delay, len(made))
+        else:
+            assert rc == 130 and err == "spar: interrupted\n", (rc, err)
+            assert not out.exists() and list(out.parent.iterdir()) == [], (delay, list(out.parent.rglob("*")))
+        assert [p.name for p in out.parent.iterdir() if p.name.startswith(".")] == [], delay
+        seen.add(rc)
+    assert 130 in seen  # the signal did arrive during some run
     whole = tmp_path / "whole"
     r = subprocess.run(SPAR + ["gen", "assembly", "--parts", "3", "-o", str(whole / "g")], capture_output=True,
                        text=True, cwd=ROOT)
