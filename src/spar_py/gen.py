@@ -244,7 +244,9 @@ def scaled_model(text: str, k: float) -> str:
         return text
     import yaml
 
-    d = yaml.load(text, Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))  # the same data, parsed in C
+    from .kb import SAFE_LOADER
+
+    d = yaml.load(text, Loader=SAFE_LOADER)
 
     def sc(v):
         return [sc(x) for x in v] if isinstance(v, list) else float(v) * k

@@ -492,7 +492,8 @@ def read_text(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> str:
         raise KBError(f, "", "a UTF-8 text file", f"one with byte 0x{data[e.start]:02x} at offset {e.start}") from None
 
 
-_BASE_LOADER: type = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+#: PyYAML's safe loader, libyaml's where PyYAML has it (the same data, parsed in C).
+SAFE_LOADER: type = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
 
 class Refused(yaml.YAMLError):
@@ -503,7 +504,7 @@ class Refused(yaml.YAMLError):
         super().__init__(expected)
 
 
-class BoundedLoader(_BASE_LOADER):  # type: ignore[misc, valid-type]
+class BoundedLoader(SAFE_LOADER):  # type: ignore[misc, valid-type]
     """PyYAML's safe loader that refuses duplicate keys and, in a document with anchors,
     more than MAX_NODES nodes with aliases expanded, nesting deeper than MAX_DEPTH and
     recursive aliases, before it builds any Python object. (Without an anchor there is no

@@ -179,15 +179,19 @@ def _placements(cell: Cell, steps: list[Step],
     """choose_placements memoised per cell, manipulation sequence (sensing moves nothing),
     the parts those manipulations take and the motions' approach length (None without them)."""
     manip = [s for s in steps if s["name"] in ("pickup", "putdown", "assemble")]
-    length = None
-    if cell.motion is not None:
-        from .world.motion import approach_length
-
-        length = approach_length(cell, cell.motion)
     key = (tuple(_step_key(s) for s in manip),
-           tuple(sorted((k, tuple(sorted(v.items()))) for k, v in src.items())), length)
+           tuple(sorted((k, tuple(sorted(v.items()))) for k, v in src.items())), _approach_length(cell))
     memo = cell.memo.table("phase2.placements", MEMO_LIMIT)
     return key, memo.get_or_compute(key, lambda: choose_placements(cell, manip, src))
+
+
+def _approach_length(cell: Cell) -> float | None:
+    """The motions' approach length (cell unit; world/motion.approach_length), None without motions."""
+    if cell.motion is None:
+        return None
+    from .world.motion import approach_length
+
+    return approach_length(cell, cell.motion)
 
 
 def _grasp(cell: Cell, obj: str, label: str) -> Grasp:
@@ -205,11 +209,7 @@ def choose_placements(cell: Cell, steps: list[Step],
     in the free regions works. ``sources`` (see :func:`new_world`) says which part of a
     stock a pickup takes."""
     src = sources or {}
-    length = None  # with motions: the approach length, and each put-down's lines reachable too
-    if cell.motion is not None:
-        from .world.motion import approach_length
-
-        length = approach_length(cell, cell.motion)
+    length = _approach_length(cell)  # with motions, each put-down's tool lines must be reachable too
     # parts on the table: initial position name or putdown id -> (object, pose)
     on_table: dict[str, tuple[str, np.ndarray]] = {p.name: (p.obj, p.T) for p in cell.positions.values()}
     last: dict[str, np.ndarray] = {}  # object -> where the part in the hand was picked from

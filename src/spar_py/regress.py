@@ -216,7 +216,7 @@ def run_regression(directory: Path, jobs: int = 1, update: bool = False, schedul
     """Run every problem under ``directory``; print the table; return the exit code (0/1).
 
     ``write(path, text)`` writes an expected result with ``--update`` (the ``spar`` command
-    passes its run guard's, so Ctrl-C never leaves one half written); default: a plain write.
+    passes its run guard's, so Ctrl-C never leaves one half written); default: ``Path.write_text``.
 
     ``jobs`` > 1: that many worker processes here. ``scheduler`` (an address such as
     ``tcp://host:8786``) or ``client`` (a ``distributed.Client``): the problems run as
@@ -265,11 +265,7 @@ def run_regression(directory: Path, jobs: int = 1, update: bool = False, schedul
             failed += 1
         elif update:
             expected_dir.mkdir(exist_ok=True)
-            text = json.dumps(got, indent=1, sort_keys=True) + "\n"
-            if write is not None:
-                write(exp_path, text)
-            else:
-                exp_path.write_text(text)
+            (write or Path.write_text)(exp_path, json.dumps(got, indent=1, sort_keys=True) + "\n")
             status, note = "UPDATED", got["outcome"]
         elif not exp_path.exists():
             status, note = "NEW", f"no {exp_path} (run with --update to accept)"

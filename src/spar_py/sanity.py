@@ -87,9 +87,10 @@ def _sources(cell: Cell) -> dict[str, Any]:
     resolved against its folder. Empty where the file cannot be read again."""
     import yaml
 
+    from .kb import SAFE_LOADER
+
     try:
-        data = yaml.load(Path(cell.file).read_text(encoding="utf-8"),
-                         Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
+        data = yaml.load(Path(cell.file).read_text(encoding="utf-8"), Loader=SAFE_LOADER)
         base = Path(cell.file).parent
         return {"robot": str(base / data["robot"]),
                 "models": {o: str(base / n["model"]) for o, n in data["objects"].items()}}

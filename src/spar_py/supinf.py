@@ -1954,11 +1954,15 @@ def _branch_and_bound(B: Bounder, lo0: np.ndarray, hi0: np.ndarray, rel_tol: flo
     t_end = None if max_time is None else time.perf_counter() + max_time
     sides = [s for s, w in ((0, "lo"), (1, "hi")) if want in ("both", w)]
     S = search if search is not None else _Search(B, lo0, hi0, sides, rel_tol, abs_tol)
-    decided = beat is not None and S.steps > 0 and bool(S.pool[2].size) and S.decided(beat)
+
+    def settled() -> bool:  # (a fresh search has decided nothing before its first step)
+        return beat is not None and S.steps > 0 and bool(S.pool[2].size) and S.decided(beat)
+
+    decided = settled()
     while not decided and S.pool[2].size and S.evaluated < max_boxes and (
             t_end is None or time.perf_counter() < t_end):
         S.step()
-        decided = beat is not None and bool(S.pool[2].size) and S.decided(beat)
+        decided = settled()
     r = S.result()
     return (replace(r, decided=True) if decided else r), S
 
