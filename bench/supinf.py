@@ -43,7 +43,7 @@ from spar_py import geometry
 from spar_py.kb import load_problem
 from spar_py.model import Cell
 from spar_py.supinf import Bounder
-from spar_py.symbolic import Registry, apply, compose, inv, rotz, trans
+from spar_py.symbolic import Chain, ChainExpr, ErrorFactor, Registry
 from spar_py.uncertainty import (
     WorldState,
     assemble_constraints,
@@ -203,28 +203,28 @@ def _rigid(rng: np.random.Generator, scale: float) -> np.ndarray:
 
 
 def _chain(rng: np.random.Generator, length: int,
-           step_bounds: Callable[[], Callable[[], tuple[float, float]]]) -> tuple[ca.SX, Registry]:
+           step_bounds: Callable[[], Callable[[], tuple[float, float]]]) -> tuple[ChainExpr, Registry]:
     """A product of ``length`` error transforms (trans + rotz, each variable bounded by the
     ``b()`` of its step: ``b = step_bounds()`` once per step) between random rigid transforms;
     then a translation component, a coordinate of T^-1 p or a squared distance (as
-    tests/test_supinf.py builds them)."""
+    tests/test_supinf.py builds them), kept as a chain expression (its ``expr`` is the SX)."""
     reg = Registry()
-    T = _rigid(rng, 30.0)
+    T = Chain.of(_rigid(rng, 30.0))
     for _ in range(length):
         b = step_bounds()
-        E = compose(trans(reg.new("dx", *b()), reg.new("dy", *b()), reg.new("dz", *b())), rotz(reg.new("th", *b())))
+        E = ErrorFactor(reg.new("dx", *b()), reg.new("dy", *b()), reg.new("dz", *b()), reg.new("th", *b()))
         if rng.random() < 0.3:
-            E = inv(E)
-        T = compose(T, E, _rigid(rng, 5.0)) if rng.random() < 0.7 else compose(E, T, _rigid(rng, 5.0))
+            E = E.inverted()
+        T = Chain.of(T, E, _rigid(rng, 5.0)) if rng.random() < 0.7 else Chain.of(E, T, _rigid(rng, 5.0))
     kind, p = int(rng.integers(3)), rng.uniform(-3, 3, 3)
     if kind == 0:
-        return T[int(rng.integers(3)), 3], reg
+        return ChainExpr.coordinate(T, np.zeros(3), int(rng.integers(3))), reg
     if kind == 1:
-        return apply(inv(T), p)[int(rng.integers(3))], reg
-    return ca.sumsqr(apply(T, p) - rng.uniform(-30, 30, 3)), reg
+        return ChainExpr.coordinate(T.inverse(), p, int(rng.integers(3))), reg
+    return ChainExpr.sqdist(T, p, rng.uniform(-30, 30, 3)), reg
 
 
-def random_chain(rng: np.random.Generator, length: int) -> tuple[ca.SX, Registry]:
+def random_chain(rng: np.random.Generator, length: int) -> tuple[ChainExpr, Registry]:
     """:func:`_chain` with each step's variables in [-u, 0] x [0, u] draws, ``w`` log-uniform in
     [1e-3, 0.2] per step (up to +-0.2 in / rad)."""
     def step() -> Callable[[], tuple[float, float]]:
@@ -234,7 +234,7 @@ def random_chain(rng: np.random.Generator, length: int) -> tuple[ca.SX, Registry
     return _chain(rng, length, step)
 
 
-def uniform_chain(rng: np.random.Generator, length: int, half: float = 0.1) -> tuple[ca.SX, Registry]:
+def uniform_chain(rng: np.random.Generator, length: int, half: float = 0.1) -> tuple[ChainExpr, Registry]:
     """As :func:`random_chain`, but every error variable bounded by +-``half`` (in and rad):
     the issue's "products of depth 8 at +-0.1 rad"."""
     return _chain(rng, length, lambda: lambda: (-half, half))
@@ -250,6 +250,7 @@ def deep(rng: np.random.Generator, count: int, length: int = 8, half: float = 0.
     from spar_py.supinf import MAX_BOXES, cached_bounds
 
     ms, boxes, capped, cached, comp, first = [], [], 0, [], [], []
+    sx_gap, sx_capped, sx_t, sx_reached = [], 0, [], 0
     for _ in range(count):
         e, reg = uniform_chain(rng, length, half)
         box = reg.box(e)
@@ -257,6 +258,15 @@ def deep(rng: np.random.Generator, count: int, length: int = 8, half: float = 0.
         ms.append(m)
         boxes.append(m["boxes"])
         capped += m["boxes"] >= MAX_BOXES
+        # the peer: the same search on the SX alone, without the chain's point sets
+        B0 = Bounder(e.expr)
+        r0 = B0.bounds(box)
+        sx_t.append(median_time(lambda: B0.bounds(box), 1) * 1e3)
+        tmin, tmax = m["true"]
+        tmin, tmax = min(tmin, r0.lo_found), max(tmax, r0.hi_found)
+        sx_gap.append(max(tmin - r0.lo, r0.hi - tmax) / max(tmax - tmin, 1e-300))
+        sx_capped += r0.boxes >= MAX_BOXES
+        sx_reached += r0.tolerance_reached
         memo = Memo()
         cached_bounds(e, box, memo)
         cached.append(median_time(lambda: cached_bounds(e, box, memo), repeats) * 1e3)
@@ -269,7 +279,10 @@ def deep(rng: np.random.Generator, count: int, length: int = 8, half: float = 0.
     out.update({"length": length, "half": half, "boxes_median": statistics.median(boxes),
                 "boxes_max": max(boxes), "capped": capped, "max_boxes": MAX_BOXES,
                 "t_cached": statistics.median(cached), "t_compiled": statistics.median(comp),
-                "t_compiled_first": statistics.median(first), "unsound": sum(not m["sound"] for m in ms)})
+                "t_compiled_first": statistics.median(first), "unsound": sum(not m["sound"] for m in ms),
+                "sx_ours": statistics.median(sx_gap), "sx_worst": max(sx_gap), "sx_capped": sx_capped,
+                "sx_reached": sx_reached, "t_sx": statistics.median(sx_t),
+                "worst": max(m["ours"] for m in ms)})
     return out
 
 
@@ -296,7 +309,7 @@ def uniform_table(rng: np.random.Generator, count: int, lengths: tuple[int, ...]
     return rows
 
 
-def _box(er: tuple[ca.SX, Registry]) -> tuple[ca.SX, dict]:
+def _box(er: tuple[ChainExpr, Registry]) -> tuple[ChainExpr, dict]:
     return er[0], er[1].box(er[0])
 
 
@@ -435,6 +448,7 @@ def summarise(name: str, ms: list[dict]) -> dict:
     out.update({k: statistics.median(m[k] for m in ms) for k in SUMMARY_KEYS})
     out["reached"] = sum(bool(m["reached"]) for m in ms)
     out["sound"] = all(m["sound"] for m in ms)
+    out["worst"] = max(m["ours"] for m in ms)
     return out
 
 

@@ -74,6 +74,7 @@ import numpy as np
 
 from .errors import SparValueError
 from .memo import Memo
+from .symbolic import ChainExpr
 from .taylor import GradientModel, affine_centres
 
 __all__ = [
@@ -96,6 +97,13 @@ Box = Mapping[str, tuple[float, float]]
 REL_TOL = 1e-3
 ABS_TOL = 1e-9
 MAX_BOXES = 5000
+#: Boxes evaluated after which a search of a chain expression (symbolic.ChainExpr) also
+#: bounds it by point sets through its chain (hulls.py): most expressions are finished
+#: before. HULL_TOL: the first round's arc tolerance, as a fraction of the spread found
+#: (shared among the arcs); HULL_ROUNDS: the most rounds, each 16 times finer.
+HULL_AFTER = 512
+HULL_TOL = 0.1
+HULL_ROUNDS = 3
 BATCH = 256
 #: The search's affine step (``AffineProgram``) on the expression alone, or (AFFINE_GRADIENT)
 #: on the expression and its gradient, whose enclosures then tighten the interval gradient.
@@ -1380,7 +1388,9 @@ class BoundResult:
         return max(self.lo_found - self.lo, self.hi - self.hi_found)
 
 
-def _as_scalar(expr: ca.SX | float) -> ca.SX:
+def _as_scalar(expr: ca.SX | float | ChainExpr) -> ca.SX:
+    if isinstance(expr, ChainExpr):
+        return expr.expr
     if isinstance(expr, (int, float, np.floating, np.integer)):
         return ca.SX(float(expr))
     if isinstance(expr, ca.DM):
@@ -1414,15 +1424,21 @@ class Bounder:
     ``names`` are the expression's free variables (in the order of the compiled input).
     ``compiled``: evaluate small batches of boxes with the interval rules compiled into a
     CasADi Function (:class:`AdaptiveProgram`; worth it only for a bounder used many times).
+    ``expr`` may be a :class:`~spar_py.symbolic.ChainExpr`: its SX is bounded as any other,
+    and a search that has not finished after :data:`HULL_AFTER` passes also bounds it by
+    point sets through the chain (:mod:`spar_py.hulls`), which keeps deep products tight.
     """
 
-    def __init__(self, expr: ca.SX | float, compiled: bool = False) -> None:
+    def __init__(self, expr: ca.SX | float | ChainExpr, compiled: bool = False) -> None:
         e = _as_scalar(expr)
+        self.chain: ChainExpr | None = expr if isinstance(expr, ChainExpr) else None
         self._compiled = compiled
         syms = ca.symvar(e)
         self.names: list[str] = [s.name() for s in syms]
         if len(set(self.names)) != len(self.names):
             raise SparValueError("supinf: two different symbols share a name in the expression")
+        #: the chain's variables (element_hash) -> their positions in ``names``
+        self.chain_index: dict[int, int] = {v.element_hash(): i for i, v in enumerate(syms)}
         self.expr = e
         x = ca.vertcat(*syms) if syms else ca.SX(0, 1)
         self._x = x
@@ -1558,7 +1574,7 @@ def _check_options(want: str, rel_tol: float, abs_tol: float, beat: float | None
         raise SparValueError("supinf: tolerances must be >= 0 and not both 0")
 
 
-def compile_bounder(expr: ca.SX | float) -> Bounder:
+def compile_bounder(expr: ca.SX | float | ChainExpr) -> Bounder:
     """Compile ``expr`` once for repeated bounding (see :class:`Bounder`)."""
     return Bounder(expr)
 
@@ -1571,28 +1587,38 @@ BOUNDER_LIMIT = 64
 RESULT_LIMIT = 8192
 
 
-def _canonical(expr: ca.SX | float) -> tuple[ca.SX, list[str]]:
+def _canonical(expr: ca.SX | float | ChainExpr) -> tuple[ca.SX | ChainExpr, list[str]]:
     """``expr`` with its free symbols renamed ``v0, v1, ...`` in CasADi's order of appearance,
-    and their original names in that order."""
+    and their original names in that order (a chain expression stays one, renamed)."""
     e = _as_scalar(expr)
     syms = ca.symvar(e)
     canon = [ca.SX.sym(f"v{i}") for i in range(len(syms))]
-    if syms:
-        e = ca.substitute(e, ca.vertcat(*syms), ca.vertcat(*canon))
     names = [v.name() for v in syms]
     if len(set(names)) != len(names):
         raise SparValueError("supinf: two different symbols share a name in the expression")
+    if isinstance(expr, ChainExpr):
+        return expr.substitute(dict(zip(names, canon))), names
+    if syms:
+        e = ca.substitute(e, ca.vertcat(*syms), ca.vertcat(*canon))
     return e, names
 
 
-def expression_key(expr: ca.SX | float) -> bytes:
+def _key(canon: ca.SX | ChainExpr) -> bytes:
+    if isinstance(canon, ChainExpr):
+        return canon.expr.serialize().encode() + b"|chain|" + canon.structure_key()
+    return canon.serialize().encode()
+
+
+def expression_key(expr: ca.SX | float | ChainExpr) -> bytes:
     """A key equal for expressions equal up to the names of their variables (the same
     operations and constants, the variables met in the same order): CasADi's exact
-    serialisation of the graph with its symbols renamed by order of appearance."""
-    return _canonical(expr)[0].serialize().encode()
+    serialisation of the graph with its symbols renamed by order of appearance (and, for
+    a chain expression, its chain's structure)."""
+    return _key(_canonical(expr)[0])
 
 
-def cached_bounds(expr: ca.SX | float, box: Box, memo: Memo | None = None, **options: object) -> BoundResult:
+def cached_bounds(expr: ca.SX | float | ChainExpr, box: Box, memo: Memo | None = None,
+                  **options: object) -> BoundResult:
     """``Bounder.bounds(box, **options)`` of ``expr``, with the compiled bounder and the result
     remembered in ``memo``'s tables ``supinf.bounders`` (at most :data:`BOUNDER_LIMIT`
     entries) and ``supinf.results`` (at most :data:`RESULT_LIMIT`), least recently used
@@ -1609,7 +1635,7 @@ def cached_bounds(expr: ca.SX | float, box: Box, memo: Memo | None = None, **opt
     if memo is None:
         return Bounder(expr).bounds(box, **options)  # type: ignore[arg-type]
     canon, names = _canonical(expr)
-    k = canon.serialize().encode()
+    k = _key(canon)
     lo, hi = _check_box(names, box)
     beat = options.pop("beat", None)
     full_key = (k, lo.tobytes(), hi.tobytes(), tuple(sorted(options.items())))
@@ -1702,6 +1728,9 @@ class _Search:
         self.evaluated = 0
         self.steps = 0  # passes made (steps that have begun)
         self.plain: tuple[float, float] | None = None  # the interval value on the whole box
+        #: sound lower bounds of min g_0 and min g_1 from outside the boxes (the chain's
+        #: point sets, ``use_hull``); None until computed
+        self.floor: list[float] | None = None
 
     def tol(self) -> float:
         return max(self.abs_tol, self.rel_tol * max(0.0, -self.U[1] - self.U[0]))
@@ -1728,7 +1757,36 @@ class _Search:
             return True
         _, _, ps, pL = self.pool
         waiting = pL[ps == s]
-        return min(self.settled[s], float(waiting.min()) if waiting.size else _INF) > t
+        return self._floored(s, min(self.settled[s], float(waiting.min()) if waiting.size else _INF)) > t
+
+    def _floored(self, s: int, lowest: float) -> float:
+        """A lower bound of min g_s: ``lowest`` (from the boxes) or the floor, the higher."""
+        return lowest if self.floor is None else max(lowest, self.floor[s])
+
+    def use_hull(self) -> None:
+        """Bound the chain expression by point sets through its chain (hulls.py): the bounds
+        become the floor, and the variables' values where they are nearly attained are offered
+        as points. The arcs' tolerance starts at :data:`HULL_TOL` of the spread found so far
+        (shared among the chain's arcs) and is divided by 16 (4 times the segments) while a
+        searched side's floor is further than the search's tolerance from the best value,
+        at most :data:`HULL_ROUNDS` times: an extreme at the end of every angle's range (the
+        usual case) is found exactly by the first, coarse round."""
+        from .hulls import hull_bounds
+
+        ce = self.B.chain
+        assert ce is not None
+        n_arcs = 1 + sum(1 for f in ce.chain.factors if not isinstance(f, np.ndarray))
+        for k in range(HULL_ROUNDS):
+            spread = max(0.0, -self.U[1] - self.U[0])
+            tol = max(self.abs_tol, HULL_TOL * spread) / n_arcs / 16.0 ** k
+            if ce.kind == "sqdist":  # x's unit: the spread of |x - q|^2 is about 2 |x - q| times x's
+                tol /= max(1.0, 2.0 * math.sqrt(max(0.0, -self.U[1])))
+            hb = hull_bounds(ce, self.B.names, self.lo0, self.hi0, tol, self.B.chain_index)
+            floor = [hb.lo, -hb.hi]
+            self.floor = floor if self.floor is None else [max(a, b) for a, b in zip(floor, self.floor)]
+            self.offer_points(np.vstack((hb.lo_at, hb.hi_at)))
+            if all(self.U[s] - self.floor[s] <= self.tol() for s in self.sides):
+                break
 
     def offer_points(self, points: np.ndarray) -> None:
         if points.size:
@@ -1759,8 +1817,8 @@ class _Search:
                 keep &= ~on
                 continue
             waiting = pL[ps == s]
-            lowest = min(self.settled[s], float(L[on].min()) if on.any() else _INF,
-                         float(waiting.min()) if waiting.size else _INF)
+            lowest = self._floored(s, min(self.settled[s], float(L[on].min()) if on.any() else _INF,
+                                          float(waiting.min()) if waiting.size else _INF))
             if self.U[s] - lowest <= tol:  # this side is finished
                 self.settled[s], self.done[s] = lowest, True
                 keep &= ~on
@@ -1925,6 +1983,7 @@ class _Search:
         for s in (0, 1):  # boxes still in the pool (the budget ran out) bound the minimum too
             if not self.done[s] and (ps == s).any():
                 settled[s] = min(settled[s], float(pL[ps == s].min()))
+            settled[s] = self._floored(s, settled[s])
         lo = settled[0] if 0 in self.sides else plain[0]
         hi = -settled[1] if 1 in self.sides else plain[1]
         lo, hi = max(lo, plain[0]), min(hi, plain[1])  # the plain enclosure is valid too
@@ -1961,6 +2020,12 @@ def _branch_and_bound(B: Bounder, lo0: np.ndarray, hi0: np.ndarray, rel_tol: flo
     decided = settled()
     while not decided and S.pool[2].size and S.evaluated < max_boxes and (
             t_end is None or time.perf_counter() < t_end):
+        if B.chain is not None and S.floor is None and S.evaluated >= HULL_AFTER:
+            S.use_hull()
+            # the floor may finish a side
+            S.settle(np.empty((0, S.nv)), np.empty((0, S.nv)), np.empty(0, int), np.empty(0))
+            if not S.pool[2].size:
+                break
         S.step()
         decided = settled()
     r = S.result()

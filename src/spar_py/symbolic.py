@@ -16,9 +16,11 @@ homogeneous matrices, column vectors, ``T_world_obj``; lengths in the caller's u
 """
 from __future__ import annotations
 
+import functools
 import math
 import re
 from collections.abc import Iterator, Mapping
+from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
@@ -44,6 +46,9 @@ from .geometry import (
 )
 
 __all__ = [
+    "Chain",
+    "ChainExpr",
+    "ErrorFactor",
     "Matrix",
     "Registry",
     "Scalar",
@@ -181,8 +186,10 @@ class Registry:
         except KeyError:
             raise SparValueError(f"no uncertainty variable named {name!r}") from None
 
-    def box(self, expr: ca.SX | Matrix) -> dict[str, tuple[float, float]]:
+    def box(self, expr: ca.SX | Matrix | ChainExpr) -> dict[str, tuple[float, float]]:
         """``{name: (lo, hi)}`` for the free symbols of ``expr`` (SparValueError for unknown ones)."""
+        if isinstance(expr, ChainExpr):
+            expr = expr.expr
         if not is_symbolic(expr):
             return {}
         out: dict[str, tuple[float, float]] = {}
@@ -215,3 +222,193 @@ class Registry:
 
     def __repr__(self) -> str:
         return f"Registry({len(self)} variables)"
+
+
+# ------------------------------------------------------------------ transform chains
+
+
+Entry = float | ca.SX  # a number or one uncertainty variable (an SX symbol)
+
+
+def _entry(v: object, what: str) -> Entry:
+    """``v`` as a chain entry: a finite float, or an SX scalar symbol (SparValueError otherwise)."""
+    if isinstance(v, ca.SX):
+        if v.numel() == 1 and v.is_constant():
+            v = float(v)
+        elif v.numel() == 1 and v.is_symbolic():
+            return v
+        else:
+            raise SparValueError(f"chain: {what} must be a number or one variable, got {v}")
+    try:
+        f = float(v)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise SparValueError(f"chain: {what} must be a number or one variable, got {v!r}") from None
+    if not math.isfinite(f):
+        raise SparValueError(f"chain: {what} must be finite, got {f}")
+    return f
+
+
+@dataclass(frozen=True)
+class ErrorFactor:
+    """The error transform ``trans(dx, dy, dz) @ rotz(theta)`` (``inverse``: its inverse) of a
+    :class:`Chain`: each entry a number or one uncertainty variable (lengths in the cell unit,
+    ``theta`` in radians)."""
+
+    dx: Entry
+    dy: Entry
+    dz: Entry
+    theta: Entry
+    inverse: bool = False
+
+    def matrix(self) -> Matrix:
+        """The 4x4 transform (SX if an entry is a variable)."""
+        E = compose(trans(self.dx, self.dy, self.dz), rotz(self.theta))
+        return inv(E) if self.inverse else E
+
+    def inverted(self) -> ErrorFactor:
+        return ErrorFactor(self.dx, self.dy, self.dz, self.theta, not self.inverse)
+
+    def symbols(self) -> list[ca.SX]:
+        return [e for e in (self.dx, self.dy, self.dz, self.theta) if isinstance(e, ca.SX)]
+
+
+Factor = np.ndarray | ErrorFactor
+
+
+def _affine(M: ArrayLike) -> np.ndarray:
+    A = np.array(M, dtype=float)
+    if A.shape != (4, 4) or not np.isfinite(A).all() or not np.array_equal(A[3], [0.0, 0.0, 0.0, 1.0]):
+        raise SparValueError("chain: a constant factor must be a finite 4x4 affine transform (last row 0 0 0 1)")
+    return A
+
+
+@dataclass(frozen=True, eq=False)
+class Chain:
+    """A product of transforms kept as its factors, left to right: constant 4x4 arrays and
+    :class:`ErrorFactor` s. Its :meth:`matrix` is ``compose`` of the factors; the factor list
+    is what :mod:`spar_py.hulls` propagates point sets through (supinf's bound on deep
+    products).
+
+    Adjacent constants are multiplied on construction exactly as :func:`compose` does (left
+    to right, in numpy), and an error factor whose entries are all numbers is a constant, so
+    the SX of :meth:`matrix` is, operation for operation, the product of the stored factors.
+    """
+
+    factors: tuple[Factor, ...]
+
+    @classmethod
+    def of(cls, *items: Chain | ErrorFactor | ArrayLike) -> Chain:
+        """The chain of ``items`` in order (chains are flattened)."""
+        out: list[Factor] = []
+        for it in items:
+            for f in (it.factors if isinstance(it, Chain) else (it,)):
+                if isinstance(f, ErrorFactor):
+                    f = ErrorFactor(*(_entry(getattr(f, k), k) for k in ("dx", "dy", "dz", "theta")), f.inverse)
+                    if f.symbols():
+                        out.append(f)
+                        continue
+                    f = np.asarray(f.matrix(), float)
+                A = _affine(f)
+                if out and isinstance(out[-1], np.ndarray):
+                    out[-1] = out[-1] @ A
+                else:
+                    out.append(A)
+        return cls(tuple(out))
+
+    def __matmul__(self, other: Chain | ErrorFactor | ArrayLike) -> Chain:
+        return Chain.of(self, other)
+
+    def inverse(self) -> Chain:
+        """The chain of the inverse: factors reversed, each inverted (constants by :func:`inv`,
+        the closed-form rigid inverse, as numbers)."""
+        return Chain.of(*(f.inverted() if isinstance(f, ErrorFactor) else np.asarray(inv(f), float)
+                          for f in reversed(self.factors)))
+
+    def matrix(self) -> Matrix:
+        """The product as a 4x4 (SX when a factor has a variable)."""
+        return compose(*(f.matrix() if isinstance(f, ErrorFactor) else f for f in self.factors))
+
+    def symbols(self) -> list[ca.SX]:
+        """The variables of the factors (first appearance, each once)."""
+        seen: dict[int, ca.SX] = {}
+        for f in self.factors:
+            if isinstance(f, ErrorFactor):
+                for s in f.symbols():
+                    seen.setdefault(s.element_hash(), s)
+        return list(seen.values())
+
+    def substitute(self, to: Mapping[str, ca.SX]) -> Chain:
+        """The chain with variables renamed (``to``: old name -> new symbol)."""
+        def sub(e: Entry) -> Entry:
+            return to.get(e.name(), e) if isinstance(e, ca.SX) else e
+
+        return Chain(tuple(ErrorFactor(sub(f.dx), sub(f.dy), sub(f.dz), sub(f.theta), f.inverse)
+                           if isinstance(f, ErrorFactor) else f for f in self.factors))
+
+
+@dataclass(frozen=True, eq=False)
+class ChainExpr:
+    """A scalar function of the point ``chain @ point`` (x, in the chain's output frame):
+    ``kind`` 'linear': ``c . x + offset`` (``vector`` = c); 'sqdist': ``|x - q|^2`` (``vector``
+    = q). :attr:`expr` is its SX; supinf bounds it with the chain's structure too."""
+
+    chain: Chain
+    point: tuple[float, float, float]
+    kind: str
+    vector: tuple[float, float, float]
+    offset: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.kind not in ("linear", "sqdist"):
+            raise SparValueError(f"chain expression: kind must be 'linear' or 'sqdist', got {self.kind!r}")
+        for what in ("point", "vector"):
+            v = np.asarray(getattr(self, what), float)
+            if v.shape != (3,) or not np.isfinite(v).all():
+                raise SparValueError(f"chain expression: {what} must be 3 finite numbers")
+            object.__setattr__(self, what, tuple(float(x) for x in v))
+        if not math.isfinite(self.offset):
+            raise SparValueError("chain expression: offset must be finite")
+
+    @classmethod
+    def coordinate(cls, chain: Chain, point: ArrayLike, axis: int) -> ChainExpr:
+        """Coordinate ``axis`` (0, 1, 2) of ``chain @ point``."""
+        if axis not in (0, 1, 2):
+            raise SparValueError(f"chain expression: axis must be 0, 1 or 2, got {axis!r}")
+        return cls(chain, tuple(np.asarray(point, float)), "linear", tuple(np.eye(3)[axis]))
+
+    @classmethod
+    def sqdist(cls, chain: Chain, point: ArrayLike, target: ArrayLike) -> ChainExpr:
+        """``|chain @ point - target|^2``."""
+        return cls(chain, tuple(np.asarray(point, float)), "sqdist", tuple(np.asarray(target, float)))
+
+    @functools.cached_property
+    def expr(self) -> ca.SX:
+        """The SX of the function."""
+        x = apply(self.chain.matrix(), self.point)
+        x = as_sx(x) if is_symbolic(x) else ca.SX(np.asarray(x, float).reshape(3, 1))
+        if self.kind == "linear":
+            c = self.vector
+            out = ca.SX(self.offset) if self.offset else ca.SX(0.0)
+            for k in range(3):
+                if c[k]:
+                    out = out + c[k] * x[k]
+            return out
+        return ca.sumsqr(x - ca.DM(self.vector))
+
+    def substitute(self, to: Mapping[str, ca.SX]) -> ChainExpr:
+        """The same function of renamed variables (``to``: old name -> new symbol)."""
+        return ChainExpr(self.chain.substitute(to), self.point, self.kind, self.vector, self.offset)
+
+    def structure_key(self) -> bytes:
+        """Bytes equal for chain expressions of equal structure (factors, entries' variable
+        positions by first appearance, numbers, kind); with :func:`supinf.expression_key`
+        of :attr:`expr` it keys a bounder."""
+        order = {s.element_hash(): i for i, s in enumerate(self.chain.symbols())}
+        parts: list[bytes] = [self.kind.encode(), np.array(self.point + self.vector + (self.offset,)).tobytes()]
+        for f in self.chain.factors:
+            if isinstance(f, ErrorFactor):
+                parts.append(repr(tuple(f"v{order[e.element_hash()]}" if isinstance(e, ca.SX) else float(e)
+                                        for e in (f.dx, f.dy, f.dz, f.theta)) + (f.inverse,)).encode())
+            else:
+                parts.append(f.tobytes())
+        return b"|".join(parts)
