@@ -20,14 +20,19 @@ factor maps the representation soundly:
 
 After each step V is pruned to its convex hull's vertices (scipy's Qhull). Qhull decides
 in floating point which points are interior; its roundoff is of the order of 1e-15 of the
-coordinates, and e grows by :data:`PRUNE_MARGIN` of them at every pruning, which covers a
-point it may misjudge. Every other rounding (sin, cos, hypot, products) is bounded by a
-few dozen ulps of the magnitudes involved and added to e.
+coordinates, and e grows by :data:`PRUNE_MARGIN` of them at every pruning (or
+:data:`JOGGLE_MARGIN` when a flat set must be joggled), which covers a point it may
+misjudge. Every other rounding (sin, cos, hypot, products) is bounded by a few dozen ulps
+of the magnitudes involved and added to e.
 
 The end: for ``c . x + offset`` the bounds are ``min / max_V c . v -+ |c| e``; for
 ``|x - q|^2`` the maximum is at a vertex, and the minimum distance is bounded below by
 the plane through q's nearest point of conv(V) (Gilbert's algorithm; any unit normal n
-gives ``dist >= n . q - max_V n . v``). Each point also carries the variables' values it
+gives ``dist >= n . q - max_V n . v``). The set is not convex, and its hull may come far
+nearer q than the set does, so the minimum is also bounded by splitting the chain after
+its first error factors (``_split_lower``: the distance between the hull of the right
+part's points and the hull of q carried back through the left part, on pieces of the left
+part's angles), and the best bound is kept. Each point also carries the variables' values it
 came from (its *witness*: an arc end point's angle is attained exactly, a tangent point's
 is the middle of its segment), so supinf can evaluate the function where the bounds are
 nearly attained.
@@ -48,8 +53,11 @@ __all__ = ["HullBound", "hull_bounds"]
 
 _U = 2.0 ** -53
 #: Relative margin (of the largest coordinate) added to the ball radius at each pruning to
-#: a convex hull: many orders of magnitude above Qhull's roundoff.
+#: a convex hull: orders of magnitude above Qhull's roundoff (about 1e-15 of the
+#: coordinates); JOGGLE_MARGIN when the set is flat and Qhull joggles it ('QJ': each
+#: coordinate moved by up to about 1e-11 of the largest).
 PRUNE_MARGIN = 1e-11
+JOGGLE_MARGIN = 1e-8
 #: The largest arc segment (rad): the tangent construction needs delta < pi.
 MAX_SEGMENT = 0.5 * math.pi
 #: The most points one rotation makes (segments are widened beyond: sound, but looser than
@@ -147,13 +155,15 @@ class _Points:
         if len(V) > 4:
             from scipy.spatial import ConvexHull, QhullError
 
-            for opts in ("", "QJ"):
+            margin = PRUNE_MARGIN
+            for opts in ("", "QJ"):  # QJ (joggled input) for flat or degenerate sets
                 try:
                     keep = idx[ConvexHull(V, qhull_options=opts or None).vertices]
                     break
                 except (QhullError, ValueError):
+                    margin = JOGGLE_MARGIN
                     continue
-        self.e += PRUNE_MARGIN * self.scale()
+            self.e += margin * self.scale()
         self.V, self.W = self.V[keep], self.W[keep]
 
 
