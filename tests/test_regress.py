@@ -2,10 +2,12 @@
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import pytest
 
+from spar_py.guard import RunGuard
 from spar_py.regress import run_regression
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -174,3 +176,46 @@ def test_scheduler_and_jobs_exclude_each_other_and_a_bad_address_is_one_line(sui
     r = subprocess.run(spar + ["--scheduler", "bogus://x:1"], capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and r.stderr.count("\n") == 1
     assert r.stderr.startswith("spar: regress: --scheduler bogus://x:1: expected an address")
+
+
+def test_update_writes_every_expected_outcome_and_then_the_suite_passes(tmp_path: Path,
+                                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    for name in ("hole_up", "placement_trap"):
+        _copy_problem(name, tmp_path)
+    shutil.rmtree(tmp_path / "expected")
+    assert run_regression(tmp_path) == 1  # nothing expected yet: NEW
+    assert "NEW" in capsys.readouterr().out
+    written: list[list[Path]] = []
+
+    def write_all(files: list[tuple[Path, str]]) -> None:
+        written.append([p for p, _ in files])
+        for p, text in files:
+            p.write_text(text)
+
+    assert run_regression(tmp_path, update=True, write_all=write_all) == 0
+    # one call with both files, after both problems ran: all or none (the guard's write_all)
+    assert written == [[tmp_path / "expected" / "hole_up.json", tmp_path / "expected" / "placement_trap.json"]]
+    for name in ("hole_up", "placement_trap"):
+        got = json.loads((tmp_path / "expected" / f"{name}.json").read_text())
+        assert got == json.loads((KB / "problems" / "expected" / f"{name}.json").read_text())
+    assert run_regression(tmp_path) == 0
+    assert "2 of 2 passed" in capsys.readouterr().out
+
+
+def test_the_guards_write_all_writes_all_or_none(tmp_path: Path) -> None:
+    """A file that cannot be staged (its directory is a file) stops the set before any file
+    is replaced; a stop (cleanup) before the commit leaves the old files and no staging."""
+    a, b = tmp_path / "a.json", tmp_path / "b.json"
+    a.write_text("old a")
+    blocker = tmp_path / "blocker"
+    blocker.write_text("")
+    exits: list[int] = []
+    with RunGuard(exit=exits.append) as guard:
+        with pytest.raises(OSError):
+            guard.write_all([(a, "new a"), (blocker / "c.json", "new c")])
+        guard.cleanup()
+    assert a.read_text() == "old a" and not [p for p in tmp_path.glob(".*")]
+    with RunGuard(exit=exits.append) as guard:
+        guard.write_all([(a, "new a"), (b, "new b")])
+    assert a.read_text() == "new a" and b.read_text() == "new b"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.json", "b.json", "blocker"]

@@ -225,7 +225,7 @@ def cmd_regress(args: argparse.Namespace) -> int:
     if args.scheduler is not None and args.jobs != 1:
         raise SparError("regress: -j N runs processes on this machine, --scheduler on a cluster: give one")
     return run_regression(Path(args.dir), jobs=args.jobs, update=args.update, scheduler=args.scheduler,
-                          write=args.guard.write_text)
+                          write_all=args.guard.write_all)
 
 
 # ---------------------------------------------------------------------- gen

@@ -22,7 +22,7 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -126,6 +126,21 @@ class RunGuard:
         with self.lock:
             os.replace(stage / final.name, final)
         self._discard(stage)
+
+    def write_all(self, files: Sequence[tuple[Path, str]]) -> None:
+        """Write every (path, text) of ``files``, all or none: each made in a staging
+        directory beside its path, then all moved into place under the lock (a stop before
+        that leaves none of them; one that comes during it waits for the last)."""
+        staged = []
+        for final, text in files:
+            stage = self.staging(final)
+            (stage / final.name).write_text(text, encoding="utf-8")
+            staged.append((stage, final))
+        with self.lock:
+            for stage, final in staged:
+                os.replace(stage / final.name, final)
+        for stage, _ in staged:
+            self._discard(stage)
 
     def move_tree(self, stage: Path, root: Path) -> None:
         """Move every file under the staging directory ``stage`` (:meth:`staging`) to the same

@@ -212,11 +212,12 @@ def _row_name(directory: Path, problem: Path) -> str:
 
 
 def run_regression(directory: Path, jobs: int = 1, update: bool = False, scheduler: str | None = None,
-                   client: Any = None, write: Callable[[Path, str], None] | None = None) -> int:
+                   client: Any = None, write_all: Callable[[list[tuple[Path, str]]], None] | None = None) -> int:
     """Run every problem under ``directory``; print the table; return the exit code (0/1).
 
-    ``write(path, text)`` writes an expected result with ``--update`` (the ``spar`` command
-    passes its run guard's, so Ctrl-C never leaves one half written); default: ``Path.write_text``.
+    ``write_all([(path, text), ...])`` writes the expected results with ``--update``, once
+    every problem has run (the ``spar`` command passes its run guard's: all of them or,
+    after a Ctrl-C, none, and none half written); default: each by ``Path.write_text``.
 
     ``jobs`` > 1: that many worker processes here. ``scheduler`` (an address such as
     ``tcp://host:8786``) or ``client`` (a ``distributed.Client``): the problems run as
@@ -257,6 +258,7 @@ def run_regression(directory: Path, jobs: int = 1, update: bool = False, schedul
     failed = 0
     rows = []
     diffs: list[str] = []
+    updates: list[tuple[Path, str]] = []
     for path, got, err, secs in results:
         stem, expected_dir = names[path], Path(path).parent / "expected"
         exp_path = expected_dir / f"{Path(path).stem}.json"
@@ -264,8 +266,7 @@ def run_regression(directory: Path, jobs: int = 1, update: bool = False, schedul
             status, note = "ERROR", err
             failed += 1
         elif update:
-            expected_dir.mkdir(exist_ok=True)
-            (write or Path.write_text)(exp_path, json.dumps(got, indent=1, sort_keys=True) + "\n")
+            updates.append((exp_path, json.dumps(got, indent=1, sort_keys=True) + "\n"))
             status, note = "UPDATED", got["outcome"]
         elif not exp_path.exists():
             status, note = "NEW", f"no {exp_path} (run with --update to accept)"
@@ -280,6 +281,10 @@ def run_regression(directory: Path, jobs: int = 1, update: bool = False, schedul
                 diffs += [f"--- {stem}"] + diff(expected, got)
         rows.append((stem, status, f"{secs:7.2f}", note))
 
+    if updates:
+        for p, _ in updates:
+            p.parent.mkdir(exist_ok=True)
+        (write_all or _write_each)(updates)
     w = max(len(r[0]) for r in rows)
     print(f"{'problem':{w}}  result   time/s  note")
     for stem, status, secs, note in rows:
@@ -289,6 +294,11 @@ def run_regression(directory: Path, jobs: int = 1, update: bool = False, schedul
     if diffs:
         print("\n".join(diffs))
     return 1 if failed else 0
+
+
+def _write_each(files: list[tuple[Path, str]]) -> None:
+    for path, text in files:
+        path.write_text(text, encoding="utf-8")
 
 
 def _note(s: dict[str, Any]) -> str:
