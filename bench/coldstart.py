@@ -268,8 +268,13 @@ def target_rows(r: dict | None) -> list[list[str]]:
     if not r:
         return []
     m = r["median"]
-    return [[f"cold `spar plan` <= {r['target']:g}x the import floor (issue 18)",
-             f"{r['ratio']:.2f}x ({m['plan'] * 1e3:.0f} ms against {m['floor'] * 1e3:.0f} ms)",
+    text = f"{r['ratio']:.2f}x ({m['plan'] * 1e3:.0f} ms against {m['floor'] * 1e3:.0f} ms)"
+    steps = (r.get("breakdown") or {}).get("steps", {})
+    first = next((v for k, v in steps.items() if k.startswith("Planner.plan (")), None)
+    if first is not None:  # how much of the excess is the plan's own work, not starting up
+        text += (f"; the first plan itself (Planner.plan: {first * 1e3:.0f} ms, breakdown below) taken out, "
+                 f"{(m['plan'] - first) / m['floor']:.2f}x")
+    return [[f"cold `spar plan` <= {r['target']:g}x the import floor (issue 18)", text,
              "met" if r["ratio"] <= r["target"] else "NOT met"]]
 
 
