@@ -189,3 +189,19 @@ def test_an_entry_that_is_not_code_is_compiled_again(tmp_path: Path) -> None:
     image.exec(src, {}, ns)
     assert ns["x"] == 1 and image.added == 1 and image.save()
     assert marshal.loads(dcimage.CodeImage(path).codes[src]) == compile(src, "<string>", "exec", dont_inherit=True)
+
+
+def test_saving_removes_images_of_other_layouts_only(tmp_path: Path) -> None:
+    """An image of an older layout of this module (format 1 before) is never read again and is
+    removed when this one is written; another interpreter's image of this layout stays."""
+    path = dcimage.image_path(tmp_path)
+    assert path is not None and f"-{dcimage.FORMAT}-" in path.name
+    old = tmp_path / path.name.replace(f"-{dcimage.FORMAT}-", "-1-", 1)
+    other = tmp_path / f"dataclass-methods-{dcimage.FORMAT}-cpython-399-00000000-O0.marshal"
+    unrelated = tmp_path / "notes.marshal"
+    for p in (old, other, unrelated):
+        p.write_bytes(marshal.dumps({}))
+    image = dcimage.CodeImage(path)
+    _with_image(image, _make_classes)
+    assert image.save()
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([path.name, other.name, unrelated.name])

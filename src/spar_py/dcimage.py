@@ -97,7 +97,21 @@ class CodeImage:
                 pass
             return False
         self.added = 0
+        _drop_other_formats(self.path.parent)
         return True
+
+
+def _drop_other_formats(base: Path) -> None:
+    """Remove images of this module's other layouts (``dataclass-methods-<F>-*.marshal``,
+    F != FORMAT) from ``base``: no process reads them again. Images of the same layout for
+    other interpreters stay (their processes still use them)."""
+    for p in base.glob("dataclass-methods-*-*.marshal"):
+        fmt = p.name[len("dataclass-methods-"):].split("-", 1)[0]
+        if fmt != str(FORMAT):
+            try:
+                p.unlink()
+            except OSError:
+                pass
 
 
 def _code(data: bytes) -> CodeType | None:
