@@ -188,6 +188,31 @@ def test_hull_bounds_are_sound_and_their_witnesses_nearly_attain_them(seed: int,
         assert hb.hi - at[1] <= 1e-3 * w + depth * 2e-3 * 2 * math.sqrt(hb.hi)
 
 
+def test_constant_entries_and_variables_shared_between_factors_stay_sound() -> None:
+    """Entries may be numbers, and one variable may appear in several factors (the point sets
+    then treat its appearances as independent: looser, never unsound)."""
+    rng = np.random.default_rng(7)
+    for _ in range(12):
+        reg = Registry()
+        pool = [reg.new(n, -0.2, 0.1) for n in ("a", "b", "c", "t")]
+        T = Chain.of(rigid(rng, 20.0))
+        for _ in range(int(rng.integers(2, 6))):
+            entries = [pool[int(rng.integers(4))] if rng.random() < 0.7 else float(rng.uniform(-1, 1))
+                       for _ in range(4)]
+            E = ErrorFactor(*entries)
+            T = Chain.of(T, E.inverted() if rng.random() < 0.3 else E, rigid(rng, 4.0))
+        ce = (ChainExpr.coordinate(T, rng.uniform(-2, 2, 3), int(rng.integers(3))) if rng.random() < 0.6
+              else ChainExpr.sqdist(T, rng.uniform(-2, 2, 3), rng.uniform(-20, 20, 3)))
+        box = reg.box(ce)
+        names = list(box)
+        lo, hi = arrays(names, box)
+        hb = hull_bounds(ce, names, lo, hi, 1e-3)
+        v = own_values(ce, names, sample(rng, lo, hi, 300))
+        assert hb.lo <= v.min() and v.max() <= hb.hi
+        r = Bounder(ce).bounds(box)
+        assert r.lo <= v.min() and v.max() <= r.hi
+
+
 # ------------------------------------------------------------------ through supinf
 
 
