@@ -178,7 +178,8 @@ def verdicts(r: dict) -> dict:
             max(worst_deep, by_depth) <= SUPINF_EXCESS and d["capped"] == 0,
             f"depth 8 at +-0.1: {worst_deep:.1e} of the width at worst, cap hit {d['capped']}/{d['count']}; "
             f"random products depth 1-8: {by_depth:.1e} at worst (the same search on the SX alone, same "
-            f"run: {_f(d.get('sx_worst'), '.1e')} at worst, cap hit {d.get('sx_capped', '?')}/{d['count']})")
+            f"run: {_f(d.get('sx_worst'), '.1e')} at worst, cap hit {d.get('sx_capped', '?')}/{d['count']}; on "
+            f"the SX as composed: {_f(d.get('old_worst'), '.1e')}, cap hit {d.get('old_capped', '?')}/{d['count']})")
     v["warm"] = (p["warm"]["wall_s"] < WARM_S, f"{p['warm']['wall_s'] * 1e3:.0f} ms")
     v["cold"] = (p["cold"]["plan_s"] < COLD_S, f"{p['cold']['plan_s']:.2f} s")
     n10 = next((x for x in p["scaling"] if x["n"] == 10), None)
@@ -317,16 +318,23 @@ def render(r: dict) -> str:
         L += [f"### Products of depth 8 at +-0.1 (in, rad), {d['count']} expressions", ""]
         L += ["`ours` bounds each product as a chain expression (symbolic.ChainExpr: the search, and point "
               "sets through the chain once it has evaluated 512 boxes); `SX alone` is the same search on the "
-              "same expression's SX, without the chain (the search before the chain bound), in the same run.", ""]
-        L += _table(["vars", "ours/w (median, worst)", "SX alone/w (median, worst)", "plain/w",
-                     "reached (ours, SX alone)",
-                     "box cap hit (ours, SX alone)", "boxes (median, max)", "ours ms", "SX alone ms",
-                     "cached ms", "compiled=True ms (first)", "compile ms", "plain ms"],
+              "chain's SX, without the chain; `SX as composed` the same search on the SX a caller gets by "
+              "composing SX matrices (T^-1 p through `inv` of the whole product, not the factors' inverses; "
+              "this table's expressions before chains); all in the same run.", ""]
+        L += _table(["vars", "ours/w (median, worst)", "SX alone/w (median, worst)",
+                     "SX as composed/w (median, worst)", "plain/w", "reached (ours, SX alone, as composed)",
+                     "box cap hit (ours, SX alone, as composed)", "boxes (median, max)", "ours ms",
+                     "SX alone ms", "SX as composed ms", "cached ms", "compiled=True ms (first)",
+                     "compile ms", "plain ms"],
                     [[f"{d['n_vars']:.0f}", f"{_f(d['ours'], '.1e')}, {_f(d.get('worst'), '.1e')}",
-                      f"{_f(d.get('sx_ours'), '.1e')}, {_f(d.get('sx_worst'), '.1e')}", _f(d["plain"], ".1e"),
-                      f"{d['reached']}/{d['count']}, {d.get('sx_reached', '?')}/{d['count']}",
-                      f"{d['capped']}/{d['count']}, {d.get('sx_capped', '?')}/{d['count']} (cap {d['max_boxes']})",
+                      f"{_f(d.get('sx_ours'), '.1e')}, {_f(d.get('sx_worst'), '.1e')}",
+                      f"{_f(d.get('old_ours'), '.1e')}, {_f(d.get('old_worst'), '.1e')}", _f(d["plain"], ".1e"),
+                      f"{d['reached']}/{d['count']}, {d.get('sx_reached', '?')}/{d['count']}, "
+                      f"{d.get('old_reached', '?')}/{d['count']}",
+                      f"{d['capped']}/{d['count']}, {d.get('sx_capped', '?')}/{d['count']}, "
+                      f"{d.get('old_capped', '?')}/{d['count']} (cap {d['max_boxes']})",
                       f"{d['boxes_median']:.0f}, {d['boxes_max']}", _f(d["t_ours"]), _f(d.get("t_sx")),
+                      _f(d.get("t_old")),
                       _f(d["t_cached"], ".3f"), f"{_f(d['t_compiled'])} ({_f(d['t_compiled_first'], '.0f')})",
                       _f(d["t_compile"]), _f(d["t_plain"], ".3f")]])
     L += [(f"`uncertainty.evaluate` on the first pickup's four constraints: {s['evaluate_ms']:.2f} ms per "

@@ -43,7 +43,7 @@ from spar_py import geometry
 from spar_py.kb import load_problem
 from spar_py.model import Cell
 from spar_py.supinf import Bounder
-from spar_py.symbolic import Chain, ChainExpr, ErrorFactor, Registry
+from spar_py.symbolic import Chain, ChainExpr, ErrorFactor, Registry, apply, inv
 from spar_py.uncertainty import (
     WorldState,
     assemble_constraints,
@@ -208,6 +208,15 @@ def _chain(rng: np.random.Generator, length: int,
     ``b()`` of its step: ``b = step_bounds()`` once per step) between random rigid transforms;
     then a translation component, a coordinate of T^-1 p or a squared distance (as
     tests/test_supinf.py builds them), kept as a chain expression (its ``expr`` is the SX)."""
+    e, reg, _ = _chain_and_sx(rng, length, step_bounds)
+    return e, reg
+
+
+def _chain_and_sx(rng: np.random.Generator, length: int,
+                  step_bounds: Callable[[], Callable[[], tuple[float, float]]]) -> tuple[ChainExpr, Registry, ca.SX]:
+    """:func:`_chain`, and the same function's SX as this bench built it before chains (and as
+    a caller composing SX matrices builds it): for T^-1 p the inverse of the whole product
+    (``inv`` of its SX), not the product of the factors' inverses."""
     reg = Registry()
     T = Chain.of(_rigid(rng, 30.0))
     for _ in range(length):
@@ -218,10 +227,13 @@ def _chain(rng: np.random.Generator, length: int,
         T = Chain.of(T, E, _rigid(rng, 5.0)) if rng.random() < 0.7 else Chain.of(E, T, _rigid(rng, 5.0))
     kind, p = int(rng.integers(3)), rng.uniform(-3, 3, 3)
     if kind == 0:
-        return ChainExpr.coordinate(T, np.zeros(3), int(rng.integers(3))), reg
+        e = ChainExpr.coordinate(T, np.zeros(3), int(rng.integers(3)))
+        return e, reg, e.expr
     if kind == 1:
-        return ChainExpr.coordinate(T.inverse(), p, int(rng.integers(3))), reg
-    return ChainExpr.sqdist(T, p, rng.uniform(-30, 30, 3)), reg
+        axis = int(rng.integers(3))
+        return ChainExpr.coordinate(T.inverse(), p, axis), reg, apply(inv(T.matrix()), p)[axis]
+    e = ChainExpr.sqdist(T, p, rng.uniform(-30, 30, 3))
+    return e, reg, e.expr
 
 
 def random_chain(rng: np.random.Generator, length: int) -> tuple[ChainExpr, Registry]:
@@ -240,6 +252,12 @@ def uniform_chain(rng: np.random.Generator, length: int, half: float = 0.1) -> t
     return _chain(rng, length, lambda: lambda: (-half, half))
 
 
+def uniform_chain_and_sx(rng: np.random.Generator, length: int,
+                         half: float = 0.1) -> tuple[ChainExpr, Registry, ca.SX]:
+    """:func:`uniform_chain` with the SX built as before chains (:func:`_chain_and_sx`)."""
+    return _chain_and_sx(rng, length, lambda: lambda: (-half, half))
+
+
 def deep(rng: np.random.Generator, count: int, length: int = 8, half: float = 0.1, repeats: int = 3) -> dict:
     """Products of ``length`` error transforms at +-``half``: how many reach the tolerance,
     how many hit the box cap, boxes and times (ms, medians), and a repeated question
@@ -251,8 +269,9 @@ def deep(rng: np.random.Generator, count: int, length: int = 8, half: float = 0.
 
     ms, boxes, capped, cached, comp, first = [], [], 0, [], [], []
     sx_gap, sx_capped, sx_t, sx_reached = [], 0, [], 0
+    old_gap, old_capped, old_t, old_reached = [], 0, [], 0
     for _ in range(count):
-        e, reg = uniform_chain(rng, length, half)
+        e, reg, old_sx = uniform_chain_and_sx(rng, length, half)
         box = reg.box(e)
         m = measure(e, box, rng, repeats=repeats)
         ms.append(m)
@@ -267,6 +286,14 @@ def deep(rng: np.random.Generator, count: int, length: int = 8, half: float = 0.
         sx_gap.append(max(tmin - r0.lo, r0.hi - tmax) / max(tmax - tmin, 1e-300))
         sx_capped += r0.boxes >= MAX_BOXES
         sx_reached += r0.tolerance_reached
+        # ... and on the SX a caller composing SX matrices builds (T^-1 as the product's inverse)
+        B1 = Bounder(old_sx)
+        r1 = B1.bounds(box)
+        old_t.append(median_time(lambda: B1.bounds(box), 1) * 1e3)
+        tmin, tmax = min(tmin, r1.lo_found), max(tmax, r1.hi_found)
+        old_gap.append(max(tmin - r1.lo, r1.hi - tmax) / max(tmax - tmin, 1e-300))
+        old_capped += r1.boxes >= MAX_BOXES
+        old_reached += r1.tolerance_reached
         memo = Memo()
         cached_bounds(e, box, memo)
         cached.append(median_time(lambda: cached_bounds(e, box, memo), repeats) * 1e3)
@@ -282,6 +309,8 @@ def deep(rng: np.random.Generator, count: int, length: int = 8, half: float = 0.
                 "t_compiled_first": statistics.median(first), "unsound": sum(not m["sound"] for m in ms),
                 "sx_ours": statistics.median(sx_gap), "sx_worst": max(sx_gap), "sx_capped": sx_capped,
                 "sx_reached": sx_reached, "t_sx": statistics.median(sx_t),
+                "old_ours": statistics.median(old_gap), "old_worst": max(old_gap), "old_capped": old_capped,
+                "old_reached": old_reached, "t_old": statistics.median(old_t),
                 "worst": max(m["ours"] for m in ms)})
     return out
 
@@ -461,7 +490,7 @@ def row(name: str, ms: list[dict]) -> str:
 
 def run(per_length: int = 6, seed: int = 0, lengths: tuple[int, ...] = tuple(range(1, 9)),
         groups: tuple[str, ...] = GROUPS, repeats: int = 5,
-        progress=None, deep_count: int = 6) -> dict:
+        progress=None, deep_count: int = 12) -> dict:
     """All the SUP/INF figures as data.
 
     Keys: ``paper`` (one :func:`measure` dict per expression of the paper's cell, with
