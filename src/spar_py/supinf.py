@@ -1763,14 +1763,16 @@ class _Search:
         """A lower bound of min g_s: ``lowest`` (from the boxes) or the floor, the higher."""
         return lowest if self.floor is None else max(lowest, self.floor[s])
 
-    def use_hull(self) -> None:
+    def use_hull(self, t_end: float | None = None) -> None:
         """Bound the chain expression by point sets through its chain (hulls.py): the bounds
         become the floor, and the variables' values where they are nearly attained are offered
         as points. The arcs' tolerance starts at :data:`HULL_TOL` of the spread found so far
         (shared among the chain's arcs) and is divided by 16 (4 times the segments) while a
         searched side's floor is further than the search's tolerance from the best value,
         at most :data:`HULL_ROUNDS` times: an extreme at the end of every angle's range (the
-        usual case) is found exactly by the first, coarse round."""
+        usual case) is found exactly by the first, coarse round. No finer round when the
+        last could not keep its tolerance (hulls.MAX_POINTS: a finer one cannot either) or
+        once ``t_end`` (perf_counter seconds) has passed."""
         from .hulls import hull_bounds
 
         ce = self.B.chain
@@ -1785,7 +1787,8 @@ class _Search:
             floor = [hb.lo, -hb.hi]
             self.floor = floor if self.floor is None else [max(a, b) for a, b in zip(floor, self.floor)]
             self.offer_points(np.vstack((hb.lo_at, hb.hi_at)))
-            if all(self.U[s] - self.floor[s] <= self.tol() for s in self.sides):
+            if all(self.U[s] - self.floor[s] <= self.tol() for s in self.sides) or not hb.tol_kept or (
+                    t_end is not None and time.perf_counter() >= t_end):
                 break
 
     def offer_points(self, points: np.ndarray) -> None:
@@ -2021,7 +2024,7 @@ def _branch_and_bound(B: Bounder, lo0: np.ndarray, hi0: np.ndarray, rel_tol: flo
     while not decided and S.pool[2].size and S.evaluated < max_boxes and (
             t_end is None or time.perf_counter() < t_end):
         if B.chain is not None and S.floor is None and S.evaluated >= HULL_AFTER:
-            S.use_hull()
+            S.use_hull(t_end)
             # the floor may finish a side
             S.settle(np.empty((0, S.nv)), np.empty((0, S.nv)), np.empty(0, int), np.empty(0))
             if not S.pool[2].size:
