@@ -1425,8 +1425,9 @@ class Bounder:
     ``compiled``: evaluate small batches of boxes with the interval rules compiled into a
     CasADi Function (:class:`AdaptiveProgram`; worth it only for a bounder used many times).
     ``expr`` may be a :class:`~spar_py.symbolic.ChainExpr`: its SX is bounded as any other,
-    and a search that has not finished after :data:`HULL_AFTER` passes also bounds it by
-    point sets through the chain (:mod:`spar_py.hulls`), which keeps deep products tight.
+    and a search that has not finished once it has evaluated :data:`HULL_AFTER` boxes also
+    bounds it by point sets through the chain (:mod:`spar_py.hulls`), which keeps deep
+    products tight. (An SX alone carries no chain: build deep products as chains.)
     """
 
     def __init__(self, expr: ca.SX | float | ChainExpr, compiled: bool = False) -> None:
