@@ -213,6 +213,27 @@ def test_constant_entries_and_variables_shared_between_factors_stay_sound() -> N
         assert r.lo <= v.min() and v.max() <= r.hi
 
 
+def test_a_planar_chain_is_pruned_in_its_plane_soundly_and_tightly() -> None:
+    """Rotations about z and translations in x, y only: every point set stays in one plane,
+    too flat for a 3-d hull, and is pruned in it (hulls._flat_vertices)."""
+    rng = np.random.default_rng(2)
+    reg = Registry()
+    T = Chain.of(*(ErrorFactor(reg.new("dx", -0.5, 0.5), reg.new("dy", -0.2, 0.3), 0.0,
+                               reg.new("th", -0.4, 0.3)) for _ in range(6)))
+    for ce in (ChainExpr.coordinate(T, (4.0, 1.0, 2.0), 0), ChainExpr.sqdist(T, (4.0, 1.0, 2.0), (9.0, 3.0, 1.0))):
+        box = reg.box(ce)
+        names = list(box)
+        lo, hi = arrays(names, box)
+        hb = hull_bounds(ce, names, lo, hi, 1e-4)
+        v = own_values(ce, names, sample(rng, lo, hi, 2000))
+        at = own_values(ce, names, np.vstack((hb.lo_at, hb.hi_at)))
+        assert hb.lo <= v.min() and v.max() <= hb.hi
+        w = max(v.max(), at[1]) - min(v.min(), at[0])
+        assert hb.hi - at[1] <= 1e-3 * w
+        if ce.kind == "linear":
+            assert at[0] - hb.lo <= 1e-3 * w
+
+
 # ------------------------------------------------------------------ through supinf
 
 

@@ -20,10 +20,10 @@ factor maps the representation soundly:
 
 After each step V is pruned to its convex hull's vertices (scipy's Qhull). Qhull decides
 in floating point which points are interior; its roundoff is of the order of 1e-15 of the
-coordinates, and e grows by :data:`PRUNE_MARGIN` of them at every pruning (or
-:data:`JOGGLE_MARGIN` when a flat set must be joggled), which covers a point it may
-misjudge. Every other rounding (sin, cos, hypot, products) is bounded by a few dozen ulps
-of the magnitudes involved and added to e.
+coordinates, and e grows by :data:`PRUNE_MARGIN` of them at every pruning, which
+covers a point it may misjudge (a set too flat for a 3-d hull is pruned in its plane,
+and e grows by twice its distance from it too). Every other rounding (sin, cos, hypot,
+products) is bounded by a few dozen ulps of the magnitudes involved and added to e.
 
 The end: for ``c . x + offset`` the bounds are ``min / max_V c . v -+ |c| e``; for
 ``|x - q|^2`` the maximum is at a vertex, and the minimum distance is bounded below by
@@ -54,10 +54,9 @@ __all__ = ["HullBound", "hull_bounds"]
 _U = 2.0 ** -53
 #: Relative margin (of the largest coordinate) added to the ball radius at each pruning to
 #: a convex hull: orders of magnitude above Qhull's roundoff (about 1e-15 of the
-#: coordinates); JOGGLE_MARGIN when the set is flat and Qhull joggles it ('QJ': each
-#: coordinate moved by up to about 1e-11 of the largest).
+#: coordinates). A set too flat for a 3-d hull is pruned to the hull of its projection on
+#: its plane (or line), and the radius grows by twice its distance from it as well.
 PRUNE_MARGIN = 1e-11
-JOGGLE_MARGIN = 1e-8
 #: The largest arc segment (rad): the tangent construction needs delta < pi.
 MAX_SEGMENT = 0.5 * math.pi
 #: The most points one rotation makes (segments are widened beyond: sound, but looser than
@@ -155,16 +154,38 @@ class _Points:
         if len(V) > 4:
             from scipy.spatial import ConvexHull, QhullError
 
-            margin = PRUNE_MARGIN
-            for opts in ("", "QJ"):  # QJ (joggled input) for flat or degenerate sets
-                try:
-                    keep = idx[ConvexHull(V, qhull_options=opts or None).vertices]
-                    break
-                except (QhullError, ValueError):
-                    margin = JOGGLE_MARGIN
-                    continue
-            self.e += margin * self.scale()
+            try:
+                keep = idx[ConvexHull(V).vertices]
+            except (QhullError, ValueError):  # flat (or on a line): the hull of its projection
+                sub, extra = _flat_vertices(V)
+                keep = idx[sub]
+                self.e += extra
+            self.e += PRUNE_MARGIN * self.scale()
         self.V, self.W = self.V[keep], self.W[keep]
+
+
+def _flat_vertices(V: np.ndarray) -> tuple[np.ndarray, float]:
+    """For points V (n, 3) too flat for a 3-d hull: the indices of the vertices of the hull
+    of their projection on their best plane (or line), and how far that can leave out: every
+    point is within ``h`` of the plane (its largest residual), so within 2 h (plus rounding)
+    of the hull of the kept points themselves."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    c = V.mean(axis=0)
+    D = V - c
+    _, _, Vt = np.linalg.svd(D, full_matrices=False)
+    for dim in (2, 1):
+        P = D @ Vt[:dim].T
+        R = D - P @ Vt[:dim]
+        h = float(np.sqrt((R * R).sum(1)).max()) if len(R) else 0.0
+        extra = 2.0 * h + 16.0 * _U * float(np.abs(V).max()) * math.sqrt(3.0)
+        if dim == 1:
+            return np.unique([int(np.argmin(P[:, 0])), int(np.argmax(P[:, 0]))]), extra
+        try:
+            return ConvexHull(P).vertices, extra
+        except (QhullError, ValueError):
+            continue
+    raise AssertionError("unreachable")  # pragma: no cover
 
 
 def _ends(v: object, index: dict[int, int], lo: np.ndarray, hi: np.ndarray) -> tuple[float, float, int | None]:
