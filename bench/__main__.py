@@ -320,23 +320,30 @@ def render(r: dict) -> str:
               "sets through the chain once it has evaluated 512 boxes); `SX alone` is the same search on the "
               "chain's SX, without the chain; `SX as composed` the same search on the SX a caller gets by "
               "composing SX matrices (T^-1 p through `inv` of the whole product, not the factors' inverses; "
-              "this table's expressions before chains); all in the same run.", ""]
-        L += _table(["vars", "ours/w (median, worst)", "SX alone/w (median, worst)",
+              "this table's expressions before chains); all in the same run. The second row, beyond the "
+              "target, has every angle at +-1 rad (the point sets' budget then widens their arcs' segments).",
+              ""]
+
+        def deep_row(label: str, d: dict) -> list[str]:
+            return [label, f"{d['n_vars']:.0f}", f"{_f(d['ours'], '.1e')}, {_f(d.get('worst'), '.1e')}",
+                    f"{_f(d.get('sx_ours'), '.1e')}, {_f(d.get('sx_worst'), '.1e')}",
+                    f"{_f(d.get('old_ours'), '.1e')}, {_f(d.get('old_worst'), '.1e')}", _f(d["plain"], ".1e"),
+                    f"{d['reached']}/{d['count']}, {d.get('sx_reached', '?')}/{d['count']}, "
+                    f"{d.get('old_reached', '?')}/{d['count']}",
+                    f"{d['capped']}/{d['count']}, {d.get('sx_capped', '?')}/{d['count']}, "
+                    f"{d.get('old_capped', '?')}/{d['count']} (cap {d['max_boxes']})",
+                    f"{d['boxes_median']:.0f}, {d['boxes_max']}", _f(d["t_ours"]), _f(d.get("t_sx")),
+                    _f(d.get("t_old")), _f(d["t_cached"], ".3f"),
+                    f"{_f(d['t_compiled'])} ({_f(d['t_compiled_first'], '.0f')})",
+                    _f(d["t_compile"]), _f(d["t_plain"], ".3f")]
+
+        rows = [deep_row("+-0.1", d)] + ([deep_row(f"+-0.1, angles +-1 ({s['deep_wide']['count']})",
+                                                     s["deep_wide"])] if "deep_wide" in s else [])
+        L += _table(["products", "vars", "ours/w (median, worst)", "SX alone/w (median, worst)",
                      "SX as composed/w (median, worst)", "plain/w", "reached (ours, SX alone, as composed)",
                      "box cap hit (ours, SX alone, as composed)", "boxes (median, max)", "ours ms",
                      "SX alone ms", "SX as composed ms", "cached ms", "compiled=True ms (first)",
-                     "compile ms", "plain ms"],
-                    [[f"{d['n_vars']:.0f}", f"{_f(d['ours'], '.1e')}, {_f(d.get('worst'), '.1e')}",
-                      f"{_f(d.get('sx_ours'), '.1e')}, {_f(d.get('sx_worst'), '.1e')}",
-                      f"{_f(d.get('old_ours'), '.1e')}, {_f(d.get('old_worst'), '.1e')}", _f(d["plain"], ".1e"),
-                      f"{d['reached']}/{d['count']}, {d.get('sx_reached', '?')}/{d['count']}, "
-                      f"{d.get('old_reached', '?')}/{d['count']}",
-                      f"{d['capped']}/{d['count']}, {d.get('sx_capped', '?')}/{d['count']}, "
-                      f"{d.get('old_capped', '?')}/{d['count']} (cap {d['max_boxes']})",
-                      f"{d['boxes_median']:.0f}, {d['boxes_max']}", _f(d["t_ours"]), _f(d.get("t_sx")),
-                      _f(d.get("t_old")),
-                      _f(d["t_cached"], ".3f"), f"{_f(d['t_compiled'])} ({_f(d['t_compiled_first'], '.0f')})",
-                      _f(d["t_compile"]), _f(d["t_plain"], ".3f")]])
+                     "compile ms", "plain ms"], rows)
     L += [(f"`uncertainty.evaluate` on the first pickup's four constraints: {s['evaluate_ms']:.2f} ms per "
           f"constraint. Unsound bounds (inside the sampled range): {s['unsound']}."), ""]
 

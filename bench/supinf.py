@@ -213,15 +213,18 @@ def _chain(rng: np.random.Generator, length: int,
 
 
 def _chain_and_sx(rng: np.random.Generator, length: int,
-                  step_bounds: Callable[[], Callable[[], tuple[float, float]]]) -> tuple[ChainExpr, Registry, ca.SX]:
+                  step_bounds: Callable[[], Callable[[], tuple[float, float]]],
+                  angle: float | None = None) -> tuple[ChainExpr, Registry, ca.SX]:
     """:func:`_chain`, and the same function's SX as this bench built it before chains (and as
     a caller composing SX matrices builds it): for T^-1 p the inverse of the whole product
-    (``inv`` of its SX), not the product of the factors' inverses."""
+    (``inv`` of its SX), not the product of the factors' inverses. ``angle``: every angle
+    at +-``angle`` instead of its step's bounds."""
     reg = Registry()
     T = Chain.of(_rigid(rng, 30.0))
     for _ in range(length):
         b = step_bounds()
-        E = ErrorFactor(reg.new("dx", *b()), reg.new("dy", *b()), reg.new("dz", *b()), reg.new("th", *b()))
+        E = ErrorFactor(reg.new("dx", *b()), reg.new("dy", *b()), reg.new("dz", *b()),
+                        reg.new("th", *((-angle, angle) if angle is not None else b())))
         if rng.random() < 0.3:
             E = E.inverted()
         T = Chain.of(T, E, _rigid(rng, 5.0)) if rng.random() < 0.7 else Chain.of(E, T, _rigid(rng, 5.0))
@@ -252,14 +255,17 @@ def uniform_chain(rng: np.random.Generator, length: int, half: float = 0.1) -> t
     return _chain(rng, length, lambda: lambda: (-half, half))
 
 
-def uniform_chain_and_sx(rng: np.random.Generator, length: int,
-                         half: float = 0.1) -> tuple[ChainExpr, Registry, ca.SX]:
-    """:func:`uniform_chain` with the SX built as before chains (:func:`_chain_and_sx`)."""
-    return _chain_and_sx(rng, length, lambda: lambda: (-half, half))
+def uniform_chain_and_sx(rng: np.random.Generator, length: int, half: float = 0.1,
+                         angle: float | None = None) -> tuple[ChainExpr, Registry, ca.SX]:
+    """:func:`uniform_chain` with the SX built as before chains (:func:`_chain_and_sx`);
+    ``angle``: the angles at +-``angle`` instead of +-``half``."""
+    return _chain_and_sx(rng, length, lambda: lambda: (-half, half), angle)
 
 
-def deep(rng: np.random.Generator, count: int, length: int = 8, half: float = 0.1, repeats: int = 3) -> dict:
-    """Products of ``length`` error transforms at +-``half``: how many reach the tolerance,
+def deep(rng: np.random.Generator, count: int, length: int = 8, half: float = 0.1, repeats: int = 3,
+         angle: float | None = None) -> dict:
+    """Products of ``length`` error transforms at +-``half`` (the angles at +-``angle`` if
+    given): how many reach the tolerance,
     how many hit the box cap, boxes and times (ms, medians), and a repeated question
     answered from a cell's memo (``t_cached``: supinf.cached_bounds, a hit) and
     ``Bounder(compiled=True)`` (``t_compiled`` warm, ``t_compiled_first`` with building its
@@ -271,7 +277,7 @@ def deep(rng: np.random.Generator, count: int, length: int = 8, half: float = 0.
     sx_gap, sx_capped, sx_t, sx_reached = [], 0, [], 0
     old_gap, old_capped, old_t, old_reached = [], 0, [], 0
     for _ in range(count):
-        e, reg, old_sx = uniform_chain_and_sx(rng, length, half)
+        e, reg, old_sx = uniform_chain_and_sx(rng, length, half, angle)
         box = reg.box(e)
         m = measure(e, box, rng, repeats=repeats)
         ms.append(m)
@@ -302,7 +308,7 @@ def deep(rng: np.random.Generator, count: int, length: int = 8, half: float = 0.
         Bc.bounds(box)  # builds the compiled program on its first small batch
         first.append((time.perf_counter() - t) * 1e3)
         comp.append(median_time(lambda: Bc.bounds(box), repeats) * 1e3)
-    out = summarise(f"depth {length} at +-{half:g}", ms)
+    out = summarise(f"depth {length} at +-{half:g}" + ("" if angle is None else f", angles +-{angle:g}"), ms)
     out.update({"length": length, "half": half, "boxes_median": statistics.median(boxes),
                 "boxes_max": max(boxes), "capped": capped, "max_boxes": MAX_BOXES,
                 "t_cached": statistics.median(cached), "t_compiled": statistics.median(comp),
@@ -531,6 +537,9 @@ def run(per_length: int = 6, seed: int = 0, lengths: tuple[int, ...] = tuple(ran
     if deep_count:
         say(f"-- products of depth 8 at +-0.1 (in, rad), {deep_count} expressions")
         d = out["deep"] = deep(rng, deep_count, repeats=min(3, repeats))
+        # beyond the target: wide angles, where the search alone is lost
+        out["deep_wide"] = deep(rng, max(2, deep_count // 3), repeats=1, angle=1.0)
+        out["unsound"] += out["deep_wide"]["unsound"]
         out["unsound"] += d["unsound"]
         say(f"{d['name']:<26}{d['n_vars']:>5.0f}{d['ours']:>10.1e}{d['plain']:>10.1e}"
             f"{d['reached']:>5}/{d['count']:<3}{d['t_ours']:>9.2f}{d['t_one']:>10.2f}"
