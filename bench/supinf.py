@@ -274,8 +274,21 @@ def deep(rng: np.random.Generator, count: int, length: int = 8, half: float = 0.
     from spar_py.supinf import MAX_BOXES, cached_bounds
 
     ms, boxes, capped, cached, comp, first = [], [], 0, [], [], []
-    sx_gap, sx_capped, sx_t, sx_reached = [], 0, [], 0
-    old_gap, old_capped, old_t, old_reached = [], 0, [], 0
+    peers: dict[str, dict[str, list]] = {p: {"gap": [], "capped": [], "t": [], "reached": []} for p in ("sx", "old")}
+
+    def peer(name: str, expr: ca.SX, box: dict, true: tuple[float, float]) -> tuple[float, float]:
+        """The search on ``expr`` alone; its figures into ``peers[name]``; the true range widened
+        by the values it attained."""
+        B = Bounder(expr)
+        r = B.bounds(box)
+        got = peers[name]
+        got["t"].append(median_time(lambda: B.bounds(box), 1) * 1e3)
+        tmin, tmax = min(true[0], r.lo_found), max(true[1], r.hi_found)
+        got["gap"].append(max(tmin - r.lo, r.hi - tmax) / max(tmax - tmin, 1e-300))
+        got["capped"].append(r.boxes >= MAX_BOXES)
+        got["reached"].append(r.tolerance_reached)
+        return tmin, tmax
+
     for _ in range(count):
         e, reg, old_sx = uniform_chain_and_sx(rng, length, half, angle)
         box = reg.box(e)
@@ -283,23 +296,9 @@ def deep(rng: np.random.Generator, count: int, length: int = 8, half: float = 0.
         ms.append(m)
         boxes.append(m["boxes"])
         capped += m["boxes"] >= MAX_BOXES
-        # the peer: the same search on the SX alone, without the chain's point sets
-        B0 = Bounder(e.expr)
-        r0 = B0.bounds(box)
-        sx_t.append(median_time(lambda: B0.bounds(box), 1) * 1e3)
-        tmin, tmax = m["true"]
-        tmin, tmax = min(tmin, r0.lo_found), max(tmax, r0.hi_found)
-        sx_gap.append(max(tmin - r0.lo, r0.hi - tmax) / max(tmax - tmin, 1e-300))
-        sx_capped += r0.boxes >= MAX_BOXES
-        sx_reached += r0.tolerance_reached
-        # ... and on the SX a caller composing SX matrices builds (T^-1 as the product's inverse)
-        B1 = Bounder(old_sx)
-        r1 = B1.bounds(box)
-        old_t.append(median_time(lambda: B1.bounds(box), 1) * 1e3)
-        tmin, tmax = min(tmin, r1.lo_found), max(tmax, r1.hi_found)
-        old_gap.append(max(tmin - r1.lo, r1.hi - tmax) / max(tmax - tmin, 1e-300))
-        old_capped += r1.boxes >= MAX_BOXES
-        old_reached += r1.tolerance_reached
+        # the peers: the same search on the chain's SX alone, without its point sets, and on
+        # the SX a caller composing SX matrices builds (T^-1 as the product's inverse)
+        peer("old", old_sx, box, peer("sx", e.expr, box, m["true"]))
         memo = Memo()
         cached_bounds(e, box, memo)
         cached.append(median_time(lambda: cached_bounds(e, box, memo), repeats) * 1e3)
@@ -313,10 +312,10 @@ def deep(rng: np.random.Generator, count: int, length: int = 8, half: float = 0.
                 "boxes_max": max(boxes), "capped": capped, "max_boxes": MAX_BOXES,
                 "t_cached": statistics.median(cached), "t_compiled": statistics.median(comp),
                 "t_compiled_first": statistics.median(first), "unsound": sum(not m["sound"] for m in ms),
-                "sx_ours": statistics.median(sx_gap), "sx_worst": max(sx_gap), "sx_capped": sx_capped,
-                "sx_reached": sx_reached, "t_sx": statistics.median(sx_t),
-                "old_ours": statistics.median(old_gap), "old_worst": max(old_gap), "old_capped": old_capped,
-                "old_reached": old_reached, "t_old": statistics.median(old_t),
+                **{k: v for p, got in peers.items() for k, v in (
+                    (f"{p}_ours", statistics.median(got["gap"])), (f"{p}_worst", max(got["gap"])),
+                    (f"{p}_capped", sum(got["capped"])), (f"{p}_reached", sum(got["reached"])),
+                    (f"t_{p}", statistics.median(got["t"])))},
                 "worst": max(m["ours"] for m in ms)})
     return out
 

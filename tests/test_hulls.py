@@ -16,7 +16,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from spar_py.errors import SparValueError
-from spar_py.hulls import hull_bounds
+from spar_py.hulls import HullBound, hull_bounds
 from spar_py.memo import Memo
 from spar_py.supinf import MAX_BOXES, Bounder, cached_bounds, expression_key
 from spar_py.symbolic import Chain, ChainExpr, ErrorFactor, Registry
@@ -86,6 +86,16 @@ def sample(rng: np.random.Generator, lo: np.ndarray, hi: np.ndarray, n: int) -> 
 
 def arrays(names: list[str], box: dict) -> tuple[np.ndarray, np.ndarray]:
     return np.array([box[n][0] for n in names]), np.array([box[n][1] for n in names])
+
+
+def bound_and_sample(ce: ChainExpr, reg: Registry, rng: np.random.Generator, tol: float,
+                     n: int) -> tuple[list[str], np.ndarray, np.ndarray, HullBound, np.ndarray]:
+    """(names, lo, hi, hull_bounds of ce over its registry box, own values at n random points
+    and n corners)."""
+    box = reg.box(ce)
+    names = list(box)
+    lo, hi = arrays(names, box)
+    return names, lo, hi, hull_bounds(ce, names, lo, hi, tol), own_values(ce, names, sample(rng, lo, hi, n))
 
 
 # ------------------------------------------------------------------ the chain itself
@@ -170,11 +180,7 @@ def test_hull_bounds_are_sound_and_their_witnesses_nearly_attain_them(seed: int,
                                                                       angle: float | None) -> None:
     rng = np.random.default_rng(seed)
     ce, reg = make_chain(rng, depth, half, angle)
-    box = reg.box(ce)
-    names = list(box)
-    lo, hi = arrays(names, box)
-    hb = hull_bounds(ce, names, lo, hi, 1e-3)
-    v = own_values(ce, names, sample(rng, lo, hi, 300))
+    names, lo, hi, hb, v = bound_and_sample(ce, reg, rng, 1e-3, 300)
     assert hb.lo <= v.min() and v.max() <= hb.hi
     at = own_values(ce, names, np.vstack((hb.lo_at, hb.hi_at)))
     assert np.all((lo <= hb.lo_at) & (hb.lo_at <= hi)) and np.all((lo <= hb.hi_at) & (hb.hi_at <= hi))
@@ -203,13 +209,9 @@ def test_constant_entries_and_variables_shared_between_factors_stay_sound() -> N
             T = Chain.of(T, E.inverted() if rng.random() < 0.3 else E, rigid(rng, 4.0))
         ce = (ChainExpr.coordinate(T, rng.uniform(-2, 2, 3), int(rng.integers(3))) if rng.random() < 0.6
               else ChainExpr.sqdist(T, rng.uniform(-2, 2, 3), rng.uniform(-20, 20, 3)))
-        box = reg.box(ce)
-        names = list(box)
-        lo, hi = arrays(names, box)
-        hb = hull_bounds(ce, names, lo, hi, 1e-3)
-        v = own_values(ce, names, sample(rng, lo, hi, 300))
+        _, _, _, hb, v = bound_and_sample(ce, reg, rng, 1e-3, 300)
         assert hb.lo <= v.min() and v.max() <= hb.hi
-        r = Bounder(ce).bounds(box)
+        r = Bounder(ce).bounds(reg.box(ce))
         assert r.lo <= v.min() and v.max() <= r.hi
 
 
@@ -221,11 +223,7 @@ def test_a_planar_chain_is_pruned_in_its_plane_soundly_and_tightly() -> None:
     T = Chain.of(*(ErrorFactor(reg.new("dx", -0.5, 0.5), reg.new("dy", -0.2, 0.3), 0.0,
                                reg.new("th", -0.4, 0.3)) for _ in range(6)))
     for ce in (ChainExpr.coordinate(T, (4.0, 1.0, 2.0), 0), ChainExpr.sqdist(T, (4.0, 1.0, 2.0), (9.0, 3.0, 1.0))):
-        box = reg.box(ce)
-        names = list(box)
-        lo, hi = arrays(names, box)
-        hb = hull_bounds(ce, names, lo, hi, 1e-4)
-        v = own_values(ce, names, sample(rng, lo, hi, 2000))
+        names, lo, hi, hb, v = bound_and_sample(ce, reg, rng, 1e-4, 2000)
         at = own_values(ce, names, np.vstack((hb.lo_at, hb.hi_at)))
         assert hb.lo <= v.min() and v.max() <= hb.hi
         w = max(v.max(), at[1]) - min(v.min(), at[0])

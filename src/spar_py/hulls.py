@@ -47,6 +47,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from .geometry import inv
 from .symbolic import ChainExpr, ErrorFactor
 
 __all__ = ["HullBound", "hull_bounds"]
@@ -277,8 +278,8 @@ def _split_lower(ce: ChainExpr, stages: list[tuple[np.ndarray, float]], k: int, 
         s_min, g = _inverse_error(M[:3, :3])
         sigma *= s_min
         inverse.append((M, g))
-    thetas = sorted({j for f in A if isinstance(f, ErrorFactor)
-                     for j in [_ends(f.theta, index, lo, hi)[2]] if j is not None})
+    angle_vars = (_ends(f.theta, index, lo, hi)[2] for f in A if isinstance(f, ErrorFactor))
+    thetas = sorted({j for j in angle_vars if j is not None})
     worst = math.inf
     for cell in np.ndindex(*(SPLIT_PIECES,) * len(thetas)):
         l2, h2 = lo.copy(), hi.copy()
@@ -292,22 +293,16 @@ def _split_lower(ce: ChainExpr, stages: list[tuple[np.ndarray, float]], k: int, 
                 _propagate(Q, [f], index, l2, h2, tol)
             else:
                 M, g = f
-                R, t = M[:3, :3].T, M[:3, 3]
+                t = M[:3, 3]
                 reach = float(np.sqrt(((Q.V - t) ** 2).sum(1)).max()) * (1.0 + 4.0 * _U) + Q.e
-                Q.affine(_frame(R, -R @ t))
-                # the exact inverse maps y to within g |y - t| of R^T (y - t); -R t is rounded
+                Q.affine(np.asarray(inv(M), float))  # [R^T, -R^T t]
+                # the exact inverse maps y to within g |y - t| of R^T (y - t); -R^T t is rounded
                 Q.e += g * reach + 8.0 * _U * float(np.abs(t).sum()) * math.sqrt(3.0)
         d = _distance_lower(VB, Q.V) - eB - Q.e
         worst = min(worst, d)
         if worst <= 0.0:
             return 0.0
     return sigma * worst
-
-
-def _frame(R: np.ndarray, t: np.ndarray) -> np.ndarray:
-    M = np.eye(4)
-    M[:3, :3], M[:3, 3] = R, t
-    return M
 
 
 def _inverse_error(A: np.ndarray) -> tuple[float, float]:
@@ -321,6 +316,8 @@ def _inverse_error(A: np.ndarray) -> tuple[float, float]:
     if not (E < 0.5 and s_min > 0.0):
         return 0.0, math.inf  # not nearly orthonormal: the split gives nothing
     return s_min, nA * E / (1.0 - E)
+
+
 def _finish(ce: ChainExpr, S: _Points) -> HullBound:
     V, W, e = S.V, S.W, S.e
     if ce.kind == "linear":

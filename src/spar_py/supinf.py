@@ -1837,6 +1837,10 @@ class _Search:
         self.pool = (pl, ph, ps, pL)
         return keep
 
+    def settle_pool(self) -> None:
+        """:meth:`settle` with no new boxes: retire what the bounds known now finish."""
+        self.settle(np.empty((0, self.nv)), np.empty((0, self.nv)), np.empty(0, int), np.empty(0))
+
     def push(self, bl: np.ndarray, bh: np.ndarray, side: np.ndarray, L: np.ndarray) -> None:
         pl, ph, ps, pL = self.pool
         self.pool = (np.vstack((pl, bl)), np.vstack((ph, bh)), np.concatenate((ps, side)),
@@ -2026,8 +2030,7 @@ def _branch_and_bound(B: Bounder, lo0: np.ndarray, hi0: np.ndarray, rel_tol: flo
             t_end is None or time.perf_counter() < t_end):
         if B.chain is not None and S.floor is None and S.evaluated >= HULL_AFTER:
             S.use_hull(t_end)
-            # the floor may finish a side
-            S.settle(np.empty((0, S.nv)), np.empty((0, S.nv)), np.empty(0, int), np.empty(0))
+            S.settle_pool()  # the floor may finish a side
             if not S.pool[2].size:
                 break
         S.step()

@@ -303,7 +303,8 @@ class Chain:
         for it in items:
             for f in (it.factors if isinstance(it, Chain) else (it,)):
                 if isinstance(f, ErrorFactor):
-                    f = ErrorFactor(*(_entry(getattr(f, k), k) for k in ("dx", "dy", "dz", "theta")), f.inverse)
+                    if not isinstance(it, Chain):  # (a chain's own factors were checked when it was made)
+                        f = ErrorFactor(*(_entry(getattr(f, k), k) for k in ("dx", "dy", "dz", "theta")), f.inverse)
                     if f.symbols():
                         out.append(f)
                         continue
@@ -388,7 +389,7 @@ class ChainExpr:
         x = as_sx(x) if is_symbolic(x) else ca.SX(np.asarray(x, float).reshape(3, 1))
         if self.kind == "linear":
             c = self.vector
-            out = ca.SX(self.offset) if self.offset else ca.SX(0.0)
+            out = ca.SX(self.offset)
             for k in range(3):
                 if c[k]:
                     out = out + c[k] * x[k]
