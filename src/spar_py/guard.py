@@ -121,11 +121,7 @@ class RunGuard:
     def write_text(self, final: Path, text: str) -> None:
         """Write ``final`` whole or not at all: made in a staging directory and moved into
         place under the lock (a stop before that leaves nothing; the run goes on after)."""
-        stage = self.staging(final)
-        (stage / final.name).write_text(text, encoding="utf-8")
-        with self.lock:
-            os.replace(stage / final.name, final)
-        self._discard(stage)
+        self.write_all([(final, text)])
 
     def write_all(self, files: Sequence[tuple[Path, str]]) -> None:
         """Write every (path, text) of ``files``, all or none: each made in a staging
