@@ -315,8 +315,7 @@ def deep(rng: np.random.Generator, count: int, length: int = 8, half: float = 0.
                 **{k: v for p, got in peers.items() for k, v in (
                     (f"{p}_ours", statistics.median(got["gap"])), (f"{p}_worst", max(got["gap"])),
                     (f"{p}_capped", sum(got["capped"])), (f"{p}_reached", sum(got["reached"])),
-                    (f"t_{p}", statistics.median(got["t"])))},
-                "worst": max(m["ours"] for m in ms)})
+                    (f"t_{p}", statistics.median(got["t"])))}})
     return out
 
 
