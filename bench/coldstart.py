@@ -7,15 +7,18 @@ load (the order rotates from round to round); the figures are medians over the r
 
 - ``floor``: ``python -c "import numpy, casadi, janus_swi"`` (importing janus starts
   the embedded SWI-Prolog): what any process of this design pays before planning;
-- ``plan``: ``spar plan kb/problems/peg_in_block.yaml``, the planner's Prolog loaded
-  from its compiled image (spar_py/qlf.py; the cache is filled first, and the package's
-  bytecode brought up to date, so no process compiles an edited module);
+- ``plan``: ``spar plan kb/problems/peg_in_block.yaml``, SWI-Prolog started from the
+  planner's saved state (spar_py/qlf.py: janus and the planner in one file; the cache is
+  filled first, and the package's bytecode brought up to date, so no process compiles an
+  edited module);
+- ``plan, image``: the same with ``SPAR_SAVED_STATE=off``: SWI-Prolog started as janus
+  does, the planner loaded from its compiled .qlf image in a thread meanwhile;
 - ``plan, sources``: the same with ``SPAR_QLF_CACHE=off``: the Prolog consulted from
   prolog/*.pl and kb/templates/*.pl at every start, as before the image;
 - ``floor, frozen exit``: the floor ending with ``gc.freeze()`` as ``spar`` does (cli.exiting:
   the shutdown collections skip the heap), the like-for-like floor of a process that exits so;
-- ``engine`` and ``engine, sources``: ``python -c "import spar_py.engine as e; e.engine()"``,
-  the engine start alone, both ways;
+- ``engine``, ``engine, image`` and ``engine, sources``: ``python -c "import spar_py.engine
+  as e; e.engine()"``, the engine start alone, each way;
 - with ``--peer DIR`` (another checkout of spar-py, e.g. ``git archive`` of an older commit
   unpacked there): ``plan, peer``, the same ``spar plan`` with ``DIR/src`` first on
   PYTHONPATH (this venv's libraries, that checkout's spar_py, prolog/ and kb/templates/),
@@ -62,12 +65,15 @@ def _commands(peer: str | Path | None = None) -> dict[str, tuple[list[str], dict
     """Name -> (argv, extra environment) of each timed process."""
     py = sys.executable
     off = {"SPAR_QLF_CACHE": "off"}
+    image = {"SPAR_SAVED_STATE": "off"}
     plan = [str(BIN / "spar"), "plan", CELL]
     cmds = {"floor": ([py, "-c", FLOOR], {}),
             "floor, frozen exit": ([py, "-c", FLOOR + "; import gc; gc.freeze()"], {}),
             "plan": (plan, {}),
+            "plan, image": (plan, image),
             "plan, sources": (plan, off),
             "engine": ([py, "-c", ENGINE], {}),
+            "engine, image": ([py, "-c", ENGINE], image),
             "engine, sources": ([py, "-c", ENGINE], off)}
     if peer is not None:
         cmds["plan, peer"] = (plan, _peer_env(peer))
@@ -256,9 +262,12 @@ def run(repeats: int = 15, importtime_runs: int = 5, peer: str | Path | None = N
     return {**extra, "repeats": repeats, "cache_before": first, "median": med, "runs": runs, "cpu": med_cpu,
             "ratio_cpu": med_cpu["plan"] / med_cpu["floor"],
             "ratio": med["plan"] / med["floor"], "ratio_sources": med["plan, sources"] / med["floor"],
+            "ratio_image": med["plan, image"] / med["floor"],
             "ratio_frozen": med["plan"] / med["floor, frozen exit"],
-            "engine_saving_s": med["engine, sources"] - med["engine"],
-            "plan_saving_s": med["plan, sources"] - med["plan"],
+            "engine_saving_s": med["engine, sources"] - med["engine, image"],
+            "plan_saving_s": med["plan, sources"] - med["plan, image"],
+            "state_engine_saving_s": med["engine, image"] - med["engine"],
+            "state_plan_saving_s": med["plan, image"] - med["plan"],
             "target": TARGET_RATIO, "imports": importtime(importtime_runs),
             "breakdown": breakdown(max(importtime_runs, 1))}
 
@@ -284,12 +293,14 @@ def render(r: dict) -> list[str]:
     L = ["## Cold start (bench/coldstart.py)", "",
          (f"Fresh processes, {r['repeats']} rounds, each round running every command once (rotating "
           "order); medians. `floor` = `python -c \"import numpy, casadi, janus_swi\"` (janus starts "
-          "SWI-Prolog); `plan` = `spar plan kb/problems/peg_in_block.yaml`; `sources` = the same with "
-          "`SPAR_QLF_CACHE=off` (the Prolog consulted at every start instead of loaded from its .qlf "
-          "image); `engine` = `python -c \"import spar_py.engine as e; e.engine()\"`."), ""]
+          "SWI-Prolog); `plan` = `spar plan kb/problems/peg_in_block.yaml` (SWI-Prolog started from the "
+          "planner's saved state); `image` = the same with `SPAR_SAVED_STATE=off` (SWI-Prolog started as "
+          "janus does, the planner loaded from its .qlf image meanwhile); `sources` = the same with "
+          "`SPAR_QLF_CACHE=off` (the Prolog consulted at every start); `engine` = "
+          "`python -c \"import spar_py.engine as e; e.engine()\"`."), ""]
     rows = []
-    for name in [n for n in ("floor", "floor, frozen exit", "plan", "plan, sources", "engine", "engine, sources",
-                             "plan, peer")
+    for name in [n for n in ("floor", "floor, frozen exit", "plan", "plan, image", "plan, sources", "engine",
+                             "engine, image", "engine, sources", "plan, peer")
                  if n in m]:
         c = r["cpu"][name]
         rows.append([name, f"{m[name] * 1e3:.0f} ms", f"{m[name] / f:.2f}",
@@ -300,12 +311,15 @@ def render(r: dict) -> list[str]:
           *["| " + " | ".join(x) + " |" for x in rows], ""]
     ok = r["ratio"] <= r["target"]
     L += [(f"Cold `spar plan` is {r['ratio']:.2f}x the floor in wall time (target <= {r['target']:g}x: "
-           f"{'met' if ok else 'NOT met'}) and {r['ratio_cpu']:.2f}x in CPU time; from sources it is "
-           f"{r['ratio_sources']:.2f}x; against the floor ending as `spar` does (gc.freeze() before exit) "
-           f"{r['ratio_frozen']:.2f}x. Loading the "
-           f"image instead of the sources changes the engine start by {-r['engine_saving_s'] * 1e3:+.0f} ms "
-           f"and the whole plan by {-r['plan_saving_s'] * 1e3:+.0f} ms (differences of medians; `spar plan` "
-           "loads the Prolog in a thread while Python imports numpy and reads the problem)."), ""]
+           f"{'met' if ok else 'NOT met'}) and {r['ratio_cpu']:.2f}x in CPU time; with the image alone it "
+           f"is {r['ratio_image']:.2f}x, from sources {r['ratio_sources']:.2f}x; against the floor ending as "
+           f"`spar` does (gc.freeze() before exit) {r['ratio_frozen']:.2f}x. Starting from the saved state "
+           f"instead of janus' own start and the image changes the engine start by "
+           f"{-r['state_engine_saving_s'] * 1e3:+.0f} ms and the whole plan by "
+           f"{-r['state_plan_saving_s'] * 1e3:+.0f} ms; loading the image instead of the sources changes them "
+           f"by {-r['engine_saving_s'] * 1e3:+.0f} and {-r['plan_saving_s'] * 1e3:+.0f} ms (differences of "
+           "medians; without the state `spar plan` loads the Prolog in a thread while Python imports numpy "
+           "and reads the problem)."), ""]
     if "ratio_peer" in r:
         L += [(f"`plan, peer` = the same `spar plan` running the spar_py of {r['peer']} (its src/ first on "
                f"PYTHONPATH) in the same rounds: {r['ratio_peer']:.2f}x the floor, against {r['ratio']:.2f}x "

@@ -1,7 +1,10 @@
-"""Cold start: the planner loaded from its compiled image (.qlf), never a stale one.
+"""Cold start: the planner loaded from its compiled image (.qlf) or SWI-Prolog started
+from its saved state, never a stale one.
 
 Each test runs a copy of the checkout's package and Prolog sources in a fresh process
-(its own cache directory), so it can edit a .pl file without touching the checkout.
+(its own cache directory), so it can edit a .pl file without touching the checkout. The
+image's tests run with the saved state off (``SPAR_SAVED_STATE=off``), so each run shows
+what the image alone does; the state's tests turn it on.
 """
 from __future__ import annotations
 
@@ -27,7 +30,8 @@ from spar_py.engine import Engine
 e = Engine()
 bound = e.query_once("spar_defaults:default_option(max_actions_floor, N)")["N"]
 probe = e.query_once("catch(spar_defaults:coldstart_probe(X), _, fail)")
-print(json.dumps({"how": e.loaded_from, "bound": bound, "probe": probe.get("X") if probe["truth"] else None}))
+print(json.dumps({"how": e.loaded_from, "bound": bound, "probe": probe.get("X") if probe["truth"] else None,
+                  "state": e.state_status}))
 """
 
 
@@ -43,12 +47,18 @@ def tree(tmp_path: Path) -> Path:
     return dest
 
 
-def _run(tree: Path, cache: Path | str, code: str = PROBE) -> dict:
-    env = {**os.environ, "PYTHONPATH": str(tree / "src"), qlf.ENV: str(cache)}
+def _run(tree: Path, cache: Path | str, code: str = PROBE, state: bool = False) -> dict:
+    """The probe's answer in a fresh process of ``tree`` (without the "state" status
+    unless ``state``: the saved state on)."""
+    env = {**os.environ, "PYTHONPATH": str(tree / "src"), qlf.ENV: str(cache),
+           qlf.STATE_ENV: "on" if state else "off"}
     r = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120,
                        cwd=tree)
     assert r.returncode == 0, r.stderr
-    return json.loads(r.stdout.strip().splitlines()[-1])
+    doc = json.loads(r.stdout.strip().splitlines()[-1])
+    if not state:
+        assert doc.pop("state", "") == ""
+    return doc
 
 
 def _defaults(tree: Path) -> Path:
@@ -207,12 +217,14 @@ def test_the_benchmark_measures_plan_and_floor_in_one_run() -> None:
     finally:
         sys.path.remove(str(ROOT))
     r = coldstart.run(repeats=1, importtime_runs=1)
-    assert set(r["median"]) == {"floor", "floor, frozen exit", "plan", "plan, sources", "engine", "engine, sources"}
+    assert set(r["median"]) == {"floor", "floor, frozen exit", "plan", "plan, image", "plan, sources", "engine",
+                                "engine, image", "engine, sources"}
     assert all(v > 0 for v in r["median"].values())
     assert r["ratio"] == pytest.approx(r["median"]["plan"] / r["median"]["floor"])
     assert r["ratio_frozen"] == pytest.approx(r["median"]["plan"] / r["median"]["floor, frozen exit"])
     assert set(r["imports"]["heavy"]) <= {"fcl"}
     assert any(g.startswith("spar_py.") for g, _ in r["imports"]["beyond_floor"])
+    assert r["breakdown"]["loaded_from"] == ["state"]  # the cache filled first: the plan starts from the state
     steps = r["breakdown"]["steps"]
     again = [k for k in steps if k.startswith("Planner.plan again")]
     assert len(again) == 1 and steps[again[0]] > 0  # the warm plan, apart from the cold run's steps
@@ -242,8 +254,107 @@ def test_spar_plan_after_an_edit_compiles_in_its_loading_thread(tree: Path, tmp_
     f.write_text(f.read_text() + "\n% an edit that changes no behaviour\n")
     assert not list(cache.glob("*/planner.qlf"))
     assert plan(str(cache)) == from_sources
-    assert len(list(cache.glob("*/" + qlf.MANIFEST))) == 1
-    assert plan(str(cache)) == from_sources
+    # the image, and the saved state taken in that thread once it loaded
+    assert len(list(cache.glob("*/" + qlf.MANIFEST))) == 2 and _state(cache).is_file()
+    assert plan(str(cache)) == from_sources  # started from the state
+
+
+# ---------------------------------------------------------------------- the saved state
+
+
+def _state(cache: Path) -> Path:
+    (image,) = cache.glob("state-*/" + qlf.STATE)
+    return image
+
+
+def test_the_saved_state_is_written_once_then_started_from(tree: Path, tmp_path: Path) -> None:
+    """The first run compiles the image and saves the state (published once a fresh process
+    started from it); the next runs start SWI-Prolog from it, the planner already loaded,
+    and answer as the sources do."""
+    cache = tmp_path / "cache"
+    sources = _run(tree, "off")
+    first = _run(tree, cache, state=True)
+    assert first == {**sources, "how": "compiled", "state": "written"}
+    assert (_state(cache).parent / qlf.MANIFEST).is_file()
+    assert not list(cache.glob("state-*/.*.tmp"))  # the staged file was moved into place
+    for _ in range(2):
+        assert _run(tree, cache, state=True) == {**sources, "how": "state", "state": "used"}
+
+
+def test_an_edit_is_never_answered_from_an_old_state(tree: Path, tmp_path: Path) -> None:
+    """The state's key holds the sources' hashes: after an edit the next run compiles (the old
+    state is not started from) and saves a state of its own, which the run after uses."""
+    cache = tmp_path / "cache"
+    assert _run(tree, cache, state=True)["state"] == "written"
+    f = _defaults(tree)
+    f.write_text(f.read_text() + "\ncoldstart_probe(3).\n")
+    got = _run(tree, cache, state=True)
+    assert got["how"] == "compiled" and got["probe"] == 3 and got["state"] == "written"
+    assert _run(tree, cache, state=True) == {**got, "how": "state", "state": "used"}
+    assert len(list(cache.glob("state-*/" + qlf.STATE))) == 2
+
+
+def test_a_damaged_state_is_not_started_from(tree: Path, tmp_path: Path) -> None:
+    """A state whose bytes are not the published ones (SWI-Prolog aborts the process that
+    starts from a state it cannot read) is never used: the run loads the image and saves
+    the state again."""
+    cache = tmp_path / "cache"
+    _run(tree, cache, state=True)
+    image = _state(cache)
+    image.write_bytes(image.read_bytes()[:5000])
+    got = _run(tree, cache, state=True)
+    assert got["how"] == "qlf" and got["state"] == "written"
+    assert _run(tree, cache, state=True)["how"] == "state"
+
+
+def test_a_state_that_does_not_start_is_never_published(tmp_path: Path) -> None:
+    """The check a state passes before it is published runs in another process: a file
+    SWI-Prolog cannot start from fails it, and this process lives on."""
+    from spar_py.engine import _roots, _starts_from
+
+    bad = tmp_path / "bad.state"
+    bad.write_bytes(b"#!/bin/sh\n# not a state\n" * 50)
+    assert _starts_from(bad, _roots()) is False
+
+
+def test_the_saved_state_off_keeps_janus_own_start(tree: Path, tmp_path: Path) -> None:
+    cache = tmp_path / "cache"
+    assert _run(tree, cache)["how"] == "compiled"
+    assert _run(tree, cache)["how"] == "qlf"
+    assert not list(cache.glob("state-*"))
+
+
+def test_processes_starting_together_write_one_state(tree: Path, tmp_path: Path) -> None:
+    """Processes that find no state and load the planner together: one writes the state, the
+    others do not wait for it (their status is "busy" or "ready")."""
+    cache = tmp_path / "cache"
+    _run(tree, cache)  # the image alone, so the four do not also wait on its compile
+    with ThreadPoolExecutor(4) as pool:
+        got = list(pool.map(lambda _: _run(tree, cache, state=True), range(4)))
+    assert sum(g["state"] == "written" for g in got) == 1
+    assert {g["state"] for g in got} <= {"written", "busy", "ready", "used"}
+    assert len({(g["bound"], g["probe"]) for g in got}) == 1
+    assert _run(tree, cache, state=True)["how"] == "state"
+
+
+def test_the_state_key_changes_with_swi_prolog_and_janus(tmp_path: Path) -> None:
+    s = qlf.Sources.scan([ROOT / "prolog" / "spar.pl"], [ROOT / "prolog"])
+    home, janus = tmp_path / "home", tmp_path / "janus"
+    home.mkdir()
+    janus.mkdir()
+    (home / "boot.prc").write_bytes(b"boot")
+    (janus / "_swipl.so").write_bytes(b"ext")
+    (janus / "janus.pl").write_text(":- module(janus, []).\n")
+    ident = qlf.swi_identity(str(home), janus)
+    k = qlf.state_key(s, ident)
+    assert k == qlf.state_key(s, qlf.swi_identity(str(home), janus)) and k != qlf.key(s, 90209, str(home))
+    (janus / "janus.pl").write_text(":- module(janus, [py_call/2]).\n")
+    k2 = qlf.state_key(s, qlf.swi_identity(str(home), janus))
+    (home / "boot.prc").write_bytes(b"boot, rebuilt")
+    k3 = qlf.state_key(s, qlf.swi_identity(str(home), janus))
+    assert len({k, k2, k3}) == 3
+    (janus / "_swipl.so").unlink()
+    assert qlf.swi_identity(str(home), janus) is None
 
 
 def test_no_home_directory_means_no_cache(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -315,4 +426,4 @@ def test_the_plan_json_is_the_same_text_however_the_planner_was_loaded(tmp_path:
         doc.pop("timing")
         return json.dumps(doc)  # the keys in the order the plan gave them
 
-    assert plan({}) == plan({qlf.ENV: "off"})
+    assert plan({}) == plan({qlf.ENV: "off"}) == plan({qlf.STATE_ENV: "off"})

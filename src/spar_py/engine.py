@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import os
+import sys
 import threading
 import time
 from contextlib import contextmanager
@@ -62,16 +63,99 @@ def swipl_record() -> dict[str, Any]:
         return {}
 
 
-def _import_janus() -> Any:
-    rec = swipl_record()
-    home = os.environ.get("SPAR_SWIPL_HOME") or rec.get("home")
+def _swi_home() -> str | None:
+    """The SWI-Prolog home janus is to use (``SPAR_SWIPL_HOME``, else the set-up record)."""
+    return os.environ.get("SPAR_SWIPL_HOME") or swipl_record().get("home")
+
+
+def _roots() -> list[Path]:
+    """The planner's files in load order: prolog/spar.pl, then kb/templates/*.pl."""
+    return [PROLOG_DIR / "spar.pl", *sorted(TEMPLATES_DIR.glob("*.pl"))]
+
+
+def _import_janus(state: Path | None = None) -> tuple[Any, bool]:
+    """(janus_swi imported, True if SWI-Prolog started from the saved state ``state``).
+
+    A state is used only by the import that starts SWI-Prolog (janus not imported yet)."""
+    home = _swi_home()
     if home:
         os.environ["SWI_HOME_DIR"] = home
     try:
+        if state is not None and "janus_swi" not in sys.modules:
+            return _janus_from_state(state)
         import janus_swi as janus
     except ImportError as e:  # pragma: no cover - set-up problem, not a planner one
         raise SparError(f"janus-swi is not importable ({e}); run `make setup`") from None
-    return janus
+    return janus, False
+
+
+def _janus_from_state(state: Path) -> tuple[Any, bool]:
+    """Import janus_swi with SWI-Prolog started from the saved state ``state``.
+
+    janus' package ``__init__`` starts SWI-Prolog with ``_swipl.initialize(argv...)``; it
+    runs here as it is, with ``initialize`` wrapped for the call to put ``-x state`` after
+    the program name. janus.py is imported first, as ``__init__`` itself does first: it
+    loads the C extension with RTLD_GLOBAL, which the foreign libraries a state reloads
+    need. (janus, False) if ``__init__`` did not start SWI-Prolog through ``initialize``
+    (a janus of another shape): it then started as janus does, without the state."""
+    import importlib
+    import importlib.util
+
+    spec = importlib.util.find_spec("janus_swi")
+    if spec is None or spec.loader is None:
+        raise ImportError("no module named 'janus_swi'")
+    package = importlib.util.module_from_spec(spec)
+    sys.modules["janus_swi"] = package
+    try:
+        importlib.import_module("janus_swi.janus")
+        ext = sys.modules["janus_swi._swipl"]
+        real = ext.initialize
+        used: list[bool] = []
+
+        def initialize(*argv: str) -> Any:
+            used.append(True)
+            return real(*argv[:1], "-x", str(state), *argv[1:])
+
+        ext.initialize = initialize
+        try:
+            spec.loader.exec_module(package)
+        finally:
+            ext.initialize = real
+    except BaseException:
+        for name in [m for m in sys.modules if m == "janus_swi" or m.startswith("janus_swi.")]:
+            del sys.modules[name]
+        raise
+    return package, bool(used)
+
+
+#: The query a process started from a saved state answers before the state is published
+#: (:meth:`Engine._save_state`) or used: every planner file loaded, the planner's entry
+#: point defined, and Python reachable from Prolog.
+STATE_PROBE = ("forall(member(_S, Fs), (atom_string(_F, _S), source_file(_F))), "
+               "current_predicate(spar:plan_dict/4), py_call(math:sqrt(4.0), _R), _R =:= 2.0")
+
+_CHECK_STATE = """\
+import json, sys
+sys.path.insert(0, sys.argv[1])
+from spar_py.engine import _import_janus, STATE_PROBE
+janus, used = _import_janus(__import__("pathlib").Path(sys.argv[2]))
+ok = used and janus.query_once(STATE_PROBE, {"Fs": json.loads(sys.argv[3])})["truth"]
+print("state ok" if ok else "state refused")
+"""
+
+
+def _starts_from(state: Path, roots: list[Path]) -> bool:
+    """True if a fresh process starts SWI-Prolog from ``state`` and finds the planner there
+    (a state SWI-Prolog cannot read aborts the process that tries: never this one)."""
+    import subprocess
+
+    try:
+        r = subprocess.run([sys.executable, "-c", _CHECK_STATE, str(PACKAGE_DIR.parent), str(state),
+                            json.dumps([str(p.resolve()) for p in roots])],
+                           capture_output=True, text=True, timeout=120)
+    except (OSError, subprocess.SubprocessError):
+        return False
+    return r.returncode == 0 and r.stdout.strip().endswith("state ok")
 
 
 class Engine:
@@ -88,16 +172,39 @@ class Engine:
     def __init__(self, background: bool = False) -> None:
         """Start SWI-Prolog (in this thread) and consult the planner: here, or with
         ``background`` in a thread of its own, so the caller can go on (importing numpy,
-        reading the problem) while Prolog compiles; every query waits for it first."""
-        self.janus = _import_janus()
+        reading the problem) while Prolog compiles; every query waits for it first.
+
+        With a saved state of these very sources in the cache (spar_py/qlf.py), SWI-Prolog
+        starts from it, the planner already loaded, and there is nothing left to load."""
+        t0 = time.perf_counter()
         self.cells: dict[str, Any] = {}
         self._kept: dict[str, None] = {}  # problems sessions keep loaded, oldest first
         self.lock = threading.RLock()
         self._loader: threading.Thread | None = None
         self._trim: Any = False  # glibc's malloc_trim once looked up (None: there is none)
-        self.loaded_from = ""  # how the planner was loaded: "qlf", "compiled" or "source"
+        #: how the planner was loaded: "state" (SWI-Prolog started from the saved state),
+        #: "qlf", "compiled" or "source"
+        self.loaded_from = ""
         self.load_s = 0.0  # seconds that took (wall, in the thread that loaded it)
+        #: the saved state: "used", "written" (by this process), "ready" (published by
+        #: another process meanwhile), "busy" (another process is writing it), "refused"
+        #: (a fresh process could not start from it), "" (none: cache or state off)
+        self.state_status = ""
         self._load_error: BaseException | None = None
+        self._sources: Any = None  # qlf.Sources of this start, scanned once
+        self._image_extra: dict[str, str] = {}  # the loaded image's files beyond its directories
+        self._state: Any = self._state_entry()
+        ready = self._state is not None and self._state.ready()
+        fresh = "janus_swi" not in sys.modules
+        self.janus, from_state = _import_janus(self._state.image if ready else None)
+        #: SWI-Prolog was started here as janus does, so its state after loading the
+        #: planner is the planner's alone, and may be saved
+        self._may_save = fresh and not from_state
+        if from_state and self._query_once(STATE_PROBE, {"Fs": [str(p.resolve()) for p in _roots()]})["truth"]:
+            self.loaded_from, self.state_status = "state", "used"
+            self.load_s = time.perf_counter() - t0
+            self._state.touch()
+            return
         if background:
             self._loader = threading.Thread(target=self._load_in_thread, name="spar-consult")
             self._loader.start()
@@ -110,7 +217,7 @@ class Engine:
         it there first when not, and from the sources when there is no usable cache.
         :attr:`loaded_from` says which ("qlf", "compiled" or "source")."""
         t0 = time.perf_counter()
-        roots = [PROLOG_DIR / "spar.pl", *sorted(TEMPLATES_DIR.glob("*.pl"))]
+        roots = _roots()
         how = self._load_image(roots)
         if how is None:
             for f in roots:
@@ -118,6 +225,57 @@ class Engine:
             how = "source"
         self.loaded_from = how
         self.load_s = time.perf_counter() - t0
+        if how in ("qlf", "compiled") and self._may_save and self._state is not None:
+            self._save_state(roots)
+
+    def _state_entry(self) -> Any:
+        """The cache entry of the saved state of the planner's sources as they are now
+        (qlf.state_entry), or None: cache or saved state off, no SWI-Prolog home or janus
+        known before it starts."""
+        from . import qlf
+
+        base = qlf.cache_dir()
+        home = _swi_home()
+        if base is None or not home or not qlf.saved_state_on():
+            return None
+        import importlib.util
+
+        spec = importlib.util.find_spec("janus_swi")
+        if spec is None or not spec.origin:
+            return None
+        identity = qlf.swi_identity(home, Path(spec.origin).parent)
+        if identity is None:
+            return None
+        self._sources = qlf.Sources.scan(_roots(), [PROLOG_DIR, TEMPLATES_DIR])
+        return qlf.state_entry(base, qlf.state_key(self._sources, identity))
+
+    def _save_state(self, roots: list[Path]) -> None:
+        """Save SWI-Prolog's state now (janus and the planner just loaded, nothing else) as
+        the saved-state entry, published once a fresh process started from it. Best
+        effort: a busy or unwritable cache, or a state that does not start, leaves the
+        entry unpublished (:attr:`state_status` says which)."""
+        from . import qlf
+
+        entry = self._state
+        try:
+            with qlf.building_unless_busy(entry) as must:
+                if not must:
+                    self.state_status = "ready" if entry.ready() else "busy"
+                    return
+                tmp = entry.directory / f".{qlf.STATE}.{os.getpid()}.tmp"
+                try:
+                    self._query_once("qsave_program(F, [stand_alone(false), autoload(false), class(development)])",
+                                     {"F": str(tmp)})
+                    if not _starts_from(tmp, roots):
+                        self.state_status = "refused"
+                        return
+                    os.replace(tmp, entry.image)
+                finally:
+                    tmp.unlink(missing_ok=True)
+                entry.publish(self._image_extra)
+                self.state_status = "written"
+        except (OSError, SparError):
+            self.state_status = "refused"
 
     def _load_image(self, roots: list[Path]) -> str | None:
         """Load the planner from the .qlf cache (see :mod:`spar_py.qlf`); "qlf" if loaded
@@ -128,14 +286,16 @@ class Engine:
         base = qlf.cache_dir()
         if base is None:
             return None
-        sources = qlf.Sources.scan(roots, [PROLOG_DIR, TEMPLATES_DIR])
+        sources = self._sources or qlf.Sources.scan(roots, [PROLOG_DIR, TEMPLATES_DIR])
         swi = self._query_once("current_prolog_flag(version, V), current_prolog_flag(home, H)")
         entry = qlf.entry(base, qlf.key(sources, int(swi["V"]), str(swi["H"])))
         if entry.ready():
+            self._image_extra = entry.extra()
             return self._load_qlf(entry, roots)
         try:
             with qlf.building(entry) as must:
                 if not must:
+                    self._image_extra = entry.extra()
                     return self._load_qlf(entry, roots)
                 return self._compile_qlf(entry, sources, str(swi["H"]))
         except OSError:  # an unwritable cache: consult the sources
@@ -176,10 +336,12 @@ class Engine:
             if sources.covers(f):
                 if sources.hashes.get(f) != digest:  # edited while compiling: do not keep it
                     entry.image.unlink(missing_ok=True)
+                    self._may_save = False  # (nor a state of it)
                     return "compiled"
             else:
                 extra[f] = digest
         entry.publish(extra)
+        self._image_extra = extra
         qlf.evict(entry.directory.parent, spare=entry.directory.name)
         return "compiled"
 

@@ -19,6 +19,19 @@ edits a .pl file gets a new key, and the next run compiles and loads the edited 
 Files the image turns out to contain beyond those directories (none today) are listed
 with their hashes in the manifest and checked on every load.
 
+Beside the image, the cache keeps a **saved state** of SWI-Prolog (``qsave_program/2``)
+taken just after a process started janus and loaded the image: the Prolog system,
+library(janus) and the planner, in one file. A process that finds it starts SWI-Prolog
+from it (``-x``, engine.py's ``_import_janus``): about 15 ms, where janus' own start
+compiles library(janus) and its libraries from source (some 50 ms) before the image can
+even load. Its key is computed before Prolog runs, so it cannot ask SWI-Prolog its
+version: it holds the sources' key parts, the SWI-Prolog home with the size and mtime of
+its boot file, and janus' own files (the ``_swipl`` extension's size and mtime, the hash
+of janus.pl, which the state holds compiled). A state is published only once a fresh
+process has started from it (a state SWI-Prolog cannot read aborts the process that
+tries), and it is used only if its bytes still hash to what its manifest says.
+``SPAR_SAVED_STATE=off`` keeps janus' own start (and the image).
+
 The cache is filled at set-up (``python -m spar_py.qlf``, run by scripts/setup.sh) and
 otherwise by the first run after a change. ``SPAR_QLF_CACHE`` names the cache directory
 (default ``$XDG_CACHE_HOME/spar-py/qlf``, else ``~/.cache/spar-py/qlf``); set it to
@@ -53,7 +66,10 @@ KEEP = 16
 ENV = "SPAR_QLF_CACHE"
 LOADER = "planner.pl"
 IMAGE = "planner.qlf"
+STATE = "planner.state"
 MANIFEST = "manifest.json"
+#: ``off`` (or 0, no, false): start SWI-Prolog as janus does, never from a saved state.
+STATE_ENV = "SPAR_SAVED_STATE"
 
 
 def cache_dir() -> Path | None:
@@ -107,6 +123,40 @@ def key(sources: Sources, swi_version: int, swi_home: str) -> str:
     return sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:32]
 
 
+def saved_state_on() -> bool:
+    """False when ``SPAR_SAVED_STATE`` says off (the cache itself may still be on)."""
+    v = os.environ.get(STATE_ENV)
+    return v is None or v.strip().lower() not in ("off", "0", "no", "false", "")
+
+
+def _stat(path: Path) -> list:
+    st = path.stat()
+    return [str(path), st.st_size, st.st_mtime_ns]
+
+
+def swi_identity(home: str, janus_dir: Path) -> dict | None:
+    """What a saved state depends on beyond the sources, known before SWI-Prolog starts:
+    the home (with its boot file's size and mtime: a rebuilt SWI-Prolog rewrites it) and
+    janus' C extension (size, mtime) and janus.pl (hash; the state holds it compiled).
+    None if one of them is missing (no saved state then)."""
+    try:
+        ext = sorted(janus_dir.glob("_swipl*"))
+        if not ext:
+            return None
+        return {"home": str(Path(home).resolve()), "boot": _stat(Path(home) / "boot.prc"),
+                "janus_ext": [_stat(p) for p in ext], "janus_pl": file_digest(janus_dir / "janus.pl")}
+    except OSError:
+        return None
+
+
+def state_key(sources: Sources, identity: dict) -> str:
+    """The cache key of the saved state of ``sources`` started by the SWI-Prolog and janus
+    of ``identity`` (:func:`swi_identity`)."""
+    doc = {"format": FORMAT, "kind": "state", "swi": identity,
+           "roots": [str(p) for p in sources.roots], "files": sorted(sources.hashes.items())}
+    return sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:32]
+
+
 def loader_text(roots: tuple[Path, ...]) -> str:
     """The Prolog file the image is compiled from: one ``use_module/1`` per root file,
     each written as a quoted atom (a path is never read as code)."""
@@ -122,9 +172,11 @@ def _quoted(text: str) -> str:
 
 @dataclass(frozen=True)
 class Entry:
-    """One cache entry: ``directory`` holds the loader, the image and the manifest."""
+    """One cache entry: ``directory`` holds the loader, the image (``image_name``: the .qlf,
+    or a saved state) and the manifest."""
 
     directory: Path
+    image_name: str = IMAGE
 
     @property
     def loader(self) -> Path:
@@ -132,7 +184,7 @@ class Entry:
 
     @property
     def image(self) -> Path:
-        return self.directory / IMAGE
+        return self.directory / self.image_name
 
     @property
     def manifest(self) -> Path:
@@ -143,7 +195,8 @@ class Entry:
         file it lists is unchanged."""
         try:
             doc = json.loads(self.manifest.read_text())
-            if doc.get("format") != FORMAT or file_digest(self.image) != doc.get("sha256"):
+            if (doc.get("format") != FORMAT or doc.get("image") != self.image_name
+                    or file_digest(self.image) != doc.get("sha256")):
                 return False  # damaged, truncated or replaced since it was published
             for path, digest in doc.get("extra", {}).items():
                 if file_digest(Path(path)) != digest:
@@ -151,6 +204,14 @@ class Entry:
         except (OSError, ValueError, AttributeError):
             return False
         return True
+
+    def extra(self) -> dict[str, str]:
+        """The files beyond the scanned directories the published image holds, with their
+        hashes (from the manifest; {} if there is none)."""
+        try:
+            return dict(json.loads(self.manifest.read_text()).get("extra", {}))
+        except (OSError, ValueError, AttributeError):
+            return {}
 
     def touch(self) -> None:
         """Mark the entry as just used (its manifest's mtime orders eviction)."""
@@ -165,7 +226,7 @@ class Entry:
         directories, with their hashes."""
         import tempfile
 
-        doc = {"format": FORMAT, "image": IMAGE, "sha256": file_digest(self.image), "extra": extra}
+        doc = {"format": FORMAT, "image": self.image_name, "sha256": file_digest(self.image), "extra": extra}
         fd, tmp = tempfile.mkstemp(dir=self.directory, prefix=".manifest.", suffix=".tmp")
         with os.fdopen(fd, "w") as f:
             json.dump(doc, f, sort_keys=True)
@@ -175,6 +236,11 @@ class Entry:
 def entry(base: Path, cache_key: str) -> Entry:
     """The entry of ``cache_key`` under ``base`` (it may not exist yet)."""
     return Entry(base / cache_key)
+
+
+def state_entry(base: Path, cache_key: str) -> Entry:
+    """The saved-state entry of ``cache_key`` (:func:`state_key`) under ``base``."""
+    return Entry(base / f"state-{cache_key}", STATE)
 
 
 @contextmanager
@@ -191,6 +257,29 @@ def building(e: Entry) -> Iterator[bool]:
             yield not e.ready()
             return
         fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            yield not e.ready()
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
+
+
+@contextmanager
+def building_unless_busy(e: Entry) -> Iterator[bool]:
+    """:func:`building` without waiting: yield False at once if another process holds the
+    lock (it is building the entry; this one goes on without it)."""
+    e.directory.mkdir(parents=True, exist_ok=True)
+    lock = e.directory.parent / f"{e.directory.name}.lock"
+    with open(lock, "a+") as fh:
+        try:
+            import fcntl
+        except ImportError:  # pragma: no cover - not POSIX: never build without a lock
+            yield False
+            return
+        try:
+            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            yield False
+            return
         try:
             yield not e.ready()
         finally:
@@ -237,10 +326,14 @@ def main() -> None:
     eng = Engine()
     base = cache_dir()
     where = "the cache is off" if base is None else f"cache {base}"
-    print(f"setup: planner Prolog {_DONE.get(eng.loaded_from, eng.loaded_from)} ({where})", file=sys.stderr)
+    state = {"written": ", saved state written", "used": ", saved state up to date",
+             "ready": ", saved state up to date", "refused": ", saved state refused (SWI-Prolog did not start from it)",
+             }.get(eng.state_status, "")
+    print(f"setup: planner Prolog {_DONE.get(eng.loaded_from, eng.loaded_from)}{state} ({where})", file=sys.stderr)
 
 
-_DONE = {"qlf": "image up to date", "compiled": "compiled to a .qlf image", "source": "consulted from source"}
+_DONE = {"qlf": "image up to date", "compiled": "compiled to a .qlf image", "source": "consulted from source",
+         "state": "image up to date"}
 
 
 if __name__ == "__main__":
