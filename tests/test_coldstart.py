@@ -414,6 +414,27 @@ def test_collections_are_held_until_the_problem_is_read() -> None:
     assert json.loads(r.stdout.strip().splitlines()[-1]) == [[0, True, True, 0], False, [0, True, True, True]]
 
 
+@pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="counts threads in /proc")
+@pytest.mark.parametrize("user", [None, "2"])
+def test_the_console_script_runs_one_blas_thread_unless_told(user: str | None) -> None:
+    """entry.one_blas_thread, as the spar script calls it before numpy loads: numpy's OpenBLAS
+    then starts no worker thread (the process has one thread), and a count the user set is kept
+    (its workers are there)."""
+    code = ("import os\nfrom spar_py.entry import one_blas_thread\none_blas_thread()\nimport numpy\n"
+            "print(os.environ.get('OPENBLAS_NUM_THREADS'), len(os.listdir('/proc/self/task')))\n")
+    env = {k: v for k, v in os.environ.items() if k not in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")}
+    if user is not None:
+        env["OPENBLAS_NUM_THREADS"] = user
+    r = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    value, threads = r.stdout.split()
+    assert value == (user or "1")
+    if user is None:
+        assert threads == "1"
+    elif (os.cpu_count() or 1) > 1:
+        assert int(threads) == 2  # the main thread and the one worker asked for
+
+
 def test_the_plan_json_is_the_same_text_however_the_planner_was_loaded(tmp_path: Path) -> None:
     """SWI-Prolog dicts keep their keys in atom-handle order, which depends on what the process
     created first; the image (.qlf) and the sources create atoms in another order. The JSON

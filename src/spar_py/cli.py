@@ -8,9 +8,10 @@ Errors are one line on stderr, never a traceback.
 from __future__ import annotations
 
 if __name__ == "__main__":  # python -m spar_py.cli: a signal during the imports below is one line too
-    from spar_py.entry import early_signals, hold_collections, keep_compiled_methods
+    from spar_py.entry import early_signals, hold_collections, keep_compiled_methods, one_blas_thread
 
     early_signals()
+    one_blas_thread()  # as the spar script: before numpy loads
     hold_collections()  # as the spar script (entry.main): until resume_collections
     _image = keep_compiled_methods()
 

@@ -34,6 +34,25 @@ def early_signals() -> None:
         signal.signal(sig, _stop)
 
 
+#: Environment variables that set the BLAS thread count; :func:`one_blas_thread` leaves a
+#: count the user set alone.
+BLAS_THREADS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")
+
+
+def one_blas_thread() -> None:
+    """One OpenBLAS thread for this process (and the processes it starts: ``spar regress -j``
+    workers), unless the user set a count. Called before numpy is imported, by the console
+    script only (never the Python API).
+
+    The planner's numerical work is small: 4x4 transforms and batches of a few hundred rows,
+    which BLAS runs on one thread anyway. numpy's OpenBLAS otherwise starts one worker per
+    core as numpy loads, and the workers spin while idle: on two cores that is about 100 ms
+    of CPU taken from the planner in a cold ``spar plan`` (bench/coldstart.py), and N
+    workers of ``spar regress -j N`` would start N pools on one machine."""
+    if not any(v in os.environ for v in BLAS_THREADS):
+        os.environ["OPENBLAS_NUM_THREADS"] = "1"
+
+
 #: Whether :func:`hold_collections` disabled the cyclic garbage collector (and
 #: :func:`resume_collections` has not enabled it again).
 _held = False
@@ -81,6 +100,7 @@ def save_compiled_methods(image: CodeImage | None) -> None:
 def main() -> None:
     """``spar``: early handlers, then :func:`spar_py.cli.main`."""
     early_signals()
+    one_blas_thread()
     hold_collections()
     image = keep_compiled_methods()
     from .cli import exiting, main as cli_main
