@@ -15,8 +15,9 @@ load (the order rotates from round to round); the figures are medians over the r
   does, the planner loaded from its compiled .qlf image in a thread meanwhile;
 - ``plan, sources``: the same with ``SPAR_QLF_CACHE=off``: the Prolog consulted from
   prolog/*.pl and kb/templates/*.pl at every start, as before the image;
-- ``floor, frozen exit``: the floor ending with ``gc.freeze()`` as ``spar`` does (cli.exiting:
-  the shutdown collections skip the heap), the like-for-like floor of a process that exits so;
+- ``floor, frozen exit``: the floor ending as ``spar`` does (cli.exiting: ``gc.freeze()``, so
+  the shutdown collections skip the heap, then ``os._exit``, without the interpreter's
+  teardown), the like-for-like floor of a process that exits so;
 - ``engine``, ``engine, image`` and ``engine, sources``: ``python -c "import spar_py.engine
   as e; e.engine()"``, the engine start alone, each way;
 - with ``--peer DIR`` (another checkout of spar-py, e.g. ``git archive`` of an older commit
@@ -68,7 +69,7 @@ def _commands(peer: str | Path | None = None) -> dict[str, tuple[list[str], dict
     image = {"SPAR_SAVED_STATE": "off"}
     plan = [str(BIN / "spar"), "plan", CELL]
     cmds = {"floor": ([py, "-c", FLOOR], {}),
-            "floor, frozen exit": ([py, "-c", FLOOR + "; import gc; gc.freeze()"], {}),
+            "floor, frozen exit": ([py, "-c", FLOOR + "; import gc, os; gc.freeze(); os._exit(0)"], {}),
             "plan": (plan, {}),
             "plan, image": (plan, image),
             "plan, sources": (plan, off),
@@ -204,7 +205,7 @@ again = time.perf_counter() - t
 out.write(json.dumps({"marks": kept, "total": total, "load_s": eng.load_s, "loaded_from": eng.loaded_from,
                       "again": again, "elapsed": time.perf_counter() - t0}) + "\n")
 out.flush()
-cli.exiting()  # as the spar script ends
+cli.exiting(0)  # as the spar script ends (its code: the plan ran)
 """
 
 
@@ -313,7 +314,7 @@ def render(r: dict) -> list[str]:
     L += [(f"Cold `spar plan` is {r['ratio']:.2f}x the floor in wall time (target <= {r['target']:g}x: "
            f"{'met' if ok else 'NOT met'}) and {r['ratio_cpu']:.2f}x in CPU time; with the image alone it "
            f"is {r['ratio_image']:.2f}x, from sources {r['ratio_sources']:.2f}x; against the floor ending as "
-           f"`spar` does (gc.freeze() before exit) {r['ratio_frozen']:.2f}x. Starting from the saved state "
+           f"`spar` does (gc.freeze() and os._exit) {r['ratio_frozen']:.2f}x. Starting from the saved state "
            f"instead of janus' own start and the image changes the engine start by "
            f"{-r['state_engine_saving_s'] * 1e3:+.0f} ms and the whole plan by "
            f"{-r['state_plan_saving_s'] * 1e3:+.0f} ms; loading the image instead of the sources changes them "

@@ -414,6 +414,33 @@ def test_collections_are_held_until_the_problem_is_read() -> None:
     assert json.loads(r.stdout.strip().splitlines()[-1]) == [[0, True, True, 0], False, [0, True, True, True]]
 
 
+#: Run in a fresh process: write to stdout (unflushed), maybe start a thread that is still
+#: running, then call cli.exiting(code) as the console script does, and write again.
+EXITING = """
+import sys, threading, time
+from spar_py import cli
+sys.stdout.write("before\\n")
+if sys.argv[2] == "thread":
+    threading.Thread(target=time.sleep, args=(0.3,)).start()
+cli.exiting(eval(sys.argv[1]))
+print("after")
+"""
+
+
+@pytest.mark.parametrize("code, thread, ends_at_once", [
+    ("0", "", True), ("1", "", True), ("None", "", True),
+    ("2", "", False), ("130", "", False), ("...", "", False), ("0", "thread", False)])
+def test_exiting_ends_at_once_only_when_nothing_is_left_to_do(code: str, thread: str, ends_at_once: bool) -> None:
+    """cli.exiting: a run that ended with a plan or without one (exit 0 or 1) ends at once
+    (os._exit), its output flushed first; an error's exit, no SystemExit at all (``...``), or a
+    thread still running leaves the usual shutdown to do its work."""
+    r = subprocess.run([sys.executable, "-c", EXITING, code, thread], capture_output=True, text=True,
+                       timeout=60, cwd=ROOT)
+    assert r.stderr == ""
+    assert r.stdout == ("before\n" if ends_at_once else "before\nafter\n")
+    assert r.returncode == (int(eval(code) or 0) if ends_at_once else 0)
+
+
 @pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="counts threads in /proc")
 @pytest.mark.parametrize("user", [None, "2"])
 def test_the_console_script_runs_one_blas_thread_unless_told(user: str | None) -> None:

@@ -188,7 +188,8 @@ class Engine:
         self.load_s = 0.0  # seconds that took (wall, in the thread that loaded it)
         #: the saved state: "used", "written" (by this process), "ready" (published by
         #: another process meanwhile), "busy" (another process is writing it), "refused"
-        #: (a fresh process could not start from it), "" (none: cache or state off)
+        #: (not saved, or a fresh process could not start from it), "unwritable" (the
+        #: cache could not be written), "" (none: cache or state off)
         self.state_status = ""
         self._load_error: BaseException | None = None
         self._sources: Any = None  # qlf.Sources of this start, scanned once
@@ -274,7 +275,9 @@ class Engine:
                     tmp.unlink(missing_ok=True)
                 entry.publish(self._image_extra)
                 self.state_status = "written"
-        except (OSError, SparError):
+        except OSError:  # an unwritable cache: the image alone, as before
+            self.state_status = "unwritable"
+        except SparError:  # qsave_program refused (Prolog said why): the image alone
             self.state_status = "refused"
 
     def _load_image(self, roots: list[Path]) -> str | None:
