@@ -196,6 +196,8 @@ class Engine:
         self._image_extra: dict[str, str] = {}  # the loaded image's files beyond its directories
         self._state: Any = self._state_entry()
         ready = self._state is not None and self._state.ready()
+        if ready:  # the most recently used entry from now: qlf.evict, run by another process, spares it
+            self._state.touch()
         fresh = "janus_swi" not in sys.modules
         self.janus, from_state = _import_janus(self._state.image if ready else None)
         #: SWI-Prolog was started here as janus does, so its state after loading the
@@ -204,7 +206,6 @@ class Engine:
         if from_state and self._query_once(STATE_PROBE, {"Fs": [str(p.resolve()) for p in _roots()]})["truth"]:
             self.loaded_from, self.state_status = "state", "used"
             self.load_s = time.perf_counter() - t0
-            self._state.touch()
             return
         if background:
             self._loader = threading.Thread(target=self._load_in_thread, name="spar-consult")
