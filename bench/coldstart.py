@@ -164,7 +164,8 @@ def timed(name, fn):
     return run
 PATCH = {"spar_py.kb": ("load_problem", "load_problem (YAML, checks)"),
          "spar_py.planner": ("Planner.plan", "Planner.plan (first plan: lazy imports, compute)"),
-         "spar_py.engine": ("start_engine", "start engine (import janus, start the loading thread)")}
+         "spar_py.engine": ("start_engine",
+                            "start engine (import janus: SWI-Prolog from the saved state, else the loader started)")}
 class Patcher(importlib.abc.MetaPathFinder):
     # wrap a function of a module once the module has run (so imports keep their real order)
     def find_spec(self, name, path, target=None):
@@ -211,10 +212,11 @@ cli.exiting(0)  # as the spar script ends (its code: the plan ran)
 
 def breakdown(runs: int = 5) -> dict:
     """Where a cold ``spar plan`` spends its wall time: ``runs`` children running cli.main
-    with its steps timed; medians (s) of each step, of "interpreter start" (the parent's
-    wall time minus the child's own) and of "other" (the rest of the child's time: the
-    imports between the steps, printing); "prolog load (thread)": the loading thread's time
-    (it overlaps the steps); "Planner.plan again": the same plan once more in that process on
+    with its steps timed; medians (s) of each step, of "interpreter start and exit" (the
+    parent's wall time minus the child's own) and of "other" (the rest of the child's time:
+    the imports between the steps, printing); "planner loaded": the time until the planner
+    was loaded, within the engine start when SWI-Prolog starts from the saved state, else
+    the loading thread's (overlapping the steps); "Planner.plan again": the same plan once more in that process on
     a freshly loaded cell, after the cold run (what the first plan costs beyond one-off work)."""
     per: dict[str, list[float]] = collections.defaultdict(list)
     loaded = set()
@@ -225,11 +227,11 @@ def breakdown(runs: int = 5) -> dict:
         wall = time.perf_counter() - t
         doc = json.loads(r.stdout.strip().splitlines()[-1])
         steps = dict(doc["marks"])
-        per["interpreter start"].append(wall - doc["elapsed"])
+        per["interpreter start and exit"].append(wall - doc["elapsed"])
         for k, v in steps.items():
             per[k].append(v)
         per["other (imports between the steps, output)"].append(doc["total"] - sum(steps.values()))
-        per["prolog load (thread)"].append(doc["load_s"])
+        per["planner loaded (engine start from the state, else the loading thread; overlaps)"].append(doc["load_s"])
         per["Planner.plan again (not in the cold run: same process, fresh cell)"].append(doc["again"])
         loaded.add(doc["loaded_from"])
     return {"runs": runs, "steps": {k: statistics.median(v) for k, v in per.items()}, "loaded_from": sorted(loaded)}
