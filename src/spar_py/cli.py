@@ -460,18 +460,19 @@ def exiting(code: object = ...) -> None:
 
 
 def _end_now(code: int) -> None:
-    """End the process with ``code`` at once (os._exit), skipping the interpreter's teardown
-    of every module and object (some 6 ms of a cold ``spar plan``, the same work as the
-    collections gc.freeze saves, done by the allocator instead), once what it would still do
-    for this run is done: Python's stdout and stderr and SWI-Prolog's user_output and
-    user_error flushed. Returns (the usual shutdown follows) if a flush fails (a closed pipe:
-    the usual path reports it as before), if a thread other than a daemon is still running
-    (the usual shutdown waits for it), or if anything is registered with atexit."""
+    """End the process with ``code`` at once (os._exit), skipping the interpreter's teardown,
+    which frees every module and object one by one (about 6 ms of a cold ``spar plan``), once
+    what that shutdown would still do for this run is done: Python's stdout and stderr and
+    SWI-Prolog's user_output and user_error flushed. Returns (the usual shutdown follows) if a
+    flush fails (a closed pipe: the usual path reports it as before), if a thread other than a
+    daemon is still running (the usual shutdown waits for it), or if anything is registered
+    with atexit (or the interpreter cannot say: not CPython)."""
     import atexit
     import threading
 
-    if atexit._ncallbacks() or any(t is not threading.main_thread() and not t.daemon and t.is_alive()
-                                   for t in threading.enumerate()):
+    registered = getattr(atexit, "_ncallbacks", None)
+    if registered is None or registered() or any(
+            t is not threading.main_thread() and not t.daemon and t.is_alive() for t in threading.enumerate()):
         return
     try:
         janus = sys.modules.get("janus_swi")

@@ -260,7 +260,7 @@ class Engine:
 
         entry = self._state
         try:
-            with qlf.building_unless_busy(entry) as must:
+            with qlf.building(entry, wait=False) as must:
                 if not must:
                     self.state_status = "ready" if entry.ready() else "busy"
                     return

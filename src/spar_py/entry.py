@@ -72,8 +72,8 @@ def hold_collections() -> None:
 
 #: The youngest generation's collection threshold of a console-script run (Python's default is
 #: 700): a plan's work allocates tens of thousands of short-lived containers, and 23 young
-#: collections (and 2 older ones) of the paper's cell's first plan become one. A run ends within
-#: seconds, so what a collection would free a little earlier is of no use to it.
+#: collections (and 2 older ones) of the paper's cell's first plan become one. Cyclic garbage
+#: waits for at most this many allocations: some thousands of objects, a few MB at most.
 YOUNG_THRESHOLD = 10_000
 
 

@@ -244,40 +244,23 @@ def state_entry(base: Path, cache_key: str) -> Entry:
 
 
 @contextmanager
-def building(e: Entry) -> Iterator[bool]:
-    """Hold the entry's build lock; yield True if this process must compile it (False if
-    another process completed it while this one waited). Raises OSError if the cache
-    directory cannot be written (the caller then consults the sources)."""
+def building(e: Entry, wait: bool = True) -> Iterator[bool]:
+    """Hold the entry's build lock; yield True if this process must build the entry (False if
+    another process completed it while this one waited). With ``wait`` False the lock is not
+    waited for: False at once if another process holds it (that one is building the entry;
+    this one goes on without it). Raises OSError if the cache directory cannot be written
+    (the caller then does without the entry)."""
     e.directory.mkdir(parents=True, exist_ok=True)
     lock = e.directory.parent / f"{e.directory.name}.lock"
     with open(lock, "a+") as fh:
         try:
             import fcntl
-        except ImportError:  # pragma: no cover - not POSIX: no lock, compile anyway
-            yield not e.ready()
-            return
-        fcntl.flock(fh, fcntl.LOCK_EX)
-        try:
-            yield not e.ready()
-        finally:
-            fcntl.flock(fh, fcntl.LOCK_UN)
-
-
-@contextmanager
-def building_unless_busy(e: Entry) -> Iterator[bool]:
-    """:func:`building` without waiting: yield False at once if another process holds the
-    lock (it is building the entry; this one goes on without it)."""
-    e.directory.mkdir(parents=True, exist_ok=True)
-    lock = e.directory.parent / f"{e.directory.name}.lock"
-    with open(lock, "a+") as fh:
-        try:
-            import fcntl
-        except ImportError:  # pragma: no cover - not POSIX: never build without a lock
-            yield False
+        except ImportError:  # pragma: no cover - not POSIX: no lock; build only when asked to wait
+            yield wait and not e.ready()
             return
         try:
-            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
+            fcntl.flock(fh, fcntl.LOCK_EX if wait else fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:  # (only without waiting) another process is building it
             yield False
             return
         try:
@@ -327,8 +310,9 @@ def main() -> None:
     base = cache_dir()
     where = "the cache is off" if base is None else f"cache {base}"
     state = {"written": ", saved state written", "used": ", saved state up to date",
-             "ready": ", saved state up to date", "refused": ", saved state refused (SWI-Prolog did not start from it)",
-             }.get(eng.state_status, "")
+             "ready": ", saved state up to date", "busy": ", saved state being written by another process",
+             "refused": ", saved state refused (SWI-Prolog did not start from it)",
+             "unwritable": ", saved state not written (the cache is not writable)"}.get(eng.state_status, "")
     print(f"setup: planner Prolog {_DONE.get(eng.loaded_from, eng.loaded_from)}{state} ({where})", file=sys.stderr)
 
 
