@@ -486,15 +486,7 @@ def _end_now(code: int) -> None:
 
 
 if __name__ == "__main__":
-    from spar_py.entry import save_compiled_methods
+    from spar_py.entry import run_to_end
 
-    _code: object = ...  # no SystemExit (yet)
-    try:
-        main(sys.argv[1:])
-    except SystemExit as _e:
-        _code = _e.code
-        raise
-    finally:
-        save_compiled_methods(_image)
-        exiting(_code)
+    run_to_end(main, exiting, _image)
 

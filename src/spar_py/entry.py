@@ -12,6 +12,7 @@ import gc
 import os
 import signal
 import sys
+from collections.abc import Callable
 from types import FrameType
 from typing import TYPE_CHECKING
 
@@ -114,7 +115,17 @@ def main() -> None:
     image = keep_compiled_methods()
     from .cli import exiting, main as cli_main
 
-    code: object = ...  # no SystemExit (yet): exiting() then leaves the usual shutdown alone
+    run_to_end(cli_main, exiting, image)
+
+
+def run_to_end(cli_main: Callable[[list[str]], None], exiting: Callable[[object], None],
+               image: CodeImage | None) -> None:
+    """Run ``cli_main(sys.argv[1:])`` (spar_py.cli.main) and end the process as the console
+    script does (and ``python -m spar_py.cli``): the dataclass-methods image saved, then
+    ``exiting`` (cli.exiting: a shutdown without the full heap's collections, or none at all)
+    with the SystemExit code the run raised (``...`` if it raised none, which leaves the usual
+    shutdown alone)."""
+    code: object = ...
     try:
         cli_main(sys.argv[1:])
     except SystemExit as e:
@@ -122,4 +133,4 @@ def main() -> None:
         raise
     finally:
         save_compiled_methods(image)
-        exiting(code)  # the process ends here: a shutdown without the full heap's collections
+        exiting(code)
