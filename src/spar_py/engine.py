@@ -73,6 +73,11 @@ def _roots() -> list[Path]:
     return [PROLOG_DIR / "spar.pl", *sorted(TEMPLATES_DIR.glob("*.pl"))]
 
 
+def _root_names(roots: list[Path]) -> list[str]:
+    """``roots`` as the absolute paths Prolog's source_file/1 names them by."""
+    return [str(p.resolve()) for p in roots]
+
+
 def _import_janus(state: Path | None = None) -> tuple[Any, bool]:
     """(janus_swi imported, True if SWI-Prolog started from the saved state ``state``).
 
@@ -128,11 +133,12 @@ def _janus_from_state(state: Path) -> tuple[Any, bool]:
     return package, bool(used)
 
 
+#: The query true when every file named in ``Fs`` (:func:`_root_names`) is loaded.
+ROOTS_LOADED = "forall(member(_S, Fs), (atom_string(_F, _S), source_file(_F)))"
 #: The query a process started from a saved state answers before the state is published
 #: (:meth:`Engine._save_state`) or used: every planner file loaded, the planner's entry
 #: point defined, and Python reachable from Prolog.
-STATE_PROBE = ("forall(member(_S, Fs), (atom_string(_F, _S), source_file(_F))), "
-               "current_predicate(spar:plan_dict/4), py_call(math:sqrt(4.0), _R), _R =:= 2.0")
+STATE_PROBE = ROOTS_LOADED + ", current_predicate(spar:plan_dict/4), py_call(math:sqrt(4.0), _R), _R =:= 2.0"
 
 _CHECK_STATE = """\
 import json, sys
@@ -151,7 +157,7 @@ def _starts_from(state: Path, roots: list[Path]) -> bool:
 
     try:
         r = subprocess.run([sys.executable, "-c", _CHECK_STATE, str(PACKAGE_DIR.parent), str(state),
-                            json.dumps([str(p.resolve()) for p in roots])],
+                            json.dumps(_root_names(roots))],
                            capture_output=True, text=True, timeout=120)
     except (OSError, subprocess.SubprocessError):
         return False
@@ -194,6 +200,7 @@ class Engine:
         self._load_error: BaseException | None = None
         self._sources: Any = None  # qlf.Sources of this start, scanned once
         self._image_extra: dict[str, str] = {}  # the loaded image's files beyond its directories
+        self._roots = _roots()
         self._state: Any = self._state_entry()
         ready = self._state is not None and self._state.ready()
         if ready:  # the most recently used entry from now: qlf.evict, run by another process, spares it
@@ -203,7 +210,7 @@ class Engine:
         #: SWI-Prolog was started here as janus does, so its state after loading the
         #: planner is the planner's alone, and may be saved
         self._may_save = fresh and not from_state
-        if from_state and self._query_once(STATE_PROBE, {"Fs": [str(p.resolve()) for p in _roots()]})["truth"]:
+        if from_state and self._query_once(STATE_PROBE, {"Fs": _root_names(self._roots)})["truth"]:
             self.loaded_from, self.state_status = "state", "used"
             self.load_s = time.perf_counter() - t0
             return
@@ -219,7 +226,7 @@ class Engine:
         it there first when not, and from the sources when there is no usable cache.
         :attr:`loaded_from` says which ("qlf", "compiled" or "source")."""
         t0 = time.perf_counter()
-        roots = _roots()
+        roots = self._roots
         how = self._load_image(roots)
         if how is None:
             for f in roots:
@@ -248,7 +255,7 @@ class Engine:
         identity = qlf.swi_identity(home, Path(spec.origin).parent)
         if identity is None:
             return None
-        self._sources = qlf.Sources.scan(_roots(), [PROLOG_DIR, TEMPLATES_DIR])
+        self._sources = qlf.Sources.scan(self._roots, [PROLOG_DIR, TEMPLATES_DIR])
         return qlf.state_entry(base, qlf.state_key(self._sources, identity))
 
     def _save_state(self, roots: list[Path]) -> None:
@@ -294,12 +301,10 @@ class Engine:
         swi = self._query_once("current_prolog_flag(version, V), current_prolog_flag(home, H)")
         entry = qlf.entry(base, qlf.key(sources, int(swi["V"]), str(swi["H"])))
         if entry.ready():
-            self._image_extra = entry.extra()
             return self._load_qlf(entry, roots)
         try:
             with qlf.building(entry) as must:
                 if not must:
-                    self._image_extra = entry.extra()
                     return self._load_qlf(entry, roots)
                 return self._compile_qlf(entry, sources, str(swi["H"]))
         except OSError:  # an unwritable cache: consult the sources
@@ -310,14 +315,14 @@ class Engine:
         root file (the caller then consults the sources, and the next run rebuilds it)."""
         try:
             self._query_once("load_files(File, [silent(true)])", {"File": str(entry.image)})
-            ok = self._query_once("forall(member(_S, Fs), (atom_string(_F, _S), source_file(_F)))",
-                                  {"Fs": [str(p.resolve()) for p in roots]})["truth"]
+            ok = self._query_once(ROOTS_LOADED, {"Fs": _root_names(roots)})["truth"]
         except SparError:
             ok = False
         if not ok:
             entry.manifest.unlink(missing_ok=True)
             return None
         entry.touch()
+        self._image_extra = entry.extra()  # (a state saved later holds what the image holds)
         return "qlf"
 
     def _compile_qlf(self, entry: Any, sources: Any, swi_home: str) -> str:

@@ -72,11 +72,16 @@ MANIFEST = "manifest.json"
 STATE_ENV = "SPAR_SAVED_STATE"
 
 
+def _says_off(value: str) -> bool:
+    """True for a setting that turns a feature off: off, 0, no, false or empty."""
+    return value.strip().lower() in ("off", "0", "no", "false", "")
+
+
 def cache_dir() -> Path | None:
     """The cache directory (``$SPAR_QLF_CACHE``, ``$XDG_CACHE_HOME/spar-py/qlf`` or
     ``~/.cache/spar-py/qlf``), or None when ``SPAR_QLF_CACHE=off`` (or there is no home)."""
     env = os.environ.get(ENV)
-    if env is not None and env.strip().lower() in ("off", "0", "no", "false", ""):
+    if env is not None and _says_off(env):
         return None
     if env:
         return Path(env).expanduser()
@@ -118,15 +123,20 @@ class Sources:
 
 def key(sources: Sources, swi_version: int, swi_home: str) -> str:
     """The cache key of ``sources`` compiled by SWI-Prolog ``swi_version`` at ``swi_home``."""
-    doc = {"format": FORMAT, "swi": [swi_version, swi_home],
-           "roots": [str(p) for p in sources.roots], "files": sorted(sources.hashes.items())}
+    return _key_of(sources, swi=[swi_version, swi_home])
+
+
+def _key_of(sources: Sources, **parts: object) -> str:
+    """A key of ``sources`` (their roots and every file's hash), :data:`FORMAT` and ``parts``."""
+    doc = {"format": FORMAT, **parts, "roots": [str(p) for p in sources.roots],
+           "files": sorted(sources.hashes.items())}
     return sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:32]
 
 
 def saved_state_on() -> bool:
     """False when ``SPAR_SAVED_STATE`` says off (the cache itself may still be on)."""
     v = os.environ.get(STATE_ENV)
-    return v is None or v.strip().lower() not in ("off", "0", "no", "false", "")
+    return v is None or not _says_off(v)
 
 
 def _stat(path: Path) -> list:
@@ -152,9 +162,7 @@ def swi_identity(home: str, janus_dir: Path) -> dict | None:
 def state_key(sources: Sources, identity: dict) -> str:
     """The cache key of the saved state of ``sources`` started by the SWI-Prolog and janus
     of ``identity`` (:func:`swi_identity`)."""
-    doc = {"format": FORMAT, "kind": "state", "swi": identity,
-           "roots": [str(p) for p in sources.roots], "files": sorted(sources.hashes.items())}
-    return sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:32]
+    return _key_of(sources, kind="state", swi=identity)
 
 
 def loader_text(roots: tuple[Path, ...]) -> str:
