@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import os
 import select
-import shutil
 import signal
 import sys
 import threading
@@ -151,6 +150,8 @@ class RunGuard:
 
     def _discard(self, stage: Path) -> None:
         """Remove the (emptied) staging directory ``stage`` and forget it."""
+        import shutil  # loaded already: a staging directory is made with tempfile, which imports it
+
         with self.lock:
             self._temporaries = [p for p in self._temporaries if p != stage]
         shutil.rmtree(stage, ignore_errors=True)
@@ -161,7 +162,15 @@ class RunGuard:
         A directory is first renamed to a name nobody else knows, then removed: writers
         that are still running (the main thread, a ``dot`` child) make their files by
         path, and after the rename no such path leads into it, so the removal cannot race
-        with them and leave a half-emptied directory behind."""
+        with them and leave a half-emptied directory behind.
+
+        shutil is imported only here and in :meth:`_discard` (a plan without outputs never
+        needs it: 2 ms of a cold start), and only once a temporary exists, when staging's
+        tempfile has imported it: a stop on the watchdog's thread never runs an import."""
+        if not self._temporaries:
+            return
+        import shutil
+
         for p in self._temporaries:
             try:
                 if p.is_dir() and not p.is_symlink():
