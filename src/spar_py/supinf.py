@@ -1732,6 +1732,10 @@ class _Search:
         #: sound lower bounds of min g_0 and min g_1 from outside the boxes (the chain's
         #: point sets, ``use_hull``); None until computed
         self.floor: list[float] | None = None
+        #: the best points of the last :meth:`result` (their bytes) and their rigorous values:
+        #: a search resumed after a decision (cached_bounds) whose steps found no better point
+        #: reads them instead of evaluating the same points again
+        self._found: tuple[bytes, np.ndarray] | None = None
 
     def tol(self) -> float:
         return max(self.abs_tol, self.rel_tol * max(0.0, -self.U[1] - self.U[0]))
@@ -1997,7 +2001,11 @@ class _Search:
         lo, hi = max(lo, plain[0]), min(hi, plain[1])  # the plain enclosure is valid too
         # rigorous values at the best points found; the tolerance claim is made with them
         P = np.vstack(self.best)
-        fp = self.B.enclose(P, P)
+        if self._found is not None and self._found[0] == P.tobytes():
+            fp = self._found[1]
+        else:
+            fp = self.B.enclose(P, P)
+            self._found = (P.tobytes(), fp)
         lo_found = float(fp[1, 0]) if math.isfinite(fp[1, 0]) else _INF
         hi_found = float(fp[0, 1]) if math.isfinite(fp[0, 1]) else -_INF
         tol = max(self.abs_tol, self.rel_tol * max(0.0, hi_found - lo_found))
