@@ -607,11 +607,20 @@ def _some_placement(cell: Cell, obj: str, items: list[tuple[np.ndarray, Requirem
     out = [False] * len(items)
     live: list[tuple[int, SceneState | None]] = []  # (item, its requirement's scene state)
     T0 = [cands[0] @ np.asarray(req.X, float) if len(cands) else None for cands, req in items]
+    # the items share a few grids (one per stable pose): each grid's z-row test made once, and
+    # every item's wrist height at its first placement in one batch
+    z_rows: dict[int, bool] = {}
+    for cands, _ in items:
+        if len(cands) and id(cands) not in z_rows:
+            z_rows[id(cands)] = bool(np.all(cands[:, 2, :] == cands[0, 2, :]))
+    placed = [k for k, (cands, _) in enumerate(items) if len(cands)]
+    wrist = dict(zip(placed, wrist_height(cell.robot, np.stack([T0[k] for k in placed])).tolist())) if placed else {}
+    below = -from_mm(cell.unit, ROUND_MM)
     for k, (cands, req) in enumerate(items):
         if not len(cands):
             continue
-        z_row = bool(np.all(cands[:, 2, :] == cands[0, 2, :]))
-        if z_row and wrist_height(cell.robot, T0[k][None])[0] < -from_mm(cell.unit, ROUND_MM):
+        z_row = z_rows[id(cands)]
+        if z_row and wrist[k] < below:
             continue
         state = requirement_state(cell, obj, req)
         if tool_refusal(cell, obj, T0[k], req, table=z_row, state=state) is None:
