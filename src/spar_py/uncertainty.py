@@ -384,6 +384,11 @@ class Constraint:
     #: What determines ``expr`` and ``bounding`` up to a renaming of their variables, and
     #: those variables' bounds in order (None: unknown): equal keys, equal SUP/INF answers.
     key: tuple | None = field(default=None, compare=False, repr=False)
+    #: ``(h, c)`` when ``expr`` is ``h + c`` for a constant c (built so): SUP/INF bounds
+    #: ``h`` on both sides at once and shifts the end it needs (:func:`evaluate`), so
+    #: constraints that differ by a constant (the pickup pairs p1_ci, p2_ci) share one
+    #: compiled bounder and one search
+    core: tuple[ca.SX, float] | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self) -> None:
         if self.sense not in (">", "<"):
@@ -411,26 +416,24 @@ def pickup_constraints(state: WorldState, obj: str, grasp_T: np.ndarray, width: 
         # both the contacts and the finger frames are taken relative to the object's ideal
         # position t_O (trans(-t_O) on the left of each), which cancels in P_k^-1 C_i
         T_M = snap(R_O @ T_G)
-        dM_inv = inv(manip.matrix())
         contact = compose(o.possible_rel(), T_G)
-        C = {1: apply(contact, [0.0, Wg / 2, 0.0]), 2: apply(contact, [0.0, -Wg / 2, 0.0])}
-        out = []
-        for k, i in names:
-            # P_k^-1 = trans(0, -+W_m/2, 0)^-1 T_dM^-1 (T_O T_G)^-1, inverted factor by factor
-            ysign = -1.0 if k == 1 else 1.0
-            P_inv = compose(trans(0.0, -ysign * Wm / 2, 0.0), dM_inv, inv(T_M))
-            out.append(ca.cse(apply(P_inv, C[i])[1]))
-        return out
+        # P_k^-1 = trans(0, -+W_m/2, 0)^-1 T_dM^-1 (T_O T_G)^-1, inverted factor by factor; the
+        # translation on the left adds its y to the y of every point, so y(P_k^-1 C_i) is
+        # y(T_dM^-1 (T_O T_G)^-1 C_i) plus a constant: one expression per contact
+        Q = compose(inv(manip.matrix()), inv(T_M))
+        return [ca.cse(apply(Q, apply(contact, [0.0, s * Wg / 2, 0.0]))[1]) for s in (1.0, -1.0)]
 
     key = ("pickup", o.where, R_O.tobytes(), T_G.tobytes(), Wg, Wm)
-    exprs, ckey = _built(state.registry, memo, key, (o.error, manip), build)
+    cores, ckey = _built(state.registry, memo, key, (o.error, manip), build)
     out = []
-    for (k, i), y in zip(names, exprs):
+    for k, i in names:
         sense = ">" if k == 1 else "<"
         side = "positive" if sense == ">" else "negative"
-        out.append(Constraint(action, f"p{k}_c{i}", y, sense, 0.0,
+        shift = Wm / 2 if k == 1 else -Wm / 2  # the y of trans(0, -+W_m/2, 0)^-1
+        h = cores[i - 1]
+        out.append(Constraint(action, f"p{k}_c{i}", h + shift, sense, 0.0,
                               f"contact C{i} of {obj} on the {side} y side of finger frame P{k}",
-                              key=None if ckey is None else (ckey, f"p{k}_c{i}")))
+                              key=None if ckey is None else (ckey, f"p{k}_c{i}"), core=(h, shift)))
     return out
 
 
@@ -636,7 +639,9 @@ def evaluate(constraint: Constraint, registry: Registry, *, memo: Memo | None = 
     ``decide``: only the verdict is wanted, and SUP/INF stops as soon as it is settled
     (Bounder.bounds' ``beat``, the threshold). ``satisfied`` is the one the full
     refinement gives; ``bound`` is sound but may be looser than that refinement's (phase
-    2 refines the verdicts it reports: phase2.evaluate)."""
+    2 refines the verdicts it reports: phase2.evaluate). A constraint with a ``core``
+    (``h + c``) is always refined: its one search of both ends of h answers it and its
+    sibling, at about the cost of one decision."""
     if decide:
         options = {**options, "beat": float(constraint.threshold)}
     vkey = None
@@ -647,16 +652,35 @@ def evaluate(constraint: Constraint, registry: Registry, *, memo: Memo | None = 
         hit = memo.table("uncertainty.verdicts", VERDICT_LIMIT).get(vkey)
         if hit is not None:
             return _verdict(constraint, *hit)
-    if constraint.bounding is not None:
-        expr, box = constraint.bounding[0], dict(constraint.bounding[1])
-    else:
-        expr, box = constraint.expr, registry.box(constraint.expr)
     want = "lo" if constraint.sense == ">" else "hi"
-    r = cached_bounds(expr, box, memo, want=want, **options)
-    bound = r.lo if want == "lo" else r.hi
+    if constraint.core is not None and constraint.bounding is None:
+        bound, reached = _core_bound(constraint, registry, memo, want, options)
+    else:
+        if constraint.bounding is not None:
+            expr, box = constraint.bounding[0], dict(constraint.bounding[1])
+        else:
+            expr, box = constraint.expr, registry.box(constraint.expr)
+        r = cached_bounds(expr, box, memo, want=want, **options)
+        bound, reached = (r.lo if want == "lo" else r.hi), r.tolerance_reached
     if vkey is not None:
-        memo.table("uncertainty.verdicts", VERDICT_LIMIT)[vkey] = (float(bound), r.tolerance_reached)  # type: ignore[union-attr]
-    return _verdict(constraint, float(bound), r.tolerance_reached)
+        memo.table("uncertainty.verdicts", VERDICT_LIMIT)[vkey] = (float(bound), reached)  # type: ignore[union-attr]
+    return _verdict(constraint, float(bound), reached)
+
+
+def _core_bound(constraint: Constraint, registry: Registry, memo: Memo | None, want: str,
+                options: Mapping[str, Any]) -> tuple[float, bool]:
+    """INF (``want`` 'lo') or SUP ('hi') of ``constraint.expr = h + c`` (its ``core``) and
+    whether SUP/INF's tolerance was reached: both ends of h bounded in one search to the
+    tolerance (a ``beat`` is not used: the sibling constraint, h plus another constant, asks
+    the other end, and phase 2 reports the refined bound anyway), the end wanted shifted by
+    c and moved one float outward (the sum's rounding), so the bound stays sound. The
+    tolerance is the same as the expression's own: h + c has h's spread of values."""
+    h, c = constraint.core  # type: ignore[misc]
+    opts = {k: v for k, v in options.items() if k != "beat"}
+    r = cached_bounds(h, registry.box(h), memo, want="both", **opts)
+    if want == "lo":
+        return (math.nextafter(r.lo + c, -math.inf) if math.isfinite(r.lo) else r.lo), r.tolerance_reached
+    return (math.nextafter(r.hi + c, math.inf) if math.isfinite(r.hi) else r.hi), r.tolerance_reached
 
 
 def _verdict(constraint: Constraint, bound: float, tolerance_reached: bool) -> Verdict:
