@@ -290,6 +290,44 @@ def test_sec6_pickup_expression_is_satisfied(cell: Cell) -> None:
         assert 3.2 < v.bound < 3.5
 
 
+def test_pickup_pairs_share_a_core_and_stay_sound(cell: Cell) -> None:
+    """p1_ci and p2_ci are one core y(T_dM^-1 (T_O T_G)^-1 C_i) plus -+W_m/2: each expression
+    is its core plus that constant, and the bound evaluate() derives from one search of the
+    core's both ends is below (INF) or above (SUP) every sampled value, within SUP/INF's
+    tolerance of bounding the whole expression directly, with the same verdict."""
+    from spar_py.memo import Memo
+    from spar_py.supinf import REL_TOL, cached_bounds
+
+    w = initial_world(cell)
+    g = cell.objects["block"].grasps["p2G1"]
+    cs = pickup_constraints(w, "block", g.T, g.width, cell.finger_separation, w.manipulator_error(), memo=Memo())
+    Wm = cell.finger_separation
+    for c in cs:
+        h, shift = c.core
+        assert shift == (Wm / 2 if c.name.startswith("p1") else -Wm / 2)
+        box = w.registry.box(c.expr)
+        B = Bounder(c.expr - (h + shift))
+        P = np.random.default_rng(1).uniform([box[k][0] for k in B.names], [box[k][1] for k in B.names],
+                                             (200, len(B.names)))
+        assert np.abs(B.values(P)).max() <= 1e-12  # expr is its core plus the constant
+    assert cs[0].core[0] is cs[2].core[0] and cs[1].core[0] is cs[3].core[0]  # one core per contact
+    memo = Memo()
+    for c in cs:
+        v = evaluate(c, w.registry, memo=memo, decide=True)
+        smin, smax = sampled_range(c.expr, w.registry)
+        direct = cached_bounds(c.expr, w.registry.box(c.expr), None, want="lo" if c.sense == ">" else "hi")
+        d = direct.lo if c.sense == ">" else direct.hi
+        assert v.tolerance_reached
+        if c.sense == ">":
+            assert v.bound <= smin
+        else:
+            assert v.bound >= smax
+        assert abs(v.bound - d) <= 2 * REL_TOL * (smax - smin) + 1e-12, c.name
+        assert v.satisfied == ((d > 0) if c.sense == ">" else (d < 0))
+    # the four constraints cost two compiled bounders (one per core)
+    assert len(memo.table("supinf.bounders", 64)) == 2
+
+
 def test_pickup_fails_with_large_uncertainty_and_scan_helps() -> None:
     """A 4 in gripper on a 3.5 in wide part: 0.25 in each side. +-0.3 in of y error fails."""
     T_O = geometry.trans(20, 0, 1)
