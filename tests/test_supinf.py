@@ -603,14 +603,23 @@ def test_cached_bounds_by_structure_not_names() -> None:
     r1 = cached_bounds(e1, b1, memo)
     r2 = cached_bounds(e2, b2, memo)
     assert r1 == r2 == Bounder(e1).bounds(b1)
-    assert memo.sizes() == {"supinf.results": 1, "supinf.bounders": 1}
+    # (two expression objects: two canonical forms, by object, of one structure)
+    assert memo.sizes() == {"supinf.results": 1, "supinf.bounders": 1, "supinf.canonical": 2}
     wider = {k: (2 * lo, 2 * hi) for k, (lo, hi) in b1.items()}
     r3 = cached_bounds(e1, wider, memo)
     assert r3.lo <= r1.lo and r3.hi >= r1.hi
-    assert memo.sizes() == {"supinf.results": 2, "supinf.bounders": 1}
+    assert memo.sizes() == {"supinf.results": 2, "supinf.bounders": 1, "supinf.canonical": 2}
     assert cached_bounds(e1, b1, memo, want="lo").lo == cached_bounds(e1, b1, None, want="lo").lo
     assert memo.table("supinf.results", RESULT_LIMIT).limit == RESULT_LIMIT
     assert memo.table("supinf.bounders", BOUNDER_LIMIT).limit == BOUNDER_LIMIT
+    # an expression object asked again reads its canonical form; another object, even of an
+    # equal structure, is renamed anew and finds the same bounder
+    from spar_py.supinf import CANONICAL_LIMIT, _canonical_key
+
+    c1 = _canonical_key(e1, memo)
+    assert _canonical_key(e1, memo)[0] is c1[0] and c1[2] == expression_key(e1)
+    assert _canonical_key(build(0)[0], memo)[0] is not c1[0]
+    assert memo.table("supinf.canonical", CANONICAL_LIMIT).limit == CANONICAL_LIMIT
 
 
 def test_affine_division_contains_samples() -> None:

@@ -1635,8 +1635,7 @@ def cached_bounds(expr: ca.SX | float | ChainExpr, box: Box, memo: Memo | None =
     search that ran to its end answers the full refinement too."""
     if memo is None:
         return Bounder(expr).bounds(box, **options)  # type: ignore[arg-type]
-    canon, names = _canonical(expr)
-    k = _key(canon)
+    canon, names, k = _canonical_key(expr, memo)
     lo, hi = _check_box(names, box)
     beat = options.pop("beat", None)
     full_key = (k, lo.tobytes(), hi.tobytes(), tuple(sorted(options.items())))
@@ -1663,6 +1662,27 @@ def cached_bounds(expr: ca.SX | float | ChainExpr, box: Box, memo: Memo | None =
         results[rkey] = r
     return r
 
+
+def _canonical_key(expr: ca.SX | float | ChainExpr, memo: Memo) -> tuple[ca.SX | ChainExpr, list[str], bytes]:
+    """:func:`_canonical` of ``expr`` and its :func:`_key`, kept in ``memo``'s table
+    ``supinf.canonical`` (at most :data:`CANONICAL_LIMIT`) by the expression object itself:
+    one object asked again (a constraint decided, then refined; the core two pickup
+    constraints share) is renamed and serialised once. The entry holds the object, so its
+    id cannot be another's while it is there."""
+    table = memo.table("supinf.canonical", CANONICAL_LIMIT)
+    hit = table.get(id(expr))
+    if hit is not None and hit[0] is expr:
+        return hit[1], hit[2], hit[3]
+    canon, names = _canonical(expr)
+    k = _key(canon)
+    table[id(expr)] = (expr, canon, names, k)
+    return canon, names, k
+
+
+#: Bound of the table of canonical forms by expression object (:func:`_canonical_key`): each
+#: holds a renamed copy of its expression (kB for a pickup constraint, about 1 MB for a
+#: product of 8 transforms).
+CANONICAL_LIMIT = 128
 
 #: Bound of the table of searches stopped on ``beat`` (:func:`cached_bounds`): each holds
 #: its pool of boxes (a few kB), not its bounder.
