@@ -24,7 +24,7 @@ from typing import Callable
 from . import __version__
 from .entry import resume_collections
 from .errors import InternalError, KBError, PlanningTimeout, PrologError, SparError, SparValueError
-from .world.motion import PLANNERS, MotionOptions
+from .world.motion_options import PLANNERS, MotionOptions
 
 EXIT_OK, EXIT_FAIL, EXIT_INPUT, EXIT_INTERNAL, EXIT_TIMEOUT = 0, 1, 2, 3, 4
 DEFAULT_PROBLEM = "kb/problems/peg_in_block.yaml"

@@ -14,7 +14,7 @@ import numpy as np
 from .memo import Memo
 
 if TYPE_CHECKING:
-    from .world.motion import MotionOptions
+    from .world.motion_options import MotionOptions
     from .world.robots import Robot
     from .world.shapes import FeatureGeometry, Geometry
 

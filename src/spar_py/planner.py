@@ -29,7 +29,7 @@ from .errors import PlanningTimeout, SparValueError
 from .kb import load_problem
 from .memo import LRU
 from .model import Cell
-from .world.motion import FAILURES_KEPT, MotionFailure, MotionOptions, attach
+from .world.motion_options import FAILURES_KEPT, MotionFailure, MotionOptions
 
 SCHEMA = 2
 
@@ -367,7 +367,9 @@ class Planner:
             failures = cell.memo.table("motion.failures", FAILURES_KEPT)
             first = [failures[k] for k in range(len(failures))]
             d = _canonical(ans["Dict"])
-            if isinstance(d.get("instance"), dict):
+            if isinstance(d.get("instance"), dict) and d["instance"].get("motion") is not None:
+                from .world.motion import attach  # only for an instance with motions
+
                 attach(cell, d["instance"])
         d.setdefault("timing", {})["total_s"] = round(time.perf_counter() - t0, 6)
         _motion_reason(d, first)

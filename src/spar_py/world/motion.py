@@ -48,16 +48,13 @@ from typing import Any, Protocol
 import numpy as np
 
 from ..errors import SparValueError
+from .motion_options import FAILURES_KEPT, PLANNERS, MotionFailure, MotionOptions
 
 __all__ = ["MotionOptions", "Segment", "MotionFailure", "PLANNERS", "resolution", "densify",
            "free_motion", "line_motion", "durations", "DEFAULT_APPROACH_IN"]
 
 #: The default approach / retreat length, inches (converted to the cell's unit).
 DEFAULT_APPROACH_IN = 2.0
-
-#: OMPL geometric planners by option name.
-PLANNERS = {"rrtconnect": "RRTConnect", "rrt": "RRT", "rrtstar": "RRTstar", "prm": "PRM",
-            "kpiece": "KPIECE1", "bkpiece": "BKPIECE1", "bitstar": "BITstar"}
 
 
 class SceneState(Protocol):
@@ -66,27 +63,6 @@ class SceneState(Protocol):
     def clear(self, q: np.ndarray) -> np.ndarray: ...
 
     def clearance(self, q: np.ndarray) -> tuple[np.ndarray, list[tuple[str, str]]]: ...
-
-
-@dataclass(frozen=True)
-class MotionOptions:
-    """How motions are planned: ``planner`` (a key of :data:`PLANNERS`), ``time_budget_s``
-    (OMPL seconds per free motion), ``seed`` (OMPL's RNG, for reproducible paths),
-    ``approach_length`` (cell unit; None: 2 in), ``simplify`` (OMPL's path simplifier)."""
-
-    planner: str = "rrtconnect"
-    time_budget_s: float = 1.0
-    seed: int = 0
-    approach_length: float | None = None
-    simplify: bool = True
-
-    def __post_init__(self) -> None:
-        if self.planner not in PLANNERS:
-            raise SparValueError(f"motion planner {self.planner!r}: expected one of {', '.join(PLANNERS)}")
-        if not self.time_budget_s > 0:
-            raise SparValueError(f"motion time budget {self.time_budget_s!r}: expected a positive number of seconds")
-        if self.approach_length is not None and not self.approach_length > 0:
-            raise SparValueError(f"approach length {self.approach_length!r}: expected a positive length")
 
 
 @dataclass(frozen=True)
@@ -105,23 +81,6 @@ class Segment:
     length_raw: float
     length: float
     time_s: float
-
-
-@dataclass(frozen=True)
-class MotionFailure:
-    """Why a motion does not exist: ``motion`` names it ("transit to the approach of
-    action_2"), ``pair`` the bodies that blocked it (closest pair at the first blocked
-    waypoint; None when nothing collides, e.g. no continuous IK), ``detail`` one line."""
-
-    motion: str
-    pair: tuple[str, str] | None
-    detail: str
-    at: str | None = None  # the step id whose motion failed (None: home)
-
-    def text(self) -> str:
-        """One line for the user."""
-        by = f", blocked by {self.pair[0]} and {self.pair[1]}" if self.pair else ""
-        return f"no {self.motion}{by}: {self.detail}"
 
 
 # ---------------------------------------------------------------------- resolution
@@ -832,8 +791,6 @@ def default_home(robot: Any, state: SceneState) -> np.ndarray | None:
 ARM_STEPS = ("pickup", "putdown", "assemble", "squeeze")
 #: Bound of the cell's memo table of instance motions (cell.memo "motion.runs").
 MEMO_LIMIT = 256
-#: Distinct motion failures a run keeps for its no-plan reason.
-FAILURES_KEPT = 8
 
 
 def _world_parts(w: Any) -> tuple[dict[str, np.ndarray], tuple[str, np.ndarray] | None]:
