@@ -68,6 +68,7 @@
 :- use_module(library(apply)).
 :- use_module(library(error)).
 :- use_module(library(assoc)).
+:- use_module(library(dif)).     % imported, not autoloaded: autoloading reads the library index
 
 :- use_module(kb, []).
 :- use_module(ordering).
