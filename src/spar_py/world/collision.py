@@ -294,11 +294,24 @@ class Obstacle:
 # --------------------------------------------------------------------------- distances
 
 
+#: Pairs up to which :func:`segment_distance` computes in Python floats: a few pairs (most
+#: calls of one check or grasp test) cost tens of numpy calls' overhead each, where the
+#: arithmetic itself is some 40 operations per pair.
+FEW_SEGMENTS = 12
+
+
 def segment_distance(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.ndarray) -> np.ndarray:
     """(...,) distance between segments p1-q1 and p2-q2 (arrays (..., 3)), vectorised
     (Ericson, Real-Time Collision Detection, Sec. 5.1.9, every branch as np.where; clamps as
     np.minimum/np.maximum, the same values as np.clip at a fraction of its call overhead on
-    the small arrays of one check)."""
+    the small arrays of one check). Up to :data:`FEW_SEGMENTS` pairs in Python floats
+    (:func:`_segment_distance_few`: the same operations in the same order, so the same
+    values to the bit)."""
+    s1 = np.shape(p1)
+    shape = (s1 if np.shape(q1) == s1 == np.shape(p2) == np.shape(q2)
+             else np.broadcast_shapes(s1, np.shape(q1), np.shape(p2), np.shape(q2)))[:-1]
+    if math.prod(shape) <= FEW_SEGMENTS:
+        return _segment_distance_few(p1, q1, p2, q2, shape)
     d1, d2, r = q1 - p1, q2 - p2, p1 - p2
     a = (d1 * d1).sum(-1)
     e = (d2 * d2).sum(-1)
@@ -321,6 +334,44 @@ def segment_distance(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.ndar
     t = np.where(pe, np.where(pa, t, hi(lo(f / e_, 0.0), 1.0)), 0.0)
     diff = (p1 + d1 * s[..., None]) - (p2 + d2 * t[..., None])
     return np.sqrt((diff * diff).sum(-1))
+
+
+def _segment_distance_few(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.ndarray,
+                          shape: tuple[int, ...]) -> np.ndarray:
+    """:func:`segment_distance` of few pairs (broadcast to ``shape`` + (3,)), pair by pair in
+    Python floats: each of its np.where branches as a conditional, each sum of three products
+    added left to right as numpy adds them, np.maximum/np.minimum as max/min (NaN kept alike)."""
+    full = (*shape, 3)
+    rows = [np.broadcast_to(x, full).reshape(-1, 3).tolist() if np.shape(x) != full else x.reshape(-1, 3).tolist()
+            for x in (np.asarray(p1, float), np.asarray(q1, float), np.asarray(p2, float), np.asarray(q2, float))]
+    eps = 1e-12
+    out = []
+    for (p1x, p1y, p1z), (q1x, q1y, q1z), (p2x, p2y, p2z), (q2x, q2y, q2z) in zip(*rows):
+        d1x, d1y, d1z = q1x - p1x, q1y - p1y, q1z - p1z
+        d2x, d2y, d2z = q2x - p2x, q2y - p2y, q2z - p2z
+        rx, ry, rz = p1x - p2x, p1y - p2y, p1z - p2z
+        a = d1x * d1x + d1y * d1y + d1z * d1z
+        e = d2x * d2x + d2y * d2y + d2z * d2z
+        f = d2x * rx + d2y * ry + d2z * rz
+        c = d1x * rx + d1y * ry + d1z * rz
+        b = d1x * d2x + d1y * d2y + d1z * d2z
+        pa, pe = a > eps, e > eps
+        a_, e_ = (a if pa else 1.0), (e if pe else 1.0)
+        denom = a * e - b * b
+        s = min(max((b * f - c * e) / (denom if denom > 0 else 1.0), 0.0), 1.0) if denom > eps * max(a * e, eps) \
+            else 0.0
+        t = (b * s + f) / e_
+        tc = min(max(t, 0.0), 1.0)
+        if t != tc:
+            s = min(max((tc * b - c) / a_, 0.0), 1.0)
+        t = tc
+        s = (s if pe else min(max(-c / a_, 0.0), 1.0)) if pa else 0.0
+        t = (t if pa else min(max(f / e_, 0.0), 1.0)) if pe else 0.0
+        dx = (p1x + d1x * s) - (p2x + d2x * t)
+        dy = (p1y + d1y * s) - (p2y + d2y * t)
+        dz = (p1z + d1z * s) - (p2z + d2z * t)
+        out.append(math.sqrt(dx * dx + dy * dy + dz * dz))
+    return np.array(out, dtype=float).reshape(shape)
 
 
 def _fcl_transform(T: np.ndarray) -> Any:
