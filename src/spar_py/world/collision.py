@@ -727,14 +727,7 @@ class SceneState:
     def _plane_heights(self, F: np.ndarray) -> np.ndarray:
         """(n, m) each table-checked moving body's height above the plane z = 0 (exact, signed):
         the z row of its frame times its vertices, less its radius."""
-        pts, frames, radius = self._table_points()
-        Fb = F[:, frames]                                             # (n, m, 4, 4)
-        return (pts @ Fb[:, :, 2, :3, None])[..., 0].min(axis=2) + Fb[:, :, 2, 3] - radius
-
-    def _table_points(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Every table-checked body's vertices (m, k, 3) in its frame, padded by repeating its
-        first (the lowest is the same), its frame (m,) and its radius (m,); made once."""
-        if self._table_pts is None:
+        if self._table_pts is None:  # every table-checked body's vertices, padded by repeating one
             bodies = [self.bodies[i] for i in self.table_bodies]
             k = max((len(b.points) for b in bodies), default=1)
             pts = np.empty((len(bodies), k, 3))
@@ -743,7 +736,9 @@ class SceneState:
                 pts[j, len(b.points):] = b.points[0]
             self._table_pts = (pts, np.array([b.frame for b in bodies], dtype=int),
                                np.array([b.radius for b in bodies]))
-        return self._table_pts
+        pts, frames, radius = self._table_pts
+        Fb = F[:, frames]                                             # (n, m, 4, 4)
+        return (pts @ Fb[:, :, 2, :3, None])[..., 0].min(axis=2) + Fb[:, :, 2, 3] - radius
 
     def _table(self, F: np.ndarray) -> np.ndarray:
         """(n, m) each table-checked moving body's height above the table (exact, signed); for a
@@ -780,16 +775,13 @@ class SceneState:
         if self.scene.table is not None or not len(self.table_bodies):
             return None
         T_tool = np.asarray(T_tool, float)
-        pts, frames, radius = self._table_points()
-        on_tool, on_flange = frames == TOOL, frames == 6
-        if not (on_tool.any() or on_flange.any()):
-            return None
-        # as _plane_heights, for the bodies on frames 6 and 7 (every one at once, the first in
-        # the bodies' order named)
-        z = np.where(on_tool[:, None], T_tool[2], (T_tool @ self.scene.robot.tool_inverse())[2])  # (m, 4)
-        h = (pts @ z[:, :3, None])[..., 0].min(axis=1) + z[:, 3] - radius
-        hit = np.flatnonzero((on_tool | on_flange) & (h <= self.scene.margin))
-        return (self.bodies[int(self.table_bodies[hit[0]])].name, "table") if hit.size else None
+        frames = {TOOL: T_tool, 6: T_tool @ self.scene.robot.tool_inverse()}
+        for i in self.table_bodies.tolist():  # as _plane_heights, for the bodies on frames 6 and 7
+            b = self.bodies[i]
+            Fb = frames.get(b.frame)
+            if Fb is not None and (b.points @ Fb[2, :3]).min() + Fb[2, 3] - b.radius <= self.scene.margin:
+                return (b.name, "table")
+        return None
 
     def tool_rigid_refusal(self, T_tool: np.ndarray) -> tuple[str, str] | None:
         """What refuses every joint vector of this state whatever the tool pose, as the pair
