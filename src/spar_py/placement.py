@@ -577,7 +577,11 @@ def reachable_somewhere_each(cell: Cell, obj: str,
                 items.setdefault(key, (pose, r))
         outs.append(out)
     if todo:
-        got = _some_placement(cell, obj, [(_grid(cell, obj, pose), r) for pose, r in items.values()])
+        grids: dict[str, np.ndarray] = {}  # one grid per stable pose (its key made once, not per item)
+        for pose, _ in items.values():
+            if pose not in grids:
+                grids[pose] = _grid(cell, obj, pose)
+        got = _some_placement(cell, obj, [(grids[pose], r) for pose, r in items.values()])
         for (key, where), ok in zip(todo.items(), got):
             memo[key] = ok
             for a, i in where:
