@@ -89,6 +89,10 @@ TOOL, WORLD = 7, -1
 #: pairs per arrangement of body names (a state's bodies, allowed contacts, attached parts).
 GRASP_LIMIT = 4096
 PAIRS_LIMIT = 256
+#: Bound of the cell's memo table of whole pair structures (_pair_structure's answers, by the
+#: head's key and the world's body names: some kB each, up to some 100 kB for a generated
+#: cell of hundreds of part bodies).
+STRUCTURES_LIMIT = 256
 #: Bound of the cell's memo table of placed part bodies per (part, frame, pose): phase 2 places
 #: every part on the table at every step, most of them where they were at the step before.
 PLACED_LIMIT = 2048
@@ -1113,6 +1117,15 @@ def _pair_structure(scene: CollisionScene, bodies: list[Body], n_moving: int, ha
     hkey = (tuple((names[j], int(frames[j]), bodies[j].kind) for j in head_cols.tolist()), head_cols.tobytes(),
             n_moving, hand_part, skip, attached)
     table = scene.memo.table("collision.pairs", PAIRS_LIMIT) if scene.memo is not None else None
+    # the whole answer, by what it is made of (the head's key, the world's names in order and
+    # every body's kind of bound): the requirement states of phase 1 (one per grasp, in a
+    # world of obstacles alone) ask the same few structures again and again
+    wcols = np.flatnonzero(world_col)
+    fkey = (hkey, len(bodies), tuple(names[j] for j in wcols.tolist()), is_cap.tobytes())
+    whole = scene.memo.table("collision.structures", STRUCTURES_LIMIT) if scene.memo is not None else None
+    done = whole.get(fkey) if whole is not None else None
+    if done is not None:
+        return done
     head = table.get(hkey) if table is not None else None
     if head is None:
         head = _head_structure([bodies[j] for j in head_cols.tolist()], n_moving, hand_part, skip, attached)
@@ -1121,7 +1134,6 @@ def _pair_structure(scene: CollisionScene, bodies: list[Body], n_moving: int, ha
     block, table_bodies, fixed_in_tool, excluded = head
     M = np.zeros((n_moving, len(bodies)), dtype=bool)
     M[:, head_cols] = block
-    wcols = np.flatnonzero(world_col)
     if len(wcols) and n_moving:
         index: dict[str, int] = {}
         ids = np.array([index.setdefault(names[j], len(index)) for j in wcols.tolist()], dtype=int)
@@ -1142,7 +1154,12 @@ def _pair_structure(scene: CollisionScene, bodies: list[Body], n_moving: int, ha
     pi, pj = pairs_arr[:, 0], pairs_arr[:, 1]
     exact_pair = is_cap[pi] & is_cap[pj]
     rigid = tuple(np.flatnonzero(in_hand[pi] & in_hand[pj]).tolist())
-    return pairs_arr, table_bodies, exact_pair, rigid
+    out = (pairs_arr, table_bodies, exact_pair, rigid)
+    if whole is not None:  # shared by the states that ask it again: read-only
+        for a in out[:3]:
+            a.setflags(write=False)
+        whole[fkey] = out
+    return out
 
 
 
