@@ -180,6 +180,34 @@ def test_derived_grasps_touch_the_part_and_keep_the_fingers_out(path: Path) -> N
         assert extent.max() == pytest.approx(g.width / 2, abs=0.02), f"{g.label}: the fingers do not touch"
 
 
+def test_shaft_grasps_are_the_same_from_either_side() -> None:
+    """A round shaft is symmetric about its axis: for every grasp across it with the approach
+    normal to the axis, the grasp with the opposite approach (the same closing line) is derived
+    too. Its contact line then lies on the pads' tip edge, which the sign of a rounding error
+    decided before (34 grasps of the paper's peg on one CPU, 36 on another)."""
+    m = load_object(OBJ / "peg_shape.yaml", "in")
+    d = m.feature.geometry.direction
+    side = [(g.T[:3, 1], g.T[:3, 2]) for g in m.grasps.values()
+            if "peg_face" in g.gfaces and abs(g.T[:3, 2] @ d) < 1e-9]
+    assert len(side) == 8  # 4 closing lines at 45 deg steps, each from both sides
+    for c, a in side:
+        assert any(abs(abs(c @ c2) - 1) < 1e-9 and np.allclose(a2, -a, atol=1e-9) for c2, a2 in side), (c, a)
+
+
+def test_line_contact_on_the_pads_edge_does_not_hang_on_rounding() -> None:
+    """A contact line parallel to the pad's tip edge, a rounding error either side of it, has
+    the same contact length (shapes_derive._line_contact)."""
+    from spar_py.world.robots import GripperGeometry
+    from spar_py.world.shapes_derive import _line_contact
+
+    g = GripperGeometry.default(4.0, 25.4)
+    T = np.eye(4)  # pad: tool x within +-finger_width/2, z from -finger_length to 0
+    d = np.array([1.0, 0.0, 0.0])
+    got = [_line_contact(np.array([-0.1, 0.0, w]), d, 0.2, T, g) for w in (-1e-15, 0.0, 1e-15)]
+    assert got == pytest.approx([0.2] * 3)
+    assert _line_contact(np.array([-0.1, 0.0, 1e-3]), d, 0.2, T, g) == 0.0  # off the pad: none
+
+
 def test_ofaces_name_the_face_the_gripper_comes_from() -> None:
     d = load_object(OBJ / "peg_shape.yaml", "in")
     approach_x = next(g for g in d.grasps.values() if np.allclose(g.T[:3, 2], [1, 0, 0]) and g.gfaces == ("py", "ny"))

@@ -689,14 +689,20 @@ def _pad_contact(pieces: list[np.ndarray], areas: np.ndarray, e1: np.ndarray, e2
 
 
 def _line_contact(start: np.ndarray, d: np.ndarray, length: float, T: np.ndarray, g: Gripper) -> float:
-    """Length of the segment start + d t, t in [0, length], inside a finger pad's (u, w) rectangle."""
+    """Length of the segment start + d t, t in [0, length], inside a finger pad's (u, w) rectangle.
+
+    A segment parallel to a side of the pad is inside it up to a rounding allowance (1e-9 of the
+    scale): a shaft closed on with the approach normal to its axis has its contact line on the
+    pad's tip edge (w = 0 exactly), where the sign of a dot product's rounding (which differs
+    between CPUs' summation orders) would otherwise accept or refuse the grasp."""
     x, z, o = T[:3, 0], T[:3, 2], T[:3, 3]
     u0, w0 = float((start - o) @ x), float((start - o) @ z)
     du, dw = float(d @ x), float(d @ z)
     lo, hi = 0.0, length
+    eps = 1e-9 * (1.0 + length + g.finger_length + g.finger_width)
     for p0, dp, a, b in ((u0, du, -g.finger_width / 2, g.finger_width / 2), (w0, dw, -g.finger_length, 0.0)):
         if abs(dp) < 1e-12:
-            if not (a <= p0 <= b):
+            if not (a - eps <= p0 <= b + eps):
                 return 0.0
             continue
         t1, t2 = (a - p0) / dp, (b - p0) / dp
