@@ -15,7 +15,7 @@ demo: setup
 
 test: setup
 	$(PY) -m pytest
-	$(PY) -m spar_py.plunit tests/prolog
+	$(PY) -m spar_py.app.plunit tests/prolog
 
 bench: setup
 	$(PY) -m pip install -q -e '.[bench]' 2>&1 | grep -v '^WARNING: Location' || true

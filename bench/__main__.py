@@ -87,12 +87,12 @@ def bytecode() -> str:
     or 'none' (every cold process compiles the sources)."""
     import importlib.util
 
-    import spar_py.cli
+    import spar_py.app.cli
 
     writes = not (sys.dont_write_bytecode or os.environ.get("PYTHONDONTWRITEBYTECODE"))
     if writes:
         return "written"
-    pyc = Path(importlib.util.cache_from_source(spar_py.cli.__file__))
+    pyc = Path(importlib.util.cache_from_source(spar_py.app.cli.__file__))
     return "compiled" if pyc.exists() else "none"
 
 
@@ -101,7 +101,7 @@ def versions() -> dict:
     import casadi
     import numpy
 
-    from spar_py.engine import swipl_record
+    from spar_py.planning.engine import swipl_record
 
     try:
         import roboticstoolbox
@@ -376,12 +376,12 @@ def render(r: dict) -> str:
     L += [(f"Outcome {w['outcome']}, {w['actions']} actions, {w['instances_examined']} instance(s) "
           f"examined; process exit codes {c['returncodes']}."), ""]
 
-    L += ["### Generated problems: N pegs into N blocks (spar_py.gen)", "",
+    L += ["### Generated problems: N pegs into N blocks (spar_py.app.gen)", "",
           (f"One subprocess per N, a warm-up plan of the paper's cell first; "
           f"`Planner(timeout={p['timeout_s']:g})` with phase 1's default bound, derived from the problem "
           "(up to 42 pairs the blocks start hole-down and each is turned over, up to 70 on a side face "
           "and each is turned a quarter turn: 4N actions; above, the blocks start hole-up: 2N actions, see "
-          "spar_py.gen.blocks_for; the bound is derived from the problem). "
+          "spar_py.app.gen.blocks_for; the bound is derived from the problem). "
           "Times: phase 1/2 are Prolog CPU seconds, wall the "
           "`plan()` call; RSS (Python and the embedded Prolog share the process): 'before' after the "
           "warm-up, 'peak' sampled every 5 ms while planning (getrusage's maxrss is not used: on Linux "

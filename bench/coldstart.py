@@ -8,7 +8,7 @@ load (the order rotates from round to round); the figures are medians over the r
 - ``floor``: ``python -c "import numpy, casadi, janus_swi"`` (importing janus starts
   the embedded SWI-Prolog): what any process of this design pays before planning;
 - ``plan``: ``spar plan kb/problems/peg_in_block.yaml``, SWI-Prolog started from the
-  planner's saved state (spar_py/qlf.py: janus and the planner in one file; the cache is
+  planner's saved state (spar_py/startup/qlf.py: janus and the planner in one file; the cache is
   filled first, and the package's bytecode brought up to date, so no process compiles an
   edited module);
 - ``plan, image``: the same with ``SPAR_SAVED_STATE=off``: SWI-Prolog started as janus
@@ -18,7 +18,7 @@ load (the order rotates from round to round); the figures are medians over the r
 - ``floor, frozen exit``: the floor ending as ``spar`` does (cli.exiting: ``gc.freeze()``, so
   the shutdown collections skip the heap, then ``os._exit``, without the interpreter's
   teardown), the like-for-like floor of a process that exits so;
-- ``engine``, ``engine, image`` and ``engine, sources``: ``python -c "import spar_py.engine
+- ``engine``, ``engine, image`` and ``engine, sources``: ``python -c "import spar_py.planning.engine
   as e; e.engine()"``, the engine start alone, each way;
 - with ``--peer DIR`` (another checkout of spar-py, e.g. ``git archive`` of an older commit
   unpacked there): ``plan, peer``, the same ``spar plan`` with ``DIR/src`` first on
@@ -47,7 +47,7 @@ ROOT = Path(__file__).resolve().parent.parent
 CELL = "kb/problems/peg_in_block.yaml"
 BIN = Path(sys.executable).parent
 FLOOR = "import numpy, casadi, janus_swi"
-ENGINE = "import spar_py.engine as e; e.engine()"
+ENGINE = "import spar_py.planning.engine as e; e.engine()"
 #: The target of issue 18: cold `spar plan` of the paper's cell over the floor.
 TARGET_RATIO = 1.5
 #: Libraries the world layer and the tools may bring; a cold plan of the paper's cell
@@ -105,7 +105,8 @@ def _compile_bytecode(src: Path) -> None:
 
 def _fill_cache(env: dict[str, str] | None = None) -> str:
     """Make sure the planner's image is in the cache (as set-up does); how it was loaded."""
-    out = subprocess.run([sys.executable, "-c", "from spar_py.engine import Engine; print(Engine().loaded_from)"],
+    code = "from spar_py.planning.engine import Engine; print(Engine().loaded_from)"
+    out = subprocess.run([sys.executable, "-c", code],
                          cwd=ROOT, capture_output=True, text=True, check=True, env={**os.environ, **(env or {})})
     return out.stdout.strip()
 
@@ -133,7 +134,7 @@ def importtime(runs: int = 5) -> dict:
     counts = []
     for _ in range(runs):
         floor_mods |= set(imported(["-c", FLOOR]))
-        plan = imported(["-m", "spar_py.cli", "plan", CELL])
+        plan = imported(["-m", "spar_py.app.cli", "plan", CELL])
         heavy |= {m.split(".")[0] for m in plan if m.split(".")[0] in HEAVY}
         extra = {m: t for m, t in plan.items() if m not in floor_mods}
         counts.append(len(extra))
@@ -163,8 +164,8 @@ def timed(name, fn):
             marks[name] = marks.get(name, 0.0) + time.perf_counter() - t
     return run
 PATCH = {"spar_py.kb": ("load_problem", "load_problem (YAML, checks)"),
-         "spar_py.planner": ("Planner.plan", "Planner.plan (first plan: lazy imports, compute)"),
-         "spar_py.engine": ("start_engine",
+         "spar_py.planning.planner": ("Planner.plan", "Planner.plan (first plan: lazy imports, compute)"),
+         "spar_py.planning.engine": ("start_engine",
                             "start engine (import janus: SWI-Prolog from the saved state, else the loader started)")}
 class Patcher(importlib.abc.MetaPathFinder):
     # wrap a function of a module once the module has run (so imports keep their real order)
@@ -182,11 +183,11 @@ class Patcher(importlib.abc.MetaPathFinder):
         spec.loader.exec_module = exec_module
         return spec
 sys.meta_path.insert(0, Patcher())
-from spar_py.entry import hold_collections, keep_compiled_methods  # as the spar script (entry.main)
+from spar_py.startup.entry import hold_collections, keep_compiled_methods  # as the spar script (entry.main)
 hold_collections()
 keep_compiled_methods()
-import spar_py.cli as cli
-marks["import spar_py.cli"] = time.perf_counter() - t0
+import spar_py.app.cli as cli
+marks["import spar_py.app.cli"] = time.perf_counter() - t0
 out = sys.stdout
 sys.stdout = open(os.devnull, "w")
 try:
@@ -194,11 +195,11 @@ try:
 except SystemExit:
     pass
 total = time.perf_counter() - t0
-eng = sys.modules["spar_py.engine"]._engine
+eng = sys.modules["spar_py.planning.engine"]._engine
 # the same plan again in this warm process, on a freshly loaded cell: what is not one-off
 kept = dict(marks)
 from spar_py.kb import load_problem
-from spar_py.planner import Planner
+from spar_py.planning.planner import Planner
 cell = load_problem(sys.argv[1])
 t = time.perf_counter()
 Planner().plan(cell)
@@ -300,7 +301,7 @@ def render(r: dict) -> list[str]:
           "planner's saved state); `image` = the same with `SPAR_SAVED_STATE=off` (SWI-Prolog started as "
           "janus does, the planner loaded from its .qlf image meanwhile); `sources` = the same with "
           "`SPAR_QLF_CACHE=off` (the Prolog consulted at every start); `engine` = "
-          "`python -c \"import spar_py.engine as e; e.engine()\"`."), ""]
+          "`python -c \"import spar_py.planning.engine as e; e.engine()\"`."), ""]
     rows = []
     for name in [n for n in ("floor", "floor, frozen exit", "plan", "plan, image", "plan, sources", "engine",
                              "engine, image", "engine, sources", "plan, peer")

@@ -52,7 +52,7 @@ def _no_collision_copy(tmp: Path) -> Path:
 def per_solution(cell, obj: str, repeats: int) -> dict[str, float]:
     """Median us per IK solution checked: every grasp of ``obj`` at a 1 in grid of xy over the
     cell's first free region, in its first stable pose, the part grasped (one batched check)."""
-    from spar_py.workspace import ik_rows
+    from spar_py.world.workspace import ik_rows
     from spar_py.world.collision import scene_for
 
     model = cell.objects[obj]
@@ -204,7 +204,7 @@ def libraries(coal_python: str) -> dict:
 
 
 def warm(path: Path, repeats: int) -> float:
-    from spar_py.planner import Planner
+    from spar_py.planning.planner import Planner
 
     planner = Planner()
     planner.plan(path)
@@ -226,7 +226,7 @@ def cold(path: Path, repeats: int) -> float:
 
 
 def run(repeats: int = 5, quick: bool = False, coal_python: str | None = None) -> dict:
-    from spar_py import gen
+    from spar_py.app import gen
     from spar_py.kb import load_problem
 
     out: dict = {"goals": GOALS}

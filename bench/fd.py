@@ -4,14 +4,14 @@ Run from the project root: ``.venv/bin/python -m bench.fd [--ns 1,2,5,10,20,30,4
 (the generated problems need 4N actions up to N = 70: every block turned over up to 42, turned
 a quarter turn from a side face above; 2N beyond 70).
 
-For each N, ``spar_py.gen.generate_assembly(N)`` is planned by our phase 1 and, in the
+For each N, ``spar_py.app.gen.generate_assembly(N)`` is planned by our phase 1 and, in the
 same run, by Fast Downward on a PDDL encoding that this module writes from the loaded
 cell (:func:`pddl`):
 
 - the operational part as SPAR's templates have it (Figs. 2-4): pickup(Obj, Grasp) from
   a position, putdown(Obj, Pos) into a stable pose, assemble(Obj1, Obj2); gripper(open),
   holding, part_location, assembled;
-- the geometry as static facts, from the arcs phase 1's network uses (spar_py.reach,
+- the geometry as static facts, from the arcs phase 1's network uses (spar_py.world.reach,
   the same IK and placement rule): ``reach ?g ?p`` for reachable(Grasp, Position) and
   ``mate ?g ?p`` for mate_reachable(Grasp, Position, T_a) of each goal's pair, the mating
   grasps and poses of Sec. 6 (their ofaces avoid the mating faces; the hole part's initial
@@ -81,16 +81,16 @@ def _name(label: str) -> str:
 
 def _ofaces_at(model, T) -> set:
     """The ofaces of every stable pose of ``model`` that world transform T (4x4) is in."""
-    from spar_py.geometry import same_stable_pose
+    from spar_py.core.geometry import same_stable_pose
 
     return {f for sp in model.poses.values() if same_stable_pose(np.asarray(T)[:3, :3], sp.R) for f in sp.ofaces}
 
 
 def pddl(cell) -> str:
     """The PDDL problem of ``cell`` (a loaded spar_py Cell whose goals are assembled/5), for
-    :data:`DOMAIN`. Static facts from spar_py.reach, as phase 1's arcs (rule "reachable")."""
+    :data:`DOMAIN`. Static facts from spar_py.world.reach, as phase 1's arcs (rule "reachable")."""
     from spar_py.kb import parse_term
-    from spar_py.reach import mate_reachable_pairs, reachable_pairs
+    from spar_py.world.reach import mate_reachable_pairs, reachable_pairs
 
     nm = _name
 
@@ -177,7 +177,7 @@ def ours(cell, repeats: int = 3) -> dict:
     """Our phase 1 on ``cell`` with the default options (no flag): the first run (arcs
     computed), then the median of ``repeats`` more (arcs memoised in the cell). Prolog CPU
     seconds (plan.timing's phase1_s); ``actions``; ``outcome``."""
-    from spar_py.planner import Planner
+    from spar_py.planning.planner import Planner
 
     p = Planner()
     first = p.plan(cell, phase1_only=True)
@@ -189,7 +189,7 @@ def ours(cell, repeats: int = 3) -> dict:
 
 def row(n: int, fd_timeout: float = FD_TIMEOUT) -> dict:
     """One N: ours and FD's figures (see the module docstring)."""
-    from spar_py.gen import generate_assembly
+    from spar_py.app.gen import generate_assembly
     from spar_py.kb import load_problem
 
     with tempfile.TemporaryDirectory(prefix=f"spar-fd-{n}-") as d:

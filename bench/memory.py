@@ -2,7 +2,7 @@
 
 Run from the project root: ``.venv/bin/python -m bench.memory [--plans 1000] [--warmup 50]``.
 
-For the paper's cell and a generated N = 3 cell (``spar_py.gen.generate_assembly(3)``,
+For the paper's cell and a generated N = 3 cell (``spar_py.app.gen.generate_assembly(3)``,
 planned with ``Planner(max_actions=14)``), each in a fresh subprocess: ``warmup`` plans,
 then ``plans`` more; the figure is (RSS after - RSS after the warm-up) / plans, in kB,
 with RSS read from /proc/self/statm after a ``gc.collect()``. Planning by path, as a
@@ -52,12 +52,12 @@ def _live(cls_names: tuple[str, ...]) -> dict[str, int]:
 
 def child(which: str, plans: int, warmup: int) -> dict:
     """One measurement in this process (the child side)."""
-    from spar_py.planner import Planner
+    from spar_py.planning.planner import Planner
 
     if which == "paper":
         path, planner = CELL, Planner()
     else:
-        from spar_py.gen import generate_assembly
+        from spar_py.app.gen import generate_assembly
 
         path = generate_assembly(3, Path(tempfile.mkdtemp(prefix="spar-mem-")))
         planner = Planner(max_actions=14)

@@ -30,8 +30,8 @@ CELL = "kb/problems/peg_in_block.yaml"
 
 _CHILD = r"""
 import json, sys, time
-from spar_py.planner import Planner, load_problem
-from spar_py import phase2
+from spar_py.planning.planner import Planner, load_problem
+from spar_py.phase2 import instance as phase2
 acc = {}
 def wrap(name):
     f = getattr(phase2, name)
@@ -68,7 +68,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--parts", type=int, nargs="*", default=[10, 30, 34, 50], help="generated problems' N")
     ap.add_argument("--repeats", type=int, default=3)
     args = ap.parse_args(argv)
-    from spar_py.gen import generate_assembly
+    from spar_py.app.gen import generate_assembly
 
     rows = []
     with tempfile.TemporaryDirectory() as tmp:

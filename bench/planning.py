@@ -7,10 +7,10 @@ Run from the project root: ``.venv/bin/python -m bench.planning [--quick] [--max
   wall time of the call (loading the YAML included);
 - cold: ``spar plan kb/problems/peg_in_block.yaml`` as a subprocess, and beside it, in
   the same run and interleaved, the bare cost of a process that starts the engine
-  (``python -c "import spar_py.engine as e; e.engine()"``);
+  (``python -c "import spar_py.planning.engine as e; e.engine()"``);
 - hopeless: ``spar plan kb/problems/hopeless_uncertainty.yaml`` as a subprocess, beside the
   same file ``--phase1-only`` and the paper's cell, interleaved (phase 2 at its worst);
-- scaling: ``spar_py.gen.generate_assembly(N)`` for N = 1..10, 20, 30, 40, 42, 43 and 50, each planned
+- scaling: ``spar_py.app.gen.generate_assembly(N)`` for N = 1..10, 20, 30, 40, 42, 43 and 50, each planned
   in its own subprocess (so its peak RSS is its own) after a warm-up plan of the paper's
   cell, with ``Planner(timeout=...)`` and no other option: the generated problem needs 4N
   actions up to N = 70 (its blocks turned over up to 42, turned a quarter turn from a side face
@@ -41,13 +41,13 @@ ROOT = Path(__file__).resolve().parent.parent
 CELL = ROOT / "kb" / "problems" / "peg_in_block.yaml"
 BIN = Path(sys.executable).parent
 SPAR = BIN / "spar"
-ENGINE_ONLY = "import spar_py.engine as e; e.engine()"
+ENGINE_ONLY = "import spar_py.planning.engine as e; e.engine()"
 #: Time limit of one scaling run (s): the planner's own timeout; the child is killed 30 s later.
 TIMEOUT = 120.0
 
 
 #: The sizes of the scaling run beyond N = 1..max_n (issue 18's targets are at 20 and 50): all
-#: 4N problems (spar_py.gen: blocks turned over up to 42 pairs, turned a quarter turn from a side
+#: 4N problems (spar_py.app.gen: blocks turned over up to 42 pairs, turned a quarter turn from a side
 #: face up to 70), 42 the largest of the half turn, 43 the first of the quarter turn.
 EXTRA_NS = (20, 30, 40, 42, 43, 50)
 
@@ -55,9 +55,9 @@ EXTRA_NS = (20, 30, 40, 42, 43, 50)
 def max_actions_for(n: int) -> int:
     """Phase 1's default plan-size bound for N pairs, as max_actions(auto) derives it
     (spar_defaults:derived_max_actions/2, twice the lower bound, at least 12): the lower bound
-    is 4N for blocks turned over (hole-down or on-side: N <= spar_py.gen.MAX_SIDE), 2N for blocks
+    is 4N for blocks turned over (hole-down or on-side: N <= spar_py.app.gen.MAX_SIDE), 2N for blocks
     hole-up."""
-    from spar_py.gen import blocks_for
+    from spar_py.app.gen import blocks_for
 
     per_pair = 2 if blocks_for(n).startswith("hole-up") else 4
     return max(12, 2 * per_pair * n)
@@ -79,7 +79,7 @@ def warm(repeats: int = 20, profile_top: int = 0) -> dict:
     YAML reading and checking inside each wall time), ``min_wall_s``, ``max_wall_s``, and with ``profile_top`` > 0
     ``profile``: cProfile's top entries by internal time of one more plan (text).
     """
-    from spar_py.planner import Planner
+    from spar_py.planning.planner import Planner
 
     p = Planner()
     plan = p.plan(CELL)  # warm-up: engine start, imports, first CasADi compiles
@@ -206,10 +206,10 @@ def one(n: int, timeout: float = TIMEOUT, profile_top: int = 0) -> dict:
     parent's at fork, so read it with care), ``prolog_stack_mb`` (SWI-Prolog's stacks in use at the end). With
     ``profile_top`` the plan runs under cProfile instead and only ``profile`` is returned.
     """
-    from spar_py.engine import engine
-    from spar_py.errors import PlanningTimeout
-    from spar_py.gen import blocks_for, generate_assembly
-    from spar_py.planner import Planner
+    from spar_py.planning.engine import engine
+    from spar_py.core.errors import PlanningTimeout
+    from spar_py.app.gen import blocks_for, generate_assembly
+    from spar_py.planning.planner import Planner
 
     Planner().plan(CELL)
     rss0 = _rss_mb()

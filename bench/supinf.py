@@ -39,12 +39,12 @@ from typing import Callable
 import casadi as ca
 import numpy as np
 
-from spar_py import geometry
+from spar_py.core import geometry
 from spar_py.kb import load_problem
-from spar_py.model import Cell
-from spar_py.supinf import Bounder
-from spar_py.symbolic import Chain, ChainExpr, ErrorFactor, Registry, apply, inv
-from spar_py.uncertainty import (
+from spar_py.core.model import Cell
+from spar_py.phase2.supinf import Bounder
+from spar_py.phase2.symbolic import Chain, ChainExpr, ErrorFactor, Registry, apply, inv
+from spar_py.phase2.uncertainty import (
     WorldState,
     assemble_constraints,
     dense_range_scan,
@@ -270,8 +270,8 @@ def deep(rng: np.random.Generator, count: int, length: int = 8, half: float = 0.
     answered from a cell's memo (``t_cached``: supinf.cached_bounds, a hit) and
     ``Bounder(compiled=True)`` (``t_compiled`` warm, ``t_compiled_first`` with building its
     CasADi program), beside ``t_ours`` and ``t_plain`` from the same run."""
-    from spar_py.memo import Memo
-    from spar_py.supinf import MAX_BOXES, cached_bounds
+    from spar_py.core.memo import Memo
+    from spar_py.phase2.supinf import MAX_BOXES, cached_bounds
 
     ms, boxes, capped, cached, comp, first = [], [], 0, [], [], []
     peers: dict[str, dict[str, list]] = {p: {"gap": [], "capped": [], "t": [], "reached": []} for p in ("sx", "old")}
@@ -325,7 +325,7 @@ def uniform_table(rng: np.random.Generator, count: int, lengths: tuple[int, ...]
     medians over ``count`` expressions of ours/w and plain/w (excess over the sampled true range
     as a fraction of its width), the times (ms) of ours (warm bounder, both ends) and plain,
     boxes evaluated, and how many reached the tolerance / hit the box cap, all from one run."""
-    from spar_py.supinf import MAX_BOXES
+    from spar_py.phase2.supinf import MAX_BOXES
 
     say = progress or (lambda line: None)
     say(f"{'depth':<8}{'vars':>5}{'ours/w':>10}{'plain/w':>10}{'reached':>9}{'capped':>8}"
@@ -355,7 +355,7 @@ def model_table(rng: np.random.Generator, count: int, lengths: tuple[int, ...] =
     ``count`` expressions); ``radius``: the share of rho that is the affine forms' radius
     row (the lumped quadratic terms of products), the rest being nonlinear operations'
     noise symbols. No search is run."""
-    from spar_py.taylor import GradientModel
+    from spar_py.phase2.taylor import GradientModel
 
     say = progress or (lambda line: None)
     say(f"{'depth':<8}{'vars':>5}" + "".join(f"{'rem/w @' + format(f, 'g'):>12}" for f in fracs) + f"{'radius':>9}")
@@ -402,7 +402,9 @@ def planner_questions(problem: Path = HOPELESS) -> list[tuple[ca.SX, dict, dict]
     import contextlib
     import io
 
-    from spar_py import cli, supinf, uncertainty
+    from spar_py.app import cli
+    from spar_py.phase2 import supinf
+    from spar_py.phase2 import uncertainty
 
     asked: list[tuple[ca.SX, dict, dict]] = []
     real = uncertainty.cached_bounds
@@ -434,7 +436,7 @@ def kinks_table(rounds: int = 3, problem: Path = HOPELESS, progress=None) -> dic
     holding a kink of fabs are only bisected) and on, interleaved over ``rounds``: total
     time (ms, median over rounds), boxes, tolerance reached, and the largest change of a
     bound the planner reads (INF for '>' , SUP for '<')."""
-    from spar_py import supinf
+    from spar_py.phase2 import supinf
 
     say = progress or (lambda line: None)
     qs = planner_questions(problem)

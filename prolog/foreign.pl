@@ -2,7 +2,7 @@
 
     Everything numeric or symbolic (inverse kinematics, CasADi transforms,
     SUP/INF) lives in src/spar_py/ and is reached from here, through the
-    Python-side bridge module spar_py.engine. Other Prolog modules call
+    Python-side bridge module spar_py.planning.engine. Other Prolog modules call
     these predicates and never py_call/2,3 themselves.
 */
 :- module(foreign,
@@ -47,7 +47,7 @@ arc_pairs(Problem, Rule, Constraint, Objects, GLabels, PLabels, Pairs) :-
     arc_call(Constraint, Objects, GLabels, PLabels, Call0),
     Call0 =.. [F|Args],
     Call =.. [F, Problem, Rule|Args],
-    py_call('spar_py.engine':Call, Raw),
+    py_call('spar_py.planning.engine':Call, Raw),
     maplist(pair_term, Raw, Pairs).
 
 %!  arc_pairs(+Constraint, +Objects, +GraspLabels, +PosLabels, -Pairs) is det.
@@ -73,7 +73,7 @@ pair_term([G, P], G/P).
 
 %!  py_bridge(+Call, -Result) is det.
 %
-%   Call a function of spar_py.engine for phase 2: uncertainty.pl calls
+%   Call a function of spar_py.planning.engine for phase 2: uncertainty.pl calls
 %   evaluate(Problem, Steps, Sources, GivenUp, Sensing) once per run of a
 %   plan instance; Result is plain data (dicts, lists, strings, numbers),
 %   no Python object.
@@ -82,7 +82,7 @@ pair_term([G, P], G/P).
 
 py_bridge(Call, Result) :-
     must_be(callable, Call),
-    py_call('spar_py.engine':Call, Result).
+    py_call('spar_py.planning.engine':Call, Result).
 
 %!  spar_load_facts(+Data:list) is det.
 %
@@ -105,7 +105,7 @@ spar_load_facts(Data) :-
 
 load_problem_file(File, Problem) :-
     atom_string(File, FileS),
-    catch(py_call('spar_py.engine':load_problem_file(FileS), [Name, Data]), E,
+    catch(py_call('spar_py.planning.engine':load_problem_file(FileS), [Name, Data]), E,
           spar_error(E)),
     atom_string(Problem, Name),
     spar_load_facts(Data).
@@ -116,12 +116,12 @@ load_problem_file(File, Problem) :-
 
 unload_problem_cell(Problem) :-
     kb:unload_facts(Problem),
-    py_call('spar_py.engine':forget_cell(Problem)).
+    py_call('spar_py.planning.engine':forget_cell(Problem)).
 
 %   A SparError raised by the loader becomes error(spar_error(Msg), _),
 %   printed as its one-line message.
 spar_error(error(python_error(_, V), _)) :-
-    py_call('spar_py.engine':is_spar_error(V), @(true)),
+    py_call('spar_py.planning.engine':is_spar_error(V), @(true)),
     !,
     py_call(str(V), Msg),
     throw(error(spar_error(Msg), _)).
@@ -154,7 +154,7 @@ data_term(D, T) :-
 %!  error_info(+Error, -Info:dict) is det.
 %
 %   What the Python side needs to raise the right exception for a Prolog
-%   exception Error (spar_py.engine, the one place that maps them):
+%   exception Error (spar_py.planning.engine, the one place that maps them):
 %
 %     - _{kind: timeout} for time_limit_exceeded;
 %     - _{kind: interrupted} for an abort (unwind(abort), '$aborted');

@@ -4,7 +4,7 @@
     the ordering graph) are generated lazily from the phase-1 partial plan.
     Each is run with the world's uncertainty propagated forward by Python
     (numbers and symbols, reached through foreign.pl): ONE call,
-    spar_py.engine:evaluate/5, per run of an instance, which executes the
+    spar_py.planning.engine:evaluate/5, per run of an instance, which executes the
     whole step list and returns plain data: each step's verdicts, geometry,
     the poses of every part and the held part at its end-point, and where the
     run stopped (ok, failed at a step, infeasible at a step). Every decision
@@ -176,7 +176,7 @@ remedy_loop(Ctx, Steps, GivenUp, failed(Step, Before), Bound, Final, Failed, Ver
     ).
 
 %   run(+Ctx, +Steps, +GivenUp, -Result): run Steps in one Python call
-%   (spar_py.engine:evaluate/5). Result = ok(Verdicts, Geometry), or
+%   (spar_py.planning.engine:evaluate/5). Result = ok(Verdicts, Geometry), or
 %   failed(Step, Before) for the first action whose uncertainty-reduction
 %   preconditions are not all satisfied and that is not in GivenUp, Before
 %   the steps before it. Fails if a geometric precondition fails (the

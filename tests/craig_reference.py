@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from spar_py.geometry import rotx, rotz, trans
+from spar_py.core.geometry import rotx, rotz, trans
 
 
 def craig_fk(robot, q: np.ndarray) -> np.ndarray:

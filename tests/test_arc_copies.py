@@ -19,10 +19,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from spar_py import reach, workspace
-from spar_py.gen import generate_assembly
+from spar_py.world import reach
+from spar_py.world import workspace
+from spar_py.app.gen import generate_assembly
 from spar_py.kb import load_problem
-from spar_py.placement import reachable_somewhere_each
+from spar_py.world.placement import reachable_somewhere_each
 from spar_py.world.collision import scene_for
 
 PROBLEMS = Path(__file__).resolve().parent.parent / "kb" / "problems"
@@ -172,7 +173,7 @@ def test_somewhere_answers_a_copy_from_its_twin_as_a_fresh_cell_would(g3: Path) 
 
 
 def test_stable_poses_at_once_are_same_stable_pose_one_by_one() -> None:
-    from spar_py.geometry import ORTHO_TOL, same_stable_pose, same_stable_poses
+    from spar_py.core.geometry import ORTHO_TOL, same_stable_pose, same_stable_poses
 
     def rule(R_abs: np.ndarray, R_pose: np.ndarray) -> bool:  # Sec. 5.2.3: the third rows agree
         return bool(np.allclose(R_abs[2, :3], R_pose[2, :3], rtol=0.0, atol=ORTHO_TOL))

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from spar_py import qlf
+from spar_py.startup import qlf
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -26,7 +26,7 @@ ROOT = Path(__file__).resolve().parent.parent
 #: action bound from spar_defaults.pl and whether a probe predicate exists).
 PROBE = """
 import json
-from spar_py.engine import Engine
+from spar_py.planning.engine import Engine
 e = Engine()
 bound = e.query_once("spar_defaults:default_option(max_actions_floor, N)")["N"]
 probe = e.query_once("catch(spar_defaults:coldstart_probe(X), _, fail)")
@@ -238,7 +238,7 @@ def test_spar_plan_after_an_edit_compiles_in_its_loading_thread(tree: Path, tmp_
     compiles the new image, and the plan is the same as from the sources."""
     cache = tmp_path / "cache"
     env = {**os.environ, "PYTHONPATH": str(tree / "src")}
-    cmd = [sys.executable, "-m", "spar_py.cli", "plan", str(ROOT / "kb" / "problems" / "peg_in_block.yaml"),
+    cmd = [sys.executable, "-m", "spar_py.app.cli", "plan", str(ROOT / "kb" / "problems" / "peg_in_block.yaml"),
            "--json"]
 
     def plan(cache_setting: str) -> dict:
@@ -310,7 +310,7 @@ def test_a_damaged_state_is_not_started_from(tree: Path, tmp_path: Path) -> None
 def test_a_state_that_does_not_start_is_never_published(tmp_path: Path) -> None:
     """The check a state passes before it is published runs in another process: a file
     SWI-Prolog cannot start from fails it, and this process lives on."""
-    from spar_py.engine import _roots, _starts_from
+    from spar_py.planning.engine import _roots, _starts_from
 
     bad = tmp_path / "bad.state"
     bad.write_bytes(b"#!/bin/sh\n# not a state\n" * 50)
@@ -371,7 +371,7 @@ def test_a_plan_with_motions_ends_without_a_word_on_stderr() -> None:
     library that reports live objects at exit as leaks is loaded: a plan with motions loads OMPL
     (nanobind), and its run still ends with nothing on stderr and exit code 0."""
     problem = str(ROOT / "kb" / "problems" / "wall_detour.yaml")
-    r = subprocess.run([sys.executable, "-m", "spar_py.cli", "plan", problem], capture_output=True, text=True,
+    r = subprocess.run([sys.executable, "-m", "spar_py.app.cli", "plan", problem], capture_output=True, text=True,
                        timeout=300, cwd=ROOT)
     assert r.returncode == 0 and r.stderr == "", r.stderr[-500:]
 
@@ -383,7 +383,7 @@ NOT_FOR_A_PLAIN_PLAN = ("hashlib", "_hashlib", "_blake2")
 
 
 def test_a_plain_plan_does_not_import_what_it_does_not_use() -> None:
-    code = ("import contextlib, io, json, sys\nfrom spar_py import cli\n"
+    code = ("import contextlib, io, json, sys\nfrom spar_py.app import cli\n"
             "with contextlib.redirect_stdout(io.StringIO()) as out:\n"
             "    try:\n        cli.main(['plan', 'kb/problems/peg_in_block.yaml', '--json'])\n"
             "    except SystemExit as e:\n        code = e.code\n"
@@ -398,7 +398,8 @@ def test_collections_are_held_until_the_problem_is_read() -> None:
     """The console script holds the cyclic collector off while it imports and reads the
     problem (entry.hold_collections) and resumes it before planning; `cli.main` called from
     Python leaves the collector as it found it (never disabled, nothing frozen)."""
-    code = ("import contextlib, gc, io, json, sys\nfrom spar_py import cli, entry, planner\n"
+    code = ("import contextlib, gc, io, json, sys\nfrom spar_py.app import cli\nfrom spar_py.startup import entry\n"
+            "from spar_py.planning import planner\n"
             "seen = {}\nplan = planner.Planner.plan\n"
             "def spy(self, *a, **k):\n    seen.setdefault('enabled', gc.isenabled()); return plan(self, *a, **k)\n"
             "planner.Planner.plan = spy\n"
@@ -418,7 +419,7 @@ def test_collections_are_held_until_the_problem_is_read() -> None:
 #: running, then call cli.exiting(code) as the console script does, and write again.
 EXITING = """
 import sys, threading, time
-from spar_py import cli
+from spar_py.app import cli
 sys.stdout.write("before\\n")
 if sys.argv[2] == "thread":
     threading.Thread(target=time.sleep, args=(0.3,)).start()
@@ -447,7 +448,7 @@ def test_the_console_script_runs_one_blas_thread_unless_told(user: str | None) -
     """entry.one_blas_thread, as the spar script calls it before numpy loads: numpy's OpenBLAS
     then starts no worker thread (the process has one thread), and a count the user set is kept
     (its workers are there)."""
-    code = ("import os\nfrom spar_py.entry import one_blas_thread\none_blas_thread()\nimport numpy\n"
+    code = ("import os\nfrom spar_py.startup.entry import one_blas_thread\none_blas_thread()\nimport numpy\n"
             "print(os.environ.get('OPENBLAS_NUM_THREADS'), len(os.listdir('/proc/self/task')))\n")
     env = {k: v for k, v in os.environ.items() if k not in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")}
     if user is not None:
@@ -467,7 +468,7 @@ def test_the_plan_json_is_the_same_text_however_the_planner_was_loaded(tmp_path:
     created first; the image (.qlf) and the sources create atoms in another order. The JSON
     text must not depend on it (planner._canonical)."""
     def plan(env: dict[str, str]) -> str:
-        r = subprocess.run([sys.executable, "-m", "spar_py.cli", "plan", "kb/problems/peg_in_block.yaml", "--json"],
+        r = subprocess.run([sys.executable, "-m", "spar_py.app.cli", "plan", "kb/problems/peg_in_block.yaml", "--json"],
                            cwd=ROOT, env={**os.environ, **env}, capture_output=True, text=True, timeout=300)
         assert r.returncode == 0, r.stderr
         doc = json.loads(r.stdout)

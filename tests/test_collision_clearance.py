@@ -718,7 +718,7 @@ PLAN_CELLS = _plan_cells()
 def planned() -> dict[str, tuple[dict, Any, CellGeo]]:
     """Every plan cell's plan JSON (as spar regress plans it), loaded cell and checker geometry."""
     from spar_py.kb import load_problem
-    from spar_py.planner import Planner
+    from spar_py.planning.planner import Planner
 
     planner = Planner()
     out = {}
@@ -855,7 +855,7 @@ def test_putdown_goes_round_the_fixture(planned) -> None:
 
 
 def test_collision_no_plan_names_the_shelf(planned, capsys: pytest.CaptureFixture[str]) -> None:
-    from spar_py.cli import main
+    from spar_py.app.cli import main
 
     path = PROBLEMS / "collision_no_plan.yaml"
     with pytest.raises(SystemExit) as ended:
@@ -865,7 +865,7 @@ def test_collision_no_plan_names_the_shelf(planned, capsys: pytest.CaptureFixtur
     lines = [ln for ln in out.splitlines() if "no collision-free IK" in ln]
     assert lines and all("-" in ln.split(":")[-1] for ln in lines)
     assert any("shelf" in ln for ln in lines)
-    from spar_py.planner import Planner
+    from spar_py.planning.planner import Planner
 
     plan = Planner().plan(path)
     assert not plan.ok

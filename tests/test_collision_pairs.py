@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from spar_py.gen import generate_assembly
+from spar_py.app.gen import generate_assembly
 from spar_py.kb import load_problem
 from spar_py.world import collision
 from spar_py.world.collision import TOOL, WORLD, scene_for

@@ -217,8 +217,8 @@ def test_clearance_names_the_pair_the_whole_sort_names_at_a_tie(tmp_path: Path, 
     planner): the distances and pairs are the plain loop's, ties included (at assembles, the
     two fingers at one distance from the block, with equal capsule bounds: a tie only the whole
     row's sort order decides, and the pair named is the one that order visits first)."""
-    from spar_py.gen import generate_assembly
-    from spar_py.planner import Planner
+    from spar_py.app.gen import generate_assembly
+    from spar_py.planning.planner import Planner
 
     seen = {"rows": 0, "ties": 0}
     clearance = collision.SceneState.clearance

@@ -19,7 +19,8 @@ from typing import Any, Callable
 
 import pytest
 
-from spar_py import dcimage, qlf
+from spar_py.startup import dcimage
+from spar_py.startup import qlf
 
 ROOT = Path(__file__).resolve().parent.parent
 METHODS = ("__init__", "__repr__", "__eq__", "__hash__", "__setattr__", "__delattr__", "__lt__", "__le__",
@@ -152,7 +153,7 @@ def test_cache_off_means_no_image(monkeypatch: pytest.MonkeyPatch) -> None:
 
 def _spar(args: list[str], cache: Path) -> subprocess.CompletedProcess:
     env = {**os.environ, qlf.ENV: str(cache)}
-    return subprocess.run([sys.executable, "-m", "spar_py.cli", *args], env=env, cwd=ROOT, capture_output=True,
+    return subprocess.run([sys.executable, "-m", "spar_py.app.cli", *args], env=env, cwd=ROOT, capture_output=True,
                           text=True, timeout=300)
 
 
@@ -172,7 +173,7 @@ def test_spar_fills_the_image_once_and_then_compiles_nothing(tmp_path: Path) -> 
 
 
 def test_the_python_api_leaves_dataclasses_alone() -> None:
-    code = ("import dataclasses, json; from spar_py import Planner, load_problem; import spar_py.cli; "
+    code = ("import dataclasses, json; from spar_py import Planner, load_problem; import spar_py.app.cli; "
             "print(json.dumps('exec' in vars(dataclasses)))")
     r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr

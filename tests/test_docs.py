@@ -35,7 +35,7 @@ def test_demo_graphs_are_current(tmp_path: Path) -> None:
     graph PNGs dot's drawing of those files (same pixel size as drawn now), and its cell
     pictures one per step of the plan, named as write_pictures names them."""
     from spar_py.pictures import network_dot, ordering_dot, render_png
-    from spar_py.planner import Planner
+    from spar_py.planning.planner import Planner
 
     plan = Planner().plan(ROOT / "kb" / "problems" / "peg_in_block.yaml").to_json()
     demo = ROOT / "docs" / "demo"

@@ -10,12 +10,12 @@ from pathlib import Path
 
 import pytest
 
-from spar_py.engine import engine, swipl_record
-from spar_py.errors import PrologError
-from spar_py.planner import Outcome, Planner
+from spar_py.planning.engine import engine, swipl_record
+from spar_py.core.errors import PrologError
+from spar_py.planning.planner import Outcome, Planner
 
 ROOT = Path(__file__).resolve().parent.parent
-SPAR = [sys.executable, "-m", "spar_py.cli"]
+SPAR = [sys.executable, "-m", "spar_py.app.cli"]
 
 
 def test_runs_the_recorded_swi_prolog() -> None:
@@ -39,7 +39,7 @@ def test_engine_survives_a_failed_query() -> None:
 
 
 def test_timeout_ends_the_search_cleanly(tmp_path: Path) -> None:
-    from spar_py.gen import generate_assembly
+    from spar_py.app.gen import generate_assembly
 
     big = generate_assembly(10, tmp_path)  # 40 actions
     # a quarter of what the whole plan takes on this machine (a fixed 0.3 s came after the end of
@@ -74,7 +74,7 @@ def _old_swipl() -> str | None:
 def test_old_swipl_first_on_path_does_not_break_the_engine() -> None:
     env = {**os.environ, "PATH": f"/usr/bin:{os.environ['PATH']}"}
     r = subprocess.run([sys.executable, "-c",
-                        "from spar_py.engine import engine; "
+                        "from spar_py.planning.engine import engine; "
                         "print(engine().query_once('current_prolog_flag(version, V)')['V'])"],
                        capture_output=True, text=True, timeout=120, env=env)
     assert r.returncode == 0, r.stderr
@@ -101,8 +101,8 @@ def test_the_package_imports_cheaply_and_exports_the_api() -> None:
 def test_a_run_asks_python_each_arc_question_once(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """One oracle memo per phase-1 run (goals:run_oracle/2): the mate_reachable questions the
     lower bound asks about blocks on their side are the search's own, and are not asked again."""
-    import spar_py.engine as bridge
-    from spar_py.gen import generate_assembly
+    import spar_py.planning.engine as bridge
+    from spar_py.app.gen import generate_assembly
 
     asked: list[tuple] = []
     real = bridge.arc_pairs

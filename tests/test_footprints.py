@@ -13,10 +13,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from spar_py import placement
+from spar_py.world import placement
 from spar_py.kb import LENGTH_UNITS, load_problem
-from spar_py.model import Cell, ObjectModel
-from spar_py.planner import Planner
+from spar_py.core.model import Cell, ObjectModel
+from spar_py.planning.planner import Planner
 
 ROOT = Path(__file__).resolve().parent.parent
 PROBLEMS = sorted((ROOT / "kb/problems").glob("*.yaml"))

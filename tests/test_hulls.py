@@ -15,11 +15,11 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from spar_py.errors import SparValueError
-from spar_py.hulls import HullBound, hull_bounds
-from spar_py.memo import Memo
-from spar_py.supinf import MAX_BOXES, Bounder, cached_bounds, expression_key
-from spar_py.symbolic import Chain, ChainExpr, ErrorFactor, Registry
+from spar_py.core.errors import SparValueError
+from spar_py.phase2.hulls import HullBound, hull_bounds
+from spar_py.core.memo import Memo
+from spar_py.phase2.supinf import MAX_BOXES, Bounder, cached_bounds, expression_key
+from spar_py.phase2.symbolic import Chain, ChainExpr, ErrorFactor, Registry
 
 
 def rigid(rng: np.random.Generator, scale: float) -> np.ndarray:

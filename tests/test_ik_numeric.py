@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from spar_py.geometry import rotx, trans
+from spar_py.core.geometry import rotx, trans
 from spar_py.kb import load_robot
 from spar_py.world.robots import Robot
 from craig_reference import craig_fk
@@ -84,7 +84,7 @@ def test_numeric_is_reproducible(offset_puma: Robot) -> None:
 
 
 def test_forcing_a_family_the_table_lacks_is_a_one_line_error(tmp_path: Path) -> None:
-    from spar_py.errors import KBError
+    from spar_py.core.errors import KBError
 
     path = tmp_path / "puma_as_ur.yaml"
     path.write_text(PUMA.read_text().replace("name: puma762", "name: puma762\nik: ur"))

@@ -12,8 +12,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from spar_py.errors import SparValueError
-from spar_py.geometry import inv, rotx, rotz, rpy, trans
+from spar_py.core.errors import SparValueError
+from spar_py.core.geometry import inv, rotx, rotz, rpy, trans
 from spar_py.kb import load_robot
 from spar_py.world.robots import LIMIT_TOL, Robot
 from craig_reference import craig_fk

@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from spar_py.cli import main
-from spar_py.errors import KBError, SparValueError
+from spar_py.app.cli import main
+from spar_py.core.errors import KBError, SparValueError
 from spar_py.kb import facts, load_object, load_problem, load_robot, parse_term
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -62,7 +62,7 @@ def test_every_kb_file_checks(capsys: pytest.CaptureFixture[str]) -> None:
 
 def test_cli_process_exit_code_and_no_traceback() -> None:
     bad = ROOT / "tests" / "bad" / "bounds_lo_gt_hi.yaml"
-    r = subprocess.run([sys.executable, "-m", "spar_py.cli", "kb", "check", str(bad)],
+    r = subprocess.run([sys.executable, "-m", "spar_py.app.cli", "kb", "check", str(bad)],
                        capture_output=True, text=True, timeout=120)
     assert r.returncode == 2
     assert r.stderr.count("\n") == 1 and "Traceback" not in r.stderr
@@ -156,7 +156,7 @@ def test_bad_robot_file_one_line_error(tmp_path: Path, old: str, new: str, key: 
 
 
 @pytest.mark.parametrize("module", ["spar_py.world.robots", "spar_py.world.ik.puma", "spar_py.world.ik.ur",
-                                    "spar_py.world.ik.numeric", "spar_py.model", "spar_py.geometry"])
+                                    "spar_py.world.ik.numeric", "spar_py.core.model", "spar_py.core.geometry"])
 def test_the_model_does_not_import_the_kb(module: str) -> None:
     # kb -> model -> kinematics -> kb was an import circle: the robot loader lives in kb now
     code = f"import sys, {module}; print(sorted(m for m in ('spar_py.kb', 'yaml') if m in sys.modules))"

@@ -20,11 +20,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from spar_py import kb, sanity
-from spar_py.errors import KBError
-from spar_py.gen import generate_assembly
-from spar_py.geometry import tm_rows
-from spar_py.memo import Memo
+from spar_py import kb
+from spar_py.kb import sanity
+from spar_py.core.errors import KBError
+from spar_py.app.gen import generate_assembly
+from spar_py.core.geometry import tm_rows
+from spar_py.core.memo import Memo
 
 ROOT = Path(__file__).resolve().parent.parent
 YAMLS = sorted(p for d in ("kb", "tests") for p in (ROOT / d).rglob("*.yaml"))
@@ -367,7 +368,7 @@ def test_tm_node_memo_tells_minus_zero_from_zero() -> None:
 
 def test_grasp_frame_memo_gives_eulerxyz_bit_for_bit() -> None:
     """The load's memo of grasp frames: eulerxyz's own array each time (a copy; -0.0 kept apart)."""
-    from spar_py.geometry import eulerxyz
+    from spar_py.core.geometry import eulerxyz
 
     memo = Memo()
     for euler in [(0.0, 0.0, 0.5, -1.5707963267948966, 1.5707963267948966, 0.0),

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from spar_py.errors import KBError, SparValueError
+from spar_py.core.errors import KBError, SparValueError
 from spar_py.kb import load_robot
 from spar_py.world import motion as mo
 
@@ -446,7 +446,7 @@ def test_cli_animate_writes_the_gif(tmp_path: Path, capsys) -> None:
     is needed on the command line: --animate plans the motions)."""
     from PIL import Image
 
-    from spar_py import cli
+    from spar_py.app import cli
 
     gif = tmp_path / "out" / "wall.gif"
     with pytest.raises(SystemExit) as e:
@@ -554,7 +554,7 @@ def test_the_fast_line_walk_is_the_exact_nearest_previous_walk(robot_file: str, 
     what the point-by-point nearest-previous rule (_walk_exact) returns, bit for bit, on random
     tool lines from random configurations (some with the wrist or elbow nearly straight, where
     branches meet), sampled densely and coarsely; and it walks point by point on few of them."""
-    from spar_py.workspace import wrist_above_table
+    from spar_py.world.workspace import wrist_above_table
 
     robot = load_robot(ROOT / "kb" / "robots" / robot_file, "in")
     rng = np.random.default_rng(17)
@@ -613,7 +613,7 @@ def test_line_ends_are_where_the_tool_lines_end(kind: str) -> None:
     the lines the motions take (module doc), written out here: a pickup approaches along the
     tool's z and lifts the part straight up; a put-down sets it down from straight above and
     backs off along tool z; an assemble inserts along V_a and backs off."""
-    from spar_py.geometry import rotz
+    from spar_py.core.geometry import rotz
 
     rng = np.random.default_rng(3)
 

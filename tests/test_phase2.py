@@ -10,11 +10,11 @@ from typing import Any
 import numpy as np
 import pytest
 
-from spar_py import engine as engine_module
-from spar_py import phase2
-from spar_py.geometry import rotz
+from spar_py.planning import engine as engine_module
+from spar_py.phase2 import instance as phase2
+from spar_py.core.geometry import rotz
 from spar_py.kb import load_problem
-from spar_py.planner import Planner
+from spar_py.planning.planner import Planner
 
 ROOT = Path(__file__).resolve().parent.parent
 PROBLEMS = ROOT / "kb" / "problems"
@@ -148,7 +148,7 @@ def test_stock_world_keeps_the_spare() -> None:
 
 @pytest.fixture
 def evaluations(monkeypatch: pytest.MonkeyPatch) -> list[dict[str, Any]]:
-    """Every call Prolog makes to spar_py.engine.evaluate, and how many steps phase 2
+    """Every call Prolog makes to spar_py.planning.engine.evaluate, and how many steps phase 2
     executed in it (each call's arguments and result recorded)."""
     calls: list[dict[str, Any]] = []
     real = engine_module.evaluate
@@ -329,7 +329,7 @@ def test_deciding_verdicts_changes_no_plan(problem: str, monkeypatch: pytest.Mon
     settled) and refines the bounds of the runs that go through: the plan, every reported
     bound included, is the one bounding everything to the tolerance gives, and each
     reported bound reached it."""
-    from spar_py import uncertainty as ur
+    from spar_py.phase2 import uncertainty as ur
 
     def strip(d: dict) -> dict:
         return {k: v for k, v in d.items() if k != "timing"}

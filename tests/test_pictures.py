@@ -21,10 +21,10 @@ from typing import Any
 import numpy as np
 import pytest
 
-from spar_py.errors import SparError, SparValueError
-from spar_py.geometry import rotz, trans
+from spar_py.core.errors import SparError, SparValueError
+from spar_py.core.geometry import rotz, trans
 from spar_py.kb import load_problem
-from spar_py.model import Cell
+from spar_py.core.model import Cell
 from spar_py.pictures import cell_png, network_dot, ordering_dot, render_png, scenes, write_pictures
 from spar_py.pictures import graphs
 from spar_py.pictures.cell import arm_polyline, gripper_segments, hole_mouth, object_points, solid_points
@@ -299,7 +299,7 @@ def test_missing_dot_is_a_one_line_spar_error(cell: Cell, plan: dict[str, Any], 
 
 def test_cli_without_dot_says_so_in_one_line(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                             capsys: pytest.CaptureFixture[str]) -> None:
-    from spar_py import cli
+    from spar_py.app import cli
 
     monkeypatch.setattr(graphs.shutil, "which", lambda name: None)
     with pytest.raises(SystemExit) as e:
@@ -400,7 +400,7 @@ def test_stock_parts_keep_keys_of_their_own(cell: Cell) -> None:
 def test_the_planners_plan_draws_the_peg_seated_in_the_hole(cell: Cell) -> None:
     """The scenes of a real plan (poses from phase 2): after the assemble, the peg's tip
     F_p sits at the hole's bottom centre F_h, computed here from the object models."""
-    from spar_py.planner import Planner
+    from spar_py.planning.planner import Planner
 
     doc = Planner().plan(PROBLEM).to_json()
     sc = scenes(cell, doc)

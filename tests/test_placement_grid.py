@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 from test_footprints import _distance, _wrap
 
-from spar_py import placement
-from spar_py.geometry import rotz
+from spar_py.world import placement
+from spar_py.core.geometry import rotz
 from spar_py.kb import load_problem
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -6,9 +6,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from spar_py.geometry import rotz, trans
+from spar_py.core.geometry import rotz, trans
 from spar_py.kb import load_problem
-from spar_py.planner import Planner
+from spar_py.planning.planner import Planner
 
 ROOT = Path(__file__).resolve().parent.parent
 TRAP = ROOT / "kb/problems/placement_trap.yaml"

@@ -9,8 +9,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from spar_py import placement
-from spar_py.engine import engine
+from spar_py.world import placement
+from spar_py.planning.engine import engine
 from spar_py.kb import load_problem
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -7,11 +7,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from spar_py.errors import SparValueError
-from spar_py.geometry import eulerxyz, rot, rotx, rotz, trans
+from spar_py.core.errors import SparValueError
+from spar_py.core.geometry import eulerxyz, rot, rotx, rotz, trans
 from spar_py.kb import load_problem, load_robot
-from spar_py.model import Bounds, Cell, Grasp, ObjectModel, Position, StablePose
-from spar_py.reach import (
+from spar_py.core.model import Bounds, Cell, Grasp, ObjectModel, Position, StablePose
+from spar_py.world.reach import (
     arc,
     mate_reachable_pairs,
     natural_key,
@@ -190,7 +190,7 @@ def test_paper_cell_pairs_are_sound() -> None:
     # Sec. 6's cell: every returned absolute pair has a verified joint solution, every
     # omitted one fails condition 1, has none, or every one collides and the refusal names
     # the pair of bodies (the CMS is exact on its own model)
-    from spar_py.workspace import refusals
+    from spar_py.world.workspace import refusals
 
     cell = load_problem(ROOT / "kb" / "problems" / "peg_in_block.yaml")
     for obj, pos in (("peg", "tr1"), ("block", "tr2")):
@@ -211,9 +211,9 @@ def test_paper_cell_pairs_are_sound() -> None:
 
 def test_wrist_under_the_table_is_not_reachable() -> None:
     """A tool pose pointing up from under the table top fails condition 2, whatever IK says."""
-    from spar_py.geometry import roty, trans
+    from spar_py.core.geometry import roty, trans
     from spar_py.kb import load_problem
-    from spar_py.workspace import wrist_above_table
+    from spar_py.world.workspace import wrist_above_table
 
     cell = load_problem(Path(__file__).resolve().parent.parent / "kb/problems/peg_in_block.yaml")
     down = trans(30, 0, 1.0) @ roty(np.pi)   # tool z pointing down: flange above

@@ -10,7 +10,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 BAD = sorted((ROOT / "tests" / "bad").glob("*.yaml"))
-SPAR = [sys.executable, "-m", "spar_py.cli"]
+SPAR = [sys.executable, "-m", "spar_py.app.cli"]
 
 
 def spar(*args: str, timeout: float = 300) -> subprocess.CompletedProcess[str]:
@@ -38,7 +38,7 @@ def test_unreachable_goal_is_a_no_plan_outcome_with_its_reason(tmp_path: Path) -
 
 
 def test_timeout_is_a_clean_exit(tmp_path: Path) -> None:
-    from spar_py.gen import generate_assembly
+    from spar_py.app.gen import generate_assembly
 
     big = generate_assembly(10, tmp_path / "gen")  # 40 actions
     out = tmp_path / "plan.json"

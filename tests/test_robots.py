@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from spar_py import Planner
-from spar_py.errors import KBError, SparValueError
+from spar_py.core.errors import KBError, SparValueError
 from spar_py.kb import load_problem, load_robot
 from spar_py.world.robots import Robot, check_against_urdf, read_urdf_chain, robot_from_urdf, standard_to_modified
 
@@ -220,7 +220,7 @@ def test_prismatic_joint_and_cli_exit(tmp_path: Path) -> None:
                                             '<joint name="elbow_joint" type="prismatic">'))
     path = write_cell(tmp_path, f"robot: {{urdf: {bad}, base_link: base, tip_link: tool0, "
                                 "gripper: {finger_separation: 3}}\n")
-    out = subprocess.run([sys.executable, "-m", "spar_py.cli", "plan", str(path)], capture_output=True, text=True)
+    out = subprocess.run([sys.executable, "-m", "spar_py.app.cli", "plan", str(path)], capture_output=True, text=True)
     assert out.returncode == 2, out.stderr
     assert out.stderr.count("\n") == 1 and "elbow_joint (prismatic)" in out.stderr and "Traceback" not in out.stderr
 

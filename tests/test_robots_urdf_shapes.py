@@ -145,7 +145,7 @@ def test_a_urdf_arm_may_allow_pairs_of_its_own_links(tmp_path: Path) -> None:
 
 
 def test_an_unknown_body_in_a_urdf_allow_is_one_line(tmp_path: Path) -> None:
-    from spar_py.errors import KBError
+    from spar_py.core.errors import KBError
     from spar_py.kb import load_problem
 
     path = _urdf_cell_with(tmp_path, {"allow": [["wrist_1_link", "elbow"]]})
@@ -176,7 +176,7 @@ def test_a_broken_urdf_is_one_line_on_stderr(tmp_path: Path, damage: str) -> Non
     cell.write_text(yaml.safe_dump(doc, sort_keys=False))
     # a process of its own: logging's last-resort handler writes to the real stderr there, as
     # for a user (under pytest, pytest's handler would take yourdfpy's lines)
-    ran = subprocess.run([sys.executable, "-m", "spar_py.cli", "kb", "check", str(cell)], capture_output=True,
+    ran = subprocess.run([sys.executable, "-m", "spar_py.app.cli", "kb", "check", str(cell)], capture_output=True,
                          text=True, timeout=120)
     assert ran.returncode != 0
     err = [ln for ln in ran.stderr.splitlines() if ln.strip()]

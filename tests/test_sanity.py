@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from spar_py import sanity
-from spar_py.errors import KBError
+from spar_py.kb import sanity
+from spar_py.core.errors import KBError
 from spar_py.kb import load_problem
-from spar_py.model import Solid
+from spar_py.core.model import Solid
 
 ROOT = Path(__file__).resolve().parent.parent
 PEG_AT = "[30, -8, 1.5]]}"

@@ -1,7 +1,7 @@
 """Issue 13, items 1, 7, 8, 10: strict schemas, bounded reading, one flat line per bad input.
 
 Every loading finding of issue 13 is a case here, run through the real command line
-(``python -m spar_py.cli``): exit 2, exactly one line on stderr, no traceback. The
+(``python -m spar_py.app.cli``): exit 2, exactly one line on stderr, no traceback. The
 cases are the files of tests/bad/ (``kb check``) and the ones a file cannot hold
 (not UTF-8, UTF-16, a FIFO, a symlink to /dev/zero, the wrong kind given to ``plan``).
 """
@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from spar_py.errors import KBError
+from spar_py.core.errors import KBError
 from spar_py.kb import (
     KINDS,
     MAX_INPUT_BYTES,
@@ -97,7 +97,7 @@ def _generated(tmp: Path) -> list[Case]:
 
 def _run(args: tuple[str, ...]) -> Result:
     t0 = time.perf_counter()
-    r = subprocess.run([sys.executable, "-m", "spar_py.cli", *args], capture_output=True, text=True,
+    r = subprocess.run([sys.executable, "-m", "spar_py.app.cli", *args], capture_output=True, text=True,
                        timeout=60, cwd=ROOT)
     return Result(r.returncode, r.stdout, r.stderr, time.perf_counter() - t0)
 
@@ -187,7 +187,7 @@ def test_max_input_bytes_raises_the_limit(tmp_path: Path) -> None:
 
 
 def test_help_states_the_default_limit() -> None:
-    from spar_py.cli import build_parser
+    from spar_py.app.cli import build_parser
 
     sub = build_parser()._subparsers._group_actions[0].choices  # type: ignore[union-attr]
     assert f"(default {MAX_INPUT_BYTES})" in sub["plan"].format_help().replace("\n", " ").replace("  ", " ")

@@ -18,12 +18,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from spar_py.engine import engine
+from spar_py.planning.engine import engine
 from spar_py.kb import load_problem
 
 ROOT = Path(__file__).resolve().parent.parent
 PROBLEM = ROOT / "kb" / "problems" / "separation.yaml"
-SPAR = [sys.executable, "-m", "spar_py.cli"]
+SPAR = [sys.executable, "-m", "spar_py.app.cli"]
 FIXTURE = ROOT / "tests" / "prolog" / "fixtures" / "separation_cell.pl"
 TWO = ["pickup(peg,grasp_1)", "assemble(peg,block,[[peg_face],[block_face]],trans_1,vec_1)"]
 

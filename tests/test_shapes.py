@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from spar_py.errors import KBError
-from spar_py.geometry import eulerxyz
+from spar_py.core.errors import KBError
+from spar_py.core.geometry import eulerxyz
 from spar_py.kb import check_file, load_object, load_problem
 from spar_py.world import shapes_cache
 from spar_py.world.shapes import part_mesh
@@ -25,7 +25,7 @@ from test_problems import PAPER_ACTIONS, PAPER_ORDER, PHASE1, Outcome, phase1
 
 ROOT = Path(__file__).resolve().parent.parent
 OBJ = ROOT / "kb" / "objects"
-SPAR = [sys.executable, "-m", "spar_py.cli"]
+SPAR = [sys.executable, "-m", "spar_py.app.cli"]
 
 
 @pytest.fixture(autouse=True)
@@ -272,7 +272,7 @@ TAB_PEG_POINTS = np.vstack([
 
 
 def _phase1_cell(cell: object, max_actions: int = 6) -> Outcome:
-    from spar_py.engine import engine
+    from spar_py.planning.engine import engine
 
     e = engine()
     e.load_cell(cell)

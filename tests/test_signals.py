@@ -12,13 +12,13 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
-SPAR = [sys.executable, "-m", "spar_py.cli"]
+SPAR = [sys.executable, "-m", "spar_py.app.cli"]
 PAPER = ROOT / "kb/problems/peg_in_block.yaml"
 
 
 @pytest.fixture(scope="module")
 def slow_problem(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
-    from spar_py.gen import generate_assembly
+    from spar_py.app.gen import generate_assembly
 
     return (generate_assembly(70, tmp_path_factory.mktemp("gen70")),
             generate_assembly(100, tmp_path_factory.mktemp("gen100")))
@@ -131,7 +131,7 @@ def import_floor() -> float:
 @pytest.mark.parametrize("share", [0.5, 0.9])
 def test_a_signal_during_start_up_is_one_line(cmd: list[str], share: float, import_floor: float) -> None:
     """Ctrl-C while the command is still importing numpy and the engine (before the run's guard
-    exists): one line and exit 130, not a KeyboardInterrupt traceback (spar_py/entry.py)."""
+    exists): one line and exit 130, not a KeyboardInterrupt traceback (spar_py/startup/entry.py)."""
     rc, took, err = _signal_after(cmd + ["plan", str(PAPER)], signal.SIGINT, share * import_floor)
     assert rc == 130 and took < 0.5, (rc, took, err)
     assert err == "spar: interrupted\n"
@@ -143,7 +143,7 @@ def test_a_stop_leaves_no_staging_behind_while_writers_still_run(tmp_path: Path)
     (Removing the directory in place raced with the writer: CI once found a `.pics.*` left.)"""
     import threading
 
-    from spar_py.guard import RunGuard
+    from spar_py.app.guard import RunGuard
 
     for round_ in range(20):
         parent = tmp_path / f"r{round_}"
@@ -178,7 +178,7 @@ def test_a_stop_leaves_no_staging_behind_while_writers_still_run(tmp_path: Path)
 def test_after_the_commit_a_stop_changes_nothing(tmp_path: Path) -> None:
     """Outputs in place means the run is done: a late Ctrl-C must not end it with 130 (which
     says "no outputs") nor remove anything."""
-    from spar_py.guard import RunGuard
+    from spar_py.app.guard import RunGuard
 
     exits: list[int] = []
     with RunGuard(exit=exits.append) as guard:
@@ -235,8 +235,8 @@ def test_a_stop_during_a_tree_move_sees_all_or_none(tmp_path: Path, monkeypatch:
     import os
     import threading
 
-    from spar_py import guard as guard_module
-    from spar_py.guard import RunGuard
+    from spar_py.app import guard as guard_module
+    from spar_py.app.guard import RunGuard
 
     for stop_first in (True, False):
         root = tmp_path / f"root{stop_first}"

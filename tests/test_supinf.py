@@ -19,11 +19,11 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from spar_py import geometry
-from spar_py.errors import SparValueError
+from spar_py.core import geometry
+from spar_py.core.errors import SparValueError
 from spar_py.kb import load_problem
-from spar_py.memo import Memo
-from spar_py.supinf import (
+from spar_py.core.memo import Memo
+from spar_py.phase2.supinf import (
     AffineProgram,
     Bounder,
     BoundResult,
@@ -50,8 +50,8 @@ from spar_py.supinf import (
     iv_tan,
     sup,
 )
-from spar_py.symbolic import Registry, apply, compose, inv, rotz, trans
-from spar_py.uncertainty import (
+from spar_py.phase2.symbolic import Registry, apply, compose, inv, rotz, trans
+from spar_py.phase2.uncertainty import (
     assemble_constraints,
     dense_range_scan,
     initial_world,
@@ -505,7 +505,7 @@ def _uniform_chain(rng: np.random.Generator, n_actions: int, reg: Registry, half
 def test_compiled_program_encloses_the_interpreted_one(seed: int, n: int) -> None:
     """The compiled interval program (value and gradient) contains the interpreted program's
     enclosure on random sub-boxes, and the sampled values; it is at most a hair wider."""
-    from spar_py.supinf import CompiledIntervalProgram
+    from spar_py.phase2.supinf import CompiledIntervalProgram
 
     rng = np.random.default_rng(seed)
     reg = Registry()
@@ -531,7 +531,7 @@ def test_compiled_program_encloses_the_interpreted_one(seed: int, n: int) -> Non
 def test_compiled_program_falls_back_off_its_domain() -> None:
     """Division by an interval holding 0, log of a box reaching 0, atan2 on its cut: the
     compiled program hands those boxes to the interpreted rules and agrees with them."""
-    from spar_py.supinf import CompiledIntervalProgram
+    from spar_py.phase2.supinf import CompiledIntervalProgram
 
     x, y = ca.SX.sym("x"), ca.SX.sym("y")
     v = ca.vertcat(x, y)
@@ -585,7 +585,7 @@ def test_cached_bounds_by_structure_not_names() -> None:
     """The same constraint rebuilt in another registry (other variable numbering) is one
     cache entry with the same answer; another constant or another box is a new one; the
     tables keep their bounds."""
-    from spar_py.supinf import BOUNDER_LIMIT, RESULT_LIMIT, cached_bounds, expression_key
+    from spar_py.phase2.supinf import BOUNDER_LIMIT, RESULT_LIMIT, cached_bounds, expression_key
 
     def build(skip: int, c: float = 2.0) -> tuple[ca.SX, dict]:
         reg = Registry()
@@ -614,7 +614,7 @@ def test_cached_bounds_by_structure_not_names() -> None:
     assert memo.table("supinf.bounders", BOUNDER_LIMIT).limit == BOUNDER_LIMIT
     # an expression object asked again reads its canonical form; another object, even of an
     # equal structure, is renamed anew and finds the same bounder
-    from spar_py.supinf import CANONICAL_LIMIT, _canonical_key
+    from spar_py.phase2.supinf import CANONICAL_LIMIT, _canonical_key
 
     c1 = _canonical_key(e1, memo)
     assert _canonical_key(e1, memo)[0] is c1[0] and c1[2] == expression_key(e1)
@@ -716,7 +716,7 @@ def test_gradient_model_bound_and_monotone_faces_are_sound(seed: int, n: int, up
     the face it reduces a box to is below g at every sampled point of the whole box; (2) the
     reduction is a true monotonicity: moving a point's fixed coordinates onto the face never
     raises g; (3) its gradient enclosure holds the sampled gradients (g = f, or -f)."""
-    from spar_py.taylor import GradientModel
+    from spar_py.phase2.taylor import GradientModel
 
     rng = np.random.default_rng(seed)
     reg = Registry()
@@ -756,7 +756,7 @@ def test_gradient_model_is_exact_on_a_quadratic() -> None:
     """On f = (x - 0.3)^2 + 2 x y the gradient is linear, so the model's remainder is rounding
     only, and its bound is below the true minimum -0.4 (by hand: df/dx = 0 at x = 0.3 - y,
     inside [-1, 1]; there f = 0.6 y - y^2, concave, least at y = 1 of [0.5, 1])."""
-    from spar_py.taylor import GradientModel
+    from spar_py.phase2.taylor import GradientModel
 
     x, y = ca.SX.sym("x"), ca.SX.sym("y")
     e = (x - 0.3) ** 2 + 2 * x * y
@@ -829,7 +829,7 @@ def test_sign_of_its_own_keeps_the_discontinuity() -> None:
 
 
 def test_clarke_fabs_off_restores_the_bisection_only_search(monkeypatch: pytest.MonkeyPatch) -> None:
-    import spar_py.supinf as supinf
+    import spar_py.phase2.supinf as supinf
 
     reg = Registry()
     a, b = reg.new("a", -0.05, 0.05), reg.new("b", -0.05, 0.05)

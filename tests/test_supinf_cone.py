@@ -1,7 +1,7 @@
 """supinf._cone: the value's instructions cut from the value-and-gradient Function's.
 
 Bounder builds one CasADi Function (value and gradient) and takes the instruction list
-of the value alone from it (:func:`spar_py.supinf._cone`) for the affine program of the
+of the value alone from it (:func:`spar_py.phase2.supinf._cone`) for the affine program of the
 value and for the kinks check, instead of building a second Function. The results are
 only the same bit for bit if the cut list is, instruction for instruction, the list the
 second Function would have had; these tests check that on expressions like the
@@ -13,8 +13,8 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from spar_py import geometry
-from spar_py.supinf import _UNARY, AffineProgram, Bounder, _cone, _instructions
+from spar_py.core import geometry
+from spar_py.phase2.supinf import _UNARY, AffineProgram, Bounder, _cone, _instructions
 
 _INSTR = list[tuple[int, list[int], list[int], float]]
 

@@ -7,9 +7,9 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from spar_py import geometry
-from spar_py.errors import SparValueError
-from spar_py.symbolic import (
+from spar_py.core import geometry
+from spar_py.core.errors import SparValueError
+from spar_py.phase2.symbolic import (
     Registry,
     apply,
     as_sx,
@@ -36,7 +36,7 @@ def substitute(M: ca.SX, values: dict[str, float]) -> np.ndarray:
 
 
 def test_transforms_are_geometrys_one_code_path() -> None:
-    from spar_py import symbolic
+    from spar_py.phase2 import symbolic
 
     for name in ("trans", "rotx", "roty", "rotz", "rpy", "euler_zyz", "eulerxyz", "compose", "inv", "apply",
                  "tm_rows", "rot", "transl", "is_symbolic", "as_sx"):

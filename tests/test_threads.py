@@ -10,7 +10,7 @@ import threading
 from pathlib import Path
 from typing import Any
 
-from spar_py.planner import Outcome, Plan, Planner
+from spar_py.planning.planner import Outcome, Plan, Planner
 
 ROOT = Path(__file__).resolve().parent.parent
 A = ROOT / "kb/problems/peg_in_block.yaml"
@@ -66,7 +66,7 @@ def test_two_threads_two_planners_get_the_sequential_plans() -> None:
 
 
 def test_a_thread_that_times_out_does_not_disturb_the_other(tmp_path: Path) -> None:
-    from spar_py.gen import generate_assembly
+    from spar_py.app.gen import generate_assembly
 
     big = generate_assembly(10, tmp_path)  # 40 actions
     # a quarter of the whole plan on this machine (a fixed 0.3 s could outlast a faster plan)

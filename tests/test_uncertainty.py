@@ -12,13 +12,13 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from spar_py import geometry
-from spar_py.errors import SparValueError
+from spar_py.core import geometry
+from spar_py.core.errors import SparValueError
 from spar_py.kb import load_problem
-from spar_py.model import Bounds, Cell, MatingFeature
-from spar_py.supinf import Bounder
-from spar_py.symbolic import Registry
-from spar_py.uncertainty import (
+from spar_py.core.model import Bounds, Cell, MatingFeature
+from spar_py.phase2.supinf import Bounder
+from spar_py.phase2.symbolic import Registry
+from spar_py.phase2.uncertainty import (
     Constraint,
     ErrorTm,
     ObjectState,
@@ -295,8 +295,8 @@ def test_pickup_pairs_share_a_core_and_stay_sound(cell: Cell) -> None:
     is its core plus that constant, and the bound evaluate() derives from one search of the
     core's both ends is below (INF) or above (SUP) every sampled value, within SUP/INF's
     tolerance of bounding the whole expression directly, with the same verdict."""
-    from spar_py.memo import Memo
-    from spar_py.supinf import REL_TOL, cached_bounds
+    from spar_py.core.memo import Memo
+    from spar_py.phase2.supinf import REL_TOL, cached_bounds
 
     w = initial_world(cell)
     g = cell.objects["block"].grasps["p2G1"]
@@ -536,8 +536,8 @@ def test_constraints_built_once_per_structure_are_the_direct_builds() -> None:
     """The second pair's constraints come from the first's by renaming variables: node for
     node the expressions a direct build gives (SUP/INF's key of the graph, the variables
     in the same order), each in the second pair's own variables, with equal verdicts."""
-    from spar_py.memo import Memo
-    from spar_py.supinf import expression_key
+    from spar_py.core.memo import Memo
+    from spar_py.phase2.supinf import expression_key
 
     memo = Memo()
     w, _ = _two_pairs()
@@ -570,7 +570,7 @@ def test_constraints_built_once_per_structure_are_the_direct_builds() -> None:
 def test_structure_key_holds_the_bounds_the_closed_form_uses() -> None:
     """The assemble constraint's closed form holds its variables' bounds: a pair with wider
     bounds is another structure (built anew, a larger SUP), not a renamed copy."""
-    from spar_py.memo import Memo
+    from spar_py.core.memo import Memo
 
     wide = Bounds((-0.2, 0.2), (-0.2, 0.2), (-0.2, 0.2), (-5.5 * DEG, 5.5 * DEG))
     memo = Memo()

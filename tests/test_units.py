@@ -10,9 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from spar_py import placement
+from spar_py.world import placement
 from spar_py.kb import LENGTH_UNITS, load_problem
-from spar_py.planner import Planner
+from spar_py.planning.planner import Planner
 
 from units_fixture import ROOT, write_cell
 

@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 from spar_py.kb import load_problem
-from spar_py.workspace import ik_rows, reach_clear, requirement_clear
+from spar_py.world.workspace import ik_rows, reach_clear, requirement_clear
 from spar_py.world.collision import scene_for
 
 sys.path.insert(0, str(Path(__file__).parent))

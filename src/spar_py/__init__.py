@@ -14,14 +14,15 @@ from __future__ import annotations
 
 from typing import Any
 
-from .errors import InternalError, KBError, PlanningTimeout, PrologError, SparError, SparValueError
+from spar_py.core.errors import InternalError, KBError, PlanningTimeout, PrologError, SparError, SparValueError
 
 __version__ = "0.1.0"
 
 #: Lazily imported names -> the module that defines them.
 _LAZY = {
-    "Planner": "planner", "Plan": "planner", "Outcome": "planner", "Action": "planner",
-    "Step": "planner", "Verdict": "planner", "load_problem": "kb", "Cell": "model",
+    "Planner": "planning.planner", "Plan": "planning.planner", "Outcome": "planning.planner",
+    "Action": "planning.planner", "Step": "planning.planner", "Verdict": "planning.planner",
+    "load_problem": "kb", "Cell": "core.model",
 }
 
 __all__ = [

@@ -14,13 +14,13 @@ import re
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from .cell import cell_figure, cell_png, extent
-from .graphs import dot_executable, network_dot, ordering_dot, render_png
-from .plandoc import as_doc, instance, is_plan
-from .scene import Scene, scenes
+from spar_py.pictures.cell import cell_figure, cell_png, extent
+from spar_py.pictures.graphs import dot_executable, network_dot, ordering_dot, render_png
+from spar_py.pictures.plandoc import as_doc, instance, is_plan
+from spar_py.pictures.scene import Scene, scenes
 
 if TYPE_CHECKING:
-    from ..model import Cell
+    from spar_py.core.model import Cell
 
 __all__ = ["Scene", "cell_png", "network_dot", "ordering_dot", "render_png", "scenes", "write_pictures"]
 

@@ -19,10 +19,10 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import SparValueError
-from ..model import Cell
-from .plandoc import as_doc, instance
-from .scene import Scene, held_grasp, part_model, scenes
+from spar_py.core.errors import SparValueError
+from spar_py.core.model import Cell
+from spar_py.pictures.plandoc import as_doc, instance
+from spar_py.pictures.scene import Scene, held_grasp, part_model, scenes
 
 __all__ = ["arm_faces", "frames_of", "obstacle_faces", "write_animation"]
 
@@ -100,7 +100,7 @@ def arm_faces(cell: Cell, q: np.ndarray, width: float | None = None) -> list[tup
     of each body is taken once in its own frame (cell.memo) and moved by the frame's pose."""
     from scipy.spatial import ConvexHull
 
-    from ..world.collision import TOOL, scene_for
+    from spar_py.world.collision import TOOL, scene_for
 
     scene = scene_for(cell)
     F = cell.robot.frames(np.asarray(q, float))
@@ -148,7 +148,7 @@ def write_animation(cell: Cell, plan: Any, path: str | Path, max_frames: int = M
     from matplotlib.animation import PillowWriter
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
-    from .cell import _draw_3d, extent
+    from spar_py.pictures.cell import _draw_3d, extent
 
     frames = frames_of(cell, plan, max_frames)
     obstacles = obstacle_faces(cell)

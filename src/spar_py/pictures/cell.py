@@ -28,18 +28,18 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..errors import SparValueError
-from ..geometry import convex_hull_2d
-from .plandoc import term_parts
-from ..units import from_mm
-from .scene import MIN_SIZE_MM, Scene, part_model, scenes
+from spar_py.core.errors import SparValueError
+from spar_py.core.geometry import convex_hull_2d
+from spar_py.pictures.plandoc import term_parts
+from spar_py.core.units import from_mm
+from spar_py.pictures.scene import MIN_SIZE_MM, Scene, part_model, scenes
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
 
-    from ..world.collision import Body
-    from ..world.robots import Robot
-    from ..model import Cell, ObjectModel, Solid
+    from spar_py.world.collision import Body
+    from spar_py.world.robots import Robot
+    from spar_py.core.model import Cell, ObjectModel, Solid
 
 __all__ = ["Shape", "arm_polyline", "body_faces", "cell_figure", "cell_png", "draw_figure", "extent",
            "gripper_segments", "hole_mouth", "obstacle_shapes", "object_points", "robot_shapes", "solid_faces",
@@ -241,7 +241,7 @@ def robot_shapes(cell: Cell, s: Scene) -> list[Shape]:
     """The arm's collision bodies at scene ``s``: each link shape of the robot file in its
     frame (the pedestal's frame 0 even without a configuration), and with a configuration the
     palm and fingers, their contact faces at the held grasp's width (open: finger_separation)."""
-    from ..world.collision import TOOL, scene_for
+    from spar_py.world.collision import TOOL, scene_for
 
     scene = scene_for(cell)
     base = np.asarray(cell.robot.base, float)
@@ -386,7 +386,7 @@ def _mesh_facets(model: ObjectModel, T: np.ndarray, eye: np.ndarray, colour: str
         return None
     from matplotlib.colors import to_hex, to_rgb
 
-    from ..world.shapes import part_mesh
+    from spar_py.world.shapes import part_mesh
 
     mesh = part_mesh(model)
     R = np.asarray(T, float)[:3, :3]

@@ -46,7 +46,7 @@ def pretty_term(term: str) -> str:
 
 def term_parts(term: str) -> tuple[str, list[str]]:
     """Functor and argument texts of a ground term (``("pickup", ["peg", "p1G10"])``)."""
-    from ..kb import parse_term, term_text
+    from spar_py.kb import parse_term, term_text
 
     try:
         t = parse_term(term)

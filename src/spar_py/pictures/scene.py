@@ -19,12 +19,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..errors import SparValueError
-from ..units import from_mm
-from .plandoc import as_doc, instance, pretty_term
+from spar_py.core.errors import SparValueError
+from spar_py.core.units import from_mm
+from spar_py.pictures.plandoc import as_doc, instance, pretty_term
 
 if TYPE_CHECKING:
-    from ..model import Cell
+    from spar_py.core.model import Cell
 
 __all__ = ["Scene", "World", "initial_poses", "part_model", "scenes", "step_world"]
 

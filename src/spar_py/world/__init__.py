@@ -11,5 +11,5 @@
 
 Frames: world Z up, table top z = 0; transforms 4x4, column vectors, ``T_world_obj``.
 Units: lengths in the cell's unit (``Cell.unit``); constants written in the code are in mm
-and converted where used (``spar_py.units``); angles in radians.
+and converted where used (``spar_py.core.units``); angles in radians.
 """

@@ -64,12 +64,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..errors import SparValueError
-from ..units import from_mm
+from spar_py.core.errors import SparValueError
+from spar_py.core.units import from_mm
 
 if TYPE_CHECKING:
-    from ..model import Cell, Solid
-    from .robots import GripperGeometry, Robot
+    from spar_py.core.model import Cell, Solid
+    from spar_py.world.robots import GripperGeometry, Robot
 
 __all__ = ["CollisionScene", "DEFAULT_MARGIN_MM", "Obstacle", "SceneState", "scene_for", "segment_distance",
            "solids_key"]
@@ -1245,8 +1245,8 @@ def scene_for(cell: Cell) -> CollisionScene:
     table = cell.memo.table("collision.scene", 1)
     if "scene" in table:
         return table["scene"]
-    from .robots import GripperGeometry
-    from ..units import mm_per
+    from spar_py.world.robots import GripperGeometry
+    from spar_py.core.units import mm_per
 
     robot = cell.robot
     gripper = robot.gripper or GripperGeometry.default(cell.finger_separation, mm_per(cell.unit))

@@ -47,8 +47,8 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from ..errors import SparValueError
-from .motion_options import FAILURES_KEPT, PLANNERS, MotionFailure, MotionOptions
+from spar_py.core.errors import SparValueError
+from spar_py.world.motion_options import FAILURES_KEPT, PLANNERS, MotionFailure, MotionOptions
 
 __all__ = ["MotionOptions", "Segment", "MotionFailure", "PLANNERS", "resolution", "densify",
            "free_motion", "line_motion", "durations", "DEFAULT_APPROACH_IN"]
@@ -163,7 +163,7 @@ def column_rates(state: Any) -> np.ndarray:
     other, each moving the f2 body's points by at most their distance from its axis times
     the joint step (:func:`body_reach`); bodies rigid with each other (frame 6 and the tool)
     get 0."""
-    from .collision import TOOL, WORLD, bound_columns
+    from spar_py.world.collision import TOOL, WORLD, bound_columns
 
     robot = state.scene.robot
     cols = bound_columns(state)
@@ -217,8 +217,8 @@ def certify(state: Any, w: np.ndarray, memo: CertifyMemo | None = None) -> tuple
     checking every waypoint). Needs a ``collision.SceneState`` whose hand is empty or holds
     its part (the grasp rule then the same on every row); others: :func:`blocked`. ``memo``
     (of this ``state``) carries what one call learns to the next; None: nothing is kept."""
-    from .collision import SceneState as Exact
-    from .collision import clearance_bounds
+    from spar_py.world.collision import SceneState as Exact
+    from spar_py.world.collision import clearance_bounds
 
     if not isinstance(state, Exact) or state.hand is not None and state.hand[1] == "world":
         return blocked(state, w)  # a part being grasped where it lies: the grasp rule varies along w
@@ -438,7 +438,7 @@ def _line_ik(robot: Any, T_anchor: np.ndarray, q_anchor: np.ndarray, d: np.ndarr
     """IK along the line T_anchor + s * length * d (s (n,) from 0), nearest-previous from
     ``q_anchor``; None if some point has no in-limit solution (or the wrist goes under
     the table)."""
-    from ..workspace import wrist_above_table
+    from spar_py.world.workspace import wrist_above_table
 
     T = np.repeat(np.asarray(T_anchor, float)[None], len(s), axis=0)
     T[:, :3, 3] += np.outer(s * length, d)
@@ -846,7 +846,7 @@ def extent(cell: Any) -> float:
 
 def approach_length(cell: Any, opts: MotionOptions) -> float:
     """The approach / retreat length in the cell unit (the option, else 2 in)."""
-    from ..kb import LENGTH_UNITS
+    from spar_py.kb import LENGTH_UNITS
 
     if opts.approach_length is not None:
         return float(opts.approach_length)
@@ -864,7 +864,7 @@ def run_motions(cell: Any, steps: Sequence[Mapping[str, Any]], worlds: Sequence[
     ``motion.failures`` for the no-plan reason). Memoised per run (cell.memo)."""
     opts: MotionOptions = cell.motion
     if scene is None:
-        from .collision import scene_for
+        from spar_py.world.collision import scene_for
 
         scene = scene_for(cell)
     home = getattr(cell, "home", None)

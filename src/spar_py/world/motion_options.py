@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..errors import SparValueError
+from spar_py.core.errors import SparValueError
 
 __all__ = ["FAILURES_KEPT", "PLANNERS", "MotionFailure", "MotionOptions"]
 

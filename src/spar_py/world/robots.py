@@ -26,9 +26,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import SparValueError
-from ..geometry import check_transform, inv, rotx, trans
-from .ik import FAMILY_TWISTS, LIMIT_TOL, Solver, craig_links, lowest_representation, solver_for, turn_combinations
+from spar_py.core.errors import SparValueError
+from spar_py.core.geometry import check_transform, inv, rotx, trans
+from spar_py.world.ik import (FAMILY_TWISTS, LIMIT_TOL, Solver, craig_links, lowest_representation, solver_for,
+                              turn_combinations)
 
 __all__ = ["GripperGeometry", "LIMIT_TOL", "LinkShape", "Robot", "UrdfChain", "check_against_urdf", "dh_from_axes",
            "read_urdf_chain", "robot_from_urdf", "standard_to_modified"]

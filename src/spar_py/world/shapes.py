@@ -27,7 +27,7 @@ Stable poses, grasps and the checks of hand-written entries are in
 
 Frames: object frame as the model file gives it; T_a is the peg's frame in the hole's
 frame (4x4, column vectors). Units: lengths in the cell unit, the tolerances below in mm
-(converted with :func:`spar_py.units.from_mm`), angles in radians unless a name says deg.
+(converted with :func:`spar_py.core.units.from_mm`), angles in radians unless a name says deg.
 trimesh and manifold3d are imported inside the functions that need them.
 """
 from __future__ import annotations
@@ -39,12 +39,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..units import from_mm
+from spar_py.core.units import from_mm
 
 if TYPE_CHECKING:
     import trimesh
 
-    from ..model import ObjectModel
+    from spar_py.core.model import ObjectModel
 
 __all__ = [
     "Face", "FeatureGeometry", "Geometry", "Primitive", "assembly_transforms", "axis_basis",

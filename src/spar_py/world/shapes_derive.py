@@ -29,7 +29,7 @@ at the opening and palm, swept in along the approach) enter the part. ``ofaces``
 faces, every planar face whose plane the palm or a closed finger reaches beyond (the part
 cannot rest on it while held) and the feature's face if they enter the space its mate needs.
 
-Units: lengths in the cell unit, constants in mm (converted with spar_py.units.from_mm);
+Units: lengths in the cell unit, constants in mm (converted with spar_py.core.units.from_mm);
 angles in radians. Frames: object frame; tool frames T_g are 4x4 in the object frame.
 """
 from __future__ import annotations
@@ -40,8 +40,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..units import from_mm
-from .shapes import Face, FeatureGeometry, Primitive, axis_basis, clean, cross, minimal_rotation
+from spar_py.core.units import from_mm
+from spar_py.world.shapes import Face, FeatureGeometry, Primitive, axis_basis, clean, cross, minimal_rotation
 
 if TYPE_CHECKING:
     import trimesh
@@ -227,7 +227,7 @@ def support_check(mesh: "trimesh.Trimesh", R: np.ndarray, faces: list[Face], uni
     the mesh are the support, their 2-D convex hull the support polygon, and the centre of
     mass must project inside it by STABLE_MARGIN_MM; the part must rest on a face.
     """
-    from ..geometry import convex_hull_2d
+    from spar_py.core.geometry import convex_hull_2d
 
     tol = from_mm(unit, SUPPORT_TOL_MM)
     A = _arrays(mesh)
@@ -653,7 +653,7 @@ def _round(mesh: "trimesh.Trimesh", faces: list[Face], root: np.ndarray, d: np.n
 
 
 def _face_at(faces: list[Face], mesh: "trimesh.Trimesh", p: np.ndarray, unit: str) -> str | None:
-    from .shapes import ON_SURFACE_MM, face_of_point
+    from spar_py.world.shapes import ON_SURFACE_MM, face_of_point
 
     k = face_of_point(faces, mesh, p, 10 * from_mm(unit, ON_SURFACE_MM) + 1e-3 * float(mesh.scale))
     return None if k is None else faces[k].name
@@ -720,7 +720,7 @@ def check_entries(model: "object", gripper: Gripper, unit: str, which: tuple[str
     Returns (key, expected, got) for each problem, in file order: a face that is not on the
     shape, a stable pose that is not stable (or rests at another height, or on other faces),
     a grasp wider than the opening or whose fingers or palm enter the part."""
-    from .shapes import derive_faces
+    from spar_py.world.shapes import derive_faces
 
     geo = model.geometry  # type: ignore[attr-defined]
     mesh = geo.mesh()

@@ -17,10 +17,10 @@ from collections.abc import Callable
 
 import numpy as np
 
-from .common import LIMIT_TOL, Solver, craig_links, lowest_representation, turn_combinations
-from .numeric import NumericSolver
-from .puma import PUMA_TWISTS, PumaSolver
-from .ur import UR_TWISTS, URSolver
+from spar_py.world.ik.common import LIMIT_TOL, Solver, craig_links, lowest_representation, turn_combinations
+from spar_py.world.ik.numeric import NumericSolver
+from spar_py.world.ik.puma import PUMA_TWISTS, PumaSolver
+from spar_py.world.ik.ur import UR_TWISTS, URSolver
 
 __all__ = ["FAMILIES", "FAMILY_TWISTS", "LIMIT_TOL", "NumericSolver", "PumaSolver", "Solver", "URSolver", "craig_links",
            "lowest_representation", "solver_for", "turn_combinations"]

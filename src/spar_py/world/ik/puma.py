@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...geometry import inv, rotx, trans
+from spar_py.core.geometry import inv, rotx, trans
 
 __all__ = ["PUMA_TWISTS", "PumaSolver", "puma_structure"]
 

@@ -15,7 +15,7 @@ INTERNAL_UNIT = "mm"
 
 def mm_per(unit: str) -> float:
     """Millimetres per ``unit`` (kb.LENGTH_UNITS; KeyError for an unknown unit)."""
-    from .kb import LENGTH_UNITS  # kb loads sanity, which uses this module
+    from spar_py.kb import LENGTH_UNITS  # kb loads sanity, which uses this module
 
     return LENGTH_UNITS[unit]
 

@@ -32,7 +32,7 @@ process has started from it (a state SWI-Prolog cannot read aborts the process t
 tries), and it is used only if its bytes still hash to what its manifest says.
 ``SPAR_SAVED_STATE=off`` keeps janus' own start (and the image).
 
-The cache is filled at set-up (``python -m spar_py.qlf``, run by scripts/setup.sh) and
+The cache is filled at set-up (``python -m spar_py.startup.qlf``, run by scripts/setup.sh) and
 otherwise by the first run after a change. ``SPAR_QLF_CACHE`` names the cache directory
 (default ``$XDG_CACHE_HOME/spar-py/qlf``, else ``~/.cache/spar-py/qlf``); set it to
 ``off`` to consult the sources every time. At most :data:`KEEP` entries are kept, the
@@ -168,7 +168,7 @@ def state_key(sources: Sources, identity: dict) -> str:
 def loader_text(roots: tuple[Path, ...]) -> str:
     """The Prolog file the image is compiled from: one ``use_module/1`` per root file,
     each written as a quoted atom (a path is never read as code)."""
-    lines = ["% spar-py: the planner's files, compiled into one image by spar_py.qlf.", ""]
+    lines = ["% spar-py: the planner's files, compiled into one image by spar_py.startup.qlf.", ""]
     lines += [f":- use_module({_quoted(str(p))})." for p in roots]
     return "\n".join(lines) + "\n"
 
@@ -303,13 +303,15 @@ def evict(base: Path, keep: int = KEEP, spare: str | None = None) -> list[Path]:
 
 
 def main() -> None:
-    """``python -m spar_py.qlf``: compile the planner into the cache now (set-up runs it);
+    """``python -m spar_py.startup.qlf``: compile the planner into the cache now (set-up runs it);
     prints where the image is, or that the cache is off."""
-    from . import dcimage
+    from spar_py.startup import dcimage
 
     image = dcimage.install()  # the spar command's dataclass methods, compiled now too
-    from . import cli, phase2, planner  # noqa: F401 - imported for their dataclasses
-    from .engine import Engine
+    from spar_py.app import cli  # noqa: F401 - imported for their dataclasses
+    from spar_py.phase2 import instance as phase2  # noqa: F401
+    from spar_py.planning import planner  # noqa: F401 - imported for their dataclasses
+    from spar_py.planning.engine import Engine
 
     if image is not None:
         image.save()

@@ -2,7 +2,7 @@
 
 This is the only Python module that imports janus. Prolog reaches Python through
 the functions at the bottom of this file (called from prolog/foreign.pl with
-``py_call(spar_py.engine:...)``); they delegate to the numeric modules.
+``py_call(spar_py.planning.engine:...)``); they delegate to the numeric modules.
 
 SWI-Prolog is located from ``_swipl.json`` beside this file, written by ``make setup``
 with the home directory janus-swi was compiled against. Setting ``SWI_HOME_DIR``
@@ -21,9 +21,9 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Iterator
 
-from .errors import InternalError, PlanningTimeout, PrologError, SparError
+from spar_py.core.errors import InternalError, PlanningTimeout, PrologError, SparError
 
-PACKAGE_DIR = Path(__file__).resolve().parent
+PACKAGE_DIR = Path(__file__).resolve().parent.parent  # src/spar_py
 ROOT = PACKAGE_DIR.parent.parent  # the checkout: prolog/, kb/ live here
 PROLOG_DIR = ROOT / "prolog"
 TEMPLATES_DIR = ROOT / "kb" / "templates"
@@ -146,7 +146,7 @@ STATE_PROBE = ROOTS_LOADED + ", current_predicate(spar:plan_dict/4), py_call(mat
 _CHECK_STATE = """\
 import json, sys
 sys.path.insert(0, sys.argv[1])
-from spar_py.engine import _import_janus, STATE_PROBE
+from spar_py.planning.engine import _import_janus, STATE_PROBE
 janus, used = _import_janus(__import__("pathlib").Path(sys.argv[2]))
 ok = used and janus.query_once(STATE_PROBE, {"Fs": json.loads(sys.argv[3])})["truth"]
 print("state ok" if ok else "state refused")
@@ -183,7 +183,7 @@ class Engine:
         ``background`` in a thread of its own, so the caller can go on (importing numpy,
         reading the problem) while Prolog compiles; every query waits for it first.
 
-        With a saved state of these very sources in the cache (spar_py/qlf.py), SWI-Prolog
+        With a saved state of these very sources in the cache (spar_py/startup/qlf.py), SWI-Prolog
         starts from it, the planner already loaded, and there is nothing left to load."""
         t0 = time.perf_counter()
         self.cells: dict[str, Any] = {}
@@ -225,7 +225,7 @@ class Engine:
 
     def _load(self) -> None:
         """Load the planner (prolog/spar.pl, then kb/templates/*.pl): from its compiled
-        image when the cache has one for these very sources (spar_py/qlf.py), compiling
+        image when the cache has one for these very sources (spar_py/startup/qlf.py), compiling
         it there first when not, and from the sources when there is no usable cache.
         :attr:`loaded_from` says which ("qlf", "compiled" or "source")."""
         t0 = time.perf_counter()
@@ -244,7 +244,7 @@ class Engine:
         """The cache entry of the saved state of the planner's sources as they are now
         (qlf.state_entry), or None: cache or saved state off, no SWI-Prolog home or janus
         known before it starts."""
-        from . import qlf
+        from spar_py.startup import qlf
 
         base = qlf.cache_dir()
         home = _swi_home()
@@ -266,7 +266,7 @@ class Engine:
         the saved-state entry, published once a fresh process started from it. Best
         effort: a busy or unwritable cache, or a state that does not start, leaves the
         entry unpublished (:attr:`state_status` says which)."""
-        from . import qlf
+        from spar_py.startup import qlf
 
         entry = self._state
         try:
@@ -292,10 +292,10 @@ class Engine:
             self.state_status = "refused"
 
     def _load_image(self, roots: list[Path]) -> str | None:
-        """Load the planner from the .qlf cache (see :mod:`spar_py.qlf`); "qlf" if loaded
+        """Load the planner from the .qlf cache (see :mod:`spar_py.startup.qlf`); "qlf" if loaded
         from an image, "compiled" if this process compiled (and so loaded) it, None if the
         cache is off or unusable (nothing loaded)."""
-        from . import qlf
+        from spar_py.startup import qlf
 
         base = qlf.cache_dir()
         if base is None:
@@ -332,7 +332,7 @@ class Engine:
         """Compile the planner into ``entry`` (qcompile/2 with include(user): every planner
         file in one image), which also loads it here; publish the entry only if no file it
         holds changed while it was compiled."""
-        from . import qlf
+        from spar_py.startup import qlf
 
         for stale in (entry.image, entry.manifest):
             stale.unlink(missing_ok=True)
@@ -424,7 +424,7 @@ class Engine:
     def load_cell(self, cell: Any) -> None:
         """Load ``cell`` as problem ``cell.name``: its facts replace that problem's in Prolog
         (other loaded problems stay), and Python calls about that problem get ``cell``."""
-        from .kb import facts
+        from spar_py.kb import facts
 
         with self.lock:
             self.query_once("foreign:spar_load_facts(Facts)", {"Facts": facts(cell)})
@@ -513,7 +513,7 @@ def _cell(problem: str) -> Any:
 def load_problem_file(path: str) -> list[Any]:
     """The toplevel's load_problem/1,2: load and check ``path``, keep its cell by name, and
     return ``[name, facts]`` for Prolog to assert (foreign:load_problem_file/2)."""
-    from .kb import facts, load_problem
+    from spar_py.kb import facts, load_problem
 
     cell = load_problem(path)
     if _engine is None:
@@ -537,7 +537,7 @@ def arc_pairs(problem: str, rule: str, kind: str, objects: list[str], grasps: li
               positions: list[str], ta: str) -> list[list[str]]:
     """All grasp/position pairs of loaded problem ``problem`` satisfying ``kind``
     (reachable | mate_reachable), Sec. 5.2.4; ``rule`` for stable-pose labels (reach.RULES)."""
-    from . import reach
+    from spar_py.world import reach
 
     return reach.arc(_cell(problem), kind, objects, grasps, positions, None if ta == "none" else ta, rule)
 
@@ -547,6 +547,6 @@ def evaluate(problem: str, steps: list[dict[str, Any]], sources: dict[str, dict[
     """Phase 2: run a whole plan instance of loaded problem ``problem`` in one call and
     return plain data: every step's verdicts, geometry, part poses and held part, and
     where the run stopped (phase2.evaluate; cell unit, degrees, world frame)."""
-    from . import phase2
+    from spar_py.phase2 import instance as phase2
 
     return phase2.evaluate(_cell(problem), steps, sources, given_up or (), sensing)

@@ -1,5 +1,5 @@
 """The ``spar`` console script's first code: Ctrl-C and SIGTERM end the run cleanly from its
-first instant, before ``spar_py.cli`` and its imports (numpy, the engine) are loaded.
+first instant, before ``spar_py.app.cli`` and its imports (numpy, the engine) are loaded.
 
 Until the run's guard (guard.RunGuard) takes over, a signal writes one line (``spar:
 interrupted`` or ``spar: terminated``) and exits 130 or 143 at once: nothing has been written
@@ -17,7 +17,7 @@ from types import FrameType
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from .dcimage import CodeImage
+    from spar_py.startup.dcimage import CodeImage
 
 #: Exit code and line per signal (cli.py's EXIT_CODES).
 _EARLY = {signal.SIGINT: (130, b"spar: interrupted\n"), signal.SIGTERM: (143, b"spar: terminated\n")}
@@ -64,7 +64,7 @@ def hold_collections() -> None:
     imports numpy, casadi and the planner and reads its problem first, allocating some
     hundreds of thousands of objects that all stay alive; the collector's passes over them
     (about 90 in that run, some 3% of its time) find nothing to free. Called by the console
-    script (and ``python -m spar_py.cli``) before its imports, never by the Python API."""
+    script (and ``python -m spar_py.app.cli``) before its imports, never by the Python API."""
     global _held
     if gc.isenabled():
         gc.disable()
@@ -96,7 +96,7 @@ def keep_compiled_methods() -> CodeImage | None:
     """Dataclasses defined from now on take their generated methods' code from the cache
     (dcimage.py: compiling their source is the largest cost of importing the planner); the
     image to save at the end, or None (cache off). Console script only, never the Python API."""
-    from .dcimage import install
+    from spar_py.startup.dcimage import install
 
     return install()
 
@@ -108,20 +108,20 @@ def save_compiled_methods(image: CodeImage | None) -> None:
 
 
 def main() -> None:
-    """``spar``: early handlers, then :func:`spar_py.cli.main`."""
+    """``spar``: early handlers, then :func:`spar_py.app.cli.main`."""
     early_signals()
     one_blas_thread()
     hold_collections()
     image = keep_compiled_methods()
-    from .cli import exiting, main as cli_main
+    from spar_py.app.cli import exiting, main as cli_main
 
     run_to_end(cli_main, exiting, image)
 
 
 def run_to_end(cli_main: Callable[[list[str]], None], exiting: Callable[[object], None],
                image: CodeImage | None) -> None:
-    """Run ``cli_main(sys.argv[1:])`` (spar_py.cli.main) and end the process as the console
-    script does (and ``python -m spar_py.cli``): the dataclass-methods image saved, then
+    """Run ``cli_main(sys.argv[1:])`` (spar_py.app.cli.main) and end the process as the console
+    script does (and ``python -m spar_py.app.cli``): the dataclass-methods image saved, then
     ``exiting`` (cli.exiting: a shutdown without the full heap's collections, or none at all)
     with the SystemExit code the run raised (``...`` if it raised none, which leaves the usual
     shutdown alone)."""

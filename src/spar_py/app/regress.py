@@ -31,7 +31,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from .errors import SparError
+from spar_py.core.errors import SparError
 
 
 def summarize(plan: dict[str, Any]) -> dict[str, Any]:
@@ -70,7 +70,7 @@ CONNECT_TIMEOUT_S = 10.0
 def _plan_one(path: str, cell: Any = None) -> Result:
     """Plan one problem file (here, in a -j worker process, or as a cluster task given its
     loaded ``cell``); (path, summary or None, error text, seconds)."""
-    from .planner import Planner
+    from spar_py.planning.planner import Planner
 
     t0 = time.perf_counter()
     try:
@@ -91,7 +91,7 @@ def run_on_cluster(paths: list[str], client: Any, progress: Any = None) -> list[
     from distributed import as_completed
     from distributed.scheduler import KilledWorker
 
-    from .kb import load_problem
+    from spar_py.kb import load_problem
 
     rows: dict[str, Result] = {}
     futures: dict[Any, str] = {}
@@ -187,7 +187,7 @@ def problem_files(directory: Path) -> tuple[list[Path], list[str]]:
     """The problem files under ``directory`` (sorted) and a note line for each other KB file.
 
     A file that cannot be read or parsed counts as a problem: planning it reports why."""
-    from .kb import KINDS, file_kind, read_yaml
+    from spar_py.kb import KINDS, file_kind, read_yaml
 
     problems: list[Path] = []
     notes: list[str] = []

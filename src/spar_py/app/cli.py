@@ -7,8 +7,8 @@ Errors are one line on stderr, never a traceback.
 """
 from __future__ import annotations
 
-if __name__ == "__main__":  # python -m spar_py.cli: a signal during the imports below is one line too
-    from spar_py.entry import early_signals, hold_collections, keep_compiled_methods, one_blas_thread
+if __name__ == "__main__":  # python -m spar_py.app.cli: a signal during the imports below is one line too
+    from spar_py.startup.entry import early_signals, hold_collections, keep_compiled_methods, one_blas_thread
 
     early_signals()
     one_blas_thread()  # as the spar script: before numpy loads
@@ -21,10 +21,10 @@ import sys
 from pathlib import Path
 from typing import Callable
 
-from . import __version__
-from .entry import resume_collections
-from .errors import InternalError, KBError, PlanningTimeout, PrologError, SparError, SparValueError
-from .world.motion_options import PLANNERS, MotionOptions
+from spar_py import __version__
+from spar_py.startup.entry import resume_collections
+from spar_py.core.errors import InternalError, KBError, PlanningTimeout, PrologError, SparError, SparValueError
+from spar_py.world.motion_options import PLANNERS, MotionOptions
 
 EXIT_OK, EXIT_FAIL, EXIT_INPUT, EXIT_INTERNAL, EXIT_TIMEOUT = 0, 1, 2, 3, 4
 DEFAULT_PROBLEM = "kb/problems/peg_in_block.yaml"
@@ -49,7 +49,7 @@ def _err(msg: str) -> None:
 
 def cmd_kb_check(args: argparse.Namespace) -> int:
     """Validate knowledge-base files; one line per file."""
-    from .kb import check_file, iter_kb_files
+    from spar_py.kb import check_file, iter_kb_files
 
     files = iter_kb_files(args.files)
     if not files:
@@ -67,7 +67,7 @@ def cmd_kb_check(args: argparse.Namespace) -> int:
 
 def cmd_kb_derive(args: argparse.Namespace) -> int:
     """Write an object model with every face, stable pose and grasp explicit (derived ones too)."""
-    from .kb import derive_text
+    from spar_py.kb import derive_text
 
     if args.output is not None:
         _check_output_file("-o", Path(args.output))  # before the work, as spar plan does
@@ -92,8 +92,8 @@ def cmd_repl(args: argparse.Namespace) -> int:
     """The Prolog toplevel with the planner and a problem loaded. Interactive on a terminal;
     with standard input piped, a scripted session (spar_toplevel:batch_toplevel/0: each
     query answered once, so none is swallowed as the answer to "more?")."""
-    from .engine import engine
-    from .kb import load_problem
+    from spar_py.planning.engine import engine
+    from spar_py.kb import load_problem
 
     cell = load_problem(args.problem)
     eng = engine()
@@ -167,11 +167,11 @@ def cmd_plan(args: argparse.Namespace) -> int:
     for d in picture_dirs:
         _check_output_dir("--png" if args.png and Path(args.png) == d else "--dot", d)
     guard = args.guard
-    from .engine import start_engine
+    from spar_py.planning.engine import start_engine
 
     start_engine()  # Prolog loads the planner while the imports below run
-    from .kb import load_problem
-    from .planner import Outcome, Planner
+    from spar_py.kb import load_problem
+    from spar_py.planning.planner import Outcome, Planner
 
     cell = load_problem(args.problem, max_bytes=_max_input_bytes(args))
     resume_collections()  # the planning run allocates (and frees) as it goes
@@ -185,12 +185,12 @@ def cmd_plan(args: argparse.Namespace) -> int:
         raise PlanningTimeout(f"{cell.name}: no result within {args.timeout:g} s")
     staged: list[tuple[Path, Path]] = []  # (temporary, final)
     for d in picture_dirs:
-        from .pictures import write_pictures
+        from spar_py.pictures import write_pictures
 
         for p in write_pictures(cell, plan.to_json(), guard.staging(d)):
             staged.append((p, d / p.name))
     if animate is not None:
-        from .pictures.animate import write_animation
+        from spar_py.pictures.animate import write_animation
 
         tmpgif = guard.staging(animate) / animate.name
         write_animation(cell, plan.to_json(), tmpgif)
@@ -221,7 +221,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
 
 def cmd_regress(args: argparse.Namespace) -> int:
     """Check every problem under a directory against its expected outcome."""
-    from .regress import run_regression
+    from spar_py.app.regress import run_regression
 
     if args.scheduler is not None and args.jobs != 1:
         raise SparError("regress: -j N runs processes on this machine, --scheduler on a cluster: give one")
@@ -234,7 +234,7 @@ def cmd_regress(args: argparse.Namespace) -> int:
 
 def cmd_gen(args: argparse.Namespace) -> int:
     """Generate a problem (``spar gen assembly --parts N``)."""
-    from .gen import generate_assembly
+    from spar_py.app.gen import generate_assembly
 
     out = Path(args.output)
     _check_output_dir("-o", out, "the generated problem")
@@ -354,7 +354,7 @@ def _add_max_input_bytes(p: argparse.ArgumentParser) -> None:
 
 def _max_input_bytes(args: argparse.Namespace) -> int:
     """The per-file size limit of a command: --max-input-bytes, or kb.MAX_INPUT_BYTES."""
-    from .kb import MAX_INPUT_BYTES
+    from spar_py.kb import MAX_INPUT_BYTES
 
     return MAX_INPUT_BYTES if args.max_input_bytes is None else int(args.max_input_bytes)
 
@@ -400,7 +400,7 @@ exit codes:
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``spar`` console script: one line on stderr for every error,
     never a traceback; the exit codes of EXIT_CODES."""
-    from .guard import RunGuard
+    from spar_py.app.guard import RunGuard
 
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -442,7 +442,7 @@ LEAK_REPORTING = ("ompl", "manifold3d")
 
 
 def exiting(code: object = ...) -> None:
-    """The process ends next (the console script's and ``python -m spar_py.cli``'s last call),
+    """The process ends next (the console script's and ``python -m spar_py.app.cli``'s last call),
     with the SystemExit ``code`` that :func:`main` raised (``...``: it raised none). Move every
     object to the collector's permanent generation (gc.freeze), so the interpreter's shutdown
     collections skip the heap numpy, casadi, the embedded Prolog's bridge and the plan left
@@ -486,7 +486,7 @@ def _end_now(code: int) -> None:
 
 
 if __name__ == "__main__":
-    from spar_py.entry import run_to_end
+    from spar_py.startup.entry import run_to_end
 
     run_to_end(main, exiting, _image)
 

@@ -11,12 +11,12 @@ from typing import TYPE_CHECKING, Union
 
 import numpy as np
 
-from .memo import Memo
+from spar_py.core.memo import Memo
 
 if TYPE_CHECKING:
-    from .world.motion_options import MotionOptions
-    from .world.robots import Robot
-    from .world.shapes import FeatureGeometry, Geometry
+    from spar_py.world.motion_options import MotionOptions
+    from spar_py.world.robots import Robot
+    from spar_py.world.shapes import FeatureGeometry, Geometry
 
 Face = Union[int, str]
 

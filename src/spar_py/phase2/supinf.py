@@ -31,7 +31,7 @@ the guarantee and removes most of the looseness:
    the interval gradient suffers the wrapping effect, the affine one does not, and the
    intersection of the two proves monotonicity on far more boxes. The affine gradient is
    also used as a first-order model of the gradient valid on every sub-box
-   (:class:`~spar_py.taylor.GradientModel`): iterated monotonicity reduces a box to the
+   (:class:`~spar_py.phase2.taylor.GradientModel`): iterated monotonicity reduces a box to the
    faces holding its minimum without another evaluation, and the model integrated from
    the centre gives a lower bound whose error is third order in the box size (rigorous:
    a relative margin covers its floating-point sums). Values at points (box
@@ -72,10 +72,10 @@ from dataclasses import dataclass, replace
 import casadi as ca
 import numpy as np
 
-from .errors import SparValueError
-from .memo import Memo
-from .symbolic import ChainExpr
-from .taylor import GradientModel, affine_centres
+from spar_py.core.errors import SparValueError
+from spar_py.core.memo import Memo
+from spar_py.phase2.symbolic import ChainExpr
+from spar_py.phase2.taylor import GradientModel, affine_centres
 
 __all__ = [
     "BoundResult",
@@ -1424,9 +1424,9 @@ class Bounder:
     ``names`` are the expression's free variables (in the order of the compiled input).
     ``compiled``: evaluate small batches of boxes with the interval rules compiled into a
     CasADi Function (:class:`AdaptiveProgram`; worth it only for a bounder used many times).
-    ``expr`` may be a :class:`~spar_py.symbolic.ChainExpr`: its SX is bounded as any other,
+    ``expr`` may be a :class:`~spar_py.phase2.symbolic.ChainExpr`: its SX is bounded as any other,
     and a search that has not finished once it has evaluated :data:`HULL_AFTER` boxes also
-    bounds it by point sets through the chain (:mod:`spar_py.hulls`), which keeps deep
+    bounds it by point sets through the chain (:mod:`spar_py.phase2.hulls`), which keeps deep
     products tight. (An SX alone carries no chain: build deep products as chains.)
     """
 
@@ -1798,7 +1798,7 @@ class _Search:
         usual case) is found exactly by the first, coarse round. No finer round when the
         last could not keep its tolerance (hulls.MAX_POINTS: a finer one cannot either) or
         once ``t_end`` (perf_counter seconds) has passed."""
-        from .hulls import hull_bounds
+        from spar_py.phase2.hulls import hull_bounds
 
         ce = self.B.chain
         assert ce is not None

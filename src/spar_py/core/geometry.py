@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING, Any, Protocol, Union
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .errors import SparValueError
+from spar_py.core.errors import SparValueError
 
 if TYPE_CHECKING:
     import casadi as ca

@@ -20,14 +20,14 @@ from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
-from .geometry import convex_hull_2d, rotz
-from .model import Cell, ObjectModel
-from .units import from_mm, mm_per
-from .workspace import (Requirement, ik_rows, reaches, requirement_clear, requirement_clear_each, requirement_state,
-                        shape_key, tool_refusal, wrist_height)
+from spar_py.core.geometry import convex_hull_2d, rotz
+from spar_py.core.model import Cell, ObjectModel
+from spar_py.core.units import from_mm, mm_per
+from spar_py.world.workspace import (Requirement, ik_rows, reaches, requirement_clear, requirement_clear_each,
+                                     requirement_state, shape_key, tool_refusal, wrist_height)
 
 if TYPE_CHECKING:
-    from .world.collision import SceneState
+    from spar_py.world.collision import SceneState
 
 #: Grid spacing of candidate placements: 50.8 mm (2 in); number of yaw steps.
 GRID_STEP_MM = 50.8
@@ -130,7 +130,7 @@ FOOTPRINT_LIMIT = 4096
 def _shape_key(model: ObjectModel) -> tuple:
     """What a footprint depends on in ``model``: its shape's primitives (world.collision.solids_key;
     not the object's name: copies of one model share their footprints)."""
-    from .world.collision import solids_key  # on first use: the collision layer loads lazily
+    from spar_py.world.collision import solids_key  # on first use: the collision layer loads lazily
 
     return solids_key(model.shape)
 

@@ -1,6 +1,6 @@
 """Second-order reasoning from an affine enclosure of the gradient (used by supinf's search).
 
-:class:`~spar_py.supinf.AffineProgram` run on an expression *and its gradient* over a box
+:class:`~spar_py.phase2.supinf.AffineProgram` run on an expression *and its gradient* over a box
 gives, for every component, an affine form in the box's normalised coordinates
 
     s_j = (x_j - mid_j) / rd_j  in [-1, 1]  (``mid``, ``rd``: the form's centre and radii),

@@ -3,7 +3,7 @@
 A planning run asks the same geometric questions many times: phase 1 in every round
 of its deepening search, phase 2 each time it re-runs an instance after a remedy. The
 answers depend only on the cell and the question, so they are kept in tables that
-belong to the :class:`~spar_py.model.Cell` (``cell.memo``): they live as long as the
+belong to the :class:`~spar_py.core.model.Cell` (``cell.memo``): they live as long as the
 cell does, are freed with it, and each table holds at most ``limit`` entries (the
 least recently used is dropped first).
 """

@@ -24,12 +24,12 @@ from enum import Enum
 from pathlib import Path
 from typing import Any
 
-from .engine import engine
-from .errors import PlanningTimeout, SparValueError
-from .kb import load_problem
-from .memo import LRU
-from .model import Cell
-from .world.motion_options import FAILURES_KEPT, MotionFailure, MotionOptions
+from spar_py.planning.engine import engine
+from spar_py.core.errors import PlanningTimeout, SparValueError
+from spar_py.kb import load_problem
+from spar_py.core.memo import LRU
+from spar_py.core.model import Cell
+from spar_py.world.motion_options import FAILURES_KEPT, MotionFailure, MotionOptions
 
 SCHEMA = 2
 
@@ -368,14 +368,14 @@ class Planner:
             first = [failures[k] for k in range(len(failures))]
             d = _canonical(ans["Dict"])
             if isinstance(d.get("instance"), dict) and d["instance"].get("motion") is not None:
-                from .world.motion import attach  # only for an instance with motions
+                from spar_py.world.motion import attach  # only for an instance with motions
 
                 attach(cell, d["instance"])
         d.setdefault("timing", {})["total_s"] = round(time.perf_counter() - t0, 6)
         _motion_reason(d, first)
         plan = _plan(cell.name, d, ans.get("Trace", ""))
         if plan.outcome is Outcome.NO_PLAN:  # name the colliding pairs that stood in the way (issue 15)
-            from .workspace import refusals
+            from spar_py.world.workspace import refusals
 
             said = refusals(cell)
             if said:

@@ -1,6 +1,6 @@
 """Run the plunit suites (tests/prolog/*.plt) inside the embedded SWI-Prolog.
 
-``python -m spar_py.plunit tests/prolog`` loads the planner as the package does,
+``python -m spar_py.app.plunit tests/prolog`` loads the planner as the package does,
 then each .plt file, runs all tests and prints plunit's summary; the exit code is
 0 only if every test passed.
 """
@@ -9,8 +9,8 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from .engine import engine
-from .errors import SparError
+from spar_py.planning.engine import engine
+from spar_py.core.errors import SparError
 
 
 def run(paths: list[str]) -> int:
@@ -29,7 +29,7 @@ def run(paths: list[str]) -> int:
 
 
 def main() -> None:
-    """Entry point of ``python -m spar_py.plunit``."""
+    """Entry point of ``python -m spar_py.app.plunit``."""
     try:
         sys.exit(run(sys.argv[1:] or ["tests/prolog"]))
     except SparError as e:

@@ -6,7 +6,7 @@ planner's control is prolog/uncertainty.pl). Conventions: world Z up, table top 
 unit (the paper's cell: inches), angles in radians.
 
 Uncertain quantities are CasADi SX expressions in bounded uncertainty variables made
-by a :class:`~spar_py.symbolic.Registry` (Fig. 11's supinf facts). An object's error is
+by a :class:`~spar_py.phase2.symbolic.Registry` (Fig. 11's supinf facts). An object's error is
 an :class:`ErrorTm`, ``trans(dx, dy, dz) @ rotz(theta)`` (Fig. 11's ErrTm), read
 
 * on the table, in the world frame: ``dx, dy, dz`` is ``Tr_dO`` and ``theta`` the rotation
@@ -44,11 +44,11 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from .errors import SparValueError
-from .model import Bounds, Cell, MatingFeature
-from .memo import Memo
-from .supinf import cached_bounds
-from .symbolic import Matrix, Registry, Scalar, apply, as_sx, compose, inv, rotz, snap, trans
+from spar_py.core.errors import SparValueError
+from spar_py.core.model import Bounds, Cell, MatingFeature
+from spar_py.core.memo import Memo
+from spar_py.phase2.supinf import cached_bounds
+from spar_py.phase2.symbolic import Matrix, Registry, Scalar, apply, as_sx, compose, inv, rotz, snap, trans
 
 __all__ = [
     "Constraint",

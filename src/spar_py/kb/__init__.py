@@ -1,6 +1,6 @@
 """Knowledge-base loading: YAML files -> validated models (model.py) -> Prolog facts.
 
-Every malformed input raises :class:`~spar_py.errors.KBError`, whose message is one
+Every malformed input raises :class:`~spar_py.core.errors.KBError`, whose message is one
 line: ``FILE: KEY.PATH: expected ..., not ...``. Reading is bounded before anything
 is parsed: a file must be a regular file (never a FIFO or a device), at most
 ``max_bytes`` (MAX_INPUT_BYTES by default), UTF-8, and its YAML at most MAX_NODES
@@ -29,12 +29,12 @@ from typing import Any, Iterable, Iterator, Mapping, Union
 import numpy as np
 import yaml
 
-from . import sanity
-from .memo import Memo
-from .units import from_mm
-from .errors import KBError, SparError, SparValueError, UnknownKeyError, WrongKindError
-from .geometry import ORTHO_TOL, eulerxyz, rotation_problem, rpy, same_stable_pose, tm_rows, trans
-from .world.robots import (
+from spar_py.kb import sanity
+from spar_py.core.memo import Memo
+from spar_py.core.units import from_mm
+from spar_py.core.errors import KBError, SparError, SparValueError, UnknownKeyError, WrongKindError
+from spar_py.core.geometry import ORTHO_TOL, eulerxyz, rotation_problem, rpy, same_stable_pose, tm_rows, trans
+from spar_py.world.robots import (
     GripperGeometry,
     LinkShape,
     Robot,
@@ -43,7 +43,7 @@ from .world.robots import (
     robot_from_urdf,
     standard_to_modified,
 )
-from .model import (
+from spar_py.core.model import (
     Bounds,
     Cell,
     Face,
@@ -890,7 +890,7 @@ def load_object(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, o
         if geometry is None:
             root.key(missing[0])  # raises: key missing
         step = geometry.step
-        from .world.shapes_cache import derive
+        from spar_py.world.shapes_cache import derive
 
         grip = _derive_gripper(unit, opening, gripper)
         try:
@@ -1035,7 +1035,7 @@ def _geometry(root: Node, path: Path, unit: str, scale: float) -> tuple[Any, tup
         raise mnode.fail("mesh: or shape:, not both")
     if mnode is None and snode is None:
         return None, ()
-    from .world.shapes import Geometry, Primitive
+    from spar_py.world.shapes import Geometry, Primitive
 
     if mnode is not None:
         ref = path.parent / mnode.text()
@@ -1075,7 +1075,7 @@ def _feature_geometry(fnode: Node, scale: float) -> Any:
         fnode.key("faces")
         fnode.key("vector")
         return None
-    from .world.shapes import FeatureGeometry
+    from spar_py.world.shapes import FeatureGeometry
 
     kind = fnode.key("kind").choice(("peg", "hole"))
     name = fnode.key("name").label()
@@ -1522,7 +1522,7 @@ def _same_stable_pose(R_abs: np.ndarray, R_pose: np.ndarray, memo: Memo | None) 
 def _derive_gripper(unit: str, opening: float | None, gripper: GripperGeometry | None) -> Any:
     """The gripper grasps are derived and checked for (world.shapes_derive.Gripper): the robot's
     own where given, else the default fingers at ``opening`` (or DEFAULT_OPENING_MM)."""
-    from .world.shapes_derive import Gripper
+    from spar_py.world.shapes_derive import Gripper
 
     if gripper is not None:
         return Gripper.of_robot(gripper)
@@ -1613,7 +1613,7 @@ def _derived_assembly(node: Node, goal: tuple, objects: dict[str, ObjectModel], 
     poses in which the mated peg stays clear of the table (world.shapes.poses_clear_of_table;
     every pose when the peg has no shape). The planner chooses the turn (kb/templates/actions.pl).
     """
-    from .world.shapes import assembly_transforms, part_mesh, poses_clear_of_table
+    from spar_py.world.shapes import assembly_transforms, part_mesh, poses_clear_of_table
 
     _, peg, hole = goal
     feats = []
@@ -1660,7 +1660,7 @@ def _obstacles(root: Node, base: Path, rad_per: float) -> list:
     """``obstacles:``: named shapes in the world frame (cell unit): ``box: {min, max}``,
     ``cylinder: {radius, z: [lo, hi], center: [x, y]}`` (axis along world z) or ``mesh: FILE``
     placed at ``xyz``, ``rpy`` (its convex hull: a conservative stand-in for a concave fixture)."""
-    from .world.collision import Obstacle, box, convex, cylinder
+    from spar_py.world.collision import Obstacle, box, convex, cylinder
 
     onode = root.key("obstacles", required=False)
     out: list = []
@@ -1946,7 +1946,7 @@ def check_against_shape(path: str | Path, root: Node, model: ObjectModel, unit: 
     hand = tuple(k for k in DERIVABLE if k in root.value)
     if model.geometry is None or not hand:
         return
-    from .world.shapes_derive import check_entries
+    from spar_py.world.shapes_derive import check_entries
 
     grip = _derive_gripper(unit, opening, gripper)
     try:

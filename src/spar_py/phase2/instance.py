@@ -38,13 +38,13 @@ from typing import Any
 
 import numpy as np
 
-from . import placement as pl
-from . import uncertainty as ur
-from .errors import SparValueError
-from .geometry import same_stable_pose
-from .model import Bounds, Cell, Grasp
-from .workspace import solutions
-from .symbolic import Registry
+from spar_py.world import placement as pl
+from spar_py.phase2 import uncertainty as ur
+from spar_py.core.errors import SparValueError
+from spar_py.core.geometry import same_stable_pose
+from spar_py.core.model import Bounds, Cell, Grasp
+from spar_py.world.workspace import solutions
+from spar_py.phase2.symbolic import Registry
 
 Step = dict[str, Any]
 
@@ -95,7 +95,7 @@ def sensing_bounds(cell: Cell, rules: Mapping[str, Mapping[str, Any]] | None) ->
     action's name to ``{"dx": [lo, hi], "dy": ..., "dz": ..., "dtheta": [lo, hi],
     "units": {"length": "in", "angle": "deg"}}`` (uncertainty.pl's sensing data, from
     kb/templates/sensing.pl's sensing_rule/5, in the units the templates state)."""
-    from .kb import ANGLE_UNITS, LENGTH_UNITS
+    from spar_py.kb import ANGLE_UNITS, LENGTH_UNITS
 
     out: dict[str, Bounds] = {}
     for name, r in (rules or {}).items():
@@ -189,7 +189,7 @@ def _approach_length(cell: Cell) -> float | None:
     """The motions' approach length (cell unit; world/motion.approach_length), None without motions."""
     if cell.motion is None:
         return None
-    from .world.motion import approach_length
+    from spar_py.world.motion import approach_length
 
     return approach_length(cell, cell.motion)
 
@@ -292,7 +292,7 @@ def _line_ends(cell: Cell, obj: str, pose: str, uses: list[tuple[str, np.ndarray
     """The far ends of the approach and retreat lines of each use of ``obj`` put down in stable
     pose ``pose`` (world/motion.py's line_ends), relative to its frame: world z in that frame
     is the same at every placement of the pose (they differ by a turn about world z)."""
-    from .world.motion import line_ends
+    from spar_py.world.motion import line_ends
 
     up = cell.objects[obj].poses[pose].R.T @ np.array([0.0, 0.0, 1.0])
     return [T for kind, X, v in uses for T in line_ends(kind, X, up, length, v)]
@@ -388,7 +388,7 @@ def evaluate(cell: Cell, steps: Sequence[Step], sources: Sources | None = None,
             return {"status": "failed", "at": s["id"], "steps": out}
     out = _refined(cell, out, worlds)
     if cell.motion is not None:  # the end-points are fixed: the motions between them (world/motion.py)
-        from .world.motion import run_motions
+        from spar_py.world.motion import run_motions
 
         return run_motions(cell, steps, worlds, {"status": "ok", "at": None, "steps": out})
     return {"status": "ok", "at": None, "steps": out}
@@ -459,8 +459,8 @@ def _arm(world: World, T: np.ndarray, what: str = "", held: tuple[str, np.ndarra
     ``grasped`` being closed on, ``allow`` the step's own contacts), and display data: every IK
     solution, the chosen one's clearance (cell unit) and closest pair; without a clear
     solution ``collisions`` lists the pairs and the refusal is remembered (workspace.refusals)."""
-    from .world.collision import scene_for
-    from .workspace import remember_refusal
+    from spar_py.world.collision import scene_for
+    from spar_py.world.workspace import remember_refusal
 
     cell = world.cell
     sols = solutions(cell.robot, T)
@@ -495,7 +495,7 @@ def _no_arm(what: str, geo: dict[str, Any]) -> str:
     """Why no joint vector was chosen for ``what``: none at all, or none clear of the world."""
     if "collisions" not in geo:
         return f"no joint solution for {what}"
-    from .workspace import _pair_text
+    from spar_py.world.workspace import _pair_text
 
     return f"no collision-free IK for {what}: {', '.join(dict.fromkeys(_pair_text(p) for p in geo['collisions']))}"
 
@@ -613,7 +613,7 @@ def _squeeze(world: World, s: Step, early: bool = False) -> tuple[list[dict], Wo
     obj = s["args"][0]
     cell = world.cell
     o = world.unc.obj(obj)
-    from .reach import reachable_pairs
+    from spar_py.world.reach import reachable_pairs
 
     labels = [g for g, _ in reachable_pairs(cell, obj, list(cell.objects[obj].grasps), _position_label(cell, obj, o))]
     for label in labels:

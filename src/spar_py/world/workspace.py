@@ -26,9 +26,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
-    from .model import Cell
-    from .world.collision import SceneState
-    from .world.robots import Robot
+    from spar_py.core.model import Cell
+    from spar_py.world.collision import SceneState
+    from spar_py.world.robots import Robot
 
 __all__ = ["Reached", "Requirement", "clear_of_world", "ik_rows", "reach_clear", "reaches", "refusals",
            "remember_refusal", "requirement_clear", "requirement_clear_ik", "solutions", "tool_on_table",
@@ -127,7 +127,7 @@ def clear_of_world(cell: Cell, Q: np.ndarray, okb: np.ndarray, *, parts: Mapping
                    allow: Iterable[tuple[str, str]] = (), state: SceneState | None = None) -> Reached:
     """:func:`reach_clear` from the IK branches already solved (:func:`ik_rows`); ``state`` the
     scene state of those arguments when the caller has it already (CollisionScene.at)."""
-    from .world.collision import scene_for
+    from spar_py.world.collision import scene_for
 
     n = len(Q)
     ik = okb.any(axis=1)
@@ -212,7 +212,7 @@ def requirement_clear_each(cell: Cell, obj: str, TO: np.ndarray, req: Requiremen
 def shape_key(cell: Cell, obj: str) -> tuple:
     """The collision geometry of ``obj`` (world.collision.CollisionScene.shape_key): equal for
     renamed copies of one model."""
-    from .world.collision import scene_for
+    from spar_py.world.collision import scene_for
 
     return scene_for(cell).shape_key(obj)
 
@@ -246,7 +246,7 @@ def _renamed_or_new(cell: Cell, obj: str, req: Requirement) -> SceneState:
     renamed copy of ``obj`` (the same geometry exactly: shape, X, the part in the hand and its
     pose, the width) renamed (SceneState.renamed: the state at() would make, without placing or
     pairing again), else at()'s. Generated cells ask one requirement of each of N copies."""
-    from .world.collision import scene_for
+    from spar_py.world.collision import scene_for
 
     scene = scene_for(cell)
     held = None if req.held is None else req.held[0]
@@ -283,7 +283,7 @@ def tool_on_table(cell: Cell, obj: str, T: np.ndarray, req: Requirement) -> tupl
     (SceneState.tool_rigid_on_table): a refusal for every pose turned about z or shifted in x, y."""
     if not cell.collisions or cell.table is not None:
         return None
-    from .world.collision import scene_for
+    from spar_py.world.collision import scene_for
 
     state = scene_for(cell).at({}, **_requirement_world(obj, req))
     return state.tool_rigid_on_table(np.asarray(T, float))

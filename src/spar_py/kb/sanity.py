@@ -1,7 +1,7 @@
 """Physical sanity of a loaded cell (issue 13, item 2): is the cell one that could exist?
 
 Checked once at load (:func:`check_cell`, the last step of kb.load_problem), before any
-grid or IK is built, each failure a one-line :class:`~spar_py.errors.KBError` naming the
+grid or IK is built, each failure a one-line :class:`~spar_py.core.errors.KBError` naming the
 file, the key and both parties:
 
 - reach: every initial position, placement region, named transform's displacement and
@@ -34,9 +34,9 @@ from typing import Any, Iterator
 
 import numpy as np
 
-from .errors import KBError
-from .model import Cell, ObjectModel, Position, Solid
-from .units import from_mm
+from spar_py.core.errors import KBError
+from spar_py.core.model import Cell, ObjectModel, Position, Solid
+from spar_py.core.units import from_mm
 
 __all__ = ["check_cell", "overlap_depth", "reach_box", "solid_points"]
 
@@ -87,7 +87,7 @@ def _sources(cell: Cell) -> dict[str, Any]:
     resolved against its folder. Empty where the file cannot be read again."""
     import yaml
 
-    from .kb import SAFE_LOADER
+    from spar_py.kb import SAFE_LOADER
 
     try:
         data = yaml.load(Path(cell.file).read_text(encoding="utf-8"), Loader=SAFE_LOADER)
@@ -282,7 +282,7 @@ def _on_table(cell: Cell) -> Iterator[KBError]:
         if m.shape:
             low, what = _lowest(m, pos.T), "its lowest point"
         else:
-            from .geometry import same_stable_pose
+            from spar_py.core.geometry import same_stable_pose
 
             sp = next((p for p in m.poses.values() if same_stable_pose(pos.T[:3, :3], p.R)), None)
             if sp is None:

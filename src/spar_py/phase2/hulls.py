@@ -1,6 +1,6 @@
 """Sound bounds of a function of a transform chain's point by convex point sets (used by supinf).
 
-A :class:`~spar_py.symbolic.ChainExpr` is ``g(x)``, ``x = F_1 F_2 ... F_n p``: constant
+A :class:`~spar_py.phase2.symbolic.ChainExpr` is ``g(x)``, ``x = F_1 F_2 ... F_n p``: constant
 transforms and error transforms ``trans(d) rotz(theta)`` (or their inverses), each error
 variable bounded. The set of points ``x`` the variables reach is built from the right:
 
@@ -47,8 +47,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .geometry import inv
-from .symbolic import ChainExpr, ErrorFactor
+from spar_py.core.geometry import inv
+from spar_py.phase2.symbolic import ChainExpr, ErrorFactor
 
 __all__ = ["HullBound", "hull_bounds"]
 

@@ -26,8 +26,8 @@ import casadi as ca
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .errors import SparValueError
-from .geometry import (
+from spar_py.core.errors import SparValueError
+from spar_py.core.geometry import (
     apply,
     as_sx,
     compose,
@@ -286,7 +286,7 @@ def _affine(M: ArrayLike) -> np.ndarray:
 class Chain:
     """A product of transforms kept as its factors, left to right: constant 4x4 arrays and
     :class:`ErrorFactor` s. Its :meth:`matrix` is ``compose`` of the factors; the factor list
-    is what :mod:`spar_py.hulls` propagates point sets through (supinf's bound on deep
+    is what :mod:`spar_py.phase2.hulls` propagates point sets through (supinf's bound on deep
     products).
 
     Adjacent constants are multiplied on construction exactly as :func:`compose` does (left

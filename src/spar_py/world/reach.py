@@ -1,6 +1,6 @@
 """Reachability of grasps (Sec. 5.2.4): the pairs behind the CMS's reachable / mate_reachable arcs.
 
-Numbers only; Prolog reaches this module through ``spar_py.engine.arc_pairs``.
+Numbers only; Prolog reaches this module through ``spar_py.planning.engine.arc_pairs``.
 For a grasp label G and a position label P the paper checks
 
 1. the faces the fingers touch (G's gfaces) are not the faces P rests on (rfaces);
@@ -22,10 +22,10 @@ from collections.abc import Callable, Iterable, Sequence
 
 import numpy as np
 
-from .errors import SparValueError
-from .geometry import same_stable_poses
-from .model import Cell, Face, Grasp, ObjectModel
-from .workspace import Requirement, ik_rows, remember_refusal, requirement_clear_ik, requirement_state
+from spar_py.core.errors import SparValueError
+from spar_py.core.geometry import same_stable_poses
+from spar_py.core.model import Cell, Face, Grasp, ObjectModel
+from spar_py.world.workspace import Requirement, ik_rows, remember_refusal, requirement_clear_ik, requirement_state
 
 __all__ = [
     "ARCS",
@@ -118,7 +118,7 @@ def _somewhere(cell: Cell, obj: str, asks: list[tuple[str, list[Grasp], list[Req
     every pose of the arc at once); all of them under the paper's rule."""
     if rule == "paper":
         return [(g.label, p) for p, grasps, _ in asks for g in grasps]
-    from .placement import reachable_somewhere_each  # placement builds on workspace, not on this module
+    from spar_py.world.placement import reachable_somewhere_each  # placement builds on workspace, not on this module
 
     oks = reachable_somewhere_each(cell, obj, [(p, X) for p, _, X in asks])
     return [(g.label, p) for (p, grasps, _), ok in zip(asks, oks) for g, reached in zip(grasps, ok) if reached]
