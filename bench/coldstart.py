@@ -8,7 +8,7 @@ load (the order rotates from round to round); the figures are medians over the r
 - ``floor``: ``python -c "import numpy, casadi, janus_swi"`` (importing janus starts
   the embedded SWI-Prolog): what any process of this design pays before planning;
 - ``plan``: ``spar plan kb/problems/peg_in_block.yaml``, SWI-Prolog started from the
-  planner's saved state (spar_py/startup/qlf.py: janus and the planner in one file; the cache is
+  planner's saved state (spar_py/planning/qlf.py: janus and the planner in one file; the cache is
   filled first, and the package's bytecode brought up to date, so no process compiles an
   edited module);
 - ``plan, image``: the same with ``SPAR_SAVED_STATE=off``: SWI-Prolog started as janus
@@ -134,7 +134,7 @@ def importtime(runs: int = 5) -> dict:
     counts = []
     for _ in range(runs):
         floor_mods |= set(imported(["-c", FLOOR]))
-        plan = imported(["-m", "spar_py.app.cli", "plan", CELL])
+        plan = imported(["-m", "spar_py", "plan", CELL])
         heavy |= {m.split(".")[0] for m in plan if m.split(".")[0] in HEAVY}
         extra = {m: t for m, t in plan.items() if m not in floor_mods}
         counts.append(len(extra))

@@ -7,7 +7,7 @@
 #   3. .venv with `pip install -e '.[dev]'`, janus-swi compiled against that SWI;
 #   4. src/spar_py/_swipl.json: the SWI-Prolog home the package must start;
 #   5. the planner's Prolog compiled into the .qlf cache, and a saved state of
-#      SWI-Prolog with it loaded (src/spar_py/startup/qlf.py).
+#      SWI-Prolog with it loaded (src/spar_py/planning/qlf.py).
 # Re-running it when all is in place takes a few seconds.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -62,9 +62,9 @@ fi
 # 4. record the SWI-Prolog home ----------------------------------------------------------
 printf '{"home": "%s", "version": %s, "swipl": "%s"}\n' "$home" "$version" "$swipl" > src/spar_py/_swipl.json
 
-# 5. the planner's Prolog compiled into one .qlf image (src/spar_py/startup/qlf.py), so the first
+# 5. the planner's Prolog compiled into one .qlf image (src/spar_py/planning/qlf.py), so the first
 #    run does not pay for it; the cache is keyed by the sources' content and the SWI
 #    version, so an edited .pl file is compiled again by the next run, never loaded stale;
 #    then the saved state SWI-Prolog starts from (janus and the image loaded)
-.venv/bin/python -m spar_py.startup.qlf || log "warning: could not compile the planner's .qlf (runs consult the sources)"
+.venv/bin/spar cache || log "warning: could not compile the planner's .qlf (runs consult the sources)"
 log "ready: SWI-Prolog $version at $home"

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from spar_py.startup import qlf
+from spar_py.planning import qlf
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -238,7 +238,7 @@ def test_spar_plan_after_an_edit_compiles_in_its_loading_thread(tree: Path, tmp_
     compiles the new image, and the plan is the same as from the sources."""
     cache = tmp_path / "cache"
     env = {**os.environ, "PYTHONPATH": str(tree / "src")}
-    cmd = [sys.executable, "-m", "spar_py.app.cli", "plan", str(ROOT / "kb" / "problems" / "peg_in_block.yaml"),
+    cmd = [sys.executable, "-m", "spar_py", "plan", str(ROOT / "kb" / "problems" / "peg_in_block.yaml"),
            "--json"]
 
     def plan(cache_setting: str) -> dict:
@@ -371,7 +371,7 @@ def test_a_plan_with_motions_ends_without_a_word_on_stderr() -> None:
     library that reports live objects at exit as leaks is loaded: a plan with motions loads OMPL
     (nanobind), and its run still ends with nothing on stderr and exit code 0."""
     problem = str(ROOT / "kb" / "problems" / "wall_detour.yaml")
-    r = subprocess.run([sys.executable, "-m", "spar_py.app.cli", "plan", problem], capture_output=True, text=True,
+    r = subprocess.run([sys.executable, "-m", "spar_py", "plan", problem], capture_output=True, text=True,
                        timeout=300, cwd=ROOT)
     assert r.returncode == 0 and r.stderr == "", r.stderr[-500:]
 
@@ -468,7 +468,7 @@ def test_the_plan_json_is_the_same_text_however_the_planner_was_loaded(tmp_path:
     created first; the image (.qlf) and the sources create atoms in another order. The JSON
     text must not depend on it (planner._canonical)."""
     def plan(env: dict[str, str]) -> str:
-        r = subprocess.run([sys.executable, "-m", "spar_py.app.cli", "plan", "kb/problems/peg_in_block.yaml", "--json"],
+        r = subprocess.run([sys.executable, "-m", "spar_py", "plan", "kb/problems/peg_in_block.yaml", "--json"],
                            cwd=ROOT, env={**os.environ, **env}, capture_output=True, text=True, timeout=300)
         assert r.returncode == 0, r.stderr
         doc = json.loads(r.stdout)

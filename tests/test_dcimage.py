@@ -20,7 +20,7 @@ from typing import Any, Callable
 import pytest
 
 from spar_py.startup import dcimage
-from spar_py.startup import qlf
+from spar_py.planning import qlf
 
 ROOT = Path(__file__).resolve().parent.parent
 METHODS = ("__init__", "__repr__", "__eq__", "__hash__", "__setattr__", "__delattr__", "__lt__", "__le__",
@@ -153,7 +153,7 @@ def test_cache_off_means_no_image(monkeypatch: pytest.MonkeyPatch) -> None:
 
 def _spar(args: list[str], cache: Path) -> subprocess.CompletedProcess:
     env = {**os.environ, qlf.ENV: str(cache)}
-    return subprocess.run([sys.executable, "-m", "spar_py.app.cli", *args], env=env, cwd=ROOT, capture_output=True,
+    return subprocess.run([sys.executable, "-m", "spar_py", *args], env=env, cwd=ROOT, capture_output=True,
                           text=True, timeout=300)
 
 

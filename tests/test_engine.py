@@ -15,7 +15,7 @@ from spar_py.core.errors import PrologError
 from spar_py.planning.planner import Outcome, Planner
 
 ROOT = Path(__file__).resolve().parent.parent
-SPAR = [sys.executable, "-m", "spar_py.app.cli"]
+SPAR = [sys.executable, "-m", "spar_py"]
 
 
 def test_runs_the_recorded_swi_prolog() -> None:

@@ -322,7 +322,7 @@ def test_cli_blocks_option(tmp_path: Path) -> None:
     import subprocess
     import sys
 
-    spar = [sys.executable, "-m", "spar_py.app.cli"]
+    spar = [sys.executable, "-m", "spar_py"]
     ok = subprocess.run(spar + ["gen", "assembly", "--parts", "3", "--blocks", "hole-up", "-o", str(tmp_path)],
                         capture_output=True, text=True)
     assert ok.returncode == 0, ok.stderr

@@ -62,7 +62,7 @@ def test_every_kb_file_checks(capsys: pytest.CaptureFixture[str]) -> None:
 
 def test_cli_process_exit_code_and_no_traceback() -> None:
     bad = ROOT / "tests" / "bad" / "bounds_lo_gt_hi.yaml"
-    r = subprocess.run([sys.executable, "-m", "spar_py.app.cli", "kb", "check", str(bad)],
+    r = subprocess.run([sys.executable, "-m", "spar_py", "kb", "check", str(bad)],
                        capture_output=True, text=True, timeout=120)
     assert r.returncode == 2
     assert r.stderr.count("\n") == 1 and "Traceback" not in r.stderr

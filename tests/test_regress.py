@@ -169,7 +169,7 @@ def test_scheduler_and_jobs_exclude_each_other_and_a_bad_address_is_one_line(sui
     import subprocess
     import sys
 
-    spar = [sys.executable, "-m", "spar_py.app.cli", "regress", str(suite)]
+    spar = [sys.executable, "-m", "spar_py", "regress", str(suite)]
     r = subprocess.run(spar + ["-j", "2", "--scheduler", "tcp://127.0.0.1:8786"], capture_output=True,
                        text=True, timeout=60)
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "-j" in r.stderr and "--scheduler" in r.stderr

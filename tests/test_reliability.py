@@ -10,7 +10,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 BAD = sorted((ROOT / "tests" / "bad").glob("*.yaml"))
-SPAR = [sys.executable, "-m", "spar_py.app.cli"]
+SPAR = [sys.executable, "-m", "spar_py"]
 
 
 def spar(*args: str, timeout: float = 300) -> subprocess.CompletedProcess[str]:

@@ -6,7 +6,7 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-SPAR = [sys.executable, "-m", "spar_py.app.cli"]
+SPAR = [sys.executable, "-m", "spar_py"]
 
 
 def session(script: str) -> subprocess.CompletedProcess[str]:

@@ -220,7 +220,7 @@ def test_prismatic_joint_and_cli_exit(tmp_path: Path) -> None:
                                             '<joint name="elbow_joint" type="prismatic">'))
     path = write_cell(tmp_path, f"robot: {{urdf: {bad}, base_link: base, tip_link: tool0, "
                                 "gripper: {finger_separation: 3}}\n")
-    out = subprocess.run([sys.executable, "-m", "spar_py.app.cli", "plan", str(path)], capture_output=True, text=True)
+    out = subprocess.run([sys.executable, "-m", "spar_py", "plan", str(path)], capture_output=True, text=True)
     assert out.returncode == 2, out.stderr
     assert out.stderr.count("\n") == 1 and "elbow_joint (prismatic)" in out.stderr and "Traceback" not in out.stderr
 

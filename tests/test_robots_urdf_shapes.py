@@ -176,7 +176,7 @@ def test_a_broken_urdf_is_one_line_on_stderr(tmp_path: Path, damage: str) -> Non
     cell.write_text(yaml.safe_dump(doc, sort_keys=False))
     # a process of its own: logging's last-resort handler writes to the real stderr there, as
     # for a user (under pytest, pytest's handler would take yourdfpy's lines)
-    ran = subprocess.run([sys.executable, "-m", "spar_py.app.cli", "kb", "check", str(cell)], capture_output=True,
+    ran = subprocess.run([sys.executable, "-m", "spar_py", "kb", "check", str(cell)], capture_output=True,
                          text=True, timeout=120)
     assert ran.returncode != 0
     err = [ln for ln in ran.stderr.splitlines() if ln.strip()]

@@ -1,7 +1,7 @@
 """Issue 13, items 1, 7, 8, 10: strict schemas, bounded reading, one flat line per bad input.
 
 Every loading finding of issue 13 is a case here, run through the real command line
-(``python -m spar_py.app.cli``): exit 2, exactly one line on stderr, no traceback. The
+(``python -m spar_py``): exit 2, exactly one line on stderr, no traceback. The
 cases are the files of tests/bad/ (``kb check``) and the ones a file cannot hold
 (not UTF-8, UTF-16, a FIFO, a symlink to /dev/zero, the wrong kind given to ``plan``).
 """
@@ -97,7 +97,7 @@ def _generated(tmp: Path) -> list[Case]:
 
 def _run(args: tuple[str, ...]) -> Result:
     t0 = time.perf_counter()
-    r = subprocess.run([sys.executable, "-m", "spar_py.app.cli", *args], capture_output=True, text=True,
+    r = subprocess.run([sys.executable, "-m", "spar_py", *args], capture_output=True, text=True,
                        timeout=60, cwd=ROOT)
     return Result(r.returncode, r.stdout, r.stderr, time.perf_counter() - t0)
 

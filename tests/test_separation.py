@@ -23,7 +23,7 @@ from spar_py.kb import load_problem
 
 ROOT = Path(__file__).resolve().parent.parent
 PROBLEM = ROOT / "kb" / "problems" / "separation.yaml"
-SPAR = [sys.executable, "-m", "spar_py.app.cli"]
+SPAR = [sys.executable, "-m", "spar_py"]
 FIXTURE = ROOT / "tests" / "prolog" / "fixtures" / "separation_cell.pl"
 TWO = ["pickup(peg,grasp_1)", "assemble(peg,block,[[peg_face],[block_face]],trans_1,vec_1)"]
 

@@ -25,7 +25,7 @@ from test_problems import PAPER_ACTIONS, PAPER_ORDER, PHASE1, Outcome, phase1
 
 ROOT = Path(__file__).resolve().parent.parent
 OBJ = ROOT / "kb" / "objects"
-SPAR = [sys.executable, "-m", "spar_py.app.cli"]
+SPAR = [sys.executable, "-m", "spar_py"]
 
 
 @pytest.fixture(autouse=True)

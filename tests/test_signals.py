@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
-SPAR = [sys.executable, "-m", "spar_py.app.cli"]
+SPAR = [sys.executable, "-m", "spar_py"]
 PAPER = ROOT / "kb/problems/peg_in_block.yaml"
 
 

@@ -9,7 +9,7 @@ element dropped or doubled) or byte-level (non-UTF-8 bytes, UTF-16, a NUL, a str
 character, truncation). Everything is drawn from ``random.Random`` seeded with the seed,
 the file and the mutant's index, so a run is the same on every machine.
 
-Each mutant is judged by running ``python -m spar_py.app.cli plan PROBLEM --timeout T`` (and
+Each mutant is judged by running ``python -m spar_py plan PROBLEM --timeout T`` (and
 ``kb check FILE`` first for object and robot mutants, with a problem that uses the file)
 in a subprocess under RLIMIT_AS (:data:`MEMORY_LIMIT`), its peak RSS read from
 ``wait4``'s rusage. OK is exit 0, 1, 2 or 4 with exactly one stderr line for 2 and 4 (at
@@ -460,7 +460,7 @@ def limit_resources() -> None:
 
 def spar(args: Sequence[str]) -> list[str]:
     """The command line of ``spar ARGS`` with this interpreter (the project's venv)."""
-    return [sys.executable, "-m", "spar_py.app.cli", *args]
+    return [sys.executable, "-m", "spar_py", *args]
 
 
 def execute(argv: Sequence[str], cwd: Path, cap: float) -> tuple[int, str, float, float]:

@@ -7,14 +7,6 @@ Errors are one line on stderr, never a traceback.
 """
 from __future__ import annotations
 
-if __name__ == "__main__":  # python -m spar_py.app.cli: a signal during the imports below is one line too
-    from spar_py.startup.entry import early_signals, hold_collections, keep_compiled_methods, one_blas_thread
-
-    early_signals()
-    one_blas_thread()  # as the spar script: before numpy loads
-    hold_collections()  # as the spar script (entry.main): until resume_collections
-    _image = keep_compiled_methods()
-
 import argparse
 import os
 import sys
@@ -22,7 +14,7 @@ from pathlib import Path
 from typing import Callable
 
 from spar_py import __version__
-from spar_py.startup.entry import resume_collections
+from spar_py.app.gcpause import resume_collections
 from spar_py.core.errors import InternalError, KBError, PlanningTimeout, PrologError, SparError, SparValueError
 from spar_py.world.motion_options import PLANNERS, MotionOptions
 
@@ -247,7 +239,34 @@ def cmd_gen(args: argparse.Namespace) -> int:
 
 # ---------------------------------------------------------------------- main
 
+def cmd_cache(args: argparse.Namespace) -> int:
+    """Compile the planner's Prolog into the cache now, with its saved state (``spar cache``; set-up
+    runs it): one line on stderr says where the image is, or that the cache is off."""
+    from spar_py.phase2 import instance  # noqa: F401 - the plan command's dataclasses, compiled into
+    from spar_py.planning import planner  # noqa: F401 - the methods image (startup.dcimage) at exit
+    from spar_py.planning.engine import Engine
+    from spar_py.planning.qlf import cache_dir
+
+    eng = Engine()
+    base = cache_dir()
+    where = "the cache is off" if base is None else f"cache {base}"
+    state = CACHE_STATES.get(eng.state_status, "")
+    print(f"setup: planner Prolog {CACHE_LOADS.get(eng.loaded_from, eng.loaded_from)}{state} ({where})",
+          file=sys.stderr)
+    return EXIT_OK
+
+
+#: ``spar cache``'s words for how the engine loaded the planner and for its saved state.
+CACHE_LOADS = {"qlf": "image up to date", "compiled": "compiled to a .qlf image", "source": "consulted from source",
+               "state": "image up to date"}
+CACHE_STATES = {"written": ", saved state written", "used": ", saved state up to date",
+                "ready": ", saved state up to date", "busy": ", saved state being written by another process",
+                "refused": ", saved state refused (SWI-Prolog did not start from it)",
+                "unwritable": ", saved state not written (the cache is not writable)"}
+
+
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
+    "cache": cmd_cache,
     "kb_check": cmd_kb_check,
     "kb_derive": cmd_kb_derive,
     "repl": cmd_repl,
@@ -336,6 +355,9 @@ def build_parser() -> argparse.ArgumentParser:
                           "default: the first that holds N")
     asm.add_argument("-o", "--output", default="out/gen", metavar="DIR")
     asm.set_defaults(func="gen")
+
+    cache = sub.add_parser("cache", help="compile the planner's Prolog into its cache now (set-up runs it)")
+    cache.set_defaults(func="cache")
     return p
 
 
@@ -442,7 +464,7 @@ LEAK_REPORTING = ("ompl", "manifold3d")
 
 
 def exiting(code: object = ...) -> None:
-    """The process ends next (the console script's and ``python -m spar_py.app.cli``'s last call),
+    """The process ends next (the console script's last call),
     with the SystemExit ``code`` that :func:`main` raised (``...``: it raised none). Move every
     object to the collector's permanent generation (gc.freeze), so the interpreter's shutdown
     collections skip the heap numpy, casadi, the embedded Prolog's bridge and the plan left
@@ -483,10 +505,3 @@ def _end_now(code: int) -> None:
     except Exception:  # noqa: BLE001 - the usual shutdown then says what it says
         return
     os._exit(code)
-
-
-if __name__ == "__main__":
-    from spar_py.startup.entry import run_to_end
-
-    run_to_end(main, exiting, _image)
-

@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any, Iterator
 
 from spar_py.core.errors import InternalError, PlanningTimeout, PrologError, SparError
+from spar_py.planning import qlf
 
 PACKAGE_DIR = Path(__file__).resolve().parent.parent  # src/spar_py
 ROOT = PACKAGE_DIR.parent.parent  # the checkout: prolog/, kb/ live here
@@ -183,7 +184,7 @@ class Engine:
         ``background`` in a thread of its own, so the caller can go on (importing numpy,
         reading the problem) while Prolog compiles; every query waits for it first.
 
-        With a saved state of these very sources in the cache (spar_py/startup/qlf.py), SWI-Prolog
+        With a saved state of these very sources in the cache (spar_py/planning/qlf.py), SWI-Prolog
         starts from it, the planner already loaded, and there is nothing left to load."""
         t0 = time.perf_counter()
         self.cells: dict[str, Any] = {}
@@ -225,7 +226,7 @@ class Engine:
 
     def _load(self) -> None:
         """Load the planner (prolog/spar.pl, then kb/templates/*.pl): from its compiled
-        image when the cache has one for these very sources (spar_py/startup/qlf.py), compiling
+        image when the cache has one for these very sources (spar_py/planning/qlf.py), compiling
         it there first when not, and from the sources when there is no usable cache.
         :attr:`loaded_from` says which ("qlf", "compiled" or "source")."""
         t0 = time.perf_counter()
@@ -244,8 +245,6 @@ class Engine:
         """The cache entry of the saved state of the planner's sources as they are now
         (qlf.state_entry), or None: cache or saved state off, no SWI-Prolog home or janus
         known before it starts."""
-        from spar_py.startup import qlf
-
         base = qlf.cache_dir()
         home = _swi_home()
         if base is None or not home or not qlf.saved_state_on():
@@ -266,8 +265,6 @@ class Engine:
         the saved-state entry, published once a fresh process started from it. Best
         effort: a busy or unwritable cache, or a state that does not start, leaves the
         entry unpublished (:attr:`state_status` says which)."""
-        from spar_py.startup import qlf
-
         entry = self._state
         try:
             with qlf.building(entry, wait=False) as must:
@@ -292,11 +289,9 @@ class Engine:
             self.state_status = "refused"
 
     def _load_image(self, roots: list[Path]) -> str | None:
-        """Load the planner from the .qlf cache (see :mod:`spar_py.startup.qlf`); "qlf" if loaded
+        """Load the planner from the .qlf cache (see :mod:`spar_py.planning.qlf`); "qlf" if loaded
         from an image, "compiled" if this process compiled (and so loaded) it, None if the
         cache is off or unusable (nothing loaded)."""
-        from spar_py.startup import qlf
-
         base = qlf.cache_dir()
         if base is None:
             return None
@@ -332,8 +327,6 @@ class Engine:
         """Compile the planner into ``entry`` (qcompile/2 with include(user): every planner
         file in one image), which also loads it here; publish the entry only if no file it
         holds changed while it was compiled."""
-        from spar_py.startup import qlf
-
         for stale in (entry.image, entry.manifest):
             stale.unlink(missing_ok=True)
         entry.loader.write_text(qlf.loader_text(sources.roots))

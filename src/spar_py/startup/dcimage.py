@@ -17,7 +17,7 @@ inherited ``__future__`` flags, the interpreter's optimisation level, all part o
 file's key with the bytecode magic number), so the classes and their methods are the
 same (tests/test_dcimage.py compares them).
 
-Only the ``spar`` console script installs it (entry.main, ``python -m spar_py.app.cli``),
+Only the ``spar`` console script installs it (entry.main, ``python -m spar_py``),
 before its first import of the planner, and saves what was new when the process ends;
 the Python API never does (a library must not change the stdlib for its host). A file
 that cannot be read, is corrupt or is of another interpreter is ignored (and rewritten);
@@ -34,7 +34,7 @@ from pathlib import Path
 from types import CodeType
 from typing import Any
 
-from spar_py.startup import qlf
+from spar_py.planning import qlf
 
 #: Layout version of the file; part of its name.
 FORMAT = 2

@@ -8,13 +8,14 @@ in whatever import was running and print a traceback.
 """
 from __future__ import annotations
 
-import gc
 import os
 import signal
 import sys
 from collections.abc import Callable
 from types import FrameType
 from typing import TYPE_CHECKING
+
+from spar_py.app.gcpause import hold_collections
 
 if TYPE_CHECKING:
     from spar_py.startup.dcimage import CodeImage
@@ -54,44 +55,6 @@ def one_blas_thread() -> None:
         os.environ["OPENBLAS_NUM_THREADS"] = "1"
 
 
-#: Whether :func:`hold_collections` disabled the cyclic garbage collector (and
-#: :func:`resume_collections` has not enabled it again).
-_held = False
-
-
-def hold_collections() -> None:
-    """No cyclic garbage collections until :func:`resume_collections`: a cold ``spar plan``
-    imports numpy, casadi and the planner and reads its problem first, allocating some
-    hundreds of thousands of objects that all stay alive; the collector's passes over them
-    (about 90 in that run, some 3% of its time) find nothing to free. Called by the console
-    script (and ``python -m spar_py.app.cli``) before its imports, never by the Python API."""
-    global _held
-    if gc.isenabled():
-        gc.disable()
-        _held = True
-
-
-#: The youngest generation's collection threshold of a console-script run (Python's default is
-#: 700): a plan's work allocates tens of thousands of short-lived containers, and 23 young
-#: collections (and 2 older ones) of the paper's cell's first plan become one. Cyclic garbage
-#: waits for at most this many allocations: some thousands of objects, a few MB at most.
-YOUNG_THRESHOLD = 10_000
-
-
-def resume_collections() -> None:
-    """The command's own work starts (cli.py calls this once the problem is read, or before
-    any other command): what was allocated until now is moved to the collector's permanent
-    generation (gc.freeze: the run's full collections need not go over it again) and the
-    collector runs from here, its youngest generation collected every :data:`YOUNG_THRESHOLD`
-    allocations. A no-op unless :func:`hold_collections` disabled it."""
-    global _held
-    if _held:
-        _held = False
-        gc.freeze()
-        gc.set_threshold(YOUNG_THRESHOLD, *gc.get_threshold()[1:])
-        gc.enable()
-
-
 def keep_compiled_methods() -> CodeImage | None:
     """Dataclasses defined from now on take their generated methods' code from the cache
     (dcimage.py: compiling their source is the largest cost of importing the planner); the
@@ -108,12 +71,12 @@ def save_compiled_methods(image: CodeImage | None) -> None:
 
 
 def main() -> None:
-    """``spar``: early handlers, then :func:`spar_py.app.cli.main`."""
+    """``spar`` (and ``python -m spar_py``): early handlers, then :func:`spar_py.app.cli.main`."""
     early_signals()
     one_blas_thread()
     hold_collections()
     image = keep_compiled_methods()
-    from spar_py.app.cli import exiting, main as cli_main
+    from spar_py.app.cli import exiting, main as cli_main  # after the handlers: numpy, casadi load here
 
     run_to_end(cli_main, exiting, image)
 
@@ -121,7 +84,7 @@ def main() -> None:
 def run_to_end(cli_main: Callable[[list[str]], None], exiting: Callable[[object], None],
                image: CodeImage | None) -> None:
     """Run ``cli_main(sys.argv[1:])`` (spar_py.app.cli.main) and end the process as the console
-    script does (and ``python -m spar_py.app.cli``): the dataclass-methods image saved, then
+    script does: the dataclass-methods image saved, then
     ``exiting`` (cli.exiting: a shutdown without the full heap's collections, or none at all)
     with the SystemExit code the run raised (``...`` if it raised none, which leaves the usual
     shutdown alone)."""

@@ -32,7 +32,7 @@ process has started from it (a state SWI-Prolog cannot read aborts the process t
 tries), and it is used only if its bytes still hash to what its manifest says.
 ``SPAR_SAVED_STATE=off`` keeps janus' own start (and the image).
 
-The cache is filled at set-up (``python -m spar_py.startup.qlf``, run by scripts/setup.sh) and
+The cache is filled at set-up (``spar cache``, run by scripts/setup.sh) and
 otherwise by the first run after a change. ``SPAR_QLF_CACHE`` names the cache directory
 (default ``$XDG_CACHE_HOME/spar-py/qlf``, else ``~/.cache/spar-py/qlf``); set it to
 ``off`` to consult the sources every time. At most :data:`KEEP` entries are kept, the
@@ -44,7 +44,6 @@ from __future__ import annotations
 
 import json
 import os
-import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -168,7 +167,7 @@ def state_key(sources: Sources, identity: dict) -> str:
 def loader_text(roots: tuple[Path, ...]) -> str:
     """The Prolog file the image is compiled from: one ``use_module/1`` per root file,
     each written as a quoted atom (a path is never read as code)."""
-    lines = ["% spar-py: the planner's files, compiled into one image by spar_py.startup.qlf.", ""]
+    lines = ["% spar-py: the planner's files, compiled into one image by spar_py.planning.qlf.", ""]
     lines += [f":- use_module({_quoted(str(p))})." for p in roots]
     return "\n".join(lines) + "\n"
 
@@ -300,35 +299,3 @@ def evict(base: Path, keep: int = KEEP, spare: str | None = None) -> list[Path]:
             pass
         removed.append(d)
     return removed
-
-
-def main() -> None:
-    """``python -m spar_py.startup.qlf``: compile the planner into the cache now (set-up runs it);
-    prints where the image is, or that the cache is off."""
-    from spar_py.startup import dcimage
-
-    image = dcimage.install()  # the spar command's dataclass methods, compiled now too
-    from spar_py.app import cli  # noqa: F401 - imported for their dataclasses
-    from spar_py.phase2 import instance as phase2  # noqa: F401
-    from spar_py.planning import planner  # noqa: F401 - imported for their dataclasses
-    from spar_py.planning.engine import Engine
-
-    if image is not None:
-        image.save()
-        dcimage.uninstall(image)
-    eng = Engine()
-    base = cache_dir()
-    where = "the cache is off" if base is None else f"cache {base}"
-    state = {"written": ", saved state written", "used": ", saved state up to date",
-             "ready": ", saved state up to date", "busy": ", saved state being written by another process",
-             "refused": ", saved state refused (SWI-Prolog did not start from it)",
-             "unwritable": ", saved state not written (the cache is not writable)"}.get(eng.state_status, "")
-    print(f"setup: planner Prolog {_DONE.get(eng.loaded_from, eng.loaded_from)}{state} ({where})", file=sys.stderr)
-
-
-_DONE = {"qlf": "image up to date", "compiled": "compiled to a .qlf image", "source": "consulted from source",
-         "state": "image up to date"}
-
-
-if __name__ == "__main__":
-    main()
