@@ -19,7 +19,7 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent.parent
 CELL = "kb/problems/peg_in_block.yaml"
-WARM = ("import json, statistics, time; from spar_py.planning.planner import Planner; p = Planner(); "
+WARM = ("import json, statistics, time; from spar_py import Planner; p = Planner(); "
         "p.plan({cell!r}); ts = []\n"
         "for _ in range({n}):\n"
         "    t = time.perf_counter(); p.plan({cell!r}); ts.append(time.perf_counter() - t)\n"
