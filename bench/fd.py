@@ -89,7 +89,7 @@ def _ofaces_at(model, T) -> set:
 def pddl(cell) -> str:
     """The PDDL problem of ``cell`` (a loaded spar_py Cell whose goals are assembled/5), for
     :data:`DOMAIN`. Static facts from spar_py.world.reach, as phase 1's arcs (rule "reachable")."""
-    from spar_py.kb import parse_term
+    from spar_py.kb import term_text
     from spar_py.world.reach import mate_reachable_pairs, reachable_pairs
 
     nm = _name
@@ -105,18 +105,16 @@ def pddl(cell) -> str:
         init += [f"(grasp-of {nm(g)} {nm(o)})" for g in grasps[o]]
         init += [f"(pose-of {nm(p)} {nm(o)})" for p in poses[o]]
         init += [f"(reach {nm(g)} {nm(p)})" for g, p in reachable_pairs(cell, o, grasps[o], positions + poses[o])]
-    for fact in cell.initial:
-        t = parse_term(fact)
+    for t in cell.initial:
         if t == ("gripper", "open"):
             init.append("(gripper-open)")
         elif isinstance(t, tuple) and t[0] == "part_location":
             label = next(p.label for p in cell.positions.values() if p.name == t[2])
             init.append(f"(at {nm(t[1])} {nm(label)})")
     goals = []
-    for g in cell.goals:
-        t = parse_term(g)
+    for t in cell.goals:
         if not (isinstance(t, tuple) and t[0] == "assembled"):
-            raise ValueError(f"{cell.file}: goal {g}: only assembled/5 goals are encoded")
+            raise ValueError(f"{cell.file}: goal {term_text(t)}: only assembled/5 goals are encoded")
         _, peg, hole, (m1, m2), ta, _va = t
         pm, hm = cell.objects[peg], cell.objects[hole]
         gs = [lbl for lbl, gr in pm.grasps.items() if not set(gr.ofaces) & set(m1)]

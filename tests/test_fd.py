@@ -30,7 +30,7 @@ def test_encoding_names_every_part_goal_and_arc(tmp_path: Path) -> None:
 
 def test_bad_goal_is_refused(tmp_path: Path) -> None:
     cell = load_problem(gen.generate_assembly(1, tmp_path))
-    cell.goals.append("gripper(closed)")
+    cell.goals.append(("gripper", "closed"))
     with pytest.raises(ValueError, match="only assembled/5"):
         fd.pddl(cell)
 

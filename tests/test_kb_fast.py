@@ -1,4 +1,4 @@
-"""The fast paths of kb.py (issue 18: load_problem at N = 50) agree with the slow ones.
+"""The fast paths of the kb package (issue 18: load_problem at N = 50) agree with the slow ones.
 
 Each fast path may only ever take what its slow path takes, and give the same data:
 - ``_fast_load`` (YAML from libyaml's events) against ``_full_load`` (BoundedLoader):
@@ -21,7 +21,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from spar_py import kb
-from spar_py.kb import sanity
+from spar_py.kb import node as kbnode
+from spar_py.kb import objects, reader, sanity, schema, values
 from spar_py.core.errors import KBError
 from spar_py.app.gen import generate_assembly
 from spar_py.core.geometry import tm_rows
@@ -34,7 +35,7 @@ YAMLS = sorted(p for d in ("kb", "tests") for p in (ROOT / d).rglob("*.yaml"))
 def full(text: str) -> tuple[str, Any]:
     """What the full loader makes of ``text``: ("ok", data) or ("error", type, message)."""
     try:
-        return ("ok", kb._full_load(text))
+        return ("ok", reader._full_load(text))
     except Exception as e:  # noqa: BLE001 - compared, not handled
         return ("error", type(e).__name__, str(e))
 
@@ -55,8 +56,8 @@ def same(a: Any, b: Any) -> bool:
 def agree(text: str) -> bool:
     """_fast_load is right about ``text``: the full loader's data, or _NotFast; True if fast."""
     try:
-        got = kb._fast_load(text)
-    except kb._NotFast:
+        got = reader._fast_load(text)
+    except reader._NotFast:
         return False
     want = full(text)
     assert want[0] == "ok", f"the fast reader took what the full loader refuses: {want}"
@@ -70,7 +71,7 @@ def agree(text: str) -> bool:
 @pytest.mark.parametrize("path", YAMLS, ids=lambda p: str(p.relative_to(ROOT)))
 def test_fast_reader_agrees_on_every_kb_and_test_file(path: Path) -> None:
     try:
-        text = kb.read_text(path)
+        text = reader.read_text(path)
     except KBError:
         return  # not text: read_text refuses it before any YAML
     agree(text)
@@ -78,14 +79,14 @@ def test_fast_reader_agrees_on_every_kb_and_test_file(path: Path) -> None:
 
 def test_fast_reader_takes_the_project_files() -> None:
     """Every kb/ file is read fast (else the speed-up is gone: a fallback is silent)."""
-    slow = [str(p) for p in YAMLS if "kb" in p.relative_to(ROOT).parts[:1] and not agree(kb.read_text(p))]
+    slow = [str(p) for p in YAMLS if "kb" in p.relative_to(ROOT).parts[:1] and not agree(reader.read_text(p))]
     assert slow == []
 
 
 def test_fast_reader_takes_generated_problems(tmp_path: Path) -> None:
     generate_assembly(3, tmp_path)
     files = sorted(tmp_path.rglob("*.yaml"))
-    assert len(files) == 8 and all(agree(kb.read_text(f)) for f in files)
+    assert len(files) == 8 and all(agree(reader.read_text(f)) for f in files)
 
 
 #: Documents the fast reader must refuse (the full loader refuses them or reads them in
@@ -131,8 +132,8 @@ REFUSED = [
 def test_fast_reader_refuses_what_it_cannot_vouch_for(text: str) -> None:
     """Fails if the fast reader builds data for any of these: each is the full loader's
     to refuse (with its message) or to read its own way (merge keys, YAML 1.1 forms)."""
-    with pytest.raises(kb._NotFast):
-        kb._fast_load(text)
+    with pytest.raises(reader._NotFast):
+        reader._fast_load(text)
 
 
 #: Documents it must take, each exactly as the full loader reads them.
@@ -161,13 +162,13 @@ def test_fast_reader_takes_plain_documents_exactly(text: str) -> None:
 
 
 def test_fast_reader_does_not_share_mutable_data() -> None:
-    data = kb._fast_load("a: [1, 2]\nb: [1, 2]\nc: {x: 1}\nd: {x: 1}\n")
+    data = reader._fast_load("a: [1, 2]\nb: [1, 2]\nc: {x: 1}\nd: {x: 1}\n")
     assert data["a"] is not data["b"] and data["c"] is not data["d"]
 
 
 def _parsed(path: Path) -> tuple[str, Any]:
     try:
-        return ("ok", kb.parse_yaml(path))
+        return ("ok", reader.parse_yaml(path))
     except Exception as e:  # noqa: BLE001 - compared, not handled
         return ("error", type(e).__name__, str(e))
 
@@ -183,9 +184,9 @@ def test_parse_yaml_says_what_it_said_without_the_fast_reader(tmp_path: Path,
     now = [_parsed(p) for p in paths]
 
     def off(text: str) -> Any:
-        raise kb._NotFast
+        raise reader._NotFast
 
-    monkeypatch.setattr(kb, "_fast_load", off)
+    monkeypatch.setattr(reader, "_fast_load", off)
     before = [_parsed(p) for p in paths]
     for p, a, b in zip(paths, now, before):
         assert a[0] == b[0] and (same(a[1], b[1]) if a[0] == "ok" else a == b), p
@@ -232,9 +233,9 @@ def test_fast_reader_agrees_on_random_documents(doc: list[tuple[str, Any]]) -> N
 # --------------------------------------------------------------------------- conforms
 
 
-def _walk_ok(value: Any, spec: kb.Spec) -> bool:
+def _walk_ok(value: Any, spec: schema.Spec) -> bool:
     try:
-        kb._check_shape(kb.Node("f", "", value), spec)
+        schema._check_shape(kbnode.Node("f", "", value), spec)
         return True
     except KBError:
         return False
@@ -245,35 +246,35 @@ def _walk_ok(value: Any, spec: kb.Spec) -> bool:
 def test_conforms_agrees_with_the_walk(path: Path) -> None:
     """On every file of a kind: conforms says yes exactly where the walk passes."""
     try:
-        data = kb.parse_yaml(path)
+        data = reader.parse_yaml(path)
     except KBError:
         return
     if not isinstance(data, dict):
         return
-    kind = kb.file_kind(kb.Node(str(path), "", data))
+    kind = schema.file_kind(kbnode.Node(str(path), "", data))
     if kind is None:
         return
-    assert kb.conforms(data, kind.schema) == _walk_ok(data, kind.schema)
+    assert schema.conforms(data, kind.schema) == _walk_ok(data, kind.schema)
 
 
 @pytest.mark.parametrize("value, spec", [
-    ({"length": "in", "angle": "deg", "extra": 1}, kb.UNITS_SCHEMA),           # an unknown key
-    ({"length": "in"}, kb.UNITS_SCHEMA),                                       # a missing key
-    ({1: "in", "length": "in", "angle": "deg"}, kb.UNITS_SCHEMA),             # a key that is no str
-    (["length", "angle"], kb.UNITS_SCHEMA),                                    # not a mapping
-    ({"Bad": {"dx": 1, "dy": 1, "dz": 1, "dtheta": 1}}, kb.Named(kb.BOUNDS_SCHEMA)),  # not a label
-    ({"a\n": {"dx": 1, "dy": 1, "dz": 1, "dtheta": 1}}, kb.Named(kb.BOUNDS_SCHEMA)),
-    ([], kb.Each(kb.LEAF, 1)),                                                 # too short
-    ({"box": {"min": 1, "max": 2}, "cylinder": {"radius": 1, "z": 1}}, kb.OBJECT_SCHEMA.optional["shape"].item),
-    ({"sphere": {}}, kb.OBJECT_SCHEMA.optional["shape"].item),
-    ([], kb.PROBLEM_SCHEMA.required["objects"].value.required["initial"]),     # OneOrMany: empty list
+    ({"length": "in", "angle": "deg", "extra": 1}, schema.UNITS_SCHEMA),           # an unknown key
+    ({"length": "in"}, schema.UNITS_SCHEMA),                                       # a missing key
+    ({1: "in", "length": "in", "angle": "deg"}, schema.UNITS_SCHEMA),             # a key that is no str
+    (["length", "angle"], schema.UNITS_SCHEMA),                                    # not a mapping
+    ({"Bad": {"dx": 1, "dy": 1, "dz": 1, "dtheta": 1}}, schema.Named(schema.BOUNDS_SCHEMA)),  # not a label
+    ({"a\n": {"dx": 1, "dy": 1, "dz": 1, "dtheta": 1}}, schema.Named(schema.BOUNDS_SCHEMA)),
+    ([], schema.Each(schema.LEAF, 1)),                                                 # too short
+    ({"box": {"min": 1, "max": 2}, "cylinder": {"radius": 1, "z": 1}}, schema.OBJECT_SCHEMA.optional["shape"].item),
+    ({"sphere": {}}, schema.OBJECT_SCHEMA.optional["shape"].item),
+    ([], schema.PROBLEM_SCHEMA.required["objects"].value.required["initial"]),     # OneOrMany: empty list
 ])
-def test_conforms_refuses_what_the_walk_refuses(value: Any, spec: kb.Spec) -> None:
+def test_conforms_refuses_what_the_walk_refuses(value: Any, spec: schema.Spec) -> None:
     """Fails if conforms lets through a value the walk refuses (check_shape would then pass it)."""
     assert not _walk_ok(value, spec)
-    assert not kb.conforms(value, spec)
+    assert not schema.conforms(value, spec)
     with pytest.raises(KBError):
-        kb.check_shape(kb.Node("f", "", value), spec)
+        schema.check_shape(kbnode.Node("f", "", value), spec)
 
 
 # --------------------------------------------------------------------------- Node fast paths
@@ -285,7 +286,7 @@ _ITEMS = [0, 1, -1, 1.5, -0.0, 1e9, -1e9, 1e9 + 1, 10**9, 10**9 + 1, 10**400, fl
 
 def _slow_vector(value: Any, n: int) -> Any:
     """Node.vector's per-item walk (elements + number), as it was: the array or the error."""
-    node = kb.Node("f.yaml", "k", value)
+    node = kbnode.Node("f.yaml", "k", value)
     try:
         items = node.elements()
         if len(items) != n:
@@ -300,7 +301,7 @@ def _slow_vector(value: Any, n: int) -> Any:
 def test_vector_fast_path_agrees(value: Any) -> None:
     want = _slow_vector(value, 2)
     try:
-        got: Any = kb.Node("f.yaml", "k", value).vector(2)
+        got: Any = kbnode.Node("f.yaml", "k", value).vector(2)
     except KBError as e:
         got = str(e)
     if isinstance(want, str):
@@ -325,7 +326,7 @@ ROWS = [[1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 2, 3]]
 def test_tm_node_fast_path_and_memo_agree(rows: Any) -> None:
     """tm_node with and without a memo, first and second time: the same transform (a copy)
     or the same error as the per-row walk (Node.elements, Node.vector)."""
-    node = kb.Node("f.yaml", "stable_poses[0].tm", rows)
+    node = kbnode.Node("f.yaml", "stable_poses[0].tm", rows)
 
     def walk() -> Any:
         try:
@@ -340,7 +341,7 @@ def test_tm_node_fast_path_and_memo_agree(rows: Any) -> None:
 
     def call(memo: Memo | None) -> Any:
         try:
-            return kb.tm_node(node, 2.0, memo)
+            return values.tm_node(node, 2.0, memo)
         except KBError as e:
             return str(e)
 
@@ -361,8 +362,8 @@ def test_tm_node_fast_path_and_memo_agree(rows: Any) -> None:
 
 def test_tm_node_memo_tells_minus_zero_from_zero() -> None:
     memo = Memo()
-    a = kb.tm_node(kb.Node("f", "tm", [[1, 0, 0], [0, 1, 0], [0, 0, 1], [0.0, 0, 0]]), 1.0, memo)
-    b = kb.tm_node(kb.Node("f", "tm", [[1, 0, 0], [0, 1, 0], [0, 0, 1], [-0.0, 0, 0]]), 1.0, memo)
+    a = values.tm_node(kbnode.Node("f", "tm", [[1, 0, 0], [0, 1, 0], [0, 0, 1], [0.0, 0, 0]]), 1.0, memo)
+    b = values.tm_node(kbnode.Node("f", "tm", [[1, 0, 0], [0, 1, 0], [0, 0, 1], [-0.0, 0, 0]]), 1.0, memo)
     assert math.copysign(1, a[0, 3]) == 1 and math.copysign(1, b[0, 3]) == -1
 
 
@@ -374,11 +375,11 @@ def test_grasp_frame_memo_gives_eulerxyz_bit_for_bit() -> None:
     for euler in [(0.0, 0.0, 0.5, -1.5707963267948966, 1.5707963267948966, 0.0),
                   (-0.0, 0.0, 0.5, -1.5707963267948966, 1.5707963267948966, -0.0), (1.0, 2.0, 3.0, 0.1, 0.2, 0.3)]:
         want = eulerxyz(*euler)
-        first, again = kb._grasp_frame(euler, memo), kb._grasp_frame(euler, memo)
-        assert first.tobytes() == again.tobytes() == want.tobytes() == kb._grasp_frame(euler, None).tobytes()
+        first, again = objects._grasp_frame(euler, memo), objects._grasp_frame(euler, memo)
+        assert first.tobytes() == again.tobytes() == want.tobytes() == objects._grasp_frame(euler, None).tobytes()
         first[0, 0] = 99.0
-        assert kb._grasp_frame(euler, memo).tobytes() == want.tobytes()
-    assert len(memo.table("eulerxyz", kb.LOAD_MEMO_LIMIT)) == 3
+        assert objects._grasp_frame(euler, memo).tobytes() == want.tobytes()
+    assert len(memo.table("eulerxyz", values.LOAD_MEMO_LIMIT)) == 3
 
 
 @pytest.mark.parametrize("faces, known, min_len", [
@@ -388,7 +389,7 @@ def test_grasp_frame_memo_gives_eulerxyz_bit_for_bit() -> None:
     ([["b1"]], None, 1),
 ])
 def test_faces_fast_path_agrees(faces: Any, known: set | None, min_len: int) -> None:
-    node = kb.Node("f.yaml", "faces", faces)
+    node = kbnode.Node("f.yaml", "faces", faces)
 
     def walk() -> Any:  # _faces's loop, as it was
         out = []
@@ -396,19 +397,19 @@ def test_faces_fast_path_agrees(faces: Any, known: set | None, min_len: int) -> 
             for e in node.elements(min_len):
                 f = e.value
                 if isinstance(f, bool) or not isinstance(f, (int, str)) or (isinstance(f, int) and abs(f) > 1e9):
-                    raise e.fail("a face name or number", kb.show(f))
+                    raise e.fail("a face name or number", kbnode.show(f))
                 if isinstance(f, str):
                     e.label()
                 if known is not None and f not in known:
-                    raise e.fail(f"a face of the object ({kb._cut(', '.join(map(str, sorted(known, key=str))))})",
-                                 kb.show(f))
+                    raise e.fail(f"a face of the object ({kbnode.cut(', '.join(map(str, sorted(known, key=str))))})",
+                                 kbnode.show(f))
                 out.append(f)
         except KBError as e:
             return str(e)
         return tuple(out)
 
     try:
-        got: Any = kb._faces(node, known, min_len)
+        got: Any = objects._faces(node, known, min_len)
     except KBError as e:
         got = str(e)
     assert got == walk() and [type(f) for f in got] == [type(f) for f in walk()]

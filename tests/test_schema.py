@@ -20,18 +20,11 @@ import pytest
 import yaml
 
 from spar_py.core.errors import KBError
-from spar_py.kb import (
-    KINDS,
-    MAX_INPUT_BYTES,
-    MAX_NODES,
-    SENSOR_NAMES,
-    BoundedLoader,
-    check_file,
-    load_problem,
-    read_yaml,
-    schema_keys,
-    show,
-)
+from spar_py.kb import KINDS, MAX_INPUT_BYTES, check_file, load_problem, read_yaml
+from spar_py.kb.node import show
+from spar_py.kb.problem import SENSOR_NAMES
+from spar_py.kb.reader import MAX_NODES, BoundedLoader
+from spar_py.kb.schema import schema_keys
 
 ROOT = Path(__file__).resolve().parent.parent
 BAD = ROOT / "tests" / "bad"

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from spar_py.world import placement
-from spar_py.kb import LENGTH_UNITS, load_problem
+from spar_py.core.units import LENGTH_UNITS
+from spar_py.kb import load_problem
 from spar_py.planning.planner import Planner
 
 from units_fixture import ROOT, write_cell

@@ -1,4 +1,4 @@
-"""The validated in-memory models of a work cell (what kb.py builds from YAML).
+"""The validated in-memory models of a work cell (what the kb package builds from YAML).
 
 Units inside: lengths in the problem file's length unit (the paper's cell: inches),
 angles in radians. Frames: world Z up, table top at z = 0, 4x4 homogeneous
@@ -19,6 +19,9 @@ if TYPE_CHECKING:
     from spar_py.world.shapes import FeatureGeometry, Geometry
 
 Face = Union[int, str]
+#: A ground Prolog term as data: an atom (str), a number, a list of terms, or a compound as a
+#: tuple (functor, arg1, ...), the form the bridge sends to Prolog (kb.terms renders it as text).
+Term = Union[str, int, float, list["Term"], tuple["Term", ...]]
 
 
 @dataclass(frozen=True)
@@ -156,8 +159,8 @@ class Cell:
     positions: dict[str, Position]  # by label (tr1, ...)
     transforms: dict[str, np.ndarray]  # named constant transforms (trans_1: T_a)
     vectors: dict[str, np.ndarray]  # named vectors (vec_1: V_a)
-    initial: list[str]  # initial-state facts, Prolog text (gripper(open), ...)
-    goals: list[str]  # goals, Prolog text
+    initial: list[Term]  # initial-state facts as terms: ("gripper", "open"), ("part_location", obj, pos)
+    goals: list[Term]  # goals as terms: ("assembled", peg, hole, [[pf], [hf]], ta, va), ...
     manipulator_bounds: Bounds
     object_bounds: dict[str, Bounds]
     sensors: dict[str, Sensor]

@@ -2,21 +2,26 @@
 
 A constant in the code (a grid step, a clearance, a reach margin) is stated in mm
 (``*_MM``) and converted to the cell's own length unit (``Cell.unit``, a key of
-``kb.LENGTH_UNITS``, mm per unit) where it is used, so the same cell written in
+:data:`LENGTH_UNITS`, mm per unit) where it is used, so the same cell written in
 inches, millimetres or metres is planned on the same physical grid.
 """
 from __future__ import annotations
 
-__all__ = ["INTERNAL_UNIT", "from_mm", "mm_per"]
+import math
+from types import MappingProxyType
+
+__all__ = ["ANGLE_UNITS", "INTERNAL_UNIT", "LENGTH_UNITS", "from_mm", "mm_per"]
 
 #: The unit of every length constant in src/spar_py.
 INTERNAL_UNIT = "mm"
+#: The length units a KB file may name (``units: {length: ...}``): millimetres per unit.
+LENGTH_UNITS = MappingProxyType({"mm": 1.0, "m": 1000.0, "in": 25.4, "cm": 10.0})
+#: The angle units a KB file may name (``units: {angle: ...}``): radians per unit.
+ANGLE_UNITS = MappingProxyType({"deg": math.pi / 180.0, "rad": 1.0})
 
 
 def mm_per(unit: str) -> float:
-    """Millimetres per ``unit`` (kb.LENGTH_UNITS; KeyError for an unknown unit)."""
-    from spar_py.kb import LENGTH_UNITS  # kb loads sanity, which uses this module
-
+    """Millimetres per ``unit`` (:data:`LENGTH_UNITS`; KeyError for an unknown unit)."""
     return LENGTH_UNITS[unit]
 
 

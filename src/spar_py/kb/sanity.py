@@ -1,6 +1,6 @@
 """Physical sanity of a loaded cell (issue 13, item 2): is the cell one that could exist?
 
-Checked once at load (:func:`check_cell`, the last step of kb.load_problem), before any
+Checked once at load (:func:`check_cell`, the last step of kb.problem.load_problem), before any
 grid or IK is built, each failure a one-line :class:`~spar_py.core.errors.KBError` naming the
 file, the key and both parties:
 
@@ -33,10 +33,14 @@ from pathlib import Path
 from typing import Any, Iterator
 
 import numpy as np
+import yaml
 
 from spar_py.core.errors import KBError
+from spar_py.core.geometry import same_stable_pose
 from spar_py.core.model import Cell, ObjectModel, Position, Solid
 from spar_py.core.units import from_mm
+from spar_py.kb.reader import SAFE_LOADER
+from spar_py.kb.terms import atoms
 
 __all__ = ["check_cell", "overlap_depth", "reach_box", "solid_points"]
 
@@ -85,10 +89,6 @@ def _sources(cell: Cell) -> dict[str, Any]:
     the robot and model files):
     ``{"robot": path, "models": {obj: path}}``; paths as the problem names them,
     resolved against its folder. Empty where the file cannot be read again."""
-    import yaml
-
-    from spar_py.kb import SAFE_LOADER
-
     try:
         data = yaml.load(Path(cell.file).read_text(encoding="utf-8"), Loader=SAFE_LOADER)
         base = Path(cell.file).parent
@@ -141,7 +141,7 @@ def _axes(s: Solid, sides: int = CYL_SIDES) -> tuple[np.ndarray, np.ndarray]:
 
 def _hull_axes(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(unique face normals, unique edge directions) of the convex hull of points P (k, 3)."""
-    from scipy.spatial import ConvexHull
+    from scipy.spatial import ConvexHull  # about 0.8 s to import: only a part with a hull (a mesh) needs it
 
     h = ConvexHull(P)
     normals = np.unique(np.round(h.equations[:, :3], 9), axis=0)
@@ -262,9 +262,10 @@ def _vectors(cell: Cell) -> Iterator[KBError]:
     """Approach and mating vectors (``vectors:``, the V_a of assembled goals) are non-zero."""
     users: dict[str, list[str]] = {}
     for k, g in enumerate(cell.goals):
+        used = set(atoms(g))
         for name in cell.vectors:
-            if name in g.replace("(", ",").replace(")", ",").replace(" ", "").split(","):
-                users.setdefault(name, []).append(f"goals[{k}] {g.split('(')[0]}")
+            if name in used:
+                users.setdefault(name, []).append(f"goals[{k}] {g[0] if isinstance(g, tuple) else g}")
     for name, v in cell.vectors.items():
         if float(np.linalg.norm(v)) <= ZERO_VECTOR:
             who = ", ".join(users.get(name, [])) or "no goal"
@@ -282,8 +283,6 @@ def _on_table(cell: Cell) -> Iterator[KBError]:
         if m.shape:
             low, what = _lowest(m, pos.T), "its lowest point"
         else:
-            from spar_py.core.geometry import same_stable_pose
-
             sp = next((p for p in m.poses.values() if same_stable_pose(pos.T[:3, :3], p.R)), None)
             if sp is None:
                 continue  # kb refuses an orientation that is no stable pose

@@ -43,6 +43,7 @@ from spar_py.phase2 import uncertainty as ur
 from spar_py.core.errors import SparValueError
 from spar_py.core.geometry import same_stable_pose
 from spar_py.core.model import Bounds, Cell, Grasp
+from spar_py.core.units import ANGLE_UNITS, LENGTH_UNITS
 from spar_py.world.workspace import solutions
 from spar_py.phase2.symbolic import Registry
 
@@ -95,8 +96,6 @@ def sensing_bounds(cell: Cell, rules: Mapping[str, Mapping[str, Any]] | None) ->
     action's name to ``{"dx": [lo, hi], "dy": ..., "dz": ..., "dtheta": [lo, hi],
     "units": {"length": "in", "angle": "deg"}}`` (uncertainty.pl's sensing data, from
     kb/templates/sensing.pl's sensing_rule/5, in the units the templates state)."""
-    from spar_py.kb import ANGLE_UNITS, LENGTH_UNITS
-
     out: dict[str, Bounds] = {}
     for name, r in (rules or {}).items():
         units = r.get("units", {})

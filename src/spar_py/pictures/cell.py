@@ -30,7 +30,6 @@ import numpy as np
 
 from spar_py.core.errors import SparValueError
 from spar_py.core.geometry import convex_hull_2d
-from spar_py.pictures.plandoc import term_parts
 from spar_py.core.units import from_mm
 from spar_py.pictures.scene import MIN_SIZE_MM, Scene, part_model, scenes
 
@@ -150,10 +149,9 @@ def hole_mouth(cell: Cell, obj: str) -> tuple[np.ndarray, np.ndarray, float] | N
     if model is None or model.feature is None or model.feature.kind != "hole":
         return None
     axis = None
-    for g in cell.goals:
-        name, args = term_parts(g)
-        if name == "assembled" and len(args) == 5 and args[1] == obj and args[4] in cell.vectors:
-            va = np.asarray(cell.vectors[args[4]], float)
+    for g in cell.goals:  # term data (core.model.Term): ("assembled", peg, hole, faces, ta, va)
+        if isinstance(g, tuple) and g[0] == "assembled" and len(g) == 6 and g[2] == obj and g[5] in cell.vectors:
+            va = np.asarray(cell.vectors[g[5]], float)
             if np.linalg.norm(va) > 0:
                 axis = -va / np.linalg.norm(va)
                 break

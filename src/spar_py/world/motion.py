@@ -48,6 +48,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from spar_py.core.errors import SparValueError
+from spar_py.core.units import LENGTH_UNITS
 from spar_py.world.motion_options import FAILURES_KEPT, PLANNERS, MotionFailure, MotionOptions
 
 __all__ = ["MotionOptions", "Segment", "MotionFailure", "PLANNERS", "resolution", "densify",
@@ -846,8 +847,6 @@ def extent(cell: Any) -> float:
 
 def approach_length(cell: Any, opts: MotionOptions) -> float:
     """The approach / retreat length in the cell unit (the option, else 2 in)."""
-    from spar_py.kb import LENGTH_UNITS
-
     if opts.approach_length is not None:
         return float(opts.approach_length)
     return DEFAULT_APPROACH_IN * LENGTH_UNITS["in"] / LENGTH_UNITS[cell.unit]

@@ -1,0 +1,407 @@
+"""Problem assembly: ``kb/problems/*.yaml`` with the robot and object files it names, to a
+:class:`~spar_py.core.model.Cell`.
+
+Objects and their initial positions, uncertainty bounds, sensors, goals (parsed to term
+data and checked against the cell; ``assembled(Peg, Hole)`` completed from the features'
+geometry), placement regions, obstacles, the table and the switches; the loaded cell is
+checked for physical sanity (kb.sanity) last. Lengths in the problem's unit, angles in radians.
+"""
+from __future__ import annotations
+
+import math
+import os
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any, Iterator, Mapping
+
+import numpy as np
+
+from spar_py.core.errors import UnknownKeyError, WrongKindError
+from spar_py.core.geometry import same_stable_pose
+from spar_py.core.memo import Memo
+from spar_py.core.model import Bounds, Cell, ObjectModel, Position, Sensor, Term
+from spar_py.kb import sanity
+from spar_py.kb.node import Node, cut, did_you_mean, show
+from spar_py.kb.objects import load_object
+from spar_py.kb.reader import MAX_INPUT_BYTES
+from spar_py.kb.robots import home_angles, load_robot, load_urdf_robot
+from spar_py.kb.schema import KINDS, read_kb
+from spar_py.kb.terms import parse_term
+from spar_py.kb.values import LOAD_MEMO_LIMIT, tm_node, units_of, xyz_rpy_frame
+from spar_py.world.robots import GripperGeometry
+
+__all__ = ["GOAL_SHAPES", "SENSOR_NAMES", "load_problem"]
+
+
+# The sensing actions kb/templates/sensing.pl defines: the names `sensors:` may use.
+SENSOR_NAMES = ("dense_range_scan",)
+
+
+def _bounds(node: Node, len_scale: float, rad_per: float) -> Bounds:
+    def iv(k: str, s: float) -> tuple[float, float]:
+        lo, hi = node.key(k).interval()
+        return lo * s, hi * s
+
+    return Bounds(iv("dx", len_scale), iv("dy", len_scale), iv("dz", len_scale), iv("dtheta", rad_per))
+
+
+GOAL_SHAPES: dict[str, tuple[int, ...]] = {"assembled": (5, 2), "part_location": (2,)}
+
+
+def _check_goal(node: Node, goal: Any, cell_objects: dict[str, ObjectModel], transforms: dict, vectors: dict,
+                positions: dict[str, Position]) -> None:
+    """Validate a parsed goal against the cell (known objects, faces, transforms, positions)."""
+    if not isinstance(goal, tuple) or goal[0] not in GOAL_SHAPES or len(goal) - 1 not in GOAL_SHAPES[goal[0]]:
+        raise node.fail("a goal assembled(Peg, Hole), assembled(Peg, Hole, [[PegFaces], [HoleFaces]], Ta, Va) "
+                        "or part_location(Object, InitialPosition)")
+    if goal[0] == "part_location":
+        _, obj, pos = goal
+        if obj not in cell_objects:
+            raise node.fail(f"a known object in part_location/2 ({', '.join(sorted(cell_objects))})", show(obj))
+        names = sorted(p.name for p in positions.values() if p.obj == obj)
+        if pos not in names:
+            raise node.fail(f"an initial position of {obj} in part_location/2 ({', '.join(names)})", show(pos))
+        return
+    _, held, fixed, faces, ta, va = goal
+    for role, obj in (("first", held), ("second", fixed)):
+        if obj not in cell_objects:
+            raise node.fail(f"a known object as {role} argument ({', '.join(sorted(cell_objects))})", show(obj))
+    if not (isinstance(faces, list) and len(faces) == 2 and all(isinstance(f, list) for f in faces)):
+        raise node.fail("mating faces as [[PegFaces], [HoleFaces]]")
+    for obj, fl in ((held, faces[0]), (fixed, faces[1])):
+        for f in fl:
+            if f not in cell_objects[obj].faces:
+                raise node.fail(f"faces of {obj} in the mating faces", show(f))
+    if not isinstance(ta, str) or ta not in transforms:
+        raise node.fail(f"Ta naming a transform under transforms: ({_names(transforms)})", show(ta))
+    if not isinstance(va, str) or va not in vectors:
+        raise node.fail(f"Va naming a vector under vectors: ({_names(vectors)})", show(va))
+
+
+def _names(table: Mapping[str, Any]) -> str:
+    """The names of a table for a message (cut), or 'none'."""
+    return cut(", ".join(table)) if table else "none"
+
+
+def _ref_path(node: Node, base: Path, kind: str) -> Path:
+    """The file a ``robot:`` or ``model:`` reference names, relative to the problem file."""
+    ref = base / node.text()
+    if not os.path.lexists(ref):
+        raise node.fail(f"the path of {KINDS[kind].wanted}", f"{show(node.value)} (no such file)")
+    return ref
+
+
+@contextmanager
+def _referenced(node: Node, kind: str) -> Iterator[None]:
+    """Load the file a reference names: a file of another kind is the reference's error
+    (``robot: expected the path of a robot file, not '/etc/passwd', a plain text file``)."""
+    try:
+        yield
+    except WrongKindError as e:
+        raise node.fail(f"the path of {KINDS[kind].wanted}", f"{show(node.value)}, {e.got}") from None
+
+
+def _positions(onode: Node, oname: str, model: ObjectModel, taken: dict[str, Position],
+               memo: Memo | None = None) -> list[Position]:
+    """An object's initial position, or the list of them (a stock of identical parts:
+    part_location(Obj, Pos) holds for each; "the peg" is whichever is taken). ``memo``:
+    the load's tables (:func:`tm_node`, :func:`_same_stable_pose`)."""
+    inode = onode.key("initial")
+    inits = inode.elements(1) if isinstance(inode.value, list) else [inode]
+    out: list[Position] = []
+    names = {p.name for p in taken.values()}
+    for init in inits:
+        pname, plabel = init.key("name").label(), init.key("label").label()
+        if plabel in taken or pname in names or any(plabel == p.label or pname == p.name for p in out):
+            raise init.fail("a position name and label not used before", f"{pname}, {plabel}")
+        T = tm_node(init.key("tm"), 1.0, memo)
+        if not any(_same_stable_pose(T[:3, :3], p.R, memo) for p in model.poses.values()):
+            raise init.key("tm").fail(f"an orientation of one of {oname}'s stable poses")
+        out.append(Position(pname, plabel, oname, T))
+    return out
+
+
+def _same_stable_pose(R_abs: np.ndarray, R_pose: np.ndarray, memo: Memo | None) -> bool:
+    """geometry.same_stable_pose of two (3, 3) float rotations, kept in ``memo`` (the load's
+    tables) by their bytes: the same rotations, the same answer."""
+    if memo is None:
+        return same_stable_pose(R_abs, R_pose)
+    return memo.table("same_stable_pose", LOAD_MEMO_LIMIT).get_or_compute(
+        (R_abs.tobytes(), R_pose.tobytes()), lambda: same_stable_pose(R_abs, R_pose))
+
+
+def _objects(root: Node, base: Path, unit: str, max_bytes: int, opening: float | None = None,
+             gripper: GripperGeometry | None = None, memo: Memo | None = None
+             ) -> tuple[dict[str, ObjectModel], dict[str, Position], list[Path]]:
+    """The problem's objects (models loaded), their initial positions and the model files
+    (``memo``: the load's tables, :func:`load_object`)."""
+    objects: dict[str, ObjectModel] = {}
+    positions: dict[str, Position] = {}
+    files: list[Path] = []
+    for oname, onode in root.key("objects").items():
+        mnode = onode.key("model")
+        mpath = _ref_path(mnode, base, "object")
+        with _referenced(mnode, "object"):
+            model = load_object(mpath, unit, max_bytes, opening=opening, gripper=gripper, memo=memo)
+        if model.name != oname:
+            raise mnode.fail(f"the model of {oname}", f"the model of {model.name}")
+        objects[oname] = model
+        files.append(mpath)
+        for pos in _positions(onode, oname, model, positions, memo):
+            positions[pos.label] = pos
+    if not objects:
+        raise root.key("objects").fail("at least one object", "none")
+    return objects, positions, files
+
+
+def _object_bounds(unc: Node, objects: Mapping[str, ObjectModel], rad_per: float) -> dict[str, Bounds]:
+    """``uncertainty.objects``: bounds for every object of the cell, and only for them."""
+    onodes = unc.key("objects")
+    out: dict[str, Bounds] = {}
+    for oname, bnode in onodes.items():
+        if oname not in objects:
+            near = did_you_mean(oname, objects)
+            raise bnode.fail(f"bounds of a known object ({', '.join(sorted(objects))})",
+                             show(oname) + (f"; did you mean {near}?" if near else ""))
+        out[oname] = _bounds(bnode, 1.0, rad_per)
+    for oname in objects:
+        if oname not in out:
+            raise onodes.fail(f"bounds for every object (missing {oname})")
+    return out
+
+
+def _sensors(root: Node, rad_per: float) -> dict[str, Sensor]:
+    """``sensors``: each named after a sensing action of kb/templates/sensing.pl (SENSOR_NAMES)."""
+    snode = root.key("sensors", required=False)
+    out: dict[str, Sensor] = {}
+    for sname, s in snode.items() if snode is not None else []:
+        if sname not in SENSOR_NAMES:
+            near = did_you_mean(sname, SENSOR_NAMES)
+            raise UnknownKeyError(s.file, s.path, near) if near else s.fail(
+                f"a sensing action ({', '.join(SENSOR_NAMES)})", show(sname))
+        out[sname] = Sensor(sname, _bounds(s, 1.0, rad_per))
+    return out
+
+
+def _goals(root: Node, objects: dict[str, ObjectModel], transforms: dict, vectors: dict,
+           positions: dict[str, Position], turns: dict) -> list[Term]:
+    """The goals, parsed and checked against the cell, as term data (kb.terms); an ``assembled(Peg,
+    Hole)`` goal adds its derived T_a turns to ``transforms`` and ``turns`` (_derived_assembly)."""
+    goals: list[Term] = []
+    for g in root.key("goals").elements(1):
+        text = g.text()  # outside the try: a KBError is a ValueError too, and must not nest
+        try:
+            term = parse_term(text)
+        except ValueError as e:
+            raise g.fail(f"a Prolog term ({e})", show(text)) from None
+        if isinstance(term, tuple) and term[0] == "assembled" and len(term) == 3:
+            term = _derived_assembly(g, term, objects, transforms, vectors, turns)
+        _check_goal(g, term, objects, transforms, vectors, positions)
+        goals.append(term)
+    return goals
+
+
+def _derived_assembly(node: Node, goal: tuple, objects: dict[str, ObjectModel], transforms: dict,
+                      vectors: dict, turns: dict) -> tuple:
+    """``assembled(Peg, Hole)`` as the paper's five-argument goal: the mating faces are the two
+    features' faces, T_a and V_a derived from their geometry (world.shapes.assembly_transforms).
+
+    T_a is a choice among the turns about the hole's axis, quantised by the finer of the two
+    models' ``grasp_step`` (45 deg by default): the first turn (the least rotation of the
+    peg's axis onto the hole's) is added to the cell's transforms as trans_K, turn J (J = 2,
+    3, ...; turned by (J - 1) steps) as trans_K_tJ, and V_a as vec_K (the first K not taken).
+    The goal names trans_K; ``turns[trans_K]`` lists every turn with the hole part's stable
+    poses in which the mated peg stays clear of the table (world.shapes.poses_clear_of_table;
+    every pose when the peg has no shape). The planner chooses the turn (kb/templates/actions.pl).
+    """
+    from spar_py.world.shapes import assembly_transforms, part_mesh, poses_clear_of_table  # 4.5 ms: assembled/2 only
+
+    _, peg, hole = goal
+    feats = []
+    for role, obj, kind in (("first", peg, "peg"), ("second", hole, "hole")):
+        if obj not in objects:
+            raise node.fail(f"a known object as {role} argument ({', '.join(sorted(objects))})", show(obj))
+        f = objects[obj].feature
+        if f is None or f.geometry is None or f.kind != kind:
+            raise node.fail(f"{obj} with a {kind} feature declared by geometry (feature: {{kind: {kind}, name, "
+                            "radius, axis, length}) for assembled/2, or the five-argument goal")
+        feats.append(f)
+    steps = [m.geometry.step for m in (objects[peg], objects[hole]) if m.geometry is not None]
+    Tas, Va, _ = assembly_transforms(feats[0].geometry, feats[1].geometry, min(steps, default=math.radians(45.0)))
+    k = 1
+    while f"trans_{k}" in transforms or f"vec_{k}" in vectors or any(
+            f"trans_{k}_t{j}" in transforms for j in range(2, len(Tas) + 1)):
+        k += 1
+    name = f"trans_{k}"
+    pgeo = objects[peg].geometry
+    pts = None
+    if pgeo is not None:  # the hull a derivation gave, else (all entries hand-written) the mesh's vertices
+        pts = pgeo.hull if pgeo.hull is not None else np.asarray(part_mesh(objects[peg]).vertices)
+    poses = list(objects[hole].poses.values())
+    alternatives = []
+    for j, T in enumerate(Tas, start=1):
+        tname = name if j == 1 else f"{name}_t{j}"
+        transforms[tname] = T
+        clear = ([True] * len(poses) if pts is None else poses_clear_of_table(
+            pts, T, [(p.R, p.height) for p in poses], pgeo.unit))
+        alternatives.append((tname, tuple(p.label for p, ok in zip(poses, clear) if ok)))
+    vectors[f"vec_{k}"] = Va
+    turns[name] = tuple(alternatives)
+    return ("assembled", peg, hole, [list(feats[0].faces), list(feats[1].faces)], name, f"vec_{k}")
+
+
+def _regions(root: Node) -> list[dict[str, tuple[float, float]]]:
+    """``placement_regions``: the free table rectangles ``{x: [lo, hi], y: [lo, hi]}``."""
+    rnode = root.key("placement_regions", required=False)
+    return [{"x": r.key("x").interval(), "y": r.key("y").interval()}
+            for r in (rnode.elements() if rnode is not None else [])]
+
+
+def _obstacles(root: Node, base: Path, rad_per: float) -> list:
+    """``obstacles:``: named shapes in the world frame (cell unit): ``box: {min, max}``,
+    ``cylinder: {radius, z: [lo, hi], center: [x, y]}`` (axis along world z) or ``mesh: FILE``
+    placed at ``xyz``, ``rpy`` (its convex hull: a conservative stand-in for a concave fixture)."""
+    from spar_py.world.collision import Obstacle, box, convex, cylinder  # 10 ms: paid by a load, not by the import
+
+    onode = root.key("obstacles", required=False)
+    out: list = []
+    seen: set[str] = set()
+    for on in (onode.elements() if onode is not None else []):
+        name = on.key("name").label()
+        if name in seen or name == "table":
+            raise on.key("name").fail("a name no other obstacle (nor the table) has", name)
+        seen.add(name)
+        kinds = [k for k in ("box", "cylinder", "mesh") if on.key(k, required=False) is not None]
+        if len(kinds) != 1:
+            raise on.fail("exactly one of box: {min, max}, cylinder: {radius, z, center}, mesh: FILE",
+                          ", ".join(kinds) or "none")
+        k = kinds[0]
+        if k == "box":
+            b = on.key("box")
+            lo, hi = b.key("min").vector(3), b.key("max").vector(3)
+            if np.any(lo >= hi):
+                raise b.fail("min < max in every coordinate")
+            bodies = (box(name, -1, lo, hi),)
+        elif k == "cylinder":
+            c = on.key("cylinder")
+            r = c.key("radius").positive()
+            z0, z1 = c.key("z").interval()
+            if not z0 < z1:
+                raise c.key("z").fail("[lo, hi] with lo < hi")
+            cx, cy = c.key("center").vector(2)
+            bodies = (cylinder(name, -1, [cx, cy, z0], [cx, cy, z1], r),)
+        else:
+            mnode = on.key("mesh")
+            mpath = base / mnode.text()
+            if not mpath.is_file():
+                raise mnode.fail("the path of a mesh file (STL, OBJ, PLY)", f"{show(mnode.value)} (no such file)")
+            try:
+                import trimesh  # 1-2 s to import (scipy with it): a mesh obstacle only
+
+                mesh = trimesh.load(str(mpath), force="mesh")
+                pts = np.asarray(mesh.convex_hull.vertices, float)
+            except Exception as e:  # trimesh's many loader errors: one line
+                raise mnode.fail(f"a mesh trimesh can read ({type(e).__name__}: {str(e)[:80]})") from None
+            T = xyz_rpy_frame(on, 1.0, rad_per) if on.key("xyz", required=False) is not None else np.eye(4)
+            bodies = (convex(name, -1, pts @ T[:3, :3].T + T[:3, 3]),)
+        out.append(Obstacle(name, bodies))
+    return out
+
+
+def _table(root: Node) -> tuple[float, float, float, float] | None:
+    """``table: {x: [lo, hi], y: [lo, hi]}``: the table top's extent (cell unit), None: the whole plane."""
+    tnode = root.key("table", required=False)
+    if tnode is None:
+        return None
+    (x0, x1), (y0, y1) = tnode.key("x").interval(), tnode.key("y").interval()
+    if not (x0 < x1 and y0 < y1):
+        raise tnode.fail("x: [lo, hi] and y: [lo, hi] with lo < hi")
+    return (x0, x1, y0, y1)
+
+
+def _collision_switch(root: Node) -> bool:
+    """``collision: false`` turns the collision check off for a cell (a user's opt-out: every
+    reach is then decided by IK and the wrist height alone); default true."""
+    node = root.key("collision", required=False)
+    if node is None:
+        return True
+    if not isinstance(node.value, bool):
+        raise node.fail("true or false", show(node.value))
+    return node.value
+
+
+def _clearance(root: Node) -> float | None:
+    """``clearance:`` the collision margin (cell unit, >= 0), None when not given."""
+    cnode = root.key("clearance", required=False)
+    if cnode is None:
+        return None
+    m = cnode.number()
+    if m < 0:
+        raise cnode.fail("a clearance margin >= 0", show(cnode.value))
+    return m
+
+
+def load_problem(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> Cell:
+    """Load and validate ``kb/problems/*.yaml`` with the robot and object files it names
+    (each file at most ``max_bytes``)."""
+    path = Path(path)
+    root = read_kb(path, "problem", max_bytes)
+    name = root.key("problem").label()
+    unit, _, rad_per = units_of(root)
+    base = path.parent
+
+    rnode = root.key("robot")
+    if isinstance(rnode.value, dict):  # inline, from a URDF
+        robot, rpath = load_urdf_robot(rnode, base, unit, rad_per)
+    else:
+        rpath = _ref_path(rnode, base, "robot")
+        with _referenced(rnode, "robot"):
+            robot = load_robot(rpath, unit=unit, max_bytes=max_bytes)
+    memo = Memo()  # this load's tables: the object files of a problem repeat their transforms
+    objects, positions, model_files = _objects(root, base, unit, max_bytes, robot.finger_separation, robot.gripper,
+                                               memo)
+    grip = root.key("gripper").choice(("open", "closed"))
+    unc = root.key("uncertainty")
+    man = _bounds(unc.key("manipulator"), 1.0, rad_per)
+    obj_bounds = _object_bounds(unc, objects, rad_per)
+    sensors = _sensors(root, rad_per)
+    transforms = {k: tm_node(n.key("tm"), 1.0, memo)
+                  for k, n in (root.key("transforms", False) or Node("", "", {})).items()}
+    vectors = {k: n.vector(3) for k, n in (root.key("vectors", False) or Node("", "", {})).items()}
+    turns: dict[str, tuple[tuple[str, tuple[str, ...]], ...]] = {}
+    goals = _goals(root, objects, transforms, vectors, positions, turns)
+    initial: list[Term] = [("gripper", grip)] + [("part_location", p.obj, p.name) for p in positions.values()]
+    meshes = [m.geometry.mesh_file for m in objects.values() if m.geometry is not None and m.geometry.mesh_file]
+    files = tuple(dict.fromkeys(str(Path(u).resolve()) for u in [path, rpath, *model_files, *meshes]))
+    cell = Cell(
+        files=files,
+        name=name,
+        file=str(path),
+        unit=unit,
+        robot=robot,
+        finger_separation=robot.finger_separation,
+        objects=objects,
+        positions=positions,
+        transforms=transforms,
+        vectors=vectors,
+        turns=turns,
+        initial=initial,
+        goals=goals,
+        manipulator_bounds=man,
+        object_bounds=obj_bounds,
+        sensors=sensors,
+        placement_regions=_regions(root),
+        obstacles=tuple(_obstacles(root, base, rad_per)),
+        table=_table(root),
+        clearance=_clearance(root),
+        collisions=_collision_switch(root),
+        home=home_angles(root.key("home", required=False), robot, rad_per),
+    )
+    if cell.home is None:
+        cell.home = robot.home
+    mnode = root.key("motion", required=False)
+    if mnode is not None and not isinstance(mnode.value, bool):
+        raise mnode.fail("true or false (plan the motions between the end-points)", show(mnode.value))
+    cell.plan_motions = bool(mnode is not None and mnode.value)
+    sanity.check_cell(cell)  # physically possible: parts apart, on the table, in reach (sanity.py)
+    return cell
