@@ -12,7 +12,7 @@ import pytest
 
 from spar_py.app.cli import main
 from spar_py.core.errors import KBError, SparValueError
-from spar_py.kb import facts, load_object, load_problem, load_robot, parse_term
+from spar_py.kb import facts, load_object, load_problem, load_robot, parse_term, term_text
 
 ROOT = Path(__file__).resolve().parent.parent
 BAD = sorted((ROOT / "tests" / "bad").glob("*.yaml"))
@@ -156,7 +156,8 @@ def test_bad_robot_file_one_line_error(tmp_path: Path, old: str, new: str, key: 
 
 
 @pytest.mark.parametrize("module", ["spar_py.world.robots", "spar_py.world.ik.puma", "spar_py.world.ik.ur",
-                                    "spar_py.world.ik.numeric", "spar_py.core.model", "spar_py.core.geometry"])
+                                    "spar_py.world.ik.numeric", "spar_py.core.model", "spar_py.core.geometry",
+                                    "spar_py.core.units"])
 def test_the_model_does_not_import_the_kb(module: str) -> None:
     # kb -> model -> kinematics -> kb was an import circle: the robot loader lives in kb now
     code = f"import sys, {module}; print(sorted(m for m in ('spar_py.kb', 'yaml') if m in sys.modules))"
@@ -181,3 +182,38 @@ def test_rotation_check_says_what_was_expected(tmp_path: Path) -> None:
     bad.write_text(text.replace(old, "tm: [[1, 0, 0], [0, 1, 0], [0, 0, 1.001], [0, 0, 0]]", 1))
     with pytest.raises(KBError, match=r"orthonormal to 1e-06, det \+1; R\^T R is off I by 0\.002"):
         load_object(bad, "in")
+
+
+#: The kb package's modules, each importing only modules before it in this list (kb/__init__.py).
+KB_ORDER = ["node", "reader", "schema", "values", "terms", "objects", "robots", "sanity", "problem",
+            "prolog_facts", "check"]
+
+
+def test_the_kb_modules_import_one_way() -> None:
+    """Every module of src/spar_py/kb/ (imports at any depth, inside functions too) imports only
+    modules before it in KB_ORDER, never the package itself; only __init__ imports them all."""
+    pkg = ROOT / "src" / "spar_py" / "kb"
+    assert sorted(p.stem for p in pkg.glob("*.py") if p.stem != "__init__") == sorted(KB_ORDER)
+    for i, name in enumerate(KB_ORDER):
+        used = set()
+        for node in ast.walk(ast.parse((pkg / f"{name}.py").read_text())):
+            if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("spar_py.kb"):
+                assert node.module != "spar_py.kb", f"kb/{name}.py imports the kb package itself"
+                used.add(node.module.removeprefix("spar_py.kb."))
+            elif isinstance(node, ast.Import):
+                assert not any(a.name.startswith("spar_py.kb") for a in node.names), name
+        assert used <= set(KB_ORDER[:i]), f"kb/{name}.py imports {sorted(used - set(KB_ORDER[:i]))} from above it"
+
+
+def test_goals_and_initial_facts_are_term_data_from_the_yaml_to_the_facts() -> None:
+    """The goals are parsed once, at load, and kept as terms (no text round trip); the initial
+    state is built as terms; facts() sends both as they are."""
+    cell = load_problem(PAPER)
+    goal = ("assembled", "peg", "block", [["peg_face"], ["block_face"]], "trans_1", "vec_1")
+    assert cell.goals == [goal]
+    assert cell.initial == [("gripper", "open"), ("part_location", "peg", "init_pos1"),
+                            ("part_location", "block", "init_pos2")]
+    sent = [f for f in facts(cell) if f[0] in ("initial", "goal")]
+    assert sent == [("initial", t) for t in cell.initial] + [("goal", goal)]
+    assert term_text(goal) == "assembled(peg, block, [[peg_face], [block_face]], trans_1, vec_1)"
+    assert parse_term(term_text(goal)) == goal

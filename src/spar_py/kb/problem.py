@@ -20,11 +20,11 @@ from spar_py.core.errors import UnknownKeyError, WrongKindError
 from spar_py.core.geometry import same_stable_pose
 from spar_py.core.memo import Memo
 from spar_py.core.model import Bounds, Cell, ObjectModel, Position, Sensor, Term
-from spar_py.kb import sanity
 from spar_py.kb.node import Node, cut, did_you_mean, show
 from spar_py.kb.objects import load_object
 from spar_py.kb.reader import MAX_INPUT_BYTES
 from spar_py.kb.robots import home_angles, load_robot, load_urdf_robot
+from spar_py.kb.sanity import check_cell
 from spar_py.kb.schema import KINDS, read_kb
 from spar_py.kb.terms import parse_term
 from spar_py.kb.values import LOAD_MEMO_LIMIT, tm_node, units_of, xyz_rpy_frame
@@ -403,5 +403,5 @@ def load_problem(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> Cell:
     if mnode is not None and not isinstance(mnode.value, bool):
         raise mnode.fail("true or false (plan the motions between the end-points)", show(mnode.value))
     cell.plan_motions = bool(mnode is not None and mnode.value)
-    sanity.check_cell(cell)  # physically possible: parts apart, on the table, in reach (sanity.py)
+    check_cell(cell)  # physically possible: parts apart, on the table, in reach (sanity.py)
     return cell
