@@ -256,6 +256,7 @@ def _geometry(root: Node, path: Path, unit: str, scale: float) -> tuple[Any, tup
 
 
 def _flag(node: Node) -> bool:
+    """A ``true`` / ``false`` value."""
     if not isinstance(node.value, bool):
         raise node.fail("true or false", show(node.value))
     return node.value

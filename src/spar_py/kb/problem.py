@@ -38,6 +38,7 @@ SENSOR_NAMES = ("dense_range_scan",)
 
 
 def _bounds(node: Node, len_scale: float, rad_per: float) -> Bounds:
+    """An uncertainty box ``{dx, dy, dz, dtheta}`` (each ``[lo, hi]``), lengths times ``len_scale``, angles in rad."""
     def iv(k: str, s: float) -> tuple[float, float]:
         lo, hi = node.key(k).interval()
         return lo * s, hi * s
@@ -403,5 +404,5 @@ def load_problem(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> Cell:
     if mnode is not None and not isinstance(mnode.value, bool):
         raise mnode.fail("true or false (plan the motions between the end-points)", show(mnode.value))
     cell.plan_motions = bool(mnode is not None and mnode.value)
-    check_cell(cell)  # physically possible: parts apart, on the table, in reach (sanity.py)
+    check_cell(cell)  # physically possible: parts apart, on the table, in reach (kb.sanity)
     return cell

@@ -18,11 +18,13 @@ __all__ = ["facts", "position_class"]
 
 
 def _tm(T: np.ndarray) -> tuple:
+    """A 4x4 transform as the paper's ``tm(Rows)`` term: the rotation's columns as rows, then the displacement."""
     rows = [[_num(v) for v in T[:3, i]] for i in range(3)] + [[_num(v) for v in T[:3, 3]]]
     return ("tm", rows)
 
 
 def _num(v: float) -> float:
+    """A number for a fact: rounded to 12 decimals, without a negative zero."""
     r = round(float(v), 12)
     return 0.0 if r == 0 else r
 

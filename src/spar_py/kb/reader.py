@@ -118,6 +118,7 @@ BoundedLoader.add_implicit_resolver("tag:yaml.org,2002:float", re.compile(r"^[-+
 
 
 def _children(node: yaml.Node) -> Iterator[yaml.Node]:
+    """A YAML node's children (a sequence's items, a mapping's keys and values)."""
     if isinstance(node, yaml.SequenceNode):
         yield from node.value
     elif isinstance(node, yaml.MappingNode):

@@ -201,6 +201,7 @@ def _limits(lim_node: Node, rad_per: float) -> np.ndarray:
 
 
 def _ik_choice(root: Node) -> str:
+    """``ik:`` (IK_CHOICES), ``auto`` when absent."""
     node = root.key("ik", required=False)
     return "auto" if node is None else node.choice(IK_CHOICES)
 

@@ -268,6 +268,7 @@ def _check_shape(node: Node, spec: Spec) -> None:
 
 
 def _check_keys(node: Node, spec: Keys) -> None:
+    """check_shape of a :class:`Keys` mapping: no unknown key, every required key, each value by its spec."""
     allowed = {**spec.required, **spec.optional}
     children = node.items()
     for k, child in children:
