@@ -71,7 +71,8 @@
 :- use_module(establish).
 :- use_module(plan_state).
 :- use_module(spar_defaults).
-:- use_module('../kb/templates/actions', [gensym//2]).
+:- use_module('../kb/templates/actions',
+              [gensym//2, mating_grasps/3, assembly_turn/3]).
 
 %!  phase1_search(+Options, -Outcome, -Bound) is det.
 %
@@ -218,15 +219,15 @@ approach_down(Va, [Rx, Ry, Rz|_]) :-
 %   no_mate_at(+Oracle, +Peg-PegFaces, +Hole, +Ta, +Pose, +Label): the
 %   assemble for the goal could not happen with Hole at its absolute
 %   position Label (in stable pose Pose): for every turn of Ta that allows
-%   Pose (actions:assembly_turn/3), the oracle's mate_reachable pairs of
+%   Pose (spar_actions:assembly_turn/3), the oracle's mate_reachable pairs of
 %   Peg's mating grasps at Label are none.
 
 no_mate_at(Oracle, Peg-PegFaces, Hole, Ta, Pose, Label) :-
     atom(Ta),
-    actions:mating_grasps(Peg, PegFaces, Gs0),
+    mating_grasps(Peg, PegFaces, Gs0),
     sort(Gs0, Gs),
     Gs \== [],
-    \+ ( actions:assembly_turn(Ta, Turn, Allowed),
+    \+ ( assembly_turn(Ta, Turn, Allowed),
          ( Allowed == all -> true ; memberchk(Pose, Allowed) ),
          cms_ask(Oracle, mate_reachable(Turn), Peg-Hole, Gs, [Label], Pairs),
          Pairs \== [] ).

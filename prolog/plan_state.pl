@@ -179,7 +179,7 @@ set_net_of_plan(Net, plan(A1,A2,_,A4,A5,A6,A7,A8,A9,A10,A11,A12,A13,A14,A15,A16,
 %!  set_ids_of_plan(+Ids:list, +Plan0, -Plan) is det.
 %
 %   The symbol counters of the plan's names (action_N, grasp_N, pos_N,
-%   goal_N, ...), threaded by actions:gensym//2.
+%   goal_N, ...), threaded by spar_actions:gensym//2.
 %
 %   @error type_error(list, Ids) from set_ids_of_plan/3 if Ids is
 %          not a list (instantiation_error if it is unbound or partial).
