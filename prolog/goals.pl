@@ -9,7 +9,7 @@
     to be satisfied just before action ActionId; the user's goals are
     op(top_N, finish, Goal), `finish` being the virtual last action.
 
-    The plan state is the plan/16 record of plan_state.pl, threaded
+    The plan state is the plan/18 record of plan_state.pl, threaded
     through the search (Plan0 -> Plan): the plan actions (newest first, as
     Fig. 23 lists them), the ordering graph, the geometric network, the
     goal stacks, the satisfied list of sat(Goal, Establisher) entries, the
@@ -39,12 +39,13 @@
     from a lower bound on the plan size (lower_bound/2) to max_actions one
     step at a time (iterative deepening): the first plan found is a
     smallest one, and an unsolvable problem ends, reporting the goal that
-    failed at the deepest point of the last round (a geometric goal the CMS refused, if any). A
-    round that never met the bound ends the search at once. Planning of
-    this kind is exponential in the plan size (Sec. 7.2) and undecidable
-    (Sec. 2), so a budget of steps over all rounds (max_steps, by default
-    derived from the problem's size; the defaults are spar_defaults.pl's) keeps even a hard unsolvable problem
-    short; when it is spent, the outcome names the last bound searched
+    failed at the deepest point of the last round (a geometric goal the
+    CMS refused, if any). A round that never met the bound ends the search
+    at once. Planning of this kind is exponential in the plan size (Sec.
+    7.2) and undecidable (Sec. 2), so a budget of steps over all rounds
+    (max_steps, by default derived from the problem's size; the defaults
+    are spar_defaults.pl's) keeps even a hard unsolvable problem short;
+    when it is spent, the outcome names the last bound searched
     completely.
 */
 :- module(goals,

@@ -1,19 +1,28 @@
-/*  spar-py: the planner's entry points (phase 1 of Sec. 2) and the partial
-    plan it returns.
+/*  spar-py: the planner's entry points (phases 1 and 2 of Sec. 2) and the
+    terms they return.
 
-    Load this file; it loads the rest (Fig. 1, one module per box):
+    Load this file; it loads the rest (Fig. 1, one module per box), listed
+    so that each uses only modules below it (no cycle:
+    tests/prolog/modules.plt):
 
+      toplevel.pl   the toplevel: load_problem/1,2, print_plan/1, help
+      uncertainty.pl  phase 2: plan instances run, sensing and recovery
+                    inserted (Secs. 3.3, 4.3)
+      partial_plan.pl the partial plan: readers, instances, dict, printing
       goals.pl      goal stacks, satisfied list, the loop, geometric goals
+      establish.pl  establishment, clobbering, promotion, white knights
       plan_state.pl the plan record the loop threads, the search recorder
       spar_defaults.pl  the default of every planner option
-      establish.pl  establishment, clobbering, promotion, white knights
       ordering.pl   the ordering graph: prior_to/2, cycles, linearisations
       cms.pl        the geometric constraint network
       csp.pl        network consistency (Figs. 16-17), AC-3, solutions
-      kb.pl         the knowledge base (module kb), loaded from Python
       foreign.pl    the calls into Python
       ../kb/templates/actions.pl   templates and rules (Figs. 2-6)
       ../kb/templates/sensing.pl   Figs. 11-13, for phase 2
+      kb.pl         the knowledge base (module kb), loaded from Python
+
+    spar reexports partial_plan.pl and toplevel.pl: a user of the planner
+    finds every entry point here.
 
     Terms:
 
