@@ -36,7 +36,7 @@
 :- use_module(foreign, [load_problem_file/2, unload_problem_cell/1]).
 :- use_module(partial_plan, [print_partial/1]).
 :- use_module(uncertainty, [print_ur/1]).
-:- autoload(library(pldoc/doc_process), [doc_comment/4]).
+:- autoload(library(pldoc/doc_process), [doc_comment/4]).  % loaded by spar_help/1
 
 %!  load_problem(+File) is det.
 %!  load_problem(+File, -Problem) is det.
@@ -198,6 +198,7 @@ in_directory(Dir, Name, File) :-
 spar_help(Spec) :-
     (   Spec = Name/Arity -> true ; Name = Spec ),
     must_be(atom, Name),
+    use_module(library(pldoc), []),     % before doc_comment/4's own library
     findall(C, ( doc_comment(M:Name/Arity, _, _, C),
                  spar_module(M) ),
             Cs0),
