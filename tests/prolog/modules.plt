@@ -48,7 +48,13 @@ planner_files(Root, Files) :-
 
 module_graph(Root, Graph) :-
     planner_files(Root, Files),
-    maplist(xref_source, Files),
+    files_module_graph(Files, Graph).
+
+%   files_module_graph(+Files, -Graph): module_graph/2 of the module files
+%   Files.
+
+files_module_graph(Files, Graph) :-
+    maplist([F]>>xref_source(F, [silent(true)]), Files),
     findall(F-M, ( member(F, Files), xref_module(F, M) ), FileModules),
     pairs_values(FileModules, Modules),
     findall(M1-M2,
@@ -98,6 +104,20 @@ test(graph_has_imports_and_qualified_calls) :-
     memberchk(spar_sensing, Unc),           % spar_sensing:remedy_rule/3, ...
     memberchk(goals-Goals, G),
     memberchk(spar_actions, Goals).
+
+%   Two modules in temporary files, a qualified call from each into the
+%   other and no import: the graph has both arcs, and the cycle is found.
+test(qualified_calls_make_a_cycle, [ Graph == [qa-[qb], qb-[qa]],
+                                     Cycles == [qa-qb, qb-qa],
+                                     cleanup(maplist(delete_file, [A, B])) ]) :-
+    tmp_file_stream(text, A, SA),
+    format(SA, ":- module(qa, [a/0]).~na :- qb:b.~n", []),
+    close(SA),
+    tmp_file_stream(text, B, SB),
+    format(SB, ":- module(qb, [b/0]).~nb :- true.~nc :- findall(x, qa:a, _).~n", []),
+    close(SB),
+    files_module_graph([A, B], Graph),
+    module_cycles(Graph, Cycles).
 
 test(no_cycle, Cycles == []) :-
     repo_root(Root),
