@@ -273,8 +273,8 @@ restrict(V, Labels, Net0, Result) :-
 %   unless its label set is empty, which is tested over the whole network
 %   here, as the search of the whole network would find it). So the answer
 %   is the one of a search of the whole network (cms_consistent/1), at the
-%   cost of the component: phase 1 of N independent pairs no longer pays
-%   N-fold for each check.
+%   cost of the component: in a network of N independent pairs a check
+%   searches one pair, not N.
 
 checked(Net, Vars, Result) :-
     cms_component(Net, Vars, Component),

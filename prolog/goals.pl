@@ -9,7 +9,7 @@
     to be satisfied just before action ActionId; the user's goals are
     op(top_N, finish, Goal), `finish` being the virtual last action.
 
-    The plan state is the plan/16 record of plan_state.pl, threaded
+    The plan state is the plan/18 record of plan_state.pl, threaded
     through the search (Plan0 -> Plan): the plan actions (newest first, as
     Fig. 23 lists them), the ordering graph, the geometric network, the
     goal stacks, the satisfied list of sat(Goal, Establisher) entries, the
@@ -39,12 +39,13 @@
     from a lower bound on the plan size (lower_bound/2) to max_actions one
     step at a time (iterative deepening): the first plan found is a
     smallest one, and an unsolvable problem ends, reporting the goal that
-    failed at the deepest point of the last round (a geometric goal the CMS refused, if any). A
-    round that never met the bound ends the search at once. Planning of
-    this kind is exponential in the plan size (Sec. 7.2) and undecidable
-    (Sec. 2), so a budget of steps over all rounds (max_steps, by default
-    derived from the problem's size; the defaults are spar_defaults.pl's) keeps even a hard unsolvable problem
-    short; when it is spent, the outcome names the last bound searched
+    failed at the deepest point of the last round (a geometric goal the
+    CMS refused, if any). A round that never met the bound ends the search
+    at once. Planning of this kind is exponential in the plan size (Sec.
+    7.2) and undecidable (Sec. 2), so a budget of steps over all rounds
+    (max_steps, by default derived from the problem's size; the defaults
+    are spar_defaults.pl's) keeps even a hard unsolvable problem short;
+    when it is spent, the outcome names the last bound searched
     completely.
 */
 :- module(goals,
@@ -71,7 +72,8 @@
 :- use_module(establish).
 :- use_module(plan_state).
 :- use_module(spar_defaults).
-:- use_module('../kb/templates/actions', [gensym//2]).
+:- use_module('../kb/templates/actions',
+              [gensym//2, mating_grasps/3, assembly_turn/3]).
 
 %!  phase1_search(+Options, -Outcome, -Bound) is det.
 %
@@ -218,15 +220,15 @@ approach_down(Va, [Rx, Ry, Rz|_]) :-
 %   no_mate_at(+Oracle, +Peg-PegFaces, +Hole, +Ta, +Pose, +Label): the
 %   assemble for the goal could not happen with Hole at its absolute
 %   position Label (in stable pose Pose): for every turn of Ta that allows
-%   Pose (actions:assembly_turn/3), the oracle's mate_reachable pairs of
+%   Pose (spar_actions:assembly_turn/3), the oracle's mate_reachable pairs of
 %   Peg's mating grasps at Label are none.
 
 no_mate_at(Oracle, Peg-PegFaces, Hole, Ta, Pose, Label) :-
     atom(Ta),
-    actions:mating_grasps(Peg, PegFaces, Gs0),
+    mating_grasps(Peg, PegFaces, Gs0),
     sort(Gs0, Gs),
     Gs \== [],
-    \+ ( actions:assembly_turn(Ta, Turn, Allowed),
+    \+ ( assembly_turn(Ta, Turn, Allowed),
          ( Allowed == all -> true ; memberchk(Pose, Allowed) ),
          cms_ask(Oracle, mate_reachable(Turn), Peg-Hole, Gs, [Label], Pairs),
          Pairs \== [] ).

@@ -1,6 +1,6 @@
 /*  spar-py: the knowledge bases of the loaded problems (module kb).
 
-    The Python loader (src/spar_py/kb.py) validates the YAML files and sends
+    The Python loader (package spar_py.kb) validates the YAML files and sends
     a problem's facts here through foreign:spar_load_facts/1. Several
     problems may be loaded at once: each fact is stored under its problem's
     name, and loading a problem again replaces only that problem's facts.

@@ -1,19 +1,28 @@
-/*  spar-py: the planner's entry points (phase 1 of Sec. 2) and the partial
-    plan it returns.
+/*  spar-py: the planner's entry points (phases 1 and 2 of Sec. 2) and the
+    terms they return.
 
-    Load this file; it loads the rest (Fig. 1, one module per box):
+    Load this file; it loads the rest (Fig. 1, one module per box), listed
+    so that each uses only modules below it (no cycle:
+    tests/prolog/modules.plt):
 
+      toplevel.pl   the toplevel: load_problem/1,2, print_plan/1, help
+      uncertainty.pl  phase 2: plan instances run, sensing and recovery
+                    inserted (Secs. 3.3, 4.3)
+      partial_plan.pl the partial plan: readers, instances, dict, printing
       goals.pl      goal stacks, satisfied list, the loop, geometric goals
+      establish.pl  establishment, clobbering, promotion, white knights
       plan_state.pl the plan record the loop threads, the search recorder
       spar_defaults.pl  the default of every planner option
-      establish.pl  establishment, clobbering, promotion, white knights
       ordering.pl   the ordering graph: prior_to/2, cycles, linearisations
       cms.pl        the geometric constraint network
       csp.pl        network consistency (Figs. 16-17), AC-3, solutions
-      kb.pl         the knowledge base (module kb), loaded from Python
       foreign.pl    the calls into Python
       ../kb/templates/actions.pl   templates and rules (Figs. 2-6)
       ../kb/templates/sensing.pl   Figs. 11-13, for phase 2
+      kb.pl         the knowledge base (module kb), loaded from Python
+
+    spar reexports partial_plan.pl and toplevel.pl: a user of the planner
+    finds every entry point here.
 
     Terms:
 
@@ -38,36 +47,30 @@
 :- module(spar,
           [ plan/2,                  % +Problem, -Plan
             plan/3,                  % +Problem, +Options, -Plan
-            print_plan/1,            % +Plan
             plan_dict/4,             % +Problem, +Options, -Dict, -Text
             plan_phase1/2,           % +Problem, -Partial
-            phase1/3,                % +Problem, +Options, -Outcome
-            partial_dict/2,          % +Partial, -Dict
-            print_partial/1,         % +Partial
-            partial_instances/2,     % +Partial, -Instance
-            partial_actions/2,       % +Partial, -Actions
-            partial_ordering/2,      % +Partial, -PriorTos
-            partial_network/2        % +Partial, -Net
+            phase1/3                 % +Problem, +Options, -Outcome
           ]).
 :- use_module(library(error)).
 :- use_module(library(lists)).
 :- use_module(library(apply)).
 :- use_module(library(option)).
-:- use_module(library(pairs)).
 :- use_module(library(yall)).
-:- use_module(kb, [with_problem/2]).
-:- use_module(foreign).
-:- use_module(csp).
-:- use_module(ordering).
-:- use_module(cms).
-:- use_module(establish).
-:- use_module(goals).
-:- use_module(spar_defaults).
-:- use_module('../kb/templates/actions').
-:- use_module('../kb/templates/sensing').
-:- use_module(uncertainty).
-:- reexport(toplevel).
 :- use_module(library(time)).
+:- use_module(kb, [with_problem/2]).
+:- use_module(foreign, [term_data/2]).
+:- use_module(establish, [known_declobber_method/1]).
+:- use_module(goals, [phase1_search/3, max_action_bound/2]).
+:- use_module(spar_defaults, [default_option/2]).
+:- use_module('../kb/templates/actions', []).
+:- use_module('../kb/templates/sensing', []).
+:- use_module(uncertainty, [phase2/4, print_ur/1, ur_dict/2]).
+%   What a user of the planner calls besides the entry points above: the
+%   partial plan's readers, instances, dict and printing (partial_plan.pl),
+%   print_plan/1, load_problem/1,2 and the rest of the toplevel
+%   (toplevel.pl).
+:- reexport(partial_plan).
+:- reexport(toplevel).
 
 :- meta_predicate phase1(+, :, -).
 
@@ -174,194 +177,6 @@ check_option(M, oracle(O0), oracle(O)) :- !,
     O = Mod:O1.
 check_option(_, Option, Option).
 
-%!  partial_actions(+Partial, -Actions:list) is det.
-%
-%   The plan actions as action(Id, Term), newest first (Fig. 23).
-
-partial_actions(partial(Actions, _, _, _), List) :-
-    maplist([action(Id, T, _, _, _), action(Id, T)]>>true, Actions, List).
-
-%!  partial_ordering(+Partial, -PriorTos:list) is det.
-%
-%   The ordering constraints as prior_to(A1, A2), in standard order.
-
-partial_ordering(partial(_, Order, _, _), PriorTos) :-
-    ordering_arcs(Order, PriorTos).
-
-%!  partial_network(+Partial, -Net) is det.
-%
-%   The CMS network of the partial plan (see cms.pl).
-
-partial_network(partial(_, _, Net, _), Net).
-
-%!  partial_instances(+Partial, -Instance) is nondet.
-%
-%   A plan instance for phase 2 (Sec. 3.3): a solution of the network
-%   combined with a linearisation of the ordering graph. Instance is
-%   instance(Steps, Bindings): Steps the instantiated templates in
-%   execution order with every network variable replaced by its label,
-%   Bindings the Var = Label pairs in standard order of Var. Backtracking
-%   enumerates solutions (outer) and linearisations (inner), lazily. A
-%   solution that gives a separated pair sep(D, Cond) the same labels
-%   (D would clobber Cond after all) is skipped.
-
-partial_instances(partial(Actions, Order, Net, Sat), instance(Steps, Bindings)) :-
-    cms_solution(Net, Assignment),
-    forall(member(sep(D, Cond), Sat),
-           ( substitute(Assignment, D, D1),
-             substitute(Assignment, Cond, Cond1),
-             D1 \= Cond1 )),
-    linearisation(Order, Ids),
-    maplist(instance_step(Actions, Assignment), Ids, Steps),
-    maplist([V-L, V=L]>>true, Assignment, Bindings).
-
-instance_step(Actions, Assignment, Id, Step) :-
-    memberchk(action(Id, T, Pre, Add, Del), Actions),
-    substitute(Assignment, action(Id, T, Pre, Add, Del), Step).
-
-substitute(Assignment, T0, T) :-
-    (   atom(T0), memberchk(T0-L, Assignment)
-    ->  T = L
-    ;   compound(T0)
-    ->  T0 =.. [F|As0],
-        maplist(substitute(Assignment), As0, As),
-        T =.. [F|As]
-    ;   T = T0
-    ).
-
-%!  partial_dict(+Partial, -Dict) is det.
-%
-%   Partial as a dict for janus (the "partial" of the plan JSON, schema 2,
-%   docs/json-schema.md):
-%
-%     _{actions: [_{id, term, name, args}],    newest first (Fig. 23)
-%       ordering: [[Before, After]],           prior_to/2 (Fig. 24)
-%       variables: _{Var: [Label]},             label sets after AC-3
-%       raw_variables: _{Var: [Label]},         as posted (Fig. 25)
-%       arcs: [_{vars: [V1, V2], pairs: [[L1, L2]]}],
-%       separations: [_{deleted, condition, text}]}   dif(Deleted, Cond)
-%                                                 posted by separation,
-%                                                 oldest first
-%
-%   Arguments, deleted and condition are term data (foreign:term_data/2:
-%   atoms as strings, compounds as _{functor, args}); term and text are
-%   the same terms written with ~q, for display only. Ids, variables and
-%   labels are atoms.
-
-partial_dict(Partial, Dict) :-
-    Partial = partial(Actions, _, Net, Sat),
-    maplist(action_dict, Actions, ADicts),
-    partial_ordering(Partial, PriorTos),
-    maplist([prior_to(A, B), [A, B]]>>true, PriorTos, Ordering),
-    cms_nodes(Net, Raw),
-    (   cms_pruned_nodes(Net, Pruned) -> true ; Pruned = Raw ),
-    dict_pairs(RawDict, _, Raw),
-    dict_pairs(PrunedDict, _, Pruned),
-    cms_arcs(Net, Arcs),
-    maplist(arc_dict, Arcs, ArcDicts),
-    findall(SD, ( member(sep(D, C), Sat), separation_dict(D, C, SD) ), Separations),
-    Dict = _{actions: ADicts, ordering: Ordering, variables: PrunedDict,
-             raw_variables: RawDict, arcs: ArcDicts,
-             separations: Separations}.
-
-separation_dict(D, C, _{deleted: DD, condition: CD, text: [DS, CS]}) :-
-    term_data(D, DD),
-    term_data(C, CD),
-    format(string(DS), "~q", [D]),
-    format(string(CS), "~q", [C]).
-
-action_dict(action(Id, Term, _, _, _),
-            _{id: Id, term: S, name: Name, args: ArgData}) :-
-    format(string(S), "~q", [Term]),
-    Term =.. [Name|Args],
-    maplist(term_data, Args, ArgData).
-
-arc_dict(arc(V1, V2, Pairs), _{vars: [V1, V2], pairs: Ps}) :-
-    maplist([A/B, [A, B]]>>true, Pairs, Ps).
-
-%!  print_partial(+Partial) is det.
-%
-%   Print Partial to current output: the plan actions as Fig. 23, the
-%   ordering constraints, the network arcs and label sets as Fig. 25
-%   (`grasp_1-pos_1: [p1G1/p2P1, ...]`), and the label sets after arc
-%   consistency, and the separations posted (`sep(D, Cond)`: D, deleted
-%   by a possible clobberer, is kept apart from Cond), if any.
-
-print_partial(Partial) :-
-    Partial = partial(Actions, _, Net, Sat),
-    format("PLAN ACTIONS~n"),
-    forall(member(A, Actions), print_action(A)),
-    partial_ordering(Partial, PriorTos),
-    format("ORDERING~n"),
-    forall(member(P, PriorTos),
-           format("  ~W~n", [P, [quoted(true), spacing(next_argument)]])),
-    format("NETWORK ARCS~n"),
-    cms_arcs(Net, Arcs),
-    forall(member(arc(V1, V2, Pairs), Arcs),
-           print_labelled(V1-V2, Pairs)),
-    format("LABEL SETS~n"),
-    cms_nodes(Net, Raw),
-    forall(member(V-Ls, Raw), print_labels(V, Ls)),
-    format("LABEL SETS AFTER ARC CONSISTENCY~n"),
-    (   cms_pruned_nodes(Net, Pruned)
-    ->  forall(member(V-Ls, Pruned), print_labels(V, Ls))
-    ;   format("  (inconsistent)~n")
-    ),
-    (   memberchk(sep(_, _), Sat)
-    ->  format("SEPARATIONS~n"),
-        forall(member(sep(D, C), Sat),
-               format("  dif(~W, ~W)~n",
-                      [D, [quoted(true), spacing(next_argument)],
-                       C, [quoted(true), spacing(next_argument)]]))
-    ;   true
-    ).
-
-print_labels(V, Labels) :-
-    map_list_to_pairs(natural_key, Labels, Keyed),
-    keysort(Keyed, Sorted),
-    pairs_values(Sorted, Natural),
-    print_labelled(V, Natural).
-
-%   print_labelled(+Head, +List): "  Head: [a,b,...]" wrapped at 76 columns.
-
-print_labelled(Head, List) :-
-    format(string(H), "  ~q: [", [Head]),
-    string_length(H, Col0),
-    format("~s", [H]),
-    foldl(print_item(Col0), List, Col0-first, _),
-    format("]~n").
-
-print_item(Indent, X, Col0-State, Col-later) :-
-    format(string(S), "~q", [X]),
-    string_length(S, Len),
-    (   State == first
-    ->  Sep = "", Col1 = Col0
-    ;   Col0 + Len + 1 > 76
-    ->  format(",~n~*c", [Indent, 0'\s]), Sep = "", Col1 = Indent
-    ;   Sep = ",", Col1 = Col0 + 1
-    ),
-    format("~s~s", [Sep, S]),
-    Col is Col1 + Len.
-
-%   natural_key(+Label, -Key): p1G11 sorts after p1G2.
-
-natural_key(Label, Key) :-
-    atom_codes(Label, Codes),
-    phrase(chunks(Key), Codes).
-
-chunks([C|Cs]) --> chunk(C), !, chunks(Cs).
-chunks([]) --> [].
-
-chunk(N) --> digit(D), digits(Ds), { number_codes(N, [D|Ds]) }.
-chunk(A) --> nondigit(C), nondigits(Cs), { atom_codes(A, [C|Cs]) }.
-
-digits([D|Ds]) --> digit(D), !, digits(Ds).
-digits([]) --> [].
-digit(D) --> [D], { code_type(D, digit) }.
-nondigits([C|Cs]) --> nondigit(C), !, nondigits(Cs).
-nondigits([]) --> [].
-nondigit(C) --> [C], { \+ code_type(C, digit) }.
-
 		 /*******************************
 		 *     BOTH PHASES (Sec. 2)     *
 		 *******************************/
@@ -389,18 +204,9 @@ plan(Problem, Options, plan(Partial, Result)) :-
     with_problem(Problem,
                  ( phase1(Problem, P1, Outcome),
                    Outcome = plan(Partial),
-                   uncertainty:phase2(Problem, Partial, P2, Result) )).
+                   phase2(Problem, Partial, P2, Result) )).
 
 phase2_option(max_instances(_)).
-
-%!  print_plan(+Plan) is det.
-%
-%   Print a plan/3 result: the partial plan (Figs. 23-25) and the chosen
-%   plan instance with its sensing, verdicts, verifications and recoveries.
-
-print_plan(plan(Partial, Result)) :-
-    print_partial(Partial),
-    uncertainty:print_ur(Result).
 
 %!  plan_dict(+Problem, +Options:dict, -Dict, -Text) is det.
 %
@@ -439,7 +245,7 @@ plan_dict_(Problem, Opts, P1, Dict) :-
     Phase1 is T1 - T0,
     (   Outcome = no_plan(N, Goal)
     ->  format(string(G), "~q", [Goal]),
-        goals:max_action_bound(P1, Max),
+        max_action_bound(P1, Max),
         (   N < Max                     % the step budget ran out first
         ->  format("NO PLAN within ~w actions (the last bound searched completely \c
                     before the step budget ran out; the bound was ~w): the goal \c
@@ -456,11 +262,11 @@ plan_dict_(Problem, Opts, P1, Dict) :-
         (   Opts.phase1_only == @(true)
         ->  Dict = _{outcome: "plan", reason: @(none), partial: PD, instance: @(none),
                      timing: _{phase1_s: Phase1}}
-        ;   uncertainty:phase2(Problem, Partial, [max_instances(Opts.max_instances)], R),
+        ;   phase2(Problem, Partial, [max_instances(Opts.max_instances)], R),
             statistics(cputime, T2),
             Phase2 is T2 - T1,
-            uncertainty:print_ur(R),
-            uncertainty:ur_dict(R, ID),
+            print_ur(R),
+            ur_dict(R, ID),
             phase2_outcome(R, ID, Out, Reason),
             Dict = _{outcome: Out, reason: Reason, partial: PD, instance: ID,
                      timing: _{phase1_s: Phase1, phase2_s: Phase2}}

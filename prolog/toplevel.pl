@@ -6,8 +6,9 @@
       - load_problem/1,2 reads a problem file through the Python loader
         (every KB check applies) and keeps it loaded beside the others;
         loaded_problems/1 lists them, unload_problem/1 forgets one;
-      - answers print plan terms as print_plan/1 and partial plans as
-        print_partial/1 do (a portray/1 hook), not as several kB of term;
+      - print_plan/1 prints a plan/2 answer, both phases; answers print
+        plan terms as print_plan/1 and partial plans as print_partial/1
+        do (a portray/1 hook), not as several kB of term;
       - batch_toplevel/0 runs a script read from standard input one query
         at a time (each answered once, bindings printed), for a piped
         `spar repl` where the interactive toplevel would read the next
@@ -22,6 +23,7 @@
             load_problem/2,          % +File, -Problem
             loaded_problems/1,       % -Problems
             unload_problem/1,        % +Problem
+            print_plan/1,            % +Plan
             batch_toplevel/0,
             collect_docs/0,
             spar_help/1              % +Spec
@@ -32,6 +34,9 @@
 :- use_module(library(yall)).
 :- use_module(kb, [loaded_problem/1]).
 :- use_module(foreign, [load_problem_file/2, unload_problem_cell/1]).
+:- use_module(partial_plan, [print_partial/1]).
+:- use_module(uncertainty, [print_ur/1]).
+:- autoload(library(pldoc/doc_process), [doc_comment/4]).  % loaded by spar_help/1
 
 %!  load_problem(+File) is det.
 %!  load_problem(+File, -Problem) is det.
@@ -72,6 +77,15 @@ unload_problem(Problem) :-
 		 *        PRINTING PLANS        *
 		 *******************************/
 
+%!  print_plan(+Plan) is det.
+%
+%   Print a plan/3 result: the partial plan (Figs. 23-25) and the chosen
+%   plan instance with its sensing, verdicts, verifications and recoveries.
+
+print_plan(plan(Partial, Result)) :-
+    print_partial(Partial),
+    print_ur(Result).
+
 :- multifile user:portray/1.
 
 %   The toplevel prints answers with portray(true): a plan prints as
@@ -82,12 +96,12 @@ user:portray(Plan) :-
     is_partial(Partial),
     !,
     nl,
-    spar:print_plan(Plan).
+    print_plan(Plan).
 user:portray(Partial) :-
     is_partial(Partial),
     !,
     nl,
-    spar:print_partial(Partial).
+    print_partial(Partial).
 
 is_partial(P) :-
     nonvar(P),
@@ -184,7 +198,8 @@ in_directory(Dir, Name, File) :-
 spar_help(Spec) :-
     (   Spec = Name/Arity -> true ; Name = Spec ),
     must_be(atom, Name),
-    findall(C, ( pldoc_process:doc_comment(M:Name/Arity, _, _, C),
+    use_module(library(pldoc), []),     % before doc_comment/4's own library
+    findall(C, ( doc_comment(M:Name/Arity, _, _, C),
                  spar_module(M) ),
             Cs0),
     sort(Cs0, Cs),

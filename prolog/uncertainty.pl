@@ -44,9 +44,10 @@
 :- use_module(library(option)).
 :- use_module(library(error)).
 :- use_module(library(yall)).
-:- use_module(library(solution_sequences), [limit/2]).  % imported, not autoloaded (issue 18)
+:- use_module(library(solution_sequences), [limit/2]).  % imported: autoloading reads the library index
 :- use_module(foreign, [py_bridge/2, term_data/2]).
 :- use_module(spar_defaults, [default_option/2]).
+:- use_module(partial_plan, [partial_instances/2]).
 :- use_module('../kb/templates/sensing', []).
 :- use_module('../kb/templates/actions', []).
 
@@ -67,7 +68,7 @@ phase2(Problem, Partial, Options, Result) :-
     option(max_instances(Cap), Options, Cap0),
     must_be(positive_integer, Cap),
     State = best(none, inf, 0, false),
-    (   once(( limit(Cap, spar:partial_instances(Partial, Instance)),
+    (   once(( limit(Cap, partial_instances(Partial, Instance)),
                examine(Problem, Instance, State, Aug),
                arg(2, Aug, 0)
              ))
@@ -96,7 +97,7 @@ examine(Problem, Instance, State, Aug) :-
 
 %!  instance_steps(+Instance, -Steps, -Bindings) is det.
 %
-%   The steps step(Id, Action) of a plan instance (spar:partial_instances/2)
+%   The steps step(Id, Action) of a plan instance (partial_plan:partial_instances/2)
 %   in execution order, and its bindings Var = Label.
 
 instance_steps(instance(Actions, Bindings), Steps, Bindings) :-

@@ -32,6 +32,10 @@ RECORD = PACKAGE_DIR / "_swipl.json"
 
 _lock = threading.Lock()
 _engine: "Engine | None" = None
+#: The loaded cells by name when Prolog hosts Python (a bare ``swipl`` loading prolog/spar.pl,
+#: janus importing this module): there is no Engine then, and the toplevel's load_problem/1
+#: keeps its cells here.
+_hosted_cells: dict[str, Any] = {}
 
 
 #: Problems a session keeps loaded after its run (the last ones planned), so planning one
@@ -493,11 +497,19 @@ def start_engine() -> None:
             _engine = Engine(background=True)
 
 
+def _cells() -> dict[str, Any]:
+    """The loaded cells by name: the engine's, or :data:`_hosted_cells` without one."""
+    return _engine.cells if _engine is not None else _hosted_cells
+
+
 def _cell(problem: str) -> Any:
     """The cell of loaded problem ``problem`` (for the calls from Prolog below)."""
-    if _engine is None:
-        raise SparError("the engine is not started")
-    return _engine.cell(problem)
+    if _engine is not None:
+        return _engine.cell(problem)
+    try:
+        return _hosted_cells[problem]
+    except KeyError:
+        raise SparError(f"problem {problem!r} is not loaded") from None
 
 
 # ---------------------------------------------------------------------- called from Prolog
@@ -509,9 +521,7 @@ def load_problem_file(path: str) -> list[Any]:
     from spar_py.kb import facts, load_problem
 
     cell = load_problem(path)
-    if _engine is None:
-        raise SparError("the engine is not started")
-    _engine.cells[cell.name] = cell
+    _cells()[cell.name] = cell
     return [cell.name, facts(cell)]
 
 
@@ -522,8 +532,7 @@ def is_spar_error(value: Any) -> bool:
 
 def forget_cell(problem: str) -> None:
     """The toplevel's unload_problem/1: drop the cell of ``problem`` (if loaded)."""
-    if _engine is not None:
-        _engine.cells.pop(problem, None)
+    _cells().pop(problem, None)
 
 
 def arc_pairs(problem: str, rule: str, kind: str, objects: list[str], grasps: list[str],

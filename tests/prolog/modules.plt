@@ -1,0 +1,131 @@
+/*  Tests of the planner's module structure: the modules of the .pl files
+    in prolog/ and kb/templates/, with an arc M1 -> M2 when M1 imports M2
+    (use_module, reexport) or calls into it by a qualified goal M2:G in a
+    clause body, form a graph without cycles, so each can be read, loaded
+    and tested with only the modules below it.
+
+    The graph comes from library(prolog_xref): xref_uses_file/3 gives the
+    imports, xref_called/3 the qualified calls (meta-calls included:
+    limit/2, phrase/3, findall/3, ...).
+
+    swipl -g run_tests -t halt tests/prolog/modules.plt
+*/
+:- use_module(library(plunit)).
+:- use_module(library(prolog_xref)).
+:- use_module(library(ugraphs)).
+:- use_module(library(lists)).
+:- use_module(library(apply)).
+:- use_module(library(yall)).
+
+:- prolog_load_context(directory, Dir),
+   asserta(modules_test_dir(Dir)).
+
+%   repo_root(-Root): the checkout this test file belongs to.
+repo_root(Root) :-
+    modules_test_dir(Dir),
+    atomic_list_concat([Dir, '/../..'], Root0),
+    absolute_file_name(Root0, Root, [file_type(directory)]).
+
+%!  planner_files(+Root, -Files) is det.
+%
+%   The planner's own source files under Root: prolog/*.pl and
+%   kb/templates/*.pl, as absolute paths.
+
+planner_files(Root, Files) :-
+    atomic_list_concat([Root, '/prolog/*.pl'], P1),
+    atomic_list_concat([Root, '/kb/templates/*.pl'], P2),
+    expand_file_name(P1, F1),
+    expand_file_name(P2, F2),
+    append(F1, F2, Fs0),
+    maplist([F, A]>>absolute_file_name(F, A), Fs0, Fs),
+    sort(Fs, Files).
+
+%!  module_graph(+Root, -Graph) is det.
+%
+%   Graph is the ugraph of the planner's modules under Root: an arc M1-M2
+%   for every import of M2's file by M1's file and every qualified call
+%   M2:G made from M1, both modules the planner's own.
+
+module_graph(Root, Graph) :-
+    planner_files(Root, Files),
+    files_module_graph(Files, Graph).
+
+%   files_module_graph(+Files, -Graph): module_graph/2 of the module files
+%   Files.
+
+files_module_graph(Files, Graph) :-
+    maplist([F]>>xref_source(F, [silent(true)]), Files),
+    findall(F-M, ( member(F, Files), xref_module(F, M) ), FileModules),
+    pairs_values(FileModules, Modules),
+    findall(M1-M2,
+            ( member(F1-M1, FileModules),
+              module_dependency(F1, M1, FileModules, M2),
+              M2 \== M1 ),
+            Arcs0),
+    sort(Arcs0, Arcs),
+    vertices_edges_to_ugraph(Modules, Arcs, Graph).
+
+module_dependency(File, _, FileModules, M2) :-
+    xref_uses_file(File, _Spec, Path),
+    memberchk(Path-M2, FileModules).
+module_dependency(File, _, FileModules, M2) :-
+    xref_called(File, Called, _By),
+    nonvar(Called),
+    Called = M2:_,
+    atom(M2),
+    memberchk(_-M2, FileModules).
+
+%!  module_cycles(+Graph, -Pairs) is det.
+%
+%   Pairs are the arcs M1-M2 of Graph that lie on a cycle (M1 is reachable
+%   from M2): the arcs to undo.
+
+module_cycles(Graph, Pairs) :-
+    transitive_closure(Graph, Closure),
+    findall(M1-M2,
+            ( member(M1-Ns, Graph), member(M2, Ns),
+              memberchk(M2-Reach, Closure), memberchk(M1, Reach) ),
+            Pairs).
+
+:- begin_tests(planner_modules).
+
+test(every_file_a_module, Missing == []) :-
+    repo_root(Root),
+    planner_files(Root, Files),
+    maplist(xref_source, Files),
+    exclude([F]>>xref_module(F, _), Files, Missing).
+
+test(graph_has_imports_and_qualified_calls) :-
+    repo_root(Root),
+    module_graph(Root, G),
+    memberchk(spar-Spar, G),
+    memberchk(goals, Spar),                 % use_module(goals, [...])
+    memberchk(uncertainty-Unc, G),
+    memberchk(spar_sensing, Unc),           % spar_sensing:remedy_rule/3, ...
+    memberchk(goals-Goals, G),
+    memberchk(spar_actions, Goals).
+
+%   Two modules in temporary files, a qualified call from each into the
+%   other and no import: the graph has both arcs, and the cycle is found.
+test(qualified_calls_make_a_cycle, [ Graph == [qa-[qb], qb-[qa]],
+                                     Cycles == [qa-qb, qb-qa],
+                                     cleanup(maplist(delete_file, [A, B])) ]) :-
+    tmp_file_stream(text, A, SA),
+    format(SA, ":- module(qa, [a/0]).~na :- qb:b.~n", []),
+    close(SA),
+    tmp_file_stream(text, B, SB),
+    format(SB, ":- module(qb, [b/0]).~nb :- true.~nc :- findall(x, qa:a, _).~n", []),
+    close(SB),
+    files_module_graph([A, B], Graph),
+    module_cycles(Graph, Cycles).
+
+test(no_cycle, Cycles == []) :-
+    repo_root(Root),
+    module_graph(Root, G),
+    module_cycles(G, Cycles),
+    (   Cycles == []
+    ->  assertion(top_sort(G, _))
+    ;   true
+    ).
+
+:- end_tests(planner_modules).
