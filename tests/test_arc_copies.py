@@ -8,7 +8,7 @@ pegs and blocks), and only between them.
   verdicts and named pairs from check(); it refuses a renaming onto a link's or gripper's name.
 - workspace.requirement_state of a copy is such a renamed state, and its check() equals that of
   a state at() builds for the copy itself.
-- placement.reachable_somewhere_each answers a copy from its twin's memo entry: the same answers
+- placement.some_placement_reaches_each answers a copy from its twin's memo entry: the same answers
   as a fresh cell asked about the copy alone.
 - reach.arc on every copy of a generated cell, asked in a run that shares all of this, gives the
   answers and refusals of a fresh cell per question (nothing shared)."""
@@ -19,11 +19,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from spar_py.world import reach
+from spar_py.world import arcs
 from spar_py.world import workspace
 from spar_py.app.gen import generate_assembly
 from spar_py.kb import load_problem
-from spar_py.world.placement import reachable_somewhere_each
+from spar_py.world.placement import some_placement_reaches_each
 from spar_py.world.collision import scene_for
 
 PROBLEMS = Path(__file__).resolve().parent.parent / "kb" / "problems"
@@ -163,8 +163,8 @@ def test_somewhere_answers_a_copy_from_its_twin_as_a_fresh_cell_would(g3: Path) 
         name = f"block{k}"
         model = shared.objects[name]
         asks = [(p, [workspace.Requirement(g.T, None, g.width) for g in model.grasps.values()]) for p in model.poses]
-        got = reachable_somewhere_each(shared, name, asks)
-        ref = reachable_somewhere_each(load_problem(g3), name, asks)
+        got = some_placement_reaches_each(shared, name, asks)
+        ref = some_placement_reaches_each(load_problem(g3), name, asks)
         assert [a.tolist() for a in got] == [r.tolist() for r in ref]
     memo = shared.memo.table("placement.somewhere", 100_000)
     n_poses = len(shared.objects["block1"].poses)

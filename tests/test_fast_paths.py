@@ -35,13 +35,13 @@ def _reach_everywhere(cell, obj: str, cands: np.ndarray, X: np.ndarray) -> np.nd
     return np.array([requirement_clear(cell, obj, cands, x).ok.any() for x in X])
 
 
-def test_reachable_somewhere_matches_the_whole_grid() -> None:
+def test_some_placement_reaches_matches_the_whole_grid() -> None:
     CELL.memo.clear()
     for obj, model in CELL.objects.items():
         X = [g.T for g in model.grasps.values()]
         X += [CELL.transforms["trans_1"] @ g.T for g in CELL.objects["peg"].grasps.values()]
         for pose in model.poses:
-            got = placement.reachable_somewhere(CELL, obj, pose, X)
+            got = placement.some_placement_reaches(CELL, obj, pose, X)
             grid = placement._grid(CELL, obj, pose)
             assert np.array_equal(got, _reach_everywhere(CELL, obj, grid, np.stack(X))), (obj, pose)
             # a grasp from below the table is among them, so the prune is exercised

@@ -10,7 +10,7 @@ import pytest
 from bench import fd
 from spar_py.app import gen
 from spar_py.kb import load_problem
-from spar_py.world.reach import reachable_pairs
+from spar_py.world.arcs import reachable_pairs
 
 
 def test_encoding_names_every_part_goal_and_arc(tmp_path: Path) -> None:

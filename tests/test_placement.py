@@ -128,8 +128,8 @@ def test_rigid_refusal_refuses_only_what_the_full_check_refuses() -> None:
 
 
 def test_somewhere_is_the_whole_grid_answer() -> None:
-    """reachable_somewhere (first placement alone, then chunks; prunes before IK), a pose at a time
-    and every pose at once (reachable_somewhere_each), answers, for every grasp of either object
+    """some_placement_reaches (first placement alone, then chunks; prunes before IK), a pose at a time
+    and every pose at once (some_placement_reaches_each), answers, for every grasp of either object
     and every mate requirement, what one check of the whole grid answers."""
     from spar_py.world.workspace import Requirement, requirement_clear
 
@@ -141,9 +141,9 @@ def test_somewhere_is_the_whole_grid_answer() -> None:
     for obj, rs in reqs.items():
         poses = list(cell.objects[obj].poses)
         # every pose at once, as an arc asks (one batch per requirement), on a cell of its own
-        each = placement.reachable_somewhere_each(replace(cell, memo=type(CELL.memo)()), obj, [(p, rs) for p in poses])
+        each = placement.some_placement_reaches_each(replace(cell, memo=type(CELL.memo)()), obj, [(p, rs) for p in poses])
         for pose, together in zip(poses, each):
-            got = placement.reachable_somewhere(cell, obj, pose, rs)
+            got = placement.some_placement_reaches(cell, obj, pose, rs)
             grid = placement._grid(cell, obj, pose)
             fresh = replace(cell, memo=type(CELL.memo)())
             want = [requirement_clear(fresh, obj, grid, r).ok.any() for r in rs]

@@ -11,7 +11,7 @@ from spar_py.core.errors import SparValueError
 from spar_py.core.geometry import eulerxyz, rot, rotx, rotz, trans
 from spar_py.kb import load_problem, load_robot
 from spar_py.core.model import Bounds, Cell, Grasp, ObjectModel, Position, StablePose
-from spar_py.world.reach import (
+from spar_py.world.arcs import (
     arc,
     mate_reachable_pairs,
     natural_key,

@@ -171,10 +171,11 @@ class Engine:
     """The embedded SWI-Prolog with prolog/spar.pl and kb/templates/ consulted (one per process).
 
     Loaded problems are kept by name (:meth:`load_cell`): their facts in Prolog's kb
-    module, their cells here in :attr:`cells`; every call from Prolog into Python says
-    which problem it is about. Queries are serialised: the engine holds one re-entrant
-    lock for each query, and :meth:`session` holds it for a whole planning run (load,
-    plan), so threads sharing an engine take turns and never see each other's
+    module, their cells here in :attr:`cells`, the planning run of each problem being
+    planned in :attr:`runs`; every call from Prolog into Python says which problem it is
+    about, and is answered by that problem's run (planning/run.py). Queries are
+    serialised: the engine holds one re-entrant lock for each query, and :meth:`session`
+    holds it for a whole planning run (load, plan), so threads sharing an engine take turns and never see each other's
     problem.
     """
 
@@ -187,6 +188,10 @@ class Engine:
         starts from it, the planner already loaded, and there is nothing left to load."""
         t0 = time.perf_counter()
         self.cells: dict[str, Any] = {}
+        #: the planning run of each problem a query is planning now (planning.run.PlanRun)
+        self.runs: dict[str, Any] = {}
+        #: the kept answers of cells loaded by the Prolog toplevel (world.run.CellCache), by name
+        self.caches: dict[str, Any] = {}
         self._kept: dict[str, None] = {}  # problems sessions keep loaded, oldest first
         self.lock = threading.RLock()
         self._loader: threading.Thread | None = None
@@ -434,6 +439,8 @@ class Engine:
         """Forget problem ``name`` (its Prolog facts and its cell); a no-op if not loaded."""
         with self.lock:
             self.cells.pop(name, None)
+            self.caches.pop(name, None)
+            self.runs.pop(name, None)
             self._kept.pop(name, None)
             self.query_once("kb:unload_facts(P)", {"P": name})
 
@@ -444,19 +451,40 @@ class Engine:
         except KeyError:
             raise SparError(f"problem {name!r} is not loaded") from None
 
+    def run(self, name: str) -> Any:
+        """The planning run of problem ``name``: the one a session holds, else (a problem the
+        Prolog toplevel loaded) a run with the default options, kept until the problem is
+        loaded again or forgotten (SparError if the problem is not loaded)."""
+        got = self.runs.get(name)
+        if got is not None:
+            return got
+        from spar_py.planning.run import PlanRun  # planning.run imports phase 2: not for a bare engine
+        from spar_py.world.run import CellCache
+
+        cell = self.cell(name)
+        cache = self.caches.get(name)
+        if cache is None or cache.cell is not cell:
+            cache = self.caches[name] = CellCache(cell)
+        got = self.runs[name] = PlanRun(cache)
+        return got
+
     @contextmanager
-    def session(self, cell: Any) -> Iterator[None]:
-        """Hold the engine for one planning run of ``cell``: load it (unless this very cell
-        is loaded already), yield, and keep it loaded for the next run of it; the engine
-        keeps the last ``KEEP_LOADED`` cells planned this way and unloads older ones, so
-        their facts and memo tables are freed with them."""
+    def session(self, run: Any) -> Iterator[None]:
+        """Hold the engine for one planning ``run`` (planning.run.PlanRun) of its cell: load the
+        cell (unless this very cell is loaded already), make the run the one Prolog's calls
+        about that problem reach, yield, and keep the cell loaded for the next run of it; the
+        engine keeps the last ``KEEP_LOADED`` cells planned this way and unloads older ones."""
+        cell = run.cell
         self.wait_loaded()
         with self.lock:
             if self.cells.get(cell.name) is not cell:
                 self.load_cell(cell)
+            self.runs[cell.name] = run
             try:
                 yield
             finally:
+                if self.runs.get(cell.name) is run:
+                    del self.runs[cell.name]
                 self._keep(cell.name)
                 self._give_back()
 
@@ -500,11 +528,11 @@ def start_engine() -> None:
             _engine = Engine(background=True)
 
 
-def _cell(problem: str) -> Any:
-    """The cell of loaded problem ``problem`` (for the calls from Prolog below)."""
+def _run(problem: str) -> Any:
+    """The planning run of loaded problem ``problem`` (for the calls from Prolog below)."""
     if _engine is None:
         raise SparError("the engine is not started")
-    return _engine.cell(problem)
+    return _engine.run(problem)
 
 
 # ---------------------------------------------------------------------- called from Prolog
@@ -519,6 +547,7 @@ def load_problem_file(path: str) -> list[Any]:
     if _engine is None:
         raise SparError("the engine is not started")
     _engine.cells[cell.name] = cell
+    _engine.runs.pop(cell.name, None)
     return [cell.name, facts(cell)]
 
 
@@ -531,22 +560,27 @@ def forget_cell(problem: str) -> None:
     """The toplevel's unload_problem/1: drop the cell of ``problem`` (if loaded)."""
     if _engine is not None:
         _engine.cells.pop(problem, None)
+        _engine.caches.pop(problem, None)
+        _engine.runs.pop(problem, None)
 
 
 def arc_pairs(problem: str, rule: str, kind: str, objects: list[str], grasps: list[str],
               positions: list[str], ta: str) -> list[list[str]]:
     """All grasp/position pairs of loaded problem ``problem`` satisfying ``kind``
-    (reachable | mate_reachable), Sec. 5.2.4; ``rule`` for stable-pose labels (reach.RULES)."""
-    from spar_py.world import reach
-
-    return reach.arc(_cell(problem), kind, objects, grasps, positions, None if ta == "none" else ta, rule)
+    (reachable | mate_reachable), Sec. 5.2.4; ``rule`` for stable-pose labels (arcs.RULES).
+    Phase 1's door: the problem's run answers (planning.run.PlanRun.arc_pairs)."""
+    return _run(problem).arc_pairs(rule, kind, objects, grasps, positions, None if ta == "none" else ta)
 
 
 def evaluate(problem: str, steps: list[dict[str, Any]], sources: dict[str, dict[str, str]] | None = None,
              given_up: list[str] | None = None, sensing: dict[str, dict[str, Any]] | None = None) -> dict[str, Any]:
-    """Phase 2: run a whole plan instance of loaded problem ``problem`` in one call and
-    return plain data: every step's verdicts, geometry, part poses and held part, and
-    where the run stopped (phase2.evaluate; cell unit, degrees, world frame)."""
-    from spar_py.phase2 import instance as phase2
+    """Phase 2: run a whole plan instance of loaded problem ``problem`` in one call: status, the
+    step where it stopped, each step's verdicts and a token naming its geometry (phase 2's
+    door, planning.run.PlanRun.evaluate)."""
+    return _run(problem).evaluate(steps, sources, given_up or (), sensing)
 
-    return phase2.evaluate(_cell(problem), steps, sources, given_up or (), sensing)
+
+def step_geometry(problem: str, token: int, step: str) -> dict[str, Any]:
+    """The geometry of step ``step`` of the phase-2 run ``token`` of ``problem``'s run (tool
+    pose, joints, placement, ...; empty if the step has none), for printing an instance."""
+    return _run(problem).step_geometry(token, step)
