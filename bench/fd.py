@@ -91,8 +91,10 @@ def pddl(cell) -> str:
     :data:`DOMAIN`. Static facts from spar_py.world.arcs, as phase 1's arcs (rule "reachable")."""
     from spar_py.kb import parse_term
     from spar_py.world.arcs import mate_reachable_pairs, reachable_pairs
+    from spar_py.world.run import CellCache
 
     nm = _name
+    cache = CellCache(cell)
 
     objs = sorted(cell.objects)
     init = []
@@ -104,7 +106,8 @@ def pddl(cell) -> str:
         poses[o] = list(m.poses)
         init += [f"(grasp-of {nm(g)} {nm(o)})" for g in grasps[o]]
         init += [f"(pose-of {nm(p)} {nm(o)})" for p in poses[o]]
-        init += [f"(reach {nm(g)} {nm(p)})" for g, p in reachable_pairs(cell, o, grasps[o], positions + poses[o])]
+        reach = reachable_pairs(cache, o, grasps[o], positions + poses[o]).pairs
+        init += [f"(reach {nm(g)} {nm(p)})" for g, p in reach]
     for fact in cell.initial:
         t = parse_term(fact)
         if t == ("gripper", "open"):
@@ -127,7 +130,7 @@ def pddl(cell) -> str:
         ps += [p.label for p in cell.positions.values()
                if p.obj == hole and not _ofaces_at(hm, p.T) & set(m2)]
         init += [f"(mate {nm(peg)} {nm(hole)} {nm(a)} {nm(b)})"
-                 for a, b in mate_reachable_pairs(cell, peg, hole, gs, ps, ta)]
+                 for a, b in mate_reachable_pairs(cache, peg, hole, gs, ps, ta).pairs]
         goals.append(f"(assembled {nm(peg)} {nm(hole)})")
     pos_labels = sorted({p.label for p in cell.positions.values()} | {p for o in objs for p in poses[o]})
     objects = (" ".join(nm(o) for o in objs) + " - obj\n    "

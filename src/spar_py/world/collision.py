@@ -37,7 +37,7 @@ cells whose bound is within the margin and whose shapes are not both capsules, o
 second lower bound (:func:`support_gap`: the bodies' supports over their axes and the axes'
 cross products, the separating-axis bound of two boxes) does not already put beyond the margin
 go to the collision library, imported on first use; the grasp rule is decided once per grasp
-(the part's geometry and pose in the tool frame) and kept in the cell's cache (world.run.CellCache). The closest pair of a clear row
+(the part's geometry and pose in the tool frame) and kept in the cell's cache. The closest pair of a clear row
 (:meth:`SceneState.clearance`) is sought among the pairs whose bounding spheres come within the
 table's distance, in order of their capsule bounds.
 
