@@ -3,7 +3,8 @@
 - runs of different problems, interleaved on one engine (through its doors, and plan by plan
   on one Planner), each explain their own no-plan: one's refusals never appear in the other's;
 - the same problem planned again after its file changed explains the new cell, not the old;
-- a no-plan planned again (the cell's answers kept) explains itself again, the same way;
+- a no-plan planned again (the cell's answers kept) explains itself again, the same way, and a
+  phase-2 step answered from the cell's kept answers logs its refusal in each run's own log;
 - planning does not write onto the cached cell; a run's log starts empty.
 """
 from __future__ import annotations
@@ -160,3 +161,30 @@ def test_a_run_s_log_starts_empty() -> None:
     assert log.refused == {} and log.motion_failures == [] and len(log.tokens) == 0 and log.notes == []
     assert run.world.options == RunOptions(placements="reachable", motion=None)
     assert _collisions(p.plan(cell)) == _collisions(first)
+
+
+def test_a_phase_2_no_plan_planned_again_explains_itself_again() -> None:
+    """enclosed_part ends in phase 2 (the motions of its instances blocked): planned again by the
+    same Planner, every step and motion answered from the cell's kept answers, its reason names
+    the same refusals and motion failures."""
+    p = Planner()
+    first, again = (p.plan(PROBLEMS / "enclosed_part.yaml") for _ in range(2))
+    for key in ("collisions", "motion_failures", "why"):
+        assert again.reason[key] == first.reason[key], key
+    assert again.reason["motion_failures"] and _collisions(again)
+
+
+def test_a_kept_phase_2_step_logs_its_refusal_in_every_run() -> None:
+    """Phase 2's door: a pickup whose every joint solution hits the shelf, evaluated by two runs
+    of one cell (the second answered from the cell's kept step): each run's log names the
+    refusal and its pair, and the run's answer to Prolog carries no geometry."""
+    cache = CellCache(load_problem(PROBLEMS / "collision_no_plan.yaml"))
+    steps = [{"id": "action_1", "name": "pickup", "args": ["peg", "p1G10"]}]
+    answers, logs = [], []
+    for _ in range(2):
+        run = PlanRun(cache)
+        answers.append(run.evaluate(steps))
+        logs.append([r.text() for r in run.world.log.refusals()])
+    assert answers[0] == answers[1] and answers[0]["status"] == "infeasible"
+    assert set(answers[0]) == {"status", "at", "steps"} and set(answers[0]["steps"][0]) == {"id", "verdicts"}
+    assert logs[0] == logs[1] == ["no collision-free IK for pickup(peg, p1G10): tool_mount-shelf"]

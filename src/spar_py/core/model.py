@@ -143,7 +143,10 @@ class Sensor:
 
 @dataclass
 class Cell:
-    """A whole problem: robot, objects, initial positions, uncertainty, sensors and goals."""
+    """A whole problem: robot, objects, initial positions, uncertainty, sensors and goals.
+
+    Read only once loaded: a planning run keeps its own state (world.run.WorldRun) and the
+    answers worth keeping across runs sit beside the cell (world.run.CellCache)."""
 
     name: str
     file: str

@@ -2,7 +2,9 @@
 
 This is the only Python module that imports janus. Prolog reaches Python through
 the functions at the bottom of this file (called from prolog/foreign.pl with
-``py_call(spar_py.planning.engine:...)``); they delegate to the numeric modules.
+``py_call(spar_py.planning.engine:...)``); the geometric ones (arc_pairs, evaluate) are
+answered by the planning run of their problem (planning/run.py: PlanRun), the others
+delegate to the loaders.
 
 SWI-Prolog is located from ``_swipl.json`` beside this file, written by ``make setup``
 with the home directory janus-swi was compiled against. Setting ``SWI_HOME_DIR``
