@@ -47,8 +47,8 @@ from spar_py.core.geometry import same_stable_pose
 from spar_py.core.model import Bounds, Cell, Grasp
 from spar_py.world.arcs import reachable_pairs
 from spar_py.world.motion_options import MotionFailure, MotionOptions
-from spar_py.world.run import CellCache, pair_text
-from spar_py.world.workspace import arm_at
+from spar_py.world.run import CellCache
+from spar_py.world.workspace import arm_at, pair_text
 from spar_py.phase2.symbolic import Registry
 
 if TYPE_CHECKING:

@@ -30,7 +30,7 @@ import numpy as np
 from spar_py.core.errors import SparValueError
 from spar_py.core.geometry import same_stable_poses
 from spar_py.core.model import Cell, Face, Grasp, ObjectModel
-from spar_py.world.workspace import Requirement, ik_rows, requirement_clear_ik, requirement_state
+from spar_py.world.workspace import Refusal, Requirement, ik_rows, requirement_clear_ik, requirement_state
 
 if TYPE_CHECKING:
     from spar_py.world.run import CellCache
@@ -38,7 +38,6 @@ if TYPE_CHECKING:
 __all__ = [
     "ARCS",
     "Arc",
-    "ArcRefusal",
     "arc",
     "mate_reachable_pairs",
     "natural_key",
@@ -54,22 +53,13 @@ def natural_key(label: str) -> tuple:
     return tuple(int(t) if t.isdigit() else t for t in re.split(r"(\d+)", label))
 
 
-@dataclass(frozen=True)
-class ArcRefusal:
-    """``what`` (e.g. "pickup(block, p2G3) at tr1") has joint solutions, every one colliding:
-    ``pairs`` the colliding pairs of bodies."""
-
-    what: str
-    pairs: tuple[tuple[str, str], ...]
-
-
 @dataclass
 class Arc:
     """An arc's answer: ``pairs`` the [grasp, position] pairs that hold (natural label order),
     ``refusals`` those refused only because every joint solution collides."""
 
     pairs: list[list[str]]
-    refusals: list[ArcRefusal] = field(default_factory=list)
+    refusals: list[Refusal] = field(default_factory=list)
 
 
 def _sorted_pairs(pairs: Iterable[tuple[str, str]]) -> list[list[str]]:
@@ -154,7 +144,7 @@ def _somewhere(cache: CellCache, obj: str, asks: list[tuple[str, list[Grasp], li
 
 def _clear_pass(cache: CellCache, obj: str, pending: list[tuple[Grasp, str, np.ndarray]],
                 requirement: Callable[[Grasp], Requirement], what: Callable[[Grasp, str], str],
-                refused: list[ArcRefusal]) -> list[bool]:
+                refused: list[Refusal]) -> list[bool]:
     """Which (grasp, position label, T_O) of ``pending`` the arm reaches clear of the world
     (workspace.requirement_clear, one batched call per grasp); a pair with IK solutions that all
     collide is added to ``refused`` with its pairs."""
@@ -174,7 +164,7 @@ def _clear_pass(cache: CellCache, obj: str, pending: list[tuple[Grasp, str, np.n
         for k, i in enumerate(ix):
             out[i] = bool(r.ok[k])
             if r.ik[k] and not r.ok[k]:
-                refused.append(ArcRefusal(what(g, pending[i][1]), tuple(tuple(p) for p in r.pairs[k])))
+                refused.append(Refusal(what(g, pending[i][1]), tuple(tuple(p) for p in r.pairs[k])))
     return out
 
 
@@ -202,7 +192,7 @@ def reachable_pairs(cache: CellCache, obj: str, grasp_labels: Sequence[str],
             continue
         pending += [(g, p, T_O) for g in free]
     pairs = _somewhere(cache, obj, asks, rule)
-    refused: list[ArcRefusal] = []
+    refused: list[Refusal] = []
     ok = _clear_pass(cache, obj, pending, lambda g: Requirement(g.T, None, g.width),
                      lambda g, p: f"pickup({obj}, {g.label}) at {p}", refused)
     pairs += [(g.label, p) for (g, p, _), reached in zip(pending, ok) if reached]
@@ -246,7 +236,7 @@ def mate_reachable_pairs(cache: CellCache, held_obj: str, fixed_obj: str, grasp_
             continue
         pending += [(g, p, T_O) for g in grasps]
     pairs = _somewhere(cache, fixed_obj, asks, rule)
-    refused: list[ArcRefusal] = []
+    refused: list[Refusal] = []
     ok = _clear_pass(cache, fixed_obj, pending, req,
                      lambda g, p: f"assemble({held_obj}, {fixed_obj}) with {g.label} at {p}", refused)
     pairs += [(g.label, p) for (g, p, _), reached in zip(pending, ok) if reached]

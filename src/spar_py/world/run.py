@@ -29,8 +29,9 @@ from spar_py.core.model import Cell
 from spar_py.world.arcs import RULES, arc
 from spar_py.world.collision import CollisionScene, scene_for
 from spar_py.world.motion_options import FAILURES_KEPT, MotionFailure, MotionOptions
+from spar_py.world.workspace import Refusal
 
-__all__ = ["CellCache", "Refusal", "RunLog", "RunOptions", "WorldRun", "pair_text"]
+__all__ = ["CellCache", "RunLog", "RunOptions", "WorldRun"]
 
 #: Refusals a run's log keeps (the "no plan" explanation): at most this many distinct ones.
 REFUSALS_LIMIT = 256
@@ -73,23 +74,6 @@ class CellCache:
         if self._scene is None:
             self._scene = scene_for(self.cell, self.memo)
         return self._scene
-
-
-def pair_text(p: Sequence[str]) -> str:
-    """A colliding pair as the user reads it (the two fingers are "fingers")."""
-    return "-".join("fingers" if n in ("finger_l", "finger_r") else n for n in p)
-
-
-@dataclass(frozen=True)
-class Refusal:
-    """``what`` (e.g. "pickup(block, p2G3)") had joint solutions, every one colliding: ``pairs``."""
-
-    what: str
-    pairs: tuple[tuple[str, str], ...]
-
-    def text(self) -> str:
-        """One line: ``no collision-free IK for pickup(block, p2G3): forearm-shelf, fingers-table``."""
-        return f"no collision-free IK for {self.what}: {', '.join(dict.fromkeys(pair_text(p) for p in self.pairs))}"
 
 
 @dataclass

@@ -20,7 +20,7 @@ convention; world Z up, table top z = 0.
 """
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -32,9 +32,9 @@ if TYPE_CHECKING:
     from spar_py.world.robots import Robot
     from spar_py.world.run import CellCache
 
-__all__ = ["ArmAt", "Reached", "Requirement", "arm_at", "clear_of_world", "ik_rows", "reach_clear",
-           "reachable_ignoring_collisions", "requirement_clear", "requirement_clear_ik", "solutions",
-           "tool_on_table", "requirement_clear_each", "requirement_state", "shape_key", "tool_refusal",
+__all__ = ["ArmAt", "Reached", "Refusal", "Requirement", "arm_at", "clear_of_world", "ik_rows", "pair_text",
+           "reach_clear", "reachable_ignoring_collisions", "requirement_clear", "requirement_clear_each",
+           "requirement_clear_ik", "requirement_state", "shape_key", "solutions", "tool_on_table", "tool_refusal",
            "wrist_above_table", "wrist_height"]
 #: Bound of the cell cache's table of requirement answers by geometry (:func:`requirement_clear`).
 REQUIREMENT_LIMIT = 2048
@@ -305,6 +305,24 @@ def tool_refusal(cache: CellCache, obj: str, T: np.ndarray, req: Requirement, *,
         if hit is not None:
             return hit
     return state.tool_rigid_refusal(T)
+
+
+def pair_text(p: Sequence[str]) -> str:
+    """A colliding pair as the user reads it (the two fingers are "fingers")."""
+    return "-".join("fingers" if n in ("finger_l", "finger_r") else n for n in p)
+
+
+@dataclass(frozen=True)
+class Refusal:
+    """``what`` (e.g. "pickup(block, p2G3) at tr1") has joint solutions, every one colliding:
+    ``pairs`` the colliding pairs of bodies, in the order found."""
+
+    what: str
+    pairs: tuple[tuple[str, str], ...]
+
+    def text(self) -> str:
+        """One line: ``no collision-free IK for pickup(block, p2G3): forearm-shelf, fingers-table``."""
+        return f"no collision-free IK for {self.what}: {', '.join(dict.fromkeys(pair_text(p) for p in self.pairs))}"
 
 
 @dataclass
