@@ -158,7 +158,7 @@ def test_a_run_s_log_starts_empty() -> None:
     assert len(cache.memo.sizes()) > 0
     run = PlanRun(cache, p.run_options(cell))
     log = run.world.log
-    assert log.refused == {} and log.motion_failures == [] and len(log.tokens) == 0 and log.notes == []
+    assert log.refused == {} and log.motion_failures == [] and len(log.tokens) == 0
     assert run.world.options == RunOptions(placements="reachable", motion=None)
     assert _collisions(p.plan(cell)) == _collisions(first)
 

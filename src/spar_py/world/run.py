@@ -10,7 +10,7 @@ Beside it sit two kinds of state:
   that reason in its own log.
 - :class:`WorldRun`: one planning run: the cache, the run's :class:`RunOptions` and its
   :class:`RunLog` (collision refusals with their pairs, motion failures, the instance
-  motions and step data Prolog names by token, notes), empty when the run starts. Its
+  motions and step data Prolog names by token), empty when the run starts. Its
   :meth:`WorldRun.arc_pairs` is phase 1's door to the world; phase 2's door is the
   planning run (planning/run.py), which holds a WorldRun, since the paper's phase 2
   (phase2/) sits above this layer.
@@ -80,12 +80,11 @@ class CellCache:
 class RunLog:
     """What one run refused and why, and the data it keeps for the plan: collision refusals
     (by what was refused, their pairs in first-seen order), motion failures (distinct, at
-    most FAILURES_KEPT), data Prolog names by token (instance motions, step geometry), notes."""
+    most FAILURES_KEPT), data Prolog names by token (instance motions, step geometry)."""
 
     refused: dict[str, list[tuple[str, str]]] = field(default_factory=dict)
     motion_failures: list[MotionFailure] = field(default_factory=list)
     tokens: LRU = field(default_factory=lambda: LRU(TOKENS_LIMIT))
-    notes: list[str] = field(default_factory=list)
     kept_count: int = 0
 
     def refuse(self, what: str, pairs: Iterable[Sequence[str]]) -> None:
