@@ -127,10 +127,10 @@ action_sources(action(Id, _, preconditions(Ops, _), _, _), Id-Pairs) :-
 %   Recoveries, Verdicts, Geometry): Steps1 with sensing and squeezes
 %   inserted; Verdicts a list of verdict(Id, Action, Dicts) (Python's
 %   verdict dicts: constraint, bound, threshold, sense, satisfied, ...);
-%   Geometry geo(Problem, Token, Motion): Token names the run's geometry
-%   (tool poses, joint angles, IK solutions, placements, poses, held
-%   parts), which stays in Python (spar_py.planning.run) and is joined to
-%   the plan there; Motion the motion summary dict or @(none). Fails if the instance cannot be executed
+%   Geometry geo(Problem, Token): Token names the run's geometry (tool
+%   poses, joint angles, IK solutions, placements, poses, held parts and
+%   the instance's motions), which stays in Python (spar_py.planning.run)
+%   and is joined to the plan there. Fails if the instance cannot be executed
 %   at all (a geometric precondition fails: no placement, no joint
 %   solution). It fails as soon as the instance has Bound errors (it cannot
 %   beat the best so far; inf for no bound); Sources as instance_sources/2
@@ -195,12 +195,11 @@ run(ctx(Problem, From, Sensing), Steps, GivenUp, Result) :-
 
 %   eval_result(+Status, +Problem, +Eval, +Steps, -Result): Eval holds each
 %   step's id and verdicts; a run that went through also its token (the
-%   geometry Python keeps) and, with motions, their summary.
-eval_result(ok, Problem, Eval, Steps, ok(Verdicts, geo(Problem, Token, Motion))) :-
+%   geometry Python keeps).
+eval_result(ok, Problem, Eval, Steps, ok(Verdicts, geo(Problem, Token))) :-
     foldl(step_record, Eval.steps, Steps, Verdicts0, []),
     exclude([verdict(_, _, [])]>>true, Verdicts0, Verdicts),
-    get_dict(token, Eval, Token),
-    (   get_dict(motion, Eval, Motion) -> true ; Motion = @(none) ).
+    get_dict(token, Eval, Token).
 
 eval_result(failed, _, Eval, Steps, failed(Step, Before)) :-
     atom_string(At, Eval.at),
@@ -388,10 +387,10 @@ ur_dict(ur(aug(Steps, E, Vs, Rs, Verdicts, Geo, Bindings), N, Cap, Complete), D)
     maplist(term_dict, Vs, VDicts),
     maplist(term_dict, Rs, RDicts),
     json_bool(Complete, C),
-    Geo = geo(_, Token, M),
+    Geo = geo(_, Token),
     D = _{bindings: BDict, steps: SDicts, constraints: Cs, verifications: VDicts,
           recoveries: RDicts, error_count: E, instances_examined: N,
-          instance_cap: Cap, complete: C, motion: M, token: Token}.
+          instance_cap: Cap, complete: C, token: Token}.
 ur_dict(no_instance(N, Cap, Complete), D) :-
     json_bool(Complete, C),
     D = _{bindings: _{}, steps: [], constraints: [], verifications: [], recoveries: [],
@@ -451,7 +450,7 @@ print_ur(ur(aug(Steps, E, Vs, Rs, Verdicts, Geo, Bindings), N, Cap, Complete)) :
     ;   format("RECOVERIES~n"), forall(member(R, Rs), format("  ~q~n", [R]))
     ).
 
-print_step(geo(Problem, Token, _), I, Id, A) :-
+print_step(geo(Problem, Token), I, Id, A) :-
     step_id_text(Id, T),
     step_kind(Id, A, Kind, _),
     (   Kind == manipulation -> Mark = "" ; format(string(Mark), "  [~w]", [Kind]) ),

@@ -67,8 +67,7 @@ class PlanRun:
         """Phase 2's door: run a whole plan instance (phase2.evaluate with the run's motion
         options), log its refusals and motion failure, and return what Prolog reads:
         ``{"status", "at", "steps": [{"id", "verdicts"}], "token"}`` (``token`` names the run's
-        geometry, kept here; only for a run that went through) and, with motions, ``motion``
-        (the summary the instance shows)."""
+        geometry and motions, kept here; only for a run that went through)."""
         log = self.world.log
         ev = phase2.evaluate(self.world.cache, steps, sources, given_up, sensing, self.world.options.motion)
         for what, pairs in ev.refusals:
@@ -81,16 +80,13 @@ class PlanRun:
             return out
         geo = {r["id"]: {**r["geometry"], "poses": r["poses"], "held": r["held"]} for r in ev.steps}
         out["token"] = log.keep(StepData(geo, ev.motion))
-        if ev.motion is not None:
-            from spar_py.world.motion import motion_summary  # motion.py is some 2 ms of a cold start
-
-            out["motion"] = motion_summary(ev.motion)
         return out
 
     def join(self, instance: dict[str, Any]) -> Any:
         """Put the kept geometry of the chosen phase-2 run into the plan's ``instance`` (in place):
-        each step's display fields (None where the step has none). The instance names its run
-        by ``token``; returns that run's motions (world/motion.attach adds their waypoints) or None."""
+        each step's display fields (None where the step has none) and ``motion``, the summary of
+        its motions (None without). The instance names its run by ``token``; returns that run's
+        motions (world/motion.attach adds their waypoints) or None."""
         token = instance.pop("token", None)
         if token is None:
             return None
@@ -99,6 +95,11 @@ class PlanRun:
             g = data.steps.get(st["id"], {})
             for k in STEP_FIELDS:
                 st[k] = g.get(k)
+        instance["motion"] = None
+        if data.motion is not None:
+            from spar_py.world.motion import motion_summary  # motion.py is some 2 ms of a cold start
+
+            instance["motion"] = motion_summary(data.motion)
         return data.motion
 
     def step_geometry(self, token: int, step: str) -> dict[str, Any]:
