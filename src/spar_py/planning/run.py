@@ -19,29 +19,31 @@ the end (:meth:`join`).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 from spar_py.core.model import Cell
 from spar_py.phase2 import instance as phase2
 from spar_py.world.motion_options import MotionFailure
 from spar_py.world.run import CellCache, RunOptions, WorldRun
 
+if TYPE_CHECKING:
+    from spar_py.world.motion import InstanceMotion
+
 __all__ = ["PlanRun", "StepData"]
 
-#: The fields of a step's geometry the plan's JSON shows (uncertainty.pl's step_out/3 order).
+#: The fields of a step's geometry the plan's JSON shows (docs/json-schema.md).
 STEP_FIELDS = ("tool_pose", "joints_deg", "ik_solutions_deg", "ik_solver", "placement", "from", "poses", "held",
                "clearance", "closest_pair")
 
 
+@dataclass(frozen=True)
 class StepData:
     """The geometry of one phase-2 run that went through, kept while Prolog decides: each
     step's display fields by step id, and the instance's motions (or None)."""
 
-    __slots__ = ("steps", "motion")
-
-    def __init__(self, steps: dict[str, dict[str, Any]], motion: Any) -> None:
-        self.steps = steps
-        self.motion = motion
+    steps: dict[str, dict[str, Any]]
+    motion: InstanceMotion | None = None
 
 
 class PlanRun:
