@@ -53,7 +53,7 @@ def per_solution(cell, obj: str, repeats: int) -> dict[str, float]:
     """Median us per IK solution checked: every grasp of ``obj`` at a 1 in grid of xy over the
     cell's first free region, in its first stable pose, the part grasped (one batched check)."""
     from spar_py.world.workspace import ik_rows
-    from spar_py.world.collision import scene_for
+    from spar_py.world.run import CellCache
 
     model = cell.objects[obj]
     pose = next(iter(model.poses.values()))
@@ -65,7 +65,7 @@ def per_solution(cell, obj: str, repeats: int) -> dict[str, float]:
     TO[:, :3, :3] = pose.R
     TO[:, 0, 3], TO[:, 1, 3] = np.repeat(xs, len(ys)), np.tile(ys, len(xs))
     TO[:, 2, 3] = pose.height
-    scene = scene_for(cell)
+    scene = CellCache(cell).scene()
     work = []  # per grasp: its state (the part in the hand where the tool is) and its IK rows
     for g in model.grasps.values():
         Q, ok = ik_rows(cell, TO @ g.T)

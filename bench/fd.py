@@ -11,7 +11,7 @@ cell (:func:`pddl`):
 - the operational part as SPAR's templates have it (Figs. 2-4): pickup(Obj, Grasp) from
   a position, putdown(Obj, Pos) into a stable pose, assemble(Obj1, Obj2); gripper(open),
   holding, part_location, assembled;
-- the geometry as static facts, from the arcs phase 1's network uses (spar_py.world.reach,
+- the geometry as static facts, from the arcs phase 1's network uses (spar_py.world.arcs,
   the same IK and placement rule): ``reach ?g ?p`` for reachable(Grasp, Position) and
   ``mate ?g ?p`` for mate_reachable(Grasp, Position, T_a) of each goal's pair, the mating
   grasps and poses of Sec. 6 (their ofaces avoid the mating faces; the hole part's initial
@@ -88,11 +88,13 @@ def _ofaces_at(model, T) -> set:
 
 def pddl(cell) -> str:
     """The PDDL problem of ``cell`` (a loaded spar_py Cell whose goals are assembled/5), for
-    :data:`DOMAIN`. Static facts from spar_py.world.reach, as phase 1's arcs (rule "reachable")."""
+    :data:`DOMAIN`. Static facts from spar_py.world.arcs, as phase 1's arcs (rule "reachable")."""
     from spar_py.kb import term_text
-    from spar_py.world.reach import mate_reachable_pairs, reachable_pairs
+    from spar_py.world.arcs import mate_reachable_pairs, reachable_pairs
+    from spar_py.world.run import CellCache
 
     nm = _name
+    cache = CellCache(cell)
 
     objs = sorted(cell.objects)
     init = []
@@ -104,7 +106,8 @@ def pddl(cell) -> str:
         poses[o] = list(m.poses)
         init += [f"(grasp-of {nm(g)} {nm(o)})" for g in grasps[o]]
         init += [f"(pose-of {nm(p)} {nm(o)})" for p in poses[o]]
-        init += [f"(reach {nm(g)} {nm(p)})" for g, p in reachable_pairs(cell, o, grasps[o], positions + poses[o])]
+        reach = reachable_pairs(cache, o, grasps[o], positions + poses[o]).pairs
+        init += [f"(reach {nm(g)} {nm(p)})" for g, p in reach]
     for t in cell.initial:
         if t == ("gripper", "open"):
             init.append("(gripper-open)")
@@ -125,7 +128,7 @@ def pddl(cell) -> str:
         ps += [p.label for p in cell.positions.values()
                if p.obj == hole and not _ofaces_at(hm, p.T) & set(m2)]
         init += [f"(mate {nm(peg)} {nm(hole)} {nm(a)} {nm(b)})"
-                 for a, b in mate_reachable_pairs(cell, peg, hole, gs, ps, ta)]
+                 for a, b in mate_reachable_pairs(cache, peg, hole, gs, ps, ta).pairs]
         goals.append(f"(assembled {nm(peg)} {nm(hole)})")
     pos_labels = sorted({p.label for p in cell.positions.values()} | {p for o in objs for p in poses[o]})
     objects = (" ".join(nm(o) for o in objs) + " - obj\n    "

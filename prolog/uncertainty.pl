@@ -5,9 +5,11 @@
     Each is run with the world's uncertainty propagated forward by Python
     (numbers and symbols, reached through foreign.pl): ONE call,
     spar_py.planning.engine:evaluate/5, per run of an instance, which executes the
-    whole step list and returns plain data: each step's verdicts, geometry,
-    the poses of every part and the held part at its end-point, and where the
-    run stopped (ok, failed at a step, infeasible at a step). Every decision
+    whole step list and returns plain data: each step's verdicts, where the
+    run stopped (ok, failed at a step, infeasible at a step) and, for a run
+    that went through, a token naming its geometry (tool poses, joints, the
+    poses of every part), which stays in Python and is joined to the plan's
+    JSON there. Every decision
     stays here. At the first action whose uncertainty-reduction
     preconditions fail (and that is not given up), the remedies are read as
     data from kb/templates/sensing.pl and tried in order:
@@ -126,8 +128,10 @@ action_sources(action(Id, _, preconditions(Ops, _), _, _), Id-Pairs) :-
 %   Recoveries, Verdicts, Geometry): Steps1 with sensing and squeezes
 %   inserted; Verdicts a list of verdict(Id, Action, Dicts) (Python's
 %   verdict dicts: constraint, bound, threshold, sense, satisfied, ...);
-%   Geometry a list of IdText-Dict (tool pose, joint angles, IK solutions,
-%   placement, from, poses, held). Fails if the instance cannot be executed
+%   Geometry geo(Problem, Token): Token names the run's geometry (tool
+%   poses, joint angles, IK solutions, placements, poses, held parts and
+%   the instance's motions), which stays in Python (spar_py.planning.run)
+%   and is joined to the plan there. Fails if the instance cannot be executed
 %   at all (a geometric precondition fails: no placement, no joint
 %   solution). It fails as soon as the instance has Bound errors (it cannot
 %   beat the best so far; inf for no bound); Sources as instance_sources/2
@@ -188,36 +192,24 @@ run(ctx(Problem, From, Sensing), Steps, GivenUp, Result) :-
     maplist(step_id_text, GivenUp, GivenUpText),
     py_bridge(evaluate(Problem, Dicts, From, GivenUpText, Sensing), Eval),
     atom_string(Status, Eval.status),
-    eval_result(Status, Eval, Steps, Result).
+    eval_result(Status, Problem, Eval, Steps, Result).
 
-eval_result(ok, Eval, Steps, ok(Verdicts, Geometry)) :-
+%   eval_result(+Status, +Problem, +Eval, +Steps, -Result): Eval holds each
+%   step's id and verdicts; a run that went through also its token (the
+%   geometry Python keeps).
+eval_result(ok, Problem, Eval, Steps, ok(Verdicts, geo(Problem, Token))) :-
     foldl(step_record, Eval.steps, Steps, Verdicts0, []),
     exclude([verdict(_, _, [])]>>true, Verdicts0, Verdicts),
-    maplist(step_geometry, Eval.steps, Geometry0),
-    motion_geometry(Eval, Geometry0, Geometry).
+    get_dict(token, Eval, Token).
 
-eval_result(failed, Eval, Steps, failed(Step, Before)) :-
+eval_result(failed, _, Eval, Steps, failed(Step, Before)) :-
     atom_string(At, Eval.at),
     append(Before, [Step|_], Steps),
     Step = step(Id, _),
     step_id_text(Id, At),
     !.
 
-%   motion_geometry(+Eval, +Geometry0, -Geometry): the summary of the run's
-%   motions (Python's world/motion.py, when the run plans them: the
-%   waypoints stay in Python, the Planner adds them to the steps) rides
-%   along with the steps' geometry as the entry '$motion'-Dict; ur_dict/2
-%   puts it in the instance.
-motion_geometry(Eval, G0, ['$motion'-M|G0]) :-
-    get_dict(motion, Eval, M),
-    !.
-motion_geometry(_, G, G).
-
 step_record(Record, step(Id, Action), [verdict(Id, Action, Record.verdicts)|Vs], Vs).
-
-step_geometry(Record, IdText-Geo) :-
-    atom_string(IdText, Record.id),
-    put_dict(_{poses: Record.poses, held: Record.held}, Record.geometry, Geo).
 
 %   janus passes Python's True as @(true).
 satisfied(C) :-
@@ -378,9 +370,9 @@ recovery(step(Id, Action), R) :-
 %
 %   The phase-2 Result (phase2/4) as a dict for janus, the "instance" of the
 %   JSON schema (docs/json-schema.md): bindings, steps (each with its kind,
-%   the action it serves, its term as text and its args as term data, tool
-%   pose, joint angles, placement, the poses of every part and the held part
-%   at its end-point), constraints (one per checked precondition: action,
+%   the action it serves, its term as text and its args as term data; their
+%   tool poses, joint angles, placements, part poses and held parts are
+%   joined in Python by the instance's token), constraints (one per checked precondition: action,
 %   constraint, bound, threshold, sense, satisfied), verifications and
 %   recoveries (the term as text and as data), error_count,
 %   instances_examined, instance_cap, complete. For no_instance/3 the dict
@@ -390,16 +382,16 @@ ur_dict(ur(aug(Steps, E, Vs, Rs, Verdicts, Geo, Bindings), N, Cap, Complete), D)
     !,
     maplist(binding_pair, Bindings, BPairs),
     dict_pairs(BDict, _, BPairs),
-    maplist(step_out(Geo), Steps, SDicts),
+    maplist(step_out, Steps, SDicts),
     foldl(verdict_dicts, Verdicts, [], Cs0),
     reverse(Cs0, Cs),
     maplist(term_dict, Vs, VDicts),
     maplist(term_dict, Rs, RDicts),
     json_bool(Complete, C),
-    (   memberchk('$motion'-M, Geo) -> true ; M = @(none) ),
+    Geo = geo(_, Token),
     D = _{bindings: BDict, steps: SDicts, constraints: Cs, verifications: VDicts,
           recoveries: RDicts, error_count: E, instances_examined: N,
-          instance_cap: Cap, complete: C, motion: M}.
+          instance_cap: Cap, complete: C, token: Token}.
 ur_dict(no_instance(N, Cap, Complete), D) :-
     json_bool(Complete, C),
     D = _{bindings: _{}, steps: [], constraints: [], verifications: [], recoveries: [],
@@ -411,34 +403,21 @@ json_bool(_, @(false)).
 
 binding_pair(V = L, V-L).
 
-step_out(Geo, step(Id, Action), D) :-
+%   step_out(+Step, -Dict): the step as the plan shows it: its id, kind,
+%   the action it serves, its term as text and as data. Its geometry stays
+%   in Python and is joined there by the instance's token.
+step_out(step(Id, Action), D) :-
     step_id_text(Id, IdText),
     step_kind(Id, Action, Kind, Serves),
     format(string(Term), "~q", [Action]),
     Action =.. [Name, Obj|Args0],
     maplist(term_data, [Obj|Args0], Args),
-    (   memberchk(IdText-G, Geo) -> true ; G = _{} ),
-    geo_value(G, tool_pose, TP),
-    geo_value(G, joints_deg, Q),
-    geo_value(G, placement, Pl),
-    geo_value(G, ik_solutions_deg, Sols),
-    geo_value(G, ik_solver, Solver),
-    geo_value(G, from, From),
-    geo_value(G, poses, Poses),
-    geo_value(G, held, Held),
-    geo_value(G, clearance, Clear),
-    geo_value(G, closest_pair, Pair),
     D = _{id: IdText, kind: Kind, serves: Serves, term: Term, name: Name, object: Obj,
-          args: Args, tool_pose: TP, joints_deg: Q, ik_solutions_deg: Sols, ik_solver: Solver,
-          placement: Pl, from: From, poses: Poses, held: Held, clearance: Clear,
-          closest_pair: Pair}.
+          args: Args}.
 
 step_kind(sense(A, _), _, sensing, A) :- !.
 step_kind(squeeze(A), _, squeeze, A) :- !.
 step_kind(Id, _, manipulation, Id).
-
-geo_value(G, K, V) :-
-    (   get_dict(K, G, V0) -> V = V0 ; V = @(none) ).
 
 verdict_dicts(verdict(_, _, Checks), Acc0, Acc) :-
     foldl([C, A0, [C|A0]]>>true, Checks, Acc0, Acc).
@@ -472,19 +451,20 @@ print_ur(ur(aug(Steps, E, Vs, Rs, Verdicts, Geo, Bindings), N, Cap, Complete)) :
     ;   format("RECOVERIES~n"), forall(member(R, Rs), format("  ~q~n", [R]))
     ).
 
-print_step(Geo, I, Id, A) :-
+print_step(geo(Problem, Token), I, Id, A) :-
     step_id_text(Id, T),
     step_kind(Id, A, Kind, _),
     (   Kind == manipulation -> Mark = "" ; format(string(Mark), "  [~w]", [Kind]) ),
     format("  ~w. ~w: ~q~s~n", [I, T, A, Mark]),
-    (   memberchk(T-G, Geo), get_dict(joints_deg, G, Q), is_list(Q)
+    py_bridge(step_geometry(Problem, Token, T), G),
+    (   get_dict(joints_deg, G, Q), is_list(Q)
     ->  (   get_dict(ik_solver, G, S), S \== @(none)
         ->  format("       joints (deg, ~w IK): ~w~n", [S, Q])
         ;   format("       joints (deg): ~w~n", [Q])
         )
     ;   true
     ),
-    (   memberchk(T-G2, Geo), get_dict(placement, G2, P), is_dict(P)
+    (   get_dict(placement, G, P), is_dict(P)
     ->  format("       placement: x=~w y=~w z=~w yaw=~w deg (~w)~n",
                [P.x, P.y, P.z, P.yaw_deg, P.pose])
     ;   true

@@ -8,9 +8,9 @@ pegs and blocks), and only between them.
   verdicts and named pairs from check(); it refuses a renaming onto a link's or gripper's name.
 - workspace.requirement_state of a copy is such a renamed state, and its check() equals that of
   a state at() builds for the copy itself.
-- placement.reachable_somewhere_each answers a copy from its twin's memo entry: the same answers
+- placement.some_placement_reaches_each answers a copy from its twin's memo entry: the same answers
   as a fresh cell asked about the copy alone.
-- reach.arc on every copy of a generated cell, asked in a run that shares all of this, gives the
+- arcs.arc on every copy of a generated cell, asked in a run that shares all of this, gives the
   answers and refusals of a fresh cell per question (nothing shared)."""
 from __future__ import annotations
 
@@ -19,12 +19,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from spar_py.world import reach
+from spar_py.world import arcs
 from spar_py.world import workspace
 from spar_py.app.gen import generate_assembly
 from spar_py.kb import load_problem
-from spar_py.world.placement import reachable_somewhere_each
-from spar_py.world.collision import scene_for
+from spar_py.world.placement import some_placement_reaches_each
+from spar_py.world.run import CellCache, WorldRun
 
 PROBLEMS = Path(__file__).resolve().parent.parent / "kb" / "problems"
 
@@ -41,14 +41,14 @@ def _random_q(robot, rng: np.random.Generator, n: int) -> np.ndarray:
 
 def test_copies_share_a_shape_key_and_their_bodies_but_not_their_names(g3: Path) -> None:
     cell = load_problem(g3)
-    scene = scene_for(cell)
+    scene = CellCache(cell).scene()
     assert scene.shape_key("peg1") == scene.shape_key("peg2") == scene.shape_key("peg3")
     assert scene.shape_key("block1") == scene.shape_key("block3")
     assert scene.shape_key("peg1") != scene.shape_key("block1")
     for a, b in zip(scene.shapes_of("peg1"), scene.shapes_of("peg2")):
         assert (a.name, b.name) == ("peg1", "peg2")
         assert a.points is b.points and a.T is b.T and a._fcl is b._fcl
-    paper = scene_for(load_problem(PROBLEMS / "peg_in_block.yaml"))
+    paper = CellCache(load_problem(PROBLEMS / "peg_in_block.yaml")).scene()
     assert paper.shape_key("peg") != paper.shape_key("block")
 
 
@@ -66,7 +66,7 @@ def _same_state(a, b) -> None:
 
 def test_renamed_state_is_the_state_at_makes_for_the_renamed_world(g3: Path) -> None:
     cell = load_problem(g3)
-    scene = scene_for(cell)
+    scene = CellCache(cell).scene()
     rng = np.random.default_rng(7)
     g = next(iter(cell.objects["peg1"].grasps.values()))
     inv = np.linalg.inv(g.T)
@@ -109,7 +109,8 @@ def test_renamed_state_is_the_state_at_makes_for_the_renamed_world(g3: Path) -> 
 
 def test_a_copy_s_requirement_state_is_renamed_and_checks_as_its_own(g3: Path) -> None:
     cell = load_problem(g3)
-    scene = scene_for(cell)
+    cache = CellCache(cell)
+    scene = cache.scene()
     rng = np.random.default_rng(3)
     q = _random_q(cell.robot, rng, 300)
     for k in (1, 2, 3):
@@ -120,11 +121,11 @@ def test_a_copy_s_requirement_state_is_renamed_and_checks_as_its_own(g3: Path) -
         else:
             continue
         req = workspace.Requirement(gk.T, None, gk.width)
-        state = workspace.requirement_state(cell, f"peg{k}", req)
+        state = workspace.requirement_state(cache, f"peg{k}", req)
         own = scene.at({}, **workspace._requirement_world(f"peg{k}", req))
         _same_state(state, own)
         assert state.check(q)[1] == own.check(q)[1]
-    assert len(cell.memo.table("workspace.requirement_proto", workspace.STATE_LIMIT)) >= 1
+    assert len(cache.table("workspace.requirement_proto", workspace.STATE_LIMIT)) >= 1
 
 
 def _arcs(cell) -> list[tuple]:
@@ -141,34 +142,34 @@ def _arcs(cell) -> list[tuple]:
 
 
 def test_arcs_of_copies_are_those_of_a_fresh_cell_per_question(g3: Path) -> None:
-    shared = load_problem(g3)
-    arcs = _arcs(shared)
-    got = [reach.arc(shared, kind, objs, gs, ps, ta) for kind, objs, gs, ps, ta in arcs]
-    for (kind, objs, gs, ps, ta), pairs in zip(arcs, got):
-        fresh = load_problem(g3)
-        assert reach.arc(fresh, kind, objs, gs, ps, ta) == pairs
+    shared = WorldRun(CellCache(load_problem(g3)))
+    asks = _arcs(shared.cell)
+    got = [shared.arc_pairs(kind, objs, gs, ps, ta) for kind, objs, gs, ps, ta in asks]
+    for (kind, objs, gs, ps, ta), pairs in zip(asks, got):
+        fresh = CellCache(load_problem(g3))
+        assert arcs.arc(fresh, kind, objs, gs, ps, ta).pairs == pairs
     assert any(got)
     # the refusals, each asked alone, are the shared run's
     alone: list[str] = []
-    for kind, objs, gs, ps, ta in arcs:
-        fresh = load_problem(g3)
-        reach.arc(fresh, kind, objs, gs, ps, ta)
-        alone += workspace.refusals(fresh)
-    assert sorted(workspace.refusals(shared)) == sorted(alone)
+    for kind, objs, gs, ps, ta in asks:
+        run = WorldRun(CellCache(load_problem(g3)))
+        run.arc_pairs(kind, objs, gs, ps, ta)
+        alone += [r.text() for r in run.log.refusals()]
+    assert sorted(r.text() for r in shared.log.refusals()) == sorted(alone)
 
 
 def test_somewhere_answers_a_copy_from_its_twin_as_a_fresh_cell_would(g3: Path) -> None:
-    shared = load_problem(g3)
+    shared = CellCache(load_problem(g3))
     for k in (1, 2, 3):
         name = f"block{k}"
-        model = shared.objects[name]
+        model = shared.cell.objects[name]
         asks = [(p, [workspace.Requirement(g.T, None, g.width) for g in model.grasps.values()]) for p in model.poses]
-        got = reachable_somewhere_each(shared, name, asks)
-        ref = reachable_somewhere_each(load_problem(g3), name, asks)
+        got = some_placement_reaches_each(shared, name, asks)
+        ref = some_placement_reaches_each(CellCache(load_problem(g3)), name, asks)
         assert [a.tolist() for a in got] == [r.tolist() for r in ref]
-    memo = shared.memo.table("placement.somewhere", 100_000)
-    n_poses = len(shared.objects["block1"].poses)
-    distinct = {g.T.tobytes() for k in (1, 2, 3) for g in shared.objects[f"block{k}"].grasps.values()}
+    memo = shared.table("placement.somewhere", 100_000)
+    n_poses = len(shared.cell.objects["block1"].poses)
+    distinct = {g.T.tobytes() for k in (1, 2, 3) for g in shared.cell.objects[f"block{k}"].grasps.values()}
     assert len(memo) == n_poses * len(distinct)  # one entry per geometry, not per copy
 
 

@@ -17,7 +17,8 @@ import pytest
 from spar_py.app.gen import generate_assembly
 from spar_py.kb import load_problem
 from spar_py.world import collision
-from spar_py.world.collision import TOOL, WORLD, scene_for
+from spar_py.world.collision import TOOL, WORLD
+from spar_py.world.run import CellCache
 
 PROBLEMS = Path(__file__).resolve().parent.parent / "kb" / "problems"
 
@@ -84,7 +85,7 @@ def _cells(tmp: Path) -> list:
 
 def _states(cell):
     """States of every kind of hand in ``cell``: (state, its n_moving, hand part, allow, attached)."""
-    scene = scene_for(cell)
+    scene = CellCache(cell).scene()
     parts = {p.obj if p.obj not in seen else f"{p.obj}@{p.name}": p.T
              for seen in [set()] for p in cell.positions.values() if not seen.add(p.obj)}
     names = list(parts)
@@ -133,7 +134,7 @@ def test_pair_structure_without_a_memo_is_the_same(tmp_path: Path) -> None:
 @pytest.mark.parametrize("frame", [WORLD, TOOL])
 def test_placed_bodies_are_placed_afresh_per_pose(frame: int) -> None:
     cell = load_problem(PROBLEMS / "peg_in_block.yaml")
-    scene = scene_for(cell)
+    scene = CellCache(cell).scene()
     T = cell.positions["tr1"].T.copy()
     first = scene.placed("peg", T, frame)
     assert scene.placed("peg", T.copy(), frame) is first  # kept on the cell

@@ -21,7 +21,8 @@ from scipy.optimize import minimize
 
 from spar_py.kb import load_problem
 from spar_py.world import collision
-from spar_py.world.collision import WORLD, _exact, box, capsule, convex, cylinder, scene_for, support_gap
+from spar_py.world.collision import WORLD, _exact, box, capsule, convex, cylinder, support_gap
+from spar_py.world.run import CellCache
 from test_collision_pairs import _cells, _states
 
 PROBLEMS = Path(__file__).resolve().parent.parent / "kb" / "problems"
@@ -242,14 +243,14 @@ def test_clearance_names_the_pair_the_whole_sort_names_at_a_tie(tmp_path: Path, 
 
 def test_grasp_rule_key_makes_signed_zeros_one_and_its_verdicts_are_the_library_s() -> None:
     cell = load_problem(PROBLEMS / "peg_in_block.yaml")
-    scene = scene_for(cell)
+    scene = CellCache(cell).scene()
     g = next(iter(cell.objects["peg"].grasps.values()))
     state = scene.at({"peg": cell.positions["tr1"].T}, None, "peg", width=g.width)
     T = np.linalg.inv(g.T)
     T = np.where(T == 0.0, 0.0, T)
     signed = np.where(T == 0.0, -0.0, T)
     assert T.tobytes() != signed.tobytes()
-    table = cell.memo.table("collision.grasp", collision.GRASP_LIMIT)
+    table = scene.memo.table("collision.grasp", collision.GRASP_LIMIT)
     table.clear()
     first = state.grasp_ok(T)
     assert state.grasp_ok(signed) == first and len(table) == 1

@@ -7,6 +7,7 @@ import numpy as np
 
 from spar_py.world import placement
 from spar_py.kb import load_problem
+from spar_py.world.run import CellCache
 
 ROOT = Path(__file__).resolve().parent.parent
 CELL = load_problem(ROOT / "kb/problems/peg_in_block.yaml")
@@ -32,17 +33,17 @@ def _reach_everywhere(cell, obj: str, cands: np.ndarray, X: np.ndarray) -> np.nd
     (no pruning, no chunks: every placement at once)."""
     from spar_py.world.workspace import requirement_clear
 
-    return np.array([requirement_clear(cell, obj, cands, x).ok.any() for x in X])
+    return np.array([requirement_clear(CellCache(cell), obj, cands, x).ok.any() for x in X])
 
 
-def test_reachable_somewhere_matches_the_whole_grid() -> None:
-    CELL.memo.clear()
+def test_some_placement_reaches_matches_the_whole_grid() -> None:
+    cache = CellCache(CELL)
     for obj, model in CELL.objects.items():
         X = [g.T for g in model.grasps.values()]
         X += [CELL.transforms["trans_1"] @ g.T for g in CELL.objects["peg"].grasps.values()]
         for pose in model.poses:
-            got = placement.reachable_somewhere(CELL, obj, pose, X)
-            grid = placement._grid(CELL, obj, pose)
+            got = placement.some_placement_reaches(cache, obj, pose, X)
+            grid = placement._grid(cache, obj, pose)
             assert np.array_equal(got, _reach_everywhere(CELL, obj, grid, np.stack(X))), (obj, pose)
             # a grasp from below the table is among them, so the prune is exercised
             assert not got.all()
@@ -55,14 +56,15 @@ def test_choose_is_the_nearest_feasible_of_all_candidates() -> None:
              ("block", "p2P1", [blk.grasps["p2G3"].T]),
              ("peg", "p1P1", [peg.grasps["p1G7"].T, peg.grasps["p1G1"].T])]
     for obj, pose, reqs in cases:
-        cands = placement.candidates(CELL, obj, pose, occupied)
-        ok = placement.feasible(CELL, cands, reqs)
+        cache = CellCache(CELL)
+        cands = placement.candidates(cache, obj, pose, occupied)
+        ok = placement.feasible(cache, cands, reqs)
         regs = placement.default_regions(CELL)
         near = np.mean([[(r["x"][0] + r["x"][1]) / 2, (r["y"][0] + r["y"][1]) / 2] for r in regs], axis=0)
         good = [c for c, f in zip(cands, ok) if f]
         want = min(good, key=lambda p: (round(float(np.hypot(p.x - near[0], p.y - near[1])), 9), p.yaw),
                    default=None)
-        got = placement.choose(CELL, obj, pose, reqs, occupied)
+        got = placement.choose(cache, obj, pose, reqs, occupied)
         if want is None:
             assert got is None
         else:

@@ -10,7 +10,8 @@ import pytest
 from bench import fd
 from spar_py.app import gen
 from spar_py.kb import load_problem
-from spar_py.world.reach import reachable_pairs
+from spar_py.world.run import CellCache
+from spar_py.world.arcs import reachable_pairs
 
 
 def test_encoding_names_every_part_goal_and_arc(tmp_path: Path) -> None:
@@ -21,7 +22,7 @@ def test_encoding_names_every_part_goal_and_arc(tmp_path: Path) -> None:
     for p in cell.positions.values():
         assert f"(at {p.obj} {p.label})" in text
     # the reach facts are exactly phase 1's reachable pairs for the block where it lies
-    pairs = reachable_pairs(cell, "block1", list(cell.objects["block1"].grasps), ["tr2"])
+    pairs = reachable_pairs(CellCache(cell), "block1", list(cell.objects["block1"].grasps), ["tr2"]).pairs
     facts = set(re.findall(r"\(reach (p2-g\d+) tr2\)", text))
     assert facts == {fd._name(g) for g, _ in pairs} and facts
     # labels that differ only in case stay apart (PDDL names are case-insensitive)

@@ -16,6 +16,7 @@ import pytest
 from spar_py.world import placement
 from spar_py.core.units import LENGTH_UNITS
 from spar_py.kb import load_problem
+from spar_py.world.run import CellCache
 from spar_py.core.model import Cell, ObjectModel
 from spar_py.planning.planner import Planner
 
@@ -173,9 +174,10 @@ def test_footprint_clearance_is_tighter_than_bounding_circles() -> None:
     peg = cell.positions["tr1"]
     near = np.array([30.0, -6.0])
     X = [cell.objects["block"].grasps["p2G10"].T]  # from above
-    exact = placement.choose(cell, "block", "p2P1", X, [placement.occupant(cell, "peg", peg.T)], near)
-    circle = placement.choose(cell, "block", "p2P1", X, [(peg.T[:2, 3], cell.objects["peg"].bounding_radius())],
-                              near)
+    cache = CellCache(cell)
+    exact = placement.choose(cache, "block", "p2P1", X, [placement.occupant(cache, "peg", peg.T)], near)
+    circle = placement.choose(CellCache(cell), "block", "p2P1", X,
+                              [(peg.T[:2, 3], cell.objects["peg"].bounding_radius())], near)
     assert exact is not None and (exact.x, exact.y, exact.yaw) == (30.0, -4.0, 0.0)
     assert circle is not None and math.hypot(circle.x - 30, circle.y + 6) > 2.0
     peg_foot = _wrap(_shadow(cell.objects["peg"], peg.T))

@@ -16,6 +16,7 @@ import pytest
 from spar_py.core.errors import KBError, SparValueError
 from spar_py.kb import load_robot
 from spar_py.world import motion as mo
+from spar_py.world.run import CellCache
 
 sys.path.insert(0, str(Path(__file__).parent))
 from craig_reference import craig_fk  # noqa: E402
@@ -366,10 +367,9 @@ def test_certified_segments_agree_with_checking_every_waypoint() -> None:
     configuration (the arm in the table, the wall or a part) with both ends just clear of it,
     so only the interior decides, and random short segments with clear ends."""
     from spar_py import Planner
-    from spar_py.world.collision import scene_for
 
     cell = Planner(motion=True).load_problem(ROOT / "kb" / "problems" / "wall_detour.yaml")
-    scene = scene_for(cell)
+    scene = CellCache(cell).scene()
     state = scene.at({p.obj: np.asarray(p.T, float) for p in cell.positions.values()})
     res = mo.resolution(cell.robot.dh, cell.robot.tool, scene.margin, mo.extent(cell))
     rng = np.random.default_rng(7)
@@ -521,10 +521,9 @@ def test_certify_keeps_what_it_learns_in_the_motion_memo_not_on_the_state() -> N
     after certify as before, a memo passed in is filled and gives the same verdicts when
     reused, and a memo of another state is refused."""
     from spar_py import Planner
-    from spar_py.world.collision import scene_for
 
     cell = Planner(motion=True).load_problem(ROOT / "kb" / "problems" / "wall_detour.yaml")
-    scene = scene_for(cell)
+    scene = CellCache(cell).scene()
     parts = {p.obj: np.asarray(p.T, float) for p in cell.positions.values()}
     state = scene.at(parts)
     res = mo.resolution(cell.robot.dh, cell.robot.tool, scene.margin, mo.extent(cell))

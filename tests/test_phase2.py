@@ -15,6 +15,7 @@ from spar_py.phase2 import instance as phase2
 from spar_py.core.geometry import rotz
 from spar_py.kb import load_problem
 from spar_py.planning.planner import Planner
+from spar_py.world.run import CellCache
 
 ROOT = Path(__file__).resolve().parent.parent
 PROBLEMS = ROOT / "kb" / "problems"
@@ -34,7 +35,7 @@ def _steps(instance: dict) -> list[dict]:
 
 def _execution_check(problem: str, instance: dict) -> list[dict]:
     """Replay the instance at 10^4 draws of its uncertainty variables (issue 5's execution check)."""
-    return phase2.sample_check(load_problem(PROBLEMS / f"{problem}.yaml"), _steps(instance), draws=10_000)
+    return phase2.sample_check(CellCache(load_problem(PROBLEMS / f"{problem}.yaml")), _steps(instance), draws=10_000)
 
 
 def test_paper_cell_all_constraints_hold(planner: Planner) -> None:
@@ -126,7 +127,7 @@ def test_stock_parts_each_picked_where_they_lie(planner: Planner, tmp_path: Path
         np.testing.assert_allclose(np.array(s["tool_pose"]), cell.positions[s["from"]["peg"]].T @ g.T, atol=1e-6)
     mates = {s["args"][1]: s for s in inst["steps"] if s["name"] == "assemble"}
     assert mates["block"]["from"] == {"block": "tr2"} and mates["block2"]["from"] == {"block2": "tr4"}
-    report = phase2.sample_check(cell, _steps(inst), draws=10_000)
+    report = phase2.sample_check(CellCache(cell), _steps(inst), draws=10_000)
     assert report and all(r["failed_draws"] == 0 for r in report if r["declared_satisfied"])
 
 
@@ -135,7 +136,7 @@ def test_stock_world_keeps_the_spare() -> None:
     'peg', the spare keeps its own state at its own place."""
     cell = load_problem(PROBLEMS / "separation.yaml")
     steps = [{"id": "action_2", "name": "pickup", "args": ["peg", "p1G10"]}]
-    w = phase2.new_world(cell, steps, {"action_2": {"peg": "tr5"}})
+    w = phase2.new_world(CellCache(cell), steps, {"action_2": {"peg": "tr5"}})
     assert set(w.unc.objects) == {"peg", "peg@init_pos1", "block"}
     np.testing.assert_allclose(w.unc.objects["peg"].pose, cell.positions["tr5"].T)
     np.testing.assert_allclose(w.unc.objects["peg@init_pos1"].pose, cell.positions["tr1"].T)
@@ -239,12 +240,12 @@ def test_squeeze_is_the_remedy_that_works(planner: Planner) -> None:
     assert sq["poses"]["block"] == inst["steps"][inst["steps"].index(sq) - 1]["poses"]["block"]  # squeezed in place
     steps = _steps(inst)
     sources = {s["id"]: s["from"] for s in steps if s.get("from")}
-    ok = phase2.evaluate(cell, steps, sources)
-    assert ok["status"] == "ok"
+    ok = phase2.evaluate(CellCache(cell), steps, sources)
+    assert ok.status == "ok"
     # sensing alone: the same instance without the squeeze fails at the assemble
-    alone = phase2.evaluate(cell, [s for s in steps if s["name"] != "squeeze"], sources)
-    assert (alone["status"], alone["at"]) == ("failed", "action_1")
-    centres = [v for v in alone["steps"][-1]["verdicts"] if v["constraint"] == "centres"]
+    alone = phase2.evaluate(CellCache(cell), [s for s in steps if s["name"] != "squeeze"], sources)
+    assert (alone.status, alone.at) == ("failed", "action_1")
+    centres = [v for v in alone.steps[-1]["verdicts"] if v["constraint"] == "centres"]
     assert centres and not centres[0]["satisfied"]
 
 
@@ -277,12 +278,12 @@ def test_scan_without_a_sensors_entry_uses_the_sensing_rule() -> None:
     steps = [{"id": "sense_action_4_1", "name": "dense_range_scan", "args": ["block"]},
              {"id": "action_4", "name": "pickup", "args": ["block", "p2G1"]}]
     bare = replace(cell, sensors={})
-    assert phase2.evaluate(bare, steps)["status"] == "infeasible"  # no bounds at all
-    w = phase2.new_world(bare, steps, None, phase2.sensing_bounds(bare, FIG11))
+    assert phase2.evaluate(CellCache(bare), steps).status == "infeasible"  # no bounds at all
+    w = phase2.new_world(CellCache(bare), steps, None, phase2.sensing_bounds(bare, FIG11))
     _, after, _ = phase2.step(w, steps[0])
     e = after.unc.obj("block").error
     assert after.unc.registry.bounds(e.dx.name()) == pytest.approx((-0.05, 0.05))
-    own = phase2.new_world(cell, steps, None, phase2.sensing_bounds(cell, {"dense_range_scan": {
+    own = phase2.new_world(CellCache(cell), steps, None, phase2.sensing_bounds(cell, {"dense_range_scan": {
         **FIG11["dense_range_scan"], "dx": [-9, 9]}}))
     assert own.scans["dense_range_scan"] == cell.sensors["dense_range_scan"].leaves
 
@@ -309,18 +310,18 @@ def test_a_run_stops_bounding_at_its_failing_precondition(planner: Planner) -> N
     cell's, every constraint of the action bounded."""
     inst = planner.plan(PROBLEMS / "hopeless_uncertainty.yaml").to_json()["instance"]
     bare = [s for s in _steps(inst) if s["name"] in ("pickup", "putdown", "assemble")]
-    cell = load_problem(PROBLEMS / "hopeless_uncertainty.yaml")
-    first = phase2.evaluate(cell, bare)
-    assert first["status"] == "failed"
-    at = first["at"]
-    cut = next(r["verdicts"] for r in first["steps"] if r["id"] == at)
+    cache = CellCache(load_problem(PROBLEMS / "hopeless_uncertainty.yaml"))
+    first = phase2.evaluate(cache, bare)
+    assert first.status == "failed"
+    at = first.at
+    cut = next(r["verdicts"] for r in first.steps if r["id"] == at)
     assert not cut[-1]["satisfied"] and all(v["satisfied"] for v in cut[:-1])
-    later = phase2.evaluate(cell, bare, given_up=[at])
-    fresh = phase2.evaluate(load_problem(PROBLEMS / "hopeless_uncertainty.yaml"), bare, given_up=[at])
-    whole = next(r["verdicts"] for r in later["steps"] if r["id"] == at)
-    assert whole == next(r["verdicts"] for r in fresh["steps"] if r["id"] == at)
+    later = phase2.evaluate(cache, bare, given_up=[at])
+    fresh = phase2.evaluate(CellCache(load_problem(PROBLEMS / "hopeless_uncertainty.yaml")), bare, given_up=[at])
+    whole = next(r["verdicts"] for r in later.steps if r["id"] == at)
+    assert whole == next(r["verdicts"] for r in fresh.steps if r["id"] == at)
     assert len(whole) > len(cut) and whole[:len(cut)] == cut  # it was cut short, and is whole now
-    assert later["status"] == fresh["status"] and later["at"] == fresh["at"]
+    assert later.status == fresh.status and later.at == fresh.at
 
 
 @pytest.mark.parametrize("problem", ["peg_in_block", "hopeless_uncertainty", "large_uncertainty", "squeeze"])

@@ -8,6 +8,7 @@ import numpy as np
 
 from spar_py.world import placement
 from spar_py.kb import load_problem
+from spar_py.world.run import CellCache
 
 CELL = load_problem(Path(__file__).resolve().parent.parent / "kb/problems/peg_in_block.yaml")
 
@@ -21,7 +22,7 @@ def test_chosen_placement_is_reachable_by_fk() -> None:
     # (p2G9 with p1G11, the pair this test used before the collision check, has no placement
     # now: p1G11's wrist then passes 0.14 in through the table)
     reqs = [blk.grasps["p2G1"].T, CELL.transforms["trans_1"] @ peg.grasps["p1G10"].T]
-    p = placement.choose(CELL, "block", "p2P5", reqs, _occupied())
+    p = placement.choose(CellCache(CELL), "block", "p2P5", reqs, _occupied())
     assert p is not None
     assert p.z == blk.poses["p2P5"].height
     for X in reqs:
@@ -38,14 +39,14 @@ def test_chosen_placement_is_reachable_by_fk() -> None:
 def test_region_out_of_reach_gives_no_placement() -> None:
     far = replace(CELL, placement_regions=[{"x": (200.0, 210.0), "y": (0.0, 10.0)}])
     reqs = [CELL.objects["block"].grasps["p2G9"].T]
-    assert placement.choose(far, "block", "p2P1", reqs, []) is None
+    assert placement.choose(CellCache(far), "block", "p2P1", reqs, []) is None
 
 
 def test_feasible_matches_single_ik_queries() -> None:
     blk = CELL.objects["block"]
-    cands = placement.candidates(CELL, "block", "p2P1", _occupied())[:200]
+    cands = placement.candidates(CellCache(CELL), "block", "p2P1", _occupied())[:200]
     X = blk.grasps["p2G3"].T
-    ok = placement.feasible(CELL, cands, [X])
+    ok = placement.feasible(CellCache(CELL), cands, [X])
     for c, f in zip(cands[:60], ok[:60]):
         T = c.T @ X
         single = len(CELL.robot.ik(T)) > 0
@@ -59,12 +60,13 @@ def test_default_region_stays_on_a_table_with_edges() -> None:
     y = 8 in; a table ending at y = 10 in leaves a strip beyond it, and the chosen placement's
     whole footprint (computed here from the block's box, not by the module) is on the table."""
     edge = 10.0
-    cell = replace(CELL, table=(-100.0, 100.0, -100.0, edge), memo=type(CELL.memo)())
+    cell = replace(CELL, table=(-100.0, 100.0, -100.0, edge))
+    cache = CellCache(cell)
     (r,) = placement.default_regions(cell)
     assert r["y"][1] == edge and r["y"][0] == placement.default_regions(CELL)[0]["y"][0]
     assert placement.default_regions(replace(cell, table=(-100.0, 100.0, 50.0, 60.0))) == []
     blk = CELL.objects["block"]
-    p = placement.choose(cell, "block", "p2P5", [blk.grasps["p2G1"].T], _occupied())
+    p = placement.choose(cache, "block", "p2P5", [blk.grasps["p2G1"].T], _occupied())
     assert p is not None
     (box,) = [s for s in blk.shape if s.kind == "box"]
     corners = np.array([[x, y, z, 1.0] for x in (box.lo[0], box.hi[0]) for y in (box.lo[1], box.hi[1])
@@ -78,22 +80,23 @@ def test_tool_on_table_prune_refuses_only_what_the_full_check_refuses() -> None:
     every solution, refuses every placement of the grid too. Some grasps are pruned, some not."""
     from spar_py.world.workspace import Requirement, requirement_clear, tool_on_table
 
-    cell = replace(CELL, memo=type(CELL.memo)())
+    cache = CellCache(CELL)
+    cell = cache.cell
     pruned = kept = 0
     for obj in ("peg", "block"):
         m = cell.objects[obj]
         for pose in m.poses:
-            grid = placement._grid(cell, obj, pose)
+            grid = placement._grid(cache, obj, pose)
             for g in m.grasps.values():
                 req = Requirement(g.T, width=g.width)
-                if tool_on_table(cell, obj, grid[0] @ g.T, req) is not None:
+                if tool_on_table(cache, obj, grid[0] @ g.T, req) is not None:
                     pruned += 1
-                    assert not requirement_clear(cell, obj, grid, req).ok.any(), (obj, pose, g.label)
+                    assert not requirement_clear(cache, obj, grid, req).ok.any(), (obj, pose, g.label)
                 else:
                     kept += 1
     assert pruned and kept
-    assert tool_on_table(replace(cell, table=(-100.0, 100.0, -100.0, 100.0)), "peg",
-                         placement._grid(cell, "peg", "p1P1")[0] @ CELL.objects["peg"].grasps["p1G17"].T,
+    assert tool_on_table(CellCache(replace(cell, table=(-100.0, 100.0, -100.0, 100.0))), "peg",
+                         placement._grid(cache, "peg", "p1P1")[0] @ CELL.objects["peg"].grasps["p1G17"].T,
                          Requirement(CELL.objects["peg"].grasps["p1G17"].T)) is None
 
 
@@ -112,28 +115,30 @@ def test_rigid_refusal_refuses_only_what_the_full_check_refuses() -> None:
     mate requirements are pruned, some not."""
     from spar_py.world.workspace import requirement_clear, requirement_state, tool_refusal
 
-    cell = replace(CELL, memo=type(CELL.memo)())
+    cache = CellCache(CELL)
+    cell = cache.cell
     pruned = kept = 0
     for pose in cell.objects["block"].poses:
-        grid = placement._grid(cell, "block", pose)
+        grid = placement._grid(cache, "block", pose)
         for label, req in _mate_requirements(cell):
-            why = tool_refusal(cell, "block", grid[0] @ req.X, req, table=False)
+            why = tool_refusal(cache, "block", grid[0] @ req.X, req, table=False)
             if why is None:
                 kept += 1
                 continue
             pruned += 1
-            full = requirement_clear(cell, "block", grid, req, state=requirement_state(cell, "block", req))
+            full = requirement_clear(cache, "block", grid, req, state=requirement_state(cache, "block", req))
             assert not full.ok.any(), (pose, label, why)
     assert pruned and kept
 
 
 def test_somewhere_is_the_whole_grid_answer() -> None:
-    """reachable_somewhere (first placement alone, then chunks; prunes before IK), a pose at a time
-    and every pose at once (reachable_somewhere_each), answers, for every grasp of either object
+    """some_placement_reaches (first placement alone, then chunks; prunes before IK), a pose at a time
+    and every pose at once (some_placement_reaches_each), answers, for every grasp of either object
     and every mate requirement, what one check of the whole grid answers."""
     from spar_py.world.workspace import Requirement, requirement_clear
 
-    cell = replace(CELL, memo=type(CELL.memo)())
+    cache = CellCache(CELL)
+    cell = cache.cell
     reqs = {"block": [Requirement(g.T, None, g.width) for g in cell.objects["block"].grasps.values()]
             + [r for _, r in _mate_requirements(cell)],
             "peg": [Requirement(g.T, None, g.width) for g in cell.objects["peg"].grasps.values()]}
@@ -141,11 +146,12 @@ def test_somewhere_is_the_whole_grid_answer() -> None:
     for obj, rs in reqs.items():
         poses = list(cell.objects[obj].poses)
         # every pose at once, as an arc asks (one batch per requirement), on a cell of its own
-        each = placement.reachable_somewhere_each(replace(cell, memo=type(CELL.memo)()), obj, [(p, rs) for p in poses])
+        each = placement.some_placement_reaches_each(CellCache(cell), obj,
+                                                      [(p, rs) for p in poses])
         for pose, together in zip(poses, each):
-            got = placement.reachable_somewhere(cell, obj, pose, rs)
-            grid = placement._grid(cell, obj, pose)
-            fresh = replace(cell, memo=type(CELL.memo)())
+            got = placement.some_placement_reaches(cache, obj, pose, rs)
+            grid = placement._grid(cache, obj, pose)
+            fresh = CellCache(cell)
             want = [requirement_clear(fresh, obj, grid, r).ok.any() for r in rs]
             assert got.tolist() == want, (obj, pose)
             assert together.tolist() == want, (obj, pose)
@@ -158,9 +164,9 @@ def test_placements_do_not_keep_the_grid_alive() -> None:
     grid alive wherever the placement is kept (phase 2's memo tables held 62 MB so at N = 50)."""
     blk, peg = CELL.objects["block"], CELL.objects["peg"]
     reqs = [blk.grasps["p2G1"].T, CELL.transforms["trans_1"] @ peg.grasps["p1G10"].T]
-    chosen = placement.choose(CELL, "block", "p2P5", reqs, _occupied())
+    chosen = placement.choose(CellCache(CELL), "block", "p2P5", reqs, _occupied())
     assert chosen is not None
-    cands = placement.candidates(CELL, "block", "p2P5", _occupied())
+    cands = placement.candidates(CellCache(CELL), "block", "p2P5", _occupied())
     assert len(cands) > 1
     for p in [chosen, *cands[:3]]:
         assert p.T.shape == (4, 4)

@@ -15,6 +15,7 @@ from test_footprints import _distance, _wrap
 from spar_py.world import placement
 from spar_py.core.geometry import rotz
 from spar_py.kb import load_problem
+from spar_py.world.run import CellCache
 
 ROOT = Path(__file__).resolve().parent.parent
 CELL = ROOT / "kb/problems/peg_in_block.yaml"
@@ -27,7 +28,8 @@ def _layout(cell, seed: int, n: int) -> list[tuple]:
     ``occupied`` entries (every third one by its bounding disc only)."""
     rng = np.random.default_rng(seed)
     (x0, x1), (y0, y1) = placement.default_regions(cell)[0]["x"], placement.default_regions(cell)[0]["y"]
-    occ = [placement.occupant(cell, p.obj, p.T) for p in cell.positions.values()]
+    cache = CellCache(cell)
+    occ = [placement.occupant(cache, p.obj, p.T) for p in cell.positions.values()]
     for i in range(n):
         obj = ("peg", "block")[i % 2]
         sp = list(cell.objects[obj].poses.values())[int(rng.integers(len(cell.objects[obj].poses)))]
@@ -35,7 +37,7 @@ def _layout(cell, seed: int, n: int) -> list[tuple]:
         T[:3, :3] = rotz(rng.uniform(0, 2 * np.pi))[:3, :3] @ sp.R
         T[:3, 3] = rng.uniform(x0, x1), rng.uniform(y0, y1), sp.height
         occ.append((T[:2, 3].copy(), cell.objects[obj].bounding_radius()) if i % 3 == 2
-                   else placement.occupant(cell, obj, T))
+                   else placement.occupant(cache, obj, T))
     return occ
 
 
@@ -54,7 +56,7 @@ def test_grid_keeps_exactly_the_placements_clear_of_every_part(obj: str, pose: s
     occ = _layout(cell, seed, 10)
     step, yaws = 3.0, 8
     kept = {(round(p.x, 9), round(p.y, 9), round(p.yaw, 9))
-            for p in placement.candidates(cell, obj, pose, occ, step, yaws)}
+            for p in placement.candidates(CellCache(cell), obj, pose, occ, step, yaws)}
     sp = cell.objects[obj].poses[pose]
     reg = placement.default_regions(cell)[0]
     (x0, x1), (y0, y1) = reg["x"], reg["y"]
@@ -84,19 +86,20 @@ def test_grid_keeps_exactly_the_placements_clear_of_every_part(obj: str, pose: s
 
 
 def test_memoised_answers_are_a_fresh_cells() -> None:
-    """Placements among partly the same parts, asked in turn of one cell (its memo tables
+    """Placements among partly the same parts, asked in turn of one cell (its cache's tables
     filling), equal those a fresh cell gives each time; a cell copied with other regions
-    (sharing the memo) gets its own grid's answers."""
-    warm = load_problem(CELL)
-    occ = _layout(warm, 5, 12)
+    (sharing the cache's tables) gets its own grid's answers."""
+    warm = CellCache(load_problem(CELL))
+    occ = _layout(warm.cell, 5, 12)
     for i in range(4):
         part = occ[i:i + 10]
         a = placement._grid_arrays(warm, "block", "p2P1", part, 2.0, 12)
-        b = placement._grid_arrays(load_problem(CELL), "block", "p2P1", part, 2.0, 12)
+        b = placement._grid_arrays(CellCache(load_problem(CELL)), "block", "p2P1", part, 2.0, 12)
         assert all(np.array_equal(u, v) for u, v in zip(a, b))
     assert warm.memo.sizes()["placement.blocks"] > 0
-    moved = replace(warm, placement_regions=[{"x": (20.0, 40.0), "y": (-15.0, 5.0)}])
-    fresh = replace(load_problem(CELL), placement_regions=moved.placement_regions)
+    moved = CellCache(replace(warm.cell, placement_regions=[{"x": (20.0, 40.0), "y": (-15.0, 5.0)}]))
+    moved.memo = warm.memo
+    fresh = CellCache(replace(load_problem(CELL), placement_regions=moved.cell.placement_regions))
     a = placement._grid_arrays(moved, "block", "p2P1", occ, 2.0, 12)
     b = placement._grid_arrays(fresh, "block", "p2P1", occ, 2.0, 12)
     assert all(np.array_equal(u, v) for u, v in zip(a, b))

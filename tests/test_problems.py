@@ -12,6 +12,7 @@ import pytest
 from spar_py.world import placement
 from spar_py.planning.engine import engine
 from spar_py.kb import load_problem
+from spar_py.world.run import CellCache
 
 ROOT = Path(__file__).resolve().parent.parent
 PROBLEMS = sorted((ROOT / "kb" / "problems").glob("*.yaml"))
@@ -155,7 +156,7 @@ def test_placement_trap_has_no_placement() -> None:
     occupied = [(cell.positions["tr1"].T[:2, 3], peg.bounding_radius())]
     for pose in ("p2P1", "p2P2", "p2P4", "p2P5", "p2P6"):
         for g in ("p2G1", "p2G3", "p2G7", "p2G9"):
-            assert placement.choose(cell, "block", pose, [block.grasps[g].T], occupied) is None
+            assert placement.choose(CellCache(cell), "block", pose, [block.grasps[g].T], occupied) is None
 
 
 def test_regrasp_has_a_placement() -> None:
@@ -166,8 +167,9 @@ def test_regrasp_has_a_placement() -> None:
     cell = load_problem(ROOT / "kb" / "problems" / "regrasp.yaml")
     peg = cell.objects["peg"]
     occupied = [(cell.positions["tr2"].T[:2, 3], cell.objects["block"].bounding_radius())]
-    p = placement.choose(cell, "peg", "p1P2", [peg.grasps["p1G17"].T, peg.grasps["p1G1"].T], occupied)
+    p = placement.choose(CellCache(cell), "peg", "p1P2", [peg.grasps["p1G17"].T, peg.grasps["p1G1"].T], occupied)
     assert p is not None
     assert 20 <= p.x <= 40 and -20 <= p.y <= 0
     assert np.isclose(p.z, cell.objects["peg"].poses["p1P2"].height)
-    assert placement.choose(cell, "peg", "p1P1", [peg.grasps["p1G7"].T, peg.grasps["p1G1"].T], occupied) is None
+    assert placement.choose(CellCache(cell), "peg", "p1P1", [peg.grasps["p1G7"].T, peg.grasps["p1G1"].T],
+                            occupied) is None

@@ -1,4 +1,4 @@
-"""reach.py: the CMS's reachable / mate_reachable pairs (Sec. 5.2.4) on a small hand-built cell."""
+"""world/arcs.py: the CMS's reachable / mate_reachable pairs (Sec. 5.2.4) on a small hand-built cell."""
 from __future__ import annotations
 
 import math
@@ -11,7 +11,8 @@ from spar_py.core.errors import SparValueError
 from spar_py.core.geometry import eulerxyz, rot, rotx, rotz, trans
 from spar_py.kb import load_problem, load_robot
 from spar_py.core.model import Bounds, Cell, Grasp, ObjectModel, Position, StablePose
-from spar_py.world.reach import (
+from spar_py.world.run import CellCache, WorldRun
+from spar_py.world.arcs import (
     arc,
     mate_reachable_pairs,
     natural_key,
@@ -93,7 +94,7 @@ def test_front_pose_is_reachable_by_hand(cell: Cell) -> None:
     # and 762 mm > d3 = 190 mm: the arm reaches it; the IK must find it within the limits.
     T = cell.positions["tr1"].T @ cell.objects["box"].grasps["g1"].T
     assert np.allclose(T[:3, 3], [30, 0, 1]) and np.allclose(T[:3, 2], [0, 0, -1])
-    assert reachable_pairs(cell, "box", ["g1"], ["tr1"]) == [["g1", "tr1"]]
+    assert reachable_pairs(CellCache(cell), "box", ["g1"], ["tr1"]).pairs == [["g1", "tr1"]]
     sols = solutions_for(cell, T)
     assert sols and all(len(s) == 6 and all(isinstance(v, float) for v in s) for s in sols)
     for s in sols:  # degrees, for display
@@ -101,7 +102,7 @@ def test_front_pose_is_reachable_by_hand(cell: Cell) -> None:
 
 
 def test_three_metres_away_is_not_reachable(cell: Cell) -> None:
-    assert reachable_pairs(cell, "box", GRASPS, ["tr_far"]) == []
+    assert reachable_pairs(CellCache(cell), "box", GRASPS, ["tr_far"]).pairs == []
     assert solutions_for(cell, cell.positions["tr_far"].T @ cell.objects["box"].grasps["g1"].T) == []
 
 
@@ -113,10 +114,10 @@ def test_gfaces_on_the_resting_face_never_reachable(cell: Cell) -> None:
     assert len(cell.robot.ik(T)) > 0
     # ... but the box rests on its bottom (tr1, box_up) or top (tr_down, box_down): condition 1 fails
     labels = ["tr1", "tr_down", "tr_yaw", "box_up", "box_down"]
-    pairs = reachable_pairs(cell, "box", GRASPS, labels)
+    pairs = reachable_pairs(CellCache(cell), "box", GRASPS, labels).pairs
     assert not [p for p in pairs if p[0] == "g2"]
     # stable-pose labels under the paper's rule: condition 1 only, so every other grasp passes
-    paper = reachable_pairs(cell, "box", GRASPS, labels, rule="paper")
+    paper = reachable_pairs(CellCache(cell), "box", GRASPS, labels, rule="paper").pairs
     assert ["g1", "box_up"] in paper and ["g10", "box_down"] in paper
     # our rule asks for a placement the arm reaches: a subset of the paper's pairs
     assert set(map(tuple, pairs)) <= set(map(tuple, paper)) and ["g1", "box_up"] in pairs
@@ -128,11 +129,11 @@ def test_absolute_positions_are_classified_into_stable_poses(cell: Cell) -> None
     assert resting_faces(cell, "box", "tr_down") == ("top",)
     assert resting_faces(cell, "box", "box_down") == ("top",)
     with pytest.raises(SparValueError, match="tr_tilt"):
-        reachable_pairs(cell, "box", GRASPS, ["tr_tilt"])
+        reachable_pairs(CellCache(cell), "box", GRASPS, ["tr_tilt"]).pairs
 
 
 def test_pairs_are_sorted_string_lists(cell: Cell) -> None:
-    pairs = reachable_pairs(cell, "box", ["g10", "g1", "g1"], ["box_up", "tr1"])
+    pairs = reachable_pairs(CellCache(cell), "box", ["g10", "g1", "g1"], ["box_up", "tr1"]).pairs
     assert pairs == [["g1", "box_up"], ["g1", "tr1"], ["g10", "box_up"], ["g10", "tr1"]]
     assert all(isinstance(x, str) for p in pairs for x in p)
     assert sorted(["p1G10", "p1G2", "p1G1"], key=natural_key) == ["p1G1", "p1G2", "p1G10"]
@@ -146,8 +147,10 @@ def test_all_pairs_in_one_batched_ik_call(cell: Cell, monkeypatch: pytest.Monkey
         calls.append(len(T))
         return real(T)
 
+    cache = CellCache(cell)
+    reachable_pairs(cache, "box", GRASPS, ["box_up"])  # the stable pose's placement search, kept
     monkeypatch.setattr(cell.robot, "ik_batch", counting)
-    reachable_pairs(cell, "box", GRASPS, ["tr1", "tr_far", "tr_yaw", "box_up"])
+    reachable_pairs(cache, "box", GRASPS, ["tr1", "tr_far", "tr_yaw", "box_up"])
     # g2 fails condition 1 at every one of the three absolute positions: 2 grasps x 3 positions
     assert calls == [6]
 
@@ -155,50 +158,51 @@ def test_all_pairs_in_one_batched_ik_call(cell: Cell, monkeypatch: pytest.Monkey
 def test_mate_reachable(cell: Cell) -> None:
     # a stable-pose label of the fixed object under the paper's rule: condition 2 is assumed
     # satisfiable, all pairs pass; ours keeps those some placement of the plate lets the arm reach
-    pairs = mate_reachable_pairs(cell, "box", "plate", GRASPS, ["plate_up", "plate_down"], cell.transforms["on_top"],
-                                 rule="paper")
+    pairs = mate_reachable_pairs(CellCache(cell), "box", "plate", GRASPS, ["plate_up", "plate_down"],
+                                 cell.transforms["on_top"], rule="paper").pairs
     assert len(pairs) == 6
-    ours = mate_reachable_pairs(cell, "box", "plate", GRASPS, ["plate_up", "plate_down"], cell.transforms["on_top"])
+    ours = mate_reachable_pairs(CellCache(cell), "box", "plate", GRASPS, ["plate_up", "plate_down"],
+                                cell.transforms["on_top"]).pairs
     assert 0 < len(ours) < 6 and set(map(tuple, ours)) <= set(map(tuple, pairs))
     # absolute: T = T_O T_a T_g; the box on the plate at (30, 0, 3) in is reachable from above,
     # and condition 1 does not apply (g2's faces are not checked)
-    pairs = mate_reachable_pairs(cell, "box", "plate", GRASPS, ["trp", "trp_far"], "on_top")
+    pairs = mate_reachable_pairs(CellCache(cell), "box", "plate", GRASPS, ["trp", "trp_far"], "on_top").pairs
     assert ["g1", "trp"] in pairs and ["g10", "trp"] in pairs
     assert not [p for p in pairs if p[1] == "trp_far"]
     T = cell.positions["trp"].T @ cell.transforms["on_top"] @ cell.objects["box"].grasps["g1"].T
     assert np.allclose(T[:3, 3], [30, 0, 3])
     with pytest.raises(SparValueError, match="holds box"):
-        mate_reachable_pairs(cell, "box", "plate", GRASPS, ["tr1"], "on_top")
+        mate_reachable_pairs(CellCache(cell), "box", "plate", GRASPS, ["tr1"], "on_top").pairs
 
 
 def test_arc_dispatch_and_errors(cell: Cell) -> None:
-    assert arc(cell, "reachable", ["box"], GRASPS, ["tr1"]) == reachable_pairs(cell, "box", GRASPS, ["tr1"])
-    assert arc(cell, "mate_reachable", ["box", "plate"], GRASPS, ["trp"], "on_top") == \
-        mate_reachable_pairs(cell, "box", "plate", GRASPS, ["trp"], "on_top")
+    assert arc(CellCache(cell), "reachable", ["box"], GRASPS, ["tr1"]).pairs == \
+        reachable_pairs(CellCache(cell), "box", GRASPS, ["tr1"]).pairs
+    assert arc(CellCache(cell), "mate_reachable", ["box", "plate"], GRASPS, ["trp"], "on_top").pairs == \
+        mate_reachable_pairs(CellCache(cell), "box", "plate", GRASPS, ["trp"], "on_top").pairs
     with pytest.raises(SparValueError, match="unknown geometric constraint"):
-        arc(cell, "near", ["box"], GRASPS, ["tr1"])
+        arc(CellCache(cell), "near", ["box"], GRASPS, ["tr1"]).pairs
     with pytest.raises(SparValueError, match="not a grasp"):
-        reachable_pairs(cell, "box", ["g7"], ["tr1"])
+        reachable_pairs(CellCache(cell), "box", ["g7"], ["tr1"]).pairs
     with pytest.raises(SparValueError, match="neither a stable pose"):
-        reachable_pairs(cell, "box", GRASPS, ["nowhere"])
+        reachable_pairs(CellCache(cell), "box", GRASPS, ["nowhere"]).pairs
     with pytest.raises(SparValueError, match="unknown object"):
-        reachable_pairs(cell, "ball", GRASPS, ["tr1"])
-    assert reachable_pairs(cell, "box", [], ["tr1"]) == []
+        reachable_pairs(CellCache(cell), "ball", GRASPS, ["tr1"]).pairs
+    assert reachable_pairs(CellCache(cell), "box", [], ["tr1"]).pairs == []
 
 
 def test_paper_cell_pairs_are_sound() -> None:
     # Sec. 6's cell: every returned absolute pair has a verified joint solution, every
     # omitted one fails condition 1, has none, or every one collides and the refusal names
     # the pair of bodies (the CMS is exact on its own model)
-    from spar_py.world.workspace import refusals
-
     cell = load_problem(ROOT / "kb" / "problems" / "peg_in_block.yaml")
+    run = WorldRun(CellCache(cell))
     for obj, pos in (("peg", "tr1"), ("block", "tr2")):
         model = cell.objects[obj]
-        pairs = reachable_pairs(cell, obj, list(model.grasps), [pos])
+        pairs = run.arc_pairs("reachable", [obj], list(model.grasps), [pos])
         assert pairs, f"no grasp of the {obj} is reachable at {pos}"
         rfaces = set(resting_faces(cell, obj, pos))
-        said = refusals(cell)
+        said = [r.text() for r in run.log.refusals()]
         for g in model.grasps.values():
             T = cell.positions[pos].T @ g.T
             expected = not (rfaces & set(g.gfaces)) and len(cell.robot.ik(T)) > 0

@@ -20,10 +20,10 @@ ROOT = Path(__file__).resolve().parent.parent
 @pytest.fixture(scope="module")
 def edge_cell():
     from spar_py import Planner
-    from spar_py.world.collision import scene_for
+    from spar_py.world.run import CellCache
 
     cell = Planner().load_problem(ROOT / "kb" / "problems" / "ur5e_peg_in_block.yaml")
-    scene = scene_for(cell)
+    scene = CellCache(cell).scene()
     return cell, scene, scene.at({})  # no parts: only the table (y <= 6.5 in) and the arm
 
 

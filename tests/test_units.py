@@ -13,6 +13,7 @@ import pytest
 from spar_py.world import placement
 from spar_py.core.units import LENGTH_UNITS
 from spar_py.kb import load_problem
+from spar_py.world.run import CellCache
 from spar_py.planning.planner import Planner
 
 from units_fixture import ROOT, write_cell
@@ -49,7 +50,7 @@ def test_constants_are_the_same_lengths_in_every_unit(cells: dict[str, Path]) ->
             assert np.allclose(np.array([a["x"], a["y"]]) * k, np.array([b["x"], b["y"]]), atol=1e-9)
         for obj, m in cell.objects.items():
             for pose in m.poses:
-                g, g0 = placement._grid(cell, obj, pose), placement._grid(ref, obj, pose)
+                g, g0 = placement._grid(CellCache(cell), obj, pose), placement._grid(CellCache(ref), obj, pose)
                 assert g.shape == g0.shape, (u, obj, pose)
                 assert np.allclose(g[:, :3, 3] * k, g0[:, :3, 3], atol=1e-6)
 

@@ -23,7 +23,7 @@ import pytest
 
 from spar_py.kb import load_problem
 from spar_py.world.workspace import ik_rows, reach_clear, requirement_clear
-from spar_py.world.collision import scene_for
+from spar_py.world.run import CellCache
 
 sys.path.insert(0, str(Path(__file__).parent))
 from test_ik_ur import std_fk  # noqa: E402  (UR's published DH, written out)
@@ -113,7 +113,7 @@ def cell_on_open_table(name: str):
 
 def module_heights(cell, q: np.ndarray) -> dict[str, np.ndarray]:
     """The module's height over the table (mm) of each moving link shape at rows q (n, 6)."""
-    state = scene_for(cell).at({})
+    state = CellCache(cell).scene().at({})
     H = state._table(cell.robot.frames_batch(q)) * MM
     return {state.bodies[i].name: H[:, k] for k, i in enumerate(state.table_bodies)}
 
@@ -157,9 +157,9 @@ def pick_pose(cell) -> np.ndarray:
 def test_a_pick_in_front_at_table_height_is_clear() -> None:
     cell = cell_on_open_table("ur5e_peg_in_block")
     T = pick_pose(cell)
-    assert reach_clear(cell, T[None]).ok[0]
+    assert reach_clear(CellCache(cell), T[None]).ok[0]
     Q, okb = ik_rows(cell, T[None])
-    clear = scene_for(cell).at({}).clear(Q[0][okb[0]])
+    clear = CellCache(cell).scene().at({}).clear(Q[0][okb[0]])
     assert clear.any()
     margin = 2.0
     for qk, c in zip(Q[0][okb[0]], clear):
@@ -176,13 +176,13 @@ def test_side_grasp_at_the_blocks_centre_needs_the_table_edge() -> None:
     assert okb.any()
     for qk in Q[0][okb[0]]:
         assert min(lowest(*s) for n, s in cylinders(qk).items() if n != "base") < 0.0
-    assert not requirement_clear(cell, "block", TO[None], g.T).ok[0]
+    assert not requirement_clear(CellCache(cell), "block", TO[None], g.T).ok[0]
     # ...with the cell's table, ending at y = 6.5 in under the block's face, one is clear, and
     # every shape that is under the table top's level is wholly beyond the edge
     cell = load_problem(PROBLEMS / "ur5e_peg_in_block.yaml")
     edge = cell.table[3] * MM
     Q, okb = ik_rows(cell, (TO @ g.T)[None])
-    clear = scene_for(cell).at({}, grasped="block", width=g.width,
+    clear = CellCache(cell).scene().at({}, grasped="block", width=g.width,
                                 attached={"block": np.linalg.inv(g.T)}).clear(Q[0][okb[0]])
     assert clear.any()
     for qk in Q[0][okb[0]][clear]:

@@ -34,7 +34,7 @@ keeps the cells that
 
 - keep every footprint at least PEDESTAL_RADIUS from the robot's base axis (the
   pedestal stands there), and
-- the arm can work, by the planner's own IK (workspace.reaches) and then the world layer's
+- the arm can work, by the planner's own IK (workspace.reachable_ignoring_collisions) and then the world layer's
   collision scene (world.collision, as phase 2 checks each step; :func:`_usable`): some block
   grasp (hole-down only) with which the block is picked up where it starts and put down hole-up at
   the same spot (phase 2 puts a part down nearest its previous spot, and every block centre
@@ -321,12 +321,12 @@ def _grasp_ok(robot, grasps, first: np.ndarray, second: np.ndarray) -> np.ndarra
     grasp of ``grasps`` (each a 4x4 tool-in-object) reaches both: one batched IK call."""
     if not grasps:
         return np.zeros(len(first), dtype=bool)
-    from spar_py.world.workspace import reaches
+    from spar_py.world.workspace import reachable_ignoring_collisions
 
     G = np.stack(grasps)                                            # (g, 4, 4)
     A = np.einsum("nij,gjk->ngik", first, G).reshape(-1, 4, 4)
     B = np.einsum("nij,gjk->ngik", second, G).reshape(-1, 4, 4)
-    ok = reaches(robot, np.concatenate([A, B])).reshape(2, len(first), len(G))
+    ok = reachable_ignoring_collisions(robot, np.concatenate([A, B])).reshape(2, len(first), len(G))
     return (ok[0] & ok[1]).any(axis=1)
 
 

@@ -1,11 +1,12 @@
-"""Bounded memo tables owned by one loaded cell (no module-level caches).
+"""Bounded memo tables (no module-level caches).
 
 A planning run asks the same geometric questions many times: phase 1 in every round
-of its deepening search, phase 2 each time it re-runs an instance after a remedy. The
-answers depend only on the cell and the question, so they are kept in tables that
-belong to the :class:`~spar_py.core.model.Cell` (``cell.memo``): they live as long as the
-cell does, are freed with it, and each table holds at most ``limit`` entries (the
-least recently used is dropped first).
+of its deepening search, phase 2 each time it re-runs an instance after a remedy, and
+planning a cell again asks them all again. The answers that depend only on the cell and
+the question are kept in the tables of the cell's cache (world.run.CellCache, kept beside
+the immutable cell by the Planner or the engine): they live as long as it does, and each
+table holds at most ``limit`` entries (the least recently used is dropped first). A
+run's own state (what it refused, its tokens) is in its log, never here.
 """
 from __future__ import annotations
 

@@ -11,10 +11,8 @@ from typing import TYPE_CHECKING, Union
 
 import numpy as np
 
-from spar_py.core.memo import Memo
 
 if TYPE_CHECKING:
-    from spar_py.world.motion_options import MotionOptions
     from spar_py.world.robots import Robot
     from spar_py.world.shapes import FeatureGeometry, Geometry
 
@@ -148,7 +146,10 @@ class Sensor:
 
 @dataclass
 class Cell:
-    """A whole problem: robot, objects, initial positions, uncertainty, sensors and goals."""
+    """A whole problem: robot, objects, initial positions, uncertainty, sensors and goals.
+
+    Read only once loaded: a planning run keeps its own state (world.run.WorldRun) and the
+    answers worth keeping across runs sit beside the cell (world.run.CellCache)."""
 
     name: str
     file: str
@@ -185,11 +186,6 @@ class Cell:
     #: The problem file's ``motion: true``: plan motions unless the Planner says otherwise
     #: (the regression suite plans motions for these cells only).
     plan_motions: bool = False
-    #: How a planning run plans motions (world.motion.MotionOptions), None for end-point
-    #: planning only; set by the Planner for each run.
-    motion: "MotionOptions | None" = field(default=None, compare=False, repr=False)
-    #: The cell's memo tables (bounded; freed with the cell): see memo.py.
-    memo: Memo = field(default_factory=Memo, compare=False, repr=False)
 
     def position_of(self, label: str) -> Position:
         """The absolute position labelled ``label`` (KeyError if none)."""

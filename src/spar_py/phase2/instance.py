@@ -11,9 +11,11 @@ at a step, infeasible at a step). A step is plain data from Prolog: ``{"id":
 (foreign.pl's term_data/2: atoms are strings, lists lists, compounds
 ``{"functor", "args"}``); names: pickup, putdown, assemble, dense_range_scan, squeeze.
 
-Step results are memoised in the cell's memo tables (cell.memo), keyed by everything
+Step results are kept in the cell's cache (world.run.CellCache), keyed by everything
 that determines the world before the step, so a re-run after a remedy reuses the
-prefix it shares with earlier runs, and instances reuse each other's prefixes.
+prefix it shares with earlier runs, and instances (and later runs of the cell) reuse
+each other's prefixes. A kept step keeps its refusals (:attr:`World.refused`), so every
+run that meets it again hears why its arm did not reach.
 
 The bounds a sensing action leaves (Fig. 11) come from the problem file's ``sensors``
 entry where it has one, else from the sensing rule's bounds that Prolog passes with
@@ -34,7 +36,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -44,8 +46,14 @@ from spar_py.core.errors import SparValueError
 from spar_py.core.geometry import same_stable_pose
 from spar_py.core.model import Bounds, Cell, Grasp
 from spar_py.core.units import ANGLE_UNITS, LENGTH_UNITS
-from spar_py.world.workspace import solutions
+from spar_py.world.arcs import reachable_pairs
+from spar_py.world.motion_options import MotionFailure, MotionOptions
+from spar_py.world.run import CellCache
+from spar_py.world.workspace import arm_at, pair_text
 from spar_py.phase2.symbolic import Registry
+
+if TYPE_CHECKING:
+    from spar_py.world.motion import InstanceMotion
 
 Step = dict[str, Any]
 
@@ -55,7 +63,7 @@ class World:
     """The world before a step: uncertainty state, what the hand holds and with which grasp,
     the put-down placements chosen for this instance, the arm's last joint vector."""
 
-    cell: Cell
+    cache: CellCache
     unc: ur.WorldState
     placements: dict[str, pl.Placement | None]
     grasps: dict[str, str] = field(default_factory=dict)  # object -> grasp label while held
@@ -66,28 +74,55 @@ class World:
     key: tuple = ()  # what determines this world: the placements' key and the steps so far
     checked: tuple = ()  # (Constraint, satisfied) of every UR precondition checked so far
     complete: bool = True  # False: the last step's verdicts stop at its first unsatisfied one (step's early)
+    #: What the step that made this world refused because every joint solution collides:
+    #: (what, colliding pairs) each.
+    refused: tuple[tuple[str, tuple[tuple[str, str], ...]], ...] = ()
+
+    @property
+    def cell(self) -> Cell:
+        """The cell this world is of."""
+        return self.cache.cell
+
+
+Refusals = tuple[tuple[str, tuple[tuple[str, str], ...]], ...]
+
+
+@dataclass
+class Evaluation:
+    """One run of a plan instance (:func:`evaluate`): ``status`` ok | failed | infeasible, ``at``
+    the step id where it stopped (None if ok), ``steps`` the step records, ``refusals`` what
+    its steps refused with the colliding pairs (in order), ``motion`` the instance's motions
+    (world/motion.py InstanceMotion), or the MotionFailure that made it infeasible, or None."""
+
+    status: str
+    at: str | None
+    steps: list[dict[str, Any]]
+    refusals: list[tuple[str, tuple[tuple[str, str], ...]]] = field(default_factory=list)
+    motion: InstanceMotion | MotionFailure | None = None
 
 
 # ---------------------------------------------------------------------- set-up
 
 
-def new_world(cell: Cell, steps: list[Step], sources: Sources | None = None,
-              sensing: Mapping[str, Bounds] | None = None) -> World:
+def new_world(cache: CellCache, steps: list[Step], sources: Sources | None = None,
+              sensing: Mapping[str, Bounds] | None = None, motion: MotionOptions | None = None) -> World:
     """The initial world for an instance whose steps (in order) are ``steps``; chooses
     every put-down placement now, knowing the later actions on the object (Sec. 5.2.4).
     ``sources`` says where each action takes its objects from (module doc), step id ->
     {obj: label}; needed only where an object has several initial positions.
     ``sensing``: the bounds each sensing action's rule leaves (cell units,
-    :func:`sensing_bounds`); the cell's own ``sensors`` entries take precedence."""
+    :func:`sensing_bounds`); the cell's own ``sensors`` entries take precedence; ``motion``
+    the run's motion options (their approach length shapes the placements)."""
+    cell = cache.cell
     src = _inherit_sources(steps, {str(k): dict(v) for k, v in (sources or {}).items()})
-    key, placements = _placements(cell, steps, src)
+    key, placements = _placements(cache, steps, src, motion)
     active = _first_parts(cell, steps, src)
     scans = {**(sensing or {}), **{n: sn.leaves for n, sn in cell.sensors.items()}}
     unc = ur.initial_world(cell, Registry(), active=active)
     scan_key = tuple(sorted(scans.items()))
     # the key holds what the world depends on before any step; step() adds each step's own
     # inputs (its placement, its sources), so instances that agree on a prefix share it
-    return World(cell, unc, placements, sources=src, active=active, scans=scans,
+    return World(cache, unc, placements, sources=src, active=active, scans=scans,
                  key=(tuple(sorted(active.items())), scan_key))
 
 
@@ -152,7 +187,7 @@ def _first_parts(cell: Cell, steps: list[Step], src: dict[str, dict[str, str]]) 
     return out
 
 
-#: Bounds of the cell's memo tables (cell.memo): placements per manipulation sequence;
+#: Bounds of the cell cache's tables (world.run.CellCache): placements per manipulation sequence;
 #: step results per world key. Phase 2 re-runs an instance from the start after each
 #: remedy it tries, and instances share prefixes; a world is fully determined by its key,
 #: so a step's result can be reused (its uncertainty variables stay in the registry they
@@ -173,24 +208,25 @@ def _step_key(s: Step) -> tuple:
     return (s["id"], s["name"], _frozen(list(s["args"])))
 
 
-def _placements(cell: Cell, steps: list[Step],
-                src: dict[str, dict[str, str]]) -> tuple[tuple, dict[str, pl.Placement | None]]:
+def _placements(cache: CellCache, steps: list[Step], src: dict[str, dict[str, str]],
+                motion: MotionOptions | None) -> tuple[tuple, dict[str, pl.Placement | None]]:
     """choose_placements memoised per cell, manipulation sequence (sensing moves nothing),
     the parts those manipulations take and the motions' approach length (None without them)."""
     manip = [s for s in steps if s["name"] in ("pickup", "putdown", "assemble")]
-    key = (tuple(_step_key(s) for s in manip),
-           tuple(sorted((k, tuple(sorted(v.items()))) for k, v in src.items())), _approach_length(cell))
-    memo = cell.memo.table("phase2.placements", MEMO_LIMIT)
-    return key, memo.get_or_compute(key, lambda: choose_placements(cell, manip, src))
+    length = _approach_length(cache.cell, motion)
+    key = (tuple(_step_key(s) for s in manip), tuple(sorted((k, tuple(sorted(v.items()))) for k, v in src.items())),
+           length)
+    memo = cache.table("phase2.placements", MEMO_LIMIT)
+    return key, memo.get_or_compute(key, lambda: choose_placements(cache, manip, src, length))
 
 
-def _approach_length(cell: Cell) -> float | None:
+def _approach_length(cell: Cell, motion: MotionOptions | None) -> float | None:
     """The motions' approach length (cell unit; world/motion.approach_length), None without motions."""
-    if cell.motion is None:
+    if motion is None:
         return None
-    from spar_py.world.motion import approach_length
+    from spar_py.world.motion import approach_length  # motion.py is some 2 ms of a cold start
 
-    return approach_length(cell, cell.motion)
+    return approach_length(cell, motion)
 
 
 def _grasp(cell: Cell, obj: str, label: str) -> Grasp:
@@ -200,15 +236,16 @@ def _grasp(cell: Cell, obj: str, label: str) -> Grasp:
         raise SparValueError(f"{label!r} is not a grasp of {obj!r}") from None
 
 
-def choose_placements(cell: Cell, steps: list[Step],
-                      sources: dict[str, dict[str, str]] | None = None) -> dict[str, pl.Placement | None]:
+def choose_placements(cache: CellCache, steps: list[Step], sources: dict[str, dict[str, str]] | None = None,
+                      length: float | None = None) -> dict[str, pl.Placement | None]:
     """For each putdown into a stable pose, the placement nearest the object's previous spot
     at which the arm reaches the put-down grasp and every later grasp and mate on the object
     until it is picked up again, clear of every part on the table; None where no placement
     in the free regions works. ``sources`` (see :func:`new_world`) says which part of a
-    stock a pickup takes."""
+    stock a pickup takes; ``length`` the motions' approach length (cell unit), None without
+    motions (with motions, each put-down's tool lines must be reachable too)."""
+    cell = cache.cell
     src = sources or {}
-    length = _approach_length(cell)  # with motions, each put-down's tool lines must be reachable too
     # parts on the table: initial position name or putdown id -> (object, pose)
     on_table: dict[str, tuple[str, np.ndarray]] = {p.name: (p.obj, p.T) for p in cell.positions.values()}
     last: dict[str, np.ndarray] = {}  # object -> where the part in the hand was picked from
@@ -230,9 +267,9 @@ def choose_placements(cell: Cell, steps: list[Step],
             else:
                 uses = [("putdown", _grasp(cell, obj, held[obj]).T, None),
                         *_later_requirements(cell, steps[i + 1:], obj, held)]
-                occupied = [pl.occupant(cell, o, T) for o, T in on_table.values()]
+                occupied = [pl.occupant(cache, o, T) for o, T in on_table.values()]
                 near = prev[:2, 3] if prev is not None else None
-                out[s["id"]] = pl.choose(cell, obj, pos, [X for _, X, _ in uses], occupied, near,
+                out[s["id"]] = pl.choose(cache, obj, pos, [X for _, X, _ in uses], occupied, near,
                                          reach=[] if length is None else _line_ends(cell, obj, pos, uses, length))
             held.pop(obj, None)
             if out[s["id"]] is not None:
@@ -317,12 +354,12 @@ def step(world: World, s: Step, early: bool = False) -> tuple[list[dict[str, Any
                         None if place is None else (place.pose, place.T.tobytes())),)
 
     def run() -> tuple[list[dict[str, Any]], World, dict[str, Any], bool]:
-        checks, after, geo = handler(_activate(world, s), s, early)
+        checks, after, geo = handler(replace(_activate(world, s), refused=()), s, early)
         if s["id"] in world.sources:
             geo["from"] = dict(world.sources[s["id"]])
         return checks, replace(after, key=key), geo, not (early and not after.complete)
 
-    table = world.cell.memo.table("phase2.steps", MEMO_LIMIT)
+    table = world.cache.table("phase2.steps", MEMO_LIMIT)
     hit = table.get(key)
     if hit is None or not (early or hit[3]):
         hit = table[key] = run()
@@ -355,45 +392,52 @@ def _all_satisfied(checks: list[dict[str, Any]], kind: str) -> bool:
     return all(c["satisfied"] for c in checks if c["kind"] == kind)
 
 
-def evaluate(cell: Cell, steps: Sequence[Step], sources: Sources | None = None,
-             given_up: Sequence[str] = (), sensing: Mapping[str, Mapping[str, Any]] | None = None) -> dict[str, Any]:
-    """Run the plan instance ``steps`` (in order) of ``cell`` from its initial world: one
-    call per run, the result plain data for Prolog.
+def evaluate(cache: CellCache, steps: Sequence[Step], sources: Sources | None = None,
+             given_up: Sequence[str] = (), sensing: Mapping[str, Mapping[str, Any]] | None = None,
+             motion: MotionOptions | None = None) -> Evaluation:
+    """Run the plan instance ``steps`` (in order) of the cell of ``cache`` from its initial
+    world: one call per run (planning/run.py's PlanRun.evaluate, for Prolog).
 
     ``sources`` as :func:`new_world`; ``given_up`` the ids of steps whose unmet
     uncertainty-reduction preconditions the run goes past (they count as errors);
-    ``sensing`` the sensing rules' bounds in their own units (:func:`sensing_bounds`).
-    Returns ``{"status": "ok" | "failed" | "infeasible", "at": step id or None, "steps":
-    [...]}``: the run stops at the first step whose uncertainty-reduction preconditions
-    are not all satisfied and that is not in ``given_up`` (failed) or at the first whose
-    geometric precondition fails (infeasible: no placement, no joint solution); each
-    step record, up to and including that one, is ``{"id", "verdicts": [verdict dicts],
-    "geometry": {"tool_pose", "joints_deg", "ik_solutions_deg", "placement", "from",
-    ...}, "poses": poses(world after it), "held": the object in the hand after it or
-    None}``. Lengths in the cell unit, angles in degrees, world frame."""
-    world = new_world(cell, list(steps), sources, sensing_bounds(cell, sensing))
+    ``sensing`` the sensing rules' bounds in their own units (:func:`sensing_bounds`);
+    ``motion`` the run's motion options (None: end-points only). The run stops at the first
+    step whose uncertainty-reduction preconditions are not all satisfied and that is not in
+    ``given_up`` (failed) or at the first whose geometric precondition fails (infeasible: no
+    placement, no joint solution, no motion); each step record, up to and including that
+    one, is ``{"id", "verdicts": [verdict dicts], "geometry": {"tool_pose", "joints_deg",
+    "ik_solutions_deg", "placement", "from", ...}, "poses": poses(world after it), "held":
+    the object in the hand after it or None}``. Lengths in the cell unit, angles in degrees,
+    world frame."""
+    cell = cache.cell
+    world = new_world(cache, list(steps), sources, sensing_bounds(cell, sensing), motion)
     skip = set(given_up)
     out: list[dict[str, Any]] = []
+    refused: list[tuple[str, tuple[tuple[str, str], ...]]] = []
     worlds = [world]
     seen: dict[int, tuple[ur.ObjectState, list[list[float]]]] = {}
     for s in steps:
         checks, world, geo = step(world, s, early=s["id"] not in skip)
         worlds.append(world)
+        refused += world.refused
         out.append({"id": s["id"], "verdicts": checks, "geometry": geo,
                     "poses": poses(world, seen), "held": world.unc.holding})
         if not _all_satisfied(checks, "geometric"):
-            return {"status": "infeasible", "at": s["id"], "steps": out}
+            return Evaluation("infeasible", s["id"], out, refused)
         if not _all_satisfied(checks, "uncertainty") and s["id"] not in skip:
-            return {"status": "failed", "at": s["id"], "steps": out}
-    out = _refined(cell, out, worlds)
-    if cell.motion is not None:  # the end-points are fixed: the motions between them (world/motion.py)
-        from spar_py.world.motion import run_motions
+            return Evaluation("failed", s["id"], out, refused)
+    out = _refined(cache, out, worlds)
+    if motion is not None:  # the end-points are fixed: the motions between them (world/motion.py)
+        from spar_py.world.motion import run_motions  # motion.py is some 2 ms of a cold start
 
-        return run_motions(cell, steps, worlds, {"status": "ok", "at": None, "steps": out})
-    return {"status": "ok", "at": None, "steps": out}
+        records, got = run_motions(cache, steps, worlds, out, motion)
+        if isinstance(got, MotionFailure):
+            return Evaluation("infeasible", records[-1]["id"], records, refused, got)
+        return Evaluation("ok", None, records, refused, got)
+    return Evaluation("ok", None, out, refused)
 
 
-def _refined(cell: Cell, out: list[dict[str, Any]], worlds: list[World]) -> list[dict[str, Any]]:
+def _refined(cache: CellCache, out: list[dict[str, Any]], worlds: list[World]) -> list[dict[str, Any]]:
     """The step records of a run that went through, with each uncertainty-reduction
     verdict's bound refined to SUP/INF's tolerance.
 
@@ -415,7 +459,7 @@ def _refined(cell: Cell, out: list[dict[str, Any]], worlds: list[World]) -> list
         for v in rec["verdicts"]:
             if v["kind"] == "uncertainty":
                 c, satisfied = next(pairs)
-                v = {**ur.evaluate(c, after.unc.registry, memo=cell.memo).as_dict(), "kind": "uncertainty"}
+                v = {**ur.evaluate(c, after.unc.registry, memo=cache.memo).as_dict(), "kind": "uncertainty"}
                 if v["satisfied"] != satisfied:  # cannot happen (Bounder.bounds' beat): say so if it does
                     raise AssertionError(f"phase 2: {c.action} {c.name}: the refined verdict differs")
             verdicts.append(v)
@@ -452,51 +496,36 @@ def _part_at(world: World, obj: str, label: str) -> str | None:
 
 def _arm(world: World, T: np.ndarray, what: str = "", held: tuple[str, np.ndarray] | None = None,
          grasped: str | None = None, width: float | None = None,
-         allow: Sequence[tuple[str, str]] = ()) -> tuple[np.ndarray | None, dict[str, Any]]:
+         allow: Sequence[tuple[str, str]] = ()) -> tuple[np.ndarray | None, dict[str, Any], Refusals]:
     """The joint vector reaching tool pose T nearest the previous one among those clear of the
-    world at this step (world.collision: every part where it is now, ``held`` in the hand,
-    ``grasped`` being closed on, ``allow`` the step's own contacts), and display data: every IK
-    solution, the chosen one's clearance (cell unit) and closest pair; without a clear
-    solution ``collisions`` lists the pairs and the refusal is remembered (workspace.refusals)."""
-    from spar_py.world.collision import scene_for
-    from spar_py.world.workspace import remember_refusal
-
+    world at this step (workspace.arm_at: every part where it is now, ``held`` in the hand,
+    ``grasped`` being closed on, ``allow`` the step's own contacts), display data (every IK
+    solution, the chosen one's clearance (cell unit) and closest pair; without a clear solution
+    ``collisions`` the pairs) and the refusal of ``what`` with those pairs (empty if none)."""
     cell = world.cell
-    sols = solutions(cell.robot, T)
-    q = None
+    parts = {k: o.pose for k, o in world.unc.objects.items() if k != world.unc.holding}
+    got = arm_at(world.cache, T, world.joints, parts=parts, held=held, grasped=grasped, width=width, allow=allow)
     geo: dict[str, Any] = {}
-    if len(sols) and cell.collisions:
-        parts = {k: o.pose for k, o in world.unc.objects.items() if k != world.unc.holding}
-        state = scene_for(cell).at(parts, held, grasped, width=width, allow=allow)
-        clear, why = state.check(sols)
-        good = sols[clear]
-        if len(good):
-            ref = world.joints if world.joints is not None else np.zeros(6)
-            q = good[int(np.argmin(np.abs(good - ref).sum(axis=1)))]
-            d, names = state.clearance(q[None])
-            geo["clearance"] = round(float(d[0]), 6)
-            geo["closest_pair"] = list(names[0])
-        else:
-            pairs = list(dict.fromkeys(w for w in why if w is not None))
-            geo["collisions"] = [list(p) for p in pairs]
-            remember_refusal(cell, what, pairs)
-    elif len(sols):  # no collision check in this cell (Cell.collisions): the nearest solution
-        ref = world.joints if world.joints is not None else np.zeros(6)
-        q = sols[int(np.argmin(np.abs(sols - ref).sum(axis=1)))]
+    if got.clearance is not None:
+        geo["clearance"] = round(got.clearance, 6)
+        geo["closest_pair"] = list(got.closest_pair or ())
+    refused: Refusals = ()
+    if got.collisions:
+        geo["collisions"] = [list(p) for p in got.collisions]
+        refused = ((what, tuple(got.collisions)),)
+    q = got.q
     geo = {"tool_pose": np.round(T, 9).tolist(),
            "joints_deg": None if q is None else [round(float(v), 6) for v in np.degrees(q)],
-           "ik_solutions_deg": [[round(float(v), 6) for v in np.degrees(r)] for r in sols],
+           "ik_solutions_deg": [[round(float(v), 6) for v in np.degrees(r)] for r in got.solutions],
            "ik_solver": cell.robot.solver_name, **geo}
-    return q, geo
+    return q, geo, refused
 
 
 def _no_arm(what: str, geo: dict[str, Any]) -> str:
     """Why no joint vector was chosen for ``what``: none at all, or none clear of the world."""
     if "collisions" not in geo:
         return f"no joint solution for {what}"
-    from spar_py.world.workspace import _pair_text
-
-    return f"no collision-free IK for {what}: {', '.join(dict.fromkeys(_pair_text(p) for p in geo['collisions']))}"
+    return f"no collision-free IK for {what}: {', '.join(dict.fromkeys(pair_text(p) for p in geo['collisions']))}"
 
 
 def _reach_verdict(action: str, ok: bool, what: str) -> dict[str, Any]:
@@ -510,7 +539,7 @@ def _verdicts(world: World, cs: list[ur.Constraint], early: bool = False) -> lis
     if early:
         return _verdicts_until_unsatisfied(world, cs)
     out = []
-    for v in ur.evaluate_all(cs, world.unc.registry, memo=world.cell.memo, decide=True):
+    for v in ur.evaluate_all(cs, world.unc.registry, memo=world.cache.memo, decide=True):
         d = v.as_dict()
         d["kind"] = "uncertainty"
         out.append(d)
@@ -521,7 +550,7 @@ def _verdicts_until_unsatisfied(world: World, cs: list[ur.Constraint]) -> list[d
     """The verdicts of ``cs`` in order, up to and including the first unsatisfied one."""
     out = []
     for c in cs:
-        d = ur.evaluate(c, world.unc.registry, memo=world.cell.memo, decide=True).as_dict()
+        d = ur.evaluate(c, world.unc.registry, memo=world.cache.memo, decide=True).as_dict()
         d["kind"] = "uncertainty"
         out.append(d)
         if not d["satisfied"]:
@@ -541,13 +570,14 @@ def _pickup(world: World, s: Step, early: bool = False) -> tuple[list[dict], Wor
     o = world.unc.obj(obj)
     manip = world.unc.manipulator_error()
     cs = ur.pickup_constraints(world.unc, obj, g.T, g.width, world.cell.finger_separation, manip, action=s["id"],
-                               memo=world.cell.memo)
+                               memo=world.cache.memo)
     checks = _verdicts(world, cs, early)
     what = f"pickup({obj}, {label})"
-    q, geo = _arm(world, o.pose @ g.T, what, grasped=obj, width=g.width)
+    q, geo, refused = _arm(world, o.pose @ g.T, what, grasped=obj, width=g.width)
     if q is None:
         checks.append(_reach_verdict(s["id"], False, _no_arm(what, geo)))
-    w = replace(world, unc=ur.pickup(world.unc, obj, g.T, manip, world.cell.memo), grasps={**world.grasps, obj: label},
+    w = replace(world, refused=refused, unc=ur.pickup(world.unc, obj, g.T, manip, world.cache.memo),
+                grasps={**world.grasps, obj: label},
                 joints=q if q is not None else world.joints, checked=_checked(world, cs, checks),
                 complete=sum(c["kind"] == "uncertainty" for c in checks) == len(cs))
     return checks, w, geo
@@ -562,12 +592,12 @@ def _putdown(world: World, s: Step, early: bool = False) -> tuple[list[dict], Wo
         return checks, world, {"tool_pose": None, "joints_deg": None, "placement": None}
     g = _grasp(world.cell, obj, world.grasps[obj])
     what = f"putdown({obj})"
-    q, geo = _arm(world, place.T @ g.T, what, held=(obj, np.linalg.inv(g.T)), width=g.width,
-                  allow=[(f"held:{obj}", "table")])
+    q, geo, refused = _arm(world, place.T @ g.T, what, held=(obj, np.linalg.inv(g.T)), width=g.width,
+                           allow=[(f"held:{obj}", "table")])
     geo["placement"] = place.as_dict()
     checks = [] if q is not None else [_reach_verdict(s["id"], False, _no_arm(what, geo))]
     grasps = {k: v for k, v in world.grasps.items() if k != obj}
-    w = replace(world, unc=ur.putdown(world.unc, obj, place.T, world.cell.memo), grasps=grasps,
+    w = replace(world, refused=refused, unc=ur.putdown(world.unc, obj, place.T, world.cache.memo), grasps=grasps,
                 joints=q if q is not None else world.joints)
     return checks, w, geo
 
@@ -580,15 +610,15 @@ def _assemble(world: World, s: Step, early: bool = False) -> tuple[list[dict], W
     if fp is None or fh is None:
         raise SparValueError(f"assemble({peg}, {hole}): both objects need a mating feature")
     g = _grasp(cell, peg, world.grasps[peg])
-    cs = ur.assemble_constraints(world.unc, peg, hole, Ta, fp, fh, action=s["id"], memo=cell.memo)
+    cs = ur.assemble_constraints(world.unc, peg, hole, Ta, fp, fh, action=s["id"], memo=world.cache.memo)
     checks = _verdicts(world, cs, early)
     what = f"assemble({peg}, {hole})"
-    q, geo = _arm(world, world.unc.obj(hole).pose @ Ta @ g.T, what, held=(peg, np.linalg.inv(g.T)), width=g.width,
-                  allow=[(f"held:{peg}", hole)])
+    q, geo, refused = _arm(world, world.unc.obj(hole).pose @ Ta @ g.T, what, held=(peg, np.linalg.inv(g.T)),
+                           width=g.width, allow=[(f"held:{peg}", hole)])
     if q is None:
         checks.append(_reach_verdict(s["id"], False, _no_arm(what, geo)))
     grasps = {k: v for k, v in world.grasps.items() if k != peg}
-    w = replace(world, unc=ur.assemble(world.unc, peg, hole, Ta), grasps=grasps,
+    w = replace(world, refused=refused, unc=ur.assemble(world.unc, peg, hole, Ta), grasps=grasps,
                 joints=q if q is not None else world.joints, checked=_checked(world, cs, checks),
                 complete=sum(c["kind"] == "uncertainty" for c in checks) == len(cs))
     return checks, w, geo
@@ -612,25 +642,26 @@ def _squeeze(world: World, s: Step, early: bool = False) -> tuple[list[dict], Wo
     obj = s["args"][0]
     cell = world.cell
     o = world.unc.obj(obj)
-    from spar_py.world.reach import reachable_pairs
-
-    labels = [g for g, _ in reachable_pairs(cell, obj, list(cell.objects[obj].grasps), _position_label(cell, obj, o))]
-    for label in labels:
+    arc = reachable_pairs(world.cache, obj, list(cell.objects[obj].grasps), _position_label(cell, obj, o))
+    refused: Refusals = tuple((r.what, r.pairs) for r in arc.refusals)
+    for label in (g for g, _ in arc.pairs):
         g = _grasp(cell, obj, label)
-        q, geo = _arm(world, o.pose @ g.T, f"squeeze({obj}) with {label}", grasped=obj, width=g.width)
+        q, geo, no = _arm(world, o.pose @ g.T, f"squeeze({obj}) with {label}", grasped=obj, width=g.width)
+        refused += no
         if q is None:
             continue
         manip = world.unc.manipulator_error()
         cs = ur.pickup_constraints(world.unc, obj, g.T, g.width, cell.finger_separation, manip, action=s["id"],
-                                   memo=cell.memo)
+                                   memo=world.cache.memo)
         checks = _verdicts_until_unsatisfied(world, cs)
         if len(checks) == len(cs) and all(c["satisfied"] for c in checks):
             geo["grasp"] = label
-            w = replace(world, unc=ur.squeeze(world.unc, obj, g.T, manip, cell.memo), joints=q,
+            w = replace(world, refused=refused, unc=ur.squeeze(world.unc, obj, g.T, manip, world.cache.memo),
+                        joints=q,
                         checked=_checked(world, cs, checks))
             return checks, w, geo
     return ([_reach_verdict(s["id"], False, f"no grasp of {obj} both reachable and sure to succeed for a squeeze")],
-            world, {"tool_pose": None, "joints_deg": None})
+            replace(world, refused=refused), {"tool_pose": None, "joints_deg": None})
 
 
 def _position_label(cell: Cell, obj: str, o: ur.ObjectState) -> list[str]:
@@ -652,7 +683,7 @@ STEPS = {
 # ---------------------------------------------------------------------- execution check
 
 
-def sample_check(cell: Cell, steps: list[Step], draws: int = 10_000, seed: int = 0,
+def sample_check(cache: CellCache, steps: list[Step], draws: int = 10_000, seed: int = 0,
                  sensing: Mapping[str, Bounds] | None = None) -> list[dict[str, Any]]:
     """Replay an instance numerically: for every uncertainty-reduction precondition checked
     along ``steps`` (in order, sensing and squeezes included), evaluate its expression at
@@ -664,7 +695,7 @@ def sample_check(cell: Cell, steps: list[Step], draws: int = 10_000, seed: int =
     import casadi as ca
 
     sources = {s["id"]: s["from"] for s in steps if s.get("from")}
-    world = new_world(cell, steps, sources, sensing)
+    world = new_world(cache, steps, sources, sensing)
     for s in steps:
         _, world, _ = step(world, s)
     rng = np.random.default_rng(seed)

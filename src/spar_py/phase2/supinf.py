@@ -55,7 +55,7 @@ the guarantee and removes most of the looseness:
    once as a CasADi SX graph and evaluates a batch in one call (``Bounder(expr,
    compiled=True)`` uses it for small batches; building it costs ~250 us per
    instruction, so it pays only for a bounder used many times). :func:`cached_bounds`
-   keeps bounders and results on a cell's memo tables (bounded LRUs), keyed by the
+   keeps bounders and results in a cell cache's memo tables (bounded LRUs), keyed by the
    expression's structure up to variable names.
 
 Variables are named by their SX symbol names; a box is ``{name: (lo, hi)}``. Units are
@@ -1580,7 +1580,7 @@ def compile_bounder(expr: ca.SX | float | ChainExpr) -> Bounder:
     return Bounder(expr)
 
 
-#: Bounds of the memo tables :func:`cached_bounds` keeps on a cell (cell.memo): compiled
+#: Bounds of the memo tables :func:`cached_bounds` keeps in a cell's cache (world.run.CellCache.memo): compiled
 #: bounders (CasADi Functions and instruction lists: about 0.2 MB for a pickup constraint,
 #: 1-2 MB for a product of 8 transforms, so at most some 100 MB) and bound results (a few
 #: hundred bytes each).

@@ -27,7 +27,7 @@ Sec. 3.2.2 as :class:`Constraint` records; :func:`evaluate` decides one with SUP
 
 Built once per structure: every error transform the actions make records how it was
 made (``ErrorTm.shape``, plain data) and from which fresh variables (``ErrorTm.vars``).
-Given a cell's memo, the constraint builders make a structure's expressions once and,
+Given a cell cache's memo, the constraint builders make a structure's expressions once and,
 for the next part alike in its history (many identical pegs), evaluate that first
 build on the new variables: the same graph node for node, so SUP/INF's answers are
 unchanged, at a fraction of the CasADi products' cost (:func:`_built`).
@@ -290,7 +290,7 @@ def pickup(state: WorldState, obj: str, grasp_T: np.ndarray, manip: ErrorTm, mem
     rotation block as [[cos, sin], [sin, cos]], which is no rotation (a typo); we use
     the proper rotation [[cos, -sin], [sin, cos]], the same as its T_dM. As in the paper,
     the object's own angle error and its lever arm are dropped (the grasp re-seats it).
-    ``memo`` (a cell's memo tables): the entries are built once per structure (:func:`_built`).
+    ``memo`` (world.run.CellCache.memo): the entries are built once per structure (:func:`_built`).
     """
     o = _on_table(state, obj, "pickup")
     if state.holding is not None:
@@ -404,7 +404,7 @@ def pickup_constraints(state: WorldState, obj: str, grasp_T: np.ndarray, width: 
     arm is sent there); contact points ``C_1,2 = T_{O+d} T_G trans(0, +-W_g/2, 0) [0,0,0,1]^t``
     (Eq. 2). Needs ``y(P_1^-1 C_i) > 0`` and ``y(P_2^-1 C_i) < 0``. ``width`` is W_g,
     ``finger_separation`` W_m (cell unit); ``manip`` the pickup motion's T_dM. ``memo``
-    (a cell's memo tables): the expressions are built once per structure (:func:`_built`).
+    (world.run.CellCache.memo): the expressions are built once per structure (:func:`_built`).
     """
     o = _on_table(state, obj, "pickup")
     T_G = _pose(grasp_T, f"pickup({obj}) grasp")
@@ -450,7 +450,7 @@ def assemble_constraints(state: WorldState, peg: str, hole: str, T_a: np.ndarray
     If R_h <= R_p no position fits: the threshold is 0, which SUP of a square never
     beats. ``motion`` (optional, not in the paper) is the assemble motion's own T_dM,
     inserted after T_G to account for the arm's error when it goes to T_H T_a T_G.
-    ``memo`` (a cell's memo tables): the expressions are built once per structure
+    ``memo`` (world.run.CellCache.memo): the expressions are built once per structure
     (:func:`_built`).
     """
     p = _in_hand(state, peg, "assemble")
@@ -491,7 +491,7 @@ def assemble_constraints(state: WorldState, peg: str, hole: str, T_a: np.ndarray
                        f"of {hole}'s hole centre{note}", bounding, key=ckey)]
 
 
-#: Entries of a cell's memo table ``uncertainty.built`` (:func:`_built`) and
+#: Entries of a cell cache's memo table ``uncertainty.built`` (:func:`_built`) and
 #: ``uncertainty.verdicts`` (:func:`evaluate`).
 BUILT_LIMIT = 1024
 VERDICT_LIMIT = 4096
@@ -632,7 +632,7 @@ def evaluate(constraint: Constraint, registry: Registry, *, memo: Memo | None = 
              **options: Any) -> Verdict:
     """Decide ``constraint`` with SUP/INF over its variables' registry bounds (options: Bounder.bounds).
 
-    ``memo`` (a cell's memo tables) keeps compiled bounders and results by the
+    ``memo`` (world.run.CellCache.memo) keeps compiled bounders and results by the
     expression's structure and box (supinf.cached_bounds): phase 2 meets the same
     constraint in many plan instances and after every remedy it tries.
 

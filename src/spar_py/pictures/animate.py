@@ -23,6 +23,7 @@ from spar_py.core.errors import SparValueError
 from spar_py.core.model import Cell
 from spar_py.pictures.plandoc import as_doc, instance
 from spar_py.pictures.scene import Scene, held_grasp, part_model, scenes
+from spar_py.world.collision import TOOL, CollisionScene, scene_for
 
 __all__ = ["arm_faces", "frames_of", "obstacle_faces", "write_animation"]
 
@@ -93,18 +94,18 @@ def _local_points(body: Any) -> np.ndarray:
     return np.vstack([c + sphere for c in np.asarray(body.points, float)])
 
 
-def arm_faces(cell: Cell, q: np.ndarray, width: float | None = None) -> list[tuple[str, list[np.ndarray]]]:
+def arm_faces(cell: Cell, q: np.ndarray, width: float | None = None, scene: CollisionScene | None = None,
+              hulls: dict | None = None) -> list[tuple[str, list[np.ndarray]]]:
     """The arm's link geometry at joints ``q`` (6,) rad: per collision body (the robot file's
     links, then the gripper's palm and fingers with their contact faces ``width`` apart, None:
-    open), its name and its hull's triangles (each (3, 3) world points, cell unit). The hull
-    of each body is taken once in its own frame (cell.memo) and moved by the frame's pose."""
+    open), its name and its hull's triangles (each (3, 3) world points, cell unit). ``scene``
+    the cell's collision scene and ``hulls`` each body's hull in its own frame, when the caller
+    keeps them for many frames (bounded by the arm's bodies and the grasp widths)."""
     from scipy.spatial import ConvexHull
 
-    from spar_py.world.collision import TOOL, scene_for
-
-    scene = scene_for(cell)
+    scene = scene if scene is not None else scene_for(cell)
     F = cell.robot.frames(np.asarray(q, float))
-    table = cell.memo.table("animate.hulls", 64)
+    table = hulls if hulls is not None else {}
     out = []
     for b in list(scene.links) + list(scene.gripper_bodies(width)):
         key = (b.name, b.frame, np.asarray(b.points).tobytes())
@@ -151,6 +152,7 @@ def write_animation(cell: Cell, plan: Any, path: str | Path, max_frames: int = M
     from spar_py.pictures.cell import _draw_3d, extent
 
     frames = frames_of(cell, plan, max_frames)
+    scene, hulls = scene_for(cell), {}  # one scene and one hull per body for every frame
     obstacles = obstacle_faces(cell)
     fr = extent(cell, frames)
     fig = plt.figure(figsize=(6, 6), dpi=80)
@@ -165,7 +167,7 @@ def write_animation(cell: Cell, plan: Any, path: str | Path, max_frames: int = M
                 ax.add_collection3d(Poly3DCollection(obstacles, facecolor="#9a9a9a", alpha=0.45,
                                                      edgecolor="none"), autolim=False)
             if s.q is not None:
-                links = [t for _, tris in arm_faces(cell, s.q, _width(cell, s)) for t in tris]
+                links = [t for _, tris in arm_faces(cell, s.q, _width(cell, s), scene, hulls) for t in tris]
                 ax.add_collection3d(Poly3DCollection(links, facecolor=LINK_COLOUR, alpha=0.55, edgecolor="none",
                                                      zorder=4), autolim=False)
             ax.set_title(s.title, fontsize=8)

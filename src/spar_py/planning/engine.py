@@ -2,7 +2,9 @@
 
 This is the only Python module that imports janus. Prolog reaches Python through
 the functions at the bottom of this file (called from prolog/foreign.pl with
-``py_call(spar_py.planning.engine:...)``); they delegate to the numeric modules.
+``py_call(spar_py.planning.engine:...)``); the geometric ones (arc_pairs, evaluate) are
+answered by the planning run of their problem (planning/run.py: PlanRun), the others
+delegate to the loaders.
 
 SWI-Prolog is located from ``_swipl.json`` beside this file, written by ``make setup``
 with the home directory janus-swi was compiled against. Setting ``SWI_HOME_DIR``
@@ -32,10 +34,10 @@ RECORD = PACKAGE_DIR / "_swipl.json"
 
 _lock = threading.Lock()
 _engine: "Engine | None" = None
-#: The loaded cells by name when Prolog hosts Python (a bare ``swipl`` loading prolog/spar.pl,
-#: janus importing this module): there is no Engine then, and the toplevel's load_problem/1
-#: keeps its cells here.
-_hosted_cells: dict[str, Any] = {}
+#: The loaded problems when Prolog hosts Python (a bare ``swipl`` loading prolog/spar.pl, janus
+#: importing this module): there is no Engine then, and the toplevel's load_problem/1 keeps its
+#: cells and runs here.
+_hosted: "ProblemRegistry | None" = None
 
 
 #: Problems a session keeps loaded after its run (the last ones planned), so planning one
@@ -172,14 +174,53 @@ def _starts_from(state: Path, roots: list[Path]) -> bool:
     return r.returncode == 0 and r.stdout.strip().endswith("state ok")
 
 
-class Engine:
+class ProblemRegistry:
+    """The problems loaded in this process, by name: their cells, the kept answers of cells the
+    Prolog toplevel loaded (world.run.CellCache) and the planning run of each problem being
+    planned (planning.run.PlanRun). Every call from Prolog into Python names its problem and is
+    answered by that problem's run."""
+
+    def __init__(self) -> None:
+        self.cells: dict[str, Any] = {}
+        #: the planning run of each problem a query is planning now (planning.run.PlanRun)
+        self.runs: dict[str, Any] = {}
+        #: the kept answers of cells loaded by the Prolog toplevel (world.run.CellCache), by name
+        self.caches: dict[str, Any] = {}
+
+    def cell(self, name: str) -> Any:
+        """The loaded cell of problem ``name`` (SparError if it is not loaded)."""
+        try:
+            return self.cells[name]
+        except KeyError:
+            raise SparError(f"problem {name!r} is not loaded") from None
+
+    def run(self, name: str) -> Any:
+        """The planning run of problem ``name``: the one a session holds, else (a problem the
+        Prolog toplevel loaded) a run with the default options, kept until the problem is
+        loaded again or forgotten (SparError if the problem is not loaded)."""
+        got = self.runs.get(name)
+        if got is not None:
+            return got
+        from spar_py.planning.run import PlanRun  # planning.run imports phase 2: not for a bare engine
+        from spar_py.world.run import CellCache
+
+        cell = self.cell(name)
+        cache = self.caches.get(name)
+        if cache is None or cache.cell is not cell:
+            cache = self.caches[name] = CellCache(cell)
+        got = self.runs[name] = PlanRun(cache)
+        return got
+
+
+class Engine(ProblemRegistry):
     """The embedded SWI-Prolog with prolog/spar.pl and kb/templates/ consulted (one per process).
 
     Loaded problems are kept by name (:meth:`load_cell`): their facts in Prolog's kb
-    module, their cells here in :attr:`cells`; every call from Prolog into Python says
-    which problem it is about. Queries are serialised: the engine holds one re-entrant
-    lock for each query, and :meth:`session` holds it for a whole planning run (load,
-    plan), so threads sharing an engine take turns and never see each other's
+    module, their cells here in :attr:`cells`, the planning run of each problem being
+    planned in :attr:`runs`; every call from Prolog into Python says which problem it is
+    about, and is answered by that problem's run (planning/run.py). Queries are
+    serialised: the engine holds one re-entrant lock for each query, and :meth:`session`
+    holds it for a whole planning run (load, plan), so threads sharing an engine take turns and never see each other's
     problem.
     """
 
@@ -191,7 +232,7 @@ class Engine:
         With a saved state of these very sources in the cache (spar_py/planning/qlf.py), SWI-Prolog
         starts from it, the planner already loaded, and there is nothing left to load."""
         t0 = time.perf_counter()
-        self.cells: dict[str, Any] = {}
+        super().__init__()
         self._kept: dict[str, None] = {}  # problems sessions keep loaded, oldest first
         self.lock = threading.RLock()
         self._loader: threading.Thread | None = None
@@ -431,29 +472,28 @@ class Engine:
         """Forget problem ``name`` (its Prolog facts and its cell); a no-op if not loaded."""
         with self.lock:
             self.cells.pop(name, None)
+            self.caches.pop(name, None)
+            self.runs.pop(name, None)
             self._kept.pop(name, None)
             self.query_once("kb:unload_facts(P)", {"P": name})
 
-    def cell(self, name: str) -> Any:
-        """The loaded cell of problem ``name`` (SparError if it is not loaded)."""
-        try:
-            return self.cells[name]
-        except KeyError:
-            raise SparError(f"problem {name!r} is not loaded") from None
-
     @contextmanager
-    def session(self, cell: Any) -> Iterator[None]:
-        """Hold the engine for one planning run of ``cell``: load it (unless this very cell
-        is loaded already), yield, and keep it loaded for the next run of it; the engine
-        keeps the last ``KEEP_LOADED`` cells planned this way and unloads older ones, so
-        their facts and memo tables are freed with them."""
+    def session(self, run: Any) -> Iterator[None]:
+        """Hold the engine for one planning ``run`` (planning.run.PlanRun) of its cell: load the
+        cell (unless this very cell is loaded already), make the run the one Prolog's calls
+        about that problem reach, yield, and keep the cell loaded for the next run of it; the
+        engine keeps the last ``KEEP_LOADED`` cells planned this way and unloads older ones."""
+        cell = run.cell
         self.wait_loaded()
         with self.lock:
             if self.cells.get(cell.name) is not cell:
                 self.load_cell(cell)
+            self.runs[cell.name] = run
             try:
                 yield
             finally:
+                if self.runs.get(cell.name) is run:
+                    del self.runs[cell.name]
                 self._keep(cell.name)
                 self._give_back()
 
@@ -497,19 +537,21 @@ def start_engine() -> None:
             _engine = Engine(background=True)
 
 
-def _cells() -> dict[str, Any]:
-    """The loaded cells by name: the engine's, or :data:`_hosted_cells` without one."""
-    return _engine.cells if _engine is not None else _hosted_cells
-
-
-def _cell(problem: str) -> Any:
-    """The cell of loaded problem ``problem`` (for the calls from Prolog below)."""
+def _problems() -> ProblemRegistry:
+    """The loaded problems of this process: the engine's when Python embeds Prolog, else (a bare
+    ``swipl`` that loaded prolog/spar.pl and calls Python through janus) the hosted registry."""
+    global _hosted
     if _engine is not None:
-        return _engine.cell(problem)
-    try:
-        return _hosted_cells[problem]
-    except KeyError:
-        raise SparError(f"problem {problem!r} is not loaded") from None
+        return _engine
+    with _lock:
+        if _hosted is None:
+            _hosted = ProblemRegistry()
+        return _hosted
+
+
+def _run(problem: str) -> Any:
+    """The planning run of loaded problem ``problem`` (for the calls from Prolog below)."""
+    return _problems().run(problem)
 
 
 # ---------------------------------------------------------------------- called from Prolog
@@ -521,7 +563,9 @@ def load_problem_file(path: str) -> list[Any]:
     from spar_py.kb import facts, load_problem
 
     cell = load_problem(path)
-    _cells()[cell.name] = cell
+    problems = _problems()
+    problems.cells[cell.name] = cell
+    problems.runs.pop(cell.name, None)
     return [cell.name, facts(cell)]
 
 
@@ -532,23 +576,29 @@ def is_spar_error(value: Any) -> bool:
 
 def forget_cell(problem: str) -> None:
     """The toplevel's unload_problem/1: drop the cell of ``problem`` (if loaded)."""
-    _cells().pop(problem, None)
+    problems = _problems()
+    problems.cells.pop(problem, None)
+    problems.caches.pop(problem, None)
+    problems.runs.pop(problem, None)
 
 
 def arc_pairs(problem: str, rule: str, kind: str, objects: list[str], grasps: list[str],
               positions: list[str], ta: str) -> list[list[str]]:
     """All grasp/position pairs of loaded problem ``problem`` satisfying ``kind``
-    (reachable | mate_reachable), Sec. 5.2.4; ``rule`` for stable-pose labels (reach.RULES)."""
-    from spar_py.world import reach
-
-    return reach.arc(_cell(problem), kind, objects, grasps, positions, None if ta == "none" else ta, rule)
+    (reachable | mate_reachable), Sec. 5.2.4; ``rule`` for stable-pose labels (arcs.RULES).
+    Phase 1's door: the problem's run answers (planning.run.PlanRun.arc_pairs)."""
+    return _run(problem).arc_pairs(rule, kind, objects, grasps, positions, None if ta == "none" else ta)
 
 
 def evaluate(problem: str, steps: list[dict[str, Any]], sources: dict[str, dict[str, str]] | None = None,
              given_up: list[str] | None = None, sensing: dict[str, dict[str, Any]] | None = None) -> dict[str, Any]:
-    """Phase 2: run a whole plan instance of loaded problem ``problem`` in one call and
-    return plain data: every step's verdicts, geometry, part poses and held part, and
-    where the run stopped (phase2.evaluate; cell unit, degrees, world frame)."""
-    from spar_py.phase2 import instance as phase2
+    """Phase 2: run a whole plan instance of loaded problem ``problem`` in one call: status, the
+    step where it stopped, each step's verdicts and a token naming its geometry (phase 2's
+    door, planning.run.PlanRun.evaluate)."""
+    return _run(problem).evaluate(steps, sources, given_up or (), sensing)
 
-    return phase2.evaluate(_cell(problem), steps, sources, given_up or (), sensing)
+
+def step_geometry(problem: str, token: int, step: str) -> dict[str, Any]:
+    """The geometry of step ``step`` of the phase-2 run ``token`` of ``problem``'s run (tool
+    pose, joints, placement, ...; empty if the step has none), for printing an instance."""
+    return _run(problem).step_geometry(token, step)

@@ -29,7 +29,9 @@ from spar_py.core.errors import PlanningTimeout, SparValueError
 from spar_py.kb import load_problem
 from spar_py.core.memo import LRU
 from spar_py.core.model import Cell
-from spar_py.world.motion_options import FAILURES_KEPT, MotionFailure, MotionOptions
+from spar_py.planning.run import PlanRun
+from spar_py.world.motion_options import MotionFailure, MotionOptions
+from spar_py.world.run import CellCache, RunOptions
 
 SCHEMA = 2
 
@@ -256,7 +258,8 @@ def _motion_reason(d: dict[str, Any], failures: list[MotionFailure]) -> None:
     reason["motion_failures"] = [data(f) for f in failures]
 
 
-#: Loaded cells a Planner keeps, by file (their memo tables make planning a file again fast).
+#: Loaded cells a Planner keeps, by file, and cells with their kept answers (world.run.CellCache),
+#: by cell: planning a cell again reuses its answers.
 CELL_CACHE = 8
 
 
@@ -293,7 +296,9 @@ class Planner:
     per motion, seed, approach length, simplification).
 
     A Planner keeps the last few cells it loaded from files (at most ``CELL_CACHE``,
-    reloaded when a file changes), so planning a file again reuses their memo tables.
+    reloaded when a file changes) and each cell's kept answers (world.run.CellCache), so
+    planning a file again reuses them; each plan is one run (planning.run.PlanRun) with a
+    log of its own, from which its no-plan reason is built.
     """
 
     def __init__(self, max_actions: int | None = None, max_instances: int | None = None,
@@ -316,6 +321,7 @@ class Planner:
         self.motion = motion
         self.motion_options = motion_options if motion_options is not None else MotionOptions()
         self._cells: LRU[tuple[tuple, Cell]] = LRU(CELL_CACHE)
+        self._caches: LRU[CellCache] = LRU(CELL_CACHE)  # by id(cell); each holds its cell alive
         self._cells_lock = threading.Lock()
         #: The last plan this Planner made (None before the first). Keeping it also keeps
         #: its dict keys alive: janus interns every Prolog dict key it converts, and keys
@@ -348,14 +354,28 @@ class Planner:
             "timeout": self.timeout if self.timeout is not None else 0,
         }
 
+    def cache_of(self, cell: Cell) -> CellCache:
+        """The kept answers of ``cell`` (made on first use, at most ``CELL_CACHE`` cells)."""
+        with self._cells_lock:
+            got = self._caches.get(id(cell))
+            if got is None or got.cell is not cell:
+                got = self._caches[id(cell)] = CellCache(cell)
+            return got
+
+    def run_options(self, cell: Cell, phase1_only: bool = False) -> RunOptions:
+        """The options of a run of ``cell``: the placement rule, and the motion options when
+        motions are planned (this Planner's ``motion``, else the problem file's)."""
+        wanted = cell.plan_motions if self.motion is None else self.motion
+        return RunOptions(placements="paper" if self.paper_placements else "reachable",
+                          motion=self.motion_options if wanted and not phase1_only else None)
+
     def plan(self, problem: Cell | str | Path, phase1_only: bool = False, trace: bool = False) -> Plan:
-        """Plan ``problem`` (a loaded Cell or a problem file path)."""
+        """Plan ``problem`` (a loaded Cell or a problem file path): one run (planning.run.PlanRun)
+        of the cell with this Planner's options."""
         cell = problem if isinstance(problem, Cell) else self.load_problem(problem)
         opts = self.options(phase1_only, trace)
-        with self.engine.session(cell):
-            wanted = cell.plan_motions if self.motion is None else self.motion
-            cell.motion = self.motion_options if wanted and not phase1_only else None
-            cell.memo.table("motion.failures", FAILURES_KEPT).clear()
+        run = PlanRun(self.cache_of(cell), self.run_options(cell, phase1_only))
+        with self.engine.session(run):
             t0 = time.perf_counter()
             try:
                 ans = self.engine.query_once("spar:plan_dict(Problem, Options, Dict, Trace)",
@@ -364,20 +384,19 @@ class Planner:
                 return Plan(problem=cell.name, outcome=Outcome.TIMEOUT,
                             reason={"timeout_s": self.timeout},
                             timing={"total_s": round(time.perf_counter() - t0, 6)})
-            failures = cell.memo.table("motion.failures", FAILURES_KEPT)
-            first = [failures[k] for k in range(len(failures))]
-            d = _canonical(ans["Dict"])
-            if isinstance(d.get("instance"), dict) and d["instance"].get("motion") is not None:
+            raw = ans["Dict"]
+            motion = run.join(raw["instance"]) if isinstance(raw.get("instance"), dict) else None
+            d = _canonical(raw)
+            if motion is not None:
                 from spar_py.world.motion import attach  # only for an instance with motions
 
-                attach(cell, d["instance"])
+                attach(motion, d["instance"])
         d.setdefault("timing", {})["total_s"] = round(time.perf_counter() - t0, 6)
-        _motion_reason(d, first)
+        log = run.world.log
+        _motion_reason(d, log.motion_failures)
         plan = _plan(cell.name, d, ans.get("Trace", ""))
         if plan.outcome is Outcome.NO_PLAN:  # name the colliding pairs that stood in the way (issue 15)
-            from spar_py.world.workspace import refusals
-
-            said = refusals(cell)
+            said = [r.text() for r in log.refusals()]
             if said:
                 plan.reason = {**(plan.reason or {}), "collisions": said}
         self.last = plan

@@ -2,7 +2,7 @@
 obstacles and the table; "is this joint vector clear by the margin", the clearance and the
 closest pair.
 
-What is in the scene (:func:`scene_for`, built once per cell and kept on ``cell.memo``):
+What is in the scene (:func:`scene_for`, built once per cell and kept by its world.run.CellCache):
 
 - the robot's link shapes (robot file ``collision: links``): capsules, cylinders and boxes,
   each fixed to one of Craig's frames 0..6 (0 is the base: it does not move);
@@ -37,7 +37,7 @@ cells whose bound is within the margin and whose shapes are not both capsules, o
 second lower bound (:func:`support_gap`: the bodies' supports over their axes and the axes'
 cross products, the separating-axis bound of two boxes) does not already put beyond the margin
 go to the collision library, imported on first use; the grasp rule is decided once per grasp
-(the part's geometry and pose in the tool frame) and memoised on the cell. The closest pair of a clear row
+(the part's geometry and pose in the tool frame) and kept in the cell's cache. The closest pair of a clear row
 (:meth:`SceneState.clearance`) is sought among the pairs whose bounding spheres come within the
 table's distance, in order of their capsule bounds.
 
@@ -85,15 +85,15 @@ GRASP_TOL_MM = 0.05
 CYL_SIDES = 16
 #: Frame index of the tool (gripper, held part) and of the world (parts, obstacles).
 TOOL, WORLD = 7, -1
-#: Bounds of the cell's memo tables: the grasp rule per (part, grasp pose, width); the checked
+#: Bounds of the cell cache's tables: the grasp rule per (part, grasp pose, width); the checked
 #: pairs per arrangement of body names (a state's bodies, allowed contacts, attached parts).
 GRASP_LIMIT = 4096
 PAIRS_LIMIT = 256
-#: Bound of the cell's memo table of whole pair structures (_pair_structure's answers, by the
+#: Bound of the cell cache's table of whole pair structures (_pair_structure's answers, by the
 #: head's key and the world's body names: some kB each, up to some 100 kB for a generated
 #: cell of hundreds of part bodies).
 STRUCTURES_LIMIT = 256
-#: Bound of the cell's memo table of placed part bodies per (part, frame, pose): phase 2 places
+#: Bound of the cell cache's table of placed part bodies per (part, frame, pose): phase 2 places
 #: every part on the table at every step, most of them where they were at the step before.
 PLACED_LIMIT = 2048
 #: The gripper's bodies (robots.py's palm and finger boxes), checked against the part it closes on
@@ -1108,7 +1108,7 @@ def _pair_structure(scene: CollisionScene, bodies: list[Body], n_moving: int, ha
     after the moving ones: obstacles and parts, most of a generated cell's bodies) depend only
     on the moving body and the world body's name, and are set a name at a time for all of them;
     the rest (links, gripper, tool parts: the same at most steps) come from
-    :func:`_head_structure`, memoised on the cell."""
+    :func:`_head_structure`, kept in the cell's cache."""
     names, frames, is_cap = _body_columns(bodies)[3:] if columns is None else columns
     world_col = frames == WORLD
     world_col[:n_moving] = False
@@ -1239,12 +1239,10 @@ def _near_all(A: list[Body], B: list[Body], within: float) -> np.ndarray:
 # --------------------------------------------------------------------------- the cell's scene
 
 
-def scene_for(cell: Cell) -> CollisionScene:
-    """The run's one collision scene (built once, kept on cell.memo): robot link and gripper
-    shapes, part shapes, obstacles, the table; the clearance margin (cell's length unit)."""
-    table = cell.memo.table("collision.scene", 1)
-    if "scene" in table:
-        return table["scene"]
+def scene_for(cell: Cell, memo: Any = None) -> CollisionScene:
+    """A new collision scene of ``cell``: robot link and gripper shapes, part shapes, obstacles,
+    the table; the clearance margin (cell's length unit). ``memo`` (core.memo.Memo) keeps the
+    scene's derived answers; a planning run's scene is its cell cache's (world.run.CellCache.scene)."""
     from spar_py.world.robots import GripperGeometry
     from spar_py.core.units import mm_per
 
@@ -1255,8 +1253,7 @@ def scene_for(cell: Cell) -> CollisionScene:
         margin = robot.margin if robot.margin is not None else from_mm(cell.unit, DEFAULT_MARGIN_MM)
     parts = _part_bodies(cell.objects)
     scene = CollisionScene(robot, gripper, parts, getattr(cell, "obstacles", ()), margin,
-                           getattr(cell, "table", None), cell.unit, cell.memo)
-    table["scene"] = scene
+                           getattr(cell, "table", None), cell.unit, memo)
     return scene
 
 

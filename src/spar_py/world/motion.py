@@ -43,13 +43,16 @@ import math
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
 from spar_py.core.errors import SparValueError
 from spar_py.core.units import LENGTH_UNITS
-from spar_py.world.motion_options import FAILURES_KEPT, PLANNERS, MotionFailure, MotionOptions
+from spar_py.world.motion_options import PLANNERS, MotionFailure, MotionOptions
+
+if TYPE_CHECKING:
+    from spar_py.world.run import CellCache
 
 __all__ = ["MotionOptions", "Segment", "MotionFailure", "PLANNERS", "resolution", "densify",
            "free_motion", "line_motion", "durations", "DEFAULT_APPROACH_IN"]
@@ -576,7 +579,6 @@ class InstanceMotion:
     options: MotionOptions
     velocity: np.ndarray | None = None
     extra: dict[str, Any] = field(default_factory=dict)
-    token: int = 0  # its key in the cell's memo table motion.tokens (attach)
 
     def step_data(self, sid: str) -> dict[str, Any]:
         """``approach``, ``path``, ``retreat`` (degrees) and ``duration_s`` of step ``sid``."""
@@ -639,7 +641,7 @@ def _without(parts: Mapping[str, np.ndarray], key: str) -> dict[str, np.ndarray]
     return {k: v for k, v in parts.items() if k != key}
 
 
-#: Bound of the cell's memo table of approach / retreat pairs (cell.memo "motion.lines").
+#: Bound of the cell cache's table of approach / retreat pairs ("motion.lines").
 LINES_LIMIT = 1024
 
 
@@ -652,7 +654,7 @@ def _world_key(world: tuple[dict[str, np.ndarray], tuple[str, np.ndarray] | None
 def _lines(robot: Any, scene: Any, st: Stop, q: np.ndarray, length: float, res: float,
            margin: float) -> tuple[Segment, Segment] | MotionFailure:
     """Approach and retreat of stop ``st`` with the end-point at ``q``, memoised on the
-    scene's memo (cell.memo "motion.lines"): instances that share a step and its world (and
+    scene's memo (the cell cache's "motion.lines"): instances that share a step and its world (and
     runs with another OMPL seed) share its tool lines, which do not depend on the planner."""
     key = (st.name, st.obj, st.onto, np.asarray(st.T, float).tobytes(), np.asarray(q, float).tobytes(),
            None if st.insert is None else np.asarray(st.insert, float).tobytes(), _world_key(st.before),
@@ -790,7 +792,7 @@ def default_home(robot: Any, state: SceneState) -> np.ndarray | None:
 
 #: Steps that move the arm to a tool pose (sensing moves nothing).
 ARM_STEPS = ("pickup", "putdown", "assemble", "squeeze")
-#: Bound of the cell's memo table of instance motions (cell.memo "motion.runs").
+#: Bound of the cell cache's table of instance motions ("motion.runs").
 MEMO_LIMIT = 256
 
 
@@ -852,70 +854,56 @@ def approach_length(cell: Any, opts: MotionOptions) -> float:
     return DEFAULT_APPROACH_IN * LENGTH_UNITS["in"] / LENGTH_UNITS[cell.unit]
 
 
-def run_motions(cell: Any, steps: Sequence[Mapping[str, Any]], worlds: Sequence[Any],
-                result: dict[str, Any], scene: Any = None) -> dict[str, Any]:
-    """Phase 2's run ``result`` (status ok) with the motions of the instance added: each
-    arm step's geometry gains ``approach``, ``path``, ``retreat`` (degrees) and
-    ``duration_s`` and its ``joints_deg`` becomes the IK solution the motions use; the
-    result gains ``motion`` (:meth:`InstanceMotion.summary`). When no motion exists the
-    run is infeasible at the step whose motion failed, with a geometric verdict
-    ``motion`` naming the motion and the blocking pair (kept in the cell's memo table
-    ``motion.failures`` for the no-plan reason). Memoised per run (cell.memo)."""
-    opts: MotionOptions = cell.motion
+def run_motions(cache: CellCache, steps: Sequence[Mapping[str, Any]], worlds: Sequence[Any],
+                records: list[dict[str, Any]], opts: MotionOptions,
+                scene: Any = None) -> tuple[list[dict[str, Any]], InstanceMotion | MotionFailure]:
+    """The motions of a phase-2 run that went through (``records`` its step records) and the
+    records as they stand with them: each arm step's ``joints_deg`` becomes the IK solution the
+    motions use; when no motion exists, the records up to the step whose motion failed, that
+    step with a geometric verdict ``motion`` naming the motion and the blocking pair. The
+    answer (InstanceMotion or MotionFailure) is kept in the cell's cache by the run's world."""
+    cell = cache.cell
     if scene is None:
-        from spar_py.world.collision import scene_for
-
-        scene = scene_for(cell)
+        scene = cache.scene()
     home = getattr(cell, "home", None)
     key = (worlds[-1].key, opts, None if home is None else np.asarray(home).tobytes(), id(scene))
 
     def compute() -> InstanceMotion | MotionFailure:
-        stops = stops_of(cell, steps, worlds, result["steps"])
+        stops = stops_of(cell, steps, worlds, records)
         res = resolution(cell.robot.dh, cell.robot.tool, float(scene.margin), extent(cell))
         initial, _ = _world_parts(worlds[0])
         return plan_stops(cell.robot, scene, stops, None if home is None else np.asarray(home, float), initial,
                           res, approach_length(cell, opts), opts)
 
-    def numbered() -> InstanceMotion | MotionFailure:
-        got = compute()
-        if isinstance(got, InstanceMotion):
-            counter = cell.memo.table("motion.counter", 1)
-            got.token = counter["n"] = counter.get("n", 0) + 1
-        return got
-
-    got = cell.memo.table("motion.runs", MEMO_LIMIT).get_or_compute(key, numbered)
+    got = cache.table("motion.runs", MEMO_LIMIT).get_or_compute(key, compute)
     if isinstance(got, MotionFailure):
-        failures = cell.memo.table("motion.failures", FAILURES_KEPT)  # this run's, one per instance (Planner clears)
-        if len(failures) < FAILURES_KEPT and got not in [failures.get(k) for k in range(len(failures))]:
-            failures[len(failures)] = got
-        at = next((r for r in result["steps"] if r["id"] == got.at), result["steps"][-1])
-        at["verdicts"] = list(at["verdicts"]) + [{
+        at = next((r for r in records if r["id"] == got.at), records[-1])
+        at = {**at, "verdicts": list(at["verdicts"]) + [{
             "action": at["id"], "constraint": "motion", "kind": "geometric", "sense": "", "bound": None,
-            "threshold": None, "satisfied": False, "tolerance_reached": True, "description": got.text()}]
-        idx = result["steps"].index(at)
-        return {"status": "infeasible", "at": at["id"], "steps": result["steps"][:idx + 1]}
-    for rec in result["steps"]:
+            "threshold": None, "satisfied": False, "tolerance_reached": True, "description": got.text()}]}
+        idx = next(i for i, r in enumerate(records) if r["id"] == at["id"])
+        return records[:idx] + [at], got
+    out = []
+    for rec in records:
         m = got.steps.get(rec["id"])
         if m is not None:
-            rec["geometry"] = {**rec["geometry"], "joints_deg": [round(float(v), 6) for v in np.degrees(m.joints)]}
-    token = cell.memo.table("motion.tokens", MEMO_LIMIT)
-    token[got.token] = got
-    summary = {k: v for k, v in got.summary().items() if k != "home_path"}
-    return {**result, "motion": {**summary, "token": got.token}}
+            rec = {**rec, "geometry": {**rec["geometry"],
+                                       "joints_deg": [round(float(v), 6) for v in np.degrees(m.joints)]}}
+        out.append(rec)
+    return out, got
 
 
-def attach(cell: Any, instance: dict[str, Any]) -> None:
-    """Put the waypoints of the chosen instance's motions into its JSON ``instance`` (in
-    place): the waypoints stay in Python while Prolog chooses (they would cost more to
-    carry through it than to plan); ``instance["motion"]["token"]`` names them in the
-    cell's memo table ``motion.tokens``. Every step gains ``approach``, ``path``,
-    ``retreat`` and ``duration_s``; the motion block ``home_path``."""
-    motion = instance.get("motion")
-    if not isinstance(motion, dict) or "token" not in motion:
-        return
-    got = cell.memo.table("motion.tokens", MEMO_LIMIT).get(motion.pop("token"))
-    if got is None:
-        raise SparValueError("the instance's motions are no longer in the cell's memo")
+def motion_summary(got: InstanceMotion) -> dict[str, Any]:
+    """The instance's ``motion`` block as Prolog carries it: :meth:`InstanceMotion.summary`
+    without the waypoints (``home_path``; :func:`attach` adds them to the plan)."""
+    return {k: v for k, v in got.summary().items() if k != "home_path"}
+
+
+def attach(got: InstanceMotion, instance: dict[str, Any]) -> None:
+    """Put the waypoints of the chosen instance's motions ``got`` into its JSON ``instance`` (in
+    place): the waypoints stay in Python while Prolog chooses (they would cost more to carry
+    through it than to plan). Every step gains ``approach``, ``path``, ``retreat`` and
+    ``duration_s``; the motion block ``home_path``."""
     for st in instance.get("steps", []):
         st.update(got.step_data(st["id"]))
-    motion["home_path"] = deg_rows(got.home_path.waypoints)
+    instance["motion"]["home_path"] = deg_rows(got.home_path.waypoints)

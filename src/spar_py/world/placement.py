@@ -23,11 +23,12 @@ import numpy as np
 from spar_py.core.geometry import convex_hull_2d, rotz
 from spar_py.core.model import Cell, ObjectModel
 from spar_py.core.units import from_mm, mm_per
-from spar_py.world.workspace import (Requirement, ik_rows, reaches, requirement_clear, requirement_clear_each,
-                                     requirement_state, shape_key, tool_refusal, wrist_height)
+from spar_py.world.workspace import (Requirement, ik_rows, reachable_ignoring_collisions, requirement_clear,
+                                     requirement_clear_each, requirement_state, shape_key, tool_refusal, wrist_height)
 
 if TYPE_CHECKING:
     from spar_py.world.collision import SceneState
+    from spar_py.world.run import CellCache
 
 #: Grid spacing of candidate placements: 50.8 mm (2 in); number of yaw steps.
 GRID_STEP_MM = 50.8
@@ -122,7 +123,7 @@ def footprint(model: ObjectModel, R: np.ndarray) -> np.ndarray:
     return convex_hull_2d((P @ np.asarray(R, float).T)[:, :2])
 
 
-#: Bound of the cell's memo table of footprints per (object, rotation): phase 2 asks for
+#: Bound of the cell cache's table of footprints per (object, rotation): phase 2 asks for
 #: the footprints of the parts on the table at every put-down it places.
 FOOTPRINT_LIMIT = 4096
 
@@ -135,24 +136,26 @@ def _shape_key(model: ObjectModel) -> tuple:
     return solids_key(model.shape)
 
 
-#: Bound of the cell's memo table of shape keys per object name.
+#: Bound of the cell cache's table of shape keys per object name.
 SHAPE_KEY_LIMIT = 1024
 
 
-def _model_key(cell: Cell, obj: str) -> tuple:
-    """:func:`_shape_key` of ``obj``'s model, memoised in the cell by the object's name (and
+def _model_key(cache: CellCache, obj: str) -> tuple:
+    """:func:`_shape_key` of ``obj``'s model, kept in the cell's cache by the object's name (and
     made again should the name stand for another model)."""
+    cell = cache.cell
     model = cell.objects[obj]
-    table = cell.memo.table("placement.shape_key", SHAPE_KEY_LIMIT)
+    table = cache.table("placement.shape_key", SHAPE_KEY_LIMIT)
     hit = table.get(obj)
     if hit is None or hit[0] is not model:
         hit = table[obj] = (model, _shape_key(model))
     return hit[1]
 
 
-def _footprint(cell: Cell, obj: str, R: np.ndarray) -> np.ndarray:
-    """:func:`footprint` of ``obj`` turned by R (3x3), memoised in the cell by the shape and
+def _footprint(cache: CellCache, obj: str, R: np.ndarray) -> np.ndarray:
+    """:func:`footprint` of ``obj`` turned by R (3x3), kept in the cell's cache by the shape and
     the rotation; read-only."""
+    cell = cache.cell
     model = cell.objects[obj]
     R = np.ascontiguousarray(R, dtype=float)
 
@@ -161,25 +164,26 @@ def _footprint(cell: Cell, obj: str, R: np.ndarray) -> np.ndarray:
         f.setflags(write=False)
         return f
 
-    key = (_model_key(cell, obj), R.tobytes())
-    return cell.memo.table("placement.footprints", FOOTPRINT_LIMIT).get_or_compute(key, compute)
+    key = (_model_key(cache, obj), R.tobytes())
+    return cache.table("placement.footprints", FOOTPRINT_LIMIT).get_or_compute(key, compute)
 
 
-def occupant(cell: Cell, obj: str, T: np.ndarray) -> Occupant:
+def occupant(cache: CellCache, obj: str, T: np.ndarray) -> Occupant:
     """The ``occupied`` entry of a part of ``obj`` at world pose T (4x4): its xy centre,
     bounding radius and footprint polygon in world xy (cell unit); memoised in the cell
     by the object's shape and the pose (the arrays are read-only)."""
+    cell = cache.cell
     model = cell.objects[obj]
     T = np.ascontiguousarray(T, dtype=float)
 
     def compute() -> Occupant:
-        c, poly = T[:2, 3].copy(), _footprint(cell, obj, T[:3, :3]) + T[:2, 3]
+        c, poly = T[:2, 3].copy(), _footprint(cache, obj, T[:3, :3]) + T[:2, 3]
         c.setflags(write=False)
         poly.setflags(write=False)
         return (c, model.bounding_radius(), poly)
 
-    key = (_model_key(cell, obj), T.tobytes())
-    return cell.memo.table("placement.occupants", FOOTPRINT_LIMIT).get_or_compute(key, compute)
+    key = (_model_key(cache, obj), T.tobytes())
+    return cache.table("placement.occupants", FOOTPRINT_LIMIT).get_or_compute(key, compute)
 
 
 def _occupant_polygon(entry: Sequence) -> np.ndarray:
@@ -296,18 +300,18 @@ def _blocks(P: np.ndarray, xs: np.ndarray, ys: np.ndarray, feet: list[np.ndarray
     return [flat[cut[j]:cut[j + 1]] for j in range(J)]
 
 
-#: Bound of the cell's memo table of :func:`_blocks` answers per (grid, footprints,
+#: Bound of the cell cache's table of :func:`_blocks` answers per (grid, footprints,
 #: occupant polygon): phase 2 places parts among mostly the same occupants at every
 #: put-down of an instance and in every instance.
 BLOCKS_LIMIT = 4096
 
 
-def _blocked(cell: Cell, P: np.ndarray, xs: np.ndarray, ys: np.ndarray, feet: list[np.ndarray],
+def _blocked(cache: CellCache, P: np.ndarray, xs: np.ndarray, ys: np.ndarray, feet: list[np.ndarray],
              others: list[np.ndarray], gap: float, margin: float) -> np.ndarray:
     """The flat indices ``i * K + k`` of the grid placements some polygon of ``others``
-    blocks (:func:`_blocks`), each polygon's answer memoised in the cell by what it
+    blocks (:func:`_blocks`), each polygon's answer kept in the cell's cache by what it
     depends on: the grid, the footprints, the clearance and the polygon."""
-    memo = cell.memo.table("placement.blocks", BLOCKS_LIMIT)
+    memo = cache.table("placement.blocks", BLOCKS_LIMIT)
     gkey = (xs.tobytes(), ys.tobytes(), tuple(f.tobytes() for f in feet), gap, margin)
     keys = [(gkey, W.tobytes()) for W in others]
     todo = {k: W for k, W in zip(keys, others) if k not in memo}  # equal polygons are one
@@ -318,16 +322,16 @@ def _blocked(cell: Cell, P: np.ndarray, xs: np.ndarray, ys: np.ndarray, feet: li
     return np.concatenate(parts) if parts else np.zeros(0, dtype=np.int32)
 
 
-def _grid_arrays(cell: Cell, obj: str, pose: str, occupied: list[Occupant],
+def _grid_arrays(cache: CellCache, obj: str, pose: str, occupied: list[Occupant],
                  step: float, yaw_steps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The grid placements of :func:`candidates` as arrays, in the same order (regions, x,
     y, yaw): ``(xy (n, 2), yaw (n,), T (n, 4, 4))``, lengths in the cell unit
     (:func:`_grid_points`, their poses made for all)."""
-    xy, k, yaws, rots, height = _grid_points(cell, obj, pose, occupied, step, yaw_steps)
+    xy, k, yaws, rots, height = _grid_points(cache, obj, pose, occupied, step, yaw_steps)
     return xy, yaws[k], _grid_poses(xy, rots[k], height)
 
 
-def _grid_points(cell: Cell, obj: str, pose: str, occupied: list[Occupant], step: float,
+def _grid_points(cache: CellCache, obj: str, pose: str, occupied: list[Occupant], step: float,
                  yaw_steps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
     """The grid placements of :func:`candidates`, in its order (regions, x, y, yaw), without
     their poses: ``(xy (n, 2), k (n,) each one's yaw step, yaws (yaw_steps,) rad, rots
@@ -340,13 +344,14 @@ def _grid_points(cell: Cell, obj: str, pose: str, occupied: list[Occupant], step
     the clearance; every grid point, yaw and occupant at once, :func:`_blocked`).
     Each yaw's rotation is computed once, by the same expression (``rotz(yaw)[:3, :3] @
     R``) a placement at a time would use."""
+    cell = cache.cell
     model = cell.objects[obj]
     sp = model.poses[pose]
     tol = from_mm(cell.unit, ROUND_MM)
     gap = from_mm(cell.unit, CLEARANCE_MM) - tol
     yaws = np.array([2 * np.pi * k / yaw_steps for k in range(yaw_steps)])
     rots = np.stack([rotz(yaw)[:3, :3] @ sp.R for yaw in yaws])  # (yaw_steps, 3, 3)
-    feet = [_footprint(cell, obj, R) for R in rots]
+    feet = [_footprint(cache, obj, R) for R in rots]
     lo = np.array([f.min(axis=0) for f in feet])                # (yaw_steps, 2)
     hi = np.array([f.max(axis=0) for f in feet])
     others = [_occupant_polygon(e) for e in occupied]
@@ -360,7 +365,7 @@ def _grid_points(cell: Cell, obj: str, pose: str, occupied: list[Occupant], step
         ok = ((P[:, None, 0] + lo[None, :, 0] >= x0 - tol) & (P[:, None, 0] + hi[None, :, 0] <= x1 + tol)
               & (P[:, None, 1] + lo[None, :, 1] >= y0 - tol) & (P[:, None, 1] + hi[None, :, 1] <= y1 + tol))
         if others:
-            ok.flat[_blocked(cell, P, xs, ys, feet, others, gap, tol + step * 1e-9)] = False
+            ok.flat[_blocked(cache, P, xs, ys, feet, others, gap, tol + step * 1e-9)] = False
         i, k = np.nonzero(ok)                                    # row-major: grid order, then yaw
         xy_parts.append(P[i])
         yaw_parts.append(k)
@@ -381,14 +386,15 @@ def _grid_poses(xy: np.ndarray, R: np.ndarray, height: float) -> np.ndarray:
     return T
 
 
-def candidates(cell: Cell, obj: str, pose: str, occupied: list[Occupant],
+def candidates(cache: CellCache, obj: str, pose: str, occupied: list[Occupant],
                step: float | None = None, yaw_steps: int = YAW_STEPS) -> list[Placement]:
     """Grid placements of ``obj`` in stable pose ``pose`` whose footprint lies in a free
     region, clear of ``occupied`` (:data:`Occupant` entries: the other parts on the
     table) by the clearance. ``step``: grid spacing in the cell unit (default GRID_STEP_MM)."""
+    cell = cache.cell
     height = cell.objects[obj].poses[pose].height
     step = from_mm(cell.unit, GRID_STEP_MM) if step is None else step
-    xy, yaw, T = _grid_arrays(cell, obj, pose, occupied, step, yaw_steps)
+    xy, yaw, T = _grid_arrays(cache, obj, pose, occupied, step, yaw_steps)
     # copies, not views of T: a kept placement must not keep the whole grid's poses alive
     return [Placement(obj, pose, x, y, height, w, t.copy()) for (x, y), w, t in zip(xy.tolist(), yaw.tolist(), T)]
 
@@ -397,22 +403,24 @@ def _req_X(r: Requirement | np.ndarray) -> np.ndarray:
     return np.asarray(r.X if isinstance(r, Requirement) else r, float)
 
 
-def _reach_all(cell: Cell, TO: np.ndarray, X: Sequence[Requirement | np.ndarray], obj: str | None = None) -> np.ndarray:
+def _reach_all(cache: CellCache, TO: np.ndarray, X: Sequence[Requirement | np.ndarray],
+               obj: str | None = None) -> np.ndarray:
     """(n, m) bool: the arm reaches T_O @ X (wrist above the table) for object poses TO
     (n, 4, 4) and requirements X (m: 4x4 tool transforms, or workspace.Requirement); with the
     object ``obj`` named, by a solution clear of the table, the obstacles and the object itself
     (workspace.requirement_clear, one batched call per requirement), else by IK alone."""
+    cell = cache.cell
     if obj is None:
         Xs = np.stack([_req_X(x) for x in X])
         T = np.einsum("nij,mjk->nmik", TO, Xs).reshape(-1, 4, 4)     # (n*m,4,4)
-        return reaches(cell.robot, T).reshape(len(TO), len(Xs))
+        return reachable_ignoring_collisions(cell.robot, T).reshape(len(TO), len(Xs))
     out = np.zeros((len(TO), len(X)), dtype=bool)
     for k, x in enumerate(X):
-        out[:, k] = requirement_clear(cell, obj, TO, x).ok
+        out[:, k] = requirement_clear(cache, obj, TO, x).ok
     return out
 
 
-def feasible(cell: Cell, placements: list[Placement], requirements: list[np.ndarray | Requirement]) -> np.ndarray:
+def feasible(cache: CellCache, placements: list[Placement], requirements: list[np.ndarray | Requirement]) -> np.ndarray:
     """(n,) bool: placements at which every requirement is reachable, clear of the world.
 
     A requirement is a 4x4 X: the tool must reach T_O @ X (X = T_g for a pickup or
@@ -426,7 +434,7 @@ def feasible(cell: Cell, placements: list[Placement], requirements: list[np.ndar
         return np.ones(len(placements), dtype=bool)
     objs = {p.obj for p in placements}
     obj = objs.pop() if len(objs) == 1 else None
-    return _reach_all(cell, np.stack([p.T for p in placements]), requirements, obj).all(axis=1)
+    return _reach_all(cache, np.stack([p.T for p in placements]), requirements, obj).all(axis=1)
 
 
 #: Placements :func:`choose` checks at a time, nearest first.
@@ -461,7 +469,7 @@ def nearest_order(dist: np.ndarray, yaw: np.ndarray, digits: int) -> np.ndarray:
     return np.lexsort((np.arange(len(dist)), yaw, round_like_python(dist, digits)))
 
 
-def choose(cell: Cell, obj: str, pose: str, requirements: list[np.ndarray],
+def choose(cache: CellCache, obj: str, pose: str, requirements: list[np.ndarray],
            occupied: list[Occupant], near: np.ndarray | None = None,
            reach: Sequence[np.ndarray] = ()) -> Placement | None:
     """The feasible placement nearest ``near`` (xy, cell unit; default the regions'
@@ -476,7 +484,8 @@ def choose(cell: Cell, obj: str, pose: str, requirements: list[np.ndarray],
     so the search stops at the first chunk holding a feasible one instead of solving IK for
     the whole grid.
     """
-    xy, kyaw, yaw_of, rots, height = _grid_points(cell, obj, pose, occupied, from_mm(cell.unit, GRID_STEP_MM),
+    cell = cache.cell
+    xy, kyaw, yaw_of, rots, height = _grid_points(cache, obj, pose, occupied, from_mm(cell.unit, GRID_STEP_MM),
                                                   YAW_STEPS)
     n = len(xy)
     if not n:
@@ -502,11 +511,11 @@ def choose(cell: Cell, obj: str, pose: str, requirements: list[np.ndarray],
             if not len(live):
                 break
             at = np.array([idx[i] for i in live], dtype=int)
-            ok[live] = _reach_all(cell, _grid_poses(xy[at], rots[kyaw[at]], height), [x], obj)[:, 0]
+            ok[live] = _reach_all(cache, _grid_poses(xy[at], rots[kyaw[at]], height), [x], obj)[:, 0]
         live = np.flatnonzero(ok)
         if len(reach) and len(live):
             at = np.array([idx[i] for i in live], dtype=int)
-            ok[live] = _reach_all(cell, _grid_poses(xy[at], rots[kyaw[at]], height), list(reach)).all(axis=1)
+            ok[live] = _reach_all(cache, _grid_poses(xy[at], rots[kyaw[at]], height), list(reach)).all(axis=1)
         hits = np.flatnonzero(ok)
         if len(hits):
             i = idx[hits[0]]
@@ -536,7 +545,7 @@ PHASE1_STEP_MM = 152.4
 PHASE1_YAWS = 6
 
 
-def reachable_somewhere(cell: Cell, obj: str, pose: str,
+def some_placement_reaches(cache: CellCache, obj: str, pose: str,
                         requirements: Sequence[np.ndarray | Requirement]) -> np.ndarray:
     """(m,) bool: for each requirement (a tool transform X in the object frame, or a
     workspace.Requirement), some placement of ``obj`` in ``pose`` on the phase-1 grid of the
@@ -547,28 +556,29 @@ def reachable_somewhere(cell: Cell, obj: str, pose: str,
     the other objects (phase 1 does not know where they will be); phase 2 chooses a real
     placement clear of them that serves every later action at once.
     """
-    return reachable_somewhere_each(cell, obj, [(pose, requirements)])[0]
+    return some_placement_reaches_each(cache, obj, [(pose, requirements)])[0]
 
 
-def reachable_somewhere_each(cell: Cell, obj: str,
+def some_placement_reaches_each(cache: CellCache, obj: str,
                              asks: Sequence[tuple[str, Sequence[np.ndarray | Requirement]]]) -> list[np.ndarray]:
-    """:func:`reachable_somewhere` for each (stable pose, requirements) of ``asks`` (one arc's
+    """:func:`some_placement_reaches` for each (stable pose, requirements) of ``asks`` (one arc's
     positions), solved together: a requirement asked in several poses is checked at all their
     first placements in one batch (one scene state, one IK call, one clearance check)."""
-    memo = cell.memo.table("placement.somewhere", SOMEWHERE_LIMIT)
+    cell = cache.cell
+    memo = cache.table("placement.somewhere", SOMEWHERE_LIMIT)
     # the answer depends on the geometry only (the world holds no other part): renamed copies
     # of one model (generated cells: N identical blocks and pegs) share it
     shape = shape_key if cell.collisions else _name_key
-    okey = shape(cell, obj)
+    okey = shape(cache, obj)
     outs: list[np.ndarray] = []
     todo: dict[tuple, list[tuple[int, int]]] = {}  # equal (pose, requirement) asks are solved once
     items: dict[tuple, tuple[str, Requirement]] = {}
     for a, (pose, requirements) in enumerate(asks):
         reqs = [r if isinstance(r, Requirement) else Requirement(np.asarray(r, float)) for r in requirements]
         out = np.zeros(len(reqs), dtype=bool)
-        gkey = _grid_key(cell, obj, pose) if reqs else None
+        gkey = _grid_key(cache, obj, pose) if reqs else None
         for i, r in enumerate(reqs):
-            held = None if r.held is None else (shape(cell, r.held[0]), np.round(r.held[1], 12).tobytes())
+            held = None if r.held is None else (shape(cache, r.held[0]), np.round(r.held[1], 12).tobytes())
             key = (gkey, okey, np.round(r.X, 12).tobytes(), held, None if r.width is None else round(r.width, 12))
             if key in memo:
                 out[i] = memo[key]
@@ -580,8 +590,8 @@ def reachable_somewhere_each(cell: Cell, obj: str,
         grids: dict[str, np.ndarray] = {}  # one grid per stable pose (its key made once, not per item)
         for pose, _ in items.values():
             if pose not in grids:
-                grids[pose] = _grid(cell, obj, pose)
-        got = _some_placement(cell, obj, [(grids[pose], r) for pose, r in items.values()])
+                grids[pose] = _grid(cache, obj, pose)
+        got = _some_placement(cache, obj, [(grids[pose], r) for pose, r in items.values()])
         for (key, where), ok in zip(todo.items(), got):
             memo[key] = ok
             for a, i in where:
@@ -589,13 +599,13 @@ def reachable_somewhere_each(cell: Cell, obj: str,
     return outs
 
 
-def _name_key(cell: Cell, obj: str) -> str:
+def _name_key(cache: CellCache, obj: str) -> str:
     """The memo key of ``obj`` in a cell without collision checks: its name (IK alone does not
     look at the object, so any key serves; the name keeps such cells' tables as they were)."""
     return obj
 
 
-def _some_placement(cell: Cell, obj: str, items: list[tuple[np.ndarray, Requirement]],
+def _some_placement(cache: CellCache, obj: str, items: list[tuple[np.ndarray, Requirement]],
                     chunk: int = 48) -> list[bool]:
     """For each (object poses ``cands`` (n,4,4), requirement) of ``items``, some pose of ``cands``
     at which the arm reaches T_O @ req.X clear of the world: the first :data:`FIRST_PLACEMENTS`
@@ -610,6 +620,7 @@ def _some_placement(cell: Cell, obj: str, items: list[tuple[np.ndarray, Requirem
     refuse every placement alike; and, the grid's placements differing only by a turn about
     world z and a shift in x, y, a wrist below the table at the first one (by more than
     rounding) or a body rigid with the tool on an unbounded table, which are so at every one."""
+    cell = cache.cell
     out = [False] * len(items)
     live: list[tuple[int, SceneState | None]] = []  # (item, its requirement's scene state)
     T0 = [cands[0] @ np.asarray(req.X, float) if len(cands) else None for cands, req in items]
@@ -628,8 +639,8 @@ def _some_placement(cell: Cell, obj: str, items: list[tuple[np.ndarray, Requirem
         z_row = z_rows[id(cands)]
         if z_row and wrist[k] < below:
             continue
-        state = requirement_state(cell, obj, req)
-        if tool_refusal(cell, obj, T0[k], req, table=z_row, state=state) is None:
+        state = requirement_state(cache, obj, req)
+        if tool_refusal(cache, obj, T0[k], req, table=z_row, state=state) is None:
             live.append((k, state))
     if not live:
         return out
@@ -649,14 +660,14 @@ def _some_placement(cell: Cell, obj: str, items: list[tuple[np.ndarray, Requirem
     first = np.zeros(len(live), dtype=bool)
     for hs in groups.values():
         k, state = live[heads[hs[0]][0]]
-        ok = requirement_clear_each(cell, obj, np.stack([heads[h][1] for h in hs]), items[k][1], state,
+        ok = requirement_clear_each(cache, obj, np.stack([heads[h][1] for h in hs]), items[k][1], state,
                                     (Q[hs], okb[hs]))
         first[[heads[h][0] for h, o in zip(hs, ok.tolist()) if o]] = True
     for row, (k, state) in enumerate(live):
         cands, req = items[k]
         start0 = min(FIRST_PLACEMENTS, len(cands))
         out[k] = bool(first[row]) or any(
-            requirement_clear(cell, obj, cands[start:start + chunk], req, state=state).ok.any()
+            requirement_clear(cache, obj, cands[start:start + chunk], req, state=state).ok.any()
             for start in [start0, *range(start0 + chunk, len(cands), chunk)] if start < len(cands))
     return out
 
@@ -692,12 +703,12 @@ def _any_placement(cell: Cell, cands: np.ndarray, X: np.ndarray, chunk: int = 48
             break
         C = cands[start:start + chunk]
         T = np.einsum("nij,mjk->nmik", C, X[open_]).reshape(-1, 4, 4)
-        hit = reaches(cell.robot, T).reshape(len(C), len(open_)).any(axis=0)
+        hit = reachable_ignoring_collisions(cell.robot, T).reshape(len(C), len(open_)).any(axis=0)
         ok[open_[hit]] = True
     return ok
 
 
-#: Bounds of the cell's memo tables (cell.memo): reachable_somewhere's answers per
+#: Bounds of the cell cache's tables: some_placement_reaches's answers per
 #: (grid, requirement), and the phase-1 grids per stable-pose geometry. Phase 1 asks the
 #: same arcs again in every round of its deepening search, and objects that are copies of
 #: one model (the same stable pose, so the same grid) ask the same questions.
@@ -705,16 +716,18 @@ SOMEWHERE_LIMIT = 100_000
 GRID_LIMIT = 1024
 
 
-def _grid_key(cell: Cell, obj: str, pose: str) -> tuple:
+def _grid_key(cache: CellCache, obj: str, pose: str) -> tuple:
     """What the phase-1 grid of ``obj`` in ``pose`` depends on within a cell: the stable
     pose's rotation and height and the object's footprint in it, not the object's name."""
+    cell = cache.cell
     model = cell.objects[obj]
     sp = model.poses[pose]
-    return (np.asarray(sp.R, float).tobytes(), float(sp.height), _footprint(cell, obj, sp.R).tobytes())
+    return (np.asarray(sp.R, float).tobytes(), float(sp.height), _footprint(cache, obj, sp.R).tobytes())
 
 
-def _grid(cell: Cell, obj: str, pose: str) -> np.ndarray:
-    """(n,4,4) object poses of the phase-1 grid (memoised in the cell per stable-pose geometry)."""
+def _grid(cache: CellCache, obj: str, pose: str) -> np.ndarray:
+    """(n,4,4) object poses of the phase-1 grid (kept in the cell's cache per stable-pose geometry)."""
+    cell = cache.cell
     step = from_mm(cell.unit, PHASE1_STEP_MM)
-    return cell.memo.table("placement.grids", GRID_LIMIT).get_or_compute(
-        _grid_key(cell, obj, pose), lambda: _grid_arrays(cell, obj, pose, [], step, PHASE1_YAWS)[2])
+    return cache.table("placement.grids", GRID_LIMIT).get_or_compute(
+        _grid_key(cache, obj, pose), lambda: _grid_arrays(cache, obj, pose, [], step, PHASE1_YAWS)[2])

@@ -1,17 +1,18 @@
 """The one place that says whether the arm reaches a tool pose: "the arm has an in-limit
 joint solution for T, with its wrist above the table top, clear of the world".
 
-Phase 1's reach arcs (reach.py), the put-down placement search (placement.py) and
-phase 2's steps (phase2.py) all ask here, so the rule is written once. The paper's
+Phase 1's reach arcs (arcs.py), the put-down placement search (placement.py) and
+phase 2's steps (phase2/instance.py, :func:`arm_at`) all ask here, so the rule is written once. The paper's
 condition 2 of a reachable constraint (Sec. 5.2.4) looks at joint limits only; a tool
 pose whose wrist (the flange origin) would be under the table top (z = 0), e.g. a
 grasp from below, is refused too, so the CMS stays conservative (Sec. 7.1). With the
 cell (:func:`reach_clear`; unless the problem file opts out with ``collision: false``,
 ``Cell.collisions``), an IK solution counts only if the arm, the gripper and the
 part in the hand are clear of the table, the obstacles and the parts given, by the
-margin (world.collision); a pose whose every solution collides is refused, and the
-colliding pairs are remembered on the cell (:func:`refusals`) so a "no plan" can say
-which pair stood in the way.
+margin (world.collision); a pose whose every solution collides is refused with the
+colliding pairs, which the caller's run logs (world.run.RunLog) so a "no plan" can say
+which pair stood in the way. Every function here is a pure answer about the cell; the
+tables it keeps are its world.run.CellCache's.
 
 Frames and units: ``T`` is ``T_world_tool`` (4x4, or a batch (n, 4, 4)), lengths in the
 robot's unit (the cell's); joint vectors in radians, in the robot file's DH zero
@@ -19,7 +20,7 @@ convention; world Z up, table top z = 0.
 """
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -29,15 +30,13 @@ if TYPE_CHECKING:
     from spar_py.core.model import Cell
     from spar_py.world.collision import SceneState
     from spar_py.world.robots import Robot
+    from spar_py.world.run import CellCache
 
-__all__ = ["Reached", "Requirement", "clear_of_world", "ik_rows", "reach_clear", "reaches", "refusals",
-           "remember_refusal", "requirement_clear", "requirement_clear_ik", "solutions", "tool_on_table",
-           "requirement_clear_each", "requirement_state", "shape_key", "tool_refusal", "wrist_above_table",
-           "wrist_height"]
-
-#: Refusals kept per cell (the "no plan" explanation): at most this many distinct ones.
-REFUSALS_LIMIT = 256
-#: Bound of the cell's memo table of requirement answers by geometry (:func:`requirement_clear`).
+__all__ = ["ArmAt", "Reached", "Refusal", "Requirement", "arm_at", "clear_of_world", "ik_rows", "pair_text",
+           "reach_clear", "reachable_ignoring_collisions", "requirement_clear", "requirement_clear_each",
+           "requirement_clear_ik", "requirement_state", "shape_key", "solutions", "tool_on_table", "tool_refusal",
+           "wrist_above_table", "wrist_height"]
+#: Bound of the cell cache's table of requirement answers by geometry (:func:`requirement_clear`).
 REQUIREMENT_LIMIT = 2048
 #: Scene states kept per cell by requirement (:func:`requirement_state`), and by the requirement's
 #: geometry (the state a renamed copy's is made from).
@@ -55,7 +54,7 @@ def wrist_above_table(robot: Robot, T: np.ndarray) -> np.ndarray:
     return wrist_height(robot, T) > 0.0
 
 
-def reaches(robot: Robot, T: np.ndarray) -> np.ndarray:
+def reachable_ignoring_collisions(robot: Robot, T: np.ndarray) -> np.ndarray:
     """(n,) bool: the arm reaches each world tool pose of T (n, 4, 4) within its joint
     limits, wrist above the table; one batched IK call (no collision check: :func:`reach_clear`)."""
     T = np.asarray(T, float)
@@ -97,7 +96,7 @@ class Reached:
     pairs: list[list[tuple[str, str]]] = field(default_factory=list)
 
 
-def reach_clear(cell: Cell, T: np.ndarray, *, parts: Mapping[str, np.ndarray] | None = None,
+def reach_clear(cache: CellCache, T: np.ndarray, *, parts: Mapping[str, np.ndarray] | None = None,
                 held: tuple[str, np.ndarray] | None = None, grasped: str | None = None,
                 attached: Mapping[str, np.ndarray] | None = None, width: float | None = None,
                 allow: Iterable[tuple[str, str]] = ()) -> Reached:
@@ -106,11 +105,11 @@ def reach_clear(cell: Cell, T: np.ndarray, *, parts: Mapping[str, np.ndarray] | 
     hand, ``grasped`` closing on, ``attached`` parts where the tool is (T_tool_part, the same
     for every row), ``width`` the fingers' opening, ``allow`` the step's own contacts
     (CollisionScene.at). One batched IK call and one batched clearance check."""
-
+    cell = cache.cell
     T = np.asarray(T, float).reshape(-1, 4, 4)
     if not len(T):
         return Reached(np.zeros(0, bool), np.zeros(0, bool), [])
-    return clear_of_world(cell, *ik_rows(cell, T), parts=parts, held=held, grasped=grasped, attached=attached,
+    return clear_of_world(cache, *ik_rows(cell, T), parts=parts, held=held, grasped=grasped, attached=attached,
                           width=width, allow=allow)
 
 
@@ -121,21 +120,20 @@ def ik_rows(cell: Cell, T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return Q, okb & wrist_above_table(cell.robot, T)[:, None]
 
 
-def clear_of_world(cell: Cell, Q: np.ndarray, okb: np.ndarray, *, parts: Mapping[str, np.ndarray] | None = None,
+def clear_of_world(cache: CellCache, Q: np.ndarray, okb: np.ndarray, *, parts: Mapping[str, np.ndarray] | None = None,
                    held: tuple[str, np.ndarray] | None = None, grasped: str | None = None,
                    attached: Mapping[str, np.ndarray] | None = None, width: float | None = None,
                    allow: Iterable[tuple[str, str]] = (), state: SceneState | None = None) -> Reached:
     """:func:`reach_clear` from the IK branches already solved (:func:`ik_rows`); ``state`` the
     scene state of those arguments when the caller has it already (CollisionScene.at)."""
-    from spar_py.world.collision import scene_for
-
+    cell = cache.cell
     n = len(Q)
     ik = okb.any(axis=1)
     if not cell.collisions:  # the problem file opted out (collision: false): IK alone
         return Reached(ik.copy(), ik, [[] for _ in range(n)])
     rows, cols = np.nonzero(okb)
     if state is None:
-        state = scene_for(cell).at(parts or {}, held, grasped, width=width, allow=allow, attached=attached)
+        state = cache.scene().at(parts or {}, held, grasped, width=width, allow=allow, attached=attached)
     clear, why = state.check(Q[rows, cols])
     ok = np.zeros(n, dtype=bool)
     ok[rows[clear]] = True
@@ -146,52 +144,54 @@ def clear_of_world(cell: Cell, Q: np.ndarray, okb: np.ndarray, *, parts: Mapping
     return Reached(ok, ik, pairs)
 
 
-def requirement_clear(cell: Cell, obj: str, TO: np.ndarray, req: Requirement | np.ndarray,
+def requirement_clear(cache: CellCache, obj: str, TO: np.ndarray, req: Requirement | np.ndarray,
                       state: SceneState | None = None,
                       ik: tuple[np.ndarray, np.ndarray] | None = None) -> Reached:
     """:func:`reach_clear` for the tool at ``TO[i] @ X`` for object poses TO (n, 4, 4) of ``obj``
     and one requirement (a :class:`Requirement`, or a bare X: the object in the hand with the
     fingers open); ``state`` its :func:`requirement_state` and ``ik`` the :func:`ik_rows` of
     those tool poses when the caller has them (a batch solved for several requirements)."""
+    cell = cache.cell
     req = req if isinstance(req, Requirement) else Requirement(np.asarray(req, float))
     TO = np.asarray(TO, float).reshape(-1, 4, 4)
     T = TO @ np.asarray(req.X, float)
     if not len(T):
         return Reached(np.zeros(0, bool), np.zeros(0, bool), [])
     if not cell.collisions:
-        return requirement_clear_ik(cell, obj, req, *(ik if ik is not None else ik_rows(cell, T)))
+        return requirement_clear_ik(cache, obj, req, *(ik if ik is not None else ik_rows(cell, T)))
     # the answer depends on the geometry only (no other part is in this world): renamed copies
     # of one model (generated cells: N identical blocks) asked the same poses share it
     held = req.held[0] if req.held is not None else None
-    hand = None if held is None else (shape_key(cell, held), np.round(req.held[1], 12).tobytes())
+    hand = None if held is None else (shape_key(cache, held), np.round(req.held[1], 12).tobytes())
     width = None if req.width is None else round(float(req.width), 12)
-    key = (shape_key(cell, obj), hand, np.round(req.X, 12).tobytes(), width, np.round(TO, 12).tobytes())
-    table = cell.memo.table("workspace.requirement", REQUIREMENT_LIMIT)
+    key = (shape_key(cache, obj), hand, np.round(req.X, 12).tobytes(), width, np.round(TO, 12).tobytes())
+    table = cache.table("workspace.requirement", REQUIREMENT_LIMIT)
     names = {obj: "\0obj"} | ({f"held:{held}": "\0held"} if held is not None else {})
     back = {v: k for k, v in names.items()}
     if key in table:
         ok, ik, pairs = table[key]
         return Reached(ok.copy(), ik.copy(), [[tuple(back.get(n, n) for n in p) for p in row] for row in pairs])
-    r = requirement_clear_ik(cell, obj, req, *(ik if ik is not None else ik_rows(cell, T)), state=state)
+    r = requirement_clear_ik(cache, obj, req, *(ik if ik is not None else ik_rows(cell, T)), state=state)
     table[key] = (r.ok.copy(), r.ik.copy(), [[tuple(names.get(n, n) for n in p) for p in row] for row in r.pairs])
     return r
 
 
-def requirement_clear_each(cell: Cell, obj: str, TO: np.ndarray, req: Requirement,
+def requirement_clear_each(cache: CellCache, obj: str, TO: np.ndarray, req: Requirement,
                            state: SceneState | None, ik: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
     """(k,) bool: :func:`requirement_clear` of each object pose TO[i] (k, 4, 4) alone, ``ik`` the
     :func:`ik_rows` of TO @ req.X: the same answers and memo entries as k calls with one pose
     each (rows are independent), the poses the memo lacks checked in one batch."""
+    cell = cache.cell
     TO = np.asarray(TO, float).reshape(-1, 4, 4)
     Q, okb = ik
     if not cell.collisions:
-        return requirement_clear_ik(cell, obj, req, Q, okb).ok.copy()
+        return requirement_clear_ik(cache, obj, req, Q, okb).ok.copy()
     held = req.held[0] if req.held is not None else None
-    hand = None if held is None else (shape_key(cell, held), np.round(req.held[1], 12).tobytes())
+    hand = None if held is None else (shape_key(cache, held), np.round(req.held[1], 12).tobytes())
     width = None if req.width is None else round(float(req.width), 12)
-    base = (shape_key(cell, obj), hand, np.round(req.X, 12).tobytes(), width)
+    base = (shape_key(cache, obj), hand, np.round(req.X, 12).tobytes(), width)
     keys = [(*base, np.round(TO[i:i + 1], 12).tobytes()) for i in range(len(TO))]
-    table = cell.memo.table("workspace.requirement", REQUIREMENT_LIMIT)
+    table = cache.table("workspace.requirement", REQUIREMENT_LIMIT)
     out = np.zeros(len(TO), dtype=bool)
     miss = []
     for i, key in enumerate(keys):
@@ -201,7 +201,7 @@ def requirement_clear_each(cell: Cell, obj: str, TO: np.ndarray, req: Requiremen
             miss.append(i)
     if miss:
         names = {obj: "\0obj"} | ({f"held:{held}": "\0held"} if held is not None else {})
-        r = requirement_clear_ik(cell, obj, req, Q[miss], okb[miss], state=state)
+        r = requirement_clear_ik(cache, obj, req, Q[miss], okb[miss], state=state)
         for k, i in enumerate(miss):
             out[i] = bool(r.ok[k])
             table[keys[i]] = (r.ok[k:k + 1].copy(), r.ik[k:k + 1].copy(),
@@ -209,51 +209,48 @@ def requirement_clear_each(cell: Cell, obj: str, TO: np.ndarray, req: Requiremen
     return out
 
 
-def shape_key(cell: Cell, obj: str) -> tuple:
+def shape_key(cache: CellCache, obj: str) -> tuple:
     """The collision geometry of ``obj`` (world.collision.CollisionScene.shape_key): equal for
     renamed copies of one model."""
-    from spar_py.world.collision import scene_for
-
-    return scene_for(cell).shape_key(obj)
+    return cache.scene().shape_key(obj)
 
 
-def requirement_clear_ik(cell: Cell, obj: str, req: Requirement, Q: np.ndarray, okb: np.ndarray,
+def requirement_clear_ik(cache: CellCache, obj: str, req: Requirement, Q: np.ndarray, okb: np.ndarray,
                          state: SceneState | None = None) -> Reached:
     """:func:`requirement_clear` from the IK branches already solved (:func:`ik_rows`)."""
-    return clear_of_world(cell, Q, okb, **_requirement_world(obj, req), state=state)
+    return clear_of_world(cache, Q, okb, **_requirement_world(obj, req), state=state)
 
 
-def requirement_state(cell: Cell, obj: str, req: Requirement) -> SceneState | None:
+def requirement_state(cache: CellCache, obj: str, req: Requirement) -> SceneState | None:
     """The scene state (CollisionScene.at) of a requirement on ``obj`` (:func:`requirement_clear`'s
-    world), or None when the cell has no collision check. Kept on the cell (at most STATE_LIMIT):
+    world), or None when the cell has no collision check. Kept in the cell's cache (at most STATE_LIMIT):
     it depends on the requirement only, not on where the object is, so one state serves
     :func:`tool_refusal` and every batch of poses of that requirement, in every stable pose
     (phase 1 asks each grasp's requirement once per pose)."""
+    cell = cache.cell
     if not cell.collisions:
         return None
     held = None if req.held is None else (req.held[0], np.round(req.held[1], 12).tobytes())
     width = None if req.width is None else round(float(req.width), 12)
     key = (obj, np.round(req.X, 12).tobytes(), held, width)
-    table = cell.memo.table("workspace.requirement_state", STATE_LIMIT)
+    table = cache.table("workspace.requirement_state", STATE_LIMIT)
     state = table.get(key)
     if state is None:
-        state = table[key] = _renamed_or_new(cell, obj, req)
+        state = table[key] = _renamed_or_new(cache, obj, req)
     return state
 
 
-def _renamed_or_new(cell: Cell, obj: str, req: Requirement) -> SceneState:
+def _renamed_or_new(cache: CellCache, obj: str, req: Requirement) -> SceneState:
     """A new scene state of a requirement on ``obj``: the state of the same requirement on a
     renamed copy of ``obj`` (the same geometry exactly: shape, X, the part in the hand and its
     pose, the width) renamed (SceneState.renamed: the state at() would make, without placing or
     pairing again), else at()'s. Generated cells ask one requirement of each of N copies."""
-    from spar_py.world.collision import scene_for
-
-    scene = scene_for(cell)
+    scene = cache.scene()
     held = None if req.held is None else req.held[0]
     hand = None if held is None else (scene.shape_key(held), np.ascontiguousarray(req.held[1], float).tobytes())
     width = None if req.width is None else float(req.width)
     key = (scene.shape_key(obj), hand, np.ascontiguousarray(req.X, float).tobytes(), width)
-    table = cell.memo.table("workspace.requirement_proto", STATE_LIMIT)
+    table = cache.table("workspace.requirement_proto", STATE_LIMIT)
     proto = table.get(key)
     if proto is not None:
         state, p_obj, p_held = proto
@@ -277,19 +274,18 @@ def _requirement_world(obj: str, req: Requirement) -> dict:
             "allow": [(f"held:{req.held[0]}", obj)]}
 
 
-def tool_on_table(cell: Cell, obj: str, T: np.ndarray, req: Requirement) -> tuple[str, str] | None:
+def tool_on_table(cache: CellCache, obj: str, T: np.ndarray, req: Requirement) -> tuple[str, str] | None:
     """The body rigid with the tool that meets an unbounded table when the tool is at world pose
     T (4x4) for ``req`` on ``obj`` (the world of :func:`requirement_clear_ik`), or None
     (SceneState.tool_rigid_on_table): a refusal for every pose turned about z or shifted in x, y."""
+    cell = cache.cell
     if not cell.collisions or cell.table is not None:
         return None
-    from spar_py.world.collision import scene_for
-
-    state = scene_for(cell).at({}, **_requirement_world(obj, req))
+    state = cache.scene().at({}, **_requirement_world(obj, req))
     return state.tool_rigid_on_table(np.asarray(T, float))
 
 
-def tool_refusal(cell: Cell, obj: str, T: np.ndarray, req: Requirement, *, table: bool = True,
+def tool_refusal(cache: CellCache, obj: str, T: np.ndarray, req: Requirement, *, table: bool = True,
                  state: SceneState | None = None) -> tuple[str, str] | None:
     """A pair that refuses ``req`` on ``obj`` at every tool pose of a batch, before any IK, or None:
     the grasp rule or two bodies rigid with the flange closer than the margin
@@ -298,10 +294,11 @@ def tool_refusal(cell: Cell, obj: str, T: np.ndarray, req: Requirement, *, table
     (:func:`tool_on_table`: true at every pose turned about z or shifted in x, y from T).
     One scene state for both (``state``: the :func:`requirement_state` when the caller has it);
     None without collision checks."""
+    cell = cache.cell
     if not cell.collisions:
         return None
     if state is None:
-        state = requirement_state(cell, obj, req)
+        state = requirement_state(cache, obj, req)
     T = np.asarray(T, float)
     if table and cell.table is None:
         hit = state.tool_rigid_on_table(T)
@@ -310,34 +307,58 @@ def tool_refusal(cell: Cell, obj: str, T: np.ndarray, req: Requirement, *, table
     return state.tool_rigid_refusal(T)
 
 
-def _refusal_table(cell: Cell) -> dict[str, list[tuple[str, str]]]:
-    table = cell.memo.table("workspace.refusals", 1)
-    return table.get_or_compute("all", dict)
-
-
-def remember_refusal(cell: Cell, what: str, pairs: Iterable[tuple[str, str]]) -> None:
-    """Keep on the cell that ``what`` (e.g. "pickup(block, p2G3)") had IK solutions but every one
-    collided, and with which pairs (the "no plan" explanation, :func:`refusals`); at most
-    REFUSALS_LIMIT of them."""
-    d = _refusal_table(cell)
-    if what not in d and len(d) >= REFUSALS_LIMIT:
-        return
-    seen = d.setdefault(what, [])
-    for p in pairs:
-        p = tuple(p)
-        if p not in seen:
-            seen.append(p)
-
-
-def _pair_text(p: tuple[str, str]) -> str:
+def pair_text(p: Sequence[str]) -> str:
+    """A colliding pair as the user reads it (the two fingers are "fingers")."""
     return "-".join("fingers" if n in ("finger_l", "finger_r") else n for n in p)
 
 
-def refusals(cell: Cell) -> list[str]:
-    """Every remembered collision refusal as a line: ``no collision-free IK for pickup(block,
-    p2G3): forearm-shelf, fingers-table``."""
-    out = []
-    for what, pairs in _refusal_table(cell).items():
-        texts = list(dict.fromkeys(_pair_text(p) for p in pairs))
-        out.append(f"no collision-free IK for {what}: {', '.join(texts)}")
-    return out
+@dataclass(frozen=True)
+class Refusal:
+    """``what`` (e.g. "pickup(block, p2G3) at tr1") has joint solutions, every one colliding:
+    ``pairs`` the colliding pairs of bodies, in the order found."""
+
+    what: str
+    pairs: tuple[tuple[str, str], ...]
+
+    def text(self) -> str:
+        """One line: ``no collision-free IK for pickup(block, p2G3): forearm-shelf, fingers-table``."""
+        return f"no collision-free IK for {self.what}: {', '.join(dict.fromkeys(pair_text(p) for p in self.pairs))}"
+
+
+@dataclass
+class ArmAt:
+    """The answer of :func:`arm_at`: ``q`` the chosen joint vector (rad) or None, ``solutions``
+    every in-limit IK solution (k, 6) rad, ``clearance`` (cell unit) and ``closest_pair`` of the
+    chosen one (None without a collision check), ``collisions`` the pairs that refused every
+    solution (empty unless there were solutions and all collide)."""
+
+    q: np.ndarray | None
+    solutions: np.ndarray
+    clearance: float | None = None
+    closest_pair: tuple[str, str] | None = None
+    collisions: list[tuple[str, str]] = field(default_factory=list)
+
+
+def arm_at(cache: CellCache, T: np.ndarray, ref: np.ndarray | None, *, parts: Mapping[str, np.ndarray],
+           held: tuple[str, np.ndarray] | None = None, grasped: str | None = None, width: float | None = None,
+           allow: Iterable[tuple[str, str]] = ()) -> ArmAt:
+    """The arm at world tool pose T (4x4) in a world of ``parts`` (key -> T_world_part), ``held``
+    in the hand, ``grasped`` being closed on with the fingers ``width`` apart, ``allow`` the
+    step's own contacts: the solution nearest ``ref`` (rad; zeros if None) among those clear of
+    the world (all of them when the cell opts out of collision checks), with the reason when
+    there is none (:class:`ArmAt`). Phase 2 asks this for every step that moves the arm."""
+    cell = cache.cell
+    sols = solutions(cell.robot, T)
+    ref = np.zeros(6) if ref is None else ref
+    if not len(sols):
+        return ArmAt(None, sols)
+    if not cell.collisions:
+        return ArmAt(sols[int(np.argmin(np.abs(sols - ref).sum(axis=1)))], sols)
+    state = cache.scene().at(parts, held, grasped, width=width, allow=allow)
+    clear, why = state.check(sols)
+    good = sols[clear]
+    if not len(good):
+        return ArmAt(None, sols, collisions=list(dict.fromkeys(w for w in why if w is not None)))
+    q = good[int(np.argmin(np.abs(good - ref).sum(axis=1)))]
+    d, names = state.clearance(q[None])
+    return ArmAt(q, sols, float(d[0]), tuple(names[0]))

@@ -1,6 +1,9 @@
-"""Reachability of grasps (Sec. 5.2.4): the pairs behind the CMS's reachable / mate_reachable arcs.
+"""Phase 1's reach arcs (Sec. 5.2.4): the pairs behind the CMS's reachable / mate_reachable arcs.
 
-Numbers only; Prolog reaches this module through ``spar_py.planning.engine.arc_pairs``.
+Numbers only; Prolog reaches this module through its run (world.run.WorldRun.arc_pairs,
+called by ``spar_py.planning.engine.arc_pairs``). Every answer is an :class:`Arc`: the pairs
+and the refusals (a pair whose every joint solution collides, and with which pairs), which
+the run logs.
 For a grasp label G and a position label P the paper checks
 
 1. the faces the fingers touch (G's gfaces) are not the faces P rests on (rfaces);
@@ -19,16 +22,22 @@ from __future__ import annotations
 import functools
 import re
 from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from spar_py.core.errors import SparValueError
 from spar_py.core.geometry import same_stable_poses
 from spar_py.core.model import Cell, Face, Grasp, ObjectModel
-from spar_py.world.workspace import Requirement, ik_rows, remember_refusal, requirement_clear_ik, requirement_state
+from spar_py.world.workspace import Refusal, Requirement, ik_rows, requirement_clear_ik, requirement_state
+
+if TYPE_CHECKING:
+    from spar_py.world.run import CellCache
 
 __all__ = [
     "ARCS",
+    "Arc",
     "arc",
     "mate_reachable_pairs",
     "natural_key",
@@ -42,6 +51,15 @@ __all__ = [
 def natural_key(label: str) -> tuple:
     """Sort key putting p1G2 before p1G10 (digit runs compare as numbers)."""
     return tuple(int(t) if t.isdigit() else t for t in re.split(r"(\d+)", label))
+
+
+@dataclass
+class Arc:
+    """An arc's answer: ``pairs`` the [grasp, position] pairs that hold (natural label order),
+    ``refusals`` those refused only because every joint solution collides."""
+
+    pairs: list[list[str]]
+    refusals: list[Refusal] = field(default_factory=list)
 
 
 def _sorted_pairs(pairs: Iterable[tuple[str, str]]) -> list[list[str]]:
@@ -110,25 +128,27 @@ def _check_rule(rule: str) -> None:
         raise SparValueError(f"placement rule {rule!r} is not one of {', '.join(RULES)}")
 
 
-def _somewhere(cell: Cell, obj: str, asks: list[tuple[str, list[Grasp], list[Requirement]]],
+def _somewhere(cache: CellCache, obj: str, asks: list[tuple[str, list[Grasp], list[Requirement]]],
                rule: str) -> list[tuple[str, str]]:
     """The (grasp label, pose) pairs of ``asks`` (stable pose, grasps, their requirements X: tool
     transform in the object frame, and what is in the hand) whose requirement the arm reaches
-    clear of the world at some placement of ``obj`` in that pose (placement.reachable_somewhere,
+    clear of the world at some placement of ``obj`` in that pose (placement.some_placement_reaches,
     every pose of the arc at once); all of them under the paper's rule."""
     if rule == "paper":
         return [(g.label, p) for p, grasps, _ in asks for g in grasps]
-    from spar_py.world.placement import reachable_somewhere_each  # placement builds on workspace, not on this module
+    from spar_py.world.placement import some_placement_reaches_each  # placement builds on workspace, not on this module
 
-    oks = reachable_somewhere_each(cell, obj, [(p, X) for p, _, X in asks])
+    oks = some_placement_reaches_each(cache, obj, [(p, X) for p, _, X in asks])
     return [(g.label, p) for (p, grasps, _), ok in zip(asks, oks) for g, reached in zip(grasps, ok) if reached]
 
 
-def _clear_pass(cell: Cell, obj: str, pending: list[tuple[Grasp, str, np.ndarray]],
-                requirement: Callable[[Grasp], Requirement], what: Callable[[Grasp, str], str]) -> list[bool]:
+def _clear_pass(cache: CellCache, obj: str, pending: list[tuple[Grasp, str, np.ndarray]],
+                requirement: Callable[[Grasp], Requirement], what: Callable[[Grasp, str], str],
+                refused: list[Refusal]) -> list[bool]:
     """Which (grasp, position label, T_O) of ``pending`` the arm reaches clear of the world
     (workspace.requirement_clear, one batched call per grasp); a pair with IK solutions that all
-    collide is remembered on the cell with its pairs (workspace.refusals)."""
+    collide is added to ``refused`` with its pairs."""
+    cell = cache.cell
     out = [False] * len(pending)
     if not pending:
         return out
@@ -140,16 +160,16 @@ def _clear_pass(cell: Cell, obj: str, pending: list[tuple[Grasp, str, np.ndarray
     for ix in by_grasp.values():
         g = pending[ix[0]][0]
         req = requirement(g)
-        r = requirement_clear_ik(cell, obj, req, Q[ix], okb[ix], state=requirement_state(cell, obj, req))
+        r = requirement_clear_ik(cache, obj, req, Q[ix], okb[ix], state=requirement_state(cache, obj, req))
         for k, i in enumerate(ix):
             out[i] = bool(r.ok[k])
             if r.ik[k] and not r.ok[k]:
-                remember_refusal(cell, what(g, pending[i][1]), r.pairs[k])
+                refused.append(Refusal(what(g, pending[i][1]), tuple(tuple(p) for p in r.pairs[k])))
     return out
 
 
-def reachable_pairs(cell: Cell, obj: str, grasp_labels: Sequence[str],
-                    pos_labels: Sequence[str], rule: str = "reachable") -> list[list[str]]:
+def reachable_pairs(cache: CellCache, obj: str, grasp_labels: Sequence[str],
+                    pos_labels: Sequence[str], rule: str = "reachable") -> Arc:
     """All [grasp, position] pairs satisfying reachable(Grasp, Position) for ``obj`` (Sec. 5.2.4).
 
     Condition 1 for every pair; condition 2 (IK with T = T_O T_g inside the joint
@@ -157,6 +177,7 @@ def reachable_pairs(cell: Cell, obj: str, grasp_labels: Sequence[str],
     clear of the table and the obstacles: workspace.requirement_clear) only for absolute
     positions, and for stable poses as ``rule`` says (RULES). Sorted by natural label order.
     """
+    cell = cache.cell
     _check_rule(rule)
     model = _object(cell, obj)
     grasps = _grasps(model, grasp_labels)
@@ -170,16 +191,17 @@ def reachable_pairs(cell: Cell, obj: str, grasp_labels: Sequence[str],
             asks.append((p, free, [Requirement(g.T, None, g.width) for g in free]))
             continue
         pending += [(g, p, T_O) for g in free]
-    pairs = _somewhere(cell, obj, asks, rule)
-    ok = _clear_pass(cell, obj, pending, lambda g: Requirement(g.T, None, g.width),
-                     lambda g, p: f"pickup({obj}, {g.label}) at {p}")
+    pairs = _somewhere(cache, obj, asks, rule)
+    refused: list[Refusal] = []
+    ok = _clear_pass(cache, obj, pending, lambda g: Requirement(g.T, None, g.width),
+                     lambda g, p: f"pickup({obj}, {g.label}) at {p}", refused)
     pairs += [(g.label, p) for (g, p, _), reached in zip(pending, ok) if reached]
-    return _sorted_pairs(pairs)
+    return Arc(_sorted_pairs(pairs), refused)
 
 
-def mate_reachable_pairs(cell: Cell, held_obj: str, fixed_obj: str, grasp_labels: Sequence[str],
+def mate_reachable_pairs(cache: CellCache, held_obj: str, fixed_obj: str, grasp_labels: Sequence[str],
                          pos_labels: Sequence[str], Ta: np.ndarray | str,
-                         rule: str = "reachable") -> list[list[str]]:
+                         rule: str = "reachable") -> Arc:
     """All [grasp, position] pairs satisfying mate_reachable(Grasp, Position, T_a) (Sec. 5.2.4).
 
     Grasps are of ``held_obj``, positions of ``fixed_obj``; ``Ta`` (4x4, cell unit,
@@ -188,6 +210,7 @@ def mate_reachable_pairs(cell: Cell, held_obj: str, fixed_obj: str, grasp_labels
     the arm, the gripper and the held object clear of the table, the obstacles and the fixed
     object (the held and the fixed object may touch); a stable-pose label as ``rule`` says (RULES).
     """
+    cell = cache.cell
     _check_rule(rule)
     if isinstance(Ta, str):
         if Ta not in cell.transforms:
@@ -212,39 +235,40 @@ def mate_reachable_pairs(cell: Cell, held_obj: str, fixed_obj: str, grasp_labels
             asks.append((p, grasps, [req(g) for g in grasps]))
             continue
         pending += [(g, p, T_O) for g in grasps]
-    pairs = _somewhere(cell, fixed_obj, asks, rule)
-    ok = _clear_pass(cell, fixed_obj, pending, req,
-                     lambda g, p: f"assemble({held_obj}, {fixed_obj}) with {g.label} at {p}")
+    pairs = _somewhere(cache, fixed_obj, asks, rule)
+    refused: list[Refusal] = []
+    ok = _clear_pass(cache, fixed_obj, pending, req,
+                     lambda g, p: f"assemble({held_obj}, {fixed_obj}) with {g.label} at {p}", refused)
     pairs += [(g.label, p) for (g, p, _), reached in zip(pending, ok) if reached]
-    return _sorted_pairs(pairs)
+    return Arc(_sorted_pairs(pairs), refused)
 
 
-def _arc_reachable(cell: Cell, objects: Sequence[str], grasps: Sequence[str],
-                   positions: Sequence[str], ta: np.ndarray | str | None, rule: str) -> list[list[str]]:
-    return reachable_pairs(cell, objects[0], grasps, positions, rule)
+def _arc_reachable(cache: CellCache, objects: Sequence[str], grasps: Sequence[str],
+                   positions: Sequence[str], ta: np.ndarray | str | None, rule: str) -> Arc:
+    return reachable_pairs(cache, objects[0], grasps, positions, rule)
 
 
-def _arc_mate(cell: Cell, objects: Sequence[str], grasps: Sequence[str],
-              positions: Sequence[str], ta: np.ndarray | str | None, rule: str) -> list[list[str]]:
+def _arc_mate(cache: CellCache, objects: Sequence[str], grasps: Sequence[str],
+              positions: Sequence[str], ta: np.ndarray | str | None, rule: str) -> Arc:
     if ta is None or len(objects) != 2:
         raise SparValueError("mate_reachable needs objects [held, fixed] and T_a")
-    return mate_reachable_pairs(cell, objects[0], objects[1], grasps, positions, ta, rule)
+    return mate_reachable_pairs(cache, objects[0], objects[1], grasps, positions, ta, rule)
 
 
-ARCS: dict[str, Callable[..., list[list[str]]]] = {
+ARCS: dict[str, Callable[..., Arc]] = {
     "reachable": _arc_reachable,
     "mate_reachable": _arc_mate,
 }
 
 
-def arc(cell: Cell, kind: str, objects: Sequence[str], grasps: Sequence[str],
+def arc(cache: CellCache, kind: str, objects: Sequence[str], grasps: Sequence[str],
         positions: Sequence[str], ta: np.ndarray | str | None = None,
-        rule: str = "reachable") -> list[list[str]]:
+        rule: str = "reachable") -> Arc:
     """The pairs of a geometric arc ``kind`` (reachable | mate_reachable); objects [obj] or
     [held, fixed]; ``rule`` for stable-pose labels (RULES)."""
     if kind not in ARCS:
         raise SparValueError(f"unknown geometric constraint {kind!r} (one of {', '.join(ARCS)})")
-    return ARCS[kind](cell, objects, grasps, positions, ta, rule)
+    return ARCS[kind](cache, objects, grasps, positions, ta, rule)
 
 
 def solutions_for(cell: Cell, T: np.ndarray) -> list[list[float]]:

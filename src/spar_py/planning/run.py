@@ -1,0 +1,110 @@
+"""One planning run as Prolog sees it: the two doors to the world, and what stays in Python.
+
+A :class:`PlanRun` is made for each :meth:`Planner.plan <spar_py.planning.planner.Planner.plan>`
+from the cached, immutable cell, the cell's kept answers (world.run.CellCache) and the run's
+options. The engine keeps it by problem name for the length of the query, and the two
+functions Prolog calls into Python for geometry (engine.arc_pairs, engine.evaluate) are its
+methods :meth:`arc_pairs` (phase 1: the world run's) and :meth:`evaluate` (phase 2).
+Phase 2's evaluation is the paper's (phase2/instance.py), which sits above the world layer,
+so this object lives in planning/ and holds the world run (world/run.py) rather than being
+it: world/ never imports phase2/.
+
+Every "no" is logged in the run's own log (world.run.RunLog) as data: the refusals of the
+arcs and of phase 2's steps with their colliding pairs, the motions that do not exist. What
+Prolog needs of a phase-2 run crosses the bridge (status, where it stopped, each step's
+verdicts); each step's geometry (tool pose, joints, IK solutions, placement, poses, ...) and
+the instance's motions stay here under a token, and the plan's JSON is joined from them at
+the end (:meth:`join`).
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+from spar_py.core.model import Cell
+from spar_py.phase2 import instance as phase2
+from spar_py.world.motion_options import MotionFailure
+from spar_py.world.run import CellCache, RunOptions, WorldRun
+
+if TYPE_CHECKING:
+    from spar_py.world.motion import InstanceMotion
+
+__all__ = ["PlanRun", "StepData"]
+
+#: The fields of a step's geometry the plan's JSON shows (docs/json-schema.md).
+STEP_FIELDS = ("tool_pose", "joints_deg", "ik_solutions_deg", "ik_solver", "placement", "from", "poses", "held",
+               "clearance", "closest_pair")
+
+
+@dataclass(frozen=True)
+class StepData:
+    """The geometry of one phase-2 run that went through, kept while Prolog decides: each
+    step's display fields by step id, and the instance's motions (or None)."""
+
+    steps: dict[str, dict[str, Any]]
+    motion: InstanceMotion | None = None
+
+
+class PlanRun:
+    """One planning run: its world (``world``: cell cache, options, log) and phase 2's door."""
+
+    __slots__ = ("world",)
+
+    def __init__(self, cache: CellCache, options: RunOptions | None = None) -> None:
+        self.world = WorldRun(cache, options)
+
+    @property
+    def cell(self) -> Cell:
+        """The run's cell (read only)."""
+        return self.world.cell
+
+    def arc_pairs(self, rule: str, kind: str, objects: Sequence[str], grasps: Sequence[str],
+                  positions: Sequence[str], ta: str | None) -> list[list[str]]:
+        """Phase 1's door: the [grasp, position] pairs of an arc (world.run.WorldRun.arc_pairs)."""
+        return self.world.arc_pairs(kind, objects, grasps, positions, ta, rule)
+
+    def evaluate(self, steps: list[dict[str, Any]], sources: dict[str, dict[str, str]] | None = None,
+                 given_up: Sequence[str] = (), sensing: dict[str, dict[str, Any]] | None = None) -> dict[str, Any]:
+        """Phase 2's door: run a whole plan instance (phase2.evaluate with the run's motion
+        options), log its refusals and motion failure, and return what Prolog reads:
+        ``{"status", "at", "steps": [{"id", "verdicts"}], "token"}`` (``token`` names the run's
+        geometry and motions, kept here; only for a run that went through)."""
+        log = self.world.log
+        ev = phase2.evaluate(self.world.cache, steps, sources, given_up, sensing, self.world.options.motion)
+        for what, pairs in ev.refusals:
+            log.refuse(what, pairs)
+        if isinstance(ev.motion, MotionFailure):
+            log.fail_motion(ev.motion)
+        out: dict[str, Any] = {"status": ev.status, "at": ev.at,
+                               "steps": [{"id": r["id"], "verdicts": r["verdicts"]} for r in ev.steps]}
+        if ev.status != "ok":
+            return out
+        geo = {r["id"]: {**r["geometry"], "poses": r["poses"], "held": r["held"]} for r in ev.steps}
+        out["token"] = log.keep(StepData(geo, ev.motion))
+        return out
+
+    def join(self, instance: dict[str, Any]) -> Any:
+        """Put the kept geometry of the chosen phase-2 run into the plan's ``instance`` (in place):
+        each step's display fields (None where the step has none) and ``motion``, the summary of
+        its motions (None without). The instance names its run by ``token``; returns that run's
+        motions (world/motion.attach adds their waypoints) or None."""
+        token = instance.pop("token", None)
+        if token is None:
+            return None
+        data: StepData = self.world.log.kept(token)
+        for st in instance.get("steps", []):
+            g = data.steps.get(st["id"], {})
+            for k in STEP_FIELDS:
+                st[k] = g.get(k)
+        instance["motion"] = None
+        if data.motion is not None:
+            from spar_py.world.motion import motion_summary  # motion.py is some 2 ms of a cold start
+
+            instance["motion"] = motion_summary(data.motion)
+        return data.motion
+
+    def step_geometry(self, token: int, step: str) -> dict[str, Any]:
+        """The kept geometry of step ``step`` of the phase-2 run ``token`` (empty if none)."""
+        data: StepData = self.world.log.kept(token)
+        return dict(data.steps.get(step, {}))
