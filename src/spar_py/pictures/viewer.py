@@ -35,6 +35,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from spar_py.core.errors import SparValueError
+from spar_py.core.units import from_mm
 from spar_py.pictures.cell import OBJECT_COLOURS, hole_mouth, obstacle_shapes, solid_faces
 from spar_py.pictures.plandoc import as_doc, instance, partial, pretty_term
 from spar_py.pictures.scene import Scene, held_grasp, part_model, scenes
@@ -49,6 +50,8 @@ __all__ = ["MAX_WAYPOINTS", "ViewerPage", "render_html", "viewer_data", "write_v
 MAX_WAYPOINTS = 48
 #: Digits kept of every number sent to the page (lengths in the cell unit, matrix entries).
 DIGITS = 5
+#: Width (mm) of the cube a part without a shape is drawn as.
+MARKER_MM = 10.0
 #: Joint pace (rad/s) the page plays a motion at when the robot gives no velocity limits.
 DEFAULT_PACE = 1.0
 HERE = Path(__file__).parent
@@ -86,19 +89,26 @@ def _mesh(tris: np.ndarray) -> dict[str, Any]:
     return {"positions": _b64(np.asarray(tris, float).reshape(-1), "<f4"), "triangles": int(len(tris))}
 
 
-def part_triangles(model: ObjectModel) -> np.ndarray:
-    """A part's triangles (n, 3, 3) in its object frame (cell unit): its mesh (world.shapes.part_mesh)
-    when it has ``mesh:`` or ``shape:``, else its primitives' faces; (0, 3, 3) without a shape."""
+def part_triangles(model: ObjectModel, unit: str) -> np.ndarray:
+    """A part's triangles (n, 3, 3) in its object frame (``unit``, the cell's): its mesh
+    (world.shapes.part_mesh) when it has ``mesh:`` or ``shape:``, else its primitives' faces; a
+    part without a shape is drawn as a cube MARKER_MM wide about its origin."""
     from spar_py.world.shapes import part_mesh
 
     mesh = part_mesh(model) if model.geometry is not None else None
     if mesh is not None:
         return np.asarray(mesh.vertices, float)[np.asarray(mesh.faces)]
-    return _triangles([f for s in model.shape for f in solid_faces(s, np.eye(4), 32)])
+    solids = list(model.shape)
+    if not solids:
+        from spar_py.core.model import Solid
+
+        h = from_mm(unit, MARKER_MM) / 2
+        solids = [Solid("box", np.full(3, -h), np.full(3, h))]
+    return _triangles([f for s in solids for f in solid_faces(s, np.eye(4), 32)])
 
 
 def _body_triangles(body: Any) -> np.ndarray:
-    """A collision body's triangles (n, 3, 3) in its own frame (cell.body_faces at the identity)."""
+    """A collision body's triangles (n, 3, 3) in its frame (pictures.cell.body_faces at the identity)."""
     from spar_py.pictures.cell import body_faces
 
     faces, _ = body_faces(body, np.eye(4))
@@ -274,7 +284,7 @@ def _focus(cell: Cell, part_tris: Mapping[str, np.ndarray], states: Sequence[Map
             "radius": float(max(np.linalg.norm(hi - lo) / 2, 1e-6)), "away": _r(away)}
 
 
-def _table(cell: Cell, sc: Sequence[Scene], focus: Mapping[str, Any]) -> dict[str, Any]:
+def _table(cell: Cell, focus: Mapping[str, Any]) -> dict[str, Any]:
     """The table top at z = 0: the cell's ``table:`` extent, else the work's box padded by half its
     size and the arm's base (declared: false)."""
     if cell.table is not None:
@@ -299,7 +309,7 @@ def viewer_data(cell: Cell, plan: Any) -> dict[str, Any]:
     steps = list(inst.get("steps") or [])
     sc = scenes(cell, doc)
     widths = _Widths()
-    part_tris = {name: part_triangles(m) for name, m in cell.objects.items()}
+    part_tris = {name: part_triangles(m, cell.unit) for name, m in cell.objects.items()}
     colours = {name: OBJECT_COLOURS[k % len(OBJECT_COLOURS)] for k, name in enumerate(cell.objects)}
 
     bounds = {o: _bounds_list(b) for o, b in cell.object_bounds.items()}
@@ -361,7 +371,7 @@ def viewer_data(cell: Cell, plan: Any) -> dict[str, Any]:
     focus = _focus(cell, part_tris, states, out_steps)
     return {
         "problem": doc.get("problem"), "unit": cell.unit, "robot": cell.robot.name,
-        "base": _flat(cell.robot.base), "table": _table(cell, sc, focus), "focus": focus,
+        "base": _flat(cell.robot.base), "table": _table(cell, focus), "focus": focus,
         "meshes": meshes, "parts": parts, "links": links, "grippers": grippers, "obstacles": obstacles,
         "states": states, "steps": out_steps, "home_motion": home_seg, "partial": _partial(doc),
         "motion": {k: motion.get(k) for k in ("planner", "duration_s", "path_resolution_deg")} if motion else None,
@@ -378,8 +388,8 @@ def _script_text(text: str) -> str:
     return re.sub(r"</(script)", r"<\\/\1", text, flags=re.IGNORECASE)
 
 
-def render_html(cell: Cell, plan: Any) -> str:
-    """The whole viewer page (one HTML document: three.js, the page's code and the plan's data inline)."""
+def _page(cell: Cell, plan: Any) -> tuple[str, dict[str, Any]]:
+    """The viewer page's text and the data in it."""
     data = viewer_data(cell, plan)
     template = TEMPLATE.read_text(encoding="utf-8")
     libs = "\n".join(f'<script type="text/plain" id="lib:{name}">{_script_text((VENDOR / name).read_text("utf-8"))}'
@@ -387,23 +397,18 @@ def render_html(cell: Cell, plan: Any) -> str:
     title = f"spar-py viewer: {data['problem']}"
     fill = {"TITLE": title.replace("&", "&amp;").replace("<", "&lt;"), "LIBS": libs,
             "DATA": _script_text(json.dumps(data, separators=(",", ":"), allow_nan=False))}
-    return re.sub(r"\{\{(TITLE|LIBS|DATA)\}\}", lambda m: fill[m.group(1)], template)
+    return re.sub(r"\{\{(TITLE|LIBS|DATA)\}\}", lambda m: fill[m.group(1)], template), data
+
+
+def render_html(cell: Cell, plan: Any) -> str:
+    """The whole viewer page (one HTML document: three.js, the page's code and the plan's data inline)."""
+    return _page(cell, plan)[0]
 
 
 def write_viewer(cell: Cell, plan: Any, path: str | Path) -> ViewerPage:
     """Write the viewer page of ``plan`` to ``path`` (the caller stages it: spar plan/view write it
     whole or not at all) and say what it holds."""
-    text = render_html(cell, plan)
+    text, data = _page(cell, plan)
     path = Path(path)
-    path.write_text(text, encoding="utf-8")
-    doc = as_doc(plan)
-    steps = len(instance(doc).get("steps") or [])
-    parts = sum(1 for k in initial_part_keys(cell) if part_model(k) in cell.objects)
-    return ViewerPage(path, steps, parts, len(text.encode("utf-8")))
-
-
-def initial_part_keys(cell: Cell) -> list[str]:
-    """The part keys of the cell (scene.initial_poses' keys): the parts the page draws."""
-    from spar_py.pictures.scene import initial_poses
-
-    return list(initial_poses(cell))
+    path.write_bytes(text.encode("utf-8"))
+    return ViewerPage(path, len(data["steps"]), len(data["parts"]), len(text.encode("utf-8")))
