@@ -148,8 +148,11 @@ def cmd_plan(args: argparse.Namespace) -> int:
     output = Path(args.output) if args.output else None
     picture_dirs = sorted({Path(d) for d in (args.dot, args.png) if d})
     animate = Path(args.animate) if args.animate else None
+    html = Path(args.html) if args.html else None
     if output is not None:
         _check_output_file("-o", output)
+    if html is not None:
+        _check_output_file("--html", html)
     if animate is not None:
         if args.no_motion or args.phase1_only:
             raise SparValueError("--animate replays the plan's motions: not with --no-motion or --phase1-only")
@@ -187,9 +190,20 @@ def cmd_plan(args: argparse.Namespace) -> int:
         tmpgif = guard.staging(animate) / animate.name
         write_animation(cell, plan.to_json(), tmpgif)
         staged.append((tmpgif, animate))
+    page = None
+    if html is not None and plan.ok:
+        from spar_py.pictures.viewer import write_viewer
+
+        page = write_viewer(cell, plan.to_json(), guard.staging(html) / html.name)
+        staged.append((page.path, html))
     if output is not None:
+        from spar_py.planning.planner import dumps
+
         tmpfile = guard.staging(output) / output.name
-        tmpfile.write_text(plan.dumps() + "\n", encoding="utf-8")
+        doc = plan.to_json()
+        if "problem_file" not in doc:  # where `spar view` finds the cell again
+            doc = {**doc, "problem_file": str(Path(args.problem).resolve())}
+        tmpfile.write_text(dumps(doc) + "\n", encoding="utf-8")
         staged.append((tmpfile, output))
     with guard.commit():
         for d in picture_dirs:
@@ -205,7 +219,92 @@ def cmd_plan(args: argparse.Namespace) -> int:
     for d in picture_dirs:
         n = sum(1 for _, f in staged if f.parent == d)
         print(f"spar: wrote {n} pictures to {d}", file=sys.stderr)
+    if html is not None:
+        print(f"spar: wrote the viewer to {html} ({page.steps} steps, {page.parts} parts)" if page is not None
+              else f"spar: no plan: no viewer written to {html}", file=sys.stderr)
     return EXIT_OK if plan.ok else EXIT_FAIL
+
+
+# ---------------------------------------------------------------------- view
+
+
+def _read_plan_json(path: Path, max_bytes: int) -> dict:
+    """The plan document of ``spar plan -o``'s file ``path``; SparError (one line, exit 2) naming the
+    file and what was expected if it is missing, too large, not JSON or not a plan."""
+    import json
+
+    try:
+        size = path.stat().st_size
+        if path.is_dir():
+            raise SparError(f"{path}: expected a plan JSON file (spar plan -o), not a directory")
+        if size > max_bytes:
+            raise SparError(f"{path}: expected a plan JSON of at most {max_bytes} bytes (--max-input-bytes), "
+                            f"not {size}")
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise SparError(f"{path}: no such file (expected a plan JSON written by spar plan -o)") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise SparError(f"{path}: cannot read a plan JSON ({getattr(e, 'strerror', None) or e})") from None
+    try:
+        doc = json.loads(text)
+    except json.JSONDecodeError as e:
+        raise SparError(f"{path}: expected a plan JSON (spar plan -o), not JSON: {e.msg} at line {e.lineno}") from None
+    if not isinstance(doc, dict) or "outcome" not in doc or "schema" not in doc:
+        found = f"an object with keys {', '.join(list(doc)[:5])}" if isinstance(doc, dict) else type(doc).__name__
+        raise SparError(f"{path}: expected a plan JSON written by spar plan -o (keys schema, outcome, instance), "
+                        f"found {found or 'an empty object'}")
+    if doc.get("outcome") != "plan":
+        raise SparError(f"{path}: expected a plan to view, but its outcome is {doc.get('outcome')!r}: no steps to show")
+    return doc
+
+
+def _plan_problem(path: Path, doc: dict, given: str | None) -> Path:
+    """The problem file of a plan JSON: ``--problem``, else the file's ``problem_file`` (spar plan -o
+    writes it), else kb/problems/<problem>.yaml; SparError if none is there."""
+    if given is not None:
+        return Path(given)
+    tried = []
+    if doc.get("problem_file"):
+        p = Path(str(doc["problem_file"]))
+        tried.append(p if p.is_absolute() else path.parent / p)
+    if doc.get("problem"):
+        tried.append(Path("kb/problems") / f"{doc['problem']}.yaml")
+    for p in tried:
+        if p.is_file():
+            return p
+    raise SparError(f"{path}: cannot find the problem file of plan {doc.get('problem')!r} (tried "
+                    f"{', '.join(map(str, tried)) or 'nothing'}): give it with --problem FILE")
+
+
+def cmd_view(args: argparse.Namespace) -> int:
+    """Write the 3-D viewer page of a plan JSON (``spar view PLAN.json [-o FILE]``): one HTML file that
+    opens offline. The output is checked before any work and written whole or not at all."""
+    src = Path(args.plan)
+    out = Path(args.output) if args.output else src.with_suffix(".html")
+    if out.resolve() == src.resolve():
+        raise SparError(f"{out}: -o: expected an HTML file other than the plan JSON itself")
+    _check_output_file("-o", out)
+    max_bytes = _max_input_bytes(args)
+    doc = _read_plan_json(src, VIEW_MAX_PLAN_BYTES if args.max_input_bytes is None else max_bytes)
+    problem = _plan_problem(src, doc, args.problem)
+    from spar_py.kb import load_problem
+    from spar_py.pictures.viewer import write_viewer
+
+    cell = load_problem(problem, max_bytes=max_bytes)
+    if cell.name != doc.get("problem"):
+        raise SparError(f"{problem}: expected the problem {doc.get('problem')!r} of {src}, not {cell.name!r}")
+    try:
+        page = write_viewer(cell, doc, args.guard.staging(out) / out.name)
+        with args.guard.commit():
+            os.replace(page.path, out)
+    except OSError as e:
+        raise SparError(f"{out}: -o: cannot write the page ({e.strerror or e})") from None
+    print(f"spar: wrote the viewer to {out} ({page.steps} steps, {page.parts} parts)", file=sys.stderr)
+    return EXIT_OK
+
+
+#: The largest plan JSON `spar view` reads (bytes): a plan with motions holds every waypoint.
+VIEW_MAX_PLAN_BYTES = 200_000_000
 
 
 # ---------------------------------------------------------------------- regress
@@ -271,6 +370,7 @@ COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "kb_derive": cmd_kb_derive,
     "repl": cmd_repl,
     "plan": cmd_plan,
+    "view": cmd_view,
     "regress": cmd_regress,
     "gen": cmd_gen,
 }
@@ -333,7 +433,16 @@ def build_parser() -> argparse.ArgumentParser:
                       help="approach and retreat length in the problem's length unit (default 2 in)")
     plan.add_argument("--dot", metavar="DIR", help="write the ordering graph, network and cell pictures here")
     plan.add_argument("--png", metavar="DIR", help="same as --dot (both write .dot and .png)")
+    plan.add_argument("--html", metavar="FILE", help="write the plan's 3-D viewer: one HTML page that opens offline")
     plan.set_defaults(func="plan")
+
+    view = sub.add_parser("view", help="write the 3-D viewer of a plan JSON (spar plan -o): one HTML page")
+    view.add_argument("plan", metavar="PLAN.json", help="a plan written by spar plan -o")
+    view.add_argument("-o", "--output", metavar="FILE", help="the page to write (default: PLAN.html beside it)")
+    view.add_argument("--problem", metavar="FILE", help="the plan's problem file (default: the one the plan "
+                      "JSON names, else kb/problems/<problem>.yaml)")
+    _add_max_input_bytes(view)
+    view.set_defaults(func="view")
 
     reg = sub.add_parser("regress", help="check every problem under DIR against its expected outcome")
     reg.add_argument("dir", nargs="?", default="kb/problems")

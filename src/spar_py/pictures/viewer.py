@@ -1,0 +1,414 @@
+"""`spar plan --html FILE` and `spar view PLAN.json`: the plan in 3-D, one HTML page that works offline.
+
+The page (viewer.html beside this module, three.js vendored under vendor/three/) draws
+what this module computes; it never recomputes kinematics. :func:`viewer_data` reads the
+plan JSON and the cell and gives the page, as data:
+
+- meshes, each in its own frame: every part's (its mesh, or its shape's primitives), every
+  arm collision body's (world.collision: the robot file's link shapes in their Craig frame
+  0..6, the gripper's palm and fingers in the tool frame, one set per finger opening), the
+  obstacles' (world frame);
+- states: the initial one (the arm at home when the plan or the cell gives one) and one per
+  step of the instance: each part's pose, the arm's 8 world frames (``robot.frames(q)``),
+  the held part, the finger opening, the parts' position uncertainty;
+- per step: its verdicts (the instance's constraints that serve it), clearance and closest
+  pair, the insertion check's tolerance at the hole's mouth (assemble), and its motions
+  (``path``, ``approach``, ``retreat``: waypoints sampled to at most MAX_WAYPOINTS each,
+  the arm's frames and the held part's pose at each, and their times in seconds);
+- the partial order (the partial plan's actions and prior_to pairs) and the table.
+
+Frames and units: world Z up, table top z = 0, 4x4 poses ``T_world_x`` with column vectors,
+sent row-major (16 numbers); lengths in the cell's unit (``cell.unit``, which the page
+states), angles in degrees in the JSON (radians inside), times in seconds.
+"""
+from __future__ import annotations
+
+import base64
+import json
+import math
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from spar_py.core.errors import SparValueError
+from spar_py.core.units import from_mm
+from spar_py.pictures.cell import OBJECT_COLOURS, hole_mouth, obstacle_shapes, solid_faces
+from spar_py.pictures.plandoc import as_doc, instance, partial, pretty_term
+from spar_py.pictures.scene import Scene, held_grasp, part_model, scenes
+
+if TYPE_CHECKING:
+    from spar_py.core.model import Bounds, Cell, ObjectModel
+
+__all__ = ["MAX_WAYPOINTS", "ViewerPage", "render_html", "viewer_data", "write_viewer"]
+
+#: At most this many waypoints of each motion segment are sent to the page (evenly sampled,
+#: the first and last always): the JSON's paths run at a fraction of a degree per waypoint.
+MAX_WAYPOINTS = 48
+#: Digits kept of every number sent to the page (lengths in the cell unit, matrix entries).
+DIGITS = 5
+#: Width (mm) of the cube a part without a shape is drawn as.
+MARKER_MM = 10.0
+#: Joint pace (rad/s) the page plays a motion at when the robot gives no velocity limits.
+DEFAULT_PACE = 1.0
+HERE = Path(__file__).parent
+TEMPLATE = HERE / "viewer.html"
+VENDOR = HERE / "vendor" / "three"
+#: The vendored three.js files, inlined in the page in this order (see vendor/three/README.md).
+THREE_FILES = ("three.core.min.js", "three.module.min.js", "OrbitControls.js")
+
+
+@dataclass(frozen=True)
+class ViewerPage:
+    """A written viewer page: its path, its number of steps and of parts drawn, its size in bytes."""
+
+    path: Path
+    steps: int
+    parts: int
+    size: int
+
+
+# =========================================================================== meshes
+
+
+def _b64(a: np.ndarray, dtype: str) -> str:
+    return base64.b64encode(np.ascontiguousarray(a, dtype=dtype).tobytes()).decode("ascii")
+
+
+def _triangles(faces: Sequence[np.ndarray]) -> np.ndarray:
+    """Triangles (n, 3, 3) of convex polygons (each (m, 3), in order round the face), as fans."""
+    tris = [np.array([f[0], f[i], f[i + 1]]) for f in faces if len(f) >= 3 for i in range(1, len(f) - 1)]
+    return np.array(tris, float).reshape(-1, 3, 3)
+
+
+def _mesh(tris: np.ndarray) -> dict[str, Any]:
+    """A mesh for the page: its triangles' corners as base64 float32 (x, y, z per corner)."""
+    return {"positions": _b64(np.asarray(tris, float).reshape(-1), "<f4"), "triangles": int(len(tris))}
+
+
+def part_triangles(model: ObjectModel, unit: str) -> np.ndarray:
+    """A part's triangles (n, 3, 3) in its object frame (``unit``, the cell's): its mesh
+    (world.shapes.part_mesh) when it has ``mesh:`` or ``shape:``, else its primitives' faces; a
+    part without a shape is drawn as a cube MARKER_MM wide about its origin."""
+    from spar_py.world.shapes import part_mesh
+
+    mesh = part_mesh(model) if model.geometry is not None else None
+    if mesh is not None:
+        return np.asarray(mesh.vertices, float)[np.asarray(mesh.faces)]
+    solids = list(model.shape)
+    if not solids:
+        from spar_py.core.model import Solid
+
+        h = from_mm(unit, MARKER_MM) / 2
+        solids = [Solid("box", np.full(3, -h), np.full(3, h))]
+    return _triangles([f for s in solids for f in solid_faces(s, np.eye(4), 32)])
+
+
+def _body_triangles(body: Any) -> np.ndarray:
+    """A collision body's triangles (n, 3, 3) in its frame (pictures.cell.body_faces at the identity)."""
+    from spar_py.pictures.cell import body_faces
+
+    faces, _ = body_faces(body, np.eye(4))
+    return _triangles(faces)
+
+
+# =========================================================================== states
+
+
+def _r(x: Any) -> Any:
+    """Numbers rounded to DIGITS decimals (nested lists), for a compact JSON."""
+    return np.round(np.asarray(x, float), DIGITS).tolist()
+
+
+def _flat(T: np.ndarray) -> list[float]:
+    """A 4x4 pose as 16 numbers, row-major (three.js's Matrix4.set order)."""
+    return _r(np.asarray(T, float).reshape(-1))
+
+
+def _width(cell: Cell, held: str | None, grasp: str | None) -> float:
+    """The fingers' opening (cell unit): the held grasp's width, else the open gripper's."""
+    if held is not None and grasp is not None:
+        return float(cell.objects[part_model(held)].grasps[grasp].width)
+    return float(cell.finger_separation)
+
+
+def _bounds_list(b: Bounds) -> list[float]:
+    """Bounds as [dx0, dx1, dy0, dy1, dz0, dz1, dtheta0, dtheta1] (cell unit; dtheta in degrees)."""
+    return _r([*b.dx, *b.dy, *b.dz, math.degrees(b.dtheta[0]), math.degrees(b.dtheta[1])])
+
+
+def _home(cell: Cell, doc: Mapping[str, Any]) -> np.ndarray | None:
+    """The arm's rest configuration (rad): the plan's motion home, the cell's, the robot file's, or None."""
+    motion = instance(doc).get("motion") or {}
+    if motion.get("home_deg") is not None:
+        return np.radians(np.asarray(motion["home_deg"], float))
+    for q in (getattr(cell, "home", None), getattr(cell.robot, "home", None)):
+        if q is not None:
+            return np.asarray(q, float)
+    return None
+
+
+class _Widths:
+    """The finger openings the page draws a gripper for (cell unit), by index."""
+
+    def __init__(self) -> None:
+        self.values: list[float] = []
+
+    def index(self, w: float) -> int:
+        for k, v in enumerate(self.values):
+            if abs(v - w) <= 1e-9 * max(1.0, abs(w)):
+                return k
+        self.values.append(w)
+        return len(self.values) - 1
+
+
+def _state(cell: Cell, s: Scene, q: np.ndarray | None, widths: _Widths,
+           bounds: Mapping[str, list[float]]) -> dict[str, Any]:
+    """One state for the page: part poses, arm frames (None: no arm drawn but the pedestal), held part,
+    gripper opening index, uncertainty bounds per part."""
+    frames = None if q is None else cell.robot.frames(np.asarray(q, float))
+    return {"parts": {k: _flat(T) for k, T in s.poses.items()},
+            "frames": None if frames is None else [_flat(F) for F in frames],
+            "held": s.held, "grasp": s.grasp, "gripper": widths.index(_width(cell, s.held, s.grasp)),
+            "uncertainty": {k: bounds[part_model(k)] for k in s.poses if part_model(k) in bounds}}
+
+
+def _sample(q: np.ndarray, n: int = MAX_WAYPOINTS) -> np.ndarray:
+    """At most ``n`` rows of waypoints ``q`` (k, 6), evenly spread, the first and last kept."""
+    if len(q) <= n:
+        return q
+    return q[np.unique(np.linspace(0, len(q) - 1, n).round().astype(int))]
+
+
+def _times(q: np.ndarray, velocity: np.ndarray | None) -> np.ndarray:
+    """Seconds from the first waypoint to each of ``q`` (k, 6) rad at the joint velocity limits
+    (the slowest joint sets each interval's pace, as world.motion.durations), or DEFAULT_PACE."""
+    if len(q) < 2:
+        return np.zeros(len(q))
+    v = np.full(6, DEFAULT_PACE) if velocity is None else np.asarray(velocity, float)
+    return np.concatenate([[0.0], np.cumsum((np.abs(np.diff(q, axis=0)) / v).max(axis=1))])
+
+
+def _segment(cell: Cell, kind: str, rows: Any, world: Scene, widths: _Widths) -> dict[str, Any] | None:
+    """A motion segment for the page: its waypoints' times (s), arm frames, held part's pose (the
+    tool carries it by its grasp), gripper opening; None without waypoints."""
+    q_all = np.radians(np.asarray(rows or [], float)).reshape(-1, 6)
+    if len(q_all) == 0:
+        return None
+    velocity = getattr(cell.robot, "velocity_limits", None)
+    t_all = _times(q_all, velocity)
+    keep = np.unique(np.linspace(0, len(q_all) - 1, min(MAX_WAYPOINTS, len(q_all))).round().astype(int))
+    q, t = q_all[keep], t_all[keep]
+    F = cell.robot.frames_batch(q)
+    held_pose = None
+    grasp = world.grasp
+    if world.held is not None:
+        grasp = grasp or held_grasp(cell, world.held, world.poses.get(world.held), world.tool)
+        if grasp is not None:
+            g_inv = np.linalg.inv(np.asarray(cell.objects[part_model(world.held)].grasps[grasp].T, float))
+            held_pose = [_flat(Fk[7] @ g_inv) for Fk in F]
+    return {"kind": kind, "t": _r(t), "frames": [[_flat(T) for T in Fk] for Fk in F],
+            "held": world.held if held_pose is not None else None, "held_pose": held_pose,
+            "gripper": widths.index(_width(cell, world.held, grasp)), "waypoints": int(len(q_all))}
+
+
+# =========================================================================== steps
+
+
+def _verdicts(inst: Mapping[str, Any], step: Mapping[str, Any], sid: str) -> list[dict[str, Any]]:
+    """The instance's constraints checked at step ``sid`` (an arm step; a sensing step has none)."""
+    out = []
+    if step.get("kind") == "sensing":
+        return out
+    for c in list(inst.get("constraints") or []) + list(inst.get("verifications") or []):
+        if c.get("action") == sid:
+            out.append({k: c.get(k) for k in ("constraint", "description", "kind", "bound", "sense", "threshold",
+                                               "satisfied", "tolerance_reached")})
+    return out
+
+
+def _tolerance(cell: Cell, step: Mapping[str, Any], verdicts: Sequence[Mapping[str, Any]],
+               poses: Mapping[str, np.ndarray]) -> dict[str, Any] | None:
+    """The insertion check of an assemble step drawn at the hole's mouth: the mouth's world centre
+    and outward axis, the hole's radius, the tolerance R_h - R_p (the square root of the check's
+    threshold) and the bound reached (the square root of its bound), cell unit; None otherwise."""
+    args = step.get("args") or []
+    if step.get("name") != "assemble" or len(args) < 2:
+        return None
+    check = next((v for v in verdicts if v.get("constraint") == "centres" and v.get("threshold") is not None), None)
+    hole = str(args[1])
+    mouth = hole_mouth(cell, hole)
+    T = poses.get(hole)
+    if check is None or mouth is None or T is None:
+        return None
+    c, n, radius = mouth
+    return {"hole": hole, "centre": _r(T[:3, :3] @ c + T[:3, 3]), "axis": _r(T[:3, :3] @ n),
+            "hole_radius": radius, "tolerance": math.sqrt(max(float(check["threshold"]), 0.0)),
+            "bound": math.sqrt(max(float(check["bound"]), 0.0)), "satisfied": bool(check.get("satisfied"))}
+
+
+def _partial(doc: Mapping[str, Any]) -> dict[str, Any]:
+    """The partial order: the partial plan's actions (id, term) and its prior_to pairs (before, after)."""
+    p = partial(doc)
+    return {"actions": [{"id": a.get("id"), "term": pretty_term(str(a.get("term", "")))}
+                        for a in p.get("actions") or []],
+            "ordering": [[str(a), str(b)] for a, b in p.get("ordering") or []]}
+
+
+def _focus(cell: Cell, part_tris: Mapping[str, np.ndarray], states: Sequence[Mapping[str, Any]],
+           steps: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    """What the camera frames: every part at every state and the tool at each step (cell unit);
+    and the side it looks from, away from the arm's base across the work."""
+    pts = []
+    for st in states:
+        for k, flat in st["parts"].items():
+            T = np.asarray(flat, float).reshape(4, 4)
+            tri = part_tris.get(part_model(k))
+            local = tri.reshape(-1, 3) if tri is not None and len(tri) else np.zeros((1, 3))
+            pts.append(local @ T[:3, :3].T + T[:3, 3])
+        if st["frames"] is not None and st is not states[0]:
+            pts.append(np.asarray(st["frames"][7], float).reshape(4, 4)[:3, 3][None])
+    for s in steps:
+        if s.get("tolerance"):
+            pts.append(np.asarray(s["tolerance"]["centre"], float)[None])
+    allp = np.vstack(pts) if pts else np.zeros((1, 3))
+    lo, hi = allp.min(axis=0), allp.max(axis=0)
+    centre = (lo + hi) / 2
+    base = np.asarray(cell.robot.base, float)[:3, 3]
+    away = centre[:2] - base[:2]
+    away = away / np.linalg.norm(away) if np.linalg.norm(away) > 1e-9 else np.array([1.0, 0.0])
+    return {"lo": _r(lo), "hi": _r(hi), "centre": _r(centre),
+            "radius": float(max(np.linalg.norm(hi - lo) / 2, 1e-6)), "away": _r(away)}
+
+
+def _table(cell: Cell, focus: Mapping[str, Any]) -> dict[str, Any]:
+    """The table top at z = 0: the cell's ``table:`` extent, else the work's box padded by half its
+    size and the arm's base (declared: false)."""
+    if cell.table is not None:
+        return {"extent": _r(cell.table), "declared": True}
+    lo, hi = np.asarray(focus["lo"], float), np.asarray(focus["hi"], float)
+    base = np.asarray(cell.robot.base, float)[:3, 3]
+    pad = 0.5 * float(max(hi[:2] - lo[:2])) + 1e-6
+    x0, x1 = min(lo[0] - pad, base[0] - pad), max(hi[0] + pad, base[0] + pad)
+    y0, y1 = min(lo[1] - pad, base[1] - pad), max(hi[1] + pad, base[1] + pad)
+    return {"extent": _r([x0, x1, y0, y1]), "declared": False}
+
+
+def viewer_data(cell: Cell, plan: Any) -> dict[str, Any]:
+    """Everything the page draws, as JSON-ready data (see the module docstring). SparValueError
+    (one line) if ``plan`` is not a plan (its outcome is not ``"plan"``) or its steps carry no poses."""
+    from spar_py.world.collision import TOOL, scene_for
+
+    doc = as_doc(plan)
+    if doc.get("outcome") != "plan":
+        raise SparValueError(f"expected a plan to view, not outcome {doc.get('outcome')!r} (no steps to show)")
+    inst = instance(doc)
+    steps = list(inst.get("steps") or [])
+    sc = scenes(cell, doc)
+    widths = _Widths()
+    part_tris = {name: part_triangles(m, cell.unit) for name, m in cell.objects.items()}
+    colours = {name: OBJECT_COLOURS[k % len(OBJECT_COLOURS)] for k, name in enumerate(cell.objects)}
+
+    bounds = {o: _bounds_list(b) for o, b in cell.object_bounds.items()}
+    home = _home(cell, doc)
+    states = [_state(cell, sc[0], home if home is not None else sc[0].q, widths, bounds)]
+    states[0]["arm_note"] = "home" if home is not None else ("the plan's first configuration" if sc[0].q is not None
+                                                              else "")
+    out_steps = []
+    for k, step in enumerate(steps, start=1):
+        s = sc[k]
+        if step.get("kind") == "sensing" and step.get("name") in cell.sensors and step.get("object"):
+            bounds = {**bounds, str(step["object"]): _bounds_list(cell.sensors[str(step["name"])].leaves)}
+        st = _state(cell, s, s.q if step.get("joints_deg") is not None else None, widths, bounds)
+        if st["frames"] is None:  # a step without arm motion (sensing): the arm stays where it was
+            st["frames"] = states[-1]["frames"]
+            st["gripper"] = states[-1]["gripper"]
+        states.append(st)
+        sid = str(step.get("id", f"step_{k}"))
+        verdicts = _verdicts(inst, step, sid)
+        segs = [_segment(cell, key, step.get(key), world, widths)
+                for key, world in (("path", sc[k - 1]), ("approach", sc[k - 1]), ("retreat", s))]
+        out_steps.append({
+            "id": sid, "name": step.get("name"), "kind": step.get("kind"), "object": step.get("object"),
+            "term": pretty_term(str(step.get("term", ""))), "clearance": step.get("clearance"),
+            "closest_pair": step.get("closest_pair"), "joints_deg": step.get("joints_deg"),
+            "duration_s": step.get("duration_s"), "verdicts": verdicts,
+            "tolerance": _tolerance(cell, step, verdicts, s.poses),
+            "motion": [g for g in segs if g is not None]})
+    home_seg = None
+    motion = inst.get("motion") or {}
+    if motion.get("home_path"):
+        home_seg = _segment(cell, "home", motion["home_path"], sc[-1], widths)
+
+    scene = scene_for(cell)
+    meshes: dict[str, dict[str, Any]] = {}
+    parts = []
+    for key in sc[0].poses:
+        model = part_model(key)
+        if model not in cell.objects:
+            continue
+        meshes.setdefault(f"part:{model}", _mesh(part_tris[model]))
+        parts.append({"key": key, "model": model, "mesh": f"part:{model}", "colour": colours[model]})
+    links = []
+    for b in scene.links:
+        meshes[f"link:{b.name}"] = _mesh(_body_triangles(b))
+        links.append({"name": b.name, "frame": 7 if b.frame == TOOL else int(b.frame), "mesh": f"link:{b.name}"})
+    grippers = []
+    for k, w in enumerate(widths.values):
+        bodies = []
+        for b in scene.gripper_bodies(w):
+            meshes[f"gripper{k}:{b.name}"] = _mesh(_body_triangles(b))
+            bodies.append({"name": b.name, "mesh": f"gripper{k}:{b.name}"})
+        grippers.append({"width": w, "bodies": bodies})
+    obstacles = []
+    for sh in obstacle_shapes(cell):
+        mid = f"{sh.gid}#{len(obstacles)}"
+        meshes[mid] = _mesh(_triangles(sh.faces))
+        obstacles.append({"name": sh.gid.split(":", 1)[-1], "mesh": mid})
+    focus = _focus(cell, part_tris, states, out_steps)
+    return {
+        "problem": doc.get("problem"), "unit": cell.unit, "robot": cell.robot.name,
+        "base": _flat(cell.robot.base), "table": _table(cell, focus), "focus": focus,
+        "meshes": meshes, "parts": parts, "links": links, "grippers": grippers, "obstacles": obstacles,
+        "states": states, "steps": out_steps, "home_motion": home_seg, "partial": _partial(doc),
+        "motion": {k: motion.get(k) for k in ("planner", "duration_s", "path_resolution_deg")} if motion else None,
+        "hole_colour": "#1a1a1a",
+    }
+
+
+# =========================================================================== the page
+
+
+def _script_text(text: str) -> str:
+    """JavaScript or JSON text safe inside a <script> element: any ``</script`` (which can only be
+    inside a string there) written ``<\\/script``, the same string to JavaScript and JSON."""
+    return re.sub(r"</(script)", r"<\\/\1", text, flags=re.IGNORECASE)
+
+
+def _page(cell: Cell, plan: Any) -> tuple[str, dict[str, Any]]:
+    """The viewer page's text and the data in it."""
+    data = viewer_data(cell, plan)
+    template = TEMPLATE.read_text(encoding="utf-8")
+    libs = "\n".join(f'<script type="text/plain" id="lib:{name}">{_script_text((VENDOR / name).read_text("utf-8"))}'
+                     "</script>" for name in THREE_FILES)
+    title = f"spar-py viewer: {data['problem']}"
+    fill = {"TITLE": title.replace("&", "&amp;").replace("<", "&lt;"), "LIBS": libs,
+            "DATA": _script_text(json.dumps(data, separators=(",", ":"), allow_nan=False))}
+    return re.sub(r"\{\{(TITLE|LIBS|DATA)\}\}", lambda m: fill[m.group(1)], template), data
+
+
+def render_html(cell: Cell, plan: Any) -> str:
+    """The whole viewer page (one HTML document: three.js, the page's code and the plan's data inline)."""
+    return _page(cell, plan)[0]
+
+
+def write_viewer(cell: Cell, plan: Any, path: str | Path) -> ViewerPage:
+    """Write the viewer page of ``plan`` to ``path`` (the caller stages it: spar plan/view write it
+    whole or not at all) and say what it holds."""
+    text, data = _page(cell, plan)
+    path = Path(path)
+    path.write_bytes(text.encode("utf-8"))
+    return ViewerPage(path, len(data["steps"]), len(data["parts"]), len(text.encode("utf-8")))
