@@ -117,3 +117,29 @@ def test_the_start_up_code_is_imported_by_nothing_of_the_planner() -> None:
     users = sorted(m for m, es in g.items() if any(e.startswith(f"{PACKAGE}.startup") for e in es)
                    and not m.startswith(f"{PACKAGE}.startup") and m != f"{PACKAGE}.__main__")
     assert users == []
+
+
+#: The layers of spar_py, top first: a module imports only from its own layer or those below.
+#: The kb's loaders build world objects (robots, shapes, the collision scene), so kb sits above
+#: world; phase2 and pictures are side by side and import neither each other.
+LAYERS = (("startup", "__main__"), ("app",), ("planning",), ("phase2",), ("pictures",), ("kb",), ("world",),
+          ("core",))
+SIDE_BY_SIDE = {"phase2", "pictures"}
+
+
+def _layer(module: str) -> int | None:
+    part = module.split(".")[1] if "." in module else ""
+    return next((i for i, names in enumerate(LAYERS) if part in names), None)
+
+
+def test_imports_run_one_way_down_the_layers() -> None:
+    up = []
+    for m, es in sorted(_graph().items()):
+        for e in sorted(es):
+            a, b = _layer(m), _layer(e)
+            if a is None or b is None or a == b:
+                continue
+            parts = {m.split(".")[1], e.split(".")[1]}
+            if b < a or parts <= SIDE_BY_SIDE:
+                up.append(f"{m} -> {e}")
+    assert up == [], "imports against the layers: " + "; ".join(up)
