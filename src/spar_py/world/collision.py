@@ -65,11 +65,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from spar_py.core.errors import SparValueError
-from spar_py.core.units import from_mm
+from spar_py.core.units import from_mm, mm_per
+from spar_py.world.robots import GripperGeometry
 
 if TYPE_CHECKING:
     from spar_py.core.model import Cell, Solid
-    from spar_py.world.robots import GripperGeometry, Robot
+    from spar_py.world.robots import Robot
 
 __all__ = ["CollisionScene", "DEFAULT_MARGIN_MM", "Obstacle", "SceneState", "scene_for", "segment_distance",
            "solids_key"]
@@ -228,8 +229,8 @@ def convex(name: str, frame: int, points: np.ndarray) -> Body:
 
 
 def _fcl_convex(points: np.ndarray) -> Any:
-    import fcl
-    from scipy.spatial import ConvexHull
+    import fcl  # ~0.15 s at import: see Body.fcl_geometry
+    from scipy.spatial import ConvexHull  # ~0.7 s at import: only a convex body reaching the library
 
     hull = ConvexHull(points)
     verts = points[hull.vertices]
@@ -379,7 +380,7 @@ def _segment_distance_few(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np
 
 
 def _fcl_transform(T: np.ndarray) -> Any:
-    import fcl
+    import fcl  # ~0.15 s at import: see Body.fcl_geometry
 
     return fcl.Transform(np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]))
 
@@ -387,7 +388,7 @@ def _fcl_transform(T: np.ndarray) -> Any:
 def _exact(b1: Body, T1: np.ndarray, b2: Body, T2: np.ndarray) -> float:
     """The distance of two placed bodies (world poses T1, T2 of their frames): 0 when they
     touch or overlap (``collide`` first), else python-fcl's unsigned distance."""
-    import fcl
+    import fcl  # ~0.15 s at import: see Body.fcl_geometry
 
     o1 = fcl.CollisionObject(b1.fcl_geometry(), _fcl_transform(T1 @ b1.T))
     o2 = fcl.CollisionObject(b2.fcl_geometry(), _fcl_transform(T2 @ b2.T))
@@ -1243,9 +1244,6 @@ def scene_for(cell: Cell, memo: Any = None) -> CollisionScene:
     """A new collision scene of ``cell``: robot link and gripper shapes, part shapes, obstacles,
     the table; the clearance margin (cell's length unit). ``memo`` (core.memo.Memo) keeps the
     scene's derived answers; a planning run's scene is its cell cache's (world.run.CellCache.scene)."""
-    from spar_py.world.robots import GripperGeometry
-    from spar_py.core.units import mm_per
-
     robot = cell.robot
     gripper = robot.gripper or GripperGeometry.default(cell.finger_separation, mm_per(cell.unit))
     margin = getattr(cell, "clearance", None)
