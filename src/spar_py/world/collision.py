@@ -29,27 +29,17 @@ problem file ``clearance:``, else DEFAULT_MARGIN_MM):
 - ``allow`` pairs of :meth:`CollisionScene.at`: the step's own contacts, e.g. the held part and
   the part it is inserted into at an assemble, the held part and the table at a put-down.
 
-How (speed): every body has a bounding capsule in its frame (exact for capsules). One
-vectorised numpy pass over all rows and pairs gives each pair's capsule distance, a lower
-bound of its true distance (exact for capsule pairs), and each body's height over the table
-(exact: the lowest vertex, or the lowest capsule end less its radius). Of the (row, pair)
-cells whose bound is within the margin and whose shapes are not both capsules, only those a
-second lower bound (:func:`support_gap`: the bodies' supports over their axes and the axes'
-cross products, the separating-axis bound of two boxes) does not already put beyond the margin
-go to the collision library, imported on first use; the grasp rule is decided once per grasp
-(the part's geometry and pose in the tool frame) and kept in the cell's cache. The closest pair of a clear row
-(:meth:`SceneState.clearance`) is sought among the pairs whose bounding spheres come within the
-table's distance, in order of their capsule bounds.
+How: every body has a bounding capsule in its frame (exact for capsules). One vectorised numpy
+pass gives each (row, pair) cell's capsule distance, a lower bound of its true distance, and each
+body's height over the table. Only the cells within the margin, not both capsules, and not put
+beyond it by a second bound (:func:`support_gap`, the separating-axis bound) go to the collision
+library. The grasp rule is decided once per grasp and kept in the cell's cache. The closest pair
+of a clear row (:meth:`SceneState.clearance`) is sought among the pairs whose bounding spheres
+come within the table's distance, in order of their capsule bounds.
 
-The library: python-fcl, chosen over coal (bench/collision.py measures both on these
-queries). Coal's GJK/EPA signed distance is robust and its queries about twice as fast, but
-it installs 316 MB (boost headers, assimp, eigenpy; python-fcl: 28 MB, plus Cython 17 MB) and
-takes about 0.6 s to import against python-fcl's 0.3 s, which the paper cell's 0.6 s cold
-budget cannot pay; here the library sees only the few near, non-capsule pairs, so its speed
-matters little. python-fcl's signed distance (libccd EPA) can abort the process on touching
-shapes, so it is never asked for: a near pair is first tested with ``collide`` (penetration:
-clearance 0) and only a separated pair is measured with unsigned ``distance``. Both libraries
-are maintained (coal 3.0.3 and python-fcl 0.7.0.11 released in 2026).
+The library: python-fcl, imported on first use (the choice: bench/RESULTS.md). Its signed
+distance can abort the process on touching shapes, so it is never asked for: a near pair is
+tested with ``collide`` (clearance 0) and only a separated pair measured with ``distance``.
 
 Frames and units: world Z up, table top z = 0; all lengths in the cell's unit (the robot is
 loaded in it); joint vectors in radians; a body's pose is its frame's world pose times its
