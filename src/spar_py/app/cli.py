@@ -565,7 +565,7 @@ def main(argv: list[str] | None = None) -> None:
 
 #: Libraries whose bindings (nanobind) report, at interpreter shutdown, every object of theirs
 #: still alive as a leak on stderr: with one of them loaded, :func:`exiting` leaves the heap to
-#: the shutdown collections (which free those objects) as before.
+#: the interpreter's usual shutdown collections (which free those objects).
 LEAK_REPORTING = ("ompl", "manifold3d")
 
 
@@ -577,7 +577,7 @@ def exiting(code: object = ...) -> None:
     (about 50 ms of a cold ``spar plan``, more than the run's own output); then, for a run
     that ended with a plan or without one (codes 0 and 1), :func:`_end_now`. Every output file
     is closed and in place before :func:`main` exits. Neither when a LEAK_REPORTING library is
-    loaded (a plan with motions: OMPL): shutdown is then as before."""
+    loaded (a plan with motions: OMPL): the usual shutdown then runs."""
     if any(name in sys.modules for name in LEAK_REPORTING):
         return
     gc.freeze()
@@ -590,7 +590,7 @@ def _end_now(code: int) -> None:
     which frees every module and object one by one (about 6 ms of a cold ``spar plan``), once
     what that shutdown would still do for this run is done: Python's stdout and stderr and
     SWI-Prolog's user_output and user_error flushed. Returns (the usual shutdown follows) if a
-    flush fails (a closed pipe: the usual path reports it as before), if a thread other than a
+    flush fails (a closed pipe: the usual path reports it), if a thread other than a
     daemon is still running (the usual shutdown waits for it), or if anything is registered
     with atexit (or the interpreter cannot say: not CPython)."""
     registered = getattr(atexit, "_ncallbacks", None)

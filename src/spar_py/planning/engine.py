@@ -326,7 +326,7 @@ class Engine(ProblemRegistry):
                     tmp.unlink(missing_ok=True)
                 entry.publish(self._image_extra)
                 self.state_status = "written"
-        except OSError:  # an unwritable cache: the image alone, as before
+        except OSError:  # an unwritable cache: the .qlf image alone, no state
             self.state_status = "unwritable"
         except SparError:  # qsave_program refused (Prolog said why): the image alone
             self.state_status = "refused"

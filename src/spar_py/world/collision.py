@@ -969,7 +969,7 @@ class SceneState:
         rows, ps = np.nonzero(lb <= m)
         # the library is asked only where the support bound does not already put the pair beyond
         # the margin (its distance is at least that bound: the same verdict); a pair rigid with the
-        # flange is measured as before, once per state
+        # flange is measured once per state, not here
         ask = ~self.exact_pair[ps] & ~self._is_rigid[ps] & ok[rows]
         if ask.any():
             at = np.flatnonzero(ask)

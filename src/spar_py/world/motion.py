@@ -1,4 +1,4 @@
-"""Motions between a plan instance's end-points (issue 16; the paper's Secs. 7.3, 8 leave
+"""Motions between a plan instance's end-points (the paper's Secs. 7.3, 8 leave
 gross and fine motion to other planners: this is that planner).
 
 For the chosen plan instance, a joint path from home through every step and back home:

@@ -1,5 +1,5 @@
 """Object geometry: a part's mesh from ``mesh: FILE`` or ``shape:`` primitives, its faces,
-the mating feature's geometry and the assembly transform T_a (issue 14).
+the mating feature's geometry and the assembly transform T_a.
 
 The one door for other modules is :func:`part_mesh`::
 

@@ -1,5 +1,5 @@
 """Stable poses and parallel-jaw grasps derived from a part's mesh, and the checks of
-hand-written ones against it (issue 14).
+hand-written ones against it.
 
 Stable poses (Fig. 18): trimesh's ``compute_stable_poses`` (deterministic: no noise, one
 sample) gives the resting orientations of the convex hull with the probability of each
