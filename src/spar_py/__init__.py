@@ -12,6 +12,7 @@ imported on first use of ``Planner``, ``Plan``, ``load_problem`` and the rest.
 """
 from __future__ import annotations
 
+from importlib import import_module
 from typing import Any
 
 from spar_py.core.errors import InternalError, KBError, PlanningTimeout, PrologError, SparError, SparValueError
@@ -36,8 +37,6 @@ def __getattr__(name: str) -> Any:
     module = _LAZY.get(name)
     if module is None:
         raise AttributeError(f"module 'spar_py' has no attribute {name!r}")
-    from importlib import import_module
-
     value = getattr(import_module(f".{module}", __name__), name)
     globals()[name] = value
     return value

@@ -8,14 +8,21 @@ Errors are one line on stderr, never a traceback.
 from __future__ import annotations
 
 import argparse
+import atexit
+import gc
+import json
 import os
 import sys
+import threading
 from pathlib import Path
 from typing import Callable
 
 from spar_py import __version__
 from spar_py.app.gcpause import resume_collections
+from spar_py.app.guard import RunGuard
 from spar_py.core.errors import InternalError, KBError, PlanningTimeout, PrologError, SparError, SparValueError
+from spar_py.planning.engine import Engine, engine, start_engine
+from spar_py.planning.qlf import cache_dir
 from spar_py.world.motion_options import PLANNERS, MotionOptions
 
 EXIT_OK, EXIT_FAIL, EXIT_INPUT, EXIT_INTERNAL, EXIT_TIMEOUT = 0, 1, 2, 3, 4
@@ -41,7 +48,7 @@ def _err(msg: str) -> None:
 
 def cmd_kb_check(args: argparse.Namespace) -> int:
     """Validate knowledge-base files; one line per file."""
-    from spar_py.kb import check_file, iter_kb_files
+    from spar_py.kb import check_file, iter_kb_files  # kb imports numpy: not at the top (see cmd_plan)
 
     files = iter_kb_files(args.files)
     if not files:
@@ -59,7 +66,7 @@ def cmd_kb_check(args: argparse.Namespace) -> int:
 
 def cmd_kb_derive(args: argparse.Namespace) -> int:
     """Write an object model with every face, stable pose and grasp explicit (derived ones too)."""
-    from spar_py.kb import derive_text
+    from spar_py.kb import derive_text  # kb imports numpy: not at the top (see cmd_plan)
 
     if args.output is not None:
         _check_output_file("-o", Path(args.output))  # before the work, as spar plan does
@@ -84,8 +91,7 @@ def cmd_repl(args: argparse.Namespace) -> int:
     """The Prolog toplevel with the planner and a problem loaded. Interactive on a terminal;
     with standard input piped, a scripted session (spar_toplevel:batch_toplevel/0: each
     query answered once, so none is swallowed as the answer to "more?")."""
-    from spar_py.planning.engine import engine
-    from spar_py.kb import load_problem
+    from spar_py.kb import load_problem  # kb imports numpy: not at the top (see cmd_plan)
 
     cell = load_problem(args.problem)
     eng = engine()
@@ -162,11 +168,9 @@ def cmd_plan(args: argparse.Namespace) -> int:
     for d in picture_dirs:
         _check_output_dir("--png" if args.png and Path(args.png) == d else "--dot", d)
     guard = args.guard
-    from spar_py.planning.engine import start_engine
-
     start_engine()  # Prolog loads the planner while the imports below run
     from spar_py.kb import load_problem
-    from spar_py.planning.planner import Outcome, Planner
+    from spar_py.planning.planner import Outcome, Planner, dumps
 
     cell = load_problem(args.problem, max_bytes=_max_input_bytes(args))
     resume_collections()  # the planning run allocates (and frees) as it goes
@@ -180,25 +184,23 @@ def cmd_plan(args: argparse.Namespace) -> int:
         raise PlanningTimeout(f"{cell.name}: no result within {args.timeout:g} s")
     staged: list[tuple[Path, Path]] = []  # (temporary, final)
     for d in picture_dirs:
-        from spar_py.pictures import write_pictures
+        from spar_py.pictures import write_pictures  # matplotlib: only with --png/--dot
 
         for p in write_pictures(cell, plan.to_json(), guard.staging(d)):
             staged.append((p, d / p.name))
     if animate is not None:
-        from spar_py.pictures.animate import write_animation
+        from spar_py.pictures.animate import write_animation  # matplotlib: only with --animate
 
         tmpgif = guard.staging(animate) / animate.name
         write_animation(cell, plan.to_json(), tmpgif)
         staged.append((tmpgif, animate))
     page = None
     if html is not None and plan.ok:
-        from spar_py.pictures.viewer import write_viewer
+        from spar_py.pictures.viewer import write_viewer  # the mesh layer: only with --html
 
         page = write_viewer(cell, plan.to_json(), guard.staging(html) / html.name)
         staged.append((page.path, html))
     if output is not None:
-        from spar_py.planning.planner import dumps
-
         tmpfile = guard.staging(output) / output.name
         doc = plan.to_json()
         if "problem_file" not in doc:  # where `spar view` finds the cell again
@@ -231,8 +233,6 @@ def cmd_plan(args: argparse.Namespace) -> int:
 def _read_plan_json(path: Path, max_bytes: int) -> dict:
     """The plan document of ``spar plan -o``'s file ``path``; SparError (one line, exit 2) naming the
     file and what was expected if it is missing, too large, not JSON or not a plan."""
-    import json
-
     try:
         size = path.stat().st_size
         if path.is_dir():
@@ -287,6 +287,7 @@ def cmd_view(args: argparse.Namespace) -> int:
     max_bytes = _max_input_bytes(args)
     doc = _read_plan_json(src, VIEW_MAX_PLAN_BYTES if args.max_input_bytes is None else max_bytes)
     problem = _plan_problem(src, doc, args.problem)
+    # kb (numpy) and the viewer (the mesh layer): this command only, not every command's start-up
     from spar_py.kb import load_problem
     from spar_py.pictures.viewer import write_viewer
 
@@ -312,7 +313,7 @@ VIEW_MAX_PLAN_BYTES = 200_000_000
 
 def cmd_regress(args: argparse.Namespace) -> int:
     """Check every problem under a directory against its expected outcome."""
-    from spar_py.app.regress import run_regression
+    from spar_py.app.regress import run_regression  # dask.distributed for --scheduler: this command only
 
     if args.scheduler is not None and args.jobs != 1:
         raise SparError("regress: -j N runs processes on this machine, --scheduler on a cluster: give one")
@@ -325,7 +326,7 @@ def cmd_regress(args: argparse.Namespace) -> int:
 
 def cmd_gen(args: argparse.Namespace) -> int:
     """Generate a problem (``spar gen assembly --parts N``)."""
-    from spar_py.app.gen import generate_assembly
+    from spar_py.app.gen import generate_assembly  # the collision layer: this command only
 
     out = Path(args.output)
     _check_output_dir("-o", out, "the generated problem")
@@ -343,8 +344,6 @@ def cmd_cache(args: argparse.Namespace) -> int:
     runs it): one line on stderr says where the image is, or that the cache is off."""
     from spar_py.phase2 import instance  # noqa: F401 - the plan command's dataclasses, compiled into
     from spar_py.planning import planner  # noqa: F401 - the methods image (startup.dcimage) at exit
-    from spar_py.planning.engine import Engine
-    from spar_py.planning.qlf import cache_dir
 
     eng = Engine()
     base = cache_dir()
@@ -485,7 +484,7 @@ def _add_max_input_bytes(p: argparse.ArgumentParser) -> None:
 
 def _max_input_bytes(args: argparse.Namespace) -> int:
     """The per-file size limit of a command: --max-input-bytes, or kb.MAX_INPUT_BYTES."""
-    from spar_py.kb import MAX_INPUT_BYTES
+    from spar_py.kb import MAX_INPUT_BYTES  # kb imports numpy: not at the top (see cmd_plan)
 
     return MAX_INPUT_BYTES if args.max_input_bytes is None else int(args.max_input_bytes)
 
@@ -531,8 +530,6 @@ exit codes:
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``spar`` console script: one line on stderr for every error,
     never a traceback; the exit codes of EXIT_CODES."""
-    from spar_py.app.guard import RunGuard
-
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.func != "plan":  # `spar plan` resumes them once its problem is read
@@ -568,7 +565,7 @@ def main(argv: list[str] | None = None) -> None:
 
 #: Libraries whose bindings (nanobind) report, at interpreter shutdown, every object of theirs
 #: still alive as a leak on stderr: with one of them loaded, :func:`exiting` leaves the heap to
-#: the shutdown collections (which free those objects) as before.
+#: the interpreter's usual shutdown collections (which free those objects).
 LEAK_REPORTING = ("ompl", "manifold3d")
 
 
@@ -580,9 +577,7 @@ def exiting(code: object = ...) -> None:
     (about 50 ms of a cold ``spar plan``, more than the run's own output); then, for a run
     that ended with a plan or without one (codes 0 and 1), :func:`_end_now`. Every output file
     is closed and in place before :func:`main` exits. Neither when a LEAK_REPORTING library is
-    loaded (a plan with motions: OMPL): shutdown is then as before."""
-    import gc
-
+    loaded (a plan with motions: OMPL): the usual shutdown then runs."""
     if any(name in sys.modules for name in LEAK_REPORTING):
         return
     gc.freeze()
@@ -595,12 +590,9 @@ def _end_now(code: int) -> None:
     which frees every module and object one by one (about 6 ms of a cold ``spar plan``), once
     what that shutdown would still do for this run is done: Python's stdout and stderr and
     SWI-Prolog's user_output and user_error flushed. Returns (the usual shutdown follows) if a
-    flush fails (a closed pipe: the usual path reports it as before), if a thread other than a
+    flush fails (a closed pipe: the usual path reports it), if a thread other than a
     daemon is still running (the usual shutdown waits for it), or if anything is registered
     with atexit (or the interpreter cannot say: not CPython)."""
-    import atexit
-    import threading
-
     registered = getattr(atexit, "_ncallbacks", None)
     if registered is None or registered() or any(
             t is not threading.main_thread() and not t.daemon and t.is_alive() for t in threading.enumerate()):

@@ -89,13 +89,21 @@ import argparse
 import math
 import re
 import sys
+import tempfile
 from collections.abc import Iterable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 from spar_py.core.errors import SparValueError
+from spar_py.core.memo import Memo
+from spar_py.core.units import from_mm
+from spar_py.kb import SAFE_LOADER, load_object, load_robot
+from spar_py.world.collision import DEFAULT_MARGIN_MM, CollisionScene, solid_bodies
+from spar_py.world.placement import GRID_STEP_MM, footprint
+from spar_py.world.workspace import reachable_ignoring_collisions, wrist_above_table
 
 __all__ = [
     "CAPACITY",
@@ -242,10 +250,6 @@ def scaled_model(text: str, k: float) -> str:
     labels kept. The YAML is rewritten (its comments are dropped); ``k`` = 1 returns it as is."""
     if k == 1:
         return text
-    import yaml
-
-    from spar_py.kb import SAFE_LOADER
-
     d = yaml.load(text, Loader=SAFE_LOADER)
 
     def sc(v):
@@ -291,10 +295,6 @@ def robot_text(text: str, k: float) -> str:
 def _models(scale: float = 1.0):
     """The peg and block models (lengths times ``scale``) and the robot, in inches
     (kb.load_object, kb.load_robot)."""
-    import tempfile
-
-    from spar_py.kb import load_object, load_robot
-
     if scale == 1:
         return load_object(PEG_MODEL, "in"), load_object(BLOCK_MODEL, "in"), load_robot(ROBOT, "in")
     with tempfile.TemporaryDirectory(prefix="spar-gen-") as d:
@@ -321,8 +321,6 @@ def _grasp_ok(robot, grasps, first: np.ndarray, second: np.ndarray) -> np.ndarra
     grasp of ``grasps`` (each a 4x4 tool-in-object) reaches both: one batched IK call."""
     if not grasps:
         return np.zeros(len(first), dtype=bool)
-    from spar_py.world.workspace import reachable_ignoring_collisions
-
     G = np.stack(grasps)                                            # (g, 4, 4)
     A = np.einsum("nij,gjk->ngik", first, G).reshape(-1, 4, 4)
     B = np.einsum("nij,gjk->ngik", second, G).reshape(-1, 4, 4)
@@ -336,8 +334,6 @@ def slots(blocks: str = "hole-down") -> list[Slot]:
     (ties by angle about it, from -x round)."""
     if blocks not in CAPACITY:
         raise SparValueError(f"blocks must be one of {', '.join(CAPACITY)}, not {blocks!r}")
-    from spar_py.world.placement import footprint
-
     scale, pitch_y = SCALE[blocks], LAYOUT[blocks][2]
     peg, block, robot = _models(scale)
     sp_peg, sp_blk, sp_up = peg.poses[PEG_POSE], block.poses[BLOCK_POSE], block.poses[BLOCK_UP_POSE]
@@ -456,10 +452,6 @@ def _usable(peg, block, robot, cells: list[Slot], free: list, mate: list, start,
     instances of one assignment in every order before it tries another: one bad grasp of one
     part exhausts the instance cap. A generated part's model lists only what works where it lies.
     """
-    from spar_py.core.memo import Memo
-    from spar_py.core.units import from_mm
-    from spar_py.world.workspace import wrist_above_table
-    from spar_py.world.collision import DEFAULT_MARGIN_MM, CollisionScene, solid_bodies
 
     margin = robot.margin if robot.margin is not None else from_mm("in", DEFAULT_MARGIN_MM)
     scene = CollisionScene(robot, robot.gripper, {"peg": solid_bodies("peg", peg.shape),
@@ -562,8 +554,6 @@ def _num(v: float) -> str:
 def _region(cells: list[Slot]) -> tuple[tuple[float, float], tuple[float, float]]:
     """The free table: the layout's box grown by MARGIN, its corner on the placement grid
     through the block centres (so a block can go down again exactly where it stood)."""
-    from spar_py.world.placement import GRID_STEP_MM
-
     step = GRID_STEP_MM / 25.4
     box = np.array([c.box for c in cells])
     lo, hi = box[:, :2].min(0) - MARGIN, box[:, 2:].max(0) + MARGIN
@@ -599,8 +589,6 @@ def _bounds(text: str, k: float) -> str:
 
 
 def _problem_text(cells: list[Slot], robot_rel: str, scale: float = 1.0) -> str:
-    from spar_py.kb import load_object
-
     n_parts = len(cells)
     (x0, x1), (y0, y1) = _region(cells)
     block = load_object(BLOCK_MODEL, "in")

@@ -169,7 +169,7 @@ class RunGuard:
         tempfile has imported it: a stop on the watchdog's thread never runs an import."""
         if not self._temporaries:
             return
-        import shutil
+        import shutil  # loaded already once a temporary exists (tempfile imports it): see _discard
 
         for p in self._temporaries:
             try:

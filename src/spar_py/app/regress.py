@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from spar_py.core.errors import SparError
+from spar_py.kb import KINDS, file_kind, load_problem, read_yaml
 
 
 def summarize(plan: dict[str, Any]) -> dict[str, Any]:
@@ -70,7 +71,7 @@ CONNECT_TIMEOUT_S = 10.0
 def _plan_one(path: str, cell: Any = None) -> Result:
     """Plan one problem file (here, in a -j worker process, or as a cluster task given its
     loaded ``cell``); (path, summary or None, error text, seconds)."""
-    from spar_py.planning.planner import Planner
+    from spar_py.planning.planner import Planner  # in the process that plans (a -j worker, a cluster task)
 
     t0 = time.perf_counter()
     try:
@@ -88,10 +89,9 @@ def run_on_cluster(paths: list[str], client: Any, progress: Any = None) -> list[
     worker is rescheduled by Dask; one that Dask gives up on (``KilledWorker``) is
     submitted again, at most :data:`CLUSTER_RETRIES` times; any other failure of a task
     (not a SparError, which its row reports) is an ERROR row naming it."""
+    # distributed: ~0.8 s at import, an optional extra (spar-py[cluster]): --scheduler only
     from distributed import as_completed
     from distributed.scheduler import KilledWorker
-
-    from spar_py.kb import load_problem
 
     rows: dict[str, Result] = {}
     futures: dict[Any, str] = {}
@@ -143,10 +143,10 @@ def connect(address: str) -> Any:
     """A ``distributed.Client`` of the scheduler at ``address``; SparError (one line) if
     distributed is not installed or the scheduler does not answer."""
     try:
-        from distributed import Client
+        from distributed import Client  # optional (spar-py[cluster]): the except is its absence
     except ImportError:
         raise SparError("regress: --scheduler needs Dask's distributed (pip install 'spar-py[cluster]')") from None
-    from distributed.comm import parse_address
+    from distributed.comm import parse_address  # imported with Client above
     from distributed.comm.registry import backends
 
     try:
@@ -187,8 +187,6 @@ def problem_files(directory: Path) -> tuple[list[Path], list[str]]:
     """The problem files under ``directory`` (sorted) and a note line for each other KB file.
 
     A file that cannot be read or parsed counts as a problem: planning it reports why."""
-    from spar_py.kb import KINDS, file_kind, read_yaml
-
     problems: list[Path] = []
     notes: list[str] = []
     for p in sorted(directory.rglob("*.yaml")):

@@ -101,7 +101,7 @@ def _entries_symbolic(x: object) -> bool:
 
 def as_sx(M: Any) -> ca.SX:
     """``M`` as a CasADi SX matrix (numbers become constant entries; MX is refused)."""
-    import casadi as ca
+    import casadi as ca  # ~80 ms at import: only a symbolic caller pays for it
 
     if isinstance(M, ca.SX):
         return M
@@ -248,13 +248,13 @@ class _Casadi:
 
     @staticmethod
     def cos(a: Any) -> Any:
-        import casadi as ca
+        import casadi as ca  # lazy: see as_sx
 
         return ca.cos(a)
 
     @staticmethod
     def sin(a: Any) -> Any:
-        import casadi as ca
+        import casadi as ca  # lazy: see as_sx
 
         return ca.sin(a)
 
@@ -265,7 +265,7 @@ class _Casadi:
         The numbers first, as one dense numeric matrix, then the symbolic entries set in
         place: the same dense SX as concatenating the rows (the same entries and constants),
         made in a third of the time (each concatenation converts its numbers one by one)."""
-        import casadi as ca
+        import casadi as ca  # lazy: see as_sx
 
         M = ca.SX(ca.DM([[0.0 if isinstance(x, ca.SX) else float(x) for x in r] for r in rows]))
         for i, r in enumerate(rows):
@@ -300,13 +300,13 @@ class _Casadi:
 
     @staticmethod
     def matvec(M: ca.SX, v: ca.SX) -> ca.SX:
-        import casadi as ca
+        import casadi as ca  # lazy: see as_sx
 
         return ca.mtimes(M, v)
 
     @staticmethod
     def frame(R: ca.SX, t: ca.SX) -> ca.SX:
-        import casadi as ca
+        import casadi as ca  # lazy: see as_sx
 
         return ca.vertcat(ca.horzcat(R, t), ca.horzcat(ca.SX.zeros(1, 3), ca.SX(1.0)))
 
@@ -429,7 +429,7 @@ def apply(T: Matrix, p: Iterable[Scalar] | Matrix) -> Matrix:
         if len(pl) != 3:
             raise SparValueError(f"apply: a point has 3 coordinates, got {len(pl)}")
     if is_symbolic(T, *pl):
-        import casadi as ca
+        import casadi as ca  # lazy: see as_sx
 
         return ca.mtimes(as_sx(T), ca.vertcat(*pl, 1.0))[:3]
     return (np.asarray(T, float) @ np.array([*pl, 1.0], dtype=float))[..., :3]

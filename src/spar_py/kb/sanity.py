@@ -1,4 +1,4 @@
-"""Physical sanity of a loaded cell (issue 13, item 2): is the cell one that could exist?
+"""Physical sanity of a loaded cell: is the cell one that could exist?
 
 Checked once at load (:func:`check_cell`, the last step of kb.problem.load_problem), before any
 grid or IK is built, each failure a one-line :class:`~spar_py.core.errors.KBError` naming the

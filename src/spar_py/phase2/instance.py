@@ -328,7 +328,7 @@ def _line_ends(cell: Cell, obj: str, pose: str, uses: list[tuple[str, np.ndarray
     """The far ends of the approach and retreat lines of each use of ``obj`` put down in stable
     pose ``pose`` (world/motion.py's line_ends), relative to its frame: world z in that frame
     is the same at every placement of the pose (they differ by a turn about world z)."""
-    from spar_py.world.motion import line_ends
+    from spar_py.world.motion import line_ends  # motion.py is some 2 ms of a cold start
 
     up = cell.objects[obj].poses[pose].R.T @ np.array([0.0, 0.0, 1.0])
     return [T for kind, X, v in uses for T in line_ends(kind, X, up, length, v)]
@@ -692,7 +692,7 @@ def sample_check(cache: CellCache, steps: list[Step], draws: int = 10_000, seed:
     Steps as in the plan's JSON (``id``, ``name``, ``args`` as term data); a step's
     ``from`` (which part of a stock it takes) is honoured; ``sensing`` as
     :func:`new_world` (needed only when the cell has no sensors entry)."""
-    import casadi as ca
+    import casadi as ca  # ~80 ms at import: only this check's draws need it here
 
     sources = {s["id"]: s["from"] for s in steps if s.get("from")}
     world = new_world(cache, steps, sources, sensing)

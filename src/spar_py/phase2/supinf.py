@@ -1798,7 +1798,7 @@ class _Search:
         usual case) is found exactly by the first, coarse round. No finer round when the
         last could not keep its tolerance (hulls.MAX_POINTS: a finer one cannot either) or
         once ``t_end`` (perf_counter seconds) has passed."""
-        from spar_py.phase2.hulls import hull_bounds
+        from spar_py.phase2.hulls import hull_bounds  # only a refined bound needs it: not in most cold plans
 
         ce = self.B.chain
         assert ce is not None

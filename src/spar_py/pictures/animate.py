@@ -21,6 +21,7 @@ import numpy as np
 
 from spar_py.core.errors import SparValueError
 from spar_py.core.model import Cell
+from spar_py.pictures.cell import _draw_3d, extent
 from spar_py.pictures.plandoc import as_doc, instance
 from spar_py.pictures.scene import Scene, held_grasp, part_model, scenes
 from spar_py.world.collision import TOOL, CollisionScene, scene_for
@@ -101,7 +102,7 @@ def arm_faces(cell: Cell, q: np.ndarray, width: float | None = None, scene: Coll
     open), its name and its hull's triangles (each (3, 3) world points, cell unit). ``scene``
     the cell's collision scene and ``hulls`` each body's hull in its own frame, when the caller
     keeps them for many frames (bounded by the arm's bodies and the grasp widths)."""
-    from scipy.spatial import ConvexHull
+    from scipy.spatial import ConvexHull  # ~0.7 s at import: only when a GIF is drawn
 
     scene = scene if scene is not None else scene_for(cell)
     F = cell.robot.frames(np.asarray(q, float))
@@ -122,7 +123,7 @@ def arm_faces(cell: Cell, q: np.ndarray, width: float | None = None, scene: Coll
 def obstacle_faces(cell: Cell) -> list[np.ndarray]:
     """Triangles (each (3, 3) world points, cell unit) of the hulls of the cell's obstacle
     bodies (world/collision.py's Obstacle: a body's vertices in the world)."""
-    from scipy.spatial import ConvexHull
+    from scipy.spatial import ConvexHull  # ~0.7 s at import: only when a GIF is drawn
 
     faces = []
     for ob in getattr(cell, "obstacles", None) or ():
@@ -142,14 +143,12 @@ def _width(cell: Cell, s: Scene) -> float | None:
 
 def write_animation(cell: Cell, plan: Any, path: str | Path, max_frames: int = MAX_FRAMES) -> Path:
     """Write the GIF of the plan's motions to ``path`` (Pillow writer); returns the path."""
-    import matplotlib
+    import matplotlib  # ~0.9 s at import: only when a GIF is drawn; Agg is chosen before pyplot loads
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.animation import PillowWriter
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
-
-    from spar_py.pictures.cell import _draw_3d, extent
 
     frames = frames_of(cell, plan, max_frames)
     scene, hulls = scene_for(cell), {}  # one scene and one hull per body for every frame

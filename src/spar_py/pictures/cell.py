@@ -32,6 +32,8 @@ from spar_py.core.errors import SparValueError
 from spar_py.core.geometry import convex_hull_2d
 from spar_py.core.units import from_mm
 from spar_py.pictures.scene import MIN_SIZE_MM, Scene, part_model, scenes
+from spar_py.world.collision import TOOL, scene_for
+from spar_py.world.shapes import part_mesh
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -226,7 +228,7 @@ def body_faces(body: Body, T_frame: np.ndarray) -> tuple[list[np.ndarray], np.nd
         return _capsule_mesh(P[0], P[-1], float(body.size[0]))
     if body.kind in ("box", "cylinder"):
         return _faces_of_points(P), P
-    from scipy.spatial import ConvexHull
+    from scipy.spatial import ConvexHull  # ~0.7 s at import: a convex body only
 
     try:
         hull = ConvexHull(P)
@@ -239,7 +241,6 @@ def robot_shapes(cell: Cell, s: Scene) -> list[Shape]:
     """The arm's collision bodies at scene ``s``: each link shape of the robot file in its
     frame (the pedestal's frame 0 even without a configuration), and with a configuration the
     palm and fingers, their contact faces at the held grasp's width (open: finger_separation)."""
-    from spar_py.world.collision import TOOL, scene_for
 
     scene = scene_for(cell)
     base = np.asarray(cell.robot.base, float)
@@ -382,9 +383,7 @@ def _mesh_facets(model: ObjectModel, T: np.ndarray, eye: np.ndarray, colour: str
     geo = model.geometry
     if geo is None or not (geo.mesh_file or any(p.subtract for p in geo.primitives)):
         return None
-    from matplotlib.colors import to_hex, to_rgb
-
-    from spar_py.world.shapes import part_mesh
+    from matplotlib.colors import to_hex, to_rgb  # ~0.9 s at import: drawing only (the viewer needs none)
 
     mesh = part_mesh(model)
     R = np.asarray(T, float)[:3, :3]
@@ -448,7 +447,7 @@ def _items(cell: Cell, s: Scene, eye: Sequence[float]) -> list[tuple[str, list[n
 def _draw_3d(ax: Any, cell: Cell, s: Scene, fr: Extent) -> None:
     """The 3-D panel; painted in a fixed order (table, parts, obstacles and the arm's shapes far
     to near, the skeleton on top)."""
-    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection  # ~0.9 s at import: drawing only (the viewer needs none)
 
     ax.computed_zorder = False
     x0, x1, y0, y1 = fr.table
@@ -477,7 +476,7 @@ def _draw_3d(ax: Any, cell: Cell, s: Scene, fr: Extent) -> None:
 
 def _draw_2d(ax: Axes, cell: Cell, s: Scene, fr: Extent, axes: tuple[int, int], eye: Sequence[float]) -> None:
     """An orthographic view onto world axes ``axes`` (0 x, 1 y, 2 z) seen from ``eye``, far to near."""
-    from matplotlib.patches import Polygon, Rectangle
+    from matplotlib.patches import Polygon, Rectangle  # ~0.9 s at import: drawing only (the viewer needs none)
 
     i, j = axes
     x0, x1, y0, y1 = fr.table
@@ -502,6 +501,7 @@ def _draw_2d(ax: Axes, cell: Cell, s: Scene, fr: Extent, axes: tuple[int, int], 
 def _legend(cell: Cell, s: Scene) -> list[Any]:
     """Legend entries: each object present (the held one with its grasp), hole mouths if any
     is seen, the obstacles, the link shapes, the table, the arm's frames and the gripper."""
+    # matplotlib: ~0.9 s at import: drawing only (the viewer needs none)
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 
@@ -530,7 +530,7 @@ def draw_figure(cell: Cell, s: Scene, fr: Extent) -> Any:
     """The matplotlib Figure (1200 x 720 px at 100 dpi) of scene ``s`` within extents ``fr``,
     not saved; the caller closes it (``matplotlib.pyplot.close``). Each drawn collision body's
     artists carry its ``gid`` (:class:`Shape`): one per panel."""
-    import matplotlib
+    import matplotlib  # ~0.9 s at import, only to draw; Agg is chosen before pyplot loads
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -557,7 +557,7 @@ def draw_figure(cell: Cell, s: Scene, fr: Extent) -> Any:
 
 def cell_figure(cell: Cell, s: Scene, fr: Extent, path: str | Path) -> Path:
     """Draw scene ``s`` within extents ``fr`` into the PNG ``path`` (1200 x 720 px) and return the path."""
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # loaded already by draw_figure (with Agg)
 
     fig = draw_figure(cell, s, fr)
     try:

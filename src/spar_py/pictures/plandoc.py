@@ -9,6 +9,8 @@ import re
 from collections.abc import Mapping
 from typing import Any
 
+from spar_py.kb import parse_term, term_text
+
 __all__ = ["PlanDoc", "as_doc", "instance", "is_plan", "natural_key", "partial", "pretty_term", "term_parts"]
 
 PlanDoc = Mapping[str, Any]  # the plan JSON document
@@ -46,8 +48,6 @@ def pretty_term(term: str) -> str:
 
 def term_parts(term: str) -> tuple[str, list[str]]:
     """Functor and argument texts of a ground term (``("pickup", ["peg", "p1G10"])``)."""
-    from spar_py.kb import parse_term, term_text
-
     try:
         t = parse_term(term)
     except ValueError:

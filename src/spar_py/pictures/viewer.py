@@ -35,10 +35,13 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from spar_py.core.errors import SparValueError
+from spar_py.core.model import Solid
 from spar_py.core.units import from_mm
-from spar_py.pictures.cell import OBJECT_COLOURS, hole_mouth, obstacle_shapes, solid_faces
+from spar_py.pictures.cell import OBJECT_COLOURS, body_faces, hole_mouth, obstacle_shapes, solid_faces
 from spar_py.pictures.plandoc import as_doc, instance, partial, pretty_term
 from spar_py.pictures.scene import Scene, held_grasp, part_model, scenes
+from spar_py.world.collision import TOOL, scene_for
+from spar_py.world.shapes import part_mesh
 
 if TYPE_CHECKING:
     from spar_py.core.model import Bounds, Cell, ObjectModel
@@ -93,15 +96,11 @@ def part_triangles(model: ObjectModel, unit: str) -> np.ndarray:
     """A part's triangles (n, 3, 3) in its object frame (``unit``, the cell's): its mesh
     (world.shapes.part_mesh) when it has ``mesh:`` or ``shape:``, else its primitives' faces; a
     part without a shape is drawn as a cube MARKER_MM wide about its origin."""
-    from spar_py.world.shapes import part_mesh
-
     mesh = part_mesh(model) if model.geometry is not None else None
     if mesh is not None:
         return np.asarray(mesh.vertices, float)[np.asarray(mesh.faces)]
     solids = list(model.shape)
     if not solids:
-        from spar_py.core.model import Solid
-
         h = from_mm(unit, MARKER_MM) / 2
         solids = [Solid("box", np.full(3, -h), np.full(3, h))]
     return _triangles([f for s in solids for f in solid_faces(s, np.eye(4), 32)])
@@ -109,8 +108,6 @@ def part_triangles(model: ObjectModel, unit: str) -> np.ndarray:
 
 def _body_triangles(body: Any) -> np.ndarray:
     """A collision body's triangles (n, 3, 3) in its frame (pictures.cell.body_faces at the identity)."""
-    from spar_py.pictures.cell import body_faces
-
     faces, _ = body_faces(body, np.eye(4))
     return _triangles(faces)
 
@@ -300,8 +297,6 @@ def _table(cell: Cell, focus: Mapping[str, Any]) -> dict[str, Any]:
 def viewer_data(cell: Cell, plan: Any) -> dict[str, Any]:
     """Everything the page draws, as JSON-ready data (see the module docstring). SparValueError
     (one line) if ``plan`` is not a plan (its outcome is not ``"plan"``) or its steps carry no poses."""
-    from spar_py.world.collision import TOOL, scene_for
-
     doc = as_doc(plan)
     if doc.get("outcome") != "plan":
         raise SparValueError(f"expected a plan to view, not outcome {doc.get('outcome')!r} (no steps to show)")

@@ -14,6 +14,8 @@ PATH.
 """
 from __future__ import annotations
 
+import importlib
+import importlib.util
 import json
 import os
 import sys
@@ -48,7 +50,7 @@ KEEP_LOADED = 8
 def _malloc_trim() -> Any:
     """glibc's malloc_trim(3), or None where the C library has none."""
     try:
-        import ctypes
+        import ctypes  # ~2 ms at import: only a run that trims needs it
 
         return ctypes.CDLL(None).malloc_trim
     except (OSError, AttributeError):
@@ -95,7 +97,7 @@ def _import_janus(state: Path | None = None) -> tuple[Any, bool]:
     try:
         if state is not None and "janus_swi" not in sys.modules:
             return _janus_from_state(state)
-        import janus_swi as janus
+        import janus_swi as janus  # its import starts SWI-Prolog: only here, once the state is settled
     except ImportError as e:  # pragma: no cover - set-up problem, not a planner one
         raise SparError(f"janus-swi is not importable ({e}); run `make setup`") from None
     return janus, False
@@ -110,9 +112,6 @@ def _janus_from_state(state: Path) -> tuple[Any, bool]:
     loads the C extension with RTLD_GLOBAL, which the foreign libraries a state reloads
     need. (janus, False) if ``__init__`` did not start SWI-Prolog through ``initialize``
     (a janus of another shape): it then started as janus does, without the state."""
-    import importlib
-    import importlib.util
-
     spec = importlib.util.find_spec("janus_swi")
     if spec is None or spec.loader is None:
         raise ImportError("no module named 'janus_swi'")
@@ -163,7 +162,7 @@ print("state ok" if ok else "state refused")
 def _starts_from(state: Path, roots: list[Path]) -> bool:
     """True if a fresh process starts SWI-Prolog from ``state`` and finds the planner there
     (a state SWI-Prolog cannot read aborts the process that tries: never this one)."""
-    import subprocess
+    import subprocess  # ~8 ms at import: only when a saved state is tested (numpy loads it later anyway)
 
     try:
         r = subprocess.run([sys.executable, "-c", _CHECK_STATE, str(PACKAGE_DIR.parent), str(state),
@@ -201,7 +200,8 @@ class ProblemRegistry:
         got = self.runs.get(name)
         if got is not None:
             return got
-        from spar_py.planning.run import PlanRun  # planning.run imports phase 2: not for a bare engine
+        # planning.run imports phase 2, world.run numpy and the collision layer: not for a bare engine
+        from spar_py.planning.run import PlanRun
         from spar_py.world.run import CellCache
 
         cell = self.cell(name)
@@ -294,8 +294,6 @@ class Engine(ProblemRegistry):
         home = _swi_home()
         if base is None or not home or not qlf.saved_state_on():
             return None
-        import importlib.util
-
         spec = importlib.util.find_spec("janus_swi")
         if spec is None or not spec.origin:
             return None
@@ -328,7 +326,7 @@ class Engine(ProblemRegistry):
                     tmp.unlink(missing_ok=True)
                 entry.publish(self._image_extra)
                 self.state_status = "written"
-        except OSError:  # an unwritable cache: the image alone, as before
+        except OSError:  # an unwritable cache: the .qlf image alone, no state
             self.state_status = "unwritable"
         except SparError:  # qsave_program refused (Prolog said why): the image alone
             self.state_status = "refused"
@@ -462,7 +460,7 @@ class Engine(ProblemRegistry):
     def load_cell(self, cell: Any) -> None:
         """Load ``cell`` as problem ``cell.name``: its facts replace that problem's in Prolog
         (other loaded problems stay), and Python calls about that problem get ``cell``."""
-        from spar_py.kb import facts
+        from spar_py.kb import facts  # kb imports numpy: the engine starts before it (cli.cmd_plan)
 
         with self.lock:
             self.query_once("foreign:spar_load_facts(Facts)", {"Facts": facts(cell)})
@@ -560,7 +558,7 @@ def _run(problem: str) -> Any:
 def load_problem_file(path: str) -> list[Any]:
     """The toplevel's load_problem/1,2: load and check ``path``, keep its cell by name, and
     return ``[name, facts]`` for Prolog to assert (foreign:load_problem_file/2)."""
-    from spar_py.kb import facts, load_problem
+    from spar_py.kb import facts, load_problem  # kb imports numpy: the engine starts before it
 
     cell = load_problem(path)
     problems = _problems()

@@ -286,7 +286,7 @@ class Planner:
     reachable somewhere, Sec. 5.2.4; by default some placement in the free table
     regions must reach it), ``timeout`` (seconds for the whole query, None for none).
 
-    Motions (issue 16, world/motion.py): ``motion`` True plans the joint paths between
+    Motions (world/motion.py): ``motion`` True plans the joint paths between
     the chosen instance's end-points (home, transit and transfer motions, approach and
     retreat) and makes an instance whose motions do not exist inexecutable; False plans
     end-points only (the paper's phase 2); None (the default) follows the problem file's
@@ -395,7 +395,7 @@ class Planner:
         log = run.world.log
         _motion_reason(d, log.motion_failures)
         plan = _plan(cell.name, d, ans.get("Trace", ""))
-        if plan.outcome is Outcome.NO_PLAN:  # name the colliding pairs that stood in the way (issue 15)
+        if plan.outcome is Outcome.NO_PLAN:  # name the colliding pairs that stood in the way
             said = [r.text() for r in log.refusals()]
             if said:
                 plan.reason = {**(plan.reason or {}), "collisions": said}

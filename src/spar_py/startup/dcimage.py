@@ -30,6 +30,7 @@ import dataclasses
 import marshal
 import os
 import sys
+from importlib.util import MAGIC_NUMBER
 from pathlib import Path
 from types import CodeType
 from typing import Any
@@ -144,8 +145,6 @@ def image_path(base: Path | None = None) -> Path | None:
     base = qlf.cache_dir() if base is None else base
     if base is None:
         return None
-    from importlib.util import MAGIC_NUMBER
-
     tag = f"{sys.implementation.cache_tag}-{MAGIC_NUMBER.hex()}-O{sys.flags.optimize}"
     return base / f"dataclass-methods-{FORMAT}-{tag}.marshal"
 

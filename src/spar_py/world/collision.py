@@ -29,27 +29,17 @@ problem file ``clearance:``, else DEFAULT_MARGIN_MM):
 - ``allow`` pairs of :meth:`CollisionScene.at`: the step's own contacts, e.g. the held part and
   the part it is inserted into at an assemble, the held part and the table at a put-down.
 
-How (speed): every body has a bounding capsule in its frame (exact for capsules). One
-vectorised numpy pass over all rows and pairs gives each pair's capsule distance, a lower
-bound of its true distance (exact for capsule pairs), and each body's height over the table
-(exact: the lowest vertex, or the lowest capsule end less its radius). Of the (row, pair)
-cells whose bound is within the margin and whose shapes are not both capsules, only those a
-second lower bound (:func:`support_gap`: the bodies' supports over their axes and the axes'
-cross products, the separating-axis bound of two boxes) does not already put beyond the margin
-go to the collision library, imported on first use; the grasp rule is decided once per grasp
-(the part's geometry and pose in the tool frame) and kept in the cell's cache. The closest pair of a clear row
-(:meth:`SceneState.clearance`) is sought among the pairs whose bounding spheres come within the
-table's distance, in order of their capsule bounds.
+How: every body has a bounding capsule in its frame (exact for capsules). One vectorised numpy
+pass gives each (row, pair) cell's capsule distance, a lower bound of its true distance, and each
+body's height over the table. Only the cells within the margin, not both capsules, and not put
+beyond it by a second bound (:func:`support_gap`, the separating-axis bound) go to the collision
+library. The grasp rule is decided once per grasp and kept in the cell's cache. The closest pair
+of a clear row (:meth:`SceneState.clearance`) is sought among the pairs whose bounding spheres
+come within the table's distance, in order of their capsule bounds.
 
-The library: python-fcl, chosen over coal (bench/collision.py measures both on these
-queries). Coal's GJK/EPA signed distance is robust and its queries about twice as fast, but
-it installs 316 MB (boost headers, assimp, eigenpy; python-fcl: 28 MB, plus Cython 17 MB) and
-takes about 0.6 s to import against python-fcl's 0.3 s, which the paper cell's 0.6 s cold
-budget cannot pay; here the library sees only the few near, non-capsule pairs, so its speed
-matters little. python-fcl's signed distance (libccd EPA) can abort the process on touching
-shapes, so it is never asked for: a near pair is first tested with ``collide`` (penetration:
-clearance 0) and only a separated pair is measured with unsigned ``distance``. Both libraries
-are maintained (coal 3.0.3 and python-fcl 0.7.0.11 released in 2026).
+The library: python-fcl, imported on first use (the choice: bench/RESULTS.md). Its signed
+distance can abort the process on touching shapes, so it is never asked for: a near pair is
+tested with ``collide`` (clearance 0) and only a separated pair measured with ``distance``.
 
 Frames and units: world Z up, table top z = 0; all lengths in the cell's unit (the robot is
 loaded in it); joint vectors in radians; a body's pose is its frame's world pose times its
@@ -65,11 +55,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from spar_py.core.errors import SparValueError
-from spar_py.core.units import from_mm
+from spar_py.core.units import from_mm, mm_per
+from spar_py.world.robots import GripperGeometry
 
 if TYPE_CHECKING:
     from spar_py.core.model import Cell, Solid
-    from spar_py.world.robots import GripperGeometry, Robot
+    from spar_py.world.robots import Robot
 
 __all__ = ["CollisionScene", "DEFAULT_MARGIN_MM", "Obstacle", "SceneState", "scene_for", "segment_distance",
            "solids_key"]
@@ -228,8 +219,8 @@ def convex(name: str, frame: int, points: np.ndarray) -> Body:
 
 
 def _fcl_convex(points: np.ndarray) -> Any:
-    import fcl
-    from scipy.spatial import ConvexHull
+    import fcl  # ~0.15 s at import: see Body.fcl_geometry
+    from scipy.spatial import ConvexHull  # ~0.7 s at import: only a convex body reaching the library
 
     hull = ConvexHull(points)
     verts = points[hull.vertices]
@@ -379,7 +370,7 @@ def _segment_distance_few(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np
 
 
 def _fcl_transform(T: np.ndarray) -> Any:
-    import fcl
+    import fcl  # ~0.15 s at import: see Body.fcl_geometry
 
     return fcl.Transform(np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]))
 
@@ -387,7 +378,7 @@ def _fcl_transform(T: np.ndarray) -> Any:
 def _exact(b1: Body, T1: np.ndarray, b2: Body, T2: np.ndarray) -> float:
     """The distance of two placed bodies (world poses T1, T2 of their frames): 0 when they
     touch or overlap (``collide`` first), else python-fcl's unsigned distance."""
-    import fcl
+    import fcl  # ~0.15 s at import: see Body.fcl_geometry
 
     o1 = fcl.CollisionObject(b1.fcl_geometry(), _fcl_transform(T1 @ b1.T))
     o2 = fcl.CollisionObject(b2.fcl_geometry(), _fcl_transform(T2 @ b2.T))
@@ -978,7 +969,7 @@ class SceneState:
         rows, ps = np.nonzero(lb <= m)
         # the library is asked only where the support bound does not already put the pair beyond
         # the margin (its distance is at least that bound: the same verdict); a pair rigid with the
-        # flange is measured as before, once per state
+        # flange is measured once per state, not here
         ask = ~self.exact_pair[ps] & ~self._is_rigid[ps] & ok[rows]
         if ask.any():
             at = np.flatnonzero(ask)
@@ -1243,9 +1234,6 @@ def scene_for(cell: Cell, memo: Any = None) -> CollisionScene:
     """A new collision scene of ``cell``: robot link and gripper shapes, part shapes, obstacles,
     the table; the clearance margin (cell's length unit). ``memo`` (core.memo.Memo) keeps the
     scene's derived answers; a planning run's scene is its cell cache's (world.run.CellCache.scene)."""
-    from spar_py.world.robots import GripperGeometry
-    from spar_py.core.units import mm_per
-
     robot = cell.robot
     gripper = robot.gripper or GripperGeometry.default(cell.finger_separation, mm_per(cell.unit))
     margin = getattr(cell, "clearance", None)

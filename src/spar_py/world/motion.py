@@ -1,4 +1,4 @@
-"""Motions between a plan instance's end-points (issue 16; the paper's Secs. 7.3, 8 leave
+"""Motions between a plan instance's end-points (the paper's Secs. 7.3, 8 leave
 gross and fine motion to other planners: this is that planner).
 
 For the chosen plan instance, a joint path from home through every step and back home:
@@ -49,7 +49,10 @@ import numpy as np
 
 from spar_py.core.errors import SparValueError
 from spar_py.core.units import LENGTH_UNITS
+from spar_py.world.collision import TOOL, WORLD, bound_columns, clearance_bounds
+from spar_py.world.collision import SceneState as Exact
 from spar_py.world.motion_options import PLANNERS, MotionFailure, MotionOptions
+from spar_py.world.workspace import wrist_above_table
 
 if TYPE_CHECKING:
     from spar_py.world.run import CellCache
@@ -167,8 +170,6 @@ def column_rates(state: Any) -> np.ndarray:
     other, each moving the f2 body's points by at most their distance from its axis times
     the joint step (:func:`body_reach`); bodies rigid with each other (frame 6 and the tool)
     get 0."""
-    from spar_py.world.collision import TOOL, WORLD, bound_columns
-
     robot = state.scene.robot
     cols = bound_columns(state)
     out = np.zeros((len(cols), 6))
@@ -221,9 +222,6 @@ def certify(state: Any, w: np.ndarray, memo: CertifyMemo | None = None) -> tuple
     checking every waypoint). Needs a ``collision.SceneState`` whose hand is empty or holds
     its part (the grasp rule then the same on every row); others: :func:`blocked`. ``memo``
     (of this ``state``) carries what one call learns to the next; None: nothing is kept."""
-    from spar_py.world.collision import SceneState as Exact
-    from spar_py.world.collision import clearance_bounds
-
     if not isinstance(state, Exact) or state.hand is not None and state.hand[1] == "world":
         return blocked(state, w)  # a part being grasped where it lies: the grasp rule varies along w
     w = np.asarray(w, float)
@@ -318,6 +316,7 @@ def _ompl(state: SceneState, a: np.ndarray, b: np.ndarray, limits: np.ndarray, r
     simplification; (None, 0) when none is found in the budget. States are checked one
     by one, motions by a validator that checks all of a motion's waypoints at ``res`` in
     one batched call (``memo``: the motion's :class:`CertifyMemo` of ``state``)."""
+    # OMPL: only a plan with motions loads it (its leak reports change the shutdown: cli.LEAK_REPORTING)
     from ompl import base as ob
     from ompl import geometric as og
     from ompl import util as ou
@@ -442,8 +441,6 @@ def _line_ik(robot: Any, T_anchor: np.ndarray, q_anchor: np.ndarray, d: np.ndarr
     """IK along the line T_anchor + s * length * d (s (n,) from 0), nearest-previous from
     ``q_anchor``; None if some point has no in-limit solution (or the wrist goes under
     the table)."""
-    from spar_py.world.workspace import wrist_above_table
-
     T = np.repeat(np.asarray(T_anchor, float)[None], len(s), axis=0)
     T[:, :3, 3] += np.outer(s * length, d)
     Q, ok = robot.ik_batch(T)

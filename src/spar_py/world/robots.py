@@ -434,7 +434,7 @@ def _load_urdf(path: Path):  # -> yourdfpy.URDF
     (lxml's message, with its line and column) or yourdfpy cannot read it. yourdfpy's own log
     lines (it retries a broken file with a recovering parser and logs each attempt) are kept
     off stderr while it reads: the error says it once."""
-    import logging
+    import logging  # only while yourdfpy reads: a cold plan never loads it
 
     import yourdfpy  # lazily: only a URDF robot pays for it (and for lxml, trimesh)
     from lxml import etree

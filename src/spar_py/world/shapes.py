@@ -1,5 +1,5 @@
 """Object geometry: a part's mesh from ``mesh: FILE`` or ``shape:`` primitives, its faces,
-the mating feature's geometry and the assembly transform T_a (issue 14).
+the mating feature's geometry and the assembly transform T_a.
 
 The one door for other modules is :func:`part_mesh`::
 
@@ -33,7 +33,7 @@ trimesh and manifold3d are imported inside the functions that need them.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -163,7 +163,7 @@ def part_mesh(model: "ObjectModel") -> "trimesh.Trimesh | None":
 def _load_mesh(path: str, scale: float) -> "trimesh.Trimesh":
     """Read an STL, OBJ or PLY file as one mesh, scaled by ``scale``. ValueError (one line) if
     it cannot be read or is not a closed, consistently oriented volume."""
-    import trimesh
+    import trimesh  # ~1.4 s at import: only a mesh or primitives model pays for it
 
     p = Path(path)
     size = p.stat().st_size
@@ -191,7 +191,7 @@ def _load_mesh(path: str, scale: float) -> "trimesh.Trimesh":
 
 def _primitives_mesh(prims: tuple[Primitive, ...]) -> "trimesh.Trimesh":
     """The union of the positive primitives less the union of the subtracted ones."""
-    import trimesh
+    import trimesh  # ~1.4 s at import: only a mesh or primitives model pays for it
 
     def solid(p: Primitive) -> trimesh.Trimesh:
         if p.kind == "box":
@@ -313,7 +313,7 @@ def _face(name: str, tris: np.ndarray, mesh: "trimesh.Trimesh", is_feature: bool
 
 def face_of_point(faces: list[Face], mesh: "trimesh.Trimesh", p: np.ndarray, tol: float) -> int | None:
     """The index of the face ``p`` lies on (within ``tol``), or None."""
-    import trimesh
+    import trimesh  # ~1.4 s at import: only a mesh or primitives model pays for it
 
     tri = mesh.triangles
     closest = trimesh.triangles.closest_point(tri, np.repeat(np.asarray(p, float)[None], len(tri), 0))
@@ -330,8 +330,6 @@ _AXES = {"px": (1, 0, 0), "nx": (-1, 0, 0), "py": (0, 1, 0), "ny": (0, -1, 0), "
 def _name_faces(faces: list[Face], mesh: "trimesh.Trimesh", feature: FeatureGeometry | None,
                 face_names: dict[str, np.ndarray], tol: float) -> list[Face]:
     """Names by precedence: feature, face_names, axis names where unique, then f1, f2, ..."""
-    from dataclasses import replace
-
     names: dict[int, str] = {}
     if feature is not None and faces and faces[0].feature:
         names[0] = feature.name

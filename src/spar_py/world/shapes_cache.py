@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from spar_py.world.shapes import FeatureGeometry, Geometry
+from spar_py.world.shapes import FeatureGeometry, Geometry, derive_faces
 
 __all__ = ["DERIVE_VERSION", "MAX_ENTRIES", "cache_dir", "derive"]
 
@@ -71,8 +71,7 @@ def derive(name: str, geometry: Geometry, feature: FeatureGeometry | None, face_
 
 def _compute(name: str, geometry: Geometry, feature: FeatureGeometry | None, face_names: dict[str, np.ndarray],
              gripper: Any, step: float, need_hull: bool) -> dict[str, Any]:
-    from spar_py.world.shapes import derive_faces
-    from spar_py.world.shapes_derive import derive_grasps, derive_poses
+    from spar_py.world.shapes_derive import derive_grasps, derive_poses  # ~10 ms at import: a cache miss only
 
     mesh = geometry.mesh()
     faces = derive_faces(mesh, feature, face_names, geometry.unit)
@@ -87,7 +86,7 @@ def _compute(name: str, geometry: Geometry, feature: FeatureGeometry | None, fac
                     "euler": [float(v) for v in g.euler], "width": g.width} for g in grasps],
     }
     if need_hull:
-        from spar_py.world.shapes_derive import hull_vertices
+        from spar_py.world.shapes_derive import hull_vertices  # a cache miss only (see _compute)
 
         V = np.asarray(mesh.vertices, float)
         out["hull"] = [[float(v) for v in p] for p in V[hull_vertices(mesh)]]

@@ -1,5 +1,5 @@
 """Stable poses and parallel-jaw grasps derived from a part's mesh, and the checks of
-hand-written ones against it (issue 14).
+hand-written ones against it.
 
 Stable poses (Fig. 18): trimesh's ``compute_stable_poses`` (deterministic: no noise, one
 sample) gives the resting orientations of the convex hull with the probability of each
@@ -40,8 +40,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from spar_py.core.geometry import convex_hull_2d
 from spar_py.core.units import from_mm
-from spar_py.world.shapes import Face, FeatureGeometry, Primitive, axis_basis, clean, cross, minimal_rotation
+from spar_py.world.shapes import (ON_SURFACE_MM, Face, FeatureGeometry, Primitive, axis_basis, clean, cross,
+                                  derive_faces, face_of_point, minimal_rotation)
 
 if TYPE_CHECKING:
     import trimesh
@@ -189,8 +191,7 @@ def hull_vertices(mesh: "trimesh.Trimesh") -> np.ndarray:
     the fallback if joggling fails."""
     h = mesh.metadata.get("_spar_hull")
     if h is None:
-        from scipy.spatial import ConvexHull
-        from scipy.spatial import QhullError
+        from scipy.spatial import ConvexHull, QhullError  # ~0.7 s at import: a model with a hull only
 
         V = _arrays(mesh).V
         try:
@@ -204,7 +205,7 @@ def hull_vertices(mesh: "trimesh.Trimesh") -> np.ndarray:
 def _hull_mesh(P: np.ndarray) -> "trimesh.Trimesh":
     """The convex hull of points P as a closed, outward-oriented trimesh (qhull's facets,
     each turned to agree with its outward plane normal)."""
-    import trimesh
+    import trimesh  # ~1.4 s at import (scipy with it): a derivation only
     from scipy.spatial import ConvexHull
 
     qh = ConvexHull(P)
@@ -227,8 +228,6 @@ def support_check(mesh: "trimesh.Trimesh", R: np.ndarray, faces: list[Face], uni
     the mesh are the support, their 2-D convex hull the support polygon, and the centre of
     mass must project inside it by STABLE_MARGIN_MM; the part must rest on a face.
     """
-    from spar_py.core.geometry import convex_hull_2d
-
     tol = from_mm(unit, SUPPORT_TOL_MM)
     A = _arrays(mesh)
     V = A.V @ np.asarray(R, float).T
@@ -286,7 +285,7 @@ def derive_poses(mesh: "trimesh.Trimesh", faces: list[Face], feature: FeatureGeo
                  prefix: str, prob_floor: float = PROB_FLOOR) -> list[DerivedPose]:
     """The stable poses of the part (module docstring), most probable first, labelled
     ``{prefix}1, {prefix}2, ...``."""
-    import trimesh
+    import trimesh  # ~1.4 s at import: a derivation only
 
     A = _arrays(mesh)
     hv = A.V[hull_vertices(mesh)]
@@ -653,8 +652,6 @@ def _round(mesh: "trimesh.Trimesh", faces: list[Face], root: np.ndarray, d: np.n
 
 
 def _face_at(faces: list[Face], mesh: "trimesh.Trimesh", p: np.ndarray, unit: str) -> str | None:
-    from spar_py.world.shapes import ON_SURFACE_MM, face_of_point
-
     k = face_of_point(faces, mesh, p, 10 * from_mm(unit, ON_SURFACE_MM) + 1e-3 * float(mesh.scale))
     return None if k is None else faces[k].name
 
@@ -720,8 +717,6 @@ def check_entries(model: "object", gripper: Gripper, unit: str, which: tuple[str
     Returns (key, expected, got) for each problem, in file order: a face that is not on the
     shape, a stable pose that is not stable (or rests at another height, or on other faces),
     a grasp wider than the opening or whose fingers or palm enter the part."""
-    from spar_py.world.shapes import derive_faces
-
     geo = model.geometry  # type: ignore[attr-defined]
     mesh = geo.mesh()
     fg = model.feature.geometry if model.feature is not None else None  # type: ignore[attr-defined]
