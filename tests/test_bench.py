@@ -49,6 +49,7 @@ def test_ik_figures(ik_figures: dict) -> None:
     assert r["numeric"]["solver"] == "numeric" and r["numeric"]["solved"] > 0.9
 
 
+@pytest.mark.slow
 def test_supinf_figures(supinf_figures: dict) -> None:
     r = supinf_figures
     names = [m["name"] for m in r["paper"]]
@@ -87,6 +88,7 @@ def _fake_planning(warm: dict) -> dict:
     return {"warm": warm, "cold": cold, "scaling": rows, "timeout_s": 120.0}
 
 
+@pytest.mark.slow
 def test_render_has_every_section(ik_figures: dict, supinf_figures: dict, warm_figures: dict) -> None:
     r = {"quick": True, "date": "2025-01-01T00:00:00+00:00", "machine": bench_main.machine(),
          "versions": bench_main.versions(), "seconds": {"ik": 1.0},
