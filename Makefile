@@ -13,14 +13,13 @@ setup:
 demo: setup
 	$(SPAR) plan $(PROBLEM) --dot docs/demo --png docs/demo
 
-# pytest on every core (pytest-xdist): tests/conftest.py keeps the tests that share a module's
-# fixture on one worker and starts the modules with slow tests first; the plunit suites run as
-# one of the tests (tests/test_plunit.py). `make test PYTEST_ARGS="-m 'not slow'"` skips the
+# pytest on every core (pytest-xdist, each file on one worker): tests/conftest.py starts the
+# heavy files first; the plunit suites run as one of the tests (tests/test_plunit.py). `make test PYTEST_ARGS="-m 'not slow'"` skips the
 # slow ones; TEST_WORKERS=0 runs everything in one process.
 TEST_WORKERS ?= auto
 PYTEST_ARGS ?=
 test: setup
-	$(PY) -m pytest -n $(TEST_WORKERS) --dist loadgroup --no-loadscope-reorder $(PYTEST_ARGS)
+	$(PY) -m pytest -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder $(PYTEST_ARGS)
 
 bench: setup
 	$(PY) -m pip install -q -e '.[bench]' 2>&1 | grep -v '^WARNING: Location' || true
