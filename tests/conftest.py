@@ -20,7 +20,7 @@ from __future__ import annotations
 import pytest
 
 #: Files whose shared fixtures cost the most (measured with --durations, heaviest first).
-HEAVY_FIRST = ("test_fuzz", "test_bench", "test_signals", "test_schema", "test_motion")
+HEAVY_FIRST = ("test_bench", "test_fuzz", "test_bench_run", "test_signals", "test_schema", "test_motion")
 
 
 def _order(item: pytest.Item, slow_modules: set[str]) -> tuple[int, int]:
