@@ -13,9 +13,13 @@ setup:
 demo: setup
 	$(SPAR) plan $(PROBLEM) --dot docs/demo --png docs/demo
 
+# pytest on every core (pytest-xdist, each file on one worker): tests/conftest.py starts the
+# heavy files first; the plunit suites run as one of the tests (tests/test_plunit.py). `make test PYTEST_ARGS="-m 'not slow'"` skips the
+# slow ones; TEST_WORKERS=0 runs everything in one process.
+TEST_WORKERS ?= auto
+PYTEST_ARGS ?=
 test: setup
-	$(PY) -m pytest
-	$(PY) -m spar_py.app.plunit tests/prolog
+	$(PY) -m pytest -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder $(PYTEST_ARGS)
 
 bench: setup
 	$(PY) -m pip install -q -e '.[bench]' 2>&1 | grep -v '^WARNING: Location' || true

@@ -51,6 +51,11 @@ if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
         | grep -v '^WARNING: Location' >&2 || true
     .venv/bin/python -m pip install -q -e '.[dev]' 2>&1 | grep -v '^WARNING: Location' >&2 || true
     .venv/bin/python -c 'import janus_swi' 2>/dev/null || { log "error: janus-swi did not install"; exit 1; }
+    # bytecode for the dependencies, which a venv can lack (the 2-core test machine's had
+    # none, with PYTHONDONTWRITEBYTECODE set): without it every `spar` process (hundreds in
+    # `make test`) compiles trimesh, scipy and the rest again (`spar kb check` 1.8 s of CPU, 0.7 s with)
+    .venv/bin/python -m compileall -q -j 0 "$(.venv/bin/python -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')" \
+        >/dev/null 2>&1 || true
     echo "$want" > "$stamp"
 fi
 

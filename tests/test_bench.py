@@ -49,6 +49,7 @@ def test_ik_figures(ik_figures: dict) -> None:
     assert r["numeric"]["solver"] == "numeric" and r["numeric"]["solved"] > 0.9
 
 
+@pytest.mark.slow
 def test_supinf_figures(supinf_figures: dict) -> None:
     r = supinf_figures
     names = [m["name"] for m in r["paper"]]
@@ -87,6 +88,7 @@ def _fake_planning(warm: dict) -> dict:
     return {"warm": warm, "cold": cold, "scaling": rows, "timeout_s": 120.0}
 
 
+@pytest.mark.slow
 def test_render_has_every_section(ik_figures: dict, supinf_figures: dict, warm_figures: dict) -> None:
     r = {"quick": True, "date": "2025-01-01T00:00:00+00:00", "machine": bench_main.machine(),
          "versions": bench_main.versions(), "seconds": {"ik": 1.0},
@@ -100,24 +102,6 @@ def test_render_has_every_section(ik_figures: dict, supinf_figures: dict, warm_f
     v = bench_main.verdicts(r)
     assert v["n10"] == (False, "timeout after 150.00 s")
     assert "N = 10 timeout" in bench_main.reading(r)
-
-
-@pytest.mark.slow
-def test_cold_and_one_generated_n() -> None:
-    c = planning.cold(repeats=1)
-    assert c["returncodes"] == [0] and c["plan_s"] > 0 and c["start_s"] > 0
-    (row,) = planning.scaling([1], timeout=60)
-    assert row["outcome"] == "plan" and row["actions"] == 4 and row["rss_peak_mb"] >= row["rss_before_mb"] > 0
-
-
-@pytest.mark.slow
-def test_quick_run_end_to_end(tmp_path: Path) -> None:
-    out = tmp_path / "RESULTS.md"
-    r = subprocess.run([sys.executable, "-m", "bench", "--quick", "--out", str(out)], cwd=ROOT,
-                       capture_output=True, text=True, timeout=600, check=False)
-    assert r.returncode == 0, r.stderr[-2000:]
-    text = out.read_text()
-    assert "a QUICK run" in text and "## Reading" in text
 
 
 def test_planning_cli_child_prints_json() -> None:

@@ -17,6 +17,13 @@ SAMPLE_TIMEOUT = 3.0
 FULL = os.environ.get("SPAR_FUZZ_FULL") == "1"
 
 
+def sample_jobs() -> int:
+    """Processes for the sample: every core, or this pytest-xdist worker's share of them (the
+    other workers fill the rest; more would only queue, and the judge times every run)."""
+    workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
+    return max(1, (os.cpu_count() or 1) // workers)
+
+
 # ---------------------------------------------------------------------- the mutations
 
 
@@ -135,10 +142,12 @@ def test_unmutated_paper_files_plan(source: str) -> None:
 
 @pytest.fixture(scope="module")
 def sample() -> kbfuzz.Report:
-    """The seeded sample: SAMPLE_COUNT mutants of each of the paper's files, 2 workers."""
-    return kbfuzz.fuzz(SEED, SAMPLE_COUNT, SAMPLE_TIMEOUT, kbfuzz.PAPER_FILES, jobs=2)
+    """The seeded sample: SAMPLE_COUNT mutants of each of the paper's files (the same mutants
+    and commands whatever the number of processes)."""
+    return kbfuzz.fuzz(SEED, SAMPLE_COUNT, SAMPLE_TIMEOUT, kbfuzz.PAPER_FILES, jobs=sample_jobs())
 
 
+@pytest.mark.slow
 def test_sample_summary(sample: kbfuzz.Report, capsys: pytest.CaptureFixture[str]) -> None:
     with capsys.disabled():
         print("\n" + sample.summary())
@@ -153,22 +162,27 @@ def findings(report: kbfuzz.Report, kinds: tuple[str, ...]) -> list[str]:
             for r in report.findings() if r.finding and r.finding.startswith(kinds)]
 
 
+@pytest.mark.slow
 def test_sample_no_traceback(sample: kbfuzz.Report) -> None:
     assert findings(sample, ("traceback",)) == []
 
 
+@pytest.mark.slow
 def test_sample_no_internal_error(sample: kbfuzz.Report) -> None:
     assert findings(sample, ("exit 3", "exit ", "killed")) == []
 
 
+@pytest.mark.slow
 def test_sample_one_line(sample: kbfuzz.Report) -> None:
     assert findings(sample, ("no message", "empty message", "multi-line")) == []
 
 
+@pytest.mark.slow
 def test_sample_time_and_memory(sample: kbfuzz.Report) -> None:
     assert findings(sample, ("past", "RSS")) == []
 
 
+@pytest.mark.slow
 def test_sample_refuses_duplicate_and_unknown_keys(sample: kbfuzz.Report) -> None:
     assert [f"{r.mutant} {r.op} at {r.where}: spar {r.command}: exit {r.code}" for r in sample.accepted()] == []
 

@@ -173,6 +173,7 @@ def test_a_translation_box_is_exact() -> None:
 # ------------------------------------------------------------------ random chains
 
 
+@pytest.mark.slow
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(seed=st.integers(0, 10_000), depth=st.integers(1, 8),
        half=st.sampled_from([1e-3, 0.03, 0.1, 0.2]), angle=st.sampled_from([None, 0.5, 2.0, 3.2]))
@@ -235,6 +236,7 @@ def test_a_planar_chain_is_pruned_in_its_plane_soundly_and_tightly() -> None:
 # ------------------------------------------------------------------ through supinf
 
 
+@pytest.mark.slow
 def test_depth_8_products_reach_the_tolerance_where_the_sx_alone_hits_the_box_cap() -> None:
     """The issue's deep products: 8 error factors, every variable at +-0.1. Each is bounded
     soundly within 1e-3 of its width; the search on the SX alone (no chain) is the peer

@@ -278,6 +278,7 @@ def motion_plans():
     return [(p, pl.load_problem(p), pl.plan(p)) for p in cells]
 
 
+@pytest.mark.slow
 def test_every_path_of_every_regression_plan(motion_plans) -> None:
     """Every path of every regression plan that plans motions, checked on its own: consecutive
     waypoints within path_resolution_deg in every joint, joint limits, the paths' ends equal
@@ -318,6 +319,7 @@ def test_every_path_of_every_regression_plan(motion_plans) -> None:
                 assert not np.all((pts >= blo) & (pts <= bhi), axis=-1).any(), (path, name)
 
 
+@pytest.mark.slow
 def test_enclosed_part_has_no_plan_and_names_the_enclosure(motion_plans) -> None:
     """The part in a box whose lid's hole passes the gripper's mount but not the gripper: the
     top grasp's end-point is clear (it is not among the end-point refusals), no motion reaches
@@ -336,6 +338,7 @@ def test_enclosed_part_has_no_plan_and_names_the_enclosure(motion_plans) -> None
     assert "lid_" in f["text"] and "approach" in f["text"]
 
 
+@pytest.mark.slow
 def test_animation_replays_the_motions(motion_plans, tmp_path: Path) -> None:
     from PIL import Image
 
@@ -350,6 +353,7 @@ def test_animation_replays_the_motions(motion_plans, tmp_path: Path) -> None:
         assert im.n_frames == 4
 
 
+@pytest.mark.slow
 def test_animation_needs_motions(motion_plans) -> None:
     from spar_py.pictures.animate import frames_of
 
@@ -360,6 +364,7 @@ def test_animation_needs_motions(motion_plans) -> None:
         frames_of(cell, doc)
 
 
+@pytest.mark.slow
 def test_certified_segments_agree_with_checking_every_waypoint() -> None:
     """certify (clearance bounds, bisection) says a segment is clear exactly when
     SceneState.check finds every waypoint at the resolution clear, and a blocked index it
@@ -414,6 +419,7 @@ def test_certified_segments_agree_with_checking_every_waypoint() -> None:
     assert sum(verdicts) >= 8 and len(verdicts) - sum(verdicts) >= 6  # both answers exercised
 
 
+@pytest.mark.slow
 def test_animation_draws_the_link_shapes(motion_plans) -> None:
     """The animation's link geometry is each robot-file shape where the test's own Craig FK
     puts it: every drawn vertex of a capsule within its radius of the capsule's axis (and
@@ -441,6 +447,7 @@ def test_animation_draws_the_link_shapes(motion_plans) -> None:
             assert all(np.isclose(np.linalg.norm(pts - c, axis=1).min(), 0, atol=1e-9) for c in corners), s.name
 
 
+@pytest.mark.slow
 def test_cli_animate_writes_the_gif(tmp_path: Path, capsys) -> None:
     """`spar plan CELL --animate FILE.gif` writes a GIF of several frames (and nothing else
     is needed on the command line: --animate plans the motions)."""
@@ -456,6 +463,7 @@ def test_cli_animate_writes_the_gif(tmp_path: Path, capsys) -> None:
         assert im.n_frames > 10
 
 
+@pytest.mark.slow
 def test_durations_of_regression_plans_from_the_robot_file(motion_plans) -> None:
     """Every arm step of every regression plan with motions has a duration: its path,
     approach and retreat at the robot file's velocity_limits (read from the YAML here), each

@@ -91,6 +91,7 @@ def _table_rows(out: str) -> list[tuple[str, str]]:
     return rows
 
 
+@pytest.mark.slow
 def test_cluster_run_gives_every_result_in_the_problems_order(suite: Path, cluster,
                                                               capsys: pytest.CaptureFixture[str]) -> None:
     assert run_regression(suite, client=cluster) == 0
@@ -110,6 +111,7 @@ def test_cluster_run_gives_every_result_in_the_problems_order(suite: Path, clust
     assert on_cluster.split("planning\n", 1)[1] == here.split("planning\n", 1)[1]  # the diffs
 
 
+@pytest.mark.slow
 def test_a_problem_that_does_not_load_is_an_error_row(suite: Path, cluster,
                                                       capsys: pytest.CaptureFixture[str]) -> None:
     (suite / "broken.yaml").write_text("problem: broken\nrobot: nowhere.yaml\n")
@@ -118,6 +120,7 @@ def test_a_problem_that_does_not_load_is_an_error_row(suite: Path, cluster,
     assert rows.pop("broken") == "ERROR" and set(rows.values()) == {"PASS"}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("cluster", [None, 0], indirect=True, ids=["dask-reschedules", "spar-resubmits"])
 def test_a_worker_killed_mid_run_loses_no_result(suite: Path, cluster,
                                                  capsys: pytest.CaptureFixture[str]) -> None:

@@ -58,6 +58,7 @@ def _signal_after(cmd: list[str], sig: int, delay: float) -> tuple[int, float, s
     return p.returncode, time.monotonic() - t, err
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sig, code, word", [(signal.SIGINT, 130, "interrupted"),
                                              (signal.SIGTERM, 143, "terminated")])
 @pytest.mark.parametrize("late", [False, True], ids=["early", "late"])
@@ -69,6 +70,7 @@ def test_a_signal_ends_the_run_at_once(slow_problem: tuple[Path, Path], delays: 
     assert err == f"spar: {word}\n"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("run", ["phase1", "phase2"])
 def test_timeout_bounds_the_whole_run(slow_problem: tuple[Path, Path], run: str) -> None:
     t = time.monotonic()
@@ -79,6 +81,7 @@ def test_timeout_bounds_the_whole_run(slow_problem: tuple[Path, Path], run: str)
     assert r.stderr.count("\n") == 1 and "timeout" in r.stderr
 
 
+@pytest.mark.slow
 def test_no_partial_pictures_or_json(tmp_path: Path) -> None:
     """Ctrl-C at any point of a run that writes pictures and JSON: all of them or none."""
     whole = tmp_path / "whole"

@@ -39,6 +39,7 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from collections import Counter
 from collections.abc import Callable, Iterator, Sequence
@@ -634,11 +635,12 @@ def fuzz(seed: int = 0, count: int = 20, timeout: float = 3.0, files: Sequence[s
     chosen = list(files) if files is not None else kb_files()
     todo = [(m, timeout) for f in chosen for m in mutants(f, seed, count)]
     t0 = time.monotonic()
-    if jobs <= 1:
+    if jobs <= 1 and threading.active_count() == 1:
         results = [run_mutant(j) for j in todo]
     else:
-        # spawned workers: single-threaded, so preexec_fn is safe in them
-        with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
+        # spawned workers: single-threaded, so preexec_fn is safe in them (a pytest-xdist
+        # worker has threads of its own, so even one job goes to a spawned process there)
+        with ProcessPoolExecutor(max(1, jobs), mp_context=multiprocessing.get_context("spawn")) as pool:
             results = list(pool.map(run_mutant, todo, chunksize=1))
     runs = [r for rs in results for r in rs]
     return Report(seed, timeout, chosen, len(todo), runs, time.monotonic() - t0)
