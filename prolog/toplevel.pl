@@ -245,7 +245,7 @@ user:portray(Step) :-
     integer(N),
     nonvar(Geo), Geo = geo(_, _),
     !,
-    format("<step ~w ~q: ~q>", [N, Id, Action]).
+    format("<step ~w ~q: ~W>", [N, Id, Action, [quoted(true), spacing(next_argument)]]).
 
 plan_summary(Partial, Result, S) :-
     partial_actions(Partial, As),
@@ -273,7 +273,8 @@ is_partial(P) :-
 %!  batch_toplevel is det.
 %
 %   Read queries from user_input until end of file and answer each once:
-%   its bindings (printed as the toplevel prints them) and "true." or
+%   its bindings (written as the toplevel writes them: quoted, portrayed,
+%   a space after each argument's comma) and "true." or
 %   "false.", or the error's message. Nothing is read between queries,
 %   so a nondeterministic answer does not swallow the next query.
 
@@ -305,10 +306,11 @@ print_bindings(Bindings) :-
     (   Shown == []
     ->  format("true.~n~n")
     ;   length(Shown, N),
+        Opts = [quoted(true), portray(true), spacing(next_argument)],
         forall(nth1(I, Shown, Name = Value),
                (   I < N
-               ->  format("~w = ~p,~n", [Name, Value])
-               ;   format("~w = ~p.~n~n", [Name, Value])
+               ->  format("~w = ~W,~n", [Name, Value, Opts])
+               ;   format("~w = ~W.~n~n", [Name, Value, Opts])
                ))
     ).
 
