@@ -192,6 +192,9 @@ step_verdicts(Step, Verdicts) :-
 %   The arm's joint angles (degrees, q1..q6) at the end of a plan step,
 %   asked of the planning run that keeps the step's geometry; fails for
 %   a step without joints (sensing).
+%
+%   @error the run's message if it no longer keeps the geometry (its
+%   problem was unloaded or reloaded since).
 
 step_joints(Step, Joints) :-
     must_be_step(Step),
