@@ -39,6 +39,7 @@
             instance_steps/3,      % +Instance, -Steps, -Bindings
             instance_sources/2,    % +Instance, -Sources
             ur_dict/2,             % +Result, -Dict
+            step_id_text/2,        % +Id, -Text
             print_ur/1             % +Result
           ]).
 :- use_module(library(apply)).
@@ -347,6 +348,12 @@ var_interval(Bounds, V, [Lo, Hi]) :-
 %
 %   Inserted steps get ids naming the action they serve: sense_action_2_1,
 %   squeeze_action_1.
+
+%!  step_id_text(+Id, -Text:atom) is det.
+%
+%   The id of a plan-instance step as the JSON and the planning run name
+%   it: Id for an action, sense_<action>_<k> and squeeze_<action> for the
+%   steps a remedy inserted.
 
 step_id_text(sense(Id, K), T) :- !, format(atom(T), 'sense_~w_~w', [Id, K]).
 step_id_text(squeeze(Id), T) :- !, format(atom(T), 'squeeze_~w', [Id]).

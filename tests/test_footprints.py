@@ -113,7 +113,7 @@ def check_plan_footprints(cell: Cell, steps: list[dict]) -> int:
     for s in steps:
         if s["name"] == "pickup":
             obj = s["object"]
-            src = (s.get("from") or {}).get(obj)
+            src = (s.get("source") or {}).get(obj)
             mine = [i for i, (lab, o, _) in enumerate(table) if o == obj]
             exact = [i for i in mine if table[i][0] == src]
             placed = [i for i in mine if table[i][0].startswith("@")]

@@ -28,8 +28,8 @@ def planner() -> Planner:
 
 def _steps(instance: dict) -> list[dict]:
     """The instance's steps as phase2 takes them: id, name, args (term data, as the JSON
-    has them), from."""
-    return [{"id": s["id"], "name": s["name"], "args": s["args"]} | ({"from": s["from"]} if s.get("from") else {})
+    has them), source."""
+    return [{"id": s["id"], "name": s["name"], "args": s["args"]} | ({"source": s["source"]} if s.get("source") else {})
             for s in instance["steps"]]
 
 
@@ -121,12 +121,12 @@ def test_stock_parts_each_picked_where_they_lie(planner: Planner, tmp_path: Path
     assert plan["outcome"] == "plan"
     inst = plan["instance"]
     picks = [s for s in inst["steps"] if s["name"] == "pickup"]
-    assert sorted(s["from"]["peg"] for s in picks) == ["tr1", "tr5"]
+    assert sorted(s["source"]["peg"] for s in picks) == ["tr1", "tr5"]
     for s in picks:
         g = cell.objects["peg"].grasps[s["args"][1]]
-        np.testing.assert_allclose(np.array(s["tool_pose"]), cell.positions[s["from"]["peg"]].T @ g.T, atol=1e-6)
+        np.testing.assert_allclose(np.array(s["tool_pose"]), cell.positions[s["source"]["peg"]].T @ g.T, atol=1e-6)
     mates = {s["args"][1]: s for s in inst["steps"] if s["name"] == "assemble"}
-    assert mates["block"]["from"] == {"block": "tr2"} and mates["block2"]["from"] == {"block2": "tr4"}
+    assert mates["block"]["source"] == {"block": "tr2"} and mates["block2"]["source"] == {"block2": "tr4"}
     report = phase2.sample_check(CellCache(cell), _steps(inst), draws=10_000)
     assert report and all(r["failed_draws"] == 0 for r in report if r["declared_satisfied"])
 
@@ -239,7 +239,7 @@ def test_squeeze_is_the_remedy_that_works(planner: Planner) -> None:
     assert sq["serves"] == "action_1" and sq["held"] is None
     assert sq["poses"]["block"] == inst["steps"][inst["steps"].index(sq) - 1]["poses"]["block"]  # squeezed in place
     steps = _steps(inst)
-    sources = {s["id"]: s["from"] for s in steps if s.get("from")}
+    sources = {s["id"]: s["source"] for s in steps if s.get("source")}
     ok = phase2.evaluate(CellCache(cell), steps, sources)
     assert ok.status == "ok"
     # sensing alone: the same instance without the squeeze fails at the assemble

@@ -71,7 +71,8 @@ def _quickstart_goals() -> list[str]:
 
 def test_bare_toplevel_quickstart() -> None:
     """`swipl prolog/spar.pl` at its toplevel: load the paper's cell, then the quick-start
-    goals each give an answer, printed through the portray hook as a plan, no error."""
+    goals each give an answer, shown as a one-line summary (the portray hook), the plan
+    printed once (by print_plan/1), no error."""
     goals = _quickstart_goals()
     script = "load_problem('kb/problems/peg_in_block.yaml').\n" + "".join(g + "\n" for g in goals)
     r = _run(["prolog/spar.pl"], stdin=script)
@@ -79,6 +80,15 @@ def test_bare_toplevel_quickstart() -> None:
     assert r.returncode == 0, out
     assert "ERROR" not in out and "Warning:" not in out, out
     assert "false." not in out, out
-    answers = re.findall(r"^P = \nPLAN ACTIONS$", out, flags=re.M)
-    assert len(answers) == len(goals), out
-    assert out.count("PLAN INSTANCE") >= 2, out  # print_plan/1's, then the answer's portrayal
+    assert re.search(r"^P = <plan peg_in_block: 4 actions, 4 steps, 0 expected failures>", out, flags=re.M), out
+    assert re.search(r"^P = <partial plan: 4 actions, 4 orderings>", out, flags=re.M), out
+    assert out.count("PLAN INSTANCE") == 1, out  # print_plan/1's only
+
+
+def test_bare_toplevel_help() -> None:
+    """help/1 in a bare swipl (no collect_docs/0) reads the planner's PlDoc from its sources."""
+    r = _run(["prolog/spar.pl"], stdin="help(plan/2).\nhelp(plan_step/3).\n")
+    assert r.returncode == 0, r.stdout
+    assert "plan(+Problem, -Plan) is semidet." in r.stdout, r.stdout
+    assert "plan_step(+Plan, ?N:positive_integer, -Step) is nondet." in r.stdout, r.stdout
+    assert "No documentation" not in r.stdout, r.stdout

@@ -51,7 +51,7 @@ def test_phase2_takes_the_part_the_separation_leaves() -> None:
     pose is a grasp of that peg, not of the spare 30 in further out."""
     d = json.loads(spar("--json").stdout)
     pick = next(s for s in d["instance"]["steps"] if s["name"] == "pickup")
-    assert pick["from"] == {"peg": "tr5"}
+    assert pick["source"] == {"peg": "tr5"}
     cell = load_problem(PROBLEM)
     g = cell.objects["peg"].grasps[d["instance"]["bindings"]["grasp_1"]]
     np.testing.assert_allclose(np.array(pick["tool_pose"]), cell.positions["tr5"].T @ g.T, atol=1e-6)

@@ -70,7 +70,7 @@ def test_same_plan_in_every_unit(plans: dict[str, dict]) -> None:
         assert gi["instances_examined"] == ri["instances_examined"]
         assert len(gi["steps"]) == len(ri["steps"])
         for s, r in zip(gi["steps"], ri["steps"]):
-            for key in ("id", "name", "term", "kind", "object", "serves", "from"):
+            for key in ("id", "name", "term", "kind", "object", "serves", "source"):
                 assert s.get(key) == r.get(key), (u, key)
             assert np.allclose(s["joints_deg"], r["joints_deg"], rtol=0, atol=1e-6)
             assert np.allclose(s["ik_solutions_deg"], r["ik_solutions_deg"], rtol=0, atol=1e-6)

@@ -5,7 +5,7 @@
 */
 :- use_module('../../prolog/spar').
 :- use_module('../../prolog/goals').
-:- use_module('../../prolog/plan_state').
+:- use_module('../../prolog/plan_state', except([plan_actions/2])).  % spar's toplevel has its own
 :- use_module('../../prolog/establish').
 :- use_module('../../prolog/ordering').
 :- use_module('../../prolog/cms').
@@ -31,7 +31,7 @@ arcs(P, Arcs) :-
     ordering_arcs(G, Arcs).
 
 terms(P, Terms) :-
-    plan_actions(P, As),
+    plan_state:plan_actions(P, As),
     maplist([action(_, T, _, _, _), T]>>true, As, Terms).
 
 test(by_new_action, [E-Terms == action_1-[assemble(peg, block, [[peg_face], [block_face]], trans_1, vec_1)]]) :-
@@ -123,7 +123,7 @@ test(white_knight_new,
     plan0([white_knight], P0),
     new_actions([holding(peg, _), holding(block, _)], P0, P1),
     once(declobber(op(goal_x, action_1, gripper(open)), start, P1, P)),
-    plan_actions(P, [action(action_3, T, _, _, _)|_]),
+    plan_state:plan_actions(P, [action(action_3, T, _, _, _)|_]),
     arcs(P, Arcs).
 
 test(no_method_no_declobbering, fail) :-
@@ -154,7 +154,7 @@ test(no_binding_by_clobber_test, [C == action_1, true(var(State))]) :-
 %   argument the actions bound after they were indexed.
 
 scan_clobberers(Cond, P, Ids) :-
-    plan_actions(P, As),
+    plan_state:plan_actions(P, As),
     findall(Id, ( member(action(Id, _, _, _, dellist(Ds)), As),
                   once(( member(D, Ds), \+ D \= Cond )) ),
             Ids).
@@ -222,7 +222,7 @@ test(identical_bits_as_scan, true(Got == Want)) :-
     new_actions([ holding(Obj, _), holding(block, _), part_location(block, _),
                   holding(peg, _) ], P0, P),
     Obj = peg,
-    plan_actions(P, As),
+    plan_state:plan_actions(P, As),
     once(( member(action(_, pickup(peg, _), _, _, dellist(Dels)), As),
            memberchk(part_location(peg, Pos), Dels) )),
     Pos = p1,
@@ -281,7 +281,7 @@ test(undone_goals_in_order, Undone-Sat == [G1, G3]-[S2, S4, S5]) :-
     S4 = sat(geo(g4, finish, member(grasp_1, [a]), []), [start]),
     S5 = sat(op(g5, finish, gripper(closed)), start),
     set_sat_of_plan([sat(G1, start), S2, sat(G3, start), S4, S5], P1, P),
-    plan_actions(P, [Action|_]),
+    plan_state:plan_actions(P, [Action|_]),
     establish:undone_goals(Action, P, Undone, Sat).
 
 :- end_tests(establish_sec4_1).

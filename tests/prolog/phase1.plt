@@ -6,7 +6,7 @@
 */
 :- use_module('../../prolog/spar').
 :- use_module('../../prolog/goals').
-:- use_module('../../prolog/plan_state').
+:- use_module('../../prolog/plan_state', except([plan_actions/2])).  % spar's toplevel has its own
 :- use_module('../../prolog/establish').
 :- use_module('../../prolog/cms').
 :- use_module(fixtures/paper_cell).
@@ -119,7 +119,7 @@ test(fig22_stacks,
     once(establish(G1, P1, P, _)),
     plan_ops(P, OpGoals), goal_ids(OpGoals, Ops),
     plan_geos(P, GeoGoals), goal_ids(GeoGoals, Geos),
-    plan_actions(P, Actions),
+    plan_state:plan_actions(P, Actions),
     maplist([action(_, T, _, _, _), T]>>true, Actions, As).
 
 fig21(P) :-

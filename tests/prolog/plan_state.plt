@@ -9,7 +9,7 @@
 :- use_module('../../prolog/spar').
 :- use_module('../../prolog/goals').
 :- use_module('../../prolog/establish').
-:- use_module('../../prolog/plan_state').
+:- use_module('../../prolog/plan_state', except([plan_actions/2])).  % spar's toplevel has its own
 :- use_module('../../prolog/spar_defaults').
 :- use_module('../../prolog/ordering').
 :- use_module(library(plunit)).
@@ -45,7 +45,7 @@ field(pending,   none, seen([], [])).
 
 read_field(Plan, Name, Value) :-
     atom_concat(plan_, Name, Reader),
-    call(Reader, Plan, Value).
+    call(plan_state:Reader, Plan, Value).
 
 write_field(Name, Value, Plan0, Plan) :-
     atomic_list_concat([set_, Name, '_of_plan'], Writer),
@@ -118,7 +118,7 @@ test(writer_untyped_net, Net == anything) :-
     plan_net(P, Net).
 
 test(reader_fails_on_non_plan, fail) :-
-    plan_actions(partial([], [], n, []), _).
+    plan_state:plan_actions(partial([], [], n, []), _).
 
 test(defaults, [Bound, Methods, Trace, Lookahead, Lists, Order, Checked, Steps, Recorder] ==
                [12, [promotion, separation, white_knight], false, true,

@@ -9,7 +9,7 @@
 */
 :- use_module('../../prolog/spar').
 :- use_module('../../prolog/goals').
-:- use_module('../../prolog/plan_state').
+:- use_module('../../prolog/plan_state', except([plan_actions/2])).  % spar's toplevel has its own
 :- use_module('../../prolog/establish').
 :- use_module(fixtures/separation_cell).
 :- use_module(library(plunit)).
@@ -37,7 +37,7 @@ plan_with_pickup(Methods, Plan, Pos) :-
     goal1(G1),
     once(establish(G1, P0, P1, start)),
     once(new_action(holding(peg, _), Id, [Id-finish], P1, Plan)),
-    plan_actions(Plan, Actions),
+    plan_state:plan_actions(Plan, Actions),
     memberchk(action(Id, _, _, _, dellist(Dels)), Actions),
     memberchk(part_location(peg, Pos), Dels).
 

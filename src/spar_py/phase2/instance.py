@@ -356,7 +356,7 @@ def step(world: World, s: Step, early: bool = False) -> tuple[list[dict[str, Any
     def run() -> tuple[list[dict[str, Any]], World, dict[str, Any], bool]:
         checks, after, geo = handler(replace(_activate(world, s), refused=()), s, early)
         if s["id"] in world.sources:
-            geo["from"] = dict(world.sources[s["id"]])
+            geo["source"] = dict(world.sources[s["id"]])
         return checks, replace(after, key=key), geo, not (early and not after.complete)
 
     table = world.cache.table("phase2.steps", MEMO_LIMIT)
@@ -406,7 +406,7 @@ def evaluate(cache: CellCache, steps: Sequence[Step], sources: Sources | None = 
     ``given_up`` (failed) or at the first whose geometric precondition fails (infeasible: no
     placement, no joint solution, no motion); each step record, up to and including that
     one, is ``{"id", "verdicts": [verdict dicts], "geometry": {"tool_pose", "joints_deg",
-    "ik_solutions_deg", "placement", "from", ...}, "poses": poses(world after it), "held":
+    "ik_solutions_deg", "placement", "source", ...}, "poses": poses(world after it), "held":
     the object in the hand after it or None}``. Lengths in the cell unit, angles in degrees,
     world frame."""
     cell = cache.cell
@@ -690,11 +690,12 @@ def sample_check(cache: CellCache, steps: list[Step], draws: int = 10_000, seed:
     ``draws`` points drawn uniformly from its variables' bounds and count the draws in
     which the inequality fails. A precondition declared satisfied must never fail.
     Steps as in the plan's JSON (``id``, ``name``, ``args`` as term data); a step's
-    ``from`` (which part of a stock it takes) is honoured; ``sensing`` as
+    ``source`` (which part of a stock it takes; ``from`` in a JSON written before the
+    key was renamed) is honoured; ``sensing`` as
     :func:`new_world` (needed only when the cell has no sensors entry)."""
     import casadi as ca  # ~80 ms at import: only this check's draws need it here
 
-    sources = {s["id"]: s["from"] for s in steps if s.get("from")}
+    sources = {s["id"]: s.get("source") or s["from"] for s in steps if s.get("source") or s.get("from")}
     world = new_world(cache, steps, sources, sensing)
     for s in steps:
         _, world, _ = step(world, s)

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import threading
 import time
 from dataclasses import dataclass, field
@@ -24,6 +25,7 @@ from enum import Enum
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from spar_py.planning.engine import engine
 from spar_py.core.errors import PlanningTimeout, SparValueError
 from spar_py.kb import load_problem
@@ -101,7 +103,16 @@ class Step:
     the hand after the step, or None; ``clearance`` the least distance (cell unit) between
     the arm, gripper or held part and anything else at the joints used (at least the collision
     margin; None where the cell has no collision check), ``closest_pair`` the two bodies at
-    that distance."""
+    that distance; ``source`` where the step takes an object lying on the table ({object:
+    position label}: the part picked, the part mated onto) or None.
+
+    With motions planned (``--motion``, ``Planner(motion=True)``, a file's ``motion: true``):
+    ``path`` the free motion into the step (from home or the previous retreat's end),
+    ``approach`` the straight tool line into its end-point (ending at ``joints_deg``),
+    ``retreat`` the one out of it, each an (n, 6) float array of joint vectors (deg,
+    waypoints in order); ``duration_s`` the step's estimated time (s). None without motions
+    (and ``path`` None for a step that does not move the arm). The arrays are not compared
+    by ``==``."""
 
     id: str
     kind: str
@@ -121,6 +132,10 @@ class Step:
     verdicts: tuple[Verdict, ...]
     clearance: float | None = None
     closest_pair: tuple[str, str] | None = None
+    path: np.ndarray | None = field(default=None, compare=False, repr=False)
+    approach: np.ndarray | None = field(default=None, compare=False, repr=False)
+    retreat: np.ndarray | None = field(default=None, compare=False, repr=False)
+    duration_s: float | None = None
 
 
 @dataclass
@@ -147,6 +162,20 @@ class Plan:
     def ok(self) -> bool:
         """True when a plan was found."""
         return self.outcome is Outcome.PLAN
+
+    @property
+    def bound_actions(self) -> list[Action]:
+        """The phase-1 ``actions`` with their plan variables (grasp_1, pos_1) replaced by the
+        labels the chosen instance binds them to (``instance["bindings"]``): what the arm does,
+        pickup(peg, p1G14) for pickup(peg, grasp_1). Variables the instance leaves unbound
+        (none in a plan instance) and the actions without an instance stay as they are."""
+        bindings: dict[str, str] = dict((self.instance or {}).get("bindings") or {})
+        if not bindings:
+            return list(self.actions)
+        word = re.compile(r"(?<![\w'])(" + "|".join(map(re.escape, sorted(bindings, key=len, reverse=True)))
+                          + r")(?![\w'])")
+        return [Action(a.id, a.name, tuple(_bind(x, bindings) for x in a.args),
+                       word.sub(lambda m: bindings[m.group(1)], a.term)) for a in self.actions]
 
     @property
     def verdicts(self) -> list[Verdict]:
@@ -220,13 +249,35 @@ def _verdict(c: dict[str, Any]) -> Verdict:
                    description=c.get("description", ""))
 
 
+def _bind(data: Any, bindings: dict[str, str]) -> Any:
+    """Term data (term_text's form) with every atom that is a bound plan variable replaced by its label."""
+    if isinstance(data, str):
+        return bindings.get(data, data)
+    if isinstance(data, list):
+        return [_bind(x, bindings) for x in data]
+    if isinstance(data, dict) and "functor" in data:
+        return {**data, "args": [_bind(x, bindings) for x in data["args"]]}
+    return data
+
+
+def _joints(v: Any) -> np.ndarray | None:
+    """A list of joint vectors (deg) as an (n, 6) float array, or None."""
+    if v is None:
+        return None
+    a = np.asarray(v, dtype=float)
+    return a if a.ndim == 2 else a.reshape(len(v), 0)
+
+
 def _step(s: dict[str, Any], verdicts: list[Verdict]) -> Step:
     return Step(id=s["id"], kind=s["kind"], serves=s["serves"], name=s["name"], object=s["object"],
                 term=s["term"], args=tuple(s.get("args", ())), tool_pose=s.get("tool_pose"),
                 joints_deg=s.get("joints_deg"), ik_solutions_deg=list(s.get("ik_solutions_deg") or []),
                 ik_solver=s.get("ik_solver"),
-                placement=s.get("placement"), source=s.get("from"), poses=dict(s.get("poses") or {}),
-                held=s.get("held"), clearance=s.get("clearance"),
+                placement=s.get("placement"), source=s.get("source", s.get("from")),
+                poses=dict(s.get("poses") or {}), held=s.get("held"), clearance=s.get("clearance"),
+                path=_joints(s.get("path")), approach=_joints(s.get("approach")),
+                retreat=_joints(s.get("retreat")),
+                duration_s=None if s.get("duration_s") is None else float(s["duration_s"]),
                 closest_pair=tuple(s["closest_pair"]) if s.get("closest_pair") else None,
                 verdicts=tuple(v for v in verdicts if v.action == s["id"]))
 

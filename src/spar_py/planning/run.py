@@ -33,7 +33,7 @@ if TYPE_CHECKING:
 __all__ = ["PlanRun", "StepData"]
 
 #: The fields of a step's geometry the plan's JSON shows (docs/json-schema.md).
-STEP_FIELDS = ("tool_pose", "joints_deg", "ik_solutions_deg", "ik_solver", "placement", "from", "poses", "held",
+STEP_FIELDS = ("tool_pose", "joints_deg", "ik_solutions_deg", "ik_solver", "placement", "source", "poses", "held",
                "clearance", "closest_pair")
 
 
