@@ -403,7 +403,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     plan = sub.add_parser("plan", help="plan a problem (phase 1 and phase 2)")
     plan.add_argument("problem", help="a problem file, e.g. kb/problems/peg_in_block.yaml")
-    plan.add_argument("--json", action="store_true", help="print the plan as JSON (schema 2)")
+    plan.add_argument("--json", action="store_true", help="print the plan as JSON (schema 3)")
     plan.add_argument("-o", "--output", help="write the JSON to this file (atomically)")
     plan.add_argument("--trace", action="store_true", help="print the goal stacks at each step (Figs. 21-22)")
     plan.add_argument("--phase1-only", action="store_true", help="stop after the partial plan")

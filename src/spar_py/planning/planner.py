@@ -35,7 +35,9 @@ from spar_py.planning.run import PlanRun
 from spar_py.world.motion_options import MotionFailure, MotionOptions
 from spar_py.world.run import CellCache, RunOptions
 
-SCHEMA = 2
+#: The plan JSON's schema (docs/json-schema.md); :meth:`Plan.from_json` also reads :data:`READS`.
+SCHEMA = 3
+READS = (2, 3)
 
 __all__ = ["Action", "Outcome", "Plan", "Planner", "SCHEMA", "Step", "Verdict", "term_text"]
 
@@ -140,7 +142,7 @@ class Step:
 
 @dataclass
 class Plan:
-    """A planning outcome (JSON schema 2, docs/json-schema.md).
+    """A planning outcome (JSON schema 3, docs/json-schema.md).
 
     ``outcome`` an :class:`Outcome`; ``partial`` the phase-1 partial plan (actions,
     ordering, variables, arcs, separations) as the JSON has it; ``instance`` the chosen
@@ -205,9 +207,9 @@ class Plan:
 
     @classmethod
     def from_json(cls, doc: dict[str, Any]) -> Plan:
-        """A Plan from its JSON document (schema 2)."""
-        if doc.get("schema") != SCHEMA:
-            raise SparValueError(f"plan JSON schema {doc.get('schema')!r}, not {SCHEMA}")
+        """A Plan from its JSON document (schema 3, or 2: a step's ``from`` read as ``source``)."""
+        if doc.get("schema") not in READS:
+            raise SparValueError(f"plan JSON schema {doc.get('schema')!r}, not one of {', '.join(map(str, READS))}")
         return _plan(doc["problem"], doc, "")
 
 
