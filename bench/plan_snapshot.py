@@ -1,5 +1,6 @@
 """Snapshot every kb/problems plan's JSON (steps, verdicts, joints, poses, reasons) and compare
-two snapshots: the check that a refactor changed no plan.
+two snapshots: the check that a refactor changed no plan (a key renamed between schemas, listed
+in RENAMED, and the schema number itself are not differences).
 
     python -m bench.plan_snapshot write DIR [PROBLEMS_DIR]   # one JSON per problem, timing removed
     python -m bench.plan_snapshot compare OLD_DIR NEW_DIR    # exit 1 and name each difference
@@ -56,6 +57,24 @@ def _diff(a: Any, b: Any, path: str, out: list[str]) -> None:
         out.append(f"{path}: {a!r} against {b!r}")
 
 
+#: Keys renamed between plan JSON schemas, old name -> new (docs/json-schema.md): a snapshot of an
+#: older schema is read with the new names, so a rename alone is no difference.
+RENAMED = {2: {"from": "source"}}
+
+
+def _upgrade(doc: Any, renamed: dict[str, str]) -> Any:
+    if isinstance(doc, dict):
+        return {renamed.get(k, k): _upgrade(v, renamed) for k, v in doc.items()}
+    if isinstance(doc, list):
+        return [_upgrade(x, renamed) for x in doc]
+    return doc
+
+
+def _read(path: Path) -> Any:
+    doc = json.loads(path.read_text())
+    return _upgrade({k: v for k, v in doc.items() if k != "schema"}, RENAMED.get(doc.get("schema"), {}))
+
+
 def compare(old: Path, new: Path) -> int:
     bad = 0
     for f in sorted(old.glob("*.json")):
@@ -65,7 +84,7 @@ def compare(old: Path, new: Path) -> int:
             bad += 1
             continue
         out: list[str] = []
-        _diff(json.loads(f.read_text()), json.loads(g.read_text()), f.stem, out)
+        _diff(_read(f), _read(g), f.stem, out)
         print(f"{f.stem}: {'same' if not out else 'DIFFERENT'}")
         for line in out:
             print("   ", line)
