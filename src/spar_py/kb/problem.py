@@ -132,10 +132,10 @@ def _same_stable_pose(R_abs: np.ndarray, R_pose: np.ndarray, memo: Memo | None) 
 
 
 def _objects(root: Node, base: Path, unit: str, max_bytes: int, opening: float | None = None,
-             gripper: GripperGeometry | None = None, memo: Memo | None = None
+             gripper: GripperGeometry | None = None, memo: Memo | None = None, reach: float | None = None
              ) -> tuple[dict[str, ObjectModel], dict[str, Position], list[Path]]:
     """The problem's objects (models loaded), their initial positions and the model files
-    (``memo``: the load's tables, :func:`load_object`)."""
+    (``memo``: the load's tables, ``reach`` the arm's length: :func:`load_object`)."""
     objects: dict[str, ObjectModel] = {}
     positions: dict[str, Position] = {}
     files: list[Path] = []
@@ -143,7 +143,8 @@ def _objects(root: Node, base: Path, unit: str, max_bytes: int, opening: float |
         mnode = onode.key("model")
         mpath = _ref_path(mnode, base, "object")
         with _referenced(mnode, "object"):
-            model = load_object(mpath, unit, max_bytes, opening=opening, gripper=gripper, memo=memo)
+            model = load_object(mpath, unit, max_bytes, opening=opening, gripper=gripper, memo=memo,
+                                reach=reach)
         if model.name != oname:
             raise mnode.fail(f"the model of {oname}", f"the model of {model.name}")
         objects[oname] = model
@@ -359,8 +360,9 @@ def load_problem(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> Cell:
         with _referenced(rnode, "robot"):
             robot = load_robot(rpath, unit=unit, max_bytes=max_bytes)
     memo = Memo()  # this load's tables: the object files of a problem repeat their transforms
+    arm = float(np.abs(robot.dh[:, 1]).sum() + np.abs(robot.dh[:, 2]).sum() + np.linalg.norm(robot.tool[:3, 3]))
     objects, positions, model_files = _objects(root, base, unit, max_bytes, robot.finger_separation, robot.gripper,
-                                               memo)
+                                               memo, arm)
     grip = root.key("gripper").choice(("open", "closed"))
     unc = root.key("uncertainty")
     man = _bounds(unc.key("manipulator"), 1.0, rad_per)
