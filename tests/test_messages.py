@@ -50,3 +50,32 @@ def test_part_out_of_proportion_names_file_part_size_and_asks_for_the_unit(tmp_p
 def test_part_sizes_of_the_kb_pass() -> None:
     for name in ("shaft_in_bracket", "peg_in_block_shapes", "ur5e_peg_in_block"):
         assert load_problem(KB / "problems" / f"{name}.yaml").objects
+
+
+def _rad_cell(tmp: Path, allow: bool) -> Path:
+    """The paper's cell in radians, its peg's dtheta written as [-3, 3] (degrees meant)."""
+    text = (KB / "problems/peg_in_block.yaml").read_text()
+    text = text.replace("units: {length: in, angle: deg}", "units: {length: in, angle: rad}")
+    text = text.replace("../robots/", str(KB / "robots") + "/").replace("../objects/", str(KB / "objects") + "/")
+    lines = text.splitlines()
+    for i, line in enumerate(lines):
+        if "dtheta" in line:  # every bound: the cell's few degrees read as that many radians
+            lines[i] = line[:line.index("dtheta")] + "dtheta: [-0.01, 0.01]}"
+    peg = next(i for i, line in enumerate(lines) if line.strip().startswith("peg:") and "dtheta" in line)
+    lines[peg] = lines[peg].replace("dtheta: [-0.01, 0.01]", "dtheta: [-3, 3]")
+    if allow:
+        lines.append("allow_large_angles: true")
+    p = tmp / "rad.yaml"
+    p.write_text("\n".join(lines) + "\n")
+    return p
+
+
+def test_large_angle_in_radians_is_an_error_unless_allowed(tmp_path: Path) -> None:
+    with pytest.raises(KBError) as e:
+        load_problem(_rad_cell(tmp_path, allow=False))
+    msg = str(e.value)
+    assert "\n" not in msg
+    assert "uncertainty.objects.peg.dtheta: expected an angle bound within 90 deg" in msg
+    assert "3 rad is 172 deg" in msg and "allow_large_angles: true" in msg
+    cell = load_problem(_rad_cell(tmp_path, allow=True))
+    assert cell.object_bounds["peg"].dtheta == (-3.0, 3.0)
