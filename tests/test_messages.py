@@ -79,3 +79,57 @@ def test_large_angle_in_radians_is_an_error_unless_allowed(tmp_path: Path) -> No
     assert "3 rad is 172 deg" in msg and "allow_large_angles: true" in msg
     cell = load_problem(_rad_cell(tmp_path, allow=True))
     assert cell.object_bounds["peg"].dtheta == (-3.0, 3.0)
+
+
+# ---------------------------------------------------------------- no plan, in the user's terms
+
+NO_PLAN_LINES = {
+    "unreachable": "NO PLAN for assembled(peg, block) within 12 actions (the bound on the plan size; --max-actions raises it): peg at init_pos1 (tr1) is out of the "
+                   "arm's reach: no grasp of it has a joint solution within puma762's limits (102.7 in from its "
+                   "base)",
+    "collision_no_plan": "NO PLAN for assembled(peg, block) within 7 actions (the last bound searched completely before the step budget ran out; the bound was 12): every grasp of peg at init_pos1 (tr1) "
+                         "that the arm reaches collides: 6 refused, most often tool_mount-shelf (4), "
+                         "forearm-shelf (1), palm-table (1)",
+    "placement_trap": "NO PLAN for assembled(peg, block) within 12 actions (the bound on the plan size; --max-actions raises it): a placement is missing: block has to be "
+                      "put down in one of its stable poses p2P1, p2P2, p2P4, p2P5, p2P6, and no spot in the free "
+                      "table (placement_regions) is one the arm reaches",
+    "enclosed_part": "NO PLAN for assembled(peg, block): none of the 8 plan instances examined can be executed: no "
+                     "approach to action_2 (pickup(peg, p1G10)), blocked by finger_l and lid_e: the tool line is "
+                     "blocked 2 along it",
+}
+
+
+@pytest.fixture(scope="module")
+def planner():
+    from spar_py.planning.planner import Planner
+
+    return Planner()
+
+
+@pytest.mark.parametrize("name", sorted(NO_PLAN_LINES))
+def test_no_plan_ends_with_one_line_in_the_users_terms(planner, name: str) -> None:
+    plan = planner.plan(KB / "problems" / f"{name}.yaml")
+    assert plan.outcome.value == "no_plan"
+    assert plan.reason["summary"] == NO_PLAN_LINES[name]
+    assert "goal" in plan.reason or "why" in plan.reason  # the JSON keeps its keys
+    assert "geo(" not in plan.trace  # the Prolog goal term is --trace's
+
+
+def test_the_prolog_goal_term_is_in_the_trace(planner) -> None:
+    plan = planner.plan(KB / "problems/unreachable.yaml", trace=True)
+    assert "the goal that could not be met: geo(goal_8,action_2,reachable(grasp_1,init_pos1)" in plan.trace
+
+
+def test_a_pair_every_refusal_shares_is_said_once() -> None:
+    from spar_py.planning.noplan import collision_lines
+    from spar_py.world.workspace import Refusal
+
+    lines = collision_lines([Refusal("pickup(peg, p1G1) at tr1", (("upper_arm", "table"), ("palm", "block"))),
+                             Refusal("pickup(peg, p1G2) at tr1", (("finger_l", "block"), ("upper_arm", "table"))),
+                             Refusal("pickup(block, p2G1) at tr2", (("upper_arm", "table"),))])
+    assert lines == ["every refused IK solution of this cell collides with upper_arm-table; "
+                     "the other pairs of each refusal:",
+                     "no collision-free IK for pickup(peg, p1G1) at tr1: palm-block",
+                     "no collision-free IK for pickup(peg, p1G2) at tr1: fingers-block",
+                     "no collision-free IK for pickup(block, p2G1) at tr2: only the shared pairs"]
+    assert sum("upper_arm-table" in line for line in lines) == 1

@@ -212,10 +212,13 @@ def cmd_plan(args: argparse.Namespace) -> int:
             os.replace(tmp, final)
     if args.json and output is None:
         sys.stdout.write(plan.dumps() + "\n")
-    elif not args.json:  # JSON carries the colliding pairs in reason.collisions
-        for line in (plan.reason or {}).get("collisions", []) if plan.outcome is Outcome.NO_PLAN else []:
+    elif not args.json:  # JSON carries the colliding pairs in reason.collisions, the last line in reason.summary
+        no_plan = (plan.reason or {}) if plan.outcome is Outcome.NO_PLAN else {}
+        for line in no_plan.get("collisions", []):
             print(line)
         sys.stdout.write(plan.trace)
+        if no_plan.get("summary"):
+            print(no_plan["summary"])
     for d in picture_dirs:
         n = sum(1 for _, f in staged if f.parent == d)
         print(f"spar: wrote {n} pictures to {d}", file=sys.stderr)

@@ -29,6 +29,7 @@ from spar_py.core.errors import PlanningTimeout, SparValueError
 from spar_py.kb import load_problem
 from spar_py.core.memo import LRU
 from spar_py.core.model import Cell
+from spar_py.planning.noplan import collision_lines, summary
 from spar_py.planning.run import PlanRun
 from spar_py.world.motion_options import MotionFailure, MotionOptions
 from spar_py.world.run import CellCache, RunOptions
@@ -395,9 +396,11 @@ class Planner:
         log = run.world.log
         _motion_reason(d, log.motion_failures)
         plan = _plan(cell.name, d, ans.get("Trace", ""))
-        if plan.outcome is Outcome.NO_PLAN:  # name the colliding pairs that stood in the way (issue 15)
-            said = [r.text() for r in log.refusals()]
+        if plan.outcome is Outcome.NO_PLAN:  # name the colliding pairs that stood in the way, and why
+            refusals = log.refusals()
+            said = collision_lines(refusals)
             if said:
                 plan.reason = {**(plan.reason or {}), "collisions": said}
+            plan.reason = {**(plan.reason or {}), "summary": summary(cell, plan.reason or {}, refusals)}
         self.last = plan
         return plan

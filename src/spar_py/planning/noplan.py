@@ -1,0 +1,121 @@
+"""Why there is no plan, in the user's terms: one line from the no-plan reason and the run's log.
+
+The planner's reason names the Prolog goal that failed deepest (``geo(goal_8, action_2,
+reachable(grasp_1, init_pos1), [part_location(peg, init_pos1)])``) or, in phase 2, the
+instance failure. :func:`summary` turns it into one line that says which of the cell's goals
+could not be met and the nearest cause: a part out of the arm's reach, every grasp refused by
+collisions (with the pairs seen most often), no placement for a put-down. :func:`collision_lines`
+writes the run's collision refusals, a pair that every refusal shares said once.
+"""
+from __future__ import annotations
+
+import re
+from collections import Counter
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from spar_py.core.model import Cell
+from spar_py.world.workspace import Refusal, pair_text
+
+__all__ = ["collision_lines", "shared_pairs", "summary"]
+
+#: Pairs named in a summary line at most.
+PAIRS_SHOWN = 3
+
+#: A refusal's ``what`` for a pickup (world/arcs.py): ``pickup(peg, p1G11) at tr1``.
+_PICKUP = re.compile(r"pickup\((?P<obj>[^,]+), (?P<grasp>[^)]+)\) at (?P<label>\S+)$")
+
+
+def _goal_text(cell: Cell) -> str:
+    """The cell's goals as the problem file writes them, short (``assembled(peg, block)``)."""
+    return "; ".join(f"{g[0]}({', '.join(str(a) for a in g[1:3])})" for g in cell.goals)
+
+
+def shared_pairs(refusals: Sequence[Refusal]) -> list[tuple[str, str]]:
+    """The pairs every one of ``refusals`` names (none unless there are at least two)."""
+    if len(refusals) < 2:
+        return []
+    common = set(refusals[0].pairs)
+    for r in refusals[1:]:
+        common &= set(r.pairs)
+    return [p for p in refusals[0].pairs if p in common]
+
+
+def collision_lines(refusals: Sequence[Refusal]) -> list[str]:
+    """One line per refusal; a pair that every refusal shares is said once, first, and left out
+    of the lines below it (``upper_arm-table`` on every refused grasp says nothing per grasp)."""
+    shared = shared_pairs(refusals)
+    out = []
+    if shared:
+        names = ", ".join(dict.fromkeys(pair_text(p) for p in shared))
+        out.append(f"every refused IK solution of this cell collides with {names}; "
+                   f"the other pairs of each refusal:")
+    for r in refusals:
+        rest = list(dict.fromkeys(pair_text(p) for p in r.pairs if p not in shared))
+        out.append(f"no collision-free IK for {r.what}: {', '.join(rest) if rest else 'only the shared pairs'}")
+    return out
+
+
+def _pairs_counted(refusals: Sequence[Refusal]) -> str:
+    """The pairs of ``refusals`` most frequent first, with the number of refusals naming each."""
+    counts: Counter[str] = Counter()
+    for r in refusals:
+        counts.update(list(dict.fromkeys(pair_text(p) for p in r.pairs)))
+    return ", ".join(f"{p} ({n})" for p, n in counts.most_common(PAIRS_SHOWN))
+
+
+def _args(term: Any) -> tuple[str, list[Any]]:
+    """(functor, args) of a term given as data (foreign.pl's term_data/2); atoms have no args."""
+    if isinstance(term, dict) and "functor" in term:
+        return str(term["functor"]), list(term["args"])
+    return str(term), []
+
+
+def _cause(cell: Cell, goal_data: Any, refusals: Sequence[Refusal]) -> str | None:
+    """The nearest cause of a phase-1 no plan from the failed goal's term (its constraint and
+    context), or None when the constraint is not one this knows."""
+    functor, args = _args(goal_data)
+    if functor != "geo" or len(args) < 4:
+        return None
+    kind, cargs = _args(args[2])
+    where = {n: o for f, a in map(_args, args[3]) if f == "part_location" and len(a) == 2 for o, n in [a]}
+    if kind == "reachable" and len(cargs) == 2:
+        posname = str(cargs[1])
+        obj = where.get(posname)
+        pos = next((p for p in cell.positions.values() if p.name == posname), None)
+        if pos is None or obj is None:
+            return f"no grasp is reachable at {posname}"
+        here = [r for r in refusals if (m := _PICKUP.match(r.what)) and m["obj"] == obj and m["label"] == pos.label]
+        if here:
+            return (f"every grasp of {obj} at {posname} ({pos.label}) that the arm reaches collides: "
+                    f"{len(here)} refused, most often {_pairs_counted(here)}")
+        dist = float(np.linalg.norm(pos.T[:3, 3] - cell.robot.base[:3, 3]))
+        return (f"{obj} at {posname} ({pos.label}) is out of the arm's reach: no grasp of it has a joint "
+                f"solution within {cell.robot.name}'s limits ({dist:.4g} {cell.unit} from its base)")
+    if kind == "in_position_class" and len(cargs) == 2:
+        posname, poses = str(cargs[0]), [str(p) for p in cargs[1]] if isinstance(cargs[1], list) else []
+        obj = where.get(posname) or next((p.obj for p in cell.positions.values() if p.name == posname), posname)
+        regions = "placement_regions" if cell.placement_regions else "the table around the parts"
+        return (f"a placement is missing: {obj} has to be put down in one of its stable poses "
+                f"{', '.join(poses)}, and no spot in the free table ({regions}) is one the arm reaches")
+    return None
+
+
+def summary(cell: Cell, reason: dict[str, Any], refusals: Sequence[Refusal]) -> str:
+    """One line: ``NO PLAN for GOALS: CAUSE`` (phase 1: the goal that could not be met and its
+    nearest cause; phase 2: why no instance examined could be executed)."""
+    head = f"NO PLAN for {_goal_text(cell)}"
+    if reason.get("phase") == 2:
+        n = reason.get("instances_examined")
+        return f"{head}: none of the {n} plan instances examined can be executed: {reason.get('why', '')}"
+    cause = _cause(cell, reason.get("goal_data"), refusals)
+    n, bound = reason.get("max_actions"), reason.get("bound")
+    size = f" within {n} actions" if n is not None else ""
+    if isinstance(n, int) and isinstance(bound, int):
+        size += (f" (the last bound searched completely before the step budget ran out; the bound was {bound})"
+                 if n < bound else " (the bound on the plan size; --max-actions raises it)")
+    if cause is None:
+        return f"{head}{size}: a geometric goal could not be met ({reason.get('goal', '')}; --trace shows it)"
+    return f"{head}{size}: {cause}"
