@@ -84,13 +84,17 @@ def test_large_angle_in_radians_is_an_error_unless_allowed(tmp_path: Path) -> No
 # ---------------------------------------------------------------- no plan, in the user's terms
 
 NO_PLAN_LINES = {
-    "unreachable": "NO PLAN for assembled(peg, block) within 12 actions (the bound on the plan size; --max-actions raises it): peg at init_pos1 (tr1) is out of the "
+    "unreachable": "NO PLAN for assembled(peg, block) within 12 actions "
+                   "(the bound on the plan size; --max-actions raises it): peg at init_pos1 (tr1) is out of the "
                    "arm's reach: no grasp of it has a joint solution within puma762's limits (102.7 in from its "
                    "base)",
-    "collision_no_plan": "NO PLAN for assembled(peg, block) within 7 actions (the last bound searched completely before the step budget ran out; the bound was 12): every grasp of peg at init_pos1 (tr1) "
+    "collision_no_plan": "NO PLAN for assembled(peg, block) within 7 actions "
+                         "(the last bound searched completely before the step budget ran out; the bound was 12): "
+                         "every grasp of peg at init_pos1 (tr1) "
                          "that the arm reaches collides: 6 refused, most often tool_mount-shelf (4), "
                          "forearm-shelf (1), palm-table (1)",
-    "placement_trap": "NO PLAN for assembled(peg, block) within 12 actions (the bound on the plan size; --max-actions raises it): a placement is missing: block has to be "
+    "placement_trap": "NO PLAN for assembled(peg, block) within 12 actions "
+                      "(the bound on the plan size; --max-actions raises it): a placement is missing: block has to be "
                       "put down in one of its stable poses p2P1, p2P2, p2P4, p2P5, p2P6, and no spot in the free "
                       "table (placement_regions) is one the arm reaches",
     "enclosed_part": "NO PLAN for assembled(peg, block): none of the 8 plan instances examined can be executed: no "
