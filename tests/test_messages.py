@@ -84,17 +84,18 @@ def test_large_angle_in_radians_is_an_error_unless_allowed(tmp_path: Path) -> No
 # ---------------------------------------------------------------- no plan, in the user's terms
 
 NO_PLAN_LINES = {
-    "unreachable": "NO PLAN for assembled(peg, block) within 12 actions "
-                   "(the bound on the plan size; --max-actions raises it): peg at init_pos1 (tr1) is out of the "
+    "unreachable": "NO PLAN within 12 actions "
+                   "(the bound on the plan size; --max-actions raises it) for assembled(peg, block): peg at init_pos1 (tr1) is out of the "
                    "arm's reach: no grasp of it has a joint solution within puma762's limits (102.7 in from its "
                    "base)",
-    "collision_no_plan": "NO PLAN for assembled(peg, block) within 7 actions "
-                         "(the last bound searched completely before the step budget ran out; the bound was 12): "
+    "collision_no_plan": "NO PLAN within 7 actions "
+                         "(the last bound searched completely before the step budget ran out; the bound was 12) "
+                         "for assembled(peg, block): "
                          "every grasp of peg at init_pos1 (tr1) "
                          "that the arm reaches collides: 6 refused, most often tool_mount-shelf (4), "
                          "forearm-shelf (1), palm-table (1)",
-    "placement_trap": "NO PLAN for assembled(peg, block) within 12 actions "
-                      "(the bound on the plan size; --max-actions raises it): a placement is missing: block has to be "
+    "placement_trap": "NO PLAN within 12 actions "
+                      "(the bound on the plan size; --max-actions raises it) for assembled(peg, block): a placement is missing: block has to be "
                       "put down in one of its stable poses p2P1, p2P2, p2P4, p2P5, p2P6, and no spot in the free "
                       "table (placement_regions) is one the arm reaches",
     "enclosed_part": "NO PLAN for assembled(peg, block): none of the 8 plan instances examined can be executed: no "
@@ -137,3 +138,20 @@ def test_a_pair_every_refusal_shares_is_said_once() -> None:
                      "no collision-free IK for pickup(peg, p1G2) at tr1: fingers-block",
                      "no collision-free IK for pickup(block, p2G1) at tr2: only the shared pairs"]
     assert sum("upper_arm-table" in line for line in lines) == 1
+
+
+# ---------------------------------------------------------------- units of the bounds
+
+@pytest.mark.parametrize("name, unit", [("peg_in_block", "in"), ("shaft_in_bracket", "mm")])
+def test_every_bound_is_printed_with_its_unit(planner, name: str, unit: str) -> None:
+    import re
+
+    plan = planner.plan(KB / "problems" / f"{name}.yaml")
+    lines = [ln for ln in plan.trace.splitlines() if ": bound " in ln]
+    assert lines
+    for ln in lines:
+        squared = " centres:" in ln
+        u = f"{unit}^2" if squared else unit
+        assert re.search(rf": bound -?[0-9.]+ {re.escape(u)} [<>] -?[0-9.e-]+ {re.escape(u)}: ", ln), ln
+    assert any(" centres:" in ln for ln in lines)
+    assert all(v["unit"] in (unit, f"{unit}^2") for v in plan.instance["constraints"] if v["kind"] == "uncertainty")

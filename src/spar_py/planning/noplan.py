@@ -104,12 +104,12 @@ def _cause(cell: Cell, goal_data: Any, refusals: Sequence[Refusal]) -> str | Non
 
 
 def summary(cell: Cell, reason: dict[str, Any], refusals: Sequence[Refusal]) -> str:
-    """One line: ``NO PLAN for GOALS: CAUSE`` (phase 1: the goal that could not be met and its
+    """One line: ``NO PLAN within N actions (...) for GOALS: CAUSE`` (phase 1: the goal that could not be met and its
     nearest cause; phase 2: why no instance examined could be executed)."""
-    head = f"NO PLAN for {_goal_text(cell)}"
+    goals = f"for {_goal_text(cell)}"
     if reason.get("phase") == 2:
         n = reason.get("instances_examined")
-        return f"{head}: none of the {n} plan instances examined can be executed: {reason.get('why', '')}"
+        return f"NO PLAN {goals}: none of the {n} plan instances examined can be executed: {reason.get('why', '')}"
     cause = _cause(cell, reason.get("goal_data"), refusals)
     n, bound = reason.get("max_actions"), reason.get("bound")
     size = f" within {n} actions" if n is not None else ""
@@ -117,5 +117,5 @@ def summary(cell: Cell, reason: dict[str, Any], refusals: Sequence[Refusal]) -> 
         size += (f" (the last bound searched completely before the step budget ran out; the bound was {bound})"
                  if n < bound else " (the bound on the plan size; --max-actions raises it)")
     if cause is None:
-        return f"{head}{size}: a geometric goal could not be met ({reason.get('goal', '')}; --trace shows it)"
-    return f"{head}{size}: {cause}"
+        return f"NO PLAN{size} {goals}: a geometric goal could not be met ({reason.get('goal', '')})"
+    return f"NO PLAN{size} {goals}: {cause}"
