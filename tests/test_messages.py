@@ -85,9 +85,9 @@ def test_large_angle_in_radians_is_an_error_unless_allowed(tmp_path: Path) -> No
 
 NO_PLAN_LINES = {
     "unreachable": "NO PLAN within 12 actions "
-                   "(the bound on the plan size; --max-actions raises it) for assembled(peg, block): peg at init_pos1 (tr1) is out of the "
-                   "arm's reach: no grasp of it has a joint solution within puma762's limits (102.7 in from its "
-                   "base)",
+                   "(the bound on the plan size; --max-actions raises it) for assembled(peg, block): "
+                   "peg at init_pos1 (tr1) is out of the arm's reach: no grasp of it has a joint solution "
+                   "within puma762's limits (102.7 in from its base)",
     "collision_no_plan": "NO PLAN within 7 actions "
                          "(the last bound searched completely before the step budget ran out; the bound was 12) "
                          "for assembled(peg, block): "
@@ -95,9 +95,10 @@ NO_PLAN_LINES = {
                          "that the arm reaches collides: 6 refused, most often tool_mount-shelf (4), "
                          "forearm-shelf (1), palm-table (1)",
     "placement_trap": "NO PLAN within 12 actions "
-                      "(the bound on the plan size; --max-actions raises it) for assembled(peg, block): a placement is missing: block has to be "
-                      "put down in one of its stable poses p2P1, p2P2, p2P4, p2P5, p2P6, and no spot in the free "
-                      "table (placement_regions) is one the arm reaches",
+                      "(the bound on the plan size; --max-actions raises it) for assembled(peg, block): "
+                      "a placement is missing: block has to be put down in one of its stable poses "
+                      "p2P1, p2P2, p2P4, p2P5, p2P6, and no spot in the free table (placement_regions) is one the "
+                      "arm reaches",
     "enclosed_part": "NO PLAN for assembled(peg, block): none of the 8 plan instances examined can be executed: no "
                      "approach to action_2 (pickup(peg, p1G10)), blocked by finger_l and lid_e: the tool line is "
                      "blocked 2 along it",
