@@ -127,7 +127,7 @@ def test_the_prolog_goal_term_is_in_the_trace(planner) -> None:
 
 
 def test_a_pair_every_refusal_shares_is_said_once() -> None:
-    from spar_py.planning.noplan import collision_lines
+    from spar_py.planning.messages import collision_lines
     from spar_py.world.workspace import Refusal
 
     lines = collision_lines([Refusal("pickup(peg, p1G1) at tr1", (("upper_arm", "table"), ("palm", "block"))),
@@ -156,3 +156,38 @@ def test_every_bound_is_printed_with_its_unit(planner, name: str, unit: str) -> 
         assert re.search(rf": bound -?[0-9.]+ {re.escape(u)} [<>] -?[0-9.e-]+ {re.escape(u)}: ", ln), ln
     assert any(" centres:" in ln for ln in lines)
     assert all(v["unit"] in (unit, f"{unit}^2") for v in plan.instance["constraints"] if v["kind"] == "uncertainty")
+
+
+# ---------------------------------------------------------------- expected failures, --strict
+
+def test_strict_planner_raises_on_expected_failures_and_the_plan_says_how_many(planner) -> None:
+    from spar_py.core.errors import ExpectedFailures, SparError
+    from spar_py.planning.planner import Planner
+
+    hopeless = KB / "problems/hopeless_uncertainty.yaml"
+    plan = planner.plan(hopeless)  # not strict: returned, like a certain plan
+    assert plan.ok and plan.error_count == 3
+    strict = Planner(strict=True)
+    with pytest.raises(ExpectedFailures) as e:
+        strict.plan(hopeless)
+    assert isinstance(e.value, SparError) and e.value.plan.error_count == 3
+    assert str(e.value).startswith("EXPECTED FAILURES: 1 insertion and 2 other actions of this plan are expected "
+                                   "to fail (error count 3)")
+    assert strict.plan(KB / "problems/peg_in_block.yaml").error_count == 0  # a certain plan: returned
+
+
+def test_strict_cli_exits_1_and_the_first_line_counts_the_insertions() -> None:
+    import subprocess
+    import sys
+
+    def spar(*args: str) -> subprocess.CompletedProcess:
+        return subprocess.run([sys.executable, "-m", "spar_py", "plan", *args], capture_output=True, text=True,
+                              cwd=ROOT, timeout=300, check=False)
+
+    for strict, code in ((False, 0), (True, 1)):
+        r = spar("kb/problems/hopeless_uncertainty.yaml", *(["--strict"] if strict else []))
+        assert r.returncode == code, r.stderr
+        assert r.stdout.splitlines()[0].startswith("EXPECTED FAILURES: 1 insertion and 2 other actions")
+    assert r.stderr == "spar: --strict: a plan with expected failures (error count 3)\n"
+    r = spar("kb/problems/peg_in_block.yaml", "--strict")
+    assert r.returncode == 0 and r.stdout.startswith("PLAN ACTIONS")

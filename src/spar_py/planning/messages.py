@@ -1,4 +1,4 @@
-"""Why there is no plan, in the user's terms: one line from the no-plan reason and the run's log.
+"""The planner's lines in the user's terms: why there is no plan, and what a plan expects to fail.
 
 The planner's reason names the Prolog goal that failed deepest (``geo(goal_8, action_2,
 reachable(grasp_1, init_pos1), [part_location(peg, init_pos1)])``) or, in phase 2, the
@@ -6,6 +6,7 @@ instance failure. :func:`summary` turns it into one line that says which of the 
 could not be met and the nearest cause: a part out of the arm's reach, every grasp refused by
 collisions (with the pairs seen most often), no placement for a put-down. :func:`collision_lines`
 writes the run's collision refusals, a pair that every refusal shares said once.
+:func:`expected_failures` is the first line of a plan with actions planned for failure.
 """
 from __future__ import annotations
 
@@ -19,7 +20,7 @@ import numpy as np
 from spar_py.core.model import Cell
 from spar_py.world.workspace import Refusal, pair_text
 
-__all__ = ["collision_lines", "shared_pairs", "summary"]
+__all__ = ["collision_lines", "expected_failures", "shared_pairs", "summary"]
 
 #: Pairs named in a summary line at most.
 PAIRS_SHOWN = 3
@@ -119,3 +120,21 @@ def summary(cell: Cell, reason: dict[str, Any], refusals: Sequence[Refusal]) -> 
     if cause is None:
         return f"NO PLAN{size} {goals}: a geometric goal could not be met ({reason.get('goal', '')})"
     return f"NO PLAN{size} {goals}: {cause}"
+
+
+def expected_failures(instance: dict[str, Any] | None) -> str | None:
+    """The first line of a plan instance (its JSON) with actions planned for failure (error
+    count > 0): how many insertions (assemble actions) and other actions are expected to fail;
+    None for a certain plan or without an instance."""
+    if not instance or not instance.get("error_count"):
+        return None
+    names = {s["id"]: s["name"] for s in instance.get("steps", [])}
+    failing = [names.get(v["action"], "") for v in instance.get("verifications", [])]
+    k = sum(1 for n in failing if n == "assemble")
+    others = len(failing) - k
+    what = f"{k} insertion{'' if k == 1 else 's'}"
+    if others:
+        what += f" and {others} other action{'' if others == 1 else 's'}"
+    return (f"EXPECTED FAILURES: {what} of this plan {'is' if len(failing) == 1 else 'are'} expected to fail "
+            f"(error count {instance['error_count']}): each is verified and has a recovery (below); "
+            f"--strict exits 1 on such a plan")
