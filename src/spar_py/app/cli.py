@@ -226,6 +226,8 @@ def cmd_plan(args: argparse.Namespace) -> int:
     for d in picture_dirs:
         n = sum(1 for _, f in staged if f.parent == d)
         print(f"spar: wrote {n} pictures to {d}", file=sys.stderr)
+    if animate is not None:
+        print(f"spar: wrote the animation to {animate}", file=sys.stderr)
     if html is not None:
         print(f"spar: wrote the viewer to {html} ({page.steps} steps, {page.parts} parts)" if page is not None
               else f"spar: no plan: no viewer written to {html}", file=sys.stderr)
