@@ -191,3 +191,32 @@ def test_strict_cli_exits_1_and_the_first_line_counts_the_insertions() -> None:
     assert r.stderr == "spar: --strict: a plan with expected failures (error count 3)\n"
     r = spar("kb/problems/peg_in_block.yaml", "--strict")
     assert r.returncode == 0 and r.stdout.startswith("PLAN ACTIONS")
+
+
+def _geo(kind: str, args: list, context: list) -> dict:
+    """A phase-1 reason for a failed geometric goal, as spar.pl writes it (term data)."""
+    return {"max_actions": 6, "bound": 6, "goal": "geo(...)",
+            "goal_data": {"functor": "geo", "args": ["goal_9", "action_3", {"functor": kind, "args": args},
+                                                     [{"functor": f, "args": a} for f, a in context]]}}
+
+
+def test_each_kind_of_failed_goal_has_its_cause_in_the_users_terms() -> None:
+    from spar_py.planning.messages import summary
+    from spar_py.world.workspace import Refusal
+
+    cell = load_problem(KB / "problems/peg_in_block.yaml")
+    putdown = summary(cell, _geo("reachable", ["grasp_1", "pos_1"], [("holding", ["block", "grasp_1"])]), [])
+    assert putdown.endswith(": a placement is missing: no spot to put block down at pos_1 that the arm reaches "
+                            "with it in the hand")
+    member = summary(cell, _geo("member", ["grasp_2", ["p1G1"]], [("holding", ["peg", "grasp_2"])]), [])
+    assert member.endswith(": peg is held by none of the grasps the assembly leaves free")
+    refused = [Refusal("assemble(peg, block) with p1G17 at tr2", (("fingers", "block"),)),
+               Refusal("assemble(peg, block) with p1G19 at tr2", (("fingers", "block"), ("palm", "table")))]
+    mate = summary(cell, _geo("mate_reachable", ["grasp_2", "init_pos2", "trans_1"],
+                              [("holding", ["peg", "grasp_2"]), ("part_location", ["block", "init_pos2"])]), refused)
+    assert mate.endswith(": the arm cannot reach the assembly of peg with block: every solution collides, "
+                         "2 refused, most often fingers-block (2), palm-table (1)")
+    for line in (putdown, member, mate):
+        assert line.startswith("NO PLAN within 6 actions (the bound on the plan size; --max-actions raises it) "
+                               "for assembled(peg, block): ")
+        assert "geo(" not in line and "\n" not in line

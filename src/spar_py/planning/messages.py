@@ -74,24 +74,34 @@ def _args(term: Any) -> tuple[str, list[Any]]:
     return str(term), []
 
 
+def _refused_line(here: Sequence[Refusal]) -> str:
+    """``N refused, most often PAIR (n), ...``."""
+    return f"{len(here)} refused, most often {_pairs_counted(here)}"
+
+
 def _cause(cell: Cell, goal_data: Any, refusals: Sequence[Refusal]) -> str | None:
-    """The nearest cause of a phase-1 no plan from the failed goal's term (its constraint and
-    context), or None when the constraint is not one this knows."""
+    """The nearest cause of a phase-1 no plan from the failed goal's term (its constraint, of
+    kb/templates/actions.pl, and its context), or None when the term is not a geometric goal."""
     functor, args = _args(goal_data)
     if functor != "geo" or len(args) < 4:
         return None
     kind, cargs = _args(args[2])
-    where = {n: o for f, a in map(_args, args[3]) if f == "part_location" and len(a) == 2 for o, n in [a]}
-    if kind == "reachable" and len(cargs) == 2:
+    context = [_args(c) for c in args[3]] if isinstance(args[3], list) else []
+    where = {str(a[1]): str(a[0]) for f, a in context if f == "part_location" and len(a) == 2}
+    held = next((str(a[0]) for f, a in context if f == "holding" and a), None)
+    if kind == "reachable" and len(cargs) == 2 and held is not None:  # a put-down
+        return (f"a placement is missing: no spot to put {held} down at {cargs[1]} that the arm reaches "
+                f"with it in the hand")
+    if kind == "reachable" and len(cargs) == 2:  # a pickup
         posname = str(cargs[1])
         obj = where.get(posname)
         pos = next((p for p in cell.positions.values() if p.name == posname), None)
         if pos is None or obj is None:
-            return f"no grasp is reachable at {posname}"
+            return f"no grasp of {obj or 'the part'} at {posname} is reachable"
         here = [r for r in refusals if (m := _PICKUP.match(r.what)) and m["obj"] == obj and m["label"] == pos.label]
         if here:
             return (f"every grasp of {obj} at {posname} ({pos.label}) that the arm reaches collides: "
-                    f"{len(here)} refused, most often {_pairs_counted(here)}")
+                    f"{_refused_line(here)}")
         dist = float(np.linalg.norm(pos.T[:3, 3] - cell.robot.base[:3, 3]))
         return (f"{obj} at {posname} ({pos.label}) is out of the arm's reach: no grasp of it has a joint "
                 f"solution within {cell.robot.name}'s limits ({dist:.4g} {cell.unit} from its base)")
@@ -101,7 +111,14 @@ def _cause(cell: Cell, goal_data: Any, refusals: Sequence[Refusal]) -> str | Non
         regions = "placement_regions" if cell.placement_regions else "the table around the parts"
         return (f"a placement is missing: {obj} has to be put down in one of its stable poses "
                 f"{', '.join(poses)}, and no spot in the free table ({regions}) is one the arm reaches")
-    return None
+    if kind == "member" and held is not None:
+        return f"{held} is held by none of the grasps the assembly leaves free"
+    if kind == "mate_reachable" and held is not None:
+        fixed = next(iter(where.values()), "the other part")
+        here = [r for r in refusals if r.what.startswith(f"assemble({held}, {fixed})")]
+        tail = f": every solution collides, {_refused_line(here)}" if here else ""
+        return f"the arm cannot reach the assembly of {held} with {fixed}{tail}"
+    return f"the geometric condition {kind} of {args[1]} could not be met"
 
 
 def summary(cell: Cell, reason: dict[str, Any], refusals: Sequence[Refusal]) -> str:
@@ -117,8 +134,8 @@ def summary(cell: Cell, reason: dict[str, Any], refusals: Sequence[Refusal]) -> 
     if isinstance(n, int) and isinstance(bound, int):
         size += (f" (the last bound searched completely before the step budget ran out; the bound was {bound})"
                  if n < bound else " (the bound on the plan size; --max-actions raises it)")
-    if cause is None:
-        return f"NO PLAN{size} {goals}: a geometric goal could not be met ({reason.get('goal', '')})"
+    if cause is None:  # not a geometric goal: say so, the term is in --trace and reason.goal
+        return f"NO PLAN{size} {goals}: a goal could not be met (--trace names it)"
     return f"NO PLAN{size} {goals}: {cause}"
 
 
