@@ -246,7 +246,9 @@ plan_dict_(Problem, Opts, P1, Dict) :-
     (   Outcome = no_plan(N, Goal)
     ->  format(string(G), "~q", [Goal]),
         max_action_bound(P1, Max),
-        (   N < Max                     % the step budget ran out first
+        (   Opts.trace \== @(true)      % the user's line is the caller's (reason.summary)
+        ->  true
+        ;   N < Max                     % the step budget ran out first
         ->  format("NO PLAN within ~w actions (the last bound searched completely \c
                     before the step budget ran out; the bound was ~w): the goal \c
                     that could not be met: ~s~n", [N, Max, G])
@@ -254,7 +256,7 @@ plan_dict_(Problem, Opts, P1, Dict) :-
                     --max-actions raises it): the goal that could not be met: ~s~n", [N, G])
         ),
         term_data(Goal, GD),
-        Dict = _{outcome: "no_plan", reason: _{max_actions: N, goal: G, goal_data: GD},
+        Dict = _{outcome: "no_plan", reason: _{max_actions: N, bound: Max, goal: G, goal_data: GD},
                  partial: @(none), instance: @(none), timing: _{phase1_s: Phase1}}
     ;   Outcome = plan(Partial),
         partial_dict(Partial, PD),

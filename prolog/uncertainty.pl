@@ -483,8 +483,9 @@ print_verdict(Id0, C) :-
     (   get_dict(kind, C, geometric)
     ->  format("  ~w ~w: ~w (~w)~n", [Id, C.constraint, V, C.description])
     ;   readable(C.threshold, Th),
-        format("  ~w ~w: bound ~4f ~w ~w: ~w~n",
-               [Id, C.constraint, C.bound, C.sense, Th, V])
+        (   get_dict(unit, C, U0) -> format(string(U), " ~w", [U0]) ; U = "" ),
+        format("  ~w ~w: bound ~4f~s ~w ~w~s: ~w~n",
+               [Id, C.constraint, C.bound, U, C.sense, Th, U, V])
     ).
 
 %   readable(+X, -Y): X rounded to 9 decimals for printing (0.16, not the

@@ -327,7 +327,9 @@ def test_initial_objects_rest_on_the_table_where_the_problem_puts_them(cell: Cel
         assert math.isclose(pts[:, 2].min(), 0.0, abs_tol=1e-9)  # resting on z = 0
     block = object_points(cell.objects["block"], s0.poses["block"])
     assert np.allclose(block[:, :2].mean(axis=0), [30, 8])
-    assert s0.arm_note == "first configuration" and s0.held is None
+    assert s0.arm_note == "home" and s0.held is None
+    # no home in the cell, no motions in the plan: the documented default home, mid-range
+    assert np.allclose(s0.q, cell.robot.limits.mean(axis=1))
 
 
 def test_scenes_draw_the_poses_and_held_the_plan_gives(cell: Cell, plan: dict[str, Any]) -> None:
@@ -362,10 +364,10 @@ def test_the_arm_is_drawn_from_the_steps_joints(cell: Cell, plan: dict[str, Any]
             assert np.allclose(np.degrees(s.q), st["joints_deg"])
             assert np.allclose(s.frames, cell.robot.frames(s.q)) and s.arm_note == ""
             assert np.allclose(s.tool, st["tool_pose"], atol=1e-6)  # fk of the IK solution
-    # sensing: no joints, the arm stays where it was
+    # sensing: no joints, the arm at rest (home), as in the initial state
     assert steps[2]["joints_deg"] is None
-    assert np.array_equal(sc[3].q, sc[2].q) and sc[3].arm_note == "unchanged"
-    assert "(unchanged)" in sc[3].detail and sc[3].detail.startswith("sensing")
+    assert np.array_equal(sc[3].q, sc[0].q) and sc[3].arm_note == "home"
+    assert "(home)" in sc[3].detail and sc[3].detail.startswith("sensing")
 
 
 def test_held_grasp_is_the_one_that_puts_the_tool_where_it_is(cell: Cell) -> None:

@@ -15,7 +15,8 @@ from __future__ import annotations
 from importlib import import_module
 from typing import Any
 
-from spar_py.core.errors import InternalError, KBError, PlanningTimeout, PrologError, SparError, SparValueError
+from spar_py.core.errors import (ExpectedFailures, InternalError, KBError, PlanningTimeout, PrologError, SparError,
+                                 SparValueError)
 
 __version__ = "0.1.0"
 
@@ -27,7 +28,7 @@ _LAZY = {
 }
 
 __all__ = [
-    "Action", "Cell", "InternalError", "KBError", "Outcome", "Plan", "Planner", "PlanningTimeout",
+    "Action", "Cell", "ExpectedFailures", "InternalError", "KBError", "Outcome", "Plan", "Planner", "PlanningTimeout",
     "PrologError", "SparError", "SparValueError", "Step", "Verdict", "__version__", "load_problem",
 ]
 

@@ -170,6 +170,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
     guard = args.guard
     start_engine()  # Prolog loads the planner while the imports below run
     from spar_py.kb import load_problem
+    from spar_py.planning.messages import expected_failures
     from spar_py.planning.planner import Outcome, Planner, dumps
 
     cell = load_problem(args.problem, max_bytes=_max_input_bytes(args))
@@ -182,6 +183,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
     plan = planner.plan(cell, phase1_only=args.phase1_only, trace=args.trace)
     if plan.outcome is Outcome.TIMEOUT:
         raise PlanningTimeout(f"{cell.name}: no result within {args.timeout:g} s")
+    failing = expected_failures(plan.instance) if plan.ok else None  # the text plan's first line
     staged: list[tuple[Path, Path]] = []  # (temporary, final)
     for d in picture_dirs:
         from spar_py.pictures import write_pictures  # matplotlib: only with --png/--dot
@@ -214,16 +216,26 @@ def cmd_plan(args: argparse.Namespace) -> int:
             os.replace(tmp, final)
     if args.json and output is None:
         sys.stdout.write(plan.dumps() + "\n")
-    elif not args.json:  # JSON carries the colliding pairs in reason.collisions
-        for line in (plan.reason or {}).get("collisions", []) if plan.outcome is Outcome.NO_PLAN else []:
+    elif not args.json:  # JSON carries the colliding pairs in reason.collisions, the last line in reason.summary
+        no_plan = (plan.reason or {}) if plan.outcome is Outcome.NO_PLAN else {}
+        for line in no_plan.get("collisions", []):
             print(line)
+        if failing:
+            print(failing)
         sys.stdout.write(plan.trace)
+        if no_plan.get("summary"):
+            print(no_plan["summary"])
     for d in picture_dirs:
         n = sum(1 for _, f in staged if f.parent == d)
         print(f"spar: wrote {n} pictures to {d}", file=sys.stderr)
+    if animate is not None:
+        print(f"spar: wrote the animation to {animate}", file=sys.stderr)
     if html is not None:
         print(f"spar: wrote the viewer to {html} ({page.steps} steps, {page.parts} parts)" if page is not None
               else f"spar: no plan: no viewer written to {html}", file=sys.stderr)
+    if failing and args.strict:
+        print(f"spar: --strict: a plan with expected failures (error count {plan.error_count})", file=sys.stderr)
+        return EXIT_FAIL
     return EXIT_OK if plan.ok else EXIT_FAIL
 
 
@@ -405,7 +417,11 @@ def build_parser() -> argparse.ArgumentParser:
     plan.add_argument("problem", help="a problem file, e.g. kb/problems/peg_in_block.yaml")
     plan.add_argument("--json", action="store_true", help="print the plan as JSON (schema 3)")
     plan.add_argument("-o", "--output", help="write the JSON to this file (atomically)")
-    plan.add_argument("--trace", action="store_true", help="print the goal stacks at each step (Figs. 21-22)")
+    plan.add_argument("--trace", action="store_true", help="print the goal stacks at each step (Figs. 21-22) "
+                      "and, without a plan, the Prolog goal that could not be met")
+    plan.add_argument("--strict", action="store_true",
+                      help="exit 1 on a plan with expected failures (error count > 0: actions verified and "
+                           "recovered because their uncertainty-reduction preconditions do not hold)")
     plan.add_argument("--phase1-only", action="store_true", help="stop after the partial plan")
     plan.add_argument("--max-actions", type=_positive_int, metavar="N",
                       help="bound on the plan size (default: derived from the problem, twice its "
@@ -519,7 +535,8 @@ _positive_length = _positive("the cell's length unit")
 EXIT_CODES = """\
 exit codes:
   0    a plan (or every check passed)
-  1    no plan (or a check or regression failed)
+  1    no plan, or with --strict a plan with expected failures (or a check or
+       regression failed)
   2    bad input or arguments: a knowledge-base file, an option, an output that
        cannot be written
   3    internal error: a bug in spar-py (one line; please report it)

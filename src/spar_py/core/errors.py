@@ -54,3 +54,13 @@ class InternalError(SparError):
 
 class PlanningTimeout(SparError):
     """A planning query ran past its time limit."""
+
+
+class ExpectedFailures(SparError):
+    """A plan with actions planned for failure (error count > 0) where a certain plan was asked
+    for (``Planner(strict=True)``, ``spar plan --strict``); ``plan`` is the plan, ``line`` what
+    the text plan's first line says of it."""
+
+    def __init__(self, plan: object, line: str) -> None:
+        self.plan, self.line = plan, line
+        super().__init__(line)

@@ -25,11 +25,19 @@ from spar_py.kb.schema import read_kb
 from spar_py.kb.values import LOAD_MEMO_LIMIT, tm_node, units_of
 from spar_py.world.robots import GripperGeometry
 
-__all__ = ["DEFAULT_OPENING_MM", "DERIVABLE", "check_against_shape", "load_object"]
+__all__ = ["DEFAULT_OPENING_MM", "DERIVABLE", "PART_SIZE_MM", "REACH_RATIO", "check_against_shape", "load_object",
+           "part_size"]
 
 
 #: The entries an object model may leave out when it gives its geometry (derived: world.shapes).
 DERIVABLE = ("faces", "stable_poses", "grasps")
+
+
+#: The sizes (mm) a part's largest extent must lie between: a part outside them is almost
+#: always a file whose length unit is not its mesh's or shape's (a mesh in metres read as mm).
+PART_SIZE_MM = (1.0, 10_000.0)
+#: A part may be at most this many times smaller or larger than the arm's reach.
+REACH_RATIO = 1000.0
 
 
 #: The gripper opening assumed when an object model is derived without a robot (mm: the
@@ -60,7 +68,7 @@ def _faces(node: Node, known: set[Face] | None, min_len: int = 1) -> tuple[Face,
 
 def load_object(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, opening: float | None = None,
                 use_cache: bool = True, gripper: GripperGeometry | None = None,
-                memo: Memo | None = None) -> ObjectModel:
+                memo: Memo | None = None, reach: float | None = None) -> ObjectModel:
     """Load ``kb/objects/*.yaml`` converting lengths to ``unit``.
 
     ``faces``, ``stable_poses`` and ``grasps`` left out of a model with ``mesh:`` or
@@ -69,7 +77,10 @@ def load_object(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, o
     or, without one, a gripper of opening ``opening`` (cell unit; DEFAULT_OPENING_MM without a
     robot) with the default fingers; hand-written ones take precedence. Only a derivation
     imports trimesh. ``memo``: the tables of a load reading many files (:func:`tm_node`,
-    :func:`_grasp_frame`); the model is the same without.
+    :func:`_grasp_frame`); the model is the same without. A model with a mesh or shape whose
+    largest extent is out of proportion (PART_SIZE_MM, or REACH_RATIO times the arm's
+    ``reach``, cell unit, when given) is refused before anything is derived: its file's
+    length unit is likely not its geometry's.
     """
     root = read_kb(path, "object", max_bytes)
     name = root.key("object").label()
@@ -80,6 +91,7 @@ def load_object(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, o
     fnode = root.key("feature", required=False)
     feature_geo = _feature_geometry(fnode, scale) if fnode is not None else None
     if geometry is not None:
+        _check_size(root, Path(path), name, geometry, solids, unit, reach)
         geometry.face_names = face_names
         geometry.step = _grasp_step(root, rad_per)
     missing = [k for k in DERIVABLE if k not in root.value]
@@ -192,6 +204,72 @@ def _grasp_frame(euler: tuple[float, ...], memo: Memo | None) -> np.ndarray:
     if T is None:
         T = table[key] = eulerxyz(*euler)
     return T.copy()
+
+
+def part_size(geometry: Any, solids: tuple[Solid, ...]) -> float:
+    """The largest side of a part's axis-aligned bounding box (object frame, cell unit): from
+    the mesh file's vertices (world.shapes.mesh_bounds) or the positive primitives."""
+    if geometry.mesh_file is not None:
+        lo, hi = _mesh_bounds(Path(geometry.mesh_file))
+        return float((hi - lo).max()) * geometry.scale
+    lo = np.min([s.lo - (s.radius if s.kind == "cylinder" else 0.0) for s in solids], axis=0)
+    hi = np.max([s.hi + (s.radius if s.kind == "cylinder" else 0.0) for s in solids], axis=0)
+    return float((hi - lo).max())
+
+
+def _mesh_bounds(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """(min, max) of a mesh file's vertices (its own unit), read without building the mesh: a
+    binary or ASCII STL or an OBJ by their vertex records, any other through trimesh."""
+    data = path.read_bytes()
+    suffix = path.suffix.lower()
+    pts: np.ndarray | None = None
+    if suffix == ".stl" and len(data) >= 84:
+        n = int.from_bytes(data[80:84], "little")
+        if len(data) == 84 + 50 * n and n > 0:  # binary: 50-byte records, normal then 3 vertices
+            rec = np.frombuffer(data, dtype=np.dtype([("n", "<f4", 3), ("v", "<f4", (3, 3)), ("a", "<u2")]),
+                                count=n, offset=84)
+            pts = rec["v"].reshape(-1, 3).astype(float)
+    if pts is None and suffix in (".stl", ".obj"):
+        word = b"vertex" if suffix == ".stl" else b"v"
+        rows = [line.split()[1:4] for line in data.splitlines() if line.split()[:1] == [word]]
+        try:
+            pts = np.array(rows, float) if rows else None
+        except ValueError:
+            pts = None
+    if pts is None or pts.ndim != 2 or pts.shape[1] != 3:
+        import trimesh  # a PLY, or a file the readers above do not take (trimesh then says why)
+
+        try:
+            return tuple(np.asarray(trimesh.load(str(path), force="mesh").bounds, float))  # type: ignore[return-value]
+        except Exception as e:  # trimesh raises many kinds for a bad file
+            raise KBError(str(path), "", f"a readable STL, OBJ or PLY mesh ({type(e).__name__})") from None
+    return pts.min(axis=0), pts.max(axis=0)
+
+
+def _check_size(root: Node, path: Path, name: str, geometry: Any, solids: tuple[Solid, ...], unit: str,
+                reach: float | None) -> None:
+    """KBError when the part is under 1 mm or over 10 m (PART_SIZE_MM), or REACH_RATIO times
+    smaller or larger than the arm's ``reach`` (cell unit): naming the file, the part, its
+    size and the file's length unit, and asking whether that unit is right."""
+    size = part_size(geometry, solids)
+    mm = size * LENGTH_UNITS[unit]
+    lo_mm, hi_mm = PART_SIZE_MM
+    why = None
+    if mm < lo_mm:
+        why = f"under {lo_mm:g} mm"
+    elif mm > hi_mm:
+        why = f"over {hi_mm / 1000:g} m"
+    elif reach and size < reach / REACH_RATIO:
+        why = f"{REACH_RATIO:g}x smaller than the arm's reach ({reach:.4g} {unit})"
+    elif reach and size > reach * REACH_RATIO:
+        why = f"{REACH_RATIO:g}x larger than the arm's reach ({reach:.4g} {unit})"
+    if why is None:
+        return
+    file_unit = root.key("units").key("length").value
+    key = "mesh" if geometry.mesh_file is not None else "shape"
+    raise KBError(str(path), key, f"a part of a size in proportion to the cell: {name} is {size:.3g} {unit} across, "
+                  f"{why}; is the file's length unit ({file_unit}, units: {{length: {file_unit}}}) "
+                  f"the unit its {key} is drawn in?")
 
 
 def _geometry_error(path: str | Path, geometry: Any, e: Exception) -> KBError:

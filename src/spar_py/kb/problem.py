@@ -37,13 +37,26 @@ __all__ = ["GOAL_SHAPES", "SENSOR_NAMES", "load_problem"]
 SENSOR_NAMES = ("dense_range_scan",)
 
 
-def _bounds(node: Node, len_scale: float, rad_per: float) -> Bounds:
-    """An uncertainty box ``{dx, dy, dz, dtheta}`` (each ``[lo, hi]``), lengths times ``len_scale``, angles in rad."""
+#: An angle bound beyond this (rad: 90 deg) in a file whose angle unit is rad is refused unless
+#: the file says ``allow_large_angles: true``: it is almost always degrees written as radians.
+LARGE_ANGLE = math.pi / 2
+
+
+def _bounds(node: Node, len_scale: float, rad_per: float, large_ok: bool = True) -> Bounds:
+    """An uncertainty box ``{dx, dy, dz, dtheta}`` (each ``[lo, hi]``), lengths times ``len_scale``, angles in
+    rad. Without ``large_ok``, a ``dtheta`` end beyond LARGE_ANGLE in a file in radians is a KBError."""
     def iv(k: str, s: float) -> tuple[float, float]:
         lo, hi = node.key(k).interval()
         return lo * s, hi * s
 
-    return Bounds(iv("dx", len_scale), iv("dy", len_scale), iv("dz", len_scale), iv("dtheta", rad_per))
+    dtheta = iv("dtheta", rad_per)
+    big = max(abs(v) for v in dtheta)
+    if not large_ok and rad_per == 1.0 and big > LARGE_ANGLE:
+        n = node.key("dtheta")
+        raise n.fail(f"an angle bound within 90 deg (the file's angle unit is rad: {big:g} rad is "
+                     f"{math.degrees(big):.0f} deg; were degrees meant? allow_large_angles: true allows it)",
+                     show(n.value))
+    return Bounds(iv("dx", len_scale), iv("dy", len_scale), iv("dz", len_scale), dtheta)
 
 
 GOAL_SHAPES: dict[str, tuple[int, ...]] = {"assembled": (5, 2), "part_location": (2,)}
@@ -132,10 +145,10 @@ def _same_stable_pose(R_abs: np.ndarray, R_pose: np.ndarray, memo: Memo | None) 
 
 
 def _objects(root: Node, base: Path, unit: str, max_bytes: int, opening: float | None = None,
-             gripper: GripperGeometry | None = None, memo: Memo | None = None
+             gripper: GripperGeometry | None = None, memo: Memo | None = None, reach: float | None = None
              ) -> tuple[dict[str, ObjectModel], dict[str, Position], list[Path]]:
     """The problem's objects (models loaded), their initial positions and the model files
-    (``memo``: the load's tables, :func:`load_object`)."""
+    (``memo``: the load's tables, ``reach`` the arm's length: :func:`load_object`)."""
     objects: dict[str, ObjectModel] = {}
     positions: dict[str, Position] = {}
     files: list[Path] = []
@@ -143,7 +156,8 @@ def _objects(root: Node, base: Path, unit: str, max_bytes: int, opening: float |
         mnode = onode.key("model")
         mpath = _ref_path(mnode, base, "object")
         with _referenced(mnode, "object"):
-            model = load_object(mpath, unit, max_bytes, opening=opening, gripper=gripper, memo=memo)
+            model = load_object(mpath, unit, max_bytes, opening=opening, gripper=gripper, memo=memo,
+                                reach=reach)
         if model.name != oname:
             raise mnode.fail(f"the model of {oname}", f"the model of {model.name}")
         objects[oname] = model
@@ -155,8 +169,10 @@ def _objects(root: Node, base: Path, unit: str, max_bytes: int, opening: float |
     return objects, positions, files
 
 
-def _object_bounds(unc: Node, objects: Mapping[str, ObjectModel], rad_per: float) -> dict[str, Bounds]:
-    """``uncertainty.objects``: bounds for every object of the cell, and only for them."""
+def _object_bounds(unc: Node, objects: Mapping[str, ObjectModel], rad_per: float,
+                   large_ok: bool = True) -> dict[str, Bounds]:
+    """``uncertainty.objects``: bounds for every object of the cell, and only for them (``large_ok``:
+    :func:`_bounds`)."""
     onodes = unc.key("objects")
     out: dict[str, Bounds] = {}
     for oname, bnode in onodes.items():
@@ -164,15 +180,16 @@ def _object_bounds(unc: Node, objects: Mapping[str, ObjectModel], rad_per: float
             near = did_you_mean(oname, objects)
             raise bnode.fail(f"bounds of a known object ({', '.join(sorted(objects))})",
                              show(oname) + (f"; did you mean {near}?" if near else ""))
-        out[oname] = _bounds(bnode, 1.0, rad_per)
+        out[oname] = _bounds(bnode, 1.0, rad_per, large_ok)
     for oname in objects:
         if oname not in out:
             raise onodes.fail(f"bounds for every object (missing {oname})")
     return out
 
 
-def _sensors(root: Node, rad_per: float) -> dict[str, Sensor]:
-    """``sensors``: each named after a sensing action of kb/templates/sensing.pl (SENSOR_NAMES)."""
+def _sensors(root: Node, rad_per: float, large_ok: bool = True) -> dict[str, Sensor]:
+    """``sensors``: each named after a sensing action of kb/templates/sensing.pl (SENSOR_NAMES; ``large_ok``:
+    :func:`_bounds`)."""
     snode = root.key("sensors", required=False)
     out: dict[str, Sensor] = {}
     for sname, s in snode.items() if snode is not None else []:
@@ -180,7 +197,7 @@ def _sensors(root: Node, rad_per: float) -> dict[str, Sensor]:
             near = did_you_mean(sname, SENSOR_NAMES)
             raise UnknownKeyError(s.file, s.path, near) if near else s.fail(
                 f"a sensing action ({', '.join(SENSOR_NAMES)})", show(sname))
-        out[sname] = Sensor(sname, _bounds(s, 1.0, rad_per))
+        out[sname] = Sensor(sname, _bounds(s, 1.0, rad_per, large_ok))
     return out
 
 
@@ -359,13 +376,18 @@ def load_problem(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> Cell:
         with _referenced(rnode, "robot"):
             robot = load_robot(rpath, unit=unit, max_bytes=max_bytes)
     memo = Memo()  # this load's tables: the object files of a problem repeat their transforms
+    arm = float(np.abs(robot.dh[:, 1]).sum() + np.abs(robot.dh[:, 2]).sum() + np.linalg.norm(robot.tool[:3, 3]))
     objects, positions, model_files = _objects(root, base, unit, max_bytes, robot.finger_separation, robot.gripper,
-                                               memo)
+                                               memo, arm)
     grip = root.key("gripper").choice(("open", "closed"))
     unc = root.key("uncertainty")
-    man = _bounds(unc.key("manipulator"), 1.0, rad_per)
-    obj_bounds = _object_bounds(unc, objects, rad_per)
-    sensors = _sensors(root, rad_per)
+    lnode = root.key("allow_large_angles", required=False)
+    if lnode is not None and not isinstance(lnode.value, bool):
+        raise lnode.fail("true or false (allow angle bounds over 90 deg in a file in radians)", show(lnode.value))
+    large_ok = bool(lnode is not None and lnode.value)
+    man = _bounds(unc.key("manipulator"), 1.0, rad_per, large_ok)
+    obj_bounds = _object_bounds(unc, objects, rad_per, large_ok)
+    sensors = _sensors(root, rad_per, large_ok)
     transforms = {k: tm_node(n.key("tm"), 1.0, memo)
                   for k, n in (root.key("transforms", False) or Node("", "", {})).items()}
     vectors = {k: n.vector(3) for k, n in (root.key("vectors", False) or Node("", "", {})).items()}

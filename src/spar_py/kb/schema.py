@@ -152,7 +152,7 @@ PROBLEM_SCHEMA = keys(
     {"sensors": Named(BOUNDS_SCHEMA), "transforms": Named(keys(["tm"])), "vectors": Named(LEAF),
      "placement_regions": Each(keys(["x", "y"])),
      "obstacles": Each(OBSTACLE_SCHEMA), "table": keys(["x", "y"]), "clearance": LEAF, "collision": LEAF,
-     "home": LEAF, "motion": LEAF},
+     "home": LEAF, "motion": LEAF, "allow_large_angles": LEAF},
 )
 
 

@@ -459,7 +459,9 @@ def _refined(cache: CellCache, out: list[dict[str, Any]], worlds: list[World]) -
         for v in rec["verdicts"]:
             if v["kind"] == "uncertainty":
                 c, satisfied = next(pairs)
-                v = {**ur.evaluate(c, after.unc.registry, memo=cache.memo).as_dict(), "kind": "uncertainty"}
+                unit = cache.cell.unit if c.power == 1 else f"{cache.cell.unit}^{c.power}"
+                v = {**ur.evaluate(c, after.unc.registry, memo=cache.memo).as_dict(), "kind": "uncertainty",
+                     "unit": unit}
                 if v["satisfied"] != satisfied:  # cannot happen (Bounder.bounds' beat): say so if it does
                     raise AssertionError(f"phase 2: {c.action} {c.name}: the refined verdict differs")
             verdicts.append(v)

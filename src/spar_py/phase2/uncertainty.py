@@ -389,6 +389,9 @@ class Constraint:
     #: constraints that differ by a constant (the pickup pairs p1_ci, p2_ci) share one
     #: compiled bounder and one search
     core: tuple[ca.SX, float] | None = field(default=None, compare=False, repr=False)
+    #: The power of the length ``expr`` is: 1 a length (the pickup contacts), 2 a squared
+    #: length (the assemble check's |C_h - C_p|^2); its bound's unit is the cell's to it.
+    power: int = 1
 
     def __post_init__(self) -> None:
         if self.sense not in (">", "<"):
@@ -488,7 +491,7 @@ def assemble_constraints(state: WorldState, peg: str, hole: str, T_a: np.ndarray
     note = "" if margin > 0 else f" (impossible: hole radius {hole_feature.radius} <= peg radius {peg_feature.radius})"
     return [Constraint(action, "centres", d2, "<", threshold,
                        f"|C_h - C_p|^2 < (R_h - R_p)^2: {peg}'s tip centre within {margin:g} "
-                       f"of {hole}'s hole centre{note}", bounding, key=ckey)]
+                       f"of {hole}'s hole centre{note}", bounding, key=ckey, power=2)]
 
 
 #: Entries of a cell cache's memo table ``uncertainty.built`` (:func:`_built`) and

@@ -164,11 +164,11 @@ def write_animation(cell: Cell, plan: Any, path: str | Path, max_frames: int = M
             _draw_3d(ax, cell, s, fr)
             if obstacles:
                 ax.add_collection3d(Poly3DCollection(obstacles, facecolor="#9a9a9a", alpha=0.45,
-                                                     edgecolor="none"), autolim=False)
+                                                     edgecolor="none", axlim_clip=True), autolim=False)
             if s.q is not None:
                 links = [t for _, tris in arm_faces(cell, s.q, _width(cell, s), scene, hulls) for t in tris]
                 ax.add_collection3d(Poly3DCollection(links, facecolor=LINK_COLOUR, alpha=0.55, edgecolor="none",
-                                                     zorder=4), autolim=False)
+                                                     zorder=4, axlim_clip=True), autolim=False)
             ax.set_title(s.title, fontsize=8)
             writer.grab_frame()
     plt.close(fig)

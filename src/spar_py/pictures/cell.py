@@ -31,7 +31,7 @@ import numpy as np
 from spar_py.core.errors import SparValueError
 from spar_py.core.geometry import convex_hull_2d
 from spar_py.core.units import from_mm
-from spar_py.pictures.scene import MIN_SIZE_MM, Scene, part_model, scenes
+from spar_py.pictures.scene import AT_REST, MIN_SIZE_MM, Scene, part_model, scenes
 from spar_py.world.collision import TOOL, scene_for
 from spar_py.world.shapes import part_mesh
 
@@ -56,8 +56,13 @@ OBSTACLE_COLOUR = "#7f7f7f"
 CAPSULE_SIDES, CAPSULE_RINGS = 16, 4
 HOLE_COLOUR = "#1a1a1a"
 VIEW_3D = (22.0, -58.0)  # elevation, azimuth (deg) of the 3-D panel
+ZOOM_3D = 1.1  # the 3-D panel's box in its axes (matplotlib's set_box_aspect zoom)
 TOP_EYE = (0.0, 0.0, 1.0)  # the top view looks down from +z
 SIDE_EYE = (0.0, -1.0, 0.0)  # the side view looks from -y
+
+#: The PNG's text chunks: none that names the matplotlib version, so the same picture is the same
+#: bytes whichever matplotlib drew it.
+PNG_METADATA: dict[str, Any] = {"Software": None}
 
 Projection = Callable[[np.ndarray], tuple[np.ndarray, ...]]  # (k, 3) world points -> plot arguments
 
@@ -307,32 +312,36 @@ def _part_points(cell: Cell, all_scenes: Sequence[Scene]) -> list[np.ndarray]:
             if part_model(k) in cell.objects]
 
 
-def _table(cell: Cell, all_scenes: Sequence[Scene]) -> tuple[float, float, float, float]:
-    """The table top (x0, x1, y0, y1 at z = 0, cell unit): every part of every scene, padded
-    by a fifth of their spread or the largest object's bounding radius, whichever is more."""
-    objs = _part_points(cell, all_scenes)
-    op = np.vstack(objs) if objs else np.zeros((1, 3))
-    span = float(max(np.ptp(op[:, 0]), np.ptp(op[:, 1])))
-    size = max((m.bounding_radius() for m in cell.objects.values()), default=from_mm(cell.unit, MIN_SIZE_MM))
-    pad = max(0.2 * span, size, from_mm(cell.unit, 1e-3))  # never below 1 micrometre
-    return (float(op[:, 0].min() - pad), float(op[:, 0].max() + pad),
-            float(op[:, 1].min() - pad), float(op[:, 1].max() + pad))
+#: The work box of the pictures: the parts' and obstacles' box grown on every side by this
+#: fraction of its largest side, and at least by WORK_PAD_SIZES times the largest part's size.
+WORK_PAD, WORK_PAD_SIZES = 0.1, 1.0
+#: Above the parts the box reaches this many gripper lengths (finger and palm): the arm over the work.
+REACH_OVER = 2.5
+
+
+def _table(cell: Cell, lo: np.ndarray, hi: np.ndarray) -> tuple[float, float, float, float]:
+    """The table top drawn (x0, x1, y0, y1 at z = 0, cell unit): the cell's ``table:`` extent,
+    else the whole view (without ``table:`` the table is the whole plane), cut to the view box
+    ``lo``..``hi`` (a polygon is drawn whole or not at all in the 3-D panel)."""
+    t = cell.table if cell.table is not None else (lo[0], hi[0], lo[1], hi[1])
+    x0, x1 = max(float(t[0]), float(lo[0])), min(float(t[1]), float(hi[0]))
+    y0, y1 = max(float(t[2]), float(lo[1])), min(float(t[3]), float(hi[1]))
+    return (x0, max(x0, x1), y0, max(y0, y1))
 
 
 def extent(cell: Cell, all_scenes: Sequence[Scene]) -> Extent:
-    """Table and axis box shared by all pictures of a plan: parts, table, pedestal, obstacles
-    and every arm configuration with its link shapes, with a 5 % margin (cell unit)."""
-    table = _table(cell, all_scenes)
-    base = np.asarray(cell.robot.base, float)[:3, 3]
-    pts = [np.array([[table[0], table[2], 0.0], [table[1], table[3], 0.0], base, [base[0], base[1], 0.0]])]
-    pts += _part_points(cell, all_scenes)
-    pts += [p for s in all_scenes if (p := _arm_points(cell, s)) is not None]
-    pts += [sh.points for sh in obstacle_shapes(cell)]
-    pts += [sh.points for s in all_scenes for sh in robot_shapes(cell, s)]
-    allp = np.vstack(pts)
+    """The view shared by all pictures of a plan, zoomed to the work: the parts of every scene
+    and the obstacles, padded (WORK_PAD, WORK_PAD_SIZES), from the table top up to REACH_OVER
+    gripper lengths over the highest part; the arm is drawn where it enters that box. The table
+    is its ``table:`` extent cut to the box (cell unit)."""
+    pts = _part_points(cell, all_scenes) + [sh.points for sh in obstacle_shapes(cell)]
+    allp = np.vstack(pts) if pts else np.asarray(cell.robot.base, float)[None, :3, 3]
     lo, hi = allp.min(axis=0), allp.max(axis=0)
-    m = 0.05 * float(max(hi - lo))
-    return Extent(table, lo - m, hi + m)
+    size = max((m.bounding_radius() for m in cell.objects.values()), default=from_mm(cell.unit, MIN_SIZE_MM))
+    pad = max(WORK_PAD * float(max(hi - lo)), WORK_PAD_SIZES * size, from_mm(cell.unit, 1e-3))
+    lo = np.array([lo[0] - pad, lo[1] - pad, min(0.0, float(lo[2])) - 0.02 * pad])
+    hi = np.array([hi[0] + pad, hi[1] + pad, float(hi[2]) + REACH_OVER * 2 * _finger_length(cell)])
+    return Extent(_table(cell, lo, hi), lo, hi)
 
 
 # =========================================================================== painting
@@ -367,8 +376,20 @@ def _paint_list(cell: Cell, s: Scene, eye: Sequence[float]) -> list[tuple[str, n
             if float(nw @ eye) > 1e-6:
                 cw = T[:3, :3] @ c + T[:3, 3] + 1e-3 * size * nw
                 items.append((float(cw @ eye), "hole", _disc(cw, nw, r), HOLE_COLOUR))
-    items.sort(key=lambda t: t[0])
+    items.sort(key=lambda t: _depth_key(t[0], size))
     return [(k, p, col) for _, k, p, col in items]
+
+
+#: Depths (along the eye) closer than this fraction of the largest part's size are a tie.
+DEPTH_TIE = 1e-6
+
+
+def _depth_key(depth: float, size: float) -> float:
+    """The painter's sort key of a depth: rounded to DEPTH_TIE x ``size``, so that items at the
+    same depth (a peg centred in its hole) keep the order they were listed in (a stable sort)
+    whatever the last bits of their arithmetic, and every machine paints them alike."""
+    q = DEPTH_TIE * max(size, 1e-12)
+    return round(depth / q) * q
 
 
 #: Where the light comes from when a mesh's facets are shaded (world frame, towards the light).
@@ -406,25 +427,27 @@ def _view_eye(elev_deg: float, azim_deg: float) -> np.ndarray:
 
 
 def _arm_alpha(s: Scene) -> float:
-    return 0.35 if s.arm_note == "first configuration" else 1.0
+    return 0.35 if s.arm_note == AT_REST else 1.0
 
 
-def _draw_arm(ax: Any, cell: Cell, s: Scene, proj: Projection, zorder: float = 3, shapes: bool = False) -> None:
+def _draw_arm(ax: Any, cell: Cell, s: Scene, proj: Projection, zorder: float = 3, shapes: bool = False,
+              **clip: Any) -> None:
     """The pedestal (unless its link shape is drawn), the arm skeleton over the link shapes,
-    and the gripper as lines where its boxes are not drawn (``shapes``: they are)."""
+    and the gripper as lines where its boxes are not drawn (``shapes``: they are); ``clip``:
+    the 3-D panel's ``axlim_clip=True`` (hide what leaves the view box)."""
     base = np.asarray(cell.robot.base, float)[:3, 3]
     if not shapes or not any(b.frame == 0 for b in cell.robot.links):
         ax.plot(*proj(np.array([[base[0], base[1], 0.0], base])), color="#888888", lw=7, solid_capstyle="butt",
-                zorder=zorder)
+                zorder=zorder, **clip)
     pts = _arm_points(cell, s)
     if pts is None or s.tool is None:
         return
     ax.plot(*proj(pts), color=ARM_COLOUR, lw=1.6 if shapes else 3.5, alpha=_arm_alpha(s), marker="o",
-            ms=3 if shapes else 4, solid_capstyle="round", zorder=zorder, gid="skeleton")
+            ms=3 if shapes else 4, solid_capstyle="round", zorder=zorder, gid="skeleton", **clip)
     if shapes:
         return
     for seg in gripper_segments(s.tool, _grip_width(cell, s), _finger_length(cell)):
-        ax.plot(*proj(seg), color=GRIPPER_COLOUR, lw=2.4, alpha=_arm_alpha(s), zorder=zorder + 0.1)
+        ax.plot(*proj(seg), color=GRIPPER_COLOUR, lw=2.4, alpha=_arm_alpha(s), zorder=zorder + 0.1, **clip)
 
 
 def _items(cell: Cell, s: Scene, eye: Sequence[float]) -> list[tuple[str, list[np.ndarray], np.ndarray, str, float,
@@ -440,7 +463,8 @@ def _items(cell: Cell, s: Scene, eye: Sequence[float]) -> list[tuple[str, list[n
                       (kind, faces, p, colour, 0.92 if kind == "solid" else 1.0, f"part:{kind}")))
     for sh in obstacle_shapes(cell) + robot_shapes(cell, s):
         items.append((float(sh.points.mean(axis=0) @ e), ("shape", sh.faces, sh.points, sh.colour, sh.alpha, sh.gid)))
-    items.sort(key=lambda t: t[0])
+    size = max((m.bounding_radius() for m in cell.objects.values()), default=from_mm(cell.unit, MIN_SIZE_MM))
+    items.sort(key=lambda t: _depth_key(t[0], size))
     return [it for _, it in items]
 
 
@@ -452,26 +476,39 @@ def _draw_3d(ax: Any, cell: Cell, s: Scene, fr: Extent) -> None:
     ax.computed_zorder = False
     x0, x1, y0, y1 = fr.table
     ax.add_collection3d(Poly3DCollection([np.array([[x0, y0, 0], [x1, y0, 0], [x1, y1, 0], [x0, y1, 0]])],
-                                         facecolor=TABLE_COLOUR, alpha=0.35, edgecolor="#8a7a5a", zorder=1),
+                                         facecolor=TABLE_COLOUR, alpha=0.35, edgecolor="#8a7a5a", zorder=1,
+                                         axlim_clip=True),
                         autolim=False)
     for k, (kind, faces, _, colour, alpha, gid) in enumerate(_items(cell, s, _view_eye(*VIEW_3D))):
         edge = colour if kind == "facet" else "#555555" if kind == "shape" else "#222222"
         ax.add_collection3d(Poly3DCollection(faces, facecolor=colour, alpha=alpha, edgecolor=edge,
                                              linewidths=0.1 if kind == "shape" else 0.3, zorder=2 + k * 1e-3,
-                                             gid=gid),
+                                             gid=gid, axlim_clip=True),
                             autolim=False)
-    _draw_arm(ax, cell, s, lambda p: (p[:, 0], p[:, 1], p[:, 2]), zorder=3, shapes=True)
-    c, h = (fr.lo + fr.hi) / 2, float(max(fr.hi - fr.lo)) / 2
-    ax.set_xlim(c[0] - h, c[0] + h)
-    ax.set_ylim(c[1] - h, c[1] + h)
-    z0 = max(c[2] - h, fr.lo[2])
-    ax.set_zlim(z0, z0 + 2 * h)
-    ax.set_box_aspect((1, 1, 1), zoom=1.0)
+    _draw_arm(ax, cell, s, lambda p: (p[:, 0], p[:, 1], p[:, 2]), zorder=3, shapes=True, axlim_clip=True)
+    ax.set_xlim(fr.lo[0], fr.hi[0])
+    ax.set_ylim(fr.lo[1], fr.hi[1])
+    ax.set_zlim(fr.lo[2], fr.hi[2])
+    ax.set_box_aspect(tuple(fr.hi - fr.lo), zoom=ZOOM_3D)  # equal scaling on the three axes
     ax.view_init(elev=VIEW_3D[0], azim=VIEW_3D[1])
+    from matplotlib.ticker import MaxNLocator
+
+    for axis, n in ((ax.xaxis, 4), (ax.yaxis, 5), (ax.zaxis, 5)):
+        axis.set_major_locator(MaxNLocator(n, steps=[1, 2, 5, 10]))
     u = cell.unit
     ax.set_xlabel(f"x ({u})")
     ax.set_ylabel(f"y ({u})")
     ax.set_zlabel(f"z ({u})")
+
+
+def _tick_step(lo: float, hi: float) -> float:
+    """The largest round step (1, 2 or 5 times a power of ten) that puts at least two ticks in
+    ``lo``..``hi``: a narrow panel gets few, readable tick labels."""
+    power = 10.0 ** math.floor(math.log10(max(hi - lo, 1e-12)))
+    for step in (5 * power, 2 * power, power, power / 2, power / 5):
+        if math.floor(hi / step) - math.ceil(lo / step) + 1 >= 2:
+            return step
+    return power / 10
 
 
 def _draw_2d(ax: Axes, cell: Cell, s: Scene, fr: Extent, axes: tuple[int, int], eye: Sequence[float]) -> None:
@@ -492,6 +529,11 @@ def _draw_2d(ax: Axes, cell: Cell, s: Scene, fr: Extent, axes: tuple[int, int], 
     ax.set_xlim(fr.lo[i], fr.hi[i])
     ax.set_ylim(fr.lo[j], fr.hi[j])
     ax.set_aspect("equal", adjustable="box", anchor="W")
+    from matplotlib.ticker import MaxNLocator, MultipleLocator
+
+    ax.xaxis.set_major_locator(MultipleLocator(_tick_step(float(fr.lo[i]), float(fr.hi[i]))))
+    ax.tick_params(axis="x", labelsize=8)
+    ax.yaxis.set_major_locator(MaxNLocator(6, steps=[1, 2, 5, 10]))
     names = "xyz"
     ax.set_xlabel(f"{names[i]} ({cell.unit})")
     ax.set_ylabel(f"{names[j]} ({cell.unit})")
@@ -561,7 +603,7 @@ def cell_figure(cell: Cell, s: Scene, fr: Extent, path: str | Path) -> Path:
 
     fig = draw_figure(cell, s, fr)
     try:
-        fig.savefig(path, dpi=100, facecolor="white")
+        fig.savefig(path, dpi=100, facecolor="white", metadata=PNG_METADATA)
     finally:
         plt.close(fig)
     return Path(path)

@@ -46,7 +46,7 @@ class Scene:
     """The work cell at one step (index 0 = before the plan): titles, the parts' world poses
     (4x4, cell unit), the held object and the grasp it is held by, the arm's joints q (6,)
     rad and its 8 world frames (``robot.frames(q)``; None when no configuration is known),
-    and a note on the arm (``"first configuration"``, ``"unchanged"`` or "")."""
+    and a note on the arm (``"home"`` (at rest: :func:`_home`), ``"unchanged"`` or "")."""
 
     index: int
     title: str
@@ -124,6 +124,24 @@ def _joints(cell: Cell, step: Mapping[str, Any] | None) -> tuple[np.ndarray | No
     return q, cell.robot.frames(q)
 
 
+#: The arm note of a scene with the arm at rest (:func:`_home`).
+AT_REST = "home"
+
+
+def _home(cell: Cell, plan: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray]:
+    """(q rad, robot.frames(q)) of the arm at rest: the home the plan's motions start from
+    (``instance.motion.home_deg``), else the cell's ``home``, else the documented default home,
+    the middle of the joint ranges (world.motion.default_home)."""
+    motion = instance(plan).get("motion") or {}
+    if motion.get("home_deg") is not None:
+        q = np.radians(np.asarray(motion["home_deg"], float))
+    elif cell.home is not None:
+        q = np.asarray(cell.home, float)
+    else:
+        q = np.asarray(cell.robot.limits, float).mean(axis=1)
+    return q, cell.robot.frames(q)
+
+
 def _detail(s: Scene, step: Mapping[str, Any]) -> str:
     """The picture's subtitle: step kind (unless a manipulation), held object, joints (deg), placement."""
     kind = step.get("kind", "")
@@ -132,7 +150,7 @@ def _detail(s: Scene, step: Mapping[str, Any]) -> str:
         parts.append(f"holding {s.held}" + (f" ({s.grasp})" if s.grasp else ""))
     if s.q is not None:
         parts.append("q = (" + ", ".join(f"{v:.0f}" for v in np.degrees(s.q)) + ") deg"
-                     + (" (unchanged)" if s.arm_note else ""))
+                     + (f" ({s.arm_note})" if s.arm_note else ""))
     pl = step.get("placement")
     if pl:
         obj = pl.get("object") or step.get("object") or ""
@@ -141,11 +159,15 @@ def _detail(s: Scene, step: Mapping[str, Any]) -> str:
     return "; ".join(parts)
 
 
-def _step_scene(cell: Cell, step: Mapping[str, Any], world: World, before: Scene, index: int) -> Scene:
-    """The scene after step ``index``: its world, its joints (or the arm where it was)."""
+def _step_scene(cell: Cell, step: Mapping[str, Any], world: World, before: Scene, index: int,
+                rest: tuple[np.ndarray, np.ndarray]) -> Scene:
+    """The scene after step ``index``: its world, its joints (a sensing step: the arm at ``rest``,
+    (q, frames); another step without joints: the arm where it was)."""
     q, frames = _joints(cell, step)
     note = ""
-    if q is None:
+    if q is None and step.get("kind") == "sensing":
+        q, frames, note = rest[0], rest[1], AT_REST
+    elif q is None:
         q, frames, note = before.q, before.frames, "unchanged"
     title = f"step {index}: {pretty_term(str(step.get('term') or step.get('name') or ''))}"
     s = Scene(index, title, "", world.poses, world.held, None, q, frames, note)
@@ -157,15 +179,14 @@ def _step_scene(cell: Cell, step: Mapping[str, Any], world: World, before: Scene
 def scenes(cell: Cell, plan: Any) -> list[Scene]:
     """The work cell before the plan (index 0) and after each step of the plan instance (1..n).
 
-    Initial part poses come from ``cell.positions``; the initial picture shows the arm,
-    greyed, in the first configuration the plan uses (the plan gives no rest pose).
+    Initial part poses come from ``cell.positions``; the initial picture and the sensing steps
+    show the arm at rest (:func:`_home`).
     """
     plan = as_doc(plan)
     steps = list(instance(plan).get("steps") or [])
-    q0, frames0 = _joints(cell, next((st for st in steps if st.get("joints_deg") is not None), None))
-    known = q0 is not None
-    out = [Scene(0, "initial state", "arm drawn in the plan's first configuration" if known else "",
-                 initial_poses(cell), q=q0, frames=frames0, arm_note="first configuration" if known else "")]
+    rest = _home(cell, plan)
+    out = [Scene(0, "initial state", "arm at rest (home)", initial_poses(cell), q=rest[0], frames=rest[1],
+                 arm_note=AT_REST)]
     for k, (step, world) in enumerate(zip(steps, _worlds(cell, plan, steps)), start=1):
-        out.append(_step_scene(cell, step, world, out[-1], k))
+        out.append(_step_scene(cell, step, world, out[-1], k, rest))
     return out

@@ -310,8 +310,7 @@ def viewer_data(cell: Cell, plan: Any) -> dict[str, Any]:
     bounds = {o: _bounds_list(b) for o, b in cell.object_bounds.items()}
     home = _home(cell, doc)
     states = [_state(cell, sc[0], home if home is not None else sc[0].q, widths, bounds)]
-    states[0]["arm_note"] = "home" if home is not None else ("the plan's first configuration" if sc[0].q is not None
-                                                              else "")
+    states[0]["arm_note"] = "home" if home is not None or sc[0].q is not None else ""  # scenes: the arm at rest
     out_steps = []
     for k, step in enumerate(steps, start=1):
         s = sc[k]

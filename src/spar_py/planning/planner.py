@@ -27,10 +27,11 @@ from typing import Any
 
 import numpy as np
 from spar_py.planning.engine import engine
-from spar_py.core.errors import PlanningTimeout, SparValueError
+from spar_py.core.errors import ExpectedFailures, PlanningTimeout, SparValueError
 from spar_py.kb import load_problem
 from spar_py.core.memo import LRU
 from spar_py.core.model import Cell
+from spar_py.planning.messages import collision_lines, expected_failures, summary
 from spar_py.planning.run import PlanRun
 from spar_py.world.motion_options import MotionFailure, MotionOptions
 from spar_py.world.run import CellCache, RunOptions
@@ -348,6 +349,10 @@ class Planner:
     ``motion_options`` a :class:`~spar_py.world.motion.MotionOptions` (planner, time budget
     per motion, seed, approach length, simplification).
 
+    ``strict`` True: a plan with actions planned for failure (``error_count`` > 0) raises
+    :class:`~spar_py.core.errors.ExpectedFailures` (its ``plan`` the plan) instead of being
+    returned like a certain one.
+
     A Planner keeps the last few cells it loaded from files (at most ``CELL_CACHE``,
     reloaded when a file changes) and each cell's kept answers (world.run.CellCache), so
     planning a file again reuses them; each plan is one run (planning.run.PlanRun) with a
@@ -357,7 +362,7 @@ class Planner:
     def __init__(self, max_actions: int | None = None, max_instances: int | None = None,
                  separation: bool | None = None, timeout: float | None = None,
                  paper_placements: bool = False, motion: bool | None = None,
-                 motion_options: MotionOptions | None = None) -> None:
+                 motion_options: MotionOptions | None = None, strict: bool = False) -> None:
         self.engine = engine()
         defaults = self.engine.query_once("spar_defaults:default_options(D)")["D"]
         #: The bound on the plan size, or "auto" (the default): derived from the problem
@@ -373,6 +378,7 @@ class Planner:
         self.paper_placements = paper_placements
         self.motion = motion
         self.motion_options = motion_options if motion_options is not None else MotionOptions()
+        self.strict = strict
         self._cells: LRU[tuple[tuple, Cell]] = LRU(CELL_CACHE)
         self._caches: LRU[CellCache] = LRU(CELL_CACHE)  # by id(cell); each holds its cell alive
         self._cells_lock = threading.Lock()
@@ -448,9 +454,14 @@ class Planner:
         log = run.world.log
         _motion_reason(d, log.motion_failures)
         plan = _plan(cell.name, d, ans.get("Trace", ""))
-        if plan.outcome is Outcome.NO_PLAN:  # name the colliding pairs that stood in the way
-            said = [r.text() for r in log.refusals()]
+        if plan.outcome is Outcome.NO_PLAN:  # name the colliding pairs that stood in the way, and why
+            refusals = log.refusals()
+            said = collision_lines(refusals)
             if said:
                 plan.reason = {**(plan.reason or {}), "collisions": said}
+            plan.reason = {**(plan.reason or {}), "summary": summary(cell, plan.reason or {}, refusals)}
         self.last = plan
+        line = expected_failures(plan.instance) if self.strict and plan.ok else None
+        if line is not None:
+            raise ExpectedFailures(plan, line)
         return plan

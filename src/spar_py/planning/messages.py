@@ -1,0 +1,157 @@
+"""The planner's lines in the user's terms: why there is no plan, and what a plan expects to fail.
+
+The planner's reason names the Prolog goal that failed deepest (``geo(goal_8, action_2,
+reachable(grasp_1, init_pos1), [part_location(peg, init_pos1)])``) or, in phase 2, the
+instance failure. :func:`summary` turns it into one line that says which of the cell's goals
+could not be met and the nearest cause: a part out of the arm's reach, every grasp refused by
+collisions (with the pairs seen most often), no placement for a put-down. :func:`collision_lines`
+writes the run's collision refusals, a pair that every refusal shares said once.
+:func:`expected_failures` is the first line of a plan with actions planned for failure.
+"""
+from __future__ import annotations
+
+import re
+from collections import Counter
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from spar_py.core.model import Cell
+from spar_py.world.workspace import Refusal, pair_text
+
+__all__ = ["collision_lines", "expected_failures", "shared_pairs", "summary"]
+
+#: Pairs named in a summary line at most.
+PAIRS_SHOWN = 3
+
+#: A refusal's ``what`` for a pickup (world/arcs.py): ``pickup(peg, p1G11) at tr1``.
+_PICKUP = re.compile(r"pickup\((?P<obj>[^,]+), (?P<grasp>[^)]+)\) at (?P<label>\S+)$")
+
+
+def _goal_text(cell: Cell) -> str:
+    """The cell's goals as the problem file writes them, short (``assembled(peg, block)``)."""
+    return "; ".join(f"{g[0]}({', '.join(str(a) for a in g[1:3])})" for g in cell.goals)
+
+
+def shared_pairs(refusals: Sequence[Refusal]) -> list[tuple[str, str]]:
+    """The pairs every one of ``refusals`` names (none unless there are at least two)."""
+    if len(refusals) < 2:
+        return []
+    common = set(refusals[0].pairs)
+    for r in refusals[1:]:
+        common &= set(r.pairs)
+    return [p for p in refusals[0].pairs if p in common]
+
+
+def collision_lines(refusals: Sequence[Refusal]) -> list[str]:
+    """One line per refusal; a pair that every refusal shares is said once, first, and left out
+    of the lines below it (``upper_arm-table`` on every refused grasp says nothing per grasp)."""
+    shared = shared_pairs(refusals)
+    out = []
+    if shared:
+        names = ", ".join(dict.fromkeys(pair_text(p) for p in shared))
+        out.append(f"every refused IK solution of this cell collides with {names}; "
+                   f"the other pairs of each refusal:")
+    for r in refusals:
+        rest = list(dict.fromkeys(pair_text(p) for p in r.pairs if p not in shared))
+        out.append(f"no collision-free IK for {r.what}: {', '.join(rest) if rest else 'only the shared pairs'}")
+    return out
+
+
+def _pairs_counted(refusals: Sequence[Refusal]) -> str:
+    """The pairs of ``refusals`` most frequent first, with the number of refusals naming each."""
+    counts: Counter[str] = Counter()
+    for r in refusals:
+        counts.update(list(dict.fromkeys(pair_text(p) for p in r.pairs)))
+    return ", ".join(f"{p} ({n})" for p, n in counts.most_common(PAIRS_SHOWN))
+
+
+def _args(term: Any) -> tuple[str, list[Any]]:
+    """(functor, args) of a term given as data (foreign.pl's term_data/2); atoms have no args."""
+    if isinstance(term, dict) and "functor" in term:
+        return str(term["functor"]), list(term["args"])
+    return str(term), []
+
+
+def _refused_line(here: Sequence[Refusal]) -> str:
+    """``N refused, most often PAIR (n), ...``."""
+    return f"{len(here)} refused, most often {_pairs_counted(here)}"
+
+
+def _cause(cell: Cell, goal_data: Any, refusals: Sequence[Refusal]) -> str | None:
+    """The nearest cause of a phase-1 no plan from the failed goal's term (its constraint, of
+    kb/templates/actions.pl, and its context), or None when the term is not a geometric goal."""
+    functor, args = _args(goal_data)
+    if functor != "geo" or len(args) < 4:
+        return None
+    kind, cargs = _args(args[2])
+    context = [_args(c) for c in args[3]] if isinstance(args[3], list) else []
+    where = {str(a[1]): str(a[0]) for f, a in context if f == "part_location" and len(a) == 2}
+    held = next((str(a[0]) for f, a in context if f == "holding" and a), None)
+    if kind == "reachable" and len(cargs) == 2 and held is not None:  # a put-down
+        return (f"a placement is missing: no spot to put {held} down at {cargs[1]} that the arm reaches "
+                f"with it in the hand")
+    if kind == "reachable" and len(cargs) == 2:  # a pickup
+        posname = str(cargs[1])
+        obj = where.get(posname)
+        pos = next((p for p in cell.positions.values() if p.name == posname), None)
+        if pos is None or obj is None:
+            return f"no grasp of {obj or 'the part'} at {posname} is reachable"
+        here = [r for r in refusals if (m := _PICKUP.match(r.what)) and m["obj"] == obj and m["label"] == pos.label]
+        if here:
+            return (f"every grasp of {obj} at {posname} ({pos.label}) that the arm reaches collides: "
+                    f"{_refused_line(here)}")
+        dist = float(np.linalg.norm(pos.T[:3, 3] - cell.robot.base[:3, 3]))
+        return (f"{obj} at {posname} ({pos.label}) is out of the arm's reach: no grasp of it has a joint "
+                f"solution within {cell.robot.name}'s limits ({dist:.4g} {cell.unit} from its base)")
+    if kind == "in_position_class" and len(cargs) == 2:
+        posname, poses = str(cargs[0]), [str(p) for p in cargs[1]] if isinstance(cargs[1], list) else []
+        obj = where.get(posname) or next((p.obj for p in cell.positions.values() if p.name == posname), posname)
+        regions = "placement_regions" if cell.placement_regions else "the table around the parts"
+        return (f"a placement is missing: {obj} has to be put down in one of its stable poses "
+                f"{', '.join(poses)}, and no spot in the free table ({regions}) is one the arm reaches")
+    if kind == "member" and held is not None:
+        return f"{held} is held by none of the grasps the assembly leaves free"
+    if kind == "mate_reachable" and held is not None:
+        fixed = next(iter(where.values()), "the other part")
+        here = [r for r in refusals if r.what.startswith(f"assemble({held}, {fixed})")]
+        tail = f": every solution collides, {_refused_line(here)}" if here else ""
+        return f"the arm cannot reach the assembly of {held} with {fixed}{tail}"
+    return f"the geometric condition {kind} of {args[1]} could not be met"
+
+
+def summary(cell: Cell, reason: dict[str, Any], refusals: Sequence[Refusal]) -> str:
+    """One line: ``NO PLAN within N actions (...) for GOALS: CAUSE`` (phase 1: the goal that could not be met and its
+    nearest cause; phase 2: why no instance examined could be executed)."""
+    goals = f"for {_goal_text(cell)}"
+    if reason.get("phase") == 2:
+        n = reason.get("instances_examined")
+        return f"NO PLAN {goals}: none of the {n} plan instances examined can be executed: {reason.get('why', '')}"
+    cause = _cause(cell, reason.get("goal_data"), refusals)
+    n, bound = reason.get("max_actions"), reason.get("bound")
+    size = f" within {n} actions" if n is not None else ""
+    if isinstance(n, int) and isinstance(bound, int):
+        size += (f" (the last bound searched completely before the step budget ran out; the bound was {bound})"
+                 if n < bound else " (the bound on the plan size; --max-actions raises it)")
+    if cause is None:  # not a geometric goal: say so, the term is in --trace and reason.goal
+        return f"NO PLAN{size} {goals}: a goal could not be met (--trace names it)"
+    return f"NO PLAN{size} {goals}: {cause}"
+
+
+def expected_failures(instance: dict[str, Any] | None) -> str | None:
+    """The first line of a plan instance (its JSON) with actions planned for failure (error
+    count > 0): how many insertions (assemble actions) and other actions are expected to fail;
+    None for a certain plan or without an instance."""
+    if not instance or not instance.get("error_count"):
+        return None
+    names = {s["id"]: s["name"] for s in instance.get("steps", [])}
+    failing = [names.get(v["action"], "") for v in instance.get("verifications", [])]
+    k = sum(1 for n in failing if n == "assemble")
+    others = len(failing) - k
+    what = f"{k} insertion{'' if k == 1 else 's'}"
+    if others:
+        what += f" and {others} other action{'' if others == 1 else 's'}"
+    return (f"EXPECTED FAILURES: {what} of this plan {'is' if len(failing) == 1 else 'are'} expected to fail "
+            f"(error count {instance['error_count']}): each is verified and has a recovery (below); "
+            f"--strict exits 1 on such a plan")
