@@ -24,6 +24,9 @@ from . import coldstart, collision, derive, fd, ik, memory, motion, planning, su
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "RESULTS.md"
+#: The line after which RESULTS.md holds hand-written records (measurements of changes, choices
+#: made and why): a new run writes its figures above it and keeps what follows.
+RECORDS = "<!-- Records: written by hand, kept by python -m bench -->"
 
 #: Issue 7's targets.
 IK_US_PER_POSE = 5.0
@@ -550,6 +553,9 @@ def main(argv: list[str] | None = None) -> None:
     if out is None:
         print(text)
     else:
+        old = out.read_text(encoding="utf-8") if out.exists() else ""
+        if RECORDS in old:
+            text = text.rstrip("\n") + "\n\n" + RECORDS + old.split(RECORDS, 1)[1]
         out.write_text(text, encoding="utf-8")
         print(f"wrote {out}", file=sys.stderr)
         print(text.split("## IK")[0])
