@@ -1,13 +1,16 @@
 """`spar plan --animate FILE.gif`: the whole plan replayed from its motions.
 
 Read from the plan JSON, not recomputed: each step's ``path``, ``approach`` and
-``retreat`` (waypoints in degrees, world/motion.py) and the instance's ``motion.home_path``
-give the arm's joints frame by frame; the parts stand where the step before left them
+``retreat`` (waypoints in degrees, world/motion.py) give the arm's joints frame by frame (the
+travel home after the last step, ``motion.home_path``, is left out: it shows no work); the parts stand where the step before left them
 (``poses``), the held part moves with the tool (its grasp). Each frame is the cell
 pictures' 3-D panel (pictures/cell.py: table, parts, the arm's skeleton and gripper), the
 arm's link geometry (the collision scene's bodies, world/collision.py: the robot file's
 link capsules, cylinders and boxes, and the gripper's palm and fingers at the frame's
-opening, drawn as their hulls at the frame's joints) and the cell's obstacles.
+opening, drawn as their hulls at the frame's joints) and the cell's obstacles, within the
+cell pictures' view of the work (pictures/cell.py ``extent``: the parts, the obstacles and the
+arm's reach over them). One figure and one 3-D axes serve every frame: only the artists of
+the parts and the arm are replaced, so the axes' ticks and panes are not rebuilt per frame.
 
 Units: the cell's length unit, joints in degrees in the JSON (radians inside).
 """
@@ -29,9 +32,11 @@ from spar_py.world.collision import TOOL, CollisionScene, scene_for
 __all__ = ["arm_faces", "frames_of", "obstacle_faces", "write_animation"]
 
 #: At most this many frames in a GIF (waypoints are sampled evenly beyond it).
-MAX_FRAMES = 120
+MAX_FRAMES = 60
 #: Milliseconds per frame.
-FRAME_MS = 80
+FRAME_MS = 100
+#: The GIF's size (inches) and resolution (dots per inch): 480 x 480 px.
+FIGSIZE_IN, DPI = 6.0, 80
 #: Points per circle of a capsule's drawn hull (its end spheres sampled on a grid of
 #: this many longitudes and half as many latitudes).
 CAPSULE_SIDES = 12
@@ -41,8 +46,8 @@ LINK_COLOUR = "#c8a040"
 
 def frames_of(cell: Cell, plan: Any, max_frames: int = MAX_FRAMES) -> list[Scene]:
     """The scenes of the animation: for each arm step, its path, approach and retreat
-    waypoints in the world before (path, approach) and after (retreat) the step, then the
-    path home; sampled evenly to at most ``max_frames``. SparValueError if the plan has
+    waypoints in the world before (path, approach) and after (retreat) the step (not the
+    path home after the last step); sampled evenly to at most ``max_frames``. SparValueError if the plan has
     no motions (planned with --no-motion)."""
     doc = as_doc(plan)
     inst = instance(doc)
@@ -57,8 +62,6 @@ def frames_of(cell: Cell, plan: Any, max_frames: int = MAX_FRAMES) -> list[Scene
         for key, world in (("path", before), ("approach", before), ("retreat", after)):
             for q in np.radians(np.asarray(st.get(key) or [], float)).reshape(-1, 6):
                 seq.append((world, q, f"{st['id']}: {key} ({st['term']})"))
-    for q in np.radians(np.asarray(motion.get("home_path") or [], float)).reshape(-1, 6):
-        seq.append((sc[-1], q, "back home"))
     if not seq:
         raise SparValueError("the plan's motions have no waypoints")
     pick = np.unique(np.linspace(0, len(seq) - 1, min(max_frames, len(seq))).round().astype(int))
@@ -142,7 +145,9 @@ def _width(cell: Cell, s: Scene) -> float | None:
 
 
 def write_animation(cell: Cell, plan: Any, path: str | Path, max_frames: int = MAX_FRAMES) -> Path:
-    """Write the GIF of the plan's motions to ``path`` (Pillow writer); returns the path."""
+    """Write the GIF of the plan's motions to ``path`` (Pillow writer); returns the path. The
+    view is the cell pictures' (``extent`` of the plan's scenes); each frame replaces the
+    previous frame's artists in one reused 3-D axes."""
     import matplotlib  # ~0.9 s at import: only when a GIF is drawn; Agg is chosen before pyplot loads
 
     matplotlib.use("Agg")
@@ -153,23 +158,28 @@ def write_animation(cell: Cell, plan: Any, path: str | Path, max_frames: int = M
     frames = frames_of(cell, plan, max_frames)
     scene, hulls = scene_for(cell), {}  # one scene and one hull per body for every frame
     obstacles = obstacle_faces(cell)
-    fr = extent(cell, frames)
-    fig = plt.figure(figsize=(6, 6), dpi=80)
+    fr = extent(cell, scenes(cell, as_doc(plan)))
+    fig = plt.figure(figsize=(FIGSIZE_IN, FIGSIZE_IN), dpi=DPI)
+    ax = fig.add_axes((0.02, 0.05, 0.94, 0.89), projection="3d")
+    title = fig.text(0.5, 0.98, "", ha="center", va="top", fontsize=8)
     writer = PillowWriter(fps=max(1, round(1000 / FRAME_MS)))
     path = Path(path)
-    with writer.saving(fig, str(path), dpi=80):
-        for s in frames:
-            fig.clf()
-            ax = fig.add_subplot(projection="3d")
-            _draw_3d(ax, cell, s, fr)
-            if obstacles:
-                ax.add_collection3d(Poly3DCollection(obstacles, facecolor="#9a9a9a", alpha=0.45,
-                                                     edgecolor="none", axlim_clip=True), autolim=False)
-            if s.q is not None:
-                links = [t for _, tris in arm_faces(cell, s.q, _width(cell, s), scene, hulls) for t in tris]
-                ax.add_collection3d(Poly3DCollection(links, facecolor=LINK_COLOUR, alpha=0.55, edgecolor="none",
-                                                     zorder=4, axlim_clip=True), autolim=False)
-            ax.set_title(s.title, fontsize=8)
-            writer.grab_frame()
-    plt.close(fig)
+    try:
+        with writer.saving(fig, str(path), dpi=DPI):
+            for s in frames:
+                for artist in list(ax.collections) + list(ax.lines):
+                    artist.remove()
+                _draw_3d(ax, cell, s, fr)
+                if obstacles:
+                    ax.add_collection3d(Poly3DCollection(obstacles, facecolor="#9a9a9a", alpha=0.45,
+                                                         edgecolor="none", axlim_clip=True), autolim=False)
+                if s.q is not None:
+                    links = [t for _, tris in arm_faces(cell, s.q, _width(cell, s), scene, hulls) for t in tris]
+                    ax.add_collection3d(Poly3DCollection(links, facecolor=LINK_COLOUR, alpha=0.55,
+                                                         edgecolor="none", zorder=4, axlim_clip=True),
+                                        autolim=False)
+                title.set_text(s.title)
+                writer.grab_frame()
+    finally:
+        plt.close(fig)
     return path
