@@ -1,9 +1,10 @@
 """`spar plan --animate FILE.gif`: the whole plan replayed from its motions.
 
 Read from the plan JSON, not recomputed: each step's ``path``, ``approach`` and
-``retreat`` (waypoints in degrees, world/motion.py) give the arm's joints frame by frame (the
-travel home after the last step, ``motion.home_path``, is left out: it shows no work); the parts stand where the step before left them
-(``poses``), the held part moves with the tool (its grasp). Each frame is the cell
+``retreat`` (waypoints in degrees, world/motion.py) give the arm's joints frame by frame
+(the travel home after the last step, ``motion.home_path``, is left out: it shows no work);
+the parts stand where the step before left them (``poses``), the held part moves with the tool
+(its grasp). Each frame is the cell
 pictures' 3-D panel (pictures/cell.py: table, parts, the arm's skeleton and gripper), the
 arm's link geometry (the collision scene's bodies, world/collision.py: the robot file's
 link capsules, cylinders and boxes, and the gripper's palm and fingers at the frame's
