@@ -14,7 +14,7 @@ import re
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from spar_py.pictures.cell import cell_figure, cell_png, extent
+from spar_py.pictures.cell import cell_figure, cell_png, closeup_png, extent
 from spar_py.pictures.graphs import dot_executable, network_dot, ordering_dot, render_png
 from spar_py.pictures.plandoc import as_doc, instance, is_plan
 from spar_py.pictures.scene import Scene, scenes
@@ -38,7 +38,9 @@ def _step_names(plan: Any) -> list[str]:
 def write_pictures(cell: Cell, plan: Any, outdir: str | Path) -> list[Path]:
     """Write every picture of a plan into ``outdir`` and return their paths, in this order:
     ordering.dot, ordering.png, network.dot, network.png, cell_00_initial.png,
-    cell_01_<name>.png, ... (one per step of the instance, named by the step's action name).
+    cell_01_<name>.png, ... (one per step of the instance, named by the step's action name), each
+    assemble step's followed by its close-up cell_<k>_assemble_closeup.png (the peg, the hole
+    and the insertion check's tolerance: pictures.cell.closeup_png).
 
     ``plan`` is the plan JSON or a ``planner.Plan``. A plan whose outcome is not ``"plan"``
     writes nothing and returns []. Raises SparError (one line) before writing anything
@@ -59,4 +61,7 @@ def write_pictures(cell: Cell, plan: Any, outdir: str | Path) -> list[Path]:
     fr = extent(cell, all_scenes)
     for s, name in zip(all_scenes, _step_names(plan)):
         paths.append(cell_figure(cell, s, fr, out / f"cell_{s.index:02d}_{name}.png"))
+        closeup = closeup_png(cell, plan, s, out / f"cell_{s.index:02d}_{name}_closeup.png")
+        if closeup is not None:
+            paths.append(closeup)
     return paths

@@ -42,7 +42,8 @@ if TYPE_CHECKING:
     from spar_py.world.robots import Robot
     from spar_py.core.model import Cell, ObjectModel, Solid
 
-__all__ = ["Shape", "arm_polyline", "body_faces", "cell_figure", "cell_png", "draw_figure", "extent",
+__all__ = ["Shape", "Tolerance", "arm_polyline", "assemble_tolerance", "body_faces", "cell_figure", "cell_png",
+           "closeup_figure", "closeup_png", "draw_figure", "extent",
            "gripper_segments", "hole_mouth", "obstacle_shapes", "object_points", "robot_shapes", "solid_faces",
            "solid_points"]
 
@@ -619,3 +620,152 @@ def cell_png(cell: Cell, plan: Any, step_index: int, path: str | Path) -> Path:
     if not 0 <= step_index < len(all_scenes):
         raise SparValueError(f"step_index {step_index} outside 0..{len(all_scenes) - 1}")
     return cell_figure(cell, all_scenes[step_index], extent(cell, all_scenes), path)
+
+
+# =========================================================================== close-up of an assemble
+
+#: The close-up's half-width: this many times the largest of the hole's radius, the tolerance
+#: and the bound reached, round the hole's mouth.
+CLOSEUP_RADII = 3.0
+TOLERANCE_COLOUR = "#2ca02c"
+BOUND_COLOUR = "#d62728"
+
+
+@dataclass(frozen=True)
+class Tolerance:
+    """The insertion check of an assemble step at the hole's mouth (cell unit): the hole
+    object, the mouth's world centre (3,) and outward axis (3,), the hole's radius, the
+    tolerance R_h - R_p (the square root of the check's threshold), the bound reached (the
+    square root of the check's bound: how far the peg's centre may be off the hole's) and
+    whether the check is satisfied. pictures/viewer.py draws the same circles."""
+
+    hole: str
+    centre: np.ndarray
+    axis: np.ndarray
+    hole_radius: float
+    tolerance: float
+    bound: float
+    satisfied: bool
+
+
+def assemble_tolerance(cell: Cell, plan: Any, s: Scene) -> Tolerance | None:
+    """The :class:`Tolerance` of the step scene ``s`` shows (``s.index`` >= 1), if it is an
+    assemble step whose insertion check (the ``centres`` constraint, with a threshold) is in
+    the plan and whose hole has a mouth (:func:`hole_mouth`); None otherwise."""
+    from spar_py.pictures.plandoc import as_doc, instance
+
+    inst = instance(as_doc(plan))
+    steps = list(inst.get("steps") or [])
+    if not 1 <= s.index <= len(steps):
+        return None
+    step = steps[s.index - 1]
+    args = step.get("args") or []
+    if step.get("name") != "assemble" or len(args) < 2:
+        return None
+    checks = list(inst.get("constraints") or []) + list(inst.get("verifications") or [])
+    check = next((c for c in checks if c.get("action") == step.get("id") and c.get("constraint") == "centres"
+                  and c.get("threshold") is not None and c.get("bound") is not None), None)
+    hole = str(args[1])
+    mouth = hole_mouth(cell, hole)
+    T = s.poses.get(hole)
+    if check is None or mouth is None or T is None:
+        return None
+    c, n, radius = mouth
+    T = np.asarray(T, float)
+    return Tolerance(hole, T[:3, :3] @ c + T[:3, 3], T[:3, :3] @ n, float(radius),
+                     math.sqrt(max(float(check["threshold"]), 0.0)), math.sqrt(max(float(check["bound"]), 0.0)),
+                     bool(check.get("satisfied")))
+
+
+def _mouth_basis(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(u, v, n): the hole's outward axis n and two unit vectors across it (u nearest world x)."""
+    n = np.asarray(axis, float) / np.linalg.norm(axis)
+    a = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    u = a - (a @ n) * n
+    u /= np.linalg.norm(u)
+    return u, np.cross(n, u), n
+
+
+def _draw_closeup(ax: Axes, cell: Cell, s: Scene, tol: Tolerance, across: np.ndarray, up: np.ndarray,
+                  eye: np.ndarray, alpha: float) -> None:
+    """The parts of ``s`` (no arm: it would hide the mouth) projected onto (``across``, ``up``)
+    about the mouth's centre, far to near along ``eye``."""
+    from matplotlib.patches import Polygon  # ~0.9 s at import: drawing only
+
+    for kind, p, colour in _paint_list(cell, s, eye):
+        q = np.column_stack([(p - tol.centre) @ across, (p - tol.centre) @ up])
+        ax.add_patch(Polygon(convex_hull_2d(q) if kind == "solid" else q, closed=True, fc=colour,
+                             ec="#222222", lw=0.6 if kind == "solid" else 0.0, alpha=alpha if kind == "solid" else 1.0,
+                             gid=f"part:{kind}"))
+
+
+def closeup_figure(cell: Cell, s: Scene, tol: Tolerance) -> Any:
+    """The matplotlib Figure (1000 x 560 px at 100 dpi) of the close-up of an assemble step:
+    looking down the hole (the peg over the hole's mouth, the tolerance R_h - R_p circle and
+    the bound reached drawn about the mouth's centre) and across it (the same radii at the
+    mouth). The caller closes it."""
+    import matplotlib  # ~0.9 s at import, only to draw; Agg is chosen before pyplot loads
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Circle
+
+    u, v, n = _mouth_basis(tol.axis)
+    half = CLOSEUP_RADII * max(tol.hole_radius, tol.tolerance, tol.bound, from_mm(cell.unit, 1e-3))
+    fig = plt.figure(figsize=(10, 5.6), dpi=100)
+    try:
+        down = fig.add_axes((0.06, 0.16, 0.42, 0.66))
+        _draw_closeup(down, cell, s, tol, u, v, n, 0.5)
+        for r, colour, style in ((tol.tolerance, TOLERANCE_COLOUR, "--"), (tol.bound, BOUND_COLOUR, "-")):
+            down.add_patch(Circle((0.0, 0.0), r, fill=False, ec=colour, ls=style, lw=1.8, zorder=5))
+        down.plot([0.0], [0.0], marker="+", color="#ffffff", ms=10, zorder=6)
+        down.set_title(f"looking down {tol.hole}'s hole (the parts see-through)", fontsize=9)
+        side = fig.add_axes((0.55, 0.16, 0.42, 0.66))
+        _draw_closeup(side, cell, s, tol, u, n, -v, 0.5)
+        for r, colour, style, y in ((tol.tolerance, TOLERANCE_COLOUR, "--", 0.0), (tol.bound, BOUND_COLOUR, "-", 0.0)):
+            side.plot([-r, r], [y, y], color=colour, ls=style, lw=2.2, marker="|", ms=12, zorder=5)
+        side.set_title("across the hole (the parts see-through)", fontsize=9)
+        for ax in (down, side):
+            ax.set_xlim(-half, half)
+            ax.set_ylim(-half, half)
+            ax.set_aspect("equal", adjustable="box")
+            ax.grid(True, lw=0.3, alpha=0.5)
+            ax.tick_params(labelsize=8)
+        down.set_xlabel(f"across the hole ({cell.unit})")
+        down.set_ylabel(f"across the hole ({cell.unit})")
+        side.set_xlabel(f"across the hole ({cell.unit})")
+        side.set_ylabel(f"along the hole's axis, from its mouth ({cell.unit})")
+        fig.text(0.5, 0.975, f"{s.title}: close-up", ha="center", va="top", fontsize=12, weight="bold",
+                 family="monospace")
+        verdict = "satisfied" if tol.satisfied else "NOT satisfied: the insertion may fail"
+        fig.text(0.5, 0.92, f"the peg's centre within {tol.bound:.4g} {cell.unit} of the hole's (bound reached) "
+                 f"< tolerance R_h - R_p = {tol.tolerance:.4g} {cell.unit}: {verdict}",
+                 ha="center", va="top", fontsize=9, family="monospace")
+        drawn = {part_model(k) for k in s.poses}
+        handles: list[Any] = [Line2D([], [], color=_colour(cell, o), lw=8, label=o) for o in cell.objects if o in drawn]
+        handles += [Line2D([], [], color=HOLE_COLOUR, lw=8, label="hole mouth"),
+                    Line2D([], [], color=TOLERANCE_COLOUR, ls="--", lw=1.8,
+                           label=f"tolerance R_h - R_p ({tol.tolerance:.4g} {cell.unit})"),
+                    Line2D([], [], color=BOUND_COLOUR, lw=1.8, label=f"bound reached ({tol.bound:.4g} {cell.unit})")]
+        fig.legend(handles=handles, loc="lower center", ncol=len(handles), fontsize=8, frameon=False)
+    except BaseException:
+        plt.close(fig)
+        raise
+    return fig
+
+
+def closeup_png(cell: Cell, plan: Any, s: Scene, path: str | Path) -> Path | None:
+    """Draw the close-up of the assemble step scene ``s`` shows into the PNG ``path`` and return
+    the path; None (nothing written) when ``s`` is no assemble step with an insertion check."""
+    import matplotlib.pyplot as plt  # loaded already by the cell pictures (with Agg)
+
+    tol = assemble_tolerance(cell, plan, s)
+    if tol is None:
+        return None
+    fig = closeup_figure(cell, s, tol)
+    try:
+        fig.savefig(path, dpi=100, facecolor="white", metadata=PNG_METADATA)
+    finally:
+        plt.close(fig)
+    return Path(path)
