@@ -1,0 +1,105 @@
+"""Issue 35, item 3: a close-up of each assemble step in the cell pictures (the peg, the hole
+and the insertion check's tolerance), and ``--animate`` framing the work without the travel
+home. Speed is measured, not asserted (see the commit messages)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+PROBLEMS = ROOT / "kb" / "problems"
+
+
+@pytest.fixture(scope="module")
+def paper() -> tuple:
+    """The paper's cell planned with motions, and its plan JSON."""
+    from spar_py import Planner
+
+    pl = Planner(motion=True)
+    cell = pl.load_problem(PROBLEMS / "peg_in_block.yaml")
+    return cell, pl.plan(PROBLEMS / "peg_in_block.yaml").to_json()
+
+
+def _blend(colour: str, alpha: float) -> np.ndarray:
+    """RGB (0..1) of ``colour`` painted with ``alpha`` over white."""
+    from matplotlib.colors import to_rgb
+
+    return alpha * np.array(to_rgb(colour)) + (1 - alpha) * np.ones(3)
+
+
+def _share(img: np.ndarray, rgb: np.ndarray, tol: float = 0.08) -> float:
+    """The share of ``img``'s pixels within ``tol`` of ``rgb`` in every channel (0..1 scale)."""
+    return float((np.abs(img[..., :3] - rgb).max(axis=2) < tol).mean())
+
+
+def test_each_assemble_step_has_a_closeup_showing_the_parts(paper, tmp_path: Path) -> None:
+    import matplotlib.image as mpimg
+
+    from spar_py.pictures import write_pictures
+    from spar_py.pictures.cell import OBJECT_COLOURS
+
+    cell, doc = paper
+    paths = write_pictures(cell, doc, tmp_path)
+    steps = doc["instance"]["steps"]
+    assembles = [k for k, st in enumerate(steps, start=1) if st.get("name") == "assemble"]
+    assert assembles
+    names = [p.name for p in paths]
+    for k in assembles:
+        closeup = f"cell_{k:02d}_assemble_closeup.png"
+        assert closeup in names, names
+        assert names.index(closeup) == names.index(f"cell_{k:02d}_assemble.png") + 1  # listed after its step
+        img = mpimg.imread(tmp_path / closeup)
+        for k_obj, obj in enumerate(cell.objects):  # both parts drawn see-through (alpha 0.5)
+            share = _share(img, _blend(OBJECT_COLOURS[k_obj % len(OBJECT_COLOURS)], 0.5))
+            assert share > 0.01, (obj, share)
+    assert sum(n.endswith("_closeup.png") for n in names) == len(assembles)
+
+
+def test_the_closeup_draws_the_tolerance_of_the_insertion_check(paper) -> None:
+    from spar_py.pictures.cell import assemble_tolerance
+    from spar_py.pictures.scene import scenes
+
+    cell, doc = paper
+    sc = scenes(cell, doc)
+    inst = doc["instance"]
+    k = next(k for k, st in enumerate(inst["steps"], start=1) if st.get("name") == "assemble")
+    tol = assemble_tolerance(cell, doc, sc[k])
+    check = next(c for c in inst["constraints"] + inst.get("verifications", [])
+                 if c["action"] == inst["steps"][k - 1]["id"] and c["constraint"] == "centres")
+    assert tol is not None and tol.hole == "block"
+    assert tol.tolerance == pytest.approx(np.sqrt(check["threshold"]))
+    assert tol.bound == pytest.approx(np.sqrt(check["bound"]))
+    assert tol.satisfied and tol.bound < tol.tolerance
+    assert all(assemble_tolerance(cell, doc, s) is None for s in sc if s.index != k)
+
+
+def test_the_animation_leaves_out_the_trip_home_and_frames_the_work(paper, tmp_path: Path) -> None:
+    from PIL import Image
+
+    from spar_py.pictures.animate import MAX_FRAMES, frames_of, write_animation
+    from spar_py.pictures.cell import OBJECT_COLOURS
+
+    cell, doc = paper
+    steps = doc["instance"]["steps"]
+    def count(wp: object) -> int:
+        return len(np.asarray(wp or [], float).reshape(-1, 6))
+
+    work = sum(count(st.get(key)) for st in steps for key in ("path", "approach", "retreat"))
+    home = count(doc["instance"]["motion"]["home_path"])
+    assert home > 0  # there is a trip home to leave out
+    frames = frames_of(cell, doc, max_frames=work + home)
+    assert len(frames) == work  # every waypoint of the steps' motions, none of the home path
+    assert not any("home" in f.title for f in frames)
+    assert np.allclose(frames[-1].q, np.radians(steps[-1]["retreat"][-1] if steps[-1].get("retreat")
+                                                else steps[-1]["path"][-1]))
+    gif = write_animation(cell, doc, tmp_path / "a.gif")
+    with Image.open(gif) as im:
+        # Pillow merges a frame identical to the one before it (the arm still between two samples)
+        assert 1 < im.n_frames <= len(frames_of(cell, doc)) == min(MAX_FRAMES, work)
+        im.seek(0)
+        first = np.asarray(im.convert("RGB"), float) / 255
+    # the parts (solids at alpha 0.92) are a sizeable share of the frame
+    parts = sum(_share(first, _blend(OBJECT_COLOURS[k], 0.92), tol=0.12) for k in range(len(cell.objects)))
+    assert parts > 0.01, parts  # over 2,300 of the 480 x 480 px (measured: 2 %)
