@@ -33,7 +33,8 @@ def test_demo_graphs_are_current(tmp_path: Path) -> None:
     """docs/demo holds what `make demo` writes for the paper's cell: its DOT files must be
     the planner's current output (a stale demo shows arcs the planner no longer gives), its
     graph PNGs dot's drawing of those files (same pixel size as drawn now), and its cell
-    pictures one per step of the plan, named as write_pictures names them."""
+    pictures one per step of the plan and a close-up per assemble step, named as write_pictures
+    names them."""
     from spar_py.pictures import network_dot, ordering_dot, render_png
     from spar_py.planning.planner import Planner
 
@@ -43,6 +44,9 @@ def test_demo_graphs_are_current(tmp_path: Path) -> None:
         assert (demo / f"{stem}.dot").read_text() == text
         assert _png_size(demo / f"{stem}.png") == _png_size(render_png(text, tmp_path / f"{stem}.png"))
     steps = plan["instance"]["steps"]
-    cells = sorted(p.name for p in demo.glob("cell_*.png"))
+    closeups = sorted(p.name for p in demo.glob("cell_*_closeup.png"))
+    cells = sorted(p.name for p in demo.glob("cell_*.png") if not p.name.endswith("_closeup.png"))
     assert len(cells) == len(steps) + 1 and cells[0] == "cell_00_initial.png"
     assert [c.split("_", 2)[2][:-4] for c in cells[1:]] == [st["name"] for st in steps]
+    # one close-up per assemble step, named after its step's picture
+    assert closeups == [c[:-4] + "_closeup.png" for c, st in zip(cells[1:], steps) if st["name"] == "assemble"]
