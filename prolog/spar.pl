@@ -202,9 +202,9 @@ plan(Problem, Options, plan(Partial, Result)) :-
     must_be(list, Options),
     partition(phase2_option, Options, P2, P1),
     with_problem(Problem,
-                 ( phase1(Problem, P1, Outcome),
-                   Outcome = plan(Partial),
-                   phase2(Problem, Partial, P2, Result) )).
+                 once(( phase1(Problem, P1, Outcome),   % semidet: the first plan, no choice point
+                        Outcome = plan(Partial),
+                        phase2(Problem, Partial, P2, Result) ))).
 
 phase2_option(max_instances(_)).
 
