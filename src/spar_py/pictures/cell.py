@@ -31,6 +31,7 @@ import numpy as np
 from spar_py.core.errors import SparValueError
 from spar_py.core.geometry import convex_hull_2d
 from spar_py.core.units import from_mm
+from spar_py.pictures.plandoc import as_doc, instance
 from spar_py.pictures.scene import AT_REST, MIN_SIZE_MM, Scene, part_model, scenes
 from spar_py.world.collision import TOOL, scene_for
 from spar_py.world.shapes import part_mesh
@@ -652,8 +653,6 @@ def assemble_tolerance(cell: Cell, plan: Any, s: Scene) -> Tolerance | None:
     """The :class:`Tolerance` of the step scene ``s`` shows (``s.index`` >= 1), if it is an
     assemble step whose insertion check (the ``centres`` constraint, with a threshold) is in
     the plan and whose hole has a mouth (:func:`hole_mouth`); None otherwise."""
-    from spar_py.pictures.plandoc import as_doc, instance
-
     inst = instance(as_doc(plan))
     steps = list(inst.get("steps") or [])
     if not 1 <= s.index <= len(steps):
