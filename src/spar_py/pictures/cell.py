@@ -601,9 +601,13 @@ def draw_figure(cell: Cell, s: Scene, fr: Extent) -> Any:
 
 def cell_figure(cell: Cell, s: Scene, fr: Extent, path: str | Path) -> Path:
     """Draw scene ``s`` within extents ``fr`` into the PNG ``path`` (1200 x 720 px) and return the path."""
-    import matplotlib.pyplot as plt  # loaded already by draw_figure (with Agg)
+    return _save_png(draw_figure(cell, s, fr), path)
 
-    fig = draw_figure(cell, s, fr)
+
+def _save_png(fig: Any, path: str | Path) -> Path:
+    """Write the matplotlib figure ``fig`` to the PNG ``path`` (100 dpi, no varying metadata), close it."""
+    import matplotlib.pyplot as plt  # loaded already by whoever drew ``fig`` (with Agg)
+
     try:
         fig.savefig(path, dpi=100, facecolor="white", metadata=PNG_METADATA)
     finally:
@@ -757,14 +761,7 @@ def closeup_figure(cell: Cell, s: Scene, tol: Tolerance) -> Any:
 def closeup_png(cell: Cell, plan: Any, s: Scene, path: str | Path) -> Path | None:
     """Draw the close-up of the assemble step scene ``s`` shows into the PNG ``path`` and return
     the path; None (nothing written) when ``s`` is no assemble step with an insertion check."""
-    import matplotlib.pyplot as plt  # loaded already by the cell pictures (with Agg)
-
     tol = assemble_tolerance(cell, plan, s)
     if tol is None:
         return None
-    fig = closeup_figure(cell, s, tol)
-    try:
-        fig.savefig(path, dpi=100, facecolor="white", metadata=PNG_METADATA)
-    finally:
-        plt.close(fig)
-    return Path(path)
+    return _save_png(closeup_figure(cell, s, tol), path)

@@ -41,6 +41,7 @@ from spar_py.pictures.cell import OBJECT_COLOURS, body_faces, hole_mouth, obstac
 from spar_py.pictures.plandoc import as_doc, instance, partial, pretty_term
 from spar_py.pictures.scene import Scene, held_grasp, part_model, scenes
 from spar_py.world.collision import TOOL, scene_for
+from spar_py.world.motion import interval_seconds
 from spar_py.world.shapes import part_mesh
 
 if TYPE_CHECKING:
@@ -173,20 +174,18 @@ def _state(cell: Cell, s: Scene, q: np.ndarray | None, widths: _Widths,
             "uncertainty": {k: bounds[part_model(k)] for k in s.poses if part_model(k) in bounds}}
 
 
-def _sample(q: np.ndarray, n: int = MAX_WAYPOINTS) -> np.ndarray:
-    """At most ``n`` rows of waypoints ``q`` (k, 6), evenly spread, the first and last kept."""
-    if len(q) <= n:
-        return q
-    return q[np.unique(np.linspace(0, len(q) - 1, n).round().astype(int))]
+def _sample(k: int, n: int = MAX_WAYPOINTS) -> np.ndarray:
+    """The indices of at most ``n`` of ``k`` waypoints, evenly spread, the first and last kept."""
+    return np.unique(np.linspace(0, k - 1, min(n, k)).round().astype(int))
 
 
 def _times(q: np.ndarray, velocity: np.ndarray | None) -> np.ndarray:
     """Seconds from the first waypoint to each of ``q`` (k, 6) rad at the joint velocity limits
-    (the slowest joint sets each interval's pace, as world.motion.durations), or DEFAULT_PACE."""
+    (world.motion.interval_seconds), or DEFAULT_PACE."""
     if len(q) < 2:
         return np.zeros(len(q))
-    v = np.full(6, DEFAULT_PACE) if velocity is None else np.asarray(velocity, float)
-    return np.concatenate([[0.0], np.cumsum((np.abs(np.diff(q, axis=0)) / v).max(axis=1))])
+    v = np.full(6, DEFAULT_PACE) if velocity is None else velocity
+    return np.concatenate([[0.0], np.cumsum(interval_seconds(q, v))])
 
 
 def _segment(cell: Cell, kind: str, rows: Any, world: Scene, widths: _Widths) -> dict[str, Any] | None:
@@ -197,7 +196,7 @@ def _segment(cell: Cell, kind: str, rows: Any, world: Scene, widths: _Widths) ->
         return None
     velocity = getattr(cell.robot, "velocity_limits", None)
     t_all = _times(q_all, velocity)
-    keep = np.unique(np.linspace(0, len(q_all) - 1, min(MAX_WAYPOINTS, len(q_all))).round().astype(int))
+    keep = _sample(len(q_all))
     q, t = q_all[keep], t_all[keep]
     F = cell.robot.frames_batch(q)
     held_pose = None

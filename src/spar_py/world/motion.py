@@ -531,13 +531,18 @@ def _walk(Q: np.ndarray, ok: np.ndarray, q0: np.ndarray, limits: np.ndarray) -> 
 # ---------------------------------------------------------------------- durations
 
 
+def interval_seconds(q: np.ndarray, velocity: np.ndarray) -> np.ndarray:
+    """Seconds of each interval of waypoints q (n, 6) rad at the joint velocity limits
+    ``velocity`` (6,) rad/s, each at the pace of its slowest joint (no acceleration phases): (n - 1,)."""
+    return (np.abs(np.diff(q, axis=0)) / np.asarray(velocity, float)).max(axis=1)
+
+
 def durations(q: np.ndarray, velocity: np.ndarray | None) -> float | None:
     """Seconds to run waypoints q (n, 6) rad at the joint velocity limits ``velocity`` (6,)
-    rad/s, each interval at the pace of its slowest joint (no acceleration phases); None
-    without limits."""
+    rad/s (:func:`interval_seconds` summed); None without limits."""
     if velocity is None or len(q) < 2:
         return None if velocity is None else 0.0
-    return float((np.abs(np.diff(q, axis=0)) / np.asarray(velocity, float)).max(axis=1).sum())
+    return float(interval_seconds(q, velocity).sum())
 
 
 # ---------------------------------------------------------------------- data for JSON
