@@ -9,7 +9,9 @@ from __future__ import annotations
 
 import math
 import re
+from dataclasses import replace
 from pathlib import Path
+from types import MappingProxyType
 
 import numpy as np
 
@@ -17,16 +19,19 @@ from spar_py.core.errors import KBError, SparValueError
 from spar_py.core.units import LENGTH_UNITS
 from spar_py.kb.node import LABEL_RE, Node, num, show
 from spar_py.kb.reader import MAX_INPUT_BYTES
-from spar_py.kb.schema import URDF_ROBOT_SCHEMA, check_shape, read_kb
+from spar_py.kb.schema import URDF_ROBOT_SCHEMA, OneOf, check_shape, keys, read_kb
 from spar_py.kb.values import units_of, xyz_rpy_frame
 from spar_py.world.robots import (
+    TOOL_BODY,
     GripperGeometry,
     LinkShape,
     Robot,
+    ToolBody,
     UrdfMeshError,
     read_urdf_chain,
     robot_from_urdf,
     standard_to_modified,
+    tool_body_behind,
 )
 
 __all__ = ["IK_CHOICES", "MAX_JOINT_RAD", "home_angles", "load_robot", "load_urdf_robot"]
@@ -79,7 +84,8 @@ def load_robot(path: str | Path, unit: str | None = None, max_bytes: int = MAX_I
         dh, flange = standard_to_modified(dh)
     limits = _limits(root.key("limits"), rad_per)
     base = xyz_rpy_frame(root.key("base"), scale, rad_per)
-    tool = flange @ xyz_rpy_frame(root.key("tool"), scale, rad_per)
+    flange_tool = xyz_rpy_frame(root.key("tool"), scale, rad_per)
+    tool = flange @ flange_tool
     wm = root.key("gripper").key("finger_separation").positive() * scale
     family = _ik_choice(root)
     try:
@@ -87,7 +93,7 @@ def load_robot(path: str | Path, unit: str | None = None, max_bytes: int = MAX_I
     except SparValueError as e:
         raise KBError(str(path), "dh", f"a robot the kinematics accepts ({e})") from None
     _check_family(robot, root, path, unit, file_unit, max_bytes)
-    _collision_shapes(robot, root, scale, LENGTH_UNITS[unit])
+    _collision_shapes(robot, root, scale, LENGTH_UNITS[unit], flange_tool)
     _robot_motion(robot, root, rad_per)
     return robot
 
@@ -125,6 +131,11 @@ def _robot_motion(robot: Robot, root: Node, rad_per: float) -> None:
         robot.velocity_limits = v
 
 
+#: The shapes a robot file's ``gripper: body`` may give (each with an optional ``length``).
+TOOL_BODY_SCHEMA = OneOf(MappingProxyType({"box": keys(["width", "thickness"], ["length"]),
+                                           "cylinder": keys(["radius"], ["length"])}))
+
+
 def _gripper(gnode: Node, wm: float, scale: float, mm_per_unit: float) -> GripperGeometry:
     """The ``gripper:`` section's boxes (robot unit; GripperGeometry's documented defaults where absent)."""
     def sizes(key: str) -> dict | None:
@@ -133,21 +144,60 @@ def _gripper(gnode: Node, wm: float, scale: float, mm_per_unit: float) -> Grippe
     return GripperGeometry.default(wm, mm_per_unit, sizes("finger"), sizes("palm"))
 
 
-def _collision_shapes(robot: Robot, root: Node, scale: float, mm_per_unit: float) -> None:
-    """Set ``robot``'s gripper boxes and its ``collision:`` section: link shapes (capsule,
-    cylinder: ``{radius, from, to}``; box: ``{min, max}``; lengths in the file's unit, in Craig's
-    frame ``frame`` 0..6), ``allow`` (pairs of body names never checked), ``margin``."""
-    robot.gripper = _gripper(root.key("gripper"), robot.finger_separation, scale, mm_per_unit)
+def _tool_body(gnode: Node, gripper: GripperGeometry, tool: np.ndarray, scale: float, has_collision: bool
+               ) -> GripperGeometry:
+    """``gripper`` with its tool body (world.robots.ToolBody, robot unit): the ``gripper: body``
+    the file gives (``none``: no body; a box ``{width, thickness}`` or a cylinder ``{radius}``,
+    ``length`` by default from the palm back to the flange of ``tool``), else, for a robot without
+    a ``collision:`` section (nothing else describes the tool), a box the palm's size from the palm
+    back to the flange; a robot with one describes its tool mount among its links."""
+    bnode = gnode.key("body", required=False)
+    if bnode is None:
+        return gripper if has_collision else gripper.with_default_body(tool)
+    if bnode.value == "none":
+        return gripper
+    if not isinstance(bnode.value, dict):
+        raise bnode.fail("none, or one shape: box: {width, thickness[, length]} or cylinder: {radius[, length]}",
+                         show(bnode.value))
+    check_shape(bnode, TOOL_BODY_SCHEMA)
+    kind, sn = bnode.items()[0]
+    behind = tool_body_behind(tool, gripper.finger_length, gripper.palm_length)
+    lnode = sn.key("length", required=False)
+    if lnode is not None:
+        length = lnode.positive() * scale
+    elif behind > 0:
+        length = behind
+    else:
+        raise sn.fail(f"a length: the palm's back face is on or behind the flange ({num(behind / scale)} from it)")
+    if kind == "box":
+        body = ToolBody("box", length, sn.key("width").positive() * scale, sn.key("thickness").positive() * scale)
+    else:
+        body = ToolBody("cylinder", length, radius=sn.key("radius").positive() * scale)
+    return replace(gripper, body=body)
+
+
+def _collision_shapes(robot: Robot, root: Node, scale: float, mm_per_unit: float, flange_tool: np.ndarray) -> None:
+    """Set ``robot``'s gripper boxes and tool body (:func:`_tool_body`; ``flange_tool`` the file's
+    ``tool``, T_flange_tool from the real flange: a URDF's tip link, a standard table's frame 6) and its ``collision:``
+    section: link shapes (capsule, cylinder: ``{radius, from, to}``; box: ``{min, max}``; lengths
+    in the file's unit, in Craig's frame ``frame`` 0..6), ``allow`` (pairs of body names never
+    checked), ``margin``."""
+    gnode = root.key("gripper")
     cnode = root.key("collision", required=False)
+    robot.gripper = _tool_body(gnode, _gripper(gnode, robot.finger_separation, scale, mm_per_unit), flange_tool,
+                               scale, cnode is not None)
     if cnode is None:
         return
-    known = {"palm", "finger_l", "finger_r", "table"}
+    known = {"palm", "finger_l", "finger_r", "table"} | ({TOOL_BODY} if robot.gripper.body is not None else set())
     lnode = cnode.key("links", required=False)
     if lnode is None:  # the shapes the robot already has (a URDF's own) stay: their names may be allowed
         known |= {s.name for s in robot.links}
     links: list[LinkShape] = []
     for ln in (lnode or Node(cnode.file, cnode.path, [])).elements():
         lname = ln.key("name").label()
+        if lname == TOOL_BODY and robot.gripper.body is not None:
+            raise ln.key("name").fail(f"a name other than {TOOL_BODY!r} (the gripper's body: gripper: body)",
+                                      show(lname))
         fnode = ln.key("frame")
         frame = fnode.number()
         if frame != int(frame) or not 0 <= frame <= 6:
@@ -256,7 +306,7 @@ def load_urdf_robot(node: Node, base_dir: Path, unit: str, rad_per: float) -> tu
         raise KBError(node.file, unode.path, f"a {family.upper()}-family arm (ik: {family}; docs/robots.md)",
                       f"one with {robot.not_closed_form[family]}")
     urdf_links = robot.links
-    _collision_shapes(robot, node, 1.0, LENGTH_UNITS[unit])
+    _collision_shapes(robot, node, 1.0, LENGTH_UNITS[unit], frame("tool"))
     robot.links = robot.links or urdf_links  # the URDF's own collision shapes unless the file gives some
     _robot_motion(robot, node, rad_per)
     return robot, upath

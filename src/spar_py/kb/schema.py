@@ -105,7 +105,8 @@ OBJECT_SCHEMA = keys(
 GRIPPER_BOX_SCHEMA = keys(["length", "width", "thickness"])
 
 
-GRIPPER_SCHEMA = keys(["finger_separation"], {"finger": GRIPPER_BOX_SCHEMA, "palm": GRIPPER_BOX_SCHEMA})
+GRIPPER_SCHEMA = keys(["finger_separation"], {"finger": GRIPPER_BOX_SCHEMA, "palm": GRIPPER_BOX_SCHEMA,
+                                              "body": LEAF})  # body: none, or a shape (kb.robots._tool_body)
 
 
 #: A link's collision shape (robot file ``collision: links``): a capsule or cylinder from one

@@ -8,7 +8,9 @@ What is in the scene (:func:`scene_for`, built once per cell and kept by its wor
   each fixed to one of Craig's frames 0..6 (0 is the base: it does not move);
 - the gripper (robot file ``gripper:``, :class:`~spar_py.world.robots.GripperGeometry`): the
   palm and two fingers whose contact faces are the grasp's width apart (the open
-  finger_separation when no part is in the hand);
+  finger_separation when no part is in the hand), and the tool body "tool" from the palm back to
+  the flange (``gripper: body``; by default, for a robot without ``collision:``, a box the palm's
+  size), which counts as the gripper wherever the gripper does;
 - the parts (each object's ``shape:`` solids: boxes, z-cylinders, convex hulls of meshes),
   placed by :meth:`CollisionScene.at`;
 - the obstacles (problem file ``obstacles:``), and the table: the half-space z < 0 over its
@@ -17,7 +19,7 @@ What is in the scene (:func:`scene_for`, built once per cell and kept by its wor
 Which pairs are checked, and with which margin (``margin``: robot file ``collision: margin``,
 problem file ``clearance:``, else DEFAULT_MARGIN_MM):
 
-- every moving body (links 1..6, palm, fingers, held part) against the table, the obstacles
+- every moving body (links 1..6, palm, fingers, tool body, held part) against the table, the obstacles
   and every part in the world, by the margin;
 - links against links whose frames are two or more apart (self-collision of non-adjacent
   links), the gripper against links 0..5 and the held part against links 0..6, by the margin;
@@ -56,7 +58,7 @@ import numpy as np
 
 from spar_py.core.errors import SparValueError
 from spar_py.core.units import from_mm, mm_per
-from spar_py.world.robots import GripperGeometry
+from spar_py.world.robots import TOOL_BODY, GripperGeometry
 
 if TYPE_CHECKING:
     from spar_py.core.model import Cell, Solid
@@ -87,9 +89,9 @@ STRUCTURES_LIMIT = 256
 #: Bound of the cell cache's table of placed part bodies per (part, frame, pose): phase 2 places
 #: every part on the table at every step, most of them where they were at the step before.
 PLACED_LIMIT = 2048
-#: The gripper's bodies (robots.py's palm and finger boxes), checked against the part it closes on
-#: by the grasp rule, not by a pair.
-_GRIPPER_NAMES = frozenset({"palm", "finger_l", "finger_r"})
+#: The gripper's bodies (robots.py's palm and finger boxes and the tool body behind the palm),
+#: checked against the part it closes on by the grasp rule, not by a pair.
+_GRIPPER_NAMES = frozenset({"palm", "finger_l", "finger_r", TOOL_BODY})
 
 
 # --------------------------------------------------------------------------- bodies
@@ -496,19 +498,34 @@ class CollisionScene:
 
     def gripper_bodies(self, width: float | None) -> list[Body]:
         """The palm and fingers (TOOL frame) with the fingers' contact faces ``width`` apart (default
-        open), made once per width (a handful of widths per cell)."""
+        open), and the tool body behind the palm when the gripper has one (body "tool"), made once
+        per width (a handful of widths per cell)."""
         key = None if width is None else round(float(width), 9)
         if key not in self._grippers:
-            self._grippers[key] = [box(n, TOOL, lo, hi) for n, lo, hi in self.gripper.boxes(width)]
+            self._grippers[key] = ([box(n, TOOL, lo, hi) for n, lo, hi in self.gripper.boxes(width)]
+                                   + self._tool_body(0.0))
         return self._grippers[key]
 
     def shrunk_gripper(self, width: float | None, tol: float) -> list[Body]:
-        """The palm and fingers as :meth:`gripper_bodies`, each box shrunk by ``tol`` on every side
-        (the grasp rule's: touching counts as clear), made once per width and tolerance."""
+        """The palm, fingers and tool body as :meth:`gripper_bodies`, each shrunk by ``tol`` on every
+        side (the grasp rule's: touching counts as clear), made once per width and tolerance."""
         key = ("shrunk", None if width is None else round(float(width), 9), round(float(tol), 12))
         if key not in self._grippers:
-            self._grippers[key] = [box(n, TOOL, lo + tol, hi - tol) for n, lo, hi in self.gripper.boxes(width)]
+            self._grippers[key] = ([box(n, TOOL, lo + tol, hi - tol) for n, lo, hi in self.gripper.boxes(width)]
+                                   + self._tool_body(tol))
         return self._grippers[key]
+
+    def _tool_body(self, shrink: float) -> list[Body]:
+        """The gripper's tool body (robots.GripperGeometry.body_shape) as a body in the TOOL frame,
+        shrunk by ``shrink`` on every side; [] without one."""
+        shape = self.gripper.body_shape()
+        if shape is None:
+            return []
+        name, kind, a, b, r = shape
+        if kind == "cylinder":
+            u = (b - a) / np.linalg.norm(b - a)
+            return [cylinder(name, TOOL, a + shrink * u, b - shrink * u, r - shrink)]
+        return [box(name, TOOL, a + shrink, b - shrink)]
 
     def shapes_of(self, part: str) -> list[Body]:
         """The bodies of ``part`` (an object, or a stock part ``obj@pos``) in its object frame."""

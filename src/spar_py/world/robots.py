@@ -20,7 +20,7 @@ joint convention (``theta_i = q_i + offset_i``; for a URDF the URDF's own joint 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 from pathlib import Path
 
@@ -31,8 +31,9 @@ from spar_py.core.geometry import check_transform, inv, rotx, trans
 from spar_py.world.ik import (FAMILY_TWISTS, LIMIT_TOL, Solver, craig_links, lowest_representation, solver_for,
                               turn_combinations)
 
-__all__ = ["GripperGeometry", "LIMIT_TOL", "LinkShape", "Robot", "UrdfChain", "check_against_urdf", "dh_from_axes",
-           "read_urdf_chain", "robot_from_urdf", "standard_to_modified"]
+__all__ = ["GripperGeometry", "LIMIT_TOL", "LinkShape", "Robot", "TOOL_BODY", "ToolBody", "UrdfChain",
+           "check_against_urdf", "dh_from_axes", "read_urdf_chain", "robot_from_urdf", "standard_to_modified",
+           "tool_body_behind"]
 
 # the twist signs each closed-form family wants for alpha_1..alpha_5 (0: parallel axes), to choose
 # the free sign of a common normal when a URDF chain is converted
@@ -61,6 +62,34 @@ class LinkShape:
     points: np.ndarray | None = None
 
 
+#: The collision body name of the tool between the palm and the flange (:class:`ToolBody`).
+TOOL_BODY = "tool"
+
+
+@dataclass(frozen=True)
+class ToolBody:
+    """The tool's body from the palm's back face to the flange, along the tool axis (robot unit):
+    a ``kind`` "box" ``width`` (tool x) by ``thickness`` (tool y), or a "cylinder" of ``radius``
+    about tool z, ``length`` long from the palm's back face (z = -(finger_length + palm_length))
+    back towards the flange (-z). The gripper's own mount and housing: without it, a grasp under a
+    shelf would put the tool through the shelf unchecked."""
+
+    kind: str
+    length: float
+    width: float = 0.0
+    thickness: float = 0.0
+    radius: float = 0.0
+
+
+def tool_body_behind(tool: np.ndarray, finger_length: float, palm_length: float) -> float:
+    """How far the flange lies behind the palm's back face along the tool axis (robot unit; <= 0:
+    the palm is on or behind the flange): the depth of the flange's origin along -z of the tool
+    frame (``tool`` is T_flange_tool, 4x4) less the fingers' and palm's lengths."""
+    T = np.asarray(tool, float)
+    depth = float(T[:3, 2] @ T[:3, 3])  # -(flange origin's z in the tool frame) = z_tool . t
+    return depth - finger_length - palm_length
+
+
 @dataclass(frozen=True)
 class GripperGeometry:
     """A parallel-jaw gripper's boxes in the tool frame (robot unit).
@@ -82,6 +111,8 @@ class GripperGeometry:
     palm_length: float
     palm_width: float
     palm_thickness: float
+    #: the tool's body behind the palm (:class:`ToolBody`), None: none is checked
+    body: ToolBody | None = None
 
     @classmethod
     def default(cls, finger_separation: float, mm_per_unit: float, finger: dict | None = None,
@@ -104,6 +135,30 @@ class GripperGeometry:
         return [("finger_l", np.array([-u, w, -L]), np.array([u, w + t, 0.0])),
                 ("finger_r", np.array([-u, -w - t, -L]), np.array([u, -w, 0.0])),
                 ("palm", np.array([-pu, -pt, -L - self.palm_length]), np.array([pu, pt, -L]))]
+
+    def body_shape(self) -> tuple[str, str, np.ndarray, np.ndarray, float] | None:
+        """The tool body in the tool frame as (name, kind, a, b, radius): a "box" with corners
+        ``a`` (min) and ``b`` (max), or a "cylinder" of axis a -> b (from the palm's back face
+        towards the flange); None without a body or one of no length."""
+        b = self.body
+        if b is None or not b.length > 0:
+            return None
+        z0 = -self.finger_length - self.palm_length
+        if b.kind == "cylinder":
+            return (TOOL_BODY, "cylinder", np.array([0.0, 0.0, z0]), np.array([0.0, 0.0, z0 - b.length]), b.radius)
+        return (TOOL_BODY, "box", np.array([-b.width / 2, -b.thickness / 2, z0 - b.length]),
+                np.array([b.width / 2, b.thickness / 2, z0]), 0.0)
+
+    def with_default_body(self, tool: np.ndarray) -> "GripperGeometry":
+        """This gripper with the default tool body (when it has none): a box the palm's size
+        (palm_width x palm_thickness) from the palm's back face to the flange of ``tool``
+        (T_flange_tool, 4x4); unchanged when the palm reaches the flange."""
+        if self.body is not None:
+            return self
+        length = tool_body_behind(tool, self.finger_length, self.palm_length)
+        if not length > 1e-9 * (1.0 + self.finger_length):
+            return self
+        return replace(self, body=ToolBody("box", length, self.palm_width, self.palm_thickness))
 
 
 @dataclass(eq=False)
