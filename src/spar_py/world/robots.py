@@ -101,7 +101,9 @@ class GripperGeometry:
     the fingers (z from -finger_length - palm_length to -finger_length), ``palm_width`` along x,
     ``palm_thickness`` along y (centred). Defaults (:meth:`default`): fingers 60 x 20 x 10 mm, a palm
     25 mm deep, as wide as a finger and as thick as the open fingers' span (finger_separation + 2
-    finger thicknesses): the sizes world.shapes_derive's grasp filter has always assumed.
+    finger thicknesses): the sizes world.shapes_derive's grasp filter has always assumed. ``body``
+    the tool behind the palm (:class:`ToolBody`; the loader gives a robot without ``collision:``
+    the default, :meth:`with_default_body`).
     """
 
     finger_separation: float
