@@ -25,8 +25,8 @@ from spar_py.kb.schema import read_kb
 from spar_py.kb.values import LOAD_MEMO_LIMIT, tm_node, units_of
 from spar_py.world.robots import GripperGeometry
 
-__all__ = ["DEFAULT_OPENING_MM", "DERIVABLE", "PART_SIZE_MM", "REACH_RATIO", "check_against_shape", "load_object",
-           "part_size"]
+__all__ = ["DEFAULT_OPENING_MM", "DERIVABLE", "PART_SIZE_MM", "REACH_RATIO", "check_against_shape", "holdable",
+           "load_object", "part_size"]
 
 
 #: The entries an object model may leave out when it gives its geometry (derived: world.shapes).
@@ -168,9 +168,6 @@ def load_object(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, o
             euler = tuple(float(v) for v in d["euler"])
             grasps[d["label"]] = Grasp(d["label"], tuple(d["gfaces"]), tuple(d["ofaces"]), euler,  # type: ignore[arg-type]
                                        float(d["width"]), eulerxyz(*euler))
-        if not grasps:
-            raise KBError(str(path), "mesh" if geometry.mesh_file else "shape",
-                          "a part the gripper can hold (no pair of opposite faces or shaft within its opening)")
     clash = set(poses) & set(grasps)
     if clash:
         raise root.key("grasps").fail(f"labels distinct from stable pose labels ({', '.join(sorted(clash))})")
@@ -191,6 +188,18 @@ def load_object(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, o
                 fnode.key("vector").vector(3) * scale,
             )
     return ObjectModel(name, faces, poses, grasps, feature, solids, geometry)
+
+
+def holdable(path: str | Path, model: ObjectModel) -> None:
+    """Refuse ``model`` (loaded from ``path``) as a part some goal moves when the gripper cannot
+    hold it: derived grasps may be none (a base, a board no action moves loads with none), a part
+    to be moved must have one. KBError naming the file and its ``mesh`` or ``shape`` key."""
+    if model.grasps:
+        return
+    geo = model.geometry
+    key = "mesh" if geo is not None and geo.mesh_file else "shape"
+    raise KBError(str(path), key, "a part the gripper can hold, as a goal moves it (no pair of opposite faces or "
+                                  "round surface within its opening)")
 
 
 def _grasp_frame(euler: tuple[float, ...], memo: Memo | None) -> np.ndarray:

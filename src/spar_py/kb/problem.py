@@ -21,7 +21,7 @@ from spar_py.core.geometry import same_stable_pose
 from spar_py.core.memo import Memo
 from spar_py.core.model import Bounds, Cell, ObjectModel, Position, Sensor, Term
 from spar_py.kb.node import Node, cut, did_you_mean, show
-from spar_py.kb.objects import load_object
+from spar_py.kb.objects import holdable, load_object
 from spar_py.kb.reader import MAX_INPUT_BYTES
 from spar_py.kb.robots import home_angles, load_robot, load_urdf_robot
 from spar_py.kb.sanity import check_cell
@@ -393,6 +393,10 @@ def load_problem(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> Cell:
     vectors = {k: n.vector(3) for k, n in (root.key("vectors", False) or Node("", "", {})).items()}
     turns: dict[str, tuple[tuple[str, tuple[str, ...]], ...]] = {}
     goals = _goals(root, objects, transforms, vectors, positions, turns)
+    moved = {g[1] for g in goals if isinstance(g, tuple) and g[0] in ("assembled", "part_location")}
+    for (oname, model), mfile in zip(objects.items(), model_files):
+        if oname in moved:
+            holdable(mfile, model)  # only a part a goal moves must have a grasp
     initial: list[Term] = [("gripper", grip)] + [("part_location", p.obj, p.name) for p in positions.values()]
     meshes = [m.geometry.mesh_file for m in objects.values() if m.geometry is not None and m.geometry.mesh_file]
     files = tuple(dict.fromkeys(str(Path(u).resolve()) for u in [path, rpath, *model_files, *meshes]))

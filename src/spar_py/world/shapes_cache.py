@@ -30,7 +30,7 @@ from spar_py.world.shapes import FeatureGeometry, Geometry, derive_faces
 __all__ = ["DERIVE_VERSION", "MAX_ENTRIES", "cache_dir", "derive"]
 
 #: Bumped whenever the derivation's results change for the same inputs.
-DERIVE_VERSION = 3
+DERIVE_VERSION = 4
 #: Derivations kept on disk at most.
 MAX_ENTRIES = 256
 

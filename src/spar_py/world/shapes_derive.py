@@ -48,8 +48,8 @@ from spar_py.world.shapes import (ON_SURFACE_MM, Face, FeatureGeometry, Primitiv
 if TYPE_CHECKING:
     import trimesh
 
-__all__ = ["DerivedGrasp", "DerivedPose", "Gripper", "derive_grasps", "derive_poses", "euler_zyz_of",
-           "grasp_problem", "support_check"]
+__all__ = ["DerivedGrasp", "DerivedPose", "Gripper", "MeshCylinder", "derive_grasps", "derive_poses", "euler_zyz_of",
+           "grasp_problem", "mesh_cylinders", "support_check"]
 
 #: Poses whose basin of attraction (trimesh's probability) is smaller are dropped.
 PROB_FLOOR = 0.01
@@ -566,9 +566,12 @@ def _covered(mesh: "trimesh.Trimesh", faces: list[Face], feature: FeatureGeometr
     return out
 
 
-def _shafts(faces: list[Face], feature: FeatureGeometry | None, prims: tuple[Primitive, ...]
+def _shafts(faces: list[Face], feature: FeatureGeometry | None, prims: tuple[Primitive, ...],
+            mesh: "trimesh.Trimesh | None" = None, unit: str = "mm"
             ) -> list[tuple[np.ndarray, np.ndarray, float, float, str | None]]:
-    """Round shafts to grasp across: (root, unit axis, radius, length, face name or None)."""
+    """Round shafts to grasp across: (root, unit axis, radius, length, face name or None): the
+    peg feature's, the cylinder primitives', then the outer cylinders found on the mesh
+    (:func:`mesh_cylinders`: a shoulder, a shaft not declared as the feature), each once."""
     out = []
     if feature is not None and feature.kind == "peg":
         out.append((feature.origin, feature.direction, feature.radius, feature.length, feature.name))
@@ -577,7 +580,93 @@ def _shafts(faces: list[Face], feature: FeatureGeometry | None, prims: tuple[Pri
         same = [np.allclose(root, o) and np.allclose(d, a) and abs(p.radius - r) < 1e-9 for o, a, r, _, _ in out]
         if p.kind == "cylinder" and not p.subtract and not any(same):
             out.append((np.array([0.0, 0.0, p.lo[2]]), np.array([0.0, 0.0, 1.0]), p.radius, p.hi[2] - p.lo[2], None))
+    if mesh is not None:
+        tol = from_mm(unit, ON_SURFACE_MM)
+        for c in mesh_cylinders(mesh, faces, unit):
+            # one already listed on the same line with the same radius (the feature, a primitive)
+            if any(abs(r - c.radius) < tol and abs(abs(float(a @ c.axis)) - 1) < 1e-6
+                   and np.linalg.norm(np.cross(c.root - o, a)) < tol for o, a, r, _, _ in out):
+                continue
+            out.append((c.root, c.axis, c.radius, c.length, c.face))
     return out
+
+
+#: A face is a cylinder when its triangles' normals are normal to one axis within this (deg) ...
+CYL_AXIS_DEG = 0.5
+#: ... and its vertices lie at one distance from it within this fraction of the radius (a 32-gon's
+#: vertices are on its circle; its triangles' centres 0.5 % inside).
+CYL_RADIUS_REL = 0.005
+#: Both pads touch the cylinder where it has triangles whose normals are within this of the
+#: closing direction, either way (deg): a half-round surface is not closed on across.
+CYL_PAD_DEG = 15.0
+
+
+@dataclass(frozen=True)
+class MeshCylinder:
+    """An outer cylindrical surface of a mesh (object frame, cell unit): its ``face`` (a derived
+    face name), the ``root`` on its axis at one end, the unit ``axis`` towards the other end, the
+    ``radius`` and ``length``, and the unit ``normals`` of its triangles (for which closing
+    directions both pads find it)."""
+
+    face: str
+    root: np.ndarray
+    axis: np.ndarray
+    radius: float
+    length: float
+    normals: np.ndarray
+
+
+def mesh_cylinders(mesh: "trimesh.Trimesh", faces: list[Face], unit: str) -> list[MeshCylinder]:
+    """The outer cylindrical surfaces of the mesh, one per curved derived face that is one: the
+    axis the face's normals are all normal to (the least eigenvector of the area-weighted sum of
+    n n^T, within CYL_AXIS_DEG), its vertices at one distance from it (a least-squares circle in
+    the plane normal to the axis, within CYL_RADIUS_REL), its normals pointing away from it (a
+    shaft, not a bore). Kept in the mesh's metadata."""
+    key = (tuple(f.name for f in faces), unit)
+    got = mesh.metadata.get("_spar_cylinders")
+    if got is not None and got[0] == key:
+        return got[1]
+    A = _arrays(mesh)
+    area = np.asarray(mesh.area_faces, float)
+    sin_tol = math.sin(math.radians(CYL_AXIS_DEG))
+    out = []
+    for f in faces:
+        if f.planar or f.feature or len(f.tris) < 6:
+            continue
+        N, w = A.N[f.tris], area[f.tris]
+        vals, vecs = np.linalg.eigh((N * w[:, None]).T @ N)
+        d = vecs[:, 0]
+        if np.abs(N @ d).max() > sin_tol or vals[1] < 1e-6 * vals[2]:
+            continue  # not normal to one axis (a cone, a sphere), or all normals one way (a plane)
+        d = clean(d / np.linalg.norm(d), 1e-12)
+        d = _canonical(d)
+        e1, e2 = axis_basis(d)
+        V = A.V[np.unique(A.F[f.tris])]
+        P = np.column_stack([V @ e1, V @ e2])
+        # a circle x^2 + y^2 + a x + b y + c = 0 through the projected vertices, least squares
+        M = np.column_stack([P, np.ones(len(P))])
+        sol = np.linalg.lstsq(M, -(P ** 2).sum(1), rcond=None)[0]
+        c2 = -sol[:2] / 2
+        r = float(np.sqrt(max(c2 @ c2 - sol[2], 0.0)))
+        if not r > 0 or np.abs(np.linalg.norm(P - c2, axis=1) - r).max() > CYL_RADIUS_REL * r:
+            continue
+        t = V @ d
+        centre = c2[0] * e1 + c2[1] * e2
+        radial = A.C[f.tris] - centre - np.outer(A.C[f.tris] @ d, d)
+        if (np.einsum("ij,ij->i", radial, N) <= 0).any():
+            continue  # normals towards the axis: a bore
+        root = clean(centre + float(t.min()) * d, 1e-9)
+        out.append(MeshCylinder(f.name, root, d, float(round(r, 12)), float(t.max() - t.min()), N.copy()))
+    mesh.metadata["_spar_cylinders"] = (key, out)
+    return out
+
+
+def _pads_find(normals: np.ndarray | None, c: np.ndarray) -> bool:
+    """Both pads closing along +-c find the surface of triangle ``normals`` (None: a whole round)."""
+    if normals is None:
+        return True
+    cos = math.cos(math.radians(CYL_PAD_DEG))
+    return bool((normals @ c > cos).any() and (normals @ -c > cos).any())
 
 
 def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], feature: FeatureGeometry | None,
@@ -613,9 +702,11 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], feature: FeatureGe
                 if _pad_contact(pieces, areas, e1, e2, T, g, min_area) >= min_area:
                     cands.append((names, width, T))
     min_len = from_mm(unit, MIN_CONTACT_MM)
-    for root, d, r, length, fname in _shafts(faces, feature, prims):
+    cyl_normals = {c.face: c.normals for c in mesh_cylinders(mesh, faces, unit)}
+    for root, d, r, length, fname in _shafts(faces, feature, prims, mesh, unit):
         if not _round(mesh, faces, root, d, r, length):
             continue  # a prismatic shaft (a hexagon): its flats are not a cylinder to close on
+        normals = cyl_normals.get(fname) if fname is not None else None  # a mesh cylinder's; else a whole round
         name = fname if fname is not None else _face_at(faces, mesh, root + d * length / 2 + axis_basis(d)[0] * r,
                                                        unit)
         if name is None or 2 * r > g.opening * (1 + 1e-9):
@@ -625,6 +716,8 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], feature: FeatureGe
         n_dirs = max(1, int(round(math.pi / step)))
         for m in range(n_dirs):
             c = _canonical(clean(math.cos(math.pi * m / n_dirs) * e1 + math.sin(math.pi * m / n_dirs) * e2, 1e-12))
+            if not _pads_find(normals, c):
+                continue
             for a in _approaches(c, step):
                 T = _tool(p, c, a)
                 if _line_contact(root + c * r, d, length, T, g) >= min_len:

@@ -1,0 +1,132 @@
+"""Grasps on round surfaces (issue 33, item 7): a part's cylinders found on its mesh are closed
+on across their diameter, and a part no goal moves may have no grasp.
+
+The stepped shafts are made here with trimesh (a revolved profile: no flats within the opening);
+the checks of the grasps are our own arithmetic on the profile's numbers: both pads' contact
+points at the cylinder's radius from the axis and within its length, the width its diameter.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from spar_py.core.errors import KBError
+from spar_py.kb.objects import load_object
+from spar_py.kb.problem import load_problem
+from spar_py.world.robots import GripperGeometry
+
+ROOT = Path(__file__).resolve().parent.parent
+#: The stepped shaft's profile (radius, z) mm: a D30 shoulder 20 mm long, a D16 shaft 100 mm long.
+PROFILE = [(0, 0), (15, 0), (15, 20), (8, 20), (8, 120), (0, 120)]
+#: Each cylinder of it: (radius, z from, z to).
+CYLINDERS = [(15.0, 0.0, 20.0), (8.0, 20.0, 120.0)]
+
+
+def _stepped_stl(d: Path, sections: int = 48) -> Path:
+    import trimesh
+
+    m = trimesh.creation.revolve(np.array(PROFILE, float), sections=sections)
+    assert m.is_watertight
+    path = d / "stepped.stl"
+    m.export(path)
+    (d / "stepped.yaml").write_text("object: stepped\nunits: {length: mm, angle: deg}\nmesh: stepped.stl\n")
+    return d / "stepped.yaml"
+
+
+def _gripper(opening: float) -> GripperGeometry:
+    return GripperGeometry.default(opening, 1.0)
+
+
+def _on_which_cylinder(g) -> tuple[float, float, float]:
+    """The profile's cylinder both pads of grasp ``g`` touch (our own check), or a failed assert."""
+    T = g.T
+    pads = [T[:3, 3] + s * g.width / 2 * T[:3, 1] for s in (1, -1)]
+    for r, z0, z1 in CYLINDERS:
+        ok = all(abs(np.hypot(p[0], p[1]) - r) < 1e-6 and z0 < p[2] < z1 for p in pads)
+        if ok and abs(g.width - 2 * r) < 1e-6:
+            return r, z0, z1
+    raise AssertionError(f"{g.label}: pads at {np.round(pads, 3).tolist()} are not on one cylinder")
+
+
+def test_stepped_shaft_mesh_cylinders(tmp_path: Path) -> None:
+    import trimesh
+
+    from spar_py.world.shapes import derive_faces
+    from spar_py.world.shapes_derive import mesh_cylinders
+
+    mesh = trimesh.load(_stepped_stl(tmp_path).with_suffix(".stl"), force="mesh")
+    faces = derive_faces(mesh, None, {}, "mm")
+    found = sorted((c.radius, float(c.root[2]), float(c.root[2] + c.length), *np.abs(c.axis), *c.root[:2])
+                   for c in mesh_cylinders(mesh, faces, "mm"))
+    # the D16 shaft (z 20..120) and the D30 shoulder (z 0..20), both about the z axis (the STL: float32)
+    assert found == [pytest.approx((8.0, 20.0, 120.0, 0, 0, 1, 0, 0), abs=1e-5),
+                     pytest.approx((15.0, 0.0, 20.0, 0, 0, 1, 0, 0), abs=1e-5)]
+
+
+def test_stepped_shaft_mesh_has_round_grasps(tmp_path: Path) -> None:
+    """No pair of flats within an 80 mm opening (its ends are 120 mm apart): every grasp is across
+    the shoulder (D30) or the shaft (D16), from approaches around it."""
+    model = load_object(_stepped_stl(tmp_path), "mm", gripper=_gripper(80.0), use_cache=False)
+    assert model.grasps
+    held = {}
+    for g in model.grasps.values():
+        r, _, _ = _on_which_cylinder(g)
+        held.setdefault(r, []).append(g.T[:3, 2])  # the approach
+    assert set(held) == {8.0, 15.0}
+    # approaches all round the D16 shaft: from both sides across and along it
+    A = np.array(held[8.0])
+    assert (A @ [0, 0, 1.0]).min() < -0.99 and any(abs(a[2]) < 1e-9 for a in A)
+    side = [a for a in A if abs(a[2]) < 1e-9]
+    assert max(a @ b for a in side for b in side) > 0.99 and min(a @ b for a in side for b in side) < -0.99
+    # a 15 mm opening holds neither (the load does not refuse: nothing says it must move)
+    narrow = load_object(_stepped_stl(tmp_path), "mm", gripper=_gripper(15.0), use_cache=False)
+    assert not narrow.grasps
+
+
+def test_stepped_shaft_primitives_has_round_grasps(tmp_path: Path) -> None:
+    (tmp_path / "p.yaml").write_text(yaml.safe_dump({
+        "object": "stepped", "units": {"length": "mm", "angle": "deg"},
+        "shape": [{"cylinder": {"radius": r, "z": [z0, z1]}} for r, z0, z1 in CYLINDERS]}))
+    model = load_object(tmp_path / "p.yaml", "mm", gripper=_gripper(80.0), use_cache=False)
+    assert {_on_which_cylinder(g)[0] for g in model.grasps.values()} == {8.0, 15.0}
+
+
+def test_part_no_goal_moves_may_have_no_grasp(tmp_path: Path) -> None:
+    """A base too big for the fingers loads with no grasps when nothing moves it; the same part
+    as a goal's moving part is refused, naming its file."""
+    (tmp_path / "base.yaml").write_text(yaml.safe_dump({
+        "object": "base", "units": {"length": "mm", "angle": "deg"},
+        "shape": [{"box": {"min": [-100, -100, 0], "max": [100, 100, 150]}},
+                  {"cylinder": {"radius": 12, "z": [120, 150], "subtract": True}}],
+        "feature": {"kind": "hole", "name": "bore", "radius": 12, "length": 30,
+                    "axis": {"origin": [0, 0, 150], "direction": [0, 0, -1]}}}))
+    (tmp_path / "pin.yaml").write_text(yaml.safe_dump({
+        "object": "pin", "units": {"length": "mm", "angle": "deg"},
+        "shape": [{"cylinder": {"radius": 11, "z": [0, 60]}}],
+        "feature": {"kind": "peg", "name": "shank", "radius": 11, "length": 60,
+                    "axis": {"origin": [0, 0, 0], "direction": [0, 0, 1]}}}))
+    cell = {
+        "problem": "pin_in_base", "units": {"length": "mm", "angle": "deg"},
+        "robot": str(ROOT / "kb" / "robots" / "puma762.yaml"),
+        "objects": {"pin": {"model": "pin.yaml", "initial": {"name": "init_pos1", "label": "tr1",
+                                                            "tm": [[1, 0, 0], [0, 1, 0], [0, 0, 1], [700, -200, 0]]}},
+                    "base": {"model": "base.yaml", "initial": {"name": "init_pos2", "label": "tr2",
+                                                              "tm": [[1, 0, 0], [0, 1, 0], [0, 0, 1], [700, 200, 0]]}}},
+        "gripper": "open",
+        "uncertainty": {"manipulator": {k: [-0.01, 0.01] for k in ("dx", "dy", "dz", "dtheta")},
+                        "objects": {o: {k: [-0.01, 0.01] for k in ("dx", "dy", "dz", "dtheta")}
+                                    for o in ("pin", "base")}},
+        "goals": ["assembled(pin, base)"],
+    }
+    (tmp_path / "ok.yaml").write_text(yaml.safe_dump(cell))
+    loaded = load_problem(tmp_path / "ok.yaml")
+    assert loaded.objects["base"].grasps == {} and loaded.objects["pin"].grasps
+    cell["goals"] = ["assembled(base, pin, [[bore], [shank]], trans_1, vec_1)"]
+    cell["transforms"] = {"trans_1": {"tm": [[1, 0, 0], [0, 1, 0], [0, 0, 1], [0, 0, 60]]}}
+    cell["vectors"] = {"vec_1": [0, 0, -1]}
+    (tmp_path / "bad.yaml").write_text(yaml.safe_dump(cell))
+    with pytest.raises(KBError, match=r"base\.yaml: shape: expected a part the gripper can hold"):
+        load_problem(tmp_path / "bad.yaml")
