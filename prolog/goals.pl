@@ -73,7 +73,7 @@
 :- use_module(plan_state).
 :- use_module(spar_defaults).
 :- use_module('../kb/templates/actions',
-              [gensym//2, mating_grasps/3, assembly_turn/3]).
+              [gensym//2, mating_grasps/4, assembly_turn/3]).
 
 %!  phase1_search(+Options, -Outcome, -Bound) is det.
 %
@@ -225,7 +225,7 @@ approach_down(Va, [Rx, Ry, Rz|_]) :-
 
 no_mate_at(Oracle, Peg-PegFaces, Hole, Ta, Pose, Label) :-
     atom(Ta),
-    mating_grasps(Peg, PegFaces, Gs0),
+    mating_grasps(Peg, PegFaces, Ta, Gs0),
     sort(Gs0, Gs),
     Gs \== [],
     \+ ( assembly_turn(Ta, Turn, Allowed),

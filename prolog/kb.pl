@@ -18,6 +18,9 @@
                                   (a transform/2), the hole part then resting
                                   in one of HolePoses (the mated peg clears
                                   the table in them)
+      mate_grasps(Ta, Peg, Grasps)  the grasps of Peg usable for the goal's
+                                  assemble at Ta, decided by geometry (the
+                                  hand holds only what stays out of the hole)
 
     The planner reads them through the accessors of the same names
     (kb:grasp/6, ...), which answer for the problem in scope: a planning
@@ -51,6 +54,7 @@ kb_predicate(grasp, 6).          kb_predicate(position, 4).
 kb_predicate(position_class, 2). kb_predicate(initial, 1).
 kb_predicate(goal, 1).           kb_predicate(transform, 2).
 kb_predicate(vector, 2).         kb_predicate(turn, 3).
+kb_predicate(mate_grasps, 3).
 
 %   stored(?Fact, ?Problem, ?Stored): Stored is Fact as kept for Problem,
 %   '$Name'(Problem, Args...).

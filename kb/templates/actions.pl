@@ -29,6 +29,7 @@
             get_all_grasps/2,                   % +Object, -Grasps
             get_all_poses/2,                    % +Object, -Poses
             mating_grasps/3,                    % +Object, +Faces, -Grasps
+            mating_grasps/4,                    % +Object, +Faces, +Ta, -Grasps
             mating_poses/3,                     % +Object, +Faces, -Poses
             assembly_turn/3,                    % +Ta, -Turn, -HolePoses
             turn_class/2                        % +Turn, -Ta
@@ -97,7 +98,7 @@ instantiate_establishing_action(gripper(closed), Action, Constraints) -->
 instantiate_establishing_action(assembled(Obj1, Obj2, [M1, M2], Ta, Va),
                                 Action, []) -->
     { assembly_turn(Ta, Turn, Clear),
-      mating_grasps(Obj1, M1, GraspList),
+      mating_grasps(Obj1, M1, Ta, GraspList),
       mating_poses(Obj2, M2, Poses),
       clear_poses(Clear, Poses, PositionList),
       PositionList \== [] },
@@ -249,6 +250,23 @@ mating_grasps(Object, Faces, Grasps) :-
     findall(G, ( kb:grasp(Object, G, _, ofaces(Os), _, _),
                  disjoint(Os, Faces) ),
             Grasps).
+
+%!  mating_grasps(+Object, +Faces, +Ta, -Grasps:list) is det.
+%
+%   The grasps of Object usable for an assemble seating it at Ta: those
+%   the geometry allows (kb:mate_grasps/3, written where the goal's
+%   features have an axis and a length: the hand holds only what stays
+%   out of the hole), else those obscuring none of Faces (mating_grasps/3).
+%
+%   @error instantiation_error if Object or Ta is unbound.
+
+mating_grasps(Object, Faces, Ta, Grasps) :-
+    must_be(atom, Object),
+    must_be(atom, Ta),
+    (   kb:mate_grasps(Ta, Object, Gs)
+    ->  Grasps = Gs
+    ;   mating_grasps(Object, Faces, Grasps)
+    ).
 
 %!  mating_poses(+Object, +Faces, -Poses:list) is det.
 %

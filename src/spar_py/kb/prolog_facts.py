@@ -7,12 +7,15 @@ engine sends them to Prolog as they are (engine.Engine.load_cell).
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
 from spar_py.core.errors import SparError
 from spar_py.core.geometry import same_stable_pose
 from spar_py.core.model import Cell, Position
+from spar_py.core.units import mm_per
+from spar_py.world.robots import GripperGeometry
 
 __all__ = ["facts", "position_class"]
 
@@ -43,7 +46,8 @@ def facts(cell: Cell) -> list[tuple]:
     Shapes follow Figs. 18-19: pose/5, grasp/6, plus object/1, face/2, position/4,
     position_class/2, initial/1, goal/1, transform/2, vector/2, problem/1, and turn/3 for
     a derived T_a: turn(Ta, Turn, HolePoses), in order, each turn the planner may assemble
-    with and the hole part's stable poses in which the mated peg clears the table.
+    with and the hole part's stable poses in which the mated peg clears the table; and
+    mate_grasps(Ta, Peg, Grasps) for a goal whose features have geometry (:func:`_mate_grasps`).
     """
     out: list[tuple] = [("problem", cell.name)]
     for o in cell.objects.values():
@@ -68,4 +72,47 @@ def facts(cell: Cell) -> list[tuple]:
     out += [("turn", ta, t, list(poses)) for ta, alts in cell.turns.items() for t, poses in alts]
     out += [("initial", f) for f in cell.initial]
     out += [("goal", g) for g in cell.goals]
+    out += _mate_grasps(cell)
+    return out
+
+
+def _feature_geometry(model: Any, faces: Any) -> Any:
+    """The geometry (world.shapes.FeatureGeometry) of ``model``'s feature named among ``faces``
+    (a goal's mating faces), or None (none named, or one declared without geometry)."""
+    feats = getattr(model, "features", None) or ((model.feature,) if model.feature is not None else ())
+    for f in feats:
+        geo = getattr(f, "geometry", None)
+        if geo is not None and isinstance(faces, (list, tuple)) and geo.name in faces:
+            return geo
+    return None
+
+
+def _mate_grasps(cell: Cell) -> list[tuple]:
+    """``mate_grasps(Ta, Peg, Grasps)`` per assembled goal whose peg and hole features both have
+    geometry (axis, length): the peg's grasps the goal's assemble may use, which the planner reads
+    instead of the rule by ofaces (kb/templates/actions.pl mating_grasps/4). A grasp on the
+    peg's shaft (its gripped faces hold the feature's) is usable where it holds only the length
+    staying out of the hole when seated at T_a (world.shapes_derive.mate_grasp_usable); any other
+    grasp as by the ofaces rule (it hides none of the goal's peg faces)."""
+    from spar_py.world.shapes_derive import mate_grasp_usable  # numpy only; trimesh is not imported
+
+    gripper = cell.robot.gripper or GripperGeometry.default(cell.finger_separation, mm_per(cell.unit))
+    out: list[tuple] = []
+    for g in cell.goals:
+        if not (isinstance(g, tuple) and g[0] == "assembled" and len(g) == 6):
+            continue
+        _, peg, hole, faces, ta, _ = g
+        if not (isinstance(faces, list) and len(faces) == 2 and peg in cell.objects and hole in cell.objects
+                and ta in cell.transforms):
+            continue
+        pf, hf = _feature_geometry(cell.objects[peg], faces[0]), _feature_geometry(cell.objects[hole], faces[1])
+        if pf is None or hf is None or hf.kind != "hole":
+            continue
+        shown = set(faces[0]) if isinstance(faces[0], list) else set()
+        usable = [gr.label for gr in cell.objects[peg].grasps.values()
+                  if (mate_grasp_usable(gr.T, gr.width, gripper, cell.transforms[ta], hf, cell.unit)
+                      if pf.name in gr.gfaces else not shown & set(gr.ofaces))]
+        fact = ("mate_grasps", ta, peg, usable)
+        if fact not in out:
+            out.append(fact)
     return out

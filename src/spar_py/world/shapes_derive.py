@@ -49,7 +49,7 @@ if TYPE_CHECKING:
     import trimesh
 
 __all__ = ["DerivedGrasp", "DerivedPose", "Gripper", "MeshCylinder", "derive_grasps", "derive_poses", "euler_zyz_of",
-           "grasp_problem", "mesh_cylinders", "support_check"]
+           "grasp_problem", "mate_grasp_usable", "mesh_cylinders", "support_check"]
 
 #: Poses whose basin of attraction (trimesh's probability) is smaller are dropped.
 PROB_FLOOR = 0.01
@@ -843,3 +843,33 @@ def check_entries(model: "object", gripper: Gripper, unit: str, which: tuple[str
             if why is not None:
                 out.append((f"grasps[{i}]", "a grasp the gripper can make", f"{g.label}: {why}"))
     return out
+
+
+# =========================================================================== grasps for a mate
+
+
+#: A gripper body may reach this far past the hole's mouth plane into the hole side (mm):
+#: touching the mouth's plane is outside it.
+MOUTH_TOL_MM = 0.05
+
+
+def mate_grasp_usable(T_grasp: np.ndarray, width: float, gripper: Any, T_a: np.ndarray, hole: FeatureGeometry,
+                      unit: str) -> bool:
+    """Whether a grasp of the peg (tool frame ``T_grasp`` in the peg's frame, fingers ``width``
+    apart) can make the mate seated at ``T_a`` (the peg's frame in the hole part's frame, 4x4):
+    every corner of the fingers, the palm and the tool body (``gripper``, a
+    world.robots.GripperGeometry: the finger's size, not only its pad) stays on the outer side of
+    the plane of the hole's mouth (``hole``: origin the mouth's centre, direction into the part),
+    within MOUTH_TOL_MM, so the hand holds only the length that stays out of the hole when seated.
+    Cell unit throughout."""
+    boxes = [(lo, hi) for _, lo, hi in gripper.boxes(width)]
+    body = gripper.body_shape()
+    if body is not None:
+        _, kind, a, b, r = body
+        boxes.append((np.minimum(a, b) - [r, r, 0.0], np.maximum(a, b) + [r, r, 0.0]) if kind == "cylinder"
+                     else (a, b))
+    corners = np.concatenate([np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                                        for z in (lo[2], hi[2])]) for lo, hi in boxes])
+    M = np.asarray(T_a, float) @ np.asarray(T_grasp, float)  # tool frame in the hole part's frame
+    depth = (corners @ M[:3, :3].T + M[:3, 3] - hole.origin) @ hole.direction
+    return bool(depth.max() <= from_mm(unit, MOUTH_TOL_MM))
