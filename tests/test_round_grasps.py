@@ -130,3 +130,84 @@ def test_part_no_goal_moves_may_have_no_grasp(tmp_path: Path) -> None:
     (tmp_path / "bad.yaml").write_text(yaml.safe_dump(cell))
     with pytest.raises(KBError, match=r"base\.yaml: shape: expected a part the gripper can hold"):
         load_problem(tmp_path / "bad.yaml")
+
+
+# =========================================================================== a shaft grasp for the mate
+
+#: The mate cell's numbers (mm): a D30 pin 110 long (no flats within the 101.6 mm opening), a
+#: 200 x 200 x 120 base (too big for the fingers) on its side, a D31 bore 20 deep in it.
+PIN_R, PIN_L, BORE_DEPTH = 15.0, 110.0, 20.0
+#: The PUMA's fingers (kb/robots/puma762.yaml): length, width, thickness; the palm's depth.
+FINGER, PALM_DEPTH = (60.0, 20.0, 10.0), 25.0
+
+
+def _pin_cell(d: Path) -> Path:
+    (d / "base.yaml").write_text(yaml.safe_dump({
+        "object": "base", "units": {"length": "mm", "angle": "deg"},
+        "shape": [{"box": {"min": [-100, -100, 0], "max": [100, 100, 120]}},
+                  {"cylinder": {"radius": PIN_R + 0.5, "z": [120 - BORE_DEPTH, 120], "subtract": True}}],
+        "feature": {"kind": "hole", "name": "bore", "radius": PIN_R + 0.5, "length": BORE_DEPTH,
+                    "axis": {"origin": [0, 0, 120], "direction": [0, 0, -1]}}}))
+    (d / "pin.yaml").write_text(yaml.safe_dump({
+        "object": "pin", "units": {"length": "mm", "angle": "deg"},
+        "shape": [{"cylinder": {"radius": PIN_R, "z": [0, PIN_L]}}],
+        "feature": {"kind": "peg", "name": "shank", "radius": PIN_R, "length": PIN_L,
+                    "axis": {"origin": [0, 0, 0], "direction": [0, 0, 1]}}}))
+    small = {k: [-0.01, 0.01] for k in ("dx", "dy", "dz", "dtheta")}
+    cell = {
+        "problem": "pin_outer_grasp", "units": {"length": "mm", "angle": "deg"},
+        "robot": str(ROOT / "kb" / "robots" / "puma762.yaml"),
+        "objects": {
+            "pin": {"model": "pin.yaml", "initial": {"name": "init_pos1", "label": "tr1",
+                                                    "tm": [[1, 0, 0], [0, 1, 0], [0, 0, 1], [700, -200, 0]]}},
+            # on its side: its z (the bore's axis, outwards) along the world's +x, the bore 100 mm up
+            "base": {"model": "base.yaml", "initial": {"name": "init_pos2", "label": "tr2",
+                                                      "tm": [[0, 0, -1], [0, 1, 0], [1, 0, 0], [600, 250, 100]]}}},
+        "gripper": "open",
+        "uncertainty": {"manipulator": small, "objects": {"pin": small, "base": small}},
+        "goals": ["assembled(pin, base)"],
+    }
+    (d / "pin_outer.yaml").write_text(yaml.safe_dump(cell))
+    return d / "pin_outer.yaml"
+
+
+def test_shaft_grasp_holding_the_outer_length_makes_the_mate(tmp_path: Path) -> None:
+    """Every grasp of the pin is on its shaft (the feature's face), so the rule by ofaces leaves
+    none for the insertion; the grasps whose fingers stay on the 90 mm that stays out of the bore
+    are usable, and the plan inserts the pin with one. Our own check at the assemble step: the
+    fingers' and palm's corners (the robot file's sizes, placed by the step's tool pose) lie on
+    the outer side of the bore's mouth plane, and the pads on the pin's outer length."""
+    from spar_py.kb.prolog_facts import facts
+    from spar_py.planning.planner import Planner
+
+    cell = load_problem(_pin_cell(tmp_path))
+    pin = cell.objects["pin"]
+    assert pin.grasps and all("shank" in g.ofaces for g in pin.grasps.values())  # the ofaces rule: none
+    usable = next(f[3] for f in facts(cell) if f[0] == "mate_grasps")
+    assert usable and set(usable) < set(pin.grasps)
+    plan = Planner().plan(cell)
+    assert plan.ok, plan.reason
+    asm = next(s for s in plan.steps if s.name == "assemble")
+    pick = [s for s in plan.steps if s.name == "pickup" and s.object == "pin"][-1]
+    assert pick.args[1] in usable
+    T = np.asarray(asm.tool_pose, float)
+    base = next(p.T for p in cell.positions.values() if p.obj == "base")
+    mouth = base[:3, :3] @ [0, 0, 120.0] + base[:3, 3]
+    inward = base[:3, :3] @ [0, 0, -1.0]
+    width = pin.grasps[pick.args[1]].width
+    assert width == pytest.approx(2 * PIN_R)
+    L, u, t = FINGER
+    w = width / 2
+    boxes = [((-u / 2, w, -L), (u / 2, w + t, 0)), ((-u / 2, -w - t, -L), (u / 2, -w, 0)),
+             ((-u / 2, -w - t, -L - PALM_DEPTH), (u / 2, w + t, -L))]
+    for lo, hi in boxes:
+        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+        depth = (corners @ T[:3, :3].T + T[:3, 3] - mouth) @ inward
+        assert depth.max() <= 0.05, depth
+    # the pads: the TCP +- half the width across, +- half a finger's width along the pin's axis
+    for s in (1, -1):
+        for a in (-u / 2, u / 2):
+            p = T[:3, 3] + s * w * T[:3, 1] + a * T[:3, 0]
+            outside = -(p - mouth) @ inward  # how far out of the bore along its axis
+            radial = np.linalg.norm((p - mouth) - ((p - mouth) @ inward) * inward)
+            assert 0 <= outside <= PIN_L - BORE_DEPTH + 1e-6 and radial == pytest.approx(PIN_R, abs=1e-6)
