@@ -52,6 +52,15 @@ test(sec6_assemble_lists, [Ns-PL == 14-[p2P1, p2P2, p2P4, p2P5, p2P6]]) :-
              geo(goal_5, action_1, mate_reachable(_, _, trans_1), [_, _]) ],
     length(GL, Ns).
 
+test(mating_grasps_by_ofaces, Gs4 == Gs3) :-
+    % no kb:mate_grasps/3 for the paper's goal (its features have no geometry): the ofaces rule
+    mating_grasps(peg, [peg_face], Gs3),
+    mating_grasps(peg, [peg_face], trans_1, Gs4),
+    length(Gs3, 14).
+
+test(mating_grasps_unbound_ta, [error(instantiation_error)]) :-
+    mating_grasps(peg, [peg_face], _, _).
+
 test(no_rule, fail) :-
     phrase(instantiate_establishing_action(glued(peg, block), _, _), [], _).
 
