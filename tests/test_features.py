@@ -121,6 +121,14 @@ def test_a_part_with_two_named_through_bores(plate_dir: Path) -> None:
         np.testing.assert_allclose(f.vector, [BORES[f.name], 0, 0], atol=1e-12)
     with pytest.raises(SparValueError, match=r"plate has no feature 'bore_c' \(its features: bore_a, bore_b\)"):
         plate.feature_named("bore_c")
+    # a through bore's face is its wall only: every triangle 8.5 from its axis (no bottom cap)
+    from spar_py.world.shapes import derive_faces, part_mesh
+
+    mesh = part_mesh(plate)
+    faces = {f.name: f for f in derive_faces(mesh, tuple(f.geometry for f in plate.features), {}, "mm")}
+    for name, x in BORES.items():
+        V = np.asarray(mesh.vertices)[np.asarray(mesh.faces)[faces[name].tris]].reshape(-1, 3)
+        assert len(V) and np.allclose(np.hypot(V[:, 0] - x, V[:, 1]), 8.5, atol=1e-6)
 
 
 def test_a_single_feature_is_named_by_its_face_or_kind() -> None:
@@ -357,3 +365,43 @@ def test_the_insertion_check_is_sound_and_tight(yaw_deg: float, tilt: bool) -> N
                 y = x.copy()
                 y[names.index("dz_block")] *= -1
                 assert float(f(x)) == pytest.approx(float(f(y)), rel=1e-12, abs=1e-15)
+
+
+# ---------------------------------------------------------------------- a mate with a given T_a
+
+
+def test_a_mate_with_a_given_transform(plate_dir: Path) -> None:
+    """kb.problem.mate_goal (a product's poses give T_a): the goal names the features' faces,
+    T_a and V_a are added as trans_K, vec_K; a through bore may be entered from either mouth
+    (V_a is then the way in), a blind one only from its mouth, and the peg's axis must lie
+    along the hole's."""
+    from spar_py.kb.node import Node
+    from spar_py.kb.problem import mate_goal
+
+    cell = load_problem(_two_pins(plate_dir, ["mated(pin_a, shaft, plate, bore_a)"], "mate_goal.yaml"))
+    objs = cell.objects
+    node = Node("product.yaml", "mates[0]", {})
+    peg, bore_a = ("pin_a", objs["pin_a"].feature_named("shaft")), ("plate", objs["plate"].feature_named("bore_a"))
+    transforms, vectors = dict(cell.transforms), dict(cell.vectors)
+    # from the top: shaft down, its tip (0, 0, 70) at (-40, 0, 20) on bore_a's axis
+    top = geometry.trans(-40, 0, 90) @ geometry.rotx(math.pi)
+    goal = mate_goal(node, "pin_a.shaft into plate.bore_a", objs, peg, bore_a, top, transforms, vectors)
+    assert goal[:4] == ("assembled", "pin_a", "plate", [["shaft"], ["bore_a"]])
+    np.testing.assert_allclose(transforms[goal[4]], top)
+    np.testing.assert_allclose(vectors[goal[5]], [0, 0, -1], atol=1e-12)
+    # from below, through the other mouth: shaft up, the way in is +z
+    below = geometry.trans(-40, 0, -30)
+    goal = mate_goal(node, "from below", objs, peg, bore_a, below, transforms, vectors)
+    np.testing.assert_allclose(vectors[goal[5]], [0, 0, 1], atol=1e-12)
+    assert len({goal[4], "trans_1"}) == 2 and goal[4] in transforms
+    # tilted by 1 deg about the tip (which stays on the axis): not along the axis
+    tilted = top @ geometry.trans(0, 0, 70) @ geometry.roty(1 * DEG) @ geometry.trans(0, 0, -70)
+    with pytest.raises(KBError, match=r"mates\[0\]: expected T_a pointing pin_a.shaft into plate.bore_a along its "
+                                      r"axis in tilted, not 1 deg from the way in"):
+        mate_goal(node, "tilted", objs, peg, bore_a, tilted, transforms, vectors)
+    # a blind bore entered from its closed end
+    blind = load_problem(_block_cell(plate_dir / "blind", 30))
+    with pytest.raises(KBError, match=r"expected T_a pointing pin.shaft into block.bore along its axis in upwards, "
+                                      r"not 180 deg from the way in"):
+        mate_goal(node, "upwards", blind.objects, ("pin", blind.objects["pin"].features[0]),
+                  ("block", blind.objects["block"].features[0]), geometry.trans(0, 0, -40), {}, {})
