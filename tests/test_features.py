@@ -203,6 +203,14 @@ def test_two_pins_each_checked_against_its_own_bore(plate_dir: Path) -> None:
         bore = s.args[2][1][0]
         assert v.satisfied and v.bound < v.threshold == pytest.approx(0.5 ** 2)
         assert bore in v.description
+    # Monte Carlo replay: no draw of the uncertainty variables breaks a satisfied verdict
+    from spar_py.phase2.instance import sample_check
+    from spar_py.world.run import CellCache
+
+    steps = [{"id": s.id, "name": s.name, "args": list(s.args)} | ({"source": s.source} if s.source else {})
+             for s in plan.steps]
+    replay = sample_check(CellCache(load_problem(path)), steps, draws=5000)
+    assert len(replay) == 10 and all(r["declared_satisfied"] and r["failed_draws"] == 0 for r in replay)
 
 
 def test_assembled_2_is_ambiguous_with_two_bores(plate_dir: Path) -> None:
@@ -405,3 +413,30 @@ def test_a_mate_with_a_given_transform(plate_dir: Path) -> None:
                                       r"not 180 deg from the way in"):
         mate_goal(node, "upwards", blind.objects, ("pin", blind.objects["pin"].features[0]),
                   ("block", blind.objects["block"].features[0]), geometry.trans(0, 0, -40), {}, {})
+
+
+def test_the_close_up_shows_each_pins_own_bore(plate_dir: Path) -> None:
+    """pictures.cell: the plate has two mouths (both painted), and each assemble's close-up is
+    at its own bore's mouth (world point from the plate's pose and the file's numbers)."""
+    from spar_py.pictures.cell import assemble_tolerance, hole_mouth, hole_mouths
+    from spar_py.pictures.scene import scenes
+
+    path = _two_pins(plate_dir, ["mated(pin_a, shaft, plate, bore_a)", "mated(pin_b, shaft, plate, bore_b)"],
+                     "closeup.yaml")
+    cell = load_problem(path)
+    assert sorted(float(c[0]) for c, _, _ in hole_mouths(cell, "plate")) == [-40.0, 40.0]
+    assert hole_mouth(cell, "plate") is None  # two holes: name one
+    plan = Planner().plan(cell)
+    assert plan.ok
+    sc = scenes(cell, plan)
+    seen = set()
+    for k, step in enumerate(plan.steps, start=1):
+        if step.name != "assemble":
+            continue
+        tol = assemble_tolerance(cell, plan, sc[k])
+        bore = step.args[2][1][0]
+        T = np.array(sc[k].poses["plate"])
+        want = T[:3, :3] @ np.array([BORES[bore], 0.0, 60.0]) + T[:3, 3]
+        assert tol is not None and np.allclose(tol.centre, want, atol=1e-9) and tol.satisfied
+        seen.add(bore)
+    assert seen == {"bore_a", "bore_b"}
