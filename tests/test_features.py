@@ -131,6 +131,15 @@ def test_a_part_with_two_named_through_bores(plate_dir: Path) -> None:
         assert len(V) and np.allclose(np.hypot(V[:, 0] - x, V[:, 1]), 8.5, atol=1e-6)
 
 
+def test_feature_may_be_a_list_as_features(plate_dir: Path) -> None:
+    from spar_py.kb.objects import load_object
+
+    (plate_dir / "plate_list.yaml").write_text(PLATE.replace("features:", "feature:"))
+    a, b = load_object(plate_dir / "plate.yaml", "mm"), load_object(plate_dir / "plate_list.yaml", "mm")
+    assert [(f.name, f.faces, f.through) for f in a.features] == [(f.name, f.faces, f.through) for f in b.features]
+    assert len(b.features) == 2
+
+
 def test_a_single_feature_is_named_by_its_face_or_kind() -> None:
     paper = MatingFeature("hole", ("block_face",), 0.9, np.zeros(3))
     assert paper.name == "hole" and not paper.through

@@ -180,13 +180,16 @@ def load_object(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, o
 
 
 def _feature_nodes(root: Node) -> list[Node]:
-    """The nodes of the model's features: ``features:`` (a list) or ``feature:`` (a list of one)."""
+    """The nodes of the model's features: ``features:`` (a list) or ``feature:`` (one, or a list
+    as ``features:`` is)."""
     one, many = root.key("feature", required=False), root.key("features", required=False)
     if one is not None and many is not None:
         raise many.fail("feature: or features:, not both")
     if many is not None:
         return many.elements(1)
-    return [] if one is None else [one]
+    if one is None:
+        return []
+    return one.elements(1) if isinstance(one.value, list) else [one]
 
 
 def _features(fnodes: list[Node], known: set[Face], scale: float) -> tuple[MatingFeature, ...]:
