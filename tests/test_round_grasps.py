@@ -58,7 +58,7 @@ def test_stepped_shaft_mesh_cylinders(tmp_path: Path) -> None:
     from spar_py.world.shapes_derive import mesh_cylinders
 
     mesh = trimesh.load(_stepped_stl(tmp_path).with_suffix(".stl"), force="mesh")
-    faces = derive_faces(mesh, None, {}, "mm")
+    faces = derive_faces(mesh, (), {}, "mm")
     found = sorted((c.radius, float(c.root[2]), float(c.root[2] + c.length), *np.abs(c.axis), *c.root[:2])
                    for c in mesh_cylinders(mesh, faces, "mm"))
     # the D16 shaft (z 20..120) and the D30 shoulder (z 0..20), both about the z axis (the STL: float32)
@@ -124,11 +124,22 @@ def test_part_no_goal_moves_may_have_no_grasp(tmp_path: Path) -> None:
     (tmp_path / "ok.yaml").write_text(yaml.safe_dump(cell))
     loaded = load_problem(tmp_path / "ok.yaml")
     assert loaded.objects["base"].grasps == {} and loaded.objects["pin"].grasps
-    cell["goals"] = ["assembled(base, pin, [[bore], [shank]], trans_1, vec_1)"]
-    cell["transforms"] = {"trans_1": {"tm": [[1, 0, 0], [0, 1, 0], [0, 0, 1], [0, 0, 60]]}}
-    cell["vectors"] = {"vec_1": [0, 0, -1]}
+    # a part a goal moves needs a grasp: a D120 pin (the PUMA opens 101.6 mm) into a D124 bore
+    (tmp_path / "wide_base.yaml").write_text(yaml.safe_dump({
+        "object": "base", "units": {"length": "mm", "angle": "deg"},
+        "shape": [{"box": {"min": [-100, -100, 0], "max": [100, 100, 150]}},
+                  {"cylinder": {"radius": 62, "z": [120, 150], "subtract": True}}],
+        "feature": {"kind": "hole", "name": "bore", "radius": 62, "length": 30,
+                    "axis": {"origin": [0, 0, 150], "direction": [0, 0, -1]}}}))
+    (tmp_path / "fat_pin.yaml").write_text(yaml.safe_dump({
+        "object": "pin", "units": {"length": "mm", "angle": "deg"},
+        "shape": [{"cylinder": {"radius": 60, "z": [0, 60]}}],
+        "feature": {"kind": "peg", "name": "shank", "radius": 60, "length": 60,
+                    "axis": {"origin": [0, 0, 0], "direction": [0, 0, 1]}}}))
+    cell["objects"]["pin"]["model"] = "fat_pin.yaml"
+    cell["objects"]["base"]["model"] = "wide_base.yaml"
     (tmp_path / "bad.yaml").write_text(yaml.safe_dump(cell))
-    with pytest.raises(KBError, match=r"base\.yaml: shape: expected a part the gripper can hold"):
+    with pytest.raises(KBError, match=r"fat_pin\.yaml: shape: expected a part the gripper can hold"):
         load_problem(tmp_path / "bad.yaml")
 
 

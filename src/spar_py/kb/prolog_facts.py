@@ -79,12 +79,10 @@ def facts(cell: Cell) -> list[tuple]:
 def _feature_geometry(model: Any, faces: Any) -> Any:
     """The geometry (world.shapes.FeatureGeometry) of ``model``'s feature named among ``faces``
     (a goal's mating faces), or None (none named, or one declared without geometry)."""
-    feats = getattr(model, "features", None) or ((model.feature,) if model.feature is not None else ())
-    for f in feats:
-        geo = getattr(f, "geometry", None)
-        if geo is not None and isinstance(faces, (list, tuple)) and geo.name in faces:
-            return geo
-    return None
+    if not isinstance(faces, (list, tuple)):
+        return None
+    feature = model.feature_on(tuple(faces))
+    return None if feature is None else feature.geometry
 
 
 def _mate_grasps(cell: Cell) -> list[tuple]:
