@@ -38,6 +38,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
+import math
+
 import numpy as np
 
 from spar_py.world import placement as pl
@@ -50,7 +52,8 @@ from spar_py.world.arcs import reachable_pairs
 from spar_py.world.motion_options import MotionFailure, MotionOptions
 from spar_py.world.run import CellCache
 from spar_py.world.workspace import arm_at, pair_text
-from spar_py.phase2.symbolic import Registry
+from spar_py.phase2.supinf import cached_bounds
+from spar_py.phase2.symbolic import Registry, is_symbolic, snap
 
 if TYPE_CHECKING:
     from spar_py.world.motion import InstanceMotion
@@ -388,6 +391,89 @@ def poses(world: World, seen: dict[int, tuple[ur.ObjectState, list[list[float]]]
     return out
 
 
+#: Entries of the cell cache's table of parts' position bounds (:func:`position_bounds`), one
+#: per error structure and variables' bounds.
+BOUNDS_LIMIT = 4096
+
+
+def _displacement(o: ur.ObjectState) -> list[Any]:
+    """Part ``o``'s error as four expressions in its error variables: the displacement of its
+    origin from the ideal one in world x, y, z (cell unit: the translation of
+    ``trans(-t_O) T_{O+d}``, uncertainty.ObjectState.possible_rel, Eq. 2 on the table, Eq. 4
+    held or assembled) and its rotation about world z (rad): on the table the error's own
+    angle; held or assembled, the tool-z rotation times the tool z axis's world-z component
+    ``(R_O R_G)[2, 2]``, as a put-down maps it (Sec. 3.2.3), which is the world-z component of
+    the rotation vector."""
+    P = o.possible_rel()
+    if o.where == ur.TABLE:
+        rot = o.error.theta
+    else:
+        rot = float(snap(o.pose[:3, :3] @ o.grasp[:3, :3])[2, 2]) * o.error.theta  # type: ignore[index]
+    return [P[0, 3], P[1, 3], P[2, 3], rot]
+
+
+def _degrees(lo: float, hi: float) -> list[float]:
+    """[lo, hi] rad in degrees, each nonzero end moved two floats outwards (the product's
+    rounding), so the interval in degrees holds the one in radians."""
+    out = []
+    for x, way in ((lo, -math.inf), (hi, math.inf)):
+        d = math.degrees(x)
+        if d != 0.0:
+            d = math.nextafter(math.nextafter(d, way), way)
+        out.append(d)
+    return out
+
+
+def _part_bounds(cache: CellCache, reg: Registry, o: ur.ObjectState) -> tuple[tuple[float, float], ...]:
+    """SUP/INF of :func:`_displacement` over the error variables' registry box: four
+    (lo, hi), sound (lo <= min, hi >= max). Kept in the cell cache by the error's structure
+    (ErrorTm.shape), the numbers the expressions use and the variables' bounds: parts alike
+    in how their error came about are bounded once."""
+    vs = o.error.vars
+    key = None
+    if o.error.shape and len({v.element_hash() for v in vs}) == len(vs):
+        R = snap(o.pose[:3, :3])
+        G = None if o.grasp is None else snap(np.asarray(o.grasp, float)).tobytes()
+        key = (o.where, R.tobytes(), G, o.error.shape, tuple(reg.bounds(v.name()) for v in vs))
+        hit = cache.table("phase2.position_bounds", BOUNDS_LIMIT).get(key)
+        if hit is not None:
+            return hit
+
+    def bound(e: Any) -> tuple[float, float]:
+        if not is_symbolic(e):
+            return float(e), float(e)
+        r = cached_bounds(e, reg.box(e), cache.memo, want="both")
+        return float(r.lo), float(r.hi)
+
+    got = tuple(bound(e) for e in _displacement(o))
+    if key is not None:
+        cache.table("phase2.position_bounds", BOUNDS_LIMIT)[key] = got
+    return got
+
+
+def position_bounds(cache: CellCache, world: World,
+                    seen: dict[int, tuple[ur.ObjectState, dict[str, list[float]]]] | None = None
+                    ) -> dict[str, dict[str, list[float]]]:
+    """Every part's position uncertainty in ``world`` as phase 2 propagated it (the parts keyed
+    as :func:`poses`): ``{"dx", "dy", "dz": [lo, hi]}`` the displacement of its origin from its
+    ideal pose along the world axes (cell unit) and ``"dtheta_deg": [lo, hi]`` its rotation
+    about world z (degrees; :func:`_displacement`: a part held by a side grasp turns about a
+    level axis, not about z), each SUP/INF's sound bound (not rounded: a sensor's bounds
+    are given exactly). After a sensing step a part has the sensor's bounds, held the grasp's, after a put-down or
+    a squeeze what the hand left. ``seen`` as :func:`poses` (a step changes one part's state)."""
+    reg = world.unc.registry
+    out = {}
+    for k, o in sorted(world.unc.objects.items()):
+        hit = None if seen is None else seen.get(id(o))
+        if hit is None or hit[0] is not o:
+            x, y, z, t = _part_bounds(cache, reg, o)
+            hit = (o, {"dx": list(x), "dy": list(y), "dz": list(z), "dtheta_deg": _degrees(*t)})
+            if seen is not None:
+                seen[id(o)] = hit
+        out[k] = hit[1]
+    return out
+
+
 def _all_satisfied(checks: list[dict[str, Any]], kind: str) -> bool:
     return all(c["satisfied"] for c in checks if c["kind"] == kind)
 
@@ -407,8 +493,9 @@ def evaluate(cache: CellCache, steps: Sequence[Step], sources: Sources | None = 
     placement, no joint solution, no motion); each step record, up to and including that
     one, is ``{"id", "verdicts": [verdict dicts], "geometry": {"tool_pose", "joints_deg",
     "ik_solutions_deg", "placement", "source", ...}, "poses": poses(world after it), "held":
-    the object in the hand after it or None}``. Lengths in the cell unit, angles in degrees,
-    world frame."""
+    the object in the hand after it or None}``, and in a run that went through (status ok)
+    ``"position_bounds"``: :func:`position_bounds` of the world after it. Lengths in the cell
+    unit, angles in degrees, world frame."""
     cell = cache.cell
     world = new_world(cache, list(steps), sources, sensing_bounds(cell, sensing), motion)
     skip = set(given_up)
@@ -427,6 +514,9 @@ def evaluate(cache: CellCache, steps: Sequence[Step], sources: Sources | None = 
         if not _all_satisfied(checks, "uncertainty") and s["id"] not in skip:
             return Evaluation("failed", s["id"], out, refused)
     out = _refined(cache, out, worlds)
+    # a run that went through is one Prolog may report: its parts' propagated bounds, per step
+    bseen: dict[int, tuple[ur.ObjectState, dict[str, list[float]]]] = {}
+    out = [{**rec, "position_bounds": position_bounds(cache, w, bseen)} for rec, w in zip(out, worlds[1:])]
     if motion is not None:  # the end-points are fixed: the motions between them (world/motion.py)
         from spar_py.world.motion import run_motions  # motion.py is some 2 ms of a cold start
 
