@@ -40,6 +40,7 @@ from typing import TYPE_CHECKING, Any
 
 import math
 
+import casadi as ca
 import numpy as np
 
 from spar_py.world import placement as pl
@@ -398,18 +399,26 @@ BOUNDS_LIMIT = 4096
 
 def _displacement(o: ur.ObjectState) -> list[Any]:
     """Part ``o``'s error as four expressions in its error variables: the displacement of its
-    origin from the ideal one in world x, y, z (cell unit: the translation of
-    ``trans(-t_O) T_{O+d}``, uncertainty.ObjectState.possible_rel, Eq. 2 on the table, Eq. 4
-    held or assembled) and its rotation about world z (rad): on the table the error's own
-    angle; held or assembled, the tool-z rotation times the tool z axis's world-z component
-    ``(R_O R_G)[2, 2]``, as a put-down maps it (Sec. 3.2.3), which is the world-z component of
-    the rotation vector."""
-    P = o.possible_rel()
+    origin from the ideal one along world x, y, z (cell unit) and its turn about world z (rad).
+
+    On the table (Eq. 2, ``trans(d) Tr_O rotz(theta) R_O``) the origin moves by ``d`` and turns
+    by ``theta``. Held or assembled (Eq. 4, ``T_O T_G E T_G^-1`` with ``E = trans(t_E) rotz(theta)``)
+    the origin, at ``p = -R_G^T t_G`` in the tool frame, goes to ``E p``: it moves by
+    ``R_M ((rotz(theta) - I) p + t_E)`` with ``R_M = R_O R_G`` (the constant parts cancel
+    exactly), and it turns by ``theta`` about the tool z axis, whose world-z component
+    ``R_M[2, 2]`` times ``theta`` is the rotation vector's z component (as a put-down maps
+    it, Sec. 3.2.3)."""
+    e = o.error
     if o.where == ur.TABLE:
-        rot = o.error.theta
-    else:
-        rot = float(snap(o.pose[:3, :3] @ o.grasp[:3, :3])[2, 2]) * o.error.theta  # type: ignore[index]
-    return [P[0, 3], P[1, 3], P[2, 3], rot]
+        return [e.dx, e.dy, e.dz, e.theta]
+    G = snap(np.asarray(o.grasp, float))
+    R_M = snap(o.pose[:3, :3] @ G[:3, :3])
+    p = [float(v) for v in -G[:3, :3].T @ G[:3, 3]]
+    c, s = ca.cos(e.theta) - 1.0, ca.sin(e.theta)
+    local = [c * p[0] - s * p[1] + e.dx, s * p[0] + c * p[1] + e.dy, e.dz]  # (rotz(theta) - I) p + t_E
+    world = [sum((float(R_M[i, j]) * local[j] for j in range(3) if R_M[i, j] != 0.0), ca.SX(0.0))
+             for i in range(3)]
+    return [*world, float(R_M[2, 2]) * e.theta]
 
 
 def _degrees(lo: float, hi: float) -> list[float]:
@@ -442,6 +451,8 @@ def _part_bounds(cache: CellCache, reg: Registry, o: ur.ObjectState) -> tuple[tu
     def bound(e: Any) -> tuple[float, float]:
         if not is_symbolic(e):
             return float(e), float(e)
+        if isinstance(e, ca.SX) and e.is_symbolic():  # one variable (a fresh error): its own bounds, exactly
+            return reg.bounds(e.name())
         r = cached_bounds(e, reg.box(e), cache.memo, want="both")
         return float(r.lo), float(r.hi)
 
@@ -785,8 +796,6 @@ def sample_check(cache: CellCache, steps: list[Step], draws: int = 10_000, seed:
     ``source`` (which part of a stock it takes; ``from`` in a JSON written before the
     key was renamed) is honoured; ``sensing`` as
     :func:`new_world` (needed only when the cell has no sensors entry)."""
-    import casadi as ca  # ~80 ms at import: only this check's draws need it here
-
     sources = {s["id"]: s.get("source") or s["from"] for s in steps if s.get("source") or s.get("from")}
     world = new_world(cache, steps, sources, sensing)
     for s in steps:
