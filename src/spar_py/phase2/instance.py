@@ -34,11 +34,10 @@ returned for display; world frame, table top z = 0.
 """
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
-
-import math
 
 import casadi as ca
 import numpy as np
@@ -470,8 +469,9 @@ def position_bounds(cache: CellCache, world: World,
     ideal pose along the world axes (cell unit) and ``"dtheta_deg": [lo, hi]`` its rotation
     about world z (degrees; :func:`_displacement`: a part held by a side grasp turns about a
     level axis, not about z), each SUP/INF's sound bound (not rounded: a sensor's bounds
-    are given exactly). After a sensing step a part has the sensor's bounds, held the grasp's, after a put-down or
-    a squeeze what the hand left. ``seen`` as :func:`poses` (a step changes one part's state)."""
+    are given exactly). After a sensing step a part has the sensor's bounds, held the
+    grasp's, after a put-down or a squeeze what the hand left. ``seen`` as :func:`poses` (a
+    step changes one part's state)."""
     reg = world.unc.registry
     out = {}
     for k, o in sorted(world.unc.objects.items()):

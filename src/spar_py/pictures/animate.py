@@ -11,8 +11,8 @@ link capsules, cylinders and boxes, and the gripper's palm and fingers at the fr
 opening, drawn as their hulls at the frame's joints) and the cell's obstacles, within a view
 of the work (:func:`work_extent`: the parts and the tool's working path over them, the
 approach and retreat lines, not the transit from and to home nor the whole arm) that fills
-the frame (:func:`_fit`; the axes are not drawn, a line under the picture states the box in
-the cell's unit). One figure and one 3-D axes serve every frame: only the artists of the
+the frame (:func:`_fit`; the axes are not drawn, a line under the picture states what is
+framed, in the cell's unit). One figure and one 3-D axes serve every frame: only the artists of the
 parts and the arm are replaced.
 
 Units: the cell's length unit, joints in degrees in the JSON (radians inside).
@@ -77,12 +77,13 @@ def _work_points(cell: Cell, plan: Any) -> np.ndarray:
     return allp
 
 
-def work_extent(cell: Cell, plan: Any) -> Extent:
-    """The 3-D axes' box (cell unit), which only clips: the work (:func:`_work_points`) padded by
-    WORK_PAD_SIZES part sizes, joined with the cell pictures' view (pictures/cell.py ``extent``:
-    the parts, the obstacles, the arm's reach over them), so the arm above the work and an
-    obstacle beside it are drawn where the frame (fitted to the work, :func:`_fit`) shows them."""
-    allp = _work_points(cell, plan)
+def work_extent(cell: Cell, plan: Any, work: np.ndarray | None = None) -> Extent:
+    """The 3-D axes' box (cell unit), which only clips: the work (``work``, else
+    :func:`_work_points`) padded by WORK_PAD_SIZES part sizes, joined with the cell pictures'
+    view (pictures/cell.py ``extent``: the parts, the obstacles, the arm's reach over them), so
+    the arm above the work and an obstacle beside it are drawn where the frame (fitted to the
+    work, :func:`_fit`) shows them."""
+    allp = _work_points(cell, plan) if work is None else work
     size = max((m.bounding_radius() for m in cell.objects.values()), default=0.0)
     pad = max(WORK_PAD_SIZES * size, 1e-3 * float(np.ptp(allp, axis=0).max()), 1e-9)
     view = extent(cell, scenes(cell, as_doc(plan)))
@@ -224,13 +225,13 @@ def write_animation(cell: Cell, plan: Any, path: str | Path, max_frames: int = M
     frames = frames_of(cell, plan, max_frames)
     scene, hulls = scene_for(cell), {}  # one scene and one hull per body for every frame
     obstacles = obstacle_faces(cell)
-    fr = work_extent(cell, plan)
+    work = _work_points(cell, plan)
+    fr = work_extent(cell, plan, work)
     fig = plt.figure(figsize=(FIGSIZE_IN, FIGSIZE_IN), dpi=DPI)
     ax = fig.add_axes((0.02, 0.05, 0.94, 0.89), projection="3d")
     _draw_3d(ax, cell, frames[0], fr)  # the view (limits, box, angle) is every frame's
-    _fit(fig, ax, _work_points(cell, plan))  # (the table fills the frame: cut to the box, not to the frame)
+    _fit(fig, ax, work)
     title = fig.text(0.5, 0.98, "", ha="center", va="top", fontsize=8)
-    work = _work_points(cell, plan)
     (x0, y0, z0), (x1, y1, z1) = work.min(axis=0), work.max(axis=0)
     fig.text(0.5, 0.01, f"framed: the parts and the tool's work, x {x0:.4g}..{x1:.4g}, y {y0:.4g}..{y1:.4g}, "
              f"z {z0:.4g}..{z1:.4g} {cell.unit}", ha="center", va="bottom", fontsize=7, color="#555555")
