@@ -268,9 +268,11 @@ async def _visit(ws_url: str, url: str, point_expr: str) -> dict:
         await s.evaluate("new Promise(r => requestAnimationFrame(() => requestAnimationFrame(r)))", True)
         point = await s.evaluate(point_expr) if "steps" in body else None
         proj = await s.evaluate(f"JSON.stringify(window.sparProject({json.dumps(point)}))") if point else None
+        boxes = await s.evaluate("JSON.stringify(window.sparBoxes ? window.sparBoxes() : null)")
         shot = (await s.send("Page.captureScreenshot", {"format": "png"}))["data"]
         await s.evaluate("1")  # any late console message is in by now
         return {"body": body, "point": point, "proj": json.loads(proj) if proj else None,
+                "boxes": json.loads(boxes) if boxes else None,
                 "png": base64.b64decode(shot), "errors": s.errors(), "requests": s.requests()}
     finally:
         conn.close()
@@ -320,6 +322,25 @@ def _check_page(result: dict, doc: dict, cell_path: Path) -> None:
     assert _part_pixels(result["png"], [x, y], colours) >= 300  # of the 3600 pixels round the hole
 
 
+def _check_boxes(boxes: list[dict] | None, step: dict, cell_path: Path) -> None:
+    """The page draws each part's uncertainty box from the step's propagated bounds: the part's
+    world box (its mesh at its pose) moved by the bounds of its origin (a part that cannot turn
+    about z here, so no widening for a turn; the page rounds the bounds outwards to 5 decimals)."""
+    from spar_py.pictures.scene import part_model
+    from spar_py.pictures.viewer import part_triangles
+
+    cell = load_problem(cell_path)
+    assert boxes is not None and {b["part"] for b in boxes} == set(step["position_bounds"]), boxes
+    for b in boxes:
+        bounds = step["position_bounds"][b["part"]]
+        assert bounds["dtheta_deg"] == [0.0, 0.0]
+        T = np.asarray(step["poses"][b["part"]], float)
+        pts = part_triangles(cell.objects[part_model(b["part"])], cell.unit).reshape(-1, 3) @ T[:3, :3].T + T[:3, 3]
+        lo = pts.min(axis=0) + [bounds[k][0] for k in ("dx", "dy", "dz")]
+        hi = pts.max(axis=0) + [bounds[k][1] for k in ("dx", "dy", "dz")]
+        assert np.allclose(b["min"], lo, atol=2e-5) and np.allclose(b["max"], hi, atol=2e-5), (b, lo, hi)
+
+
 def _assemble_step(doc: dict) -> int:
     return 1 + next(k for k, s in enumerate(doc["instance"]["steps"]) if s["name"] == "assemble")
 
@@ -333,6 +354,7 @@ def test_browser_paper_cell(chromium, tmp_path, paper_plan):
     assert result["body"].get("state") == str(k)
     _check_page(result, doc, PAPER)
     assert time.monotonic() - t0 < 60
+    _check_boxes(result["boxes"], doc["instance"]["steps"][k - 1], PAPER)
     if os.environ.get("SPAR_VIEWER_SHOT"):  # docs/viewer.png is this screenshot
         Path(os.environ["SPAR_VIEWER_SHOT"]).write_bytes(result["png"])
 

@@ -8,10 +8,12 @@ the parts stand where the step before left them (``poses``), the held part moves
 pictures' 3-D panel (pictures/cell.py: table, parts, the arm's skeleton and gripper), the
 arm's link geometry (the collision scene's bodies, world/collision.py: the robot file's
 link capsules, cylinders and boxes, and the gripper's palm and fingers at the frame's
-opening, drawn as their hulls at the frame's joints) and the cell's obstacles, within the
-cell pictures' view of the work (pictures/cell.py ``extent``: the parts, the obstacles and the
-arm's reach over them). One figure and one 3-D axes serve every frame: only the artists of
-the parts and the arm are replaced, so the axes' ticks and panes are not rebuilt per frame.
+opening, drawn as their hulls at the frame's joints) and the cell's obstacles, within a view
+of the work (:func:`work_extent`: the parts and the tool's working path over them, the
+approach and retreat lines, not the transit from and to home nor the whole arm) that fills
+the frame (:func:`_fit`; the axes are not drawn, a line under the picture states what is
+framed, in the cell's unit). One figure and one 3-D axes serve every frame: only the artists of the
+parts and the arm are replaced.
 
 Units: the cell's length unit, joints in degrees in the JSON (radians inside).
 """
@@ -25,12 +27,12 @@ import numpy as np
 
 from spar_py.core.errors import SparValueError
 from spar_py.core.model import Cell
-from spar_py.pictures.cell import _draw_3d, extent
+from spar_py.pictures.cell import Extent, _draw_3d, _finger_length, _part_points, _table, extent
 from spar_py.pictures.plandoc import as_doc, instance
 from spar_py.pictures.scene import Scene, held_grasp, part_model, scenes
 from spar_py.world.collision import TOOL, CollisionScene, scene_for
 
-__all__ = ["arm_faces", "frames_of", "obstacle_faces", "write_animation"]
+__all__ = ["arm_faces", "frames_of", "obstacle_faces", "work_extent", "write_animation"]
 
 #: At most this many frames in a GIF (waypoints are sampled evenly beyond it).
 MAX_FRAMES = 60
@@ -43,6 +45,70 @@ FIGSIZE_IN, DPI = 6.0, 80
 CAPSULE_SIDES = 12
 #: Colour of the link geometry.
 LINK_COLOUR = "#c8a040"
+#: The work box is padded on every side by this many times the largest part's bounding radius.
+WORK_PAD_SIZES = 0.5
+#: The work box's picture fills the frame but for this margin (figure fraction) on each side,
+#: with room kept at the top for the caption and at the bottom for the line stating the box.
+MARGIN, TOP, BOTTOM = 0.02, 0.05, 0.04
+
+
+def _tool_points(cell: Cell, steps: list[dict[str, Any]]) -> np.ndarray:
+    """The tool's working path (k, 3), world, cell unit: the tool point and the gripper's palm
+    (a finger length behind it) at each step's end-point and along its approach and retreat
+    lines (the straight motions over the parts; the transit paths between them are left out)."""
+    pts = []
+    for st in steps:
+        rows = [st.get("joints_deg")] if st.get("joints_deg") is not None else []
+        rows += list(st.get("approach") or []) + list(st.get("retreat") or [])
+        for q in np.radians(np.asarray(rows, float)).reshape(-1, 6):
+            T = cell.robot.frames(q)[-1]
+            pts += [T[:3, 3], T[:3, :3] @ [0.0, 0.0, -_finger_length(cell)] + T[:3, 3]]
+    return np.array(pts, float).reshape(-1, 3)
+
+
+def _work_points(cell: Cell, plan: Any) -> np.ndarray:
+    """What the animation shows (k, 3), world, cell unit: the parts' points in every scene and
+    the tool's working path (:func:`_tool_points`)."""
+    doc = as_doc(plan)
+    steps = list(instance(doc).get("steps") or [])
+    allp = np.vstack(_part_points(cell, scenes(cell, doc)) + [_tool_points(cell, steps)])
+    if not len(allp):
+        raise SparValueError("the plan has no parts and no tool path to frame")
+    return allp
+
+
+def work_extent(cell: Cell, plan: Any, work: np.ndarray | None = None) -> Extent:
+    """The 3-D axes' box (cell unit), which only clips: the work (``work``, else
+    :func:`_work_points`) padded by WORK_PAD_SIZES part sizes, joined with the cell pictures'
+    view (pictures/cell.py ``extent``: the parts, the obstacles, the arm's reach over them), so
+    the arm above the work and an obstacle beside it are drawn where the frame (fitted to the
+    work, :func:`_fit`) shows them."""
+    allp = _work_points(cell, plan) if work is None else work
+    size = max((m.bounding_radius() for m in cell.objects.values()), default=0.0)
+    pad = max(WORK_PAD_SIZES * size, 1e-3 * float(np.ptp(allp, axis=0).max()), 1e-9)
+    view = extent(cell, scenes(cell, as_doc(plan)))
+    lo = np.minimum(np.append(allp.min(axis=0)[:2] - pad, min(0.0, float(allp[:, 2].min()))), view.lo)
+    hi = np.maximum(allp.max(axis=0) + pad, view.hi)
+    return Extent(_table(cell, lo, hi), lo, hi)
+
+
+def _fit(fig: Any, ax: Any, pts: np.ndarray) -> None:
+    """Move and scale the 3-D axes (its projection scales with it) so that the picture of the
+    points ``pts`` (k, 3; the work, :func:`_work_points`) fills the figure but for the margins,
+    centred; its own axes, ticks and panes are not drawn (they would be cut off)."""
+    from mpl_toolkits.mplot3d import proj3d
+
+    ax.set_axis_off()
+    px, py, _ = proj3d.proj_transform(pts[:, 0], pts[:, 1], pts[:, 2], ax.get_proj())
+    disp = ax.transData.transform(np.column_stack([px, py]))
+    f = fig.transFigure.inverted().transform(disp)  # figure fraction
+    pos = ax.get_position()
+    u = (f - [pos.x0, pos.y0]) / [pos.width, pos.height]  # axes fraction: unchanged by a uniform scaling
+    width, height = 1 - 2 * MARGIN, 1 - TOP - BOTTOM
+    k = min(width / max(np.ptp(f[:, 0]), 1e-9), height / max(np.ptp(f[:, 1]), 1e-9))
+    w, h = pos.width * k, pos.height * k
+    uc = (u.min(axis=0) + u.max(axis=0)) / 2
+    ax.set_position((0.5 - w * uc[0], BOTTOM + height / 2 - h * uc[1], w, h))
 
 
 def frames_of(cell: Cell, plan: Any, max_frames: int = MAX_FRAMES) -> list[Scene]:
@@ -147,8 +213,8 @@ def _width(cell: Cell, s: Scene) -> float | None:
 
 def write_animation(cell: Cell, plan: Any, path: str | Path, max_frames: int = MAX_FRAMES) -> Path:
     """Write the GIF of the plan's motions to ``path`` (Pillow writer); returns the path. The
-    view is the cell pictures' (``extent`` of the plan's scenes); each frame replaces the
-    previous frame's artists in one reused 3-D axes."""
+    view is the work's (:func:`work_extent`), filling the frame (:func:`_fit`); each frame
+    replaces the previous frame's artists in one reused 3-D axes."""
     import matplotlib  # ~0.9 s at import: only when a GIF is drawn; Agg is chosen before pyplot loads
 
     matplotlib.use("Agg")
@@ -159,10 +225,16 @@ def write_animation(cell: Cell, plan: Any, path: str | Path, max_frames: int = M
     frames = frames_of(cell, plan, max_frames)
     scene, hulls = scene_for(cell), {}  # one scene and one hull per body for every frame
     obstacles = obstacle_faces(cell)
-    fr = extent(cell, scenes(cell, as_doc(plan)))
+    work = _work_points(cell, plan)
+    fr = work_extent(cell, plan, work)
     fig = plt.figure(figsize=(FIGSIZE_IN, FIGSIZE_IN), dpi=DPI)
     ax = fig.add_axes((0.02, 0.05, 0.94, 0.89), projection="3d")
+    _draw_3d(ax, cell, frames[0], fr)  # the view (limits, box, angle) is every frame's
+    _fit(fig, ax, work)
     title = fig.text(0.5, 0.98, "", ha="center", va="top", fontsize=8)
+    (x0, y0, z0), (x1, y1, z1) = work.min(axis=0), work.max(axis=0)
+    fig.text(0.5, 0.01, f"framed: the parts and the tool's work, x {x0:.4g}..{x1:.4g}, y {y0:.4g}..{y1:.4g}, "
+             f"z {z0:.4g}..{z1:.4g} {cell.unit}", ha="center", va="bottom", fontsize=7, color="#555555")
     writer = PillowWriter(fps=max(1, round(1000 / FRAME_MS)))
     path = Path(path)
     try:

@@ -10,7 +10,9 @@ plan JSON and the cell and gives the page, as data:
   obstacles' (world frame);
 - states: the initial one (the arm at home when the plan or the cell gives one) and one per
   step of the instance: each part's pose, the arm's 8 world frames (``robot.frames(q)``),
-  the held part, the finger opening, the parts' position uncertainty;
+  the held part, the finger opening, the parts' position uncertainty (each part's bounds as
+  phase 2 propagated them to the step, the plan JSON's ``position_bounds``; before the plan,
+  the cell's declared bounds);
 - per step: its verdicts (the instance's constraints that serve it), clearance and closest
   pair, the insertion check's tolerance at the hole's mouth (assemble), and its motions
   (``path``, ``approach``, ``retreat``: waypoints sampled to at most MAX_WAYPOINTS each,
@@ -133,9 +135,24 @@ def _width(cell: Cell, held: str | None, grasp: str | None) -> float:
     return float(cell.finger_separation)
 
 
+def _outward(lo: float, hi: float) -> list[float]:
+    """[lo, hi] rounded to DIGITS decimals away from each other (the drawn box holds the bound)."""
+    q = 10.0 ** DIGITS
+    return [math.floor(lo * q) / q, math.ceil(hi * q) / q]
+
+
 def _bounds_list(b: Bounds) -> list[float]:
-    """Bounds as [dx0, dx1, dy0, dy1, dz0, dz1, dtheta0, dtheta1] (cell unit; dtheta in degrees)."""
-    return _r([*b.dx, *b.dy, *b.dz, math.degrees(b.dtheta[0]), math.degrees(b.dtheta[1])])
+    """Bounds as [dx0, dx1, dy0, dy1, dz0, dz1, dtheta0, dtheta1] (cell unit; dtheta in degrees),
+    rounded outwards."""
+    return [*_outward(*b.dx), *_outward(*b.dy), *_outward(*b.dz),
+            *_outward(math.degrees(b.dtheta[0]), math.degrees(b.dtheta[1]))]
+
+
+def _propagated(d: Mapping[str, Mapping[str, Sequence[float]]]) -> dict[str, list[float]]:
+    """A step's ``position_bounds`` (the plan JSON: dx, dy, dz cell unit, dtheta_deg) as the
+    page's lists per part key, rounded outwards."""
+    return {str(k): [v for key in ("dx", "dy", "dz", "dtheta_deg") for v in _outward(*map(float, b[key]))]
+            for k, b in d.items()}
 
 
 def _home(cell: Cell, doc: Mapping[str, Any]) -> np.ndarray | None:
@@ -164,14 +181,16 @@ class _Widths:
 
 
 def _state(cell: Cell, s: Scene, q: np.ndarray | None, widths: _Widths,
-           bounds: Mapping[str, list[float]]) -> dict[str, Any]:
+           bounds: Mapping[str, list[float]], propagated: bool) -> dict[str, Any]:
     """One state for the page: part poses, arm frames (None: no arm drawn but the pedestal), held part,
-    gripper opening index, uncertainty bounds per part."""
+    gripper opening index, position uncertainty per part key (``bounds``: as phase 2 propagated it
+    to this state when ``propagated``, else the cell's declared bounds)."""
     frames = None if q is None else cell.robot.frames(np.asarray(q, float))
     return {"parts": {k: _flat(T) for k, T in s.poses.items()},
             "frames": None if frames is None else [_flat(F) for F in frames],
             "held": s.held, "grasp": s.grasp, "gripper": widths.index(_width(cell, s.held, s.grasp)),
-            "uncertainty": {k: bounds[part_model(k)] for k in s.poses if part_model(k) in bounds}}
+            "uncertainty": {k: bounds[k] for k in s.poses if k in bounds},
+            "uncertainty_from": "propagated" if propagated else "declared"}
 
 
 def _sample(k: int, n: int = MAX_WAYPOINTS) -> np.ndarray:
@@ -306,16 +325,28 @@ def viewer_data(cell: Cell, plan: Any) -> dict[str, Any]:
     part_tris = {name: part_triangles(m, cell.unit) for name, m in cell.objects.items()}
     colours = {name: OBJECT_COLOURS[k % len(OBJECT_COLOURS)] for k, name in enumerate(cell.objects)}
 
-    bounds = {o: _bounds_list(b) for o, b in cell.object_bounds.items()}
+    declared = {o: _bounds_list(b) for o, b in cell.object_bounds.items()}  # by object model
+
+    def per_part(by_model: Mapping[str, list[float]], keys: Any) -> dict[str, list[float]]:
+        return {key: by_model[part_model(key)] for key in keys if part_model(key) in by_model}
+
+    # before the plan every part has its declared bounds (phase 2's initial world); after a step,
+    # what phase 2 propagated to it
     home = _home(cell, doc)
-    states = [_state(cell, sc[0], home if home is not None else sc[0].q, widths, bounds)]
+    states = [_state(cell, sc[0], home if home is not None else sc[0].q, widths, per_part(declared, sc[0].poses),
+                     False)]
     states[0]["arm_note"] = "home" if home is not None or sc[0].q is not None else ""  # scenes: the arm at rest
     out_steps = []
     for k, step in enumerate(steps, start=1):
         s = sc[k]
-        if step.get("kind") == "sensing" and step.get("name") in cell.sensors and step.get("object"):
-            bounds = {**bounds, str(step["object"]): _bounds_list(cell.sensors[str(step["name"])].leaves)}
-        st = _state(cell, s, s.q if step.get("joints_deg") is not None else None, widths, bounds)
+        propagated = step.get("position_bounds") is not None
+        if propagated:
+            bounds = _propagated(step["position_bounds"])
+        else:  # a plan JSON written without them: the declared bounds, a sensed object the sensor's
+            if step.get("kind") == "sensing" and step.get("name") in cell.sensors and step.get("object"):
+                declared = {**declared, str(step["object"]): _bounds_list(cell.sensors[str(step["name"])].leaves)}
+            bounds = per_part(declared, s.poses)
+        st = _state(cell, s, s.q if step.get("joints_deg") is not None else None, widths, bounds, propagated)
         if st["frames"] is None:  # a step without arm motion (sensing): the arm stays where it was
             st["frames"] = states[-1]["frames"]
             st["gripper"] = states[-1]["gripper"]

@@ -30,7 +30,7 @@ from spar_py.planning.engine import engine
 from spar_py.core.errors import ExpectedFailures, PlanningTimeout, SparValueError
 from spar_py.kb import load_problem
 from spar_py.core.memo import LRU
-from spar_py.core.model import Cell
+from spar_py.core.model import Bounds, Cell
 from spar_py.planning.messages import collision_lines, expected_failures, summary
 from spar_py.planning.run import PlanRun
 from spar_py.world.motion_options import MotionFailure, MotionOptions
@@ -115,7 +115,14 @@ class Step:
     ``retreat`` the one out of it, each an (n, 6) float array of joint vectors (deg,
     waypoints in order); ``duration_s`` the step's estimated time (s). None without motions
     (and ``path`` None for a step that does not move the arm). The arrays are not compared
-    by ``==``."""
+    by ``==``.
+
+    ``position_bounds``: every part's position uncertainty at the step's end-point as phase
+    2 propagated it (part keys as ``poses``), a :class:`~spar_py.core.model.Bounds`: ``dx``,
+    ``dy``, ``dz`` the sound SUP/INF bounds of its origin's displacement along the world axes
+    (cell unit), ``dtheta`` of its rotation about world z (radians, as every Bounds; the
+    JSON's ``dtheta_deg`` in degrees). After a sensing step the scanned part has the sensor's
+    bounds, while held the grasp's. None in a plan JSON written without them."""
 
     id: str
     kind: str
@@ -139,6 +146,7 @@ class Step:
     approach: np.ndarray | None = field(default=None, compare=False, repr=False)
     retreat: np.ndarray | None = field(default=None, compare=False, repr=False)
     duration_s: float | None = None
+    position_bounds: dict[str, Bounds] | None = None
 
 
 @dataclass
@@ -271,6 +279,18 @@ def _joints(v: Any) -> np.ndarray | None:
     return a if a.ndim == 2 else a.reshape(len(v), 0)
 
 
+def _bounds(d: dict[str, Any] | None) -> dict[str, Bounds] | None:
+    """A step's ``position_bounds`` (JSON: dtheta in degrees) as Bounds per part (dtheta in radians)."""
+    if d is None:
+        return None
+
+    def iv(v: Any, scale: float = 1.0) -> tuple[float, float]:
+        return float(v[0]) * scale, float(v[1]) * scale
+
+    rad = np.pi / 180.0
+    return {str(k): Bounds(iv(b["dx"]), iv(b["dy"]), iv(b["dz"]), iv(b["dtheta_deg"], rad)) for k, b in d.items()}
+
+
 def _step(s: dict[str, Any], verdicts: list[Verdict]) -> Step:
     return Step(id=s["id"], kind=s["kind"], serves=s["serves"], name=s["name"], object=s["object"],
                 term=s["term"], args=tuple(s.get("args", ())), tool_pose=s.get("tool_pose"),
@@ -281,6 +301,7 @@ def _step(s: dict[str, Any], verdicts: list[Verdict]) -> Step:
                 path=_joints(s.get("path")), approach=_joints(s.get("approach")),
                 retreat=_joints(s.get("retreat")),
                 duration_s=None if s.get("duration_s") is None else float(s["duration_s"]),
+                position_bounds=_bounds(s.get("position_bounds")),
                 closest_pair=tuple(s["closest_pair"]) if s.get("closest_pair") else None,
                 verdicts=tuple(v for v in verdicts if v.action == s["id"]))
 

@@ -34,7 +34,7 @@ __all__ = ["PlanRun", "StepData"]
 
 #: The fields of a step's geometry the plan's JSON shows (docs/json-schema.md).
 STEP_FIELDS = ("tool_pose", "joints_deg", "ik_solutions_deg", "ik_solver", "placement", "source", "poses", "held",
-               "clearance", "closest_pair")
+               "clearance", "closest_pair", "position_bounds")
 
 
 @dataclass(frozen=True)
@@ -80,7 +80,8 @@ class PlanRun:
                                "steps": [{"id": r["id"], "verdicts": r["verdicts"]} for r in ev.steps]}
         if ev.status != "ok":
             return out
-        geo = {r["id"]: {**r["geometry"], "poses": r["poses"], "held": r["held"]} for r in ev.steps}
+        geo = {r["id"]: {**r["geometry"], "poses": r["poses"], "held": r["held"],
+                         "position_bounds": r.get("position_bounds")} for r in ev.steps}
         out["token"] = log.keep(StepData(geo, ev.motion))
         return out
 
