@@ -280,10 +280,12 @@ def _joined(cols: list[tuple]) -> tuple:
 
 @dataclass(frozen=True)
 class Obstacle:
-    """A named obstacle of the problem file: its bodies in the world frame (cell unit)."""
+    """A named obstacle of the problem file: its bodies in the world frame (cell unit); a
+    ``support`` (a nest, a riser, a fixture plate) is one parts may rest on (its top: world.supports)."""
 
     name: str
     bodies: tuple[Body, ...]
+    support: bool = False
 
 
 # --------------------------------------------------------------------------- distances
