@@ -37,12 +37,11 @@ import numpy as np
 import yaml
 
 from spar_py.core.errors import KBError
-from spar_py.core.geometry import same_stable_pose
 from spar_py.core.model import Cell, ObjectModel, Position, Solid
 from spar_py.core.units import from_mm
 from spar_py.kb.reader import SAFE_LOADER
 from spar_py.kb.terms import atoms
-from spar_py.world.supports import REST_TOL_MM, part_surface, rest, surfaces_of
+from spar_py.world.supports import REST_TOL_MM, part_surface, rest_of, surfaces_of
 
 __all__ = ["REST_TOL_MM", "check_cell", "overlap_depth", "reach_box", "solid_points"]
 
@@ -280,22 +279,17 @@ def _on_table(cell: Cell) -> Iterator[KBError]:
     of mass over its support polygon; a part without a shape: its frame at its stable pose's
     height over the surface. A part on an unbounded table at z = 0 in a stable pose rests there
     (kb checks the pose), so its centre of mass is not computed."""
-    tol, u = from_mm(cell.unit, REST_TOL_MM), cell.unit
+    tol = from_mm(cell.unit, REST_TOL_MM)
     base = surfaces_of(cell)
     tops = {p.label: part_surface(p.obj, cell.objects[p.obj], p.T, tol)
             for p in cell.positions.values() if cell.objects[p.obj].shape}
     for pos in cell.positions.values():
         m = cell.objects[pos.obj]
-        T = pos.T
-        if not m.shape:
-            sp = next((p for p in m.poses.values() if same_stable_pose(pos.T[:3, :3], p.R)), None)
-            if sp is None:
-                continue  # kb refuses an orientation that is no stable pose
-            T = pos.T.copy()
-            T[2, 3] -= sp.height  # its frame at its lowest point
-        if cell.table is None and m.shape and abs(_lowest(m, T)) <= tol:
+        if cell.table is None and m.shape and abs(_lowest(m, pos.T)) <= tol:
             continue
-        on = rest(m, T, base + [s for k, s in tops.items() if k != pos.label], u)
+        on = rest_of(cell, pos.obj, pos.T, base + [s for k, s in tops.items() if k != pos.label])
+        if on is None:
+            continue  # kb refuses an orientation that is no stable pose
         if not on.ok:
             yield KBError(cell.file, _position_key(cell, pos),
                           f"expected {pos.obj} at {pos.name} resting on the table, a support or another part "

@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Iterable, Sequence
 
 import numpy as np
 
-from spar_py.core.geometry import convex_hull_2d
+from spar_py.core.geometry import convex_hull_2d, same_stable_pose
 from spar_py.core.model import ObjectModel, Solid
 from spar_py.core.units import from_mm
 
@@ -29,7 +29,7 @@ if TYPE_CHECKING:
     from spar_py.world.collision import Obstacle
 
 __all__ = ["REST_TOL_MM", "Rest", "Surface", "centre_of_mass", "contact", "inside", "part_points",
-           "part_surface", "rest", "support_surfaces", "table_surface"]
+           "part_surface", "rest", "rest_of", "support_surfaces", "surfaces_of", "table_surface"]
 
 #: A part's lowest point may be this far from a surface to rest on it (mm).
 REST_TOL_MM = 0.5
@@ -260,6 +260,21 @@ def rest(model: ObjectModel, T: np.ndarray, surfaces: Sequence[Surface], unit: s
     how = (f"floats {gap:.4g} {unit} above {s.describe()}" if gap > 0
            else f"sinks {-gap:.4g} {unit} into {s.describe()}")
     return Rest(None, low, gap, s, how)
+
+
+def rest_of(cell: "Cell", obj: str, T: np.ndarray, surfaces: Sequence[Surface]) -> Rest | None:
+    """:func:`rest` of a part of ``obj`` at world pose T; a model without a shape by its frame at
+    its stable pose's height over its lowest point; None when T's rotation is none of its stable
+    poses (nothing to say of a shapeless part then)."""
+    model = cell.objects[obj]
+    if model.shape:
+        return rest(model, T, surfaces, cell.unit)
+    sp = next((p for p in model.poses.values() if same_stable_pose(np.asarray(T, float)[:3, :3], p.R)), None)
+    if sp is None:
+        return None
+    low = np.array(T, float)
+    low[2, 3] -= sp.height
+    return rest(model, low, surfaces, cell.unit)
 
 
 def surfaces_of(cell: "Cell", parts: Iterable[tuple[str, ObjectModel, np.ndarray]] = ()) -> list[Surface]:
