@@ -308,3 +308,14 @@ def test_unstable_putdown_is_refused(x: float, y: float, z: float, why: str) -> 
     checks, _, _ = _putdown_world(_on_riser(x, y, z))
     refused = [c for c in checks if not c["satisfied"]]
     assert any(why in c["description"] and "leaves block unstable" in c["description"] for c in refused), checks
+
+
+def test_scene_knows_what_a_part_rests_on() -> None:
+    """CollisionScene.resting_on: the riser under the block on its top; nothing for the block on
+    the table, beside the riser at its height, or 1 in above it."""
+    cell = load_problem(PROBLEMS / "riser_putdown.yaml")
+    scene = CellCache(cell).scene()
+    assert scene.resting_on("block", _on_riser(30.0, 0.0, 3.5).T) == ["riser"]
+    assert scene.resting_on("block", _on_riser(30.0, 0.0, 4.5).T) == []
+    assert scene.resting_on("block", _on_riser(40.0, 0.0, 3.5).T) == []
+    assert scene.resting_on("block", _on_riser(30.0, 8.0, 1.5).T) == []
