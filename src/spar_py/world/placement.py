@@ -120,13 +120,21 @@ def levels(cell: Cell) -> list[Level]:
     return out
 
 
-#: Bound of the cell cache's table of grid levels (one entry per cell).
-LEVELS_LIMIT = 4
+#: Bound of the cell cache's table of the supports' levels (by the supports' geometry).
+LEVELS_LIMIT = 16
 
 
 def _levels(cache: CellCache) -> list[Level]:
-    """:func:`levels` of the cache's cell, made once."""
-    return cache.table("placement.levels", LEVELS_LIMIT).get_or_compute("levels", lambda: levels(cache.cell))
+    """:func:`levels` of the cache's cell: the table's alone as :func:`default_regions` gives them
+    (a cell without supports), else kept in the cell's cache by the regions, the table and the
+    supports' bodies (caches may share their memo)."""
+    cell = cache.cell
+    sups = [o for o in cell.obstacles if getattr(o, "support", False)]
+    if not sups:
+        return [Level(r["x"], r["y"], 0.0, "table", None, ()) for r in default_regions(cell)]
+    key = (tuple((tuple(r["x"]), tuple(r["y"])) for r in cell.placement_regions), cell.table,
+           tuple((o.name, tuple(np.ascontiguousarray(b.points, float).tobytes() for b in o.bodies)) for o in sups))
+    return cache.table("placement.levels", LEVELS_LIMIT).get_or_compute(key, lambda: levels(cell))
 
 
 def _within(poly: np.ndarray, pts: np.ndarray, tol: float) -> np.ndarray:
