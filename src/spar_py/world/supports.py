@@ -231,14 +231,23 @@ def inside(poly: np.ndarray | None, p: np.ndarray, tol: float) -> float:
 
 
 def rest(model: ObjectModel, T: np.ndarray, surfaces: Sequence[Surface], unit: str,
-         com: np.ndarray | None = None) -> Rest:
+         com: np.ndarray | None = None, stable: bool = False) -> Rest:
     """What a part of ``model`` at world pose T rests on among ``surfaces``: the surface at its
     lowest point's height (within REST_TOL_MM) under its centre of mass, the highest such; else
     the nearest surface under its centre (the gap, for the message). ``com`` its centre of mass
-    (object frame; default :func:`centre_of_mass`)."""
+    (object frame; default :func:`centre_of_mass`). ``stable``: T's rotation is one of the
+    model's stable poses, whose centre of mass lies over its contact face (kb checks it), so a
+    part whose whole contact face lies on a surface rests there without the centre computed
+    (a mesh's centre needs trimesh)."""
     tol = from_mm(unit, REST_TOL_MM)
     T = np.asarray(T, float)
     low, face = contact(model, T, tol)
+    if stable:
+        whole = [s for s in surfaces if abs(low - s.z) <= tol
+                 and (s.polygon is None or all(inside(s.polygon, p, tol) >= -tol for p in face))]
+        if whole:
+            s = max(whole, key=lambda s: s.z)
+            return Rest(s, low, 0.0, s, None)
     c = T[:3, :3] @ (centre_of_mass(model) if com is None else com) + T[:3, 3]
     at = [s for s in surfaces if abs(low - s.z) <= tol]
     under = [s for s in at if inside(s.polygon, c, tol) >= -tol]
@@ -267,14 +276,14 @@ def rest_of(cell: "Cell", obj: str, T: np.ndarray, surfaces: Sequence[Surface]) 
     its stable pose's height over its lowest point; None when T's rotation is none of its stable
     poses (nothing to say of a shapeless part then)."""
     model = cell.objects[obj]
-    if model.shape:
-        return rest(model, T, surfaces, cell.unit)
     sp = next((p for p in model.poses.values() if same_stable_pose(np.asarray(T, float)[:3, :3], p.R)), None)
+    if model.shape:
+        return rest(model, T, surfaces, cell.unit, stable=sp is not None)
     if sp is None:
         return None
     low = np.array(T, float)
     low[2, 3] -= sp.height
-    return rest(model, low, surfaces, cell.unit)
+    return rest(model, low, surfaces, cell.unit, stable=True)
 
 
 def surfaces_of(cell: "Cell", parts: Iterable[tuple[str, ObjectModel, np.ndarray]] = ()) -> list[Surface]:
