@@ -392,8 +392,8 @@ def _grid_arrays(cache: CellCache, obj: str, pose: str, occupied: list[Occupant]
     return xy, yaws[k], _grid_poses(xy, rots[k], height + zs)
 
 
-def _grid_points(cache: CellCache, obj: str, pose: str, occupied: list[Occupant], step: float,
-                 yaw_steps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+def _grid_points(cache: CellCache, obj: str, pose: str, occupied: list[Occupant], step: float, yaw_steps: int
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float, np.ndarray, np.ndarray]:
     """The grid placements of :func:`candidates`, in its order (regions, x, y, yaw), without
     their poses: ``(xy (n, 2), k (n,) each one's yaw step, yaws (yaw_steps,) rad, rots
     (yaw_steps, 3, 3) each yaw's object rotation, the pose's height, zs (n,) each one's surface
