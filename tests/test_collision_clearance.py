@@ -627,6 +627,18 @@ def grasp_width_mm(cell: Any, geo: CellGeo, part: str, T_part: np.ndarray, T_too
     return float(best.width) * geo.k
 
 
+def _z_extent(b: Body) -> tuple[float, float]:
+    """(lowest, highest) world z of a box, cylinder, capsule or hull body (mm)."""
+    if b.kind == "box":
+        z = (np.array([[x, y, w] for x in (-1, 1) for y in (-1, 1) for w in (-1, 1)]) * b.half) @ b.T[2, :3] + b.T[2, 3]
+        return float(z.min()), float(z.max())
+    if b.kind == "hull":
+        return float(b.pts[:, 2].min()), float(b.pts[:, 2].max())
+    axis = (b.b - b.a) / max(float(np.linalg.norm(b.b - b.a)), 1e-12)
+    drop = b.r if b.kind == "capsule" else b.r * math.sqrt(max(0.0, 1.0 - float(axis[2]) ** 2))
+    return min(b.a[2], b.b[2]) - drop, max(b.a[2], b.b[2]) + drop
+
+
 def check_step(geo: CellGeo, cell: Any, step: dict, q_deg: np.ndarray | None = None) -> StepCheck:
     """The clearances of one step's end-point (its ``joints_deg``, or ``q_deg`` instead: the
     part in the hand then moves with the tool)."""
@@ -673,6 +685,14 @@ def check_step(geo: CellGeo, cell: Any, step: dict, q_deg: np.ndarray | None = N
                 continue  # the grasp's contact (a pickup's or squeeze's part on the table)
             if held is not None and m.name == f"held:{held}":
                 if step["name"] == "putdown" and w.name == "table":
+                    continue
+                if step["name"] == "putdown" and w.name == (step.get("placement") or {}).get("on"):
+                    # set down on a support's top (issue 33): touching it is the step's own
+                    # contact; sinking into it is not
+                    low = min(_z_extent(h)[0] for h in moving if h.name == m.name)
+                    top = max(_z_extent(v)[1] for v in world if v.name == w.name)
+                    if low < top - TOL_MM:
+                        bounds.append(Bound(m.name, w.name, low - top, low - top))
                     continue
                 if step["name"] == "assemble" and w.name == step["args"][1]:
                     continue

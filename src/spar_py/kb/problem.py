@@ -439,7 +439,8 @@ def _regions(root: Node) -> list[dict[str, tuple[float, float]]]:
 def _obstacles(root: Node, base: Path, rad_per: float) -> list:
     """``obstacles:``: named shapes in the world frame (cell unit): ``box: {min, max}``,
     ``cylinder: {radius, z: [lo, hi], center: [x, y]}`` (axis along world z) or ``mesh: FILE``
-    placed at ``xyz``, ``rpy`` (its convex hull: a conservative stand-in for a concave fixture)."""
+    placed at ``xyz``, ``rpy`` (its convex hull: a conservative stand-in for a concave fixture);
+    ``support: true`` marks one parts may rest on (its top: a nest, a riser, a fixture plate)."""
     from spar_py.world.collision import Obstacle, box, convex, cylinder  # 10 ms: paid by a load, not by the import
 
     onode = root.key("obstacles", required=False)
@@ -483,7 +484,10 @@ def _obstacles(root: Node, base: Path, rad_per: float) -> list:
                 raise mnode.fail(f"a mesh trimesh can read ({type(e).__name__}: {str(e)[:80]})") from None
             T = xyz_rpy_frame(on, 1.0, rad_per) if on.key("xyz", required=False) is not None else np.eye(4)
             bodies = (convex(name, -1, pts @ T[:3, :3].T + T[:3, 3]),)
-        out.append(Obstacle(name, bodies))
+        snode = on.key("support", required=False)
+        if snode is not None and not isinstance(snode.value, bool):
+            raise snode.fail("true or false (parts may rest on its top)", show(snode.value))
+        out.append(Obstacle(name, bodies, support=bool(snode is not None and snode.value)))
     return out
 
 

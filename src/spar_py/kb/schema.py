@@ -144,9 +144,9 @@ URDF_ROBOT_SCHEMA = keys(
 )
 
 
-#: A problem's obstacle: a named box, z-cylinder or mesh in the world frame.
+#: A problem's obstacle: a named box, z-cylinder or mesh in the world frame (a support: parts may rest on it).
 OBSTACLE_SCHEMA = keys(["name"], {"box": keys(["min", "max"]), "cylinder": keys(["radius", "z", "center"]),
-                                  "mesh": LEAF, "xyz": LEAF, "rpy": LEAF})
+                                  "mesh": LEAF, "xyz": LEAF, "rpy": LEAF, "support": LEAF})
 
 
 PROBLEM_SCHEMA = keys(

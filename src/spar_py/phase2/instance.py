@@ -51,6 +51,7 @@ from spar_py.core.units import ANGLE_UNITS, LENGTH_UNITS
 from spar_py.world.arcs import reachable_pairs
 from spar_py.world.motion_options import MotionFailure, MotionOptions
 from spar_py.world.run import CellCache
+from spar_py.world.supports import rest_of, surfaces_of
 from spar_py.world.workspace import arm_at, pair_text
 from spar_py.phase2.supinf import cached_bounds
 from spar_py.phase2.symbolic import Registry, is_symbolic, snap
@@ -695,10 +696,14 @@ def _putdown(world: World, s: Step, early: bool = False) -> tuple[list[dict], Wo
         return checks, world, {"tool_pose": None, "joints_deg": None, "placement": None}
     g = _grasp(world.cell, obj, world.grasps[obj])
     what = f"putdown({obj})"
+    on = rest_of(world.cell, obj, place.T, surfaces_of(world.cell))
+    surface = on.surface.name if on is not None and on.surface is not None else "table"  # the step's own contact
     q, geo, refused = _arm(world, place.T @ g.T, what, held=(obj, np.linalg.inv(g.T)), width=g.width,
-                           allow=[(f"held:{obj}", "table")])
+                           allow=[(f"held:{obj}", n) for n in dict.fromkeys(("table", surface))])
     geo["placement"] = place.as_dict()
     checks = [] if q is not None else [_reach_verdict(s["id"], False, _no_arm(what, geo))]
+    if on is not None and not on.ok:
+        checks.append(_reach_verdict(s["id"], False, f"{what} leaves {obj} unstable: it {on.why}"))
     grasps = {k: v for k, v in world.grasps.items() if k != obj}
     w = replace(world, refused=refused, unc=ur.putdown(world.unc, obj, place.T, world.cache.memo), grasps=grasps,
                 joints=q if q is not None else world.joints)
