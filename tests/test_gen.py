@@ -309,7 +309,7 @@ def test_scaled_models_are_the_templates_times_k(tmp_path: Path) -> None:
             assert np.isclose(h.width, k * g.width)
         for lbl, p in full.poses.items():
             assert np.allclose(small.poses[lbl].R, p.R) and np.isclose(small.poses[lbl].height, k * p.height)
-        assert np.isclose(small.feature.radius, k * full.feature.radius)
+        assert np.isclose(small.features[0].radius, k * full.features[0].radius)
     full_r = yaml.safe_load(gen.ROBOT.read_text())
     small_r = yaml.safe_load(gen.robot_text(gen.ROBOT.read_text(), k))
     assert small_r["gripper"]["finger_separation"] == pytest.approx(k * full_r["gripper"]["finger_separation"])

@@ -407,8 +407,8 @@ def test_the_planners_plan_draws_the_peg_seated_in_the_hole(cell: Cell) -> None:
     doc = Planner().plan(PROBLEM).to_json()
     sc = scenes(cell, doc)
     peg, block = cell.objects["peg"], cell.objects["block"]
-    tip = sc[-1].poses["peg"] @ np.append(peg.feature.vector, 1)
-    bottom = sc[-1].poses["block"] @ np.append(block.feature.vector, 1)
+    tip = sc[-1].poses["peg"] @ np.append(peg.features[0].vector, 1)
+    bottom = sc[-1].poses["block"] @ np.append(block.features[0].vector, 1)
     assert np.allclose(tip, bottom, atol=1e-9)
     assert [s.held for s in sc] == [None, "block", None, "peg", None]
 

@@ -186,7 +186,7 @@ def test_shaft_grasps_are_the_same_from_either_side() -> None:
     too. Its contact line then lies on the pads' tip edge, which the sign of a rounding error
     decided before (34 grasps of the paper's peg on one CPU, 36 on another)."""
     m = load_object(OBJ / "peg_shape.yaml", "in")
-    d = m.feature.geometry.direction
+    d = m.features[0].geometry.direction
     side = [(g.T[:3, 1], g.T[:3, 2]) for g in m.grasps.values()
             if "peg_face" in g.gfaces and abs(g.T[:3, 2] @ d) < 1e-9]
     assert len(side) == 8  # 4 closing lines at 45 deg steps, each from both sides
@@ -226,7 +226,7 @@ def test_mesh_part_faces_poses_and_units() -> None:
     mm = load_object(OBJ / "hex_shaft.yaml", "mm")
     inch = load_object(OBJ / "hex_shaft.yaml", "in")
     assert "shaft" in mm.faces and "nz" in mm.faces
-    assert mm.feature.radius == pytest.approx(12) and inch.feature.radius == pytest.approx(12 / 25.4)
+    assert mm.features[0].radius == pytest.approx(12) and inch.features[0].radius == pytest.approx(12 / 25.4)
     assert [p.label for p in mm.poses.values()] == [p.label for p in inch.poses.values()]
     for a, b in zip(mm.poses.values(), inch.poses.values()):
         assert a.height == pytest.approx(b.height * 25.4)
@@ -419,7 +419,7 @@ def test_subtract_makes_a_hole_and_its_wall_a_face(tmp_path: Path) -> None:
     m = load_object(_model(tmp_path, body), "in")
     assert part_mesh(m).volume == pytest.approx(4 - math.pi * 0.25 * 0.5, rel=2e-3)
     assert "bore" in m.faces
-    np.testing.assert_allclose(m.feature.vector, [0, 0, 0.5])
+    np.testing.assert_allclose(m.features[0].vector, [0, 0, 0.5])
 
 
 def test_assembled_2_needs_geometric_features(tmp_path: Path) -> None:

@@ -371,7 +371,7 @@ def _peg_in_block(cell: Cell, scans: bool) -> tuple[WorldState, list[Constraint]
     peg, block = cell.objects["peg"], cell.objects["block"]
     w = initial_world(cell)
     gb = next(g for g in block.grasps.values() if abs(g.T[2, 2]) < 1e-9)  # approach from the side
-    up = next(p for p in block.poses.values() if block.feature.faces[0] not in p.rfaces and
+    up = next(p for p in block.poses.values() if block.features[0].faces[0] not in p.rfaces and
               np.allclose(p.R, np.eye(3)))
     pos1 = geometry.trans(30, 0, up.height)
     w = putdown(pickup(w, "block", gb.T, w.manipulator_error()), "block", pos1)
@@ -380,13 +380,13 @@ def _peg_in_block(cell: Cell, scans: bool) -> tuple[WorldState, list[Constraint]
         w = dense_range_scan(w, "peg", cell.sensors["dense_range_scan"].leaves)
     gp = peg.grasps["p1G1"]
     w = pickup(w, "peg", gp.T, w.manipulator_error())
-    return w, assemble_constraints(w, "peg", "block", cell.transforms["trans_1"], peg.feature, block.feature)
+    return w, assemble_constraints(w, "peg", "block", cell.transforms["trans_1"], peg.features[0], block.features[0])
 
 
 def test_assemble_constraint_is_the_corrected_inequality(cell: Cell) -> None:
     w, cs = _peg_in_block(cell, scans=False)
     (c,) = cs
-    margin = cell.objects["block"].feature.radius - cell.objects["peg"].feature.radius
+    margin = cell.objects["block"].features[0].radius - cell.objects["peg"].features[0].radius
     assert c.sense == "<" and c.threshold == pytest.approx(margin ** 2)
     assert float(value(c.expr)) == pytest.approx(0.0, abs=1e-20)  # tip centre on the hole centre
     v = evaluate(c, w.registry)
@@ -460,7 +460,7 @@ def test_assemble_constraint_free_of_where_the_pair_stands() -> None:
 def test_assemble_motion_error_option_widens(cell: Cell) -> None:
     w, (c,) = _peg_in_block(cell, scans=True)
     peg, block = cell.objects["peg"], cell.objects["block"]
-    (cm,) = assemble_constraints(w, "peg", "block", cell.transforms["trans_1"], peg.feature, block.feature,
+    (cm,) = assemble_constraints(w, "peg", "block", cell.transforms["trans_1"], peg.features[0], block.features[0],
                                  motion=manipulator_error(w.registry, TABLE2_MANIP))
     assert evaluate(cm, w.registry).bound > evaluate(c, w.registry).bound
 

@@ -7,10 +7,11 @@ transforms with column vectors, ``T_world_obj``.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Union
+from typing import TYPE_CHECKING, Sequence, Union
 
 import numpy as np
 
+from spar_py.core.errors import SparValueError
 
 if TYPE_CHECKING:
     from spar_py.world.robots import Robot
@@ -53,8 +54,10 @@ class Grasp:
 
 @dataclass(frozen=True)
 class MatingFeature:
-    """A round peg or hole (Sec. 3.2.2): ``kind`` 'peg' or 'hole', its radius, and its
-    vector in the object frame (F_p, the peg tip centre; F_h, the hole's bottom centre)."""
+    """A round peg or hole (Sec. 3.2.2): ``kind`` 'peg' or 'hole', the part's faces on it, its
+    radius, and its vector in the object frame (F_p, the peg tip centre; F_h, the hole's bottom
+    centre). ``name`` is unique in its part (an empty name becomes the geometric form's face
+    name, else the kind); ``through``: a hole open at both ends (a peg may enter either mouth)."""
 
     kind: str
     faces: tuple[Face, ...]
@@ -63,6 +66,12 @@ class MatingFeature:
     #: The feature declared by geometry (axis origin, direction, length), or None (the
     #: paper's form: faces and vector only).
     geometry: "FeatureGeometry | None" = None
+    name: str = ""
+    through: bool = False
+
+    def __post_init__(self) -> None:
+        if not self.name:
+            object.__setattr__(self, "name", self.geometry.name if self.geometry is not None else self.kind)
 
 
 @dataclass(frozen=True)
@@ -88,13 +97,14 @@ class Solid:
 
 @dataclass
 class ObjectModel:
-    """An object model: faces, stable poses, grasps, mating feature and shape."""
+    """An object model: faces, stable poses, grasps, mating features and shape."""
 
     name: str
     faces: tuple[Face, ...]
     poses: dict[str, StablePose]
     grasps: dict[str, Grasp]
-    feature: MatingFeature | None = None
+    #: The part's mating features (``features:``, or ``feature:`` as a list of one), names unique.
+    features: tuple[MatingFeature, ...] = ()
     shape: tuple[Solid, ...] = ()
     #: The declared geometry (``mesh:`` or ``shape:``) the part's mesh is built from
     #: (world.shapes.part_mesh), or None.
@@ -111,8 +121,27 @@ class ObjectModel:
 
     @property
     def mating_faces(self) -> tuple[Face, ...]:
-        """Faces that must stay free for assembly (empty without a feature)."""
-        return self.feature.faces if self.feature else ()
+        """Faces that must stay free for assembly: every feature's, in order (empty without one)."""
+        return tuple(dict.fromkeys(f for feat in self.features for f in feat.faces))
+
+    def feature_named(self, name: str) -> MatingFeature:
+        """The feature called ``name``; SparValueError naming the part's features if none is."""
+        for f in self.features:
+            if f.name == name:
+                return f
+        known = ", ".join(f.name for f in self.features) or "none"
+        raise SparValueError(f"{self.name} has no feature {name!r} (its features: {known})")
+
+    def feature_on(self, faces: "Sequence[Face]") -> MatingFeature | None:
+        """The feature whose faces the goal's face list ``faces`` names: the one sharing the
+        most faces with it (the first of equals), or None if it names no feature's face."""
+        want = set(faces)
+        best, hits = None, 0
+        for f in self.features:
+            n = len(want & set(f.faces))
+            if n > hits:
+                best, hits = f, n
+        return best
 
 
 @dataclass(frozen=True)

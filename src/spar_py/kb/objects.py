@@ -88,8 +88,10 @@ def load_object(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, o
     scale = mm_per / LENGTH_UNITS[unit]
     geometry, solids = _geometry(root, Path(path), unit, scale)
     face_names = {k: n.vector(3) * scale for k, n in (root.key("face_names", False) or Node("", "", {})).items()}
-    fnode = root.key("feature", required=False)
-    feature_geo = _feature_geometry(fnode, scale) if fnode is not None else None
+    fnodes = _feature_nodes(root)
+    geo_nodes = [(g, n) for g, n in ((_feature_geometry(n, scale), n) for n in fnodes) if g is not None]
+    feature_geos = tuple(g for g, _ in geo_nodes)
+    through = tuple("through" in n.value and _flag(n.key("through")) for _, n in geo_nodes)
     if geometry is not None:
         _check_size(root, Path(path), name, geometry, solids, unit, reach)
         geometry.face_names = face_names
@@ -104,8 +106,8 @@ def load_object(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, o
 
         grip = _derive_gripper(unit, opening, gripper)
         try:
-            derived = derive(name, geometry, feature_geo, face_names, grip, step, need_hull=True,
-                             use_cache=use_cache)
+            derived = derive(name, geometry, feature_geos, face_names, grip, step, need_hull=True,
+                             use_cache=use_cache, through=through)
         except KBError:
             raise
         except Exception as e:  # trimesh, manifold3d, scipy: a shape they cannot take is bad input
@@ -175,22 +177,52 @@ def load_object(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, o
     if clash:
         raise root.key("grasps").fail(f"labels distinct from stable pose labels ({', '.join(sorted(clash))})")
 
-    feature = None
-    if fnode is not None:
-        if feature_geo is not None:
-            if feature_geo.name not in known:
+    features = _features(fnodes, known, scale)
+    return ObjectModel(name, faces, poses, grasps, features, solids, geometry)
+
+
+def _feature_nodes(root: Node) -> list[Node]:
+    """The nodes of the model's features: ``features:`` (a list) or ``feature:`` (a list of one)."""
+    one, many = root.key("feature", required=False), root.key("features", required=False)
+    if one is not None and many is not None:
+        raise many.fail("feature: or features:, not both")
+    if many is not None:
+        return many.elements(1)
+    return [] if one is None else [one]
+
+
+def _features(fnodes: list[Node], known: set[Face], scale: float) -> tuple[MatingFeature, ...]:
+    """The model's mating features, each checked against the part's faces: names unique (a
+    ``name:`` required when there are several), ``through:`` only on a hole."""
+    out: list[MatingFeature] = []
+    for fnode in fnodes:
+        geo = _feature_geometry(fnode, scale)
+        if len(fnodes) > 1 and "name" not in fnode.value:
+            raise fnode.fail("a name: for each feature of a part with several")
+        tnode = fnode.key("through", required=False)
+        through = tnode is not None and _flag(tnode)
+        if geo is not None:
+            if geo.name not in known:
                 raise fnode.key("name").fail("the name of a face on the shape at the feature (its axis, radius and "
-                                             "length place it)", show(feature_geo.name))
-            feature = MatingFeature(feature_geo.kind, (feature_geo.name,), feature_geo.radius, feature_geo.end,
-                                    feature_geo)
+                                             "length place it)", show(geo.name))
+            f = MatingFeature(geo.kind, (geo.name,), geo.radius, geo.end, geo, geo.name, through)
         else:
-            feature = MatingFeature(
+            nnode = fnode.key("name", required=False)
+            f = MatingFeature(
                 fnode.key("kind").choice(("peg", "hole")),
                 _faces(fnode.key("faces"), known),
                 fnode.key("radius").positive() * scale,
                 fnode.key("vector").vector(3) * scale,
+                name=nnode.label() if nnode is not None else "",
+                through=through,
             )
-    return ObjectModel(name, faces, poses, grasps, feature, solids, geometry)
+        if through and f.kind != "hole":
+            raise tnode.fail("through: only on a hole (a peg has one tip)", show(tnode.value))
+        if any(o.name == f.name for o in out):
+            raise (fnode.key("name", required=False) or fnode).fail("a feature name not used before in the part",
+                                                                    show(f.name))
+        out.append(f)
+    return tuple(out)
 
 
 def _grasp_frame(euler: tuple[float, ...], memo: Memo | None) -> np.ndarray:
@@ -341,9 +373,13 @@ def _flag(node: Node) -> bool:
 
 
 def _feature_geometry(fnode: Node, scale: float) -> Any:
-    """The geometric form of ``feature:`` (world.shapes.FeatureGeometry), or None for the
-    paper's form ``{kind, faces, radius, vector}``; mixing the two is an error."""
-    geo_keys = [k for k in ("name", "axis", "length") if k in fnode.value]
+    """The geometric form of a feature (world.shapes.FeatureGeometry), or None for the paper's
+    form ``{kind, faces, radius, vector}`` (``name:`` then only names the feature); mixing the
+    two is an error."""
+    if not isinstance(fnode.value, dict):
+        raise fnode.fail("a feature {kind, faces, radius, vector} or {kind, name, radius, axis, length}",
+                         show(fnode.value))
+    geo_keys = [k for k in ("axis", "length") if k in fnode.value]
     old_keys = [k for k in ("faces", "vector") if k in fnode.value]
     if geo_keys and old_keys:
         raise fnode.fail("either {kind, faces, radius, vector} or {kind, name, radius, axis, length}, "

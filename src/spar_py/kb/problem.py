@@ -2,8 +2,9 @@
 :class:`~spar_py.core.model.Cell`.
 
 Objects and their initial positions, uncertainty bounds, sensors, goals (parsed to term
-data and checked against the cell; ``assembled(Peg, Hole)`` completed from the features'
-geometry), placement regions, obstacles, the table and the switches; the loaded cell is
+data and checked against the cell; ``assembled(Peg, Hole)`` and ``mated(Peg, PegFeature,
+Hole, HoleFeature)`` completed from the features' geometry; every mate checked: clearance,
+the peg's tip on the hole's axis), placement regions, obstacles, the table and the switches; the loaded cell is
 checked for physical sanity (kb.sanity) last. Lengths in the problem's unit, angles in radians.
 """
 from __future__ import annotations
@@ -19,7 +20,7 @@ import numpy as np
 from spar_py.core.errors import UnknownKeyError, WrongKindError
 from spar_py.core.geometry import same_stable_pose
 from spar_py.core.memo import Memo
-from spar_py.core.model import Bounds, Cell, ObjectModel, Position, Product, Sensor, Term
+from spar_py.core.model import Bounds, Cell, MatingFeature, ObjectModel, Position, Product, Sensor, Term
 from spar_py.kb.node import Node, cut, did_you_mean, show
 from spar_py.kb.objects import load_object
 from spar_py.kb.products import add_goal_frames, load_product, product_goals, product_part
@@ -31,7 +32,8 @@ from spar_py.kb.terms import parse_term
 from spar_py.kb.values import LOAD_MEMO_LIMIT, tm_node, units_of, xyz_rpy_frame
 from spar_py.world.robots import GripperGeometry
 
-__all__ = ["GOAL_SHAPES", "SENSOR_NAMES", "load_problem"]
+__all__ = ["COAXIAL_TOL", "GOAL_SHAPES", "SENSOR_NAMES", "check_mate", "derived_mate", "goal_features", "hole_axis",
+           "load_problem", "mate_goal"]
 
 
 # The sensing actions kb/templates/sensing.pl defines: the names `sensors:` may use.
@@ -60,14 +62,18 @@ def _bounds(node: Node, len_scale: float, rad_per: float, large_ok: bool = True)
     return Bounds(iv("dx", len_scale), iv("dy", len_scale), iv("dz", len_scale), dtheta)
 
 
-GOAL_SHAPES: dict[str, tuple[int, ...]] = {"assembled": (5, 2), "part_location": (2,)}
+GOAL_SHAPES: dict[str, tuple[int, ...]] = {"assembled": (5, 2), "part_location": (2,), "mated": (4,)}
+
+#: T_a must put the peg's tip on the hole's axis within this fraction of the cell's size.
+COAXIAL_TOL = 1e-6
 
 
 def _check_goal(node: Node, goal: Any, cell_objects: dict[str, ObjectModel], transforms: dict, vectors: dict,
                 positions: dict[str, Position]) -> None:
     """Validate a parsed goal against the cell (known objects, faces, transforms, positions)."""
     if not isinstance(goal, tuple) or goal[0] not in GOAL_SHAPES or len(goal) - 1 not in GOAL_SHAPES[goal[0]]:
-        raise node.fail("a goal assembled(Peg, Hole), assembled(Peg, Hole, [[PegFaces], [HoleFaces]], Ta, Va) "
+        raise node.fail("a goal assembled(Peg, Hole), mated(Peg, PegFeature, Hole, HoleFeature), "
+                        "assembled(Peg, Hole, [[PegFaces], [HoleFaces]], Ta, Va) "
                         "or part_location(Object, InitialPosition)")
     if goal[0] == "part_location":
         _, obj, pos = goal
@@ -91,6 +97,80 @@ def _check_goal(node: Node, goal: Any, cell_objects: dict[str, ObjectModel], tra
         raise node.fail(f"Ta naming a transform under transforms: ({_names(transforms)})", show(ta))
     if not isinstance(va, str) or va not in vectors:
         raise node.fail(f"Va naming a vector under vectors: ({_names(vectors)})", show(va))
+    fp, fh = goal_features(node, goal, cell_objects)
+    check_mate(node, _goal_text(goal), (held, fp), (fixed, fh), transforms[ta], vectors[va],
+               _cell_size(cell_objects))
+
+
+def _goal_text(goal: tuple) -> str:
+    """A goal's head for a message: ``assembled(peg, block, ...)``."""
+    return f"{goal[0]}({', '.join(str(a) for a in goal[1:3])}, ...)"
+
+
+def _cell_size(objects: Mapping[str, ObjectModel]) -> float:
+    """The cell's size for tolerances (cell unit): the largest part's bounding radius and feature
+    vector, at least 1."""
+    sizes = [m.bounding_radius() for m in objects.values()]
+    sizes += [float(np.abs(f.vector).max()) for m in objects.values() for f in m.features]
+    return max([1.0, *sizes])
+
+
+def goal_features(node: Node, goal: tuple, objects: Mapping[str, ObjectModel]
+                  ) -> tuple[MatingFeature, MatingFeature]:
+    """The peg and hole features an ``assembled/5`` goal's face lists name
+    (ObjectModel.feature_on); a KBError if a list names no feature of its part, or the kinds
+    are not a peg and a hole."""
+    _, peg, hole, faces, _, _ = goal
+    out = []
+    for obj, fl, kind in ((peg, faces[0], "peg"), (hole, faces[1], "hole")):
+        m = objects[obj]
+        f = m.feature_on(fl)
+        if f is None:
+            known = "; ".join(f"{x.name}: {', '.join(map(str, x.faces))}" for x in m.features) or "none"
+            raise node.fail(f"{kind} faces naming a feature of {obj} (its features' faces: {known})",
+                            show(", ".join(map(str, fl)) or "[]"))
+        if f.kind != kind:
+            raise node.fail(f"{obj}'s faces of a {kind} feature", f"those of {f.name}, a {f.kind}")
+        out.append(f)
+    return out[0], out[1]
+
+
+def hole_axis(hole: MatingFeature, va: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """A point on the hole's axis and its unit direction into the hole (the hole's object frame):
+    the declared axis of a hole given by geometry, else the bottom centre F_h and the goal's
+    mating motion V_a (the paper's form gives no axis). ValueError if neither is known."""
+    if hole.geometry is not None:
+        return np.asarray(hole.geometry.origin, float), np.asarray(hole.geometry.direction, float)
+    if va is None or not np.linalg.norm(va) > 0:
+        raise ValueError(f"hole {hole.name} has no axis: give it by geometry, or a nonzero V_a")
+    v = np.asarray(va, float)
+    return np.asarray(hole.vector, float), v / np.linalg.norm(v)
+
+
+def check_mate(node: Node, what: str, peg: tuple[str, MatingFeature], hole: tuple[str, MatingFeature],
+               T_a: np.ndarray, va: np.ndarray | None, size: float) -> None:
+    """A mate the planner can make: a peg feature into a hole feature with positive clearance
+    R_h - R_p, and T_a (the peg's frame in the hole's, 4x4) putting the peg's tip F_p on the
+    hole's axis (:func:`hole_axis`) within COAXIAL_TOL of ``size`` (the cell's size, cell unit).
+    A KBError at ``node`` naming the goal ``what`` and what is wrong otherwise."""
+    (pobj, fp), (hobj, fh) = peg, hole
+    if fp.kind != "peg" or fh.kind != "hole":
+        raise node.fail(f"a peg feature into a hole feature in {what}",
+                        f"{pobj}.{fp.name} ({fp.kind}) into {hobj}.{fh.name} ({fh.kind})")
+    if not fh.radius > fp.radius:
+        raise node.fail(f"a hole wider than its peg in {what}",
+                        f"{pobj}.{fp.name} of radius {fp.radius:g} into {hobj}.{fh.name} of radius {fh.radius:g} "
+                        f"(clearance {fh.radius - fp.radius:g})")
+    try:
+        a0, u = hole_axis(fh, va)
+    except ValueError:
+        return  # a zero V_a: kb.sanity names the vector
+    tip = np.asarray(T_a, float)[:3, :3] @ np.asarray(fp.vector, float) + np.asarray(T_a, float)[:3, 3]
+    r = tip - a0
+    off = float(np.linalg.norm(r - (r @ u) * u))
+    if off > COAXIAL_TOL * size:
+        raise node.fail(f"T_a putting {pobj}'s tip on the axis of {hobj}.{fh.name} in {what}",
+                        f"a tip {off:.6g} off that axis")
 
 
 def _names(table: Mapping[str, Any]) -> str:
@@ -227,15 +307,75 @@ def _goals(root: Node, objects: dict[str, ObjectModel], transforms: dict, vector
             continue
         if isinstance(term, tuple) and term[0] == "assembled" and len(term) == 3:
             term = _derived_assembly(g, term, objects, transforms, vectors, turns)
+        elif isinstance(term, tuple) and term[0] == "mated" and len(term) == 5:
+            term = _mated(g, term, objects, transforms, vectors, turns)
         _check_goal(g, term, objects, transforms, vectors, positions)
         goals.append(term)
     return goals
 
 
+def _known_object(node: Node, obj: Any, role: str, objects: Mapping[str, ObjectModel]) -> ObjectModel:
+    """The model of a goal's argument ``obj`` (a KBError naming the known objects if none)."""
+    if not isinstance(obj, str) or obj not in objects:
+        raise node.fail(f"a known object as {role} argument ({', '.join(sorted(objects))})", show(obj))
+    return objects[obj]
+
+
 def _derived_assembly(node: Node, goal: tuple, objects: dict[str, ObjectModel], transforms: dict,
                       vectors: dict, turns: dict) -> tuple:
-    """``assembled(Peg, Hole)`` as the paper's five-argument goal: the mating faces are the two
-    features' faces, T_a and V_a derived from their geometry (world.shapes.assembly_transforms).
+    """``assembled(Peg, Hole)``: Peg's only peg feature into Hole's only hole feature (refused,
+    pointing to mated/4, when either part has several or none), as :func:`derived_mate`."""
+    _, peg, hole = goal
+    feats = []
+    for role, obj, kind in (("first", peg, "peg"), ("second", hole, "hole")):
+        m = _known_object(node, obj, role, objects)
+        fs = [f for f in m.features if f.kind == kind]
+        if len(fs) > 1:
+            raise node.fail(f"{obj} with one {kind} feature for assembled/2; it has {len(fs)} "
+                            f"({', '.join(f.name for f in fs)}): name them with mated(Peg, PegFeature, Hole, "
+                            "HoleFeature)")
+        if not fs or fs[0].geometry is None:
+            raise node.fail(f"{obj} with a {kind} feature declared by geometry (feature: {{kind: {kind}, name, "
+                            "radius, axis, length}) for assembled/2, or the five-argument goal")
+        feats.append(fs[0])
+    return derived_mate(node, f"assembled({peg}, {hole})", objects, (peg, feats[0]), (hole, feats[1]),
+                        transforms, vectors, turns)
+
+
+def _mated(node: Node, goal: tuple, objects: dict[str, ObjectModel], transforms: dict, vectors: dict,
+           turns: dict) -> tuple:
+    """``mated(Peg, PegFeature, Hole, HoleFeature)``: the named features, as :func:`derived_mate`."""
+    _, peg, pf, hole, hf = goal
+    what = f"mated({peg}, {pf}, {hole}, {hf})"
+    feats = []
+    for role, obj, fname, kind in (("first", peg, pf, "peg"), ("third", hole, hf, "hole")):
+        m = _known_object(node, obj, role, objects)
+        names = ", ".join(f"{f.name} ({f.kind})" for f in m.features) or "none"
+        f = next((f for f in m.features if f.name == fname), None)
+        if f is None:
+            raise node.fail(f"a feature of {obj} in {what} ({names})", show(fname))
+        if f.kind != kind:
+            raise node.fail(f"a {kind} feature of {obj} in {what} ({names})", f"{fname}, a {f.kind}")
+        if f.geometry is None:
+            raise node.fail(f"{obj}.{fname} declared by geometry ({{kind, name, radius, axis, length}}) for "
+                            "mated/4, or the five-argument assembled goal")
+        feats.append(f)
+    return derived_mate(node, what, objects, (peg, feats[0]), (hole, feats[1]), transforms, vectors, turns)
+
+
+def _free_index(transforms: Mapping[str, Any], vectors: Mapping[str, Any], n_turns: int) -> int:
+    """The first K with trans_K, its turns trans_K_tJ (J <= n_turns) and vec_K all free."""
+    k = 1
+    while f"trans_{k}" in transforms or f"vec_{k}" in vectors or any(
+            f"trans_{k}_t{j}" in transforms for j in range(2, n_turns + 1)):
+        k += 1
+    return k
+
+
+def derived_mate(node: Node, what: str, objects: Mapping[str, ObjectModel], peg: tuple[str, MatingFeature],
+                 hole: tuple[str, MatingFeature], transforms: dict, vectors: dict, turns: dict) -> tuple:
+    """The ``assembled/5`` goal of a mate whose T_a is derived from the features' geometry
+    (world.shapes.assembly_transforms): the mating faces are the two features' faces.
 
     T_a is a choice among the turns about the hole's axis, quantised by the finer of the two
     models' ``grasp_step`` (45 deg by default): the first turn (the least rotation of the
@@ -244,31 +384,23 @@ def _derived_assembly(node: Node, goal: tuple, objects: dict[str, ObjectModel], 
     The goal names trans_K; ``turns[trans_K]`` lists every turn with the hole part's stable
     poses in which the mated peg stays clear of the table (world.shapes.poses_clear_of_table;
     every pose when the peg has no shape). The planner chooses the turn (kb/templates/actions.pl).
+    The mate is checked (:func:`check_mate`; ``what`` names it in messages).
     """
-    from spar_py.world.shapes import assembly_transforms, part_mesh, poses_clear_of_table  # 4.5 ms: assembled/2 only
+    from spar_py.world.shapes import assembly_transforms, part_mesh, poses_clear_of_table  # 4.5 ms: derived T_a only
 
-    _, peg, hole = goal
-    feats = []
-    for role, obj, kind in (("first", peg, "peg"), ("second", hole, "hole")):
-        if obj not in objects:
-            raise node.fail(f"a known object as {role} argument ({', '.join(sorted(objects))})", show(obj))
-        f = objects[obj].feature
-        if f is None or f.geometry is None or f.kind != kind:
-            raise node.fail(f"{obj} with a {kind} feature declared by geometry (feature: {{kind: {kind}, name, "
-                            "radius, axis, length}) for assembled/2, or the five-argument goal")
-        feats.append(f)
-    steps = [m.geometry.step for m in (objects[peg], objects[hole]) if m.geometry is not None]
-    Tas, Va, _ = assembly_transforms(feats[0].geometry, feats[1].geometry, min(steps, default=math.radians(45.0)))
-    k = 1
-    while f"trans_{k}" in transforms or f"vec_{k}" in vectors or any(
-            f"trans_{k}_t{j}" in transforms for j in range(2, len(Tas) + 1)):
-        k += 1
+    (pobj, fp), (hobj, fh) = peg, hole
+    if fp.geometry is None or fh.geometry is None:
+        raise node.fail(f"features declared by geometry for {what}")
+    steps = [m.geometry.step for m in (objects[pobj], objects[hobj]) if m.geometry is not None]
+    Tas, Va, _ = assembly_transforms(fp.geometry, fh.geometry, min(steps, default=math.radians(45.0)))
+    check_mate(node, what, peg, hole, Tas[0], Va, _cell_size(objects))
+    k = _free_index(transforms, vectors, len(Tas))
     name = f"trans_{k}"
-    pgeo = objects[peg].geometry
+    pgeo = objects[pobj].geometry
     pts = None
     if pgeo is not None:  # the hull a derivation gave, else (all entries hand-written) the mesh's vertices
-        pts = pgeo.hull if pgeo.hull is not None else np.asarray(part_mesh(objects[peg]).vertices)
-    poses = list(objects[hole].poses.values())
+        pts = pgeo.hull if pgeo.hull is not None else np.asarray(part_mesh(objects[pobj]).vertices)
+    poses = list(objects[hobj].poses.values())
     alternatives = []
     for j, T in enumerate(Tas, start=1):
         tname = name if j == 1 else f"{name}_t{j}"
@@ -278,7 +410,25 @@ def _derived_assembly(node: Node, goal: tuple, objects: dict[str, ObjectModel], 
         alternatives.append((tname, tuple(p.label for p, ok in zip(poses, clear) if ok)))
     vectors[f"vec_{k}"] = Va
     turns[name] = tuple(alternatives)
-    return ("assembled", peg, hole, [list(feats[0].faces), list(feats[1].faces)], name, f"vec_{k}")
+    return ("assembled", pobj, hobj, [list(fp.faces), list(fh.faces)], name, f"vec_{k}")
+
+
+def mate_goal(node: Node, what: str, objects: Mapping[str, ObjectModel], peg: tuple[str, MatingFeature],
+              hole: tuple[str, MatingFeature], T_a: np.ndarray, transforms: dict, vectors: dict) -> tuple:
+    """The ``assembled/5`` goal of a mate with a given T_a (the peg's frame in the hole's, 4x4,
+    cell unit: a product's poses give it), checked (:func:`check_mate`): T_a is added to the
+    cell's transforms as trans_K and the hole's axis direction (V_a) as vec_K."""
+    (pobj, fp), (hobj, fh) = peg, hole
+    try:
+        _, va = hole_axis(fh, None)
+    except ValueError as e:
+        raise node.fail(f"a hole declared by geometry in {what}", str(e)) from None
+    T = np.asarray(T_a, float)
+    check_mate(node, what, peg, hole, T, va, _cell_size(objects))
+    k = _free_index(transforms, vectors, 1)
+    transforms[f"trans_{k}"] = T
+    vectors[f"vec_{k}"] = va
+    return ("assembled", pobj, hobj, [list(fp.faces), list(fh.faces)], f"trans_{k}", f"vec_{k}")
 
 
 def _regions(root: Node) -> list[dict[str, tuple[float, float]]]:

@@ -18,9 +18,9 @@ from spar_py.core.errors import KBError, UnknownKeyError, WrongKindError
 from spar_py.kb.node import LABEL_RE, Node, did_you_mean
 from spar_py.kb.reader import MAX_INPUT_BYTES, parse_yaml
 
-__all__ = ["BOUNDS_SCHEMA", "KINDS", "LEAF", "OBJECT_SCHEMA", "PROBLEM_SCHEMA", "ROBOT_SCHEMA", "UNITS_SCHEMA",
-           "URDF_ROBOT_SCHEMA", "Each", "Keys", "Kind", "Leaf", "Named", "OneOf", "OneOrMany", "Spec", "check_shape",
-           "conforms", "describe", "file_kind", "keys", "read_kb", "read_yaml", "schema_keys"]
+__all__ = ["BOUNDS_SCHEMA", "FEATURE_SCHEMA", "KINDS", "LEAF", "OBJECT_SCHEMA", "PROBLEM_SCHEMA", "ROBOT_SCHEMA",
+           "UNITS_SCHEMA", "URDF_ROBOT_SCHEMA", "Each", "Keys", "Kind", "Leaf", "Named", "OneOf", "OneOrMany", "Spec",
+           "check_shape", "conforms", "describe", "file_kind", "keys", "read_kb", "read_yaml", "schema_keys"]
 
 
 @dataclass(frozen=True)
@@ -87,14 +87,19 @@ BOUNDS_SCHEMA = keys(["dx", "dy", "dz", "dtheta"])
 FRAME_SCHEMA = keys(["xyz"], ["rpy"])
 
 
+#: A mating feature: the paper's form {kind, faces, radius, vector} or by geometry {kind, name,
+#: radius, axis, length}; ``name`` (required among several) and ``through`` (a hole) in either.
+FEATURE_SCHEMA = keys(["kind", "radius"], {"faces": LEAF, "vector": LEAF, "name": LEAF, "length": LEAF,
+                                           "axis": keys(["origin", "direction"]), "through": LEAF})
+
+
 OBJECT_SCHEMA = keys(
     {"object": LEAF, "units": UNITS_SCHEMA},
     {"faces": LEAF,
      "stable_poses": Each(keys(["label", "rfaces", "ofaces", "tm"]), 1),
      "grasps": Each(keys(["label", "gfaces", "ofaces", "eulerxyz", "width"]), 1),
      # the paper's form {kind, faces, radius, vector} or by geometry {kind, name, radius, axis, length}
-     "feature": keys(["kind", "radius"], {"faces": LEAF, "vector": LEAF, "name": LEAF, "length": LEAF,
-                                          "axis": keys(["origin", "direction"])}),
+     "feature": FEATURE_SCHEMA, "features": Each(FEATURE_SCHEMA, 1),
      "shape": Each(OneOf(MappingProxyType({"box": keys(["min", "max"], ["subtract"]),
                                            "cylinder": keys(["radius", "z"], ["subtract"])}))),
      "mesh": LEAF, "face_names": Named(LEAF), "grasp_step": LEAF},

@@ -44,7 +44,7 @@ from spar_py.world import placement as pl
 from spar_py.phase2 import uncertainty as ur
 from spar_py.core.errors import SparValueError
 from spar_py.core.geometry import same_stable_pose
-from spar_py.core.model import Bounds, Cell, Grasp
+from spar_py.core.model import Bounds, Cell, Grasp, MatingFeature
 from spar_py.core.units import ANGLE_UNITS, LENGTH_UNITS
 from spar_py.world.arcs import reachable_pairs
 from spar_py.world.motion_options import MotionFailure, MotionOptions
@@ -605,14 +605,13 @@ def _putdown(world: World, s: Step, early: bool = False) -> tuple[list[dict], Wo
 
 
 def _assemble(world: World, s: Step, early: bool = False) -> tuple[list[dict], World, dict]:
-    peg, hole, ta = s["args"][0], s["args"][1], s["args"][3]
+    peg, hole, faces, ta, va = s["args"][0], s["args"][1], s["args"][2], s["args"][3], s["args"][4]
     cell = world.cell
     Ta = cell.transforms[ta]
-    fp, fh = cell.objects[peg].feature, cell.objects[hole].feature
-    if fp is None or fh is None:
-        raise SparValueError(f"assemble({peg}, {hole}): both objects need a mating feature")
+    fp, fh = _mate_features(cell, peg, hole, faces)
     g = _grasp(cell, peg, world.grasps[peg])
-    cs = ur.assemble_constraints(world.unc, peg, hole, Ta, fp, fh, action=s["id"], memo=world.cache.memo)
+    cs = ur.assemble_constraints(world.unc, peg, hole, Ta, fp, fh, action=s["id"], memo=world.cache.memo,
+                                 axis=cell.vectors.get(va) if isinstance(va, str) else None)
     checks = _verdicts(world, cs, early)
     what = f"assemble({peg}, {hole})"
     q, geo, refused = _arm(world, world.unc.obj(hole).pose @ Ta @ g.T, what, held=(peg, np.linalg.inv(g.T)),
@@ -624,6 +623,17 @@ def _assemble(world: World, s: Step, early: bool = False) -> tuple[list[dict], W
                 joints=q if q is not None else world.joints, checked=_checked(world, cs, checks),
                 complete=sum(c["kind"] == "uncertainty" for c in checks) == len(cs))
     return checks, w, geo
+
+
+def _mate_features(cell: Cell, peg: str, hole: str, faces: Any) -> tuple[MatingFeature, MatingFeature]:
+    """The peg and hole features an assemble step's ``[PegFaces, HoleFaces]`` name (the goal's own)."""
+    ok = isinstance(faces, list) and len(faces) == 2 and all(isinstance(f, list) for f in faces)
+    fp = cell.objects[peg].feature_on(faces[0]) if ok else None
+    fh = cell.objects[hole].feature_on(faces[1]) if ok else None
+    if fp is None or fh is None:
+        raise SparValueError(f"assemble({peg}, {hole}): its faces {faces!r} name no peg feature of {peg} "
+                             f"and hole feature of {hole}")
+    return fp, fh
 
 
 def _scan(world: World, s: Step, early: bool = False) -> tuple[list[dict], World, dict]:

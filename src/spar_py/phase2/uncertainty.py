@@ -443,7 +443,7 @@ def pickup_constraints(state: WorldState, obj: str, grasp_T: np.ndarray, width: 
 def assemble_constraints(state: WorldState, peg: str, hole: str, T_a: np.ndarray,
                          peg_feature: MatingFeature, hole_feature: MatingFeature,
                          action: str = "assemble", motion: ErrorTm | None = None,
-                         memo: Memo | None = None) -> list[Constraint]:
+                         memo: Memo | None = None, axis: np.ndarray | None = None) -> list[Constraint]:
     """The assemble inequality of Sec. 3.2.2: the peg tip centre within R_h - R_p of the hole's.
 
     ``C_h = T_{H+d} F_h`` (Eq. 2), ``C_p = T_H T_a T_G T_dP T_G^-1 F_p`` (Eqs. 5, 6).

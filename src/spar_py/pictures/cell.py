@@ -41,12 +41,12 @@ if TYPE_CHECKING:
 
     from spar_py.world.collision import Body
     from spar_py.world.robots import Robot
-    from spar_py.core.model import Cell, ObjectModel, Solid
+    from spar_py.core.model import Cell, MatingFeature, ObjectModel, Solid
 
 __all__ = ["Shape", "Tolerance", "arm_polyline", "assemble_tolerance", "body_faces", "cell_figure", "cell_png",
            "closeup_figure", "closeup_png", "draw_figure", "extent",
-           "gripper_segments", "hole_mouth", "obstacle_shapes", "object_points", "robot_shapes", "solid_faces",
-           "solid_points"]
+           "gripper_segments", "hole_mouth", "hole_mouths", "obstacle_shapes", "object_points", "robot_shapes",
+           "solid_faces", "solid_points"]
 
 OBJECT_COLOURS = ("#4c72b0", "#dd8452", "#55a868", "#c44e52", "#8172b3", "#937860", "#da8bc3")
 TABLE_COLOUR = "#c8b48a"
@@ -146,27 +146,41 @@ def gripper_segments(tool: np.ndarray, width: float, length: float) -> list[np.n
     ]
 
 
-def hole_mouth(cell: Cell, obj: str) -> tuple[np.ndarray, np.ndarray, float] | None:
-    """The mouth of ``obj``'s hole in its object frame: (centre (3,), outward axis (3,), radius), or None.
+def hole_mouth(cell: Cell, obj: str, feature: MatingFeature | None = None
+               ) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """The mouth of ``obj``'s hole ``feature`` (default: its only hole) in its object frame:
+    (centre (3,), outward axis (3,), radius), or None.
 
-    The model gives the hole's bottom centre F_h and radius (Sec. 3.2.2) but not its
-    axis; a goal ``assembled(P, obj, _, Ta, Va)`` does: the mating motion Va (obj's
-    frame) runs down the hole, so the mouth is where the ray F_h - t Va leaves obj's
-    boxes. None for an object with no hole or no such goal.
+    A hole declared by geometry gives its mouth (the axis origin) and axis. The paper's form
+    gives the hole's bottom centre F_h and radius (Sec. 3.2.2) but not its axis; a goal
+    ``assembled(P, obj, [_, HoleFaces], Ta, Va)`` naming the hole's faces does: the mating
+    motion Va (obj's frame) runs down the hole, so the mouth is where the ray F_h - t Va
+    leaves obj's boxes. None for an object with no such hole or no such goal.
     """
     model = cell.objects.get(obj)
-    if model is None or model.feature is None or model.feature.kind != "hole":
+    if model is None:
         return None
+    if feature is None:
+        holes = [f for f in model.features if f.kind == "hole"]
+        if len(holes) != 1:
+            return None
+        feature = holes[0]
+    if feature.kind != "hole":
+        return None
+    if feature.geometry is not None:
+        g = feature.geometry
+        return np.asarray(g.origin, float), -np.asarray(g.direction, float), float(feature.radius)
     axis = None
     for g in cell.goals:  # term data (core.model.Term): ("assembled", peg, hole, faces, ta, va)
-        if isinstance(g, tuple) and g[0] == "assembled" and len(g) == 6 and g[2] == obj and g[5] in cell.vectors:
+        if (isinstance(g, tuple) and g[0] == "assembled" and len(g) == 6 and g[2] == obj and g[5] in cell.vectors
+                and model.feature_on(_hole_faces(g[3])) is feature):
             va = np.asarray(cell.vectors[g[5]], float)
             if np.linalg.norm(va) > 0:
                 axis = -va / np.linalg.norm(va)
                 break
     if axis is None:
         return None
-    origin = np.asarray(model.feature.vector, float)
+    origin = np.asarray(feature.vector, float)
     exits = [0.0]
     for sd in model.shape:
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -176,7 +190,19 @@ def hole_mouth(cell: Cell, obj: str) -> tuple[np.ndarray, np.ndarray, float] | N
         inside_other = np.all((axis != 0) | ((sd.lo <= origin) & (origin <= sd.hi)))
         if inside_other and lo.max() <= 1e-9 <= hi.min():
             exits.append(float(hi.min()))
-    return origin + max(exits) * axis, axis, float(model.feature.radius)
+    return origin + max(exits) * axis, axis, float(feature.radius)
+
+
+def _hole_faces(faces: Any) -> list:
+    """The hole's face list of a goal's ``[PegFaces, HoleFaces]`` (empty if malformed)."""
+    return list(faces[1]) if isinstance(faces, list) and len(faces) == 2 and isinstance(faces[1], list) else []
+
+
+def hole_mouths(cell: Cell, obj: str) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """The mouth (:func:`hole_mouth`) of each of ``obj``'s holes that has one."""
+    model = cell.objects.get(obj)
+    found = [hole_mouth(cell, obj, f) for f in (model.features if model is not None else ()) if f.kind == "hole"]
+    return [m for m in found if m is not None]
 
 
 def _disc(centre: np.ndarray, normal: np.ndarray, radius: float, segments: int = 24) -> np.ndarray:
@@ -371,9 +397,7 @@ def _paint_list(cell: Cell, s: Scene, eye: Sequence[float]) -> list[tuple[str, n
         for sd in cell.objects[o].shape:
             p = solid_points(sd, T, 24)
             items.append((float(p.mean(axis=0) @ eye), "solid", p, _colour(cell, o)))
-        mouth = hole_mouth(cell, o)
-        if mouth is not None:
-            c, n, r = mouth
+        for c, n, r in hole_mouths(cell, o):
             nw = T[:3, :3] @ n
             if float(nw @ eye) > 1e-6:
                 cw = T[:3, :3] @ c + T[:3, 3] + 1e-3 * size * nw
@@ -669,7 +693,9 @@ def assemble_tolerance(cell: Cell, plan: Any, s: Scene) -> Tolerance | None:
     check = next((c for c in checks if c.get("action") == step.get("id") and c.get("constraint") == "centres"
                   and c.get("threshold") is not None and c.get("bound") is not None), None)
     hole = str(args[1])
-    mouth = hole_mouth(cell, hole)
+    model = cell.objects.get(hole)
+    feature = model.feature_on(_hole_faces(args[2]) if len(args) > 2 else []) if model is not None else None
+    mouth = hole_mouth(cell, hole, feature) if feature is not None else None
     T = s.poses.get(hole)
     if check is None or mouth is None or T is None:
         return None

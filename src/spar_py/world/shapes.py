@@ -12,11 +12,11 @@ less the primitives marked ``subtract: true`` (booleans by manifold3d); a model 
 neither gives None. The mesh is built once per model (kept on the model's
 :class:`Geometry`, freed with it) and must not be modified by callers (copy it first).
 
-Derived faces (:func:`derive_faces`): triangles of the mating feature's surfaces (the
+Derived faces (:func:`derive_faces`): triangles of each mating feature's surfaces (the
 shaft's side and tip, or the hole's wall and bottom) form the face the feature names;
 the others are joined across edges where coplanar (planar facets) or where the surface
 bends by less than SMOOTH_DEG (a tessellated curved surface), and planar facets on one
-plane are merged. Names, in order of precedence: the feature's ``name``; ``face_names:``
+plane are merged. Names, in order of precedence: the features' ``name``; ``face_names:``
 (a name -> a point on the face); ``px nx py ny pz nz`` for a planar face whose outward
 normal is that axis when no other face has it; ``f1, f2, ...`` for the rest, numbered in
 a deterministic order (by centroid, then normal).
@@ -218,7 +218,8 @@ def _primitives_mesh(prims: tuple[Primitive, ...]) -> "trimesh.Trimesh":
 class Face:
     """A derived face: its ``name``, triangle indices ``tris`` into the part mesh, area-weighted
     outward unit ``normal``, ``planar`` (and then its plane ``offset`` = normal . p), ``area``,
-    ``centroid`` (object frame, cell unit) and whether it is the mating feature's."""
+    ``centroid`` (object frame, cell unit) and whether it is a mating feature's (then ``name`` is
+    the feature's)."""
 
     name: str
     tris: np.ndarray
@@ -230,32 +231,43 @@ class Face:
     feature: bool = False
 
 
-def _feature_triangles(mesh: "trimesh.Trimesh", f: FeatureGeometry, tol: float) -> np.ndarray:
+def _feature_triangles(mesh: "trimesh.Trimesh", f: FeatureGeometry, tol: float, through: bool = False
+                       ) -> np.ndarray:
     """(n,) bool: the triangles on the feature's surfaces (its cylinder's side between root and
-    end, and the end cap: the peg's tip or the hole's bottom)."""
+    end, and the end cap: the peg's tip or the hole's bottom; a ``through`` hole has none)."""
     V = mesh.vertices[mesh.faces] - f.origin                        # (n, 3, 3)
     t = V @ f.direction                                             # axial coordinate
     radial = np.linalg.norm(V - t[..., None] * f.direction, axis=2)
     side = (np.abs(radial - f.radius) < tol).all(1) & (t > -tol).all(1) & (t < f.length + tol).all(1)
+    if through:
+        return side
     cap = (np.abs(t - f.length) < tol).all(1) & (radial < f.radius + tol).all(1)
     return side | cap
 
 
-def derive_faces(mesh: "trimesh.Trimesh", feature: FeatureGeometry | None, face_names: dict[str, np.ndarray],
-                 unit: str) -> list[Face]:
-    """The faces of ``mesh`` (module docstring), named. ``face_names`` maps a name to a point
-    on the face (object frame, cell unit); ValueError naming the entry if the point is on no
-    face, on the feature's face under another name, or two names share a face."""
+def derive_faces(mesh: "trimesh.Trimesh", features: "tuple[FeatureGeometry, ...]", face_names: dict[str, np.ndarray],
+                 unit: str, through: "tuple[bool, ...]" = ()) -> list[Face]:
+    """The faces of ``mesh`` (module docstring), named: each of ``features`` gives one face
+    (its triangles, named by the feature; ``through[i]`` true: feature i is a hole open at both
+    ends, no bottom cap). ``face_names`` maps a name to a point on the face (object frame, cell
+    unit); ValueError naming the entry if the point is on no face, on a feature's face under
+    another name, or two names share a face; or if two features claim one triangle."""
     tol = from_mm(unit, ON_SURFACE_MM)
     n = len(mesh.faces)
     N = mesh.face_normals
     label = np.full(n, -1)
     groups: list[np.ndarray] = []
-    if feature is not None:
-        ft = _feature_triangles(mesh, feature, tol)
+    owners: list[FeatureGeometry] = []
+    for i, feature in enumerate(features):
+        ft = _feature_triangles(mesh, feature, tol, bool(through[i]) if i < len(through) else False)
+        if (ft & (label >= 0)).any():
+            other = owners[int(label[np.flatnonzero(ft & (label >= 0))[0]])].name
+            raise ValueError(f"features: expected features on distinct surfaces, not {feature.name} on "
+                             f"{other}'s")
         if ft.any():
+            label[ft] = len(groups)
             groups.append(np.flatnonzero(ft))
-            label[ft] = 0
+            owners.append(feature)
     # union-find over edges between non-feature triangles: coplanar or smoothly bent
     parent = np.arange(n)
 
@@ -296,9 +308,10 @@ def derive_faces(mesh: "trimesh.Trimesh", feature: FeatureGeometry | None, face_
                 planes.append((nrm, off, list(tris)))
         else:
             curved.append(tris)
+    n_feat = len(groups)
     groups += [np.asarray(sorted(p[2])) for p in planes] + [np.asarray(sorted(c)) for c in curved]
-    faces = [_face("", g, mesh, feature is not None and k == 0 and label[g[0]] == 0) for k, g in enumerate(groups)]
-    return _name_faces(faces, mesh, feature, face_names, tol)
+    faces = [_face(owners[k].name if k < n_feat else "", g, mesh, k < n_feat) for k, g in enumerate(groups)]
+    return _name_faces(faces, mesh, face_names, tol)
 
 
 def _face(name: str, tris: np.ndarray, mesh: "trimesh.Trimesh", is_feature: bool) -> Face:
@@ -327,12 +340,11 @@ def face_of_point(faces: list[Face], mesh: "trimesh.Trimesh", p: np.ndarray, tol
 _AXES = {"px": (1, 0, 0), "nx": (-1, 0, 0), "py": (0, 1, 0), "ny": (0, -1, 0), "pz": (0, 0, 1), "nz": (0, 0, -1)}
 
 
-def _name_faces(faces: list[Face], mesh: "trimesh.Trimesh", feature: FeatureGeometry | None,
-                face_names: dict[str, np.ndarray], tol: float) -> list[Face]:
-    """Names by precedence: feature, face_names, axis names where unique, then f1, f2, ..."""
-    names: dict[int, str] = {}
-    if feature is not None and faces and faces[0].feature:
-        names[0] = feature.name
+def _name_faces(faces: list[Face], mesh: "trimesh.Trimesh", face_names: dict[str, np.ndarray], tol: float
+                ) -> list[Face]:
+    """Names by precedence: features' (already on their faces), face_names, axis names where
+    unique, then f1, f2, ..."""
+    names: dict[int, str] = {k: f.name for k, f in enumerate(faces) if f.feature}
     for name, p in face_names.items():
         k = face_of_point(faces, mesh, p, tol)
         if k is None:

@@ -30,7 +30,7 @@ from spar_py.world.shapes import FeatureGeometry, Geometry, derive_faces
 __all__ = ["DERIVE_VERSION", "MAX_ENTRIES", "cache_dir", "derive"]
 
 #: Bumped whenever the derivation's results change for the same inputs.
-DERIVE_VERSION = 3
+DERIVE_VERSION = 4
 #: Derivations kept on disk at most.
 MAX_ENTRIES = 256
 
@@ -43,13 +43,16 @@ def cache_dir() -> Path:
     return Path(base) / "spar-py" / "derive"
 
 
-def derive(name: str, geometry: Geometry, feature: FeatureGeometry | None, face_names: dict[str, np.ndarray],
-           gripper: Any, step: float, need_hull: bool, use_cache: bool = True) -> dict[str, Any]:
+def derive(name: str, geometry: Geometry, features: tuple[FeatureGeometry, ...], face_names: dict[str, np.ndarray],
+           gripper: Any, step: float, need_hull: bool, use_cache: bool = True,
+           through: tuple[bool, ...] = ()) -> dict[str, Any]:
     """The derivation of a part as plain data: ``faces`` (names), ``poses`` (label, rfaces,
     ofaces, R as 9 numbers row-major, height, probability), ``grasps`` (label, gfaces,
     ofaces, euler: X, Y, Z, phi, theta, psi in radians, width) and, if ``need_hull``, ``hull``
-    (the convex hull's vertices). ValueError (one line, naming the key) for bad geometry."""
-    key_data = [DERIVE_VERSION, name, geometry.digest(), feature.spec() if feature else None,
+    (the convex hull's vertices). ``features``: the part's features declared by geometry,
+    ``through`` whether each is a hole open at both ends. ValueError (one line, naming the
+    key) for bad geometry."""
+    key_data = [DERIVE_VERSION, name, geometry.digest(), [f.spec() for f in features], [bool(t) for t in through],
                 sorted((k, [round(float(v), 12) for v in p]) for k, p in face_names.items()),
                 gripper.spec(), round(step, 12), need_hull]
     key = hashlib.sha256(json.dumps(key_data).encode()).hexdigest()
@@ -62,21 +65,21 @@ def derive(name: str, geometry: Geometry, feature: FeatureGeometry | None, face_
                 return data
         except (OSError, ValueError):
             pass
-    data = _compute(name, geometry, feature, face_names, gripper, step, need_hull)
+    data = _compute(name, geometry, features, face_names, gripper, step, need_hull, through)
     data["key"] = key
     if use_cache:
         _store(path, data)
     return data
 
 
-def _compute(name: str, geometry: Geometry, feature: FeatureGeometry | None, face_names: dict[str, np.ndarray],
-             gripper: Any, step: float, need_hull: bool) -> dict[str, Any]:
+def _compute(name: str, geometry: Geometry, features: tuple[FeatureGeometry, ...], face_names: dict[str, np.ndarray],
+             gripper: Any, step: float, need_hull: bool, through: tuple[bool, ...] = ()) -> dict[str, Any]:
     from spar_py.world.shapes_derive import derive_grasps, derive_poses  # ~10 ms at import: a cache miss only
 
     mesh = geometry.mesh()
-    faces = derive_faces(mesh, feature, face_names, geometry.unit)
-    poses = derive_poses(mesh, faces, feature, geometry.unit, f"{name}_p")
-    grasps = derive_grasps(mesh, faces, feature, geometry.primitives, gripper, geometry.unit, f"{name}_g", step)
+    faces = derive_faces(mesh, features, face_names, geometry.unit, through)
+    poses = derive_poses(mesh, faces, features, geometry.unit, f"{name}_p")
+    grasps = derive_grasps(mesh, faces, features, geometry.primitives, gripper, geometry.unit, f"{name}_g", step)
     out: dict[str, Any] = {
         "faces": [f.name for f in faces],
         "poses": [{"label": p.label, "rfaces": list(p.rfaces), "ofaces": list(p.ofaces),

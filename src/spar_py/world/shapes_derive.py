@@ -267,21 +267,26 @@ def _inside_margin(hull: np.ndarray, c: np.ndarray) -> float:
     return float((cross / L[ok]).min())
 
 
-def _hidden(faces: list[Face], lying: list[int], feature: FeatureGeometry | None, R: np.ndarray, height: float,
-            tol: float) -> list[int]:
-    """The faces a pose hides: those lying on the table and the feature's face if its mouth
+def _hidden(faces: list[Face], lying: list[int], features: tuple[FeatureGeometry, ...], R: np.ndarray,
+            height: float, tol: float) -> list[int]:
+    """The faces a pose hides: those lying on the table and each feature's face if its mouth
     (a hole) or tip (a peg) is on the table."""
     out = list(lying)
-    if feature is not None:
+    for feature in features:
         mouth = feature.origin if feature.kind == "hole" else feature.end
         if abs(float((R @ mouth)[2]) + height) < tol:
-            k = next((i for i, f in enumerate(faces) if f.feature), None)
+            k = _feature_face(faces, feature)
             if k is not None and k not in out:
                 out.append(k)
     return out
 
 
-def derive_poses(mesh: "trimesh.Trimesh", faces: list[Face], feature: FeatureGeometry | None, unit: str,
+def _feature_face(faces: list[Face], feature: FeatureGeometry) -> int | None:
+    """The index of ``feature``'s face among ``faces`` (None if its surfaces are not on the mesh)."""
+    return next((i for i, f in enumerate(faces) if f.feature and f.name == feature.name), None)
+
+
+def derive_poses(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[FeatureGeometry, ...], unit: str,
                  prefix: str, prob_floor: float = PROB_FLOOR) -> list[DerivedPose]:
     """The stable poses of the part (module docstring), most probable first, labelled
     ``{prefix}1, {prefix}2, ...``."""
@@ -300,8 +305,7 @@ def derive_poses(mesh: "trimesh.Trimesh", faces: list[Face], feature: FeatureGeo
     Ts, probs = trimesh.poses.compute_stable_poses(hull, center_mass=A.com, sigma=0.0, n_samples=1)
     tol = from_mm(unit, SUPPORT_TOL_MM)
     normals = [f.normal for f in faces if f.planar]
-    if feature is not None and feature.kind == "peg":
-        normals.append(feature.direction)  # the tip cap
+    normals += [f.direction for f in features if f.kind == "peg"]  # the tips' caps
     cos_snap = math.cos(math.radians(SNAP_DEG))
     found: list[tuple[float, np.ndarray, float, list[int], list[int]]] = []
     for T, p in zip(Ts, probs):
@@ -317,7 +321,7 @@ def derive_poses(mesh: "trimesh.Trimesh", faces: list[Face], feature: FeatureGeo
         why, height, lying = support_check(mesh, R, faces, unit)
         if why is not None:
             continue
-        found.append((float(p), R, height, lying, _hidden(faces, lying, feature, R, height, tol)))
+        found.append((float(p), R, height, lying, _hidden(faces, lying, features, R, height, tol)))
     found.sort(key=lambda f: (-round(f[0], 9), tuple(np.round(f[1][2], 9))))
     return [DerivedPose(f"{prefix}{i + 1}", tuple(faces[k].name for k in lying),
                         tuple(faces[k].name for k in hidden), R, float(round(height, 12)), p)
@@ -530,10 +534,10 @@ def _approaches(c: np.ndarray, step: float) -> list[np.ndarray]:
     return [clean(math.cos(2 * math.pi * k / n) * e1 + math.sin(2 * math.pi * k / n) * e2, 1e-12) for k in range(n)]
 
 
-def _covered(mesh: "trimesh.Trimesh", faces: list[Face], feature: FeatureGeometry | None, T: np.ndarray,
+def _covered(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[FeatureGeometry, ...], T: np.ndarray,
              width: float, g: Gripper, unit: str) -> set[int]:
     """The faces the gripper at T covers: a planar face if the palm or a closed finger reaches
-    beyond its plane (the part could not rest on that face while held); the feature's face if
+    beyond its plane (the part could not rest on that face while held); a feature's face if
     they enter the space the mating part needs (a peg: the prism of half-width r about the shaft
     from its root outwards; a hole: that about the hole's axis out of its mouth)."""
     s = from_mm(unit, TOUCH_MM)
@@ -543,8 +547,8 @@ def _covered(mesh: "trimesh.Trimesh", faces: list[Face], feature: FeatureGeometr
                                         for z in (lo[2], hi[2])]) for _, lo, hi in boxes])
     P = corners @ T[:3, :3].T + T[:3, 3]  # gripper corners in the object frame
     out = {k for k, f in enumerate(faces) if f.planar and (P @ f.normal > f.offset + s).any()}
-    if feature is not None:
-        k = next((i for i, f in enumerate(faces) if f.feature), None)
+    for feature in features:
+        k = _feature_face(faces, feature)
         if k is not None:
             e1, e2 = axis_basis(feature.direction)
             F = np.eye(4)
@@ -566,12 +570,10 @@ def _covered(mesh: "trimesh.Trimesh", faces: list[Face], feature: FeatureGeometr
     return out
 
 
-def _shafts(faces: list[Face], feature: FeatureGeometry | None, prims: tuple[Primitive, ...]
+def _shafts(faces: list[Face], features: tuple[FeatureGeometry, ...], prims: tuple[Primitive, ...]
             ) -> list[tuple[np.ndarray, np.ndarray, float, float, str | None]]:
     """Round shafts to grasp across: (root, unit axis, radius, length, face name or None)."""
-    out = []
-    if feature is not None and feature.kind == "peg":
-        out.append((feature.origin, feature.direction, feature.radius, feature.length, feature.name))
+    out = [(f.origin, f.direction, f.radius, f.length, f.name) for f in features if f.kind == "peg"]
     for p in prims:
         root, d = np.array([0.0, 0.0, p.lo[2]]), np.array([0.0, 0.0, 1.0])
         same = [np.allclose(root, o) and np.allclose(d, a) and abs(p.radius - r) < 1e-9 for o, a, r, _, _ in out]
@@ -580,7 +582,7 @@ def _shafts(faces: list[Face], feature: FeatureGeometry | None, prims: tuple[Pri
     return out
 
 
-def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], feature: FeatureGeometry | None,
+def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[FeatureGeometry, ...],
                   prims: tuple[Primitive, ...], g: Gripper, unit: str, prefix: str,
                   step: float = math.radians(45.0)) -> list[DerivedGrasp]:
     """The grasps of the part (module docstring), labelled ``{prefix}1, {prefix}2, ...``."""
@@ -613,7 +615,7 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], feature: FeatureGe
                 if _pad_contact(pieces, areas, e1, e2, T, g, min_area) >= min_area:
                     cands.append((names, width, T))
     min_len = from_mm(unit, MIN_CONTACT_MM)
-    for root, d, r, length, fname in _shafts(faces, feature, prims):
+    for root, d, r, length, fname in _shafts(faces, features, prims):
         if not _round(mesh, faces, root, d, r, length):
             continue  # a prismatic shaft (a hexagon): its flats are not a cylinder to close on
         name = fname if fname is not None else _face_at(faces, mesh, root + d * length / 2 + axis_basis(d)[0] * r,
@@ -633,7 +635,7 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], feature: FeatureGe
     for names, width, T in cands:
         if grasp_problem(mesh, T, width, g, unit) is not None:
             continue
-        cover = {faces[k].name for k in _covered(mesh, faces, feature, T, width, g, unit)}
+        cover = {faces[k].name for k in _covered(mesh, faces, features, T, width, g, unit)}
         order = [f.name for f in faces]
         ofaces = tuple(names) + tuple(sorted(cover - set(names), key=order.index))
         out.append(DerivedGrasp(f"{prefix}{len(out) + 1}", names, ofaces, T, euler_zyz_of(T), float(round(width, 12))))
@@ -719,8 +721,8 @@ def check_entries(model: "object", gripper: Gripper, unit: str, which: tuple[str
     a grasp wider than the opening or whose fingers or palm enter the part."""
     geo = model.geometry  # type: ignore[attr-defined]
     mesh = geo.mesh()
-    fg = model.feature.geometry if model.feature is not None else None  # type: ignore[attr-defined]
-    faces = derive_faces(mesh, fg, geo.face_names, unit)
+    feats = [f for f in model.features if f.geometry is not None]  # type: ignore[attr-defined]
+    faces = derive_faces(mesh, tuple(f.geometry for f in feats), geo.face_names, unit, tuple(f.through for f in feats))
     own = {f.name: k for k, f in enumerate(faces)}
     out: list[tuple[str, str, str]] = []
     tol = max(from_mm(unit, 0.05), 1e-6)
