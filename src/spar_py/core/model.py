@@ -312,6 +312,8 @@ class Product:
     precedence: tuple[Precedence, ...] = ()
     #: The parts' model files (resolved paths).
     files: tuple[str, ...] = ()
+    #: Each part's neighbours at the product poses (world.products.near_parts).
+    near: dict[str, tuple[str, ...]] = field(default_factory=dict)
 
     def goal_of(self, part: str) -> PartGoal | None:
         """The goal of a non-base part (None for the base)."""

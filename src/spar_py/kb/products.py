@@ -24,7 +24,8 @@ from spar_py.core.units import LENGTH_UNITS
 from spar_py.kb.node import Node, did_you_mean, show
 from spar_py.kb.objects import load_object
 from spar_py.kb.reader import MAX_INPUT_BYTES
-from spar_py.kb.schema import read_kb
+from spar_py.kb.reader import parse_yaml
+from spar_py.kb.schema import KINDS, check_shape, describe, file_kind
 from spar_py.kb.values import units_of, xyz_rpy_frame
 
 __all__ = ["RETENTIONS", "add_goal_frames", "goal_term", "load_product", "product_goals", "product_part"]
@@ -109,6 +110,23 @@ def _renamed(model: ObjectModel, name: str) -> ObjectModel:
     return replace(model, name=name, poses=poses, grasps=grasps)
 
 
+def _read_product(path: Path, max_bytes: int) -> Node:
+    """The product file's root, checked against its schema (kb.schema.read_kb), with a seat's
+    ``on:`` key read as written: YAML 1.1 reads a bare ``on`` as the boolean true."""
+    data = parse_yaml(path, max_bytes)
+    if isinstance(data, dict) and isinstance(data.get("mates"), list):
+        data["mates"] = [{("on" if k is True else k): v for k, v in m.items()} if isinstance(m, dict) else m
+                         for m in data["mates"]]
+    root = Node(str(path), "", data)
+    got = file_kind(root) if isinstance(data, dict) else None
+    want = KINDS["product"]
+    if got is not want:
+        what = f"a mapping without `{want.marker}:`" if isinstance(data, dict) and got is None else describe(data)
+        raise WrongKindError(str(path), "", want.wanted, what)
+    check_shape(root, want.schema)
+    return root
+
+
 def load_product(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, memo: Memo | None = None,
                  **object_options: Any) -> Product:
     """Load ``kb/products/*.yaml`` in the cell's length ``unit``: parts (their models loaded
@@ -117,7 +135,7 @@ def load_product(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, 
     from spar_py.world import products as wp
 
     path = Path(path)
-    root = read_kb(path, "product", max_bytes)
+    root = _read_product(path, max_bytes)
     name = root.key("product").label()
     _, mm_per, rad_per = units_of(root)
     scale = mm_per / LENGTH_UNITS[unit]
@@ -148,6 +166,7 @@ def load_product(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, 
     try:
         product.goals = wp.compile_goals(product)
         product.precedence = wp.precedence(product, unit)
+        product.near = wp.near_parts(product, unit)
     except KBError:
         raise
     except SparValueError as e:

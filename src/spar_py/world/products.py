@@ -17,14 +17,16 @@ lengths converted at load).
   body is shrunk by SWEEP_MARGIN_MM first, so parts that only touch (a seat, a shoulder) do
   not block. A mated pair is tested without the peg part's feature solid (primitive shapes
   do not cut their holes: the shaft in its bore is the mate, not a collision); where the peg
-  is not a separate solid (a mesh's hull) the pair is not tested.
+  is not a separate solid (a mesh's hull) the pair is not tested. A mesh part in place is
+  tested as its own triangle mesh (its holes cut), not its convex hull; a mesh part moving
+  sweeps its hull (conservative).
 """
 from __future__ import annotations
 
 import math
 from collections import deque
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -35,8 +37,8 @@ from spar_py.core.units import from_mm
 if TYPE_CHECKING:
     from spar_py.core.model import MatingFeature
 
-__all__ = ["AXIS_TOL_MM", "SWEEP_MARGIN_MM", "Axis", "compile_goals", "feature_axis", "mate_misalignment",
-           "precedence", "seat_direction"]
+__all__ = ["AXIS_TOL_MM", "NEAR_MM", "SWEEP_MARGIN_MM", "Axis", "compile_goals", "feature_axis", "mate_misalignment",
+           "near_parts", "precedence", "seat_direction"]
 
 #: A mate's axes are coaxial when the peg's axis passes within this of the hole's (mm) and
 #: their directions differ by less than AXIS_TOL_DEG.
@@ -299,15 +301,41 @@ def _bodies(solids: list[Solid], T: np.ndarray, m: float) -> list:
     return [b.placed(T, b.frame) for b in solid_bodies("", [_shrunk(s, m) for s in solids])]
 
 
-def _collide(a, b) -> bool:
-    """Whether two placed convex bodies overlap (python-fcl)."""
+def _object(b) -> Any:
+    """A placed convex body as a python-fcl collision object."""
     import fcl
 
     from spar_py.world.collision import _fcl_transform
 
-    o1 = fcl.CollisionObject(a.fcl_geometry(), _fcl_transform(a.T))
-    o2 = fcl.CollisionObject(b.fcl_geometry(), _fcl_transform(b.T))
-    return bool(fcl.collide(o1, o2, fcl.CollisionRequest(), fcl.CollisionResult()))
+    return fcl.CollisionObject(b.fcl_geometry(), _fcl_transform(b.T))
+
+
+def _mesh_object(part) -> Any:
+    """A mesh part's own triangle mesh at its product pose, as a python-fcl collision object
+    (a mesh part's collision solid is its convex hull, which fills its holes and pockets)."""
+    import fcl
+
+    from spar_py.world.collision import _fcl_transform
+    from spar_py.world.shapes import part_mesh
+
+    mesh = part_mesh(part.model)
+    bvh = fcl.BVHModel()
+    bvh.beginModel(len(mesh.vertices), len(mesh.faces))
+    bvh.addSubModel(np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int32))
+    bvh.endModel()
+    return fcl.CollisionObject(bvh, _fcl_transform(part.pose))
+
+
+def _collide_objects(a: Any, b: Any) -> bool:
+    """Whether two python-fcl collision objects overlap."""
+    import fcl
+
+    return bool(fcl.collide(a, b, fcl.CollisionRequest(), fcl.CollisionResult()))
+
+
+def _collide(a, b) -> bool:
+    """Whether two placed convex bodies overlap (python-fcl)."""
+    return _collide_objects(_object(a), _object(b))
 
 
 def _swept(bodies: list, d: np.ndarray, travel: float) -> list:
@@ -317,13 +345,15 @@ def _swept(bodies: list, d: np.ndarray, travel: float) -> list:
     return [convex("", WORLD, np.concatenate([b.points, b.points - travel * d])) for b in bodies]
 
 
-def _hit_feature(product: Product, q: str, swept: list, unit: str) -> str | None:
-    """The first feature of Q (file order of its model) whose volume the sweep passes through."""
+def _hit_feature(product: Product, p: str, q: str, swept: list) -> str | None:
+    """The first feature of Q (file order of its model) whose volume P's sweep passes through,
+    leaving out Q's features in mates with P (their overlap is the mate)."""
     from spar_py.world.collision import WORLD, cylinder
 
     part = product.parts[q]
+    mated = {m.peg_feature if m.peg == q else m.hole_feature for m in product.mates if {m.peg, m.hole} == {p, q}}
     for f in part.model.features:
-        if f.geometry is None:
+        if f.geometry is None or f.name in mated:
             continue
         ax = feature_axis(part.pose, f)
         body = cylinder("", WORLD, ax.origin, ax.end, ax.radius)
@@ -349,20 +379,49 @@ def precedence(product: Product, unit: str) -> tuple[Precedence, ...]:
             if q == p:
                 continue
             mine = _solids_against(product, p, q, unit)
-            theirs = _solids_against(product, q, p, unit)
-            if mine is None or theirs is None or not mine or not theirs:
+            if not mine:
                 continue
             swept = _swept(_bodies(mine, product.parts[p].pose, m), d, travel)
-            others = _bodies(theirs, part.pose, m)
-            if not any(_collide(s, o) for s in swept for o in others):
+            if part.model.geometry is not None and part.model.geometry.mesh_file is not None:
+                others = [_mesh_object(part)]  # its own surface: its holes are cut
+            else:
+                theirs = _solids_against(product, q, p, unit)
+                if not theirs:
+                    continue
+                others = [_object(o) for o in _bodies(theirs, part.pose, m)]
+            if not any(_collide_objects(_object(s), o) for s in swept for o in others):
                 continue
-            what = _hit_feature(product, q, swept, unit) or q
+            what = _hit_feature(product, p, q, swept) or q
             if q == product.base:
                 raise SparValueError(f"product {product.name}: {p}'s insertion passes through the base part {what}: "
                                      "it can never be inserted")
             out.append(Precedence(p, q, f"{p}'s insertion would pass through {what}"))
     _no_cycle(product, out)
     return tuple(out)
+
+
+#: Parts nearer than this at their product poses are near by design (mm): a part's insertion
+#: may bring it within the collision margin of them (:func:`near_parts`).
+NEAR_MM = 10.0
+
+
+def near_parts(product: Product, unit: str) -> dict[str, tuple[str, ...]]:
+    """Each part's neighbours in the product: the parts whose solids come within NEAR_MM of its
+    own at the product poses (a mesh part's solid is its convex hull: nearer, never farther).
+    Phase 2 lets an insertion's held part touch them at its end-point (its product pose)."""
+    from spar_py.world.collision import _exact
+
+    gap = from_mm(unit, NEAR_MM)
+    bodies = {p: _bodies(list(part.model.shape), part.pose, 0.0) for p, part in product.parts.items()}
+    out: dict[str, list[str]] = {p: [] for p in product.parts}
+    names = list(product.parts)
+    eye = np.eye(4)
+    for i, p in enumerate(names):
+        for q in names[i + 1:]:
+            if any(_exact(a, eye, b, eye) < gap for a in bodies[p] for b in bodies[q]):
+                out[p].append(q)
+                out[q].append(p)
+    return {p: tuple(qs) for p, qs in out.items()}
 
 
 def _extent(product: Product) -> tuple[np.ndarray, np.ndarray]:
