@@ -7,9 +7,8 @@ Meshes (kb/objects/meshes/, binary STL, mm; a part with round holes off its z ax
 
 - ``plate2.stl``: a plate 120 x 40 x 10 mm with two blind holes (radius 5.5 mm, 8 mm deep)
   at x = -30 and 30 mm, opening on its top; frame at the centre of its bottom face.
-- ``bracket2.stl``: a flange 100 x 40 x 10 mm with two through holes (radius 5.5 mm) at
-  x = -35 and 35 mm, and a wall 20 x 40 x 40 mm standing on its middle (what a gripper
-  holds); frame at the centre of its bottom face.
+- ``bracket2.stl``: a plate 100 x 40 x 12 mm with two through holes (radius 5.5 mm) at
+  x = -35 and 35 mm; frame at the centre of its bottom face.
 - ``base2.stl``: a block 120 x 50 x 30 mm with two blind holes (radius 5.5 mm, 5 mm deep)
   at x = -35 and 35 mm, opening on its top; frame at the centre of its bottom face.
 - ``board20.stl``: a board 140 x 80 x 10 mm with 20 blind holes (radius 3.4 mm, 8 mm deep),
@@ -87,9 +86,7 @@ def main() -> int:
     MESHES.mkdir(parents=True, exist_ok=True)
     meshes = {
         "plate2": holed([-60, -20, 0], [60, 20, 10], [(-30, 0), (30, 0)], 5.5, 8),
-        "bracket2": trimesh.boolean.union([holed([-50, -20, 0], [50, 20, 10], [(-35, 0), (35, 0)], 5.5, None),
-                                           trimesh.creation.box(bounds=[[-10, -20, 10], [10, 20, 50]])],
-                                          engine="manifold"),
+        "bracket2": holed([-50, -20, 0], [50, 20, 12], [(-35, 0), (35, 0)], 5.5, None),
         "base2": holed([-60, -25, 0], [60, 25, 30], [(-35, 0), (35, 0)], 5.5, 5),
         "board20": holed([-70, -40, 0], [70, 40, 10], board_holes(), 3.4, 8),
     }

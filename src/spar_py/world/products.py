@@ -147,21 +147,12 @@ def _direction(product: Product, link: Mate | Seat, mover: str) -> np.ndarray:
     return _mate_direction(product, link, mover)
 
 
-def _entry(product: Product, link: Mate | Seat, mover: str, d: np.ndarray) -> float:
-    """How far back along ``d`` the other part's side of ``link`` lies (larger: met first)."""
-    if isinstance(link, Seat):
-        other = link.on if mover == link.part else link.part
-        return -float(product.parts[other].pose[:3, 3] @ d)
-    hole = product.parts[link.hole]
-    ax = feature_axis(hole.pose, hole.model.feature_named(link.hole_feature))
-    return -float(min(ax.origin @ d, ax.end @ d))
-
-
 def _parents(product: Product) -> dict[str, str]:
-    """The assembly tree: each non-base part's parent. Breadth first from the base over the
-    mate graph, the nearest part mated with it (ties in file order); where the part's mates
-    with several parts are made by one insertion along one direction (a pin through a
-    bracket into the base), the parent is the part that insertion meets first."""
+    """The assembly tree: each non-base part's parent, the part mated with it nearest the base
+    in the mate graph (breadth first from the base; ties in file order). A pin through a
+    bracket into the base goes into the base: the planner's assemble needs its parent where
+    it was put (part_location), which an assembled bracket no longer has (a subassembly's
+    location is not modelled), and the same insertion makes the pin's mate with the bracket."""
     links = _links(product)
     depth = {product.base: 0}
     queue = deque([product.base])
@@ -180,12 +171,7 @@ def _parents(product: Product) -> dict[str, str]:
         if p == product.base:
             continue
         near = min((depth[q] for q, _ in links[p]))
-        first = next(q for q, _ in links[p] if depth[q] == near)
-        d = _direction(product, next(lk for q, lk in links[p] if q == first), p)
-        along = [(q, lk) for q, lk in links[p] if float(_direction(product, lk, p) @ d) > 1 - 1e-9]
-        if len({q for q, _ in along}) > 1:
-            first = max(along, key=lambda qk: _entry(product, qk[1], p, d))[0]
-        parents[p] = first
+        parents[p] = next(q for q, _ in links[p] if depth[q] == near)
     for p in parents:  # a parent chain that loops never reaches the base
         seen, q = [p], parents[p]
         while q != product.base:
