@@ -415,8 +415,8 @@ def _extent(product: Product) -> tuple[np.ndarray, np.ndarray]:
     pts = [np.zeros(3)]
     for part in product.parts.values():
         for s in part.model.shape:
-            c = (s.points if s.points is not None else
-                 np.array([[x, y, z] for x in (s.lo[0], s.hi[0]) for y in (s.lo[1], s.hi[1]) for z in (s.lo[2], s.hi[2])]))
+            c = s.points if s.points is not None else np.array(
+                [[x, y, z] for x in (s.lo[0], s.hi[0]) for y in (s.lo[1], s.hi[1]) for z in (s.lo[2], s.hi[2])])
             pts.append(c @ part.pose[:3, :3].T + part.pose[:3, 3])
     allp = np.vstack(pts)
     return allp.min(0), allp.max(0)
