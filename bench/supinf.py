@@ -157,7 +157,8 @@ def peg_in_block(cell: Cell, scans: bool) -> tuple[WorldState, list]:
         leaves = cell.sensors["dense_range_scan"].leaves
         w = dense_range_scan(dense_range_scan(w, "block", leaves), "peg", leaves)
     w = pickup(w, "peg", peg.grasps["p1G1"].T, w.manipulator_error())
-    return w, assemble_constraints(w, "peg", "block", cell.transforms["trans_1"], peg.features[0], block.features[0])
+    return w, assemble_constraints(w, "peg", "block", cell.transforms["trans_1"], peg.features[0], block.features[0],
+                                   axis=cell.vectors["vec_1"])
 
 
 def plan_like(cell: Cell, rng: np.random.Generator, length: int) -> tuple[ca.SX, Registry]:
@@ -185,7 +186,8 @@ def plan_like(cell: Cell, rng: np.random.Generator, length: int) -> tuple[ca.SX,
             w, held = putdown(w, held, T), None
     peg, block = cell.objects["peg"], cell.objects["block"]
     if held == "peg":
-        (c,) = assemble_constraints(w, "peg", "block", cell.transforms["trans_1"], peg.features[0], block.features[0])
+        (c,) = assemble_constraints(w, "peg", "block", cell.transforms["trans_1"], peg.features[0], block.features[0],
+                                    axis=cell.vectors["vec_1"])
         return c.expr, w.registry
     if held is not None:
         w = putdown(w, held, w.obj(held).pose)

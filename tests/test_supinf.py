@@ -457,7 +457,8 @@ def paper_expressions() -> list[tuple[str, ca.SX, Registry]]:
             leaves = cell.sensors["dense_range_scan"].leaves
             ws = dense_range_scan(dense_range_scan(ws, "block", leaves), "peg", leaves)
         ws = pickup(ws, "peg", g.T, ws.manipulator_error())
-        (c,) = assemble_constraints(ws, "peg", "block", cell.transforms["trans_1"], peg.features[0], block.features[0])
+        (c,) = assemble_constraints(ws, "peg", "block", cell.transforms["trans_1"], peg.features[0], block.features[0],
+                                    axis=cell.vectors["vec_1"])
         out.append((f"assemble scans={scans}", c.expr, ws.registry))
     return out
 

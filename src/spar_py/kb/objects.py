@@ -89,9 +89,7 @@ def load_object(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, o
     geometry, solids = _geometry(root, Path(path), unit, scale)
     face_names = {k: n.vector(3) * scale for k, n in (root.key("face_names", False) or Node("", "", {})).items()}
     fnodes = _feature_nodes(root)
-    geo_nodes = [(g, n) for g, n in ((_feature_geometry(n, scale), n) for n in fnodes) if g is not None]
-    feature_geos = tuple(g for g, _ in geo_nodes)
-    through = tuple("through" in n.value and _flag(n.key("through")) for _, n in geo_nodes)
+    feature_geos = tuple(g for g in (_feature_geometry(n, scale) for n in fnodes) if g is not None)
     if geometry is not None:
         _check_size(root, Path(path), name, geometry, solids, unit, reach)
         geometry.face_names = face_names
@@ -107,7 +105,7 @@ def load_object(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, o
         grip = _derive_gripper(unit, opening, gripper)
         try:
             derived = derive(name, geometry, feature_geos, face_names, grip, step, need_hull=True,
-                             use_cache=use_cache, through=through)
+                             use_cache=use_cache)
         except KBError:
             raise
         except Exception as e:  # trimesh, manifold3d, scipy: a shape they cannot take is bad input
@@ -182,13 +180,16 @@ def load_object(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, o
 
 
 def _feature_nodes(root: Node) -> list[Node]:
-    """The nodes of the model's features: ``features:`` (a list) or ``feature:`` (a list of one)."""
+    """The nodes of the model's features: ``features:`` (a list) or ``feature:`` (one, or a list
+    as ``features:`` is)."""
     one, many = root.key("feature", required=False), root.key("features", required=False)
     if one is not None and many is not None:
         raise many.fail("feature: or features:, not both")
     if many is not None:
         return many.elements(1)
-    return [] if one is None else [one]
+    if one is None:
+        return []
+    return one.elements(1) if isinstance(one.value, list) else [one]
 
 
 def _features(fnodes: list[Node], known: set[Face], scale: float) -> tuple[MatingFeature, ...]:
@@ -199,8 +200,7 @@ def _features(fnodes: list[Node], known: set[Face], scale: float) -> tuple[Matin
         geo = _feature_geometry(fnode, scale)
         if len(fnodes) > 1 and "name" not in fnode.value:
             raise fnode.fail("a name: for each feature of a part with several")
-        tnode = fnode.key("through", required=False)
-        through = tnode is not None and _flag(tnode)
+        through = _through(fnode)
         if geo is not None:
             if geo.name not in known:
                 raise fnode.key("name").fail("the name of a face on the shape at the feature (its axis, radius and "
@@ -216,8 +216,6 @@ def _features(fnodes: list[Node], known: set[Face], scale: float) -> tuple[Matin
                 name=nnode.label() if nnode is not None else "",
                 through=through,
             )
-        if through and f.kind != "hole":
-            raise tnode.fail("through: only on a hole (a peg has one tip)", show(tnode.value))
         if any(o.name == f.name for o in out):
             raise (fnode.key("name", required=False) or fnode).fail("a feature name not used before in the part",
                                                                     show(f.name))
@@ -372,6 +370,16 @@ def _flag(node: Node) -> bool:
     return node.value
 
 
+def _through(fnode: Node) -> bool:
+    """A feature's ``through:`` (default false): true only on a hole."""
+    tnode = fnode.key("through", required=False)
+    if tnode is None or not _flag(tnode):
+        return False
+    if fnode.key("kind").choice(("peg", "hole")) != "hole":
+        raise tnode.fail("through: only on a hole (a peg has one tip)", show(tnode.value))
+    return True
+
+
 def _feature_geometry(fnode: Node, scale: float) -> Any:
     """The geometric form of a feature (world.shapes.FeatureGeometry), or None for the paper's
     form ``{kind, faces, radius, vector}`` (``name:`` then only names the feature); mixing the
@@ -392,12 +400,13 @@ def _feature_geometry(fnode: Node, scale: float) -> Any:
 
     kind = fnode.key("kind").choice(("peg", "hole"))
     name = fnode.key("name").label()
+    through = _through(fnode)
     axis = fnode.key("axis")
     d = axis.key("direction").vector(3)
     if np.linalg.norm(d) < 1e-9:
         raise axis.key("direction").fail("a non-zero direction", "[0, 0, 0]")
     return FeatureGeometry(kind, name, fnode.key("radius").positive() * scale, axis.key("origin").vector(3) * scale,
-                           d / np.linalg.norm(d), fnode.key("length").positive() * scale)
+                           d / np.linalg.norm(d), fnode.key("length").positive() * scale, through)
 
 
 def _solid(node: Node, scale: float) -> Solid:

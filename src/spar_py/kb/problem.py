@@ -165,12 +165,19 @@ def check_mate(node: Node, what: str, peg: tuple[str, MatingFeature], hole: tupl
         a0, u = hole_axis(fh, va)
     except ValueError:
         return  # a zero V_a: kb.sanity names the vector
-    tip = np.asarray(T_a, float)[:3, :3] @ np.asarray(fp.vector, float) + np.asarray(T_a, float)[:3, 3]
+    T = np.asarray(T_a, float)
+    tip = T[:3, :3] @ np.asarray(fp.vector, float) + T[:3, 3]
     r = tip - a0
     off = float(np.linalg.norm(r - (r @ u) * u))
     if off > COAXIAL_TOL * size:
         raise node.fail(f"T_a putting {pobj}'s tip on the axis of {hobj}.{fh.name} in {what}",
                         f"a tip {off:.6g} off that axis")
+    if fp.geometry is not None:  # the peg's axis along the hole's, into it (either way through a through hole)
+        d = T[:3, :3] @ np.asarray(fp.geometry.direction, float)
+        c = float(d @ u)
+        if abs(c) < 1 - COAXIAL_TOL or (c < 0 and not fh.through):
+            raise node.fail(f"T_a pointing {pobj}.{fp.name} into {hobj}.{fh.name} along its axis in {what}",
+                            f"{math.degrees(math.acos(max(-1.0, min(1.0, c)))):.6g} deg from the way in")
 
 
 def _names(table: Mapping[str, Any]) -> str:
@@ -417,7 +424,9 @@ def mate_goal(node: Node, what: str, objects: Mapping[str, ObjectModel], peg: tu
               hole: tuple[str, MatingFeature], T_a: np.ndarray, transforms: dict, vectors: dict) -> tuple:
     """The ``assembled/5`` goal of a mate with a given T_a (the peg's frame in the hole's, 4x4,
     cell unit: a product's poses give it), checked (:func:`check_mate`): T_a is added to the
-    cell's transforms as trans_K and the hole's axis direction (V_a) as vec_K."""
+    cell's transforms as trans_K and the insertion direction V_a (hole frame: the peg's axis
+    turned by T_a, so either mouth of a through hole; the hole's direction for a peg in the
+    paper's form) as vec_K."""
     (pobj, fp), (hobj, fh) = peg, hole
     try:
         _, va = hole_axis(fh, None)
@@ -425,6 +434,8 @@ def mate_goal(node: Node, what: str, objects: Mapping[str, ObjectModel], peg: tu
         raise node.fail(f"a hole declared by geometry in {what}", str(e)) from None
     T = np.asarray(T_a, float)
     check_mate(node, what, peg, hole, T, va, _cell_size(objects))
+    if fp.geometry is not None:
+        va = T[:3, :3] @ np.asarray(fp.geometry.direction, float)
     k = _free_index(transforms, vectors, 1)
     transforms[f"trans_{k}"] = T
     vectors[f"vec_{k}"] = va

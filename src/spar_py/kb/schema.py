@@ -99,7 +99,7 @@ OBJECT_SCHEMA = keys(
      "stable_poses": Each(keys(["label", "rfaces", "ofaces", "tm"]), 1),
      "grasps": Each(keys(["label", "gfaces", "ofaces", "eulerxyz", "width"]), 1),
      # the paper's form {kind, faces, radius, vector} or by geometry {kind, name, radius, axis, length}
-     "feature": FEATURE_SCHEMA, "features": Each(FEATURE_SCHEMA, 1),
+     "feature": OneOrMany(FEATURE_SCHEMA), "features": Each(FEATURE_SCHEMA, 1),
      "shape": Each(OneOf(MappingProxyType({"box": keys(["min", "max"], ["subtract"]),
                                            "cylinder": keys(["radius", "z"], ["subtract"])}))),
      "mesh": LEAF, "face_names": Named(LEAF), "grasp_step": LEAF},

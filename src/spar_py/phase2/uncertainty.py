@@ -444,15 +444,23 @@ def assemble_constraints(state: WorldState, peg: str, hole: str, T_a: np.ndarray
                          peg_feature: MatingFeature, hole_feature: MatingFeature,
                          action: str = "assemble", motion: ErrorTm | None = None,
                          memo: Memo | None = None, axis: np.ndarray | None = None) -> list[Constraint]:
-    """The assemble inequality of Sec. 3.2.2: the peg tip centre within R_h - R_p of the hole's.
+    """The assemble inequality of Sec. 3.2.2: the peg's tip on the hole's axis within R_h - R_p.
 
-    ``C_h = T_{H+d} F_h`` (Eq. 2), ``C_p = T_H T_a T_G T_dP T_G^-1 F_p`` (Eqs. 5, 6).
+    The peg's tip ``C_p = T_H T_a T_G T_dP T_G^-1 F_p`` (Eqs. 5, 6) is compared with the
+    point of the hole's axis where that tip sits when seated, ``C_t = T_{H+d} T_a F_p``
+    (Eq. 2; T_a puts the tip on the axis), not with the hole's bottom F_h (a shaft that seats
+    on its shoulder, or a bore with relief below the tip, would be misaligned by the gap),
+    and across the axis only: ``d = N (C_t - C_p)`` with N's two rows the unit directions
+    normal to the hole's axis at its nominal pose (numeric constants; world frame: the
+    hole's axis turned by R_H; the hole's error turns it about world z, so for a vertical axis
+    the plane is exact). The axis is ``hole_feature``'s declared direction, else ``axis`` (the
+    goal's V_a, hole frame: the paper's form gives no axis); SparValueError without either.
     The paper prints ``|C_h - C_p|^2 - (R_h - R_p) > 0``, which has the wrong sense (and
-    mixes a squared length with a length); success needs ``|C_h - C_p| < R_h - R_p``,
-    built here as ``|C_h - C_p|^2 < (R_h - R_p)^2`` (smooth, so SUP bounds it tightly).
-    If R_h <= R_p no position fits: the threshold is 0, which SUP of a square never
-    beats. ``motion`` (optional, not in the paper) is the assemble motion's own T_dM,
-    inserted after T_G to account for the arm's error when it goes to T_H T_a T_G.
+    mixes a squared length with a length); success needs ``|d| < R_h - R_p``, built as
+    ``|d|^2 < (R_h - R_p)^2`` (smooth, so SUP bounds it tightly). If R_h <= R_p no position
+    fits: the threshold is 0, which SUP of a square never beats (kb.problem refuses such a
+    mate at load). ``motion`` (optional, not in the paper) is the assemble motion's own
+    T_dM, inserted after T_G to account for the arm's error when it goes to T_H T_a T_G.
     ``memo`` (world.run.CellCache.memo): the expressions are built once per structure
     (:func:`_built`).
     """
@@ -463,18 +471,21 @@ def assemble_constraints(state: WorldState, peg: str, hole: str, T_a: np.ndarray
                              f"{peg_feature.kind} and {hole_feature.kind}")
     Ta = _pose(T_a, f"assemble({peg}, {hole}) T_a")
     T_G = p.grasp
-    F_p, F_h = np.asarray(peg_feature.vector, float), np.asarray(hole_feature.vector, float)
+    F_p = np.asarray(peg_feature.vector, float)
+    seated = Ta[:3, :3] @ F_p + Ta[:3, 3]  # where the tip sits when seated, hole frame
+    N = _across(_rotation_only(h.pose)[:3, :3] @ _hole_direction(peg, hole, hole_feature, axis))
 
     def build() -> list[ca.SX]:
-        # both centres relative to the hole's ideal position t_H, which cancels in C_h - C_p:
+        # both points relative to the hole's ideal position t_H, which cancels in C_t - C_p:
         # the expression depends on the pair only through the hole's orientation, T_a and T_G
         chain: list[Matrix] = [snap(_rotation_only(h.pose) @ Ta @ T_G)]
         if motion is not None:
             chain.append(motion.matrix())
         chain += [p.error.matrix(), inv(T_G)]
         C_p = apply(compose(*chain), F_p)
-        C_h = apply(h.possible_rel(), F_h)
-        d = C_h - C_p
+        C_t = apply(h.possible_rel(), seated)
+        d3 = C_t - C_p
+        d = ca.vertcat(*[sum((float(n[j]) * d3[j] for j in range(3) if n[j] != 0.0), ca.SX(0.0)) for n in N])
         sup = _sup_sumsqr(d, state.registry)
         return [ca.cse(ca.sumsqr(d))] + ([] if sup is None else [sup])
 
@@ -482,7 +493,7 @@ def assemble_constraints(state: WorldState, peg: str, hole: str, T_a: np.ndarray
     # _sup_sumsqr's closed form holds the variables' bounds: they are part of the structure
     bounds = tuple(state.registry.bounds(v.name()) for e in errors for v in e.vars)
     key = ("assemble", h.where, _rotation_only(h.pose).tobytes(), Ta.tobytes(), T_G.tobytes(),
-           F_p.tobytes(), F_h.tobytes(), motion is not None, bounds)
+           F_p.tobytes(), N.tobytes(), motion is not None, bounds)
     exprs, ckey = _built(state.registry, memo, key, errors, build)
     d2 = exprs[0]
     bounding = None if len(exprs) == 1 else (exprs[1], state.registry.box(exprs[1]))
@@ -490,8 +501,31 @@ def assemble_constraints(state: WorldState, peg: str, hole: str, T_a: np.ndarray
     threshold = margin * margin if margin > 0 else 0.0
     note = "" if margin > 0 else f" (impossible: hole radius {hole_feature.radius} <= peg radius {peg_feature.radius})"
     return [Constraint(action, "centres", d2, "<", threshold,
-                       f"|C_h - C_p|^2 < (R_h - R_p)^2: {peg}'s tip centre within {margin:g} "
-                       f"of {hole}'s hole centre{note}", bounding, key=ckey, power=2)]
+                       f"|d|^2 < (R_h - R_p)^2: {peg}'s tip ({peg_feature.name}) within {margin:g} of the axis "
+                       f"of {hole}'s {hole_feature.name}, across it{note}", bounding, key=ckey, power=2)]
+
+
+def _hole_direction(peg: str, hole: str, feature: MatingFeature, axis: np.ndarray | None) -> np.ndarray:
+    """The unit direction of ``feature``'s axis in the hole part's frame: its declared one, else
+    ``axis`` (the goal's V_a); SparValueError if neither is known or it is zero."""
+    v = feature.geometry.direction if feature.geometry is not None else axis
+    n = float(np.linalg.norm(v)) if v is not None else 0.0
+    if not n > 0:
+        raise SparValueError(f"assemble({peg}, {hole}): the axis of {hole}'s {feature.name} is unknown: declare "
+                             "the hole by geometry or give the goal's V_a")
+    return np.asarray(v, float) / n
+
+
+def _across(w: np.ndarray) -> np.ndarray:
+    """(2, 3): two orthonormal rows normal to the unit ``w`` (world): the world axes least
+    aligned with w made normal to it (exactly the world's x and y for a vertical w)."""
+    w = np.asarray(w, float) / np.linalg.norm(w)
+    order = np.argsort(np.abs(w), kind="stable")
+    e1 = np.eye(3)[order[0]] - w[order[0]] * w
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(w, e1)
+    rows = snap(np.array([e1, e2]))
+    return rows
 
 
 #: Entries of a cell cache's memo table ``uncertainty.built`` (:func:`_built`) and
@@ -539,7 +573,7 @@ def _derived(step: tuple, *parents: ErrorTm) -> dict[str, tuple]:
 
 
 def _axis_offsets(d: Matrix, registry: Registry) -> tuple[ca.SX, dict[int, tuple[float, float]]] | None:
-    """``d`` (an SX 3-column) split as ``d0 + w``: the variables that move it along one axis.
+    """``d`` (an SX column) split as ``d0 + w``: the variables that move it along one axis.
 
     A variable ``s`` whose Jacobian column ``∂d/∂s`` is a constant with one nonzero
     entry ``c`` (row r) enters ``d`` only as ``c s e_r``: the offsets of the assemble
@@ -580,7 +614,7 @@ def _axis_offsets(d: Matrix, registry: Registry) -> tuple[ca.SX, dict[int, tuple
 
 
 def _sup_sumsqr(d: Matrix, registry: Registry) -> ca.SX | None:
-    """An expression whose SUP over the registry box is SUP ``|d|^2`` (d a 3-column), in
+    """An expression whose SUP over the registry box is SUP ``|d|^2`` (d a column), in
     fewer variables, or None. With ``d = d0 + w`` (:func:`_axis_offsets`), the axis sums
     ``w_r`` in ``[m_r - rho_r, m_r + rho_r]`` free and independent, the supremum over
     them is in closed form: ``sup_w (d0_r + w_r)^2 = (|d0_r + m_r| + rho_r)^2``, so
@@ -591,7 +625,7 @@ def _sup_sumsqr(d: Matrix, registry: Registry) -> ca.SX | None:
         return None
     d0, ranges = split
     terms = []
-    for r in range(3):
+    for r in range(as_sx(d).numel()):
         if r in ranges:
             lo, hi = ranges[r]
             m = 0.5 * (lo + hi)
@@ -599,7 +633,7 @@ def _sup_sumsqr(d: Matrix, registry: Registry) -> ca.SX | None:
             terms.append(ca.power(ca.fabs(d0[r] + m) + rho, 2))
         else:
             terms.append(ca.power(d0[r], 2))
-    return ca.cse(terms[0] + terms[1] + terms[2])
+    return ca.cse(sum(terms[1:], terms[0]))
 
 
 def _positive(v: float, what: str) -> float:

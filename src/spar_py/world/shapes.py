@@ -91,7 +91,7 @@ class FeatureGeometry:
     """A mating feature declared by geometry (object frame, cell unit): ``kind`` peg or hole,
     the face ``name`` its surfaces get, ``radius``, ``origin`` (a peg's root, a hole's mouth
     centre), unit ``direction`` (to the peg's tip, into the hole) and ``length`` (the shaft's
-    length, the hole's depth)."""
+    length, the hole's depth); ``through``: a hole open at both ends (no bottom)."""
 
     kind: str
     name: str
@@ -99,6 +99,7 @@ class FeatureGeometry:
     origin: np.ndarray
     direction: np.ndarray
     length: float
+    through: bool = False
 
     @property
     def end(self) -> np.ndarray:
@@ -108,7 +109,7 @@ class FeatureGeometry:
     def spec(self) -> list:
         """Plain data for the content hash."""
         return [self.kind, self.name, round(self.radius, 12), [round(float(v), 12) for v in self.origin],
-                [round(float(v), 12) for v in self.direction], round(self.length, 12)]
+                [round(float(v), 12) for v in self.direction], round(self.length, 12), self.through]
 
 
 @dataclass
@@ -246,20 +247,20 @@ def _feature_triangles(mesh: "trimesh.Trimesh", f: FeatureGeometry, tol: float, 
 
 
 def derive_faces(mesh: "trimesh.Trimesh", features: "tuple[FeatureGeometry, ...]", face_names: dict[str, np.ndarray],
-                 unit: str, through: "tuple[bool, ...]" = ()) -> list[Face]:
+                 unit: str) -> list[Face]:
     """The faces of ``mesh`` (module docstring), named: each of ``features`` gives one face
-    (its triangles, named by the feature; ``through[i]`` true: feature i is a hole open at both
-    ends, no bottom cap). ``face_names`` maps a name to a point on the face (object frame, cell
-    unit); ValueError naming the entry if the point is on no face, on a feature's face under
-    another name, or two names share a face; or if two features claim one triangle."""
+    (its triangles, named by the feature; a ``through`` hole has no bottom cap). ``face_names``
+    maps a name to a point on the face (object frame, cell unit); ValueError naming the entry
+    if the point is on no face, on a feature's face under another name, or two names share a
+    face; or if two features claim one triangle."""
     tol = from_mm(unit, ON_SURFACE_MM)
     n = len(mesh.faces)
     N = mesh.face_normals
     label = np.full(n, -1)
     groups: list[np.ndarray] = []
     owners: list[FeatureGeometry] = []
-    for i, feature in enumerate(features):
-        ft = _feature_triangles(mesh, feature, tol, bool(through[i]) if i < len(through) else False)
+    for feature in features:
+        ft = _feature_triangles(mesh, feature, tol, feature.through)
         if (ft & (label >= 0)).any():
             other = owners[int(label[np.flatnonzero(ft & (label >= 0))[0]])].name
             raise ValueError(f"features: expected features on distinct surfaces, not {feature.name} on "

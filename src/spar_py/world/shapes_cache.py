@@ -44,15 +44,13 @@ def cache_dir() -> Path:
 
 
 def derive(name: str, geometry: Geometry, features: tuple[FeatureGeometry, ...], face_names: dict[str, np.ndarray],
-           gripper: Any, step: float, need_hull: bool, use_cache: bool = True,
-           through: tuple[bool, ...] = ()) -> dict[str, Any]:
+           gripper: Any, step: float, need_hull: bool, use_cache: bool = True) -> dict[str, Any]:
     """The derivation of a part as plain data: ``faces`` (names), ``poses`` (label, rfaces,
     ofaces, R as 9 numbers row-major, height, probability), ``grasps`` (label, gfaces,
     ofaces, euler: X, Y, Z, phi, theta, psi in radians, width) and, if ``need_hull``, ``hull``
-    (the convex hull's vertices). ``features``: the part's features declared by geometry,
-    ``through`` whether each is a hole open at both ends. ValueError (one line, naming the
-    key) for bad geometry."""
-    key_data = [DERIVE_VERSION, name, geometry.digest(), [f.spec() for f in features], [bool(t) for t in through],
+    (the convex hull's vertices). ``features``: the part's features declared by geometry.
+    ValueError (one line, naming the key) for bad geometry."""
+    key_data = [DERIVE_VERSION, name, geometry.digest(), [f.spec() for f in features],
                 sorted((k, [round(float(v), 12) for v in p]) for k, p in face_names.items()),
                 gripper.spec(), round(step, 12), need_hull]
     key = hashlib.sha256(json.dumps(key_data).encode()).hexdigest()
@@ -65,7 +63,7 @@ def derive(name: str, geometry: Geometry, features: tuple[FeatureGeometry, ...],
                 return data
         except (OSError, ValueError):
             pass
-    data = _compute(name, geometry, features, face_names, gripper, step, need_hull, through)
+    data = _compute(name, geometry, features, face_names, gripper, step, need_hull)
     data["key"] = key
     if use_cache:
         _store(path, data)
@@ -73,11 +71,11 @@ def derive(name: str, geometry: Geometry, features: tuple[FeatureGeometry, ...],
 
 
 def _compute(name: str, geometry: Geometry, features: tuple[FeatureGeometry, ...], face_names: dict[str, np.ndarray],
-             gripper: Any, step: float, need_hull: bool, through: tuple[bool, ...] = ()) -> dict[str, Any]:
+             gripper: Any, step: float, need_hull: bool) -> dict[str, Any]:
     from spar_py.world.shapes_derive import derive_grasps, derive_poses  # ~10 ms at import: a cache miss only
 
     mesh = geometry.mesh()
-    faces = derive_faces(mesh, features, face_names, geometry.unit, through)
+    faces = derive_faces(mesh, features, face_names, geometry.unit)
     poses = derive_poses(mesh, faces, features, geometry.unit, f"{name}_p")
     grasps = derive_grasps(mesh, faces, features, geometry.primitives, gripper, geometry.unit, f"{name}_g", step)
     out: dict[str, Any] = {

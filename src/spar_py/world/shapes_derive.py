@@ -721,8 +721,8 @@ def check_entries(model: "object", gripper: Gripper, unit: str, which: tuple[str
     a grasp wider than the opening or whose fingers or palm enter the part."""
     geo = model.geometry  # type: ignore[attr-defined]
     mesh = geo.mesh()
-    feats = [f for f in model.features if f.geometry is not None]  # type: ignore[attr-defined]
-    faces = derive_faces(mesh, tuple(f.geometry for f in feats), geo.face_names, unit, tuple(f.through for f in feats))
+    feats = tuple(f.geometry for f in model.features if f.geometry is not None)  # type: ignore[attr-defined]
+    faces = derive_faces(mesh, feats, geo.face_names, unit)
     own = {f.name: k for k, f in enumerate(faces)}
     out: list[tuple[str, str, str]] = []
     tol = max(from_mm(unit, 0.05), 1e-6)
