@@ -5,7 +5,7 @@ change here shows in their diff.
 Meshes (kb/objects/meshes/, binary STL, mm; a part with round holes off its z axis, which
 ``shape:`` primitives cannot cut):
 
-- ``plate2.stl``: a plate 120 x 40 x 10 mm with two blind holes (radius 5.5 mm, 8 mm deep)
+- ``plate2.stl``: a plate 120 x 40 x 14 mm with two blind holes (radius 5.5 mm, 8 mm deep)
   at x = -30 and 30 mm, opening on its top; frame at the centre of its bottom face.
 - ``bracket2.stl``: a plate 100 x 40 x 12 mm with two through holes (radius 5.5 mm) at
   x = -35 and 35 mm; frame at the centre of its bottom face.
@@ -85,7 +85,7 @@ def board_files() -> dict[Path, str]:
 def main() -> int:
     MESHES.mkdir(parents=True, exist_ok=True)
     meshes = {
-        "plate2": holed([-60, -20, 0], [60, 20, 10], [(-30, 0), (30, 0)], 5.5, 8),
+        "plate2": holed([-60, -20, 0], [60, 20, 14], [(-30, 0), (30, 0)], 5.5, 8),
         "bracket2": holed([-50, -20, 0], [50, 20, 12], [(-35, 0), (35, 0)], 5.5, None),
         "base2": holed([-60, -25, 0], [60, 25, 30], [(-35, 0), (35, 0)], 5.5, 5),
         "board20": holed([-70, -45, 0], [70, 45, 14], board_holes(), 3.4, 8),

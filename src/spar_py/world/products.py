@@ -35,7 +35,7 @@ from spar_py.core.model import Mate, PartGoal, Precedence, Product, Seat, Solid
 from spar_py.core.units import from_mm
 
 if TYPE_CHECKING:
-    from spar_py.core.model import MatingFeature
+    from spar_py.core.model import MatingFeature, ObjectModel
 
 __all__ = ["AXIS_TOL_MM", "NEAR_MM", "SWEEP_MARGIN_MM", "Axis", "compile_goals", "feature_axis", "mate_misalignment",
            "near_parts", "precedence", "seat_direction"]
@@ -104,7 +104,7 @@ def seat_direction(product: Product, seat: Seat) -> np.ndarray:
     return -(part.pose[:3, :3] @ n)
 
 
-def _face_normal(model, face: str) -> np.ndarray:
+def _face_normal(model: "ObjectModel", face: str) -> np.ndarray:
     """The outward normal of a planar face of a part's shape (object frame, unit)."""
     from spar_py.world.shapes import derive_faces, part_mesh
 
@@ -128,7 +128,7 @@ def _mate_direction(product: Product, m: Mate, mover: str) -> np.ndarray:
 
 
 def _links(product: Product) -> dict[str, list[tuple[str, Mate | Seat]]]:
-    """Each part's mates and seats with the other part, in file order (mates first)."""
+    """Each part's mates and seats with the other part: its mates in file order, then its seats."""
     out: dict[str, list[tuple[str, Mate | Seat]]] = {p: [] for p in product.parts}
     for m in product.mates:
         out[m.peg].append((m.hole, m))
@@ -170,15 +170,8 @@ def _parents(product: Product) -> dict[str, str]:
     for p in product.parts:
         if p == product.base:
             continue
-        near = min((depth[q] for q, _ in links[p]))
+        near = min((depth[q] for q, _ in links[p]))  # depth[p] - 1: the tree has no loop
         parents[p] = next(q for q, _ in links[p] if depth[q] == near)
-    for p in parents:  # a parent chain that loops never reaches the base
-        seen, q = [p], parents[p]
-        while q != product.base:
-            if q in seen:
-                raise SparValueError(f"product {product.name}: the assembly tree loops ({' -> '.join(seen + [q])})")
-            seen.append(q)
-            q = parents[q]
     return parents
 
 
@@ -255,7 +248,7 @@ def _shrunk(s: Solid, m: float) -> Solid:
     return Solid(s.kind, lo, hi, max(s.radius - m, 0.0), s.points)
 
 
-def _feature_solid(model, f: "MatingFeature", unit: str) -> int | None:
+def _feature_solid(model: "ObjectModel", f: "MatingFeature", unit: str) -> int | None:
     """The index of the cylinder solid that is peg feature ``f`` (its axis, radius), or None."""
     g = f.geometry
     tol = from_mm(unit, AXIS_TOL_MM) * 10
