@@ -264,7 +264,7 @@ def test_misaligned_mate_refused(tmp_path: Path) -> None:
 units: {length: mm, angle: deg}
 parts:
   plate: {model: OBJ/plate2.yaml}
-  pin_a: {model: OBJ/pin8.yaml, pose: {xyz: [-29, 0, 34], rpy: [180, 0, 0]}}
+  pin_a: {model: OBJ/pin8.yaml, pose: {xyz: [-29, 0, 26], rpy: [180, 0, 0]}}
 mates:
   - {peg: pin_a.shaft, hole: plate.bore_a}
 """)
@@ -320,7 +320,7 @@ def test_unknown_feature_refused(tmp_path: Path) -> None:
 units: {length: mm, angle: deg}
 parts:
   plate: {model: OBJ/plate2.yaml}
-  pin_a: {model: OBJ/pin8.yaml, pose: {xyz: [-30, 0, 34], rpy: [180, 0, 0]}}
+  pin_a: {model: OBJ/pin8.yaml, pose: {xyz: [-30, 0, 26], rpy: [180, 0, 0]}}
 mates:
   - {peg: pin_a.shaft, hole: plate.bore_c}
 """)
