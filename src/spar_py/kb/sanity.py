@@ -232,8 +232,8 @@ def _reach(cell: Cell) -> Iterator[KBError]:
         sizes = [(f"shape[{i}]", float(np.abs(np.concatenate([s.lo, s.hi])).max())) for i, s in enumerate(m.shape)]
         sizes += [(f"grasps[{i}].eulerxyz", float(np.abs(g.euler[:3]).max())) for i, g in enumerate(m.grasps.values())]
         sizes += [(f"stable_poses[{i}].tm", abs(p.height)) for i, p in enumerate(m.poses.values())]
-        key = "features" if len(m.features) > 1 else "feature"
-        sizes += [(f"{key}[{i}]" if len(m.features) > 1 else key, max(float(np.abs(f.vector).max()), f.radius))
+        many = len(m.features) > 1
+        sizes += [(f"features[{i}]" if many else "feature", max(float(np.abs(f.vector).max()), f.radius))
                   for i, f in enumerate(m.features)]
         for key, size in sizes:
             if size > h:
