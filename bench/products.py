@@ -78,12 +78,14 @@ def one(n: int, timeout: float = TIMEOUT) -> dict:
     """Plan the generated N-insertion board in this process (the board's child); figures as a dict.
 
     A warm-up plan of the paper's cell comes first (the engine's start and first calls are not
-    the board's). Keys: ``n``, ``rows``, ``cols``, ``outcome``, ``wall_s``, ``phase1_s``,
+    the board's). Keys: ``n``, ``rows``, ``cols``, ``outcome``, ``wall_s`` (loading and planning, as
+    ``spar plan`` does), ``load_s`` (``load_problem``: the files read, the product compiled), ``phase1_s``,
     ``phase2_s``, ``actions``, ``steps``, ``instances_examined``, ``error_count``, ``precedence``
     (orderings the geometry forced), ``rss_before_mb``, ``rss_peak_mb`` (sampled every 5 ms while
     planning, bench.planning._RssWatch), ``gen_s`` (writing the files)."""
     from spar_py.app.gen import board_layout, generate_board
     from spar_py.core.errors import PlanningTimeout
+    from spar_py.kb import load_problem
     from spar_py.planning.planner import Planner
 
     Planner().plan(planning.CELL)
@@ -98,8 +100,10 @@ def one(n: int, timeout: float = TIMEOUT) -> dict:
         watch = planning._RssWatch()
         t = time.perf_counter()
         try:
-            with watch:
-                plan = p.plan(path)
+            with watch:  # as `spar plan`: the cell loaded (the product compiled), then planned
+                cell = load_problem(path)
+                out["load_s"] = time.perf_counter() - t
+                plan = p.plan(cell)
         except PlanningTimeout:
             out.update(outcome="timeout", wall_s=time.perf_counter() - t)
         else:
@@ -177,7 +181,7 @@ def _load() -> str:
         return "unknown"
 
 
-KEYS = ("wall_s", "phase1_s", "phase2_s", "rss_peak_mb", "process_s")
+KEYS = ("wall_s", "load_s", "phase1_s", "phase2_s", "rss_peak_mb", "process_s")
 
 
 def run(ns=NS, repeats: int = REPEATS, timeout: float = TIMEOUT, progress=None) -> dict:
@@ -229,7 +233,8 @@ def verdicts(r: dict | None) -> dict:
         b = row["board"]
         ok = (b.get("outcomes") == ["plan"] and b["wall_s"] is not None and b["wall_s"] <= s_max
               and (mb_max is None or (b["rss_peak_mb"] or 1e9) <= mb_max))
-        out[row["n"]] = (ok, f"{b.get('outcome')}, {_f(b['wall_s'])} s (phase 1 {_f(b['phase1_s'])}, phase 2 "
+        out[row["n"]] = (ok, f"{b.get('outcome')}, {_f(b['wall_s'])} s (loading {_f(b['load_s'])}, phase 1 "
+                                    f"{_f(b['phase1_s'])}, phase 2 "
                              f"{_f(b['phase2_s'])}), peak RSS {_f(b['rss_peak_mb'], '.0f')} MB; median of "
                              f"{row['runs']}; {row['n']} pairs same run {_f(row['pairs']['wall_s'])} s")
     return out
@@ -253,12 +258,16 @@ def render(r: dict) -> list[str]:
           f"{r['timeout_s']:g})`: both phases, phase 2 collision-aware), one child process per run after a "
           "warm-up plan of the paper's cell; beside it in the same run, interleaved, its peer: the same N as N "
           "separate peg-into-block pairs (bench/planning.py's generated problem and child). `wall` is the "
-          "`plan()` call (loading the files included), phase 1/2 the plan's timing (Prolog CPU seconds, "
+          "cell's loading and its `plan()` call, as `spar plan` does them, `load` the loading alone "
+          "(`load_problem`: the YAML and the mesh read, the product compiled: its goals, its precedence by "
+          "swept insertions, world/products.py; the pairs have no product), phase 1/2 the plan's timing "
+          "(Prolog CPU seconds, "
           "Python called back included), `process` the child from start to exit (Python and the engine "
           "starting, the warm-up plan and the generation included), RSS peak sampled every 5 ms while "
           f"planning. Medians of {r['repeats']} runs (fewer where `runs` says so). Run on {r.get('date', '?')}, "
           f"load average {r.get('load', '?')} before, {r.get('load_after', '?')} after."), ""]
-    head = ["N", "board rows x cols", "runs", "actions (board / pairs)", "board phase 1 s", "board phase 2 s",
+    head = ["N", "board rows x cols", "runs", "actions (board / pairs)", "board load s", "board phase 1 s",
+            "board phase 2 s",
             "board wall s", "board process s", "board RSS peak MB", "pairs phase 1 s", "pairs phase 2 s",
             "pairs wall s", "pairs RSS peak MB", "wall board / pairs", "outcomes (board / pairs)"]
     L += ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
@@ -266,7 +275,8 @@ def render(r: dict) -> list[str]:
         b, p = row["board"], row["pairs"]
         L.append("| " + " | ".join([
             str(row["n"]), f"{b.get('rows')} x {b.get('cols')}", str(row["runs"]),
-            f"{b.get('actions')} / {p.get('actions')}", _f(b["phase1_s"], ".3f"), _f(b["phase2_s"], ".3f"),
+            f"{b.get('actions')} / {p.get('actions')}", _f(b["load_s"], ".3f"), _f(b["phase1_s"], ".3f"),
+            _f(b["phase2_s"], ".3f"),
             _f(b["wall_s"], ".3f"), _f(b["process_s"]), _f(b["rss_peak_mb"], ".0f"), _f(p["phase1_s"], ".3f"),
             _f(p["phase2_s"], ".3f"), _f(p["wall_s"], ".3f"), _f(p["rss_peak_mb"], ".0f"),
             _ratio(b["wall_s"], p["wall_s"]),
