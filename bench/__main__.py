@@ -4,7 +4,9 @@ The benchmarks are bench.ik (closed-form IK against Robotics Toolbox), bench.sup
 (SUP/INF tightness and time), bench.planning (the paper's cell warm and cold, the
 generated N-peg problems), bench.fd (phase 1 against Fast Downward on the same
 problems), bench.coldstart and bench.derive (object models derived from shapes and
-meshes, issue 14); each also runs on its own (``python -m bench.ik`` ...).
+meshes, issue 14), bench.products (the task board, issue 33); each also runs on its own
+(``python -m bench.ik`` ...), and ``python -m bench --only products`` runs one and replaces its
+section and target rows in RESULTS.md.
 Figures are medians of repeated runs; every ratio compares two figures measured in the
 same run, so machine noise affects both sides alike. ``--quick`` cuts the repeats and
 sizes down to a smoke run of a minute or two (its figures are not for quoting).
@@ -20,7 +22,7 @@ import sys
 import time
 from pathlib import Path
 
-from . import coldstart, collision, derive, fd, ik, memory, motion, planning, supinf
+from . import coldstart, collision, derive, fd, ik, memory, motion, planning, products, supinf
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "RESULTS.md"
@@ -50,14 +52,15 @@ FULL = {"ik": {"n": 10_000, "single": 1000, "rtb": 200, "repeats": 5}, "derive":
         "planning": {"quick": False, "max_n": 10},
         "memory": {"plans": 1000, "warmup": 50},
         "coldstart": {"repeats": 15, "importtime_runs": 5},
-        "fd": {"ns": fd.NS}, "motion": {"seeds": 10}, "collision": {"repeats": 5}}
+        "fd": {"ns": fd.NS}, "motion": {"seeds": 10}, "collision": {"repeats": 5},
+        "products": {"ns": products.NS, "repeats": products.REPEATS}}
 QUICK = {"ik": {"n": 1000, "single": 100, "rtb": 20, "repeats": 3}, "derive": {"repeats": 2},
          "supinf": {"per_length": 1, "lengths": (1, 4, 8), "repeats": 3, "deep_count": 2},
          "planning": {"quick": True, "max_n": 2, "timeout": 60.0},
          "memory": {"plans": 100, "warmup": 10, "processes": 1},
          "coldstart": {"repeats": 3, "importtime_runs": 1},
          "fd": {"ns": (1, 2)}, "motion": {"seeds": 2, "budget": 0.5},
-         "collision": {"repeats": 1, "quick": True}}
+         "collision": {"repeats": 1, "quick": True}, "products": {"ns": (5,), "repeats": 1}}
 
 
 # ---------------------------------------------------------------------- where and with what
@@ -134,7 +137,8 @@ def run_all(quick: bool = False, log=None) -> dict:
                      ("derive", lambda: derive.run(**sizes["derive"])),
                      ("fd", lambda: fd.run(**sizes["fd"], progress=say)),
                      ("motion", lambda: motion.run(**sizes.get("motion", {}))),
-                     ("collision", lambda: collision.run(**sizes.get("collision", {})))):
+                     ("collision", lambda: collision.run(**sizes.get("collision", {}))),
+                     ("products", lambda: products.run(**sizes["products"], progress=say))):
         say(f"== {name}")
         t = time.perf_counter()
         out[name] = fn()
@@ -250,7 +254,7 @@ def render(r: dict) -> str:
          if "n50" in v else []
     ) + ([[f"UR IK, all 8 branches, batch <= {IK_US_PER_POSE:g} us/pose (issue 17)", v["ur_ik_us"][1],
            _met(v["ur_ik_us"][0])]] if "ur_ik_us" in v else []
-    ) + coldstart.target_rows(r.get("coldstart")) + [
+    ) + coldstart.target_rows(r.get("coldstart")) + products.target_rows(r.get("products")) + [
         [f"RSS growth, {name}, <= {RSS_KB_PER_PLAN:g} kB per plan (issue 12)", v[key][1], _met(v[key][0])]
          for key, name in (("rss_paper", "paper's cell"), ("rss_n3", "generated N = 3"))
          if key in v])
@@ -417,6 +421,9 @@ def render(r: dict) -> str:
                "its driver process)."), ""]
         L += fd.table(r["fd"])
 
+    if r.get("products"):
+        L += products.render(r["products"])
+
     if r.get("memory"):
         L += ["## Memory per plan (bench/memory.py)", "",
               ("Each cell in 3 fresh processes (the median is the figure; each process's figure beside it): "
@@ -525,6 +532,26 @@ def reading(r: dict) -> str:
     return " ".join(parts)
 
 
+#: The benchmarks ``--only`` runs alone: name -> (run at the full or quick sizes, splice into RESULTS.md).
+ONLY = {"products": (lambda quick, say: products.run(**(QUICK if quick else FULL)["products"], progress=say),
+                     products.splice)}
+
+
+def only(name: str, quick: bool = False, out: Path | None = None) -> None:
+    """``python -m bench --only NAME``: that benchmark alone; its section and target rows replace
+    theirs in RESULTS.md (or ``out``; with ``quick`` and no ``out``, printed), the rest kept."""
+    run_one, splice = ONLY[name]
+    r = run_one(quick, lambda line: print(line, file=sys.stderr, flush=True))
+    target = out if out is not None else (None if quick else RESULTS)
+    old = target.read_text(encoding="utf-8") if target is not None and target.exists() else ""
+    text = splice(old, r)
+    if target is None:
+        print(text)
+        return
+    target.write_text(text, encoding="utf-8")
+    print(f"wrote {target}", file=sys.stderr)
+
+
 def _commit(root: Path) -> str:
     """The short commit of checkout ``root`` (or "?")."""
     try:
@@ -541,7 +568,12 @@ def main(argv: list[str] | None = None) -> None:
                     help="where to write the results (default bench/RESULTS.md; with --quick, stdout only)")
     ap.add_argument("--before", type=Path, default=None, metavar="DIR",
                     help="also time warm and cold planning against the checkout DIR (bench/before_after.py)")
+    ap.add_argument("--only", choices=tuple(ONLY), default=None,
+                    help="run this benchmark alone and replace its section and target rows in the results")
     a = ap.parse_args(argv)
+    if a.only is not None:
+        only(a.only, a.quick, a.out)
+        return
     r = run_all(a.quick, log=lambda line: print(line, file=sys.stderr, flush=True))
     if a.before is not None:
         from . import before_after

@@ -337,13 +337,16 @@ def cmd_regress(args: argparse.Namespace) -> int:
 
 
 def cmd_gen(args: argparse.Namespace) -> int:
-    """Generate a problem (``spar gen assembly --parts N``)."""
-    from spar_py.app.gen import generate_assembly  # the collision layer: this command only
+    """Generate a problem (``spar gen assembly --parts N``, ``spar gen board N``)."""
+    from spar_py.app.gen import generate_assembly, generate_board  # the collision layer: this command only
 
     out = Path(args.output)
     _check_output_dir("-o", out, "the generated problem")
     stage = args.guard.staging(out)  # beside it: the whole tree, or nothing, even on Ctrl-C
-    path = generate_assembly(args.parts, stage, blocks=args.blocks)
+    if args.gen_command == "board":
+        path = generate_board(args.n, stage, rows=args.rows)
+    else:
+        path = generate_assembly(args.parts, stage, blocks=args.blocks)
     args.guard.move_tree(stage, out)
     print(out / path.relative_to(stage))
     return EXIT_OK
@@ -479,6 +482,12 @@ def build_parser() -> argparse.ArgumentParser:
                           "default: the first that holds N")
     asm.add_argument("-o", "--output", default="out/gen", metavar="DIR")
     asm.set_defaults(func="gen")
+    board = gensub.add_parser("board", help="a task board: N pins into N holes of one board")
+    board.add_argument("n", type=_positive_int, metavar="N", help="insertions (holes and pins)")
+    board.add_argument("--rows", type=_positive_int, default=None, metavar="R",
+                       help="the board's rows of holes (default about 0.9 sqrt(N)); columns ceil(N / R)")
+    board.add_argument("-o", "--output", default="out/gen", metavar="DIR")
+    board.set_defaults(func="gen")
 
     cache = sub.add_parser("cache", help="compile the planner's Prolog into its cache now (set-up runs it)")
     cache.set_defaults(func="cache")
