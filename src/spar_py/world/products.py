@@ -349,25 +349,35 @@ def precedence(product: Product, unit: str) -> tuple[Precedence, ...]:
     m = from_mm(unit, SWEEP_MARGIN_MM)
     goals = {g.part: g for g in product.goals}
     lo, hi = _extent(product)
+    boxes = {q: _part_box(part) for q, part in product.parts.items()}
+    meshes: dict[str, Any] = {}  # a mesh part's fcl object, built once
+    solids: dict[tuple[str, str], list] = {}  # (part, against) -> its fcl objects, built once
     out: list[Precedence] = []
     for p, g in goals.items():
         Tq = product.parts[g.parent].pose
         d = Tq[:3, :3] @ g.V_a
         travel = float(np.abs(hi - lo) @ np.abs(d)) * 2 + from_mm(unit, 1.0)
+        blo, bhi = boxes[p]
+        # the box the sweep stays in: P's box from where it starts to where it seats
+        slo, shi = np.minimum(blo, blo - travel * d), np.maximum(bhi, bhi - travel * d)
         for q, part in product.parts.items():
-            if q == p:
-                continue
+            if q == p or not _boxes_meet(slo, shi, *boxes[q]):
+                continue  # the sweep's box misses Q's: no collision test can find one
             mine = _solids_against(product, p, q, unit)
             if not mine:
                 continue
             swept = _swept(_bodies(mine, product.parts[p].pose, m), d, travel)
             if part.model.geometry is not None and part.model.geometry.mesh_file is not None:
-                others = [_mesh_object(part)]  # its own surface: its holes are cut
+                if q not in meshes:
+                    meshes[q] = _mesh_object(part)  # its own surface: its holes are cut
+                others = [meshes[q]]
             else:
-                theirs = _solids_against(product, q, p, unit)
-                if not theirs:
+                if (q, p) not in solids:
+                    theirs = _solids_against(product, q, p, unit)
+                    solids[q, p] = [_object(o) for o in _bodies(theirs, part.pose, m)] if theirs else []
+                others = solids[q, p]
+                if not others:
                     continue
-                others = [_object(o) for o in _bodies(theirs, part.pose, m)]
             if not any(_collide_objects(_object(s), o) for s in swept for o in others):
                 continue
             what = _hit_feature(product, p, q, swept) or q
@@ -395,12 +405,31 @@ def near_parts(product: Product, unit: str) -> dict[str, tuple[str, ...]]:
     out: dict[str, list[str]] = {p: [] for p in product.parts}
     names = list(product.parts)
     eye = np.eye(4)
+    boxes = {p: _part_box(part) for p, part in product.parts.items()}
     for i, p in enumerate(names):
         for q in names[i + 1:]:
+            if not _boxes_meet(*boxes[p], *boxes[q], gap):
+                continue  # farther apart than the gap already by their boxes
             if any(_exact(a, eye, b, eye) < gap for a in bodies[p] for b in bodies[q]):
                 out[p].append(q)
                 out[q].append(p)
     return {p: tuple(qs) for p, qs in out.items()}
+
+
+def _part_box(part: Any) -> tuple[np.ndarray, np.ndarray]:
+    """The bounding box (lo, hi) of a part's solids at its product pose (product frame)."""
+    pts = [np.asarray(s.points, float) if s.points is not None else np.array(
+        [[x, y, z] for x in (s.lo[0], s.hi[0]) for y in (s.lo[1], s.hi[1]) for z in (s.lo[2], s.hi[2])])
+        for s in part.model.shape]
+    if not pts:
+        return part.pose[:3, 3].copy(), part.pose[:3, 3].copy()
+    allp = np.vstack(pts) @ part.pose[:3, :3].T + part.pose[:3, 3]
+    return allp.min(0), allp.max(0)
+
+
+def _boxes_meet(alo: np.ndarray, ahi: np.ndarray, blo: np.ndarray, bhi: np.ndarray, gap: float = 0.0) -> bool:
+    """Whether two axis-aligned boxes come within ``gap`` of each other."""
+    return bool(np.all(alo <= bhi + gap) and np.all(blo <= ahi + gap))
 
 
 def _extent(product: Product) -> tuple[np.ndarray, np.ndarray]:
