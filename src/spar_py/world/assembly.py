@@ -1,0 +1,618 @@
+"""Derive a product from its parts' meshes in their assembled poses: contacts, mates, seats,
+insertion directions and precedence by disassembly.
+
+Frames and units: every mesh is given in the product frame (its part's pose applied), all
+lengths in one unit (the caller's; the tolerances in the same unit). Nothing here reads a
+file: kb.products builds the meshes and turns the result into features and mates.
+
+- Contacts: points sampled on each part's surface (seeded, so a derivation is repeatable)
+  within ``clearance_max + contact_tol`` of another part whose nearest point there has an
+  antiparallel normal (the two surfaces face each other).
+- Mates: a pair's contact triangles whose normals are all normal to one axis (the least
+  eigenvector of sum n n^T) and whose vertices lie on circles about it: a peg on the part
+  whose normals point away from the axis, a hole on the other; radii fitted on each part's
+  own vertices (exact for a tessellated cylinder), depth the overlap along the axis, blind
+  when a ray along the axis inside the hole meets the hole part again.
+- Seats: planar contacts (antiparallel normals, coplanar points, gap within ``contact_tol``).
+  What is neither stays a contact: it constrains the directions only.
+- Directions: candidates are the mates' axes (both senses) and the product frame's six axes;
+  a part (or a set of parts) may leave along d when d . n <= eps for every outward normal n of
+  its contacts with the rest (local), and its meshes, shrunk by SHRINK of the tolerance, swept
+  along d in steps no longer than the smallest radial clearance until clear of the others'
+  bounding box, collide with none of them (python-fcl, global).
+- Precedence: remove parts (or sets of two or three that must leave together) one at a time,
+  preferring a removal that leaves a stable remainder (its centre of mass over the hull of its
+  lowest points, the product frame's -z down) and a removal upwards; the reverse is the
+  insertion order. ``first`` before ``then`` when ``then`` in place blocks ``first``'s sweep.
+  An insertion that points up in every stable pose of the partial product needs a fixture or
+  a second arm (:attr:`Insertion.needs_fixture`).
+- :func:`derive_assembly_cached` keeps the result on disk by content (world.shapes_cache's
+  directory and pattern).
+"""
+from __future__ import annotations
+
+import hashlib
+import itertools
+import json
+import math
+import os
+import time
+from dataclasses import asdict, dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+if TYPE_CHECKING:
+    import trimesh
+
+__all__ = ["ASSEMBLY_VERSION", "AssemblyResult", "Contact", "DerivedMate", "DerivedSeat", "Insertion",
+           "derive_assembly", "derive_assembly_cached"]
+
+#: Bumped whenever the derivation's results change for the same inputs.
+ASSEMBLY_VERSION = 1
+#: Surface samples per part (at most; fewer for a small area at the sample spacing).
+SAMPLES = 6000
+#: Normals of facing surfaces: n_a . n_b below -COS_FACING.
+COS_FACING = math.cos(math.radians(20.0))
+#: A contact's triangles are normal to an axis when |n . d| is below this (sin 3 deg).
+SIN_AXIS = math.sin(math.radians(3.0))
+#: A vertex lies on a fitted circle within this fraction of the radius.
+CIRCLE_REL = 0.01
+#: Local freedom: d . n <= EPS_LOCAL for every outward contact normal n of the moving part.
+EPS_LOCAL = 0.02
+#: The moving meshes are shrunk by this fraction of contact_tol (touching is not blocking).
+SHRINK = 0.5
+#: Subassemblies tried when no single part can leave: up to this many parts.
+MAX_GROUP = 3
+#: An insertion direction "points up" when its z component exceeds this (30 deg above horizontal).
+UP_Z = 0.5
+
+
+@dataclass(frozen=True)
+class Contact:
+    """Parts ``a`` and ``b`` face each other: ``points`` samples on a, ``normals`` a's outward
+    normals there, ``gaps`` the distances to b (product frame)."""
+
+    a: str
+    b: str
+    points: np.ndarray
+    normals: np.ndarray
+    gaps: np.ndarray
+
+
+@dataclass(frozen=True)
+class DerivedMate:
+    """A peg of part ``peg`` in a hole of part ``hole``: the common ``axis`` (unit, the way the
+    peg moves into the hole), a point ``origin`` on it, the radii, the peg's root and length
+    along the axis (``peg_t0``, ``peg_len``: t measured from origin), the hole's mouth and
+    depth (``hole_t0``, ``hole_len``), ``depth`` the overlap and ``through``."""
+
+    peg: str
+    hole: str
+    origin: tuple[float, float, float]
+    axis: tuple[float, float, float]
+    peg_radius: float
+    hole_radius: float
+    peg_t0: float
+    peg_len: float
+    hole_t0: float
+    hole_len: float
+    depth: float
+    through: bool
+
+
+@dataclass(frozen=True)
+class DerivedSeat:
+    """Part ``part`` rests on part ``on`` across a plane: ``point`` on it, ``normal`` the
+    outward normal of ``on`` there (unit, product frame), the contact ``area`` estimate."""
+
+    part: str
+    on: str
+    point: tuple[float, float, float]
+    normal: tuple[float, float, float]
+    area: float
+
+
+@dataclass(frozen=True)
+class Insertion:
+    """One step of the derived assembly: ``parts`` (one, or a subassembly that goes in
+    together) move along ``direction`` (unit, product frame) into place; ``needs_fixture``
+    when that direction points up in every stable pose of the partial product."""
+
+    parts: tuple[str, ...]
+    direction: tuple[float, float, float]
+    needs_fixture: bool = False
+
+
+@dataclass
+class AssemblyResult:
+    """What :func:`derive_assembly` found: the mates, seats, the contacts that are neither
+    (as ``(a, b, count)``), the insertions in order (the base part's first, alone), the
+    precedence ``(first, then, reason)``, the free directions of each part at the start of
+    its removal, and the seconds it took."""
+
+    base: str
+    mates: list[DerivedMate] = field(default_factory=list)
+    seats: list[DerivedSeat] = field(default_factory=list)
+    blocking: list[tuple[str, str, int]] = field(default_factory=list)
+    insertions: list[Insertion] = field(default_factory=list)
+    precedence: list[tuple[str, str, str]] = field(default_factory=list)
+    seconds: float = 0.0
+    unremovable: tuple[str, ...] = ()
+
+    def to_json(self) -> dict[str, Any]:
+        """As plain data (the cache's form)."""
+        return {"base": self.base, "mates": [asdict(m) for m in self.mates], "seats": [asdict(s) for s in self.seats],
+                "blocking": [list(b) for b in self.blocking], "insertions": [asdict(i) for i in self.insertions],
+                "precedence": [list(p) for p in self.precedence], "seconds": self.seconds,
+                "unremovable": list(self.unremovable)}
+
+    @classmethod
+    def from_json(cls, d: dict[str, Any]) -> "AssemblyResult":
+        """Back from :meth:`to_json`."""
+        def tup(x: Any) -> Any:
+            return tuple(x) if isinstance(x, list) else x
+        return cls(d["base"], [DerivedMate(**{k: tup(v) for k, v in m.items()}) for m in d["mates"]],
+                   [DerivedSeat(**{k: tup(v) for k, v in s.items()}) for s in d["seats"]],
+                   [tuple(b) for b in d["blocking"]],  # type: ignore[misc]
+                   [Insertion(tuple(i["parts"]), tuple(i["direction"]), i["needs_fixture"]) for i in d["insertions"]],
+                   [tuple(p) for p in d["precedence"]], d["seconds"], tuple(d.get("unremovable", ())))  # type: ignore[misc]
+
+
+# --------------------------------------------------------------------------- contacts
+
+
+def _samples(name: str, mesh: "trimesh.Trimesh", spacing: float) -> tuple[np.ndarray, np.ndarray]:
+    """Points on the surface (seeded by the part's name) and their triangles."""
+    import trimesh
+
+    n = int(min(SAMPLES, max(500, mesh.area / spacing ** 2)))
+    seed = int(hashlib.sha256(name.encode()).hexdigest()[:8], 16)
+    pts, tri = trimesh.sample.sample_surface(mesh, n, seed=seed)
+    return np.asarray(pts, float), np.asarray(tri, int)
+
+
+def _contacts(meshes: dict[str, "trimesh.Trimesh"], reach: float, spacing: float
+              ) -> dict[tuple[str, str], tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """For each ordered pair (a, b) whose boxes come within ``reach``: a's samples within
+    ``reach`` of b facing it, as (points, triangles of a, gaps)."""
+    import trimesh
+
+    names = list(meshes)
+    samples = {p: _samples(p, m, spacing) for p, m in meshes.items()}
+    out = {}
+    for a, b in itertools.permutations(names, 2):
+        ma, mb = meshes[a], meshes[b]
+        if np.any(ma.bounds[0] > mb.bounds[1] + reach) or np.any(mb.bounds[0] > ma.bounds[1] + reach):
+            continue
+        pts, tri = samples[a]
+        lo, hi = mb.bounds[0] - reach, mb.bounds[1] + reach
+        near = np.all((pts >= lo) & (pts <= hi), axis=1)
+        if not near.any():
+            continue
+        P, T = pts[near], tri[near]
+        _, dist, tb = trimesh.proximity.closest_point(mb, P)
+        facing = (ma.face_normals[T] * mb.face_normals[tb]).sum(1) < -COS_FACING
+        keep = (dist <= reach) & facing
+        if keep.any():
+            out[a, b] = (P[keep], T[keep], np.asarray(dist)[keep])
+    return out
+
+
+# --------------------------------------------------------------------------- mates and seats
+
+
+def _axis_of(normals: np.ndarray, weights: np.ndarray) -> np.ndarray | None:
+    """The axis all ``normals`` are normal to (least eigenvector of sum w n n^T), or None."""
+    vals, vecs = np.linalg.eigh((normals * weights[:, None]).T @ normals)
+    d = vecs[:, 0]
+    if np.abs(normals @ d).max() > SIN_AXIS or vals[1] < 1e-3 * vals[2]:
+        return None
+    return d / np.linalg.norm(d)
+
+
+def _circle(V: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, float] | None:
+    """The least-squares circle of points ``V`` about an axis along ``d``: a point on the axis
+    and the radius, or None if the points are not on one circle (CIRCLE_REL)."""
+    from spar_py.world.shapes import axis_basis
+
+    e1, e2 = axis_basis(d)
+    P = np.column_stack([V @ e1, V @ e2])
+    M = np.column_stack([P, np.ones(len(P))])
+    sol = np.linalg.lstsq(M, -(P ** 2).sum(1), rcond=None)[0]
+    c = -sol[:2] / 2
+    r = float(np.sqrt(max(c @ c - sol[2], 0.0)))
+    if not r > 0 or np.abs(np.linalg.norm(P - c, axis=1) - r).max() > CIRCLE_REL * r:
+        return None
+    return c[0] * e1 + c[1] * e2, r
+
+
+def _wall_extent(mesh: "trimesh.Trimesh", o: np.ndarray, d: np.ndarray, r: float, t0: float, t1: float,
+                 tol: float) -> tuple[float, float]:
+    """The extent along the axis (o, d) of the mesh's triangles on the cylinder of radius r
+    (normals normal to d, vertices at r) that joins the interval [t0, t1] (t from o)."""
+    N = mesh.face_normals
+    on = np.abs(N @ d) < SIN_AXIS
+    V = mesh.vertices[mesh.faces[on]]  # (k, 3, 3)
+    rel = V - o
+    t = rel @ d
+    radial = np.linalg.norm(rel - t[..., None] * d, axis=2)
+    ok = np.all(np.abs(radial - r) < max(CIRCLE_REL * r, tol), axis=1)
+    spans = sorted((float(a.min()), float(a.max())) for a in t[ok])
+    lo, hi = t0, t1
+    changed = True
+    while changed:
+        changed = False
+        for a, b in spans:
+            if a <= hi + tol and b >= lo - tol and (a < lo - 1e-12 or b > hi + 1e-12):
+                lo, hi, changed = min(lo, a), max(hi, b), True
+    return lo, hi
+
+
+def _components(P: np.ndarray, link: float) -> list[np.ndarray]:
+    """Index sets of the points connected by steps shorter than ``link``."""
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    pairs = cKDTree(P).query_pairs(link, output_type="ndarray")
+    import scipy.sparse as sp
+
+    g = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(P), len(P)))
+    n, lab = connected_components(g, directed=False)
+    return [np.flatnonzero(lab == i) for i in range(n)]
+
+
+def _cylinder(meshes: dict[str, "trimesh.Trimesh"], a: str, b: str, ta: np.ndarray, tb: np.ndarray, tol: float
+              ) -> DerivedMate | None:
+    """A mate from a's contact triangles ``ta`` and b's ``tb`` facing them, if both are
+    cylindrical about one axis with a's normals pointing away from it (a the peg)."""
+    ma, mb = meshes[a], meshes[b]
+    Na, Nb = ma.face_normals[ta], mb.face_normals[tb]
+    d = _axis_of(np.vstack([Na, Nb]), np.concatenate([ma.area_faces[ta], mb.area_faces[tb]]))
+    if d is None:
+        return None
+    ca = _circle(ma.vertices[np.unique(ma.faces[ta])], d)
+    cb = _circle(mb.vertices[np.unique(mb.faces[tb])], d)
+    if ca is None or cb is None:
+        return None
+    (oa, ra), (ob, rb) = ca, cb
+    if np.linalg.norm(oa - ob) > max(tol, 1e-3 * ra) or rb <= ra:
+        return None
+    Ca = ma.triangles_center[ta]
+    radial = Ca - oa - np.outer((Ca - oa) @ d, d)
+    if (np.einsum("ij,ij->i", radial, Na) <= 0).any():
+        return None  # a's normals towards the axis: a is not the peg
+    o = (oa + ob) / 2
+    tva = (ma.vertices[np.unique(ma.faces[ta])] - o) @ d
+    tvb = (mb.vertices[np.unique(mb.faces[tb])] - o) @ d
+    lo, hi = max(tva.min(), tvb.min()), min(tva.max(), tvb.max())
+    p0, p1 = _wall_extent(ma, o, d, ra, lo, hi, tol)
+    h0, h1 = _wall_extent(mb, o, d, rb, lo, hi, tol)
+    return DerivedMate(a, b, tuple(o), tuple(d), ra, rb, p0, p1 - p0, h0, h1 - h0, hi - lo, False)
+
+
+def _orient(m: DerivedMate, meshes: dict[str, "trimesh.Trimesh"], sense: np.ndarray, tol: float) -> DerivedMate:
+    """The mate with its axis along ``sense`` (the way the peg moves into the hole): the peg's
+    root and the hole's mouth at their ends against it; through unless a ray along the axis
+    from inside the hole meets the hole part's surface beyond."""
+    d = np.asarray(m.axis, float)
+    o = np.asarray(m.origin, float)
+    p0, p1, h0, h1 = m.peg_t0, m.peg_t0 + m.peg_len, m.hole_t0, m.hole_t0 + m.hole_len
+    if float(sense @ d) < 0:
+        d, p0, p1, h0, h1 = -d, -p1, -p0, -h1, -h0
+    mb = meshes[m.hole]
+    start = o + d * (h1 - 2 * tol)
+    hits = mb.ray.intersects_location([start], [d])[0]
+    far = float(np.linalg.norm(mb.extents))
+    blind = len(hits) > 0 and float(np.min((hits - start) @ d)) < min(3 * tol, far)
+    return DerivedMate(m.peg, m.hole, tuple(float(x) for x in o), tuple(float(x) for x in d), m.peg_radius,
+                       m.hole_radius, float(p0), float(p1 - p0), float(h0), float(h1 - h0), m.depth, not blind)
+
+
+def _seats(P: np.ndarray, N: np.ndarray, gaps: np.ndarray, contact_tol: float, spacing: float
+           ) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """Planar clusters of one part's contact points with another (one normal, one plane, gaps
+    within ``contact_tol``): (a point on it, the part's outward normal, an area estimate)."""
+    out = []
+    left = np.ones(len(P), bool)
+    while left.any():
+        n0 = N[np.flatnonzero(left)[0]]
+        group = left & (N @ n0 > math.cos(math.radians(2.0)))
+        left &= ~group
+        rest = group.copy()
+        while rest.sum() >= 3:
+            h0 = float(P[np.flatnonzero(rest)[0]] @ n0)
+            sel = rest & (np.abs(P @ n0 - h0) <= contact_tol)
+            rest &= ~sel
+            if sel.sum() >= 3 and np.all(gaps[sel] <= contact_tol):
+                out.append((P[sel].mean(0), n0, float(sel.sum()) * spacing ** 2))
+    return out
+
+
+# --------------------------------------------------------------------------- directions
+
+
+def _fcl_mesh(mesh: "trimesh.Trimesh", shrink: float) -> Any:
+    """The mesh as a python-fcl BVH (vertices pulled ``shrink`` inward along their normals)."""
+    import fcl
+
+    V = np.asarray(mesh.vertices, float) - shrink * np.asarray(mesh.vertex_normals, float)
+    bvh = fcl.BVHModel()
+    bvh.beginModel(len(V), len(mesh.faces))
+    bvh.addSubModel(V, np.asarray(mesh.faces, np.int32))
+    bvh.endModel()
+    return bvh
+
+
+class _Sweeper:
+    """Sweeps of parts along directions against the other parts (python-fcl)."""
+
+    def __init__(self, meshes: dict[str, "trimesh.Trimesh"], shrink: float, step: float) -> None:
+        import fcl
+
+        self.meshes = meshes
+        self.step = step
+        self.moving = {p: _fcl_mesh(m, shrink) for p, m in meshes.items()}
+        self.fixed = {p: fcl.CollisionObject(_fcl_mesh(m, 0.0), fcl.Transform()) for p, m in meshes.items()}
+
+    def hits(self, parts: tuple[str, ...], d: np.ndarray, others: list[str], first_only: bool) -> set[str]:
+        """The parts of ``others`` that ``parts`` swept along ``d`` (from their poses until
+        clear of the others' bounding box) collide with."""
+        import fcl
+
+        if not others:
+            return set()
+        lo = np.min([self.meshes[q].bounds[0] for q in others], axis=0)
+        hi = np.max([self.meshes[q].bounds[1] for q in others], axis=0)
+        mlo = np.min([self.meshes[p].bounds[0] for p in parts], axis=0)
+        mhi = np.max([self.meshes[p].bounds[1] for p in parts], axis=0)
+        travel = float(np.abs(d) @ (np.maximum(hi, mhi) - np.minimum(lo, mlo))) + self.step
+        n = max(1, int(math.ceil(travel / self.step)))
+        found: set[str] = set()
+        req = fcl.CollisionRequest()
+        for k in range(1, n + 1):
+            off = d * (travel * k / n)
+            slo, shi = mlo + off, mhi + off
+            for p in parts:
+                obj = fcl.CollisionObject(self.moving[p], fcl.Transform(off))
+                for q in others:
+                    if q in found:
+                        continue
+                    b = self.meshes[q].bounds
+                    if np.any(slo > b[1]) or np.any(b[0] > shi):
+                        continue
+                    if fcl.collide(obj, self.fixed[q], req, fcl.CollisionResult()):
+                        found.add(q)
+                        if first_only:
+                            return found
+        return found
+
+
+def _stable(meshes: dict[str, "trimesh.Trimesh"], parts: list[str], tol: float) -> bool:
+    """Whether ``parts`` rest on the table in the product's orientation: their centre of mass
+    (volume-weighted) inside the convex hull of their lowest vertices (within tol), in x, y."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    V = np.vstack([meshes[p].vertices for p in parts])
+    vols = np.array([abs(meshes[p].volume) for p in parts])
+    com = np.sum([meshes[p].center_mass * v for p, v in zip(parts, vols)], axis=0) / max(vols.sum(), 1e-300)
+    low = V[V[:, 2] <= V[:, 2].min() + tol][:, :2]
+    try:
+        h = ConvexHull(low)
+    except (QhullError, ValueError):
+        return False
+    return bool(np.all(h.equations[:, :2] @ com[:2] + h.equations[:, 2] <= 1e-9))
+
+
+def _up_in_every_pose(meshes: dict[str, "trimesh.Trimesh"], parts: list[str], d: np.ndarray) -> bool:
+    """Whether insertion direction ``d`` points up (z > UP_Z) in every stable pose of ``parts``
+    as one body (trimesh's stable poses of their union's hull)."""
+    import trimesh
+
+    body = trimesh.util.concatenate([meshes[p] for p in parts])
+    try:
+        transforms, _ = trimesh.poses.compute_stable_poses(body.convex_hull, center_mass=body.center_mass)
+    except Exception:  # qhull on a degenerate body: judge the product's orientation alone
+        return bool(d[2] > UP_Z)
+    if len(transforms) == 0:
+        return bool(d[2] > UP_Z)
+    return all(float((T[:3, :3] @ d)[2]) > UP_Z for T in transforms)
+
+
+# --------------------------------------------------------------------------- the derivation
+
+
+def derive_assembly(meshes: dict[str, "trimesh.Trimesh"], base: str, contact_tol: float = 0.1,
+                    clearance_max: float = 0.5) -> AssemblyResult:
+    """Derive mates, seats, insertions and precedence of the parts ``meshes`` (product frame,
+    one length unit, ``contact_tol`` and ``clearance_max`` in it); ``base`` is never removed.
+    See the module docstring."""
+    t_start = time.perf_counter()
+    size = float(np.linalg.norm(np.max([m.bounds[1] for m in meshes.values()], axis=0)
+                                - np.min([m.bounds[0] for m in meshes.values()], axis=0)))
+    spacing = size / 150.0
+    reach = clearance_max + contact_tol
+    tol = max(contact_tol, 1e-6 * size)
+    res = AssemblyResult(base)
+    con = _contacts(meshes, reach, spacing)
+    normals: dict[tuple[str, str], np.ndarray] = {}  # a's outward normals at its contacts with b
+    mates: list[DerivedMate] = []
+    planes: list[tuple[str, str, np.ndarray, np.ndarray, float]] = []
+    for (a, b), (P, T, gaps) in con.items():
+        N = meshes[a].face_normals[T]
+        normals[a, b] = N
+        if a < b:
+            for s_pt, s_n, area in _seats(P, N, gaps, contact_tol, spacing):
+                planes.append((a, b, s_pt, s_n, area))  # a's outward normal s_n
+        if len(P) < 6 or (b, a) not in con:
+            continue
+        Pb, Tb, _ = con[b, a]
+        for comp in _components(P, 3 * spacing):
+            ta = np.unique(T[comp])
+            cpts = P[comp]
+            lo, hi = cpts.min(0) - reach - spacing, cpts.max(0) + reach + spacing
+            tb = np.unique(Tb[np.all((Pb >= lo) & (Pb <= hi), axis=1)])
+            if len(ta) < 3 or len(tb) < 3:
+                continue
+            m = _cylinder_filtered(meshes, a, b, ta, tb, tol)
+            if m is not None and not any(_same_mate(m, x, tol) for x in mates):
+                mates.append(m)
+    mated = {(m.peg, m.hole) for m in mates} | {(m.hole, m.peg) for m in mates}
+    seated = {(a, b) for a, b, *_ in planes if (a, b) not in mated}
+    for (a, b), (P, _, _) in con.items():
+        if a < b and (a, b) not in seated and (a, b) not in mated:
+            res.blocking.append((a, b, int(len(P) + len(con.get((b, a), ((),))[0]))))
+
+    # insertion directions and the disassembly
+    gaps = [m.hole_radius - m.peg_radius for m in mates]
+    step = max(min([clearance_max, *gaps]), size / 400.0)
+    sweeper = _Sweeper(meshes, SHRINK * contact_tol, step)
+    cands = [np.eye(3)[i] * s for i in (2, 0, 1) for s in (1, -1)]
+    for m in mates:
+        for s in (1, -1):
+            cands.append(s * np.asarray(m.axis, float))
+    uniq: list[np.ndarray] = []
+    for c in cands:
+        if not any(float(c @ u) > 1 - 1e-9 for u in uniq):
+            uniq.append(c)
+    present = list(meshes)
+    removed: list[tuple[tuple[str, ...], np.ndarray]] = []
+    blocked_by: dict[str, set[str]] = {}
+    while len(present) > 1:
+        choice = None
+        for k in range(1, MAX_GROUP + 1):
+            options = []
+            for group in itertools.combinations([p for p in present if p != base], k):
+                if k > 1 and not _connected(group, con):
+                    continue
+                rest = [q for q in present if q not in group]
+                local = [normals[a, b] for a in group for b in rest if (a, b) in normals]
+                Nl = np.vstack(local) if local else np.zeros((0, 3))
+                for d in uniq:
+                    if Nl.size and float((Nl @ d).max()) > EPS_LOCAL:
+                        continue
+                    if sweeper.hits(group, d, rest, first_only=True):
+                        continue
+                    stable = _stable(meshes, rest, tol)
+                    options.append(((not stable, -float(d[2]), present.index(group[0]) * -1), group, d))
+                    break
+            if options:
+                choice = min(options, key=lambda o: o[0])
+                break
+        if choice is None:
+            res.unremovable = tuple(p for p in present if p != base)
+            break
+        _, group, d = choice
+        for p in group:
+            others = [q for q in meshes if q not in group]
+            blocked_by[p] = sweeper.hits((p,), d, others, first_only=False)
+        removed.append((group, d))
+        present = [q for q in present if q not in group]
+    # the insertions: reverse of the removals
+    order = [base] + [p for g, _ in reversed(removed) for p in g]
+    res.insertions.append(Insertion((base,), (0.0, 0.0, -1.0), False))
+    placed = [base]
+    for group, d in reversed(removed):
+        ins = -d
+        fixture = bool(ins[2] > UP_Z) and _up_in_every_pose(meshes, placed, ins)
+        res.insertions.append(Insertion(group, tuple(float(x) for x in ins), fixture))
+        placed += list(group)
+    pos = {p: i for i, p in enumerate(order)}
+    for p, qs in blocked_by.items():
+        for q in sorted(qs, key=lambda x: pos.get(x, 0)):
+            if pos.get(q, -1) > pos[p]:
+                res.precedence.append((p, q, f"{q} in place blocks {p}'s insertion"))
+    # the mates' senses: the way the peg moves into the hole, from the later part's insertion
+    direction = {p: np.asarray(i.direction, float) for i in res.insertions for p in i.parts}
+    for m in mates:
+        later = m.peg if pos.get(m.peg, 0) > pos.get(m.hole, 0) else m.hole
+        sense = direction[later] if later == m.peg else -direction[later]
+        if later == base or m.peg not in pos or m.hole not in pos:
+            sense = np.asarray(m.axis, float)
+        res.mates.append(_orient(m, meshes, sense, tol))
+    # seats between parts without a mate: the later inserted part rests on the earlier one
+    best: dict[tuple[str, str], tuple] = {}
+    for a, b, pt, n, area in planes:
+        if (a, b) in mated or pos.get(a) is None or pos.get(b) is None:
+            continue
+        part, on, n_on = (a, b, -n) if pos[a] > pos[b] else (b, a, n)
+        if (part, on) not in best or area > best[part, on][4]:
+            best[part, on] = (part, on, pt, n_on, area)
+    for part, on, pt, n_on, area in best.values():
+        res.seats.append(DerivedSeat(part, on, tuple(map(float, pt)), tuple(map(float, n_on)), float(area)))
+    res.seconds = time.perf_counter() - t_start
+    return res
+
+
+def _cylinder_filtered(meshes: dict[str, "trimesh.Trimesh"], a: str, b: str, ta: np.ndarray, tb: np.ndarray,
+                       tol: float) -> DerivedMate | None:
+    """:func:`_cylinder` on the triangles of ``ta`` and ``tb`` that are not normal to the
+    axis fitted on the rest (an end face or shoulder among a cylinder's contacts)."""
+    m = _cylinder(meshes, a, b, ta, tb, tol)
+    if m is not None:
+        return m
+    Na, Nb = meshes[a].face_normals[ta], meshes[b].face_normals[tb]
+    for n in (Na, Nb):
+        vals, vecs = np.linalg.eigh(n.T @ n)
+        d = vecs[:, 0]
+        ka, kb = np.abs(Na @ d) < SIN_AXIS, np.abs(Nb @ d) < SIN_AXIS
+        if ka.sum() >= 3 and kb.sum() >= 3:
+            m = _cylinder(meshes, a, b, ta[ka], tb[kb], tol)
+            if m is not None:
+                return m
+    return None
+
+
+def _same_mate(m: DerivedMate, x: DerivedMate, tol: float) -> bool:
+    """Whether two fitted mates are one: the same parts and the same axis."""
+    if (m.peg, m.hole) != (x.peg, x.hole) or abs(float(np.dot(m.axis, x.axis))) < 1 - 1e-6:
+        return False
+    off = np.asarray(m.origin) - np.asarray(x.origin)
+    d = np.asarray(x.axis)
+    return float(np.linalg.norm(off - (off @ d) * d)) < tol
+
+
+def _connected(group: tuple[str, ...], con: dict) -> bool:
+    """Whether the parts of ``group`` touch each other as a connected graph."""
+    seen = {group[0]}
+    frontier = [group[0]]
+    while frontier:
+        p = frontier.pop()
+        for q in group:
+            if q not in seen and ((p, q) in con or (q, p) in con):
+                seen.add(q)
+                frontier.append(q)
+    return len(seen) == len(group)
+
+
+# --------------------------------------------------------------------------- cache
+
+
+def derive_assembly_cached(meshes: dict[str, "trimesh.Trimesh"], base: str, contact_tol: float = 0.1,
+                           clearance_max: float = 0.5, use_cache: bool = True) -> AssemblyResult:
+    """:func:`derive_assembly`, kept on disk by content: the key is the SHA-256 of every part's
+    name, vertices and faces (as placed), the base, the tolerances and ASSEMBLY_VERSION; kept
+    beside the object models' derivations (world.shapes_cache.cache_dir)."""
+    from spar_py.world.shapes_cache import _store, cache_dir
+
+    h = hashlib.sha256(json.dumps([ASSEMBLY_VERSION, base, round(contact_tol, 12), round(clearance_max, 12)]).encode())
+    for p, m in meshes.items():
+        h.update(p.encode())
+        h.update(np.ascontiguousarray(np.round(m.vertices, 9), float).tobytes())
+        h.update(np.ascontiguousarray(m.faces, np.int64).tobytes())
+    key = h.hexdigest()
+    path = cache_dir() / f"assembly-{key}.json"
+    if use_cache:
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+            if data.get("key") == key:
+                os.utime(path)
+                return AssemblyResult.from_json(data)
+        except (OSError, ValueError, KeyError, TypeError):
+            pass
+    res = derive_assembly(meshes, base, contact_tol, clearance_max)
+    if use_cache:
+        data = res.to_json()
+        data["key"] = key
+        _store(path, data)
+    return res
