@@ -552,14 +552,19 @@ def _cylinder_filtered(meshes: dict[str, "trimesh.Trimesh"], a: str, b: str, ta:
     if m is not None:
         return m
     Na, Nb = meshes[a].face_normals[ta], meshes[b].face_normals[tb]
-    for n in (Na, Nb):
-        vals, vecs = np.linalg.eigh(n.T @ n)
-        d = vecs[:, 0]
+    # an end face's or shoulder's normal is the axis: try each distinct normal as the axis
+    seen: list[np.ndarray] = []
+    for d in np.vstack([Na, Nb]):
+        if any(abs(float(d @ u)) > 1 - 1e-6 for u in seen):
+            continue
+        seen.append(d)
         ka, kb = np.abs(Na @ d) < SIN_AXIS, np.abs(Nb @ d) < SIN_AXIS
         if ka.sum() >= 3 and kb.sum() >= 3:
             m = _cylinder(meshes, a, b, ta[ka], tb[kb], tol)
             if m is not None:
                 return m
+        if len(seen) > 50:
+            break
     return None
 
 
