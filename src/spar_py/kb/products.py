@@ -11,16 +11,19 @@ Lengths converted to the cell's unit once, here.
 """
 from __future__ import annotations
 
-from dataclasses import replace
+import hashlib
+import os
+from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import yaml
 
 from spar_py.core.errors import KBError, SparValueError, WrongKindError
 from spar_py.core.memo import Memo
-from spar_py.core.model import Mate, ObjectModel, PartGoal, Product, ProductPart, Seat
-from spar_py.core.units import LENGTH_UNITS
+from spar_py.core.model import Mate, ObjectModel, PartGoal, Precedence, Product, ProductPart, Seat
+from spar_py.core.units import LENGTH_UNITS, from_mm
 from spar_py.kb.node import Node, did_you_mean, show
 from spar_py.kb.objects import load_object
 from spar_py.kb.reader import MAX_INPUT_BYTES
@@ -28,7 +31,11 @@ from spar_py.kb.reader import parse_yaml
 from spar_py.kb.schema import KINDS, check_shape, describe, file_kind
 from spar_py.kb.values import units_of, xyz_rpy_frame
 
-__all__ = ["RETENTIONS", "add_goal_frames", "goal_term", "load_product", "product_goals", "product_part"]
+if TYPE_CHECKING:
+    from spar_py.world.assembly import AssemblyResult
+
+__all__ = ["RETENTIONS", "LoadedProduct", "add_goal_frames", "goal_term", "load_product", "load_product_derived",
+           "product_goals", "product_part"]
 
 #: A mate's ``retention:`` values, the default first.
 RETENTIONS = ("loose", "fixed")
@@ -127,11 +134,129 @@ def _read_product(path: Path, max_bytes: int) -> Node:
     return root
 
 
+@dataclass(frozen=True)
+class _MeshPart:
+    """A part given by ``mesh:``: its node, the mesh file, its length unit (the part's
+    ``units:``, else the product's: mm per unit) and its pose (cell unit)."""
+
+    node: Node
+    file: Path
+    unit: str
+    mm_per: float
+    pose: np.ndarray
+
+
+def _tolerance(root: Node, key: str, default_mm: float, scale: float, unit: str) -> float:
+    """A product's ``contact_tol`` or ``clearance_max`` (product units) in the cell unit."""
+    node = root.key(key, required=False)
+    return node.positive() * scale if node is not None else from_mm(unit, default_mm)
+
+
+def _derived_objects(path: Path, unit: str, meshparts: dict[str, _MeshPart], derived: AssemblyResult | None,
+                     declared_pairs: set[frozenset[str]]) -> tuple[dict[str, str], dict[tuple[str, str], str]]:
+    """The object YAML text of each mesh part (its mesh, its declared ``features:`` and
+    ``face_names:``, and the derived features and seat faces it lacks) and the name of the
+    feature each derived mate uses on each part, keyed (mate index, part)."""
+    texts: dict[str, str] = {}
+    names: dict[tuple[str, str], str] = {}
+    for pname, mp in meshparts.items():
+        k = LENGTH_UNITS[unit] / mp.mm_per  # cell unit -> the part's unit
+        inv = np.linalg.inv(mp.pose)
+        own = [dict(f) for f in (mp.node.value.get("features") or [])]
+        face_names = dict(mp.node.value.get("face_names") or {})
+        feats: list[dict[str, Any]] = []
+        for i, m in enumerate(derived.mates if derived else []):
+            if pname not in (m.peg, m.hole) or frozenset((m.peg, m.hole)) in declared_pairs:
+                continue
+            peg = pname == m.peg
+            d = np.asarray(m.axis, float)
+            t0, length = (m.peg_t0, m.peg_len) if peg else (m.hole_t0, m.hole_len)
+            o = inv[:3, :3] @ (np.asarray(m.origin, float) + t0 * d) + inv[:3, 3]
+            dd = inv[:3, :3] @ d
+            f = {"kind": "peg" if peg else "hole", "radius": _num(k * (m.peg_radius if peg else m.hole_radius)),
+                 "axis": {"origin": [_num(k * x) for x in o], "direction": [_num(x) for x in dd]},
+                 "length": _num(k * length)}
+            if not peg and m.through:
+                f["through"] = True
+            same = next((g for g in feats + own if _same_feature(g, f, k)), None)
+            if same is None:
+                f = {"kind": f["kind"], "name": f"{f['kind']}{sum(g['kind'] == f['kind'] for g in feats) + 1}",
+                     **{x: f[x] for x in f if x != "kind"}}
+                feats.append(f)
+                same = f
+            names[i, pname] = str(same["name"])
+        for s in derived.seats if derived else []:
+            if pname in (s.part, s.on) and frozenset((s.part, s.on)) not in declared_pairs:
+                other = s.on if pname == s.part else s.part
+                pt = inv[:3, :3] @ np.asarray(s.point, float) + inv[:3, 3]
+                face_names.setdefault(f"on_{other}" if pname == s.part else f"under_{other}",
+                                      [_num(k * x) for x in pt])
+        data: dict[str, Any] = {"object": pname, "units": {"length": mp.unit, "angle": "deg"},
+                                "mesh": str(mp.file)}
+        if face_names:
+            data["face_names"] = face_names
+        if own or feats:
+            data["features"] = own + feats
+        texts[pname] = yaml.safe_dump(data, sort_keys=False, default_flow_style=None)
+    return texts, names
+
+
+def _num(v: float) -> float:
+    """A length or component for a written file: 9 decimals, no negative zero."""
+    return round(float(v), 9) + 0.0
+
+
+def _same_feature(g: dict[str, Any], f: dict[str, Any], k: float) -> bool:
+    """Whether feature dicts ``g`` and ``f`` (one part's, its units) are one: same kind,
+    radius and axis line (within 1e-6 of the radius)."""
+    if g.get("kind") != f["kind"] or "axis" not in g:
+        return False
+    tol = 1e-6 * max(float(f["radius"]), 1.0) + 1e-3 * k * 1e-3
+    if abs(float(g["radius"]) - float(f["radius"])) > max(tol, 1e-4 * float(f["radius"])):
+        return False
+    d1 = np.asarray(g["axis"]["direction"], float)
+    d2 = np.asarray(f["axis"]["direction"], float)
+    d1, d2 = d1 / np.linalg.norm(d1), d2 / np.linalg.norm(d2)
+    off = np.asarray(g["axis"]["origin"], float) - np.asarray(f["axis"]["origin"], float)
+    return abs(float(d1 @ d2)) > 1 - 1e-6 and float(np.linalg.norm(off - (off @ d2) * d2)) < 1e-4 * float(f["radius"])
+
+
+def _generated(text: str) -> Path:
+    """Where a mesh part's object YAML is kept: by its content, beside the derivations."""
+    from spar_py.world.shapes_cache import cache_dir
+
+    out = cache_dir() / "parts" / f"{hashlib.sha256(text.encode()).hexdigest()[:32]}.yaml"
+    if not out.is_file() or out.read_text(encoding="utf-8") != text:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        tmp = out.with_suffix(f".tmp{os.getpid()}")
+        tmp.write_text(text, encoding="utf-8")
+        os.replace(tmp, out)
+    return out
+
+
+@dataclass
+class LoadedProduct:
+    """A product with what was derived for it (None when every part gives ``model:``) and
+    the derived names of each derived mate's features."""
+
+    product: Product
+    derived: AssemblyResult | None
+    objects: dict[str, str]
+    unit: str
+
+
 def load_product(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, memo: Memo | None = None,
                  **object_options: Any) -> Product:
     """Load ``kb/products/*.yaml`` in the cell's length ``unit``: parts (their models loaded
     with ``object_options``, as kb.problem loads a cell's), base, mates and seats, checked;
-    then its goals and precedence compiled (world.products)."""
+    then its goals and precedence compiled (world.products). Parts given by ``mesh:`` have
+    their features, mates, seats and precedence derived (world.assembly)."""
+    return load_product_derived(path, unit, max_bytes, memo, **object_options).product
+
+
+def load_product_derived(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, memo: Memo | None = None,
+                         **object_options: Any) -> LoadedProduct:
+    """:func:`load_product` with what was derived (``spar kb derive`` writes it out)."""
     from spar_py.world import products as wp
 
     path = Path(path)
@@ -141,7 +266,31 @@ def load_product(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, 
     scale = mm_per / LENGTH_UNITS[unit]
     parts: dict[str, ProductPart] = {}
     files: list[str] = []
-    for pname, pnode in root.key("parts").items():
+    meshparts: dict[str, _MeshPart] = {}
+    pnodes = dict(root.key("parts").items())
+    if not pnodes:
+        raise root.key("parts").fail("at least one part", "none")
+    for pname, pnode in pnodes.items():
+        has = [k for k in ("model", "mesh") if k in pnode.value]
+        if len(has) != 1:
+            raise pnode.fail("a part with model: FILE or mesh: FILE (one of them)",
+                             "both" if has else ", ".join(pnode.value) or "neither")
+        pose = pnode.key("pose", required=False)
+        if "mesh" in pnode.value:
+            mnode = pnode.key("mesh")
+            mpath = path.parent / mnode.text()
+            if not mpath.is_file():
+                raise mnode.fail("the path of a mesh file (STL, OBJ or PLY)", f"{show(mnode.value)} (no such file)")
+            if "units" in pnode.value:
+                punit, pmm, _ = units_of(pnode)
+            else:
+                punit, pmm = root.key("units").key("length").text(), mm_per
+            T = xyz_rpy_frame(pose, scale, rad_per) if pose is not None else np.eye(4)
+            meshparts[pname] = _MeshPart(pnode, mpath.resolve(), punit, pmm, T)
+            continue
+        for k in ("features", "face_names", "units"):
+            if k in pnode.value:
+                raise pnode.key(k).fail(f"no {k}: beside model: (the object file gives them)")
         mnode = pnode.key("model")
         mpath = path.parent / mnode.text()
         if not mpath.is_file():
@@ -150,28 +299,89 @@ def load_product(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, 
             model = load_object(mpath, unit, max_bytes, memo=memo, **object_options)
         except WrongKindError as e:
             raise mnode.fail("the path of an object file", f"{show(mnode.value)}, {e.got}") from None
-        pose = pnode.key("pose", required=False)
         T = xyz_rpy_frame(pose, scale, rad_per) if pose is not None else np.eye(4)
         parts[pname] = ProductPart(pname, _renamed(model, pname), T)
         files.append(str(mpath.resolve()))
-    if not parts:
-        raise root.key("parts").fail("at least one part", "none")
     bnode = root.key("base", required=False)
-    base = bnode.label() if bnode is not None else next(iter(parts))
-    if base not in parts:
-        raise bnode.fail(f"a part of the product ({', '.join(parts)})", show(base))
-    links = [_mate(m, parts, unit) for m in root.key("mates").elements(1)]
+    base = bnode.label() if bnode is not None else next(iter(pnodes))
+    if base not in pnodes:
+        raise bnode.fail(f"a part of the product ({', '.join(pnodes)})", show(base))
+    mates_node = root.key("mates", required=False)
+    mate_nodes = list(mates_node.elements(1)) if mates_node is not None else []
+    if mates_node is None and not meshparts:
+        root.key("mates")  # raises: a product of models declares its mates
+    declared_pairs = set()
+    for m in mate_nodes:
+        ends = [str(m.value.get(k, "")).partition(".")[0] for k in ("peg", "hole", "seat", "on") if k in m.value]
+        declared_pairs.add(frozenset(ends))
+    derived = None
+    objects: dict[str, str] = {}
+    dnames: dict[tuple[str, str], str] = {}
+    if meshparts:
+        derived = _derive(root, unit, scale, base, meshparts, parts)
+        objects, dnames = _derived_objects(path, unit, meshparts, derived, declared_pairs)
+        for pname, text in objects.items():
+            mp = meshparts[pname]
+            try:
+                model = load_object(_generated(text), unit, max_bytes, memo=memo, **object_options)
+            except KBError as e:
+                why = f"{e.key}: expected {e.expected}" + (f", not {e.got}" if e.got is not None else "")
+                raise mp.node.key("mesh").fail("a mesh part the planner can use", why) from None
+            parts[pname] = ProductPart(pname, model, mp.pose)
+            files.append(str(mp.file))
+        parts = {p: parts[p] for p in pnodes}
+    links = [_mate(m, parts, unit) for m in mate_nodes]
+    if derived is not None:
+        for i, dm in enumerate(derived.mates):
+            pf, hf = dnames.get((i, dm.peg)), dnames.get((i, dm.hole))
+            if pf is not None and hf is not None:
+                links.append(Mate(dm.peg, pf, dm.hole, hf, RETENTIONS[0]))
+        for s in derived.seats:
+            if s.part in meshparts and s.on in meshparts and frozenset((s.part, s.on)) not in declared_pairs:
+                links.append(Seat(s.part, f"on_{s.on}", s.on, f"under_{s.part}"))
     product = Product(name, str(path), base, parts, tuple(m for m in links if isinstance(m, Mate)),
                       tuple(s for s in links if isinstance(s, Seat)), files=tuple(files))
+    where = root.key("mates") if mates_node is not None else root.key("parts")
     try:
         product.goals = wp.compile_goals(product)
-        product.precedence = wp.precedence(product, unit)
+        # a derived product's precedence is the disassembly's (exact meshes both ways; the
+        # declared products' sweep moves a mesh part's hull, which fills its bores)
+        product.precedence = (wp.precedence(product, unit) if derived is None else
+                              tuple(Precedence(a, b, why) for a, b, why in derived.precedence))
         product.near = wp.near_parts(product, unit)
     except KBError:
         raise
     except SparValueError as e:
-        raise root.key("mates").fail("mates that make an assembly", str(e)) from None
-    return product
+        raise where.fail("mates that make an assembly", str(e)) from None
+    return LoadedProduct(product, derived, objects, unit)
+
+
+def _derive(root: Node, unit: str, scale: float, base: str, meshparts: dict[str, _MeshPart],
+            parts: dict[str, ProductPart]) -> AssemblyResult:
+    """The derivation (world.assembly, cached) over every part's mesh at its product pose,
+    the mesh parts read from their files in the cell unit."""
+    from spar_py.world.assembly import derive_assembly_cached
+    from spar_py.world.shapes import _load_mesh, part_mesh
+
+    contact_tol = _tolerance(root, "contact_tol", 0.1, scale, unit)
+    clearance_max = _tolerance(root, "clearance_max", 0.5, scale, unit)
+    meshes = {}
+    for pname in root.key("parts").value:
+        if pname in meshparts:
+            mp = meshparts[pname]
+            try:
+                m = _load_mesh(str(mp.file), mp.mm_per / LENGTH_UNITS[unit]).copy()
+            except ValueError as e:
+                raise mp.node.key("mesh").fail(str(e), show(mp.node.value["mesh"])) from None
+            m.apply_transform(mp.pose)
+        else:
+            pm = part_mesh(parts[pname].model)
+            if pm is None:
+                continue  # a part without a shape takes no part in the derivation
+            m = pm.copy()
+            m.apply_transform(parts[pname].pose)
+        meshes[pname] = m
+    return derive_assembly_cached(meshes, base, contact_tol, clearance_max)
 
 
 def product_part(onode: Node, product: Product, name: str) -> ObjectModel:

@@ -49,7 +49,7 @@ __all__ = ["ASSEMBLY_VERSION", "AssemblyResult", "Contact", "DerivedMate", "Deri
            "derive_assembly", "derive_assembly_cached"]
 
 #: Bumped whenever the derivation's results change for the same inputs.
-ASSEMBLY_VERSION = 1
+ASSEMBLY_VERSION = 2
 #: Surface samples per part (at most; fewer for a small area at the sample spacing).
 SAMPLES = 6000
 #: Normals of facing surfaces: n_a . n_b below -COS_FACING.
@@ -325,7 +325,8 @@ def _seats(P: np.ndarray, N: np.ndarray, gaps: np.ndarray, contact_tol: float, s
             sel = rest & (np.abs(P @ n0 - h0) <= contact_tol)
             rest &= ~sel
             if sel.sum() >= 3 and np.all(gaps[sel] <= contact_tol):
-                out.append((P[sel].mean(0), n0, float(sel.sum()) * spacing ** 2))
+                c = P[sel].mean(0)  # a ring's mean is in its hole: take the sample nearest it
+                out.append((P[sel][np.argmin(np.linalg.norm(P[sel] - c, axis=1))], n0, float(sel.sum()) * spacing ** 2))
     return out
 
 
