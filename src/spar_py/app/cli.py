@@ -65,13 +65,19 @@ def cmd_kb_check(args: argparse.Namespace) -> int:
 
 
 def cmd_kb_derive(args: argparse.Namespace) -> int:
-    """Write an object model with every face, stable pose and grasp explicit (derived ones too)."""
+    """Write an object model with every face, stable pose and grasp explicit (derived ones
+    too), or a product file with its derived features, mates, seats and order."""
     from spar_py.kb import derive_text  # kb imports numpy: not at the top (see cmd_plan)
 
     if args.output is not None:
         _check_output_file("-o", Path(args.output))  # before the work, as spar plan does
     out_dir = Path(args.output).parent if args.output is not None else Path(args.model).parent
-    text = derive_text(args.model, _max_input_bytes(args), args.robot, out_dir)
+    from spar_py.kb.products import derive_product_text, is_product_file
+
+    if is_product_file(args.model, _max_input_bytes(args)):
+        text = derive_product_text(args.model, _max_input_bytes(args), out_dir)
+    else:
+        text = derive_text(args.model, _max_input_bytes(args), args.robot, out_dir)
     if args.output is None:
         sys.stdout.write(text)
         return EXIT_OK
@@ -405,7 +411,8 @@ def build_parser() -> argparse.ArgumentParser:
     check.set_defaults(func="kb_check")
     derive = kbsub.add_parser("derive", help="write an object model with its derived faces, stable poses and "
                               "grasps explicit (to review and diff)")
-    derive.add_argument("model", help="an object model file, e.g. kb/objects/peg_shape.yaml")
+    derive.add_argument("model", help="an object model file, e.g. kb/objects/peg_shape.yaml, or a product file "
+                        "(its mesh parts' features, mates and order derived)")
     derive.add_argument("-o", "--output", help="write the model to this file (atomically) instead of stdout")
     derive.add_argument("--robot", help="derive grasps for this robot's gripper (default: a 101.6 mm opening, "
                         "the PUMA 762's)")

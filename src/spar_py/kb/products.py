@@ -35,7 +35,7 @@ if TYPE_CHECKING:
     from spar_py.world.assembly import AssemblyResult
 
 __all__ = ["RETENTIONS", "LoadedProduct", "add_goal_frames", "goal_term", "load_product", "load_product_derived",
-           "product_goals", "product_part"]
+           "derive_product_text", "is_product_file", "product_goals", "product_part"]
 
 #: A mate's ``retention:`` values, the default first.
 RETENTIONS = ("loose", "fixed")
@@ -425,3 +425,68 @@ def product_goals(node: Node, term: Any, product: Product) -> list[tuple] | None
         known = ", ".join(m.name for m in product.mates)
         raise node.fail(f"a mate of product {product.name} ({known})", name)
     return None
+
+
+def is_product_file(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> bool:
+    """Whether ``path`` is a product file (a mapping with ``product:``); False for anything else."""
+    try:
+        data = parse_yaml(Path(path), max_bytes)
+    except (KBError, OSError):
+        return False
+    return isinstance(data, dict) and "product" in data
+
+
+def derive_product_text(path: str | Path, max_bytes: int = MAX_INPUT_BYTES, out_dir: str | Path | None = None) -> str:
+    """``spar kb derive PRODUCT.yaml``: the product in the declared form, in the file's units:
+    each mesh part with its features and face names (derived ones included), every mate
+    with its retention and every seat; the derived insertions (order, direction, whether a
+    fixture is needed) and precedence as comments. Mesh paths relative to ``out_dir``."""
+    path = Path(path)
+    root = _read_product(path, max_bytes)
+    unit = root.key("units").key("length").text()
+    lp = load_product_derived(path, unit, max_bytes)
+    p = lp.product
+    base_dir = Path(out_dir).resolve() if out_dir is not None else path.parent.resolve()
+
+    def flow(v: Any) -> str:
+        return yaml.safe_dump(v, default_flow_style=True, width=10**6, sort_keys=False).strip().removesuffix(
+            "\n...").strip()
+    out = [f"# Derived by `spar kb derive` from {path}: features, mates and seats explicit.",
+           f"product: {p.name}", f"units: {flow(root.value['units'])}"]
+    out += [f"{k}: {flow(root.value[k])}" for k in ("base", "contact_tol", "clearance_max") if k in root.value]
+    out.append("parts:")
+    for pname, pnode in root.key("parts").items():
+        own = dict(pnode.value)
+        if pname in lp.objects:
+            obj = yaml.safe_load(lp.objects[pname])
+            own["mesh"] = os.path.relpath(obj["mesh"], base_dir)
+            for k in ("face_names", "features"):
+                if k in obj:
+                    own[k] = obj[k]
+        else:
+            own["model"] = os.path.relpath((path.parent / own["model"]).resolve(), base_dir)
+        out.append(f"  {pname}: {flow(own)}")
+    out.append("mates:")
+    for m in p.mates:
+        out.append("  - " + flow({"peg": f"{m.peg}.{m.peg_feature}", "hole": f"{m.hole}.{m.hole_feature}",
+                                  "retention": m.retention}))
+    for s in p.seats:
+        out.append("  - " + flow({"seat": f"{s.part}.{s.face}", "on": f"{s.on}.{s.on_face}"}))
+    d = lp.derived
+    if d is not None:
+        out.append(f"# derived in {d.seconds:.2f} s; insertions in order (direction in the product frame):")
+        for i, ins in enumerate(d.insertions):
+            what = " + ".join(ins.parts)
+            if i == 0:
+                out.append(f"#   {what}: the base, placed first")
+                continue
+            extra = "; points up in every stable pose of the partial product: needs a fixture or a second arm" \
+                if ins.needs_fixture else ""
+            out.append(f"#   {what}: along {[_num(x) for x in ins.direction]}{extra}")
+        for a, b, why in d.precedence:
+            out.append(f"# precedence: {a} before {b} ({why})")
+        for a, b, n in d.blocking:
+            out.append(f"# contact {a} - {b} ({n} samples): neither a mate nor a seat; blocking only")
+        if d.unremovable:
+            out.append(f"# no free direction found for: {', '.join(d.unremovable)}")
+    return "\n".join(out) + "\n"
