@@ -153,12 +153,14 @@ def _tolerance(root: Node, key: str, default_mm: float, scale: float, unit: str)
 
 
 def _derived_objects(path: Path, unit: str, meshparts: dict[str, _MeshPart], derived: AssemblyResult | None,
-                     declared_pairs: set[frozenset[str]]) -> tuple[dict[str, str], dict[tuple[str, str], str]]:
+                     declared_pairs: set[frozenset[str]], plane_tol: float
+                     ) -> tuple[dict[str, str], dict[tuple[int, str], str]]:
     """The object YAML text of each mesh part (its mesh, its declared ``features:`` and
     ``face_names:``, and the derived features and seat faces it lacks) and the name of the
-    feature each derived mate uses on each part, keyed (mate index, part)."""
+    feature each derived mate uses on each part, keyed (mate index, part), and of the face
+    each derived seat uses, keyed (-1 - seat index, part); coplanar seat faces share a name."""
     texts: dict[str, str] = {}
-    names: dict[tuple[str, str], str] = {}
+    names: dict[tuple[int, str], str] = {}
     for pname, mp in meshparts.items():
         k = LENGTH_UNITS[unit] / mp.mm_per  # cell unit -> the part's unit
         inv = np.linalg.inv(mp.pose)
@@ -185,12 +187,24 @@ def _derived_objects(path: Path, unit: str, meshparts: dict[str, _MeshPart], der
                 feats.append(f)
                 same = f
             names[i, pname] = str(same["name"])
-        for s in derived.seats if derived else []:
-            if pname in (s.part, s.on) and frozenset((s.part, s.on)) not in declared_pairs:
+        seats = [(j, s) for j, s in enumerate(derived.seats if derived else [])
+                 if pname in (s.part, s.on) and frozenset((s.part, s.on)) not in declared_pairs]
+        if seats:
+            from spar_py.world.shapes import _load_mesh, derive_faces, face_of_point
+
+            mesh = _load_mesh(str(mp.file), mp.mm_per / LENGTH_UNITS[unit])
+            faces = derive_faces(mesh, (), {}, unit)
+            named: dict[int, str] = {}
+            for j, s in seats:
                 other = s.on if pname == s.part else s.part
                 pt = inv[:3, :3] @ np.asarray(s.point, float) + inv[:3, 3]
-                face_names.setdefault(f"on_{other}" if pname == s.part else f"under_{other}",
-                                      [_num(k * x) for x in pt])
+                fi = face_of_point(faces, mesh, pt, plane_tol)
+                if fi is None or not faces[fi].planar:
+                    continue  # a seat on a face that is not one plane: a contact only
+                if fi not in named:
+                    named[fi] = f"on_{other}" if pname == s.part else f"under_{other}"
+                    face_names.setdefault(named[fi], [_num(k * x) for x in pt])
+                names[-1 - j, pname] = named[fi]
         data: dict[str, Any] = {"object": pname, "units": {"length": mp.unit, "angle": "deg"},
                                 "mesh": str(mp.file)}
         if face_names:
@@ -316,10 +330,11 @@ def load_product_derived(path: str | Path, unit: str, max_bytes: int = MAX_INPUT
         declared_pairs.add(frozenset(ends))
     derived = None
     objects: dict[str, str] = {}
-    dnames: dict[tuple[str, str], str] = {}
+    dnames: dict[tuple[int, str], str] = {}
     if meshparts:
         derived = _derive(root, unit, scale, base, meshparts, parts)
-        objects, dnames = _derived_objects(path, unit, meshparts, derived, declared_pairs)
+        objects, dnames = _derived_objects(path, unit, meshparts, derived, declared_pairs,
+                                           2 * _tolerance(root, "contact_tol", 0.1, scale, unit))
         for pname, text in objects.items():
             mp = meshparts[pname]
             try:
@@ -336,9 +351,10 @@ def load_product_derived(path: str | Path, unit: str, max_bytes: int = MAX_INPUT
             pf, hf = dnames.get((i, dm.peg)), dnames.get((i, dm.hole))
             if pf is not None and hf is not None:
                 links.append(Mate(dm.peg, pf, dm.hole, hf, RETENTIONS[0]))
-        for s in derived.seats:
-            if s.part in meshparts and s.on in meshparts and frozenset((s.part, s.on)) not in declared_pairs:
-                links.append(Seat(s.part, f"on_{s.on}", s.on, f"under_{s.part}"))
+        for j, s in enumerate(derived.seats):
+            sf, of = dnames.get((-1 - j, s.part)), dnames.get((-1 - j, s.on))
+            if sf is not None and of is not None:
+                links.append(Seat(s.part, sf, s.on, of))
     product = Product(name, str(path), base, parts, tuple(m for m in links if isinstance(m, Mate)),
                       tuple(s for s in links if isinstance(s, Seat)), files=tuple(files))
     where = root.key("mates") if mates_node is not None else root.key("parts")
