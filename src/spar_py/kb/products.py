@@ -332,7 +332,7 @@ def load_product_derived(path: str | Path, unit: str, max_bytes: int = MAX_INPUT
     objects: dict[str, str] = {}
     dnames: dict[tuple[int, str], str] = {}
     if meshparts:
-        derived = _derive(root, unit, scale, base, meshparts, parts)
+        derived = _derive(root, unit, scale, base, meshparts, parts, bool(object_options.get("use_cache", True)))
         objects, dnames = _derived_objects(path, unit, meshparts, derived, declared_pairs,
                                            2 * _tolerance(root, "contact_tol", 0.1, scale, unit))
         for pname, text in objects.items():
@@ -373,7 +373,7 @@ def load_product_derived(path: str | Path, unit: str, max_bytes: int = MAX_INPUT
 
 
 def _derive(root: Node, unit: str, scale: float, base: str, meshparts: dict[str, _MeshPart],
-            parts: dict[str, ProductPart]) -> AssemblyResult:
+            parts: dict[str, ProductPart], use_cache: bool = True) -> AssemblyResult:
     """The derivation (world.assembly, cached) over every part's mesh at its product pose,
     the mesh parts read from their files in the cell unit."""
     from spar_py.world.assembly import derive_assembly_cached
@@ -397,7 +397,7 @@ def _derive(root: Node, unit: str, scale: float, base: str, meshparts: dict[str,
             m = pm.copy()
             m.apply_transform(parts[pname].pose)
         meshes[pname] = m
-    return derive_assembly_cached(meshes, base, contact_tol, clearance_max)
+    return derive_assembly_cached(meshes, base, contact_tol, clearance_max, use_cache)
 
 
 def product_part(onode: Node, product: Product, name: str) -> ObjectModel:
