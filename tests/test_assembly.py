@@ -122,7 +122,9 @@ def test_declared_products_derive_again_from_meshes(name: str, tmp_path: Path) -
         d = -np.asarray(ins.direction, float)
         for p in ins.parts:
             assert _sweep_clear(meshes[p], [meshes[q] for q in placed], d), (p, ins.direction)
-            # the check can fail: across the mate's axis the part is held
+            if not any({m.peg, m.hole} & {p} and {m.peg, m.hole} & set(placed) for m in derived.mates):
+                continue
+            # the check can fail: across the axis of a mate with a placed part the part is held
             side = np.cross(d, [1.0, 0.0, 0.0] if abs(d[0]) < 0.9 else [0.0, 1.0, 0.0])
             assert not _sweep_clear(meshes[p], [meshes[q] for q in placed], side / np.linalg.norm(side))
         placed += list(ins.parts)
