@@ -343,3 +343,51 @@ def test_mated_goal_is_the_goal_of_the_insertion_that_makes_it(tmp_path: Path) -
         load_problem(p)
     msg = _one_line(e)
     assert "goals[0]" in msg and "pin_a.shaft->bracket.bore_b" in msg and "pin_b.shaft->base.bore_b" in msg
+
+
+def _mesh_model(tmp_path: Path, name: str, mesh, features: list[dict]) -> None:
+    """A mesh model (STL written by trimesh) with the given features; poses and grasps derived."""
+    mesh.export(tmp_path / f"{name}.stl")
+    (tmp_path / f"{name}.yaml").write_text(yaml.safe_dump({
+        "object": name, "units": {"length": "mm", "angle": "deg"}, "mesh": f"{name}.stl", "features": features}))
+
+
+def test_mesh_parts_sweep_their_own_bores(tmp_path: Path) -> None:
+    """shaft_stack with every part a mesh export (the bushing and collar bored): the meshes' own
+    bores let the sleeves pass down the shaft (their convex hulls would fill them, and the
+    bushing's way would pass through the base part: refused), and the collar in place blocks
+    the bushing's way, so the bushing comes first, as with the declared primitives."""
+    import trimesh
+
+    def tube(r_out: float, r_in: float, z0: float, z1: float, blind_to: float | None = None):
+        outer = trimesh.creation.cylinder(radius=r_out, segment=[[0, 0, z0], [0, 0, z1]], sections=48)
+        bore = trimesh.creation.cylinder(radius=r_in, segment=[[0, 0, z0 - 1], [0, 0, blind_to or z1 + 1]],
+                                         sections=48)
+        return outer.difference(bore)
+
+    shaft = trimesh.boolean.union([
+        trimesh.creation.cylinder(radius=20, segment=[[0, 0, 0], [0, 0, 10]], sections=48),
+        trimesh.creation.cylinder(radius=6, segment=[[0, 0, 9.9], [0, 0, 62]], sections=48)])
+    _mesh_model(tmp_path, "m_shaft", shaft, [{"kind": "peg", "name": "shaft", "radius": 6, "length": 52,
+                                              "axis": {"origin": [0, 0, 10], "direction": [0, 0, 1]}}])
+    _mesh_model(tmp_path, "m_bushing", tube(12, 6.5, 0, 36), [
+        {"kind": "hole", "name": "bore", "radius": 6.5, "length": 36, "through": True,
+         "axis": {"origin": [0, 0, 0], "direction": [0, 0, 1]}}])
+    _mesh_model(tmp_path, "m_collar", tube(10, 6.5, 0, 24, blind_to=16), [
+        {"kind": "hole", "name": "bore", "radius": 6.5, "length": 16,
+         "axis": {"origin": [0, 0, 0], "direction": [0, 0, 1]}}])
+    p = tmp_path / "stack.yaml"
+    p.write_text(f"""product: mesh_stack
+units: {{length: mm, angle: deg}}
+parts:
+  shaft: {{model: m_shaft.yaml}}
+  bushing: {{model: m_bushing.yaml, pose: {{xyz: [0, 0, 10]}}}}
+  collar: {{model: m_collar.yaml, pose: {{xyz: [0, 0, 46]}}}}
+mates:
+  - {{peg: shaft.shaft, hole: bushing.bore}}
+  - {{peg: shaft.shaft, hole: collar.bore}}
+""")
+    product = load_product(p, "mm")
+    pairs = {(pr.first, pr.then) for pr in product.precedence}
+    assert pairs == {("bushing", "collar")}
+    assert not any(pr.first == "collar" for pr in product.precedence)  # nothing blocks the collar's way

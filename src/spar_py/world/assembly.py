@@ -345,7 +345,7 @@ def _fcl_mesh(mesh: "trimesh.Trimesh", shrink: float) -> Any:
     return bvh
 
 
-class _Sweeper:
+class Sweeper:
     """Sweeps of parts along directions against the other parts (python-fcl)."""
 
     def __init__(self, meshes: dict[str, "trimesh.Trimesh"], shrink: float, step: float) -> None:
@@ -467,7 +467,7 @@ def derive_assembly(meshes: dict[str, "trimesh.Trimesh"], base: str, contact_tol
     # insertion directions and the disassembly
     gaps = [m.hole_radius - m.peg_radius for m in mates]
     step = max(min([clearance_max, *gaps]), size / 400.0)
-    sweeper = _Sweeper(meshes, SHRINK * contact_tol, step)
+    sweeper = Sweeper(meshes, SHRINK * contact_tol, step)
     cands = [np.eye(3)[i] * s for i in (2, 0, 1) for s in (1, -1)]
     for m in mates:
         for s in (1, -1):

@@ -360,6 +360,18 @@ def precedence(product: Product, unit: str) -> tuple[Precedence, ...]:
         blo, bhi = boxes[p]
         # the box the sweep stays in: P's box from where it starts to where it seats
         slo, shi = np.minimum(blo, blo - travel * d), np.maximum(bhi, bhi - travel * d)
+        if _is_mesh(product.parts[p]):
+            # a mesh part's convex hull would fill its bores: its own mesh, stepped
+            mated = {q for mt in product.mates for q in (mt.peg, mt.hole) if p in (mt.peg, mt.hole)}
+            # a part mated with P whose model does not cut its holes (the paper's form: a solid
+            # block) would meet P at the mate itself: left out, as the solids' test leaves it
+            hits = _mesh_sweep(product, p, d, m, unit, [q for q in product.parts
+                                                        if q != p and _boxes_meet(slo, shi, *boxes[q])
+                                                        and (q not in mated or _holes_cut(product.parts[q]))])
+            for q in (q for q in product.parts if q in hits):
+                _blocked(product, p, q, out, lambda: _hit_feature(product, p, q, _swept(
+                    _bodies(list(product.parts[p].model.shape), product.parts[p].pose, m), d, travel)))
+            continue
         for q, part in product.parts.items():
             if q == p or not _boxes_meet(slo, shi, *boxes[q]):
                 continue  # the sweep's box misses Q's: no collision test can find one
@@ -380,13 +392,53 @@ def precedence(product: Product, unit: str) -> tuple[Precedence, ...]:
                     continue
             if not any(_collide_objects(_object(s), o) for s in swept for o in others):
                 continue
-            what = _hit_feature(product, p, q, swept) or q
-            if q == product.base:
-                raise SparValueError(f"product {product.name}: {p}'s insertion passes through the base part {what}: "
-                                     "it can never be inserted")
-            out.append(Precedence(p, q, f"{p}'s insertion would pass through {what}"))
+            _blocked(product, p, q, out, lambda: _hit_feature(product, p, q, swept))
     _no_cycle(product, out)
     return tuple(out)
+
+
+def _blocked(product: Product, p: str, q: str, out: list[Precedence], feature: Any) -> None:
+    """Record that P's insertion passes through Q (``feature()``: the feature of Q it passes
+    through, or None); SparValueError if Q is the base part (P could never be inserted)."""
+    what = feature() or q
+    if q == product.base:
+        raise SparValueError(f"product {product.name}: {p}'s insertion passes through the base part {what}: "
+                             "it can never be inserted")
+    out.append(Precedence(p, q, f"{p}'s insertion would pass through {what}"))
+
+
+def _holes_cut(part: Any) -> bool:
+    """Whether a part's mesh has its holes: a mesh part, or primitives with a subtracted one."""
+    g = part.model.geometry
+    return g is not None and (g.mesh_file is not None or any(pr.subtract for pr in g.primitives))
+
+
+def _is_mesh(part: Any) -> bool:
+    """Whether a product part's model is a mesh (its collision solid a convex hull)."""
+    return part.model.geometry is not None and part.model.geometry.mesh_file is not None
+
+
+def _mesh_sweep(product: Product, p: str, d: np.ndarray, m: float, unit: str, others: list[str]) -> set[str]:
+    """The parts of ``others`` that mesh part P's own mesh (shrunk by ``m``) meets on its way out
+    of its product pose against ``d`` (the insertion reversed), in steps no longer than the
+    product's smallest mate clearance (at least 0.1 mm); every part as its mesh at its pose."""
+    from spar_py.world.assembly import Sweeper
+    from spar_py.world.shapes import part_mesh
+
+    if not others:
+        return set()
+    clear = [f_h.radius - f_p.radius for mt in product.mates
+             for f_p, f_h in [(product.parts[mt.peg].model.feature_named(mt.peg_feature),
+                               product.parts[mt.hole].model.feature_named(mt.hole_feature))]]
+    step = max(min(clear, default=from_mm(unit, 1.0)), from_mm(unit, 0.1))
+    meshes = {}
+    for q in [p, *others]:
+        mesh = part_mesh(product.parts[q].model)
+        if mesh is None:
+            continue
+        meshes[q] = mesh.copy()
+        meshes[q].apply_transform(product.parts[q].pose)
+    return Sweeper(meshes, m, step).hits((p,), -d, [q for q in others if q in meshes], first_only=False)
 
 
 #: Parts nearer than this at their product poses are near by design (mm): a part's insertion
