@@ -377,15 +377,15 @@ def test_mesh_parts_sweep_their_own_bores(tmp_path: Path) -> None:
         {"kind": "hole", "name": "bore", "radius": 6.5, "length": 16,
          "axis": {"origin": [0, 0, 0], "direction": [0, 0, 1]}}])
     p = tmp_path / "stack.yaml"
-    p.write_text(f"""product: mesh_stack
-units: {{length: mm, angle: deg}}
+    p.write_text("""product: mesh_stack
+units: {length: mm, angle: deg}
 parts:
-  shaft: {{model: m_shaft.yaml}}
-  bushing: {{model: m_bushing.yaml, pose: {{xyz: [0, 0, 10]}}}}
-  collar: {{model: m_collar.yaml, pose: {{xyz: [0, 0, 46]}}}}
+  shaft: {model: m_shaft.yaml}
+  bushing: {model: m_bushing.yaml, pose: {xyz: [0, 0, 10]}}
+  collar: {model: m_collar.yaml, pose: {xyz: [0, 0, 46]}}
 mates:
-  - {{peg: shaft.shaft, hole: bushing.bore}}
-  - {{peg: shaft.shaft, hole: collar.bore}}
+  - {peg: shaft.shaft, hole: bushing.bore}
+  - {peg: shaft.shaft, hole: collar.bore}
 """)
     product = load_product(p, "mm")
     pairs = {(pr.first, pr.then) for pr in product.precedence}

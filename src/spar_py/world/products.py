@@ -362,12 +362,12 @@ def precedence(product: Product, unit: str) -> tuple[Precedence, ...]:
         slo, shi = np.minimum(blo, blo - travel * d), np.maximum(bhi, bhi - travel * d)
         if _is_mesh(product.parts[p]):
             # a mesh part's convex hull would fill its bores: its own mesh, stepped
-            mated = {q for mt in product.mates for q in (mt.peg, mt.hole) if p in (mt.peg, mt.hole)}
-            # a part mated with P whose model does not cut its holes (the paper's form: a solid
-            # block) would meet P at the mate itself: left out, as the solids' test leaves it
+            # a hole part P's peg goes into whose model does not cut its holes (the paper's form:
+            # a solid block) would meet P at the mate itself: left out, as the solids' test does
+            uncut = {mt.hole for mt in product.mates if mt.peg == p and not _holes_cut(product.parts[mt.hole])}
             hits = _mesh_sweep(product, p, d, m, unit, [q for q in product.parts
-                                                        if q != p and _boxes_meet(slo, shi, *boxes[q])
-                                                        and (q not in mated or _holes_cut(product.parts[q]))])
+                                                        if q != p and q not in uncut
+                                                        and _boxes_meet(slo, shi, *boxes[q])])
             for q in (q for q in product.parts if q in hits):
                 _blocked(product, p, q, out, lambda: _hit_feature(product, p, q, _swept(
                     _bodies(list(product.parts[p].model.shape), product.parts[p].pose, m), d, travel)))
