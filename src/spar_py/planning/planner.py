@@ -106,8 +106,8 @@ class Step:
     the hand after the step, or None; ``moves`` the parts the step moves (its object and the
     parts mated into it, directly or transitively: a subassembly moves as one), empty for sensing;
     ``clearance`` the least distance (cell unit) between the arm, gripper or held part and
-    anything else at the joints used (at least the collision margin; None where the cell has no collision check), ``closest_pair`` the two bodies at
-    that distance; ``source`` where the step takes an object lying on the table ({object:
+    anything else at the joints used (at least the collision margin; None where the cell has no
+    collision check), ``closest_pair`` the two bodies at that distance; ``source`` where the step takes an object lying on the table ({object:
     position label}: the part picked, the part mated onto) or None.
 
     With motions planned (``--motion``, ``Planner(motion=True)``, a file's ``motion: true``):
