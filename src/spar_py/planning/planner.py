@@ -107,8 +107,9 @@ class Step:
     parts mated into it, directly or transitively: a subassembly moves as one), empty for sensing;
     ``clearance`` the least distance (cell unit) between the arm, gripper or held part and
     anything else at the joints used (at least the collision margin; None where the cell has no
-    collision check), ``closest_pair`` the two bodies at that distance; ``source`` where the step takes an object lying on the table ({object:
-    position label}: the part picked, the part mated onto) or None.
+    collision check), ``closest_pair`` the two bodies at that distance; ``source`` where the
+    step takes an object lying on the table ({object: position label}: the part picked, the
+    part mated onto) or None.
 
     With motions planned (``--motion``, ``Planner(motion=True)``, a file's ``motion: true``):
     ``path`` the free motion into the step (from home or the previous retreat's end),
