@@ -623,10 +623,6 @@ def _arm(world: World, T: np.ndarray, what: str = "", held: tuple[str, np.ndarra
     if held is not None:
         carried = _carried(world.unc, held[0], held[1])
         body |= {held[0], *carried}
-        # the held body's parts touch each other by design (their mates), and what the root may touch
-        # at this step its carried parts may too
-        allow = [*allow, *((f"held:{c}", o) for c in carried for h, o in allow if h == f"held:{held[0]}"),
-                 *((f"held:{a}", f"held:{b}") for a in (held[0], *carried) for b in carried if a != b)]
     parts = {k: o.pose for k, o in world.unc.objects.items() if k not in body}
     got = arm_at(world.cache, T, world.joints, parts=parts, held=held, grasped=grasped, width=width, allow=allow,
                  carried=carried)

@@ -602,8 +602,11 @@ class CollisionScene:
         the hand: one rigid body), bodies "held:<name>" moving with the tool and checked as the
         held part is, except against the gripper (by distance: the fingers may not touch a part
         they do not hold) and against each other (their contacts are the mates'; the caller
-        allows those pairs)."""
+        allows none of them: at() does, and gives each carried part the contacts ``allow`` gives
+        the held part)."""
         held_name = held[0] if held is not None else None
+        if carried and held_name is not None:
+            allow = _body_allow(held_name, list(carried), list(allow))
         if self._obstacle_bodies is None:
             self._obstacle_bodies = Placed(b for o in self.obstacles for b in o.bodies)
         groups: list[Placed] = [self._obstacle_bodies]
@@ -634,6 +637,20 @@ class CollisionScene:
                 raise SparValueError(f"grasped part {grasped!r} is neither in parts nor attached")
         return SceneState(self, world, tool, hand, width, frozenset(frozenset(p) for p in allow),
                           frozenset(attached or ()), _columns(groups))
+
+
+def _body_allow(root: str, carried: list[str], allow: list[tuple[str, str]]) -> list[tuple[str, str]]:
+    """``allow`` for a held body (``root`` in the hand carrying ``carried``): its parts' contacts
+    with each other (their mates') and, for each carried part, the contacts allowed to the root."""
+    mine = f"held:{root}"
+    out = list(allow)
+    for a, b in allow:
+        other = b if a == mine else a if b == mine else None
+        if other is not None:
+            out += [(f"held:{c}", other) for c in carried]
+    names = [mine, *(f"held:{c}" for c in carried)]
+    out += [(x, y) for i, x in enumerate(names) for y in names[i + 1:]]
+    return out
 
 
 def _link_body(s: Any) -> Body:
