@@ -673,7 +673,7 @@ def retention_refusal(unc: ur.WorldState, what: str) -> str | None:
             continue
         angle = math.degrees(math.acos(max(-1.0, min(1.0, -float(d[2]) / n))))
         if angle > LOOSE_MAX_DEG + 1e-6:
-            return f"{what} would turn {child} ({a.retention} in {a.mate}) {angle:.0f} deg from down"
+            return f"{what} would turn {child} ({a.mate}) {angle:.0f} deg from down"
     return None
 
 

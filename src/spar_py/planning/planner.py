@@ -505,6 +505,8 @@ class Planner:
         _motion_reason(d, log.motion_failures)
         plan = _plan(cell.name, d, ans.get("Trace", ""))
         if plan.outcome is Outcome.NO_PLAN:  # name the colliding pairs that stood in the way, and why
+            if run.infeasible:  # steps refused for a reason of their own (stability, retention, support)
+                plan.reason = {**(plan.reason or {}), "infeasible": list(run.infeasible)}
             refusals = log.refusals()
             said = collision_lines(refusals)
             if said:
