@@ -293,3 +293,99 @@ def test_a_loose_pin_is_never_turned_over(tmp_path: Path) -> None:
     why = plan.reason["infeasible"]
     assert any("pickup(block" not in w and "would turn pin_a (loose in block.bore_a) 180 deg from down" in w
                for w in why), why
+
+
+# --------------------------------------------------------------------------- the parts of it
+
+
+def _turn_over_world() -> tuple:
+    """The turn_over cell's world after pin_a is pressed into the block (a fresh cell cache)."""
+    from spar_py.phase2 import instance as phase2
+
+    cell = load_problem(PROBLEMS / "turn_over.yaml")
+    cache = CellCache(cell)
+    steps = [{"id": "action_2", "name": "pickup", "args": ["pin_a", "pin_a_g23"]},
+             {"id": "action_1", "name": "assemble",
+              "args": ["pin_a", "block", [["shaft"], ["bore_a"]], "trans_pin_a", "vec_pin_a"]}]
+    world = phase2.new_world(cache, steps)
+    for s in steps:
+        checks, world, _ = phase2.step(world, s)
+        assert all(c["satisfied"] for c in checks), checks
+    return cell, cache, world
+
+
+def test_carried_hole_composes_its_pose_through_the_mate() -> None:
+    """An insertion into a part mated into another is checked at the composed pose: the parent's
+    error plus the mate's clearance (sound: no draw beats SUP)."""
+    import casadi as ca
+
+    from spar_py.phase2 import uncertainty as ur
+
+    cell, _, world = _turn_over_world()
+    unc = world.unc
+    att = unc.attached["pin_a"]
+    assert att.parent == "block" and att.retention == "fixed" and att.clearance == pytest.approx(0.5)
+    bore = cell.objects["block"].feature_named("bore_b")
+    held = ur.pickup(unc, "pin_b", cell.objects["pin_b"].grasps["pin_b_g23"].T, unc.manipulator_error())
+    peg = cell.objects["pin_b"].feature_named("shaft")
+    Ta = np.eye(4)
+    Ta[2, 3] = -20.0
+    into_block = ur.assemble_constraints(held, "pin_b", "block", Ta, peg, bore)[0]
+    into_pin = ur.assemble_constraints(held, "pin_b", "pin_a", Ta, peg, bore)[0]
+    reg = unc.registry
+    b_block = ur.evaluate(into_block, reg).bound
+    b_pin = ur.evaluate(into_pin, reg).bound
+    assert b_pin > b_block  # the clearance adds to the block's own error
+    names = sorted(reg.box(into_pin.expr))
+    assert any(n.startswith("cx_pin_a") for n in names)
+    f = ca.Function("f", [ca.vertcat(*[reg.symbol(n) for n in names])], [into_pin.expr])
+    lo, hi = (np.array([reg.bounds(n)[i] for n in names]) for i in (0, 1))
+    rng = np.random.default_rng(1)
+    pts = np.vstack([rng.uniform(lo, hi, (3000, len(names))), lo, hi])
+    vals = np.asarray(f.map(len(pts))(pts.T)).ravel()
+    assert vals.max() <= b_pin
+
+
+def test_a_grasp_whose_fingers_meet_a_carried_part_is_refused_naming_it() -> None:
+    from spar_py.world.workspace import arm_at
+
+    cell, cache, world = _turn_over_world()
+    parts = {k: o.pose for k, o in world.unc.objects.items()}
+    g = cell.objects["pin_a"].grasps["pin_a_g23"]
+    # the block "grasped" where pin_a's grasp holds pin_a's head: the fingers close on pin_a
+    got = arm_at(cache, parts["pin_a"] @ g.T, None, parts=parts, grasped="block", width=g.width)
+    assert got.q is None and any("pin_a" in p for p in got.collisions), got.collisions
+
+
+def test_a_body_resting_on_a_carried_part_or_tipping_is_refused() -> None:
+    from spar_py.world.supports import rest_of_body, surfaces_of
+
+    cell, _, world = _turn_over_world()
+    T = np.eye(4)
+    T[:2, 3] = [762, 203]
+    pin = cell.objects["pin_a"]
+    low = np.eye(4)
+    low[:3, :3] = np.diag([1.0, -1.0, -1.0])
+    low[:3, 3] = [762, 203, 10]  # a pin reaching 10 mm below the block's bottom face
+    r = rest_of_body(cell, "block", T, surfaces_of(cell), [("pin_a", pin, low)])
+    assert not r.ok and "pin_a" in r.why
+    beside = T.copy()
+    beside[0, 3] += 100  # a second block mated beside it, over nothing
+    r = rest_of_body(cell, "block", T, surfaces_of(cell), [("other", cell.objects["block"], beside)])
+    assert not r.ok and "tips over" in r.why
+    r = rest_of_body(cell, "block", T, surfaces_of(cell), [("pin_a", pin, world.unc.obj("pin_a").pose)])
+    assert r.ok
+
+
+def test_a_part_resting_on_another_is_not_left_unsupported() -> None:
+    from spar_py.phase2 import instance as phase2
+    from spar_py.phase2 import uncertainty as ur
+
+    cell, cache, world = _turn_over_world()
+    on_top = np.eye(4)
+    on_top[:3, 3] = [762 + 35, 203, 156]  # pin_b standing on its head's face on a rib's top
+    unc = world.unc.with_object(ur.replace(world.unc.obj("pin_b"), pose=on_top))
+    world = ur.replace(world, unc=unc, key=world.key + ("pin_b on the block",))
+    s = {"id": "action_6", "name": "pickup", "args": ["block", "block_g1"]}
+    checks, _, _ = phase2.step(world, s)
+    assert any(not c["satisfied"] and "would leave pin_b unsupported" in c["description"] for c in checks), checks
