@@ -389,3 +389,20 @@ def test_a_part_resting_on_another_is_not_left_unsupported() -> None:
     s = {"id": "action_6", "name": "pickup", "args": ["block", "block_g1"]}
     checks, _, _ = phase2.step(world, s)
     assert any(not c["satisfied"] and "would leave pin_b unsupported" in c["description"] for c in checks), checks
+
+
+def test_motions_and_animation_carry_the_subassembly() -> None:
+    """With motions the turn_over plan exists (the carried pin_a checked along every path), and
+    every animation frame while the block is held shows pin_a where the block carries it."""
+    from spar_py.pictures.animate import frames_of
+
+    plan = Planner(motion=True).plan(PROBLEMS / "turn_over.yaml")
+    assert plan.ok, plan.reason
+    doc = plan.to_json()
+    prod = _product("turn_over")
+    rel = np.linalg.inv(prod["parts"]["block"]["pose"]) @ prod["parts"]["pin_a"]["pose"]
+    frames = frames_of(load_problem(PROBLEMS / "turn_over.yaml"), doc, max_frames=400)
+    carried = [f for f in frames if f.held == "block"]
+    assert carried
+    for f in carried:
+        assert np.allclose(np.asarray(f.poses["pin_a"]), np.asarray(f.poses["block"]) @ rel, atol=1e-6), f.title
