@@ -595,7 +595,10 @@ def _activate(world: World, s: Step) -> World:
         retired = f"{obj}@{world.active[obj]}"
         objs[retired] = replace(objs.pop(obj), name=retired)
         objs[obj] = replace(objs.pop(key), name=obj)
-        world = replace(world, unc=replace(world.unc, objects=objs),
+        names = {obj: retired, key: obj}  # the mates follow their parts
+        attached = {names.get(c, c): replace(a, parent=names.get(a.parent, a.parent))
+                    for c, a in world.unc.attached.items()}
+        world = replace(world, unc=replace(world.unc, objects=objs, attached=attached),
                         active={**world.active, obj: key.split("@", 1)[1]})
     return world
 
