@@ -712,8 +712,13 @@ def _no_arm(what: str, geo: dict[str, Any]) -> str:
     return f"no collision-free IK for {what}: {', '.join(dict.fromkeys(pair_text(p) for p in geo['collisions']))}"
 
 
-def _reach_verdict(action: str, ok: bool, what: str) -> dict[str, Any]:
-    return {"action": action, "constraint": "reachable", "kind": "geometric", "sense": "",
+#: The geometric verdicts of a body's own state (not of the arm's reach): a put-down body at rest,
+#: loose mates kept, no part left unsupported; a no plan names them (planning/run.py).
+STATE_CHECKS = ("stable", "retention", "supported")
+
+
+def _reach_verdict(action: str, ok: bool, what: str, constraint: str = "reachable") -> dict[str, Any]:
+    return {"action": action, "constraint": constraint, "kind": "geometric", "sense": "",
             "bound": None, "threshold": None, "satisfied": ok, "tolerance_reached": True,
             "description": what}
 
@@ -763,11 +768,11 @@ def _pickup(world: World, s: Step, early: bool = False) -> tuple[list[dict], Wor
     on = _stacked_on(world, obj)
     if on is not None:
         checks.append(_reach_verdict(s["id"], False, f"pickup({obj}) would leave {on} unsupported: it rests on "
-                                     f"{obj}'s body, not mated into it"))
+                                     f"{obj}'s body, not mated into it", "supported"))
     unc = ur.pickup(world.unc, obj, g.T, manip, world.cache.memo)
     lost = retention_refusal(unc, f"pickup({obj})")
     if lost is not None:
-        checks.append(_reach_verdict(s["id"], False, lost))
+        checks.append(_reach_verdict(s["id"], False, lost, "retention"))
     w = replace(world, refused=refused, unc=unc,
                 grasps={**world.grasps, obj: label},
                 joints=q if q is not None else world.joints, checked=_checked(world, cs, checks),
@@ -793,10 +798,10 @@ def _putdown(world: World, s: Step, early: bool = False) -> tuple[list[dict], Wo
     geo["placement"] = place.as_dict()
     checks = [] if q is not None else [_reach_verdict(s["id"], False, _no_arm(what, geo))]
     if on is not None and not on.ok:
-        checks.append(_reach_verdict(s["id"], False, f"{what} leaves {obj} unstable: it {on.why}"))
+        checks.append(_reach_verdict(s["id"], False, f"{what} leaves {obj} unstable: it {on.why}", "stable"))
     lost = retention_refusal(unc, what)
     if lost is not None:
-        checks.append(_reach_verdict(s["id"], False, lost))
+        checks.append(_reach_verdict(s["id"], False, lost, "retention"))
     grasps = {k: v for k, v in world.grasps.items() if k != obj}
     w = replace(world, refused=refused, unc=unc, grasps=grasps, joints=q if q is not None else world.joints)
     return checks, w, geo
@@ -833,7 +838,7 @@ def _assemble(world: World, s: Step, early: bool = False) -> tuple[list[dict], W
     lost = retention_refusal(unc, what) if cell.product is not None else retention_refusal(
         replace(unc, attached={k: a for k, a in unc.attached.items() if k != peg}), what)
     if lost is not None:
-        checks.append(_reach_verdict(s["id"], False, lost))
+        checks.append(_reach_verdict(s["id"], False, lost, "retention"))
     w = replace(world, refused=refused, unc=unc, grasps=grasps,
                 joints=q if q is not None else world.joints, checked=_checked(world, cs, checks),
                 complete=sum(c["kind"] == "uncertainty" for c in checks) == len(cs))

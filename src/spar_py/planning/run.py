@@ -53,8 +53,8 @@ class PlanRun:
 
     def __init__(self, cache: CellCache, options: RunOptions | None = None) -> None:
         self.world = WorldRun(cache, options)
-        #: Why the instances that could not be executed stopped (the failed geometric verdicts'
-        #: descriptions other than a missing joint solution, which the log's refusals say), each once.
+        #: Why the instances that could not be executed stopped where a body's own state refused a
+        #: step (phase2.STATE_CHECKS: unstable, a loose part turned, a part left unsupported), each once.
         self.infeasible: list[str] = []
 
     @property
@@ -82,8 +82,7 @@ class PlanRun:
         if ev.status == "infeasible" and ev.steps:
             for v in ev.steps[-1]["verdicts"]:
                 why = v.get("description") or ""
-                if (v.get("kind") == "geometric" and not v.get("satisfied") and why not in self.infeasible
-                        and not why.startswith(("no joint solution", "no collision-free IK"))):
+                if v.get("constraint") in phase2.STATE_CHECKS and not v.get("satisfied") and why not in self.infeasible:
                     self.infeasible.append(why)
         out: dict[str, Any] = {"status": ev.status, "at": ev.at,
                                "steps": [{"id": r["id"], "verdicts": r["verdicts"]} for r in ev.steps]}
