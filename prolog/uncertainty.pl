@@ -462,8 +462,9 @@ print_step(geo(Problem, Token), I, Id, A) :-
     step_id_text(Id, T),
     step_kind(Id, A, Kind, _),
     (   Kind == manipulation -> Mark = "" ; format(string(Mark), "  [~w]", [Kind]) ),
-    format("  ~w. ~w: ~q~s~n", [I, T, A, Mark]),
     py_bridge(step_geometry(Problem, Token, T), G),
+    moves_text(G, Moves),
+    format("  ~w. ~w: ~q~s~s~n", [I, T, A, Mark, Moves]),
     (   get_dict(joints_deg, G, Q), is_list(Q)
     ->  (   get_dict(ik_solver, G, S), S \== @(none)
         ->  format("       joints (deg, ~w IK): ~w~n", [S, Q])
@@ -479,6 +480,15 @@ print_step(geo(Problem, Token), I, Id, A) :-
         format("       placement: x=~w y=~w z=~w yaw=~w deg (~w)~w~n",
                [P.x, P.y, P.z, P.yaw_deg, P.pose, Where])
     ;   true
+    ).
+
+%   moves_text(+Geometry, -Text): "  moves block + pin_a" when the step moves
+%   a subassembly (more than one part), else "".
+moves_text(G, Text) :-
+    (   get_dict(moves, G, Parts), is_list(Parts), Parts = [_, _|_]
+    ->  atomic_list_concat(Parts, ' + ', Joined),
+        format(string(Text), "  moves ~w", [Joined])
+    ;   Text = ""
     ).
 
 print_verdict(Id0, C) :-

@@ -11,7 +11,8 @@ hulls and the table half-space. A URDF arm (a problem's ``robot: {urdf: ...}``) 
 yourdfpy instead: its own FK places each link, and each ``<collision>`` element (cylinder,
 sphere, box; a mesh as the convex hull of its vertices, read with trimesh) is placed from the
 URDF's origins, with no spar_py conversion to DH in between. From the planner only the plan JSON is read (each step's
-``joints_deg``, ``tool_pose``, ``poses``, ``held``, ``args``), and from the KB loader only grasp
+``joints_deg``, ``tool_pose``, ``poses``, ``held``, ``moves``: a subassembly's parts go with the tool,
+``args``), and from the KB loader only grasp
 widths (data, for the fingers' opening).
 
 How a distance is bounded (a certificate, not a guess): the surface of each moving body (link,
@@ -692,12 +693,14 @@ def check_step(geo: CellGeo, cell: Any, step: dict, q_deg: np.ndarray | None = N
         width = grasp_width_mm(cell, geo, hand, Tp, Tt)
     moving: list[Body] = [b.moved(F[b.frame], b.frame) for b in arm.links if b.frame >= 1]
     moving += [b.moved(F[7], 7) for b in arm.gripper(width)]
-    if held is not None:  # moves with the tool: T_world_part = T_tool(q) T_tool_part
-        T_tool_part = inv(arm.frames(q0[None])[0, 7]) @ poses[held]
-        moving += [b.moved(F[7] @ T_tool_part, 7, f"held:{held}") for b in geo.parts[held.split("@", 1)[0]]]
+    # a subassembly in the hand (issue 33): the parts the step moves with the held part go with the tool
+    body = [held, *(c for c in (step.get("moves") or [])[1:] if c != held)] if held is not None else []
+    for part in body:  # moves with the tool: T_world_part = T_tool(q) T_tool_part
+        T_tool_part = inv(arm.frames(q0[None])[0, 7]) @ poses[part]
+        moving += [b.moved(F[7] @ T_tool_part, 7, f"held:{part}") for b in geo.parts[part.split("@", 1)[0]]]
     world: list[Body] = [table_body(geo.table)] + list(geo.obstacles)
     for key, P in poses.items():
-        if key != held:
+        if key not in body:
             world += [b.moved(P, -1, key) for b in geo.parts[key.split("@", 1)[0]]]
     gripper = {"palm", "finger_l", "finger_r"}
     skip = set(arm.allow)
@@ -708,7 +711,7 @@ def check_step(geo: CellGeo, cell: Any, step: dict, q_deg: np.ndarray | None = N
                 continue
             if m.name in gripper and w.name == hand:
                 continue  # the grasp's contact (a pickup's or squeeze's part on the table)
-            if held is not None and m.name == f"held:{held}":
+            if held is not None and m.name in {f"held:{p}" for p in body}:
                 if step["name"] == "putdown" and w.name == "table":
                     continue
                 if step["name"] == "putdown" and w.name == (step.get("placement") or {}).get("on"):
@@ -730,7 +733,11 @@ def check_step(geo: CellGeo, cell: Any, step: dict, q_deg: np.ndarray | None = N
             if frozenset((m.name, o.name)) in skip:
                 continue
             if m.frame == 7 and o.frame == 7:
-                continue  # the gripper and the part in it: the grasp's contact
+                names = {m.name, o.name}
+                if not (names & gripper and names - gripper - {f"held:{held}"}):
+                    continue  # the gripper and the part in it (the grasp's contact), the body's parts (their mates)
+                bounds.append(pair_bound(m, o, geo.margin))  # the fingers against a part the body carries
+                continue
             tool, link = (m, o) if m.frame == 7 else (o, m)
             if tool.frame == 7:
                 if link.frame > (5 if tool.name in gripper else 6):

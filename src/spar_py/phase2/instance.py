@@ -47,11 +47,11 @@ from spar_py.phase2 import uncertainty as ur
 from spar_py.core.errors import SparValueError
 from spar_py.core.geometry import same_stable_pose
 from spar_py.core.model import Bounds, Cell, Grasp, MatingFeature
-from spar_py.core.units import ANGLE_UNITS, LENGTH_UNITS
+from spar_py.core.units import ANGLE_UNITS, LENGTH_UNITS, from_mm
 from spar_py.world.arcs import reachable_pairs
 from spar_py.world.motion_options import MotionFailure, MotionOptions
 from spar_py.world.run import CellCache
-from spar_py.world.supports import rest_of, surfaces_of
+from spar_py.world.supports import REST_TOL_MM, part_surface, rest_of, rest_of_body, surfaces_of
 from spar_py.world.workspace import arm_at, pair_text
 from spar_py.phase2.supinf import cached_bounds
 from spar_py.phase2.symbolic import Registry, is_symbolic, snap
@@ -358,9 +358,11 @@ def step(world: World, s: Step, early: bool = False) -> tuple[list[dict[str, Any
                         None if place is None else (place.pose, place.T.tobytes())),)
 
     def run() -> tuple[list[dict[str, Any]], World, dict[str, Any], bool]:
-        checks, after, geo = handler(replace(_activate(world, s), refused=()), s, early)
+        before = replace(_activate(world, s), refused=())
+        checks, after, geo = handler(before, s, early)
         if s["id"] in world.sources:
             geo["source"] = dict(world.sources[s["id"]])
+        geo["moves"] = moves(before, s)
         return checks, replace(after, key=key), geo, not (early and not after.complete)
 
     table = world.cache.table("phase2.steps", MEMO_LIMIT)
@@ -370,6 +372,15 @@ def step(world: World, s: Step, early: bool = False) -> tuple[list[dict[str, Any
     checks, after, geo, _ = hit
     # a world from the memo may come from another instance: keep this instance's plan data
     return checks, replace(after, placements=world.placements, sources=world.sources, complete=True), geo
+
+
+def moves(world: World, s: Step) -> list[str]:
+    """The parts step ``s`` moves in ``world`` (the world before it): the body of its object (the
+    object, then every part mated into it, directly or transitively); none for a sensing step."""
+    if s["name"] not in ("pickup", "putdown", "assemble", "squeeze"):
+        return []
+    obj = str(s["args"][0])
+    return world.unc.body(obj) if obj in world.unc.objects else [obj]
 
 
 def poses(world: World, seen: dict[int, tuple[ur.ObjectState, list[list[float]]]] | None = None
@@ -584,7 +595,10 @@ def _activate(world: World, s: Step) -> World:
         retired = f"{obj}@{world.active[obj]}"
         objs[retired] = replace(objs.pop(obj), name=retired)
         objs[obj] = replace(objs.pop(key), name=obj)
-        world = replace(world, unc=replace(world.unc, objects=objs),
+        names = {obj: retired, key: obj}  # the mates follow their parts
+        attached = {names.get(c, c): replace(a, parent=names.get(a.parent, a.parent))
+                    for c, a in world.unc.attached.items()}
+        world = replace(world, unc=replace(world.unc, objects=objs, attached=attached),
                         active={**world.active, obj: key.split("@", 1)[1]})
     return world
 
@@ -607,8 +621,14 @@ def _arm(world: World, T: np.ndarray, what: str = "", held: tuple[str, np.ndarra
     solution, the chosen one's clearance (cell unit) and closest pair; without a clear solution
     ``collisions`` the pairs) and the refusal of ``what`` with those pairs (empty if none)."""
     cell = world.cell
-    parts = {k: o.pose for k, o in world.unc.objects.items() if k != world.unc.holding}
-    got = arm_at(world.cache, T, world.joints, parts=parts, held=held, grasped=grasped, width=width, allow=allow)
+    body = set(_held_body(world.unc))
+    carried = None
+    if held is not None:
+        carried = _carried(world.unc, held[0], held[1])
+        body |= {held[0], *carried}
+    parts = {k: o.pose for k, o in world.unc.objects.items() if k not in body}
+    got = arm_at(world.cache, T, world.joints, parts=parts, held=held, grasped=grasped, width=width, allow=allow,
+                 carried=carried)
     geo: dict[str, Any] = {}
     if got.clearance is not None:
         geo["clearance"] = round(got.clearance, 6)
@@ -625,6 +645,66 @@ def _arm(world: World, T: np.ndarray, what: str = "", held: tuple[str, np.ndarra
     return q, geo, refused
 
 
+def _held_body(unc: ur.WorldState) -> list[str]:
+    """The parts of the body in the hand (its root first), none if the hand is empty."""
+    return [] if unc.holding is None else unc.body(unc.holding)
+
+
+def _carried(unc: ur.WorldState, root: str, T_tool_root: np.ndarray) -> dict[str, np.ndarray]:
+    """The parts ``root`` carries, each at its pose in the tool frame (T_tool_root times its pose
+    relative to the root, from the parts' ideal poses), for the collision check of the held body."""
+    R = unc.obj(root).pose
+    inv_R = np.linalg.inv(R)
+    return {c: np.asarray(T_tool_root, float) @ inv_R @ unc.obj(c).pose for c in unc.body(root)[1:]}
+
+
+#: A loose mate stays while its insertion direction is within this angle of world down (deg).
+LOOSE_MAX_DEG = 30.0
+
+
+def retention_refusal(unc: ur.WorldState, what: str) -> str | None:
+    """Why the state ``unc`` (after step ``what``) loses a part, or None: the first loose mate
+    whose insertion direction (the child's way into its parent, the parent's frame, turned by the
+    parent's ideal pose into the world) is more than LOOSE_MAX_DEG from world down: ``pickup(block)
+    would turn pin_b (loose in block.bore_b) 90 deg from down``."""
+    for child, a in unc.attached.items():
+        if a.retention != "loose" or a.direction is None:
+            continue
+        d = unc.obj(a.parent).pose[:3, :3] @ a.direction
+        n = float(np.linalg.norm(d))
+        if not n > 0:
+            continue
+        angle = math.degrees(math.acos(max(-1.0, min(1.0, -float(d[2]) / n))))
+        if angle > LOOSE_MAX_DEG + 1e-6:
+            return f"{what} would turn {child} ({a.mate}) {angle:.0f} deg from down"
+    return None
+
+
+def _stacked_on(world: World, obj: str) -> str | None:
+    """A part resting on ``obj``'s body (on its top, not mated into it), or None: picking ``obj`` up
+    would leave it unsupported. A part rests on it when its lowest point is at the top's height
+    (world.supports' tolerance) over the top's polygon (world.supports.rest_of)."""
+    cell, unc = world.cell, world.unc
+    body = unc.body(obj)
+    tol = from_mm(cell.unit, REST_TOL_MM)
+    tops = [part_surface(k, cell.objects[_model(k)], unc.obj(k).pose, tol) for k in body
+            if cell.objects[_model(k)].shape]
+    if not tops:
+        return None
+    for k, o in unc.objects.items():
+        if k in body or o.where != ur.TABLE or k in unc.attached:
+            continue
+        r = rest_of(cell, _model(k), o.pose, [*surfaces_of(cell), *tops])
+        if r is not None and r.surface is not None and r.surface.name in body:
+            return k
+    return None
+
+
+def _model(key: str) -> str:
+    """The object (model) name of a world key (``obj`` or ``obj@position``)."""
+    return key.split("@", 1)[0]
+
+
 def _no_arm(what: str, geo: dict[str, Any]) -> str:
     """Why no joint vector was chosen for ``what``: none at all, or none clear of the world."""
     if "collisions" not in geo:
@@ -632,8 +712,13 @@ def _no_arm(what: str, geo: dict[str, Any]) -> str:
     return f"no collision-free IK for {what}: {', '.join(dict.fromkeys(pair_text(p) for p in geo['collisions']))}"
 
 
-def _reach_verdict(action: str, ok: bool, what: str) -> dict[str, Any]:
-    return {"action": action, "constraint": "reachable", "kind": "geometric", "sense": "",
+#: The geometric verdicts of a body's own state (not of the arm's reach): a put-down body at rest,
+#: loose mates kept, no part left unsupported; a no plan names them (planning/run.py).
+STATE_CHECKS = ("stable", "retention", "supported")
+
+
+def _reach_verdict(action: str, ok: bool, what: str, constraint: str = "reachable") -> dict[str, Any]:
+    return {"action": action, "constraint": constraint, "kind": "geometric", "sense": "",
             "bound": None, "threshold": None, "satisfied": ok, "tolerance_reached": True,
             "description": what}
 
@@ -680,7 +765,15 @@ def _pickup(world: World, s: Step, early: bool = False) -> tuple[list[dict], Wor
     q, geo, refused = _arm(world, o.pose @ g.T, what, grasped=obj, width=g.width)
     if q is None:
         checks.append(_reach_verdict(s["id"], False, _no_arm(what, geo)))
-    w = replace(world, refused=refused, unc=ur.pickup(world.unc, obj, g.T, manip, world.cache.memo),
+    on = _stacked_on(world, obj)
+    if on is not None:
+        checks.append(_reach_verdict(s["id"], False, f"pickup({obj}) would leave {on} unsupported: it rests on "
+                                     f"{obj}'s body, not mated into it", "supported"))
+    unc = ur.pickup(world.unc, obj, g.T, manip, world.cache.memo)
+    lost = retention_refusal(unc, f"pickup({obj})")
+    if lost is not None:
+        checks.append(_reach_verdict(s["id"], False, lost, "retention"))
+    w = replace(world, refused=refused, unc=unc,
                 grasps={**world.grasps, obj: label},
                 joints=q if q is not None else world.joints, checked=_checked(world, cs, checks),
                 complete=sum(c["kind"] == "uncertainty" for c in checks) == len(cs))
@@ -696,17 +789,21 @@ def _putdown(world: World, s: Step, early: bool = False) -> tuple[list[dict], Wo
         return checks, world, {"tool_pose": None, "joints_deg": None, "placement": None}
     g = _grasp(world.cell, obj, world.grasps[obj])
     what = f"putdown({obj})"
-    on = rest_of(world.cell, obj, place.T, surfaces_of(world.cell))
+    unc = ur.putdown(world.unc, obj, place.T, world.cache.memo)
+    carried = [(c, world.cell.objects[_model(c)], unc.obj(c).pose) for c in unc.body(obj)[1:]]
+    on = rest_of_body(world.cell, obj, place.T, surfaces_of(world.cell), carried)
     surface = on.surface.name if on is not None and on.surface is not None else "table"  # the step's own contact
     q, geo, refused = _arm(world, place.T @ g.T, what, held=(obj, np.linalg.inv(g.T)), width=g.width,
                            allow=[(f"held:{obj}", n) for n in dict.fromkeys(("table", surface))])
     geo["placement"] = place.as_dict()
     checks = [] if q is not None else [_reach_verdict(s["id"], False, _no_arm(what, geo))]
     if on is not None and not on.ok:
-        checks.append(_reach_verdict(s["id"], False, f"{what} leaves {obj} unstable: it {on.why}"))
+        checks.append(_reach_verdict(s["id"], False, f"{what} leaves {obj} unstable: it {on.why}", "stable"))
+    lost = retention_refusal(unc, what)
+    if lost is not None:
+        checks.append(_reach_verdict(s["id"], False, lost, "retention"))
     grasps = {k: v for k, v in world.grasps.items() if k != obj}
-    w = replace(world, refused=refused, unc=ur.putdown(world.unc, obj, place.T, world.cache.memo), grasps=grasps,
-                joints=q if q is not None else world.joints)
+    w = replace(world, refused=refused, unc=unc, grasps=grasps, joints=q if q is not None else world.joints)
     return checks, w, geo
 
 
@@ -731,10 +828,41 @@ def _assemble(world: World, s: Step, early: bool = False) -> tuple[list[dict], W
     if q is None:
         checks.append(_reach_verdict(s["id"], False, _no_arm(what, geo)))
     grasps = {k: v for k, v in world.grasps.items() if k != peg}
-    w = replace(world, refused=refused, unc=ur.assemble(world.unc, peg, hole, Ta), grasps=grasps,
+    va_vec = np.asarray(cell.vectors[va], float) if isinstance(va, str) and va in cell.vectors else None
+    margin = 0.0 if fp is None else max(0.0, float(fh.radius) - float(fp.radius))
+    retention, mate = _retention(cell, peg, hole, fh)
+    unc = ur.assemble(world.unc, peg, hole, Ta, retention=retention, direction=va_vec, clearance=margin,
+                      axis=None if fp is None else va_vec, mate=mate)
+    # a non-product cell's goal asks for this mate as the paper's cells make it (the insertion itself
+    # is not held to gravity); once made, its part is loose like any other when its body moves
+    lost = retention_refusal(unc, what) if cell.product is not None else retention_refusal(
+        replace(unc, attached={k: a for k, a in unc.attached.items() if k != peg}), what)
+    if lost is not None:
+        checks.append(_reach_verdict(s["id"], False, lost, "retention"))
+    w = replace(world, refused=refused, unc=unc, grasps=grasps,
                 joints=q if q is not None else world.joints, checked=_checked(world, cs, checks),
                 complete=sum(c["kind"] == "uncertainty" for c in checks) == len(cs))
     return checks, w, geo
+
+
+def _retention(cell: Cell, peg: str, hole: str, fh: MatingFeature | None) -> tuple[str, str]:
+    """(retention, the mate as messages name it) of the insertion of ``peg`` into ``hole``: a product
+    part's goal is ``fixed`` if a mate it makes is fixed, else loose (seats are held by gravity);
+    outside a product loose. Named ``loose in block.bore_b`` by the mate into ``hole`` (else
+    the hole feature, else the part)."""
+    where = hole if fh is None or not fh.name else f"{hole}.{fh.name}"
+    if cell.product is None or cell.product.goal_of(peg) is None:
+        return "loose", f"loose in {where}"
+    goal = cell.product.goal_of(peg)
+    mates = [m for m in cell.product.mates if m.name in goal.mates]
+    retention = "fixed" if any(m.retention == "fixed" for m in mates) else "loose"
+    into = next((m for m in mates if (m.peg, m.hole) == (peg, hole)), None)
+    if into is not None:
+        return retention, f"{retention} in {into.hole}.{into.hole_feature}"
+    onto = next((m for m in mates if (m.peg, m.hole) == (hole, peg)), None)
+    if onto is not None:
+        return retention, f"{retention} on {onto.peg}.{onto.peg_feature}"
+    return retention, f"{retention} on {hole}"
 
 
 def _product_mate(cell: Cell, held: str, fixed: str, faces: Any, Ta: np.ndarray

@@ -51,6 +51,7 @@ from spar_py.phase2.supinf import cached_bounds
 from spar_py.phase2.symbolic import Matrix, Registry, Scalar, apply, as_sx, compose, inv, rotz, snap, trans
 
 __all__ = [
+    "Attachment",
     "Constraint",
     "ErrorTm",
     "ObjectState",
@@ -183,21 +184,101 @@ class ObjectState:
 
 
 @dataclass(frozen=True)
+class Attachment:
+    """A part mated into another: ``parent`` the part it went into (or onto), ``rel`` its pose
+    relative to the parent, T_parent_child (4x4: the assemble's T_a), ``retention`` 'loose' (held
+    by gravity) or 'fixed', ``direction`` the insertion direction in the parent's frame (unit: the
+    way the child moved into the parent, V_a), ``clearance`` the mate's radial clearance R_h - R_p
+    (cell unit, >= 0; the child's pose error across the axis relative to the parent, bounded by
+    it), ``axis`` the mate's axis in the parent's frame (unit; None: no insertion, a seat) and
+    ``mate`` how messages name it (``pin_b in block.bore_b``)."""
+
+    parent: str
+    rel: np.ndarray
+    retention: str = "loose"
+    direction: np.ndarray | None = None
+    clearance: float = 0.0
+    axis: np.ndarray | None = None
+    mate: str = ""
+    #: The clearance's error variables (across the axis, parent frame), fresh per assemble.
+    offsets: tuple = field(default=(), compare=False, repr=False)
+
+
+@dataclass(frozen=True)
 class WorldState:
     """The uncertainty part of the world description: every object's :class:`ObjectState`.
 
     ``registry`` is the run's variable store (shared by all copies: bounds never change);
-    ``manipulator`` the bounds of a fresh T_dM (Table 2: dxgr ... thetagr).
+    ``manipulator`` the bounds of a fresh T_dM (Table 2: dxgr ... thetagr); ``attached`` the
+    mates made so far, child -> :class:`Attachment`: mated parts are one rigid body, whose root
+    (the part mated into nothing) is what the hand picks up and puts down, and every part of it
+    moves with the root (its ideal pose is the root's times the attachments' ``rel`` down the
+    tree).
     """
 
     registry: Registry
     manipulator: Bounds
     objects: Mapping[str, ObjectState] = field(default_factory=dict)
+    attached: Mapping[str, Attachment] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "objects", MappingProxyType(dict(self.objects)))
+        object.__setattr__(self, "attached", MappingProxyType(dict(self.attached)))
         # asked at every step of a run: found once per state, not by a scan per question
         object.__setattr__(self, "_holding", next((n for n, o in self.objects.items() if o.where == HAND), None))
+
+    def root(self, name: str) -> str:
+        """The root of the body part ``name`` belongs to (itself when mated into nothing)."""
+        while name in self.attached:
+            name = self.attached[name].parent
+        return name
+
+    def children(self, name: str) -> list[str]:
+        """The parts mated directly into ``name``, in the order they were mated."""
+        return [c for c, a in self.attached.items() if a.parent == name]
+
+    def body(self, name: str) -> list[str]:
+        """Every part of the rigid body whose root is ``name``: the root first, then the parts
+        mated into it (directly or transitively), depth first in the order they were mated."""
+        out = [name]
+        for c in self.children(name):
+            out += self.body(c)
+        return out
+
+    def carried(self, name: str) -> list[str]:
+        """The parts that move with ``name``'s body other than its root (``body`` less the root)."""
+        return self.body(self.root(name))[1:]
+
+    def moved(self, root: str, pose: np.ndarray) -> dict[str, ObjectState]:
+        """The states of ``root``'s body with the root at ideal pose ``pose`` (4x4 world): each
+        carried part at its parent's pose times its relative pose (their errors unchanged)."""
+        out = {root: replace(self.obj(root), pose=pose)}
+        for c in self.body(root)[1:]:
+            a = self.attached[c]
+            out[c] = replace(self.obj(c), pose=snap(out[a.parent].pose @ a.rel))
+        return out
+
+    def possible_rel(self, name: str) -> Matrix:
+        """``name``'s possible pose with its ideal translation taken out (ObjectState.possible_rel),
+        composed through the mates for a carried part: its parent's possible pose times
+        ``trans(c)`` (the mate's clearance, across the mate's axis in the parent's frame, its own
+        bounded error variables) times the relative pose T_a. Relative to the ideal translation
+        t_X: ``trans(t_P - t_X) possible_rel(P) trans(c) T_a``."""
+        a = self.attached.get(name)
+        if a is None:
+            return self.obj(name).possible_rel()
+        P = self.possible_rel(a.parent)
+        shift = trans(*(self.obj(a.parent).pose[:3, 3] - self.obj(name).pose[:3, 3]))
+        clr = _clearance_offset(a)
+        return compose(shift, P, clr, a.rel)
+
+    def errors_of(self, name: str) -> tuple[ErrorTm, ...]:
+        """The error transforms :meth:`possible_rel` of ``name`` is built from (the root's, each
+        mate's clearance variables as a transform's), for the structure memo."""
+        a = self.attached.get(name)
+        if a is None:
+            return (self.obj(name).error,)
+        return self.errors_of(a.parent) + ((_clearance_error(a),) if a.offsets else ())
 
     def obj(self, name: str) -> ObjectState:
         """The state of object ``name`` (SparValueError if unknown)."""
@@ -241,6 +322,22 @@ def initial_world(cell: Cell, registry: Registry | None = None,
         objs[key] = ObjectState(key, TABLE, _pose(pos.T, pos.name),
                                 table_error(reg, key, cell.object_bounds[pos.obj]))
     return WorldState(reg, cell.manipulator_bounds, objs)
+
+
+def _clearance_offset(a: Attachment) -> Matrix:
+    """trans(c) of attachment ``a``'s clearance variables (parent frame), identity without them."""
+    if not a.offsets:
+        return np.eye(4)
+    u, v = _across(np.asarray(a.axis, float))
+    c = [u[i] * a.offsets[0] + v[i] * a.offsets[1] for i in range(3)]
+    return trans(*c)
+
+
+def _clearance_error(a: Attachment) -> ErrorTm:
+    """Attachment ``a``'s clearance variables as an error transform (only its ``shape`` and
+    ``vars`` are read: the structure memo's key)."""
+    cx, cy = a.offsets
+    return ErrorTm(0.0, cx, cy, 0.0, shape=("clearance", np.asarray(a.axis, float).tobytes()), vars=(cx, cy))
 
 
 def _pose(T: Any, what: str) -> np.ndarray:
@@ -328,7 +425,9 @@ def putdown(state: WorldState, obj: str, pose: np.ndarray, memo: Memo | None = N
     step = ("putdown", R.tobytes())
     (theta, dx, dy, dz), _ = _built(state.registry, memo, ("effect", *step), (o.error,), build, key_out=False)
     err = ErrorTm(theta=theta, dx=dx, dy=dy, dz=dz, **_derived(step, o.error))
-    return state.with_object(ObjectState(obj, TABLE, T, err, None))
+    body = state.moved(obj, T)
+    body[obj] = ObjectState(obj, TABLE, T, err, None)
+    return replace(state, objects={**state.objects, **body})
 
 
 def squeeze(state: WorldState, obj: str, grasp_T: np.ndarray, manip: ErrorTm, memo: Memo | None = None) -> WorldState:
@@ -348,16 +447,36 @@ def dense_range_scan(state: WorldState, obj: str, leaves: Bounds) -> WorldState:
     return state.with_object(replace(o, error=table_error(state.registry, obj, leaves)))
 
 
-def assemble(state: WorldState, peg: str, hole: str, T_a: np.ndarray) -> WorldState:
+def assemble(state: WorldState, peg: str, hole: str, T_a: np.ndarray, *, retention: str = "loose",
+             direction: np.ndarray | None = None, clearance: float = 0.0, axis: np.ndarray | None = None,
+             mate: str = "") -> WorldState:
     """The world after ``assemble(peg, hole, ..., T_a, ...)``: uncertainty unchanged (Sec. 3.2.3).
 
-    The peg leaves the hand; its ideal pose becomes ``T_H T_a`` and it keeps its
-    tool-frame error and grasp (its possible pose is Eq. 4 at the assembled pose).
+    The peg (the held part, with every part it carries) leaves the hand and is mated into
+    ``hole`` (resting, or itself carried by a resting body): its ideal pose becomes ``T_H T_a``,
+    its carried parts move with it, it keeps its tool-frame error and grasp (Eq. 4 at the
+    assembled pose) and the world records the :class:`Attachment` (``retention``,
+    ``direction``, ``clearance``, ``axis``, ``mate`` as there); with a clearance and an axis the
+    mate gets two fresh error variables across the axis, bounded by the clearance
+    (:meth:`WorldState.possible_rel`).
     """
-    p = _in_hand(state, peg, "assemble")
-    h = _on_table(state, hole, "assemble")
+    _in_hand(state, peg, "assemble")
+    h = state.obj(hole)
+    if h.where == HAND or state.objects[state.root(hole)].where != TABLE:
+        raise SparValueError(f"assemble({peg}, {hole}): {hole} must rest (or be mated into a resting part), "
+                             f"it is {h.where}")
     Ta = _pose(T_a, f"assemble({peg}, {hole}) T_a")
-    return state.with_object(replace(p, where=ASSEMBLED, pose=snap(h.pose @ Ta)))
+    offsets: tuple = ()
+    if axis is not None and clearance > 0:
+        hint = _hint(peg)
+        offsets = (state.registry.new(f"cx_{hint}", -clearance, clearance),
+                   state.registry.new(f"cy_{hint}", -clearance, clearance))
+    att = Attachment(hole, Ta, retention, None if direction is None else np.asarray(direction, float),
+                     float(clearance), None if axis is None else np.asarray(axis, float), mate, offsets)
+    placed = replace(state, attached={**state.attached, peg: att})
+    body = placed.moved(peg, snap(h.pose @ Ta))
+    body[peg] = replace(body[peg], where=ASSEMBLED)
+    return replace(placed, objects={**state.objects, **body})
 
 
 # ------------------------------------------------------------------ preconditions (Sec. 3.2.2)
@@ -465,7 +584,10 @@ def assemble_constraints(state: WorldState, peg: str, hole: str, T_a: np.ndarray
     (:func:`_built`).
     """
     p = _in_hand(state, peg, "assemble")
-    h = _on_table(state, hole, "assemble")
+    h = state.obj(hole)
+    if h.where == HAND or state.objects[state.root(hole)].where != TABLE:
+        raise SparValueError(f"assemble({peg}, {hole}): {hole} must rest (or be mated into a resting part), "
+                             f"it is {h.where}")
     if peg_feature.kind != "peg" or hole_feature.kind != "hole":
         raise SparValueError(f"assemble({peg}, {hole}): needs a peg feature and a hole feature, got "
                              f"{peg_feature.kind} and {hole_feature.kind}")
@@ -483,16 +605,17 @@ def assemble_constraints(state: WorldState, peg: str, hole: str, T_a: np.ndarray
             chain.append(motion.matrix())
         chain += [p.error.matrix(), inv(T_G)]
         C_p = apply(compose(*chain), F_p)
-        C_t = apply(h.possible_rel(), seated)
+        C_t = apply(state.possible_rel(hole), seated)  # composed through the mates if hole is carried
         d3 = C_t - C_p
         d = ca.vertcat(*[sum((float(n[j]) * d3[j] for j in range(3) if n[j] != 0.0), ca.SX(0.0)) for n in N])
         sup = _sup_sumsqr(d, state.registry)
         return [ca.cse(ca.sumsqr(d))] + ([] if sup is None else [sup])
 
-    errors = (p.error, h.error) + (() if motion is None else (motion,))
+    errors = (p.error, *state.errors_of(hole)) + (() if motion is None else (motion,))
     # _sup_sumsqr's closed form holds the variables' bounds: they are part of the structure
     bounds = tuple(state.registry.bounds(v.name()) for e in errors for v in e.vars)
-    key = ("assemble", h.where, _rotation_only(h.pose).tobytes(), Ta.tobytes(), T_G.tobytes(),
+    chain = _chain_key(state, hole)
+    key = ("assemble", h.where, _rotation_only(h.pose).tobytes(), *chain, Ta.tobytes(), T_G.tobytes(),
            F_p.tobytes(), N.tobytes(), motion is not None, bounds)
     exprs, ckey = _built(state.registry, memo, key, errors, build)
     d2 = exprs[0]
@@ -503,6 +626,18 @@ def assemble_constraints(state: WorldState, peg: str, hole: str, T_a: np.ndarray
     return [Constraint(action, "centres", d2, "<", threshold,
                        f"|d|^2 < (R_h - R_p)^2: {peg}'s tip ({peg_feature.name}) within {margin:g} of the axis "
                        f"of {hole}'s {hole_feature.name}, across it{note}", bounding, key=ckey, power=2)]
+
+
+def _chain_key(state: WorldState, name: str) -> tuple:
+    """The numbers :meth:`WorldState.possible_rel` of ``name`` uses beyond its own pose's rotation
+    (empty for a part mated into nothing): each mate's relative pose and the offsets between
+    the parts' ideal positions, down from the root."""
+    a = state.attached.get(name)
+    if a is None:
+        return ()
+    shift = state.obj(a.parent).pose[:3, 3] - state.obj(name).pose[:3, 3]
+    return (*_chain_key(state, a.parent), _rotation_only(state.obj(a.parent).pose).tobytes(),
+            np.asarray(a.rel, float).tobytes(), shift.tobytes(), bool(a.offsets))
 
 
 def _hole_direction(peg: str, hole: str, feature: MatingFeature, axis: np.ndarray | None) -> np.ndarray:

@@ -123,24 +123,26 @@ def frames_of(cell: Cell, plan: Any, max_frames: int = MAX_FRAMES) -> list[Scene
         raise SparValueError("the plan has no motions to animate (it was planned with --no-motion)")
     steps = list(inst.get("steps") or [])
     sc = scenes(cell, doc)
-    seq: list[tuple[Scene, np.ndarray, str]] = []  # (world scene, q rad, caption)
+    seq: list[tuple[Scene, np.ndarray, str, tuple[str, ...]]] = []  # (world scene, q rad, caption, carried)
     for k, st in enumerate(steps, start=1):
         before, after = sc[k - 1], sc[k]
+        carried = tuple(str(c) for c in (st.get("moves") or [])[1:])  # mated into the part the step moves
         for key, world in (("path", before), ("approach", before), ("retreat", after)):
             for q in np.radians(np.asarray(st.get(key) or [], float)).reshape(-1, 6):
-                seq.append((world, q, f"{st['id']}: {key} ({st['term']})"))
+                seq.append((world, q, f"{st['id']}: {key} ({st['term']})", carried))
     if not seq:
         raise SparValueError("the plan's motions have no waypoints")
     pick = np.unique(np.linspace(0, len(seq) - 1, min(max_frames, len(seq))).round().astype(int))
     out = []
     for i in pick:
-        world, q, caption = seq[i]
-        out.append(_at(cell, world, q, caption, int(i)))
+        world, q, caption, carried = seq[i]
+        out.append(_at(cell, world, q, caption, int(i), carried))
     return out
 
 
-def _at(cell: Cell, world: Scene, q: np.ndarray, caption: str, index: int) -> Scene:
-    """``world`` with the arm at ``q`` and the held part carried by the tool."""
+def _at(cell: Cell, world: Scene, q: np.ndarray, caption: str, index: int, carried: tuple[str, ...] = ()) -> Scene:
+    """``world`` with the arm at ``q`` and the held part carried by the tool, with ``carried``, the
+    parts mated into it (a subassembly), where they are relative to it."""
     F = cell.robot.frames(q)
     poses = dict(world.poses)
     grasp = world.grasp
@@ -148,7 +150,12 @@ def _at(cell: Cell, world: Scene, q: np.ndarray, caption: str, index: int) -> Sc
         grasp = grasp or held_grasp(cell, world.held, poses.get(world.held), world.tool)
         if grasp is not None:
             g = cell.objects[part_model(world.held)].grasps[grasp]
+            old = np.asarray(poses[world.held], float)
             poses[world.held] = F[-1] @ np.linalg.inv(np.asarray(g.T, float))
+            moved = poses[world.held] @ np.linalg.inv(old)
+            for c in carried:
+                if c in poses and c != world.held:
+                    poses[c] = moved @ np.asarray(poses[c], float)
     return replace(world, index=index, title=caption, detail="", poses=poses, grasp=grasp, q=q, frames=F,
                    arm_note="")
 

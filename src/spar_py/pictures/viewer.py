@@ -207,9 +207,11 @@ def _times(q: np.ndarray, velocity: np.ndarray | None) -> np.ndarray:
     return np.concatenate([[0.0], np.cumsum(interval_seconds(q, v))])
 
 
-def _segment(cell: Cell, kind: str, rows: Any, world: Scene, widths: _Widths) -> dict[str, Any] | None:
+def _segment(cell: Cell, kind: str, rows: Any, world: Scene, widths: _Widths,
+             carried: Sequence[str] = ()) -> dict[str, Any] | None:
     """A motion segment for the page: its waypoints' times (s), arm frames, held part's pose (the
-    tool carries it by its grasp), gripper opening; None without waypoints."""
+    tool carries it by its grasp) and the poses of ``carried``, the parts mated into it (they keep
+    their pose relative to it), gripper opening; None without waypoints."""
     q_all = np.radians(np.asarray(rows or [], float)).reshape(-1, 6)
     if len(q_all) == 0:
         return None
@@ -219,14 +221,19 @@ def _segment(cell: Cell, kind: str, rows: Any, world: Scene, widths: _Widths) ->
     q, t = q_all[keep], t_all[keep]
     F = cell.robot.frames_batch(q)
     held_pose = None
+    carried_pose: dict[str, list] = {}
     grasp = world.grasp
     if world.held is not None:
         grasp = grasp or held_grasp(cell, world.held, world.poses.get(world.held), world.tool)
         if grasp is not None:
             g_inv = np.linalg.inv(np.asarray(cell.objects[part_model(world.held)].grasps[grasp].T, float))
             held_pose = [_flat(Fk[7] @ g_inv) for Fk in F]
+            at = np.linalg.inv(np.asarray(world.poses[world.held], float))
+            rel = {c: at @ np.asarray(world.poses[c], float) for c in carried if c in world.poses and c != world.held}
+            carried_pose = {c: [_flat(Fk[7] @ g_inv @ R) for Fk in F] for c, R in rel.items()}
     return {"kind": kind, "t": _r(t), "frames": [[_flat(T) for T in Fk] for Fk in F],
             "held": world.held if held_pose is not None else None, "held_pose": held_pose,
+            "carried": carried_pose,
             "gripper": widths.index(_width(cell, world.held, grasp)), "waypoints": int(len(q_all))}
 
 
@@ -353,7 +360,8 @@ def viewer_data(cell: Cell, plan: Any) -> dict[str, Any]:
         states.append(st)
         sid = str(step.get("id", f"step_{k}"))
         verdicts = _verdicts(inst, step, sid)
-        segs = [_segment(cell, key, step.get(key), world, widths)
+        moves = [str(m) for m in (step.get("moves") or [])[1:]]
+        segs = [_segment(cell, key, step.get(key), world, widths, moves)
                 for key, world in (("path", sc[k - 1]), ("approach", sc[k - 1]), ("retreat", s))]
         out_steps.append({
             "id": sid, "name": step.get("name"), "kind": step.get("kind"), "object": step.get("object"),

@@ -127,7 +127,11 @@ def summary(cell: Cell, reason: dict[str, Any], refusals: Sequence[Refusal]) -> 
     goals = f"for {_goal_text(cell)}"
     if reason.get("phase") == 2:
         n = reason.get("instances_examined")
-        return f"NO PLAN {goals}: none of the {n} plan instances examined can be executed: {reason.get('why', '')}"
+        why = reason.get("why", "")
+        own = reason.get("infeasible") or []
+        if own:  # steps refused for a reason of their own (a loose part turned, an unstable body): say those
+            why = "; ".join(own[:3]) + (f" (and {len(own) - 3} more)" if len(own) > 3 else "")
+        return f"NO PLAN {goals}: none of the {n} plan instances examined can be executed: {why}"
     cause = _cause(cell, reason.get("goal_data"), refusals)
     n, bound = reason.get("max_actions"), reason.get("bound")
     size = f" within {n} actions" if n is not None else ""

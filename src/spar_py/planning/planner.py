@@ -103,11 +103,13 @@ class Step:
     solver gave the joints ("closed-form puma", "closed-form ur" or "numeric": not complete); ``poses`` every
     part's 4x4 world pose at the step's end-point (part key: the object name, or
     ``object@initial_position`` for the other parts of a stock); ``held`` the object in
-    the hand after the step, or None; ``clearance`` the least distance (cell unit) between
-    the arm, gripper or held part and anything else at the joints used (at least the collision
-    margin; None where the cell has no collision check), ``closest_pair`` the two bodies at
-    that distance; ``source`` where the step takes an object lying on the table ({object:
-    position label}: the part picked, the part mated onto) or None.
+    the hand after the step, or None; ``moves`` the parts the step moves (its object and the
+    parts mated into it, directly or transitively: a subassembly moves as one), empty for sensing;
+    ``clearance`` the least distance (cell unit) between the arm, gripper or held part and
+    anything else at the joints used (at least the collision margin; None where the cell has no
+    collision check), ``closest_pair`` the two bodies at that distance; ``source`` where the
+    step takes an object lying on the table ({object: position label}: the part picked, the
+    part mated onto) or None.
 
     With motions planned (``--motion``, ``Planner(motion=True)``, a file's ``motion: true``):
     ``path`` the free motion into the step (from home or the previous retreat's end),
@@ -147,6 +149,7 @@ class Step:
     retreat: np.ndarray | None = field(default=None, compare=False, repr=False)
     duration_s: float | None = None
     position_bounds: dict[str, Bounds] | None = None
+    moves: tuple[str, ...] = ()
 
 
 @dataclass
@@ -301,7 +304,7 @@ def _step(s: dict[str, Any], verdicts: list[Verdict]) -> Step:
                 path=_joints(s.get("path")), approach=_joints(s.get("approach")),
                 retreat=_joints(s.get("retreat")),
                 duration_s=None if s.get("duration_s") is None else float(s["duration_s"]),
-                position_bounds=_bounds(s.get("position_bounds")),
+                position_bounds=_bounds(s.get("position_bounds")), moves=tuple(s.get("moves") or ()),
                 closest_pair=tuple(s["closest_pair"]) if s.get("closest_pair") else None,
                 verdicts=tuple(v for v in verdicts if v.action == s["id"]))
 
@@ -502,6 +505,8 @@ class Planner:
         _motion_reason(d, log.motion_failures)
         plan = _plan(cell.name, d, ans.get("Trace", ""))
         if plan.outcome is Outcome.NO_PLAN:  # name the colliding pairs that stood in the way, and why
+            if run.infeasible:  # steps refused for a reason of their own (stability, retention, support)
+                plan.reason = {**(plan.reason or {}), "infeasible": list(run.infeasible)}
             refusals = log.refusals()
             said = collision_lines(refusals)
             if said:

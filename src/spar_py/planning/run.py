@@ -34,7 +34,7 @@ __all__ = ["PlanRun", "StepData"]
 
 #: The fields of a step's geometry the plan's JSON shows (docs/json-schema.md).
 STEP_FIELDS = ("tool_pose", "joints_deg", "ik_solutions_deg", "ik_solver", "placement", "source", "poses", "held",
-               "clearance", "closest_pair", "position_bounds")
+               "moves", "clearance", "closest_pair", "position_bounds")
 
 
 @dataclass(frozen=True)
@@ -49,10 +49,13 @@ class StepData:
 class PlanRun:
     """One planning run: its world (``world``: cell cache, options, log) and phase 2's door."""
 
-    __slots__ = ("world",)
+    __slots__ = ("world", "infeasible")
 
     def __init__(self, cache: CellCache, options: RunOptions | None = None) -> None:
         self.world = WorldRun(cache, options)
+        #: Why the instances that could not be executed stopped where a body's own state refused a
+        #: step (phase2.STATE_CHECKS: unstable, a loose part turned, a part left unsupported), each once.
+        self.infeasible: list[str] = []
 
     @property
     def cell(self) -> Cell:
@@ -76,6 +79,11 @@ class PlanRun:
             log.refuse(what, pairs)
         if isinstance(ev.motion, MotionFailure):
             log.fail_motion(ev.motion)
+        if ev.status == "infeasible" and ev.steps:
+            for v in ev.steps[-1]["verdicts"]:
+                why = v.get("description") or ""
+                if v.get("constraint") in phase2.STATE_CHECKS and not v.get("satisfied") and why not in self.infeasible:
+                    self.infeasible.append(why)
         out: dict[str, Any] = {"status": ev.status, "at": ev.at,
                                "steps": [{"id": r["id"], "verdicts": r["verdicts"]} for r in ev.steps]}
         if ev.status != "ok":

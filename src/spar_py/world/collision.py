@@ -585,7 +585,8 @@ class CollisionScene:
 
     def at(self, parts: Mapping[str, np.ndarray], held: tuple[str, np.ndarray] | None = None,
            grasped: str | None = None, *, width: float | None = None,
-           allow: Iterable[tuple[str, str]] = (), attached: Mapping[str, np.ndarray] | None = None) -> SceneState:
+           allow: Iterable[tuple[str, str]] = (), attached: Mapping[str, np.ndarray] | None = None,
+           carried: Mapping[str, np.ndarray] | None = None) -> SceneState:
         """The world at one point of a plan: ``parts`` = {name: T_world_part 4x4} for every part
         on the table or assembled; ``held`` = (name, T_tool_part) for the part in the hand (it
         moves with the gripper, body name "held:<name>"); ``grasped`` = the part the fingers are
@@ -596,14 +597,22 @@ class CollisionScene:
         names not checked at this point (the step's own contacts: ("held:peg", "block") at an
         assemble, ("held:peg", "table") at a put-down); ``attached`` = {name: T_tool_part}
         parts that are where the tool is (a batch of tool poses with one relative geometry,
-        e.g. the part being grasped at every candidate placement), checked as ``parts``."""
+        e.g. the part being grasped at every candidate placement), checked as ``parts``;
+        ``carried`` = {name: T_tool_part} the parts mated into the held part (a subassembly in
+        the hand: one rigid body), bodies "held:<name>" moving with the tool and checked as the
+        held part is, except against the gripper (by distance: the fingers may not touch a part
+        they do not hold) and against each other (their contacts are the mates'; the caller
+        allows none of them: at() does, and gives each carried part the contacts ``allow`` gives
+        the held part)."""
         held_name = held[0] if held is not None else None
+        if carried and held_name is not None:
+            allow = _body_allow(held_name, list(carried), list(allow))
         if self._obstacle_bodies is None:
             self._obstacle_bodies = Placed(b for o in self.obstacles for b in o.bodies)
         groups: list[Placed] = [self._obstacle_bodies]
         table = self.memo.table("collision.placed", PLACED_LIMIT) if self.memo is not None else None
         for name, T in parts.items():  # placed() inlined: the table looked up once, a hit read directly
-            if name == held_name:
+            if name == held_name or carried and name in carried:
                 continue
             T = np.ascontiguousarray(T, dtype=float)
             g = table.get((name, name, WORLD, T.tobytes())) if table is not None else None
@@ -614,6 +623,8 @@ class CollisionScene:
             tool += self.placed(name, T, TOOL)
         if held is not None:
             tool += self.placed(held[0], held[1], TOOL, f"held:{held[0]}")
+        for name, T in (carried or {}).items():
+            tool += self.placed(name, np.ascontiguousarray(T, dtype=float), TOOL, f"held:{name}")
         hand = None
         if held is not None:
             hand = (held[0], "tool", np.asarray(held[1], float))
@@ -626,6 +637,20 @@ class CollisionScene:
                 raise SparValueError(f"grasped part {grasped!r} is neither in parts nor attached")
         return SceneState(self, world, tool, hand, width, frozenset(frozenset(p) for p in allow),
                           frozenset(attached or ()), _columns(groups))
+
+
+def _body_allow(root: str, carried: list[str], allow: list[tuple[str, str]]) -> list[tuple[str, str]]:
+    """``allow`` for a held body (``root`` in the hand carrying ``carried``): its parts' contacts
+    with each other (their mates') and, for each carried part, the contacts allowed to the root."""
+    mine = f"held:{root}"
+    out = list(allow)
+    for a, b in allow:
+        other = b if a == mine else a if b == mine else None
+        if other is not None:
+            out += [(f"held:{c}", other) for c in carried]
+    names = [mine, *(f"held:{c}" for c in carried)]
+    out += [(x, y) for i, x in enumerate(names) for y in names[i + 1:]]
+    return out
 
 
 def _link_body(s: Any) -> Body:

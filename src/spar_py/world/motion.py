@@ -649,8 +649,10 @@ LINES_LIMIT = 1024
 
 def _world_key(world: tuple[dict[str, np.ndarray], tuple[str, np.ndarray] | None]) -> tuple:
     parts, held = world
+    carried = () if held is None or len(held) < 3 else tuple(
+        sorted((k, np.asarray(v, float).tobytes()) for k, v in held[2].items()))
     return (tuple(sorted((k, np.asarray(v, float).tobytes()) for k, v in parts.items())),
-            None if held is None else (held[0], np.asarray(held[1], float).tobytes()))
+            None if held is None else (held[0], np.asarray(held[1], float).tobytes(), carried))
 
 
 def _lines(robot: Any, scene: Any, st: Stop, q: np.ndarray, length: float, res: float,
@@ -686,15 +688,15 @@ def _lines_of(robot: Any, scene: Any, st: Stop, q: np.ndarray, length: float, re
     r_dir = -z  # the empty hand backs off along its approach
     if st.name == "pickup":
         a_state, a_dir = scene.at(pb, None, grasped=st.obj), z
-        r_state, r_dir = scene.at(pa, ha, allow=_resting(scene, st.obj, pb)), up  # lifted off its support
+        r_state, r_dir = _at(scene, pa, ha, allow=_resting(scene, st.obj, pb)), up  # lifted off its support
     elif st.name == "putdown":
-        a_state, a_dir = scene.at(pb, hb, allow=_resting(scene, st.obj, pa)), -up  # set down onto it
+        a_state, a_dir = _at(scene, pb, hb, allow=_resting(scene, st.obj, pa)), -up  # set down onto it
         r_state = scene.at(pa, None, grasped=st.obj)
     elif st.name == "assemble":
-        a_state, a_dir = scene.at(pb, hb, allow=[(f"held:{st.obj}", str(st.onto))]), st.insert  # the insertion itself
+        a_state, a_dir = _at(scene, pb, hb, allow=[(f"held:{st.obj}", str(st.onto))]), st.insert  # the insertion itself
         r_state = scene.at(pa, None, grasped=st.obj)
     else:  # squeeze: the fingers close on the part where it lies and open again
-        a_state = r_state = scene.at(pb, hb, grasped=st.obj)
+        a_state = r_state = _at(scene, pb, hb, grasped=st.obj)
         a_dir = z
     app = line_motion(robot, a_state, st.T, q, -np.asarray(a_dir, float), length, res, margin, "approach",
                       f"approach to {st.id} ({st.label})", reverse=True)
@@ -766,7 +768,7 @@ def plan_stops(robot: Any, scene: Any, stops: Sequence[Stop], home: np.ndarray |
             kind = "transfer" if hb is not None else "transit"
             if prev is None:  # home is this first approach's start
                 prev = home = app.waypoints[0]
-            path = free_motion(scene.at(pb, hb), prev, app.waypoints[0], robot.limits, res, opts, kind,
+            path = free_motion(_at(scene, pb, hb), prev, app.waypoints[0], robot.limits, res, opts, kind,
                                f"{kind} motion to the approach of {st.id} ({st.label})")
             if isinstance(path, MotionFailure):
                 if stage < 1:
@@ -779,7 +781,7 @@ def plan_stops(robot: Any, scene: Any, stops: Sequence[Stop], home: np.ndarray |
             fail = best or MotionFailure(f"motion of {st.id} ({st.label})", None, "no joint solution")
             return replace(fail, at=st.id)
     pa, ha = stops[-1].after if stops else (dict(initial), None)
-    back = free_motion(scene.at(pa, ha), prev, home, robot.limits, res, opts,
+    back = free_motion(_at(scene, pa, ha), prev, home, robot.limits, res, opts,
                        "home", "motion back home") if prev is not None else None
     if isinstance(back, MotionFailure):
         return back
@@ -805,15 +807,33 @@ ARM_STEPS = ("pickup", "putdown", "assemble", "squeeze")
 MEMO_LIMIT = 256
 
 
-def _world_parts(w: Any) -> tuple[dict[str, np.ndarray], tuple[str, np.ndarray] | None]:
-    """A phase-2 world's parts on the table or assembled, and the held part (key, T_tool_part)."""
+def _world_parts(w: Any) -> tuple[dict[str, np.ndarray], tuple | None]:
+    """A phase-2 world's parts on the table or assembled, and the held body: (key, T_tool_part,
+    {carried key: T_tool_part}) of the part in the hand and the parts mated into it (they move
+    with it: phase2's WorldState.body), or None."""
     parts, held = {}, None
     for k, o in w.unc.objects.items():
         if o.where == "hand":
-            held = (k, np.linalg.inv(o.grasp))
-        else:
+            T_tool = np.linalg.inv(o.grasp)
+            inv_pose = np.linalg.inv(o.pose)
+            carried = {c: T_tool @ inv_pose @ np.asarray(w.unc.obj(c).pose, float) for c in w.unc.body(k)[1:]}
+            held = (k, T_tool, carried)
+    body = set() if held is None else {held[0], *held[2]}
+    for k, o in w.unc.objects.items():
+        if k not in body:
             parts[k] = np.asarray(o.pose, float)
     return parts, held
+
+
+def _at(scene: Any, parts: Mapping[str, np.ndarray], held: tuple | None, **kw: Any) -> SceneState:
+    """``scene.at`` for a world of :func:`_world_parts`: the held body's root in the hand, its
+    carried parts with it (CollisionScene.at's ``carried``)."""
+    if held is None:
+        return scene.at(parts, None, **kw)
+    carried = held[2] if len(held) > 2 else None
+    if carried:
+        kw["carried"] = carried
+    return scene.at(parts, (held[0], held[1]), **kw)
 
 
 def stops_of(cell: Any, steps: Sequence[Mapping[str, Any]], worlds: Sequence[Any],

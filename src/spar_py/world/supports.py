@@ -29,7 +29,8 @@ if TYPE_CHECKING:
     from spar_py.world.collision import Obstacle
 
 __all__ = ["REST_TOL_MM", "Rest", "Surface", "centre_of_mass", "contact", "inside", "part_points",
-           "part_surface", "rest", "rest_of", "support_surfaces", "surfaces_of", "table_surface"]
+           "mass_properties", "part_surface", "rest", "rest_of", "rest_of_body", "support_surfaces", "surfaces_of",
+           "table_surface"]
 
 #: A part's lowest point may be this far from a surface to rest on it (mm).
 REST_TOL_MM = 0.5
@@ -177,10 +178,17 @@ def centre_of_mass(model: ObjectModel) -> np.ndarray:
     """(3,) the shape's centre of mass (object frame, uniform density): the mesh's (trimesh) when
     the model declares its geometry, else the volume-weighted centres of its primitives (boxes and
     cylinders exactly, hulls by their tetrahedra; overlaps counted twice), else the frame's origin."""
+    return mass_properties(model)[1]
+
+
+def mass_properties(model: ObjectModel) -> tuple[float, np.ndarray]:
+    """(volume (cell unit^3), centre of mass (3,), object frame) of the shape, uniform density, as
+    :func:`centre_of_mass` finds it; a shapeless model: (0, its frame's origin)."""
     if model.geometry is not None:
         from spar_py.world.shapes import part_mesh  # trimesh: only a model with geometry
 
-        return np.asarray(part_mesh(model).center_mass, float)
+        mesh = part_mesh(model)
+        return float(abs(mesh.volume)), np.asarray(mesh.center_mass, float)
     vols, cents = [], []
     for s in model.shape:
         lo, hi = np.asarray(s.lo, float), np.asarray(s.hi, float)
@@ -195,8 +203,8 @@ def centre_of_mass(model: ObjectModel) -> np.ndarray:
             vols.append(v)
             cents.append(c)
     if not vols or sum(vols) <= 0:
-        return np.zeros(3)
-    return np.average(np.array(cents), axis=0, weights=np.array(vols))
+        return 0.0, np.zeros(3)
+    return float(sum(vols)), np.average(np.array(cents), axis=0, weights=np.array(vols))
 
 
 def _hull_mass(P: np.ndarray) -> tuple[float, np.ndarray]:
@@ -284,6 +292,38 @@ def rest_of(cell: "Cell", obj: str, T: np.ndarray, surfaces: Sequence[Surface]) 
     low = np.array(T, float)
     low[2, 3] -= sp.height
     return rest(model, low, surfaces, cell.unit, stable=True)
+
+
+def rest_of_body(cell: "Cell", obj: str, T: np.ndarray, surfaces: Sequence[Surface],
+                 carried: Sequence[tuple[str, ObjectModel, np.ndarray]] = ()) -> Rest | None:
+    """:func:`rest_of` of a rigid body: root part ``obj`` at world pose T carrying ``carried``
+    ((name, model, world pose) each, the parts mated into it). It rests where the root's resting
+    face does, so no carried part may reach below that face (else it rests on that part: refused,
+    naming it), and the body's centre of mass (every part's, uniform density, weighted by their
+    volumes) must lie over the root's contact face and its surface. Without carried parts, the
+    root's own :func:`rest_of`."""
+    if not carried:
+        return rest_of(cell, obj, T, surfaces)
+    model = cell.objects[obj]
+    if not model.shape:
+        return rest_of(cell, obj, T, surfaces)
+    tol = from_mm(cell.unit, REST_TOL_MM)
+    T = np.asarray(T, float)
+    low, _ = contact(model, T, tol)
+    for name, m, Tc in carried:
+        if m.shape and _lowest(m, Tc) < low - tol:
+            return Rest(None, low, 0.0, None, f"would rest on {name}, which reaches {low - _lowest(m, Tc):.4g} "
+                        f"{cell.unit} below {obj}'s resting face")
+    vols, cents = [], []
+    for m, Tp in [(model, T), *((m, np.asarray(Tc, float)) for _, m, Tc in carried)]:
+        v, c = mass_properties(m)
+        vols.append(v)
+        cents.append(Tp[:3, :3] @ c + Tp[:3, 3])
+    if sum(vols) <= 0:
+        return rest_of(cell, obj, T, surfaces)
+    com_world = np.average(np.array(cents), axis=0, weights=np.array(vols))
+    com = T[:3, :3].T @ (com_world - T[:3, 3])
+    return rest(model, T, surfaces, cell.unit, com=com)
 
 
 def surfaces_of(cell: "Cell", parts: Iterable[tuple[str, ObjectModel, np.ndarray]] = ()) -> list[Surface]:

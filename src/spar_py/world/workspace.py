@@ -341,9 +341,10 @@ class ArmAt:
 
 def arm_at(cache: CellCache, T: np.ndarray, ref: np.ndarray | None, *, parts: Mapping[str, np.ndarray],
            held: tuple[str, np.ndarray] | None = None, grasped: str | None = None, width: float | None = None,
-           allow: Iterable[tuple[str, str]] = ()) -> ArmAt:
+           allow: Iterable[tuple[str, str]] = (), carried: Mapping[str, np.ndarray] | None = None) -> ArmAt:
     """The arm at world tool pose T (4x4) in a world of ``parts`` (key -> T_world_part), ``held``
-    in the hand, ``grasped`` being closed on with the fingers ``width`` apart, ``allow`` the
+    in the hand with the parts mated into it ``carried`` (key -> T_tool_part: a subassembly held
+    as one body, CollisionScene.at), ``grasped`` being closed on with the fingers ``width`` apart, ``allow`` the
     step's own contacts: the solution nearest ``ref`` (rad; zeros if None) among those clear of
     the world (all of them when the cell opts out of collision checks), with the reason when
     there is none (:class:`ArmAt`). Phase 2 asks this for every step that moves the arm."""
@@ -354,7 +355,7 @@ def arm_at(cache: CellCache, T: np.ndarray, ref: np.ndarray | None, *, parts: Ma
         return ArmAt(None, sols)
     if not cell.collisions:
         return ArmAt(sols[int(np.argmin(np.abs(sols - ref).sum(axis=1)))], sols)
-    state = cache.scene().at(parts, held, grasped, width=width, allow=allow)
+    state = cache.scene().at(parts, held, grasped, width=width, allow=allow, carried=carried)
     clear, why = state.check(sols)
     good = sols[clear]
     if not len(good):
