@@ -314,6 +314,8 @@ class Product:
     files: tuple[str, ...] = ()
     #: Each part's neighbours at the product poses (world.products.near_parts).
     near: dict[str, tuple[str, ...]] = field(default_factory=dict)
+    #: Each part's via-grasps (grasps of a part mated into it): {part: {label: the part held}}.
+    via: dict[str, dict[str, str]] = field(default_factory=dict)
 
     def goal_of(self, part: str) -> PartGoal | None:
         """The goal of a non-base part (None for the base)."""

@@ -365,11 +365,25 @@ def load_product_derived(path: str | Path, unit: str, max_bytes: int = MAX_INPUT
         product.precedence = (wp.precedence(product, unit) if derived is None else
                               tuple(Precedence(a, b, why) for a, b, why in derived.precedence))
         product.near = wp.near_parts(product, unit)
+        _add_via_grasps(product)
     except KBError:
         raise
     except SparValueError as e:
         raise where.fail("mates that make an assembly", str(e)) from None
     return LoadedProduct(product, derived, objects, unit)
+
+
+def _add_via_grasps(product: Product) -> None:
+    """Give each part the grasps of the parts that can be mated into it (world.products.via_grasps)
+    and record which part each holds by (``product.via``)."""
+    from spar_py.world import products as wp  # the world layer on first use, as load_product_derived
+
+    via = wp.via_grasps(product)
+    for name, got in via.items():
+        pp = product.parts[name]
+        grasps = {**pp.model.grasps, **{label: g for label, (_, g) in got.items()}}
+        product.parts[name] = replace(pp, model=replace(pp.model, grasps=grasps))
+    product.via = {name: {label: c for label, (c, _) in got.items()} for name, got in via.items()}
 
 
 def _derive(root: Node, unit: str, scale: float, base: str, meshparts: dict[str, _MeshPart],

@@ -638,18 +638,26 @@ def _part_at(world: World, obj: str, label: str) -> str | None:
 
 def _arm(world: World, T: np.ndarray, what: str = "", held: tuple[str, np.ndarray] | None = None,
          grasped: str | None = None, width: float | None = None,
-         allow: Sequence[tuple[str, str]] = ()) -> tuple[np.ndarray | None, dict[str, Any], Refusals]:
+         allow: Sequence[tuple[str, str]] = (), via: str | None = None
+         ) -> tuple[np.ndarray | None, dict[str, Any], Refusals]:
     """The joint vector reaching tool pose T nearest the previous one among those clear of the
     world at this step (workspace.arm_at: every part where it is now, ``held`` in the hand,
     ``grasped`` being closed on, ``allow`` the step's own contacts), display data (every IK
     solution, the chosen one's clearance (cell unit) and closest pair; without a clear solution
-    ``collisions`` the pairs) and the refusal of ``what`` with those pairs (empty if none)."""
+    ``collisions`` the pairs) and the refusal of ``what`` with those pairs (empty if none).
+    ``via``: the held body is held by this carried part (a via-grasp): the fingers' contact is
+    allowed with it alone, and the root is checked as a carried part."""
     cell = world.cell
     body = set(_held_body(world.unc))
     carried = None
     if held is not None:
         carried = _carried(world.unc, held[0], held[1])
         body |= {held[0], *carried}
+        if via is not None and via in carried:
+            root = held[0]
+            carried[root] = np.asarray(held[1], float)
+            held = (via, carried.pop(via))
+            allow = [tuple(f"held:{via}" if n == f"held:{root}" else n for n in pair) for pair in allow]
     parts = {k: o.pose for k, o in world.unc.objects.items() if k not in body}
     got = arm_at(world.cache, T, world.joints, parts=parts, held=held, grasped=grasped, width=width, allow=allow,
                  carried=carried)
@@ -667,6 +675,14 @@ def _arm(world: World, T: np.ndarray, what: str = "", held: tuple[str, np.ndarra
            "ik_solutions_deg": [[round(float(v), 6) for v in np.degrees(r)] for r in got.solutions],
            "ik_solver": cell.robot.solver_name, **geo}
     return q, geo, refused
+
+
+def _via(cell: Cell, obj: str, label: str) -> str | None:
+    """The part a via-grasp ``label`` of ``obj`` holds (world.products.via_grasps), None for the
+    part's own grasps."""
+    if cell.product is None:
+        return None
+    return cell.product.via.get(obj, {}).get(label)
 
 
 def _held_body(unc: ur.WorldState) -> list[str]:
@@ -786,7 +802,12 @@ def _pickup(world: World, s: Step, early: bool = False) -> tuple[list[dict], Wor
                                memo=world.cache.memo)
     checks = _verdicts(world, cs, early)
     what = f"pickup({obj}, {label})"
-    q, geo, refused = _arm(world, o.pose @ g.T, what, grasped=obj, width=g.width)
+    via = _via(world.cell, obj, label)
+    if via is not None and via not in world.unc.body(obj)[1:]:
+        checks.append(_reach_verdict(s["id"], False, f"{what} holds {obj} by {via}, which {obj} does not carry "
+                                     f"(not mated into it)", "via_grasp"))
+    q, geo, refused = _arm(world, o.pose @ g.T, what, grasped=via if via in world.unc.objects else obj,
+                           width=g.width)
     if q is None:
         checks.append(_reach_verdict(s["id"], False, _no_arm(what, geo)))
     on = _stacked_on(world, obj)
@@ -821,7 +842,8 @@ def _putdown(world: World, s: Step, early: bool = False) -> tuple[list[dict], Wo
     on = rest_of_body(world.cell, obj, place.T, surfaces_of(world.cell, under), carried)
     surface = on.surface.name if on is not None and on.surface is not None else "table"  # the step's own contact
     q, geo, refused = _arm(world, place.T @ g.T, what, held=(obj, np.linalg.inv(g.T)), width=g.width,
-                           allow=[(f"held:{obj}", n) for n in dict.fromkeys(("table", surface))])
+                           allow=[(f"held:{obj}", n) for n in dict.fromkeys(("table", surface))],
+                           via=_via(world.cell, obj, world.grasps[obj]))
     geo["placement"] = place.as_dict()
     checks = [] if q is not None else [_reach_verdict(s["id"], False, _no_arm(what, geo))]
     if on is not None and not on.ok:
@@ -851,7 +873,8 @@ def _assemble(world: World, s: Step, early: bool = False) -> tuple[list[dict], W
     what = f"assemble({peg}, {hole})"
     near = cell.product.near.get(peg, ()) if cell.product is not None else ()
     q, geo, refused = _arm(world, world.unc.obj(hole).pose @ Ta @ g.T, what, held=(peg, np.linalg.inv(g.T)),
-                           width=g.width, allow=[(f"held:{peg}", o) for o in dict.fromkeys((hole, *near))])
+                           width=g.width, allow=[(f"held:{peg}", o) for o in dict.fromkeys((hole, *near))],
+                           via=_via(cell, peg, world.grasps[peg]))
     if q is None:
         checks.append(_reach_verdict(s["id"], False, _no_arm(what, geo)))
     grasps = {k: v for k, v in world.grasps.items() if k != peg}

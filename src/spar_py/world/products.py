@@ -31,14 +31,14 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from spar_py.core.errors import SparValueError
-from spar_py.core.model import Mate, PartGoal, Precedence, Product, Seat, Solid
+from spar_py.core.model import Grasp, Mate, PartGoal, Precedence, Product, Seat, Solid
 from spar_py.core.units import from_mm
 
 if TYPE_CHECKING:
     from spar_py.core.model import MatingFeature, ObjectModel
 
-__all__ = ["AXIS_TOL_MM", "NEAR_MM", "SWEEP_MARGIN_MM", "Axis", "compile_goals", "feature_axis", "mate_misalignment",
-           "near_parts", "precedence", "seat_direction"]
+__all__ = ["AXIS_TOL_MM", "NEAR_MM", "SWEEP_MARGIN_MM", "VIA", "Axis", "compile_goals", "feature_axis",
+           "mate_misalignment", "near_parts", "precedence", "seat_direction", "subtree", "via_grasps"]
 
 #: A mate's axes are coaxial when the peg's axis passes within this of the hole's (mm) and
 #: their directions differ by less than AXIS_TOL_DEG.
@@ -516,3 +516,58 @@ def _no_cycle(product: Product, prec: list[Precedence]) -> None:
     for p in list(succ):
         if p not in state:
             visit(p, [p])
+
+
+#: What joins a part's name and a carried part's grasp label in a via-grasp's label
+#: (``block_via_pin_a_G3``).
+VIA = "_via_"
+
+
+def subtree(product: Product, part: str) -> list[str]:
+    """The parts that can be mated into ``part``, directly or through others (its descendants in
+    the assembly tree of the product's goals), breadth first, file order within a level."""
+    children: dict[str, list[str]] = {}
+    for g in product.goals:
+        children.setdefault(g.parent, []).append(g.part)
+    out, queue = [], deque(children.get(part, ()))
+    while queue:
+        c = queue.popleft()
+        out.append(c)
+        queue.extend(children.get(c, ()))
+    return out
+
+
+def _euler_zyz(T: np.ndarray) -> tuple[float, float, float, float, float, float]:
+    """(X, Y, Z, phi, theta, psi) of T = trans(X, Y, Z) rotz(phi) roty(theta) rotz(psi) (radians;
+    phi = 0 where theta is 0 or pi and only phi + psi or phi - psi is defined)."""
+    R = np.asarray(T, float)[:3, :3]
+    s = math.hypot(R[0, 2], R[1, 2])
+    theta = math.atan2(s, R[2, 2])
+    if s > 1e-9:
+        phi, psi = math.atan2(R[1, 2], R[0, 2]), math.atan2(R[2, 1], -R[2, 0])
+    else:
+        # theta 0: R = rotz(psi); theta pi: R = roty(pi) rotz(psi), whose column 1 is (s, c, 0)
+        phi, psi = 0.0, math.atan2(R[1, 0], R[0, 0]) if R[2, 2] > 0 else math.atan2(R[1, 0], R[1, 1])
+    return (float(T[0, 3]), float(T[1, 3]), float(T[2, 3]), phi, theta, psi)
+
+
+def via_grasps(product: Product) -> dict[str, dict[str, tuple[str, Grasp]]]:
+    """For each part with parts that can be mated into it, the grasps of those parts in its
+    frame: {part: {label: (carried part, grasp)}}, each grasp T_G' = T_rel T_G with T_rel the
+    carried part's product pose relative to the part's (T_part^-1 T_child), labelled
+    ``PART_via_LABEL`` after the carried part's own label; its faces and width are the carried
+    part's grasp's (the fingers hold that part). Such a grasp holds the body only while it
+    carries that part (phase 2 refuses it otherwise)."""
+    out: dict[str, dict[str, tuple[str, Grasp]]] = {}
+    for name, pp in product.parts.items():
+        inv_p = np.linalg.inv(pp.pose)
+        got: dict[str, tuple[str, Grasp]] = {}
+        for c in subtree(product, name):
+            T_rel = inv_p @ product.parts[c].pose
+            for g in product.parts[c].model.grasps.values():
+                label = f"{name}{VIA}{g.label}"
+                T = T_rel @ g.T
+                got[label] = (c, Grasp(label, g.gfaces, g.ofaces, _euler_zyz(T), g.width, T))
+        if got:
+            out[name] = got
+    return out
