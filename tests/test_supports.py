@@ -110,7 +110,7 @@ def _plan(problem: str) -> dict:
 # --------------------------------------------------------------------------- cells
 
 
-@pytest.mark.parametrize("problem", ["fixture_pickup", "riser_putdown"])
+@pytest.mark.parametrize("problem", ["fixture_pickup", "riser_putdown", "stack_putdown"])
 def test_every_part_rests_after_every_step(problem: str) -> None:
     """After every step each part not in the hand, nor inserted into another, rests on the
     table, a support's top or another part (the test's own geometry)."""
@@ -156,6 +156,39 @@ def test_riser_cell_puts_the_block_on_the_riser() -> None:
     P = _points(cell.objects["block"], T)
     assert P[:, 2].min() == pytest.approx(2.0, abs=TOL)
     assert np.all((P[:, 0] >= 27 - TOL) & (P[:, 0] <= 33 + TOL) & (P[:, 1] >= -3 - TOL) & (P[:, 1] <= 3 + TOL))
+
+
+def test_stack_cell_puts_the_block_on_the_slab() -> None:
+    """stack_putdown: the slab covers the whole free table, so the turned-over block goes onto the
+    slab's top (1 in up), wholly on it, its centre of mass over the top; the slab's box and pose
+    are read from the files, not from the planner."""
+    path = PROBLEMS / "stack_putdown.yaml"
+    cell = load_problem(path)
+    slab = yaml.safe_load((ROOT / "kb" / "objects" / "slab.yaml").read_text())["shape"][0]["box"]
+    x, y = yaml.safe_load(path.read_text())["objects"]["slab"]["initial"]["tm"][3][:2]
+    (x0, y0, _), (x1, y1, z1) = slab["min"], slab["max"]
+    j = _plan("stack_putdown")
+    put = next(s for s in j["instance"]["steps"] if s["name"] == "putdown")
+    assert put["placement"]["on"] == "slab"
+    T = np.array(put["poses"]["block"], float)
+    P = _points(cell.objects["block"], T)
+    assert P[:, 2].min() == pytest.approx(z1, abs=TOL)
+    assert np.all((P[:, 0] >= x + x0 - TOL) & (P[:, 0] <= x + x1 + TOL)
+                  & (P[:, 1] >= y + y0 - TOL) & (P[:, 1] <= y + y1 + TOL))
+    c = _com(cell.objects["block"], T)[:2]
+    assert x + x0 < c[0] < x + x1 and y + y0 < c[1] < y + y1
+    assert np.array(put["poses"]["slab"], float) == pytest.approx(cell.positions["tr3"].T, abs=TOL)
+
+
+def test_a_part_moved_later_is_no_put_down_top() -> None:
+    """A part's top is a put-down target only while no later step moves it: with a later pickup
+    of the slab in the steps, the block's put-down finds no place (the slab covers the table)."""
+    cell = load_problem(PROBLEMS / "stack_putdown.yaml")
+    steps = [{"id": "a1", "name": "pickup", "args": ["block", "p2G1"]},
+             {"id": "a2", "name": "putdown", "args": ["block", "p2P1"]}]
+    assert phase2.choose_placements(CellCache(cell), steps)["a2"].on == "slab"
+    later = [*steps, {"id": "a3", "name": "pickup", "args": ["slab", "none"]}]
+    assert phase2.choose_placements(CellCache(cell), later)["a2"] is None
 
 
 # --------------------------------------------------------------------------- refusals at load

@@ -273,13 +273,37 @@ def choose_placements(cache: CellCache, steps: list[Step], sources: dict[str, di
                         *_later_requirements(cell, steps[i + 1:], obj, held)]
                 occupied = [pl.occupant(cache, o, T) for o, T in on_table.values()]
                 near = prev[:2, 3] if prev is not None else None
+                tops = _part_tops(cell, on_table, occupied, obj, steps, i)
                 out[s["id"]] = pl.choose(cache, obj, pos, [X for _, X, _ in uses], occupied, near,
-                                         reach=[] if length is None else _line_ends(cell, obj, pos, uses, length))
+                                         reach=[] if length is None else _line_ends(cell, obj, pos, uses, length),
+                                         tops=tops)
             held.pop(obj, None)
             if out[s["id"]] is not None:
                 on_table[s["id"]] = (obj, out[s["id"]].T)
         elif name == "assemble":
             held.pop(args[0], None)
+    return out
+
+
+def _part_tops(cell: Cell, on_table: dict[str, tuple[str, np.ndarray]], occupied: list[pl.Occupant],
+               obj: str, steps: list[Step], i: int) -> list[pl.Level]:
+    """The tops of the parts on the table a put-down of ``obj`` at step ``i`` may go onto
+    (placement.part_level): parts with a shape, not of ``obj``, not of a stock (a part's top is
+    named by its object), that no step after ``i`` picks up and no step of the plan mates
+    anything into (so the top stays where it is, bare of carried parts, while ``obj`` rests there
+    until it is moved again). ``occupied``: the occupants of ``on_table``, in its order."""
+    stock = _stock(cell)
+    later = {s["args"][0] for s in steps[i + 1:] if s["name"] == "pickup"}
+    mated = {s["args"][1] for s in steps if s["name"] == "assemble"}
+    tol = from_mm(cell.unit, REST_TOL_MM)
+    out = []
+    for k, (o, T) in enumerate(on_table.values()):
+        model = cell.objects[o]
+        if o == obj or o in stock or o in later or o in mated or not model.shape:
+            continue
+        top = part_surface(o, model, T, tol)
+        if len(top.polygon) >= 3:
+            out.append(pl.part_level(o, top.polygon, top.z, occupied[:k] + occupied[k + 1:]))
     return out
 
 
@@ -790,8 +814,11 @@ def _putdown(world: World, s: Step, early: bool = False) -> tuple[list[dict], Wo
     g = _grasp(world.cell, obj, world.grasps[obj])
     what = f"putdown({obj})"
     unc = ur.putdown(world.unc, obj, place.T, world.cache.memo)
-    carried = [(c, world.cell.objects[_model(c)], unc.obj(c).pose) for c in unc.body(obj)[1:]]
-    on = rest_of_body(world.cell, obj, place.T, surfaces_of(world.cell), carried)
+    body = unc.body(obj)
+    carried = [(c, world.cell.objects[_model(c)], unc.obj(c).pose) for c in body[1:]]
+    under = [(k, world.cell.objects[_model(k)], o.pose) for k, o in unc.objects.items()
+             if k not in body and o.where == ur.TABLE and k not in unc.attached]
+    on = rest_of_body(world.cell, obj, place.T, surfaces_of(world.cell, under), carried)
     surface = on.surface.name if on is not None and on.surface is not None else "table"  # the step's own contact
     q, geo, refused = _arm(world, place.T @ g.T, what, held=(obj, np.linalg.inv(g.T)), width=g.width,
                            allow=[(f"held:{obj}", n) for n in dict.fromkeys(("table", surface))])

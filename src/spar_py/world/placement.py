@@ -96,7 +96,9 @@ def default_regions(cell: Cell) -> list[dict]:
 class Level:
     """A region of the grid: its rectangle (cell unit), the surface's height ``z`` and name ``on``,
     the polygon a footprint must lie in (None: the rectangle is all) and the polygons it must
-    keep the clearance from besides the parts' (the supports standing on the table)."""
+    keep the clearance from besides the parts' (the supports standing on the table). ``parts``:
+    None, the clearance is kept from every ``occupied`` part; else from these footprints instead
+    (a part's top: every occupant but the part it is the top of)."""
 
     x: tuple[float, float]
     y: tuple[float, float]
@@ -104,6 +106,16 @@ class Level:
     on: str
     polygon: np.ndarray | None
     keep_off: tuple[np.ndarray, ...]
+    parts: tuple[np.ndarray, ...] | None = None
+
+
+def part_level(name: str, top: np.ndarray, z: float, others: Sequence[Occupant]) -> Level:
+    """The grid region of a part's flat top: its polygon ``top`` ((k, 2) world xy, CCW) at height
+    ``z`` (world.supports.part_surface), named ``name``; a placement there keeps the clearance
+    from the footprints of ``others`` (the occupants but the part under it)."""
+    lo, hi = top.min(axis=0), top.max(axis=0)
+    return Level((float(lo[0]), float(hi[0])), (float(lo[1]), float(hi[1])), float(z), name,
+                 np.asarray(top, float), (), tuple(_occupant_polygon(e) for e in others))
 
 
 def levels(cell: Cell) -> list[Level]:
@@ -392,13 +404,15 @@ def _grid_arrays(cache: CellCache, obj: str, pose: str, occupied: list[Occupant]
     return xy, yaws[k], _grid_poses(xy, rots[k], height + zs)
 
 
-def _grid_points(cache: CellCache, obj: str, pose: str, occupied: list[Occupant], step: float, yaw_steps: int
+def _grid_points(cache: CellCache, obj: str, pose: str, occupied: list[Occupant], step: float, yaw_steps: int,
+                 tops: Sequence[Level] = ()
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float, np.ndarray, np.ndarray]:
     """The grid placements of :func:`candidates`, in its order (regions, x, y, yaw), without
     their poses: ``(xy (n, 2), k (n,) each one's yaw step, yaws (yaw_steps,) rad, rots
     (yaw_steps, 3, 3) each yaw's object rotation, the pose's height, zs (n,) each one's surface
     height, on (n,) each one's surface name)``, lengths in the cell unit; the regions are
-    :func:`levels`' (a support's top: the footprint within its top polygon).
+    :func:`levels`' (a support's top: the footprint within its top polygon), then ``tops`` (parts'
+    tops, :func:`part_level`: likewise within the top, clear of the other parts).
 
     Kept: the placements whose footprint (:func:`footprint`, turned by the yaw) lies in
     the region of the grid point, and is at least the clearance (CLEARANCE_MM) from the
@@ -419,9 +433,9 @@ def _grid_points(cache: CellCache, obj: str, pose: str, occupied: list[Occupant]
     hi = np.array([f.max(axis=0) for f in feet])
     parts = [_occupant_polygon(e) for e in occupied]
     xy_parts, yaw_parts, z_parts, on_parts = [], [], [], []
-    for reg in _levels(cache):
+    for reg in [*_levels(cache), *tops]:
         (x0, x1), (y0, y1) = reg.x, reg.y
-        others = parts + list(reg.keep_off)
+        others = (parts if reg.parts is None else list(reg.parts)) + list(reg.keep_off)
         if reg.polygon is None:
             xs = x0 + step * np.arange(math.floor((x1 - x0) / step + 1e-9) + 1)
             ys = y0 + step * np.arange(math.floor((y1 - y0) / step + 1e-9) + 1)
@@ -553,10 +567,11 @@ def nearest_order(dist: np.ndarray, yaw: np.ndarray, digits: int) -> np.ndarray:
 
 def choose(cache: CellCache, obj: str, pose: str, requirements: list[np.ndarray],
            occupied: list[Occupant], near: np.ndarray | None = None,
-           reach: Sequence[np.ndarray] = ()) -> Placement | None:
+           reach: Sequence[np.ndarray] = (), tops: Sequence[Level] = ()) -> Placement | None:
     """The feasible placement nearest ``near`` (xy, cell unit; default the regions'
     centre), or None. Candidates as :func:`candidates`: the footprint in a free region,
-    clear of the ``occupied`` parts' footprints by the clearance. Feasible: every
+    clear of the ``occupied`` parts' footprints by the clearance, or on one of ``tops`` (parts'
+    tops, :func:`part_level`) clear of the other parts. Feasible: every
     requirement reached clear of the world, and every tool pose of ``reach`` (relative to
     the object, as requirements are) reached by IK alone (the far ends of the motions' tool
     lines: the motion planner checks the lines' clearance itself).
@@ -568,7 +583,7 @@ def choose(cache: CellCache, obj: str, pose: str, requirements: list[np.ndarray]
     """
     cell = cache.cell
     xy, kyaw, yaw_of, rots, height, zs, on = _grid_points(cache, obj, pose, occupied,
-                                                          from_mm(cell.unit, GRID_STEP_MM), YAW_STEPS)
+                                                          from_mm(cell.unit, GRID_STEP_MM), YAW_STEPS, tops)
     n = len(xy)
     if not n:
         return None
