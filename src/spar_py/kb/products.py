@@ -11,7 +11,6 @@ Lengths converted to the cell's unit once, here.
 """
 from __future__ import annotations
 
-import hashlib
 import os
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -237,6 +236,8 @@ def _same_feature(g: dict[str, Any], f: dict[str, Any], k: float) -> bool:
 
 def _generated(text: str) -> Path:
     """Where a mesh part's object YAML is kept: by its content, beside the derivations."""
+    import hashlib  # OpenSSL's hashes load at import: only a mesh part's model needs them
+
     from spar_py.world.shapes_cache import cache_dir
 
     out = cache_dir() / "parts" / f"{hashlib.sha256(text.encode()).hexdigest()[:32]}.yaml"
