@@ -11,6 +11,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+import pytest
 import yaml
 
 from spar_py.core.geometry import eulerxyz
@@ -88,3 +89,52 @@ def test_via_grasp_refused_while_the_pin_is_not_carried() -> None:
     rec = ev.steps[0] if hasattr(ev, "steps") else ev["steps"][0]
     bad = [v for v in rec["verdicts"] if not v["satisfied"]]
     assert any(v["constraint"] == "via_grasp" and "pin_a" in v["description"] for v in bad), bad
+
+
+#: pin_a into the block, then the block (pin_a in it) picked up by one of pin_a's grasps.
+VIA_STEPS = [{"id": "a1", "name": "pickup", "args": ["pin_a", "pin_a_g23"]},
+             {"id": "a2", "name": "assemble", "args": ["pin_a", "block", [["shaft"], ["bore_a"]], "trans_pin_a",
+                                                        "vec_pin_a"]},
+             {"id": "a3", "name": "pickup", "args": ["block", "block_via_pin_a_g23"]}]
+
+
+def _radius(path: str, name: str) -> float:
+    """A feature's radius (mm) read from an object file."""
+    doc = yaml.safe_load((ROOT / path).read_text())
+    return next(f["radius"] for f in doc["features"] if f["name"] == name)
+
+
+def test_via_grasp_pickup_contacts_are_on_the_carried_pin_and_sound() -> None:
+    """A via-grasp's pickup contacts are on pin_a at its pose composed through the mate: the
+    bounds are wider than the block's own pose gives by the mate's radial clearance (read from
+    the object files), and no Monte Carlo draw falls outside them (INF <= every sampled value
+    of a '>' constraint, SUP >= every one of a '<')."""
+    cache = CellCache(load_problem(ROOT / "kb/problems/turn_over.yaml"))
+    ev = phase2.evaluate(cache, VIA_STEPS)
+    steps = ev.steps if hasattr(ev, "steps") else ev["steps"]
+    via = {v["constraint"]: v for v in steps[2]["verdicts"] if v["constraint"].startswith("p")}
+    assert sorted(via) == ["p1_c1", "p1_c2", "p2_c1", "p2_c2"]
+    assert all(v["satisfied"] for v in via.values())
+    replay = {r["constraint"]: r for r in phase2.sample_check(cache, VIA_STEPS, draws=4000) if r["action"] == "a3"}
+    assert sorted(replay) == sorted(via)
+    for name, v in via.items():
+        r = replay[name]
+        assert r["failed_draws"] == 0
+        if name.startswith("p1"):  # '>': the bound is the infimum
+            assert v["bound"] <= r["min"] + 1e-9, (name, v["bound"], r["min"])
+        else:
+            assert v["bound"] >= r["max"] - 1e-9, (name, v["bound"], r["max"])
+    # the same grasp, contacts taken on the block's own possible pose: narrower by the clearance
+    from spar_py.phase2 import uncertainty as ur
+    world = phase2.new_world(cache, VIA_STEPS, {}, None)
+    for s in VIA_STEPS[:2]:
+        _, world, _ = phase2.step(world, s)
+    cell = cache.cell
+    g = cell.objects["block"].grasps["block_via_pin_a_g23"]
+    manip = world.unc.manipulator_error()
+    own = {c.name: ur.evaluate(c, world.unc.registry).bound for c in ur.pickup_constraints(
+        world.unc, "block", g.T, g.width, cell.finger_separation, manip)}
+    clearance = _radius("kb/objects/turn_block.yaml", "bore_a") - _radius("kb/objects/pin8.yaml", "shaft")
+    for name, v in via.items():
+        wider = own[name] - v["bound"] if name.startswith("p1") else v["bound"] - own[name]
+        assert wider == pytest.approx(clearance, abs=1e-3), (name, own[name], v["bound"])

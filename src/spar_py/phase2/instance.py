@@ -798,12 +798,13 @@ def _pickup(world: World, s: Step, early: bool = False) -> tuple[list[dict], Wor
     g = _grasp(world.cell, obj, label)
     o = world.unc.obj(obj)
     manip = world.unc.manipulator_error()
-    cs = ur.pickup_constraints(world.unc, obj, g.T, g.width, world.cell.finger_separation, manip, action=s["id"],
-                               memo=world.cache.memo)
-    checks = _verdicts(world, cs, early)
     what = f"pickup({obj}, {label})"
     via = _via(world.cell, obj, label)
-    if via is not None and via not in world.unc.body(obj)[1:]:
+    carried = via is None or via in world.unc.body(obj)[1:]
+    cs = ur.pickup_constraints(world.unc, obj, g.T, g.width, world.cell.finger_separation, manip, action=s["id"],
+                               memo=world.cache.memo, via=via if carried else None)
+    checks = _verdicts(world, cs, early)
+    if not carried:
         checks.append(_reach_verdict(s["id"], False, f"{what} holds {obj} by {via}, which {obj} does not carry "
                                      f"(not mated into it)", "via_grasp"))
     q, geo, refused = _arm(world, o.pose @ g.T, what, grasped=via if via in world.unc.objects else obj,

@@ -519,7 +519,7 @@ class Constraint:
 
 def pickup_constraints(state: WorldState, obj: str, grasp_T: np.ndarray, width: float,
                        finger_separation: float, manip: ErrorTm, action: str = "pickup",
-                       memo: Memo | None = None) -> list[Constraint]:
+                       memo: Memo | None = None, via: str | None = None) -> list[Constraint]:
     """The four pickup inequalities of Sec. 3.2.2: both contact points between the fingers.
 
     Finger frames ``P_1,2 = T_O T_G T_dM trans(0, -+W_m/2, 0)`` (T_O the ideal pose, the
@@ -527,18 +527,30 @@ def pickup_constraints(state: WorldState, obj: str, grasp_T: np.ndarray, width: 
     (Eq. 2). Needs ``y(P_1^-1 C_i) > 0`` and ``y(P_2^-1 C_i) < 0``. ``width`` is W_g,
     ``finger_separation`` W_m (cell unit); ``manip`` the pickup motion's T_dM. ``memo``
     (world.run.CellCache.memo): the expressions are built once per structure (:func:`_built`).
+    ``via``: a via-grasp, the fingers on this part carried by ``obj``'s body (``grasp_T`` still
+    in ``obj``'s frame): the contacts are on that part at its possible pose composed through
+    the mates (:meth:`WorldState.possible_rel`: the root's error, each mate's clearance, its
+    relative pose), ``C_i = T_{V+d} T_V^-1 T_O T_G trans(0, +-W_g/2, 0)``.
     """
     o = _on_table(state, obj, "pickup")
     T_G = _pose(grasp_T, f"pickup({obj}) grasp")
     Wg, Wm = _positive(width, "grasp width W_g"), _positive(finger_separation, "finger separation W_m")
     R_O = _rotation_only(o.pose)
     names = [(k, i) for k in (1, 2) for i in (1, 2)]
+    if via is not None and via not in state.body(obj)[1:]:
+        raise SparValueError(f"pickup({obj}): the grasp holds {via}, which {obj}'s body does not carry")
+    held = obj if via is None else via
+    # the grasp in the held part's frame (T_G itself for the part's own grasp) and the offset of
+    # that part's ideal position from obj's (zero for its own)
+    T_Gv = T_G if via is None else snap(np.linalg.inv(state.obj(via).pose) @ o.pose @ T_G)
+    shift = state.obj(held).pose[:3, 3] - o.pose[:3, 3]
 
     def build() -> list[ca.SX]:
         # both the contacts and the finger frames are taken relative to the object's ideal
         # position t_O (trans(-t_O) on the left of each), which cancels in P_k^-1 C_i
         T_M = snap(R_O @ T_G)
-        contact = compose(o.possible_rel(), T_G)
+        contact = compose(o.possible_rel(), T_G) if via is None else compose(
+            trans(*shift), state.possible_rel(via), T_Gv)
         # P_k^-1 = trans(0, -+W_m/2, 0)^-1 T_dM^-1 (T_O T_G)^-1, inverted factor by factor; the
         # translation on the left adds its y to the y of every point, so y(P_k^-1 C_i) is
         # y(T_dM^-1 (T_O T_G)^-1 C_i) plus a constant: one expression per contact
@@ -546,7 +558,10 @@ def pickup_constraints(state: WorldState, obj: str, grasp_T: np.ndarray, width: 
         return [ca.cse(apply(Q, apply(contact, [0.0, s * Wg / 2, 0.0]))[1]) for s in (1.0, -1.0)]
 
     key = ("pickup", o.where, R_O.tobytes(), T_G.tobytes(), Wg, Wm)
-    cores, ckey = _built(state.registry, memo, key, (o.error, manip), build)
+    if via is not None:
+        key += ("via", *_chain_key(state, via), T_Gv.tobytes(), shift.tobytes())
+    errors = (o.error, manip) if via is None else (*state.errors_of(via), manip)
+    cores, ckey = _built(state.registry, memo, key, errors, build)
     out = []
     for k, i in names:
         sense = ">" if k == 1 else "<"
