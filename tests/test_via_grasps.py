@@ -138,3 +138,37 @@ def test_via_grasp_pickup_contacts_are_on_the_carried_pin_and_sound() -> None:
     for name, v in via.items():
         wider = own[name] - v["bound"] if name.startswith("p1") else v["bound"] - own[name]
         assert wider == pytest.approx(clearance, abs=1e-3), (name, own[name], v["bound"])
+
+
+def test_motions_hold_the_body_by_the_grasped_pin() -> None:
+    """After a via-grasp pickup the motions' held body is pin_a in the hand at its own grasp
+    (T_tool_pin = T_G_pin^-1, the pin's own grasp read from the cell), the block carried at
+    T_tool_block = T_G_pin^-1 T_rel^-1 (T_rel the pin's product pose, from the product file);
+    the pickup's stop closes the fingers on pin_a."""
+    from spar_py.world import motion
+
+    cell = load_problem(ROOT / "kb/problems/turn_over.yaml")
+    prod = yaml.safe_load((ROOT / "kb/products/turn_over.yaml").read_text())
+    P = prod["parts"]["pin_a"]["pose"]
+    T_rel = _pose(P["xyz"], P["rpy"])
+    T_G = cell.objects["pin_a"].grasps["pin_a_g23"].T
+    cache = CellCache(cell)
+    world = phase2.new_world(cache, VIA_STEPS, {}, None)
+    worlds, records = [world], []
+    for s in VIA_STEPS:
+        rec, world, geo = phase2.step(world, s)
+        worlds.append(world)
+        records.append({"geometry": geo})
+    parts, held = motion._world_parts(worlds[-1])
+    assert held is not None and held[0] == "pin_a"
+    np.testing.assert_allclose(held[1], np.linalg.inv(T_G), atol=TOL)
+    assert sorted(held[2]) == ["block"]
+    np.testing.assert_allclose(held[2]["block"], np.linalg.inv(T_G) @ np.linalg.inv(T_rel), atol=TOL)
+    assert "pin_a" not in parts and "block" not in parts
+    # the block's own grasp: held by the block, nothing carried
+    _, own = motion._world_parts(worlds[1])
+    assert own is not None and own[0] == "pin_a" and not own[2]
+    stops = motion.stops_of(cell, VIA_STEPS, worlds, records)
+    pick = next(st for st in stops if st.id == "a3")
+    assert pick.fingers_on == "pin_a"
+    assert next(st for st in stops if st.id == "a1").fingers_on == "pin_a"

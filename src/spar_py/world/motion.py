@@ -625,7 +625,8 @@ class Stop:
     world), ``candidates`` (k, 6) rad (phase 2's choice first), the world before and
     after it (``parts`` {key: T_world_part} on the table or assembled, ``held`` (key,
     T_tool_part) or None) and, for an assemble, the insertion direction ``insert``
-    (world unit vector, V_a in the world) and the part it goes ``onto``."""
+    (world unit vector, V_a in the world) and the part it goes ``onto``; ``grasped`` the part the
+    fingers are on (``obj`` itself, or the carried part a via-grasp holds the body by)."""
 
     id: str
     name: str
@@ -637,6 +638,12 @@ class Stop:
     after: tuple[dict[str, np.ndarray], tuple[str, np.ndarray] | None]
     insert: np.ndarray | None = None
     onto: str | None = None  # the part an assemble inserts into
+    grasped: str | None = None
+
+    @property
+    def fingers_on(self) -> str:
+        """The part the fingers close on: ``grasped``, else ``obj``."""
+        return self.grasped or self.obj
 
 
 def _without(parts: Mapping[str, np.ndarray], key: str) -> dict[str, np.ndarray]:
@@ -660,7 +667,7 @@ def _lines(robot: Any, scene: Any, st: Stop, q: np.ndarray, length: float, res: 
     """Approach and retreat of stop ``st`` with the end-point at ``q``, memoised on the
     scene's memo (the cell cache's "motion.lines"): instances that share a step and its world (and
     runs with another OMPL seed) share its tool lines, which do not depend on the planner."""
-    key = (st.name, st.obj, st.onto, np.asarray(st.T, float).tobytes(), np.asarray(q, float).tobytes(),
+    key = (st.name, st.obj, st.grasped, st.onto, np.asarray(st.T, float).tobytes(), np.asarray(q, float).tobytes(),
            None if st.insert is None else np.asarray(st.insert, float).tobytes(), _world_key(st.before),
            _world_key(st.after), float(length), float(res), float(margin), id(robot))
     if getattr(scene, "memo", None) is None:
@@ -687,16 +694,16 @@ def _lines_of(robot: Any, scene: Any, st: Stop, q: np.ndarray, length: float, re
     (pb, hb), (pa, ha) = st.before, st.after
     r_dir = -z  # the empty hand backs off along its approach
     if st.name == "pickup":
-        a_state, a_dir = scene.at(pb, None, grasped=st.obj), z
+        a_state, a_dir = scene.at(pb, None, grasped=st.fingers_on), z
         r_state, r_dir = _at(scene, pa, ha, allow=_resting(scene, st.obj, pb)), up  # lifted off its support
     elif st.name == "putdown":
         a_state, a_dir = _at(scene, pb, hb, allow=_resting(scene, st.obj, pa)), -up  # set down onto it
-        r_state = scene.at(pa, None, grasped=st.obj)
+        r_state = scene.at(pa, None, grasped=st.fingers_on)
     elif st.name == "assemble":
         a_state, a_dir = _at(scene, pb, hb, allow=[(f"held:{st.obj}", str(st.onto))]), st.insert  # the insertion itself
-        r_state = scene.at(pa, None, grasped=st.obj)
+        r_state = scene.at(pa, None, grasped=st.fingers_on)
     else:  # squeeze: the fingers close on the part where it lies and open again
-        a_state = r_state = _at(scene, pb, hb, grasped=st.obj)
+        a_state = r_state = _at(scene, pb, hb, grasped=st.fingers_on)
         a_dir = z
     app = line_motion(robot, a_state, st.T, q, -np.asarray(a_dir, float), length, res, margin, "approach",
                       f"approach to {st.id} ({st.label})", reverse=True)
@@ -807,17 +814,33 @@ ARM_STEPS = ("pickup", "putdown", "assemble", "squeeze")
 MEMO_LIMIT = 256
 
 
+def _via(w: Any, obj: str, label: str | None) -> str | None:
+    """The carried part a via-grasp ``label`` of ``obj`` holds the body by (the cell's
+    product.via), None for the part's own grasps."""
+    product = getattr(w.cell, "product", None)
+    if product is None or label is None:
+        return None
+    return product.via.get(obj, {}).get(label)
+
+
 def _world_parts(w: Any) -> tuple[dict[str, np.ndarray], tuple | None]:
     """A phase-2 world's parts on the table or assembled, and the held body: (key, T_tool_part,
-    {carried key: T_tool_part}) of the part in the hand and the parts mated into it (they move
-    with it: phase2's WorldState.body), or None."""
+    {carried key: T_tool_part}) of the part the fingers hold and the other parts of its body
+    (they move with it: phase2's WorldState.body), or None. The part held is the body's root,
+    or for a via-grasp the carried part the fingers are on, at T_tool_part = T_G^-1 T_O^-1 T_V
+    (T_G the grasp in the root's frame, T_O, T_V the ideal poses); the root is then carried."""
     parts, held = {}, None
     for k, o in w.unc.objects.items():
         if o.where == "hand":
             T_tool = np.linalg.inv(o.grasp)
             inv_pose = np.linalg.inv(o.pose)
             carried = {c: T_tool @ inv_pose @ np.asarray(w.unc.obj(c).pose, float) for c in w.unc.body(k)[1:]}
-            held = (k, T_tool, carried)
+            via = _via(w, k, w.grasps.get(k))
+            if via is not None and via in carried:
+                carried[k] = T_tool
+                held = (via, carried.pop(via), carried)
+            else:
+                held = (k, T_tool, carried)
     body = set() if held is None else {held[0], *held[2]}
     for k, o in w.unc.objects.items():
         if k not in body:
@@ -826,13 +849,18 @@ def _world_parts(w: Any) -> tuple[dict[str, np.ndarray], tuple | None]:
 
 
 def _at(scene: Any, parts: Mapping[str, np.ndarray], held: tuple | None, **kw: Any) -> SceneState:
-    """``scene.at`` for a world of :func:`_world_parts`: the held body's root in the hand, its
-    carried parts with it (CollisionScene.at's ``carried``)."""
+    """``scene.at`` for a world of :func:`_world_parts`: the held part in the hand, the rest of
+    its body carried with it (CollisionScene.at's ``carried``). A contact ``allow`` gives a
+    carried part (the root, held by a via-grasp) is given to the held part, which at() extends
+    to the whole body, as phase 2 checks it."""
     if held is None:
         return scene.at(parts, None, **kw)
     carried = held[2] if len(held) > 2 else None
     if carried:
         kw["carried"] = carried
+        names = {f"held:{c}" for c in carried}
+        if kw.get("allow"):
+            kw["allow"] = [tuple(f"held:{held[0]}" if n in names else n for n in pair) for pair in kw["allow"]]
     return scene.at(parts, (held[0], held[1]), **kw)
 
 
@@ -860,8 +888,10 @@ def stops_of(cell: Any, steps: Sequence[Mapping[str, Any]], worlds: Sequence[Any
             v = worlds[i].unc.obj(hole).pose[:3, :3] @ np.asarray(va, float)
             insert = v / np.linalg.norm(v)
         args = ", ".join(str(a) for a in s["args"][:2])
+        label = str(s["args"][1]) if s["name"] in ("pickup", "squeeze") else worlds[i].grasps.get(obj)
         out.append(Stop(str(s["id"]), s["name"], obj, f"{s['name']}({args})", np.asarray(geo["tool_pose"], float),
-                        cands, _world_parts(worlds[i]), _world_parts(worlds[i + 1]), insert, onto))
+                        cands, _world_parts(worlds[i]), _world_parts(worlds[i + 1]), insert, onto,
+                        _via(worlds[i], obj, label)))
     return out
 
 
