@@ -12,7 +12,7 @@ import yaml
 from spar_py.core.errors import KBError
 from spar_py.core.units import from_mm
 from spar_py.kb.node import num
-from spar_py.kb.objects import DEFAULT_OPENING_MM, check_against_shape, load_object
+from spar_py.kb.objects import DEFAULT_OPENING_MM, check_against_shape, load_object, mesh_note
 from spar_py.kb.problem import load_problem
 from spar_py.kb.reader import MAX_INPUT_BYTES, parse_yaml
 from spar_py.kb.robots import load_robot
@@ -23,7 +23,8 @@ __all__ = ["check_file", "derive_text", "iter_kb_files"]
 
 
 def check_file(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> str:
-    """Validate one KB file of any kind (problem, object, robot); return a one-line summary."""
+    """Validate one KB file of any kind (problem, object, robot); return a one-line summary,
+    followed by a line for each mesh that loading repaired (kb.objects.mesh_note)."""
     root = read_yaml(path, max_bytes)
     kind = file_kind(root)
     if kind is None:
@@ -35,12 +36,15 @@ def check_file(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> str:
             if mfile is not None:
                 check_against_shape(mfile, read_yaml(mfile, max_bytes), model, cell.unit, cell.finger_separation,
                                     cell.robot.gripper)
-        return f"{path}: ok (problem {cell.name}: {len(cell.objects)} objects, {len(cell.goals)} goals)"
+        notes = [n for n in dict.fromkeys(mesh_note(m) for m in cell.objects.values()) if n]
+        return "\n".join([f"{path}: ok (problem {cell.name}: {len(cell.objects)} objects, {len(cell.goals)} goals)",
+                          *notes])
     if kind.name == "object":
         o = load_object(path, units_of(root)[0], max_bytes)
         check_against_shape(path, root, o, units_of(root)[0])
+        note = mesh_note(o)
         return (f"{path}: ok (object {o.name}: {len(o.faces)} faces, {len(o.poses)} stable poses, "
-                f"{len(o.grasps)} grasps)")
+                f"{len(o.grasps)} grasps)") + (f"\n{note}" if note else "")
     r = load_robot(path, max_bytes=max_bytes)
     return f"{path}: ok (robot {r.name}, {r.solver_name} IK)"
 

@@ -30,7 +30,7 @@ from spar_py.world.shapes import FeatureGeometry, Geometry, derive_faces
 __all__ = ["DERIVE_VERSION", "MAX_ENTRIES", "cache_dir", "derive"]
 
 #: Bumped whenever the derivation's results change for the same inputs.
-DERIVE_VERSION = 5
+DERIVE_VERSION = 6
 #: Derivations kept on disk at most.
 MAX_ENTRIES = 256
 
@@ -47,7 +47,8 @@ def derive(name: str, geometry: Geometry, features: tuple[FeatureGeometry, ...],
            gripper: Any, step: float, need_hull: bool, use_cache: bool = True) -> dict[str, Any]:
     """The derivation of a part as plain data: ``faces`` (names), ``poses`` (label, rfaces,
     ofaces, R as 9 numbers row-major, height, probability), ``grasps`` (label, gfaces,
-    ofaces, euler: X, Y, Z, phi, theta, psi in radians, width) and, if ``need_hull``, ``hull``
+    ofaces, euler: X, Y, Z, phi, theta, psi in radians, width), ``repair`` (what loading the
+    mesh repaired, world.shapes.Repair's line, "" for nothing) and, if ``need_hull``, ``hull``
     (the convex hull's vertices). ``features``: the part's features declared by geometry.
     ValueError (one line, naming the key) for bad geometry."""
     key_data = [DERIVE_VERSION, name, geometry.digest(), [f.spec() for f in features],
@@ -85,6 +86,7 @@ def _compute(name: str, geometry: Geometry, features: tuple[FeatureGeometry, ...
                   for p in poses],
         "grasps": [{"label": g.label, "gfaces": list(g.gfaces), "ofaces": list(g.ofaces),
                     "euler": [float(v) for v in g.euler], "width": g.width} for g in grasps],
+        "repair": geometry.repair,
     }
     if need_hull:
         from spar_py.world.shapes_derive import hull_vertices  # a cache miss only (see _compute)
