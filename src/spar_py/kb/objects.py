@@ -112,6 +112,7 @@ def load_object(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, o
             raise _geometry_error(path, geometry, e) from None
         geometry.hull = np.asarray(derived["hull"], float)
         geometry.repair = geometry.repair or str(derived.get("repair", ""))
+        geometry.no_grasp = str(derived.get("no_grasp", ""))
         if geometry.mesh_file is not None:
             pts = geometry.hull
             solids = (Solid("hull", pts.min(0), pts.max(0), 0.0, pts),)
@@ -229,8 +230,9 @@ def holdable(path: str | Path, model: ObjectModel) -> None:
         return
     geo = model.geometry
     key = "mesh" if geo is not None and geo.mesh_file else "shape"
-    raise KBError(str(path), key, "a part the gripper can hold, as a goal moves it (no pair of opposite faces or "
-                                  "round surface within its opening)")
+    why = (geo.no_grasp if geo is not None and geo.no_grasp
+           else "no pair of opposite faces or round surface within its opening")
+    raise KBError(str(path), key, f"a part the gripper can hold, as a goal moves it ({why})")
 
 
 def mesh_note(model: ObjectModel) -> str | None:

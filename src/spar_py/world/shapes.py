@@ -164,6 +164,8 @@ class Geometry:
     #: What loading the mesh file repaired (:class:`Repair`'s line; "" for none), once the mesh
     #: was built or a cached derivation said so.
     repair: str = field(default="", compare=False)
+    #: Why the derivation found no grasp (world.shapes_derive.derive_grasps's line), or "".
+    no_grasp: str = field(default="", compare=False)
     _mesh: Any = field(default=None, compare=False, repr=False)
     _digest: str | None = field(default=None, compare=False, repr=False)
 

@@ -48,7 +48,8 @@ def derive(name: str, geometry: Geometry, features: tuple[FeatureGeometry, ...],
     """The derivation of a part as plain data: ``faces`` (names), ``poses`` (label, rfaces,
     ofaces, R as 9 numbers row-major, height, probability), ``grasps`` (label, gfaces,
     ofaces, euler: X, Y, Z, phi, theta, psi in radians, width), ``repair`` (what loading the
-    mesh repaired, world.shapes.Repair's line, "" for nothing) and, if ``need_hull``, ``hull``
+    mesh repaired, world.shapes.Repair's line, "" for nothing), ``no_grasp`` (with no grasps:
+    the sizes and opening compared, else "") and, if ``need_hull``, ``hull``
     (the convex hull's vertices). ``features``: the part's features declared by geometry.
     ValueError (one line, naming the key) for bad geometry."""
     key_data = [DERIVE_VERSION, name, geometry.digest(), [f.spec() for f in features],
@@ -78,7 +79,9 @@ def _compute(name: str, geometry: Geometry, features: tuple[FeatureGeometry, ...
     mesh = geometry.mesh()
     faces = derive_faces(mesh, features, face_names, geometry.unit)
     poses = derive_poses(mesh, faces, features, geometry.unit, f"{name}_p")
-    grasps = derive_grasps(mesh, faces, features, geometry.primitives, gripper, geometry.unit, f"{name}_g", step)
+    why: list[str] = []
+    grasps = derive_grasps(mesh, faces, features, geometry.primitives, gripper, geometry.unit, f"{name}_g", step,
+                           why)
     out: dict[str, Any] = {
         "faces": [f.name for f in faces],
         "poses": [{"label": p.label, "rfaces": list(p.rfaces), "ofaces": list(p.ofaces),
@@ -87,6 +90,7 @@ def _compute(name: str, geometry: Geometry, features: tuple[FeatureGeometry, ...
         "grasps": [{"label": g.label, "gfaces": list(g.gfaces), "ofaces": list(g.ofaces),
                     "euler": [float(v) for v in g.euler], "width": g.width} for g in grasps],
         "repair": geometry.repair,
+        "no_grasp": why[0] if why else "",
     }
     if need_hull:
         from spar_py.world.shapes_derive import hull_vertices  # a cache miss only (see _compute)

@@ -48,7 +48,8 @@ from spar_py.world.shapes import (ON_SURFACE_MM, Face, FeatureGeometry, Primitiv
 if TYPE_CHECKING:
     import trimesh
 
-__all__ = ["DerivedGrasp", "DerivedPose", "Gripper", "MeshCylinder", "derive_grasps", "derive_poses", "euler_zyz_of",
+__all__ = ["Antipodal", "DerivedGrasp", "DerivedPose", "Gripper", "MeshCylinder", "antipodal_grasps", "antipodal_pairs",
+           "derive_grasps", "derive_poses", "euler_zyz_of",
            "grasp_problem", "mate_grasp_usable", "mesh_cylinders", "support_check"]
 
 #: Poses whose basin of attraction (trimesh's probability) is smaller are dropped.
@@ -673,8 +674,11 @@ def _pads_find(normals: np.ndarray | None, c: np.ndarray) -> bool:
 
 def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[FeatureGeometry, ...],
                   prims: tuple[Primitive, ...], g: Gripper, unit: str, prefix: str,
-                  step: float = math.radians(45.0)) -> list[DerivedGrasp]:
-    """The grasps of the part (module docstring), labelled ``{prefix}1, {prefix}2, ...``."""
+                  step: float = math.radians(45.0), why: list[str] | None = None) -> list[DerivedGrasp]:
+    """The grasps of the part (module docstring), labelled ``{prefix}1, {prefix}2, ...``: those
+    across opposite planar faces and round shafts, then the antipodal grasps found on the
+    surface (:func:`antipodal_grasps`) that close across other surfaces. With none at all, ``why`` (when given)
+    receives one line saying which sizes and opening were compared."""
     min_area = from_mm(unit, math.sqrt(MIN_CONTACT_MM2)) ** 2
     cos_par = math.cos(math.radians(PARALLEL_DEG))
     cands: list[tuple[tuple[str, ...], float, np.ndarray]] = []  # (gfaces, width, T)
@@ -732,6 +736,33 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fe
         order = [f.name for f in faces]
         ofaces = tuple(names) + tuple(sorted(cover - set(names), key=order.index))
         out.append(DerivedGrasp(f"{prefix}{len(out) + 1}", names, ofaces, T, euler_zyz_of(T), float(round(width, 12))))
+    found, least, n_pairs = antipodal_grasps(mesh, g, unit, step)
+    have = [(g0.T[:3, 1], g0.T[:3, 3], g0.width) for g0 in out]
+    owner = np.full(len(mesh.faces), -1)
+    for k, f in enumerate(faces):
+        owner[f.tris] = k
+    order = [f.name for f in faces]
+    for T, width, a in found:
+        if any(abs(abs(float(c0 @ T[:3, 1])) - 1) < 1e-3 and abs(w0 - width) < 0.05 * w0
+               and abs(float((T[:3, 3] - o0) @ c0)) < 0.05 * w0 for c0, o0, w0 in have):
+            continue  # across the faces a facet or shaft grasp already closes on
+        names = tuple(dict.fromkeys(faces[k].name for k in (owner[a.tp], owner[a.tq]) if k >= 0))
+        cover = {faces[k].name for k in _covered(mesh, faces, features, T, width, g, unit)}
+        ofaces = names + tuple(sorted(cover - set(names), key=order.index))
+        out.append(DerivedGrasp(f"{prefix}{len(out) + 1}", names, ofaces, T, euler_zyz_of(T), float(round(width, 12))))
+    if not out and why is not None:
+        if least is None:
+            why.append(f"no two points of its surface face each other within {FRICTION_DEG:g} deg (a sample of "
+                       f"{ANTIPODAL_SAMPLES} surface points)")
+        elif least > g.opening:
+            why.append(f"its narrowest width across opposite surfaces (within {FRICTION_DEG:g} deg) is {least:.4g} "
+                       f"{unit}, more than the gripper's opening {g.opening:.4g} {unit}")
+        elif not n_pairs:
+            why.append(f"its narrowest width across opposite surfaces is {least:.4g} {unit}, within the gripper's "
+                       f"opening {g.opening:.4g} {unit}, but no pad finds a {PAD_PATCH_MM:g} mm patch of surface there")
+        else:
+            why.append(f"{n_pairs} contact pairs from {least:.4g} {unit} wide are within the gripper's opening "
+                       f"{g.opening:.4g} {unit}, but at each the fingers or palm enter the part")
     return out
 
 
@@ -875,3 +906,167 @@ def mate_grasp_usable(T_grasp: np.ndarray, width: float, gripper: Any, T_a: np.n
     M = np.asarray(T_a, float) @ np.asarray(T_grasp, float)  # tool frame in the hole part's frame
     depth = (corners @ M[:3, :3].T + M[:3, 3] - hole.origin) @ hole.direction
     return bool(depth.max() <= from_mm(unit, MOUTH_TOL_MM))
+
+
+# =========================================================================== antipodal grasps
+
+
+#: Surface points sampled (area-weighted, seeded) for antipodal contact pairs.
+ANTIPODAL_SAMPLES = 3000
+#: ... with this seed (the derivation is deterministic).
+ANTIPODAL_SEED = 0
+#: A pair's normals must be antiparallel within this, each to the closing line (deg): the
+#: friction cone of a hard pad (tan 12 deg ~ 0.2).
+FRICTION_DEG = 12.0
+#: Each pad must find surface over a square this wide about its contact (mm), within
+#: PAD_DEPTH_MM of the contact's plane across it.
+PAD_PATCH_MM = 5.0
+#: ... (mm): a 35 mm round sags 0.18 mm over the patch's half width.
+PAD_DEPTH_MM = 0.5
+#: Pairs narrower than this are not grasped (mm): a fin or a skin, not a part.
+MIN_WIDTH_MM = 1.0
+#: Closing directions are clustered on a grid of this many cells per unit of direction
+#: component; contact midpoints on a grid of the part's size over ANTIPODAL_GRID.
+DIRECTION_CELLS = 4
+ANTIPODAL_GRID = 4
+#: At most this many clusters are tried for approaches (the best first).
+ANTIPODAL_CLUSTERS = 12
+
+
+@dataclass(frozen=True)
+class Antipodal:
+    """An antipodal contact pair (object frame, cell unit): contacts ``p`` and ``q``, the unit
+    closing direction ``c`` (from p to q), the ``width`` |q - p|, the worse of the two
+    normals' angles to the closing line (``angle``, deg) and the contacts' triangles."""
+
+    p: np.ndarray
+    q: np.ndarray
+    c: np.ndarray
+    width: float
+    angle: float
+    #: the triangles the contacts lie on
+    tp: int = -1
+    tq: int = -1
+
+
+def _ray_first(mesh: "trimesh.Trimesh", S: np.ndarray, D: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """First hits of rays (S, D) on the mesh: (hit (k,), points (k, 3) with nan where none,
+    triangle index (k,), -1 where none)."""
+    k = len(S)
+    pts = np.full((k, 3), np.nan)
+    tri = np.full(k, -1)
+    if k == 0:
+        return np.zeros(0, bool), pts, tri
+    loc, ri, ti = mesh.ray.intersects_location(S, D, multiple_hits=False)
+    if len(ri):
+        # a ray may still report more than one hit: keep the nearest per ray
+        d = np.einsum("ij,ij->i", loc - S[ri], D[ri])
+        order = np.lexsort((d, ri))
+        ri, ti, loc = ri[order], ti[order], loc[order]
+        first = np.r_[True, ri[1:] != ri[:-1]]
+        pts[ri[first]], tri[ri[first]] = loc[first], ti[first]
+    return tri >= 0, pts, tri
+
+
+def antipodal_pairs(mesh: "trimesh.Trimesh", opening: float, unit: str, samples: int = ANTIPODAL_SAMPLES,
+                    seed: int = ANTIPODAL_SEED) -> tuple[list[Antipodal], float | None]:
+    """Antipodal contact pairs on the surface: ``samples`` points drawn area-weighted (seeded),
+    each with the point where the line into the part along its inward normal leaves it (a ray
+    cast); a pair is kept when both normals lie within FRICTION_DEG of the closing line, its
+    width is from MIN_WIDTH_MM to ``opening`` and both pads find surface (PAD_PATCH_MM,
+    PAD_DEPTH_MM). Returns the pairs and the least width of any pair in the friction cone
+    (None if none), which a refusal names. Cell unit throughout."""
+    import trimesh  # a derivation only
+
+    A = _arrays(mesh)
+    eps = 1e-6 * A.diag
+    P, fi = trimesh.sample.sample_surface(mesh, samples, seed=seed)
+    P = np.asarray(P, float)
+    n = A.N[fi]
+    hit, Q, ti = _ray_first(mesh, P - eps * n, -n)
+    P, n, Q, ti = P[hit], n[hit], Q[hit], ti[hit]
+    m = A.N[ti]
+    d = Q - P
+    w = np.linalg.norm(d, axis=1)
+    ok = w > 0
+    c = np.zeros_like(d)
+    c[ok] = d[ok] / w[ok, None]
+    cos_f = math.cos(math.radians(FRICTION_DEG))
+    ang_p = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", -n, c), -1, 1)))
+    ang_q = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", m, c), -1, 1)))
+    cone = ok & (np.einsum("ij,ij->i", -n, c) >= cos_f) & (np.einsum("ij,ij->i", m, c) >= cos_f)
+    cone &= w >= from_mm(unit, MIN_WIDTH_MM)
+    least = float(w[cone].min()) if cone.any() else None
+    keep = cone & (w <= opening * (1 + 1e-9))
+    idx = np.flatnonzero(keep)
+    pads = _pads_on_surface(mesh, P[idx], Q[idx], c[idx], unit)
+    out = [Antipodal(P[i], Q[i], c[i], float(w[i]), float(max(ang_p[i], ang_q[i])), int(fi[hit][i]), int(ti[i]))
+           for i in idx[pads]]
+    return out, least
+
+
+def _pads_on_surface(mesh: "trimesh.Trimesh", P: np.ndarray, Q: np.ndarray, C: np.ndarray, unit: str) -> np.ndarray:
+    """(k,) bool: both pads of each pair find surface: rays along the closing line from outside,
+    at the corners and edge middles of a PAD_PATCH_MM square about each contact, first meet the
+    part within PAD_DEPTH_MM of the contact's depth."""
+    k = len(P)
+    if k == 0:
+        return np.zeros(0, bool)
+    half, tol = from_mm(unit, PAD_PATCH_MM) / 2, from_mm(unit, PAD_DEPTH_MM)
+    far = 2 * _arrays(mesh).diag
+    # a basis normal to each closing direction
+    ref = np.where(np.abs(C[:, :1]) < 0.9, np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]))
+    e1 = cross(C, ref)
+    e1 /= np.linalg.norm(e1, axis=1)[:, None]
+    e2 = cross(C, e1)
+    offs = [(a, b) for a in (-1, 0, 1) for b in (-1, 0, 1)]
+    ok = np.ones(k, bool)
+    for X, sign in ((P, 1.0), (Q, -1.0)):  # the pad at p closes along +c, the pad at q along -c
+        D = sign * C
+        S = np.concatenate([X + half * (a * e1 + b * e2) - far * D for a, b in offs])
+        DD = np.tile(D, (len(offs), 1))
+        hit, H, _ = _ray_first(mesh, S, DD)
+        depth = np.einsum("ij,ij->i", np.nan_to_num(H) - np.tile(X, (len(offs), 1)), DD)
+        good = (hit & (np.abs(depth) <= tol)).reshape(len(offs), k).all(0)
+        ok &= good
+    return ok
+
+
+def antipodal_grasps(mesh: "trimesh.Trimesh", g: Gripper, unit: str, step: float
+                     ) -> tuple[list[tuple[np.ndarray, float, Antipodal]], float | None, int]:
+    """Tool frames (T, width) of antipodal grasps (:func:`antipodal_pairs`), clustered: pairs
+    are grouped by closing direction (DIRECTION_CELLS) and midpoint (the part's size over
+    ANTIPODAL_GRID), the squarest pair of a group (the least normal angle, then the narrowest)
+    stands for it, the ANTIPODAL_CLUSTERS groups of the most pairs are tried, each at the approaches
+    normal to its closing direction quantised by ``step``, the contact PAD_PATCH_MM/2 inside
+    the fingertips; kept where :func:`grasp_problem` finds neither fingers nor palm in the
+    part. Also returns the least width in the friction cone and the pairs found within the
+    opening (for a refusal)."""
+    pairs, least = antipodal_pairs(mesh, g.opening, unit)
+    if not pairs:
+        return [], least, 0
+    A = _arrays(mesh)
+    cell = A.diag / ANTIPODAL_GRID
+    groups: dict[tuple, Antipodal] = {}
+    count: dict[tuple, int] = {}
+    for a in pairs:
+        c = _canonical(a.c)
+        key = (*np.round(c * DIRECTION_CELLS).astype(int), *np.floor((a.p + a.q) / 2 / cell).astype(int))
+        count[key] = count.get(key, 0) + 1
+        best = groups.get(key)
+        if best is None or (round(a.angle, 6), round(a.width, 9)) < (round(best.angle, 6), round(best.width, 9)):
+            groups[key] = a
+    # the groups with the most pairs first (the most surface to close on), then the squarest
+    ranked = sorted(groups, key=lambda k: (-count[k], round(groups[k].angle, 6), round(groups[k].width, 9),
+                                           *np.round((groups[k].p + groups[k].q) / 2, 9)))
+    chosen = [groups[k] for k in ranked[:ANTIPODAL_CLUSTERS]]
+    inset = min(from_mm(unit, PAD_PATCH_MM) / 2, g.finger_length / 2)
+    out: list[tuple[np.ndarray, float, Antipodal]] = []
+    for a in chosen:
+        c = _canonical(clean(a.c, 1e-12))
+        mid = (a.p + a.q) / 2
+        for ap in _approaches(c, step):
+            T = _tool(mid + inset * ap, c, ap)
+            if grasp_problem(mesh, T, a.width, g, unit) is None:
+                out.append((T, a.width, a))
+    return out, least, len(pairs)
