@@ -266,7 +266,7 @@ def repair_mesh(m: "trimesh.Trimesh") -> Repair:
         if not m.is_watertight:
             E = _open_edges(m)
             P = np.asarray(m.vertices)[E.ravel()]
-            lo, hi = P.min(0), P.max(0)
+            lo, hi = (np.where(np.abs(v) < 1e-9 * part, 0.0, v) for v in (P.min(0), P.max(0)))
             done = Repair(merged, degenerate, duplicate, holes, flipped).line()
             raise ValueError(
                 f"a closed (watertight) mesh: {len(E):,} edges stay open"

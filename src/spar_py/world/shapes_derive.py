@@ -676,9 +676,9 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fe
                   prims: tuple[Primitive, ...], g: Gripper, unit: str, prefix: str,
                   step: float = math.radians(45.0), why: list[str] | None = None) -> list[DerivedGrasp]:
     """The grasps of the part (module docstring), labelled ``{prefix}1, {prefix}2, ...``: those
-    across opposite planar faces and round shafts, then the antipodal grasps found on the
-    surface (:func:`antipodal_grasps`) that close across other surfaces. With none at all, ``why`` (when given)
-    receives one line saying which sizes and opening were compared."""
+    across opposite planar faces and round shafts, or, where these give none, the antipodal
+    grasps found on the surface (:func:`antipodal_grasps`). With none at all, ``why`` (when
+    given) receives one line saying which sizes and opening were compared."""
     min_area = from_mm(unit, math.sqrt(MIN_CONTACT_MM2)) ** 2
     cos_par = math.cos(math.radians(PARALLEL_DEG))
     cands: list[tuple[tuple[str, ...], float, np.ndarray]] = []  # (gfaces, width, T)
@@ -736,16 +736,14 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fe
         order = [f.name for f in faces]
         ofaces = tuple(names) + tuple(sorted(cover - set(names), key=order.index))
         out.append(DerivedGrasp(f"{prefix}{len(out) + 1}", names, ofaces, T, euler_zyz_of(T), float(round(width, 12))))
+    if out:
+        return out  # the cells written for facet and shaft grasps keep exactly those
     found, least, n_pairs = antipodal_grasps(mesh, g, unit, step)
-    have = [(g0.T[:3, 1], g0.T[:3, 3], g0.width) for g0 in out]
     owner = np.full(len(mesh.faces), -1)
     for k, f in enumerate(faces):
         owner[f.tris] = k
     order = [f.name for f in faces]
     for T, width, a in found:
-        if any(abs(abs(float(c0 @ T[:3, 1])) - 1) < 1e-3 and abs(w0 - width) < 0.05 * w0
-               and abs(float((T[:3, 3] - o0) @ c0)) < 0.05 * w0 for c0, o0, w0 in have):
-            continue  # across the faces a facet or shaft grasp already closes on
         names = tuple(dict.fromkeys(faces[k].name for k in (owner[a.tp], owner[a.tq]) if k >= 0))
         cover = {faces[k].name for k in _covered(mesh, faces, features, T, width, g, unit)}
         ofaces = names + tuple(sorted(cover - set(names), key=order.index))
