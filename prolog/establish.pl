@@ -61,6 +61,7 @@
             new_action/5,              % +Cond, -Id, +Arcs, +Plan0, -Plan
             add_action/5,              % +Action, +Cs, +Arcs, +Plan0, -Plan
             post_prior_to/4,           % +A1, +A2, +Plan0, -Plan
+            post_precedence/3,         % +Action, +Plan0, -Plan
             possible_clobberer/5,      % +Cond, +E, +S, +Plan, -C
             known_declobber_method/1   % ?Method
           ]).
@@ -203,6 +204,48 @@ post_prior_to(A1, A2, Plan0, Plan) :-
     prior_to(A1, A2, G0, G),
     set_order_of_plan(G, Plan0, Plan).
 
+%!  post_precedence(+Action, +Plan0, -Plan) is semidet.
+%
+%   Post the orderings the product's geometry forces between Action and
+%   the assembles already in the plan: for an assemble of part P and one
+%   of part Q, prior_to(A_P, A_Q) when kb:precedence(P, Q, _) (Q in place
+%   would block P's insertion; world/products.py), and the converse. Fails
+%   if an ordering closes a cycle. Nothing for other actions, or where the
+%   cell has no product.
+%
+%   @error type_error(action, Action) if Action is not an action/5 term.
+
+post_precedence(Action, Plan0, Plan) :-
+    must_be(compound, Action),
+    (   Action = action(Id, Term, _, _, _)
+    ->  true
+    ;   type_error(action, Action)
+    ),
+    (   Term = assemble(P, _, _, _, _)
+    ->  plan_actions(Plan0, Actions),
+        foldl(precede(Id, P), Actions, Plan0, Plan)
+    ;   Plan = Plan0
+    ).
+
+%   precede(+Id, +P, +Other, +Plan0, -Plan): the orderings between the
+%   assemble Id of part P and Other (an action of the plan).
+
+precede(Id, P, action(Id2, Term, _, _, _), Plan0, Plan) :-
+    (   Id2 \== Id,
+        Term = assemble(Q, _, _, _, _)
+    ->  (   kb:precedence(P, Q, _)
+        ->  post_prior_to(Id, Id2, Plan0, Plan1),
+            note(Plan1, "  precedence: prior_to(~q, ~q)~n", [Id, Id2])
+        ;   Plan1 = Plan0
+        ),
+        (   kb:precedence(Q, P, _)
+        ->  post_prior_to(Id2, Id, Plan1, Plan),
+            note(Plan, "  precedence: prior_to(~q, ~q)~n", [Id2, Id])
+        ;   Plan = Plan1
+        )
+    ;   Plan = Plan0
+    ).
+
 %!  new_action(+Cond, -Id, +Arcs, +Plan0, -Plan) is nondet.
 %
 %   Add a new action Id from the rule base that establishes Cond, posting
@@ -246,7 +289,8 @@ add_action(Action, Constraints, Arcs, Plan0, Plan) :-
     ordering_add_action(Id, G0, G1),
     index_action(Action, G1, Plan1, Plan1a),
     set_order_of_plan(G1, Plan1a, Plan2),
-    foldl([A1-A2, P0, P]>>post_prior_to(A1, A2, P0, P), Arcs, Plan2, Plan3),
+    foldl([A1-A2, P0, P]>>post_prior_to(A1, A2, P0, P), Arcs, Plan2, Plan2a),
+    post_precedence(Action, Plan2a, Plan3),
     plan_net(Plan3, Net0),
     foldl(cms_initial, Constraints, Net0, Net),
     set_net_of_plan(Net, Plan3, Plan4),

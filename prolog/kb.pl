@@ -21,6 +21,11 @@
       mate_grasps(Ta, Peg, Grasps)  the grasps of Peg usable for the goal's
                                   assemble at Ta, decided by geometry (the
                                   hand holds only what stays out of the hole)
+      precedence(P, Q, Reason)    a product's part P must be inserted
+                                  before part Q (Q in place would block
+                                  P's insertion; Reason a string)
+      mates(Part, Names)          the mates a product part's insertion
+                                  makes (strings, PART.F->PART.G)
 
     The planner reads them through the accessors of the same names
     (kb:grasp/6, ...), which answer for the problem in scope: a planning
@@ -55,6 +60,7 @@ kb_predicate(position_class, 2). kb_predicate(initial, 1).
 kb_predicate(goal, 1).           kb_predicate(transform, 2).
 kb_predicate(vector, 2).         kb_predicate(turn, 3).
 kb_predicate(mate_grasps, 3).
+kb_predicate(precedence, 3).     kb_predicate(mates, 2).
 
 %   stored(?Fact, ?Problem, ?Stored): Stored is Fact as kept for Problem,
 %   '$Name'(Problem, Args...).

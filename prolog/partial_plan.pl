@@ -25,6 +25,7 @@
 :- use_module(ordering, [ordering_arcs/2, linearisation/2]).
 :- use_module(goals, [print_action/1]).
 :- use_module(foreign, [term_data/2]).
+:- use_module(kb, []).
 
 %!  partial_actions(+Partial, -Actions:list) is det.
 %
@@ -145,8 +146,8 @@ print_partial(Partial) :-
     forall(member(A, Actions), print_action(A)),
     partial_ordering(Partial, PriorTos),
     format("ORDERING~n"),
-    forall(member(P, PriorTos),
-           format("  ~W~n", [P, [quoted(true), spacing(next_argument)]])),
+    forall(member(P, PriorTos), print_prior_to(Actions, P)),
+    print_mates(Actions),
     format("NETWORK ARCS~n"),
     cms_arcs(Net, Arcs),
     forall(member(arc(V1, V2, Pairs), Arcs),
@@ -166,6 +167,36 @@ print_partial(Partial) :-
                       [D, [quoted(true), spacing(next_argument)],
                        C, [quoted(true), spacing(next_argument)]]))
     ;   true
+    ).
+
+%   print_prior_to(+Actions, +PriorTo): one ordering constraint, and
+%   where the product's geometry forces it (kb:precedence/3), why:
+%   `prior_to(action_5, action_9): bracket before pin_a (...)`.
+
+print_prior_to(Actions, prior_to(A, B)) :-
+    format("  ~W", [prior_to(A, B), [quoted(true), spacing(next_argument)]]),
+    (   memberchk(action(A, assemble(P, _, _, _, _), _, _, _), Actions),
+        memberchk(action(B, assemble(Q, _, _, _, _), _, _, _), Actions),
+        kb:precedence(P, Q, Reason)
+    ->  format(": ~w before ~w (~w)~n", [P, Q, Reason])
+    ;   nl
+    ).
+
+%   print_mates(+Actions): for a product cell, the mates each assemble
+%   makes (kb:mates/2), oldest action first; nothing otherwise.
+
+print_mates(Actions) :-
+    findall(Id-Names,
+            ( member(action(Id, assemble(P, _, _, _, _), _, _, _), Actions),
+              kb:mates(P, Names) ),
+            Made0),
+    (   Made0 == []
+    ->  true
+    ;   reverse(Made0, Made),
+        format("MATES~n"),
+        forall(member(Id-Names, Made),
+               ( atomic_list_concat(Names, ', ', Text),
+                 format("  ~q makes ~w~n", [Id, Text]) ))
     ).
 
 print_labels(V, Labels) :-

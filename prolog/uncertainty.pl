@@ -472,8 +472,12 @@ print_step(geo(Problem, Token), I, Id, A) :-
     ;   true
     ),
     (   get_dict(placement, G, P), is_dict(P)
-    ->  format("       placement: x=~w y=~w z=~w yaw=~w deg (~w)~n",
-               [P.x, P.y, P.z, P.yaw_deg, P.pose])
+    ->  (   get_dict(on, P, On)
+        ->  format(atom(Where), " on ~w", [On])
+        ;   Where = ''
+        ),
+        format("       placement: x=~w y=~w z=~w yaw=~w deg (~w)~w~n",
+               [P.x, P.y, P.z, P.yaw_deg, P.pose, Where])
     ;   true
     ).
 

@@ -387,6 +387,18 @@ class CellGeo:
     margin: float
     k: float
     urdf: bool = False
+    #: A product cell's parts at their product poses (mm, product frame; empty otherwise): at an
+    #: assemble, the held part may touch a part that is where the product puts it beside it.
+    product: dict[str, np.ndarray] = field(default_factory=dict)
+
+
+def load_product_poses(path: Path) -> tuple[dict[str, Path], dict[str, np.ndarray]]:
+    """A product file's parts: each model file and pose (mm)."""
+    doc = yaml.safe_load(path.read_text())
+    mm = MM[doc["units"]["length"]]
+    deg = math.pi / 180 if doc["units"].get("angle", "deg") == "deg" else 1.0
+    models = {n: (path.parent / p["model"]).resolve() for n, p in doc["parts"].items()}
+    return models, {n: xyz_rpy(p.get("pose"), mm, deg) for n, p in doc["parts"].items()}
 
 
 def load_cell(path: Path) -> CellGeo:
@@ -396,12 +408,15 @@ def load_cell(path: Path) -> CellGeo:
     robot = doc["robot"]
     urdf = isinstance(robot, dict)
     arm = load_urdf_arm(robot, path.parent, mm, deg) if urdf else load_arm((path.parent / robot).resolve())
-    parts = {name: load_part((path.parent / o["model"]).resolve()) for name, o in doc["objects"].items()}
+    models, product = load_product_poses((path.parent / doc["product"]).resolve()) if "product" in doc else ({}, {})
+    parts = {name: load_part(models[name] if "model" not in o else (path.parent / o["model"]).resolve())
+             for name, o in doc["objects"].items()}
     table = doc.get("table")
     ext = None if table is None else tuple(float(v) * mm for v in (*table["x"], *table["y"]))
     margin = (float(doc["clearance"]) * mm if doc.get("clearance") is not None
               else arm.margin if arm.margin is not None else DEFAULT_MARGIN_MM)
-    return CellGeo(arm, parts, obstacle_bodies(doc, path.parent, mm, deg), ext, margin, mm, urdf)  # type: ignore[arg-type]
+    return CellGeo(arm, parts, obstacle_bodies(doc, path.parent, mm, deg), ext, margin, mm, urdf,  # type: ignore[arg-type]
+                   product)
 
 
 # =========================================================================== signed distances
@@ -627,6 +642,28 @@ def grasp_width_mm(cell: Any, geo: CellGeo, part: str, T_part: np.ndarray, T_too
     return float(best.width) * geo.k
 
 
+def _z_extent(b: Body) -> tuple[float, float]:
+    """(lowest, highest) world z of a box, cylinder, capsule or hull body (mm)."""
+    if b.kind == "box":
+        z = (np.array([[x, y, w] for x in (-1, 1) for y in (-1, 1) for w in (-1, 1)]) * b.half) @ b.T[2, :3] + b.T[2, 3]
+        return float(z.min()), float(z.max())
+    if b.kind == "hull":
+        return float(b.pts[:, 2].min()), float(b.pts[:, 2].max())
+    axis = (b.b - b.a) / max(float(np.linalg.norm(b.b - b.a)), 1e-12)
+    drop = b.r if b.kind == "capsule" else b.r * math.sqrt(max(0.0, 1.0 - float(axis[2]) ** 2))
+    return min(b.a[2], b.b[2]) - drop, max(b.a[2], b.b[2]) + drop
+
+
+def _as_designed(geo: CellGeo, poses: dict[str, np.ndarray], held: str, other: str) -> bool:
+    """Whether ``other`` sits where the product puts it relative to the ``held`` part (a
+    product cell's design contact at the held part's assemble): within 1e-6 mm and rad."""
+    if held not in geo.product or other not in geo.product:
+        return False
+    want = inv(geo.product[held]) @ geo.product[other]
+    got = inv(poses[held]) @ poses[other]
+    return bool(np.abs(got - want).max() < 1e-6)
+
+
 def check_step(geo: CellGeo, cell: Any, step: dict, q_deg: np.ndarray | None = None) -> StepCheck:
     """The clearances of one step's end-point (its ``joints_deg``, or ``q_deg`` instead: the
     part in the hand then moves with the tool)."""
@@ -674,7 +711,15 @@ def check_step(geo: CellGeo, cell: Any, step: dict, q_deg: np.ndarray | None = N
             if held is not None and m.name == f"held:{held}":
                 if step["name"] == "putdown" and w.name == "table":
                     continue
-                if step["name"] == "assemble" and w.name == step["args"][1]:
+                if step["name"] == "putdown" and w.name == (step.get("placement") or {}).get("on"):
+                    # set down on a support's top (issue 33): touching it is the step's own
+                    # contact; sinking into it is not
+                    low = min(_z_extent(h)[0] for h in moving if h.name == m.name)
+                    top = max(_z_extent(v)[1] for v in world if v.name == w.name)
+                    if low < top - TOL_MM:
+                        bounds.append(Bound(m.name, w.name, low - top, low - top))
+                    continue
+                if step["name"] == "assemble" and (w.name == step["args"][1] or _as_designed(geo, poses, held, w.name)):
                     continue
             bounds.append(pair_bound(m, w, geo.margin))
     # the arm against itself: links two or more frames apart (the pedestal, frame 0, with links

@@ -88,11 +88,16 @@ def _distance(A: np.ndarray, B: np.ndarray) -> float:
 
 
 def _regions(cell: Cell) -> list[tuple[float, float, float, float]]:
+    """The free table rectangles and the tops of the box supports (issue 33: a put-down may go
+    onto a support's top), each (x0, x1, y0, y1)."""
+    tops = [(*b.points[:, 0].min(keepdims=True), *b.points[:, 0].max(keepdims=True),
+             *b.points[:, 1].min(keepdims=True), *b.points[:, 1].max(keepdims=True))
+            for o in cell.obstacles if o.support for b in o.bodies if b.kind == "box"]
     if cell.placement_regions:
-        return [(*r["x"], *r["y"]) for r in cell.placement_regions]
+        return [(*r["x"], *r["y"]) for r in cell.placement_regions] + tops
     xy = np.array([p.T[:2, 3] for p in cell.positions.values()])
     m = MARGIN_MM / LENGTH_UNITS[cell.unit]
-    return [(xy[:, 0].min() - m, xy[:, 0].max() + m, xy[:, 1].min() - m, xy[:, 1].max() + m)]
+    return [(xy[:, 0].min() - m, xy[:, 0].max() + m, xy[:, 1].min() - m, xy[:, 1].max() + m)] + tops
 
 
 def _placement_T(cell: Cell, obj: str, p: dict) -> np.ndarray:

@@ -185,7 +185,7 @@ def test_rotation_check_says_what_was_expected(tmp_path: Path) -> None:
 
 
 #: The kb package's modules, each importing only modules before it in this list (kb/__init__.py).
-KB_ORDER = ["node", "reader", "schema", "values", "terms", "objects", "robots", "sanity", "problem",
+KB_ORDER = ["node", "reader", "schema", "values", "terms", "objects", "robots", "products", "sanity", "problem",
             "prolog_facts", "check"]
 
 

@@ -66,13 +66,14 @@ def test_parts_side_by_side_are_fine(tmp_path: Path) -> None:
 
 def test_part_above_the_table(tmp_path: Path) -> None:
     msg = _error(_cell(tmp_path, (PEG_AT, "[30, -8, 21.5]]}")))
-    assert msg == (f"{tmp_path}/cell.yaml: objects.peg.initial: expected peg at init_pos1 resting on the table "
-                   "(z = 0, its lowest point), not 20 in above it")
+    assert msg == (f"{tmp_path}/cell.yaml: objects.peg.initial: expected peg at init_pos1 resting on the table, "
+                   "a support or another part (its lowest point on the surface, its centre of mass over it); "
+                   "it floats 20 in above the table")
 
 
 def test_part_sunk_into_the_table(tmp_path: Path) -> None:
     msg = _error(_cell(tmp_path, (PEG_AT, "[30, -8, 0.5]]}")))
-    assert msg.endswith("not 1 in below it")
+    assert msg.endswith("it sinks 1 in into the table")
 
 
 def test_grasp_wider_than_the_gripper(tmp_path: Path) -> None:

@@ -215,6 +215,8 @@ class Cell:
     #: The problem file's ``motion: true``: plan motions unless the Planner says otherwise
     #: (the regression suite plans motions for these cells only).
     plan_motions: bool = False
+    #: The product the problem's ``product:`` names (its goals compiled), or None.
+    product: "Product | None" = None
 
     def position_of(self, label: str) -> Position:
         """The absolute position labelled ``label`` (KeyError if none)."""
@@ -223,3 +225,96 @@ class Cell:
     def is_pose_label(self, obj: str, label: str) -> bool:
         """True if ``label`` names a stable pose of ``obj``."""
         return label in self.objects[obj].poses
+
+
+@dataclass(frozen=True)
+class ProductPart:
+    """A part of a product: its ``model`` and ``pose``, T_product_part (4x4, cell unit)."""
+
+    name: str
+    model: ObjectModel
+    pose: np.ndarray
+
+
+@dataclass(frozen=True)
+class Mate:
+    """A peg feature of one part in a hole feature of another (``PART.FEATURE`` each);
+    ``retention`` 'loose' (held by gravity) or 'fixed' (press fit, snap, screw)."""
+
+    peg: str
+    peg_feature: str
+    hole: str
+    hole_feature: str
+    retention: str = "loose"
+
+    @property
+    def name(self) -> str:
+        """How messages and the plan name the mate: ``pin_a.shaft->bracket.bore_a``."""
+        return f"{self.peg}.{self.peg_feature}->{self.hole}.{self.hole_feature}"
+
+
+@dataclass(frozen=True)
+class Seat:
+    """A planar contact: face ``face`` of ``part`` rests on face ``on_face`` of ``on``."""
+
+    part: str
+    face: str
+    on: str
+    on_face: str
+
+    @property
+    def name(self) -> str:
+        """How messages and the plan name the seat: ``bracket.bottom->base.top``."""
+        return f"{self.part}.{self.face}->{self.on}.{self.on_face}"
+
+
+@dataclass(frozen=True)
+class PartGoal:
+    """What a non-base part's insertion must achieve: ``part`` into ``parent`` with the
+    mating faces (``part_faces``, ``parent_faces``), T_a = T_parent^-1 T_part (the product
+    poses) and V_a, the insertion direction in the parent's frame (unit), named ``ta``,
+    ``va``; ``mates`` the mates and seats that insertion makes (their names, file order)."""
+
+    part: str
+    parent: str
+    part_faces: tuple[Face, ...]
+    parent_faces: tuple[Face, ...]
+    T_a: np.ndarray
+    V_a: np.ndarray
+    ta: str
+    va: str
+    mates: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class Precedence:
+    """``first`` must be inserted before ``then``: ``then`` in place blocks ``first``'s
+    insertion; ``reason`` says how, for the plan's text."""
+
+    first: str
+    then: str
+    reason: str
+
+
+@dataclass
+class Product:
+    """A product (kb/products/*.yaml): its parts at their poses in the product frame, the base
+    part, the mates and seats, and what they compile to: one :class:`PartGoal` per non-base
+    part (the assembly tree) and the :class:`Precedence` the geometry forces."""
+
+    name: str
+    file: str
+    base: str
+    parts: dict[str, ProductPart]
+    mates: tuple[Mate, ...]
+    seats: tuple[Seat, ...] = ()
+    goals: tuple[PartGoal, ...] = ()
+    precedence: tuple[Precedence, ...] = ()
+    #: The parts' model files (resolved paths).
+    files: tuple[str, ...] = ()
+    #: Each part's neighbours at the product poses (world.products.near_parts).
+    near: dict[str, tuple[str, ...]] = field(default_factory=dict)
+
+    def goal_of(self, part: str) -> PartGoal | None:
+        """The goal of a non-base part (None for the base)."""
+        return next((g for g in self.goals if g.part == part), None)

@@ -14,6 +14,7 @@ from spar_py.core.units import from_mm
 from spar_py.kb.node import num
 from spar_py.kb.objects import DEFAULT_OPENING_MM, check_against_shape, load_object, mesh_note
 from spar_py.kb.problem import load_problem
+from spar_py.kb.products import load_product
 from spar_py.kb.reader import MAX_INPUT_BYTES, parse_yaml
 from spar_py.kb.robots import load_robot
 from spar_py.kb.schema import describe, file_kind, read_kb, read_yaml
@@ -23,12 +24,18 @@ __all__ = ["check_file", "derive_text", "iter_kb_files"]
 
 
 def check_file(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> str:
-    """Validate one KB file of any kind (problem, object, robot); return a one-line summary,
+    """Validate one KB file of any kind (problem, object, robot, product); return a one-line summary,
     followed by a line for each mesh that loading repaired (kb.objects.mesh_note)."""
     root = read_yaml(path, max_bytes)
     kind = file_kind(root)
     if kind is None:
-        raise KBError(str(path), "", "a problem, object or robot file", describe(root.value))
+        raise KBError(str(path), "", "a problem, object, robot or product file", describe(root.value))
+    if kind.name == "product":
+        pr = load_product(path, units_of(root)[0], max_bytes)
+        notes = [n for n in dict.fromkeys(mesh_note(p.model) for p in pr.parts.values()) if n]
+        return "\n".join([f"{path}: ok (product {pr.name}: {len(pr.parts)} parts, "
+                          f"{len(pr.mates) + len(pr.seats)} mates, {len(pr.precedence)} orderings by geometry)",
+                          *notes])
     if kind.name == "problem":
         cell = load_problem(path, max_bytes)
         for oname, model in cell.objects.items():

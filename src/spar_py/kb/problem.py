@@ -20,9 +20,10 @@ import numpy as np
 from spar_py.core.errors import UnknownKeyError, WrongKindError
 from spar_py.core.geometry import same_stable_pose
 from spar_py.core.memo import Memo
-from spar_py.core.model import Bounds, Cell, MatingFeature, ObjectModel, Position, Sensor, Term
+from spar_py.core.model import Bounds, Cell, MatingFeature, ObjectModel, Position, Product, Sensor, Term
 from spar_py.kb.node import Node, cut, did_you_mean, show
 from spar_py.kb.objects import holdable, load_object
+from spar_py.kb.products import add_goal_frames, load_product, product_goals, product_part
 from spar_py.kb.reader import MAX_INPUT_BYTES
 from spar_py.kb.robots import home_angles, load_robot, load_urdf_robot
 from spar_py.kb.sanity import check_cell
@@ -232,27 +233,35 @@ def _same_stable_pose(R_abs: np.ndarray, R_pose: np.ndarray, memo: Memo | None) 
 
 
 def _objects(root: Node, base: Path, unit: str, max_bytes: int, opening: float | None = None,
-             gripper: GripperGeometry | None = None, memo: Memo | None = None, reach: float | None = None
-             ) -> tuple[dict[str, ObjectModel], dict[str, Position], list[Path]]:
-    """The problem's objects (models loaded), their initial positions and the model files
-    (``memo``: the load's tables, ``reach`` the arm's length: :func:`load_object`)."""
+             gripper: GripperGeometry | None = None, memo: Memo | None = None, reach: float | None = None,
+             product: Product | None = None) -> tuple[dict[str, ObjectModel], dict[str, Position], list[Path]]:
+    """The problem's objects (models loaded; a part of ``product`` takes its model from it), their
+    initial positions and the model files (``memo``: the load's tables, ``reach`` the arm's
+    length: :func:`load_object`)."""
     objects: dict[str, ObjectModel] = {}
     positions: dict[str, Position] = {}
     files: list[Path] = []
     for oname, onode in root.key("objects").items():
-        mnode = onode.key("model")
-        mpath = _ref_path(mnode, base, "object")
-        with _referenced(mnode, "object"):
-            model = load_object(mpath, unit, max_bytes, opening=opening, gripper=gripper, memo=memo,
-                                reach=reach)
-        if model.name != oname:
-            raise mnode.fail(f"the model of {oname}", f"the model of {model.name}")
+        if product is not None and oname in product.parts:
+            model = product_part(onode, product, oname)
+        else:
+            mnode = onode.key("model")
+            mpath = _ref_path(mnode, base, "object")
+            with _referenced(mnode, "object"):
+                model = load_object(mpath, unit, max_bytes, opening=opening, gripper=gripper, memo=memo,
+                                    reach=reach)
+            if model.name != oname:
+                raise mnode.fail(f"the model of {oname}", f"the model of {model.name}")
+            files.append(mpath)
         objects[oname] = model
-        files.append(mpath)
         for pos in _positions(onode, oname, model, positions, memo):
             positions[pos.label] = pos
     if not objects:
         raise root.key("objects").fail("at least one object", "none")
+    missing = [p for p in (product.parts if product is not None else ()) if p not in objects]
+    if missing:
+        raise root.key("objects").fail(f"an initial position for every part of product {product.name}",
+                                       f"none for {', '.join(missing)}")
     return objects, positions, files
 
 
@@ -289,9 +298,10 @@ def _sensors(root: Node, rad_per: float, large_ok: bool = True) -> dict[str, Sen
 
 
 def _goals(root: Node, objects: dict[str, ObjectModel], transforms: dict, vectors: dict,
-           positions: dict[str, Position], turns: dict) -> list[Term]:
+           positions: dict[str, Position], turns: dict, product: Product | None = None) -> list[Term]:
     """The goals, parsed and checked against the cell, as term data (kb.terms); an ``assembled(Peg,
-    Hole)`` goal adds its derived T_a turns to ``transforms`` and ``turns`` (_derived_assembly)."""
+    Hole)`` goal adds its derived T_a turns to ``transforms`` and ``turns`` (_derived_assembly);
+    a product's goals (``assembled(KIT)``, ``mated/4``) are its compiled ones (kb.products)."""
     goals: list[Term] = []
     for g in root.key("goals").elements(1):
         text = g.text()  # outside the try: a KBError is a ValueError too, and must not nest
@@ -299,6 +309,9 @@ def _goals(root: Node, objects: dict[str, ObjectModel], transforms: dict, vector
             term = parse_term(text)
         except ValueError as e:
             raise g.fail(f"a Prolog term ({e})", show(text)) from None
+        if product is not None and (compiled := product_goals(g, term, product)) is not None:
+            goals += [t for t in compiled if t not in goals]
+            continue
         if isinstance(term, tuple) and term[0] == "assembled" and len(term) == 3:
             term = _derived_assembly(g, term, objects, transforms, vectors, turns)
         elif isinstance(term, tuple) and term[0] == "mated" and len(term) == 5:
@@ -439,7 +452,8 @@ def _regions(root: Node) -> list[dict[str, tuple[float, float]]]:
 def _obstacles(root: Node, base: Path, rad_per: float) -> list:
     """``obstacles:``: named shapes in the world frame (cell unit): ``box: {min, max}``,
     ``cylinder: {radius, z: [lo, hi], center: [x, y]}`` (axis along world z) or ``mesh: FILE``
-    placed at ``xyz``, ``rpy`` (its convex hull: a conservative stand-in for a concave fixture)."""
+    placed at ``xyz``, ``rpy`` (its convex hull: a conservative stand-in for a concave fixture);
+    ``support: true`` marks one parts may rest on (its top: a nest, a riser, a fixture plate)."""
     from spar_py.world.collision import Obstacle, box, convex, cylinder  # 10 ms: paid by a load, not by the import
 
     onode = root.key("obstacles", required=False)
@@ -483,7 +497,10 @@ def _obstacles(root: Node, base: Path, rad_per: float) -> list:
                 raise mnode.fail(f"a mesh trimesh can read ({type(e).__name__}: {str(e)[:80]})") from None
             T = xyz_rpy_frame(on, 1.0, rad_per) if on.key("xyz", required=False) is not None else np.eye(4)
             bodies = (convex(name, -1, pts @ T[:3, :3].T + T[:3, 3]),)
-        out.append(Obstacle(name, bodies))
+        snode = on.key("support", required=False)
+        if snode is not None and not isinstance(snode.value, bool):
+            raise snode.fail("true or false (parts may rest on its top)", show(snode.value))
+        out.append(Obstacle(name, bodies, support=bool(snode is not None and snode.value)))
     return out
 
 
@@ -520,6 +537,19 @@ def _clearance(root: Node) -> float | None:
     return m
 
 
+def _product(root: Node, base: Path, unit: str, max_bytes: int, robot: Any, memo: Memo, reach: float
+             ) -> tuple[Product | None, list[Path]]:
+    """The product ``product:`` names (kb.products), loaded for the robot's gripper, and its files."""
+    pnode = root.key("product", required=False)
+    if pnode is None:
+        return None, []
+    ppath = _ref_path(pnode, base, "product")
+    with _referenced(pnode, "product"):
+        product = load_product(ppath, unit, max_bytes, memo, opening=robot.finger_separation,
+                               gripper=robot.gripper, reach=reach)
+    return product, [ppath, *map(Path, product.files)]
+
+
 def load_problem(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> Cell:
     """Load and validate ``kb/problems/*.yaml`` with the robot and object files it names
     (each file at most ``max_bytes``)."""
@@ -538,8 +568,10 @@ def load_problem(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> Cell:
             robot = load_robot(rpath, unit=unit, max_bytes=max_bytes)
     memo = Memo()  # this load's tables: the object files of a problem repeat their transforms
     arm = float(np.abs(robot.dh[:, 1]).sum() + np.abs(robot.dh[:, 2]).sum() + np.linalg.norm(robot.tool[:3, 3]))
+    product, product_files = _product(root, base, unit, max_bytes, robot, memo, arm)
     objects, positions, model_files = _objects(root, base, unit, max_bytes, robot.finger_separation, robot.gripper,
-                                               memo, arm)
+                                               memo, arm, product)
+    model_files += product_files
     grip = root.key("gripper").choice(("open", "closed"))
     unc = root.key("uncertainty")
     lnode = root.key("allow_large_angles", required=False)
@@ -553,7 +585,9 @@ def load_problem(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> Cell:
                   for k, n in (root.key("transforms", False) or Node("", "", {})).items()}
     vectors = {k: n.vector(3) for k, n in (root.key("vectors", False) or Node("", "", {})).items()}
     turns: dict[str, tuple[tuple[str, tuple[str, ...]], ...]] = {}
-    goals = _goals(root, objects, transforms, vectors, positions, turns)
+    if product is not None:
+        add_goal_frames(root.key("product"), product, transforms, vectors)
+    goals = _goals(root, objects, transforms, vectors, positions, turns, product)
     moved = {g[1] for g in goals if isinstance(g, tuple) and g[0] in ("assembled", "part_location")}
     for (oname, model), mfile in zip(objects.items(), model_files):
         if oname in moved:
@@ -584,6 +618,7 @@ def load_problem(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> Cell:
         clearance=_clearance(root),
         collisions=_collision_switch(root),
         home=home_angles(root.key("home", required=False), robot, rad_per),
+        product=product,
     )
     if cell.home is None:
         cell.home = robot.home

@@ -46,8 +46,10 @@ def facts(cell: Cell) -> list[tuple]:
     Shapes follow Figs. 18-19: pose/5, grasp/6, plus object/1, face/2, position/4,
     position_class/2, initial/1, goal/1, transform/2, vector/2, problem/1, and turn/3 for
     a derived T_a: turn(Ta, Turn, HolePoses), in order, each turn the planner may assemble
-    with and the hole part's stable poses in which the mated peg clears the table; and
-    mate_grasps(Ta, Peg, Grasps) for a goal whose features have geometry (:func:`_mate_grasps`).
+    with and the hole part's stable poses in which the mated peg clears the table;
+    mate_grasps(Ta, Peg, Grasps) for a goal whose features have geometry (:func:`_mate_grasps`);
+    for a product cell, precedence(P, Q, Reason) (P before Q, world.products.precedence) and
+    mates(Part, Names) (the mates Part's insertion makes).
     """
     out: list[tuple] = [("problem", cell.name)]
     for o in cell.objects.values():
@@ -73,6 +75,9 @@ def facts(cell: Cell) -> list[tuple]:
     out += [("initial", f) for f in cell.initial]
     out += [("goal", g) for g in cell.goals]
     out += _mate_grasps(cell)
+    if cell.product is not None:
+        out += [("precedence", pr.first, pr.then, pr.reason) for pr in cell.product.precedence]
+        out += [("mates", g.part, list(g.mates)) for g in cell.product.goals]
     return out
 
 

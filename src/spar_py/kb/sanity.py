@@ -8,8 +8,9 @@ file, the key and both parties:
   object-frame length (shape, grasp, feature, pose height) lies within a box about the
   robot's base of half-width REACH_FACTOR x (sum of the DH link lengths |a| + |d| and
   the tool offset), so no placement grid is ever unbounded;
-- table: each initial part's rotation is one of its stable poses (kb checks this) and
-  its lowest point is on the table top, z = 0, within REST_TOL_MM;
+- resting: each initial part's rotation is one of its stable poses (kb checks this), its
+  lowest point is on the table top (z = 0), a support's top or another part's top within
+  REST_TOL_MM and its centre of mass over its support polygon (world.supports);
 - overlap: no two initial parts overlap by more than OVERLAP_TOL_MM;
 - gripper: every grasp's width W_g is at most the finger separation W_m;
 - vectors: every approach / mating vector under ``vectors:`` is non-zero.
@@ -36,21 +37,19 @@ import numpy as np
 import yaml
 
 from spar_py.core.errors import KBError
-from spar_py.core.geometry import same_stable_pose
 from spar_py.core.model import Cell, ObjectModel, Position, Solid
 from spar_py.core.units import from_mm
 from spar_py.kb.reader import SAFE_LOADER
 from spar_py.kb.terms import atoms
+from spar_py.world.supports import REST_TOL_MM, part_surface, rest_of, surfaces_of
 
-__all__ = ["check_cell", "overlap_depth", "reach_box", "solid_points"]
+__all__ = ["REST_TOL_MM", "check_cell", "overlap_depth", "reach_box", "solid_points"]
 
 #: Half-width of the box of admissible coordinates, in multiples of the arm's length
 #: (sum of |a| + |d| + tool offset: 66.5 in for the PUMA 762, whose real reach from the
 #: shoulder is about 49 in). 2, not 1.5: kb/problems/unreachable.yaml puts its parts
 #: 100 in out on purpose, a cell that loads and has no plan; 1.5 x 66.5 in is 99.8 in.
 REACH_FACTOR = 2.0
-#: A resting part's lowest point may be this far from the table top (mm).
-REST_TOL_MM = 0.5
 #: Parts may overlap this much (mm): touching parts, rounding.
 OVERLAP_TOL_MM = 0.01
 #: Sides of the polygon inscribed in a cylinder's rims for the overlap test.
@@ -276,22 +275,26 @@ def _vectors(cell: Cell) -> Iterator[KBError]:
 
 
 def _on_table(cell: Cell) -> Iterator[KBError]:
-    """Each initial part rests on the table top: its lowest point at z = 0 (within
-    REST_TOL_MM); a part without a shape: its frame at its stable pose's height."""
-    tol, u = from_mm(cell.unit, REST_TOL_MM), cell.unit
+    """Each initial part rests on the table top, a support's top or another part's top
+    (world.supports.rest): its lowest point on the surface within REST_TOL_MM and its centre
+    of mass over its support polygon; a part without a shape: its frame at its stable pose's
+    height over the surface. A part on an unbounded table at z = 0 in a stable pose rests there
+    (kb checks the pose), so its centre of mass is not computed."""
+    tol = from_mm(cell.unit, REST_TOL_MM)
+    base = surfaces_of(cell)
+    tops = {p.label: part_surface(p.obj, cell.objects[p.obj], p.T, tol)
+            for p in cell.positions.values() if cell.objects[p.obj].shape}
     for pos in cell.positions.values():
         m = cell.objects[pos.obj]
-        if m.shape:
-            low, what = _lowest(m, pos.T), "its lowest point"
-        else:
-            sp = next((p for p in m.poses.values() if same_stable_pose(pos.T[:3, :3], p.R)), None)
-            if sp is None:
-                continue  # kb refuses an orientation that is no stable pose
-            low, what = float(pos.T[2, 3] - sp.height), f"its frame {_fmt(sp.height, u)} up (stable pose {sp.label})"
-        if abs(low) > tol:
-            how = f"{_fmt(low, u)} above it" if low > 0 else f"{_fmt(-low, u)} below it"
+        if cell.table is None and m.shape and abs(_lowest(m, pos.T)) <= tol:
+            continue
+        on = rest_of(cell, pos.obj, pos.T, base + [s for k, s in tops.items() if k != pos.label])
+        if on is None:
+            continue  # kb refuses an orientation that is no stable pose
+        if not on.ok:
             yield KBError(cell.file, _position_key(cell, pos),
-                          f"expected {pos.obj} at {pos.name} resting on the table (z = 0, {what}), not {how}")
+                          f"expected {pos.obj} at {pos.name} resting on the table, a support or another part "
+                          f"(its lowest point on the surface, its centre of mass over it); it {on.why}")
 
 
 def _overlaps(cell: Cell) -> Iterator[KBError]:

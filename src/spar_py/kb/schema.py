@@ -144,21 +144,30 @@ URDF_ROBOT_SCHEMA = keys(
 )
 
 
-#: A problem's obstacle: a named box, z-cylinder or mesh in the world frame.
+#: A problem's obstacle: a named box, z-cylinder or mesh in the world frame (a support: parts may rest on it).
 OBSTACLE_SCHEMA = keys(["name"], {"box": keys(["min", "max"]), "cylinder": keys(["radius", "z", "center"]),
-                                  "mesh": LEAF, "xyz": LEAF, "rpy": LEAF})
+                                  "mesh": LEAF, "xyz": LEAF, "rpy": LEAF, "support": LEAF})
 
 
 PROBLEM_SCHEMA = keys(
     {"problem": LEAF, "units": UNITS_SCHEMA, "robot": LEAF,
-     "objects": Named(keys({"model": LEAF, "initial": OneOrMany(keys(["name", "label", "tm"]))})),
+     "objects": Named(keys({"initial": OneOrMany(keys(["name", "label", "tm"]))}, ["model"])),
      "gripper": LEAF,
      "uncertainty": keys({"manipulator": BOUNDS_SCHEMA, "objects": Named(BOUNDS_SCHEMA)}),
      "goals": LEAF},
     {"sensors": Named(BOUNDS_SCHEMA), "transforms": Named(keys(["tm"])), "vectors": Named(LEAF),
      "placement_regions": Each(keys(["x", "y"])),
      "obstacles": Each(OBSTACLE_SCHEMA), "table": keys(["x", "y"]), "clearance": LEAF, "collision": LEAF,
-     "home": LEAF, "motion": LEAF, "allow_large_angles": LEAF},
+     "home": LEAF, "motion": LEAF, "allow_large_angles": LEAF, "product": LEAF},
+)
+
+
+#: A product file (kb/products): parts at their poses, mates ({peg, hole, retention}) and
+#: seats ({seat, on}) in one list, the base part (kb.products checks which keys go together).
+PRODUCT_SCHEMA = keys(
+    {"product": LEAF, "units": UNITS_SCHEMA, "parts": Named(keys(["model"], {"pose": FRAME_SCHEMA})),
+     "mates": Each(keys({}, ["peg", "hole", "retention", "seat", "on"]), 1)},
+    {"base": LEAF},
 )
 
 
@@ -181,6 +190,7 @@ KINDS = MappingProxyType({
     "problem": Kind("problem", "problem", PROBLEM_SCHEMA, "a problem file"),
     "object": Kind("object", "object", OBJECT_SCHEMA, "an object model"),
     "robot": Kind("robot", "dh", ROBOT_SCHEMA, "a robot model"),
+    "product": Kind("product", "product", PRODUCT_SCHEMA, "a product file"),
 })
 
 

@@ -51,6 +51,7 @@ from spar_py.core.units import ANGLE_UNITS, LENGTH_UNITS
 from spar_py.world.arcs import reachable_pairs
 from spar_py.world.motion_options import MotionFailure, MotionOptions
 from spar_py.world.run import CellCache
+from spar_py.world.supports import rest_of, surfaces_of
 from spar_py.world.workspace import arm_at, pair_text
 from spar_py.phase2.supinf import cached_bounds
 from spar_py.phase2.symbolic import Registry, is_symbolic, snap
@@ -695,10 +696,14 @@ def _putdown(world: World, s: Step, early: bool = False) -> tuple[list[dict], Wo
         return checks, world, {"tool_pose": None, "joints_deg": None, "placement": None}
     g = _grasp(world.cell, obj, world.grasps[obj])
     what = f"putdown({obj})"
+    on = rest_of(world.cell, obj, place.T, surfaces_of(world.cell))
+    surface = on.surface.name if on is not None and on.surface is not None else "table"  # the step's own contact
     q, geo, refused = _arm(world, place.T @ g.T, what, held=(obj, np.linalg.inv(g.T)), width=g.width,
-                           allow=[(f"held:{obj}", "table")])
+                           allow=[(f"held:{obj}", n) for n in dict.fromkeys(("table", surface))])
     geo["placement"] = place.as_dict()
     checks = [] if q is not None else [_reach_verdict(s["id"], False, _no_arm(what, geo))]
+    if on is not None and not on.ok:
+        checks.append(_reach_verdict(s["id"], False, f"{what} leaves {obj} unstable: it {on.why}"))
     grasps = {k: v for k, v in world.grasps.items() if k != obj}
     w = replace(world, refused=refused, unc=ur.putdown(world.unc, obj, place.T, world.cache.memo), grasps=grasps,
                 joints=q if q is not None else world.joints)
@@ -709,14 +714,20 @@ def _assemble(world: World, s: Step, early: bool = False) -> tuple[list[dict], W
     peg, hole, faces, ta, va = s["args"][0], s["args"][1], s["args"][2], s["args"][3], s["args"][4]
     cell = world.cell
     Ta = cell.transforms[ta]
-    fp, fh = _mate_features(cell, peg, hole, faces)
     g = _grasp(cell, peg, world.grasps[peg])
-    cs = ur.assemble_constraints(world.unc, peg, hole, Ta, fp, fh, action=s["id"], memo=world.cache.memo,
-                                 axis=cell.vectors.get(va) if isinstance(va, str) else None)
+    pair = _product_mate(cell, peg, hole, faces, Ta)
+    if pair is None:
+        fp, fh = _mate_features(cell, peg, hole, faces)
+    else:
+        fp, fh = pair
+    cs = [] if fp is None else ur.assemble_constraints(
+        world.unc, peg, hole, Ta, fp, fh, action=s["id"], memo=world.cache.memo,
+        axis=cell.vectors.get(va) if isinstance(va, str) else None)
     checks = _verdicts(world, cs, early)
     what = f"assemble({peg}, {hole})"
+    near = cell.product.near.get(peg, ()) if cell.product is not None else ()
     q, geo, refused = _arm(world, world.unc.obj(hole).pose @ Ta @ g.T, what, held=(peg, np.linalg.inv(g.T)),
-                           width=g.width, allow=[(f"held:{peg}", hole)])
+                           width=g.width, allow=[(f"held:{peg}", o) for o in dict.fromkeys((hole, *near))])
     if q is None:
         checks.append(_reach_verdict(s["id"], False, _no_arm(what, geo)))
     grasps = {k: v for k, v in world.grasps.items() if k != peg}
@@ -724,6 +735,28 @@ def _assemble(world: World, s: Step, early: bool = False) -> tuple[list[dict], W
                 joints=q if q is not None else world.joints, checked=_checked(world, cs, checks),
                 complete=sum(c["kind"] == "uncertainty" for c in checks) == len(cs))
     return checks, w, geo
+
+
+def _product_mate(cell: Cell, held: str, fixed: str, faces: Any, Ta: np.ndarray
+                  ) -> tuple[MatingFeature | None, MatingFeature | None] | None:
+    """A product part's assemble that is not a held peg into a fixed hole: a seat (no features
+    on its faces: (None, None), no insertion inequality, as a put-down has none), or a held
+    hole slid onto a fixed peg: the pair as the inequality takes it, the held part's point
+    the fixed peg's tip where it sits when seated (T_a^-1 F_p, so a perfect insertion has
+    |C_h - C_p| = 0) and the margin R_hole - R_peg. None for any other assemble."""
+    if cell.product is None or cell.product.goal_of(held) is None or not (
+            isinstance(faces, list) and len(faces) == 2):
+        return None
+    fa, fb = cell.objects[held].feature_on(faces[0]), cell.objects[fixed].feature_on(faces[1])
+    if fa is None and fb is None:
+        return None, None
+    if fa is None or fb is None or not (fa.kind == "hole" and fb.kind == "peg"):
+        return None
+    tip = np.asarray(fb.vector, float)
+    inv = np.linalg.inv(np.asarray(Ta, float))
+    seated = inv[:3, :3] @ tip + inv[:3, 3]
+    return (replace(fa, kind="peg", radius=fb.radius, vector=seated, geometry=None),
+            replace(fb, kind="hole", radius=fa.radius, vector=tip, geometry=None))
 
 
 def _mate_features(cell: Cell, peg: str, hole: str, faces: Any) -> tuple[MatingFeature, MatingFeature]:

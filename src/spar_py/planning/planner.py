@@ -316,6 +316,30 @@ def _plan(problem: str, d: dict[str, Any], trace: str) -> Plan:
                 actions=actions, steps=steps)
 
 
+def name_mates(cell: Cell, d: dict[str, Any]) -> None:
+    """A product cell's plan document (in place): each assemble of a part, among the partial
+    plan's actions and the instance's steps, gets ``mates``, the names of the mates and seats
+    its insertion makes (``pin_a.shaft->base.bore_a``); the partial plan gets ``precedence``,
+    the orderings the product's geometry forced, ``{before, after, reason}`` with the text
+    the printed plan gives (``bracket before pin_a (...)``)."""
+    product = cell.product
+    made = {g.part: list(g.mates) for g in product.goals}
+    partial = d.get("partial") or {}
+    part_of: dict[str, str] = {}
+    for a in partial.get("actions", []):
+        if a.get("name") == "assemble" and a.get("args") and a["args"][0] in made:
+            a["mates"] = made[a["args"][0]]
+            part_of[a["id"]] = a["args"][0]
+    for st in (d.get("instance") or {}).get("steps", []):
+        if st.get("name") == "assemble" and st.get("args") and st["args"][0] in made:
+            st["mates"] = made[st["args"][0]]
+    if partial:
+        reasons = {(pr.first, pr.then): f"{pr.first} before {pr.then} ({pr.reason})" for pr in product.precedence}
+        partial["precedence"] = [
+            {"before": a, "after": b, "reason": reasons[(part_of[a], part_of[b])]}
+            for a, b in partial.get("ordering", []) if (part_of.get(a), part_of.get(b)) in reasons]
+
+
 def _motion_reason(d: dict[str, Any], failures: list[MotionFailure]) -> None:
     """A phase-2 no plan whose instances failed for want of a motion says which motion (of
     the first instance that got that far) and which pair of bodies blocked it; ``failures``
@@ -472,6 +496,8 @@ class Planner:
 
                 attach(motion, d["instance"])
         d.setdefault("timing", {})["total_s"] = round(time.perf_counter() - t0, 6)
+        if cell.product is not None:
+            name_mates(cell, d)
         log = run.world.log
         _motion_reason(d, log.motion_failures)
         plan = _plan(cell.name, d, ans.get("Trace", ""))

@@ -69,6 +69,8 @@ __all__ = ["CollisionScene", "DEFAULT_MARGIN_MM", "Obstacle", "SceneState", "sce
 
 #: The clearance margin when neither the robot nor the problem file gives one: 2 mm.
 DEFAULT_MARGIN_MM = 2.0
+#: A part's lowest vertex this near a support's top rests on it (mm; world.supports' tolerance).
+REST_TOL_MM = 0.5
 #: Contact between the fingers (or palm) and the part in the hand: allowed up to this overlap
 #: (rounding, not geometry): 0.05 mm.
 GRASP_TOL_MM = 0.05
@@ -282,10 +284,12 @@ def _joined(cols: list[tuple]) -> tuple:
 
 @dataclass(frozen=True)
 class Obstacle:
-    """A named obstacle of the problem file: its bodies in the world frame (cell unit)."""
+    """A named obstacle of the problem file: its bodies in the world frame (cell unit); a
+    ``support`` (a nest, a riser, a fixture plate) is one parts may rest on (its top: world.supports)."""
 
     name: str
     bodies: tuple[Body, ...]
+    support: bool = False
 
 
 # --------------------------------------------------------------------------- distances
@@ -495,6 +499,24 @@ class CollisionScene:
             depth = max(x1 - x0, y1 - y0, 1.0)
             self._slab = box("table", WORLD, np.array([x0, y0, -depth]), np.array([x1, y1, 0.0]))
         return self._slab
+
+    def resting_on(self, part: str, T: np.ndarray) -> list[str]:
+        """The supports (obstacles marked ``support``) ``part`` at world pose T (4x4) rests on:
+        its lowest vertex within REST_TOL_MM of a support's highest and their footprints' boxes
+        overlapping. A part lifted straight up off such a support, or set straight down onto
+        it, touches it by design (as the table): callers allow that pair."""
+        tol = from_mm(self.unit, REST_TOL_MM)
+        P = np.concatenate([b.points for b in self.placed(part, T, WORLD)])
+        low, lo, hi = P[:, 2].min(), P[:, :2].min(axis=0), P[:, :2].max(axis=0)
+        out = []
+        for o in self.obstacles:
+            if not o.support:
+                continue
+            Q = np.concatenate([b.points for b in o.bodies])
+            over = np.all(Q[:, :2].min(axis=0) <= hi) and np.all(lo <= Q[:, :2].max(axis=0))
+            if over and abs(Q[:, 2].max() - low) <= tol:
+                out.append(o.name)
+        return out
 
     def gripper_bodies(self, width: float | None) -> list[Body]:
         """The palm and fingers (TOOL frame) with the fingers' contact faces ``width`` apart (default

@@ -667,6 +667,13 @@ def _lines(robot: Any, scene: Any, st: Stop, q: np.ndarray, length: float, res: 
         key, lambda: _lines_of(robot, scene, st, q, length, res, margin))
 
 
+def _resting(scene: Any, obj: str, parts: Mapping[str, np.ndarray]) -> list[tuple[str, str]]:
+    """The held part's contacts with what it rests on where ``parts`` has it: the table and the
+    supports under it (CollisionScene.resting_on)."""
+    under = scene.resting_on(obj, parts[obj]) if obj in parts and getattr(scene, "obstacles", ()) else []
+    return [(f"held:{obj}", n) for n in ("table", *under)]
+
+
 def _lines_of(robot: Any, scene: Any, st: Stop, q: np.ndarray, length: float, res: float,
               margin: float) -> tuple[Segment, Segment] | MotionFailure:
     """Approach and retreat of stop ``st`` with the end-point at ``q``. The part in the hand
@@ -679,9 +686,9 @@ def _lines_of(robot: Any, scene: Any, st: Stop, q: np.ndarray, length: float, re
     r_dir = -z  # the empty hand backs off along its approach
     if st.name == "pickup":
         a_state, a_dir = scene.at(pb, None, grasped=st.obj), z
-        r_state, r_dir = scene.at(pa, ha, allow=[(f"held:{st.obj}", "table")]), up  # lifted off its support
+        r_state, r_dir = scene.at(pa, ha, allow=_resting(scene, st.obj, pb)), up  # lifted off its support
     elif st.name == "putdown":
-        a_state, a_dir = scene.at(pb, hb, allow=[(f"held:{st.obj}", "table")]), -up  # set down onto it
+        a_state, a_dir = scene.at(pb, hb, allow=_resting(scene, st.obj, pa)), -up  # set down onto it
         r_state = scene.at(pa, None, grasped=st.obj)
     elif st.name == "assemble":
         a_state, a_dir = scene.at(pb, hb, allow=[(f"held:{st.obj}", str(st.onto))]), st.insert  # the insertion itself

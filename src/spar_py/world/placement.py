@@ -1,4 +1,5 @@
-"""Concrete put-down placements: where on the table an object in a stable pose can go.
+"""Concrete put-down placements: where on the table, or on a support's top, an object in a
+stable pose can go.
 
 The paper leaves a put-down position as a stable pose and assumes "some suitable
 choice of X, Y, Z" reaches it (Sec. 5.2.4). Plan instances need real coordinates,
@@ -6,7 +7,10 @@ and the arm must reach the object there for the put-down and for every later act
 on it (a pickup, a mate). This module searches a grid of placements (x, y, yaw) over
 the free table regions, batching every inverse-kinematics query. A placement's whole
 footprint (its shape projected on the table, a convex polygon) lies in one free region
-and keeps the clearance from every other part's footprint.
+and keeps the clearance from every other part's footprint. The regions are the free table
+regions (clear of the supports' footprints by the clearance) and the top of each obstacle
+marked ``support: true`` (world.supports): a placement there lies wholly on the top, at its
+height, so the part rests on it stably (its contact face within the top).
 
 Units: lengths in the cell unit, angles in radians; world frame, table top z = 0. The
 constants below are in mm (units.INTERNAL_UNIT) and converted to the cell's unit
@@ -54,7 +58,8 @@ Occupant = tuple
 
 @dataclass(frozen=True)
 class Placement:
-    """A placement: object frame at (x, y, height of the pose), turned ``yaw`` about world z."""
+    """A placement: object frame at (x, y, z: the pose's height over the surface it rests on),
+    turned ``yaw`` about world z; ``on`` that surface ("table", or a support's name)."""
 
     obj: str
     pose: str
@@ -63,11 +68,13 @@ class Placement:
     z: float
     yaw: float
     T: np.ndarray
+    on: str = "table"
 
     def as_dict(self) -> dict:
-        """JSON-ready form (yaw in degrees)."""
-        return {"object": self.obj, "pose": self.pose, "x": round(self.x, 6), "y": round(self.y, 6),
-                "z": round(self.z, 6), "yaw_deg": round(float(np.degrees(self.yaw)), 6)}
+        """JSON-ready form (yaw in degrees; ``on`` only for a support's top)."""
+        out = {"object": self.obj, "pose": self.pose, "x": round(self.x, 6), "y": round(self.y, 6),
+               "z": round(self.z, 6), "yaw_deg": round(float(np.degrees(self.yaw)), 6)}
+        return out if self.on == "table" else {**out, "on": self.on}
 
 
 def default_regions(cell: Cell) -> list[dict]:
@@ -83,6 +90,60 @@ def default_regions(cell: Cell) -> list[dict]:
         lo, hi = xy.min(axis=0) - margin, xy.max(axis=0) + margin
         regions = [{"x": (float(lo[0]), float(hi[0])), "y": (float(lo[1]), float(hi[1]))}]
     return regions if cell.table is None else _on_table(regions, cell.table)
+
+
+@dataclass(frozen=True)
+class Level:
+    """A region of the grid: its rectangle (cell unit), the surface's height ``z`` and name ``on``,
+    the polygon a footprint must lie in (None: the rectangle is all) and the polygons it must
+    keep the clearance from besides the parts' (the supports standing on the table)."""
+
+    x: tuple[float, float]
+    y: tuple[float, float]
+    z: float
+    on: str
+    polygon: np.ndarray | None
+    keep_off: tuple[np.ndarray, ...]
+
+
+def levels(cell: Cell) -> list[Level]:
+    """The grid's regions: the free table regions (:func:`default_regions`), clear of every
+    support's footprint, then each support's top (world.supports) in the file's order."""
+    from spar_py.world.supports import obstacle_footprint, support_surfaces  # the supports' geometry
+
+    tops = support_surfaces(cell)
+    feet = tuple(obstacle_footprint(o) for o in cell.obstacles if getattr(o, "support", False))
+    out = [Level(r["x"], r["y"], 0.0, "table", None, feet) for r in default_regions(cell)]
+    for s in tops:
+        lo, hi = s.polygon.min(axis=0), s.polygon.max(axis=0)
+        out.append(Level((float(lo[0]), float(hi[0])), (float(lo[1]), float(hi[1])), s.z, s.name, s.polygon, ()))
+    return out
+
+
+#: Bound of the cell cache's table of the supports' levels (by the supports' geometry).
+LEVELS_LIMIT = 16
+
+
+def _levels(cache: CellCache) -> list[Level]:
+    """:func:`levels` of the cache's cell: the table's alone as :func:`default_regions` gives them
+    (a cell without supports), else kept in the cell's cache by the regions, the table and the
+    supports' bodies (caches may share their memo)."""
+    cell = cache.cell
+    sups = [o for o in cell.obstacles if getattr(o, "support", False)]
+    if not sups:
+        return [Level(r["x"], r["y"], 0.0, "table", None, ()) for r in default_regions(cell)]
+    key = (tuple((tuple(r["x"]), tuple(r["y"])) for r in cell.placement_regions), cell.table,
+           tuple((o.name, tuple(np.ascontiguousarray(b.points, float).tobytes() for b in o.bodies)) for o in sups))
+    return cache.table("placement.levels", LEVELS_LIMIT).get_or_compute(key, lambda: levels(cell))
+
+
+def _within(poly: np.ndarray, pts: np.ndarray, tol: float) -> np.ndarray:
+    """(...) bool: each point of pts (..., 2) inside the convex CCW polygon ``poly`` (k, 2), or
+    within ``tol`` of it."""
+    E = np.roll(poly, -1, axis=0) - poly                      # (k, 2)
+    D = pts[..., None, :] - poly                               # (..., k, 2)
+    cross = (E[:, 0] * D[..., 1] - E[:, 1] * D[..., 0]) / np.linalg.norm(E, axis=1)
+    return cross.min(axis=-1) >= -tol
 
 
 def _on_table(regions: list[dict], table: tuple[float, float, float, float]) -> list[dict]:
@@ -327,15 +388,17 @@ def _grid_arrays(cache: CellCache, obj: str, pose: str, occupied: list[Occupant]
     """The grid placements of :func:`candidates` as arrays, in the same order (regions, x,
     y, yaw): ``(xy (n, 2), yaw (n,), T (n, 4, 4))``, lengths in the cell unit
     (:func:`_grid_points`, their poses made for all)."""
-    xy, k, yaws, rots, height = _grid_points(cache, obj, pose, occupied, step, yaw_steps)
-    return xy, yaws[k], _grid_poses(xy, rots[k], height)
+    xy, k, yaws, rots, height, zs, _ = _grid_points(cache, obj, pose, occupied, step, yaw_steps)
+    return xy, yaws[k], _grid_poses(xy, rots[k], height + zs)
 
 
-def _grid_points(cache: CellCache, obj: str, pose: str, occupied: list[Occupant], step: float,
-                 yaw_steps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+def _grid_points(cache: CellCache, obj: str, pose: str, occupied: list[Occupant], step: float, yaw_steps: int
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float, np.ndarray, np.ndarray]:
     """The grid placements of :func:`candidates`, in its order (regions, x, y, yaw), without
     their poses: ``(xy (n, 2), k (n,) each one's yaw step, yaws (yaw_steps,) rad, rots
-    (yaw_steps, 3, 3) each yaw's object rotation, the pose's height)``, lengths in the cell unit.
+    (yaw_steps, 3, 3) each yaw's object rotation, the pose's height, zs (n,) each one's surface
+    height, on (n,) each one's surface name)``, lengths in the cell unit; the regions are
+    :func:`levels`' (a support's top: the footprint within its top polygon).
 
     Kept: the placements whose footprint (:func:`footprint`, turned by the yaw) lies in
     the region of the grid point, and is at least the clearance (CLEARANCE_MM) from the
@@ -354,29 +417,47 @@ def _grid_points(cache: CellCache, obj: str, pose: str, occupied: list[Occupant]
     feet = [_footprint(cache, obj, R) for R in rots]
     lo = np.array([f.min(axis=0) for f in feet])                # (yaw_steps, 2)
     hi = np.array([f.max(axis=0) for f in feet])
-    others = [_occupant_polygon(e) for e in occupied]
-    xy_parts, yaw_parts = [], []
-    for reg in default_regions(cell):
-        (x0, x1), (y0, y1) = reg["x"], reg["y"]
-        xs = x0 + step * np.arange(math.floor((x1 - x0) / step + 1e-9) + 1)
-        ys = y0 + step * np.arange(math.floor((y1 - y0) / step + 1e-9) + 1)
+    parts = [_occupant_polygon(e) for e in occupied]
+    xy_parts, yaw_parts, z_parts, on_parts = [], [], [], []
+    for reg in _levels(cache):
+        (x0, x1), (y0, y1) = reg.x, reg.y
+        others = parts + list(reg.keep_off)
+        if reg.polygon is None:
+            xs = x0 + step * np.arange(math.floor((x1 - x0) / step + 1e-9) + 1)
+            ys = y0 + step * np.arange(math.floor((y1 - y0) / step + 1e-9) + 1)
+        else:  # a support's top, often little more than a part: the grid about its centre
+            xs, ys = (_centred(lo, hi, step) for lo, hi in ((x0, x1), (y0, y1)))
         X, Y = np.meshgrid(xs, ys, indexing="ij")
         P = np.stack([X.ravel(), Y.ravel()], axis=1)             # (n, 2)
         ok = ((P[:, None, 0] + lo[None, :, 0] >= x0 - tol) & (P[:, None, 0] + hi[None, :, 0] <= x1 + tol)
               & (P[:, None, 1] + lo[None, :, 1] >= y0 - tol) & (P[:, None, 1] + hi[None, :, 1] <= y1 + tol))
         if others:
             ok.flat[_blocked(cache, P, xs, ys, feet, others, gap, tol + step * 1e-9)] = False
+        if reg.polygon is not None:  # every footprint vertex on the support's top
+            for kk, f in enumerate(feet):
+                live = np.flatnonzero(ok[:, kk])
+                ok[live, kk] = _within(reg.polygon, P[live, None, :] + f[None], tol).all(axis=1)
         i, k = np.nonzero(ok)                                    # row-major: grid order, then yaw
         xy_parts.append(P[i])
         yaw_parts.append(k)
+        z_parts.append(np.full(len(i), reg.z))
+        on_parts.append(np.full(len(i), reg.on, dtype=object))
     xy = np.concatenate(xy_parts) if xy_parts else np.zeros((0, 2))
     k = np.concatenate(yaw_parts) if yaw_parts else np.zeros(0, dtype=int)
-    return xy, k, yaws, rots, float(sp.height)
+    zs = np.concatenate(z_parts) if z_parts else np.zeros(0)
+    on = np.concatenate(on_parts) if on_parts else np.zeros(0, dtype=object)
+    return xy, k, yaws, rots, float(sp.height), zs, on
 
 
-def _grid_poses(xy: np.ndarray, R: np.ndarray, height: float) -> np.ndarray:
+def _centred(lo: float, hi: float, step: float) -> np.ndarray:
+    """Grid coordinates in [lo, hi] ``step`` apart, symmetric about its middle (which is one)."""
+    m = math.floor((hi - lo) / 2 / step + 1e-9)
+    return (lo + hi) / 2 + step * np.arange(-m, m + 1)
+
+
+def _grid_poses(xy: np.ndarray, R: np.ndarray, height: float | np.ndarray) -> np.ndarray:
     """(n, 4, 4) the object poses of grid placements at ``xy`` (n, 2) turned by R (n, 3, 3), at
-    the stable pose's ``height`` (cell unit)."""
+    ``height`` (cell unit: the stable pose's over its surface, one or (n,))."""
     T = np.zeros((len(xy), 4, 4))
     T[:, :3, :3] = R
     T[:, 0, 3] = xy[:, 0]
@@ -392,11 +473,12 @@ def candidates(cache: CellCache, obj: str, pose: str, occupied: list[Occupant],
     region, clear of ``occupied`` (:data:`Occupant` entries: the other parts on the
     table) by the clearance. ``step``: grid spacing in the cell unit (default GRID_STEP_MM)."""
     cell = cache.cell
-    height = cell.objects[obj].poses[pose].height
     step = from_mm(cell.unit, GRID_STEP_MM) if step is None else step
-    xy, yaw, T = _grid_arrays(cache, obj, pose, occupied, step, yaw_steps)
+    xy, k, yaws, rots, height, zs, on = _grid_points(cache, obj, pose, occupied, step, yaw_steps)
+    T = _grid_poses(xy, rots[k], height + zs)
     # copies, not views of T: a kept placement must not keep the whole grid's poses alive
-    return [Placement(obj, pose, x, y, height, w, t.copy()) for (x, y), w, t in zip(xy.tolist(), yaw.tolist(), T)]
+    return [Placement(obj, pose, x, y, float(t[2, 3]), w, t.copy(), str(o))
+            for (x, y), w, t, o in zip(xy.tolist(), yaws[k].tolist(), T, on.tolist())]
 
 
 def _req_X(r: Requirement | np.ndarray) -> np.ndarray:
@@ -485,8 +567,8 @@ def choose(cache: CellCache, obj: str, pose: str, requirements: list[np.ndarray]
     the whole grid.
     """
     cell = cache.cell
-    xy, kyaw, yaw_of, rots, height = _grid_points(cache, obj, pose, occupied, from_mm(cell.unit, GRID_STEP_MM),
-                                                  YAW_STEPS)
+    xy, kyaw, yaw_of, rots, height, zs, on = _grid_points(cache, obj, pose, occupied,
+                                                          from_mm(cell.unit, GRID_STEP_MM), YAW_STEPS)
     n = len(xy)
     if not n:
         return None
@@ -511,19 +593,19 @@ def choose(cache: CellCache, obj: str, pose: str, requirements: list[np.ndarray]
             if not len(live):
                 break
             at = np.array([idx[i] for i in live], dtype=int)
-            ok[live] = _reach_all(cache, _grid_poses(xy[at], rots[kyaw[at]], height), [x], obj)[:, 0]
+            ok[live] = _reach_all(cache, _grid_poses(xy[at], rots[kyaw[at]], height + zs[at]), [x], obj)[:, 0]
         live = np.flatnonzero(ok)
         if len(reach) and len(live):
             at = np.array([idx[i] for i in live], dtype=int)
-            ok[live] = _reach_all(cache, _grid_poses(xy[at], rots[kyaw[at]], height), list(reach)).all(axis=1)
+            ok[live] = _reach_all(cache, _grid_poses(xy[at], rots[kyaw[at]], height + zs[at]), list(reach)).all(axis=1)
         hits = np.flatnonzero(ok)
         if len(hits):
             i = idx[hits[0]]
             # the pose made for this placement alone: no view keeps a grid's poses alive wherever
             # the placement is kept (phase 2's memo tables)
-            T = _grid_poses(xy[i:i + 1], rots[kyaw[i:i + 1]], height)[0]
-            return Placement(obj, pose, float(xy[i, 0]), float(xy[i, 1]), cell.objects[obj].poses[pose].height,
-                             float(yaw[i]), T)
+            T = _grid_poses(xy[i:i + 1], rots[kyaw[i:i + 1]], height + zs[i:i + 1])[0]
+            return Placement(obj, pose, float(xy[i, 0]), float(xy[i, 1]), float(T[2, 3]), float(yaw[i]), T,
+                             str(on[i]))
     return None
 
 
