@@ -710,7 +710,7 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fe
     min_len = from_mm(unit, MIN_CONTACT_MM)
     cyl_normals = {c.face: c.normals for c in mesh_cylinders(mesh, faces, unit)}
     for root, d, r, length, fname in _shafts(faces, features, prims, mesh, unit):
-        if not _round(mesh, faces, root, d, r, length):
+        if not _round(mesh, root, d, r, length, unit):
             continue  # a prismatic shaft (a hexagon): its flats are not a cylinder to close on
         normals = cyl_normals.get(fname) if fname is not None else None  # a mesh cylinder's; else a whole round
         name = fname if fname is not None else _face_at(faces, mesh, root + d * length / 2 + axis_basis(d)[0] * r,
@@ -764,14 +764,17 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fe
     return out
 
 
-def _round(mesh: "trimesh.Trimesh", faces: list[Face], root: np.ndarray, d: np.ndarray, r: float,
-           length: float) -> bool:
+def _round(mesh: "trimesh.Trimesh", root: np.ndarray, d: np.ndarray, r: float, length: float, unit: str) -> bool:
     """True if the mesh's side triangles of the shaft (root, d, r, length) lie on its cylinder:
-    their centroids within 1 % of r from the axis (a 64-gon's are within 0.05 %, a hexagon's 6 % off)."""
+    their centroids within 1 % of r from the axis (a 64-gon's are within 0.05 %, a hexagon's 6 % off).
+    Triangles within ON_SURFACE_MM of either end's plane are the ends' (a shoulder, a cap): a
+    mesh's vertices may be float32 (manifold3d's booleans), off by 1e-7 of their value, which in
+    inches puts a shoulder's vertices inside or outside the shaft by chance."""
     C = _arrays(mesh).C - root
     t = C @ d
     radial = np.linalg.norm(C - np.outer(t, d), axis=1)
-    side = (t > 1e-9 * length) & (t < length * (1 - 1e-9)) & (radial > 0.5 * r) & (radial < 1.5 * r)
+    tol = from_mm(unit, ON_SURFACE_MM)
+    side = (t > tol) & (t < length - tol) & (radial > 0.5 * r) & (radial < 1.5 * r)
     return bool(side.any() and (np.abs(radial[side] - r) < 0.01 * r).all())
 
 
