@@ -20,6 +20,7 @@ def _pin(tmp_path: Path, head_mm: float, unit: str) -> Path:
     """A pin: head radius 8 mm, ``head_mm`` high from z = 0; shaft radius 5 mm, 17 mm long on it."""
     s = 1.0 if unit == "mm" else 1.0 / MM_PER_IN
     h, top = head_mm * s, (head_mm + 17.0) * s
+    axis = f"{{origin: [0, 0, {h!r}], direction: [0, 0, 1]}}"
     p = tmp_path / f"pin_{unit}_{head_mm:g}.yaml"
     p.write_text(f"""object: pin
 units: {{length: {unit}, angle: deg}}
@@ -27,7 +28,7 @@ shape:
   - {{cylinder: {{radius: {8 * s!r}, z: [0, {h!r}]}}}}
   - {{cylinder: {{radius: {5 * s!r}, z: [{h!r}, {top!r}]}}}}
 features:
-  - {{kind: peg, name: shaft, radius: {5 * s!r}, axis: {{origin: [0, 0, {h!r}], direction: [0, 0, 1]}}, length: {17 * s!r}}}
+  - {{kind: peg, name: shaft, radius: {5 * s!r}, axis: {axis}, length: {17 * s!r}}}
 """)
     return p
 

@@ -159,7 +159,9 @@ class DerivedGrasp:
 @dataclass(frozen=True)
 class _Arrays:
     """A mesh's arrays read once (trimesh re-checks its content hash on every property read):
-    vertices V, faces F, triangles (n, 3, 3), normals N, centres C, bounding-box diagonal."""
+    vertices V, faces F, triangles (n, 3, 3), normals N, centres C, bounding-box diagonal,
+    centre of mass, and each triangle's bounding sphere (centre S, radius rad: the centre of its
+    box and the farthest corner from it), which culls triangles far from a box in any frame."""
 
     V: np.ndarray
     F: np.ndarray
@@ -168,6 +170,8 @@ class _Arrays:
     C: np.ndarray
     diag: float
     com: np.ndarray
+    S: np.ndarray
+    rad: np.ndarray
 
 
 def _arrays(mesh: "trimesh.Trimesh") -> _Arrays:
@@ -176,8 +180,11 @@ def _arrays(mesh: "trimesh.Trimesh") -> _Arrays:
     if a is None:
         V = np.asarray(mesh.vertices, float)
         F = np.asarray(mesh.faces)
-        a = _Arrays(V, F, V[F], np.asarray(mesh.face_normals, float), np.asarray(mesh.triangles_center, float),
-                    float(np.linalg.norm(V.max(0) - V.min(0))), np.asarray(mesh.center_mass, float))
+        tri = V[F]
+        S = (tri.min(1) + tri.max(1)) / 2
+        rad = np.linalg.norm(tri - S[:, None], axis=2).max(1)
+        a = _Arrays(V, F, tri, np.asarray(mesh.face_normals, float), np.asarray(mesh.triangles_center, float),
+                    float(np.linalg.norm(V.max(0) - V.min(0))), np.asarray(mesh.center_mass, float), S, rad)
         mesh.metadata["_spar_arrays"] = a
     return a
 
@@ -381,12 +388,16 @@ def grasp_problem(mesh: "trimesh.Trimesh", T: np.ndarray, width: float, g: Gripp
     if width > g.opening * (1 + 1e-9):
         return f"{width:.4g} {unit} wide, more than the gripper's opening {g.opening:.4g} {unit}"
     A = _arrays(mesh)
-    V = (A.V - T[:3, 3]) @ T[:3, :3]  # vertices in the tool frame
-    tri = V[A.F]
-    bbox = (tri.min(1), tri.max(1))
+    R, o = T[:3, :3], T[:3, 3]
+    S = (A.S - o) @ R  # triangles' bounding spheres' centres in the tool frame
     reach = 2 * A.diag + g.finger_length + g.palm_depth
     for what, lo, hi in _gripper_boxes(g, width, reach, from_mm(unit, TOUCH_MM)):
-        if _tri_box(tri, lo, hi, bbox).any() or ((V >= lo) & (V <= hi)).all(1).any():
+        # only triangles whose sphere meets the box (grown by the radius) can meet it
+        near = np.flatnonzero((np.abs(S - (lo + hi) / 2) <= (hi - lo) / 2 + A.rad[:, None]).all(1))
+        if not len(near):
+            continue
+        tri = (A.tri[near] - o) @ R
+        if ((tri >= lo) & (tri <= hi)).all(2).any() or _tri_box(tri, lo, hi).any():
             return f"{what} enters the part"
     return None
 
