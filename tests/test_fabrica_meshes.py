@@ -11,6 +11,7 @@ import pytest
 
 from spar_py.core.errors import KBError
 from spar_py.kb.objects import load_object, mesh_note
+from spar_py.world.shapes import _load_mesh
 
 trimesh = pytest.importorskip("trimesh")
 
@@ -49,27 +50,55 @@ def _plainly_holdable(m: "trimesh.Trimesh", opening: float) -> bool:
     return False
 
 
-def _pads_touch(m: "trimesh.Trimesh", T: np.ndarray, width: float) -> bool:
-    """Independent check of one grasp: from each finger's side, rays along the closing axis
-    (tool y) through points of the pad near the tool centre meet the surface about width/2 from
-    the centre, with normals antiparallel to each other within 15 deg."""
-    from trimesh.ray.ray_triangle import RayMeshIntersector
+#: The default gripper's pad (kb.objects: fingers 20 mm wide, 60 mm long), probed on a grid of
+#: (across, from the tip) offsets in the tool frame, mm: 1 mm apart over the 20 mm nearest the
+#: tip (a contact on a 1.5 mm rim is found), 2 mm beyond.
+PAD_ACROSS_MM = np.arange(-9.5, 10.0, 1.0)
+PAD_ALONG_MM = -np.r_[np.arange(0.5, 20.0, 1.0), np.arange(21.0, 60.0, 2.0)]
 
-    rays = RayMeshIntersector(m)
-    y, z, o = T[:3, 1], T[:3, 2], T[:3, 3]
-    far = 2 * float(np.linalg.norm(m.extents)) + width
-    got = []
-    for sign in (1.0, -1.0):
-        hits = []
-        for dz in (-0.5, -1.0, -2.0, -3.0, -5.0):  # along the pad, from the tip towards the palm
-            start = o + dz * z + sign * far * y
-            loc, _, ti = rays.intersects_location(start[None], (-sign * y)[None], multiple_hits=False)
-            if len(loc) and abs(float((loc[0] - o) @ y) * sign - width / 2) < 0.05 * width + 0.6:
-                hits.append(m.face_normals[ti[0]])
-        if not hits:
-            return False
-        got.append(hits[0])
-    return bool(got[0] @ -got[1] > math.cos(math.radians(25)) and got[0] @ y > 0.8 and got[1] @ -y > 0.8)
+
+def _pads_touch(m: "trimesh.Trimesh", grasps: list, tol: float = 0.5) -> list[str]:
+    """Independent check of grasps (label, T, width): from each finger's side, lines along the
+    closing axis (tool y) through a grid of points of the pad (PAD_ACROSS_MM x PAD_ALONG_MM)
+    first meet the surface no farther out than the pad (width/2 + tol from the centre: no part
+    inside a finger), and some of them on the pad (within tol of width/2) on surface whose
+    normal faces that pad within 25 deg: both pads touch surface squarely, with nothing through
+    them. Plain numpy: each line against every triangle under the pad, in the tool's (x, z)
+    plane by barycentric coordinates. Returns the labels of the grasps that fail."""
+    V0, F, N0 = np.asarray(m.vertices, float), np.asarray(m.faces), np.asarray(m.face_normals, float)
+    gx, gz = np.meshgrid(PAD_ACROSS_MM, PAD_ALONG_MM, indexing="ij")
+    gx, gz = gx.ravel(), gz.ravel()
+    cos25 = math.cos(math.radians(25))
+    bad = []
+    for label, T, width in grasps:
+        R, o = T[:3, :3], T[:3, 3]
+        tri = ((V0 - o) @ R)[F]  # (n, 3, 3) in the tool frame
+        lo, hi = tri.min(1), tri.max(1)
+        near = np.flatnonzero((hi[:, 0] >= gx.min()) & (lo[:, 0] <= gx.max()) & (hi[:, 2] >= gz.min())
+                              & (lo[:, 2] <= gz.max()))
+        t = tri[near]
+        a, b, c = t[:, 0], t[:, 1], t[:, 2]
+        det = (b[:, 0] - a[:, 0]) * (c[:, 2] - a[:, 2]) - (c[:, 0] - a[:, 0]) * (b[:, 2] - a[:, 2])
+        keep = np.abs(det) > 1e-12  # triangles seen edge-on along y are met by no line
+        a, b, c, det, near = a[keep], b[keep], c[keep], det[keep], near[keep]
+        px, pz = gx[:, None] - a[None, :, 0], gz[:, None] - a[None, :, 2]  # (probes, triangles)
+        u = (px * (c[:, 2] - a[:, 2]) - pz * (c[:, 0] - a[:, 0])) / det
+        v = (pz * (b[:, 0] - a[:, 0]) - px * (b[:, 2] - a[:, 2])) / det
+        inside = (u >= -1e-9) & (v >= -1e-9) & (u + v <= 1 + 1e-9)
+        y = a[:, 1] + u * (b[:, 1] - a[:, 1]) + v * (c[:, 1] - a[:, 1])
+        ok = True
+        for sign in (1.0, -1.0):
+            out = np.where(inside, sign * y, -np.inf)  # distance out from the centre towards this pad
+            k = out.argmax(1)  # the surface each line meets first coming from this pad's side
+            d = out[np.arange(len(gx)), k]
+            met = np.isfinite(d)
+            n = N0[near[k[met]]] @ R[:, 1] * sign
+            on = np.abs(d[met] - width / 2) <= tol
+            if (d[met] > width / 2 + tol).any() or not (n[on] > cos25).any():
+                ok = False
+        if not ok:
+            bad.append(label)
+    return bad
 
 
 def test_there_are_the_seven_assemblies() -> None:
@@ -82,8 +111,8 @@ def test_there_are_the_seven_assemblies() -> None:
 @pytest.mark.slow
 @pytest.mark.parametrize("part", PARTS, ids=[f"{p.parent.name}/{p.stem}" for p in PARTS])
 def test_part_loads_closed_and_holdable_parts_get_checked_grasps(tmp_path: Path, part: Path) -> None:
-    m = load_object(_model(tmp_path, part, "mm"), "mm", opening=OPENING_MM)  # the file's cm read as mm: 10x smaller
-    del m
+    small, _ = _load_mesh(str(part), 1.0)  # the file's cm read as mm: 10x smaller, repaired alike
+    assert small.is_watertight and small.volume == pytest.approx(abs(_raw(part).volume) / 1000, rel=1e-6)
     model = load_object(_model(tmp_path, part), "mm", opening=OPENING_MM)
     mesh = model.geometry.mesh()
     assert mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0
@@ -93,14 +122,45 @@ def test_part_loads_closed_and_holdable_parts_get_checked_grasps(tmp_path: Path,
         assert model.grasps, f"{part}: {model.geometry.no_grasp}"
     for g in model.grasps.values():
         assert g.width <= OPENING_MM + 1e-9
-    checked = [g for g in model.grasps.values()]
-    bad = [g.label for g in checked if not _pads_touch(raw, g.T, g.width)]
+    bad = _pads_touch(raw, [(g.label, g.T, g.width) for g in model.grasps.values()])
     assert not bad, f"{part}: pads off the surface in {bad}"
 
 
 def test_beam_gets_a_grasp_across_its_12_7_mm_faces(tmp_path: Path) -> None:
     beam = load_object(_model(tmp_path, ROOT / "beam" / "0.ply"), "mm", opening=OPENING_MM)
     assert any(abs(g.width - 12.7) < 0.05 for g in beam.grasps.values())
+
+
+def test_car_part_0_gets_grasps_across_its_35_mm_round(tmp_path: Path) -> None:
+    """Car part 0 is a 35 mm wheel on a 10 mm axle along y: beside the axle's shaft grasps it
+    gets grasps across the wheel's diameter (own check: closing normal to the axle, both pads
+    on the tyre, 35 mm apart within 0.5 mm: a chord as long as the diameter)."""
+    part = ROOT / "car" / "0.ply"
+    car = load_object(_model(tmp_path, part), "mm", opening=OPENING_MM)
+    raw = _raw(part)
+    assert np.allclose(raw.extents, 35.0, atol=0.1)
+    across = [g for g in car.grasps.values() if abs(g.width - 35.0) < 0.5 and abs(g.T[1, 1]) < 0.02]
+    assert across and any(abs(g.width - 10.0) < 1e-3 for g in car.grasps.values())
+    assert _pads_touch(raw, [(g.label, g.T, g.width) for g in across]) == []
+    shaft = max(int(g.label.rsplit("g", 1)[1]) for g in car.grasps.values() if abs(g.width - 10.0) < 1e-3)
+    assert all(int(g.label.rsplit("g", 1)[1]) > shaft for g in across)  # labelled after the shaft's
+
+
+def test_the_pad_check_refuses_a_grasp_moved_off_the_part(tmp_path: Path) -> None:
+    """The independent check fails on a real grasp shifted 2 mm along its closing axis (one pad
+    in the part, the other off it), opened 2 mm wider, or turned 30 deg about its approach."""
+    part = ROOT / "beam" / "0.ply"
+    beam = load_object(_model(tmp_path, part), "mm", opening=OPENING_MM)
+    raw = _raw(part)
+    g = next(g for g in beam.grasps.values() if abs(g.width - 12.7) < 0.05)
+    assert _pads_touch(raw, [(g.label, g.T, g.width)]) == []
+    shifted = g.T.copy()
+    shifted[:3, 3] += 2.0 * g.T[:3, 1]
+    c, s = math.cos(math.radians(30)), math.sin(math.radians(30))
+    turned = g.T.copy()
+    turned[:3, :3] = g.T[:3, :3] @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    assert _pads_touch(raw, [("shifted", shifted, g.width), ("wider", g.T, g.width + 2.0),
+                             ("turned", turned, g.width)]) == ["shifted", "wider", "turned"]
 
 
 def test_seams_a_hole_and_a_flipped_triangle_are_repaired_and_said(tmp_path: Path) -> None:

@@ -454,6 +454,79 @@ def _area_centroid(poly: "np.ndarray | list") -> tuple[float, np.ndarray]:
     return abs(A) / 2, np.array([cx, cy]) / (3 * A)
 
 
+def _pack(polys: "list[np.ndarray]") -> tuple[np.ndarray, np.ndarray]:
+    """Polygons of different sizes as one (n, K, 2) array (rows padded with zeros) and their
+    corner counts (n,)."""
+    cnt = np.array([len(p) for p in polys], int)
+    P = np.zeros((len(polys), int(cnt.max()) if len(polys) else 0, 2))
+    for i, p in enumerate(polys):
+        P[i, : len(p)] = p
+    return P, cnt
+
+
+def _unpack(P: np.ndarray, cnt: np.ndarray, rows: "np.ndarray | range") -> list[np.ndarray]:
+    return [P[i, : cnt[i]].copy() for i in rows]
+
+
+def _next_corner(cnt: np.ndarray, K: int) -> np.ndarray:
+    """(n, K): the index of each corner's successor in its polygon (0 past the last corner)."""
+    j = np.arange(K)[None, :]
+    return np.where(j < cnt[:, None], (j + 1) % np.maximum(cnt, 1)[:, None], 0)
+
+
+def _clip_many(P: np.ndarray, cnt: np.ndarray, clip: "np.ndarray | list") -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_clip_convex` of many convex polygons at once (P (n, K, 2) with ``cnt`` corners
+    each) against convex CCW polygon ``clip`` ((m, 2), or (n, m, 2): one per polygon): the same
+    arithmetic, corner by corner, so each result is the one :func:`_clip_convex` gives.
+    Returns the clipped polygons and counts."""
+    C = np.asarray(clip, float)
+    C = np.broadcast_to(C, (len(P), *C.shape)) if C.ndim == 2 else C
+    rows = np.arange(len(P))[:, None]
+    for i in range(C.shape[1]):
+        K = P.shape[1]
+        if K == 0 or not cnt.any():
+            break
+        px, py = C[:, i, 0, None], C[:, i, 1, None]
+        qx, qy = C[:, (i + 1) % C.shape[1], 0, None], C[:, (i + 1) % C.shape[1], 1, None]
+        ax, ay = qy - py, -(qx - px)  # outward normal of a CCW edge
+        b = ax * px + ay * py
+        valid = np.arange(K)[None, :] < cnt[:, None]
+        Q = P[rows, _next_corner(cnt, K)]
+        sp = ax * P[..., 0] + ay * P[..., 1] - b
+        sq = ax * Q[..., 0] + ay * Q[..., 1] - b
+        keep = valid & (sp <= 0)
+        cut = valid & (((sp < 0) & (0 < sq)) | ((sq < 0) & (0 < sp)))
+        t = sp / np.where(cut, sp - sq, 1.0)
+        X = np.stack([P[..., 0] + (Q[..., 0] - P[..., 0]) * t, P[..., 1] + (Q[..., 1] - P[..., 1]) * t], axis=-1)
+        cand = np.stack([P, X], axis=2).reshape(len(P), 2 * K, 2)
+        m = np.stack([keep, cut], axis=2).reshape(len(P), 2 * K)
+        order = np.argsort(~m, axis=1, kind="stable")
+        cnt = m.sum(1)
+        P = cand[rows, order][:, : int(cnt.max()) if len(cnt) else 0]
+    return P, cnt
+
+
+def _area_centroid_many(P: np.ndarray, cnt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_area_centroid` of many polygons at once (P (n, K, 2), ``cnt`` corners each),
+    summed corner by corner as it does: (areas (n,), centroids (n, 2))."""
+    n, K = P.shape[:2]
+    A, cx, cy = np.zeros(n), np.zeros(n), np.zeros(n)
+    nxt = _next_corner(cnt, K)
+    rows = np.arange(n)
+    for i in range(K):
+        act = i < cnt
+        x, y = P[:, i, 0], P[:, i, 1]
+        xn, yn = P[rows, nxt[:, i], 0], P[rows, nxt[:, i], 1]
+        c = x * yn - xn * y
+        A = np.where(act, A + c, A)
+        cx = np.where(act, cx + (x + xn) * c, cx)
+        cy = np.where(act, cy + (y + yn) * c, cy)
+    ok = (cnt >= 3) & ~(np.abs(A) < 1e-300)
+    den = np.where(ok, 3 * A, 1.0)
+    cen = np.where(ok[:, None], np.stack([cx / den, cy / den], axis=1), 0.0)
+    return np.where(ok, np.abs(A) / 2, 0.0), cen
+
+
 def _ccw(P: np.ndarray) -> np.ndarray:
     x, y = P[:, 0], P[:, 1]
     return P if (x * np.roll(y, -1) - np.roll(x, -1) * y).sum() >= 0 else P[::-1]
@@ -461,29 +534,67 @@ def _ccw(P: np.ndarray) -> np.ndarray:
 
 def _overlap(mesh: "trimesh.Trimesh", fa: Face, fb: Face, e1: np.ndarray, e2: np.ndarray) -> list[np.ndarray]:
     """The convex pieces (each (k, 2) in the plane basis e1, e2) where the two faces overlap
-    when projected on a plane normal to them."""
+    when projected on a plane normal to them: each triangle of the face with more (A) clipped
+    by each triangle of the other (B) whose box meets its box, in B's order; a triangle of A
+    wholly inside one of B is that triangle's piece and no later one's. All pairs at once
+    (numpy), the pieces in the order a loop over B would give them."""
     arr = _arrays(mesh)
     E = np.array([e1, e2]).T
     A, B = _ccw_all(arr.tri[fa.tris] @ E), _ccw_all(arr.tri[fb.tris] @ E)   # (n, 3, 2) each
     if len(A) < len(B):
         A, B = B, A  # clip the many against the few
-    alo, ahi = A.min(1), A.max(1)
-    pieces: list[np.ndarray] = []
-    done = np.zeros(len(A), bool)
-    for b in B:
-        blo, bhi = b.min(0), b.max(0)
-        near = np.flatnonzero(((alo <= bhi) & (ahi >= blo)).all(1) & ~done)
-        if not len(near):
-            continue
-        inside = _in_triangle(A[near].reshape(-1, 2), b).reshape(-1, 3).all(1)
-        for i in near[inside]:
-            pieces.append(A[i])
-        done[near[inside]] = True
-        for i in near[~inside]:
-            p = _clip_convex(A[i], b)
-            if len(p) >= 3 and _area_centroid(p)[0] > 0:
-                pieces.append(np.array(p))
-    return pieces
+    ii, jj = _box_pairs(A.min(1), A.max(1), B.min(1), B.max(1))
+    if not len(ii):
+        return []
+    inside = _in_triangles(A[ii], B[jj])
+    first = np.full(len(A), len(B))  # the first B triangle each A triangle lies in
+    np.minimum.at(first, ii[inside], jj[inside])
+    take = jj <= first[ii]
+    ii, jj, inside = ii[take], jj[take], inside[take]
+    cut = np.flatnonzero(~inside)
+    P, cnt = _clip_many(A[ii[cut]], np.full(len(cut), 3), B[jj[cut]])
+    area, _ = _area_centroid_many(P, cnt)
+    ok = (cnt >= 3) & (area > 0)
+    # by B triangle, those wholly inside first, then the clipped ones, each by A's order
+    whole = np.flatnonzero(inside)
+    keys_j = np.r_[jj[whole], jj[cut][ok]]
+    keys_k = np.r_[np.zeros(len(whole), int), np.ones(int(ok.sum()), int)]
+    keys_i = np.r_[ii[whole], ii[cut][ok]]
+    items = [A[i] for i in ii[whole]] + _unpack(P, cnt, np.flatnonzero(ok))
+    return [items[k] for k in np.lexsort((keys_i, keys_k, keys_j))]
+
+
+def _box_pairs(alo: np.ndarray, ahi: np.ndarray, blo: np.ndarray, bhi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The pairs (i, j) of 2-D boxes A[i], B[j] (corners lo, hi) that meet, closed: the boxes
+    of A sorted by their low x, each B box's candidates a range of them found by bisection (A's
+    boxes wider than 4 times their median width are tested against every B box instead)."""
+    w = ahi[:, 0] - alo[:, 0]
+    wide = w > 4 * float(np.median(w)) if len(w) else np.zeros(0, bool)
+    narrow = np.flatnonzero(~wide)
+    order = narrow[np.argsort(alo[narrow, 0], kind="stable")]
+    xs = alo[order, 0]
+    wmax = float(w[narrow].max()) if len(narrow) else 0.0
+    lo = np.searchsorted(xs, blo[:, 0] - wmax, "left")
+    counts = np.searchsorted(xs, bhi[:, 0], "right") - lo
+    jj = np.repeat(np.arange(len(blo)), counts)
+    ii = order[np.repeat(lo - np.cumsum(counts) + counts, counts) + np.arange(int(counts.sum()))]
+    wi = np.flatnonzero(wide)
+    if len(wi):
+        ii = np.r_[ii, np.repeat(wi[None], len(blo), 0).ravel()]
+        jj = np.r_[jj, np.repeat(np.arange(len(blo)), len(wi))]
+    meet = ((alo[ii] <= bhi[jj]) & (ahi[ii] >= blo[jj])).all(1)
+    return ii[meet], jj[meet]
+
+
+def _in_triangles(T: np.ndarray, C: np.ndarray, eps: float = 1e-12) -> np.ndarray:
+    """(n,) bool: all three corners of each triangle T[k] (n, 3, 2) in the closed CCW triangle
+    C[k] (n, 3, 2): :func:`_in_triangle` pair by pair."""
+    ok = np.ones(T.shape[:2], bool)
+    for i in range(3):
+        a, b = C[:, i, None], C[:, (i + 1) % 3, None]  # (n, 1, 2)
+        ok &= ((b[..., 0] - a[..., 0]) * (T[..., 1] - a[..., 1])
+               - (b[..., 1] - a[..., 1]) * (T[..., 0] - a[..., 0])) >= -eps
+    return ok.all(1)
 
 
 def _ccw_all(T: np.ndarray) -> np.ndarray:
@@ -687,9 +798,13 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fe
                   prims: tuple[Primitive, ...], g: Gripper, unit: str, prefix: str,
                   step: float = math.radians(45.0), why: list[str] | None = None) -> list[DerivedGrasp]:
     """The grasps of the part (module docstring), labelled ``{prefix}1, {prefix}2, ...``: those
-    across opposite planar faces and round shafts, or, where these give none, the antipodal
-    grasps found on the surface (:func:`antipodal_grasps`). With none at all, ``why`` (when
-    given) receives one line saying which sizes and opening were compared."""
+    across opposite planar faces and round shafts, then the antipodal grasps found on the
+    surface (:func:`antipodal_grasps`): all of them where the first give none; otherwise, on a
+    mesh part (no ``prims``), those with a contact on a curved face that no facet or shaft grasp
+    closes on and no feature claims (a wheel's tyre beside its axle's grasps; a declared peg is
+    the shaft grasps' to close on), while a part of primitives keeps exactly its facet and
+    shaft grasps. With none at all, ``why`` (when given) receives one line
+    saying which sizes and opening were compared."""
     min_area = from_mm(unit, math.sqrt(MIN_CONTACT_MM2)) ** 2
     cos_par = math.cos(math.radians(PARALLEL_DEG))
     cands: list[tuple[tuple[str, ...], float, np.ndarray]] = []  # (gfaces, width, T)
@@ -705,12 +820,11 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fe
             c = _canonical(fa.normal)
             e1, e2 = axis_basis(c)
             pieces = _overlap(mesh, fa, fb, e1, e2)
-            ac = [_area_centroid(p) for p in pieces]
-            areas = np.array([a for a, _ in ac])
+            areas, cens = _area_centroid_many(*_pack(pieces))
             area = float(areas.sum())
             if area < min_area:
                 continue
-            cen2 = sum(a * q for a, q in ac) / area
+            cen2 = sum(float(a) * q for a, q in zip(areas, cens)) / area
             mid = (fa.offset - width / 2) * fa.normal
             p = clean(mid + cen2[0] * e1 + cen2[1] * e2, 1e-9)
             names = tuple(sorted((fa.name, fb.name), key=lambda n: [f.name for f in faces].index(n)))
@@ -747,12 +861,19 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fe
         order = [f.name for f in faces]
         ofaces = tuple(names) + tuple(sorted(cover - set(names), key=order.index))
         out.append(DerivedGrasp(f"{prefix}{len(out) + 1}", names, ofaces, T, euler_zyz_of(T), float(round(width, 12))))
-    if out:
-        return out  # the cells written for facet and shaft grasps keep exactly those
-    found, least, n_pairs = antipodal_grasps(mesh, g, unit, step)
     owner = np.full(len(mesh.faces), -1)
     for k, f in enumerate(faces):
         owner[f.tris] = k
+    allowed = None  # triangles one contact of an added antipodal grasp must lie on (None: any)
+    if out:
+        if prims:
+            return out  # a part of primitives keeps exactly its facet and shaft grasps
+        held = {n for d in out for n in d.gfaces}
+        free = [k for k, f in enumerate(faces) if not (f.planar or f.feature) and f.name not in held]
+        if not free:
+            return out
+        allowed = np.isin(owner, free)
+    found, least, n_pairs = antipodal_grasps(mesh, g, unit, step, allowed)
     order = [f.name for f in faces]
     for T, width, a in found:
         names = tuple(dict.fromkeys(faces[k].name for k in (owner[a.tp], owner[a.tq]) if k >= 0))
@@ -817,9 +938,11 @@ def _pad_contact(pieces: list[np.ndarray], areas: np.ndarray, e1: np.ndarray, e2
     total = float(areas[inside].sum())
     if total >= need:
         return total  # enough already: the pieces across the pad's edge need no clipping
-    for i in np.flatnonzero(~inside & ~outside):
-        q = _ccw(Q[starts[i]: starts[i] + sizes[i]])
-        total += _area_centroid(_clip_convex(q, pad))[0]
+    part = np.flatnonzero(~inside & ~outside)
+    if len(part):
+        P, cnt = _pack([_ccw(Q[starts[i]: starts[i] + sizes[i]]) for i in part])
+        for a in _area_centroid_many(*_clip_many(P, cnt, pad))[0]:
+            total += float(a)
     return total
 
 
@@ -1044,9 +1167,10 @@ def _pads_on_surface(mesh: "trimesh.Trimesh", P: np.ndarray, Q: np.ndarray, C: n
     return ok
 
 
-def antipodal_grasps(mesh: "trimesh.Trimesh", g: Gripper, unit: str, step: float
+def antipodal_grasps(mesh: "trimesh.Trimesh", g: Gripper, unit: str, step: float, allowed: np.ndarray | None = None
                      ) -> tuple[list[tuple[np.ndarray, float, Antipodal]], float | None, int]:
-    """Tool frames (T, width) of antipodal grasps (:func:`antipodal_pairs`), clustered: pairs
+    """Tool frames (T, width) of antipodal grasps (:func:`antipodal_pairs`; with ``allowed``, a
+    (triangles,) bool, only the pairs with a contact on an allowed triangle), clustered: pairs
     are grouped by closing direction (DIRECTION_CELLS) and midpoint (the part's size over
     ANTIPODAL_GRID), the squarest pair of a group (the least normal angle, then the narrowest)
     stands for it, the ANTIPODAL_CLUSTERS groups of the most pairs are tried, each at the approaches
@@ -1055,6 +1179,8 @@ def antipodal_grasps(mesh: "trimesh.Trimesh", g: Gripper, unit: str, step: float
     part. Also returns the least width in the friction cone and the pairs found within the
     opening (for a refusal)."""
     pairs, least = antipodal_pairs(mesh, g.opening, unit)
+    if allowed is not None:
+        pairs = [a for a in pairs if allowed[a.tp] or allowed[a.tq]]
     if not pairs:
         return [], least, 0
     A = _arrays(mesh)
