@@ -50,6 +50,8 @@ def _plainly_holdable(m: "trimesh.Trimesh", opening: float) -> bool:
     return False
 
 
+#: The default gripper's fingers are 10 mm thick (kb.objects; world.shapes_derive.Gripper.default).
+FINGER_THICKNESS_MM = 10.0
 #: The default gripper's pad (kb.objects: fingers 20 mm wide, 60 mm long), probed on a grid of
 #: (across, from the tip) offsets in the tool frame, mm: 1 mm apart over the 20 mm nearest the
 #: tip (a contact on a 1.5 mm rim is found), 2 mm beyond.
@@ -58,13 +60,13 @@ PAD_ALONG_MM = -np.r_[np.arange(0.5, 20.0, 1.0), np.arange(21.0, 60.0, 2.0)]
 
 
 def _pads_touch(m: "trimesh.Trimesh", grasps: list, tol: float = 0.5) -> list[str]:
-    """Independent check of grasps (label, T, width): from each finger's side, lines along the
-    closing axis (tool y) through a grid of points of the pad (PAD_ACROSS_MM x PAD_ALONG_MM)
-    first meet the surface no farther out than the pad (width/2 + tol from the centre: no part
-    inside a finger), and some of them on the pad (within tol of width/2) on surface whose
-    normal faces that pad within 25 deg: both pads touch surface squarely, with nothing through
-    them. Plain numpy: each line against every triangle under the pad, in the tool's (x, z)
-    plane by barycentric coordinates. Returns the labels of the grasps that fail."""
+    """Independent check of grasps (label, T, width): lines along the closing axis (tool y)
+    through a grid of points of each pad (PAD_ACROSS_MM x PAD_ALONG_MM) meet no surface inside
+    the finger (from width/2 + tol to width/2 + FINGER_THICKNESS_MM out from the centre), and
+    some of them meet the surface nearest the pad within tol of it (width/2), where its normal
+    faces that pad within 25 deg: both pads touch surface squarely, with nothing through them.
+    Plain numpy: each line against every triangle under the pad, in the tool's (x, z) plane by
+    barycentric coordinates. Returns the labels of the grasps that fail."""
     V0, F, N0 = np.asarray(m.vertices, float), np.asarray(m.faces), np.asarray(m.face_normals, float)
     gx, gz = np.meshgrid(PAD_ACROSS_MM, PAD_ALONG_MM, indexing="ij")
     gx, gz = gx.ravel(), gz.ravel()
@@ -89,12 +91,16 @@ def _pads_touch(m: "trimesh.Trimesh", grasps: list, tol: float = 0.5) -> list[st
         ok = True
         for sign in (1.0, -1.0):
             out = np.where(inside, sign * y, -np.inf)  # distance out from the centre towards this pad
-            k = out.argmax(1)  # the surface each line meets first coming from this pad's side
+            if ((out > width / 2 + tol) & (out < width / 2 + FINGER_THICKNESS_MM)).any():
+                ok = False  # the part inside the finger
+                continue
+            out[out > width / 2 + tol] = -np.inf  # surface beyond the finger's back
+            k = out.argmax(1)  # the surface each line meets first coming from the pad
             d = out[np.arange(len(gx)), k]
             met = np.isfinite(d)
             n = N0[near[k[met]]] @ R[:, 1] * sign
             on = np.abs(d[met] - width / 2) <= tol
-            if (d[met] > width / 2 + tol).any() or not (n[on] > cos25).any():
+            if not (n[on] > cos25).any():
                 ok = False
         if not ok:
             bad.append(label)
