@@ -52,3 +52,21 @@ def test_a_headed_pin_gets_the_same_grasps_in_mm_and_in_inches(tmp_path: Path, h
         assert b.width * MM_PER_IN == pytest.approx(a.width, abs=1e-5)
         assert np.allclose(b.T[:3, 3] * MM_PER_IN, a.T[:3, 3], atol=1e-5)
         assert np.allclose(b.T[:3, :3], a.T[:3, :3], atol=1e-9)
+
+
+def test_a_fabrica_part_gets_the_same_faces_and_grasps_in_mm_and_in_inches(tmp_path: Path) -> None:
+    """Car part 0 (a wheel on an axle, every face's centroid on one axis, so their order is
+    decided by rounding) names its faces alike and gets the same grasps in either cell unit."""
+    ply = Path(__file__).resolve().parents[1] / "kb" / "products" / "fabrica" / "car" / "0.ply"
+    p = tmp_path / "car_0.yaml"
+    p.write_text(f"object: car_0\nunits: {{length: cm, angle: deg}}\nmesh: {ply}\n")
+    mm = load_object(p, "mm", opening=100.0)
+    inch = load_object(p, "in", opening=100.0 / MM_PER_IN)
+    assert mm.faces == inch.faces
+    assert [(g.label, g.gfaces, g.ofaces) for g in mm.grasps.values()] == [
+        (g.label, g.gfaces, g.ofaces) for g in inch.grasps.values()]
+    for a, b in zip(mm.grasps.values(), inch.grasps.values()):
+        assert b.width * MM_PER_IN == pytest.approx(a.width, abs=1e-5)
+        assert np.allclose(b.T[:3, 3] * MM_PER_IN, a.T[:3, 3], atol=1e-5)
+    for a, b in zip(mm.poses.values(), inch.poses.values()):
+        assert (a.label, a.rfaces, a.ofaces) == (b.label, b.rfaces, b.ofaces)

@@ -469,7 +469,7 @@ def derive_faces(mesh: "trimesh.Trimesh", features: "tuple[FeatureGeometry, ...]
     n_feat = len(groups)
     groups += [np.asarray(sorted(p[2])) for p in planes] + [np.asarray(sorted(c)) for c in curved]
     faces = [_face(owners[k].name if k < n_feat else "", g, mesh, k < n_feat) for k, g in enumerate(groups)]
-    return _name_faces(faces, mesh, face_names, tol)
+    return _name_faces(faces, mesh, face_names, tol, from_mm(unit, 1.0))
 
 
 def _face(name: str, tris: np.ndarray, mesh: "trimesh.Trimesh", is_feature: bool) -> Face:
@@ -498,10 +498,11 @@ def face_of_point(faces: list[Face], mesh: "trimesh.Trimesh", p: np.ndarray, tol
 _AXES = {"px": (1, 0, 0), "nx": (-1, 0, 0), "py": (0, 1, 0), "ny": (0, -1, 0), "pz": (0, 0, 1), "nz": (0, 0, -1)}
 
 
-def _name_faces(faces: list[Face], mesh: "trimesh.Trimesh", face_names: dict[str, np.ndarray], tol: float
-                ) -> list[Face]:
+def _name_faces(faces: list[Face], mesh: "trimesh.Trimesh", face_names: dict[str, np.ndarray], tol: float,
+                mm: float = 1.0) -> list[Face]:
     """Names by precedence: features' (already on their faces), face_names, axis names where
-    unique, then f1, f2, ..."""
+    unique, then f1, f2, ... in the order of their centroids in mm to 1e-6 mm (``mm``: one mm
+    in the cell unit), then their normals: the same names whatever the file's length unit."""
     names: dict[int, str] = {k: f.name for k, f in enumerate(faces) if f.feature}
     for name, p in face_names.items():
         k = face_of_point(faces, mesh, p, tol)
@@ -519,7 +520,7 @@ def _name_faces(faces: list[Face], mesh: "trimesh.Trimesh", face_names: dict[str
             names[hits[0]] = ax
             used.add(ax)
     order = sorted((k for k in range(len(faces)) if k not in names),
-                   key=lambda k: (*np.round(faces[k].centroid, 6), *np.round(faces[k].normal, 6)))
+                   key=lambda k: (*np.round(faces[k].centroid / mm, 6), *np.round(faces[k].normal, 6)))
     i = 0
     for k in order:
         i += 1

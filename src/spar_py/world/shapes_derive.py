@@ -29,6 +29,10 @@ at the opening and palm, swept in along the approach) enter the part. ``ofaces``
 faces, every planar face whose plane the palm or a closed finger reaches beyond (the part
 cannot rest on it while held) and the feature's face if they enter the space its mate needs.
 
+Then the antipodal grasps (:func:`antipodal_grasps`): contact pairs sampled on the surface,
+planar or curved, within a friction cone; all of them for a part the candidates above leave
+with none, and on a mesh part those on curved faces the candidates above do not close on.
+
 Units: lengths in the cell unit, constants in mm (converted with spar_py.core.units.from_mm);
 angles in radians. Frames: object frame; tool frames T_g are 4x4 in the object frame.
 """
@@ -588,7 +592,7 @@ def _box_pairs(alo: np.ndarray, ahi: np.ndarray, blo: np.ndarray, bhi: np.ndarra
 
 def _in_triangles(T: np.ndarray, C: np.ndarray, eps: float = 1e-12) -> np.ndarray:
     """(n,) bool: all three corners of each triangle T[k] (n, 3, 2) in the closed CCW triangle
-    C[k] (n, 3, 2): :func:`_in_triangle` pair by pair."""
+    C[k] (n, 3, 2): on the inner side of each of its edges, up to ``eps``."""
     ok = np.ones(T.shape[:2], bool)
     for i in range(3):
         a, b = C[:, i, None], C[:, (i + 1) % 3, None]  # (n, 1, 2)
@@ -603,15 +607,6 @@ def _ccw_all(T: np.ndarray) -> np.ndarray:
     out = T.copy()
     out[d < 0] = T[d < 0][:, ::-1]
     return out
-
-
-def _in_triangle(P: np.ndarray, t: np.ndarray, eps: float = 1e-12) -> np.ndarray:
-    """(k,) bool: points P (k, 2) in the closed CCW triangle t (3, 2)."""
-    ok = np.ones(len(P), bool)
-    for i in range(3):
-        a, b = t[i], t[(i + 1) % 3]
-        ok &= (b[0] - a[0]) * (P[:, 1] - a[1]) - (b[1] - a[1]) * (P[:, 0] - a[0]) >= -eps
-    return ok
 
 
 # =========================================================================== grasps
@@ -851,7 +846,9 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fe
                 continue
             for a in _approaches(c, step):
                 T = _tool(p, c, a)
-                if _line_contact(root + c * r, d, length, T, g) >= min_len:
+                # at least MIN_CONTACT_MM up to rounding: a 10 mm shaft closed on at 45 deg has
+                # exactly 5 mm under the pad, which rounding in inches would put just below
+                if _line_contact(root + c * r, d, length, T, g) >= min_len * (1 - 1e-9):
                     cands.append(((name,), 2 * r, T))
     out = []
     for names, width, T in cands:
@@ -1127,8 +1124,9 @@ def antipodal_pairs(mesh: "trimesh.Trimesh", opening: float, unit: str, samples:
     c = np.zeros_like(d)
     c[ok] = d[ok] / w[ok, None]
     cos_f = math.cos(math.radians(FRICTION_DEG))
-    ang_p = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", -n, c), -1, 1)))
-    ang_q = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", m, c), -1, 1)))
+    # atan2 of |cross| and dot: accurate near 0 deg, where arccos turns rounding into 1e-6 deg
+    ang_p = np.degrees(np.arctan2(np.linalg.norm(cross(-n, c), axis=1), np.einsum("ij,ij->i", -n, c)))
+    ang_q = np.degrees(np.arctan2(np.linalg.norm(cross(m, c), axis=1), np.einsum("ij,ij->i", m, c)))
     cone = ok & (np.einsum("ij,ij->i", -n, c) >= cos_f) & (np.einsum("ij,ij->i", m, c) >= cos_f)
     cone &= w >= from_mm(unit, MIN_WIDTH_MM)
     least = float(w[cone].min()) if cone.any() else None
@@ -1185,18 +1183,24 @@ def antipodal_grasps(mesh: "trimesh.Trimesh", g: Gripper, unit: str, step: float
         return [], least, 0
     A = _arrays(mesh)
     cell = A.diag / ANTIPODAL_GRID
+    mm = from_mm(unit, 1.0)  # ties are broken on lengths in mm: the same grasps in any unit
     groups: dict[tuple, Antipodal] = {}
     count: dict[tuple, int] = {}
+
+    def rank(a: Antipodal) -> tuple:
+        return round(a.angle, 6), round(a.width / mm, 9)
+
     for a in pairs:
         c = _canonical(a.c)
-        key = (*np.round(c * DIRECTION_CELLS).astype(int), *np.floor((a.p + a.q) / 2 / cell).astype(int))
+        # cells centred on the origin: a part symmetric about it has midpoints at 0 up to rounding
+        key = (*np.round(c * DIRECTION_CELLS).astype(int), *np.round((a.p + a.q) / 2 / cell).astype(int))
         count[key] = count.get(key, 0) + 1
         best = groups.get(key)
-        if best is None or (round(a.angle, 6), round(a.width, 9)) < (round(best.angle, 6), round(best.width, 9)):
+        if best is None or rank(a) < rank(best):
             groups[key] = a
     # the groups with the most pairs first (the most surface to close on), then the squarest
-    ranked = sorted(groups, key=lambda k: (-count[k], round(groups[k].angle, 6), round(groups[k].width, 9),
-                                           *np.round((groups[k].p + groups[k].q) / 2, 9)))
+    ranked = sorted(groups, key=lambda k: (-count[k], *rank(groups[k]),
+                                           *np.round((groups[k].p + groups[k].q) / 2 / mm, 9)))
     chosen = [groups[k] for k in ranked[:ANTIPODAL_CLUSTERS]]
     inset = min(from_mm(unit, PAD_PATCH_MM) / 2, g.finger_length / 2)
     out: list[tuple[np.ndarray, float, Antipodal]] = []
