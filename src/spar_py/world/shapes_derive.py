@@ -847,7 +847,7 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fe
             for a in _approaches(c, step):
                 T = _tool(p, c, a)
                 # at least MIN_CONTACT_MM up to rounding: a 10 mm shaft closed on at 45 deg has
-                # exactly 5 mm under the pad, which rounding in inches would put just below
+                # exactly 5 mm under the pad, which rounding puts just below it in some units
                 if _line_contact(root + c * r, d, length, T, g) >= min_len * (1 - 1e-9):
                     cands.append(((name,), 2 * r, T))
     out = []
