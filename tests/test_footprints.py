@@ -129,10 +129,16 @@ def check_plan_footprints(cell: Cell, steps: list[dict]) -> int:
             obj = s["object"]
             T = _placement_T(cell, obj, s["placement"])
             foot = _wrap(_shadow(cell.objects[obj], T))
+            # a put-down onto a part's top (issue 33): the part's shadow is its region
+            on = s["placement"].get("on")
+            under = [(x[:, 0].min(), x[:, 0].max(), x[:, 1].min(), x[:, 1].max())
+                     for x in (_wrap(_shadow(cell.objects[o], To)) for _, o, To in table if o == on)]
             assert any(foot[:, 0].min() >= x0 - tol and foot[:, 0].max() <= x1 + tol
                        and foot[:, 1].min() >= y0 - tol and foot[:, 1].max() <= y1 + tol
-                       for x0, x1, y0, y1 in _regions(cell)), (cell.name, s["id"], "outside every region")
+                       for x0, x1, y0, y1 in _regions(cell) + under), (cell.name, s["id"], "outside every region")
             for lab, o, To in table:
+                if o == on:
+                    continue  # resting on it: its contact, within its shadow (above)
                 d = _distance(foot, _wrap(_shadow(cell.objects[o], To)))
                 assert d >= gap - tol, (cell.name, s["id"], f"{d} from {o} at {lab}")
             table.append(("@" + s["id"], obj, T))
