@@ -37,8 +37,10 @@ from spar_py.core.units import from_mm
 if TYPE_CHECKING:
     from spar_py.core.model import MatingFeature, ObjectModel
 
-__all__ = ["AXIS_TOL_MM", "NEAR_MM", "SWEEP_MARGIN_MM", "VIA", "Axis", "compile_goals", "feature_axis",
-           "mate_misalignment", "near_parts", "precedence", "seat_direction", "subtree", "via_grasps"]
+__all__ = ["AXIS_TOL_MM", "NEAR_MM", "SUB", "SWEEP_MARGIN_MM", "VIA", "Axis", "SubPose", "compile_goals",
+           "feature_axis",
+           "mate_misalignment", "near_parts", "precedence", "resting_faces", "seat_direction", "subassembly_poses",
+           "subtree", "via_grasps"]
 
 #: A mate's axes are coaxial when the peg's axis passes within this of the hole's (mm) and
 #: their directions differ by less than AXIS_TOL_DEG.
@@ -571,3 +573,85 @@ def via_grasps(product: Product) -> dict[str, dict[str, tuple[str, Grasp]]]:
         if got:
             out[name] = got
     return out
+
+
+#: What joins a part's name and a subassembly's stable pose number (``block_sub_p1``).
+SUB = "_sub_p"
+#: Subassembly stable poses less probable than this (trimesh's quasi-static estimate) are left out.
+SUB_PROB_FLOOR = 0.02
+#: At most this many subassembly stable poses per part, the most probable first.
+SUB_POSES_MAX = 4
+
+
+@dataclass(frozen=True)
+class SubPose:
+    """A stable pose of a part with its whole product subtree mated into it (the union of their
+    shapes at their product poses): ``label`` (``PART_sub_pK``), ``R`` the part's orientation
+    (3x3, world), ``height`` the part's frame's height above the table (cell unit), ``prob``
+    trimesh's estimate of how often it lands so."""
+
+    label: str
+    R: np.ndarray
+    height: float
+    prob: float
+
+
+def subassembly_poses(product: Product) -> dict[str, list[SubPose]]:
+    """For each part with a product subtree, the stable poses of the union of its shape and its
+    subtree's at their product poses, in the part's frame (trimesh compute_stable_poses on the
+    union's convex hull about the union's centre of mass, the most probable SUB_POSES_MAX above
+    SUB_PROB_FLOOR), less those whose down direction is one of the part's own poses' (those the
+    part alone has), labelled ``PART_sub_p1, ...``. Parts without a mesh are left out."""
+    import trimesh  # a derivation only
+
+    from spar_py.world.shapes import part_mesh
+
+    out: dict[str, list[SubPose]] = {}
+    for name, pp in product.parts.items():
+        kids = subtree(product, name)
+        own = part_mesh(pp.model)
+        if not kids or own is None:
+            continue
+        inv_p = np.linalg.inv(pp.pose)
+        meshes = [own.copy()]
+        for c in kids:
+            m = part_mesh(product.parts[c].model)
+            if m is None:
+                break
+            meshes.append(m.copy().apply_transform(inv_p @ product.parts[c].pose))
+        else:
+            union = trimesh.util.concatenate(meshes)
+            com = np.sum([m.center_mass * m.volume for m in meshes], axis=0) / sum(m.volume for m in meshes)
+            Ts, probs = trimesh.poses.compute_stable_poses(union.convex_hull, center_mass=com, sigma=0.0,
+                                                           n_samples=1)
+            owned = [np.asarray(p.R, float)[2] for p in pp.model.poses.values()]
+            got: list[SubPose] = []
+            for T, p in zip(Ts, probs):
+                R = np.asarray(T, float)[:3, :3]
+                if p < SUB_PROB_FLOOR or any(np.allclose(R[2], r, atol=1e-6) for r in owned) or any(
+                        np.allclose(R[2], s.R[2], atol=1e-6) for s in got):
+                    continue
+                height = -float((union.vertices @ R.T)[:, 2].min())
+                got.append(SubPose(f"{name}{SUB}{len(got) + 1}", R, height, float(p)))
+                if len(got) == SUB_POSES_MAX:
+                    break
+            if got:
+                out[name] = got
+    return out
+
+
+def resting_faces(model: ObjectModel, R: np.ndarray, height: float, unit: str) -> tuple[str, ...]:
+    """The names of the faces of ``model``'s shape (as its derivation names them) that touch the
+    table when the part is turned by R (3x3) with its frame ``height`` above the table (cell
+    unit): a vertex of the face within REST_TOL_MM of it."""
+    from spar_py.world.shapes import derive_faces, part_mesh
+    from spar_py.world.supports import REST_TOL_MM
+
+    mesh = part_mesh(model)
+    if mesh is None or model.geometry is None:
+        return ()
+    feats = tuple(f.geometry for f in model.features if f.geometry is not None)
+    faces = derive_faces(mesh, feats, dict(model.geometry.face_names), model.geometry.unit)
+    z = (np.asarray(mesh.vertices, float) @ np.asarray(R, float).T)[:, 2] + height
+    low = z[mesh.faces] <= from_mm(unit, REST_TOL_MM)  # (triangles, 3)
+    return tuple(f.name for f in faces if low[f.tris].any())
