@@ -624,7 +624,7 @@ def subassembly_poses(product: Product) -> dict[str, list[SubPose]]:
             com = np.sum([m.center_mass * m.volume for m in meshes], axis=0) / sum(m.volume for m in meshes)
             Ts, probs = trimesh.poses.compute_stable_poses(union.convex_hull, center_mass=com, sigma=0.0,
                                                            n_samples=1)
-            owned = [np.asarray(p.R, float)[2] for p in pp.model.poses.values()]
+            owned = [np.asarray(p.R, float)[2] for k, p in pp.model.poses.items() if SUB not in k]
             got: list[SubPose] = []
             for T, p in zip(Ts, probs):
                 R = np.asarray(T, float)[:3, :3]
