@@ -38,10 +38,10 @@ def test_disc_with_pin_rests_on_its_side_on_the_pin_and_rim() -> None:
         hull = ConvexHull(low)
         assert (hull.equations[:, :2] @ c + hull.equations[:, 2] < -1e-9).all(), (s.label, c)
         assert not any(np.allclose(s.R[2], d, atol=1e-6) for d in own_down)
-        # on its side: the disc's axis lies (nearly) flat
-        assert abs((s.R @ np.array([0.0, 0.0, 1.0]))[2]) < 0.2
         # wired in: the disc's model has the pose, at that height, and it needs the pin
         sp = disc.poses[s.label]
         np.testing.assert_allclose(sp.R, s.R)
         assert sp.height == s.height and sp.rfaces
         assert product.sub_poses["disc"][s.label] == ("pin",)
+    # one of them on its side (the L of the pin and the rim): the disc's axis (nearly) flat
+    assert any(abs(s.R[2, 2]) < 0.2 for s in got["disc"])
