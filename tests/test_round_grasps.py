@@ -124,7 +124,8 @@ def test_part_no_goal_moves_may_have_no_grasp(tmp_path: Path) -> None:
     (tmp_path / "ok.yaml").write_text(yaml.safe_dump(cell))
     loaded = load_problem(tmp_path / "ok.yaml")
     assert loaded.objects["base"].grasps == {} and loaded.objects["pin"].grasps
-    # a part a goal moves needs a grasp: a D120 pin (the PUMA opens 101.6 mm) into a D124 bore
+    # a part a goal moves needs a grasp: a D120 pin 120 mm long (the PUMA opens 101.6 mm: too wide
+    # across its round, 119.9 mm across the flats of its polygon, and between its ends) into a D124 bore
     (tmp_path / "wide_base.yaml").write_text(yaml.safe_dump({
         "object": "base", "units": {"length": "mm", "angle": "deg"},
         "shape": [{"box": {"min": [-100, -100, 0], "max": [100, 100, 150]}},
@@ -133,13 +134,15 @@ def test_part_no_goal_moves_may_have_no_grasp(tmp_path: Path) -> None:
                     "axis": {"origin": [0, 0, 150], "direction": [0, 0, -1]}}}))
     (tmp_path / "fat_pin.yaml").write_text(yaml.safe_dump({
         "object": "pin", "units": {"length": "mm", "angle": "deg"},
-        "shape": [{"cylinder": {"radius": 60, "z": [0, 60]}}],
-        "feature": {"kind": "peg", "name": "shank", "radius": 60, "length": 60,
+        "shape": [{"cylinder": {"radius": 60, "z": [0, 120]}}],
+        "feature": {"kind": "peg", "name": "shank", "radius": 60, "length": 120,
                     "axis": {"origin": [0, 0, 0], "direction": [0, 0, 1]}}}))
     cell["objects"]["pin"]["model"] = "fat_pin.yaml"
     cell["objects"]["base"]["model"] = "wide_base.yaml"
     (tmp_path / "bad.yaml").write_text(yaml.safe_dump(cell))
-    with pytest.raises(KBError, match=r"fat_pin\.yaml: shape: expected a part the gripper can hold"):
+    with pytest.raises(KBError, match=r"fat_pin\.yaml: shape: expected a part the gripper can hold, as a goal "
+                                      r"moves it \(its narrowest width across opposite surfaces \(within 12 deg\) "
+                                      r"is 119\.9 mm, more than the gripper's opening 101\.6 mm\)"):
         load_problem(tmp_path / "bad.yaml")
 
 

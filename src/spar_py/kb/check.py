@@ -12,7 +12,7 @@ import yaml
 from spar_py.core.errors import KBError
 from spar_py.core.units import from_mm
 from spar_py.kb.node import num
-from spar_py.kb.objects import DEFAULT_OPENING_MM, check_against_shape, load_object
+from spar_py.kb.objects import DEFAULT_OPENING_MM, check_against_shape, load_object, mesh_note
 from spar_py.kb.problem import load_problem
 from spar_py.kb.products import load_product
 from spar_py.kb.reader import MAX_INPUT_BYTES, parse_yaml
@@ -24,15 +24,18 @@ __all__ = ["check_file", "derive_text", "iter_kb_files"]
 
 
 def check_file(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> str:
-    """Validate one KB file of any kind (problem, object, robot, product); return a one-line summary."""
+    """Validate one KB file of any kind (problem, object, robot, product); return a one-line summary,
+    followed by a line for each mesh that loading repaired (kb.objects.mesh_note)."""
     root = read_yaml(path, max_bytes)
     kind = file_kind(root)
     if kind is None:
         raise KBError(str(path), "", "a problem, object, robot or product file", describe(root.value))
     if kind.name == "product":
         pr = load_product(path, units_of(root)[0], max_bytes)
-        return (f"{path}: ok (product {pr.name}: {len(pr.parts)} parts, {len(pr.mates) + len(pr.seats)} mates, "
-                f"{len(pr.precedence)} orderings by geometry)")
+        notes = [n for n in dict.fromkeys(mesh_note(p.model) for p in pr.parts.values()) if n]
+        return "\n".join([f"{path}: ok (product {pr.name}: {len(pr.parts)} parts, "
+                          f"{len(pr.mates) + len(pr.seats)} mates, {len(pr.precedence)} orderings by geometry)",
+                          *notes])
     if kind.name == "problem":
         cell = load_problem(path, max_bytes)
         for oname, model in cell.objects.items():
@@ -40,12 +43,15 @@ def check_file(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> str:
             if mfile is not None:
                 check_against_shape(mfile, read_yaml(mfile, max_bytes), model, cell.unit, cell.finger_separation,
                                     cell.robot.gripper)
-        return f"{path}: ok (problem {cell.name}: {len(cell.objects)} objects, {len(cell.goals)} goals)"
+        notes = [n for n in dict.fromkeys(mesh_note(m) for m in cell.objects.values()) if n]
+        return "\n".join([f"{path}: ok (problem {cell.name}: {len(cell.objects)} objects, {len(cell.goals)} goals)",
+                          *notes])
     if kind.name == "object":
         o = load_object(path, units_of(root)[0], max_bytes)
         check_against_shape(path, root, o, units_of(root)[0])
+        note = mesh_note(o)
         return (f"{path}: ok (object {o.name}: {len(o.faces)} faces, {len(o.poses)} stable poses, "
-                f"{len(o.grasps)} grasps)")
+                f"{len(o.grasps)} grasps)") + (f"\n{note}" if note else "")
     r = load_robot(path, max_bytes=max_bytes)
     return f"{path}: ok (robot {r.name}, {r.solver_name} IK)"
 

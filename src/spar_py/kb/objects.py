@@ -26,7 +26,7 @@ from spar_py.kb.values import LOAD_MEMO_LIMIT, tm_node, units_of
 from spar_py.world.robots import GripperGeometry
 
 __all__ = ["DEFAULT_OPENING_MM", "DERIVABLE", "PART_SIZE_MM", "REACH_RATIO", "check_against_shape", "holdable",
-           "load_object", "part_size"]
+           "load_object", "mesh_note", "part_size"]
 
 
 #: The entries an object model may leave out when it gives its geometry (derived: world.shapes).
@@ -111,6 +111,8 @@ def load_object(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, o
         except Exception as e:  # trimesh, manifold3d, scipy: a shape they cannot take is bad input
             raise _geometry_error(path, geometry, e) from None
         geometry.hull = np.asarray(derived["hull"], float)
+        geometry.repair = geometry.repair or str(derived.get("repair", ""))
+        geometry.no_grasp = str(derived.get("no_grasp", ""))
         if geometry.mesh_file is not None:
             pts = geometry.hull
             solids = (Solid("hull", pts.min(0), pts.max(0), 0.0, pts),)
@@ -228,8 +230,24 @@ def holdable(path: str | Path, model: ObjectModel) -> None:
         return
     geo = model.geometry
     key = "mesh" if geo is not None and geo.mesh_file else "shape"
-    raise KBError(str(path), key, "a part the gripper can hold, as a goal moves it (no pair of opposite faces or "
-                                  "round surface within its opening)")
+    why = (geo.no_grasp if geo is not None and geo.no_grasp
+           else "no pair of opposite faces or round surface within its opening")
+    raise KBError(str(path), key, f"a part the gripper can hold, as a goal moves it ({why})")
+
+
+def mesh_note(model: ObjectModel) -> str | None:
+    """One line saying what loading the model's mesh file repaired (world.shapes.repair_mesh),
+    ``FILE: repaired: ...`` (the file relative to the working directory where it is under it),
+    or None when nothing was (or the model has no mesh, or its mesh was not loaded)."""
+    geo = model.geometry
+    if geo is None or geo.mesh_file is None or not geo.repair:
+        return None
+    f = Path(geo.mesh_file)
+    try:
+        f = f.relative_to(Path.cwd())
+    except ValueError:
+        pass
+    return f"{f}: repaired: {geo.repair}"
 
 
 def _grasp_frame(euler: tuple[float, ...], memo: Memo | None) -> np.ndarray:

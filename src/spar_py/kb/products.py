@@ -191,7 +191,7 @@ def _derived_objects(path: Path, unit: str, meshparts: dict[str, _MeshPart], der
         if seats:
             from spar_py.world.shapes import _load_mesh, derive_faces, face_of_point
 
-            mesh = _load_mesh(str(mp.file), mp.mm_per / LENGTH_UNITS[unit])
+            mesh, _ = _load_mesh(str(mp.file), mp.mm_per / LENGTH_UNITS[unit])  # its repair is said when the part loads
             faces = derive_faces(mesh, (), {}, unit)
             named: dict[int, str] = {}
             for j, s in seats:
@@ -421,7 +421,7 @@ def _derive(root: Node, unit: str, scale: float, base: str, meshparts: dict[str,
         if pname in meshparts:
             mp = meshparts[pname]
             try:
-                m = _load_mesh(str(mp.file), mp.mm_per / LENGTH_UNITS[unit]).copy()
+                m = _load_mesh(str(mp.file), mp.mm_per / LENGTH_UNITS[unit])[0].copy()
             except ValueError as e:
                 raise mp.node.key("mesh").fail(str(e), show(mp.node.value["mesh"])) from None
             m.apply_transform(mp.pose)

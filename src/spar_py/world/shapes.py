@@ -47,8 +47,8 @@ if TYPE_CHECKING:
     from spar_py.core.model import ObjectModel
 
 __all__ = [
-    "Face", "FeatureGeometry", "Geometry", "Primitive", "assembly_transforms", "axis_basis",
-    "derive_faces", "face_of_point", "minimal_rotation", "part_mesh", "poses_clear_of_table",
+    "Face", "FeatureGeometry", "Geometry", "Primitive", "Repair", "assembly_transforms", "axis_basis",
+    "derive_faces", "face_of_point", "minimal_rotation", "part_mesh", "poses_clear_of_table", "repair_mesh",
 ]
 
 #: Sides of the polygon a cylinder primitive is tessellated with.
@@ -63,6 +63,38 @@ ON_SURFACE_MM = 0.01
 AXIS_TOL = 1e-6
 #: The largest mesh file read (bytes): a 10^6-triangle binary STL is 50 MB.
 MAX_MESH_BYTES = 64_000_000
+#: Vertices closer than this fraction of the part's size are one (a CAD export's seams), when
+#: merging the exact duplicates leaves the mesh open.
+MERGE_REL = 1e-5
+#: Holes (loops of open edges) at most this fraction of the part's size across are filled.
+FILL_REL = 0.02
+
+
+@dataclass(frozen=True)
+class Repair:
+    """What loading a mesh had to repair (counts; all zero for a clean mesh)."""
+
+    merged: int = 0
+    degenerate: int = 0
+    duplicate: int = 0
+    holes: int = 0
+    flipped: bool = False
+    inverted: bool = False
+
+    def line(self) -> str:
+        """One line of what was done (empty when nothing was)."""
+        done = []
+        if self.merged:
+            done.append(f"merged {self.merged:,} seam vertices within {MERGE_REL:g} of the part's size")
+        if self.degenerate or self.duplicate:
+            done.append(f"removed {self.degenerate + self.duplicate:,} degenerate or duplicate triangles")
+        if self.holes:
+            done.append(f"filled {self.holes:,} hole{'s' if self.holes > 1 else ''}")
+        if self.flipped:
+            done.append("fixed winding")
+        if self.inverted:
+            done.append("turned the normals outward")
+        return ", ".join(done)
 
 
 # =========================================================================== declarations
@@ -129,6 +161,11 @@ class Geometry:
     #: The vertices of the mesh's convex hull (object frame, cell unit) once a derivation gave
     #: them (enough for the lowest point of the part in any orientation), else None.
     hull: np.ndarray | None = field(default=None, compare=False, repr=False)
+    #: What loading the mesh file repaired (:class:`Repair`'s line; "" for none), once the mesh
+    #: was built or a cached derivation said so.
+    repair: str = field(default="", compare=False)
+    #: Why the derivation found no grasp (world.shapes_derive.derive_grasps's line), or "".
+    no_grasp: str = field(default="", compare=False)
     _mesh: Any = field(default=None, compare=False, repr=False)
     _digest: str | None = field(default=None, compare=False, repr=False)
 
@@ -149,8 +186,11 @@ class Geometry:
     def mesh(self) -> "trimesh.Trimesh":
         """The part's mesh (object frame, cell unit), built on first use."""
         if self._mesh is None:
-            self._mesh = _load_mesh(self.mesh_file, self.scale) if self.mesh_file else _primitives_mesh(
-                self.primitives)
+            if self.mesh_file:
+                self._mesh, done = _load_mesh(self.mesh_file, self.scale)
+                self.repair = done.line()
+            else:
+                self._mesh = _primitives_mesh(self.primitives)
         return self._mesh
 
 
@@ -161,9 +201,10 @@ def part_mesh(model: "ObjectModel") -> "trimesh.Trimesh | None":
     return None if geo is None else geo.mesh()
 
 
-def _load_mesh(path: str, scale: float) -> "trimesh.Trimesh":
-    """Read an STL, OBJ or PLY file as one mesh, scaled by ``scale``. ValueError (one line) if
-    it cannot be read or is not a closed, consistently oriented volume."""
+def _load_mesh(path: str, scale: float) -> "tuple[trimesh.Trimesh, Repair]":
+    """Read an STL, OBJ or PLY file as one mesh, scaled by ``scale``, and repair what a CAD
+    export leaves open (:func:`repair_mesh`). ValueError (one line) if it cannot be read or
+    is not a closed volume once repaired."""
     import trimesh  # ~1.4 s at import: only a mesh or primitives model pays for it
 
     p = Path(path)
@@ -179,15 +220,131 @@ def _load_mesh(path: str, scale: float) -> "trimesh.Trimesh":
     if scale != 1.0:
         m.apply_scale(scale)
     m.merge_vertices()
-    if not m.is_watertight:
-        raise ValueError("a closed (watertight) mesh")
-    if not m.is_winding_consistent:
-        raise ValueError("a mesh with consistently oriented triangles")
-    if m.volume < 0:
+    return m, repair_mesh(m)
+
+
+def _open_edges(m: "trimesh.Trimesh") -> np.ndarray:
+    """(k, 2) the directed edges (as their triangles run) that no other triangle shares."""
+    from trimesh.grouping import group_rows
+
+    return np.asarray(m.edges)[group_rows(m.edges_sorted, require_count=1)]
+
+
+def repair_mesh(m: "trimesh.Trimesh") -> Repair:
+    """Close ``m`` in place where a CAD export left it open, and say what was done.
+
+    A mesh that is closed and consistently oriented once exact duplicate vertices are merged
+    is left as it is (only turned outward if its volume is negative). Otherwise, in order:
+    vertices within MERGE_REL of the part's size (its bounding box's largest side) are merged
+    (seams of near-duplicates), triangles left with a repeated corner and duplicates removed, holes (loops of open
+    edges) of 3 or 4 edges or at most FILL_REL of the part's size across filled,
+    and the winding made consistent. ValueError (one line: the open edges left, and where)
+    when the mesh is still open, or not one oriented volume."""
+    import trimesh
+
+    merged = degenerate = duplicate = holes = 0
+    flipped = False
+    if not (m.is_watertight and m.is_winding_consistent):
+        part = float(np.ptp(m.vertices, axis=0).max())
+        if not m.is_watertight:
+            merged = _merge_near(m, MERGE_REL * part)
+        F = np.asarray(m.faces)
+        keep = (F[:, 0] != F[:, 1]) & (F[:, 1] != F[:, 2]) & (F[:, 2] != F[:, 0])  # a corner merged away
+        degenerate = int((~keep).sum())
+        if degenerate:
+            m.update_faces(keep)
+        uniq = m.unique_faces()
+        duplicate = int(len(m.faces) - uniq.sum())
+        if duplicate:
+            m.update_faces(uniq)
+        m.remove_unreferenced_vertices()
+        if not m.is_watertight:
+            holes = _fill_small_holes(m, FILL_REL * part)
+        if m.is_watertight and not m.is_winding_consistent:
+            trimesh.repair.fix_winding(m)
+            flipped = True
+        if not m.is_watertight:
+            E = _open_edges(m)
+            P = np.asarray(m.vertices)[E.ravel()]
+            lo, hi = (np.where(np.abs(v) < 1e-9 * part, 0.0, v) for v in (P.min(0), P.max(0)))
+            done = Repair(merged, degenerate, duplicate, holes, flipped).line()
+            raise ValueError(
+                f"a closed (watertight) mesh: {len(E):,} edges stay open"
+                f"{' after repair (' + done + ')' if done else ''}, around "
+                f"[{', '.join(f'{v:.4g}' for v in (lo + hi) / 2)}] (from [{', '.join(f'{v:.4g}' for v in lo)}] to "
+                f"[{', '.join(f'{v:.4g}' for v in hi)}], the part's frame, cell unit); holes wider than "
+                f"{FILL_REL:g} of the part's size are not filled")
+        if not m.is_winding_consistent:
+            raise ValueError("a mesh whose triangles can be oriented consistently (a closed, two-sided surface)")
+    inverted = bool(m.volume < 0)
+    if inverted:
         m.invert()
     if not m.is_volume:
         raise ValueError("a mesh that bounds a volume")
-    return m
+    return Repair(merged, degenerate, duplicate, holes, flipped, inverted)
+
+
+def _merge_near(m: "trimesh.Trimesh", tol: float) -> int:
+    """Merge the vertices of ``m`` within ``tol`` of each other (clusters joined through such
+    pairs; each to its lowest-numbered vertex, which keeps its place); the number removed."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    V = np.asarray(m.vertices)
+    pairs = cKDTree(V).query_pairs(tol, output_type="ndarray")
+    if not len(pairs):
+        return 0
+    n = len(V)
+    g = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    _, comp = connected_components(g, directed=False)
+    first = np.full(comp.max() + 1, n)
+    np.minimum.at(first, comp, np.arange(n))
+    target = first[comp]
+    m.faces = target[np.asarray(m.faces)]
+    before = n
+    m.remove_unreferenced_vertices()
+    return before - len(m.vertices)
+
+
+def _fill_small_holes(m: "trimesh.Trimesh", max_across: float) -> int:
+    """Fill each simple loop of open edges that is a missing triangle or quad, or at most
+    ``max_across`` across (its bounding box's diagonal): a triangle's with one triangle, the
+    others with a fan from a new vertex at the loop's centroid, each wound against the open
+    edges' triangles; the number of holes filled. A wide loop is a cut, left open."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    E = _open_edges(m)
+    if not len(E):
+        return 0
+    V = np.asarray(m.vertices)
+    n = len(V)
+    g = coo_matrix((np.ones(len(E)), (E[:, 0], E[:, 1])), shape=(n, n))
+    _, comp = connected_components(g, directed=False)
+    loop = comp[E[:, 0]]
+    faces = set(map(tuple, np.sort(np.asarray(m.faces), axis=1).tolist()))
+    new_v: list[np.ndarray] = []
+    new_f: list[np.ndarray] = []
+    for k in np.unique(loop):
+        e = E[loop == k]
+        ids = np.unique(e)
+        if len(e) < 3 or len(ids) != len(e) or (len(e) > 4 and np.linalg.norm(np.ptp(V[ids], axis=0)) > max_across):
+            continue  # not one simple loop, or wide: a cut, not a hole
+        if len(e) == 3:
+            if tuple(ids) not in faces:  # else the loop is a lone triangle's own rim: no hole to fill
+                new_f.append(np.array([[e[0, 1], e[0, 0], next(int(v) for v in ids if v not in e[0])]]))
+            continue
+        pts = V[ids]
+        c = n + len(new_v)
+        new_v.append(pts.mean(0))
+        new_f.append(np.column_stack([e[:, 1], e[:, 0], np.full(len(e), c)]))
+    if not new_f:
+        return 0
+    if new_v:
+        m.vertices = np.vstack([V, np.array(new_v)])
+    m.faces = np.vstack([np.asarray(m.faces), *new_f])
+    return len(new_f)
 
 
 def _primitives_mesh(prims: tuple[Primitive, ...]) -> "trimesh.Trimesh":
@@ -312,7 +469,7 @@ def derive_faces(mesh: "trimesh.Trimesh", features: "tuple[FeatureGeometry, ...]
     n_feat = len(groups)
     groups += [np.asarray(sorted(p[2])) for p in planes] + [np.asarray(sorted(c)) for c in curved]
     faces = [_face(owners[k].name if k < n_feat else "", g, mesh, k < n_feat) for k, g in enumerate(groups)]
-    return _name_faces(faces, mesh, face_names, tol)
+    return _name_faces(faces, mesh, face_names, tol, from_mm(unit, 1.0))
 
 
 def _face(name: str, tris: np.ndarray, mesh: "trimesh.Trimesh", is_feature: bool) -> Face:
@@ -341,10 +498,11 @@ def face_of_point(faces: list[Face], mesh: "trimesh.Trimesh", p: np.ndarray, tol
 _AXES = {"px": (1, 0, 0), "nx": (-1, 0, 0), "py": (0, 1, 0), "ny": (0, -1, 0), "pz": (0, 0, 1), "nz": (0, 0, -1)}
 
 
-def _name_faces(faces: list[Face], mesh: "trimesh.Trimesh", face_names: dict[str, np.ndarray], tol: float
-                ) -> list[Face]:
+def _name_faces(faces: list[Face], mesh: "trimesh.Trimesh", face_names: dict[str, np.ndarray], tol: float,
+                mm: float = 1.0) -> list[Face]:
     """Names by precedence: features' (already on their faces), face_names, axis names where
-    unique, then f1, f2, ..."""
+    unique, then f1, f2, ... in the order of their centroids in mm to 1e-6 mm (``mm``: one mm
+    in the cell unit), then their normals: the same names whatever the file's length unit."""
     names: dict[int, str] = {k: f.name for k, f in enumerate(faces) if f.feature}
     for name, p in face_names.items():
         k = face_of_point(faces, mesh, p, tol)
@@ -362,7 +520,7 @@ def _name_faces(faces: list[Face], mesh: "trimesh.Trimesh", face_names: dict[str
             names[hits[0]] = ax
             used.add(ax)
     order = sorted((k for k in range(len(faces)) if k not in names),
-                   key=lambda k: (*np.round(faces[k].centroid, 6), *np.round(faces[k].normal, 6)))
+                   key=lambda k: (*np.round(faces[k].centroid / mm, 6), *np.round(faces[k].normal, 6)))
     i = 0
     for k in order:
         i += 1

@@ -3,8 +3,10 @@
 :func:`derive` returns the derivation as plain data, from a content-hash cache on disk when
 it has one: the key is the SHA-256 of everything the result depends on (the geometry's
 content and scale, the feature, ``face_names``, the gripper, the approach step, the
-labels' prefix and DERIVE_VERSION), so an edited mesh or model is derived again and an
-unchanged one never is, across runs, cells and processes. The cache lives in the user's
+labels' prefix, DERIVE_VERSION and the source of the modules that derive: world/shapes*.py),
+so an edited mesh or model is derived again and an unchanged one never is, across runs, cells
+and processes, and a derivation changed without a bump of DERIVE_VERSION (a branch's earlier
+code under the same number) is never read back as the new one's. The cache lives in the user's
 cache directory (``$SPAR_CACHE_DIR``, else ``$XDG_CACHE_HOME/spar-py/derive``, else
 ``~/.cache/spar-py/derive``), not per cell, because the same part file serves many cells
 and its derivation does not depend on the cell; it is bounded: at most MAX_ENTRIES files
@@ -15,6 +17,7 @@ Units: lengths in the cell unit, angles in radians (as in the models).
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import math
@@ -27,10 +30,12 @@ import numpy as np
 
 from spar_py.world.shapes import FeatureGeometry, Geometry, derive_faces
 
-__all__ = ["DERIVE_VERSION", "MAX_ENTRIES", "cache_dir", "derive"]
+__all__ = ["DERIVE_VERSION", "MAX_ENTRIES", "cache_dir", "derive", "source_digest"]
 
 #: Bumped whenever the derivation's results change for the same inputs.
-DERIVE_VERSION = 5
+DERIVE_VERSION = 7
+#: The modules whose source is part of the key (world/, beside this file).
+DERIVE_SOURCES = ("shapes.py", "shapes_derive.py", "shapes_cache.py")
 #: Derivations kept on disk at most.
 MAX_ENTRIES = 256
 
@@ -43,14 +48,30 @@ def cache_dir() -> Path:
     return Path(base) / "spar-py" / "derive"
 
 
+@functools.cache
+def source_digest() -> str:
+    """SHA-256 of the derivation's source (DERIVE_SOURCES), read once per process; "" where a
+    module's file cannot be read (an installation without sources: DERIVE_VERSION alone)."""
+    h = hashlib.sha256()
+    here = Path(__file__).resolve().parent
+    for name in DERIVE_SOURCES:
+        try:
+            h.update((here / name).read_bytes())
+        except OSError:
+            return ""
+    return h.hexdigest()
+
+
 def derive(name: str, geometry: Geometry, features: tuple[FeatureGeometry, ...], face_names: dict[str, np.ndarray],
            gripper: Any, step: float, need_hull: bool, use_cache: bool = True) -> dict[str, Any]:
     """The derivation of a part as plain data: ``faces`` (names), ``poses`` (label, rfaces,
     ofaces, R as 9 numbers row-major, height, probability), ``grasps`` (label, gfaces,
-    ofaces, euler: X, Y, Z, phi, theta, psi in radians, width) and, if ``need_hull``, ``hull``
+    ofaces, euler: X, Y, Z, phi, theta, psi in radians, width), ``repair`` (what loading the
+    mesh repaired, world.shapes.Repair's line, "" for nothing), ``no_grasp`` (with no grasps:
+    the sizes and opening compared, else "") and, if ``need_hull``, ``hull``
     (the convex hull's vertices). ``features``: the part's features declared by geometry.
     ValueError (one line, naming the key) for bad geometry."""
-    key_data = [DERIVE_VERSION, name, geometry.digest(), [f.spec() for f in features],
+    key_data = [DERIVE_VERSION, source_digest(), name, geometry.digest(), [f.spec() for f in features],
                 sorted((k, [round(float(v), 12) for v in p]) for k, p in face_names.items()),
                 gripper.spec(), round(step, 12), need_hull]
     key = hashlib.sha256(json.dumps(key_data).encode()).hexdigest()
@@ -77,7 +98,9 @@ def _compute(name: str, geometry: Geometry, features: tuple[FeatureGeometry, ...
     mesh = geometry.mesh()
     faces = derive_faces(mesh, features, face_names, geometry.unit)
     poses = derive_poses(mesh, faces, features, geometry.unit, f"{name}_p")
-    grasps = derive_grasps(mesh, faces, features, geometry.primitives, gripper, geometry.unit, f"{name}_g", step)
+    why: list[str] = []
+    grasps = derive_grasps(mesh, faces, features, geometry.primitives, gripper, geometry.unit, f"{name}_g", step,
+                           why)
     out: dict[str, Any] = {
         "faces": [f.name for f in faces],
         "poses": [{"label": p.label, "rfaces": list(p.rfaces), "ofaces": list(p.ofaces),
@@ -85,6 +108,8 @@ def _compute(name: str, geometry: Geometry, features: tuple[FeatureGeometry, ...
                   for p in poses],
         "grasps": [{"label": g.label, "gfaces": list(g.gfaces), "ofaces": list(g.ofaces),
                     "euler": [float(v) for v in g.euler], "width": g.width} for g in grasps],
+        "repair": geometry.repair,
+        "no_grasp": why[0] if why else "",
     }
     if need_hull:
         from spar_py.world.shapes_derive import hull_vertices  # a cache miss only (see _compute)

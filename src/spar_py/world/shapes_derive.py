@@ -29,6 +29,10 @@ at the opening and palm, swept in along the approach) enter the part. ``ofaces``
 faces, every planar face whose plane the palm or a closed finger reaches beyond (the part
 cannot rest on it while held) and the feature's face if they enter the space its mate needs.
 
+Then the antipodal grasps (:func:`antipodal_grasps`): contact pairs sampled on the surface,
+planar or curved, within a friction cone; all of them for a part the candidates above leave
+with none, and on a mesh part those on curved faces the candidates above do not close on.
+
 Units: lengths in the cell unit, constants in mm (converted with spar_py.core.units.from_mm);
 angles in radians. Frames: object frame; tool frames T_g are 4x4 in the object frame.
 """
@@ -48,7 +52,8 @@ from spar_py.world.shapes import (ON_SURFACE_MM, Face, FeatureGeometry, Primitiv
 if TYPE_CHECKING:
     import trimesh
 
-__all__ = ["DerivedGrasp", "DerivedPose", "Gripper", "MeshCylinder", "derive_grasps", "derive_poses", "euler_zyz_of",
+__all__ = ["Antipodal", "DerivedGrasp", "DerivedPose", "Gripper", "MeshCylinder", "antipodal_grasps", "antipodal_pairs",
+           "derive_grasps", "derive_poses", "euler_zyz_of",
            "grasp_problem", "mate_grasp_usable", "mesh_cylinders", "support_check"]
 
 #: Poses whose basin of attraction (trimesh's probability) is smaller are dropped.
@@ -158,7 +163,9 @@ class DerivedGrasp:
 @dataclass(frozen=True)
 class _Arrays:
     """A mesh's arrays read once (trimesh re-checks its content hash on every property read):
-    vertices V, faces F, triangles (n, 3, 3), normals N, centres C, bounding-box diagonal."""
+    vertices V, faces F, triangles (n, 3, 3), normals N, centres C, bounding-box diagonal,
+    centre of mass, and each triangle's bounding sphere (centre S, radius rad: the centre of its
+    box and the farthest corner from it), which culls triangles far from a box in any frame."""
 
     V: np.ndarray
     F: np.ndarray
@@ -167,6 +174,8 @@ class _Arrays:
     C: np.ndarray
     diag: float
     com: np.ndarray
+    S: np.ndarray
+    rad: np.ndarray
 
 
 def _arrays(mesh: "trimesh.Trimesh") -> _Arrays:
@@ -175,8 +184,11 @@ def _arrays(mesh: "trimesh.Trimesh") -> _Arrays:
     if a is None:
         V = np.asarray(mesh.vertices, float)
         F = np.asarray(mesh.faces)
-        a = _Arrays(V, F, V[F], np.asarray(mesh.face_normals, float), np.asarray(mesh.triangles_center, float),
-                    float(np.linalg.norm(V.max(0) - V.min(0))), np.asarray(mesh.center_mass, float))
+        tri = V[F]
+        S = (tri.min(1) + tri.max(1)) / 2
+        rad = np.linalg.norm(tri - S[:, None], axis=2).max(1)
+        a = _Arrays(V, F, tri, np.asarray(mesh.face_normals, float), np.asarray(mesh.triangles_center, float),
+                    float(np.linalg.norm(V.max(0) - V.min(0))), np.asarray(mesh.center_mass, float), S, rad)
         mesh.metadata["_spar_arrays"] = a
     return a
 
@@ -380,12 +392,16 @@ def grasp_problem(mesh: "trimesh.Trimesh", T: np.ndarray, width: float, g: Gripp
     if width > g.opening * (1 + 1e-9):
         return f"{width:.4g} {unit} wide, more than the gripper's opening {g.opening:.4g} {unit}"
     A = _arrays(mesh)
-    V = (A.V - T[:3, 3]) @ T[:3, :3]  # vertices in the tool frame
-    tri = V[A.F]
-    bbox = (tri.min(1), tri.max(1))
+    R, o = T[:3, :3], T[:3, 3]
+    S = (A.S - o) @ R  # triangles' bounding spheres' centres in the tool frame
     reach = 2 * A.diag + g.finger_length + g.palm_depth
     for what, lo, hi in _gripper_boxes(g, width, reach, from_mm(unit, TOUCH_MM)):
-        if _tri_box(tri, lo, hi, bbox).any() or ((V >= lo) & (V <= hi)).all(1).any():
+        # only triangles whose sphere meets the box (grown by the radius) can meet it
+        near = np.flatnonzero((np.abs(S - (lo + hi) / 2) <= (hi - lo) / 2 + A.rad[:, None]).all(1))
+        if not len(near):
+            continue
+        tri = (A.tri[near] - o) @ R
+        if ((tri >= lo) & (tri <= hi)).all(2).any() or _tri_box(tri, lo, hi).any():
             return f"{what} enters the part"
     return None
 
@@ -442,6 +458,79 @@ def _area_centroid(poly: "np.ndarray | list") -> tuple[float, np.ndarray]:
     return abs(A) / 2, np.array([cx, cy]) / (3 * A)
 
 
+def _pack(polys: "list[np.ndarray]") -> tuple[np.ndarray, np.ndarray]:
+    """Polygons of different sizes as one (n, K, 2) array (rows padded with zeros) and their
+    corner counts (n,)."""
+    cnt = np.array([len(p) for p in polys], int)
+    P = np.zeros((len(polys), int(cnt.max()) if len(polys) else 0, 2))
+    for i, p in enumerate(polys):
+        P[i, : len(p)] = p
+    return P, cnt
+
+
+def _unpack(P: np.ndarray, cnt: np.ndarray, rows: "np.ndarray | range") -> list[np.ndarray]:
+    return [P[i, : cnt[i]].copy() for i in rows]
+
+
+def _next_corner(cnt: np.ndarray, K: int) -> np.ndarray:
+    """(n, K): the index of each corner's successor in its polygon (0 past the last corner)."""
+    j = np.arange(K)[None, :]
+    return np.where(j < cnt[:, None], (j + 1) % np.maximum(cnt, 1)[:, None], 0)
+
+
+def _clip_many(P: np.ndarray, cnt: np.ndarray, clip: "np.ndarray | list") -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_clip_convex` of many convex polygons at once (P (n, K, 2) with ``cnt`` corners
+    each) against convex CCW polygon ``clip`` ((m, 2), or (n, m, 2): one per polygon): the same
+    arithmetic, corner by corner, so each result is the one :func:`_clip_convex` gives.
+    Returns the clipped polygons and counts."""
+    C = np.asarray(clip, float)
+    C = np.broadcast_to(C, (len(P), *C.shape)) if C.ndim == 2 else C
+    rows = np.arange(len(P))[:, None]
+    for i in range(C.shape[1]):
+        K = P.shape[1]
+        if K == 0 or not cnt.any():
+            break
+        px, py = C[:, i, 0, None], C[:, i, 1, None]
+        qx, qy = C[:, (i + 1) % C.shape[1], 0, None], C[:, (i + 1) % C.shape[1], 1, None]
+        ax, ay = qy - py, -(qx - px)  # outward normal of a CCW edge
+        b = ax * px + ay * py
+        valid = np.arange(K)[None, :] < cnt[:, None]
+        Q = P[rows, _next_corner(cnt, K)]
+        sp = ax * P[..., 0] + ay * P[..., 1] - b
+        sq = ax * Q[..., 0] + ay * Q[..., 1] - b
+        keep = valid & (sp <= 0)
+        cut = valid & (((sp < 0) & (0 < sq)) | ((sq < 0) & (0 < sp)))
+        t = sp / np.where(cut, sp - sq, 1.0)
+        X = np.stack([P[..., 0] + (Q[..., 0] - P[..., 0]) * t, P[..., 1] + (Q[..., 1] - P[..., 1]) * t], axis=-1)
+        cand = np.stack([P, X], axis=2).reshape(len(P), 2 * K, 2)
+        m = np.stack([keep, cut], axis=2).reshape(len(P), 2 * K)
+        order = np.argsort(~m, axis=1, kind="stable")
+        cnt = m.sum(1)
+        P = cand[rows, order][:, : int(cnt.max()) if len(cnt) else 0]
+    return P, cnt
+
+
+def _area_centroid_many(P: np.ndarray, cnt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_area_centroid` of many polygons at once (P (n, K, 2), ``cnt`` corners each),
+    summed corner by corner as it does: (areas (n,), centroids (n, 2))."""
+    n, K = P.shape[:2]
+    A, cx, cy = np.zeros(n), np.zeros(n), np.zeros(n)
+    nxt = _next_corner(cnt, K)
+    rows = np.arange(n)
+    for i in range(K):
+        act = i < cnt
+        x, y = P[:, i, 0], P[:, i, 1]
+        xn, yn = P[rows, nxt[:, i], 0], P[rows, nxt[:, i], 1]
+        c = x * yn - xn * y
+        A = np.where(act, A + c, A)
+        cx = np.where(act, cx + (x + xn) * c, cx)
+        cy = np.where(act, cy + (y + yn) * c, cy)
+    ok = (cnt >= 3) & ~(np.abs(A) < 1e-300)
+    den = np.where(ok, 3 * A, 1.0)
+    cen = np.where(ok[:, None], np.stack([cx / den, cy / den], axis=1), 0.0)
+    return np.where(ok, np.abs(A) / 2, 0.0), cen
+
+
 def _ccw(P: np.ndarray) -> np.ndarray:
     x, y = P[:, 0], P[:, 1]
     return P if (x * np.roll(y, -1) - np.roll(x, -1) * y).sum() >= 0 else P[::-1]
@@ -449,29 +538,67 @@ def _ccw(P: np.ndarray) -> np.ndarray:
 
 def _overlap(mesh: "trimesh.Trimesh", fa: Face, fb: Face, e1: np.ndarray, e2: np.ndarray) -> list[np.ndarray]:
     """The convex pieces (each (k, 2) in the plane basis e1, e2) where the two faces overlap
-    when projected on a plane normal to them."""
+    when projected on a plane normal to them: each triangle of the face with more (A) clipped
+    by each triangle of the other (B) whose box meets its box, in B's order; a triangle of A
+    wholly inside one of B is that triangle's piece and no later one's. All pairs at once
+    (numpy), the pieces in the order a loop over B would give them."""
     arr = _arrays(mesh)
     E = np.array([e1, e2]).T
     A, B = _ccw_all(arr.tri[fa.tris] @ E), _ccw_all(arr.tri[fb.tris] @ E)   # (n, 3, 2) each
     if len(A) < len(B):
         A, B = B, A  # clip the many against the few
-    alo, ahi = A.min(1), A.max(1)
-    pieces: list[np.ndarray] = []
-    done = np.zeros(len(A), bool)
-    for b in B:
-        blo, bhi = b.min(0), b.max(0)
-        near = np.flatnonzero(((alo <= bhi) & (ahi >= blo)).all(1) & ~done)
-        if not len(near):
-            continue
-        inside = _in_triangle(A[near].reshape(-1, 2), b).reshape(-1, 3).all(1)
-        for i in near[inside]:
-            pieces.append(A[i])
-        done[near[inside]] = True
-        for i in near[~inside]:
-            p = _clip_convex(A[i], b)
-            if len(p) >= 3 and _area_centroid(p)[0] > 0:
-                pieces.append(np.array(p))
-    return pieces
+    ii, jj = _box_pairs(A.min(1), A.max(1), B.min(1), B.max(1))
+    if not len(ii):
+        return []
+    inside = _in_triangles(A[ii], B[jj])
+    first = np.full(len(A), len(B))  # the first B triangle each A triangle lies in
+    np.minimum.at(first, ii[inside], jj[inside])
+    take = jj <= first[ii]
+    ii, jj, inside = ii[take], jj[take], inside[take]
+    cut = np.flatnonzero(~inside)
+    P, cnt = _clip_many(A[ii[cut]], np.full(len(cut), 3), B[jj[cut]])
+    area, _ = _area_centroid_many(P, cnt)
+    ok = (cnt >= 3) & (area > 0)
+    # by B triangle, those wholly inside first, then the clipped ones, each by A's order
+    whole = np.flatnonzero(inside)
+    keys_j = np.r_[jj[whole], jj[cut][ok]]
+    keys_k = np.r_[np.zeros(len(whole), int), np.ones(int(ok.sum()), int)]
+    keys_i = np.r_[ii[whole], ii[cut][ok]]
+    items = [A[i] for i in ii[whole]] + _unpack(P, cnt, np.flatnonzero(ok))
+    return [items[k] for k in np.lexsort((keys_i, keys_k, keys_j))]
+
+
+def _box_pairs(alo: np.ndarray, ahi: np.ndarray, blo: np.ndarray, bhi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The pairs (i, j) of 2-D boxes A[i], B[j] (corners lo, hi) that meet, closed: the boxes
+    of A sorted by their low x, each B box's candidates a range of them found by bisection (A's
+    boxes wider than 4 times their median width are tested against every B box instead)."""
+    w = ahi[:, 0] - alo[:, 0]
+    wide = w > 4 * float(np.median(w)) if len(w) else np.zeros(0, bool)
+    narrow = np.flatnonzero(~wide)
+    order = narrow[np.argsort(alo[narrow, 0], kind="stable")]
+    xs = alo[order, 0]
+    wmax = float(w[narrow].max()) if len(narrow) else 0.0
+    lo = np.searchsorted(xs, blo[:, 0] - wmax, "left")
+    counts = np.searchsorted(xs, bhi[:, 0], "right") - lo
+    jj = np.repeat(np.arange(len(blo)), counts)
+    ii = order[np.repeat(lo - np.cumsum(counts) + counts, counts) + np.arange(int(counts.sum()))]
+    wi = np.flatnonzero(wide)
+    if len(wi):
+        ii = np.r_[ii, np.repeat(wi[None], len(blo), 0).ravel()]
+        jj = np.r_[jj, np.repeat(np.arange(len(blo)), len(wi))]
+    meet = ((alo[ii] <= bhi[jj]) & (ahi[ii] >= blo[jj])).all(1)
+    return ii[meet], jj[meet]
+
+
+def _in_triangles(T: np.ndarray, C: np.ndarray, eps: float = 1e-12) -> np.ndarray:
+    """(n,) bool: all three corners of each triangle T[k] (n, 3, 2) in the closed CCW triangle
+    C[k] (n, 3, 2): on the inner side of each of its edges, up to ``eps``."""
+    ok = np.ones(T.shape[:2], bool)
+    for i in range(3):
+        a, b = C[:, i, None], C[:, (i + 1) % 3, None]  # (n, 1, 2)
+        ok &= ((b[..., 0] - a[..., 0]) * (T[..., 1] - a[..., 1])
+               - (b[..., 1] - a[..., 1]) * (T[..., 0] - a[..., 0])) >= -eps
+    return ok.all(1)
 
 
 def _ccw_all(T: np.ndarray) -> np.ndarray:
@@ -480,15 +607,6 @@ def _ccw_all(T: np.ndarray) -> np.ndarray:
     out = T.copy()
     out[d < 0] = T[d < 0][:, ::-1]
     return out
-
-
-def _in_triangle(P: np.ndarray, t: np.ndarray, eps: float = 1e-12) -> np.ndarray:
-    """(k,) bool: points P (k, 2) in the closed CCW triangle t (3, 2)."""
-    ok = np.ones(len(P), bool)
-    for i in range(3):
-        a, b = t[i], t[(i + 1) % 3]
-        ok &= (b[0] - a[0]) * (P[:, 1] - a[1]) - (b[1] - a[1]) * (P[:, 0] - a[0]) >= -eps
-    return ok
 
 
 # =========================================================================== grasps
@@ -673,8 +791,15 @@ def _pads_find(normals: np.ndarray | None, c: np.ndarray) -> bool:
 
 def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[FeatureGeometry, ...],
                   prims: tuple[Primitive, ...], g: Gripper, unit: str, prefix: str,
-                  step: float = math.radians(45.0)) -> list[DerivedGrasp]:
-    """The grasps of the part (module docstring), labelled ``{prefix}1, {prefix}2, ...``."""
+                  step: float = math.radians(45.0), why: list[str] | None = None) -> list[DerivedGrasp]:
+    """The grasps of the part (module docstring), labelled ``{prefix}1, {prefix}2, ...``: those
+    across opposite planar faces and round shafts, then the antipodal grasps found on the
+    surface (:func:`antipodal_grasps`): all of them where the first give none; otherwise, on a
+    mesh part (no ``prims``), those with a contact on a curved face that no facet or shaft grasp
+    closes on and no feature claims (a wheel's tyre beside its axle's grasps; a declared peg is
+    the shaft grasps' to close on), while a part of primitives keeps exactly its facet and
+    shaft grasps. With none at all, ``why`` (when given) receives one line
+    saying which sizes and opening were compared."""
     min_area = from_mm(unit, math.sqrt(MIN_CONTACT_MM2)) ** 2
     cos_par = math.cos(math.radians(PARALLEL_DEG))
     cands: list[tuple[tuple[str, ...], float, np.ndarray]] = []  # (gfaces, width, T)
@@ -690,12 +815,11 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fe
             c = _canonical(fa.normal)
             e1, e2 = axis_basis(c)
             pieces = _overlap(mesh, fa, fb, e1, e2)
-            ac = [_area_centroid(p) for p in pieces]
-            areas = np.array([a for a, _ in ac])
+            areas, cens = _area_centroid_many(*_pack(pieces))
             area = float(areas.sum())
             if area < min_area:
                 continue
-            cen2 = sum(a * q for a, q in ac) / area
+            cen2 = sum(float(a) * q for a, q in zip(areas, cens)) / area
             mid = (fa.offset - width / 2) * fa.normal
             p = clean(mid + cen2[0] * e1 + cen2[1] * e2, 1e-9)
             names = tuple(sorted((fa.name, fb.name), key=lambda n: [f.name for f in faces].index(n)))
@@ -706,7 +830,7 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fe
     min_len = from_mm(unit, MIN_CONTACT_MM)
     cyl_normals = {c.face: c.normals for c in mesh_cylinders(mesh, faces, unit)}
     for root, d, r, length, fname in _shafts(faces, features, prims, mesh, unit):
-        if not _round(mesh, faces, root, d, r, length):
+        if not _round(mesh, root, d, r, length, unit):
             continue  # a prismatic shaft (a hexagon): its flats are not a cylinder to close on
         normals = cyl_normals.get(fname) if fname is not None else None  # a mesh cylinder's; else a whole round
         name = fname if fname is not None else _face_at(faces, mesh, root + d * length / 2 + axis_basis(d)[0] * r,
@@ -722,7 +846,9 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fe
                 continue
             for a in _approaches(c, step):
                 T = _tool(p, c, a)
-                if _line_contact(root + c * r, d, length, T, g) >= min_len:
+                # at least MIN_CONTACT_MM up to rounding: a 10 mm shaft closed on at 45 deg has
+                # exactly 5 mm under the pad, which rounding puts just below it in some units
+                if _line_contact(root + c * r, d, length, T, g) >= min_len * (1 - 1e-9):
                     cands.append(((name,), 2 * r, T))
     out = []
     for names, width, T in cands:
@@ -732,17 +858,52 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fe
         order = [f.name for f in faces]
         ofaces = tuple(names) + tuple(sorted(cover - set(names), key=order.index))
         out.append(DerivedGrasp(f"{prefix}{len(out) + 1}", names, ofaces, T, euler_zyz_of(T), float(round(width, 12))))
+    owner = np.full(len(mesh.faces), -1)
+    for k, f in enumerate(faces):
+        owner[f.tris] = k
+    allowed = None  # triangles one contact of an added antipodal grasp must lie on (None: any)
+    if out:
+        if prims:
+            return out  # a part of primitives keeps exactly its facet and shaft grasps
+        held = {n for d in out for n in d.gfaces}
+        free = [k for k, f in enumerate(faces) if not (f.planar or f.feature) and f.name not in held]
+        if not free:
+            return out
+        allowed = np.isin(owner, free)
+    found, least, n_pairs = antipodal_grasps(mesh, g, unit, step, allowed)
+    order = [f.name for f in faces]
+    for T, width, a in found:
+        names = tuple(dict.fromkeys(faces[k].name for k in (owner[a.tp], owner[a.tq]) if k >= 0))
+        cover = {faces[k].name for k in _covered(mesh, faces, features, T, width, g, unit)}
+        ofaces = names + tuple(sorted(cover - set(names), key=order.index))
+        out.append(DerivedGrasp(f"{prefix}{len(out) + 1}", names, ofaces, T, euler_zyz_of(T), float(round(width, 12))))
+    if not out and why is not None:
+        if least is None:
+            why.append(f"no two points of its surface face each other within {FRICTION_DEG:g} deg (a sample of "
+                       f"{ANTIPODAL_SAMPLES} surface points)")
+        elif least > g.opening:
+            why.append(f"its narrowest width across opposite surfaces (within {FRICTION_DEG:g} deg) is {least:.4g} "
+                       f"{unit}, more than the gripper's opening {g.opening:.4g} {unit}")
+        elif not n_pairs:
+            why.append(f"its narrowest width across opposite surfaces is {least:.4g} {unit}, within the gripper's "
+                       f"opening {g.opening:.4g} {unit}, but no pad finds a {PAD_PATCH_MM:g} mm patch of surface there")
+        else:
+            why.append(f"{n_pairs} contact pairs from {least:.4g} {unit} wide are within the gripper's opening "
+                       f"{g.opening:.4g} {unit}, but at each the fingers or palm enter the part")
     return out
 
 
-def _round(mesh: "trimesh.Trimesh", faces: list[Face], root: np.ndarray, d: np.ndarray, r: float,
-           length: float) -> bool:
+def _round(mesh: "trimesh.Trimesh", root: np.ndarray, d: np.ndarray, r: float, length: float, unit: str) -> bool:
     """True if the mesh's side triangles of the shaft (root, d, r, length) lie on its cylinder:
-    their centroids within 1 % of r from the axis (a 64-gon's are within 0.05 %, a hexagon's 6 % off)."""
+    their centroids within 1 % of r from the axis (a 64-gon's are within 0.05 %, a hexagon's 6 % off).
+    Triangles within ON_SURFACE_MM of either end's plane are the ends' (a shoulder, a cap): a
+    mesh's vertices may be float32 (manifold3d's booleans), off by 1e-7 of their value, which in
+    inches puts a shoulder's vertices inside or outside the shaft by chance."""
     C = _arrays(mesh).C - root
     t = C @ d
     radial = np.linalg.norm(C - np.outer(t, d), axis=1)
-    side = (t > 1e-9 * length) & (t < length * (1 - 1e-9)) & (radial > 0.5 * r) & (radial < 1.5 * r)
+    tol = from_mm(unit, ON_SURFACE_MM)
+    side = (t > tol) & (t < length - tol) & (radial > 0.5 * r) & (radial < 1.5 * r)
     return bool(side.any() and (np.abs(radial[side] - r) < 0.01 * r).all())
 
 
@@ -774,9 +935,11 @@ def _pad_contact(pieces: list[np.ndarray], areas: np.ndarray, e1: np.ndarray, e2
     total = float(areas[inside].sum())
     if total >= need:
         return total  # enough already: the pieces across the pad's edge need no clipping
-    for i in np.flatnonzero(~inside & ~outside):
-        q = _ccw(Q[starts[i]: starts[i] + sizes[i]])
-        total += _area_centroid(_clip_convex(q, pad))[0]
+    part = np.flatnonzero(~inside & ~outside)
+    if len(part):
+        P, cnt = _pack([_ccw(Q[starts[i]: starts[i] + sizes[i]]) for i in part])
+        for a in _area_centroid_many(*_clip_many(P, cnt, pad))[0]:
+            total += float(a)
     return total
 
 
@@ -875,3 +1038,177 @@ def mate_grasp_usable(T_grasp: np.ndarray, width: float, gripper: Any, T_a: np.n
     M = np.asarray(T_a, float) @ np.asarray(T_grasp, float)  # tool frame in the hole part's frame
     depth = (corners @ M[:3, :3].T + M[:3, 3] - hole.origin) @ hole.direction
     return bool(depth.max() <= from_mm(unit, MOUTH_TOL_MM))
+
+
+# =========================================================================== antipodal grasps
+
+
+#: Surface points sampled (area-weighted, seeded) for antipodal contact pairs.
+ANTIPODAL_SAMPLES = 3000
+#: ... with this seed (the derivation is deterministic).
+ANTIPODAL_SEED = 0
+#: A pair's normals must be antiparallel within this, each to the closing line (deg): the
+#: friction cone of a hard pad (tan 12 deg ~ 0.2).
+FRICTION_DEG = 12.0
+#: Each pad must find surface over a square this wide about its contact (mm), within
+#: PAD_DEPTH_MM of the contact's plane across it.
+PAD_PATCH_MM = 5.0
+#: ... (mm): a 35 mm round sags 0.18 mm over the patch's half width.
+PAD_DEPTH_MM = 0.5
+#: Pairs narrower than this are not grasped (mm): a fin or a skin, not a part.
+MIN_WIDTH_MM = 1.0
+#: Closing directions are clustered on a grid of this many cells per unit of direction
+#: component; contact midpoints on a grid of the part's size over ANTIPODAL_GRID.
+DIRECTION_CELLS = 4
+ANTIPODAL_GRID = 4
+#: At most this many clusters are tried for approaches (the best first).
+ANTIPODAL_CLUSTERS = 12
+
+
+@dataclass(frozen=True)
+class Antipodal:
+    """An antipodal contact pair (object frame, cell unit): contacts ``p`` and ``q``, the unit
+    closing direction ``c`` (from p to q), the ``width`` |q - p|, the worse of the two
+    normals' angles to the closing line (``angle``, deg) and the contacts' triangles."""
+
+    p: np.ndarray
+    q: np.ndarray
+    c: np.ndarray
+    width: float
+    angle: float
+    #: the triangles the contacts lie on
+    tp: int = -1
+    tq: int = -1
+
+
+def _ray_first(mesh: "trimesh.Trimesh", S: np.ndarray, D: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """First hits of rays (S, D) on the mesh: (hit (k,), points (k, 3) with nan where none,
+    triangle index (k,), -1 where none)."""
+    k = len(S)
+    pts = np.full((k, 3), np.nan)
+    tri = np.full(k, -1)
+    if k == 0:
+        return np.zeros(0, bool), pts, tri
+    loc, ri, ti = mesh.ray.intersects_location(S, D, multiple_hits=False)
+    if len(ri):
+        # a ray may still report more than one hit: keep the nearest per ray
+        d = np.einsum("ij,ij->i", loc - S[ri], D[ri])
+        order = np.lexsort((d, ri))
+        ri, ti, loc = ri[order], ti[order], loc[order]
+        first = np.r_[True, ri[1:] != ri[:-1]]
+        pts[ri[first]], tri[ri[first]] = loc[first], ti[first]
+    return tri >= 0, pts, tri
+
+
+def antipodal_pairs(mesh: "trimesh.Trimesh", opening: float, unit: str, samples: int = ANTIPODAL_SAMPLES,
+                    seed: int = ANTIPODAL_SEED) -> tuple[list[Antipodal], float | None]:
+    """Antipodal contact pairs on the surface: ``samples`` points drawn area-weighted (seeded),
+    each with the point where the line into the part along its inward normal leaves it (a ray
+    cast); a pair is kept when both normals lie within FRICTION_DEG of the closing line, its
+    width is from MIN_WIDTH_MM to ``opening`` and both pads find surface (PAD_PATCH_MM,
+    PAD_DEPTH_MM). Returns the pairs and the least width of any pair in the friction cone
+    (None if none), which a refusal names. Cell unit throughout."""
+    import trimesh  # a derivation only
+
+    A = _arrays(mesh)
+    eps = 1e-6 * A.diag
+    P, fi = trimesh.sample.sample_surface(mesh, samples, seed=seed)
+    P = np.asarray(P, float)
+    n = A.N[fi]
+    hit, Q, ti = _ray_first(mesh, P - eps * n, -n)
+    P, n, Q, ti = P[hit], n[hit], Q[hit], ti[hit]
+    m = A.N[ti]
+    d = Q - P
+    w = np.linalg.norm(d, axis=1)
+    ok = w > 0
+    c = np.zeros_like(d)
+    c[ok] = d[ok] / w[ok, None]
+    cos_f = math.cos(math.radians(FRICTION_DEG))
+    # atan2 of |cross| and dot: accurate near 0 deg, where arccos turns rounding into 1e-6 deg
+    ang_p = np.degrees(np.arctan2(np.linalg.norm(cross(-n, c), axis=1), np.einsum("ij,ij->i", -n, c)))
+    ang_q = np.degrees(np.arctan2(np.linalg.norm(cross(m, c), axis=1), np.einsum("ij,ij->i", m, c)))
+    cone = ok & (np.einsum("ij,ij->i", -n, c) >= cos_f) & (np.einsum("ij,ij->i", m, c) >= cos_f)
+    cone &= w >= from_mm(unit, MIN_WIDTH_MM)
+    least = float(w[cone].min()) if cone.any() else None
+    keep = cone & (w <= opening * (1 + 1e-9))
+    idx = np.flatnonzero(keep)
+    pads = _pads_on_surface(mesh, P[idx], Q[idx], c[idx], unit)
+    out = [Antipodal(P[i], Q[i], c[i], float(w[i]), float(max(ang_p[i], ang_q[i])), int(fi[hit][i]), int(ti[i]))
+           for i in idx[pads]]
+    return out, least
+
+
+def _pads_on_surface(mesh: "trimesh.Trimesh", P: np.ndarray, Q: np.ndarray, C: np.ndarray, unit: str) -> np.ndarray:
+    """(k,) bool: both pads of each pair find surface: rays along the closing line from outside,
+    at the corners and edge middles of a PAD_PATCH_MM square about each contact, first meet the
+    part within PAD_DEPTH_MM of the contact's depth."""
+    k = len(P)
+    if k == 0:
+        return np.zeros(0, bool)
+    half, tol = from_mm(unit, PAD_PATCH_MM) / 2, from_mm(unit, PAD_DEPTH_MM)
+    far = 2 * _arrays(mesh).diag
+    # a basis normal to each closing direction
+    ref = np.where(np.abs(C[:, :1]) < 0.9, np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]))
+    e1 = cross(C, ref)
+    e1 /= np.linalg.norm(e1, axis=1)[:, None]
+    e2 = cross(C, e1)
+    offs = [(a, b) for a in (-1, 0, 1) for b in (-1, 0, 1)]
+    ok = np.ones(k, bool)
+    for X, sign in ((P, 1.0), (Q, -1.0)):  # the pad at p closes along +c, the pad at q along -c
+        D = sign * C
+        S = np.concatenate([X + half * (a * e1 + b * e2) - far * D for a, b in offs])
+        DD = np.tile(D, (len(offs), 1))
+        hit, H, _ = _ray_first(mesh, S, DD)
+        depth = np.einsum("ij,ij->i", np.nan_to_num(H) - np.tile(X, (len(offs), 1)), DD)
+        good = (hit & (np.abs(depth) <= tol)).reshape(len(offs), k).all(0)
+        ok &= good
+    return ok
+
+
+def antipodal_grasps(mesh: "trimesh.Trimesh", g: Gripper, unit: str, step: float, allowed: np.ndarray | None = None
+                     ) -> tuple[list[tuple[np.ndarray, float, Antipodal]], float | None, int]:
+    """Tool frames (T, width) of antipodal grasps (:func:`antipodal_pairs`; with ``allowed``, a
+    (triangles,) bool, only the pairs with a contact on an allowed triangle), clustered: pairs
+    are grouped by closing direction (DIRECTION_CELLS) and midpoint (the part's size over
+    ANTIPODAL_GRID), the squarest pair of a group (the least normal angle, then the narrowest)
+    stands for it, the ANTIPODAL_CLUSTERS groups of the most pairs are tried, each at the approaches
+    normal to its closing direction quantised by ``step``, the contact PAD_PATCH_MM/2 inside
+    the fingertips; kept where :func:`grasp_problem` finds neither fingers nor palm in the
+    part. Also returns the least width in the friction cone and the pairs found within the
+    opening (for a refusal)."""
+    pairs, least = antipodal_pairs(mesh, g.opening, unit)
+    if allowed is not None:
+        pairs = [a for a in pairs if allowed[a.tp] or allowed[a.tq]]
+    if not pairs:
+        return [], least, 0
+    A = _arrays(mesh)
+    cell = A.diag / ANTIPODAL_GRID
+    mm = from_mm(unit, 1.0)  # ties are broken on lengths in mm: the same grasps in any unit
+    groups: dict[tuple, Antipodal] = {}
+    count: dict[tuple, int] = {}
+
+    def rank(a: Antipodal) -> tuple:
+        return round(a.angle, 6), round(a.width / mm, 9)
+
+    for a in pairs:
+        c = _canonical(a.c)
+        # cells centred on the origin: a part symmetric about it has midpoints at 0 up to rounding
+        key = (*np.round(c * DIRECTION_CELLS).astype(int), *np.round((a.p + a.q) / 2 / cell).astype(int))
+        count[key] = count.get(key, 0) + 1
+        best = groups.get(key)
+        if best is None or rank(a) < rank(best):
+            groups[key] = a
+    # the groups with the most pairs first (the most surface to close on), then the squarest
+    ranked = sorted(groups, key=lambda k: (-count[k], *rank(groups[k]),
+                                           *np.round((groups[k].p + groups[k].q) / 2 / mm, 9)))
+    chosen = [groups[k] for k in ranked[:ANTIPODAL_CLUSTERS]]
+    inset = min(from_mm(unit, PAD_PATCH_MM) / 2, g.finger_length / 2)
+    out: list[tuple[np.ndarray, float, Antipodal]] = []
+    for a in chosen:
+        c = _canonical(clean(a.c, 1e-12))
+        mid = (a.p + a.q) / 2
+        for ap in _approaches(c, step):
+            T = _tool(mid + inset * ap, c, ap)
+            if grasp_problem(mesh, T, a.width, g, unit) is None:
+                out.append((T, a.width, a))
+    return out, least, len(pairs)
