@@ -33,6 +33,8 @@ def test_disc_with_pin_rests_on_its_side_on_the_pin_and_rim() -> None:
         W = V @ s.R.T
         W[:, 2] += s.height
         assert abs(W[:, 2].min()) < 1e-6  # on the table, nothing below it
+        pin_low = (meshes[1].vertices @ s.R.T)[:, 2].min() + s.height
+        assert abs(pin_low) < 1e-6, (s.label, pin_low)  # the pin carries it too
         low = W[W[:, 2] < 1e-6][:, :2]
         c = (s.R @ com)[:2]
         hull = ConvexHull(low)
@@ -43,5 +45,9 @@ def test_disc_with_pin_rests_on_its_side_on_the_pin_and_rim() -> None:
         np.testing.assert_allclose(sp.R, s.R)
         assert sp.height == s.height and sp.rfaces
         assert product.sub_poses["disc"][s.label] == ("pin",)
-    # one of them on its side (the L of the pin and the rim): the disc's axis (nearly) flat
-    assert any(abs(s.R[2, 2]) < 0.2 for s in got["disc"])
+    # one of them on its side (the L of the pin's head and tip and the disc's rim): the disc's
+    # axis (nearly) flat, the disc's rim down too
+    side = [s for s in got["disc"] if abs(s.R[2, 2]) < 0.2]
+    assert side
+    for s in side:
+        assert abs((meshes[0].vertices @ s.R.T)[:, 2].min() + s.height) < 1e-6

@@ -577,10 +577,16 @@ def via_grasps(product: Product) -> dict[str, dict[str, tuple[str, Grasp]]]:
 
 #: What joins a part's name and a subassembly's stable pose number (``block_sub_p1``).
 SUB = "_sub_p"
-#: Subassembly stable poses less probable than this (trimesh's quasi-static estimate) are left out.
+#: Subassembly stable poses less probable than this (trimesh's quasi-static estimate, summed
+#: over the poses merged into it) are left out.
 SUB_PROB_FLOOR = 0.02
 #: At most this many subassembly stable poses per part, the most probable first.
 SUB_POSES_MAX = 4
+#: Stable poses whose down directions differ by less than this (degrees) are one pose, the
+#: most probable of them standing for all (a mesh's facets split one rest into several).
+SUB_MERGE_DEG = 5.0
+#: A part touches the table in a subassembly's rest when within this fraction of the root's size.
+CONTACT_EPS = 1e-6
 
 
 @dataclass(frozen=True)
@@ -588,7 +594,7 @@ class SubPose:
     """A stable pose of a part with its whole product subtree mated into it (the union of their
     shapes at their product poses): ``label`` (``PART_sub_pK``), ``R`` the part's orientation
     (3x3, world), ``height`` the part's frame's height above the table (cell unit), ``prob``
-    trimesh's estimate of how often it lands so."""
+    trimesh's estimate of how often it lands so (summed over the poses merged into it)."""
 
     label: str
     R: np.ndarray
@@ -598,12 +604,13 @@ class SubPose:
 
 def subassembly_poses(product: Product) -> dict[str, list[SubPose]]:
     """For each part with a product subtree, the stable poses of the union of its shape and its
-    subtree's at their product poses, in the part's frame (trimesh compute_stable_poses on the
-    union's convex hull about the union's centre of mass, the most probable SUB_POSES_MAX above
-    SUB_PROB_FLOOR), less those whose down direction is one of the part's own poses' (those the
-    part alone has), labelled ``PART_sub_p1, ...``. Parts without a mesh are left out."""
-    import trimesh  # a derivation only
-
+    subtree's at their product poses, in the part's frame: trimesh
+    compute_stable_poses on the union's convex hull about the union's centre of mass, keeping
+    those where a subtree part touches the table (the rest is a face of the union's hull, so a
+    part on it touches it exactly: within CONTACT_EPS of the root's size; else the root carries
+    the body alone) in a down direction none of the part's own poses has, merged within
+    SUB_MERGE_DEG, the most probable SUB_POSES_MAX above SUB_PROB_FLOOR, labelled
+    ``PART_sub_p1, ...``. Parts without a mesh are left out."""
     from spar_py.world.shapes import part_mesh
 
     out: dict[str, list[SubPose]] = {}
@@ -620,24 +627,37 @@ def subassembly_poses(product: Product) -> dict[str, list[SubPose]]:
                 break
             meshes.append(m.copy().apply_transform(inv_p @ product.parts[c].pose))
         else:
-            union = trimesh.util.concatenate(meshes)
-            com = np.sum([m.center_mass * m.volume for m in meshes], axis=0) / sum(m.volume for m in meshes)
-            Ts, probs = trimesh.poses.compute_stable_poses(union.convex_hull, center_mass=com, sigma=0.0,
-                                                           n_samples=1)
             owned = [np.asarray(p.R, float)[2] for k, p in pp.model.poses.items() if SUB not in k]
-            got: list[SubPose] = []
-            for T, p in zip(Ts, probs):
-                R = np.asarray(T, float)[:3, :3]
-                if p < SUB_PROB_FLOOR or any(np.allclose(R[2], r, atol=1e-6) for r in owned) or any(
-                        np.allclose(R[2], s.R[2], atol=1e-6) for s in got):
-                    continue
-                height = -float((union.vertices @ R.T)[:, 2].min())
-                got.append(SubPose(f"{name}{SUB}{len(got) + 1}", R, height, float(p)))
-                if len(got) == SUB_POSES_MAX:
-                    break
+            got = _sub_rests(meshes, owned, CONTACT_EPS * float(np.ptp(own.vertices, axis=0).max()))
             if got:
-                out[name] = got
+                out[name] = [SubPose(f"{name}{SUB}{i}", R, h, p) for i, (R, h, p) in enumerate(got, 1)]
     return out
+
+
+def _sub_rests(meshes: list, owned: list[np.ndarray], tol: float) -> list[tuple[np.ndarray, float, float]]:
+    """The selected stable rests (R, height, summed probability) of the rigid union of
+    ``meshes`` (the root's first, all in the root's frame), as :func:`subassembly_poses` says."""
+    import trimesh  # a derivation only
+
+    union = trimesh.util.concatenate(meshes)
+    com = np.sum([m.center_mass * m.volume for m in meshes], axis=0) / sum(m.volume for m in meshes)
+    Ts, probs = trimesh.poses.compute_stable_poses(union.convex_hull, center_mass=com, sigma=0.0, n_samples=1)
+    cos_merge = np.cos(np.radians(SUB_MERGE_DEG))
+    rests: list[list] = []  # [R, height, prob], most probable first
+    for T, p in sorted(zip(Ts, probs), key=lambda tp: -tp[1]):
+        R = np.asarray(T, float)[:3, :3]
+        if any(np.allclose(R[2], r, atol=1e-6) for r in owned):
+            continue
+        height = -float((union.vertices @ R.T)[:, 2].min())
+        if min(float((m.vertices @ R[2]).min()) for m in meshes[1:]) + height > tol:
+            continue  # the subtree is off the table: the root rests on itself alone
+        same = next((r for r in rests if float(r[0][2] @ R[2]) >= cos_merge), None)
+        if same is not None:
+            same[2] += float(p)
+            continue
+        rests.append([R, height, float(p)])
+    rests.sort(key=lambda r: -r[2])
+    return [(R, h, p) for R, h, p in rests if p >= SUB_PROB_FLOOR][:SUB_POSES_MAX]
 
 
 def resting_faces(model: ObjectModel, R: np.ndarray, height: float, unit: str) -> tuple[str, ...]:
