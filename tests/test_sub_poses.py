@@ -7,6 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pytest
 from scipy.spatial import ConvexHull
 
 from spar_py.kb.products import load_product
@@ -18,7 +19,7 @@ ROOT = Path(__file__).resolve().parent.parent
 
 def test_disc_with_pin_rests_on_its_side_on_the_pin_and_rim() -> None:
     product = load_product(ROOT / "kb/products/disc_pin.yaml", "mm")
-    got = subassembly_poses(product)
+    got = subassembly_poses(product, "mm", use_cache=False)
     assert sorted(got) == ["disc"]
     assert got["disc"], "the disc with its pin has stable poses of its own"
     meshes = [part_mesh(product.parts[p].model).copy().apply_transform(product.parts[p].pose)
@@ -51,3 +52,29 @@ def test_disc_with_pin_rests_on_its_side_on_the_pin_and_rim() -> None:
     assert side
     for s in side:
         assert abs((meshes[0].vertices @ s.R.T)[:, 2].min() + s.height) < 1e-6
+
+
+def test_sub_poses_are_cached_by_content_and_a_hit_builds_no_mesh(tmp_path, monkeypatch) -> None:
+    """A second call with the same parts reads the poses back (same labels, R, heights, resting
+    faces) without building any part's mesh; a changed relative pose misses."""
+    from spar_py.world import shapes
+
+    monkeypatch.setenv("SPAR_CACHE_DIR", str(tmp_path))
+    product = load_product(ROOT / "kb/products/disc_pin.yaml", "mm")
+    first = subassembly_poses(product, "mm")
+    assert len(list(tmp_path.glob("subposes-*.json"))) == 1
+
+    def no_mesh(self):
+        raise AssertionError("a cache hit built a mesh")
+
+    monkeypatch.setattr(shapes.Geometry, "mesh", no_mesh)
+    again = subassembly_poses(product, "mm")
+    assert [s.label for s in again["disc"]] == [s.label for s in first["disc"]]
+    for a, b in zip(again["disc"], first["disc"]):
+        np.testing.assert_allclose(a.R, b.R, atol=1e-12)
+        assert a.height == b.height and a.prob == b.prob and a.rfaces == b.rfaces and a.rfaces
+    moved = product.parts["pin"].pose.copy()
+    moved[0, 3] += 1.0
+    product.parts["pin"] = type(product.parts["pin"])(**{**product.parts["pin"].__dict__, "pose": moved})
+    with pytest.raises(AssertionError, match="built a mesh"):
+        subassembly_poses(product, "mm")

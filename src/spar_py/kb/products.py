@@ -395,13 +395,13 @@ def _add_sub_poses(product: Product, unit: str) -> None:
     from spar_py.core.model import StablePose
     from spar_py.world import products as wp
 
-    subs = wp.subassembly_poses(product)
+    subs = wp.subassembly_poses(product, unit)
     for name, got in subs.items():
         pp = product.parts[name]
         known = set(pp.model.faces)
         poses = dict(pp.model.poses)
         for sp in got:
-            rfaces = tuple(f for f in wp.resting_faces(pp.model, sp.R, sp.height, unit) if f in known)
+            rfaces = tuple(f for f in sp.rfaces if f in known)
             poses[sp.label] = StablePose(sp.label, rfaces, (), sp.R, sp.height)
         product.parts[name] = replace(pp, model=replace(pp.model, poses=poses))
     product.sub_poses = {name: {sp.label: tuple(wp.subtree(product, name)) for sp in got} for name, got in subs.items()}

@@ -589,20 +589,26 @@ SUB_MERGE_DEG = 5.0
 CONTACT_EPS = 1e-6
 
 
+#: Bumped whenever subassembly_poses's results change for the same inputs (part of its cache key).
+SUB_VERSION = 1
+
+
 @dataclass(frozen=True)
 class SubPose:
     """A stable pose of a part with its whole product subtree mated into it (the union of their
     shapes at their product poses): ``label`` (``PART_sub_pK``), ``R`` the part's orientation
     (3x3, world), ``height`` the part's frame's height above the table (cell unit), ``prob``
-    trimesh's estimate of how often it lands so (summed over the poses merged into it)."""
+    trimesh's estimate of how often it lands so (summed over the poses merged into it),
+    ``rfaces`` the part's own faces touching the table there (:func:`resting_faces`)."""
 
     label: str
     R: np.ndarray
     height: float
     prob: float
+    rfaces: tuple[str, ...] = ()
 
 
-def subassembly_poses(product: Product) -> dict[str, list[SubPose]]:
+def subassembly_poses(product: Product, unit: str, use_cache: bool = True) -> dict[str, list[SubPose]]:
     """For each part with a product subtree, the stable poses of the union of its shape and its
     subtree's at their product poses, in the part's frame: trimesh
     compute_stable_poses on the union's convex hull about the union's centre of mass, keeping
@@ -610,28 +616,87 @@ def subassembly_poses(product: Product) -> dict[str, list[SubPose]]:
     part on it touches it exactly: within CONTACT_EPS of the root's size; else the root carries
     the body alone) in a down direction none of the part's own poses has, merged within
     SUB_MERGE_DEG, the most probable SUB_POSES_MAX above SUB_PROB_FLOOR, labelled
-    ``PART_sub_p1, ...``. Parts without a mesh are left out."""
-    from spar_py.world.shapes import part_mesh
-
+    ``PART_sub_p1, ...``, with the part's faces resting on the table in each. Parts without a
+    shape (or with a subtree part without one) are left out. Kept on disk by content
+    (:func:`_sub_key`): a hit builds no mesh."""
     out: dict[str, list[SubPose]] = {}
     for name, pp in product.parts.items():
         kids = subtree(product, name)
-        own = part_mesh(pp.model)
-        if not kids or own is None:
+        if not kids or any(product.parts[p].model.geometry is None for p in (name, *kids)):
             continue
-        inv_p = np.linalg.inv(pp.pose)
-        meshes = [own.copy()]
-        for c in kids:
-            m = part_mesh(product.parts[c].model)
-            if m is None:
-                break
-            meshes.append(m.copy().apply_transform(inv_p @ product.parts[c].pose))
-        else:
-            owned = [np.asarray(p.R, float)[2] for k, p in pp.model.poses.items() if SUB not in k]
-            got = _sub_rests(meshes, owned, CONTACT_EPS * float(np.ptp(own.vertices, axis=0).max()))
-            if got:
-                out[name] = [SubPose(f"{name}{SUB}{i}", R, h, p) for i, (R, h, p) in enumerate(got, 1)]
+        got = _sub_poses_cached(product, name, kids, unit, use_cache)
+        if got:
+            out[name] = got
     return out
+
+
+def _sub_key(product: Product, name: str, kids: list[str], unit: str) -> str:
+    """SHA-256 of everything a part's subassembly poses depend on: SUB_VERSION, the derivation
+    modules' source (faces), the selection constants, the cell unit, the part's own poses'
+    down directions and, for the part and each subtree part, its name, its geometry's content,
+    features and face names and its pose relative to the part."""
+    import hashlib
+    import json
+
+    from spar_py.world.shapes_cache import source_digest
+    from spar_py.world.supports import REST_TOL_MM
+
+    pp = product.parts[name]
+    inv_p = np.linalg.inv(pp.pose)
+    owned = sorted([round(float(v), 9) for v in np.asarray(p.R, float)[2]]
+                   for k, p in pp.model.poses.items() if SUB not in k)
+    data: list[Any] = [SUB_VERSION, source_digest(), SUB_PROB_FLOOR, SUB_POSES_MAX, SUB_MERGE_DEG, CONTACT_EPS,
+                       REST_TOL_MM, unit, name, owned]
+    for p in (name, *kids):
+        g = product.parts[p].model.geometry
+        data.append([p, g.digest(), [f.geometry.spec() for f in product.parts[p].model.features
+                                      if f.geometry is not None],
+                     sorted((k, [round(float(v), 12) for v in pt]) for k, pt in g.face_names.items()),
+                     [round(float(v), 9) for v in (inv_p @ product.parts[p].pose).ravel()]])
+    return hashlib.sha256(json.dumps(data).encode()).hexdigest()
+
+
+def _sub_poses_cached(product: Product, name: str, kids: list[str], unit: str, use_cache: bool) -> list[SubPose]:
+    """Part ``name``'s subassembly poses, from the derivations' cache directory
+    (world.shapes_cache.cache_dir, ``subposes-KEY.json``) when it has them, else computed and kept."""
+    import json
+    import os
+
+    from spar_py.world.shapes_cache import _store, cache_dir
+
+    key = _sub_key(product, name, kids, unit)
+    path = cache_dir() / f"subposes-{key}.json"
+    if use_cache:
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+            if data.get("key") == key:
+                os.utime(path)
+                return [SubPose(d["label"], np.asarray(d["R"], float).reshape(3, 3), float(d["height"]),
+                                float(d["probability"]), tuple(d["rfaces"])) for d in data["poses"]]
+        except (OSError, ValueError, KeyError, TypeError):
+            pass
+    got = _sub_poses(product, name, kids, unit)
+    if use_cache:
+        _store(path, {"key": key, "poses": [{"label": sp.label, "R": [float(v) for v in sp.R.ravel()],
+                                             "height": sp.height, "probability": sp.prob,
+                                             "rfaces": list(sp.rfaces)} for sp in got]})
+    return got
+
+
+def _sub_poses(product: Product, name: str, kids: list[str], unit: str) -> list[SubPose]:
+    """Part ``name``'s subassembly poses computed (:func:`subassembly_poses`)."""
+    from spar_py.world.shapes import part_mesh
+
+    pp = product.parts[name]
+    own = part_mesh(pp.model)
+    inv_p = np.linalg.inv(pp.pose)
+    meshes = [own.copy()]
+    for c in kids:
+        meshes.append(part_mesh(product.parts[c].model).copy().apply_transform(inv_p @ product.parts[c].pose))
+    owned = [np.asarray(p.R, float)[2] for k, p in pp.model.poses.items() if SUB not in k]
+    got = _sub_rests(meshes, owned, CONTACT_EPS * float(np.ptp(own.vertices, axis=0).max()))
+    return [SubPose(f"{name}{SUB}{i}", R, h, p, resting_faces(pp.model, R, h, unit))
+            for i, (R, h, p) in enumerate(got, 1)]
 
 
 def _sub_rests(meshes: list, owned: list[np.ndarray], tol: float) -> list[tuple[np.ndarray, float, float]]:
