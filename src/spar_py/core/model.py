@@ -316,6 +316,9 @@ class Product:
     near: dict[str, tuple[str, ...]] = field(default_factory=dict)
     #: Each part's via-grasps (grasps of a part mated into it): {part: {label: the part held}}.
     via: dict[str, dict[str, str]] = field(default_factory=dict)
+    #: Each part's subassembly stable poses (world.products.subassembly_poses): {part: {label:
+    #: the parts mated into it that the pose needs, its subtree}}.
+    sub_poses: dict[str, dict[str, tuple[str, ...]]] = field(default_factory=dict)
 
     def goal_of(self, part: str) -> PartGoal | None:
         """The goal of a non-base part (None for the base)."""

@@ -367,6 +367,7 @@ def load_product_derived(path: str | Path, unit: str, max_bytes: int = MAX_INPUT
                               tuple(Precedence(a, b, why) for a, b, why in derived.precedence))
         product.near = wp.near_parts(product, unit)
         _add_via_grasps(product)
+        _add_sub_poses(product, unit)
     except KBError:
         raise
     except SparValueError as e:
@@ -385,6 +386,25 @@ def _add_via_grasps(product: Product) -> None:
         grasps = {**pp.model.grasps, **{label: g for label, (_, g) in got.items()}}
         product.parts[name] = replace(pp, model=replace(pp.model, grasps=grasps))
     product.via = {name: {label: c for label, (c, _) in got.items()} for name, got in via.items()}
+
+
+def _add_sub_poses(product: Product, unit: str) -> None:
+    """Give each part the stable poses of itself with its product subtree mated in
+    (world.products.subassembly_poses), resting on the part's faces that touch the table there,
+    and record which parts each needs (``product.sub_poses``)."""
+    from spar_py.core.model import StablePose
+    from spar_py.world import products as wp
+
+    subs = wp.subassembly_poses(product, unit)
+    for name, got in subs.items():
+        pp = product.parts[name]
+        known = set(pp.model.faces)
+        poses = dict(pp.model.poses)
+        for sp in got:
+            rfaces = tuple(f for f in sp.rfaces if f in known)
+            poses[sp.label] = StablePose(sp.label, rfaces, (), sp.R, sp.height)
+        product.parts[name] = replace(pp, model=replace(pp.model, poses=poses))
+    product.sub_poses = {name: {sp.label: tuple(wp.subtree(product, name)) for sp in got} for name, got in subs.items()}
 
 
 def _derive(root: Node, unit: str, scale: float, base: str, meshparts: dict[str, _MeshPart],

@@ -840,14 +840,20 @@ def _putdown(world: World, s: Step, early: bool = False) -> tuple[list[dict], Wo
     carried = [(c, world.cell.objects[_model(c)], unc.obj(c).pose) for c in body[1:]]
     under = [(k, world.cell.objects[_model(k)], o.pose) for k, o in unc.objects.items()
              if k not in body and o.where == ur.TABLE and k not in unc.attached]
-    on = rest_of_body(world.cell, obj, place.T, surfaces_of(world.cell, under), carried)
+    need = world.cell.product.sub_poses.get(obj, {}).get(place.pose) if world.cell.product is not None else None
+    on = rest_of_body(world.cell, obj, place.T, surfaces_of(world.cell, under), carried,
+                      combined=need is not None and set(body[1:]) == set(need))
     surface = on.surface.name if on is not None and on.surface is not None else "table"  # the step's own contact
     q, geo, refused = _arm(world, place.T @ g.T, what, held=(obj, np.linalg.inv(g.T)), width=g.width,
                            allow=[(f"held:{obj}", n) for n in dict.fromkeys(("table", surface))],
                            via=_via(world.cell, obj, world.grasps[obj]))
     geo["placement"] = place.as_dict()
     checks = [] if q is not None else [_reach_verdict(s["id"], False, _no_arm(what, geo))]
-    if on is not None and not on.ok:
+    if need is not None and set(body[1:]) != set(need):
+        checks.append(_reach_verdict(s["id"], False, f"{what} in {place.pose}, a pose of {obj} with "
+                                     f"{', '.join(need)} mated in, but {obj} carries "
+                                     f"{', '.join(body[1:]) or 'nothing'}", "sub_pose"))
+    elif on is not None and not on.ok:
         checks.append(_reach_verdict(s["id"], False, f"{what} leaves {obj} unstable: it {on.why}", "stable"))
     lost = retention_refusal(unc, what)
     if lost is not None:

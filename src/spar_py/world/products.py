@@ -37,8 +37,10 @@ from spar_py.core.units import from_mm
 if TYPE_CHECKING:
     from spar_py.core.model import MatingFeature, ObjectModel
 
-__all__ = ["AXIS_TOL_MM", "NEAR_MM", "SWEEP_MARGIN_MM", "VIA", "Axis", "compile_goals", "feature_axis",
-           "mate_misalignment", "near_parts", "precedence", "seat_direction", "subtree", "via_grasps"]
+__all__ = ["AXIS_TOL_MM", "NEAR_MM", "SUB", "SWEEP_MARGIN_MM", "VIA", "Axis", "SubPose", "compile_goals",
+           "feature_axis",
+           "mate_misalignment", "near_parts", "precedence", "resting_faces", "seat_direction", "subassembly_poses",
+           "subtree", "via_grasps"]
 
 #: A mate's axes are coaxial when the peg's axis passes within this of the hole's (mm) and
 #: their directions differ by less than AXIS_TOL_DEG.
@@ -571,3 +573,170 @@ def via_grasps(product: Product) -> dict[str, dict[str, tuple[str, Grasp]]]:
         if got:
             out[name] = got
     return out
+
+
+#: What joins a part's name and a subassembly's stable pose number (``block_sub_p1``).
+SUB = "_sub_p"
+#: Subassembly stable poses less probable than this (trimesh's quasi-static estimate, summed
+#: over the poses merged into it) are left out.
+SUB_PROB_FLOOR = 0.02
+#: At most this many subassembly stable poses per part, the most probable first.
+SUB_POSES_MAX = 4
+#: Stable poses whose down directions differ by less than this (degrees) are one pose, the
+#: most probable of them standing for all (a mesh's facets split one rest into several).
+SUB_MERGE_DEG = 5.0
+#: A part touches the table in a subassembly's rest when within this fraction of the root's size.
+CONTACT_EPS = 1e-6
+
+
+#: Bumped whenever subassembly_poses's results change for the same inputs (part of its cache key).
+SUB_VERSION = 1
+
+
+@dataclass(frozen=True)
+class SubPose:
+    """A stable pose of a part with its whole product subtree mated into it (the union of their
+    shapes at their product poses): ``label`` (``PART_sub_pK``), ``R`` the part's orientation
+    (3x3, world), ``height`` the part's frame's height above the table (cell unit), ``prob``
+    trimesh's estimate of how often it lands so (summed over the poses merged into it),
+    ``rfaces`` the part's own faces touching the table there (:func:`resting_faces`)."""
+
+    label: str
+    R: np.ndarray
+    height: float
+    prob: float
+    rfaces: tuple[str, ...] = ()
+
+
+def subassembly_poses(product: Product, unit: str, use_cache: bool = True) -> dict[str, list[SubPose]]:
+    """For each part with a product subtree, the stable poses of the union of its shape and its
+    subtree's at their product poses, in the part's frame: trimesh
+    compute_stable_poses on the union's convex hull about the union's centre of mass, keeping
+    those where a subtree part touches the table (the rest is a face of the union's hull, so a
+    part on it touches it exactly: within CONTACT_EPS of the root's size; else the root carries
+    the body alone) in a down direction none of the part's own poses has, merged within
+    SUB_MERGE_DEG, the most probable SUB_POSES_MAX above SUB_PROB_FLOOR, labelled
+    ``PART_sub_p1, ...``, with the part's faces resting on the table in each. Parts without a
+    shape (or with a subtree part without one) are left out. Kept on disk by content
+    (:func:`_sub_key`): a hit builds no mesh."""
+    out: dict[str, list[SubPose]] = {}
+    for name, pp in product.parts.items():
+        kids = subtree(product, name)
+        if not kids or any(product.parts[p].model.geometry is None for p in (name, *kids)):
+            continue
+        got = _sub_poses_cached(product, name, kids, unit, use_cache)
+        if got:
+            out[name] = got
+    return out
+
+
+def _sub_key(product: Product, name: str, kids: list[str], unit: str) -> str:
+    """SHA-256 of everything a part's subassembly poses depend on: SUB_VERSION, the derivation
+    modules' source (faces), the selection constants, the cell unit, the part's own poses'
+    down directions and, for the part and each subtree part, its name, its geometry's content,
+    features and face names and its pose relative to the part."""
+    import hashlib
+    import json
+
+    from spar_py.world.shapes_cache import source_digest
+    from spar_py.world.supports import REST_TOL_MM
+
+    pp = product.parts[name]
+    inv_p = np.linalg.inv(pp.pose)
+    owned = sorted([round(float(v), 9) for v in np.asarray(p.R, float)[2]]
+                   for k, p in pp.model.poses.items() if SUB not in k)
+    data: list[Any] = [SUB_VERSION, source_digest(), SUB_PROB_FLOOR, SUB_POSES_MAX, SUB_MERGE_DEG, CONTACT_EPS,
+                       REST_TOL_MM, unit, name, owned]
+    for p in (name, *kids):
+        g = product.parts[p].model.geometry
+        data.append([p, g.digest(), [f.geometry.spec() for f in product.parts[p].model.features
+                                      if f.geometry is not None],
+                     sorted((k, [round(float(v), 12) for v in pt]) for k, pt in g.face_names.items()),
+                     [round(float(v), 9) for v in (inv_p @ product.parts[p].pose).ravel()]])
+    return hashlib.sha256(json.dumps(data).encode()).hexdigest()
+
+
+def _sub_poses_cached(product: Product, name: str, kids: list[str], unit: str, use_cache: bool) -> list[SubPose]:
+    """Part ``name``'s subassembly poses, from the derivations' cache directory
+    (world.shapes_cache.cache_dir, ``subposes-KEY.json``) when it has them, else computed and kept."""
+    import json
+    import os
+
+    from spar_py.world.shapes_cache import _store, cache_dir
+
+    key = _sub_key(product, name, kids, unit)
+    path = cache_dir() / f"subposes-{key}.json"
+    if use_cache:
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+            if data.get("key") == key:
+                os.utime(path)
+                return [SubPose(d["label"], np.asarray(d["R"], float).reshape(3, 3), float(d["height"]),
+                                float(d["probability"]), tuple(d["rfaces"])) for d in data["poses"]]
+        except (OSError, ValueError, KeyError, TypeError):
+            pass
+    got = _sub_poses(product, name, kids, unit)
+    if use_cache:
+        _store(path, {"key": key, "poses": [{"label": sp.label, "R": [float(v) for v in sp.R.ravel()],
+                                             "height": sp.height, "probability": sp.prob,
+                                             "rfaces": list(sp.rfaces)} for sp in got]})
+    return got
+
+
+def _sub_poses(product: Product, name: str, kids: list[str], unit: str) -> list[SubPose]:
+    """Part ``name``'s subassembly poses computed (:func:`subassembly_poses`)."""
+    from spar_py.world.shapes import part_mesh
+
+    pp = product.parts[name]
+    own = part_mesh(pp.model)
+    inv_p = np.linalg.inv(pp.pose)
+    meshes = [own.copy()]
+    for c in kids:
+        meshes.append(part_mesh(product.parts[c].model).copy().apply_transform(inv_p @ product.parts[c].pose))
+    owned = [np.asarray(p.R, float)[2] for k, p in pp.model.poses.items() if SUB not in k]
+    got = _sub_rests(meshes, owned, CONTACT_EPS * float(np.ptp(own.vertices, axis=0).max()))
+    return [SubPose(f"{name}{SUB}{i}", R, h, p, resting_faces(pp.model, R, h, unit))
+            for i, (R, h, p) in enumerate(got, 1)]
+
+
+def _sub_rests(meshes: list, owned: list[np.ndarray], tol: float) -> list[tuple[np.ndarray, float, float]]:
+    """The selected stable rests (R, height, summed probability) of the rigid union of
+    ``meshes`` (the root's first, all in the root's frame), as :func:`subassembly_poses` says."""
+    import trimesh  # a derivation only
+
+    union = trimesh.util.concatenate(meshes)
+    com = np.sum([m.center_mass * m.volume for m in meshes], axis=0) / sum(m.volume for m in meshes)
+    Ts, probs = trimesh.poses.compute_stable_poses(union.convex_hull, center_mass=com, sigma=0.0, n_samples=1)
+    cos_merge = np.cos(np.radians(SUB_MERGE_DEG))
+    rests: list[list] = []  # [R, height, prob], most probable first
+    for T, p in sorted(zip(Ts, probs), key=lambda tp: -tp[1]):
+        R = np.asarray(T, float)[:3, :3]
+        if any(np.allclose(R[2], r, atol=1e-6) for r in owned):
+            continue
+        height = -float((union.vertices @ R.T)[:, 2].min())
+        if min(float((m.vertices @ R[2]).min()) for m in meshes[1:]) + height > tol:
+            continue  # the subtree is off the table: the root rests on itself alone
+        same = next((r for r in rests if float(r[0][2] @ R[2]) >= cos_merge), None)
+        if same is not None:
+            same[2] += float(p)
+            continue
+        rests.append([R, height, float(p)])
+    rests.sort(key=lambda r: -r[2])
+    return [(R, h, p) for R, h, p in rests if p >= SUB_PROB_FLOOR][:SUB_POSES_MAX]
+
+
+def resting_faces(model: ObjectModel, R: np.ndarray, height: float, unit: str) -> tuple[str, ...]:
+    """The names of the faces of ``model``'s shape (as its derivation names them) that touch the
+    table when the part is turned by R (3x3) with its frame ``height`` above the table (cell
+    unit): a vertex of the face within REST_TOL_MM of it."""
+    from spar_py.world.shapes import derive_faces, part_mesh
+    from spar_py.world.supports import REST_TOL_MM
+
+    mesh = part_mesh(model)
+    if mesh is None or model.geometry is None:
+        return ()
+    feats = tuple(f.geometry for f in model.features if f.geometry is not None)
+    faces = derive_faces(mesh, feats, dict(model.geometry.face_names), model.geometry.unit)
+    z = (np.asarray(mesh.vertices, float) @ np.asarray(R, float).T)[:, 2] + height
+    low = z[mesh.faces] <= from_mm(unit, REST_TOL_MM)  # (triangles, 3)
+    return tuple(f.name for f in faces if low[f.tris].any())

@@ -295,13 +295,14 @@ def rest_of(cell: "Cell", obj: str, T: np.ndarray, surfaces: Sequence[Surface]) 
 
 
 def rest_of_body(cell: "Cell", obj: str, T: np.ndarray, surfaces: Sequence[Surface],
-                 carried: Sequence[tuple[str, ObjectModel, np.ndarray]] = ()) -> Rest | None:
+                 carried: Sequence[tuple[str, ObjectModel, np.ndarray]] = (), combined: bool = False) -> Rest | None:
     """:func:`rest_of` of a rigid body: root part ``obj`` at world pose T carrying ``carried``
     ((name, model, world pose) each, the parts mated into it). It rests where the root's resting
     face does, so no carried part may reach below that face (else it rests on that part: refused,
     naming it), and the body's centre of mass (every part's, uniform density, weighted by their
-    volumes) must lie over the root's contact face and its surface. Without carried parts, the
-    root's own :func:`rest_of`."""
+    volumes) must lie over the root's contact face and its surface. ``combined`` (a subassembly's
+    own stable pose): it rests on the lowest points of all its parts together, its centre of mass
+    over their hull. Without carried parts, the root's own :func:`rest_of`."""
     if not carried:
         return rest_of(cell, obj, T, surfaces)
     model = cell.objects[obj]
@@ -309,6 +310,8 @@ def rest_of_body(cell: "Cell", obj: str, T: np.ndarray, surfaces: Sequence[Surfa
         return rest_of(cell, obj, T, surfaces)
     tol = from_mm(cell.unit, REST_TOL_MM)
     T = np.asarray(T, float)
+    if combined:
+        return _rest_combined(cell, [(obj, model, T), *carried], surfaces)
     low, _ = contact(model, T, tol)
     for name, m, Tc in carried:
         if m.shape and _lowest(m, Tc) < low - tol:
@@ -324,6 +327,39 @@ def rest_of_body(cell: "Cell", obj: str, T: np.ndarray, surfaces: Sequence[Surfa
     com_world = np.average(np.array(cents), axis=0, weights=np.array(vols))
     com = T[:3, :3].T @ (com_world - T[:3, 3])
     return rest(model, T, surfaces, cell.unit, com=com)
+
+
+def _rest_combined(cell: "Cell", parts: Sequence[tuple[str, ObjectModel, np.ndarray]],
+                   surfaces: Sequence[Surface]) -> Rest:
+    """What a rigid body of ``parts`` ((name, model, world pose) each) rests on: the surface at
+    the lowest point of them all, its centre of mass (volume-weighted) over the hull of every
+    part's points within REST_TOL_MM of that height and over the surface."""
+    tol = from_mm(cell.unit, REST_TOL_MM)
+    shaped = [(m, np.asarray(Tp, float)) for _, m, Tp in parts if m.shape]
+    low = min(_lowest(m, Tp) for m, Tp in shaped)
+    P = np.concatenate([part_points(m, Tp) for m, Tp in shaped])
+    face = convex_hull_2d(P[P[:, 2] <= low + tol][:, :2])
+    vols, cents = [], []
+    for m, Tp in shaped:
+        v, c = mass_properties(m)
+        vols.append(v)
+        cents.append(Tp[:3, :3] @ c + Tp[:3, 3])
+    c = np.average(np.array(cents), axis=0, weights=np.array(vols)) if sum(vols) > 0 else shaped[0][1][:3, 3]
+    at = [s for s in surfaces if abs(low - s.z) <= tol]
+    under = [s for s in at if inside(s.polygon, c, tol) >= -tol]
+    if under:
+        s = max(under, key=lambda s: s.z)
+        if inside(face, c, tol) < -tol:
+            return Rest(s, low, 0.0, s, f"tips over on {s.describe()}: its centre of mass is "
+                        f"{-inside(face, c, tol):.4g} {cell.unit} outside the body's contact")
+        return Rest(s, low, 0.0, s, None)
+    if at:
+        s = max(at, key=lambda s: s.z)
+        return Rest(s, low, 0.0, s, f"tips over the edge of {s.describe()}")
+    s = min(surfaces, key=lambda s: (abs(low - s.z), s.z))
+    gap = low - s.z
+    return Rest(None, low, gap, s, f"floats {gap:.4g} {cell.unit} above {s.describe()}" if gap > 0
+                else f"sinks {-gap:.4g} {cell.unit} into {s.describe()}")
 
 
 def surfaces_of(cell: "Cell", parts: Iterable[tuple[str, ObjectModel, np.ndarray]] = ()) -> list[Surface]:
