@@ -442,7 +442,8 @@ def _stable_normals(mesh: "trimesh.Trimesh", com: np.ndarray) -> np.ndarray:
         return by_trimesh()
     pairs = np.asarray(cvh.face_adjacency, int)
     edges = np.asarray(cvh.face_adjacency_edges, int)
-    if len(np.unique(np.sort(pairs, axis=1), axis=0)) != len(pairs) or np.bincount(pairs.ravel(), minlength=n).min() == 0:
+    repeated = len(np.unique(np.sort(pairs, axis=1), axis=0)) != len(pairs)
+    if repeated or np.bincount(pairs.ravel(), minlength=n).min() == 0:
         return by_trimesh()
     # static probabilities (L'Huilier's formula on the unit sphere about com)
     sv = tri - com
