@@ -29,7 +29,6 @@ converted. Frames: world Z up, table top z = 0; shapes in the object frame.
 """
 from __future__ import annotations
 
-import math
 from pathlib import Path
 from typing import Any, Iterator
 
@@ -37,11 +36,11 @@ import numpy as np
 import yaml
 
 from spar_py.core.errors import KBError
-from spar_py.core.model import Cell, ObjectModel, Position, Solid
+from spar_py.core.model import Cell, Position, Solid
 from spar_py.core.units import from_mm
 from spar_py.kb.reader import SAFE_LOADER
 from spar_py.kb.terms import atoms
-from spar_py.world.supports import REST_TOL_MM, part_surface, rest_of, surfaces_of
+from spar_py.world.supports import REST_TOL_MM, lowest, part_surface, rest_of, solid_points, surfaces_of
 
 __all__ = ["REST_TOL_MM", "check_cell", "overlap_depth", "reach_box", "solid_points"]
 
@@ -112,19 +111,6 @@ def reach_box(cell: Cell) -> tuple[np.ndarray, float]:
     return r.base[:3, 3].copy(), REACH_FACTOR * arm
 
 
-def solid_points(s: Solid, sides: int = CYL_SIDES) -> np.ndarray:
-    """(k, 3) vertices of a primitive's polytope in the object frame: a box's 8 corners,
-    or the prism on the regular ``sides``-gon inscribed in a z-cylinder's rims."""
-    if s.kind == "hull":
-        return np.asarray(s.points, float)
-    if s.kind == "cylinder":
-        a = 2 * np.pi * np.arange(sides) / sides
-        ring = s.radius * np.stack([np.cos(a), np.sin(a)], axis=1)
-        return np.concatenate([np.column_stack([ring, np.full(sides, z)]) for z in (s.lo[2], s.hi[2])])
-    return np.array([[x, y, z] for x in (s.lo[0], s.hi[0]) for y in (s.lo[1], s.hi[1])
-                     for z in (s.lo[2], s.hi[2])], float)
-
-
 def _axes(s: Solid, sides: int = CYL_SIDES) -> tuple[np.ndarray, np.ndarray]:
     """(face normals (f, 3), edge directions (e, 3)) of a primitive's polytope, object frame."""
     if s.kind == "hull":
@@ -185,22 +171,6 @@ def _depth(a: tuple[np.ndarray, np.ndarray, np.ndarray], b: tuple[np.ndarray, np
     p1, p2 = P1 @ A.T, P2 @ A.T                              # (k, axes)
     over = np.minimum(p1.max(axis=0) - p2.min(axis=0), p2.max(axis=0) - p1.min(axis=0))
     return float(over.min())
-
-
-def _lowest(model: ObjectModel, T: np.ndarray) -> float:
-    """The lowest world z of ``model``'s shape at pose T (cell unit): boxes by their
-    corners, cylinders exactly (a rim of radius r about axis a reaches r sqrt(1 - a_z^2)
-    below its centre)."""
-    low = math.inf
-    for s in model.shape:
-        if s.kind == "cylinder":
-            a = T[:3, 2]
-            drop = s.radius * math.sqrt(max(0.0, 1.0 - float(a[2]) ** 2))
-            for z in (s.lo[2], s.hi[2]):
-                low = min(low, float((T @ np.array([0.0, 0.0, z, 1.0]))[2]) - drop)
-        else:
-            low = min(low, float((solid_points(s) @ T[:3, :3].T + T[:3, 3])[:, 2].min()))
-    return low
 
 
 # --------------------------------------------------------------------------- checks
@@ -286,7 +256,7 @@ def _on_table(cell: Cell) -> Iterator[KBError]:
             for p in cell.positions.values() if cell.objects[p.obj].shape}
     for pos in cell.positions.values():
         m = cell.objects[pos.obj]
-        if cell.table is None and m.shape and abs(_lowest(m, pos.T)) <= tol:
+        if cell.table is None and m.shape and abs(lowest(m, pos.T)) <= tol:
             continue
         on = rest_of(cell, pos.obj, pos.T, base + [s for k, s in tops.items() if k != pos.label])
         if on is None:

@@ -28,9 +28,9 @@ if TYPE_CHECKING:
     from spar_py.core.model import Cell
     from spar_py.world.collision import Obstacle
 
-__all__ = ["REST_TOL_MM", "Rest", "Surface", "centre_of_mass", "contact", "inside", "part_points",
-           "mass_properties", "part_surface", "rest", "rest_of", "rest_of_body", "support_surfaces", "surfaces_of",
-           "table_surface"]
+__all__ = ["REST_TOL_MM", "Rest", "Surface", "centre_of_mass", "contact", "inside", "lowest", "part_points",
+           "mass_properties", "part_surface", "rest", "rest_of", "rest_of_body", "solid_points", "support_surfaces",
+           "surfaces_of", "table_surface"]
 
 #: A part's lowest point may be this far from a surface to rest on it (mm).
 REST_TOL_MM = 0.5
@@ -122,7 +122,7 @@ def obstacle_footprint(ob: "Obstacle") -> np.ndarray:
     return convex_hull_2d(np.concatenate([np.asarray(b.points, float) for b in ob.bodies])[:, :2])
 
 
-def _solid_points(s: Solid, sides: int = RIM_SIDES) -> np.ndarray:
+def solid_points(s: Solid, sides: int = RIM_SIDES) -> np.ndarray:
     """(k, 3) vertices of a primitive in the object frame: a box's corners, a hull's points, a
     z-cylinder's inscribed prism."""
     if s.kind == "hull":
@@ -141,11 +141,11 @@ def part_points(model: ObjectModel, T: np.ndarray) -> np.ndarray:
     T = np.asarray(T, float)
     if not model.shape:
         return T[:3, 3][None].copy()
-    P = np.concatenate([_solid_points(s) for s in model.shape])
+    P = np.concatenate([solid_points(s) for s in model.shape])
     return P @ T[:3, :3].T + T[:3, 3]
 
 
-def _lowest(model: ObjectModel, T: np.ndarray) -> float:
+def lowest(model: ObjectModel, T: np.ndarray) -> float:
     """The lowest world z of the shape at T, cylinders exactly (a rim of radius r about axis a
     reaches r sqrt(1 - a_z^2) below its centre)."""
     T = np.asarray(T, float)
@@ -156,7 +156,7 @@ def _lowest(model: ObjectModel, T: np.ndarray) -> float:
             drop = s.radius * math.sqrt(max(0.0, 1.0 - float(a[2]) ** 2))
             low = min(low, *(float((T @ np.array([0.0, 0.0, z, 1.0]))[2]) - drop for z in (s.lo[2], s.hi[2])))
         else:
-            low = min(low, float((_solid_points(s) @ T[:3, :3].T + T[:3, 3])[:, 2].min()))
+            low = min(low, float((solid_points(s) @ T[:3, :3].T + T[:3, 3])[:, 2].min()))
     return low
 
 
@@ -170,7 +170,7 @@ def contact(model: ObjectModel, T: np.ndarray, tol: float) -> tuple[float, np.nd
     """(lowest z, CCW contact polygon (k, 2)) of ``model`` at world pose T: the hull of its points
     within ``tol`` of its lowest point (a segment or a point where it touches along a line)."""
     P = part_points(model, T)
-    low = _lowest(model, T) if model.shape else float(P[:, 2].min())
+    low = lowest(model, T) if model.shape else float(P[:, 2].min())
     return low, convex_hull_2d(P[P[:, 2] <= low + tol][:, :2])
 
 
@@ -238,6 +238,27 @@ def inside(poly: np.ndarray | None, p: np.ndarray, tol: float) -> float:
     return float(cross.min())
 
 
+def _on_surface(surfaces: Sequence[Surface], low: float, face: np.ndarray, c: np.ndarray, tol: float, unit: str,
+                contact: str, edge_gap: bool) -> Rest | None:
+    """The rest of a part or body whose lowest point is at ``low`` and centre of mass at ``c``
+    (world) on the highest surface at that height: under its centre (tipping over if the centre
+    is outside ``face``, its ``contact`` in the message), else over that surface's edge (with the
+    centre's distance outside it if ``edge_gap``); None if no surface is at that height."""
+    at = [s for s in surfaces if abs(low - s.z) <= tol]
+    under = [s for s in at if inside(s.polygon, c, tol) >= -tol]
+    if under:
+        s = max(under, key=lambda s: s.z)
+        if inside(face, c, tol) < -tol:
+            return Rest(s, low, 0.0, s, f"tips over on {s.describe()}: its centre of mass is "
+                        f"{-inside(face, c, tol):.4g} {unit} outside {contact}")
+        return Rest(s, low, 0.0, s, None)
+    if at:
+        s = max(at, key=lambda s: s.z)
+        gap = f": its centre of mass is {-inside(s.polygon, c, tol):.4g} {unit} outside it" if edge_gap else ""
+        return Rest(s, low, 0.0, s, f"tips over the edge of {s.describe()}{gap}")
+    return None
+
+
 def rest(model: ObjectModel, T: np.ndarray, surfaces: Sequence[Surface], unit: str,
          com: np.ndarray | None = None, stable: bool = False) -> Rest:
     """What a part of ``model`` at world pose T rests on among ``surfaces``: the surface at its
@@ -257,18 +278,9 @@ def rest(model: ObjectModel, T: np.ndarray, surfaces: Sequence[Surface], unit: s
             s = max(whole, key=lambda s: s.z)
             return Rest(s, low, 0.0, s, None)
     c = T[:3, :3] @ (centre_of_mass(model) if com is None else com) + T[:3, 3]
-    at = [s for s in surfaces if abs(low - s.z) <= tol]
-    under = [s for s in at if inside(s.polygon, c, tol) >= -tol]
-    if under:
-        s = max(under, key=lambda s: s.z)
-        if inside(face, c, tol) < -tol:
-            return Rest(s, low, 0.0, s, f"tips over on {s.describe()}: its centre of mass is "
-                        f"{-inside(face, c, tol):.4g} {unit} outside its contact face")
-        return Rest(s, low, 0.0, s, None)
-    if at:
-        s = max(at, key=lambda s: s.z)
-        return Rest(s, low, 0.0, s, f"tips over the edge of {s.describe()}: its centre of mass is "
-                    f"{-inside(s.polygon, c, tol):.4g} {unit} outside it")
+    on = _on_surface(surfaces, low, face, c, tol, unit, "its contact face", edge_gap=True)
+    if on is not None:
+        return on
     below = [s for s in surfaces if inside(s.polygon, c, tol) >= -tol]
     if not below:
         below = list(surfaces)
@@ -314,8 +326,8 @@ def rest_of_body(cell: "Cell", obj: str, T: np.ndarray, surfaces: Sequence[Surfa
         return _rest_combined(cell, [(obj, model, T), *carried], surfaces)
     low, _ = contact(model, T, tol)
     for name, m, Tc in carried:
-        if m.shape and _lowest(m, Tc) < low - tol:
-            return Rest(None, low, 0.0, None, f"would rest on {name}, which reaches {low - _lowest(m, Tc):.4g} "
+        if m.shape and lowest(m, Tc) < low - tol:
+            return Rest(None, low, 0.0, None, f"would rest on {name}, which reaches {low - lowest(m, Tc):.4g} "
                         f"{cell.unit} below {obj}'s resting face")
     vols, cents = [], []
     for m, Tp in [(model, T), *((m, np.asarray(Tc, float)) for _, m, Tc in carried)]:
@@ -336,7 +348,7 @@ def _rest_combined(cell: "Cell", parts: Sequence[tuple[str, ObjectModel, np.ndar
     part's points within REST_TOL_MM of that height and over the surface."""
     tol = from_mm(cell.unit, REST_TOL_MM)
     shaped = [(m, np.asarray(Tp, float)) for _, m, Tp in parts if m.shape]
-    low = min(_lowest(m, Tp) for m, Tp in shaped)
+    low = min(lowest(m, Tp) for m, Tp in shaped)
     P = np.concatenate([part_points(m, Tp) for m, Tp in shaped])
     face = convex_hull_2d(P[P[:, 2] <= low + tol][:, :2])
     vols, cents = [], []
@@ -345,17 +357,9 @@ def _rest_combined(cell: "Cell", parts: Sequence[tuple[str, ObjectModel, np.ndar
         vols.append(v)
         cents.append(Tp[:3, :3] @ c + Tp[:3, 3])
     c = np.average(np.array(cents), axis=0, weights=np.array(vols)) if sum(vols) > 0 else shaped[0][1][:3, 3]
-    at = [s for s in surfaces if abs(low - s.z) <= tol]
-    under = [s for s in at if inside(s.polygon, c, tol) >= -tol]
-    if under:
-        s = max(under, key=lambda s: s.z)
-        if inside(face, c, tol) < -tol:
-            return Rest(s, low, 0.0, s, f"tips over on {s.describe()}: its centre of mass is "
-                        f"{-inside(face, c, tol):.4g} {cell.unit} outside the body's contact")
-        return Rest(s, low, 0.0, s, None)
-    if at:
-        s = max(at, key=lambda s: s.z)
-        return Rest(s, low, 0.0, s, f"tips over the edge of {s.describe()}")
+    on = _on_surface(surfaces, low, face, c, tol, cell.unit, "the body's contact", edge_gap=False)
+    if on is not None:
+        return on
     s = min(surfaces, key=lambda s: (abs(low - s.z), s.z))
     gap = low - s.z
     return Rest(None, low, gap, s, f"floats {gap:.4g} {cell.unit} above {s.describe()}" if gap > 0
