@@ -152,7 +152,7 @@ def _tolerance(root: Node, key: str, default_mm: float, scale: float, unit: str)
 
 
 def _derived_objects(path: Path, unit: str, meshparts: dict[str, _MeshPart], derived: AssemblyResult | None,
-                     declared_pairs: set[frozenset[str]], plane_tol: float
+                     declared_pairs: set[frozenset[str]], plane_tol: float, raw: dict[str, Any]
                      ) -> tuple[dict[str, str], dict[tuple[int, str], str]]:
     """The object YAML text of each mesh part (its mesh, its declared ``features:`` and
     ``face_names:``, and the derived features and seat faces it lacks) and the name of the
@@ -189,9 +189,9 @@ def _derived_objects(path: Path, unit: str, meshparts: dict[str, _MeshPart], der
         seats = [(j, s) for j, s in enumerate(derived.seats if derived else [])
                  if pname in (s.part, s.on) and frozenset((s.part, s.on)) not in declared_pairs]
         if seats:
-            from spar_py.world.shapes import _load_mesh, derive_faces, face_of_point
+            from spar_py.world.shapes import derive_faces, face_of_point
 
-            mesh, _ = _load_mesh(str(mp.file), mp.mm_per / LENGTH_UNITS[unit])  # its repair is said when the part loads
+            mesh = _raw_mesh(pname, mp, unit, raw)
             faces = derive_faces(mesh, (), {}, unit)
             named: dict[int, str] = {}
             for j, s in seats:
@@ -333,9 +333,10 @@ def load_product_derived(path: str | Path, unit: str, max_bytes: int = MAX_INPUT
     objects: dict[str, str] = {}
     dnames: dict[tuple[int, str], str] = {}
     if meshparts:
-        derived = _derive(root, unit, scale, base, meshparts, parts, bool(object_options.get("use_cache", True)))
+        raw: dict[str, Any] = {}  # each mesh part's file read once, in its own frame (cell unit)
+        derived = _derive(root, unit, scale, base, meshparts, parts, raw, bool(object_options.get("use_cache", True)))
         objects, dnames = _derived_objects(path, unit, meshparts, derived, declared_pairs,
-                                           2 * _tolerance(root, "contact_tol", 0.1, scale, unit))
+                                           2 * _tolerance(root, "contact_tol", 0.1, scale, unit), raw)
         for pname, text in objects.items():
             mp = meshparts[pname]
             try:
@@ -407,12 +408,26 @@ def _add_sub_poses(product: Product, unit: str) -> None:
     product.sub_poses = {name: {sp.label: tuple(wp.subtree(product, name)) for sp in got} for name, got in subs.items()}
 
 
+def _raw_mesh(pname: str, mp: _MeshPart, unit: str, raw: dict[str, Any]) -> Any:
+    """Mesh part ``pname`` as its file gives it, in its own frame and the cell unit, read once
+    per load into ``raw`` (its repair is said when the part's model loads); KBError naming the
+    file's key if it cannot be read or closed."""
+    from spar_py.world.shapes import _load_mesh
+
+    if pname not in raw:
+        try:
+            raw[pname] = _load_mesh(str(mp.file), mp.mm_per / LENGTH_UNITS[unit])[0]
+        except ValueError as e:
+            raise mp.node.key("mesh").fail(str(e), show(mp.node.value["mesh"])) from None
+    return raw[pname]
+
+
 def _derive(root: Node, unit: str, scale: float, base: str, meshparts: dict[str, _MeshPart],
-            parts: dict[str, ProductPart], use_cache: bool = True) -> AssemblyResult:
+            parts: dict[str, ProductPart], raw: dict[str, Any], use_cache: bool = True) -> AssemblyResult:
     """The derivation (world.assembly, cached) over every part's mesh at its product pose,
-    the mesh parts read from their files in the cell unit."""
+    the mesh parts read from their files in the cell unit (kept in ``raw``, :func:`_raw_mesh`)."""
     from spar_py.world.assembly import derive_assembly_cached
-    from spar_py.world.shapes import _load_mesh, part_mesh
+    from spar_py.world.shapes import part_mesh
 
     contact_tol = _tolerance(root, "contact_tol", 0.1, scale, unit)
     clearance_max = _tolerance(root, "clearance_max", 0.5, scale, unit)
@@ -420,10 +435,7 @@ def _derive(root: Node, unit: str, scale: float, base: str, meshparts: dict[str,
     for pname in root.key("parts").value:
         if pname in meshparts:
             mp = meshparts[pname]
-            try:
-                m = _load_mesh(str(mp.file), mp.mm_per / LENGTH_UNITS[unit])[0].copy()
-            except ValueError as e:
-                raise mp.node.key("mesh").fail(str(e), show(mp.node.value["mesh"])) from None
+            m = _raw_mesh(pname, mp, unit, raw).copy()
             m.apply_transform(mp.pose)
         else:
             pm = part_mesh(parts[pname].model)
