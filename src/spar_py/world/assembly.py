@@ -49,7 +49,7 @@ __all__ = ["ASSEMBLY_VERSION", "AssemblyResult", "Contact", "DerivedMate", "Deri
            "derive_assembly", "derive_assembly_cached"]
 
 #: Bumped whenever the derivation's results change for the same inputs.
-ASSEMBLY_VERSION = 2
+ASSEMBLY_VERSION = 3
 #: Surface samples per part (at most; fewer for a small area at the sample spacing).
 SAMPLES = 6000
 #: Normals of facing surfaces: n_a . n_b below -COS_FACING.
@@ -58,6 +58,12 @@ COS_FACING = math.cos(math.radians(20.0))
 SIN_AXIS = math.sin(math.radians(3.0))
 #: A vertex lies on a fitted circle within this fraction of the radius.
 CIRCLE_REL = 0.01
+#: Wall normals wrap an axis when no angular gap across it reaches this (a half cylinder's or
+#: a two-sided guide's gap is 180 deg; 10 deg of slack for the normals of a tessellation).
+WRAP_GAP = math.radians(170.0)
+#: A prismatic fit's clearance: this percentile of the peg's wall samples' gaps (a low one:
+#: the tightest wall sets the fit, a few samples' mesh noise does not).
+CLEARANCE_PCT = 5.0
 #: Local freedom: d . n <= EPS_LOCAL for every outward contact normal n of the moving part.
 EPS_LOCAL = 0.02
 #: The moving meshes are shrunk by this fraction of contact_tol (touching is not blocking).
@@ -99,6 +105,12 @@ class DerivedMate:
     hole_len: float
     depth: float
     through: bool
+    #: 'round', or 'prism': the walls are planes normal to the axis, the radii the peg profile's
+    #: inscribed half-width and that plus the clearance.
+    profile: str = "round"
+    #: A prism peg's profile across the axis (its bounding rectangle's corners) as offsets from
+    #: the axis, product frame (empty for a round peg).
+    corners: tuple[tuple[float, float, float], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -152,7 +164,12 @@ class AssemblyResult:
         """Back from :meth:`to_json`."""
         def tup(x: Any) -> Any:
             return tuple(x) if isinstance(x, list) else x
-        return cls(d["base"], [DerivedMate(**{k: tup(v) for k, v in m.items()}) for m in d["mates"]],
+
+        def mate(m: dict[str, Any]) -> DerivedMate:
+            m = {k: tup(v) for k, v in m.items()}
+            m["corners"] = tuple(tuple(c) for c in m.get("corners", ()))
+            return DerivedMate(**m)
+        return cls(d["base"], [mate(m) for m in d["mates"]],
                    [DerivedSeat(**{k: tup(v) for k, v in s.items()}) for s in d["seats"]],
                    [tuple(b) for b in d["blocking"]],  # type: ignore[misc]
                    [Insertion(tuple(i["parts"]), tuple(i["direction"]), i["needs_fixture"]) for i in d["insertions"]],
@@ -249,6 +266,88 @@ def _wall_extent(mesh: "trimesh.Trimesh", o: np.ndarray, d: np.ndarray, r: float
     return lo, hi
 
 
+def _wraps(normals: np.ndarray, d: np.ndarray) -> bool:
+    """Whether ``normals`` (unit, normal to the axis ``d``) wrap the axis: no angular gap of
+    WRAP_GAP or more among their directions across it, so the walls they belong to stop
+    motion across the axis in every direction."""
+    from spar_py.world.shapes import axis_basis
+
+    if len(normals) < 3:
+        return False
+    e1, e2 = axis_basis(np.asarray(d, float))
+    ang = np.sort(np.arctan2(normals @ e2, normals @ e1))
+    gaps = np.diff(np.concatenate([ang, [ang[0] + 2 * math.pi]]))
+    return bool(gaps.max() < WRAP_GAP)
+
+
+def _prism(meshes: dict[str, "trimesh.Trimesh"], a: str, b: str, ta: np.ndarray, tb: np.ndarray,
+           sample_normals: np.ndarray, sample_gaps: np.ndarray, contact_tol: float) -> DerivedMate | None:
+    """A prismatic mate from a's contact triangles ``ta`` and b's ``tb``: for an axis d (each
+    distinct normal of the contact, the end faces' among them), the triangles normal to d are
+    the walls; they make a peg in a hole when a's and b's walls wrap d (:func:`_wraps`) and a's
+    normals point away from the walls' centre (a the peg). Across the axis, in a basis whose
+    first vector is a wall normal: the axis passes through the centre of the bounding rectangle
+    of a's wall vertices, whose corners are the profile; the peg's radius is the inscribed
+    half-width (the least distance of a wall plane from the axis), the clearance the
+    CLEARANCE_PCT percentile of the gaps of a's wall samples (``sample_normals``,
+    ``sample_gaps``: a's contact samples in this component); None if no axis fits or the
+    clearance is below ``contact_tol`` (a touching fit stays a contact)."""
+    ma, mb = meshes[a], meshes[b]
+    Na, Nb = ma.face_normals[ta], mb.face_normals[tb]
+    best = None
+    seen: list[np.ndarray] = []
+    for d in _by_count(Na):
+        if any(abs(float(d @ u)) > 1 - 1e-6 for u in seen):
+            continue
+        seen.append(d)
+        ka = np.abs(Na @ d) < SIN_AXIS
+        kb = np.abs(Nb @ d) < SIN_AXIS
+        if ka.sum() < 3 or kb.sum() < 3 or not _wraps(Na[ka], d):
+            continue
+        facing = (Nb[kb] @ Na[ka].T).min(axis=1) < -COS_FACING  # b's walls facing one of a's
+        kb[np.flatnonzero(kb)[~facing]] = False
+        if kb.sum() < 3 or not _wraps(Nb[kb], d):
+            continue
+        area = float(ma.area_faces[ta[ka]].sum())
+        if best is None or area > best[0]:
+            best = (area, d, ta[ka], tb[kb])
+        if len(seen) > 50:
+            break
+    if best is None:
+        return None
+    _, d, wa, wb = best
+    d = d / np.linalg.norm(d)
+    u = ma.face_normals[wa[0]] - (ma.face_normals[wa[0]] @ d) * d
+    u /= np.linalg.norm(u)
+    v = np.cross(d, u)
+    Va = ma.vertices[np.unique(ma.faces[wa])]
+    cu, cv = Va @ u, Va @ v
+    mid_u, mid_v = (cu.min() + cu.max()) / 2, (cv.min() + cv.max()) / 2
+    o = mid_u * u + mid_v * v + float(np.mean(Va @ d)) * d
+    C = ma.triangles_center[wa] - o
+    h = np.einsum("ij,ij->i", C, ma.face_normals[wa])
+    if (h <= 0).any():
+        return None  # a's walls face the centre: a is the hole
+    walls = np.abs(sample_normals @ d) < SIN_AXIS
+    if walls.sum() < 3:
+        return None
+    clearance = float(np.percentile(sample_gaps[walls], CLEARANCE_PCT))
+    if clearance < contact_tol:
+        return None
+    ra = float(h.min())
+    hu, hv = (cu.max() - cu.min()) / 2, (cv.max() - cv.min()) / 2
+    signs = ((1, 1), (-1, 1), (-1, -1), (1, -1))
+    corners = tuple(tuple(float(x) for x in su * hu * u + sv * hv * v) for su, sv in signs)
+    tva = (Va - o) @ d
+    tvb = (mb.vertices[np.unique(mb.faces[wb])] - o) @ d
+    lo, hi = max(tva.min(), tvb.min()), min(tva.max(), tvb.max())
+    if hi <= lo:
+        return None
+    return DerivedMate(a, b, tuple(float(x) for x in o), tuple(float(x) for x in d), ra, ra + clearance,
+                       float(tva.min()), float(tva.max() - tva.min()), float(tvb.min()), float(tvb.max() - tvb.min()),
+                       float(hi - lo), False, "prism", corners)
+
+
 def _components(P: np.ndarray, link: float) -> list[np.ndarray]:
     """Index sets of the points connected by steps shorter than ``link``."""
     from scipy.sparse.csgraph import connected_components
@@ -282,6 +381,8 @@ def _cylinder(meshes: dict[str, "trimesh.Trimesh"], a: str, b: str, ta: np.ndarr
     radial = Ca - oa - np.outer((Ca - oa) @ d, d)
     if (np.einsum("ij,ij->i", radial, Na) <= 0).any():
         return None  # a's normals towards the axis: a is not the peg
+    if not _wraps(Na, d):
+        return None  # a cradle (half a cylinder): it stops motion across the axis one way only
     o = (oa + ob) / 2
     tva = (ma.vertices[np.unique(ma.faces[ta])] - o) @ d
     tvb = (mb.vertices[np.unique(mb.faces[tb])] - o) @ d
@@ -306,7 +407,8 @@ def _orient(m: DerivedMate, meshes: dict[str, "trimesh.Trimesh"], sense: np.ndar
     far = float(np.linalg.norm(mb.extents))
     blind = len(hits) > 0 and float(np.min((hits - start) @ d)) < min(3 * tol, far)
     return DerivedMate(m.peg, m.hole, tuple(float(x) for x in o), tuple(float(x) for x in d), m.peg_radius,
-                       m.hole_radius, float(p0), float(p1 - p0), float(h0), float(h1 - h0), m.depth, not blind)
+                       m.hole_radius, float(p0), float(p1 - p0), float(h0), float(h1 - h0), m.depth, not blind,
+                       m.profile, m.corners)
 
 
 def _seats(P: np.ndarray, N: np.ndarray, gaps: np.ndarray, contact_tol: float, spacing: float
@@ -547,6 +649,8 @@ def derive_assembly(meshes: dict[str, "trimesh.Trimesh"], base: str, contact_tol
             if len(ta) < 3 or len(tb) < 3:
                 continue
             m = _cylinder_filtered(meshes, a, b, ta, tb, tol)
+            if m is None:
+                m = _prism(meshes, a, b, ta, tb, N[comp], gaps[comp], contact_tol)
             if m is not None and not any(_same_mate(m, x, tol) for x in mates):
                 mates.append(m)
     mated = {(m.peg, m.hole) for m in mates} | {(m.hole, m.peg) for m in mates}
@@ -646,7 +750,7 @@ def _cylinder_filtered(meshes: dict[str, "trimesh.Trimesh"], a: str, b: str, ta:
     Na, Nb = meshes[a].face_normals[ta], meshes[b].face_normals[tb]
     # an end face's or shoulder's normal is the axis: try each distinct normal as the axis
     seen: list[np.ndarray] = []
-    for d in np.vstack([Na, Nb]):
+    for d in _by_count(np.vstack([Na, Nb])):
         if any(abs(float(d @ u)) > 1 - 1e-6 for u in seen):
             continue
         seen.append(d)
@@ -658,6 +762,14 @@ def _cylinder_filtered(meshes: dict[str, "trimesh.Trimesh"], a: str, b: str, ta:
         if len(seen) > 50:
             break
     return None
+
+
+def _by_count(normals: np.ndarray) -> np.ndarray:
+    """The distinct ``normals`` (rounded to 1e-3), the most frequent first (a planar face's
+    many triangles before a curved wall's one each): the candidate axes in the order tried."""
+    keys, first, counts = np.unique(np.round(normals, 3), axis=0, return_index=True, return_counts=True)
+    order = np.lexsort((first, -counts))
+    return normals[first[order]]
 
 
 def _same_mate(m: DerivedMate, x: DerivedMate, tol: float) -> bool:
