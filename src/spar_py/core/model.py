@@ -54,10 +54,14 @@ class Grasp:
 
 @dataclass(frozen=True)
 class MatingFeature:
-    """A round peg or hole (Sec. 3.2.2): ``kind`` 'peg' or 'hole', the part's faces on it, its
+    """A peg or hole (Sec. 3.2.2): ``kind`` 'peg' or 'hole', the part's faces on it, its
     radius, and its vector in the object frame (F_p, the peg tip centre; F_h, the hole's bottom
     centre). ``name`` is unique in its part (an empty name becomes the geometric form's face
-    name, else the kind); ``through``: a hole open at both ends (a peg may enter either mouth)."""
+    name, else the kind); ``through``: a hole open at both ends (a peg may enter either mouth).
+    ``profile`` 'round' (the paper's), or 'prism' (plane walls along the axis): its radius is
+    the profile's inscribed half-width, a hole's that plus the clearance (R_h - R_p is the
+    clearance wherever used), and ``corners`` (k, 3) the profile's corners at the tip (object
+    frame; a prism peg's, for the insertion check)."""
 
     kind: str
     faces: tuple[Face, ...]
@@ -68,6 +72,8 @@ class MatingFeature:
     geometry: "FeatureGeometry | None" = None
     name: str = ""
     through: bool = False
+    profile: str = "round"
+    corners: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if not self.name:

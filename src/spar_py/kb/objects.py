@@ -204,7 +204,8 @@ def _features(fnodes: list[Node], known: set[Face], scale: float) -> tuple[Matin
             if geo.name not in known:
                 raise fnode.key("name").fail("the name of a face on the shape at the feature (its axis, radius and "
                                              "length place it)", show(geo.name))
-            f = MatingFeature(geo.kind, (geo.name,), geo.radius, geo.end, geo, geo.name, through)
+            corners = None if geo.corners is None else geo.end + np.asarray(geo.corners, float)
+            f = MatingFeature(geo.kind, (geo.name,), geo.radius, geo.end, geo, geo.name, through, geo.profile, corners)
         else:
             nnode = fnode.key("name", required=False)
             f = MatingFeature(
@@ -432,8 +433,32 @@ def _feature_geometry(fnode: Node, scale: float) -> Any:
     d = axis.key("direction").vector(3)
     if np.linalg.norm(d) < 1e-9:
         raise axis.key("direction").fail("a non-zero direction", "[0, 0, 0]")
+    d = d / np.linalg.norm(d)
+    profile, corners = _profile(fnode, d, scale)
     return FeatureGeometry(kind, name, fnode.key("radius").positive() * scale, axis.key("origin").vector(3) * scale,
-                           d / np.linalg.norm(d), fnode.key("length").positive() * scale, through)
+                           d, fnode.key("length").positive() * scale, through, profile, corners)
+
+
+def _profile(fnode: Node, d: np.ndarray, scale: float) -> tuple[str, np.ndarray | None]:
+    """A geometric feature's ``profile:`` ('round' by default, or 'prism') and a prism's
+    ``corners:`` (at least three offsets from the axis, normal to it, none nearer the axis
+    than the radius), scaled to the cell unit."""
+    pnode = fnode.key("profile", required=False)
+    profile = pnode.choice(("round", "prism")) if pnode is not None else "round"
+    cnode = fnode.key("corners", required=False)
+    if profile == "round":
+        if cnode is not None:
+            raise cnode.fail("corners: only with profile: prism")
+        return profile, None
+    cnode = fnode.key("corners")
+    items = list(cnode.elements(3))
+    C = np.array([c.vector(3) for c in items], float) * scale
+    radius = fnode.key("radius").positive() * scale
+    for c, node in zip(C, items):
+        if abs(float(c @ d)) > 1e-6 * max(1.0, float(np.linalg.norm(c))) or np.linalg.norm(c) < radius * (1 - 1e-6):
+            raise node.fail("a corner offset from the axis, normal to it, at least the radius from it",
+                            show(node.value))
+    return profile, C
 
 
 def _solid(node: Node, scale: float) -> Solid:

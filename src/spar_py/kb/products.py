@@ -179,6 +179,10 @@ def _derived_objects(path: Path, unit: str, meshparts: dict[str, _MeshPart], der
                  "length": _num(k * length)}
             if not peg and m.through:
                 f["through"] = True
+            if m.profile != "round":
+                f["profile"] = m.profile
+                f["corners"] = [[_num(k * x) for x in inv[:3, :3] @ np.asarray(c, float)]
+                                for c in (m.corners if peg else m.hole_corners)]
             same = next((g for g in feats + own if _same_feature(g, f, k)), None)
             if same is None:
                 f = {"kind": f["kind"], "name": f"{f['kind']}{sum(g['kind'] == f['kind'] for g in feats) + 1}",

@@ -88,9 +88,11 @@ FRAME_SCHEMA = keys(["xyz"], ["rpy"])
 
 
 #: A mating feature: the paper's form {kind, faces, radius, vector} or by geometry {kind, name,
-#: radius, axis, length}; ``name`` (required among several) and ``through`` (a hole) in either.
+#: radius, axis, length}; ``name`` (required among several) and ``through`` (a hole) in either;
+#: ``profile`` and ``corners`` (a prism) by geometry.
 FEATURE_SCHEMA = keys(["kind", "radius"], {"faces": LEAF, "vector": LEAF, "name": LEAF, "length": LEAF,
-                                           "axis": keys(["origin", "direction"]), "through": LEAF})
+                                           "axis": keys(["origin", "direction"]), "through": LEAF,
+                                           "profile": LEAF, "corners": LEAF})
 
 
 OBJECT_SCHEMA = keys(

@@ -596,9 +596,14 @@ def assemble_constraints(state: WorldState, peg: str, hole: str, T_a: np.ndarray
     mate at load). ``motion`` (optional, not in the paper) is the assemble motion's own
     T_dM, inserted after T_G to account for the arm's error when it goes to T_H T_a T_G.
     ``memo`` (world.run.CellCache.memo): the expressions are built once per structure
-    (:func:`_built`).
+    (:func:`_built`). A prism peg (``peg_feature.profile == 'prism'``) adds one constraint per
+    corner of its profile at the tip (``peg_feature.corners``), built the same way with the
+    corner for F_p: the rotation about the axis now matters. Sound for the whole profile: the
+    displacement ``C_t - C_p`` is affine in the point (both are fixed transforms of it), so
+    its size across the axis is convex in the point and every profile point, inside the
+    corners' convex hull, is displaced no more than the worst corner.
     """
-    p = _in_hand(state, peg, "assemble")
+    _in_hand(state, peg, "assemble")
     h = state.obj(hole)
     if h.where == HAND or state.objects[state.root(hole)].where != TABLE:
         raise SparValueError(f"assemble({peg}, {hole}): {hole} must rest (or be mated into a resting part), "
@@ -607,10 +612,25 @@ def assemble_constraints(state: WorldState, peg: str, hole: str, T_a: np.ndarray
         raise SparValueError(f"assemble({peg}, {hole}): needs a peg feature and a hole feature, got "
                              f"{peg_feature.kind} and {hole_feature.kind}")
     Ta = _pose(T_a, f"assemble({peg}, {hole}) T_a")
-    T_G = p.grasp
-    F_p = np.asarray(peg_feature.vector, float)
-    seated = Ta[:3, :3] @ F_p + Ta[:3, 3]  # where the tip sits when seated, hole frame
     N = _across(_rotation_only(h.pose)[:3, :3] @ _hole_direction(peg, hole, hole_feature, axis))
+    points = [("centres", np.asarray(peg_feature.vector, float), "tip")]
+    if peg_feature.profile == "prism" and peg_feature.corners is not None:
+        points += [(f"corner{i + 1}", np.asarray(c, float), f"tip corner {i + 1}")
+                   for i, c in enumerate(peg_feature.corners)]
+    return [_insertion_constraint(state, peg, hole, Ta, F_p, N, peg_feature, hole_feature, action, motion, memo,
+                                  label, what) for label, F_p, what in points]
+
+
+def _insertion_constraint(state: WorldState, peg: str, hole: str, Ta: np.ndarray, F_p: np.ndarray, N: np.ndarray,
+                          peg_feature: MatingFeature, hole_feature: MatingFeature, action: str,
+                          motion: ErrorTm | None, memo: Memo | None, label: str, what: str) -> Constraint:
+    """One point ``F_p`` of the peg (object frame) across the hole's axis (rows of ``N``)
+    within R_h - R_p of where it sits when seated (:func:`assemble_constraints`)."""
+    p = _in_hand(state, peg, "assemble")
+    h = state.obj(hole)
+    T_G = p.grasp
+    seated = Ta[:3, :3] @ F_p + Ta[:3, 3]  # where the point sits when seated, hole frame
+    where = "the axis of" if label == "centres" else "its seated place in"
 
     def build() -> list[ca.SX]:
         # both points relative to the hole's ideal position t_H, which cancels in C_t - C_p:
@@ -638,9 +658,9 @@ def assemble_constraints(state: WorldState, peg: str, hole: str, T_a: np.ndarray
     margin = float(hole_feature.radius) - float(peg_feature.radius)
     threshold = margin * margin if margin > 0 else 0.0
     note = "" if margin > 0 else f" (impossible: hole radius {hole_feature.radius} <= peg radius {peg_feature.radius})"
-    return [Constraint(action, "centres", d2, "<", threshold,
-                       f"|d|^2 < (R_h - R_p)^2: {peg}'s tip ({peg_feature.name}) within {margin:g} of the axis "
-                       f"of {hole}'s {hole_feature.name}, across it{note}", bounding, key=ckey, power=2)]
+    return Constraint(action, label, d2, "<", threshold,
+                      f"|d|^2 < (R_h - R_p)^2: {peg}'s {what} ({peg_feature.name}) within {margin:g} of "
+                      f"{where} {hole}'s {hole_feature.name}, across it{note}", bounding, key=ckey, power=2)
 
 
 def _chain_key(state: WorldState, name: str) -> tuple:

@@ -111,6 +111,8 @@ class DerivedMate:
     #: A prism peg's profile across the axis (its bounding rectangle's corners) as offsets from
     #: the axis, product frame (empty for a round peg).
     corners: tuple[tuple[float, float, float], ...] = ()
+    #: A prism hole's profile (its walls' bounding rectangle), the same way.
+    hole_corners: tuple[tuple[float, float, float], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -167,7 +169,8 @@ class AssemblyResult:
 
         def mate(m: dict[str, Any]) -> DerivedMate:
             m = {k: tup(v) for k, v in m.items()}
-            m["corners"] = tuple(tuple(c) for c in m.get("corners", ()))
+            for k in ("corners", "hole_corners"):
+                m[k] = tuple(tuple(c) for c in m.get(k, ()))
             return DerivedMate(**m)
         return cls(d["base"], [mate(m) for m in d["mates"]],
                    [DerivedSeat(**{k: tup(v) for k, v in s.items()}) for s in d["seats"]],
@@ -336,16 +339,19 @@ def _prism(meshes: dict[str, "trimesh.Trimesh"], a: str, b: str, ta: np.ndarray,
         return None
     ra = float(h.min())
     hu, hv = (cu.max() - cu.min()) / 2, (cv.max() - cv.min()) / 2
+    Vb = mb.vertices[np.unique(mb.faces[wb])] - o
+    gu, gv = np.abs(Vb @ u).max(), np.abs(Vb @ v).max()
     signs = ((1, 1), (-1, 1), (-1, -1), (1, -1))
     corners = tuple(tuple(float(x) for x in su * hu * u + sv * hv * v) for su, sv in signs)
+    hole_corners = tuple(tuple(float(x) for x in su * gu * u + sv * gv * v) for su, sv in signs)
     tva = (Va - o) @ d
-    tvb = (mb.vertices[np.unique(mb.faces[wb])] - o) @ d
+    tvb = Vb @ d
     lo, hi = max(tva.min(), tvb.min()), min(tva.max(), tvb.max())
     if hi <= lo:
         return None
     return DerivedMate(a, b, tuple(float(x) for x in o), tuple(float(x) for x in d), ra, ra + clearance,
                        float(tva.min()), float(tva.max() - tva.min()), float(tvb.min()), float(tvb.max() - tvb.min()),
-                       float(hi - lo), False, "prism", corners)
+                       float(hi - lo), False, "prism", corners, hole_corners)
 
 
 def _components(P: np.ndarray, link: float) -> list[np.ndarray]:
@@ -408,7 +414,7 @@ def _orient(m: DerivedMate, meshes: dict[str, "trimesh.Trimesh"], sense: np.ndar
     blind = len(hits) > 0 and float(np.min((hits - start) @ d)) < min(3 * tol, far)
     return DerivedMate(m.peg, m.hole, tuple(float(x) for x in o), tuple(float(x) for x in d), m.peg_radius,
                        m.hole_radius, float(p0), float(p1 - p0), float(h0), float(h1 - h0), m.depth, not blind,
-                       m.profile, m.corners)
+                       m.profile, m.corners, m.hole_corners)
 
 
 def _seats(P: np.ndarray, N: np.ndarray, gaps: np.ndarray, contact_tol: float, spacing: float

@@ -132,16 +132,31 @@ class FeatureGeometry:
     direction: np.ndarray
     length: float
     through: bool = False
+    #: 'round', or 'prism': plane walls normal to the axis, ``radius`` the profile's inscribed
+    #: half-width and ``corners`` (k, 3) its bounding rectangle's corners as offsets from the
+    #: axis, across it (object frame, cell unit).
+    profile: str = "round"
+    corners: np.ndarray | None = None
 
     @property
     def end(self) -> np.ndarray:
         """The peg's tip centre F_p or the hole's bottom centre F_h (object frame)."""
         return self.origin + self.length * self.direction
 
+    @property
+    def reach(self) -> float:
+        """The farthest the feature's wall gets from its axis: the radius, a prism's corners."""
+        if self.profile == "prism" and self.corners is not None and len(self.corners):
+            return float(np.linalg.norm(self.corners, axis=1).max())
+        return self.radius
+
     def spec(self) -> list:
         """Plain data for the content hash."""
-        return [self.kind, self.name, round(self.radius, 12), [round(float(v), 12) for v in self.origin],
-                [round(float(v), 12) for v in self.direction], round(self.length, 12), self.through]
+        out = [self.kind, self.name, round(self.radius, 12), [round(float(v), 12) for v in self.origin],
+               [round(float(v), 12) for v in self.direction], round(self.length, 12), self.through]
+        if self.profile != "round":
+            out += [self.profile, np.round(np.asarray(self.corners, float), 12).tolist()]
+        return out
 
 
 @dataclass
@@ -396,10 +411,19 @@ def _feature_triangles(mesh: "trimesh.Trimesh", f: FeatureGeometry, tol: float, 
     V = mesh.vertices[mesh.faces] - f.origin                        # (n, 3, 3)
     t = V @ f.direction                                             # axial coordinate
     radial = np.linalg.norm(V - t[..., None] * f.direction, axis=2)
-    side = (np.abs(radial - f.radius) < tol).all(1) & (t > -tol).all(1) & (t < f.length + tol).all(1)
+    along = (t > -tol).all(1) & (t < f.length + tol).all(1)
+    if f.profile == "prism" and f.corners is not None:
+        # a plane wall normal to the axis at the profile's support distance along its normal
+        n = mesh.face_normals * (1.0 if f.kind == "peg" else -1.0)  # away from the axis
+        h = np.einsum("ij,ij->i", V.mean(1), n)
+        support = (n @ np.asarray(f.corners, float).T).max(1)
+        wall = (np.abs(n @ f.direction) < 0.1) & (np.abs(h - support) < max(tol, 0.1 * f.radius))
+        side = wall & along
+    else:
+        side = (np.abs(radial - f.radius) < tol).all(1) & along
     if through:
         return side
-    cap = (np.abs(t - f.length) < tol).all(1) & (radial < f.radius + tol).all(1)
+    cap = (np.abs(t - f.length) < tol).all(1) & (radial < f.reach + tol).all(1)
     return side | cap
 
 

@@ -672,7 +672,7 @@ def _covered(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Feature
             F = np.eye(4)
             F[:3, 0], F[:3, 1], F[:3, 2], F[:3, 3] = e1, e2, feature.direction, feature.origin
             big = 10 * _arrays(mesh).diag + reach
-            r = feature.radius
+            r = feature.reach
             lo, hi = (np.array([-r, -r, 0.0]), np.array([r, r, big])) if feature.kind == "peg" else (
                 np.array([-r, -r, -big]), np.array([r, r, 0.0]))
             M = np.linalg.inv(F) @ T  # tool frame in the feature's frame
@@ -694,7 +694,8 @@ def _shafts(faces: list[Face], features: tuple[FeatureGeometry, ...], prims: tup
     """Round shafts to grasp across: (root, unit axis, radius, length, face name or None): the
     peg features', the cylinder primitives', then the outer cylinders found on the mesh
     (:func:`mesh_cylinders`: a shoulder, a shaft not declared as a feature), each once."""
-    out = [(f.origin, f.direction, f.radius, f.length, f.name) for f in features if f.kind == "peg"]
+    out = [(f.origin, f.direction, f.radius, f.length, f.name) for f in features
+           if f.kind == "peg" and f.profile == "round"]
     for p in prims:
         root, d = np.array([0.0, 0.0, p.lo[2]]), np.array([0.0, 0.0, 1.0])
         same = [np.allclose(root, o) and np.allclose(d, a) and abs(p.radius - r) < 1e-9 for o, a, r, _, _ in out]
