@@ -225,7 +225,7 @@ def _num(v: float) -> float:
 
 def _same_feature(g: dict[str, Any], f: dict[str, Any], k: float) -> bool:
     """Whether feature dicts ``g`` and ``f`` (one part's, its units) are one: same kind,
-    radius and axis line (within 1e-6 of the radius)."""
+    radius and axis line (within 1e-6 of the radius), and spans along it that overlap."""
     if g.get("kind") != f["kind"] or "axis" not in g:
         return False
     tol = 1e-6 * max(float(f["radius"]), 1.0) + 1e-3 * k * 1e-3
@@ -235,7 +235,15 @@ def _same_feature(g: dict[str, Any], f: dict[str, Any], k: float) -> bool:
     d2 = np.asarray(f["axis"]["direction"], float)
     d1, d2 = d1 / np.linalg.norm(d1), d2 / np.linalg.norm(d2)
     off = np.asarray(g["axis"]["origin"], float) - np.asarray(f["axis"]["origin"], float)
-    return abs(float(d1 @ d2)) > 1 - 1e-6 and float(np.linalg.norm(off - (off @ d2) * d2)) < 1e-4 * float(f["radius"])
+    if abs(float(d1 @ d2)) <= 1 - 1e-6 or float(np.linalg.norm(off - (off @ d2) * d2)) >= 1e-4 * float(f["radius"]):
+        return False
+    if "length" not in g:
+        return True
+    # one line, but apart along it (a post's two tenons, one at each end) is two features
+    og, of = np.asarray(g["axis"]["origin"], float) @ d2, np.asarray(f["axis"]["origin"], float) @ d2
+    sg = sorted((og, og + float(g["length"]) * float(d1 @ d2)))
+    sf = sorted((of, of + float(f["length"])))
+    return min(sg[1], sf[1]) - max(sg[0], sf[0]) > tol
 
 
 def _generated(text: str) -> Path:

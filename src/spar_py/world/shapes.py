@@ -413,18 +413,36 @@ def _feature_triangles(mesh: "trimesh.Trimesh", f: FeatureGeometry, tol: float, 
     radial = np.linalg.norm(V - t[..., None] * f.direction, axis=2)
     along = (t > -tol).all(1) & (t < f.length + tol).all(1)
     if f.profile == "prism" and f.corners is not None:
-        # a plane wall normal to the axis at the profile's support distance along its normal
-        n = mesh.face_normals * (1.0 if f.kind == "peg" else -1.0)  # away from the axis
-        h = np.einsum("ij,ij->i", V.mean(1), n)
-        support = (n @ np.asarray(f.corners, float).T).max(1)
-        wall = (np.abs(n @ f.direction) < 0.1) & (np.abs(h - support) < max(tol, 0.1 * f.radius))
-        side = wall & along
+        side = _prism_walls(mesh, f, V, tol) & along
     else:
         side = (np.abs(radial - f.radius) < tol).all(1) & along
     if through:
         return side
     cap = (np.abs(t - f.length) < tol).all(1) & (radial < f.reach + tol).all(1)
     return side | cap
+
+
+def _prism_walls(mesh: "trimesh.Trimesh", f: FeatureGeometry, V: np.ndarray, tol: float) -> np.ndarray:
+    """(n,) bool: the triangles of a prism feature's walls: normal to the axis within 0.1 (a
+    tapered wall, a draft, leans a little), and whose plane, at its widest across the axis over
+    the feature's length, lies between the inscribed half-width (``radius``) and the profile's
+    support distance along the wall's normal (the farthest corner), within a tenth of the
+    radius, and no farther from the axis than the farthest corner (not another feature's wall
+    in line with it). ``V`` (n, 3, 3): the triangles' corners relative to the feature's origin."""
+    d = f.direction
+    n = mesh.face_normals * (1.0 if f.kind == "peg" else -1.0)  # away from the axis
+    tilt = n @ d
+    across = np.sqrt(np.clip(1.0 - tilt ** 2, 1e-12, None))
+    n_perp = (n - tilt[:, None] * d) / across[:, None]
+    h = np.einsum("ij,ij->i", V.mean(1), n)  # the wall plane: n . x = h
+    # where the plane is across the axis at the feature's two ends (t = 0, t = length)
+    widest = np.maximum(h, h - f.length * tilt) / across
+    support = (n_perp @ np.asarray(f.corners, float).T).max(1)
+    slack = max(tol, 0.1 * f.radius)
+    C = V.mean(1)
+    off = np.linalg.norm(C - np.outer(C @ d, d), axis=1)  # the triangle's distance from the axis
+    return ((np.abs(tilt) < 0.1) & (widest > f.radius - slack) & (widest < support + slack)
+            & (off < f.reach + slack))
 
 
 def derive_faces(mesh: "trimesh.Trimesh", features: "tuple[FeatureGeometry, ...]", face_names: dict[str, np.ndarray],
