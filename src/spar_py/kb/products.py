@@ -225,7 +225,8 @@ def _num(v: float) -> float:
 
 def _same_feature(g: dict[str, Any], f: dict[str, Any], k: float) -> bool:
     """Whether feature dicts ``g`` and ``f`` (one part's, its units) are one: same kind,
-    radius and axis line (within 1e-6 of the radius), and spans along it that overlap."""
+    radius (within 1e-4 of it) and axis line (within 1e-2 of the radius: one shaft fitted
+    against two parts' samples), and spans along it that overlap."""
     if g.get("kind") != f["kind"] or "axis" not in g:
         return False
     tol = 1e-6 * max(float(f["radius"]), 1.0) + 1e-3 * k * 1e-3
@@ -235,7 +236,7 @@ def _same_feature(g: dict[str, Any], f: dict[str, Any], k: float) -> bool:
     d2 = np.asarray(f["axis"]["direction"], float)
     d1, d2 = d1 / np.linalg.norm(d1), d2 / np.linalg.norm(d2)
     off = np.asarray(g["axis"]["origin"], float) - np.asarray(f["axis"]["origin"], float)
-    if abs(float(d1 @ d2)) <= 1 - 1e-6 or float(np.linalg.norm(off - (off @ d2) * d2)) >= 1e-4 * float(f["radius"]):
+    if abs(float(d1 @ d2)) <= 1 - 1e-6 or float(np.linalg.norm(off - (off @ d2) * d2)) >= 1e-2 * float(f["radius"]):
         return False
     if "length" not in g:
         return True

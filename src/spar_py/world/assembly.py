@@ -13,7 +13,8 @@ file: kb.products builds the meshes and turns the result into features and mates
   whose normals point away from the axis, a hole on the other; radii fitted on each part's
   own vertices (exact for a tessellated cylinder), depth the overlap along the axis, blind
   when a ray along the axis inside the hole meets the hole part again.
-- Seats: planar contacts (antiparallel normals, coplanar points, gap within ``contact_tol``).
+- Seats: planar contacts (antiparallel normals, coplanar points, gap within ``contact_tol``)
+  that the later part's insertion runs into; one it slides along (a guide) is not a seat.
   What is neither stays a contact: it constrains the directions only.
 - Directions: candidates are the mates' axes (both senses) and the product frame's six axes;
   a part (or a set of parts) may leave along d when d . n <= eps for every outward normal n of
@@ -49,7 +50,7 @@ __all__ = ["ASSEMBLY_VERSION", "AssemblyResult", "Contact", "DerivedMate", "Deri
            "derive_assembly", "derive_assembly_cached"]
 
 #: Bumped whenever the derivation's results change for the same inputs.
-ASSEMBLY_VERSION = 3
+ASSEMBLY_VERSION = 4
 #: Surface samples per part (at most; fewer for a small area at the sample spacing).
 SAMPLES = 6000
 #: Normals of facing surfaces: n_a . n_b below -COS_FACING.
@@ -733,17 +734,34 @@ def derive_assembly(meshes: dict[str, "trimesh.Trimesh"], base: str, contact_tol
             sense = np.asarray(m.axis, float)
         res.mates.append(_orient(m, meshes, sense, tol))
     # seats between parts without a mate: the later inserted part rests on the earlier one
+    res.seats.extend(_seats_of(planes, mated, pos, res.insertions))
+    sat = {frozenset((s.part, s.on)) for s in res.seats}
+    for a, b in sorted(seated):
+        if frozenset((a, b)) not in sat:  # sliding guides only: a contact that blocks
+            res.blocking.append((a, b, int(len(con[a, b][0]) + len(con.get((b, a), ((),))[0]))))
+    res.seconds = time.perf_counter() - t_start
+    return res
+
+
+def _seats_of(planes: list[tuple[str, str, np.ndarray, np.ndarray, float]], mated: set[tuple[str, str]],
+              pos: dict[str, int], insertions: list[Insertion]) -> list[DerivedSeat]:
+    """The seats among planar contacts ``planes`` (a, b, point, a's outward normal, area) of
+    pairs without a mate: the later inserted part on the earlier one, the largest plane per
+    pair whose normal the part's insertion runs into (within COS_FACING of antiparallel). A
+    plane the insertion slides along (a guide, a keyway's flank) does not stop it: no seat."""
+    ins = {p: (k, np.asarray(i.direction, float)) for k, i in enumerate(insertions) for p in i.parts}
     best: dict[tuple[str, str], tuple] = {}
     for a, b, pt, n, area in planes:
         if (a, b) in mated or pos.get(a) is None or pos.get(b) is None:
             continue
         part, on, n_on = (a, b, -n) if pos[a] > pos[b] else (b, a, n)
+        (k_part, d), (k_on, _) = ins[part], ins[on]
+        if k_part != k_on and float(d @ n_on) > -COS_FACING:
+            continue  # n_on points at the part: the insertion must run against it to rest on it
         if (part, on) not in best or area > best[part, on][4]:
             best[part, on] = (part, on, pt, n_on, area)
-    for part, on, pt, n_on, area in best.values():
-        res.seats.append(DerivedSeat(part, on, tuple(map(float, pt)), tuple(map(float, n_on)), float(area)))
-    res.seconds = time.perf_counter() - t_start
-    return res
+    return [DerivedSeat(part, on, tuple(map(float, pt)), tuple(map(float, n_on)), float(area))
+            for part, on, pt, n_on, area in best.values()]
 
 
 def _cylinder_filtered(meshes: dict[str, "trimesh.Trimesh"], a: str, b: str, ta: np.ndarray, tb: np.ndarray,
