@@ -3,6 +3,8 @@ peg in a box socket, a round bar in a half-cylinder cradle. Geometry is checked 
 boxes' own numbers, not the derivation's."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -79,3 +81,110 @@ def test_half_cylinder_cradle_is_no_round_mate() -> None:
         pytest.skip(f"no mesh boolean: {e}")
     res = derive_assembly({"cradle": cradle, "bar": bar}, "cradle", 0.1, 0.5)
     assert not [m for m in res.mates if m.profile == "round"], res.mates
+
+
+# --------------------------------------------------------------------------- Fabrica's beam
+
+BEAM = Path(__file__).resolve().parents[1] / "kb" / "products" / "fabrica" / "beam"
+#: The beam's parts (Fabrica's file stems): plates 0, 1 on top, posts 2, 3, the beam 6 below.
+POSTS, SOCKETS = ("p2", "p3"), ("p0", "p1", "p6")
+
+
+def _beam() -> dict[str, "trimesh.Trimesh"]:
+    """Fabrica's beam as trimesh reads its files, in mm (the files are in cm)."""
+    out = {}
+    for f in sorted(BEAM.glob("*.ply")):
+        m = trimesh.load(str(f), force="mesh", process=True)
+        m.apply_scale(10.0)
+        out[f"p{f.stem}"] = m
+    return out
+
+
+def _section_points(mesh: "trimesh.Trimesh", z: float) -> np.ndarray:
+    """The points where the plane at height ``z`` cuts the mesh's triangles (k, 2: x, y)."""
+    seg = trimesh.intersections.mesh_plane(mesh, (0, 0, 1), (0, 0, z))
+    return np.asarray(seg, float).reshape(-1, 3)[:, :2]
+
+
+def _measured_fit(post: "trimesh.Trimesh", block: "trimesh.Trimesh") -> tuple[np.ndarray, float]:
+    """Our own measure of a post's tenon in a block's socket, from plane sections across the
+    vertical at levels inside their overlap (1.5 mm clear of each end: the lead-in chamfers):
+    the socket's centre (x, y) and the least gap of a tenon side to the socket's wall."""
+    lo = max(post.bounds[0, 2], block.bounds[0, 2]) + 1.5
+    hi = min(post.bounds[1, 2], block.bounds[1, 2]) - 1.5
+    centres, gaps = [], []
+    for z in np.linspace(lo, hi, 7):
+        tenon = _section_points(post, z)
+        c = (tenon.min(0) + tenon.max(0)) / 2
+        S = _section_points(block, z)
+        S = S[np.all(np.abs(S - c) < (tenon.max(0) - tenon.min(0)) / 2 + 1.5, axis=1)]  # the socket's walls
+        centres.append((S.min(0) + S.max(0)) / 2)
+        gaps += list(S.max(0) - tenon.max(0)) + list(tenon.min(0) - S.min(0))
+    return np.mean(centres, axis=0), float(min(gaps))
+
+
+def test_beam_derives_a_prism_mate_per_post_socket() -> None:
+    meshes = _beam()
+    res = derive_assembly(meshes, "p0", 0.1, 0.5)
+    size = float(np.max(meshes["p2"].extents))  # the post's length, 76.2 mm
+    found = {}
+    for m in res.mates:
+        assert m.profile == "prism" and m.peg in POSTS and m.hole in SOCKETS, m
+        found[m.peg, m.hole] = m
+    assert set(found) == {("p2", "p0"), ("p2", "p6"), ("p3", "p1"), ("p3", "p6")}
+    for (post, block), m in found.items():
+        centre, gap = _measured_fit(meshes[post], meshes[block])
+        assert 0.2 < gap < 0.35  # the sections' own number: a clearance fit of about 0.27 mm
+        assert abs(abs(m.axis[2]) - 1) < 1e-3
+        assert np.allclose(np.asarray(m.origin)[:2], centre, atol=1e-3 * size), (post, block)
+        assert abs((m.hole_radius - m.peg_radius) - gap) < 1e-3 * size, (post, block, m, gap)
+
+
+# --------------------------------------------------------------------------- the corner check
+
+
+def _key_in_slot(turn_deg: float) -> tuple[list, list[bool]]:
+    """A flat key (4 x 1, tip 2 from its origin) held over a slot 0.1 wider on each side, the
+    only error the grasp's turn about the tool's z (the key's axis: the fingers re-seat the
+    key, the manipulator's angle error stays), up to ``turn_deg``: the insertion constraints
+    (tip centre, then the four tip corners) and their verdicts."""
+    from spar_py.core import geometry
+    from spar_py.core.model import Bounds, MatingFeature
+    from spar_py.phase2.symbolic import Registry
+    from spar_py.phase2.uncertainty import ObjectState, WorldState, assemble_constraints, evaluate, pickup, table_error
+
+    zero = Bounds((0, 0), (0, 0), (0, 0), (0, 0))
+    turn = Bounds((0, 0), (0, 0), (0, 0), (-np.radians(turn_deg), np.radians(turn_deg)))
+    reg = Registry()
+    objs = {"block": ObjectState("block", "table", geometry.trans(20, 0, 1), table_error(reg, "block", zero)),
+            "key": ObjectState("key", "table", geometry.trans(20, 10, 1), table_error(reg, "key", zero))}
+    w = WorldState(reg, turn, objs)
+    w = pickup(w, "key", geometry.rotx(np.pi), w.manipulator_error())
+    tip = np.array([0.0, 0.0, 2.0])
+    corners = tip + np.array([[KEY_HX, KEY_HY, 0], [-KEY_HX, KEY_HY, 0], [-KEY_HX, -KEY_HY, 0], [KEY_HX, -KEY_HY, 0]])
+    key = MatingFeature("peg", ("tip",), KEY_HY, tip, profile="prism", corners=corners)
+    slot = MatingFeature("hole", ("top",), KEY_HY + SLOT_GAP, np.zeros(3), profile="prism",
+                         corners=np.array([[KEY_HX + SLOT_GAP, KEY_HY + SLOT_GAP, 0]]))
+    cs = assemble_constraints(w, "key", "block", geometry.trans(0, 0, -2), key, slot, axis=np.array([0.0, 0, -1]))
+    return cs, [bool(evaluate(c, w.registry).satisfied) for c in cs]
+
+
+KEY_HX, KEY_HY, SLOT_GAP = 2.0, 0.5, 0.1
+
+
+def _corner_leaves_slot(turn_deg: float) -> bool:
+    """Our own geometry: the key's tip corner (KEY_HX, KEY_HY) turned about the axis by
+    ``turn_deg`` lies outside the slot (half-widths KEY_HX + gap, KEY_HY + gap)."""
+    a = np.radians(turn_deg)
+    x, y = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]) @ (KEY_HX, KEY_HY)
+    return bool(abs(x) > KEY_HX + SLOT_GAP or abs(y) > KEY_HY + SLOT_GAP)
+
+
+def test_a_turn_about_the_axis_alone_fails_the_corners_not_the_centre() -> None:
+    assert _corner_leaves_slot(5.0) and not _corner_leaves_slot(0.5)
+    cs, ok = _key_in_slot(5.0)
+    assert len(cs) == 5 and cs[0].name == "centres" and all(c.name.startswith("corner") for c in cs[1:])
+    assert ok[0], "the tip centre is on the axis: a turn about it does not move it"
+    assert not all(ok[1:]), "a corner turned 5 deg leaves the slot"
+    cs, ok = _key_in_slot(0.5)
+    assert all(ok), "turned 0.5 deg the corners stay inside"
