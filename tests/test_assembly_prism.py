@@ -188,3 +188,29 @@ def test_a_turn_about_the_axis_alone_fails_the_corners_not_the_centre() -> None:
     assert not all(ok[1:]), "a corner turned 5 deg leaves the slot"
     cs, ok = _key_in_slot(0.5)
     assert all(ok), "turned 0.5 deg the corners stay inside"
+
+
+# --------------------------------------------------------------------------- guides
+
+
+def _box(lo: tuple[float, float, float], hi: tuple[float, float, float]) -> "trimesh.Trimesh":
+    lo_, hi_ = np.asarray(lo, float), np.asarray(hi, float)
+    b = trimesh.creation.box(extents=hi_ - lo_)
+    b.apply_translation((lo_ + hi_) / 2)
+    return b
+
+
+def test_a_plane_the_insertion_slides_along_is_no_seat() -> None:
+    """A slider put down on a plate beside a guide block it touches: it seats on the plate;
+    the guide's side, parallel to its way down, is a blocking contact, not a seat."""
+    meshes = {"base": _box((-40, -20, -5), (40, 20, 0)), "guide": _box((-30, -10, 0), (0, 10, 15)),
+              "slider": _box((0, -10, 0), (20, 10, 10))}
+    res = derive_assembly(meshes, "base", 0.1, 0.5)
+    order = [p for i in res.insertions for p in i.parts]
+    assert order.index("slider") > order.index("guide")
+    d = {p: np.asarray(i.direction) for i in res.insertions for p in i.parts}
+    assert abs(d["slider"][2] + 1) < 1e-9  # put down, along -z: parallel to the guide's side
+    seats = {(s.part, s.on): np.asarray(s.normal) for s in res.seats}
+    assert ("slider", "guide") not in seats and ("guide", "slider") not in seats
+    assert np.allclose(seats["slider", "base"], (0, 0, 1)) and np.allclose(seats["guide", "base"], (0, 0, 1))
+    assert ("guide", "slider") in {(a, b) for a, b, _ in res.blocking}
