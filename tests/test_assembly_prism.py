@@ -65,7 +65,8 @@ def test_box_peg_in_box_socket_is_one_prism_mate() -> None:
     assert np.allclose(np.asarray(m.origin)[:2], 0.0, atol=1e-3 * size)
 
 
-def test_half_cylinder_cradle_is_no_round_mate() -> None:
+def _bar_in_cradle() -> dict[str, "trimesh.Trimesh"]:
+    """A round bar (radius 10) lying in a block's half-cylinder trough (radius 10.3)."""
     bar = trimesh.creation.cylinder(radius=10.0, height=60.0, sections=64)
     bar.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, (1, 0, 0)))
     bar.apply_translation((0, 0, 20.0))
@@ -79,8 +80,28 @@ def test_half_cylinder_cradle_is_no_round_mate() -> None:
         cradle = block.difference(cutter)
     except Exception as e:  # no boolean engine installed
         pytest.skip(f"no mesh boolean: {e}")
-    res = derive_assembly({"cradle": cradle, "bar": bar}, "cradle", 0.1, 0.5)
+    return {"cradle": cradle, "bar": bar}
+
+
+def test_half_cylinder_cradle_is_no_round_mate() -> None:
+    res = derive_assembly(_bar_in_cradle(), "cradle", 0.1, 0.5)
     assert not [m for m in res.mates if m.profile == "round"], res.mates
+    assert [(a, b) for a, b, _ in res.blocking] == [("bar", "cradle")]
+
+
+def test_a_part_held_only_by_a_cradle_is_refused_naming_the_contact(tmp_path: Path) -> None:
+    from spar_py.core.errors import KBError
+    from spar_py.kb.products import load_product
+
+    for name, m in _bar_in_cradle().items():
+        m.export(tmp_path / f"{name}.stl")
+    (tmp_path / "p.yaml").write_text("product: cradled\nunits: {length: mm, angle: deg}\nparts:\n"
+                                     "  cradle: {mesh: cradle.stl}\n  bar: {mesh: bar.stl}\n")
+    with pytest.raises(KBError) as e:
+        load_product(tmp_path / "p.yaml", "mm", use_cache=False)
+    msg = str(e.value)
+    assert "\n" not in msg and "leads to the base cradle: bar" in msg and "neither a mate nor a planar seat" in msg
+    assert msg.endswith(": bar - cradle"), msg
 
 
 # --------------------------------------------------------------------------- Fabrica's beam

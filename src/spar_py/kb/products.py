@@ -385,8 +385,29 @@ def load_product_derived(path: str | Path, unit: str, max_bytes: int = MAX_INPUT
     except KBError:
         raise
     except SparValueError as e:
-        raise where.fail("mates that make an assembly", str(e)) from None
+        raise where.fail("mates that make an assembly", str(e) + _unlinked_contacts(product, derived)) from None
     return LoadedProduct(product, derived, objects, unit)
+
+
+def _unlinked_contacts(product: Product, derived: AssemblyResult | None) -> str:
+    """For a refusal: the derived contacts between the parts linked to the base (by mates and
+    seats) and the rest, each neither a mate nor a seat the planner can use ('' if none)."""
+    if derived is None:
+        return ""
+    linked = {product.base}
+    pairs = [(m.peg, m.hole) for m in product.mates] + [(s.part, s.on) for s in product.seats]
+    grew = True
+    while grew:
+        grew = False
+        for a, b in pairs:
+            if (a in linked) != (b in linked):
+                linked |= {a, b}
+                grew = True
+    cut = [f"{a} - {b}" for a, b, _ in derived.blocking if (a in linked) != (b in linked)]
+    if not cut:
+        return ""
+    return (f"; they touch the rest only in contacts that are neither a mate nor a planar seat "
+            f"(a cradle, a guide, a fit that is neither round nor prism): {', '.join(cut)}")
 
 
 def _add_via_grasps(product: Product) -> None:
