@@ -379,3 +379,55 @@ def test_a_wrong_mate_is_caught(case: Case) -> None:
     assert any("off" in x for x in mate_mismatch(mesh, o + 0.5 * m.peg_radius * BAND * side, d, m.peg_radius, t0, t1))
     tilted = d + 1e-2 * side
     assert any("axis" in x for x in mate_mismatch(mesh, o, tilted / np.linalg.norm(tilted), m.peg_radius, t0, t1))
+
+
+# --------------------------------------------------------------------------- the precedence picture
+
+
+def _dot_graph(text: str) -> tuple[dict[str, str], dict[tuple[str, str], str]]:
+    """Nodes (name -> label) and edges ((u, v) -> tooltip) of DOT text as precedence_dot writes it."""
+    import re
+
+    nodes = {m[1]: m[2] for m in re.finditer(r'^  "([^"]+)" \[label="([^"]*)"', text, re.M)}
+    edges = {(m[1], m[2]): m[3] for m in re.finditer(r'^  "([^"]+)" -> "([^"]+)" \[.*tooltip="([^"]*)"', text, re.M)}
+    return nodes, edges
+
+
+def test_the_precedence_picture_has_every_part_and_edge(case: Case) -> None:
+    from spar_py.pictures.precedence import insertion_node, precedence_dot
+
+    nodes, edges = _dot_graph(precedence_dot(case.res, case.name))
+    drawn = {p for n in nodes for p in n.split("+")}
+    assert drawn == set(case.meshes)
+    owner = {p: insertion_node(i) for i in case.res.insertions for p in i.parts}
+    for i, ins in enumerate(case.res.insertions[1:], start=2):
+        assert nodes[insertion_node(ins)].startswith(f"{i}. ")
+        assert "along [" in nodes[insertion_node(ins)]
+    for first, then, why in case.res.precedence:
+        if owner[first] != owner[then]:
+            assert why in edges[owner[first], owner[then]]
+    assert len(edges) <= len(case.res.precedence)
+
+
+def test_kb_derive_draws_the_stool_precedence(tmp_path: Path) -> None:
+    """``spar kb derive --dot --png`` on Fabrica's stool: the DOT has its nine parts and four
+    precedence edges, and the PNG is a picture."""
+    import subprocess
+    import sys
+
+    plys = sorted(FABRICA.joinpath("stool_circular").glob("*.ply"), key=lambda p: p.stem)
+    (tmp_path / "stool.yaml").write_text("product: stool_circular\nunits: {length: cm, angle: deg}\nparts:\n" + "".join(
+        f"  p{p.stem}: {{mesh: {p}}}\n" for p in plys))
+    cmd = [sys.executable, "-m", "spar_py", "kb", "derive", str(tmp_path / "stool.yaml"), "--dot",
+           str(tmp_path / "s.dot"), "--png", str(tmp_path / "s.png")]
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    precedence = [ln for ln in r.stdout.splitlines() if ln.startswith("# precedence: ")]
+    nodes, edges = _dot_graph((tmp_path / "s.dot").read_text())
+    assert set(nodes) == {f"p{i}" for i in range(9)}
+    assert len(precedence) == len(edges) > 0
+    for ln in precedence:  # "# precedence: p5 before p8 (p8 in place blocks p5's insertion)"
+        a, _, rest = ln.removeprefix("# precedence: ").partition(" before ")
+        b, _, why = rest.partition(" (")
+        assert edges[a, b] == why.removesuffix(")")
+    assert (tmp_path / "s.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
