@@ -102,9 +102,7 @@ def _surface_points(m, n: int, seed: int) -> np.ndarray:
 
 
 def _depth(m, pts: np.ndarray) -> np.ndarray:
-    """Distance of each point to the nearest vertex or face of ``m`` (an upper bound of the
-    point-to-surface distance by at most the triangles' size; exact enough where it is only
-    compared with the tolerance for points already known inside)."""
+    """Distance of each point to the surface of ``m`` (its depth, for points known inside)."""
     import trimesh
 
     return np.asarray(trimesh.proximity.closest_point(m, pts)[1], float)
