@@ -71,23 +71,60 @@ def cmd_kb_derive(args: argparse.Namespace) -> int:
 
     if args.output is not None:
         _check_output_file("-o", Path(args.output))  # before the work, as spar plan does
+    pictures = [(opt, Path(f)) for opt, f in (("--dot", args.dot), ("--png", args.png)) if f is not None]
+    for opt, f in pictures:
+        _check_output_file(opt, f)
     out_dir = Path(args.output).parent if args.output is not None else Path(args.model).parent
     from spar_py.kb.products import derive_product_text, is_product_file
 
+    texts: list[tuple[Path, str]] = []  # (file, text), written all or none after the work
+    png = None  # (staged, final)
     if is_product_file(args.model, _max_input_bytes(args)):
         text = derive_product_text(args.model, _max_input_bytes(args), out_dir)
+        if pictures:
+            dot = _precedence_dot(args, pictures[0][0])
+            files = dict(pictures)
+            if "--dot" in files:
+                texts.append((files["--dot"], dot))
+            if "--png" in files:
+                from spar_py.pictures.graphs import render_png
+
+                final = files["--png"]
+                png = (render_png(dot, args.guard.staging(final) / final.name), final)
     else:
+        if pictures:
+            raise SparError(f"{args.model}: {pictures[0][0]}: expected a product file (the precedence graph "
+                            "is a product's), not an object model")
         text = derive_text(args.model, _max_input_bytes(args), args.robot, out_dir)
+    if args.output is not None:
+        texts.insert(0, (Path(args.output), text))
+    try:
+        args.guard.write_all(texts)  # whole or not at all, even on Ctrl-C
+    except OSError as e:
+        _err(f"{', '.join(str(f) for f, _ in texts)}: cannot write ({e.strerror or e})")
+        return EXIT_INPUT
+    if png is not None:
+        with args.guard.commit():
+            os.replace(*png)
     if args.output is None:
         sys.stdout.write(text)
-        return EXIT_OK
-    out = Path(args.output)
-    try:
-        args.guard.write_text(out, text)  # whole or not at all, even on Ctrl-C
-    except OSError as e:
-        _err(f"{out}: cannot write ({e.strerror or e})")
-        return EXIT_INPUT
     return EXIT_OK
+
+
+def _precedence_dot(args: argparse.Namespace, option: str) -> str:
+    """``spar kb derive --dot/--png``: the product's derived precedence graph as DOT text
+    (pictures.precedence), its derivation read again from the cache by content."""
+    from spar_py.kb.products import load_product_derived
+    from spar_py.kb.reader import parse_yaml
+    from spar_py.pictures.precedence import precedence_dot
+
+    data = parse_yaml(Path(args.model), _max_input_bytes(args))
+    unit = str((data.get("units") or {}).get("length") or "mm")
+    lp = load_product_derived(args.model, unit, _max_input_bytes(args))
+    if lp.derived is None:
+        raise SparError(f"{args.model}: {option}: expected a product with mesh: parts (its precedence derived), "
+                        "not one whose parts all give model:")
+    return precedence_dot(lp.derived, lp.product.name)
 
 
 # ---------------------------------------------------------------------- repl
@@ -414,6 +451,9 @@ def build_parser() -> argparse.ArgumentParser:
     derive.add_argument("model", help="an object model file, e.g. kb/objects/peg_shape.yaml, or a product file "
                         "(its mesh parts' features, mates and order derived)")
     derive.add_argument("-o", "--output", help="write the model to this file (atomically) instead of stdout")
+    derive.add_argument("--dot", metavar="OUT.dot", help="a product file: also write its derived precedence graph "
+                        "(insertions with their directions, precedence with its reasons) as Graphviz DOT text")
+    derive.add_argument("--png", metavar="OUT.png", help="a product file: also draw that graph with Graphviz's dot")
     derive.add_argument("--robot", help="derive grasps for this robot's gripper (default: a 101.6 mm opening, "
                         "the PUMA 762's)")
     _add_max_input_bytes(derive)

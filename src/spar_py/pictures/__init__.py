@@ -2,6 +2,8 @@
 cell at every step.
 
 - :mod:`.graphs`: DOT text from the plan JSON, laid out and drawn by Graphviz's ``dot``;
+- :mod:`.precedence`: a derived product's precedence graph, drawn the same way (``spar kb
+  derive --dot/--png``);
 - :mod:`.scene`: the world at each step, read from the plan JSON's per-step ``poses``;
 - :mod:`.cell`: the cell picture of one scene (matplotlib).
 
