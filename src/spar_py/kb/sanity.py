@@ -159,18 +159,37 @@ def _local(s: Solid) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return (solid_points(s), *_axes(s))
 
 
-def _depth(a: tuple[np.ndarray, np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray, np.ndarray]) -> float:
-    """:func:`overlap_depth` of two primitives already :func:`_placed` (cell unit)."""
-    (P1, n1, e1), (P2, n2, e2) = a, b
-    u, v = e1[:, None, :], e2[None, :, :]  # every edge of one with every edge of the other
-    cross = np.stack([u[..., 1] * v[..., 2] - u[..., 2] * v[..., 1], u[..., 2] * v[..., 0] - u[..., 0] * v[..., 2],
-                      u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]], axis=-1).reshape(-1, 3)  # np.cross's terms
-    A = np.concatenate([n1, n2, cross])
-    norm = np.linalg.norm(A, axis=1)
-    A = A[norm > 1e-9] / norm[norm > 1e-9, None]            # parallel edges give no axis
+#: Edge-pair axes projected per block in :func:`_depth` (two mesh hulls of thousands of edges
+#: each give millions of cross products: projected a block at a time, memory stays bounded).
+AXES_BLOCK = 1 << 14
+
+
+def _overlap(P1: np.ndarray, P2: np.ndarray, A: np.ndarray) -> float:
+    """The least overlap of the projections of points P1 and P2 on the axes A (unit rows)."""
     p1, p2 = P1 @ A.T, P2 @ A.T                              # (k, axes)
-    over = np.minimum(p1.max(axis=0) - p2.min(axis=0), p2.max(axis=0) - p1.min(axis=0))
-    return float(over.min())
+    return float(np.minimum(p1.max(axis=0) - p2.min(axis=0), p2.max(axis=0) - p1.min(axis=0)).min())
+
+
+def _depth(a: tuple[np.ndarray, np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray, np.ndarray]) -> float:
+    """:func:`overlap_depth` of two primitives already :func:`_placed` (cell unit). The face
+    normals are tried first: when one separates the two (the overlap <= 0) that is the answer
+    (apart is apart, however far); the edges' cross products only when none does."""
+    (P1, n1, e1), (P2, n2, e2) = a, b
+    depth = _overlap(P1, P2, np.concatenate([n1, n2]))
+    if depth <= 0:
+        return depth
+    rows = max(1, AXES_BLOCK // max(1, len(e2)))
+    for k in range(0, len(e1), rows):
+        u, v = e1[k:k + rows, None, :], e2[None, :, :]       # every edge of one with every edge of the other
+        A = np.stack([u[..., 1] * v[..., 2] - u[..., 2] * v[..., 1], u[..., 2] * v[..., 0] - u[..., 0] * v[..., 2],
+                      u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]], axis=-1).reshape(-1, 3)  # np.cross's terms
+        norm = np.linalg.norm(A, axis=1)
+        A = A[norm > 1e-9] / norm[norm > 1e-9, None]        # parallel edges give no axis
+        if len(A):
+            depth = min(depth, _overlap(P1, P2, A))
+            if depth <= 0:
+                return depth
+    return depth
 
 
 # --------------------------------------------------------------------------- checks
