@@ -170,25 +170,37 @@ def _overlap(P1: np.ndarray, P2: np.ndarray, A: np.ndarray) -> float:
     return float(np.minimum(p1.max(axis=0) - p2.min(axis=0), p2.max(axis=0) - p1.min(axis=0)).min())
 
 
-def _depth(a: tuple[np.ndarray, np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray, np.ndarray]) -> float:
-    """:func:`overlap_depth` of two primitives already :func:`_placed` (cell unit). The face
-    normals are tried first: when one separates the two (the overlap <= 0) that is the answer
-    (apart is apart, however far); the edges' cross products only when none does."""
+def _cross_axes(e1: np.ndarray, e2: np.ndarray) -> np.ndarray:
+    """Every edge of e1 crossed with every edge of e2 (np.cross's terms), (len(e1) len(e2), 3)."""
+    u, v = e1[:, None, :], e2[None, :, :]
+    return np.stack([u[..., 1] * v[..., 2] - u[..., 2] * v[..., 1], u[..., 2] * v[..., 0] - u[..., 0] * v[..., 2],
+                     u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]], axis=-1).reshape(-1, 3)
+
+
+def _unit_axes(A: np.ndarray) -> np.ndarray:
+    """The rows of A normalised, those shorter than 1e-9 (parallel edges) dropped."""
+    norm = np.linalg.norm(A, axis=1)
+    return A[norm > 1e-9] / norm[norm > 1e-9, None]
+
+
+def _depth(a: tuple[np.ndarray, np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray, np.ndarray],
+           apart_is_enough: bool = False) -> float:
+    """:func:`overlap_depth` of two primitives already :func:`_placed` (cell unit): the least
+    overlap over every axis. With ``apart_is_enough`` (the sanity check asks no more than
+    whether they overlap) the face normals are tried first and the edge pairs then a block
+    of AXES_BLOCK at a time, and the first overlap <= 0 is the answer: two mesh hulls of
+    thousands of edges each are not crossed all at once."""
     (P1, n1, e1), (P2, n2, e2) = a, b
-    depth = _overlap(P1, P2, np.concatenate([n1, n2]))
-    if depth <= 0:
-        return depth
+    if not apart_is_enough:
+        return _overlap(P1, P2, _unit_axes(np.concatenate([n1, n2, _cross_axes(e1, e2)])))
+    depth = _overlap(P1, P2, _unit_axes(np.concatenate([n1, n2])))
     rows = max(1, AXES_BLOCK // max(1, len(e2)))
     for k in range(0, len(e1), rows):
-        u, v = e1[k:k + rows, None, :], e2[None, :, :]       # every edge of one with every edge of the other
-        A = np.stack([u[..., 1] * v[..., 2] - u[..., 2] * v[..., 1], u[..., 2] * v[..., 0] - u[..., 0] * v[..., 2],
-                      u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]], axis=-1).reshape(-1, 3)  # np.cross's terms
-        norm = np.linalg.norm(A, axis=1)
-        A = A[norm > 1e-9] / norm[norm > 1e-9, None]        # parallel edges give no axis
+        if depth <= 0:
+            break
+        A = _unit_axes(_cross_axes(e1[k:k + rows], e2))
         if len(A):
             depth = min(depth, _overlap(P1, P2, A))
-            if depth <= 0:
-                return depth
     return depth
 
 
@@ -326,7 +338,7 @@ def _overlaps(cell: Cell) -> Iterator[KBError]:
         a, b = pos[i], pos[j]
         if np.linalg.norm(a.T[:3, 3] - b.T[:3, 3]) > radii[i] + radii[j] + tol:
             continue  # bounding spheres apart
-        depth = max((_depth(at(i, m), at(j, n)) for m in range(len(shapes[i])) for n in range(len(shapes[j]))),
+        depth = max((_depth(at(i, m), at(j, n), True) for m in range(len(shapes[i])) for n in range(len(shapes[j]))),
                     default=0.0)
         if depth > tol:
             yield KBError(cell.file, _position_key(cell, a),

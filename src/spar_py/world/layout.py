@@ -29,7 +29,8 @@ from spar_py.core.model import ObjectModel, Product, StablePose
 from spar_py.core.units import from_mm
 from spar_py.world.workspace import reachable_ignoring_collisions
 
-__all__ = ["GAP_MM", "PEDESTAL_MM", "STEP_MM", "Layout", "PartPlacement", "apart", "layout_parts", "layout_product", "part_footprint"]
+__all__ = ["GAP_MM", "PEDESTAL_MM", "STEP_MM", "Layout", "PartPlacement", "apart", "layout_parts", "layout_product",
+           "part_footprint"]
 
 #: Kept between two footprints (mm): the open fingers go down beside a part.
 GAP_MM = 50.0
