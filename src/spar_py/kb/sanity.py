@@ -162,6 +162,11 @@ def _local(s: Solid) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 #: Edge-pair axes projected per block in :func:`_depth` (two mesh hulls of thousands of edges
 #: each give millions of cross products: projected a block at a time, memory stays bounded).
 AXES_BLOCK = 1 << 14
+#: Horizontal axes every 5 deg and the vertical, tried with the face normals when only whether
+#: two primitives overlap is asked: any axis that separates them proves they are apart, and
+#: parts side by side on the table are most often apart along a level one.
+LEVEL_AXES = np.concatenate([np.stack([np.cos(a), np.sin(a), np.zeros_like(a)], axis=1)
+                             for a in [np.radians(np.arange(0.0, 180.0, 5.0))]] + [np.eye(3)[2:]])
 
 
 def _overlap(P1: np.ndarray, P2: np.ndarray, A: np.ndarray) -> float:
@@ -187,13 +192,15 @@ def _depth(a: tuple[np.ndarray, np.ndarray, np.ndarray], b: tuple[np.ndarray, np
            apart_is_enough: bool = False) -> float:
     """:func:`overlap_depth` of two primitives already :func:`_placed` (cell unit): the least
     overlap over every axis. With ``apart_is_enough`` (the sanity check asks no more than
-    whether they overlap) the face normals are tried first and the edge pairs then a block
-    of AXES_BLOCK at a time, and the first overlap <= 0 is the answer: two mesh hulls of
+    whether they overlap) LEVEL_AXES are tried first, then the face normals, then the edge
+    pairs a block of AXES_BLOCK at a time, and the first overlap <= 0 is the answer: two mesh hulls of
     thousands of edges each are not crossed all at once."""
     (P1, n1, e1), (P2, n2, e2) = a, b
     if not apart_is_enough:
         return _overlap(P1, P2, _unit_axes(np.concatenate([n1, n2, _cross_axes(e1, e2)])))
-    depth = _overlap(P1, P2, _unit_axes(np.concatenate([n1, n2])))
+    depth = _overlap(P1, P2, LEVEL_AXES)
+    if depth > 0:
+        depth = min(depth, _overlap(P1, P2, _unit_axes(np.concatenate([n1, n2]))))
     rows = max(1, AXES_BLOCK // max(1, len(e2)))
     for k in range(0, len(e1), rows):
         if depth <= 0:
