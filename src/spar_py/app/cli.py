@@ -383,6 +383,8 @@ def cmd_gen(args: argparse.Namespace) -> int:
     """Generate a problem (``spar gen assembly --parts N``, ``spar gen board N``)."""
     from spar_py.app.gen import generate_assembly, generate_board  # the collision layer: this command only
 
+    if args.gen_command == "layout":
+        return _gen_layout(args)
     out = Path(args.output)
     _check_output_dir("-o", out, "the generated problem")
     stage = args.guard.staging(out)  # beside it: the whole tree, or nothing, even on Ctrl-C
@@ -392,6 +394,23 @@ def cmd_gen(args: argparse.Namespace) -> int:
         path = generate_assembly(args.parts, stage, blocks=args.blocks)
     args.guard.move_tree(stage, out)
     print(out / path.relative_to(stage))
+    return EXIT_OK
+
+
+def _gen_layout(args: argparse.Namespace) -> int:
+    """``spar gen layout PRODUCT.yaml [--robot R] [-o PROBLEM.yaml]``: the problem of the
+    product's parts laid out for the robot, to the file or standard output."""
+    from spar_py.app.gen import layout_problem_text
+
+    out = Path(args.output) if args.output else Path(args.product).with_name(f"{Path(args.product).stem}_layout.yaml")
+    if args.output:
+        _check_output_file("-o", out)
+    text = layout_problem_text(args.product, args.robot, out)
+    if args.output:
+        args.guard.write_text(out, text)  # atomically, even on Ctrl-C
+        print(out)
+    else:
+        sys.stdout.write(text)
     return EXIT_OK
 
 
@@ -535,6 +554,13 @@ def build_parser() -> argparse.ArgumentParser:
                        help="the board's rows of holes (default about 0.9 sqrt(N)); columns ceil(N / R)")
     board.add_argument("-o", "--output", default="out/gen", metavar="DIR")
     board.set_defaults(func="gen")
+    lay = gensub.add_parser("layout", help="a product's parts laid out on the table for a robot (a problem)")
+    lay.add_argument("product", metavar="PRODUCT.yaml")
+    lay.add_argument("--robot", default=str(Path(__file__).resolve().parents[3] / "kb" / "robots" / "ur5e.yaml"),
+                     metavar="R", help="the robot file (default kb/robots/ur5e.yaml)")
+    lay.add_argument("-o", "--output", default=None, metavar="PROBLEM.yaml",
+                     help="write the problem here (default: standard output, paths relative to the product's folder)")
+    lay.set_defaults(func="gen")
 
     cache = sub.add_parser("cache", help="compile the planner's Prolog into its cache now (set-up runs it)")
     cache.set_defaults(func="cache")

@@ -17,7 +17,7 @@ from typing import Any, Iterator, Mapping
 
 import numpy as np
 
-from spar_py.core.errors import UnknownKeyError, WrongKindError
+from spar_py.core.errors import SparValueError, UnknownKeyError, WrongKindError
 from spar_py.core.geometry import same_stable_pose
 from spar_py.core.memo import Memo
 from spar_py.core.model import Bounds, Cell, MatingFeature, ObjectModel, Position, Product, Sensor, Term
@@ -234,14 +234,24 @@ def _same_stable_pose(R_abs: np.ndarray, R_pose: np.ndarray, memo: Memo | None) 
 
 def _objects(root: Node, base: Path, unit: str, max_bytes: int, opening: float | None = None,
              gripper: GripperGeometry | None = None, memo: Memo | None = None, reach: float | None = None,
-             product: Product | None = None) -> tuple[dict[str, ObjectModel], dict[str, Position], list[Path]]:
+             product: Product | None = None, layout: Any = None
+             ) -> tuple[dict[str, ObjectModel], dict[str, Position], list[Path]]:
     """The problem's objects (models loaded; a part of ``product`` takes its model from it), their
     initial positions and the model files (``memo``: the load's tables, ``reach`` the arm's
-    length: :func:`load_object`)."""
+    length: :func:`load_object`). With ``layout`` (``layout: auto``: a world.layout.Layout),
+    the product's parts are at its placements (position ``init_PART``, label ``tr_PART``) and
+    ``objects:`` holds only the other objects, if any."""
     objects: dict[str, ObjectModel] = {}
     positions: dict[str, Position] = {}
     files: list[Path] = []
-    for oname, onode in root.key("objects").items():
+    if layout is not None and product is not None:
+        for pl in layout.placements:
+            objects[pl.part] = product.parts[pl.part].model
+            positions[f"tr_{pl.part}"] = Position(f"init_{pl.part}", f"tr_{pl.part}", pl.part, pl.T)
+    onodes = root.key("objects", required=layout is None)
+    for oname, onode in (onodes.items() if onodes is not None else []):
+        if oname in objects:
+            raise onode.fail(f"no entry for {oname} (layout: auto places the parts of product {product.name})")
         if product is not None and oname in product.parts:
             model = product_part(onode, product, oname)
         else:
@@ -258,6 +268,8 @@ def _objects(root: Node, base: Path, unit: str, max_bytes: int, opening: float |
             positions[pos.label] = pos
     if not objects:
         raise root.key("objects").fail("at least one object", "none")
+    if onodes is None:
+        return objects, positions, files
     missing = [p for p in (product.parts if product is not None else ()) if p not in objects]
     if missing:
         raise root.key("objects").fail(f"an initial position for every part of product {product.name}",
@@ -550,6 +562,25 @@ def _product(root: Node, base: Path, unit: str, max_bytes: int, robot: Any, memo
     return product, [ppath, *map(Path, product.files)]
 
 
+def _layout(root: Node, product: Product | None, robot: Any, unit: str) -> Any:
+    """``layout: auto``: the product's parts laid out on the table for the robot
+    (world.layout.layout_product); None without the key. A KBError at the key when there is no
+    ``product:`` or the parts do not fit within reach."""
+    lnode = root.key("layout", required=False)
+    if lnode is None:
+        return None
+    if lnode.value != "auto":
+        raise lnode.fail("auto (the product's parts laid out on the table at load)", show(lnode.value))
+    if product is None:
+        raise lnode.fail("a problem with product: (layout: auto lays out a product's parts)")
+    from spar_py.world.layout import layout_product  # trimesh and the IK: a laid-out cell only
+
+    try:
+        return layout_product(product, robot, unit)
+    except SparValueError as e:
+        raise lnode.fail(str(e)[len("expected "):] if str(e).startswith("expected ") else str(e)) from None
+
+
 def load_problem(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> Cell:
     """Load and validate ``kb/problems/*.yaml`` with the robot and object files it names
     (each file at most ``max_bytes``)."""
@@ -569,8 +600,9 @@ def load_problem(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> Cell:
     memo = Memo()  # this load's tables: the object files of a problem repeat their transforms
     arm = float(np.abs(robot.dh[:, 1]).sum() + np.abs(robot.dh[:, 2]).sum() + np.linalg.norm(robot.tool[:3, 3]))
     product, product_files = _product(root, base, unit, max_bytes, robot, memo, arm)
+    layout = _layout(root, product, robot, unit)
     objects, positions, model_files = _objects(root, base, unit, max_bytes, robot.finger_separation, robot.gripper,
-                                               memo, arm, product)
+                                               memo, arm, product, layout)
     model_files += product_files
     grip = root.key("gripper").choice(("open", "closed"))
     unc = root.key("uncertainty")

@@ -159,18 +159,56 @@ def _local(s: Solid) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return (solid_points(s), *_axes(s))
 
 
-def _depth(a: tuple[np.ndarray, np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray, np.ndarray]) -> float:
-    """:func:`overlap_depth` of two primitives already :func:`_placed` (cell unit)."""
-    (P1, n1, e1), (P2, n2, e2) = a, b
-    u, v = e1[:, None, :], e2[None, :, :]  # every edge of one with every edge of the other
-    cross = np.stack([u[..., 1] * v[..., 2] - u[..., 2] * v[..., 1], u[..., 2] * v[..., 0] - u[..., 0] * v[..., 2],
-                      u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]], axis=-1).reshape(-1, 3)  # np.cross's terms
-    A = np.concatenate([n1, n2, cross])
-    norm = np.linalg.norm(A, axis=1)
-    A = A[norm > 1e-9] / norm[norm > 1e-9, None]            # parallel edges give no axis
+#: Edge-pair axes projected per block in :func:`_depth` (two mesh hulls of thousands of edges
+#: each give millions of cross products: projected a block at a time, memory stays bounded).
+AXES_BLOCK = 1 << 14
+#: Horizontal axes every 5 deg and the vertical, tried with the face normals when only whether
+#: two primitives overlap is asked: any axis that separates them proves they are apart, and
+#: parts side by side on the table are most often apart along a level one.
+LEVEL_AXES = np.concatenate([np.stack([np.cos(a), np.sin(a), np.zeros_like(a)], axis=1)
+                             for a in [np.radians(np.arange(0.0, 180.0, 5.0))]] + [np.eye(3)[2:]])
+
+
+def _overlap(P1: np.ndarray, P2: np.ndarray, A: np.ndarray) -> float:
+    """The least overlap of the projections of points P1 and P2 on the axes A (unit rows)."""
     p1, p2 = P1 @ A.T, P2 @ A.T                              # (k, axes)
-    over = np.minimum(p1.max(axis=0) - p2.min(axis=0), p2.max(axis=0) - p1.min(axis=0))
-    return float(over.min())
+    return float(np.minimum(p1.max(axis=0) - p2.min(axis=0), p2.max(axis=0) - p1.min(axis=0)).min())
+
+
+def _cross_axes(e1: np.ndarray, e2: np.ndarray) -> np.ndarray:
+    """Every edge of e1 crossed with every edge of e2 (np.cross's terms), (len(e1) len(e2), 3)."""
+    u, v = e1[:, None, :], e2[None, :, :]
+    return np.stack([u[..., 1] * v[..., 2] - u[..., 2] * v[..., 1], u[..., 2] * v[..., 0] - u[..., 0] * v[..., 2],
+                     u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]], axis=-1).reshape(-1, 3)
+
+
+def _unit_axes(A: np.ndarray) -> np.ndarray:
+    """The rows of A normalised, those shorter than 1e-9 (parallel edges) dropped."""
+    norm = np.linalg.norm(A, axis=1)
+    return A[norm > 1e-9] / norm[norm > 1e-9, None]
+
+
+def _depth(a: tuple[np.ndarray, np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray, np.ndarray],
+           apart_is_enough: bool = False) -> float:
+    """:func:`overlap_depth` of two primitives already :func:`_placed` (cell unit): the least
+    overlap over every axis. With ``apart_is_enough`` (the sanity check asks no more than
+    whether they overlap) LEVEL_AXES are tried first, then the face normals, then the edge
+    pairs a block of AXES_BLOCK at a time, and the first overlap <= 0 is the answer: two mesh hulls of
+    thousands of edges each are not crossed all at once."""
+    (P1, n1, e1), (P2, n2, e2) = a, b
+    if not apart_is_enough:
+        return _overlap(P1, P2, _unit_axes(np.concatenate([n1, n2, _cross_axes(e1, e2)])))
+    depth = _overlap(P1, P2, LEVEL_AXES)
+    if depth > 0:
+        depth = min(depth, _overlap(P1, P2, _unit_axes(np.concatenate([n1, n2]))))
+    rows = max(1, AXES_BLOCK // max(1, len(e2)))
+    for k in range(0, len(e1), rows):
+        if depth <= 0:
+            break
+        A = _unit_axes(_cross_axes(e1[k:k + rows], e2))
+        if len(A):
+            depth = min(depth, _overlap(P1, P2, A))
+    return depth
 
 
 # --------------------------------------------------------------------------- checks
@@ -307,7 +345,7 @@ def _overlaps(cell: Cell) -> Iterator[KBError]:
         a, b = pos[i], pos[j]
         if np.linalg.norm(a.T[:3, 3] - b.T[:3, 3]) > radii[i] + radii[j] + tol:
             continue  # bounding spheres apart
-        depth = max((_depth(at(i, m), at(j, n)) for m in range(len(shapes[i])) for n in range(len(shapes[j]))),
+        depth = max((_depth(at(i, m), at(j, n), True) for m in range(len(shapes[i])) for n in range(len(shapes[j]))),
                     default=0.0)
         if depth > tol:
             yield KBError(cell.file, _position_key(cell, a),

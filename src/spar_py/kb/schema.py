@@ -153,14 +153,15 @@ OBSTACLE_SCHEMA = keys(["name"], {"box": keys(["min", "max"]), "cylinder": keys(
 
 PROBLEM_SCHEMA = keys(
     {"problem": LEAF, "units": UNITS_SCHEMA, "robot": LEAF,
-     "objects": Named(keys({"initial": OneOrMany(keys(["name", "label", "tm"]))}, ["model"])),
      "gripper": LEAF,
      "uncertainty": keys({"manipulator": BOUNDS_SCHEMA, "objects": Named(BOUNDS_SCHEMA)}),
      "goals": LEAF},
     {"sensors": Named(BOUNDS_SCHEMA), "transforms": Named(keys(["tm"])), "vectors": Named(LEAF),
      "placement_regions": Each(keys(["x", "y"])),
      "obstacles": Each(OBSTACLE_SCHEMA), "table": keys(["x", "y"]), "clearance": LEAF, "collision": LEAF,
-     "home": LEAF, "motion": LEAF, "allow_large_angles": LEAF, "product": LEAF},
+     "home": LEAF, "motion": LEAF, "allow_large_angles": LEAF, "product": LEAF, "layout": LEAF,
+     # required unless layout: auto places a product's parts (kb.problem._objects)
+     "objects": Named(keys({"initial": OneOrMany(keys(["name", "label", "tm"]))}, ["model"]))},
 )
 
 

@@ -1,0 +1,184 @@
+"""A product's parts laid out on the table for a robot (``spar gen layout``, a problem's
+``layout: auto``).
+
+The base part stands at the build spot in the stable pose that keeps the product frame's down
+(-z) down (the product is built there as assembled); every other part lies in its most
+probable stable pose (a derived model lists its poses most probable first, so the first one
+the planner knows), yaw 0. The build spot is on the robot base's x axis, at the distance
+(PEDESTAL_MM + the product's footprint radius up to the arm's length, in STEP_MM) where the
+fewest of the parts' grasps at their assembled poses are out of IK reach (ties: the nearer).
+The other parts, largest footprint first, take the free grid point (STEP_MM) nearest the
+build spot where their footprint keeps GAP_MM (room for the open fingers) from every placed
+footprint and from the assembled product's, PEDESTAL_MM from the robot's base axis, and some
+grasp of the part there is within IK reach (workspace.reachable_ignoring_collisions).
+Footprints: the convex hull of the part's mesh vertices turned by the pose, on the table;
+two are apart when a separating axis (an edge normal of either) shows the gap (conservative).
+
+Lengths in the cell unit (constants in mm, converted), world frame, table top z = 0.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Mapping
+
+import numpy as np
+
+from spar_py.core.errors import SparValueError
+from spar_py.core.geometry import convex_hull_2d
+from spar_py.core.model import ObjectModel, Product, StablePose
+from spar_py.core.units import from_mm
+from spar_py.world.workspace import reachable_ignoring_collisions
+
+__all__ = ["GAP_MM", "PEDESTAL_MM", "STEP_MM", "Layout", "PartPlacement", "apart", "layout_parts", "layout_product",
+           "part_footprint"]
+
+#: Kept between two footprints (mm): the open fingers go down beside a part.
+GAP_MM = 50.0
+#: No footprint nearer the robot's base axis than this (mm): nearer, the upper arm comes down on the table
+#: (a UR5e standing on it; its own cells put parts 457 to 686 mm out).
+PEDESTAL_MM = 350.0
+#: Spacing of the candidate spots (mm).
+STEP_MM = 25.0
+
+
+@dataclass(frozen=True)
+class PartPlacement:
+    """A part's initial position: its stable pose's label and T (4x4, world, cell unit)."""
+
+    part: str
+    pose: str
+    T: np.ndarray
+
+
+@dataclass(frozen=True)
+class Layout:
+    """Every part placed (the base first) and the build spot (world xy, cell unit)."""
+
+    placements: tuple[PartPlacement, ...]
+    build_spot: tuple[float, float]
+
+
+def part_footprint(model: ObjectModel, R: np.ndarray) -> np.ndarray:
+    """(k, 2) the convex footprint of the part's mesh turned by R (object to world) about the
+    object origin, counter-clockwise (cell unit)."""
+    from spar_py.world.shapes import part_mesh  # trimesh: a layout only
+
+    mesh = part_mesh(model)
+    if mesh is None:
+        raise SparValueError(f"expected a part with a mesh or shape to lay out: {model.name} has none")
+    V = np.asarray(mesh.convex_hull.vertices, float)
+    return convex_hull_2d((V @ np.asarray(R, float).T)[:, :2])
+
+
+def _axes(P: np.ndarray) -> np.ndarray:
+    """(k, 2) the unit edge normals of a convex polygon."""
+    e = np.roll(P, -1, axis=0) - P
+    n = np.column_stack([e[:, 1], -e[:, 0]])
+    L = np.linalg.norm(n, axis=1)
+    return n[L > 0] / L[L > 0, None]
+
+
+def apart(P: np.ndarray, t: np.ndarray, Q: np.ndarray, gap: float) -> np.ndarray:
+    """(n,) bool: convex polygon P moved by each row of t (n, 2) lies at least ``gap`` from
+    convex polygon Q along some edge normal of either (a separating axis: conservative)."""
+    t = np.atleast_2d(t)
+    A = np.concatenate([_axes(P), _axes(Q)])
+    pp, qq = P @ A.T, Q @ A.T                   # (k, m) projections
+    pmin, pmax, qmin, qmax = pp.min(0), pp.max(0), qq.min(0), qq.max(0)
+    s = t @ A.T                                  # (n, m) shifts along each axis
+    return ((s + pmin >= qmax + gap) | (s + pmax <= qmin - gap)).any(axis=1)
+
+
+def _grasps_reach(robot, model: ObjectModel, T: np.ndarray) -> int:
+    """How many of the part's grasps at world pose T the arm reaches (IK, wrist above the table)."""
+    G = np.stack([g.T for g in model.grasps.values()]) if model.grasps else np.zeros((0, 4, 4))
+    return int(reachable_ignoring_collisions(robot, T @ G).sum()) if len(G) else 0
+
+
+def _base_pose(model: ObjectModel) -> StablePose:
+    """The base's stable pose that keeps the product frame's -z down (R's third row +z), else
+    its most probable."""
+    poses = list(model.poses.values())
+    up = [p for p in poses if np.allclose(np.asarray(p.R)[2], [0.0, 0.0, 1.0], atol=1e-6)]
+    return (up or poses)[0]
+
+
+def _placed(R: np.ndarray, height: float, xy: np.ndarray) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3] = R
+    T[:2, 3] = xy
+    T[2, 3] = height
+    return T
+
+
+def layout_parts(parts: Mapping[str, ObjectModel], poses: Mapping[str, np.ndarray], base: str, robot,
+                 unit: str, name: str = "the product") -> Layout:
+    """Lay out ``parts`` (name: model; ``poses``: each part's pose in the product frame, 4x4)
+    on the table for ``robot`` (module docstring). SparValueError (one line) when the
+    assembled product is out of reach at every build spot or a part finds no free spot."""
+    step, gap, ped = (from_mm(unit, v) for v in (STEP_MM, GAP_MM, PEDESTAL_MM))
+    arm = float(np.abs(robot.dh[:, 1]).sum() + np.abs(robot.dh[:, 2]).sum() + np.linalg.norm(robot.tool[:3, 3]))
+    B = np.asarray(robot.base, float)
+    o, ex = B[:2, 3], B[:2, 0] / max(np.linalg.norm(B[:2, 0]), 1e-12)
+    bp = _base_pose(parts[base])
+    Rb = np.asarray(bp.R, float)
+    Pb = np.linalg.inv(poses[base])
+    # the assembled product at the base's pose, its footprint about the base's origin
+    world_of = {p: Rb @ (Pb @ poses[p])[:3, :3] for p in parts}
+    shift = {p: Rb @ (Pb @ poses[p])[:3, 3] for p in parts}
+    prod = convex_hull_2d(np.concatenate([part_footprint(parts[p], world_of[p]) + shift[p][:2] for p in parts]))
+    c0 = (prod.min(0) + prod.max(0)) / 2
+    radius = float(np.linalg.norm(prod - c0, axis=1).max())
+    best: tuple[int, float, np.ndarray] | None = None
+    for d in np.arange(ped + radius, arm, step):
+        xy = o + d * ex - c0
+        Tb = _placed(Rb, bp.height, xy)
+        counts = [_grasps_reach(robot, parts[p], Tb @ Pb @ poses[p]) for p in parts]
+        if min(counts) == 0:
+            continue
+        missing = sum(len(parts[p].grasps) - c for p, c in zip(parts, counts))
+        if best is None or missing < best[0]:
+            best = (missing, float(d), xy)
+    if best is None:
+        raise SparValueError(f"expected {name} within {robot.name}'s reach when assembled in front of it: no build "
+                             f"spot from {ped + radius:.0f} to {arm:.0f} {unit} reaches a grasp of every part")
+    xy_b = best[2]
+    out = [PartPlacement(base, bp.label, _placed(Rb, bp.height, xy_b))]
+    taken = [prod + xy_b]
+    others = [p for p in parts if p != base]
+    feet = {p: part_footprint(parts[p], next(iter(parts[p].poses.values())).R) for p in others}
+    others.sort(key=lambda p: -float(np.ptp(feet[p][:, 0]) * np.ptp(feet[p][:, 1])))
+    n = int(np.ceil(arm / step))
+    g = np.arange(-n, n + 1) * step
+    grid = np.stack(np.meshgrid(g, g), axis=-1).reshape(-1, 2) + o
+    spot = xy_b + c0
+    grid = grid[np.argsort(np.linalg.norm(grid - spot, axis=1), kind="stable")]
+    for p in others:
+        pose = next(iter(parts[p].poses.values()))
+        F = feet[p]
+        fc = (F.min(0) + F.max(0)) / 2
+        t = grid - fc                              # the footprint's centre on the grid point
+        ok = np.ones(len(t), bool)
+        for Q in taken:
+            ok &= apart(F, t, Q, gap)
+        # the footprint's every vertex PEDESTAL_MM from the base axis (a convex polygon: its nearest point
+        # to the axis may be on an edge; the centre's distance less the footprint's radius bounds it)
+        ok &= np.linalg.norm(grid - o, axis=1) - float(np.linalg.norm(F - fc, axis=1).max()) >= ped
+        for i in np.flatnonzero(ok):
+            T = _placed(np.asarray(pose.R, float), pose.height, t[i])
+            if _grasps_reach(robot, parts[p], T):
+                out.append(PartPlacement(p, pose.label, T))
+                taken.append(F + t[i])
+                break
+        else:
+            raise SparValueError(f"expected room for every part of {name} within {robot.name}'s reach: none for "
+                                 f"{p} (footprint {np.ptp(F[:, 0]):.0f} x {np.ptp(F[:, 1]):.0f} {unit}, "
+                                 f"{gap:.0f} {unit} apart from the others)")
+    return Layout(tuple(out), (float(spot[0]), float(spot[1])))
+
+
+def layout_product(product: Product, robot, unit: str) -> Layout:
+    """:func:`layout_parts` for the parts of a loaded product (cell unit ``unit``)."""
+    return layout_parts({p: pp.model for p, pp in product.parts.items()},
+                        {p: np.asarray(pp.pose, float) for p, pp in product.parts.items()},
+                        product.base, robot, unit, f"product {product.name}")

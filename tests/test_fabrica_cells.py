@@ -1,0 +1,124 @@
+"""Fabrica cells (issue 34 item 6): the product files, the parts laid out on the table
+(world/layout.py: ``spar gen layout``, a problem's ``layout: auto``).
+
+The geometry is checked with our own code: the parts' PLY files read by trimesh alone (cm,
+the product frame: a mesh part's object frame), placed by the loaded positions, against the
+table, each other and the robot's base."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from spar_py.core.errors import KBError
+from spar_py.kb.problem import load_problem
+
+ROOT = Path(__file__).resolve().parents[1]
+FABRICA = ROOT / "kb" / "products" / "fabrica"
+#: UR5e's published reach (mm, from the base axis to the flange) plus its tool's 150 mm.
+UR5E_REACH_MM = 850.0 + 150.0
+CM = 10.0  # mm per cm
+
+
+def _ply_of(product: str) -> dict[str, Path]:
+    """Part name -> its PLY file, read from the product file's ``parts:`` (own parse)."""
+    import yaml
+
+    doc = yaml.safe_load((FABRICA / f"{product}.yaml").read_text())
+    return {p: FABRICA / d["mesh"] for p, d in doc["parts"].items()}
+
+
+@pytest.fixture(scope="module")
+def car():
+    return load_problem(ROOT / "kb" / "problems" / "fabrica_car.yaml")
+
+
+def _placed(cell, product: str) -> dict[str, np.ndarray]:
+    """Each part's mesh vertices at its initial position (world, mm), from the PLY alone."""
+    out = {}
+    for part, f in _ply_of(product).items():
+        V = np.asarray(trimesh.load(f, process=False).vertices, float) * CM
+        T = cell.positions[f"tr_{part}"].T
+        out[part] = V @ T[:3, :3].T + T[:3, 3]
+    return out
+
+
+def test_layout_auto_loads_every_part(car):
+    assert set(car.objects) == set(_ply_of("car"))
+    assert {p.name for p in car.positions.values()} == {f"init_{p}" for p in car.objects}
+
+
+def test_parts_in_stable_poses_on_the_table(car):
+    placed = _placed(car, "car")
+    for pos in car.positions.values():
+        R = pos.T[:3, :3]
+        poses = car.objects[pos.obj].poses.values()
+        assert any(np.allclose(R, p.R, atol=1e-9) and math.isclose(pos.T[2, 3], p.height, abs_tol=1e-6)
+                   for p in poses), pos.obj
+        assert placed[pos.obj][:, 2].min() == pytest.approx(0.0, abs=1e-3), pos.obj
+
+
+def test_base_keeps_the_product_upright_and_others_most_probable(car):
+    base = car.product.base
+    R = car.positions[f"tr_{base}"].T[:3, :3]
+    assert np.allclose(R[2], [0, 0, 1])
+    for pos in car.positions.values():
+        if pos.obj != base:
+            first = next(iter(car.objects[pos.obj].poses.values()))
+            assert np.allclose(pos.T[:3, :3], first.R)
+
+
+def _gap(A: np.ndarray, B: np.ndarray, n: int = 2880) -> float:
+    """The widest projected gap between point sets A and B (k, 2) over n directions."""
+    a = np.linspace(0, np.pi, n, endpoint=False)
+    D = np.stack([np.cos(a), np.sin(a)], axis=1)
+    pa, pb = A @ D.T, B @ D.T
+    return float(np.maximum(pb.min(0) - pa.max(0), pa.min(0) - pb.max(0)).max())
+
+
+def test_footprints_apart_and_within_reach(car):
+    placed = _placed(car, "car")
+    names = list(placed)
+    for i, a in enumerate(names):
+        for b in names[i + 1:]:
+            assert _gap(placed[a][:, :2], placed[b][:, :2]) > 40.0, (a, b)  # room for a finger
+    o = car.robot.base[:2, 3]
+    for part, V in placed.items():
+        r = np.linalg.norm(V[:, :2] - o, axis=1)
+        assert r.min() > 150.0 and r.max() < UR5E_REACH_MM, part
+
+
+def test_gen_layout_writes_the_same_positions(car, tmp_path):
+    from spar_py.app.gen import layout_problem_text
+
+    out = tmp_path / "car_layout.yaml"
+    out.write_text(layout_problem_text(FABRICA / "car.yaml", ROOT / "kb" / "robots" / "ur5e.yaml", out))
+    cell = load_problem(out)
+    for label, pos in car.positions.items():
+        assert np.allclose(cell.positions[label].T, pos.T, atol=1e-6)
+
+
+def _problem(tmp_path: Path, extra: str) -> Path:
+    f = tmp_path / "p.yaml"
+    f.write_text(f"""problem: p
+units: {{length: mm, angle: deg}}
+robot: {ROOT / 'kb' / 'robots' / 'ur5e.yaml'}
+{extra}
+gripper: open
+uncertainty:
+  manipulator: {{dx: [0, 0], dy: [0, 0], dz: [0, 0], dtheta: [0, 0]}}
+  objects: {{}}
+goals:
+  - part_location(a, b)
+""")
+    return f
+
+
+def test_layout_refusals_are_one_line(tmp_path):
+    with pytest.raises(KBError, match=r"layout: expected auto"):
+        load_problem(_problem(tmp_path, f"product: {FABRICA / 'car.yaml'}\nlayout: yes_please"))
+    with pytest.raises(KBError, match=r"layout: expected a problem with product:"):
+        load_problem(_problem(tmp_path, "layout: auto"))
