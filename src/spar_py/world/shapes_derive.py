@@ -2,9 +2,9 @@
 hand-written ones against it.
 
 Stable poses (Fig. 18): trimesh's ``compute_stable_poses`` (deterministic: no noise, one
-sample) gives the resting orientations of the convex hull with the probability of each
-(a hull of more than HULL_FACES_MAX triangles thinned first, each pose then snapped to the
-face of the mesh it rests on);
+sample; world.shapes_stable computes the same with arrays) gives the resting orientations of
+the convex hull with the probability of each (a hull of more than HULL_FACES_MAX triangles
+thinned first, each pose then snapped to the face of the mesh it rests on);
 those below ``PROB_FLOOR`` are dropped, and every remaining one must pass
 :func:`support_check`, our own quasi-static test (the part rests on a face of its own, not
 an edge or a point, and its centre of mass projects inside the support polygon, the convex
@@ -302,7 +302,7 @@ def derive_poses(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fea
                  prefix: str, prob_floor: float = PROB_FLOOR) -> list[DerivedPose]:
     """The stable poses of the part (module docstring), most probable first, labelled
     ``{prefix}1, {prefix}2, ...``."""
-    import trimesh  # ~1.4 s at import: a derivation only
+    from spar_py.world.shapes_stable import stable_poses
 
     A = _arrays(mesh)
     hv = A.V[hull_vertices(mesh)]
@@ -314,7 +314,7 @@ def derive_poses(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fea
                             return_index=True)
         hv = hv[np.sort(keep)]
     hull = _hull_mesh(hv)
-    Ts, probs = trimesh.poses.compute_stable_poses(hull, center_mass=A.com, sigma=0.0, n_samples=1)
+    Ts, probs = stable_poses(hull, A.com)
     tol = from_mm(unit, SUPPORT_TOL_MM)
     normals = [f.normal for f in faces if f.planar]
     normals += [f.direction for f in features if f.kind == "peg"]  # the tips' caps
