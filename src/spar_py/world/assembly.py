@@ -190,6 +190,9 @@ def _contacts(meshes: dict[str, "trimesh.Trimesh"], reach: float, spacing: float
         near = np.all((pts >= lo) & (pts <= hi), axis=1)
         if not near.any():
             continue
+        near[near] = _within(mb, pts[near], reach)
+        if not near.any():
+            continue
         P, T = pts[near], tri[near]
         _, dist, tb = trimesh.proximity.closest_point(mb, P)
         facing = (ma.face_normals[T] * mb.face_normals[tb]).sum(1) < -COS_FACING
@@ -197,6 +200,21 @@ def _contacts(meshes: dict[str, "trimesh.Trimesh"], reach: float, spacing: float
         if keep.any():
             out[a, b] = (P[keep], T[keep], np.asarray(dist)[keep])
     return out
+
+
+def _within(mesh: "trimesh.Trimesh", P: np.ndarray, reach: float) -> np.ndarray:
+    """A mask of the points ``P`` that may lie within ``reach`` of the mesh's surface: those
+    whose cube of half-side ``reach`` meets a triangle's bounding box (a superset of the points
+    within reach; the points outside it are farther). trimesh's closest_point searches a box
+    out to each point's nearest vertex, which on a coarse mesh holds most of its triangles:
+    the points far from the mesh, most of a bounding-box overlap's, are dropped here first."""
+    if len(P) == 0:
+        return np.zeros(0, bool)
+    tree = mesh.triangles_tree
+    r = reach * (1 + 1e-9) + 1e-12
+    boxes = np.column_stack((P - r, P + r))
+    _, counts = tree.intersection_v(boxes[:, :3].copy(), boxes[:, 3:].copy())
+    return np.asarray(counts) > 0
 
 
 # --------------------------------------------------------------------------- mates and seats
