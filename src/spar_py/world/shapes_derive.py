@@ -823,9 +823,10 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fe
             mid = (fa.offset - width / 2) * fa.normal
             p = clean(mid + cen2[0] * e1 + cen2[1] * e2, 1e-9)
             names = tuple(sorted((fa.name, fb.name), key=lambda n: [f.name for f in faces].index(n)))
+            flat = _flatten(pieces)
             for a in _approaches(c, step):
                 T = _tool(p, c, a)
-                if _pad_contact(pieces, areas, e1, e2, T, g, min_area) >= min_area:
+                if _pad_contact(flat, areas, e1, e2, T, g, min_area) >= min_area:
                     cands.append((names, width, T))
     min_len = from_mm(unit, MIN_CONTACT_MM)
     cyl_normals = {c.face: c.normals for c in mesh_cylinders(mesh, faces, unit)}
@@ -912,22 +913,29 @@ def _face_at(faces: list[Face], mesh: "trimesh.Trimesh", p: np.ndarray, unit: st
     return None if k is None else faces[k].name
 
 
-def _pad_contact(pieces: list[np.ndarray], areas: np.ndarray, e1: np.ndarray, e2: np.ndarray, T: np.ndarray,
-                 g: Gripper, need: float = math.inf) -> float:
-    """Area of the overlap pieces (plane basis e1, e2) under one finger pad (tool x within
-    +-finger_width/2, tool z from -finger_length to 0); once the pieces wholly under it reach
-    ``need`` that lower bound is returned."""
+def _flatten(pieces: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Polygons (each (k, 2)) as their corners stacked, their corner counts and the index of
+    each one's first corner: :func:`_pad_contact`'s form, built once per face pair."""
+    sizes = np.array([len(p) for p in pieces], int)
+    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(int)
+    return (np.concatenate(pieces) if pieces else np.zeros((0, 2))), sizes, starts
+
+
+def _pad_contact(flat: tuple[np.ndarray, np.ndarray, np.ndarray], areas: np.ndarray, e1: np.ndarray,
+                 e2: np.ndarray, T: np.ndarray, g: Gripper, need: float = math.inf) -> float:
+    """Area of the overlap pieces (``flat``: :func:`_flatten`'s, plane basis e1, e2) under one
+    finger pad (tool x within +-finger_width/2, tool z from -finger_length to 0); once the
+    pieces wholly under it reach ``need`` that lower bound is returned."""
     x, z, o = T[:3, 0], T[:3, 2], T[:3, 3]
     # plane coordinates (s, t) -> pad coordinates (u, w): affine, the plane's offset drops out
     M = np.array([[e1 @ x, e2 @ x], [e1 @ z, e2 @ z]])
     off = -np.array([o @ x, o @ z])
     u, L = g.finger_width / 2, g.finger_length
     pad = np.array([[-u, -L], [u, -L], [u, 0.0], [-u, 0.0]])
-    if not pieces:
+    corners, sizes, starts = flat
+    if not len(sizes):
         return 0.0
-    sizes = np.array([len(p) for p in pieces])
-    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-    Q = np.concatenate(pieces) @ M.T + off
+    Q = corners @ M.T + off
     qlo, qhi = np.minimum.reduceat(Q, starts), np.maximum.reduceat(Q, starts)
     lo, hi = pad[0], pad[2]
     inside = (qlo >= lo).all(1) & (qhi <= hi).all(1)
