@@ -373,38 +373,48 @@ class Sweeper:
         self.step = step
         self.moving = {p: _fcl_mesh(m, shrink) for p, m in meshes.items()}
         self.fixed = {p: fcl.CollisionObject(_fcl_mesh(m, 0.0), fcl.Transform()) for p, m in meshes.items()}
+        self.bounds = {p: np.asarray(m.bounds, float) for p, m in meshes.items()}
 
     def hits(self, parts: tuple[str, ...], d: np.ndarray, others: list[str], first_only: bool) -> set[str]:
         """The parts of ``others`` that ``parts`` swept along ``d`` (from their poses until
-        clear of the others' bounding box) collide with."""
+        clear of the others' bounding box) collide with: at each of the n steps, each moving
+        part against each other part whose box meets the moving parts' box there. With
+        ``first_only`` the first one found (the answer's truth is all that is asked)."""
         import fcl
 
         if not others:
             return set()
-        lo = np.min([self.meshes[q].bounds[0] for q in others], axis=0)
-        hi = np.max([self.meshes[q].bounds[1] for q in others], axis=0)
-        mlo = np.min([self.meshes[p].bounds[0] for p in parts], axis=0)
-        mhi = np.max([self.meshes[p].bounds[1] for p in parts], axis=0)
+        lo = np.min([self.bounds[q][0] for q in others], axis=0)
+        hi = np.max([self.bounds[q][1] for q in others], axis=0)
+        mlo = np.min([self.bounds[p][0] for p in parts], axis=0)
+        mhi = np.max([self.bounds[p][1] for p in parts], axis=0)
         travel = float(np.abs(d) @ (np.maximum(hi, mhi) - np.minimum(lo, mlo))) + self.step
         n = max(1, int(math.ceil(travel / self.step)))
+        offs = d[None, :] * (travel * np.arange(1, n + 1, dtype=float) / n)[:, None]  # (n, 3), step k at row k-1
+        slo, shi = mlo + offs, mhi + offs
         found: set[str] = set()
         req = fcl.CollisionRequest()
-        for k in range(1, n + 1):
-            off = d * (travel * k / n)
-            slo, shi = mlo + off, mhi + off
-            for p in parts:
-                obj = fcl.CollisionObject(self.moving[p], fcl.Transform(off))
-                for q in others:
-                    if q in found:
-                        continue
-                    b = self.meshes[q].bounds
-                    if np.any(slo > b[1]) or np.any(b[0] > shi):
-                        continue
-                    if fcl.collide(obj, self.fixed[q], req, fcl.CollisionResult()):
-                        found.add(q)
-                        if first_only:
-                            return found
+        for q in others:
+            b = self.bounds[q]
+            steps = np.flatnonzero(~(np.any(slo > b[1], axis=1) | np.any(b[0] > shi, axis=1)))
+            if not len(steps):
+                continue
+            if self._collides(parts, offs[steps], q, req):
+                found.add(q)
+                if first_only:
+                    return found
         return found
+
+    def _collides(self, parts: tuple[str, ...], offs: np.ndarray, q: str, req: Any) -> bool:
+        """Whether a part of ``parts`` moved by one of ``offs`` collides with part ``q``."""
+        import fcl
+
+        for off in offs:
+            for p in parts:
+                if fcl.collide(fcl.CollisionObject(self.moving[p], fcl.Transform(off)), self.fixed[q], req,
+                               fcl.CollisionResult()):
+                    return True
+        return False
 
 
 def _stable(meshes: dict[str, "trimesh.Trimesh"], parts: list[str], tol: float) -> bool:
