@@ -569,25 +569,59 @@ def _overlap(mesh: "trimesh.Trimesh", fa: Face, fb: Face, e1: np.ndarray, e2: np
 
 
 def _box_pairs(alo: np.ndarray, ahi: np.ndarray, blo: np.ndarray, bhi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The pairs (i, j) of 2-D boxes A[i], B[j] (corners lo, hi) that meet, closed: the boxes
-    of A sorted by their low x, each B box's candidates a range of them found by bisection (A's
-    boxes wider than 4 times their median width are tested against every B box instead)."""
-    w = ahi[:, 0] - alo[:, 0]
-    wide = w > 4 * float(np.median(w)) if len(w) else np.zeros(0, bool)
-    narrow = np.flatnonzero(~wide)
-    order = narrow[np.argsort(alo[narrow, 0], kind="stable")]
-    xs = alo[order, 0]
-    wmax = float(w[narrow].max()) if len(narrow) else 0.0
-    lo = np.searchsorted(xs, blo[:, 0] - wmax, "left")
-    counts = np.searchsorted(xs, bhi[:, 0], "right") - lo
-    jj = np.repeat(np.arange(len(blo)), counts)
-    ii = order[np.repeat(lo - np.cumsum(counts) + counts, counts) + np.arange(int(counts.sum()))]
-    wi = np.flatnonzero(wide)
-    if len(wi):
-        ii = np.r_[ii, np.repeat(wi[None], len(blo), 0).ravel()]
-        jj = np.r_[jj, np.repeat(np.arange(len(blo)), len(wi))]
+    """The pairs (i, j) of 2-D boxes A[i], B[j] (corners lo, hi) that meet, closed, ordered by
+    j then i: both sets binned on a grid of cells the size of a median box, the pairs sharing a
+    cell tested (two closed boxes that meet share the cell of their overlap's lowest corner);
+    a box over more than BOX_CELLS_MAX cells is tested against every box of the other set."""
+    na, nb = len(alo), len(blo)
+    if not na or not nb:
+        return np.zeros(0, int), np.zeros(0, int)
+    ext = np.concatenate([ahi - alo, bhi - blo])
+    size = float(np.median(ext.max(1)))
+    if not size > 0:
+        size = float(ext.max()) or 1.0
+    origin = np.minimum(alo.min(0), blo.min(0))
+    span = int(np.floor((max(ahi[:, 1].max(), bhi[:, 1].max()) - origin[1]) / size)) + 2
+    keys_a, rows_a, wide_a = _box_cells(alo, ahi, origin, size, span)
+    keys_b, rows_b, wide_b = _box_cells(blo, bhi, origin, size, span)
+    order = np.argsort(keys_a, kind="stable")
+    keys_a, rows_a = keys_a[order], rows_a[order]
+    start = np.searchsorted(keys_a, keys_b, "left")
+    counts = np.searchsorted(keys_a, keys_b, "right") - start
+    jj = np.repeat(rows_b, counts)
+    ii = rows_a[np.repeat(start - np.cumsum(counts) + counts, counts) + np.arange(int(counts.sum()))]
+    if len(wide_a):
+        ii = np.r_[ii, np.repeat(wide_a, nb)]
+        jj = np.r_[jj, np.tile(np.arange(nb), len(wide_a))]
+    if len(wide_b):
+        ii = np.r_[ii, np.tile(np.arange(na), len(wide_b))]
+        jj = np.r_[jj, np.repeat(wide_b, na)]
+    code = np.unique(jj.astype(np.int64) * na + ii)
+    ii, jj = code % na, code // na
     meet = ((alo[ii] <= bhi[jj]) & (ahi[ii] >= blo[jj])).all(1)
     return ii[meet], jj[meet]
+
+
+#: A box over more cells than this (of the median box's size) is tested against every other.
+BOX_CELLS_MAX = 64
+
+
+def _box_cells(lo: np.ndarray, hi: np.ndarray, origin: np.ndarray, size: float, span: int
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The grid cells (of side ``size`` from ``origin``; key column * span + row) each box
+    covers, as (cell keys, box rows), and the boxes over more than BOX_CELLS_MAX cells (left
+    out of the former)."""
+    c0 = np.floor((lo - origin) / size).astype(np.int64)
+    c1 = np.floor((hi - origin) / size).astype(np.int64)
+    w = c1 - c0 + 1
+    n = w[:, 0] * w[:, 1]
+    wide = np.flatnonzero(n > BOX_CELLS_MAX)
+    n = np.where(n > BOX_CELLS_MAX, 0, n)
+    rows = np.repeat(np.arange(len(lo)), n)
+    local = np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n)
+    cx = c0[rows, 0] + local % w[rows, 0]
+    cy = c0[rows, 1] + local // w[rows, 0]
+    return cx * span + cy, rows, wide
 
 
 def _in_triangles(T: np.ndarray, C: np.ndarray, eps: float = 1e-12) -> np.ndarray:
