@@ -590,16 +590,22 @@ def _box_pairs(alo: np.ndarray, ahi: np.ndarray, blo: np.ndarray, bhi: np.ndarra
     counts = np.searchsorted(keys_a, keys_b, "right") - start
     jj = np.repeat(rows_b, counts)
     ii = rows_a[np.repeat(start - np.cumsum(counts) + counts, counts) + np.arange(int(counts.sum()))]
-    if len(wide_a):
-        ii = np.r_[ii, np.repeat(wide_a, nb)]
-        jj = np.r_[jj, np.tile(np.arange(nb), len(wide_a))]
-    if len(wide_b):
-        ii = np.r_[ii, np.tile(np.arange(na), len(wide_b))]
-        jj = np.r_[jj, np.repeat(wide_b, na)]
-    code = np.unique(jj.astype(np.int64) * na + ii)
-    ii, jj = code % na, code // na
+    cell = np.repeat(keys_b, counts)
     meet = ((alo[ii] <= bhi[jj]) & (ahi[ii] >= blo[jj])).all(1)
-    return ii[meet], jj[meet]
+    ii, jj, cell = ii[meet], jj[meet], cell[meet]
+    # a pair over several shared cells is kept in the one of its overlap's lowest corner only
+    c = np.floor((np.maximum(alo[ii], blo[jj]) - origin) / size).astype(np.int64)
+    own = c[:, 0] * span + c[:, 1] == cell
+    ii, jj = [ii[own]], [jj[own]]
+    narrow_a = np.setdiff1d(np.arange(na), wide_a)
+    for wi, wj in ((np.repeat(wide_a, nb), np.tile(np.arange(nb), len(wide_a))),
+                   (np.tile(narrow_a, len(wide_b)), np.repeat(wide_b, len(narrow_a)))):
+        m = ((alo[wi] <= bhi[wj]) & (ahi[wi] >= blo[wj])).all(1)
+        ii.append(wi[m])
+        jj.append(wj[m])
+    i_all, j_all = np.concatenate(ii), np.concatenate(jj)
+    order = np.lexsort((i_all, j_all))
+    return i_all[order], j_all[order]
 
 
 #: A box over more cells than this (of the median box's size) is tested against every other.
