@@ -393,11 +393,19 @@ def grasp_problem(mesh: "trimesh.Trimesh", T: np.ndarray, width: float, g: Gripp
         return f"{width:.4g} {unit} wide, more than the gripper's opening {g.opening:.4g} {unit}"
     A = _arrays(mesh)
     R, o = T[:3, :3], T[:3, 3]
-    S = (A.S - o) @ R  # triangles' bounding spheres' centres in the tool frame
     reach = 2 * A.diag + g.finger_length + g.palm_depth
-    for what, lo, hi in _gripper_boxes(g, width, reach, from_mm(unit, TOUCH_MM)):
+    boxes = _gripper_boxes(g, width, reach, from_mm(unit, TOUCH_MM))
+    if not boxes:
+        return None
+    # the triangles whose sphere meets the boxes' union box: a superset of each box's below
+    ulo, uhi = np.min([b[1] for b in boxes], axis=0), np.max([b[2] for b in boxes], axis=0)
+    S = (A.S - o) @ R  # triangles' bounding spheres' centres in the tool frame
+    slack = 1e-9 * (1.0 + reach)  # rounding: the union test must not drop what a box test keeps
+    cand = np.flatnonzero((np.abs(S - (ulo + uhi) / 2) <= (uhi - ulo) / 2 + A.rad[:, None] + slack).all(1))
+    S, rad = S[cand], A.rad[cand]
+    for what, lo, hi in boxes:
         # only triangles whose sphere meets the box (grown by the radius) can meet it
-        near = np.flatnonzero((np.abs(S - (lo + hi) / 2) <= (hi - lo) / 2 + A.rad[:, None]).all(1))
+        near = cand[(np.abs(S - (lo + hi) / 2) <= (hi - lo) / 2 + rad[:, None]).all(1)]
         if not len(near):
             continue
         tri = (A.tri[near] - o) @ R
