@@ -4,7 +4,8 @@ The benchmarks are bench.ik (closed-form IK against Robotics Toolbox), bench.sup
 (SUP/INF tightness and time), bench.planning (the paper's cell warm and cold, the
 generated N-peg problems), bench.fd (phase 1 against Fast Downward on the same
 problems), bench.coldstart and bench.derive (object models derived from shapes and
-meshes, issue 14), bench.products (the task board, issue 33); each also runs on its own
+meshes, issue 14), bench.products (the task board, issue 33), bench.fabrica (Fabrica's assemblies
+derived from their meshes, issue 34); each also runs on its own
 (``python -m bench.ik`` ...), and ``python -m bench --only products`` runs one and replaces its
 section and target rows in RESULTS.md.
 Figures are medians of repeated runs; every ratio compares two figures measured in the
@@ -22,7 +23,7 @@ import sys
 import time
 from pathlib import Path
 
-from . import coldstart, collision, derive, fd, ik, memory, motion, planning, products, supinf
+from . import coldstart, collision, derive, fabrica, fd, ik, memory, motion, planning, products, supinf
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "RESULTS.md"
@@ -53,14 +54,16 @@ FULL = {"ik": {"n": 10_000, "single": 1000, "rtb": 200, "repeats": 5}, "derive":
         "memory": {"plans": 1000, "warmup": 50},
         "coldstart": {"repeats": 15, "importtime_runs": 5},
         "fd": {"ns": fd.NS}, "motion": {"seeds": 10}, "collision": {"repeats": 5},
-        "products": {"ns": products.NS, "repeats": products.REPEATS}}
+        "products": {"ns": products.NS, "repeats": products.REPEATS},
+        "fabrica": {"repeats": fabrica.REPEATS}}
 QUICK = {"ik": {"n": 1000, "single": 100, "rtb": 20, "repeats": 3}, "derive": {"repeats": 2},
          "supinf": {"per_length": 1, "lengths": (1, 4, 8), "repeats": 3, "deep_count": 2},
          "planning": {"quick": True, "max_n": 2, "timeout": 60.0},
          "memory": {"plans": 100, "warmup": 10, "processes": 1},
          "coldstart": {"repeats": 3, "importtime_runs": 1},
          "fd": {"ns": (1, 2)}, "motion": {"seeds": 2, "budget": 0.5},
-         "collision": {"repeats": 1, "quick": True}, "products": {"ns": (5,), "repeats": 1}}
+         "collision": {"repeats": 1, "quick": True}, "products": {"ns": (5,), "repeats": 1},
+         "fabrica": {"which": ["beam"], "repeats": 1}}
 
 
 # ---------------------------------------------------------------------- where and with what
@@ -138,7 +141,8 @@ def run_all(quick: bool = False, log=None) -> dict:
                      ("fd", lambda: fd.run(**sizes["fd"], progress=say)),
                      ("motion", lambda: motion.run(**sizes.get("motion", {}))),
                      ("collision", lambda: collision.run(**sizes.get("collision", {}))),
-                     ("products", lambda: products.run(**sizes["products"], progress=say))):
+                     ("products", lambda: products.run(**sizes["products"], progress=say)),
+                     ("fabrica", lambda: fabrica.run(**sizes["fabrica"], progress=say))):
         say(f"== {name}")
         t = time.perf_counter()
         out[name] = fn()
@@ -254,7 +258,8 @@ def render(r: dict) -> str:
          if "n50" in v else []
     ) + ([[f"UR IK, all 8 branches, batch <= {IK_US_PER_POSE:g} us/pose (issue 17)", v["ur_ik_us"][1],
            _met(v["ur_ik_us"][0])]] if "ur_ik_us" in v else []
-    ) + coldstart.target_rows(r.get("coldstart")) + products.target_rows(r.get("products")) + [
+    ) + coldstart.target_rows(r.get("coldstart")) + products.target_rows(r.get("products"))
+      + fabrica.target_rows(r.get("fabrica")) + [
         [f"RSS growth, {name}, <= {RSS_KB_PER_PLAN:g} kB per plan (issue 12)", v[key][1], _met(v[key][0])]
          for key, name in (("rss_paper", "paper's cell"), ("rss_n3", "generated N = 3"))
          if key in v])
@@ -424,6 +429,9 @@ def render(r: dict) -> str:
     if r.get("products"):
         L += products.render(r["products"])
 
+    if r.get("fabrica"):
+        L += fabrica.render(r["fabrica"])
+
     if r.get("memory"):
         L += ["## Memory per plan (bench/memory.py)", "",
               ("Each cell in 3 fresh processes (the median is the figure; each process's figure beside it): "
@@ -534,7 +542,9 @@ def reading(r: dict) -> str:
 
 #: The benchmarks ``--only`` runs alone: name -> (run at the full or quick sizes, splice into RESULTS.md).
 ONLY = {"products": (lambda quick, say: products.run(**(QUICK if quick else FULL)["products"], progress=say),
-                     products.splice)}
+                     products.splice),
+        "fabrica": (lambda quick, say: fabrica.run(**(QUICK if quick else FULL)["fabrica"], progress=say),
+                    fabrica.splice)}
 
 
 def only(name: str, quick: bool = False, out: Path | None = None) -> None:

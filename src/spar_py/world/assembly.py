@@ -211,6 +211,9 @@ def _contacts(meshes: dict[str, "trimesh.Trimesh"], reach: float, spacing: float
         near = np.all((pts >= lo) & (pts <= hi), axis=1)
         if not near.any():
             continue
+        near[near] = _within(mb, pts[near], reach)
+        if not near.any():
+            continue
         P, T = pts[near], tri[near]
         _, dist, tb = trimesh.proximity.closest_point(mb, P)
         facing = (ma.face_normals[T] * mb.face_normals[tb]).sum(1) < -COS_FACING
@@ -218,6 +221,21 @@ def _contacts(meshes: dict[str, "trimesh.Trimesh"], reach: float, spacing: float
         if keep.any():
             out[a, b] = (P[keep], T[keep], np.asarray(dist)[keep])
     return out
+
+
+def _within(mesh: "trimesh.Trimesh", P: np.ndarray, reach: float) -> np.ndarray:
+    """A mask of the points ``P`` that may lie within ``reach`` of the mesh's surface: those
+    whose cube of half-side ``reach`` meets a triangle's bounding box (a superset of the points
+    within reach; the points outside it are farther). trimesh's closest_point searches a box
+    out to each point's nearest vertex, which on a coarse mesh holds most of its triangles:
+    the points far from the mesh, most of a bounding-box overlap's, are dropped here first."""
+    if len(P) == 0:
+        return np.zeros(0, bool)
+    tree = mesh.triangles_tree
+    r = reach * (1 + 1e-9) + 1e-12
+    boxes = np.column_stack((P - r, P + r))
+    _, counts = tree.intersection_v(boxes[:, :3].copy(), boxes[:, 3:].copy())
+    return np.asarray(counts) > 0
 
 
 # --------------------------------------------------------------------------- mates and seats
@@ -464,38 +482,48 @@ class Sweeper:
         self.step = step
         self.moving = {p: _fcl_mesh(m, shrink) for p, m in meshes.items()}
         self.fixed = {p: fcl.CollisionObject(_fcl_mesh(m, 0.0), fcl.Transform()) for p, m in meshes.items()}
+        self.bounds = {p: np.asarray(m.bounds, float) for p, m in meshes.items()}
 
     def hits(self, parts: tuple[str, ...], d: np.ndarray, others: list[str], first_only: bool) -> set[str]:
         """The parts of ``others`` that ``parts`` swept along ``d`` (from their poses until
-        clear of the others' bounding box) collide with."""
+        clear of the others' bounding box) collide with: at each of the n steps, each moving
+        part against each other part whose box meets the moving parts' box there. With
+        ``first_only`` the first one found (the answer's truth is all that is asked)."""
         import fcl
 
         if not others:
             return set()
-        lo = np.min([self.meshes[q].bounds[0] for q in others], axis=0)
-        hi = np.max([self.meshes[q].bounds[1] for q in others], axis=0)
-        mlo = np.min([self.meshes[p].bounds[0] for p in parts], axis=0)
-        mhi = np.max([self.meshes[p].bounds[1] for p in parts], axis=0)
+        lo = np.min([self.bounds[q][0] for q in others], axis=0)
+        hi = np.max([self.bounds[q][1] for q in others], axis=0)
+        mlo = np.min([self.bounds[p][0] for p in parts], axis=0)
+        mhi = np.max([self.bounds[p][1] for p in parts], axis=0)
         travel = float(np.abs(d) @ (np.maximum(hi, mhi) - np.minimum(lo, mlo))) + self.step
         n = max(1, int(math.ceil(travel / self.step)))
+        offs = d[None, :] * (travel * np.arange(1, n + 1, dtype=float) / n)[:, None]  # (n, 3), step k at row k-1
+        slo, shi = mlo + offs, mhi + offs
         found: set[str] = set()
         req = fcl.CollisionRequest()
-        for k in range(1, n + 1):
-            off = d * (travel * k / n)
-            slo, shi = mlo + off, mhi + off
-            for p in parts:
-                obj = fcl.CollisionObject(self.moving[p], fcl.Transform(off))
-                for q in others:
-                    if q in found:
-                        continue
-                    b = self.meshes[q].bounds
-                    if np.any(slo > b[1]) or np.any(b[0] > shi):
-                        continue
-                    if fcl.collide(obj, self.fixed[q], req, fcl.CollisionResult()):
-                        found.add(q)
-                        if first_only:
-                            return found
+        for q in others:
+            b = self.bounds[q]
+            steps = np.flatnonzero(~(np.any(slo > b[1], axis=1) | np.any(b[0] > shi, axis=1)))
+            if not len(steps):
+                continue
+            if self._collides(parts, offs[steps], q, req):
+                found.add(q)
+                if first_only:
+                    return found
         return found
+
+    def _collides(self, parts: tuple[str, ...], offs: np.ndarray, q: str, req: Any) -> bool:
+        """Whether a part of ``parts`` moved by one of ``offs`` collides with part ``q``."""
+        import fcl
+
+        for off in offs:
+            for p in parts:
+                if fcl.collide(fcl.CollisionObject(self.moving[p], fcl.Transform(off)), self.fixed[q], req,
+                               fcl.CollisionResult()):
+                    return True
+        return False
 
 
 def _stable(meshes: dict[str, "trimesh.Trimesh"], parts: list[str], tol: float) -> bool:
@@ -520,104 +548,17 @@ def _up_in_every_pose(meshes: dict[str, "trimesh.Trimesh"], parts: list[str], d:
     outward normal n and turns d's z component into -n . d)."""
     import trimesh
 
+    from spar_py.world.shapes_stable import stable_poses
+
     body = trimesh.util.concatenate([meshes[p] for p in parts])
     try:
-        normals = _stable_normals(body.convex_hull, body.center_mass)
+        T, _ = stable_poses(body.convex_hull, body.center_mass)
+        normals = -np.asarray(T, float)[:, 2, :3].reshape(-1, 3)
     except Exception:  # qhull on a degenerate body: judge the product's orientation alone
         return bool(d[2] > UP_Z)
     if len(normals) == 0:
         return bool(d[2] > UP_Z)
     return all(float(-n @ d) > UP_Z for n in normals)
-
-
-def _stable_normals(mesh: "trimesh.Trimesh", com: np.ndarray) -> np.ndarray:
-    """The outward normals of the faces ``trimesh.poses.compute_stable_poses(mesh, com)`` rests
-    ``mesh`` on (sigma 0, threshold 0: the same faces, first of each normal rounded to 1e-3),
-    its topple graph built with arrays instead of a per-face loop; falls back to trimesh where
-    the hull's adjacency is not the plain manifold one or com is not strictly inside."""
-    import trimesh
-    from trimesh.triangles import points_to_barycentric
-
-    def by_trimesh() -> np.ndarray:
-        T, _ = trimesh.poses.compute_stable_poses(mesh, center_mass=com)
-        return np.array([-t[2, :3] for t in T]).reshape(-1, 3)
-
-    cvh = mesh.convex_hull
-    com = np.asarray(com, float)
-    tri = np.asarray(cvh.triangles, float)
-    N = np.asarray(cvh.face_normals, float)
-    n = len(tri)
-    if not np.all(np.einsum("ij,ij->i", com - cvh.triangles_center, N) < 0):
-        return by_trimesh()
-    pairs = np.asarray(cvh.face_adjacency, int)
-    edges = np.asarray(cvh.face_adjacency_edges, int)
-    repeated = len(np.unique(np.sort(pairs, axis=1), axis=0)) != len(pairs)
-    if repeated or np.bincount(pairs.ravel(), minlength=n).min() == 0:
-        return by_trimesh()
-    # static probabilities (L'Huilier's formula on the unit sphere about com)
-    sv = tri - com
-    sv = sv / np.linalg.norm(sv, axis=2)[..., None]
-    with np.errstate(all="ignore"):
-        a = np.arccos(np.clip(np.einsum("ij,ij->i", sv[:, 0], sv[:, 1]), -1, 1))
-        b = np.arccos(np.clip(np.einsum("ij,ij->i", sv[:, 1], sv[:, 2]), -1, 1))
-        c = np.arccos(np.clip(np.einsum("ij,ij->i", sv[:, 2], sv[:, 0]), -1, 1))
-        s = (a + b + c) / 2.0
-        prob = 1.0 / np.pi * np.arctan(np.sqrt(np.tan(s / 2) * np.tan((s - a) / 2) * np.tan((s - b) / 2)
-                                                * np.tan((s - c) / 2)))
-    # where each unstable face topples: the first neighbour (adjacency order) across whose edge
-    # the projected com lies, else the last neighbour
-    proj = com - np.einsum("ij,ij->i", N, com - tri[:, 0])[:, None] * N
-    unstable = np.any(points_to_barycentric(tri, proj) < 0, axis=1)
-    rows = np.concatenate([np.arange(len(pairs)), np.arange(len(pairs))])
-    face = np.concatenate([pairs[:, 0], pairs[:, 1]])
-    other = np.concatenate([pairs[:, 1], pairs[:, 0]])
-    order = np.lexsort((rows, face))
-    face, other, rows = face[order], other[order], rows[order]
-    keep = unstable[face]
-    face, other, rows = face[keep], other[keep], rows[keep]
-    cen = np.asarray(cvh.triangles_center, float)[face]
-    nrm, pc = N[face], proj[face]
-    V = np.asarray(cvh.vertices, float)
-    v1, v2 = V[edges[rows, 0]], V[edges[rows, 1]]
-    swap = np.einsum("ij,ij->i", np.cross(v1 - cen, v2 - cen), nrm) < 0
-    v1, v2 = np.where(swap[:, None], v2, v1), np.where(swap[:, None], v1, v2)
-    ok = (_orient3d(cen, v1, v1 + nrm, pc) >= 0) & (_orient3d(cen, v2 + nrm, v2, pc) >= 0)
-    succ = np.full(n, -1)
-    last = np.r_[face[1:] != face[:-1], True] if len(face) else np.zeros(0, bool)
-    succ[face[last]] = other[last]
-    hit = np.flatnonzero(ok)
-    first = hit[np.r_[True, face[hit][1:] != face[hit][:-1]]] if len(hit) else hit
-    succ[face[first]] = other[first]
-    # the probabilities flow to the sinks breadth first, in trimesh's order
-    p = prob.tolist()
-    nxt = succ.tolist()
-    indeg = np.bincount(succ[succ >= 0], minlength=n)
-    nodes = np.flatnonzero(indeg == 0).tolist()
-    it = 0
-    while nodes and it <= len(mesh.faces):
-        new = []
-        for u in nodes:
-            v = nxt[u]
-            if v < 0:
-                continue
-            p[v] += p[u]
-            p[u] = 0.0
-            new.append(v)
-        nodes = new
-        it += 1
-    out: dict[tuple[float, ...], np.ndarray] = {}
-    for i in np.flatnonzero(np.asarray(p) > 0.0):
-        out.setdefault(tuple(np.around(N[i], decimals=3)), N[i])
-    return np.array(list(out.values())).reshape(-1, 3)
-
-
-def _orient3d(pa: np.ndarray, pb: np.ndarray, pc: np.ndarray, pd: np.ndarray) -> np.ndarray:
-    """Row-wise orientation of point pd against the plane through pa, pb, pc (trimesh.poses'
-    _orient3dfast): positive above, negative below, zero on it."""
-    ad, bd, cd = pa - pd, pb - pd, pc - pd
-    return (ad[:, 0] * (bd[:, 1] * cd[:, 2] - bd[:, 2] * cd[:, 1])
-            + bd[:, 0] * (cd[:, 1] * ad[:, 2] - cd[:, 2] * ad[:, 1])
-            + cd[:, 0] * (ad[:, 1] * bd[:, 2] - ad[:, 2] * bd[:, 1]))
 
 
 # --------------------------------------------------------------------------- the derivation

@@ -704,9 +704,11 @@ def _sub_rests(meshes: list, owned: list[np.ndarray], tol: float) -> list[tuple[
     ``meshes`` (the root's first, all in the root's frame), as :func:`subassembly_poses` says."""
     import trimesh  # a derivation only
 
+    from spar_py.world.shapes_stable import stable_poses
+
     union = trimesh.util.concatenate(meshes)
     com = np.sum([m.center_mass * m.volume for m in meshes], axis=0) / sum(m.volume for m in meshes)
-    Ts, probs = trimesh.poses.compute_stable_poses(union.convex_hull, center_mass=com, sigma=0.0, n_samples=1)
+    Ts, probs = stable_poses(union.convex_hull, com)
     cos_merge = np.cos(np.radians(SUB_MERGE_DEG))
     rests: list[list] = []  # [R, height, prob], most probable first
     for T, p in sorted(zip(Ts, probs), key=lambda tp: -tp[1]):

@@ -468,33 +468,15 @@ def derive_faces(mesh: "trimesh.Trimesh", features: "tuple[FeatureGeometry, ...]
             label[ft] = len(groups)
             groups.append(np.flatnonzero(ft))
             owners.append(feature)
-    # union-find over edges between non-feature triangles: coplanar or smoothly bent
-    parent = np.arange(n)
-
-    def find(i: int) -> int:
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
-
-    adj = mesh.face_adjacency
-    ang = mesh.face_adjacency_angles
-    join = (ang < math.radians(SMOOTH_DEG)) & (label[adj[:, 0]] < 0) & (label[adj[:, 1]] < 0)
-    for a, b in adj[join]:
-        ra, rb = find(a), find(b)
-        if ra != rb:
-            parent[max(ra, rb)] = min(ra, rb)
-    roots = np.array([find(i) for i in range(n)])
-    free = np.flatnonzero(label < 0)
-    comps: dict[int, list[int]] = {}
-    for i in free:
-        comps.setdefault(int(roots[i]), []).append(int(i))
+    # connected components over edges between non-feature triangles: coplanar or smoothly
+    # bent; each component's triangles ascending, the components in the order of their first
+    comps = _smooth_components(mesh, label < 0)
     area = mesh.area_faces
     # planar components on one plane are merged ("merged where coplanar")
     cos_tol = math.cos(math.radians(COPLANAR_DEG))
     planes: list[tuple[np.ndarray, float, list[int]]] = []
     curved: list[list[int]] = []
-    for tris in comps.values():
+    for tris in comps:
         t = np.asarray(tris)
         nrm = (N[t] * area[t, None]).sum(0)
         nrm /= max(np.linalg.norm(nrm), 1e-300)
@@ -512,6 +494,27 @@ def derive_faces(mesh: "trimesh.Trimesh", features: "tuple[FeatureGeometry, ...]
     groups += [np.asarray(sorted(p[2])) for p in planes] + [np.asarray(sorted(c)) for c in curved]
     faces = [_face(owners[k].name if k < n_feat else "", g, mesh, k < n_feat) for k, g in enumerate(groups)]
     return _name_faces(faces, mesh, face_names, tol, from_mm(unit, 1.0))
+
+
+def _smooth_components(mesh: "trimesh.Trimesh", free: np.ndarray) -> list[list[int]]:
+    """The triangles of ``free`` (a mask) joined across edges bent less than SMOOTH_DEG, as
+    lists of ascending indices, ordered by their lowest index."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+
+    n = len(mesh.faces)
+    adj = np.asarray(mesh.face_adjacency, int).reshape(-1, 2)
+    ang = np.asarray(mesh.face_adjacency_angles, float)
+    e = adj[(ang < math.radians(SMOOTH_DEG)) & free[adj[:, 0]] & free[adj[:, 1]]]
+    g = sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
+    _, lab = connected_components(g, directed=False)
+    first = np.full(lab.max() + 1 if n else 0, n)
+    np.minimum.at(first, lab, np.arange(n))
+    idx = np.flatnonzero(free)
+    key = first[lab[idx]]
+    idx = idx[np.argsort(key, kind="stable")]
+    cuts = np.flatnonzero(np.diff(np.sort(key))) + 1
+    return [c.tolist() for c in np.split(idx, cuts)] if len(idx) else []
 
 
 def _face(name: str, tris: np.ndarray, mesh: "trimesh.Trimesh", is_feature: bool) -> Face:

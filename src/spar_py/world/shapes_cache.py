@@ -122,10 +122,11 @@ def _compute(name: str, geometry: Geometry, features: tuple[FeatureGeometry, ...
 def _store(path: Path, data: dict[str, Any]) -> None:
     """Write atomically, then drop the least recently used entries beyond MAX_ENTRIES."""
     try:
+        text = json.dumps(data, allow_nan=False)  # one shot: the C encoder (json.dump streams in Python)
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-", suffix=".json")
         with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            json.dump(data, fh, allow_nan=False)
+            fh.write(text)
         os.replace(tmp, path)
         entries = sorted(path.parent.glob("*.json"), key=lambda p: p.stat().st_mtime)
         for old in entries[: max(0, len(entries) - MAX_ENTRIES)]:

@@ -2,9 +2,9 @@
 hand-written ones against it.
 
 Stable poses (Fig. 18): trimesh's ``compute_stable_poses`` (deterministic: no noise, one
-sample) gives the resting orientations of the convex hull with the probability of each
-(a hull of more than HULL_FACES_MAX triangles thinned first, each pose then snapped to the
-face of the mesh it rests on);
+sample; world.shapes_stable computes the same with arrays) gives the resting orientations of
+the convex hull with the probability of each (a hull of more than HULL_FACES_MAX triangles
+thinned first, each pose then snapped to the face of the mesh it rests on);
 those below ``PROB_FLOOR`` are dropped, and every remaining one must pass
 :func:`support_check`, our own quasi-static test (the part rests on a face of its own, not
 an edge or a point, and its centre of mass projects inside the support polygon, the convex
@@ -302,7 +302,7 @@ def derive_poses(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fea
                  prefix: str, prob_floor: float = PROB_FLOOR) -> list[DerivedPose]:
     """The stable poses of the part (module docstring), most probable first, labelled
     ``{prefix}1, {prefix}2, ...``."""
-    import trimesh  # ~1.4 s at import: a derivation only
+    from spar_py.world.shapes_stable import stable_poses
 
     A = _arrays(mesh)
     hv = A.V[hull_vertices(mesh)]
@@ -314,7 +314,7 @@ def derive_poses(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fea
                             return_index=True)
         hv = hv[np.sort(keep)]
     hull = _hull_mesh(hv)
-    Ts, probs = trimesh.poses.compute_stable_poses(hull, center_mass=A.com, sigma=0.0, n_samples=1)
+    Ts, probs = stable_poses(hull, A.com)
     tol = from_mm(unit, SUPPORT_TOL_MM)
     normals = [f.normal for f in faces if f.planar]
     normals += [f.direction for f in features if f.kind == "peg"]  # the tips' caps
@@ -393,11 +393,19 @@ def grasp_problem(mesh: "trimesh.Trimesh", T: np.ndarray, width: float, g: Gripp
         return f"{width:.4g} {unit} wide, more than the gripper's opening {g.opening:.4g} {unit}"
     A = _arrays(mesh)
     R, o = T[:3, :3], T[:3, 3]
-    S = (A.S - o) @ R  # triangles' bounding spheres' centres in the tool frame
     reach = 2 * A.diag + g.finger_length + g.palm_depth
-    for what, lo, hi in _gripper_boxes(g, width, reach, from_mm(unit, TOUCH_MM)):
+    boxes = _gripper_boxes(g, width, reach, from_mm(unit, TOUCH_MM))
+    if not boxes:
+        return None
+    # the triangles whose sphere meets the boxes' union box: a superset of each box's below
+    ulo, uhi = np.min([b[1] for b in boxes], axis=0), np.max([b[2] for b in boxes], axis=0)
+    S = (A.S - o) @ R  # triangles' bounding spheres' centres in the tool frame
+    slack = 1e-9 * (1.0 + reach)  # rounding: the union test must not drop what a box test keeps
+    cand = np.flatnonzero((np.abs(S - (ulo + uhi) / 2) <= (uhi - ulo) / 2 + A.rad[:, None] + slack).all(1))
+    S, rad = S[cand], A.rad[cand]
+    for what, lo, hi in boxes:
         # only triangles whose sphere meets the box (grown by the radius) can meet it
-        near = np.flatnonzero((np.abs(S - (lo + hi) / 2) <= (hi - lo) / 2 + A.rad[:, None]).all(1))
+        near = cand[(np.abs(S - (lo + hi) / 2) <= (hi - lo) / 2 + rad[:, None]).all(1)]
         if not len(near):
             continue
         tri = (A.tri[near] - o) @ R
@@ -569,25 +577,65 @@ def _overlap(mesh: "trimesh.Trimesh", fa: Face, fb: Face, e1: np.ndarray, e2: np
 
 
 def _box_pairs(alo: np.ndarray, ahi: np.ndarray, blo: np.ndarray, bhi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The pairs (i, j) of 2-D boxes A[i], B[j] (corners lo, hi) that meet, closed: the boxes
-    of A sorted by their low x, each B box's candidates a range of them found by bisection (A's
-    boxes wider than 4 times their median width are tested against every B box instead)."""
-    w = ahi[:, 0] - alo[:, 0]
-    wide = w > 4 * float(np.median(w)) if len(w) else np.zeros(0, bool)
-    narrow = np.flatnonzero(~wide)
-    order = narrow[np.argsort(alo[narrow, 0], kind="stable")]
-    xs = alo[order, 0]
-    wmax = float(w[narrow].max()) if len(narrow) else 0.0
-    lo = np.searchsorted(xs, blo[:, 0] - wmax, "left")
-    counts = np.searchsorted(xs, bhi[:, 0], "right") - lo
-    jj = np.repeat(np.arange(len(blo)), counts)
-    ii = order[np.repeat(lo - np.cumsum(counts) + counts, counts) + np.arange(int(counts.sum()))]
-    wi = np.flatnonzero(wide)
-    if len(wi):
-        ii = np.r_[ii, np.repeat(wi[None], len(blo), 0).ravel()]
-        jj = np.r_[jj, np.repeat(np.arange(len(blo)), len(wi))]
+    """The pairs (i, j) of 2-D boxes A[i], B[j] (corners lo, hi) that meet, closed, ordered by
+    j then i: both sets binned on a grid of cells the size of a median box, the pairs sharing a
+    cell tested (two closed boxes that meet share the cell of their overlap's lowest corner);
+    a box over more than BOX_CELLS_MAX cells is tested against every box of the other set."""
+    na, nb = len(alo), len(blo)
+    if not na or not nb:
+        return np.zeros(0, int), np.zeros(0, int)
+    ext = np.concatenate([ahi - alo, bhi - blo])
+    size = float(np.median(ext.max(1)))
+    if not size > 0:
+        size = float(ext.max()) or 1.0
+    origin = np.minimum(alo.min(0), blo.min(0))
+    span = int(np.floor((max(ahi[:, 1].max(), bhi[:, 1].max()) - origin[1]) / size)) + 2
+    keys_a, rows_a, wide_a = _box_cells(alo, ahi, origin, size, span)
+    keys_b, rows_b, wide_b = _box_cells(blo, bhi, origin, size, span)
+    order = np.argsort(keys_a, kind="stable")
+    keys_a, rows_a = keys_a[order], rows_a[order]
+    start = np.searchsorted(keys_a, keys_b, "left")
+    counts = np.searchsorted(keys_a, keys_b, "right") - start
+    jj = np.repeat(rows_b, counts)
+    ii = rows_a[np.repeat(start - np.cumsum(counts) + counts, counts) + np.arange(int(counts.sum()))]
+    cell = np.repeat(keys_b, counts)
     meet = ((alo[ii] <= bhi[jj]) & (ahi[ii] >= blo[jj])).all(1)
-    return ii[meet], jj[meet]
+    ii, jj, cell = ii[meet], jj[meet], cell[meet]
+    # a pair over several shared cells is kept in the one of its overlap's lowest corner only
+    c = np.floor((np.maximum(alo[ii], blo[jj]) - origin) / size).astype(np.int64)
+    own = c[:, 0] * span + c[:, 1] == cell
+    ii, jj = [ii[own]], [jj[own]]
+    narrow_a = np.setdiff1d(np.arange(na), wide_a)
+    for wi, wj in ((np.repeat(wide_a, nb), np.tile(np.arange(nb), len(wide_a))),
+                   (np.tile(narrow_a, len(wide_b)), np.repeat(wide_b, len(narrow_a)))):
+        m = ((alo[wi] <= bhi[wj]) & (ahi[wi] >= blo[wj])).all(1)
+        ii.append(wi[m])
+        jj.append(wj[m])
+    i_all, j_all = np.concatenate(ii), np.concatenate(jj)
+    order = np.lexsort((i_all, j_all))
+    return i_all[order], j_all[order]
+
+
+#: A box over more cells than this (of the median box's size) is tested against every other.
+BOX_CELLS_MAX = 64
+
+
+def _box_cells(lo: np.ndarray, hi: np.ndarray, origin: np.ndarray, size: float, span: int
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The grid cells (of side ``size`` from ``origin``; key column * span + row) each box
+    covers, as (cell keys, box rows), and the boxes over more than BOX_CELLS_MAX cells (left
+    out of the former)."""
+    c0 = np.floor((lo - origin) / size).astype(np.int64)
+    c1 = np.floor((hi - origin) / size).astype(np.int64)
+    w = c1 - c0 + 1
+    n = w[:, 0] * w[:, 1]
+    wide = np.flatnonzero(n > BOX_CELLS_MAX)
+    n = np.where(n > BOX_CELLS_MAX, 0, n)
+    rows = np.repeat(np.arange(len(lo)), n)
+    local = np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n)
+    cx = c0[rows, 0] + local % w[rows, 0]
+    cy = c0[rows, 1] + local // w[rows, 0]
+    return cx * span + cy, rows, wide
 
 
 def _in_triangles(T: np.ndarray, C: np.ndarray, eps: float = 1e-12) -> np.ndarray:
@@ -824,9 +872,10 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fe
             mid = (fa.offset - width / 2) * fa.normal
             p = clean(mid + cen2[0] * e1 + cen2[1] * e2, 1e-9)
             names = tuple(sorted((fa.name, fb.name), key=lambda n: [f.name for f in faces].index(n)))
+            flat = _flatten(pieces)
             for a in _approaches(c, step):
                 T = _tool(p, c, a)
-                if _pad_contact(pieces, areas, e1, e2, T, g, min_area) >= min_area:
+                if _pad_contact(flat, areas, e1, e2, T, g, min_area) >= min_area:
                     cands.append((names, width, T))
     min_len = from_mm(unit, MIN_CONTACT_MM)
     cyl_normals = {c.face: c.normals for c in mesh_cylinders(mesh, faces, unit)}
@@ -913,22 +962,29 @@ def _face_at(faces: list[Face], mesh: "trimesh.Trimesh", p: np.ndarray, unit: st
     return None if k is None else faces[k].name
 
 
-def _pad_contact(pieces: list[np.ndarray], areas: np.ndarray, e1: np.ndarray, e2: np.ndarray, T: np.ndarray,
-                 g: Gripper, need: float = math.inf) -> float:
-    """Area of the overlap pieces (plane basis e1, e2) under one finger pad (tool x within
-    +-finger_width/2, tool z from -finger_length to 0); once the pieces wholly under it reach
-    ``need`` that lower bound is returned."""
+def _flatten(pieces: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Polygons (each (k, 2)) as their corners stacked, their corner counts and the index of
+    each one's first corner: :func:`_pad_contact`'s form, built once per face pair."""
+    sizes = np.array([len(p) for p in pieces], int)
+    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(int)
+    return (np.concatenate(pieces) if pieces else np.zeros((0, 2))), sizes, starts
+
+
+def _pad_contact(flat: tuple[np.ndarray, np.ndarray, np.ndarray], areas: np.ndarray, e1: np.ndarray,
+                 e2: np.ndarray, T: np.ndarray, g: Gripper, need: float = math.inf) -> float:
+    """Area of the overlap pieces (``flat``: :func:`_flatten`'s, plane basis e1, e2) under one
+    finger pad (tool x within +-finger_width/2, tool z from -finger_length to 0); once the
+    pieces wholly under it reach ``need`` that lower bound is returned."""
     x, z, o = T[:3, 0], T[:3, 2], T[:3, 3]
     # plane coordinates (s, t) -> pad coordinates (u, w): affine, the plane's offset drops out
     M = np.array([[e1 @ x, e2 @ x], [e1 @ z, e2 @ z]])
     off = -np.array([o @ x, o @ z])
     u, L = g.finger_width / 2, g.finger_length
     pad = np.array([[-u, -L], [u, -L], [u, 0.0], [-u, 0.0]])
-    if not pieces:
+    corners, sizes, starts = flat
+    if not len(sizes):
         return 0.0
-    sizes = np.array([len(p) for p in pieces])
-    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-    Q = np.concatenate(pieces) @ M.T + off
+    Q = corners @ M.T + off
     qlo, qhi = np.minimum.reduceat(Q, starts), np.maximum.reduceat(Q, starts)
     lo, hi = pad[0], pad[2]
     inside = (qlo >= lo).all(1) & (qhi <= hi).all(1)
