@@ -7,6 +7,7 @@ fixed}`` (loose by default) and seats ``{seat: P.face, on: Q.face}``. Checked he
 ``PART.FEATURE`` and seat face exists, a peg is narrower than its hole, and a mate's features
 line up at the product poses (world.products.mate_misalignment); then the goals and the
 precedence are compiled (world.products), each refusal one line naming the file and key.
+Derived mates are loose unless ``retention: {PART: fixed}`` says the mates PART goes in by hold.
 Lengths converted to the cell's unit once, here.
 """
 from __future__ import annotations
@@ -361,11 +362,12 @@ def load_product_derived(path: str | Path, unit: str, max_bytes: int = MAX_INPUT
             files.append(str(mp.file))
         parts = {p: parts[p] for p in pnodes}
     links = [_mate(m, parts, unit) for m in mate_nodes]
+    held = _retention_overrides(root, base, derived)
     if derived is not None:
         for i, dm in enumerate(derived.mates):
             pf, hf = dnames.get((i, dm.peg)), dnames.get((i, dm.hole))
             if pf is not None and hf is not None:
-                links.append(Mate(dm.peg, pf, dm.hole, hf, RETENTIONS[0]))
+                links.append(Mate(dm.peg, pf, dm.hole, hf, held.get(_inserted_by(dm, derived), RETENTIONS[0])))
         for j, s in enumerate(derived.seats):
             sf, of = dnames.get((-1 - j, s.part)), dnames.get((-1 - j, s.on))
             if sf is not None and of is not None:
@@ -387,6 +389,32 @@ def load_product_derived(path: str | Path, unit: str, max_bytes: int = MAX_INPUT
     except SparValueError as e:
         raise where.fail("mates that make an assembly", str(e) + _unlinked_contacts(product, derived)) from None
     return LoadedProduct(product, derived, objects, unit)
+
+
+def _inserted_by(dm: Any, derived: AssemblyResult) -> str:
+    """The part whose insertion makes derived mate ``dm``: of its two parts, the later one in the
+    derived order (the base is never inserted)."""
+    order = {p: i for i, ins in enumerate(derived.insertions) for p in ins.parts}
+    return max((dm.peg, dm.hole), key=lambda p: order.get(p, -1))
+
+
+def _retention_overrides(root: Node, base: str, derived: AssemblyResult | None) -> dict[str, str]:
+    """The product file's ``retention: {PART: loose | fixed}``: the retention of the derived mates
+    PART is put in by (a press fit, a snap: ``fixed``); derived mates are loose otherwise. Each
+    key a mesh part other than the base, each value one of RETENTIONS."""
+    rnode = root.key("retention", required=False)
+    if rnode is None:
+        return {}
+    inserted = {p for ins in (derived.insertions[1:] if derived is not None else ()) for p in ins.parts}
+    out: dict[str, str] = {}
+    for part, v in rnode.items():
+        if part not in inserted:
+            near = did_you_mean(part, inserted)
+            what = ("the base (never inserted: the mates into it are its parts')" if part == base
+                    else f"{show(part)}" + (f"; did you mean {near}?" if near else ""))
+            raise v.fail(f"a mesh part inserted by a derived mate ({', '.join(sorted(inserted)) or 'none'})", what)
+        out[part] = v.choice(RETENTIONS)
+    return out
 
 
 def _unlinked_contacts(product: Product, derived: AssemblyResult | None) -> str:

@@ -167,13 +167,14 @@ PROBLEM_SCHEMA = keys(
 
 #: A product file (kb/products): parts at their poses, mates ({peg, hole, retention}) and
 #: seats ({seat, on}) in one list, the base part (kb.products checks which keys go together).
-#: A part gives ``model:`` or ``mesh:`` (its features and mates then derived: world.assembly).
+#: A part gives ``model:`` or ``mesh:`` (its features and mates then derived: world.assembly);
+#: ``retention: {PART: loose | fixed}`` sets the retention of the derived mates PART is put in by.
 PRODUCT_SCHEMA = keys(
     {"product": LEAF, "units": UNITS_SCHEMA,
      "parts": Named(keys({}, {"model": LEAF, "pose": FRAME_SCHEMA, "mesh": LEAF, "units": UNITS_SCHEMA,
                              "features": Each(FEATURE_SCHEMA, 1), "face_names": Named(LEAF)}))},
     {"base": LEAF, "mates": Each(keys({}, ["peg", "hole", "retention", "seat", "on"]), 1),
-     "contact_tol": LEAF, "clearance_max": LEAF},
+     "contact_tol": LEAF, "clearance_max": LEAF, "retention": Named(LEAF)},
 )
 
 
