@@ -123,15 +123,21 @@ def _cause(cell: Cell, goal_data: Any, refusals: Sequence[Refusal]) -> str | Non
 
 def summary(cell: Cell, reason: dict[str, Any], refusals: Sequence[Refusal]) -> str:
     """One line: ``NO PLAN within N actions (...) for GOALS: CAUSE`` (phase 1: the goal that could not be met and its
-    nearest cause; phase 2: why no instance examined could be executed)."""
+    nearest cause; phase 2: why no instance examined could be executed; a product one arm on a table cannot build,
+    world.single_arm: the insertion and what it needs)."""
     goals = f"for {_goal_text(cell)}"
+    single = reason.get("single_arm") or {}
+    if single.get("ok") is False:  # no order and poses keep the loose mates: the cause, whatever the search hit
+        return f"NO PLAN {goals}: {single['why']}"
+    level = (f"; {single['why']}; the only way left inserts sideways (a level tool): {'; '.join(single['level'])}"
+             if single.get("level") else "")
     if reason.get("phase") == 2:
         n = reason.get("instances_examined")
         why = reason.get("why", "")
         own = reason.get("infeasible") or []
         if own:  # steps refused for a reason of their own (a loose part turned, an unstable body): say those
             why = "; ".join(own[:3]) + (f" (and {len(own) - 3} more)" if len(own) > 3 else "")
-        return f"NO PLAN {goals}: none of the {n} plan instances examined can be executed: {why}"
+        return f"NO PLAN {goals}: none of the {n} plan instances examined can be executed: {why}{level}"
     cause = _cause(cell, reason.get("goal_data"), refusals)
     n, bound = reason.get("max_actions"), reason.get("bound")
     size = f" within {n} actions" if n is not None else ""
@@ -139,8 +145,8 @@ def summary(cell: Cell, reason: dict[str, Any], refusals: Sequence[Refusal]) -> 
         size += (f" (the last bound searched completely before the step budget ran out; the bound was {bound})"
                  if n < bound else " (the bound on the plan size; --max-actions raises it)")
     if cause is None:  # not a geometric goal: say so, the term is in --trace and reason.goal
-        return f"NO PLAN{size} {goals}: a goal could not be met (--trace names it)"
-    return f"NO PLAN{size} {goals}: {cause}"
+        return f"NO PLAN{size} {goals}: a goal could not be met (--trace names it){level}"
+    return f"NO PLAN{size} {goals}: {cause}{level}"
 
 
 def expected_failures(instance: dict[str, Any] | None) -> str | None:

@@ -507,6 +507,12 @@ class Planner:
         if plan.outcome is Outcome.NO_PLAN:  # name the colliding pairs that stood in the way, and why
             if run.infeasible:  # steps refused for a reason of their own (stability, retention, support)
                 plan.reason = {**(plan.reason or {}), "infeasible": list(run.infeasible)}
+            if cell.product is not None:  # a product one arm on a table cannot build: say which mate and why
+                from spar_py.world.single_arm import single_arm_report
+
+                sa = single_arm_report(cell.product, cell.unit)
+                if sa is not None and (not sa.ok or sa.level):
+                    plan.reason = {**(plan.reason or {}), "single_arm": sa.to_json()}
             refusals = log.refusals()
             said = collision_lines(refusals)
             if said:

@@ -51,7 +51,8 @@ class Insertion:
 
 @dataclass
 class SingleArmReport:
-    """The search's answer: ``ok`` when some order and poses keep every loose mate; otherwise
+    """The search's answer: ``ok`` when some order and poses keep every loose mate (``level``
+    the insertions it can make only sideways); otherwise
     ``blocked`` the insertion no reachable state could make, ``why`` one line naming it and
     what it needs, ``poses`` what each stable pose of the partial product said."""
 
@@ -60,12 +61,18 @@ class SingleArmReport:
     blocked: Insertion | None = None
     why: str = ""
     poses: list[str] = field(default_factory=list)
+    #: When ``ok`` only with insertions more than LOOSE_MAX_DEG from down (a level tool: fixed
+    #: mates put in sideways): each such insertion, its pose and its height; ``why`` then says
+    #: why no order makes every insertion from above.
+    level: list[str] = field(default_factory=list)
 
     def to_json(self) -> dict[str, Any]:
         """As plain data (the plan's JSON ``reason.single_arm``)."""
         out: dict[str, Any] = {"ok": self.ok}
         if self.ok:
             out["order"] = list(self.order)
+            if self.level:
+                out.update(level=self.level, why=self.why)
         else:
             out.update(part=self.blocked.part if self.blocked else None,
                        mate=self.blocked.mate if self.blocked else None, why=self.why, poses=self.poses)
@@ -159,11 +166,12 @@ def _pose_text(down: np.ndarray) -> str:
     return "(" + ", ".join(f"{x:.2g}" for x in down) + ") down"
 
 
-def single_arm_report(product: Product) -> SingleArmReport | None:
+def single_arm_report(product: Product, unit: str = "") -> SingleArmReport | None:
     """None when a part has no mesh or shape (no stable pose to judge by). Otherwise: search the
     orders of insertion (the goals' parents and the product's precedence first) and the stable
     poses of each partial product for one that makes every insertion with its loose mates kept
-    (module docstring); the base rests first in any of its poses."""
+    (module docstring); the base rests first in any of its poses. ``unit``: the product's length
+    unit, for the heights the report names."""
     from spar_py.world.shapes import part_mesh
 
     if any(part_mesh(pp.model) is None for pp in product.parts.values()):
@@ -176,8 +184,33 @@ def single_arm_report(product: Product) -> SingleArmReport | None:
         if pr.then in by_part:
             before[pr.then].add(pr.first)
     cache: dict = {}
+    full = _search(product.base, ins, hulls, before, cache, 90.0)
+    if full[0] is None:
+        return _refusal(full[1])
+    above = _search(product.base, ins, hulls, before, cache, LOOSE_MAX_DEG)
+    path = above[0] if above[0] is not None else full[0]
+    level = [] if above[0] is not None else [
+        f"{i.part} along {_dir_text(i.direction)} resting {_pose_text(dn)}, {_from_down(i.direction, dn):.0f} deg "
+        f"from down, its centre {_height(hulls, placed, i.part, dn):.4g} {unit} above the table".replace("  ", " ")
+        for i, dn, placed in full[0] if _from_down(i.direction, dn) > LOOSE_MAX_DEG + 1e-6]
+    return SingleArmReport(True, tuple(i.part for i, _, _ in path), level=level,
+                           why="" if above[0] is not None else _refusal(above[1], "from above").why)
+
+
+def _height(hulls: dict, placed: frozenset[str], part: str, down: np.ndarray) -> float:
+    """How high ``part``'s centre of mass is above the table (cell unit) when ``placed`` and it
+    rest on the plane whose outward normal is ``down``."""
+    V = np.vstack([hulls[p][0] for p in (*placed, part)])
+    return float((V @ down).max() - hulls[part][2] @ down)
+
+
+def _search(base: str, ins: list[Insertion], hulls: dict, before: dict[str, set[str]], cache: dict,
+            max_deg: float) -> tuple[list | None, dict[str, Any]]:
+    """Depth first over (parts placed, pose): an insertion is made in a pose where its direction is
+    at most ``max_deg`` from down and every loose mate made (and its own) stays; between insertions
+    the partial product may rest in any pose that keeps them. (The insertions made, each with its
+    pose's down vector and the parts placed before it; or None and the deepest failure.)"""
     seen: set = set()
-    # the deepest failure: how far the search got, and the first part none of its states could insert
     stuck: dict[str, Any] = {"depth": -1}
 
     def explain(placed: frozenset[str], nxt: Insertion, downs: list[np.ndarray], done: list[Insertion]) -> None:
@@ -187,36 +220,41 @@ def single_arm_report(product: Product) -> SingleArmReport | None:
         for dn in sorted(downs, key=lambda dn: _from_down(nxt.direction, dn)):
             lost = _lost([*done, nxt], dn)
             a = _from_down(nxt.direction, dn)
-            if a > 90.0 + 1e-6:
-                lines.append(f"{_pose_text(dn)}: {nxt.part}'s insertion points up ({a:.0f} deg from down)")
+            if a > max_deg + 1e-6:
+                lines.append(f"{_pose_text(dn)}: {nxt.part}'s insertion points "
+                             f"{'up' if a > 90.0 + 1e-6 else 'sideways'} ({a:.0f} deg from down)")
             elif lost is not None:
                 lines.append(f"{_pose_text(dn)}: {lost.part} ({lost.mate}, loose) would be turned "
                              f"{_from_down(lost.direction, dn):.0f} deg from down")
         stuck.update(depth=len(placed), ins=nxt, lines=lines)
 
-    def search(placed: frozenset[str], done: list[Insertion], down: np.ndarray | None) -> tuple[str, ...] | None:
+    def search(placed: frozenset[str], done: list, down: np.ndarray | None) -> list | None:
         key = (placed, None if down is None else tuple(np.round(down, 3)))
         if key in seen:
             return None
         seen.add(key)
         if len(done) == len(ins):
-            return tuple(i.part for i in done)
-        downs = [dn for dn in _downs(hulls, placed, cache) if _lost(done, dn) is None]
+            return done
+        made = [i for i, _, _ in done]
+        downs = [dn for dn in _downs(hulls, placed, cache) if _lost(made, dn) is None]
         ready = [i for i in ins if i.part not in placed and before.get(i.part, set()) <= placed]
         for nxt in ready:
-            ok = [dn for dn in downs if _from_down(nxt.direction, dn) <= 90.0 + 1e-6
-                  and _lost([*done, nxt], dn) is None]
+            ok = [dn for dn in downs if _from_down(nxt.direction, dn) <= max_deg + 1e-6
+                  and _lost([*made, nxt], dn) is None]
             for dn in ok:
-                got = search(placed | {nxt.part}, [*done, nxt], dn)
+                got = search(placed | {nxt.part}, [*done, (nxt, dn, placed)], dn)
                 if got is not None:
                     return got
             if not ok:
-                explain(placed, nxt, _downs(hulls, placed, cache), done)
+                explain(placed, nxt, _downs(hulls, placed, cache), made)
         return None
 
-    order = search(frozenset({product.base}), [], None)
-    if order is not None:
-        return SingleArmReport(True, order)
+    return search(frozenset({base}), [], None), stuck
+
+
+def _refusal(stuck: dict[str, Any], how: str = "") -> SingleArmReport:
+    """The report of a failed search from its deepest failure (``how``: 'from above' when only
+    insertions within LOOSE_MAX_DEG of down were tried)."""
     nxt = stuck.get("ins")
     if nxt is None:
         return SingleArmReport(False, why="no order of insertion respects the product's precedence")
@@ -224,8 +262,8 @@ def single_arm_report(product: Product) -> SingleArmReport | None:
     needs = ("a fixed retention (a press fit: retention: in the product file), a fixture or a second arm"
              if loose else "a fixture or a second arm")
     why = (f"one arm on a table cannot insert {nxt.part} ({nxt.mate}, {nxt.retention}) along "
-           f"{_dir_text(nxt.direction)}: in no stable pose of the partial product is it made with every loose mate "
-           f"kept ({'; '.join(stuck['lines'][:WHY_POSES]) or 'no stable pose known'}"
+           f"{_dir_text(nxt.direction)}{' ' + how if how else ''}: in no stable pose of the partial product is it "
+           f"made with every loose mate kept ({'; '.join(stuck['lines'][:WHY_POSES]) or 'no stable pose known'}"
            f"{'; ...' if len(stuck['lines']) > WHY_POSES else ''}): it needs {needs}")
     return SingleArmReport(False, blocked=nxt, why=why, poses=list(stuck["lines"]))
 
