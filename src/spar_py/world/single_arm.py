@@ -163,7 +163,7 @@ def _pose_text(down: np.ndarray) -> str:
         for s in (1.0, -1.0):
             if float(down[k]) * s > math.cos(math.radians(SAME_POSE_DEG)):
                 return f"{'+' if s > 0 else '-'}{axis} down"
-    return "(" + ", ".join(f"{x:.2g}" for x in down) + ") down"
+    return "(" + ", ".join(f"{round(float(x), 2) + 0.0:.2g}" for x in down) + ") down"
 
 
 def single_arm_report(product: Product, unit: str = "") -> SingleArmReport | None:
