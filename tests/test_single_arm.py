@@ -118,3 +118,33 @@ def test_loose_threshold_matches_the_planners():
     from spar_py.phase2.instance import LOOSE_MAX_DEG as PLANNER
 
     assert LOOSE_MAX_DEG == PLANNER
+
+
+def _rx(deg: float):
+    import numpy as np
+
+    c, s = np.cos(np.radians(deg)), np.sin(np.radians(deg))
+    return np.array([[1.0, 0, 0], [0, c, -s], [0, s, c]])
+
+
+def test_layout_turns_the_base_to_make_the_most_insertions_from_above():
+    """world.layout._base_pose: upright (-z down) unless another stable pose of the base lets
+    more insertions in from above, counted in an order the precedence allows."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from spar_py.world.layout import _base_pose
+
+    upright = SimpleNamespace(label="up", R=np.eye(3))
+    side = SimpleNamespace(label="side", R=_rx(90.0))       # the product's -y down
+    assert np.allclose(side.R @ [0, -1, 0], [0, 0, -1])
+    model = SimpleNamespace(poses={"side": side, "up": upright})
+    z, y = np.array([0, 0, -1.0]), np.array([0, -1.0, 0])
+    one_each = [("a", z, frozenset()), ("b", y, frozenset({"a"})), ("c", y, frozenset())]
+    assert _base_pose(model, np.eye(4), one_each).label == "up"           # 1 against 1: upright
+    two_side = [*one_each, ("d", y, frozenset())]
+    assert _base_pose(model, np.eye(4), two_side).label == "side"         # 1 against 2
+    chained = [("a", z, frozenset()), ("b", y, frozenset({"a"})), ("c", y, frozenset({"a"}))]
+    assert _base_pose(model, np.eye(4), chained).label == "up"            # b, c wait for a
+    assert _base_pose(model).label == "up"                                # no insertions: upright

@@ -1,8 +1,10 @@
 """A product's parts laid out on the table for a robot (``spar gen layout``, a problem's
 ``layout: auto``).
 
-The base part stands at the build spot in the stable pose that keeps the product frame's down
-(-z) down (the product is built there as assembled); every other part lies in its most
+The base part stands at the build spot in its own stable pose (not one that needs its subtree
+mated) in which the build makes the most insertions from above (within DOWN_DEG of down, in an
+order the precedence allows, before the first that needs a turn); among those the one that
+keeps the product frame's down (-z) down (the product built as assembled); every other part lies in its most
 probable stable pose (a derived model lists its poses most probable first, so the first one
 the planner knows), yaw 0. The build spot is on the robot base's x axis, at the distance
 (PEDESTAL_MM + the product's footprint radius up to the arm's length, in STEP_MM) where the
@@ -18,8 +20,9 @@ Lengths in the cell unit (constants in mm, converted), world frame, table top z 
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Mapping
+from dataclasses import dataclass, replace
+import math
+from typing import Mapping, Sequence
 
 import numpy as np
 
@@ -95,12 +98,39 @@ def _grasps_reach(robot, model: ObjectModel, T: np.ndarray) -> int:
     return int(reachable_ignoring_collisions(robot, T @ G).sum()) if len(G) else 0
 
 
-def _base_pose(model: ObjectModel) -> StablePose:
-    """The base's stable pose that keeps the product frame's -z down (R's third row +z), else
-    its most probable."""
+#: An insertion points down in a pose when its direction is within this angle of world down (deg):
+#: a loose mate stays (phase2.instance.LOOSE_MAX_DEG), the arm inserts from above.
+DOWN_DEG = 30.0
+
+
+def _down_count(R: np.ndarray, insertions: Sequence[tuple[str, np.ndarray, frozenset[str]]]) -> int:
+    """How many insertions the build can make from above with the product turned by R (product
+    frame to world): made greedily in an order the precedence allows (each ``(part, direction in
+    the product frame, the parts it needs first)``), stopping where none ready points down."""
+    down = [p for p, d, _ in insertions if -float((R @ d)[2]) >= math.cos(math.radians(DOWN_DEG)) - 1e-9]
+    placed: set[str] = set()
+    grew = True
+    while grew:
+        grew = False
+        for p, _, needs in insertions:
+            if p in down and p not in placed and needs <= placed:
+                placed.add(p)
+                grew = True
+    return len(placed)
+
+
+def _base_pose(model: ObjectModel, R_prod: np.ndarray | None = None,
+               insertions: Sequence[tuple[str, np.ndarray, frozenset[str]]] = ()) -> StablePose:
+    """The base's stable pose in which the build makes the most insertions from above
+    (:func:`_down_count`; ``R_prod`` the base's orientation in the product frame); among those
+    the one that keeps the product frame's -z down (R's third row +z), else the most probable."""
     poses = list(model.poses.values())
-    up = [p for p in poses if np.allclose(np.asarray(p.R)[2], [0.0, 0.0, 1.0], atol=1e-6)]
-    return (up or poses)[0]
+    upright = [np.allclose(np.asarray(p.R)[2], [0.0, 0.0, 1.0], atol=1e-6) for p in poses]
+    Rb = np.eye(3) if R_prod is None else np.asarray(R_prod, float)[:3, :3]
+    counts = [_down_count(np.asarray(p.R, float) @ Rb.T, insertions) if insertions else 0 for p in poses]
+    best = max(counts) if counts else 0
+    pick = [i for i, c in enumerate(counts) if c == best]
+    return poses[next((i for i in pick if upright[i]), pick[0])]
 
 
 def _placed(R: np.ndarray, height: float, xy: np.ndarray) -> np.ndarray:
@@ -112,7 +142,8 @@ def _placed(R: np.ndarray, height: float, xy: np.ndarray) -> np.ndarray:
 
 
 def layout_parts(parts: Mapping[str, ObjectModel], poses: Mapping[str, np.ndarray], base: str, robot,
-                 unit: str, name: str = "the product") -> Layout:
+                 unit: str, name: str = "the product",
+                 insertions: Sequence[tuple[str, np.ndarray, frozenset[str]]] = ()) -> Layout:
     """Lay out ``parts`` (name: model; ``poses``: each part's pose in the product frame, 4x4)
     on the table for ``robot`` (module docstring). SparValueError (one line) when the
     assembled product is out of reach at every build spot or a part finds no free spot."""
@@ -120,7 +151,7 @@ def layout_parts(parts: Mapping[str, ObjectModel], poses: Mapping[str, np.ndarra
     arm = float(np.abs(robot.dh[:, 1]).sum() + np.abs(robot.dh[:, 2]).sum() + np.linalg.norm(robot.tool[:3, 3]))
     B = np.asarray(robot.base, float)
     o, ex = B[:2, 3], B[:2, 0] / max(np.linalg.norm(B[:2, 0]), 1e-12)
-    bp = _base_pose(parts[base])
+    bp = _base_pose(parts[base], poses[base], insertions)
     Rb = np.asarray(bp.R, float)
     Pb = np.linalg.inv(poses[base])
     # the assembled product at the base's pose, its footprint about the base's origin
@@ -178,7 +209,18 @@ def layout_parts(parts: Mapping[str, ObjectModel], poses: Mapping[str, np.ndarra
 
 
 def layout_product(product: Product, robot, unit: str) -> Layout:
-    """:func:`layout_parts` for the parts of a loaded product (cell unit ``unit``)."""
-    return layout_parts({p: pp.model for p, pp in product.parts.items()},
-                        {p: np.asarray(pp.pose, float) for p, pp in product.parts.items()},
-                        product.base, robot, unit, f"product {product.name}")
+    """:func:`layout_parts` for the parts of a loaded product (cell unit ``unit``), the base
+    turned so that the most insertions are made from above (its goals' directions, their
+    parents and the precedence first)."""
+    needs: dict[str, set[str]] = {g.part: {g.parent} - {product.base} for g in product.goals}
+    for pr in product.precedence:
+        if pr.then in needs and pr.first != product.base:
+            needs[pr.then].add(pr.first)
+    insertions = [(g.part, np.asarray(product.parts[g.parent].pose, float)[:3, :3] @ np.asarray(g.V_a, float),
+                   frozenset(needs[g.part])) for g in product.goals]
+    models = {p: pp.model for p, pp in product.parts.items()}
+    sub = product.sub_poses.get(product.base, {})  # poses that need the subtree mated: not the base's alone
+    b = models[product.base]
+    models[product.base] = replace(b, poses={k: v for k, v in b.poses.items() if k not in sub})
+    return layout_parts(models, {p: np.asarray(pp.pose, float) for p, pp in product.parts.items()},
+                        product.base, robot, unit, f"product {product.name}", insertions)
