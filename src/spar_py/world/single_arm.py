@@ -110,9 +110,10 @@ def _downs(hulls: dict[str, tuple[np.ndarray, float, np.ndarray]], parts: frozen
            cache: dict) -> list[np.ndarray]:
     """The down vectors (product frame) of the poses ``parts`` can rest in as one body."""
     if parts not in cache:
-        V = np.vstack([hulls[p][0] for p in parts])
-        vol = np.array([hulls[p][1] for p in parts])
-        com = np.sum([hulls[p][2] * v for p, v in zip(parts, vol)], axis=0) / max(float(vol.sum()), 1e-300)
+        names = sorted(parts)  # one order whatever the hash seed: qhull's facet order follows the points'
+        V = np.vstack([hulls[p][0] for p in names])
+        vol = np.array([hulls[p][1] for p in names])
+        com = np.sum([hulls[p][2] * v for p, v in zip(names, vol)], axis=0) / max(float(vol.sum()), 1e-300)
         cache[parts] = _rest_planes(V, com)
     return cache[parts]
 
@@ -217,7 +218,7 @@ def _search(base: str, ins: list[Insertion], hulls: dict, before: dict[str, set[
         if len(placed) <= stuck["depth"]:
             return
         lines = []
-        for dn in sorted(downs, key=lambda dn: _from_down(nxt.direction, dn)):
+        for dn in sorted(downs, key=lambda dn: (round(_from_down(nxt.direction, dn), 6), *np.round(dn, 6))):
             lost = _lost([*done, nxt], dn)
             a = _from_down(nxt.direction, dn)
             if a > max_deg + 1e-6:
