@@ -565,7 +565,8 @@ def derive_product_text(path: str | Path, max_bytes: int = MAX_INPUT_BYTES, out_
     """``spar kb derive PRODUCT.yaml``: the product in the declared form, in the file's units:
     each mesh part with its features and face names (derived ones included), every mate
     with its retention and every seat; the derived insertions (order, direction, whether a
-    fixture is needed) and precedence as comments. Mesh paths relative to ``out_dir``."""
+    fixture is needed), precedence and whether one arm on a table can build it
+    (world.single_arm) as comments. Mesh paths relative to ``out_dir``."""
     path = Path(path)
     root = _read_product(path, max_bytes)
     unit = root.key("units").key("length").text()
@@ -614,4 +615,10 @@ def derive_product_text(path: str | Path, max_bytes: int = MAX_INPUT_BYTES, out_
             out.append(f"# contact {a} - {b} ({n} samples): neither a mate nor a seat; blocking only")
         if d.unremovable:
             out.append(f"# no free direction found for: {', '.join(d.unremovable)}")
+    from spar_py.world.single_arm import single_arm_report
+
+    sa = single_arm_report(p, unit)
+    if sa is not None:
+        order = f"# one arm on a table builds it in order {', '.join(sa.order)}"
+        out.append(f"# {sa.why}" if not sa.ok else order + (f", sideways: {'; '.join(sa.level)}" if sa.level else ""))
     return "\n".join(out) + "\n"
