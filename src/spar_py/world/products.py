@@ -94,10 +94,14 @@ def mate_misalignment(peg: Axis, hole: Axis, through: bool, unit: str) -> str | 
 
 
 def seat_direction(product: Product, seat: Seat) -> np.ndarray:
-    """The direction (product frame, unit) the seated part moves to its seat: into the surface
-    it rests on, against that face's outward normal."""
+    """The direction (product frame, unit) the seated part moves to its seat: a curved seat's
+    own ``direction``; else into the planar surface it rests on, against that face's outward
+    normal."""
     from spar_py.world.shapes import part_mesh
 
+    if seat.direction is not None:
+        d = np.asarray(seat.direction, float)
+        return d / np.linalg.norm(d)
     part = product.parts[seat.on]
     mesh = part_mesh(part.model)
     if mesh is None:
