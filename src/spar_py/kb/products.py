@@ -401,7 +401,8 @@ def load_product_derived(path: str | Path, unit: str, max_bytes: int = MAX_INPUT
                       tuple(s for s in links if isinstance(s, Seat)), files=tuple(files))
     where = root.key("mates") if mates_node is not None else root.key("parts")
     try:
-        product.goals = wp.compile_goals(product)
+        product.goals = wp.compile_goals(product, None if derived is None else
+                                         [p for i in derived.insertions for p in i.parts])
         # a derived product's precedence is the disassembly's (exact meshes both ways; the
         # declared products' sweep moves a mesh part's hull, which fills its bores)
         product.precedence = (wp.precedence(product, unit) if derived is None else

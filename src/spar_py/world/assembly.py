@@ -593,7 +593,7 @@ def derive_assembly(meshes: dict[str, "trimesh.Trimesh"], base: str, contact_tol
     # a's contact samples with b that hold it: touching, or on a fit's walls (marked below)
     holds = {ab: gaps <= contact_tol for ab, (_, _, gaps) in con.items()}
     mates: list[DerivedMate] = []
-    cradles: list[tuple[DerivedMate, np.ndarray]] = []  # the fit and its inner part's wall samples
+    cradles: list[tuple[DerivedMate, np.ndarray, np.ndarray]] = []  # the fit, each side's wall samples
     planes: list[tuple[str, str, np.ndarray, np.ndarray, float]] = []
     for (a, b), (P, T, gaps) in con.items():
         N = meshes[a].face_normals[T]
@@ -621,10 +621,11 @@ def derive_assembly(meshes: dict[str, "trimesh.Trimesh"], base: str, contact_tol
             d = np.asarray(m.axis, float)
             wall_a = comp[np.abs(N[comp] @ d) < SIN_AXIS]
             holds[a, b][wall_a] = True
-            near_b = np.all((Pb >= lo) & (Pb <= hi), axis=1)
-            holds[b, a] |= near_b & (np.abs(meshes[b].face_normals[Tb] @ d) < SIN_AXIS)
+            wall_b = np.flatnonzero(np.all((Pb >= lo) & (Pb <= hi), axis=1)
+                                    & (np.abs(meshes[b].face_normals[Tb] @ d) < SIN_AXIS))
+            holds[b, a][wall_b] = True
             if cradle is not None:
-                cradles.append((cradle, wall_a))
+                cradles.append((cradle, wall_a, wall_b))
             elif not any(_same_mate(m, x, tol) for x in mates):
                 mates.append(m)
     normals = {ab: meshes[ab[0]].face_normals[T][holds[ab]] for ab, (_, T, _) in con.items()}
@@ -642,11 +643,11 @@ def derive_assembly(meshes: dict[str, "trimesh.Trimesh"], base: str, contact_tol
     for m in mates:
         for s in (1, -1):
             cands.append(s * np.asarray(m.axis, float))
-    for c, walls in cradles:  # out of a cradle: against the inner part's mean outward normal there
+    for c, walls, _ in cradles:  # out of a cradle and off its inner part: its mean normal's two senses
         P, T, _ = con[c.peg, c.hole]
         mean = meshes[c.peg].face_normals[T[walls]].sum(0)
         if np.linalg.norm(mean) > 1e-9:
-            cands.append(-mean / np.linalg.norm(mean))
+            cands += [s * mean / np.linalg.norm(mean) for s in (-1, 1)]
     uniq: list[np.ndarray] = []
     for c in cands:
         if not any(float(c @ u) > 1 - 1e-9 for u in uniq):
@@ -708,8 +709,7 @@ def derive_assembly(meshes: dict[str, "trimesh.Trimesh"], base: str, contact_tol
         res.mates.append(_orient(m, meshes, sense, tol))
     # seats between parts without a mate: the later inserted part rests on the earlier one
     res.seats.extend(_seats_of(planes, mated, pos, res.insertions))
-    res.seats.extend(_cradle_seats(cradles, con, meshes, mated, pos, res.insertions,
-                                   {frozenset((s.part, s.on)) for s in res.seats}))
+    res.seats.extend(_cradle_seats(cradles, con, meshes, mated, pos, res.insertions, list(res.seats)))
     sat = {frozenset((s.part, s.on)) for s in res.seats}
     res.blocking = [x for x in res.blocking if frozenset(x[:2]) not in sat]
     for a, b in sorted(seated):
@@ -740,23 +740,26 @@ def _seats_of(planes: list[tuple[str, str, np.ndarray, np.ndarray, float]], mate
             for part, on, pt, n_on, area in best.values()]
 
 
-def _cradle_seats(cradles: list[tuple[DerivedMate, np.ndarray]], con: dict, meshes: dict[str, "trimesh.Trimesh"],
-                  mated: set[tuple[str, str]], pos: dict[str, int], insertions: list[Insertion],
-                  seated: set[frozenset[str]]) -> list[DerivedSeat]:
+def _cradle_seats(cradles: list[tuple[DerivedMate, np.ndarray, np.ndarray]], con: dict,
+                  meshes: dict[str, "trimesh.Trimesh"], mated: set[tuple[str, str]], pos: dict[str, int],
+                  insertions: list[Insertion], planar: list[DerivedSeat]) -> list[DerivedSeat]:
     """The curved seats among ``cradles`` (each a fit of its inner part, ``peg``, in the half
-    cylinder of ``hole``, with the inner part's wall samples in ``con[peg, hole]``) of pairs
-    with neither a mate nor a planar seat: where the inner part goes in after the cradle's
-    part, along the mean of its outward normals on the walls (within COS_FACING), it rests
-    there; the seat takes that insertion's direction. A cradle over a part placed before it
-    (a cap's over a bearing) is a contact only."""
+    cylinder of ``hole``, with each side's wall samples in ``con[peg, hole]`` and ``con[hole,
+    peg]``) of pairs with neither a mate nor a planar seat: where the later inserted part
+    moves along the mean of its outward normals on the walls (within COS_FACING: into the
+    other), it rests there (a shaft in its cradle, or a cradle onto a shaft placed first); the
+    seat takes that insertion's direction. A part that already rests on a plane (a cap on its
+    block) is held there: its cradle over another part is a contact only."""
     ins = {p: np.asarray(i.direction, float) for i in insertions for p in i.parts}
+    seated = {frozenset((s.part, s.on)) for s in planar}
+    on_plane = {s.part for s in planar}
     out: dict[tuple[str, str], DerivedSeat] = {}
-    for c, walls in cradles:
-        part, on = c.peg, c.hole
-        if (part, on) in mated or frozenset((part, on)) in seated or part not in pos or on not in pos:
+    for c, wall_in, wall_out in cradles:
+        if c.peg not in pos or c.hole not in pos or (c.peg, c.hole) in mated:
             continue
-        if pos[part] < pos[on]:
-            continue  # the cradle's part goes on later, over the inner part: a contact
+        part, on, walls = (c.peg, c.hole, wall_in) if pos[c.peg] > pos[c.hole] else (c.hole, c.peg, wall_out)
+        if frozenset((part, on)) in seated or part in on_plane or not len(walls):
+            continue
         P, T, gaps = con[part, on]
         N = meshes[part].face_normals[T[walls]]
         mean = N.sum(0)
