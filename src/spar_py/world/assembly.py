@@ -592,6 +592,7 @@ def derive_assembly(meshes: dict[str, "trimesh.Trimesh"], base: str, contact_tol
     con = _contacts(meshes, reach, spacing)
     # a's contact samples with b that hold it: touching, or on a fit's walls (marked below)
     holds = {ab: gaps <= contact_tol for ab, (_, _, gaps) in con.items()}
+    outward = {ab: meshes[ab[0]].face_normals[T] for ab, (_, T, _) in con.items()}  # a's normals there
     mates: list[DerivedMate] = []
     cradles: list[tuple[DerivedMate, np.ndarray, np.ndarray]] = []  # the fit, each side's wall samples
     planes: list[tuple[str, str, np.ndarray, np.ndarray, float]] = []
@@ -620,15 +621,21 @@ def derive_assembly(meshes: dict[str, "trimesh.Trimesh"], base: str, contact_tol
                 continue
             d = np.asarray(m.axis, float)
             wall_a = comp[np.abs(N[comp] @ d) < SIN_AXIS]
-            holds[a, b][wall_a] = True
             wall_b = np.flatnonzero(np.all((Pb >= lo) & (Pb <= hi), axis=1)
                                     & (np.abs(meshes[b].face_normals[Tb] @ d) < SIN_AXIS))
+            if cradle is not None:  # each side's walls where the other's are (not past a cradle's rim)
+                wall_a, wall_b = (wall_a[_within_span(P[wall_a], Pb[wall_b], m)],
+                                  wall_b[_within_span(Pb[wall_b], P[wall_a], m)])
+            holds[a, b][wall_a] = True
             holds[b, a][wall_b] = True
+            if m.profile == "round":  # a round wall's normal is radial (a facet's leans up to half its angle)
+                outward[a, b][wall_a] = _radial(P[wall_a], m)
+                outward[b, a][wall_b] = -_radial(Pb[wall_b], m)
             if cradle is not None:
                 cradles.append((cradle, wall_a, wall_b))
             elif not any(_same_mate(m, x, tol) for x in mates):
                 mates.append(m)
-    normals = {ab: meshes[ab[0]].face_normals[T][holds[ab]] for ab, (_, T, _) in con.items()}
+    normals = {ab: outward[ab][holds[ab]] for ab in con}
     mated = {(m.peg, m.hole) for m in mates} | {(m.hole, m.peg) for m in mates}
     seated = {(a, b) for a, b, *_ in planes if (a, b) not in mated}
     for (a, b), (P, _, _) in con.items():
@@ -738,6 +745,30 @@ def _seats_of(planes: list[tuple[str, str, np.ndarray, np.ndarray, float]], mate
             best[part, on] = (part, on, pt, n_on, area)
     return [DerivedSeat(part, on, tuple(map(float, pt)), tuple(map(float, n_on)), float(area))
             for part, on, pt, n_on, area in best.values()]
+
+
+def _radial(P: np.ndarray, m: DerivedMate) -> np.ndarray:
+    """The unit directions from the axis of round fit ``m`` out to the points ``P``."""
+    o, d = np.asarray(m.origin, float), np.asarray(m.axis, float)
+    v = P - o
+    v = v - np.outer(v @ d, d)
+    return v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-300)
+
+
+def _within_span(P: np.ndarray, Q: np.ndarray, m: DerivedMate) -> np.ndarray:
+    """A mask of the points ``P`` whose direction about fit ``m``'s axis lies within the angular
+    span of the points ``Q`` (a cradle's: less than a full turn; angles measured from their
+    mean direction)."""
+    if not len(P) or not len(Q):
+        return np.zeros(len(P), bool)
+    u, v = _radial(P, m), _radial(Q, m)
+    mid = v.sum(0)
+    if np.linalg.norm(mid) < 1e-9:
+        return np.ones(len(P), bool)
+    e1 = mid / np.linalg.norm(mid)
+    e2 = np.cross(np.asarray(m.axis, float), e1)
+    a, b = np.arctan2(u @ e2, u @ e1), np.arctan2(v @ e2, v @ e1)
+    return (a >= b.min() - 1e-9) & (a <= b.max() + 1e-9)
 
 
 def _cradle_seats(cradles: list[tuple[DerivedMate, np.ndarray, np.ndarray]], con: dict,
