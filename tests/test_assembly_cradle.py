@@ -127,3 +127,33 @@ def test_kb_derive_writes_the_seat_direction_and_it_loads_back(cradle, tmp_path:
     again = load_product_derived(out, "mm", use_cache=False).product
     assert {(s.part, s.on, s.direction) for s in again.seats} == {(s.part, s.on, s.direction)
                                                                   for s in got.product.seats}
+
+
+def test_plumbers_block_derives_with_the_bearing_down_in_its_cradle() -> None:
+    """Fabrica's plumber's block: the bearing seats down in the block's cradle (the direction
+    checked against the mean outward normal of the bearing's wall under its axis, read here),
+    the cap on the block, the bolts through the cap into the block."""
+    import trimesh
+
+    fab = Path(__file__).resolve().parents[1] / "kb" / "products" / "fabrica"
+    got = load_product_derived(fab / "plumbers_block.yaml", "mm")
+    res = got.derived
+    assert [p for i in res.insertions for p in i.parts] == ["block", "bearing", "cap", "bolt1", "bolt4"]
+    seats = {(s.part, s.on): s for s in res.seats}
+    assert set(seats) == {("bearing", "block"), ("cap", "block")}
+    assert seats["cap", "block"].direction is None
+    bearing = trimesh.load(fab / "plumbers_block" / "0.ply", force="mesh")
+    bearing.apply_scale(10.0)  # cm -> mm
+    zc = bearing.bounds.mean(0)[2]
+    c, n = bearing.triangles_center, bearing.face_normals
+    under = (np.abs(n[:, 1]) < 0.05) & (c[:, 2] < zc - 15.0) & (np.abs(c[:, 1]) < 15.0)
+    own = (n[under] * bearing.area_faces[under, None]).sum(0)
+    own /= np.linalg.norm(own)
+    assert float(np.dot(seats["bearing", "block"].direction, own)) > 1 - 1e-3
+    assert {(m.peg, m.hole) for m in res.mates} == {("bolt1", "block"), ("bolt1", "cap"), ("bolt4", "block"),
+                                                   ("bolt4", "cap")}
+    assert ("bearing", "cap") in {(a, b) for a, b, _ in res.precedence}
+    assert ("bearing", "cap") in {(a, b) for a, b, _ in res.blocking}
+    goal = next(g for g in got.product.goals if g.part == "bearing")
+    assert goal.parent == "block"
+    assert np.allclose(got.product.parts["block"].pose[:3, :3] @ goal.V_a, own, atol=1e-2)
