@@ -16,9 +16,10 @@ file: kb.products builds the meshes and turns the result into features and mates
 - Seats: planar contacts (antiparallel normals, coplanar points, gap within ``contact_tol``)
   that the later part's insertion runs into; one it slides along (a guide) is not a seat.
   A cradle (a cylindrical fit whose normals do not wrap the axis: a half cylinder) is a
-  curved seat when its inner part goes in after the cradle's part, along the mean of the
-  inner part's outward normals there (within COS_FACING: into the cradle); the seat carries
-  that insertion's direction. What is neither stays a contact: it constrains the directions only.
+  curved seat when the part inserted later moves along the mean of its own outward normals
+  there (within COS_FACING: a shaft down into its cradle, or a cradle onto a shaft placed
+  first) and rests on no plane already; the seat carries that insertion's direction. What is
+  neither stays a contact: it constrains the directions only.
 - Directions: candidates are the product frame's six axes, the mates' axes (both senses) and
   the ways out of the cradles; a part (or a set of parts) may leave along d when d . n <= eps
   for every outward normal n of its contacts with the rest that touch (gap within
