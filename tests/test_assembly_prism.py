@@ -83,25 +83,26 @@ def _bar_in_cradle() -> dict[str, "trimesh.Trimesh"]:
     return {"cradle": cradle, "bar": bar}
 
 
-def test_half_cylinder_cradle_is_no_round_mate() -> None:
+def test_half_cylinder_cradle_is_no_round_mate_but_a_curved_seat() -> None:
     res = derive_assembly(_bar_in_cradle(), "cradle", 0.1, 0.5)
     assert not [m for m in res.mates if m.profile == "round"], res.mates
-    assert [(a, b) for a, b, _ in res.blocking] == [("bar", "cradle")]
+    assert res.blocking == []
+    (seat,) = res.seats
+    assert (seat.part, seat.on) == ("bar", "cradle")
+    assert seat.direction is not None and np.allclose(seat.direction, (0, 0, -1), atol=1e-9)
 
 
-def test_a_part_held_only_by_a_cradle_is_refused_naming_the_contact(tmp_path: Path) -> None:
-    from spar_py.core.errors import KBError
+def test_a_part_held_only_by_a_cradle_loads_with_its_curved_seat(tmp_path: Path) -> None:
     from spar_py.kb.products import load_product
 
     for name, m in _bar_in_cradle().items():
         m.export(tmp_path / f"{name}.stl")
     (tmp_path / "p.yaml").write_text("product: cradled\nunits: {length: mm, angle: deg}\nparts:\n"
                                      "  cradle: {mesh: cradle.stl}\n  bar: {mesh: bar.stl}\n")
-    with pytest.raises(KBError) as e:
-        load_product(tmp_path / "p.yaml", "mm", use_cache=False)
-    msg = str(e.value)
-    assert "\n" not in msg and "leads to the base cradle: bar" in msg and "neither a mate nor a planar seat" in msg
-    assert msg.endswith(": bar - cradle"), msg
+    product = load_product(tmp_path / "p.yaml", "mm", use_cache=False)
+    (goal,) = product.goals
+    assert (goal.part, goal.parent) == ("bar", "cradle")
+    assert np.allclose(product.parts["cradle"].pose[:3, :3] @ goal.V_a, (0, 0, -1), atol=1e-9)
 
 
 # --------------------------------------------------------------------------- Fabrica's beam

@@ -219,10 +219,15 @@ def _size(m) -> float:
 
 
 def _fabrica(name: str, tmp: Path) -> Case:
-    """Fabrica assembly ``name`` as a mesh-only product (cm), derived; skipped with the refusal."""
+    """Fabrica assembly ``name`` as a mesh-only product (cm) with its product file's tolerances
+    (kb/products/fabrica/NAME.yaml: they are the meshes' data), derived; skipped with the refusal."""
+    import yaml
+
     plys = sorted(FABRICA.joinpath(name).glob("*.ply"), key=lambda p: p.stem)
-    text = f"product: {name}\nunits: {{length: cm, angle: deg}}\nparts:\n" + "".join(
-        f"  p{p.stem}: {{mesh: {p}}}\n" for p in plys)
+    own = yaml.safe_load(FABRICA.joinpath(f"{name}.yaml").read_text(encoding="utf-8"))
+    tols = {k: float(own[k]) for k in ("contact_tol", "clearance_max") if k in own}
+    text = f"product: {name}\nunits: {{length: cm, angle: deg}}\n" + "".join(
+        f"{k}: {v}\n" for k, v in tols.items()) + "parts:\n" + "".join(f"  p{p.stem}: {{mesh: {p}}}\n" for p in plys)
     path = tmp / f"{name}.yaml"
     path.write_text(text)
     try:
@@ -232,7 +237,8 @@ def _fabrica(name: str, tmp: Path) -> Case:
     if got.derived.unremovable:
         pytest.skip(f"{name}: no free direction found for {', '.join(got.derived.unremovable)}")
     meshes = {f"p{p.stem}": _own_mesh(p) for p in plys}
-    return Case(name, got.derived, meshes, 0.01, _step(got.derived, 0.05))
+    return Case(name, got.derived, meshes, tols.get("contact_tol", 0.01),
+                _step(got.derived, tols.get("clearance_max", 0.05)))
 
 
 def _declared(name: str, tmp: Path) -> Case:

@@ -261,12 +261,15 @@ class Mate:
 
 @dataclass(frozen=True)
 class Seat:
-    """A planar contact: face ``face`` of ``part`` rests on face ``on_face`` of ``on``."""
+    """Face ``face`` of ``part`` rests on face ``on_face`` of ``on``: a planar contact, which
+    ``part`` reaches moving against ``on_face``'s normal; or, with ``direction`` (unit, product
+    frame: the way ``part`` moves into it), a curved one, as a shaft lying in a cradle."""
 
     part: str
     face: str
     on: str
     on_face: str
+    direction: tuple[float, float, float] | None = None
 
     @property
     def name(self) -> str:

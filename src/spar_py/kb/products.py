@@ -12,6 +12,7 @@ Lengths converted to the cell's unit once, here.
 """
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -70,12 +71,26 @@ def _feature(node: Node, parts: dict[str, ProductPart], kind: str) -> tuple[str,
     return part, name, f
 
 
+def _seat_direction(node: Node) -> tuple[float, float, float] | None:
+    """A seat's optional ``direction: [x, y, z]`` (product frame; a curved seat's way in), unit."""
+    dnode = node.key("direction", required=False)
+    if dnode is None:
+        return None
+    v = dnode.value
+    if (not isinstance(v, list) or len(v) != 3 or not all(isinstance(x, (int, float)) and not isinstance(x, bool)
+                                                           and math.isfinite(x) for x in v)
+            or math.hypot(*v) < 1e-9):
+        raise dnode.fail("a direction [x, y, z] of three finite numbers, not all zero", show(v))
+    n = math.hypot(*v)
+    return (v[0] / n, v[1] / n, v[2] / n)
+
+
 def _mate(node: Node, parts: dict[str, ProductPart], unit: str) -> Mate | Seat:
     """One entry of ``mates:``: a peg-in-hole mate or a seat, checked."""
     from spar_py.world.products import feature_axis, mate_misalignment
 
     keys = set(node.value)
-    if keys <= {"seat", "on"} and keys:
+    if {"seat", "on"} <= keys <= {"seat", "on", "direction"}:
         part, face = _part_ref(node.key("seat"), parts, "FACE")
         on, on_face = _part_ref(node.key("on"), parts, "FACE")
         for k, p, f in (("seat", part, face), ("on", on, on_face)):
@@ -83,10 +98,11 @@ def _mate(node: Node, parts: dict[str, ProductPart], unit: str) -> Mate | Seat:
                 raise node.key(k).fail(f"a face of {p} ({', '.join(map(str, parts[p].model.faces))})", show(f))
         if part == on:
             raise node.fail("a seat of one part on another", f"{part} on itself")
-        return Seat(part, face, on, on_face)
+        return Seat(part, face, on, on_face, _seat_direction(node))
     if not keys <= {"peg", "hole", "retention"} or not {"peg", "hole"} <= keys:
         raise node.fail("a mate {peg: PART.FEATURE, hole: PART.FEATURE, retention: loose | fixed} "
-                        "or a seat {seat: PART.FACE, on: PART.FACE}", ", ".join(sorted(keys)))
+                        "or a seat {seat: PART.FACE, on: PART.FACE, direction: [X, Y, Z] (optional)}",
+                        ", ".join(sorted(keys)))
     peg, pf, fp = _feature(node.key("peg"), parts, "peg")
     hole, hf, fh = _feature(node.key("hole"), parts, "hole")
     if peg == hole:
@@ -202,11 +218,13 @@ def _derived_objects(path: Path, unit: str, meshparts: dict[str, _MeshPart], der
             for j, s in seats:
                 other = s.on if pname == s.part else s.part
                 pt = inv[:3, :3] @ np.asarray(s.point, float) + inv[:3, 3]
-                fi = face_of_point(faces, mesh, pt, plane_tol)
-                if fi is None or not faces[fi].planar:
-                    continue  # a seat on a face that is not one plane: a contact only
+                fi = face_of_point(faces, mesh, pt, plane_tol + s.gap / 2)
+                if fi is None or (s.direction is None and not faces[fi].planar):
+                    continue  # a planar seat on a face that is not one plane: a contact only
                 if fi not in named:
                     named[fi] = f"on_{other}" if pname == s.part else f"under_{other}"
+                    if s.gap > 0:  # a curved seat's point lies midway across its fit: onto the face
+                        pt = _onto(mesh, faces[fi].tris, pt)
                     face_names.setdefault(named[fi], [_num(k * x) for x in pt])
                 names[-1 - j, pname] = named[fi]
         data: dict[str, Any] = {"object": pname, "units": {"length": mp.unit, "angle": "deg"},
@@ -217,6 +235,15 @@ def _derived_objects(path: Path, unit: str, meshparts: dict[str, _MeshPart], der
             data["features"] = own + feats
         texts[pname] = yaml.safe_dump(data, sort_keys=False, default_flow_style=None)
     return texts, names
+
+
+def _onto(mesh: Any, tris: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """The point of the mesh's triangles ``tris`` nearest ``p``."""
+    import trimesh
+
+    T = mesh.triangles[tris]
+    c = trimesh.triangles.closest_point(T, np.repeat(np.asarray(p, float)[None], len(T), 0))
+    return c[int(np.argmin(np.linalg.norm(c - p, axis=1)))]
 
 
 def _num(v: float) -> float:
@@ -371,12 +398,13 @@ def load_product_derived(path: str | Path, unit: str, max_bytes: int = MAX_INPUT
         for j, s in enumerate(derived.seats):
             sf, of = dnames.get((-1 - j, s.part)), dnames.get((-1 - j, s.on))
             if sf is not None and of is not None:
-                links.append(Seat(s.part, sf, s.on, of))
+                links.append(Seat(s.part, sf, s.on, of, s.direction))
     product = Product(name, str(path), base, parts, tuple(m for m in links if isinstance(m, Mate)),
                       tuple(s for s in links if isinstance(s, Seat)), files=tuple(files))
     where = root.key("mates") if mates_node is not None else root.key("parts")
     try:
-        product.goals = wp.compile_goals(product)
+        product.goals = wp.compile_goals(product, None if derived is None else
+                                         [p for i in derived.insertions for p in i.parts])
         # a derived product's precedence is the disassembly's (exact meshes both ways; the
         # declared products' sweep moves a mesh part's hull, which fills its bores)
         product.precedence = (wp.precedence(product, unit) if derived is None else
@@ -597,7 +625,10 @@ def derive_product_text(path: str | Path, max_bytes: int = MAX_INPUT_BYTES, out_
         out.append("  - " + flow({"peg": f"{m.peg}.{m.peg_feature}", "hole": f"{m.hole}.{m.hole_feature}",
                                   "retention": m.retention}))
     for s in p.seats:
-        out.append("  - " + flow({"seat": f"{s.part}.{s.face}", "on": f"{s.on}.{s.on_face}"}))
+        seat: dict[str, Any] = {"seat": f"{s.part}.{s.face}", "on": f"{s.on}.{s.on_face}"}
+        if s.direction is not None:
+            seat["direction"] = [_num(x) for x in s.direction]
+        out.append("  - " + flow(seat))
     d = lp.derived
     if d is not None:
         out.append(f"# derived in {d.seconds:.2f} s; insertions in order (direction in the product frame):")

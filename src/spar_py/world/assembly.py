@@ -15,10 +15,17 @@ file: kb.products builds the meshes and turns the result into features and mates
   when a ray along the axis inside the hole meets the hole part again.
 - Seats: planar contacts (antiparallel normals, coplanar points, gap within ``contact_tol``)
   that the later part's insertion runs into; one it slides along (a guide) is not a seat.
-  What is neither stays a contact: it constrains the directions only.
-- Directions: candidates are the mates' axes (both senses) and the product frame's six axes;
-  a part (or a set of parts) may leave along d when d . n <= eps for every outward normal n of
-  its contacts with the rest (local), and its meshes, shrunk by SHRINK of the tolerance, swept
+  A cradle (a cylindrical fit whose normals do not wrap the axis: a half cylinder) is a
+  curved seat when the part inserted later moves along the mean of its own outward normals
+  there (within COS_FACING: a shaft down into its cradle, or a cradle onto a shaft placed
+  first) and rests on no plane already; the seat carries that insertion's direction. What is
+  neither stays a contact: it constrains the directions only.
+- Directions: candidates are the product frame's six axes, the mates' axes (both senses) and
+  the ways out of the cradles; a part (or a set of parts) may leave along d when d . n <= eps
+  for every outward normal n of its contacts with the rest that touch (gap within
+  ``contact_tol``) or are a fit's own walls (a mate's or a cradle's: a surface merely within
+  reach, as a socket's lead-in chamfer near a tenon's tip, does not hold the part; the sweep
+  finds what it meets) (local), and its meshes, shrunk by SHRINK of the tolerance, swept
   along d in steps no longer than the smallest radial clearance until clear of the others'
   bounding box, collide with none of them (python-fcl, global).
 - Precedence: remove parts (or sets of two or three that must leave together) one at a time,
@@ -50,7 +57,7 @@ __all__ = ["ASSEMBLY_VERSION", "AssemblyResult", "Contact", "DerivedMate", "Deri
            "derive_assembly", "derive_assembly_cached"]
 
 #: Bumped whenever the derivation's results change for the same inputs.
-ASSEMBLY_VERSION = 4
+ASSEMBLY_VERSION = 5
 #: Surface samples per part (at most; fewer for a small area at the sample spacing).
 SAMPLES = 6000
 #: Normals of facing surfaces: n_a . n_b below -COS_FACING.
@@ -119,13 +126,18 @@ class DerivedMate:
 @dataclass(frozen=True)
 class DerivedSeat:
     """Part ``part`` rests on part ``on`` across a plane: ``point`` on it, ``normal`` the
-    outward normal of ``on`` there (unit, product frame), the contact ``area`` estimate."""
+    outward normal of ``on`` there (unit, product frame), the contact ``area`` estimate.
+    A curved seat (a cradle) has a ``direction``: the way ``part`` moves into it (unit,
+    product frame); ``point`` lies midway across the fit's ``gap`` there, ``normal`` is the
+    mean outward normal of ``on`` over the cradle."""
 
     part: str
     on: str
     point: tuple[float, float, float]
     normal: tuple[float, float, float]
     area: float
+    direction: tuple[float, float, float] | None = None
+    gap: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -386,10 +398,12 @@ def _components(P: np.ndarray, link: float) -> list[np.ndarray]:
     return [np.flatnonzero(lab == i) for i in range(n)]
 
 
-def _cylinder(meshes: dict[str, "trimesh.Trimesh"], a: str, b: str, ta: np.ndarray, tb: np.ndarray, tol: float
-              ) -> DerivedMate | None:
+def _cylinder(meshes: dict[str, "trimesh.Trimesh"], a: str, b: str, ta: np.ndarray, tb: np.ndarray, tol: float,
+              cradle: bool = False) -> DerivedMate | None:
     """A mate from a's contact triangles ``ta`` and b's ``tb`` facing them, if both are
-    cylindrical about one axis with a's normals pointing away from it (a the peg)."""
+    cylindrical about one axis with a's normals pointing away from it (a the peg) and a's
+    normals wrap the axis; with ``cradle``, the same fit when they do not (a lying in b's
+    half cylinder: b a cradle, not a hole)."""
     ma, mb = meshes[a], meshes[b]
     Na, Nb = ma.face_normals[ta], mb.face_normals[tb]
     d = _axis_of(np.vstack([Na, Nb]), np.concatenate([ma.area_faces[ta], mb.area_faces[tb]]))
@@ -406,8 +420,8 @@ def _cylinder(meshes: dict[str, "trimesh.Trimesh"], a: str, b: str, ta: np.ndarr
     radial = Ca - oa - np.outer((Ca - oa) @ d, d)
     if (np.einsum("ij,ij->i", radial, Na) <= 0).any():
         return None  # a's normals towards the axis: a is not the peg
-    if not _wraps(Na, d):
-        return None  # a cradle (half a cylinder): it stops motion across the axis one way only
+    if _wraps(Na, d) == cradle:
+        return None  # a cradle (half a cylinder) stops motion across the axis one way only: no mate
     o = (oa + ob) / 2
     tva = (ma.vertices[np.unique(ma.faces[ta])] - o) @ d
     tvb = (mb.vertices[np.unique(mb.faces[tb])] - o) @ d
@@ -577,12 +591,14 @@ def derive_assembly(meshes: dict[str, "trimesh.Trimesh"], base: str, contact_tol
     tol = max(contact_tol, 1e-6 * size)
     res = AssemblyResult(base)
     con = _contacts(meshes, reach, spacing)
-    normals: dict[tuple[str, str], np.ndarray] = {}  # a's outward normals at its contacts with b
+    # a's contact samples with b that hold it: touching, or on a fit's walls (marked below)
+    holds = {ab: gaps <= contact_tol for ab, (_, _, gaps) in con.items()}
+    outward = {ab: meshes[ab[0]].face_normals[T] for ab, (_, T, _) in con.items()}  # a's normals there
     mates: list[DerivedMate] = []
+    cradles: list[tuple[DerivedMate, np.ndarray, np.ndarray]] = []  # the fit, each side's wall samples
     planes: list[tuple[str, str, np.ndarray, np.ndarray, float]] = []
     for (a, b), (P, T, gaps) in con.items():
         N = meshes[a].face_normals[T]
-        normals[a, b] = N
         if a < b:
             for s_pt, s_n, area in _seats(P, N, gaps, contact_tol, spacing):
                 planes.append((a, b, s_pt, s_n, area))  # a's outward normal s_n
@@ -599,8 +615,28 @@ def derive_assembly(meshes: dict[str, "trimesh.Trimesh"], base: str, contact_tol
             m = _cylinder_filtered(meshes, a, b, ta, tb, tol)
             if m is None:
                 m = _prism(meshes, a, b, ta, tb, N[comp], gaps[comp], contact_tol)
-            if m is not None and not any(_same_mate(m, x, tol) for x in mates):
+            cradle = None
+            if m is None:
+                cradle = m = _cylinder_filtered(meshes, a, b, ta, tb, tol, cradle=True)
+            if m is None:
+                continue
+            d = np.asarray(m.axis, float)
+            wall_a = comp[np.abs(N[comp] @ d) < SIN_AXIS]
+            wall_b = np.flatnonzero(np.all((Pb >= lo) & (Pb <= hi), axis=1)
+                                    & (np.abs(meshes[b].face_normals[Tb] @ d) < SIN_AXIS))
+            if cradle is not None:  # each side's walls where the other's are (not past a cradle's rim)
+                wall_a, wall_b = (wall_a[_within_span(P[wall_a], Pb[wall_b], m)],
+                                  wall_b[_within_span(Pb[wall_b], P[wall_a], m)])
+            holds[a, b][wall_a] = True
+            holds[b, a][wall_b] = True
+            if m.profile == "round":  # a round wall's normal is radial (a facet's leans up to half its angle)
+                outward[a, b][wall_a] = _radial(P[wall_a], m)
+                outward[b, a][wall_b] = -_radial(Pb[wall_b], m)
+            if cradle is not None:
+                cradles.append((cradle, wall_a, wall_b))
+            elif not any(_same_mate(m, x, tol) for x in mates):
                 mates.append(m)
+    normals = {ab: outward[ab][holds[ab]] for ab in con}
     mated = {(m.peg, m.hole) for m in mates} | {(m.hole, m.peg) for m in mates}
     seated = {(a, b) for a, b, *_ in planes if (a, b) not in mated}
     for (a, b), (P, _, _) in con.items():
@@ -615,6 +651,11 @@ def derive_assembly(meshes: dict[str, "trimesh.Trimesh"], base: str, contact_tol
     for m in mates:
         for s in (1, -1):
             cands.append(s * np.asarray(m.axis, float))
+    for c, walls, _ in cradles:  # out of a cradle and off its inner part: its mean normal's two senses
+        P, T, _ = con[c.peg, c.hole]
+        mean = meshes[c.peg].face_normals[T[walls]].sum(0)
+        if np.linalg.norm(mean) > 1e-9:
+            cands += [s * mean / np.linalg.norm(mean) for s in (-1, 1)]
     uniq: list[np.ndarray] = []
     for c in cands:
         if not any(float(c @ u) > 1 - 1e-9 for u in uniq):
@@ -676,7 +717,9 @@ def derive_assembly(meshes: dict[str, "trimesh.Trimesh"], base: str, contact_tol
         res.mates.append(_orient(m, meshes, sense, tol))
     # seats between parts without a mate: the later inserted part rests on the earlier one
     res.seats.extend(_seats_of(planes, mated, pos, res.insertions))
+    res.seats.extend(_cradle_seats(cradles, con, meshes, mated, pos, res.insertions, list(res.seats)))
     sat = {frozenset((s.part, s.on)) for s in res.seats}
+    res.blocking = [x for x in res.blocking if frozenset(x[:2]) not in sat]
     for a, b in sorted(seated):
         if frozenset((a, b)) not in sat:  # sliding guides only: a contact that blocks
             res.blocking.append((a, b, int(len(con[a, b][0]) + len(con.get((b, a), ((),))[0]))))
@@ -705,11 +748,74 @@ def _seats_of(planes: list[tuple[str, str, np.ndarray, np.ndarray, float]], mate
             for part, on, pt, n_on, area in best.values()]
 
 
+def _radial(P: np.ndarray, m: DerivedMate) -> np.ndarray:
+    """The unit directions from the axis of round fit ``m`` out to the points ``P``."""
+    o, d = np.asarray(m.origin, float), np.asarray(m.axis, float)
+    v = P - o
+    v = v - np.outer(v @ d, d)
+    return v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-300)
+
+
+def _within_span(P: np.ndarray, Q: np.ndarray, m: DerivedMate) -> np.ndarray:
+    """A mask of the points ``P`` whose direction about fit ``m``'s axis lies within the angular
+    span of the points ``Q`` (a cradle's: less than a full turn; angles measured from their
+    mean direction)."""
+    if not len(P) or not len(Q):
+        return np.zeros(len(P), bool)
+    u, v = _radial(P, m), _radial(Q, m)
+    mid = v.sum(0)
+    if np.linalg.norm(mid) < 1e-9:
+        return np.ones(len(P), bool)
+    e1 = mid / np.linalg.norm(mid)
+    e2 = np.cross(np.asarray(m.axis, float), e1)
+    a, b = np.arctan2(u @ e2, u @ e1), np.arctan2(v @ e2, v @ e1)
+    return (a >= b.min() - 1e-9) & (a <= b.max() + 1e-9)
+
+
+def _cradle_seats(cradles: list[tuple[DerivedMate, np.ndarray, np.ndarray]], con: dict,
+                  meshes: dict[str, "trimesh.Trimesh"], mated: set[tuple[str, str]], pos: dict[str, int],
+                  insertions: list[Insertion], planar: list[DerivedSeat]) -> list[DerivedSeat]:
+    """The curved seats among ``cradles`` (each a fit of its inner part, ``peg``, in the half
+    cylinder of ``hole``, with each side's wall samples in ``con[peg, hole]`` and ``con[hole,
+    peg]``) of pairs with neither a mate nor a planar seat: where the later inserted part
+    moves along the mean of its outward normals on the walls (within COS_FACING: into the
+    other), it rests there (a shaft in its cradle, or a cradle onto a shaft placed first); the
+    seat takes that insertion's direction. A part that already rests on a plane (a cap on its
+    block) is held there: its cradle over another part is a contact only."""
+    ins = {p: np.asarray(i.direction, float) for i in insertions for p in i.parts}
+    seated = {frozenset((s.part, s.on)) for s in planar}
+    on_plane = {s.part for s in planar}
+    out: dict[tuple[str, str], DerivedSeat] = {}
+    for c, wall_in, wall_out in cradles:
+        if c.peg not in pos or c.hole not in pos or (c.peg, c.hole) in mated:
+            continue
+        part, on, walls = (c.peg, c.hole, wall_in) if pos[c.peg] > pos[c.hole] else (c.hole, c.peg, wall_out)
+        if frozenset((part, on)) in seated or part in on_plane or not len(walls):
+            continue
+        P, T, gaps = con[part, on]
+        N = meshes[part].face_normals[T[walls]]
+        mean = N.sum(0)
+        if np.linalg.norm(mean) < 1e-9:
+            continue
+        mean /= np.linalg.norm(mean)
+        d = ins[part]
+        if float(d @ mean) < COS_FACING:
+            continue  # the insertion slides along the cradle (or leaves it): not resting in it
+        k = int(np.argmin(np.linalg.norm(P[walls] - P[walls].mean(0), axis=1)))
+        i = walls[k]
+        pt = P[i] + 0.5 * gaps[i] * meshes[part].face_normals[T[i]]  # midway across the fit
+        area = float(meshes[part].area_faces[np.unique(T[walls])].sum())
+        if (part, on) not in out or area > out[part, on].area:
+            out[part, on] = DerivedSeat(part, on, tuple(map(float, pt)), tuple(float(-x) for x in mean), area,
+                                        tuple(float(x) for x in d), float(gaps[i]))
+    return list(out.values())
+
+
 def _cylinder_filtered(meshes: dict[str, "trimesh.Trimesh"], a: str, b: str, ta: np.ndarray, tb: np.ndarray,
-                       tol: float) -> DerivedMate | None:
+                       tol: float, cradle: bool = False) -> DerivedMate | None:
     """:func:`_cylinder` on the triangles of ``ta`` and ``tb`` that are not normal to the
     axis fitted on the rest (an end face or shoulder among a cylinder's contacts)."""
-    m = _cylinder(meshes, a, b, ta, tb, tol)
+    m = _cylinder(meshes, a, b, ta, tb, tol, cradle)
     if m is not None:
         return m
     Na, Nb = meshes[a].face_normals[ta], meshes[b].face_normals[tb]
@@ -721,7 +827,7 @@ def _cylinder_filtered(meshes: dict[str, "trimesh.Trimesh"], a: str, b: str, ta:
         seen.append(d)
         ka, kb = np.abs(Na @ d) < SIN_AXIS, np.abs(Nb @ d) < SIN_AXIS
         if ka.sum() >= 3 and kb.sum() >= 3:
-            m = _cylinder(meshes, a, b, ta[ka], tb[kb], tol)
+            m = _cylinder(meshes, a, b, ta[ka], tb[kb], tol, cradle)
             if m is not None:
                 return m
         if len(seen) > 50:

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -94,10 +95,14 @@ def mate_misalignment(peg: Axis, hole: Axis, through: bool, unit: str) -> str | 
 
 
 def seat_direction(product: Product, seat: Seat) -> np.ndarray:
-    """The direction (product frame, unit) the seated part moves to its seat: into the surface
-    it rests on, against that face's outward normal."""
+    """The direction (product frame, unit) the seated part moves to its seat: a curved seat's
+    own ``direction``; else into the planar surface it rests on, against that face's outward
+    normal."""
     from spar_py.world.shapes import part_mesh
 
+    if seat.direction is not None:
+        d = np.asarray(seat.direction, float)
+        return d / np.linalg.norm(d)
     part = product.parts[seat.on]
     mesh = part_mesh(part.model)
     if mesh is None:
@@ -177,15 +182,18 @@ def _parents(product: Product) -> dict[str, str]:
     return parents
 
 
-def _made_by(product: Product, parents: dict[str, str]) -> dict[str, list[Mate | Seat]]:
+def _made_by(product: Product, parents: dict[str, str], order: Sequence[str] | None = None
+             ) -> dict[str, list[Mate | Seat]]:
     """The part whose insertion makes each mate or seat: the child of a tree edge, else the
-    part deeper in the tree (the later of the file's two for equals)."""
+    part deeper in the tree (for equals the later in ``order``, the insertion order where it
+    is known (a derived product's), then the file's)."""
     def depth(p: str) -> int:
         n = 0
         while p != product.base:
             p, n = parents[p], n + 1
         return n
-    order = list(product.parts)
+    known = [p for p in (order or ()) if p in product.parts]
+    order = known + [p for p in product.parts if p not in known]
     out: dict[str, list[Mate | Seat]] = {p: [] for p in parents}
     for lk in (*product.mates, *product.seats):
         a, b = (lk.peg, lk.hole) if isinstance(lk, Mate) else (lk.part, lk.on)
@@ -199,13 +207,14 @@ def _made_by(product: Product, parents: dict[str, str]) -> dict[str, list[Mate |
     return out
 
 
-def compile_goals(product: Product) -> tuple[PartGoal, ...]:
+def compile_goals(product: Product, order: Sequence[str] | None = None) -> tuple[PartGoal, ...]:
     """One goal per non-base part (file order): into its parent, with the faces of the mates
     and seats between them, T_a from the product poses and V_a its insertion direction in the
-    parent's frame. Every mate or seat the part's insertion makes must agree on the direction
-    (SparValueError naming them otherwise)."""
+    parent's frame; ``order`` the insertion order where known (a derived product's). Every
+    mate or seat the part's insertion makes must agree on the direction (SparValueError
+    naming them otherwise)."""
     parents = _parents(product)
-    made = _made_by(product, parents)
+    made = _made_by(product, parents, order)
     goals = []
     for p, parent in parents.items():
         links = made[p]
