@@ -311,9 +311,76 @@ def mate_mismatch(mesh, o: np.ndarray, d: np.ndarray, r: float, t0: float, t1: f
     return out
 
 
+def _section_points(mesh, o: np.ndarray, d: np.ndarray, t: float) -> list[np.ndarray]:
+    """The polylines (k, 3) where the plane through o + t d normal to d cuts ``mesh``."""
+    sec = mesh.section(plane_origin=o + t * d, plane_normal=d)
+    return [] if sec is None else [np.asarray(x, float) for x in sec.discrete]
+
+
+def _point_segment_distance(P: np.ndarray, A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """For each point of P (n, 3), its distance to the nearest segment A[i] B[i] (m, 3 each)."""
+    AB = B - A
+    L2 = np.maximum(np.einsum("ij,ij->i", AB, AB), 1e-300)
+    u = np.clip(np.einsum("nmj,mj->nm", P[:, None, :] - A[None], AB) / L2, 0.0, 1.0)
+    Q = A[None] + u[..., None] * AB[None]
+    return np.linalg.norm(P[:, None, :] - Q, axis=2).min(axis=1)
+
+
+def prism_mismatch(peg, hole, m) -> list[str]:
+    """How a prism mate disagrees with plane sections of its meshes across the axis, at seven
+    heights inside the overlap of the peg's and the hole's walls: the peg's section centred on
+    the axis (its bounding rectangle in the corners' frame, within 1e-3 of the peg's size),
+    inside the corners' rectangle (what the insertion check's corner constraints rely on), and
+    the clearance (hole radius - peg radius) the least gap between the two sections."""
+    k = 1e-3 * _size(peg)
+    o, d = np.asarray(m.origin, float), np.asarray(m.axis, float)
+    C = np.asarray(m.corners, float)
+    if len(C) != 4:
+        return [f"{len(C)} corners, not 4"]
+    e1 = C[0] - C[1] if np.linalg.norm(C[0] - C[1]) > 1e-12 else C[0] - C[2]
+    e1 = e1 - (e1 @ d) * d
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(d, e1)
+    cu, cv = C @ e1, C @ e2
+    lo = max(m.peg_t0, m.hole_t0)
+    hi = min(m.peg_t0 + m.peg_len, m.hole_t0 + m.hole_len)
+    out, gaps = [], []
+    for t in np.linspace(lo + 0.15 * (hi - lo), hi - 0.15 * (hi - lo), 7):
+        reach = 2.0 * float(np.abs(C).max()) + m.hole_radius
+        near = [x[np.linalg.norm((x - o) - np.outer((x - o) @ d, d), axis=1) < reach]
+                for x in _section_points(peg, o, d, t)]
+        pp = np.vstack([x for x in near if len(x)]) if any(len(x) for x in near) else np.zeros((0, 3))
+        if len(pp) < 3:
+            out.append(f"no peg section at t {t:.4g}")
+            continue
+        rel = pp - o
+        u, v = rel @ e1, rel @ e2
+        centre = np.array([(u.min() + u.max()) / 2, (v.min() + v.max()) / 2])
+        if np.linalg.norm(centre) > k:
+            out.append(f"peg section at t {t:.4g} centred {np.linalg.norm(centre):.3g} off the axis")
+        if u.min() < cu.min() - k or u.max() > cu.max() + k or v.min() < cv.min() - k or v.max() > cv.max() + k:
+            out.append(f"peg section at t {t:.4g} outside the corners' rectangle")
+        segs = [np.stack([x[:-1], x[1:]], axis=1) for x in _section_points(hole, o, d, t) if len(x) > 1]
+        if segs:
+            S = np.vstack(segs)
+            mid = (S[:, 0] + S[:, 1]) / 2 - o
+            S = S[np.linalg.norm(mid - np.outer(mid @ d, d), axis=1) < reach]
+            if len(S):
+                gaps.append(float(_point_segment_distance(pp, S[:, 0], S[:, 1]).min()))
+    if not gaps:
+        out.append("no hole section in the overlap")
+    elif abs(min(gaps) - (m.hole_radius - m.peg_radius)) > k:
+        out.append(f"clearance {m.hole_radius - m.peg_radius:.6g}, sections' least gap {min(gaps):.6g}")
+    return out
+
+
 def test_every_mate_matches_the_meshes(case: Case) -> None:
     for m in case.res.mates:
         o, d = np.asarray(m.origin, float), np.asarray(m.axis, float)
+        if m.profile == "prism":
+            bad = prism_mismatch(case.meshes[m.peg], case.meshes[m.hole], m)
+            assert not bad, f"{case.name}: {m.peg} in {m.hole} (prism): {'; '.join(bad)}"
+            continue
         for part, r, t0, ln in ((m.peg, m.peg_radius, m.peg_t0, m.peg_len),
                                 (m.hole, m.hole_radius, m.hole_t0, m.hole_len)):
             bad = mate_mismatch(case.meshes[part], o, d, r, t0, t0 + ln)
@@ -371,7 +438,11 @@ def test_a_wrong_mate_is_caught(case: Case) -> None:
     """A radius, an axis line or an axis direction off by 1e-2 (of the part's size, or radians)."""
     if not case.res.mates:
         pytest.skip(f"{case.name}: no mate")
-    m = case.res.mates[0]
+    rounds = [m for m in case.res.mates if m.profile == "round"]
+    if not rounds:
+        _a_wrong_prism_is_caught(case)
+        return
+    m = rounds[0]
     mesh = case.meshes[m.peg]
     k = 1e-2 * _size(mesh)
     o, d = np.asarray(m.origin, float), np.asarray(m.axis, float)
@@ -383,6 +454,20 @@ def test_a_wrong_mate_is_caught(case: Case) -> None:
     assert any("off" in x for x in mate_mismatch(mesh, o + 0.5 * m.peg_radius * BAND * side, d, m.peg_radius, t0, t1))
     tilted = d + 1e-2 * side
     assert any("axis" in x for x in mate_mismatch(mesh, o, tilted / np.linalg.norm(tilted), m.peg_radius, t0, t1))
+
+
+def _a_wrong_prism_is_caught(case: Case) -> None:
+    """A prism mate's clearance off by 1e-2 of the part's size, or its corners shrunk by it."""
+    from dataclasses import replace
+
+    m = case.res.mates[0]
+    peg, hole = case.meshes[m.peg], case.meshes[m.hole]
+    k = 1e-2 * _size(peg)
+    assert prism_mismatch(peg, hole, m) == []
+    assert any("clearance" in x for x in prism_mismatch(peg, hole, replace(m, hole_radius=m.hole_radius + k)))
+    C = np.asarray(m.corners, float)
+    shrunk = tuple(tuple(c * (1 - k / np.linalg.norm(c))) for c in C)
+    assert any("corners" in x for x in prism_mismatch(peg, hole, replace(m, corners=shrunk)))
 
 
 # --------------------------------------------------------------------------- the precedence picture
