@@ -22,7 +22,7 @@ import trimesh
 from spar_py.kb.problem import load_problem
 from spar_py.world import arcs
 from spar_py.world.run import CellCache
-from spar_py.world.workspace import Requirement, requirement_clear
+from spar_py.world.workspace import Requirement, assembled_touch, requirement_clear
 
 ROOT = Path(__file__).resolve().parents[1]
 STOOL = ROOT / "kb" / "products" / "fabrica" / "stool_circular"
@@ -158,3 +158,10 @@ def test_assemble_may_come_near_the_table_not_below_it(stool):
     lower[2, 3] -= 2 * low  # the seat sunk: the leg's end would go below the table top
     r = requirement_clear(cache, "seat", lower[None], req)
     assert not r.ok[0] and ("held:leg1", "table") in r.pairs[0]
+
+
+def test_only_a_product_seats_a_part_near_the_table(stool):
+    cell, _ = stool
+    assert assembled_touch(cell, ["leg1"]) == ["held:leg1"]
+    paper = load_problem(ROOT / "kb" / "problems" / "peg_in_block.yaml")
+    assert assembled_touch(paper, ["peg"]) == []

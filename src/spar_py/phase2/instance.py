@@ -52,7 +52,7 @@ from spar_py.world.arcs import reachable_pairs
 from spar_py.world.motion_options import MotionFailure, MotionOptions
 from spar_py.world.run import CellCache
 from spar_py.world.supports import REST_TOL_MM, part_surface, rest_of, rest_of_body, surfaces_of
-from spar_py.world.workspace import arm_at, pair_text
+from spar_py.world.workspace import arm_at, assembled_touch, pair_text
 from spar_py.phase2.supinf import cached_bounds
 from spar_py.phase2.symbolic import Registry, is_symbolic, snap
 
@@ -646,8 +646,8 @@ def _arm(world: World, T: np.ndarray, what: str = "", held: tuple[str, np.ndarra
     solution, the chosen one's clearance (cell unit) and closest pair; without a clear solution
     ``collisions`` the pairs) and the refusal of ``what`` with those pairs (empty if none).
     ``via``: the held body is held by this carried part (a via-grasp): the fingers' contact is
-    allowed with it alone, and the root is checked as a carried part. ``touch``: the held body
-    may touch the table (an assemble: the product may seat it within the margin of it)."""
+    allowed with it alone, and the root is checked as a carried part. ``touch``: an assemble, whose
+    held body may touch the table where the product seats it so (workspace.assembled_touch)."""
     cell = world.cell
     body = set(_held_body(world.unc))
     carried = None
@@ -660,7 +660,7 @@ def _arm(world: World, T: np.ndarray, what: str = "", held: tuple[str, np.ndarra
             held = (via, carried.pop(via))
             allow = [tuple(f"held:{via}" if n == f"held:{root}" else n for n in pair) for pair in allow]
     parts = {k: o.pose for k, o in world.unc.objects.items() if k not in body}
-    near_table = [f"held:{n}" for n in ([held[0], *(carried or {})] if held is not None and touch else [])]
+    near_table = assembled_touch(cell, [held[0], *(carried or {})] if held is not None and touch else [])
     got = arm_at(world.cache, T, world.joints, parts=parts, held=held, grasped=grasped, width=width, allow=allow,
                  carried=carried, touch=near_table)
     geo: dict[str, Any] = {}

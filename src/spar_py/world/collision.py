@@ -633,8 +633,8 @@ class CollisionScene:
         they do not hold) and against each other (their contacts are the mates'; the caller
         allows none of them: at() does, and gives each carried part the contacts ``allow`` gives
         the held part). ``touch``: bodies checked against the table for contact only, not by the
-        margin (a part the product seats within the margin of the table: a leg's end in a
-        through hole of a seat lying on it)."""
+        margin, up to GRASP_TOL_MM of rounding (a part the product seats on the table or within
+        the margin of it: a post's end flush with the bottom of the bar it stands in)."""
         held_name = held[0] if held is not None else None
         if carried and held_name is not None:
             allow = _body_allow(held_name, list(carried), list(allow))
@@ -670,7 +670,7 @@ class CollisionScene:
                            frozenset(attached or ()), _columns(groups))
         touch = frozenset(touch)
         if touch:
-            state.table_margin = np.array([0.0 if state.bodies[i].name in touch else self.margin
+            state.table_margin = np.array([-self.tol if state.bodies[i].name in touch else self.margin
                                            for i in state.table_bodies.tolist()])
         return state
 
@@ -736,8 +736,8 @@ class SceneState:
         self._body_frames = np.zeros(0, dtype=int)
         self._static: tuple[np.ndarray, np.ndarray] | None = None
         self._table_pts: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # by _plane_heights
-        #: per table-checked body, the least height it keeps over the table: the margin, 0 for
-        #: the bodies CollisionScene.at was told may touch it
+        #: per table-checked body, the least height it keeps over the table: the margin; for the
+        #: bodies CollisionScene.at was told may touch it, none (down to GRASP_TOL_MM of rounding)
         self.table_margin: float | np.ndarray = scene.margin
 
     def renamed(self, names: Mapping[str, str]) -> SceneState | None:

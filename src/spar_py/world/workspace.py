@@ -32,8 +32,8 @@ if TYPE_CHECKING:
     from spar_py.world.robots import Robot
     from spar_py.world.run import CellCache
 
-__all__ = ["ArmAt", "Reached", "Refusal", "Requirement", "arm_at", "clear_of_world", "ik_rows", "pair_text",
-           "reach_clear", "reachable_ignoring_collisions", "requirement_clear", "requirement_clear_each",
+__all__ = ["ArmAt", "Reached", "Refusal", "Requirement", "arm_at", "assembled_touch", "clear_of_world", "ik_rows",
+           "pair_text", "reach_clear", "reachable_ignoring_collisions", "requirement_clear", "requirement_clear_each",
            "requirement_clear_ik", "requirement_state", "shape_key", "solutions", "tool_on_table", "tool_refusal",
            "wrist_above_table", "wrist_height"]
 #: Bound of the cell cache's table of requirement answers by geometry (:func:`requirement_clear`).
@@ -221,7 +221,7 @@ def shape_key(cache: CellCache, obj: str) -> tuple:
 def requirement_clear_ik(cache: CellCache, obj: str, req: Requirement, Q: np.ndarray, okb: np.ndarray,
                          state: SceneState | None = None) -> Reached:
     """:func:`requirement_clear` from the IK branches already solved (:func:`ik_rows`)."""
-    return clear_of_world(cache, Q, okb, **_requirement_world(obj, req), state=state)
+    return clear_of_world(cache, Q, okb, **_requirement_world(cache.cell, obj, req), state=state)
 
 
 def requirement_state(cache: CellCache, obj: str, req: Requirement) -> SceneState | None:
@@ -261,22 +261,31 @@ def _renamed_or_new(cache: CellCache, obj: str, req: Requirement) -> SceneState:
         copy = state.renamed({a: b for a, b in names.items() if a != b})
         if copy is not None:
             return copy
-    state = scene.at({}, **_requirement_world(obj, req))
+    state = scene.at({}, **_requirement_world(cache.cell, obj, req))
     if proto is None:
         table[key] = (state, obj, held)
     return state
 
 
-def _requirement_world(obj: str, req: Requirement) -> dict:
+def _requirement_world(cell: Cell, obj: str, req: Requirement) -> dict:
     """The world of a requirement on ``obj`` (CollisionScene.at's arguments): ``obj`` where the
     tool is (T_tool_obj = X^-1), closing on it or, with a part in the hand, in contact with it
-    (and with the table: where the product seats it, its end may lie within the margin of the
-    table the object rests on, as long as it does not go below it)."""
+    (and with the table where the product seats it so: :func:`assembled_touch`)."""
     inv = np.linalg.inv(np.asarray(req.X, float))
     if req.held is None:
         return {"grasped": obj, "attached": {obj: inv}, "width": req.width}
     return {"held": req.held, "attached": {obj: inv}, "width": req.width,
-            "allow": [(f"held:{req.held[0]}", obj)], "touch": [f"held:{req.held[0]}"]}
+            "allow": [(f"held:{req.held[0]}", obj)], "touch": assembled_touch(cell, [req.held[0]])}
+
+
+def assembled_touch(cell: Cell, held: Sequence[str]) -> list[str]:
+    """The bodies of the ``held`` parts (names) that may touch the table at an assemble
+    (CollisionScene.at's ``touch``): in a product's cell, all of them, since the mated pose is
+    the product's assembled geometry, which may seat a part flush with the underside of the
+    part it goes into (a post through a bar lying on the table), where no margin can be kept;
+    none in a cell without a product (its goals' T_a are the user's: a part pressed onto the
+    table as it is inserted is refused by the margin)."""
+    return [f"held:{n}" for n in held] if getattr(cell, "product", None) is not None else []
 
 
 def tool_on_table(cache: CellCache, obj: str, T: np.ndarray, req: Requirement) -> tuple[str, str] | None:
@@ -286,7 +295,7 @@ def tool_on_table(cache: CellCache, obj: str, T: np.ndarray, req: Requirement) -
     cell = cache.cell
     if not cell.collisions or cell.table is not None:
         return None
-    state = cache.scene().at({}, **_requirement_world(obj, req))
+    state = cache.scene().at({}, **_requirement_world(cache.cell, obj, req))
     return state.tool_rigid_on_table(np.asarray(T, float))
 
 
