@@ -670,8 +670,8 @@ class CollisionScene:
                            frozenset(attached or ()), _columns(groups))
         touch = frozenset(touch)
         if touch:
-            state.table_margin = np.array([-self.tol if state.bodies[i].name in touch else self.margin
-                                           for i in state.table_bodies.tolist()])
+            state.table_touch = np.array([state.bodies[i].name in touch for i in state.table_bodies.tolist()],
+                                         dtype=bool)
         return state
 
 
@@ -736,9 +736,16 @@ class SceneState:
         self._body_frames = np.zeros(0, dtype=int)
         self._static: tuple[np.ndarray, np.ndarray] | None = None
         self._table_pts: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # by _plane_heights
-        #: per table-checked body, the least height it keeps over the table: the margin; for the
-        #: bodies CollisionScene.at was told may touch it, none (down to GRASP_TOL_MM of rounding)
-        self.table_margin: float | np.ndarray = scene.margin
+        #: per table-checked body, whether CollisionScene.at was told it may touch the table (None:
+        #: none may): :meth:`table_margin`
+        self.table_touch: np.ndarray | None = None
+
+    def table_margin(self) -> float | np.ndarray:
+        """The least height each table-checked body keeps over the table: the scene's margin, and
+        none for the bodies that may touch it (down to GRASP_TOL_MM of rounding)."""
+        if self.table_touch is None:
+            return self.scene.margin
+        return np.where(self.table_touch, -self.scene.tol, self.scene.margin)
 
     def renamed(self, names: Mapping[str, str]) -> SceneState | None:
         """The state :meth:`CollisionScene.at` makes for this state's world with every part name n
@@ -874,7 +881,7 @@ class SceneState:
             return None
         T_tool = np.asarray(T_tool, float)
         frames = {TOOL: T_tool, 6: T_tool @ self.scene.robot.tool_inverse()}
-        margin = np.broadcast_to(self.table_margin, (len(self.table_bodies),))
+        margin = np.broadcast_to(self.table_margin(), (len(self.table_bodies),))
         for k, i in enumerate(self.table_bodies.tolist()):  # as _plane_heights, for the bodies on frames 6 and 7
             b = self.bodies[i]
             Fb = frames.get(b.frame)
@@ -1069,7 +1076,7 @@ class SceneState:
         for r, (g_ok, g_name) in enumerate(self._grasp_rows(F)):
             if not g_ok:
                 ok[r], why[r] = False, (g_name, self.hand[0])
-        low = tab <= self.table_margin
+        low = tab <= self.table_margin()
         for r, k in zip(*np.nonzero(low)):
             if ok[r]:
                 ok[r], why[r] = False, (self.bodies[self.table_bodies[k]].name, "table")

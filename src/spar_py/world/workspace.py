@@ -221,7 +221,7 @@ def shape_key(cache: CellCache, obj: str) -> tuple:
 def requirement_clear_ik(cache: CellCache, obj: str, req: Requirement, Q: np.ndarray, okb: np.ndarray,
                          state: SceneState | None = None) -> Reached:
     """:func:`requirement_clear` from the IK branches already solved (:func:`ik_rows`)."""
-    return clear_of_world(cache, Q, okb, **_requirement_world(cache.cell, obj, req), state=state)
+    return clear_of_world(cache, Q, okb, **_requirement_world(obj, req, cache.cell), state=state)
 
 
 def requirement_state(cache: CellCache, obj: str, req: Requirement) -> SceneState | None:
@@ -261,21 +261,22 @@ def _renamed_or_new(cache: CellCache, obj: str, req: Requirement) -> SceneState:
         copy = state.renamed({a: b for a, b in names.items() if a != b})
         if copy is not None:
             return copy
-    state = scene.at({}, **_requirement_world(cache.cell, obj, req))
+    state = scene.at({}, **_requirement_world(obj, req, cache.cell))
     if proto is None:
         table[key] = (state, obj, held)
     return state
 
 
-def _requirement_world(cell: Cell, obj: str, req: Requirement) -> dict:
+def _requirement_world(obj: str, req: Requirement, cell: Cell | None = None) -> dict:
     """The world of a requirement on ``obj`` (CollisionScene.at's arguments): ``obj`` where the
     tool is (T_tool_obj = X^-1), closing on it or, with a part in the hand, in contact with it
-    (and with the table where the product seats it so: :func:`assembled_touch`)."""
+    (and, given the ``cell``, with the table where the product seats it so: :func:`assembled_touch`)."""
     inv = np.linalg.inv(np.asarray(req.X, float))
     if req.held is None:
         return {"grasped": obj, "attached": {obj: inv}, "width": req.width}
     return {"held": req.held, "attached": {obj: inv}, "width": req.width,
-            "allow": [(f"held:{req.held[0]}", obj)], "touch": assembled_touch(cell, [req.held[0]])}
+            "allow": [(f"held:{req.held[0]}", obj)],
+            "touch": assembled_touch(cell, [req.held[0]]) if cell is not None else []}
 
 
 def assembled_touch(cell: Cell, held: Sequence[str]) -> list[str]:
@@ -295,7 +296,7 @@ def tool_on_table(cache: CellCache, obj: str, T: np.ndarray, req: Requirement) -
     cell = cache.cell
     if not cell.collisions or cell.table is not None:
         return None
-    state = cache.scene().at({}, **_requirement_world(cache.cell, obj, req))
+    state = cache.scene().at({}, **_requirement_world(obj, req, cache.cell))
     return state.tool_rigid_on_table(np.asarray(T, float))
 
 
