@@ -52,7 +52,7 @@ from spar_py.world.arcs import reachable_pairs
 from spar_py.world.motion_options import MotionFailure, MotionOptions
 from spar_py.world.run import CellCache
 from spar_py.world.supports import REST_TOL_MM, part_surface, rest_of, rest_of_body, surfaces_of
-from spar_py.world.workspace import arm_at, pair_text
+from spar_py.world.workspace import arm_at, assembled_touch, pair_text
 from spar_py.phase2.supinf import cached_bounds
 from spar_py.phase2.symbolic import Registry, is_symbolic, snap
 
@@ -638,7 +638,7 @@ def _part_at(world: World, obj: str, label: str) -> str | None:
 
 def _arm(world: World, T: np.ndarray, what: str = "", held: tuple[str, np.ndarray] | None = None,
          grasped: str | None = None, width: float | None = None,
-         allow: Sequence[tuple[str, str]] = (), via: str | None = None
+         allow: Sequence[tuple[str, str]] = (), via: str | None = None, touch: bool = False
          ) -> tuple[np.ndarray | None, dict[str, Any], Refusals]:
     """The joint vector reaching tool pose T nearest the previous one among those clear of the
     world at this step (workspace.arm_at: every part where it is now, ``held`` in the hand,
@@ -646,7 +646,8 @@ def _arm(world: World, T: np.ndarray, what: str = "", held: tuple[str, np.ndarra
     solution, the chosen one's clearance (cell unit) and closest pair; without a clear solution
     ``collisions`` the pairs) and the refusal of ``what`` with those pairs (empty if none).
     ``via``: the held body is held by this carried part (a via-grasp): the fingers' contact is
-    allowed with it alone, and the root is checked as a carried part."""
+    allowed with it alone, and the root is checked as a carried part. ``touch``: an assemble, whose
+    held body may touch the table where the product seats it so (workspace.assembled_touch)."""
     cell = world.cell
     body = set(_held_body(world.unc))
     carried = None
@@ -659,8 +660,9 @@ def _arm(world: World, T: np.ndarray, what: str = "", held: tuple[str, np.ndarra
             held = (via, carried.pop(via))
             allow = [tuple(f"held:{via}" if n == f"held:{root}" else n for n in pair) for pair in allow]
     parts = {k: o.pose for k, o in world.unc.objects.items() if k not in body}
+    near_table = assembled_touch(cell, [held[0], *(carried or {})] if held is not None and touch else [])
     got = arm_at(world.cache, T, world.joints, parts=parts, held=held, grasped=grasped, width=width, allow=allow,
-                 carried=carried)
+                 carried=carried, touch=near_table)
     geo: dict[str, Any] = {}
     if got.clearance is not None:
         geo["clearance"] = round(got.clearance, 6)
@@ -881,7 +883,7 @@ def _assemble(world: World, s: Step, early: bool = False) -> tuple[list[dict], W
     near = cell.product.near.get(peg, ()) if cell.product is not None else ()
     q, geo, refused = _arm(world, world.unc.obj(hole).pose @ Ta @ g.T, what, held=(peg, np.linalg.inv(g.T)),
                            width=g.width, allow=[(f"held:{peg}", o) for o in dict.fromkeys((hole, *near))],
-                           via=_via(cell, peg, world.grasps[peg]))
+                           via=_via(cell, peg, world.grasps[peg]), touch=True)
     if q is None:
         checks.append(_reach_verdict(s["id"], False, _no_arm(what, geo)))
     grasps = {k: v for k, v in world.grasps.items() if k != peg}

@@ -6,7 +6,9 @@ and the refusals (a pair whose every joint solution collides, and with which pai
 the run logs.
 For a grasp label G and a position label P the paper checks
 
-1. the faces the fingers touch (G's gfaces) are not the faces P rests on (rfaces);
+1. the faces the fingers touch (G's gfaces) are not the faces P rests on (rfaces); on a part
+   whose faces are derived from its geometry, a grasp on a face it rests on still holds where
+   both contacts are above the table (a curved face touches the table along a line only);
 2. the arm has a joint solution inside its limits for the tool pose T = T_O T_g
    (reachable) or T = T_O T_a T_g (mate_reachable), T_O the position's world
    transform, T_g the grasp's characteristic transform, T_a the assembly transform.
@@ -30,6 +32,7 @@ import numpy as np
 from spar_py.core.errors import SparValueError
 from spar_py.core.geometry import same_stable_poses
 from spar_py.core.model import Cell, Face, Grasp, ObjectModel
+from spar_py.core.units import from_mm
 from spar_py.world.workspace import Refusal, Requirement, ik_rows, requirement_clear_ik, requirement_state
 
 if TYPE_CHECKING:
@@ -117,6 +120,37 @@ def resting_faces(cell: Cell, obj: str, label: str) -> tuple[Face, ...]:
     return tuple(faces)
 
 
+#: A grasp on a curved face the part rests on still holds where both its contacts are at least
+#: this far above the table (mm): condition 1 below.
+CONTACT_CLEAR_MM = 1.0
+
+
+def _table_frame(model: ObjectModel, label: str, T_O: np.ndarray | None) -> tuple[np.ndarray, float] | None:
+    """The world z axis in ``model``'s frame and the frame's height above the table at position
+    ``label`` (T_O its world transform, None for a stable pose), for a model whose faces,
+    poses and grasps are derived from its geometry (consistent with each other); else None."""
+    if getattr(model, "geometry", None) is None:
+        return None
+    if T_O is not None:
+        T = np.asarray(T_O, float)
+        return T[2, :3].copy(), float(T[2, 3])
+    pose = model.poses[label]
+    return np.asarray(pose.R, float)[2].copy(), float(pose.height)
+
+
+def _contacts_off_table(cell: Cell, model: ObjectModel, g: Grasp, up: tuple[np.ndarray, float] | None) -> bool:
+    """Condition 1 for a part whose faces are derived (``up``: :func:`_table_frame`): the paper's
+    faces are planar, so a face the part rests on is on the table wherever the fingers would
+    touch it; a derived face may be curved (a round or rounded side lying on the table touches
+    it along a line), and a grasp on it holds where both its contacts (the tool centre
+    +- width/2 along the closing axis) are CONTACT_CLEAR_MM above the table."""
+    if up is None:
+        return False
+    T = np.asarray(g.T, float)
+    P = np.stack([T[:3, 3] + s * g.width / 2 * T[:3, 1] for s in (-1.0, 1.0)])
+    return bool((P @ up[0] + up[1] >= from_mm(cell.unit, CONTACT_CLEAR_MM)).all())
+
+
 #: How a stable-pose label (a put-down position with no X, Y) counts for condition 2:
 #: "reachable" (some placement in the free regions reaches it) or "paper" (Sec. 5.2.4:
 #: "some suitable choice of X, Y, Z" is assumed). Phase 1's placements(Rule) option.
@@ -186,7 +220,8 @@ def reachable_pairs(cache: CellCache, obj: str, grasp_labels: Sequence[str],
     for p in pos_labels:
         T_O = _absolute(cell, model, p)
         rfaces = set(resting_faces(cell, obj, p))
-        free = [g for g in grasps if not rfaces & set(g.gfaces)]  # condition 1
+        up = _table_frame(model, p, T_O)
+        free = [g for g in grasps if not rfaces & set(g.gfaces) or _contacts_off_table(cell, model, g, up)]  # cond. 1
         if T_O is None:
             asks.append((p, free, [Requirement(g.T, None, g.width) for g in free]))
             continue

@@ -472,8 +472,12 @@ class CollisionScene:
 
     def __init__(self, robot: Robot, gripper: GripperGeometry, parts: Mapping[str, list[Body]],
                  obstacles: Iterable[Obstacle], margin: float, table: tuple[float, float, float, float] | None,
-                 unit: str, memo: Any = None) -> None:
+                 unit: str, memo: Any = None, meshes: Mapping[str, Any] | None = None) -> None:
+        """``meshes``: {model: world.shapes.Geometry} of the mesh parts, whose ``parts`` bodies
+        are their convex hulls; the grasp rule tests the gripper against the mesh itself."""
         self.robot = robot
+        self.meshes = dict(meshes or {})
+        self._mesh_fcl: dict[str, Any] = {}  # by model: bounded by the cell's parts
         self.gripper = gripper
         self.parts = dict(parts)
         self.obstacles = tuple(obstacles)
@@ -537,6 +541,31 @@ class CollisionScene:
                                    + self._tool_body(tol))
         return self._grippers[key]
 
+    def enters_mesh(self, part: str, g: Body, T_tool_part: np.ndarray) -> bool:
+        """Whether gripper body ``g`` (TOOL frame) meets ``part`` at T_tool_part (4x4): its mesh's
+        surface (python-fcl's BVH against the body) or, wholly inside it, the body's centre in the
+        mesh; True for a part without a mesh (its bodies are exact)."""
+        import fcl  # ~0.15 s at import: see Body.fcl_geometry
+
+        model = part.split("@", 1)[0]
+        geo = self.meshes.get(model)
+        if geo is None:
+            return True
+        mesh = geo.mesh()
+        bvh = self._mesh_fcl.get(model)
+        if bvh is None:
+            V, F = np.asarray(mesh.vertices, float), np.asarray(mesh.faces, int)
+            bvh = self._mesh_fcl[model] = fcl.BVHModel()
+            bvh.beginModel(len(V), len(F))
+            bvh.addSubModel(V, F)
+            bvh.endModel()
+        o1 = fcl.CollisionObject(g.fcl_geometry(), _fcl_transform(g.T))
+        o2 = fcl.CollisionObject(bvh, _fcl_transform(np.asarray(T_tool_part, float)))
+        if fcl.collide(o1, o2, fcl.CollisionRequest(), fcl.CollisionResult()):
+            return True
+        centre = np.linalg.inv(np.asarray(T_tool_part, float)) @ np.append(g.T[:3, 3], 1.0)
+        return bool(mesh.contains(centre[None, :3])[0])
+
     def _tool_body(self, shrink: float) -> list[Body]:
         """The gripper's tool body (robots.GripperGeometry.body_shape) as a body in the TOOL frame,
         shrunk by ``shrink`` on every side; [] without one."""
@@ -586,7 +615,7 @@ class CollisionScene:
     def at(self, parts: Mapping[str, np.ndarray], held: tuple[str, np.ndarray] | None = None,
            grasped: str | None = None, *, width: float | None = None,
            allow: Iterable[tuple[str, str]] = (), attached: Mapping[str, np.ndarray] | None = None,
-           carried: Mapping[str, np.ndarray] | None = None) -> SceneState:
+           carried: Mapping[str, np.ndarray] | None = None, touch: Iterable[str] = ()) -> SceneState:
         """The world at one point of a plan: ``parts`` = {name: T_world_part 4x4} for every part
         on the table or assembled; ``held`` = (name, T_tool_part) for the part in the hand (it
         moves with the gripper, body name "held:<name>"); ``grasped`` = the part the fingers are
@@ -603,7 +632,9 @@ class CollisionScene:
         held part is, except against the gripper (by distance: the fingers may not touch a part
         they do not hold) and against each other (their contacts are the mates'; the caller
         allows none of them: at() does, and gives each carried part the contacts ``allow`` gives
-        the held part)."""
+        the held part). ``touch``: bodies checked against the table for contact only, not by the
+        margin, up to GRASP_TOL_MM of rounding (a part the product seats on the table or within
+        the margin of it: a post's end flush with the bottom of the bar it stands in)."""
         held_name = held[0] if held is not None else None
         if carried and held_name is not None:
             allow = _body_allow(held_name, list(carried), list(allow))
@@ -635,8 +666,13 @@ class CollisionScene:
                 hand = (grasped, "world", np.asarray(parts[grasped], float))
             else:
                 raise SparValueError(f"grasped part {grasped!r} is neither in parts nor attached")
-        return SceneState(self, world, tool, hand, width, frozenset(frozenset(p) for p in allow),
-                          frozenset(attached or ()), _columns(groups))
+        state = SceneState(self, world, tool, hand, width, frozenset(frozenset(p) for p in allow),
+                           frozenset(attached or ()), _columns(groups))
+        touch = frozenset(touch)
+        if touch:
+            state.table_touch = np.array([state.bodies[i].name in touch for i in state.table_bodies.tolist()],
+                                         dtype=bool)
+        return state
 
 
 def _body_allow(root: str, carried: list[str], allow: list[tuple[str, str]]) -> list[tuple[str, str]]:
@@ -700,6 +736,16 @@ class SceneState:
         self._body_frames = np.zeros(0, dtype=int)
         self._static: tuple[np.ndarray, np.ndarray] | None = None
         self._table_pts: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # by _plane_heights
+        #: per table-checked body, whether CollisionScene.at was told it may touch the table (None:
+        #: none may): :meth:`table_margin`
+        self.table_touch: np.ndarray | None = None
+
+    def table_margin(self) -> float | np.ndarray:
+        """The least height each table-checked body keeps over the table: the scene's margin, and
+        none for the bodies that may touch it (down to GRASP_TOL_MM of rounding)."""
+        if self.table_touch is None:
+            return self.scene.margin
+        return np.where(self.table_touch, -self.scene.tol, self.scene.margin)
 
     def renamed(self, names: Mapping[str, str]) -> SceneState | None:
         """The state :meth:`CollisionScene.at` makes for this state's world with every part name n
@@ -835,10 +881,11 @@ class SceneState:
             return None
         T_tool = np.asarray(T_tool, float)
         frames = {TOOL: T_tool, 6: T_tool @ self.scene.robot.tool_inverse()}
-        for i in self.table_bodies.tolist():  # as _plane_heights, for the bodies on frames 6 and 7
+        margin = np.broadcast_to(self.table_margin(), (len(self.table_bodies),))
+        for k, i in enumerate(self.table_bodies.tolist()):  # as _plane_heights, for the bodies on frames 6 and 7
             b = self.bodies[i]
             Fb = frames.get(b.frame)
-            if Fb is not None and (b.points @ Fb[2, :3]).min() + Fb[2, 3] - b.radius <= self.scene.margin:
+            if Fb is not None and (b.points @ Fb[2, :3]).min() + Fb[2, 3] - b.radius <= margin[k]:
                 return (b.name, "table")
         return None
 
@@ -991,8 +1038,11 @@ class SceneState:
         near = _near_all(gripper, bodies, 0.0)  # (gripper box, part body): bounding capsules touch
         for gi, g in enumerate(gripper):
             if any(_exact(g, np.eye(4), b, np.eye(4)) <= 0.0 for bi, b in enumerate(bodies) if near[gi, bi]):
-                verdict = (False, g.name)
-                break
+                # a mesh part's body is its convex hull: the gripper in the hull may still be
+                # out of the part (fingers on a peg beside its shoulder), so the mesh decides
+                if self.scene.enters_mesh(part, g, T_tool_part):
+                    verdict = (False, g.name)
+                    break
         if table is not None:
             table[key] = verdict
         return verdict
@@ -1026,7 +1076,7 @@ class SceneState:
         for r, (g_ok, g_name) in enumerate(self._grasp_rows(F)):
             if not g_ok:
                 ok[r], why[r] = False, (g_name, self.hand[0])
-        low = tab <= m
+        low = tab <= self.table_margin()
         for r, k in zip(*np.nonzero(low)):
             if ok[r]:
                 ok[r], why[r] = False, (self.bodies[self.table_bodies[k]].name, "table")
@@ -1305,8 +1355,20 @@ def scene_for(cell: Cell, memo: Any = None) -> CollisionScene:
         margin = robot.margin if robot.margin is not None else from_mm(cell.unit, DEFAULT_MARGIN_MM)
     parts = _part_bodies(cell.objects)
     scene = CollisionScene(robot, gripper, parts, getattr(cell, "obstacles", ()), margin,
-                           getattr(cell, "table", None), cell.unit, memo)
+                           getattr(cell, "table", None), cell.unit, memo, _part_meshes(cell.objects))
     return scene
+
+
+def _part_meshes(objects: Mapping[str, Any]) -> dict[str, Any]:
+    """{name: its world.shapes.Geometry} of the objects given by a mesh file (their shape is its
+    convex hull); the mesh (object frame) is read on first use (Geometry.mesh())."""
+    out = {}
+    for name, m in objects.items():
+        geo = getattr(m, "geometry", None)
+        if geo is not None and getattr(geo, "mesh_file", None) is not None:
+            out[name] = geo
+    return out
+
 
 
 def solids_key(solids: Iterable[Solid]) -> tuple:

@@ -33,7 +33,7 @@ from spar_py.world.shapes import FeatureGeometry, Geometry, derive_faces
 __all__ = ["DERIVE_VERSION", "MAX_ENTRIES", "cache_dir", "derive", "source_digest"]
 
 #: Bumped whenever the derivation's results change for the same inputs.
-DERIVE_VERSION = 7
+DERIVE_VERSION = 8
 #: The modules whose source is part of the key (world/, beside this file).
 DERIVE_SOURCES = ("shapes.py", "shapes_derive.py", "shapes_cache.py")
 #: Derivations kept on disk at most.
@@ -100,7 +100,7 @@ def _compute(name: str, geometry: Geometry, features: tuple[FeatureGeometry, ...
     poses = derive_poses(mesh, faces, features, geometry.unit, f"{name}_p")
     why: list[str] = []
     grasps = derive_grasps(mesh, faces, features, geometry.primitives, gripper, geometry.unit, f"{name}_g", step,
-                           why)
+                           why, poses)
     out: dict[str, Any] = {
         "faces": [f.name for f in faces],
         "poses": [{"label": p.label, "rfaces": list(p.rfaces), "ofaces": list(p.ofaces),

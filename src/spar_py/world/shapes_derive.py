@@ -78,6 +78,17 @@ MIN_CONTACT_MM2 = 25.0
 MIN_CONTACT_MM = 5.0
 #: Fingers touching a face are not inside it: boxes are shrunk by this (mm).
 TOUCH_MM = 0.02
+#: A facet grasp from above whose fingers or palm come nearer the table than this in a stable pose
+#: of the part is offered backed off along its approach until they clear it (mm): more than the
+#: collision margin (world.collision's DEFAULT_MARGIN_MM, 2 mm) ...
+TABLE_CLEAR_MM = 3.0
+#: ... in steps of this (mm) ...
+TABLE_STEP_MM = 1.0
+#: ... where the approach descends at least this steeply (deg below the horizontal).
+TABLE_APPROACH_DEG = 15.0
+#: A shaft grasp straight down onto a lying part slides along the shaft by this (mm) to keep
+#: its fingers off the part beside the shaft (_shaft_from_above).
+SHAFT_SLIDE_MM = 1.0
 #: Opposite faces: normals antiparallel within this (deg).
 PARALLEL_DEG = 0.05
 
@@ -840,7 +851,8 @@ def _pads_find(normals: np.ndarray | None, c: np.ndarray) -> bool:
 
 def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[FeatureGeometry, ...],
                   prims: tuple[Primitive, ...], g: Gripper, unit: str, prefix: str,
-                  step: float = math.radians(45.0), why: list[str] | None = None) -> list[DerivedGrasp]:
+                  step: float = math.radians(45.0), why: list[str] | None = None,
+                  poses: "list[DerivedPose] | None" = None) -> list[DerivedGrasp]:
     """The grasps of the part (module docstring), labelled ``{prefix}1, {prefix}2, ...``: those
     across opposite planar faces and round shafts, then the antipodal grasps found on the
     surface (:func:`antipodal_grasps`): all of them where the first give none; otherwise, on a
@@ -848,10 +860,13 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fe
     closes on and no feature claims (a wheel's tyre beside its axle's grasps; a declared peg is
     the shaft grasps' to close on), while a part of primitives keeps exactly its facet and
     shaft grasps. With none at all, ``why`` (when given) receives one line
-    saying which sizes and opening were compared."""
+    saying which sizes and opening were compared. With the part's stable ``poses``, the
+    shallower facet grasps that keep the fingers above the table (:func:`_table_clear`) follow
+    the others."""
     min_area = from_mm(unit, math.sqrt(MIN_CONTACT_MM2)) ** 2
     cos_par = math.cos(math.radians(PARALLEL_DEG))
     cands: list[tuple[tuple[str, ...], float, np.ndarray]] = []  # (gfaces, width, T)
+    shallow: list[tuple[tuple[str, ...], float, np.ndarray]] = []  # the same, backed off (_table_clear)
     planar = [k for k, f in enumerate(faces) if f.planar]
     for i in planar:
         for j in planar:
@@ -877,6 +892,9 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fe
                 T = _tool(p, c, a)
                 if _pad_contact(flat, areas, e1, e2, T, g, min_area) >= min_area:
                     cands.append((names, width, T))
+                    for Ts in _table_clear(T, width, g, poses or [], unit):
+                        if _pad_contact(flat, areas, e1, e2, Ts, g, min_area) >= min_area:
+                            shallow.append((names, width, Ts))
     min_len = from_mm(unit, MIN_CONTACT_MM)
     cyl_normals = {c.face: c.normals for c in mesh_cylinders(mesh, faces, unit)}
     for root, d, r, length, fname in _shafts(faces, features, prims, mesh, unit):
@@ -900,25 +918,21 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fe
                 # exactly 5 mm under the pad, which rounding puts just below it in some units
                 if _line_contact(root + c * r, d, length, T, g) >= min_len * (1 - 1e-9):
                     cands.append(((name,), 2 * r, T))
-    out = []
-    for names, width, T in cands:
-        if grasp_problem(mesh, T, width, g, unit) is not None:
-            continue
-        cover = {faces[k].name for k in _covered(mesh, faces, features, T, width, g, unit)}
-        order = [f.name for f in faces]
-        ofaces = tuple(names) + tuple(sorted(cover - set(names), key=order.index))
-        out.append(DerivedGrasp(f"{prefix}{len(out) + 1}", names, ofaces, T, euler_zyz_of(T), float(round(width, 12))))
+        for T in _shaft_from_above(mesh, root, d, r, length, g, unit, poses or [], min_len):
+            if _pads_find(normals, T[:3, 1]):
+                shallow.append(((name,), 2 * r, T))
+    out = _facet_grasps(mesh, faces, features, g, unit, prefix, cands, [], unique=False)
     owner = np.full(len(mesh.faces), -1)
     for k, f in enumerate(faces):
         owner[f.tris] = k
     allowed = None  # triangles one contact of an added antipodal grasp must lie on (None: any)
     if out:
-        if prims:
-            return out  # a part of primitives keeps exactly its facet and shaft grasps
+        if prims:  # a part of primitives keeps exactly its facet and shaft grasps
+            return _facet_grasps(mesh, faces, features, g, unit, prefix, shallow, out)
         held = {n for d in out for n in d.gfaces}
         free = [k for k, f in enumerate(faces) if not (f.planar or f.feature) and f.name not in held]
         if not free:
-            return out
+            return _facet_grasps(mesh, faces, features, g, unit, prefix, shallow, out)
         allowed = np.isin(owner, free)
     found, least, n_pairs = antipodal_grasps(mesh, g, unit, step, allowed)
     order = [f.name for f in faces]
@@ -927,6 +941,7 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fe
         cover = {faces[k].name for k in _covered(mesh, faces, features, T, width, g, unit)}
         ofaces = names + tuple(sorted(cover - set(names), key=order.index))
         out.append(DerivedGrasp(f"{prefix}{len(out) + 1}", names, ofaces, T, euler_zyz_of(T), float(round(width, 12))))
+    out = _facet_grasps(mesh, faces, features, g, unit, prefix, shallow, out)
     if not out and why is not None:
         if least is None:
             why.append(f"no two points of its surface face each other within {FRICTION_DEG:g} deg (a sample of "
@@ -940,6 +955,88 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fe
         else:
             why.append(f"{n_pairs} contact pairs from {least:.4g} {unit} wide are within the gripper's opening "
                        f"{g.opening:.4g} {unit}, but at each the fingers or palm enter the part")
+    return out
+
+
+def _facet_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[FeatureGeometry, ...], g: Gripper,
+                  unit: str, prefix: str, cands: list[tuple[tuple[str, ...], float, np.ndarray]],
+                  out: list[DerivedGrasp], unique: bool = True) -> list[DerivedGrasp]:
+    """``out`` followed by the candidates (gfaces, width, T) whose fingers and palm stay out of
+    the part (:func:`grasp_problem`), each labelled next and given its ofaces (:func:`_covered`);
+    with ``unique``, a candidate whose T is one already listed is not repeated."""
+    out = list(out)
+    order = [f.name for f in faces]
+    for names, width, T in cands:
+        if unique and any(np.allclose(T, d.T, atol=1e-9) for d in out):
+            continue
+        if grasp_problem(mesh, T, width, g, unit) is not None:
+            continue
+        cover = {faces[k].name for k in _covered(mesh, faces, features, T, width, g, unit)}
+        ofaces = tuple(names) + tuple(sorted(cover - set(names), key=order.index))
+        out.append(DerivedGrasp(f"{prefix}{len(out) + 1}", names, ofaces, T, euler_zyz_of(T), float(round(width, 12))))
+    return out
+
+
+def _shaft_from_above(mesh: "trimesh.Trimesh", root: np.ndarray, d: np.ndarray, r: float, length: float,
+                      g: Gripper, unit: str, poses: "list[DerivedPose]", min_len: float) -> list[np.ndarray]:
+    """Tool frames closing across the shaft (root, unit axis d, radius r, length) straight down
+    onto it as the part lies in each of its stable ``poses`` whose table the shaft is not normal
+    to: the closing direction horizontal there (d x up), the approach -up (the quantised ones
+    seldom fall on it), the tool centre on the axis at the shaft's middle or, where the fingers
+    meet the part there (a pad wider than a short peg reaches its shoulder), slid along the axis
+    by SHAFT_SLIDE_MM steps to the nearest place they do not, while at least ``min_len`` of the
+    shaft stays under the pads."""
+    out: list[np.ndarray] = []
+    slide = from_mm(unit, SHAFT_SLIDE_MM)
+    for pose in poses:
+        up = np.asarray(pose.R, float)[2]
+        c = cross(d, up)
+        if np.linalg.norm(c) < math.sin(math.radians(TABLE_APPROACH_DEG)):
+            continue  # the shaft stands (nearly) upright: the quantised approaches have it
+        c = _canonical(clean(c / np.linalg.norm(c), 1e-12))
+        a = clean(-(up - (up @ c) * c) / np.linalg.norm(up - (up @ c) * c), 1e-12)
+        n = int(length / 2 // slide) + 1
+        for k in sorted(range(-n, n + 1), key=lambda k: (abs(k), k)):
+            T = _tool(clean(root + d * (length / 2 + k * slide), 1e-9), c, a)
+            if _line_contact(root + c * r, d, length, T, g) < min_len * (1 - 1e-9):
+                continue
+            if grasp_problem(mesh, T, 2 * r, g, unit) is None:
+                if not any(np.allclose(T, U, atol=1e-9) for U in out):
+                    out.append(T)
+                break
+    return out
+
+
+def _table_clear(T: np.ndarray, width: float, g: Gripper, poses: "list[DerivedPose]", unit: str) -> list[np.ndarray]:
+    """Shallower versions of the grasp at T (fingers ``width`` apart) for a part lying in its
+    stable ``poses``: where the approach points down (at least TABLE_APPROACH_DEG below the
+    horizontal) and the closed fingers or the palm come nearer the table than TABLE_CLEAR_MM (a
+    part lower than the fingers' reach, gripped with its contact centre near the table), the
+    tool backed off along its approach until they clear it by that, in whole TABLE_STEP_MM
+    (at most the finger length: deeper the pads would leave the part). One per distinct
+    back-off, shallowest first; the caller keeps those whose pads still touch the part."""
+    clear, step = from_mm(unit, TABLE_CLEAR_MM), from_mm(unit, TABLE_STEP_MM)
+    boxes = [b for b in _gripper_boxes(g, width, g.finger_length + g.palm_depth, 0.0) if "open" not in b[0]]
+    corners = np.concatenate([np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                                        for z in (lo[2], hi[2])]) for _, lo, hi in boxes])
+    P = corners @ T[:3, :3].T + T[:3, 3]  # object frame
+    a = T[:3, 2]
+    down = math.sin(math.radians(TABLE_APPROACH_DEG))
+    backs: set[int] = set()
+    for pose in poses:
+        up = np.asarray(pose.R, float)[2]  # world z of object directions
+        fall = -float(up @ a)  # how fast the tool descends along its approach
+        low = float((P @ up).min()) + pose.height
+        if fall < down or low >= clear:
+            continue
+        k = math.ceil((clear - low) / fall / step - 1e-9)
+        if k * step <= g.finger_length:
+            backs.add(k)
+    out = []
+    for k in sorted(backs):
+        Ts = T.copy()
+        Ts[:3, 3] = T[:3, 3] - k * step * a
+        out.append(clean(Ts, 1e-9))
     return out
 
 

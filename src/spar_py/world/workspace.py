@@ -32,8 +32,8 @@ if TYPE_CHECKING:
     from spar_py.world.robots import Robot
     from spar_py.world.run import CellCache
 
-__all__ = ["ArmAt", "Reached", "Refusal", "Requirement", "arm_at", "clear_of_world", "ik_rows", "pair_text",
-           "reach_clear", "reachable_ignoring_collisions", "requirement_clear", "requirement_clear_each",
+__all__ = ["ArmAt", "Reached", "Refusal", "Requirement", "arm_at", "assembled_touch", "clear_of_world", "ik_rows",
+           "pair_text", "reach_clear", "reachable_ignoring_collisions", "requirement_clear", "requirement_clear_each",
            "requirement_clear_ik", "requirement_state", "shape_key", "solutions", "tool_on_table", "tool_refusal",
            "wrist_above_table", "wrist_height"]
 #: Bound of the cell cache's table of requirement answers by geometry (:func:`requirement_clear`).
@@ -123,9 +123,11 @@ def ik_rows(cell: Cell, T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def clear_of_world(cache: CellCache, Q: np.ndarray, okb: np.ndarray, *, parts: Mapping[str, np.ndarray] | None = None,
                    held: tuple[str, np.ndarray] | None = None, grasped: str | None = None,
                    attached: Mapping[str, np.ndarray] | None = None, width: float | None = None,
-                   allow: Iterable[tuple[str, str]] = (), state: SceneState | None = None) -> Reached:
+                   allow: Iterable[tuple[str, str]] = (), state: SceneState | None = None,
+                   touch: Iterable[str] = ()) -> Reached:
     """:func:`reach_clear` from the IK branches already solved (:func:`ik_rows`); ``state`` the
-    scene state of those arguments when the caller has it already (CollisionScene.at)."""
+    scene state of those arguments when the caller has it already (CollisionScene.at); ``touch``
+    the bodies that may touch the table (CollisionScene.at)."""
     cell = cache.cell
     n = len(Q)
     ik = okb.any(axis=1)
@@ -133,7 +135,8 @@ def clear_of_world(cache: CellCache, Q: np.ndarray, okb: np.ndarray, *, parts: M
         return Reached(ik.copy(), ik, [[] for _ in range(n)])
     rows, cols = np.nonzero(okb)
     if state is None:
-        state = cache.scene().at(parts or {}, held, grasped, width=width, allow=allow, attached=attached)
+        state = cache.scene().at(parts or {}, held, grasped, width=width, allow=allow, attached=attached,
+                                 touch=touch)
     clear, why = state.check(Q[rows, cols])
     ok = np.zeros(n, dtype=bool)
     ok[rows[clear]] = True
@@ -218,7 +221,7 @@ def shape_key(cache: CellCache, obj: str) -> tuple:
 def requirement_clear_ik(cache: CellCache, obj: str, req: Requirement, Q: np.ndarray, okb: np.ndarray,
                          state: SceneState | None = None) -> Reached:
     """:func:`requirement_clear` from the IK branches already solved (:func:`ik_rows`)."""
-    return clear_of_world(cache, Q, okb, **_requirement_world(obj, req), state=state)
+    return clear_of_world(cache, Q, okb, **_requirement_world(obj, req, cache.cell), state=state)
 
 
 def requirement_state(cache: CellCache, obj: str, req: Requirement) -> SceneState | None:
@@ -258,20 +261,32 @@ def _renamed_or_new(cache: CellCache, obj: str, req: Requirement) -> SceneState:
         copy = state.renamed({a: b for a, b in names.items() if a != b})
         if copy is not None:
             return copy
-    state = scene.at({}, **_requirement_world(obj, req))
+    state = scene.at({}, **_requirement_world(obj, req, cache.cell))
     if proto is None:
         table[key] = (state, obj, held)
     return state
 
 
-def _requirement_world(obj: str, req: Requirement) -> dict:
+def _requirement_world(obj: str, req: Requirement, cell: Cell | None = None) -> dict:
     """The world of a requirement on ``obj`` (CollisionScene.at's arguments): ``obj`` where the
-    tool is (T_tool_obj = X^-1), closing on it or, with a part in the hand, in contact with it."""
+    tool is (T_tool_obj = X^-1), closing on it or, with a part in the hand, in contact with it
+    (and, given the ``cell``, with the table where the product seats it so: :func:`assembled_touch`)."""
     inv = np.linalg.inv(np.asarray(req.X, float))
     if req.held is None:
         return {"grasped": obj, "attached": {obj: inv}, "width": req.width}
     return {"held": req.held, "attached": {obj: inv}, "width": req.width,
-            "allow": [(f"held:{req.held[0]}", obj)]}
+            "allow": [(f"held:{req.held[0]}", obj)],
+            "touch": assembled_touch(cell, [req.held[0]]) if cell is not None else []}
+
+
+def assembled_touch(cell: Cell, held: Sequence[str]) -> list[str]:
+    """The bodies of the ``held`` parts (names) that may touch the table at an assemble
+    (CollisionScene.at's ``touch``): in a product's cell, all of them, since the mated pose is
+    the product's assembled geometry, which may seat a part flush with the underside of the
+    part it goes into (a post through a bar lying on the table), where no margin can be kept;
+    none in a cell without a product (its goals' T_a are the user's: a part pressed onto the
+    table as it is inserted is refused by the margin)."""
+    return [f"held:{n}" for n in held] if getattr(cell, "product", None) is not None else []
 
 
 def tool_on_table(cache: CellCache, obj: str, T: np.ndarray, req: Requirement) -> tuple[str, str] | None:
@@ -281,7 +296,7 @@ def tool_on_table(cache: CellCache, obj: str, T: np.ndarray, req: Requirement) -
     cell = cache.cell
     if not cell.collisions or cell.table is not None:
         return None
-    state = cache.scene().at({}, **_requirement_world(obj, req))
+    state = cache.scene().at({}, **_requirement_world(obj, req, cache.cell))
     return state.tool_rigid_on_table(np.asarray(T, float))
 
 
@@ -341,13 +356,15 @@ class ArmAt:
 
 def arm_at(cache: CellCache, T: np.ndarray, ref: np.ndarray | None, *, parts: Mapping[str, np.ndarray],
            held: tuple[str, np.ndarray] | None = None, grasped: str | None = None, width: float | None = None,
-           allow: Iterable[tuple[str, str]] = (), carried: Mapping[str, np.ndarray] | None = None) -> ArmAt:
+           allow: Iterable[tuple[str, str]] = (), carried: Mapping[str, np.ndarray] | None = None,
+           touch: Iterable[str] = ()) -> ArmAt:
     """The arm at world tool pose T (4x4) in a world of ``parts`` (key -> T_world_part), ``held``
     in the hand with the parts mated into it ``carried`` (key -> T_tool_part: a subassembly held
     as one body, CollisionScene.at), ``grasped`` being closed on with the fingers ``width`` apart, ``allow`` the
-    step's own contacts: the solution nearest ``ref`` (rad; zeros if None) among those clear of
-    the world (all of them when the cell opts out of collision checks), with the reason when
-    there is none (:class:`ArmAt`). Phase 2 asks this for every step that moves the arm."""
+    step's own contacts, ``touch`` the bodies that may touch the table (CollisionScene.at): the
+    solution nearest ``ref`` (rad; zeros if None) among those clear of the world (all of them when
+    the cell opts out of collision checks), with the reason when there is none (:class:`ArmAt`).
+    Phase 2 asks this for every step that moves the arm."""
     cell = cache.cell
     sols = solutions(cell.robot, T)
     ref = np.zeros(6) if ref is None else ref
@@ -355,7 +372,7 @@ def arm_at(cache: CellCache, T: np.ndarray, ref: np.ndarray | None, *, parts: Ma
         return ArmAt(None, sols)
     if not cell.collisions:
         return ArmAt(sols[int(np.argmin(np.abs(sols - ref).sum(axis=1)))], sols)
-    state = cache.scene().at(parts, held, grasped, width=width, allow=allow, carried=carried)
+    state = cache.scene().at(parts, held, grasped, width=width, allow=allow, carried=carried, touch=touch)
     clear, why = state.check(sols)
     good = sols[clear]
     if not len(good):
