@@ -403,12 +403,20 @@ def load_product_derived(path: str | Path, unit: str, max_bytes: int = MAX_INPUT
                       tuple(s for s in links if isinstance(s, Seat)), files=tuple(files))
     where = root.key("mates") if mates_node is not None else root.key("parts")
     try:
-        product.goals = wp.compile_goals(product, None if derived is None else
-                                         [p for i in derived.insertions for p in i.parts])
+        order = None if derived is None else [p for i in derived.insertions for p in i.parts]
+        product.goals = wp.compile_goals(product, order)
         # a derived product's precedence is the disassembly's (exact meshes both ways; the
         # declared products' sweep moves a mesh part's hull, which fills its bores)
-        product.precedence = (wp.precedence(product, unit) if derived is None else
-                              tuple(Precedence(a, b, why) for a, b, why in derived.precedence))
+        prec = (wp.precedence(product, unit) if derived is None else
+                tuple(Precedence(a, b, why) for a, b, why in derived.precedence))
+        # a part whose tree parent is in place first goes into the part that still has a location
+        # (the order's pairs where known, else the precedence's; the sweeps do not depend on it)
+        first = (wp.insertion_pairs([i.parts for i in derived.insertions]) if derived is not None
+                 else tuple((pr.first, pr.then) for pr in prec))
+        product.goals = wp.compile_goals(product, order, first)
+        have = {(pr.first, pr.then) for pr in prec}
+        product.precedence = prec + tuple(pr for pr in wp.through_precedence(product, first)
+                                          if (pr.first, pr.then) not in have)
         product.near = wp.near_parts(product, unit)
         _add_via_grasps(product)
         _add_sub_poses(product, unit)

@@ -870,6 +870,11 @@ def _assemble(world: World, s: Step, early: bool = False) -> tuple[list[dict], W
     cell = world.cell
     Ta = cell.transforms[ta]
     g = _grasp(cell, peg, world.grasps[peg])
+    goal_hole, goal_Ta = hole, Ta
+    hole, Ta, faces = _carried_mate(world, peg, hole, faces, Ta)
+    va_vec = np.asarray(cell.vectors[va], float) if isinstance(va, str) and va in cell.vectors else None
+    if va_vec is not None and hole != goal_hole:  # V_a is in the goal parent's frame: into the mated part's
+        va_vec = (world.unc.obj(hole).pose[:3, :3].T @ world.unc.obj(goal_hole).pose[:3, :3]) @ va_vec
     pair = _product_mate(cell, peg, hole, faces, Ta)
     if pair is None:
         fp, fh = _mate_features(cell, peg, hole, faces)
@@ -877,17 +882,17 @@ def _assemble(world: World, s: Step, early: bool = False) -> tuple[list[dict], W
         fp, fh = pair
     cs = [] if fp is None else ur.assemble_constraints(
         world.unc, peg, hole, Ta, fp, fh, action=s["id"], memo=world.cache.memo,
-        axis=cell.vectors.get(va) if isinstance(va, str) else None)
+        axis=va_vec)
     checks = _verdicts(world, cs, early)
-    what = f"assemble({peg}, {hole})"
+    what = f"assemble({peg}, {goal_hole})"
     near = cell.product.near.get(peg, ()) if cell.product is not None else ()
-    q, geo, refused = _arm(world, world.unc.obj(hole).pose @ Ta @ g.T, what, held=(peg, np.linalg.inv(g.T)),
-                           width=g.width, allow=[(f"held:{peg}", o) for o in dict.fromkeys((hole, *near))],
+    q, geo, refused = _arm(world, world.unc.obj(goal_hole).pose @ goal_Ta @ g.T, what,
+                           held=(peg, np.linalg.inv(g.T)), width=g.width,
+                           allow=[(f"held:{peg}", o) for o in dict.fromkeys((goal_hole, hole, *near))],
                            via=_via(cell, peg, world.grasps[peg]), touch=True)
     if q is None:
         checks.append(_reach_verdict(s["id"], False, _no_arm(what, geo)))
     grasps = {k: v for k, v in world.grasps.items() if k != peg}
-    va_vec = np.asarray(cell.vectors[va], float) if isinstance(va, str) and va in cell.vectors else None
     margin = 0.0 if fp is None else max(0.0, float(fh.radius) - float(fp.radius))
     retention, mate = _retention(cell, peg, hole, fh)
     unc = ur.assemble(world.unc, peg, hole, Ta, retention=retention, direction=va_vec, clearance=margin,
@@ -902,6 +907,30 @@ def _assemble(world: World, s: Step, early: bool = False) -> tuple[list[dict], W
                 joints=q if q is not None else world.joints, checked=_checked(world, cs, checks),
                 complete=sum(c["kind"] == "uncertainty" for c in checks) == len(cs))
     return checks, w, geo
+
+
+def _carried_mate(world: World, peg: str, hole: str, faces: Any, Ta: np.ndarray) -> tuple[str, np.ndarray, Any]:
+    """The part, T_a and ``[PegFaces, HoleFaces]`` a product part's insertion into ``hole`` is
+    checked against: its goal's first mate with a part ``hole``'s body carries (a goal into the
+    ancestor that still has a location, world.products.goal_parents) when the goal makes none
+    with ``hole`` itself, that part with T_a relative to it (T_M^-1 T_H T_a at their present
+    ideal poses) and the mate's features' faces; else ``hole``, ``Ta`` and ``faces`` unchanged."""
+    cell = world.cell
+    goal = None if cell.product is None else cell.product.goal_of(peg)
+    if goal is None:
+        return hole, Ta, faces
+    mates = [m for m in cell.product.mates if m.name in goal.mates and peg in (m.peg, m.hole)]
+    if any(hole in (m.peg, m.hole) for m in mates):
+        return hole, Ta, faces
+    body = set(world.unc.body(world.unc.root(hole)))
+    for m in mates:
+        other = m.hole if m.peg == peg else m.peg
+        if other != hole and other in body:
+            own, theirs = (m.peg_feature, m.hole_feature) if m.peg == peg else (m.hole_feature, m.peg_feature)
+            T_rel = np.linalg.inv(world.unc.obj(other).pose) @ world.unc.obj(hole).pose
+            return other, T_rel @ Ta, [list(cell.objects[peg].feature_named(own).faces),
+                                       list(cell.objects[other].feature_named(theirs).faces)]
+    return hole, Ta, faces
 
 
 def _retention(cell: Cell, peg: str, hole: str, fh: MatingFeature | None) -> tuple[str, str]:

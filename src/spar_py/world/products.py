@@ -8,7 +8,8 @@ lengths converted at load).
 - :func:`mate_misalignment`: whether a mate's features line up (coaxial, overlapping).
 - :func:`compile_goals`: the assembly tree rooted at the base part and one
   :class:`~spar_py.core.model.PartGoal` per other part (T_a = T_parent^-1 T_part, V_a the
-  insertion direction in the parent's frame).
+  insertion direction in the parent's frame), the parent the nearest ancestor not known to
+  be in place before the part (:func:`goal_parents`).
 - :func:`precedence`: for each non-base part P, P's solids swept along its insertion
   direction from clear of everything to its seated pose, against every other part Q at its
   product pose; a hit means Q in place blocks P, so P goes first. The sweep of a convex body
@@ -25,7 +26,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -39,7 +40,7 @@ if TYPE_CHECKING:
     from spar_py.core.model import MatingFeature, ObjectModel
 
 __all__ = ["AXIS_TOL_MM", "NEAR_MM", "SUB", "SWEEP_MARGIN_MM", "VIA", "Axis", "SubPose", "compile_goals",
-           "feature_axis",
+           "feature_axis", "goal_parents", "insertion_pairs", "through_precedence",
            "mate_misalignment", "near_parts", "precedence", "resting_faces", "seat_direction", "subassembly_poses",
            "subtree", "via_grasps"]
 
@@ -207,41 +208,96 @@ def _made_by(product: Product, parents: dict[str, str], order: Sequence[str] | N
     return out
 
 
-def compile_goals(product: Product, order: Sequence[str] | None = None) -> tuple[PartGoal, ...]:
-    """One goal per non-base part (file order): into its parent, with the faces of the mates
-    and seats between them, T_a from the product poses and V_a its insertion direction in the
-    parent's frame; ``order`` the insertion order where known (a derived product's). Every
-    mate or seat the part's insertion makes must agree on the direction (SparValueError
-    naming them otherwise)."""
+def compile_goals(product: Product, order: Sequence[str] | None = None,
+                  first: Collection[tuple[str, str]] = ()) -> tuple[PartGoal, ...]:
+    """One goal per non-base part (file order): into its goal parent (:func:`goal_parents`),
+    with the part's faces of the mates and seats its insertion makes with that parent and the
+    parts between them and the parent's faces of those with it, T_a from the product poses
+    and V_a its insertion direction in the goal parent's frame; ``order`` the insertion order
+    where known (a derived product's), ``first`` the pairs (A, B) with A in place before B
+    is inserted. Every mate or seat the part's insertion makes must agree on the direction
+    (SparValueError naming them otherwise)."""
     parents = _parents(product)
     made = _made_by(product, parents, order)
+    into = goal_parents(product, first)
     goals = []
-    for p, parent in parents.items():
+    for p in parents:
         links = made[p]
         d = None
         for lk in links:
             dk = _direction(product, lk, p)
             if d is None:
-                d, first = dk, lk
+                d, first_link = dk, lk
             elif float(dk @ d) < 1 - 1e-6:
-                raise SparValueError(f"product {product.name}: {first.name} and {lk.name} are made by one insertion "
-                                     f"of {p} but need different directions")
+                raise SparValueError(f"product {product.name}: {first_link.name} and {lk.name} are made by one "
+                                     f"insertion of {p} but need different directions")
+        parent = into[p]
+        chain = set(_ancestors(parents, p, parent))
         own, other = [], []
         for lk in links:
-            if isinstance(lk, Mate) and {lk.peg, lk.hole} == {p, parent}:
-                pf = lk.peg_feature if lk.peg == p else lk.hole_feature
-                qf = lk.hole_feature if lk.peg == p else lk.peg_feature
+            a, b = (lk.peg, lk.hole) if isinstance(lk, Mate) else (lk.part, lk.on)
+            q = b if a == p else a
+            if q not in chain:
+                continue
+            if isinstance(lk, Mate):
+                pf, qf = (lk.peg_feature, lk.hole_feature) if lk.peg == p else (lk.hole_feature, lk.peg_feature)
                 own += list(product.parts[p].model.feature_named(pf).faces)
-                other += list(product.parts[parent].model.feature_named(qf).faces)
-            elif isinstance(lk, Seat) and {lk.part, lk.on} == {p, parent}:
+                if q == parent:
+                    other += list(product.parts[parent].model.feature_named(qf).faces)
+            else:
                 own.append(lk.face if lk.part == p else lk.on_face)
-                other.append(lk.on_face if lk.part == p else lk.face)
+                if q == parent:
+                    other.append(lk.on_face if lk.part == p else lk.face)
         Tp, Tq = product.parts[p].pose, product.parts[parent].pose
         Ta = np.linalg.inv(Tq) @ Tp
         Va = Tq[:3, :3].T @ d
         goals.append(PartGoal(p, parent, tuple(dict.fromkeys(own)), tuple(dict.fromkeys(other)), Ta, Va,
                               f"trans_{p}", f"vec_{p}", tuple(lk.name for lk in links)))
     return tuple(goals)
+
+
+def _ancestors(parents: dict[str, str], p: str, upto: str) -> list[str]:
+    """P's ancestors in the assembly tree from its parent up to ``upto`` (included)."""
+    out = [parents[p]]
+    while out[-1] != upto:
+        out.append(parents[out[-1]])
+    return out
+
+
+def goal_parents(product: Product, first: Collection[tuple[str, str]] = ()) -> dict[str, str]:
+    """Each non-base part's goal parent: the part its insertion goes into, the one that still
+    has a location where it was put when the part is inserted. That is its tree parent
+    (:func:`_parents`) unless the parent is known to be in place first (``first`` holds
+    (parent, part)): an assembled part has no location of its own (its pickup deleted it), so
+    the goal goes up the tree, through each ancestor known to be in place before the part, to
+    the first one that is not (or the base). T_a is then relative to that part, and phase 2
+    checks the insertion against the carried part it mates with at its composed pose."""
+    parents = _parents(product)
+    known = set(first)
+    out: dict[str, str] = {}
+    for p, a in parents.items():
+        while a != product.base and (a, p) in known:
+            a = parents[a]
+        out[p] = a
+    return out
+
+
+def through_precedence(product: Product, first: Collection[tuple[str, str]] = ()) -> tuple[Precedence, ...]:
+    """The orderings a goal into an ancestor beyond its tree parent relies on
+    (:func:`goal_parents`): each part between the goal parent and the part is inserted first."""
+    parents = _parents(product)
+    into = goal_parents(product, first)
+    out = []
+    for p, q in into.items():
+        for a in _ancestors(parents, p, q)[:-1]:
+            out.append(Precedence(a, p, f"{p} goes into {q} with {a} in place (it mates with {parents[p]})"))
+    return tuple(out)
+
+
+def insertion_pairs(insertions: Sequence[Sequence[str]]) -> tuple[tuple[str, str], ...]:
+    """The pairs (A, B) of an insertion order (groups of parts inserted together, in order)
+    with A's group before B's: A is in place before B is inserted."""
+    return tuple((a, b) for i, ga in enumerate(insertions) for gb in insertions[i + 1:] for a in ga for b in gb)
 
 
 # --------------------------------------------------------------------------- precedence
