@@ -117,6 +117,35 @@ def resting_faces(cell: Cell, obj: str, label: str) -> tuple[Face, ...]:
     return tuple(faces)
 
 
+#: A gripper body this far below the table plane still counts as above it (mm): rounding.
+TABLE_TOL_MM = 0.05
+
+
+def _above_table(cell: Cell, model: ObjectModel, g: Grasp, label: str) -> bool:
+    """Whether grasp ``g`` of a part with a mesh holds it at position ``label`` although a face
+    it closes on is one it rests on: no corner of the fingers or the palm at the grasp's width
+    lies below the table plane there. A face a part rests on whole (a planar one) has every pad
+    on it at the table and the finger behind the pad below it, so this refuses those as the
+    paper's condition 1 does; a curved one (a round touching the table along a rim or a line)
+    is closed on where it is clear of the table. The paper's condition 1 for every other model."""
+    geo = model.geometry
+    if geo is None or geo.mesh_file is None:
+        return False
+    from spar_py.core.units import from_mm, mm_per
+    from spar_py.world.robots import GripperGeometry
+
+    T_O = _absolute(cell, model, label)
+    if T_O is None:
+        pose = model.poses[label]
+        T_O = np.eye(4)
+        T_O[:3, :3], T_O[2, 3] = pose.R, pose.height
+    gripper = cell.robot.gripper or GripperGeometry.default(cell.finger_separation, mm_per(cell.unit))
+    C = np.concatenate([np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+                        for _, lo, hi in gripper.boxes(g.width)])
+    M = T_O @ np.asarray(g.T, float)
+    return bool((C @ M[2, :3] + M[2, 3]).min() >= -from_mm(cell.unit, TABLE_TOL_MM))
+
+
 #: How a stable-pose label (a put-down position with no X, Y) counts for condition 2:
 #: "reachable" (some placement in the free regions reaches it) or "paper" (Sec. 5.2.4:
 #: "some suitable choice of X, Y, Z" is assumed). Phase 1's placements(Rule) option.
@@ -186,7 +215,7 @@ def reachable_pairs(cache: CellCache, obj: str, grasp_labels: Sequence[str],
     for p in pos_labels:
         T_O = _absolute(cell, model, p)
         rfaces = set(resting_faces(cell, obj, p))
-        free = [g for g in grasps if not rfaces & set(g.gfaces)]  # condition 1
+        free = [g for g in grasps if not rfaces & set(g.gfaces) or _above_table(cell, model, g, p)]  # condition 1
         if T_O is None:
             asks.append((p, free, [Requirement(g.T, None, g.width) for g in free]))
             continue
