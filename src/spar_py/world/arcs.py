@@ -30,6 +30,8 @@ import numpy as np
 from spar_py.core.errors import SparValueError
 from spar_py.core.geometry import same_stable_poses
 from spar_py.core.model import Cell, Face, Grasp, ObjectModel
+from spar_py.core.units import from_mm, mm_per
+from spar_py.world.robots import GripperGeometry
 from spar_py.world.workspace import Refusal, Requirement, ik_rows, requirement_clear_ik, requirement_state
 
 if TYPE_CHECKING:
@@ -39,6 +41,7 @@ __all__ = [
     "ARCS",
     "Arc",
     "arc",
+    "hand_above_table",
     "mate_reachable_pairs",
     "natural_key",
     "reachable_pairs",
@@ -121,29 +124,33 @@ def resting_faces(cell: Cell, obj: str, label: str) -> tuple[Face, ...]:
 TABLE_TOL_MM = 0.05
 
 
+def hand_above_table(gripper: GripperGeometry, T_tool: np.ndarray, width: float, unit: str) -> bool:
+    """Whether no corner of the fingers (contact faces ``width`` apart) or the palm of
+    ``gripper`` at tool pose ``T_tool`` (4x4, world, cell unit) lies below the table plane
+    z = 0 by more than TABLE_TOL_MM."""
+    C = np.concatenate([np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+                        for _, lo, hi in gripper.boxes(width)])
+    M = np.asarray(T_tool, float)
+    return bool((C @ M[2, :3] + M[2, 3]).min() >= -from_mm(unit, TABLE_TOL_MM))
+
+
 def _above_table(cell: Cell, model: ObjectModel, g: Grasp, label: str) -> bool:
     """Whether grasp ``g`` of a part with a mesh holds it at position ``label`` although a face
-    it closes on is one it rests on: no corner of the fingers or the palm at the grasp's width
-    lies below the table plane there. A face a part rests on whole (a planar one) has every pad
-    on it at the table and the finger behind the pad below it, so this refuses those as the
-    paper's condition 1 does; a curved one (a round touching the table along a rim or a line)
-    is closed on where it is clear of the table. The paper's condition 1 for every other model."""
+    it closes on is one it rests on: the hand is above the table there (:func:`hand_above_table`).
+    A face a part rests on whole (a planar one) has every pad on it at the table and the finger
+    behind the pad below it, so this refuses those as the paper's condition 1 does; a curved one
+    (a round touching the table along a rim or a line) is closed on where it is clear of the
+    table. The paper's condition 1 for every other model."""
     geo = model.geometry
     if geo is None or geo.mesh_file is None:
         return False
-    from spar_py.core.units import from_mm, mm_per
-    from spar_py.world.robots import GripperGeometry
-
     T_O = _absolute(cell, model, label)
     if T_O is None:
         pose = model.poses[label]
         T_O = np.eye(4)
         T_O[:3, :3], T_O[2, 3] = pose.R, pose.height
     gripper = cell.robot.gripper or GripperGeometry.default(cell.finger_separation, mm_per(cell.unit))
-    C = np.concatenate([np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-                        for _, lo, hi in gripper.boxes(g.width)])
-    M = T_O @ np.asarray(g.T, float)
-    return bool((C @ M[2, :3] + M[2, 3]).min() >= -from_mm(cell.unit, TABLE_TOL_MM))
+    return hand_above_table(gripper, T_O @ np.asarray(g.T, float), g.width, cell.unit)
 
 
 #: How a stable-pose label (a put-down position with no X, Y) counts for condition 2:
