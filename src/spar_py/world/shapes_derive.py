@@ -879,7 +879,9 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fe
                     cands.append((names, width, T))
     min_len = from_mm(unit, MIN_CONTACT_MM)
     cyl_normals = {c.face: c.normals for c in mesh_cylinders(mesh, faces, unit)}
-    for root, d, r, length, fname in _shafts(faces, features, prims, mesh, unit):
+    n_pegs = sum(1 for f in features if f.kind == "peg" and f.profile == "round")  # _shafts lists them first
+    at_root: list[tuple[tuple[str, ...], float, np.ndarray]] = []  # a peg's shaft held at its root end
+    for k_shaft, (root, d, r, length, fname) in enumerate(_shafts(faces, features, prims, mesh, unit)):
         if not _round(mesh, root, d, r, length, unit):
             continue  # a prismatic shaft (a hexagon): its flats are not a cylinder to close on
         normals = cyl_normals.get(fname) if fname is not None else None  # a mesh cylinder's; else a whole round
@@ -900,6 +902,16 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fe
                 # exactly 5 mm under the pad, which rounding puts just below it in some units
                 if _line_contact(root + c * r, d, length, T, g) >= min_len * (1 - 1e-9):
                     cands.append(((name,), 2 * r, T))
+                if k_shaft >= n_pegs or float(a @ d) < -1e-9:
+                    continue
+                # a peg's also at its root end: the pad's far edge along the shaft MIN_CONTACT_MM
+                # from the root (the hand beyond the root, clear of the hole the rest goes into)
+                t_root = min_len - g.finger_width / 2 * abs(float(cross(c, a) @ d))
+                if t_root < length / 2 - 1e-9 * (1.0 + length):
+                    T = _tool(clean(root + d * t_root, 1e-9), c, a)
+                    if _line_contact(root + c * r, d, length, T, g) >= min_len * (1 - 1e-9):
+                        at_root.append(((name,), 2 * r, T))
+    cands += at_root
     out = []
     for names, width, T in cands:
         if grasp_problem(mesh, T, width, g, unit) is not None:
