@@ -67,3 +67,48 @@ def test_thumbstick_cap_is_held_above_the_mouth_and_the_table() -> None:
     assert set(seated_ok) <= set(usable)
     assert lying_ok and all(_above_table(cell, stick, g, "stick0_p1") for g in lying_ok)
     assert low and not any(_above_table(cell, stick, g, "stick0_p1") for g in low)
+
+
+def _world(C: np.ndarray, T: np.ndarray) -> np.ndarray:
+    return C @ T[:3, :3].T + T[:3, 3]
+
+
+def test_button_peg_is_held_at_its_root_clear_of_the_housing() -> None:
+    """button1's peg is 20 mm long and 10 mm of it goes into the housing (mouth at z = 25 mm,
+    the peg from z = 15 to 35 in the product frame): a grasp holds at least 5 mm of the outer
+    10 mm with every finger and palm corner 2 mm (the collision margin) above the mouth."""
+    cell = load_problem(ROOT / "kb/problems/fabrica_gamepad.yaml")
+    button = cell.objects["button1"]
+    goal = next(g for g in cell.goals if isinstance(g, tuple) and g[0] == "assembled" and g[1] == "button1")
+    T_a = np.asarray(cell.transforms[goal[4]], float)
+    gripper = cell.robot.gripper
+    clear = []
+    for g in button.grasps.values():
+        M = T_a @ g.T
+        if _world(_corners(gripper, g.width), M)[:, 2].min() < 25.0 + 2.0:
+            continue
+        # the pads' extent along the peg's axis (world z here), against the peg's outer 10 mm
+        _, lo, hi = gripper.boxes(g.width)[0]
+        pad = _world(np.array([[x, 0.0, z] for x in (lo[0], hi[0]) for z in (lo[2], hi[2])]), M)[:, 2]
+        if min(pad.max(), 35.0) - max(pad.min(), 25.0) >= 5.0 - 1e-6 and abs(g.width - 23.0) < 0.01:
+            clear.append(g.label)
+    assert clear, "no grasp of button1 holds its peg above the housing by the collision margin"
+
+
+def test_layout_lays_mated_parts_where_a_usable_grasp_is_above_the_table() -> None:
+    """The sticks and button1 rest on their caps or tops in their most probable poses, where
+    every grasp their mates can use comes from below; the layout stands them the other way."""
+    cell = load_problem(ROOT / "kb/problems/fabrica_gamepad.yaml")
+    gripper = cell.robot.gripper
+    for part in ("stick0", "stick5", "button1"):
+        model = cell.objects[part]
+        T = next(p.T for p in cell.positions.values() if p.obj == part)
+        goal = next(g for g in cell.goals if isinstance(g, tuple) and g[0] == "assembled" and g[1] == part)
+        T_a = np.asarray(cell.transforms[goal[4]], float)
+        mouth = float(model.feature_on(tuple(goal[3][0])).geometry.origin[2])  # the peg's root: z of the mouth or above
+        hole_mouth = float(cell.objects["housing"].feature_on(tuple(goal[3][1])).geometry.origin[2])
+        assert mouth >= hole_mouth - 1e-6
+        ok = [g.label for g in model.grasps.values()
+              if _world(_corners(gripper, g.width), T_a @ g.T)[:, 2].min() >= hole_mouth - 0.05
+              and _world(_corners(gripper, g.width), T @ g.T)[:, 2].min() >= -0.05]
+        assert ok, f"{part}: no grasp usable when seated keeps the hand above the table where it lies"
