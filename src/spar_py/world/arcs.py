@@ -32,7 +32,8 @@ import numpy as np
 from spar_py.core.errors import SparValueError
 from spar_py.core.geometry import same_stable_poses
 from spar_py.core.model import Cell, Face, Grasp, ObjectModel
-from spar_py.core.units import from_mm
+from spar_py.core.units import from_mm, mm_per
+from spar_py.world.robots import GripperGeometry
 from spar_py.world.workspace import Refusal, Requirement, ik_rows, requirement_clear_ik, requirement_state
 
 if TYPE_CHECKING:
@@ -42,6 +43,7 @@ __all__ = [
     "ARCS",
     "Arc",
     "arc",
+    "hand_above_table",
     "mate_reachable_pairs",
     "natural_key",
     "reachable_pairs",
@@ -151,6 +153,39 @@ def _contacts_off_table(cell: Cell, model: ObjectModel, g: Grasp, up: tuple[np.n
     return bool((P @ up[0] + up[1] >= from_mm(cell.unit, CONTACT_CLEAR_MM)).all())
 
 
+#: A gripper body this far below the table plane still counts as above it (mm): rounding.
+TABLE_TOL_MM = 0.05
+
+
+def hand_above_table(gripper: GripperGeometry, T_tool: np.ndarray, width: float, unit: str) -> bool:
+    """Whether no corner of the fingers (contact faces ``width`` apart) or the palm of
+    ``gripper`` at tool pose ``T_tool`` (4x4, world, cell unit) lies below the table plane
+    z = 0 by more than TABLE_TOL_MM."""
+    C = np.concatenate([np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+                        for _, lo, hi in gripper.boxes(width)])
+    M = np.asarray(T_tool, float)
+    return bool((C @ M[2, :3] + M[2, 3]).min() >= -from_mm(unit, TABLE_TOL_MM))
+
+
+def _above_table(cell: Cell, model: ObjectModel, g: Grasp, label: str) -> bool:
+    """Whether grasp ``g`` of a part with a mesh holds it at position ``label`` although a face
+    it closes on is one it rests on: the hand is above the table there (:func:`hand_above_table`).
+    A face a part rests on whole (a planar one) has every pad on it at the table and the finger
+    behind the pad below it, so this refuses those as the paper's condition 1 does; a curved one
+    (a round touching the table along a rim or a line) is closed on where it is clear of the
+    table. The paper's condition 1 for every other model."""
+    geo = model.geometry
+    if geo is None or geo.mesh_file is None:
+        return False
+    T_O = _absolute(cell, model, label)
+    if T_O is None:
+        pose = model.poses[label]
+        T_O = np.eye(4)
+        T_O[:3, :3], T_O[2, 3] = pose.R, pose.height
+    gripper = cell.robot.gripper or GripperGeometry.default(cell.finger_separation, mm_per(cell.unit))
+    return hand_above_table(gripper, T_O @ np.asarray(g.T, float), g.width, cell.unit)
+
+
 #: How a stable-pose label (a put-down position with no X, Y) counts for condition 2:
 #: "reachable" (some placement in the free regions reaches it) or "paper" (Sec. 5.2.4:
 #: "some suitable choice of X, Y, Z" is assumed). Phase 1's placements(Rule) option.
@@ -221,7 +256,10 @@ def reachable_pairs(cache: CellCache, obj: str, grasp_labels: Sequence[str],
         T_O = _absolute(cell, model, p)
         rfaces = set(resting_faces(cell, obj, p))
         up = _table_frame(model, p, T_O)
-        free = [g for g in grasps if not rfaces & set(g.gfaces) or _contacts_off_table(cell, model, g, up)]  # cond. 1
+        # condition 1, relaxed for a derived shape: the fingers' contacts clear of the table, or
+        # the whole hand above it (a curved face the part rests on touches the table along a line)
+        free = [g for g in grasps if not rfaces & set(g.gfaces) or _contacts_off_table(cell, model, g, up)
+                or _above_table(cell, model, g, p)]
         if T_O is None:
             asks.append((p, free, [Requirement(g.T, None, g.width) for g in free]))
             continue

@@ -6,7 +6,11 @@ mated) in which the build makes the most insertions from above (within DOWN_DEG 
 order the precedence allows, before the first that needs a turn); among those the one that
 keeps the product frame's down (-z) down (the product built as assembled); every other part lies in its most
 probable stable pose (a derived model lists its poses most probable first, so the first one
-the planner knows), yaw 0. The build spot is on the robot base's x axis, at the distance
+the planner knows) among those where a grasp its mate can use (world.shapes_derive.
+mate_grasp_usable: the hand outside the hole's mouth plane when seated) keeps the hand above
+the table (a parallel gripper cannot turn a part over between its two poses, so a part lying
+where only grasps from below would seat it is never assembled), else its most probable, yaw 0.
+The build spot is on the robot base's x axis, at the distance
 (PEDESTAL_MM + the product's footprint radius up to the arm's length, in STEP_MM) where the
 fewest of the parts' grasps at their assembled poses are out of IK reach (ties: the nearer).
 The other parts, largest footprint first, take the free grid point (STEP_MM) nearest the
@@ -33,6 +37,7 @@ from spar_py.core.units import from_mm
 from spar_py.world.workspace import reachable_ignoring_collisions
 
 __all__ = ["GAP_MM", "PEDESTAL_MM", "STEP_MM", "Layout", "PartPlacement", "apart", "layout_parts", "layout_product",
+           "mate_usable_grasps",
            "part_footprint"]
 
 #: Kept between two footprints (mm): the open fingers go down beside a part.
@@ -133,6 +138,43 @@ def _base_pose(model: ObjectModel, R_prod: np.ndarray | None = None,
     return poses[next((i for i in pick if upright[i]), pick[0])]
 
 
+def _lying_pose(model: ObjectModel, usable: frozenset[str] | None, gripper, unit: str) -> StablePose:
+    """The stable pose a part other than the base lies in (module docstring): the most probable
+    one where some grasp of ``usable`` (None: no preference) keeps ``gripper``'s hand above the
+    table, else the most probable."""
+    from spar_py.world.arcs import hand_above_table
+
+    poses = list(model.poses.values())
+    if usable and gripper is not None:
+        for pose in poses:
+            T = _placed(np.asarray(pose.R, float), pose.height, np.zeros(2))
+            if any(hand_above_table(gripper, T @ np.asarray(g.T, float), g.width, unit)
+                   for label, g in model.grasps.items() if label in usable):
+                return pose
+    return poses[0]
+
+
+def mate_usable_grasps(product: Product, gripper, unit: str) -> dict[str, frozenset[str]]:
+    """Each mated peg part's grasps usable for its mate (world.shapes_derive.mate_grasp_usable
+    at the product poses; the features' geometry in their parts' frames, cell unit); parts
+    without a mate of known geometry are absent."""
+    from spar_py.world.shapes_derive import mate_grasp_usable  # numpy only
+
+    out: dict[str, frozenset[str]] = {}
+    if gripper is None:
+        return out
+    for m in product.mates:
+        peg, hole = product.parts[m.peg], product.parts[m.hole]
+        hf = hole.model.feature_named(m.hole_feature).geometry
+        if hf is None or hf.kind != "hole":
+            continue
+        T_a = np.linalg.inv(np.asarray(hole.pose, float)) @ np.asarray(peg.pose, float)
+        got = {g.label for g in peg.model.grasps.values()
+               if mate_grasp_usable(g.T, g.width, gripper, T_a, hf, unit)}
+        out[m.peg] = out.get(m.peg, frozenset()) | frozenset(got)
+    return out
+
+
 def _placed(R: np.ndarray, height: float, xy: np.ndarray) -> np.ndarray:
     T = np.eye(4)
     T[:3, :3] = R
@@ -143,10 +185,12 @@ def _placed(R: np.ndarray, height: float, xy: np.ndarray) -> np.ndarray:
 
 def layout_parts(parts: Mapping[str, ObjectModel], poses: Mapping[str, np.ndarray], base: str, robot,
                  unit: str, name: str = "the product",
-                 insertions: Sequence[tuple[str, np.ndarray, frozenset[str]]] = ()) -> Layout:
+                 insertions: Sequence[tuple[str, np.ndarray, frozenset[str]]] = (),
+                 usable: Mapping[str, frozenset[str]] | None = None) -> Layout:
     """Lay out ``parts`` (name: model; ``poses``: each part's pose in the product frame, 4x4)
-    on the table for ``robot`` (module docstring). SparValueError (one line) when the
-    assembled product is out of reach at every build spot or a part finds no free spot."""
+    on the table for ``robot`` (module docstring; ``usable``: each part's grasps its mate can
+    use, :func:`mate_usable_grasps`). SparValueError (one line) when the assembled product is
+    out of reach at every build spot or a part finds no free spot."""
     step, gap, ped = (from_mm(unit, v) for v in (STEP_MM, GAP_MM, PEDESTAL_MM))
     arm = float(np.abs(robot.dh[:, 1]).sum() + np.abs(robot.dh[:, 2]).sum() + np.linalg.norm(robot.tool[:3, 3]))
     B = np.asarray(robot.base, float)
@@ -177,7 +221,8 @@ def layout_parts(parts: Mapping[str, ObjectModel], poses: Mapping[str, np.ndarra
     out = [PartPlacement(base, bp.label, _placed(Rb, bp.height, xy_b))]
     taken = [prod + xy_b]
     others = [p for p in parts if p != base]
-    feet = {p: part_footprint(parts[p], next(iter(parts[p].poses.values())).R) for p in others}
+    lying = {p: _lying_pose(parts[p], (usable or {}).get(p), robot.gripper, unit) for p in others}
+    feet = {p: part_footprint(parts[p], lying[p].R) for p in others}
     others.sort(key=lambda p: -float(np.ptp(feet[p][:, 0]) * np.ptp(feet[p][:, 1])))
     n = int(np.ceil(arm / step))
     g = np.arange(-n, n + 1) * step
@@ -185,7 +230,7 @@ def layout_parts(parts: Mapping[str, ObjectModel], poses: Mapping[str, np.ndarra
     spot = xy_b + c0
     grid = grid[np.argsort(np.linalg.norm(grid - spot, axis=1), kind="stable")]
     for p in others:
-        pose = next(iter(parts[p].poses.values()))
+        pose = lying[p]
         F = feet[p]
         fc = (F.min(0) + F.max(0)) / 2
         t = grid - fc                              # the footprint's centre on the grid point
@@ -223,4 +268,5 @@ def layout_product(product: Product, robot, unit: str) -> Layout:
     b = models[product.base]
     models[product.base] = replace(b, poses={k: v for k, v in b.poses.items() if k not in sub})
     return layout_parts(models, {p: np.asarray(pp.pose, float) for p, pp in product.parts.items()},
-                        product.base, robot, unit, f"product {product.name}", insertions)
+                        product.base, robot, unit, f"product {product.name}", insertions,
+                        mate_usable_grasps(product, robot.gripper, unit))

@@ -897,7 +897,9 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fe
                             shallow.append((names, width, Ts))
     min_len = from_mm(unit, MIN_CONTACT_MM)
     cyl_normals = {c.face: c.normals for c in mesh_cylinders(mesh, faces, unit)}
-    for root, d, r, length, fname in _shafts(faces, features, prims, mesh, unit):
+    n_pegs = sum(1 for f in features if f.kind == "peg" and f.profile == "round")  # _shafts lists them first
+    at_root: list[tuple[tuple[str, ...], float, np.ndarray]] = []  # a peg's shaft held at its root end
+    for k_shaft, (root, d, r, length, fname) in enumerate(_shafts(faces, features, prims, mesh, unit)):
         if not _round(mesh, root, d, r, length, unit):
             continue  # a prismatic shaft (a hexagon): its flats are not a cylinder to close on
         normals = cyl_normals.get(fname) if fname is not None else None  # a mesh cylinder's; else a whole round
@@ -918,9 +920,19 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fe
                 # exactly 5 mm under the pad, which rounding puts just below it in some units
                 if _line_contact(root + c * r, d, length, T, g) >= min_len * (1 - 1e-9):
                     cands.append(((name,), 2 * r, T))
+                if k_shaft >= n_pegs or float(a @ d) < -1e-9:
+                    continue
+                # a peg's also at its root end: the pad's far edge along the shaft MIN_CONTACT_MM
+                # from the root (the hand beyond the root, clear of the hole the rest goes into)
+                t_root = min_len - g.finger_width / 2 * abs(float(cross(c, a) @ d))
+                if t_root < length / 2 - 1e-9 * (1.0 + length):
+                    T = _tool(clean(root + d * t_root, 1e-9), c, a)
+                    if _line_contact(root + c * r, d, length, T, g) >= min_len * (1 - 1e-9):
+                        at_root.append(((name,), 2 * r, T))
         for T in _shaft_from_above(mesh, root, d, r, length, g, unit, poses or [], min_len):
             if _pads_find(normals, T[:3, 1]):
                 shallow.append(((name,), 2 * r, T))
+    cands += at_root
     out = _facet_grasps(mesh, faces, features, g, unit, prefix, cands, [], unique=False)
     owner = np.full(len(mesh.faces), -1)
     for k, f in enumerate(faces):
@@ -951,7 +963,7 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fe
                        f"{unit}, more than the gripper's opening {g.opening:.4g} {unit}")
         elif not n_pairs:
             why.append(f"its narrowest width across opposite surfaces is {least:.4g} {unit}, within the gripper's "
-                       f"opening {g.opening:.4g} {unit}, but no pad finds a {PAD_PATCH_MM:g} mm patch of surface there")
+                       f"opening {g.opening:.4g} {unit}, but no pad finds a {PAD_PATCH_MM:g} mm line of surface there")
         else:
             why.append(f"{n_pairs} contact pairs from {least:.4g} {unit} wide are within the gripper's opening "
                        f"{g.opening:.4g} {unit}, but at each the fingers or palm enter the part")
@@ -1204,11 +1216,14 @@ ANTIPODAL_SEED = 0
 #: A pair's normals must be antiparallel within this, each to the closing line (deg): the
 #: friction cone of a hard pad (tan 12 deg ~ 0.2).
 FRICTION_DEG = 12.0
-#: Each pad must find surface over a square this wide about its contact (mm), within
-#: PAD_DEPTH_MM of the contact's plane across it.
+#: Each pad must find surface along a line this long through its contact (mm), within
+#: PAD_DEPTH_MM of the contact's plane (see _pads_on_surface).
 PAD_PATCH_MM = 5.0
 #: ... (mm): a 35 mm round sags 0.18 mm over the patch's half width.
 PAD_DEPTH_MM = 0.5
+#: ... along one of this many lines through the contact, evenly turned (a round's axis is then
+#: within 90 / PAD_LINES deg of one: a 12 mm round sags 0.08 mm along that line); even.
+PAD_LINES = 4
 #: Pairs narrower than this are not grasped (mm): a fin or a skin, not a part.
 MIN_WIDTH_MM = 1.0
 #: Closing directions are clustered on a grid of this many cells per unit of direction
@@ -1293,9 +1308,13 @@ def antipodal_pairs(mesh: "trimesh.Trimesh", opening: float, unit: str, samples:
 
 
 def _pads_on_surface(mesh: "trimesh.Trimesh", P: np.ndarray, Q: np.ndarray, C: np.ndarray, unit: str) -> np.ndarray:
-    """(k,) bool: both pads of each pair find surface: rays along the closing line from outside,
-    at the corners and edge middles of a PAD_PATCH_MM square about each contact, first meet the
-    part within PAD_DEPTH_MM of the contact's depth."""
+    """(k,) bool: both pads of each pair find surface. Rays along the closing line from outside,
+    at the contact and PAD_PATCH_MM/2 from it each way along PAD_LINES lines in the pad's plane,
+    first meet the part within PAD_DEPTH_MM of the contact's depth along at least one line (a
+    flat pad touches a round along a line, as the shaft grasps' MIN_CONTACT_MM: a 12 mm round
+    sags 0.55 mm over the patch's half width across its axis, 0 along it), and across that line
+    the surface falls away from the pad by at most PAD_PATCH_MM/2 (a round, not the edge of a
+    flat with nothing beyond it)."""
     k = len(P)
     if k == 0:
         return np.zeros(0, bool)
@@ -1306,7 +1325,8 @@ def _pads_on_surface(mesh: "trimesh.Trimesh", P: np.ndarray, Q: np.ndarray, C: n
     e1 = cross(C, ref)
     e1 /= np.linalg.norm(e1, axis=1)[:, None]
     e2 = cross(C, e1)
-    offs = [(a, b) for a in (-1, 0, 1) for b in (-1, 0, 1)]
+    angles = [math.pi * j / PAD_LINES for j in range(PAD_LINES)]
+    offs = [(0.0, 0.0)] + [(s * math.cos(t), s * math.sin(t)) for t in angles for s in (-1.0, 1.0)]
     ok = np.ones(k, bool)
     for X, sign in ((P, 1.0), (Q, -1.0)):  # the pad at p closes along +c, the pad at q along -c
         D = sign * C
@@ -1314,7 +1334,13 @@ def _pads_on_surface(mesh: "trimesh.Trimesh", P: np.ndarray, Q: np.ndarray, C: n
         DD = np.tile(D, (len(offs), 1))
         hit, H, _ = _ray_first(mesh, S, DD)
         depth = np.einsum("ij,ij->i", np.nan_to_num(H) - np.tile(X, (len(offs), 1)), DD)
-        good = (hit & (np.abs(depth) <= tol)).reshape(len(offs), k).all(0)
+        near = (hit & (np.abs(depth) <= tol)).reshape(len(offs), k)
+        away = (hit & (depth >= -tol) & (depth <= half)).reshape(len(offs), k)
+        good = np.zeros(k, bool)
+        for j in range(PAD_LINES):
+            a, b = 1 + 2 * j, 2 + 2 * j  # this line's ends
+            c, d = 1 + 2 * ((j + PAD_LINES // 2) % PAD_LINES), 2 + 2 * ((j + PAD_LINES // 2) % PAD_LINES)  # across it
+            good |= near[0] & near[a] & near[b] & away[c] & away[d]
         ok &= good
     return ok
 
