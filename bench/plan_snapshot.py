@@ -30,10 +30,16 @@ def _strip(v: Any) -> Any:
 
 def write(out: Path, problems: Path) -> None:
     from spar_py import Planner
+    from spar_py.core.errors import SparError
 
     out.mkdir(parents=True, exist_ok=True)
     for f in sorted(problems.glob("*.yaml")):
-        plan = Planner().plan(f)
+        try:
+            plan = Planner().plan(f)
+        except SparError as e:  # a cell that does not load is a difference to show, not a crash
+            (out / f"{f.stem}.json").write_text(json.dumps({"error": str(e)}, indent=1))
+            print(f"{f.stem}: error: {e}", flush=True)
+            continue
         doc = _strip(plan.to_json())
         (out / f"{f.stem}.json").write_text(json.dumps(doc, indent=1, sort_keys=True))
         print(f"{f.stem}: {plan.outcome.value}", flush=True)

@@ -16,7 +16,9 @@ fewest of the parts' grasps at their assembled poses are out of IK reach (ties: 
 The other parts, largest footprint first, take the free grid point (STEP_MM) nearest the
 build spot where their footprint keeps GAP_MM (room for the open fingers) from every placed
 footprint and from the assembled product's, PEDESTAL_MM from the robot's base axis, and some
-grasp of the part there is within IK reach (workspace.reachable_ignoring_collisions).
+grasp of the part there is within IK reach (workspace.reachable_ignoring_collisions); where no
+grasp reaches at any free spot, the nearest free spot within the arm's length (the planner then
+says which grasps fail, rather than the layout refusing the cell).
 Footprints: the convex hull of the part's mesh vertices turned by the pose, on the table;
 two are apart when a separating axis (an edge normal of either) shows the gap (conservative).
 
@@ -240,13 +242,19 @@ def layout_parts(parts: Mapping[str, ObjectModel], poses: Mapping[str, np.ndarra
         # the footprint's every vertex PEDESTAL_MM from the base axis (a convex polygon: its nearest point
         # to the axis may be on an edge; the centre's distance less the footprint's radius bounds it)
         ok &= np.linalg.norm(grid - o, axis=1) - float(np.linalg.norm(F - fc, axis=1).max()) >= ped
-        for i in np.flatnonzero(ok):
+        free = np.flatnonzero(ok & (np.linalg.norm(grid - o, axis=1) + float(np.linalg.norm(F - fc, axis=1).max())
+                                    <= arm))
+        for i in free:
             T = _placed(np.asarray(pose.R, float), pose.height, t[i])
             if _grasps_reach(robot, parts[p], T):
                 out.append(PartPlacement(p, pose.label, T))
                 taken.append(F + t[i])
                 break
         else:
+            if len(free):  # no grasp of p reaches at any free spot: lay it at the nearest, the planner says why
+                out.append(PartPlacement(p, pose.label, _placed(np.asarray(pose.R, float), pose.height, t[free[0]])))
+                taken.append(F + t[free[0]])
+                continue
             raise SparValueError(f"expected room for every part of {name} within {robot.name}'s reach: none for "
                                  f"{p} (footprint {np.ptp(F[:, 0]):.0f} x {np.ptp(F[:, 1]):.0f} {unit}, "
                                  f"{gap:.0f} {unit} apart from the others)")
