@@ -31,6 +31,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from .results_md import splice_section
+
 ROOT = Path(__file__).resolve().parent.parent
 FABRICA = ROOT / "kb" / "products" / "fabrica"
 PROBLEMS = ROOT / "kb" / "problems"
@@ -277,24 +279,7 @@ def splice(text: str, r: dict) -> str:
     """RESULTS.md's ``text`` with this module's section and target rows replaced by :func:`run`'s
     ``r`` (``python -m bench --only fabrica``): the section where it was, else before the
     profiles (or at the end of the generated part); the rows at the end of the targets table."""
-    section = "\n".join(render(r)).rstrip("\n") + "\n\n"
-    text = "".join(ln for ln in text.splitlines(keepends=True) if not ln.startswith(TARGET_ROW))
-    rows = "".join("| " + " | ".join(row) + " |\n" for row in target_rows(r))
-    head = text.find("## Targets (issue 7)")
-    if head >= 0 and rows:
-        end = text.find("\n\n", text.find("|", head))
-        text = text[:end + 1] + rows + text[end + 1:]
-    if SECTION in text:
-        start = text.index(SECTION)
-        nxt = text.find("\n## ", start + len(SECTION))
-        stop = [i for i in (nxt + 1 if nxt >= 0 else -1, text.find("<!-- Records:", start)) if i > 0]
-        end = min(stop) if stop else len(text)
-        return text[:start] + section + text[end:]
-    for anchor in ("## Where the time goes (cProfile)", "<!-- Records:"):
-        if anchor in text:
-            i = text.index(anchor)
-            return text[:i] + section + text[i:]
-    return text.rstrip("\n") + "\n\n" + section
+    return splice_section(text, render(r), SECTION, TARGET_ROW, target_rows(r))
 
 
 def main(argv: list[str] | None = None) -> None:
