@@ -21,6 +21,7 @@ perturbed by 1e-2 of the part's size is caught.
 """
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -140,25 +141,22 @@ def penetration(movers: list, placed: list, d: np.ndarray, step: float, tol: flo
     for k in range(int(np.ceil(T / step)) + 1):
         off = d * min(k * step, T)
         for q, tp in zip(placed, theirs):
-            lo, hi = q.bounds
-            P = mine + off
-            P = P[np.all((P >= lo) & (P <= hi), axis=1)]
-            if len(P):
-                inside = P[q.contains(P)]
-                if len(inside):
-                    deep = _depth(q, inside)
-                    if deep.max() > tol:
-                        return float(off @ d), float(deep.max())
-            for m in movers:
-                lo, hi = m.bounds[0] + off, m.bounds[1] + off
-                Q = tp[np.all((tp >= lo) & (tp <= hi), axis=1)] - off
-                if len(Q):
-                    inside = Q[m.contains(Q)]
-                    if len(inside):
-                        deep = _depth(m, inside)
-                        if deep.max() > tol:
-                            return float(off @ d), float(deep.max())
+            # the movers' points in a placed part, then the placed part's points in each mover
+            depths = itertools.chain([_deepest_inside(q, mine + off)], (_deepest_inside(m, tp - off) for m in movers))
+            for deep in depths:
+                if deep > tol:
+                    return float(off @ d), deep
     return None
+
+
+def _deepest_inside(m, P: np.ndarray) -> float:
+    """How deep the deepest of points P lies inside mesh ``m`` (0 when none is inside)."""
+    lo, hi = m.bounds
+    P = P[np.all((P >= lo) & (P <= hi), axis=1)]
+    if not len(P):
+        return 0.0
+    inside = P[m.contains(P)]
+    return float(_depth(m, inside).max()) if len(inside) else 0.0
 
 
 def fit_cylinder(m, o: np.ndarray, d: np.ndarray, r: float, t0: float, t1: float

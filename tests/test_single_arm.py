@@ -14,7 +14,7 @@ import yaml
 from spar_py.core.errors import KBError
 from spar_py.kb.products import load_product
 from spar_py.planning.messages import summary
-from spar_py.world.single_arm import LOOSE_MAX_DEG, single_arm_report
+from spar_py.world.single_arm import single_arm_report
 
 ROOT = Path(__file__).resolve().parents[1]
 FABRICA = ROOT / "kb" / "products" / "fabrica"
@@ -112,12 +112,6 @@ def test_summary_leads_with_the_single_arm_reason(car):
     cell = SimpleNamespace(product=car, goals=[], name="c", objects={})
     line = summary(cell, {"single_arm": {"ok": False, "why": why}, "max_actions": 11, "bound": 24}, [])
     assert line.endswith(why) and line.startswith("NO PLAN")
-
-
-def test_loose_threshold_matches_the_planners():
-    from spar_py.phase2.instance import LOOSE_MAX_DEG as PLANNER
-
-    assert LOOSE_MAX_DEG == PLANNER
 
 
 def _rx(deg: float):

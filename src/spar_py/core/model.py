@@ -242,6 +242,12 @@ class ProductPart:
     pose: np.ndarray
 
 
+#: A loose mate (held by gravity) stays while its insertion direction is within this angle of
+#: world down (deg): the retention check (phase2.instance), the one-arm search (world.single_arm)
+#: and the layout's insertions "from above" (world.layout) all use it.
+LOOSE_MAX_DEG = 30.0
+
+
 @dataclass(frozen=True)
 class Mate:
     """A peg feature of one part in a hole feature of another (``PART.FEATURE`` each);

@@ -46,7 +46,7 @@ from spar_py.world import placement as pl
 from spar_py.phase2 import uncertainty as ur
 from spar_py.core.errors import SparValueError
 from spar_py.core.geometry import same_stable_pose
-from spar_py.core.model import Bounds, Cell, Grasp, MatingFeature
+from spar_py.core.model import LOOSE_MAX_DEG, Bounds, Cell, Grasp, MatingFeature
 from spar_py.core.units import ANGLE_UNITS, LENGTH_UNITS, from_mm
 from spar_py.world.arcs import reachable_pairs
 from spar_py.world.motion_options import MotionFailure, MotionOptions
@@ -700,8 +700,6 @@ def _carried(unc: ur.WorldState, root: str, T_tool_root: np.ndarray) -> dict[str
     return {c: np.asarray(T_tool_root, float) @ inv_R @ unc.obj(c).pose for c in unc.body(root)[1:]}
 
 
-#: A loose mate stays while its insertion direction is within this angle of world down (deg).
-LOOSE_MAX_DEG = 30.0
 
 
 def retention_refusal(unc: ur.WorldState, what: str) -> str | None:

@@ -43,7 +43,6 @@ import hashlib
 import itertools
 import json
 import math
-import os
 import time
 from dataclasses import asdict, dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -265,17 +264,9 @@ def _axis_of(normals: np.ndarray, weights: np.ndarray) -> np.ndarray | None:
 def _circle(V: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, float] | None:
     """The least-squares circle of points ``V`` about an axis along ``d``: a point on the axis
     and the radius, or None if the points are not on one circle (CIRCLE_REL)."""
-    from spar_py.world.shapes import axis_basis
+    from spar_py.world.shapes_derive import fit_circle
 
-    e1, e2 = axis_basis(d)
-    P = np.column_stack([V @ e1, V @ e2])
-    M = np.column_stack([P, np.ones(len(P))])
-    sol = np.linalg.lstsq(M, -(P ** 2).sum(1), rcond=None)[0]
-    c = -sol[:2] / 2
-    r = float(np.sqrt(max(c @ c - sol[2], 0.0)))
-    if not r > 0 or np.abs(np.linalg.norm(P - c, axis=1) - r).max() > CIRCLE_REL * r:
-        return None
-    return c[0] * e1 + c[1] * e2, r
+    return fit_circle(V, d, CIRCLE_REL)
 
 
 def _wall_extent(mesh: "trimesh.Trimesh", o: np.ndarray, d: np.ndarray, r: float, t0: float, t1: float,
@@ -873,7 +864,7 @@ def derive_assembly_cached(meshes: dict[str, "trimesh.Trimesh"], base: str, cont
     """:func:`derive_assembly`, kept on disk by content: the key is the SHA-256 of every part's
     name, vertices and faces (as placed), the base, the tolerances and ASSEMBLY_VERSION; kept
     beside the object models' derivations (world.shapes_cache.cache_dir)."""
-    from spar_py.world.shapes_cache import _store, cache_dir
+    from spar_py.world.shapes_cache import cache_dir, load, store
 
     h = hashlib.sha256(json.dumps([ASSEMBLY_VERSION, base, round(contact_tol, 12), round(clearance_max, 12)]).encode())
     for p, m in meshes.items():
@@ -882,17 +873,14 @@ def derive_assembly_cached(meshes: dict[str, "trimesh.Trimesh"], base: str, cont
         h.update(np.ascontiguousarray(m.faces, np.int64).tobytes())
     key = h.hexdigest()
     path = cache_dir() / f"assembly-{key}.json"
-    if use_cache:
+    if use_cache and (data := load(path, key)) is not None:
         try:
-            data = json.loads(path.read_text(encoding="utf-8"))
-            if data.get("key") == key:
-                os.utime(path)
-                return AssemblyResult.from_json(data)
-        except (OSError, ValueError, KeyError, TypeError):
-            pass
+            return AssemblyResult.from_json(data)
+        except (KeyError, TypeError):
+            pass  # an entry of an older form: derived again
     res = derive_assembly(meshes, base, contact_tol, clearance_max)
     if use_cache:
         data = res.to_json()
         data["key"] = key
-        _store(path, data)
+        store(path, data)
     return res

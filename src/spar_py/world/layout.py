@@ -34,7 +34,7 @@ import numpy as np
 
 from spar_py.core.errors import SparValueError
 from spar_py.core.geometry import convex_hull_2d
-from spar_py.core.model import ObjectModel, Product, StablePose
+from spar_py.core.model import LOOSE_MAX_DEG, ObjectModel, Product, StablePose
 from spar_py.core.units import from_mm
 from spar_py.world.workspace import reachable_ignoring_collisions
 
@@ -106,8 +106,8 @@ def _grasps_reach(robot, model: ObjectModel, T: np.ndarray) -> int:
 
 
 #: An insertion points down in a pose when its direction is within this angle of world down (deg):
-#: a loose mate stays (phase2.instance.LOOSE_MAX_DEG), the arm inserts from above.
-DOWN_DEG = 30.0
+#: a loose mate stays, the arm inserts from above.
+DOWN_DEG = LOOSE_MAX_DEG
 
 
 def _down_count(R: np.ndarray, insertions: Sequence[tuple[str, np.ndarray, frozenset[str]]]) -> int:

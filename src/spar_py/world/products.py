@@ -724,25 +724,19 @@ def _sub_key(product: Product, name: str, kids: list[str], unit: str) -> str:
 def _sub_poses_cached(product: Product, name: str, kids: list[str], unit: str, use_cache: bool) -> list[SubPose]:
     """Part ``name``'s subassembly poses, from the derivations' cache directory
     (world.shapes_cache.cache_dir, ``subposes-KEY.json``) when it has them, else computed and kept."""
-    import json
-    import os
-
-    from spar_py.world.shapes_cache import _store, cache_dir
+    from spar_py.world.shapes_cache import cache_dir, load, store
 
     key = _sub_key(product, name, kids, unit)
     path = cache_dir() / f"subposes-{key}.json"
-    if use_cache:
+    if use_cache and (data := load(path, key)) is not None:
         try:
-            data = json.loads(path.read_text(encoding="utf-8"))
-            if data.get("key") == key:
-                os.utime(path)
-                return [SubPose(d["label"], np.asarray(d["R"], float).reshape(3, 3), float(d["height"]),
-                                float(d["probability"]), tuple(d["rfaces"])) for d in data["poses"]]
-        except (OSError, ValueError, KeyError, TypeError):
-            pass
+            return [SubPose(d["label"], np.asarray(d["R"], float).reshape(3, 3), float(d["height"]),
+                            float(d["probability"]), tuple(d["rfaces"])) for d in data["poses"]]
+        except (KeyError, TypeError, ValueError):
+            pass  # an entry of an older form: computed again
     got = _sub_poses(product, name, kids, unit)
     if use_cache:
-        _store(path, {"key": key, "poses": [{"label": sp.label, "R": [float(v) for v in sp.R.ravel()],
+        store(path, {"key": key, "poses": [{"label": sp.label, "R": [float(v) for v in sp.R.ravel()],
                                              "height": sp.height, "probability": sp.prob,
                                              "rfaces": list(sp.rfaces)} for sp in got]})
     return got

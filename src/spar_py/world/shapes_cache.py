@@ -76,18 +76,12 @@ def derive(name: str, geometry: Geometry, features: tuple[FeatureGeometry, ...],
                 gripper.spec(), round(step, 12), need_hull]
     key = hashlib.sha256(json.dumps(key_data).encode()).hexdigest()
     path = cache_dir() / f"{key}.json"
-    if use_cache:
-        try:
-            data = json.loads(path.read_text(encoding="utf-8"))
-            if data.get("key") == key:
-                os.utime(path)
-                return data
-        except (OSError, ValueError):
-            pass
+    if use_cache and (data := load(path, key)) is not None:
+        return data
     data = _compute(name, geometry, features, face_names, gripper, step, need_hull)
     data["key"] = key
     if use_cache:
-        _store(path, data)
+        store(path, data)
     return data
 
 
@@ -119,7 +113,20 @@ def _compute(name: str, geometry: Geometry, features: tuple[FeatureGeometry, ...
     return out
 
 
-def _store(path: Path, data: dict[str, Any]) -> None:
+def load(path: Path, key: str) -> dict[str, Any] | None:
+    """The entry at ``path`` if it holds ``key`` (its use refreshed: least recently used goes
+    first), else None (missing, unreadable or another key's)."""
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+        if isinstance(data, dict) and data.get("key") == key:
+            os.utime(path)
+            return data
+    except (OSError, ValueError):
+        pass
+    return None
+
+
+def store(path: Path, data: dict[str, Any]) -> None:
     """Write atomically, then drop the least recently used entries beyond MAX_ENTRIES."""
     try:
         text = json.dumps(data, allow_nan=False)  # one shot: the C encoder (json.dump streams in Python)

@@ -796,6 +796,21 @@ class MeshCylinder:
     normals: np.ndarray
 
 
+def fit_circle(V: np.ndarray, d: np.ndarray, rel: float) -> tuple[np.ndarray, float] | None:
+    """The least-squares circle through points ``V`` (k, 3) projected across the unit axis ``d``
+    (x^2 + y^2 + a x + b y + c = 0 in axis_basis(d)): the point of the axis nearest the origin
+    and the radius, or None when some point is off that circle by more than ``rel`` of it."""
+    e1, e2 = axis_basis(d)
+    P = np.column_stack([V @ e1, V @ e2])
+    M = np.column_stack([P, np.ones(len(P))])
+    sol = np.linalg.lstsq(M, -(P ** 2).sum(1), rcond=None)[0]
+    c = -sol[:2] / 2
+    r = float(np.sqrt(max(c @ c - sol[2], 0.0)))
+    if not r > 0 or np.abs(np.linalg.norm(P - c, axis=1) - r).max() > rel * r:
+        return None
+    return c[0] * e1 + c[1] * e2, r
+
+
 def mesh_cylinders(mesh: "trimesh.Trimesh", faces: list[Face], unit: str) -> list[MeshCylinder]:
     """The outer cylindrical surfaces of the mesh, one per curved derived face that is one: the
     axis the face's normals are all normal to (the least eigenvector of the area-weighted sum of
@@ -820,18 +835,12 @@ def mesh_cylinders(mesh: "trimesh.Trimesh", faces: list[Face], unit: str) -> lis
             continue  # not normal to one axis (a cone, a sphere), or all normals one way (a plane)
         d = clean(d / np.linalg.norm(d), 1e-12)
         d = _canonical(d)
-        e1, e2 = axis_basis(d)
         V = A.V[np.unique(A.F[f.tris])]
-        P = np.column_stack([V @ e1, V @ e2])
-        # a circle x^2 + y^2 + a x + b y + c = 0 through the projected vertices, least squares
-        M = np.column_stack([P, np.ones(len(P))])
-        sol = np.linalg.lstsq(M, -(P ** 2).sum(1), rcond=None)[0]
-        c2 = -sol[:2] / 2
-        r = float(np.sqrt(max(c2 @ c2 - sol[2], 0.0)))
-        if not r > 0 or np.abs(np.linalg.norm(P - c2, axis=1) - r).max() > CYL_RADIUS_REL * r:
+        fit = fit_circle(V, d, CYL_RADIUS_REL)
+        if fit is None:
             continue
+        centre, r = fit
         t = V @ d
-        centre = c2[0] * e1 + c2[1] * e2
         radial = A.C[f.tris] - centre - np.outer(A.C[f.tris] @ d, d)
         if (np.einsum("ij,ij->i", radial, N) <= 0).any():
             continue  # normals towards the axis: a bore

@@ -23,13 +23,10 @@ from typing import Any
 
 import numpy as np
 
-from spar_py.core.model import Product
+from spar_py.core.model import LOOSE_MAX_DEG, Product
 
 __all__ = ["Insertion", "SingleArmReport", "single_arm_report"]
 
-#: A loose mate stays while its insertion direction is within this angle of down (deg); the
-#: planner's retention check uses the same (phase2.instance.LOOSE_MAX_DEG).
-LOOSE_MAX_DEG = 30.0
 #: How many poses a refusal's line names (those where the insertion points nearest down; the
 #: report's ``poses`` has them all).
 WHY_POSES = 3
