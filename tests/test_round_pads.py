@@ -61,12 +61,13 @@ def test_thumbstick_cap_is_held_above_the_mouth_and_the_table() -> None:
     # the planner's rules take them: usable for the mate; condition 1 at the lying pose takes a
     # grasp on the face it rests on whose hand is above the table, and refuses the others
     from spar_py.kb.prolog_facts import _mate_grasps
-    from spar_py.world.arcs import _above_table
+    from spar_py.world.arcs import _gripper, _hand_clear, _part_on_table
 
     usable = next(f[3] for f in _mate_grasps(cell) if f[2] == "stick0")
     assert set(seated_ok) <= set(usable)
-    assert lying_ok and all(_above_table(cell, stick, g, "stick0_p1") for g in lying_ok)
-    assert low and not any(_above_table(cell, stick, g, "stick0_p1") for g in low)
+    T_lying, gripper = _part_on_table(stick, "stick0_p1", None), _gripper(cell)
+    assert lying_ok and all(_hand_clear(cell, stick, g, T_lying, gripper) for g in lying_ok)
+    assert low and not any(_hand_clear(cell, stick, g, T_lying, gripper) for g in low)
 
 
 def _world(C: np.ndarray, T: np.ndarray) -> np.ndarray:

@@ -127,30 +127,35 @@ def resting_faces(cell: Cell, obj: str, label: str) -> tuple[Face, ...]:
 CONTACT_CLEAR_MM = 1.0
 
 
-def _table_frame(model: ObjectModel, label: str, T_O: np.ndarray | None) -> tuple[np.ndarray, float] | None:
-    """The world z axis in ``model``'s frame and the frame's height above the table at position
-    ``label`` (T_O its world transform, None for a stable pose), for a model whose faces,
-    poses and grasps are derived from its geometry (consistent with each other); else None."""
+def _part_on_table(model: ObjectModel, label: str, T_O: np.ndarray | None) -> np.ndarray | None:
+    """T_world_part (4x4) at position ``label`` (T_O its world transform, None for a stable pose:
+    its R and height, X = Y = 0) for a model whose faces, poses and grasps are derived from its
+    geometry (consistent with each other); else None."""
     if getattr(model, "geometry", None) is None:
         return None
     if T_O is not None:
-        T = np.asarray(T_O, float)
-        return T[2, :3].copy(), float(T[2, 3])
+        return np.asarray(T_O, float)
     pose = model.poses[label]
-    return np.asarray(pose.R, float)[2].copy(), float(pose.height)
+    T = np.eye(4)
+    T[:3, :3], T[2, 3] = pose.R, pose.height
+    return T
 
 
-def _contacts_off_table(cell: Cell, model: ObjectModel, g: Grasp, up: tuple[np.ndarray, float] | None) -> bool:
-    """Condition 1 for a part whose faces are derived (``up``: :func:`_table_frame`): the paper's
-    faces are planar, so a face the part rests on is on the table wherever the fingers would
-    touch it; a derived face may be curved (a round or rounded side lying on the table touches
-    it along a line), and a grasp on it holds where both its contacts (the tool centre
-    +- width/2 along the closing axis) are CONTACT_CLEAR_MM above the table."""
-    if up is None:
+def _holds_on_resting_face(cell: Cell, model: ObjectModel, g: Grasp, T_part: np.ndarray | None,
+                           gripper: "GripperGeometry") -> bool:
+    """Condition 1 for a part whose faces are derived (``T_part``: :func:`_part_on_table`): the
+    paper's faces are planar, so a face the part rests on is on the table wherever the fingers
+    would touch it; a derived face may be curved (a round or rounded side lying on the table
+    touches it along a line), and a grasp on it holds where both its contacts (the tool centre
+    +- width/2 along the closing axis) are CONTACT_CLEAR_MM above the table, or, for a mesh part,
+    where the whole hand is above it (:func:`_hand_clear`)."""
+    if T_part is None:
         return False
     T = np.asarray(g.T, float)
     P = np.stack([T[:3, 3] + s * g.width / 2 * T[:3, 1] for s in (-1.0, 1.0)])
-    return bool((P @ up[0] + up[1] >= from_mm(cell.unit, CONTACT_CLEAR_MM)).all())
+    if (P @ T_part[2, :3] + T_part[2, 3] >= from_mm(cell.unit, CONTACT_CLEAR_MM)).all():
+        return True
+    return _hand_clear(cell, model, g, T_part, gripper)
 
 
 #: A gripper body this far below the table plane still counts as above it (mm): rounding.
@@ -167,23 +172,20 @@ def hand_above_table(gripper: GripperGeometry, T_tool: np.ndarray, width: float,
     return bool((C @ M[2, :3] + M[2, 3]).min() >= -from_mm(unit, TABLE_TOL_MM))
 
 
-def _above_table(cell: Cell, model: ObjectModel, g: Grasp, label: str) -> bool:
-    """Whether grasp ``g`` of a part with a mesh holds it at position ``label`` although a face
-    it closes on is one it rests on: the hand is above the table there (:func:`hand_above_table`).
-    A face a part rests on whole (a planar one) has every pad on it at the table and the finger
-    behind the pad below it, so this refuses those as the paper's condition 1 does; a curved one
-    (a round touching the table along a rim or a line) is closed on where it is clear of the
-    table. The paper's condition 1 for every other model."""
-    geo = model.geometry
-    if geo is None or geo.mesh_file is None:
+def _hand_clear(cell: Cell, model: ObjectModel, g: Grasp, T_part: np.ndarray, gripper: "GripperGeometry") -> bool:
+    """Whether grasp ``g`` of a part with a mesh, at world pose ``T_part``, has the whole hand above
+    the table (:func:`hand_above_table`). A face a part rests on whole (a planar one) has every
+    pad on it at the table and the finger behind the pad below it, so this refuses those as the
+    paper's condition 1 does; a curved one (a round touching the table along a rim or a line) is
+    closed on where it is clear of the table. False for every other model (the paper's rule)."""
+    if model.geometry is None or model.geometry.mesh_file is None:
         return False
-    T_O = _absolute(cell, model, label)
-    if T_O is None:
-        pose = model.poses[label]
-        T_O = np.eye(4)
-        T_O[:3, :3], T_O[2, 3] = pose.R, pose.height
-    gripper = cell.robot.gripper or GripperGeometry.default(cell.finger_separation, mm_per(cell.unit))
-    return hand_above_table(gripper, T_O @ np.asarray(g.T, float), g.width, cell.unit)
+    return hand_above_table(gripper, T_part @ np.asarray(g.T, float), g.width, cell.unit)
+
+
+def _gripper(cell: Cell) -> "GripperGeometry":
+    """The cell's gripper boxes: the robot file's, else the default for its finger separation."""
+    return cell.robot.gripper or GripperGeometry.default(cell.finger_separation, mm_per(cell.unit))
 
 
 #: How a stable-pose label (a put-down position with no X, Y) counts for condition 2:
@@ -255,11 +257,9 @@ def reachable_pairs(cache: CellCache, obj: str, grasp_labels: Sequence[str],
     for p in pos_labels:
         T_O = _absolute(cell, model, p)
         rfaces = set(resting_faces(cell, obj, p))
-        up = _table_frame(model, p, T_O)
-        # condition 1, relaxed for a derived shape: the fingers' contacts clear of the table, or
-        # the whole hand above it (a curved face the part rests on touches the table along a line)
-        free = [g for g in grasps if not rfaces & set(g.gfaces) or _contacts_off_table(cell, model, g, up)
-                or _above_table(cell, model, g, p)]
+        T_part, gripper = _part_on_table(model, p, T_O), _gripper(cell)
+        free = [g for g in grasps if not rfaces & set(g.gfaces)
+                or _holds_on_resting_face(cell, model, g, T_part, gripper)]  # condition 1
         if T_O is None:
             asks.append((p, free, [Requirement(g.T, None, g.width) for g in free]))
             continue
