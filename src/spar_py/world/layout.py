@@ -8,8 +8,10 @@ keeps the product frame's down (-z) down (the product built as assembled); every
 probable stable pose (a derived model lists its poses most probable first, so the first one
 the planner knows) among those where a grasp its mate can use (world.shapes_derive.
 mate_grasp_usable: the hand outside the hole's mouth plane when seated) keeps the hand above
-the table (a parallel gripper cannot turn a part over between its two poses, so a part lying
-where only grasps from below would seat it is never assembled), else its most probable, yaw 0.
+the table and comes from above both there and on the assembled product (FROM_ABOVE_DEG), else
+among those where one keeps the hand above the table (a parallel gripper cannot turn a part
+over between its two poses, so a part lying where only grasps from below would seat it is
+never assembled), else its most probable, yaw 0.
 The build spot is on the robot base's x axis, at the distance
 (PEDESTAL_MM + the product's footprint radius up to the arm's length, in STEP_MM) where the
 fewest of the parts' grasps at their assembled poses are out of IK reach (ties: the nearer).
