@@ -122,3 +122,85 @@ def test_layout_refusals_are_one_line(tmp_path):
         load_problem(_problem(tmp_path, f"product: {FABRICA / 'car.yaml'}\nlayout: yes_please"))
     with pytest.raises(KBError, match=r"layout: expected a problem with product:"):
         load_problem(_problem(tmp_path, "layout: auto"))
+
+
+# ---------------------------------------------------------------------------- planned cells
+
+#: The UR5e's gripper as its robot file leaves it to the defaults (mm): fingers 60 long (tool z,
+#: tips at the tool origin), 20 wide (tool x), 10 thick (tool y, outward of the contact face).
+FINGER_L, FINGER_W, FINGER_T = 60.0, 20.0, 10.0
+
+
+@pytest.fixture(scope="module")
+def cooling_plan() -> dict:
+    from spar_py.planning.planner import Planner
+
+    return Planner().plan(ROOT / "kb" / "problems" / "fabrica_cooling_manifold.yaml").to_json()
+
+
+def _meshes(product: str) -> dict[str, trimesh.Trimesh]:
+    """Each part's mesh in its own frame, mm (the PLY alone)."""
+    out = {}
+    for part, f in _ply_of(product).items():
+        m = trimesh.load(f, process=False)
+        m.apply_scale(CM)
+        out[part] = m
+    return out
+
+
+def test_cooling_manifold_plan_ends_at_product_poses(cooling_plan):
+    """Every part ends where the product puts it relative to the plate: the meshes are in the
+    product frame, so each part's final pose equals the plate's (within 0.5 mm and 0.5 deg)."""
+    assert cooling_plan["outcome"] == "plan"
+    final = {k: np.array(v, float) for k, v in cooling_plan["instance"]["steps"][-1]["poses"].items()}
+    assert set(final) == set(_ply_of("cooling_manifold"))
+    Tb = final["plate"]
+    for part, T in final.items():
+        rel = np.linalg.inv(Tb) @ T
+        assert np.abs(rel[:3, 3]).max() < 0.5, part
+        angle = math.degrees(math.acos(min(1.0, (np.trace(rel[:3, :3]) - 1) / 2)))
+        assert angle < 0.5, part
+
+
+def _width_at(mesh: trimesh.Trimesh, T_part: np.ndarray, tool: np.ndarray) -> float:
+    """The width the two fingers close to, centred on the tool origin: twice the part's
+    farthest vertex from the tool's x-z plane among those within the pads' window (tool x
+    within half the finger's width, tool z from -finger length to 0; world, mm)."""
+    V = (mesh.vertices @ T_part[:3, :3].T + T_part[:3, 3] - tool[:3, 3]) @ tool[:3, :3]
+    window = (np.abs(V[:, 0]) <= FINGER_W / 2) & (V[:, 2] >= -FINGER_L) & (V[:, 2] <= 0.0)
+    assert window.any(), "no part between the pads"
+    return 2.0 * float(np.abs(V[window, 1]).max())
+
+
+def _finger_boxes(tool: np.ndarray, width: float, shrink: float) -> list[trimesh.Trimesh]:
+    out = []
+    for s in (1.0, -1.0):
+        c = np.array([0.0, s * (width / 2 + FINGER_T / 2), -FINGER_L / 2])
+        box = trimesh.creation.box(extents=[FINGER_W - 2 * shrink, FINGER_T - 2 * shrink, FINGER_L - 2 * shrink])
+        box.apply_transform(tool @ trimesh.transformations.translation_matrix(c))
+        out.append(box)
+    return out
+
+
+def test_cooling_manifold_grasps_clear(cooling_plan):
+    """At every pickup and insertion the closed fingers (at the part's own width along the
+    closing axis) stay above the table and out of every part, the held one included (0.05 mm
+    touch allowed), by trimesh/fcl on the PLY meshes at the step's poses."""
+    meshes = _meshes("cooling_manifold")
+    steps = [s for s in cooling_plan["instance"]["steps"] if s["name"] in ("pickup", "assemble")]
+    assert len(steps) == 2 * (len(meshes) - 1)
+    for st in steps:
+        tool = np.array(st["tool_pose"], float)
+        poses = {k: np.array(v, float) for k, v in st["poses"].items()}
+        held = st["object"]
+        width = _width_at(meshes[held], poses[held], tool)
+        assert 0 < width <= 85.0, st["term"]
+        fingers = _finger_boxes(tool, width, 0.05)
+        for b in fingers:
+            assert b.vertices[:, 2].min() > 0.0, st["term"]
+        cm = trimesh.collision.CollisionManager()
+        for part, m in meshes.items():
+            cm.add_object(part, m, transform=poses[part])
+        for b in fingers:
+            hit, names = cm.in_collision_single(b, return_names=True)
+            assert not hit, (st["term"], names)

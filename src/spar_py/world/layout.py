@@ -8,8 +8,10 @@ keeps the product frame's down (-z) down (the product built as assembled); every
 probable stable pose (a derived model lists its poses most probable first, so the first one
 the planner knows) among those where a grasp its mate can use (world.shapes_derive.
 mate_grasp_usable: the hand outside the hole's mouth plane when seated) keeps the hand above
-the table (a parallel gripper cannot turn a part over between its two poses, so a part lying
-where only grasps from below would seat it is never assembled), else its most probable, yaw 0.
+the table and comes from above both there and on the assembled product (FROM_ABOVE_DEG), else
+among those where one keeps the hand above the table (a parallel gripper cannot turn a part
+over between its two poses, so a part lying where only grasps from below would seat it is
+never assembled), else its most probable, yaw 0.
 The build spot is on the robot base's x axis, at the distance
 (PEDESTAL_MM + the product's footprint radius up to the arm's length, in STEP_MM) where the
 fewest of the parts' grasps at their assembled poses are out of IK reach (ties: the nearer).
@@ -140,20 +142,37 @@ def _base_pose(model: ObjectModel, R_prod: np.ndarray | None = None,
     return poses[next((i for i in pick if upright[i]), pick[0])]
 
 
-def _lying_pose(model: ObjectModel, usable: frozenset[str] | None, gripper, unit: str) -> StablePose:
+#: A grasp is from above where its approach descends at least this steeply (deg below the
+#: horizontal): the wrist stays off the table and off the product.
+FROM_ABOVE_DEG = 15.0
+
+
+def _lying_pose(model: ObjectModel, usable: frozenset[str] | None, gripper, unit: str,
+                R_asm: np.ndarray | None = None) -> StablePose:
     """The stable pose a part other than the base lies in (module docstring): the most probable
     one where some grasp of ``usable`` (None: no preference) keeps ``gripper``'s hand above the
-    table, else the most probable."""
+    table and is from above (FROM_ABOVE_DEG) both there and on the assembled product (``R_asm``,
+    the part's world orientation when assembled: a grasp made sideways on the table puts the
+    wrist on it, one made sideways on the product puts the hand into it); else the most probable
+    where one keeps the hand above the table; else the most probable."""
     from spar_py.world.arcs import hand_above_table
 
     poses = list(model.poses.values())
-    if usable and gripper is not None:
-        for pose in poses:
-            T = _placed(np.asarray(pose.R, float), pose.height, np.zeros(2))
-            if any(hand_above_table(gripper, T @ np.asarray(g.T, float), g.width, unit)
-                   for label, g in model.grasps.items() if label in usable):
-                return pose
-    return poses[0]
+    if not (usable and gripper is not None):
+        return poses[0]
+    down = -math.sin(math.radians(FROM_ABOVE_DEG))
+    grasps = [np.asarray(g.T, float) for label, g in model.grasps.items() if label in usable]
+    widths = [g.width for label, g in model.grasps.items() if label in usable]
+    above = []
+    for pose in poses:
+        T = _placed(np.asarray(pose.R, float), pose.height, np.zeros(2))
+        ok = [hand_above_table(gripper, T @ G, w, unit) for G, w in zip(grasps, widths)]
+        if R_asm is not None and any(k and (T @ G)[2, 2] <= down and (R_asm @ G[:3, 2])[2] <= down
+                                     for k, G in zip(ok, grasps)):
+            return pose
+        if any(ok):
+            above.append(pose)
+    return above[0] if above else poses[0]
 
 
 def mate_usable_grasps(product: Product, gripper, unit: str) -> dict[str, frozenset[str]]:
@@ -223,7 +242,7 @@ def layout_parts(parts: Mapping[str, ObjectModel], poses: Mapping[str, np.ndarra
     out = [PartPlacement(base, bp.label, _placed(Rb, bp.height, xy_b))]
     taken = [prod + xy_b]
     others = [p for p in parts if p != base]
-    lying = {p: _lying_pose(parts[p], (usable or {}).get(p), robot.gripper, unit) for p in others}
+    lying = {p: _lying_pose(parts[p], (usable or {}).get(p), robot.gripper, unit, world_of[p]) for p in others}
     feet = {p: part_footprint(parts[p], lying[p].R) for p in others}
     others.sort(key=lambda p: -float(np.ptp(feet[p][:, 0]) * np.ptp(feet[p][:, 1])))
     n = int(np.ceil(arm / step))

@@ -1278,14 +1278,36 @@ def _ray_first(mesh: "trimesh.Trimesh", S: np.ndarray, D: np.ndarray) -> tuple[n
     return tri >= 0, pts, tri
 
 
+def _ray_last(mesh: "trimesh.Trimesh", S: np.ndarray, D: np.ndarray, reach: float
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Farthest hits of rays (S, unit D) on the mesh within ``reach`` of S: (hit (k,), points
+    (k, 3) with nan where none, triangle index (k,), -1 where none)."""
+    k = len(S)
+    pts = np.full((k, 3), np.nan)
+    tri = np.full(k, -1)
+    if k == 0:
+        return np.zeros(0, bool), pts, tri
+    loc, ri, ti = mesh.ray.intersects_location(S, D, multiple_hits=True)
+    d = np.einsum("ij,ij->i", loc - S[ri], D[ri]) if len(ri) else np.zeros(0)
+    keep = d <= reach
+    ri, ti, loc, d = ri[keep], ti[keep], loc[keep], d[keep]
+    if len(ri):
+        order = np.lexsort((-d, ri))
+        ri, ti, loc = ri[order], ti[order], loc[order]
+        first = np.r_[True, ri[1:] != ri[:-1]]
+        pts[ri[first]], tri[ri[first]] = loc[first], ti[first]
+    return tri >= 0, pts, tri
+
+
 def antipodal_pairs(mesh: "trimesh.Trimesh", opening: float, unit: str, samples: int = ANTIPODAL_SAMPLES,
                     seed: int = ANTIPODAL_SEED) -> tuple[list[Antipodal], float | None]:
     """Antipodal contact pairs on the surface: ``samples`` points drawn area-weighted (seeded),
-    each with the point where the line into the part along its inward normal leaves it (a ray
-    cast); a pair is kept when both normals lie within FRICTION_DEG of the closing line, its
-    width is from MIN_WIDTH_MM to ``opening`` and both pads find surface (PAD_PATCH_MM,
-    PAD_DEPTH_MM). Returns the pairs and the least width of any pair in the friction cone
-    (None if none), which a refusal names. Cell unit throughout."""
+    each with the point where the line into the part along its inward normal first leaves it (a
+    ray cast) and, where it is another, the farthest point it leaves it within ``opening`` (the
+    other side of a tube across its bore); a pair is kept when both normals lie within
+    FRICTION_DEG of the closing line, its width is from MIN_WIDTH_MM to ``opening`` and both
+    pads find surface (PAD_PATCH_MM, PAD_DEPTH_MM). Returns the pairs and the least width of
+    any pair in the friction cone (None if none), which a refusal names. Cell unit throughout."""
     import trimesh  # a derivation only
 
     A = _arrays(mesh)
@@ -1293,8 +1315,16 @@ def antipodal_pairs(mesh: "trimesh.Trimesh", opening: float, unit: str, samples:
     P, fi = trimesh.sample.sample_surface(mesh, samples, seed=seed)
     P = np.asarray(P, float)
     n = A.N[fi]
-    hit, Q, ti = _ray_first(mesh, P - eps * n, -n)
-    P, n, Q, ti = P[hit], n[hit], Q[hit], ti[hit]
+    S = P - eps * n
+    hit, Q, ti = _ray_first(mesh, S, -n)
+    far, Qf, tf = _ray_last(mesh, S, -n, opening * (1 + 1e-9))
+    # also the farthest exit within the opening where it is another point: across a bore or a
+    # gap the pads close on the outer surface beyond it (a tube's two sides), where the first
+    # exit is the inside of the wall, which no pad reaches
+    far &= hit & (np.linalg.norm(np.nan_to_num(Qf) - Q, axis=1) > 1e-3 * A.diag)
+    fi = np.concatenate([fi[hit], fi[far]])
+    P, n = np.concatenate([P[hit], P[far]]), np.concatenate([n[hit], n[far]])
+    Q, ti = np.concatenate([Q[hit], Qf[far]]), np.concatenate([ti[hit], tf[far]])
     m = A.N[ti]
     d = Q - P
     w = np.linalg.norm(d, axis=1)
@@ -1311,7 +1341,7 @@ def antipodal_pairs(mesh: "trimesh.Trimesh", opening: float, unit: str, samples:
     keep = cone & (w <= opening * (1 + 1e-9))
     idx = np.flatnonzero(keep)
     pads = _pads_on_surface(mesh, P[idx], Q[idx], c[idx], unit)
-    out = [Antipodal(P[i], Q[i], c[i], float(w[i]), float(max(ang_p[i], ang_q[i])), int(fi[hit][i]), int(ti[i]))
+    out = [Antipodal(P[i], Q[i], c[i], float(w[i]), float(max(ang_p[i], ang_q[i])), int(fi[i]), int(ti[i]))
            for i in idx[pads]]
     return out, least
 
