@@ -234,6 +234,25 @@ def _contacts(meshes: dict[str, "trimesh.Trimesh"], reach: float, spacing: float
     return out
 
 
+def triangles_tree(mesh: "trimesh.Trimesh") -> Any:
+    """The mesh's ``triangles_tree`` (an R-tree of its triangles' bounding boxes), bulk-loaded
+    from numpy arrays and kept in the mesh's own cache, where trimesh's proximity queries find
+    it. trimesh loads the same tree through a Python callback per triangle (most of the
+    contacts' time on a fine mesh); both are rtree's bulk load of the same boxes in the same
+    order, so queries answer the same ids in the same order (bench/fabrica_dump's results are
+    unchanged)."""
+    import rtree
+
+    cache = mesh._cache  # noqa: SLF001 - trimesh's property cache, checked against the mesh's data
+    cache.verify()
+    if "triangles_tree" not in cache.cache:
+        tri = np.asarray(mesh.triangles, float)
+        cache.cache["triangles_tree"] = rtree.index.Index(
+            (np.arange(len(tri), dtype=np.int64), tri.min(axis=1), tri.max(axis=1)),
+            properties=rtree.index.Property(dimension=3))
+    return mesh.triangles_tree
+
+
 def _within(mesh: "trimesh.Trimesh", P: np.ndarray, reach: float) -> np.ndarray:
     """A mask of the points ``P`` that may lie within ``reach`` of the mesh's surface: those
     whose cube of half-side ``reach`` meets a triangle's bounding box (a superset of the points
@@ -242,7 +261,7 @@ def _within(mesh: "trimesh.Trimesh", P: np.ndarray, reach: float) -> np.ndarray:
     the points far from the mesh, most of a bounding-box overlap's, are dropped here first."""
     if len(P) == 0:
         return np.zeros(0, bool)
-    tree = mesh.triangles_tree
+    tree = triangles_tree(mesh)
     r = reach * (1 + 1e-9) + 1e-12
     boxes = np.column_stack((P - r, P + r))
     _, counts = tree.intersection_v(boxes[:, :3].copy(), boxes[:, 3:].copy())
