@@ -987,15 +987,25 @@ def _facet_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fe
     with ``unique``, a candidate whose T is one already listed is not repeated."""
     out = list(out)
     order = [f.name for f in faces]
+    listed = np.array([d.T for d in out], float).reshape(-1, 4, 4)
     for names, width, T in cands:
-        if unique and any(np.allclose(T, d.T, atol=1e-9) for d in out):
+        if unique and _listed(T, listed):
             continue
         if grasp_problem(mesh, T, width, g, unit) is not None:
             continue
         cover = {faces[k].name for k in _covered(mesh, faces, features, T, width, g, unit)}
         ofaces = tuple(names) + tuple(sorted(cover - set(names), key=order.index))
         out.append(DerivedGrasp(f"{prefix}{len(out) + 1}", names, ofaces, T, euler_zyz_of(T), float(round(width, 12))))
+        listed = np.concatenate((listed, np.asarray(T, float)[None]))
     return out
+
+
+def _listed(T: np.ndarray, listed: np.ndarray) -> bool:
+    """Whether one of ``listed`` (k, 4, 4) is ``T`` by ``np.allclose(T, listed[i], atol=1e-9)``
+    (the same test, one array operation instead of a call per listed grasp)."""
+    if not len(listed):
+        return False
+    return bool(np.all(np.abs(T - listed) <= 1e-9 + 1e-5 * np.abs(listed), axis=(1, 2)).any())
 
 
 def _shaft_from_above(mesh: "trimesh.Trimesh", root: np.ndarray, d: np.ndarray, r: float, length: float,
