@@ -397,6 +397,62 @@ def _gripper_boxes(g: Gripper, width: float, reach: float, shrink: float) -> lis
     return [(what, lo + shrink, hi - shrink) for what, lo, hi in boxes if np.all(hi - lo > 2 * shrink)]
 
 
+CLUSTER_TRIS = 64
+"""About how many triangles :func:`_clusters` puts in one cluster."""
+
+
+@dataclass(frozen=True)
+class _Clusters:
+    """A mesh's triangles grouped by grid cell: triangle ``members[i]`` is in cluster ``which[i]``,
+    and every bounding sphere of cluster k's triangles lies within the sphere of centre
+    ``centre[k]`` and radius ``radius[k]`` (object frame); ``of`` the sphere centres grouped."""
+
+    of: np.ndarray
+    centre: np.ndarray
+    radius: np.ndarray
+    members: np.ndarray
+    which: np.ndarray
+
+
+def _clusters(mesh: "trimesh.Trimesh", A: _Arrays) -> _Clusters:
+    """The triangles of ``A`` (the arrays of ``mesh``) in clusters of about CLUSTER_TRIS by a
+    grid over their spheres' centres; kept in the mesh's metadata beside its arrays."""
+    c = mesh.metadata.get("_spar_clusters")
+    if c is not None and c.of is A.S:
+        return c
+    lo, hi = A.S.min(0), A.S.max(0)
+    k = max(1, int(round((len(A.S) / CLUSTER_TRIS) ** (1 / 3))))
+    cell = np.minimum(((A.S - lo) / np.maximum(hi - lo, 1e-300) * k).astype(int), k - 1)
+    cid = (cell[:, 0] * k + cell[:, 1]) * k + cell[:, 2]
+    members = np.argsort(cid, kind="stable")
+    _, start = np.unique(cid[members], return_index=True)
+    start = np.append(start, len(members))
+    which = np.repeat(np.arange(len(start) - 1), np.diff(start))
+    centre = np.add.reduceat(A.S[members], start[:-1]) / np.diff(start)[:, None]
+    reach = np.linalg.norm(A.S[members] - centre[which], axis=1) + A.rad[members]
+    radius = np.maximum.reduceat(reach, start[:-1])
+    c = _Clusters(A.S, centre, radius, members, which)
+    mesh.metadata["_spar_clusters"] = c
+    return c
+
+
+def _near_union(mesh: "trimesh.Trimesh", A: _Arrays, R: np.ndarray, o: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                slack: float) -> np.ndarray:
+    """Ascending triangle indices, a superset of those whose bounding sphere (centre moved to
+    the tool frame by ``(S - o) @ R``) meets the box [lo, hi] grown by ``slack``: the members
+    of the clusters (:func:`_clusters`) whose sphere meets that box. A triangle's sphere lies
+    in its cluster's, and a rotation moves no component of a vector by more than its length,
+    so no triangle that meets the box is left out; every triangle when R is not a rotation."""
+    n = len(A.S)
+    if n < 4 * CLUSTER_TRIS or not np.allclose(R.T @ R, np.eye(3), rtol=0.0, atol=1e-9):
+        return np.arange(n)
+    C = _clusters(mesh, A)
+    Sc = (C.centre - o) @ R
+    grow = C.radius * (1 + 1e-6) + slack + 1e-9 * (1.0 + float(np.abs(Sc).max()))
+    hit = (np.abs(Sc - (lo + hi) / 2) <= (hi - lo) / 2 + grow[:, None]).all(1)
+    return np.sort(C.members[hit[C.which]])
+
+
 def grasp_problem(mesh: "trimesh.Trimesh", T: np.ndarray, width: float, g: Gripper, unit: str) -> str | None:
     """Why the gripper at tool pose T (object frame) with fingers ``width`` apart cannot hold the
     part, or None: wider than the opening, or a finger or the palm inside the part."""
@@ -410,10 +466,12 @@ def grasp_problem(mesh: "trimesh.Trimesh", T: np.ndarray, width: float, g: Gripp
         return None
     # the triangles whose sphere meets the boxes' union box: a superset of each box's below
     ulo, uhi = np.min([b[1] for b in boxes], axis=0), np.max([b[2] for b in boxes], axis=0)
-    S = (A.S - o) @ R  # triangles' bounding spheres' centres in the tool frame
     slack = 1e-9 * (1.0 + reach)  # rounding: the union test must not drop what a box test keeps
-    cand = np.flatnonzero((np.abs(S - (ulo + uhi) / 2) <= (uhi - ulo) / 2 + A.rad[:, None] + slack).all(1))
-    S, rad = S[cand], A.rad[cand]
+    rows = _near_union(mesh, A, R, o, ulo, uhi, slack)
+    S = (A.S[rows] - o) @ R  # triangles' bounding spheres' centres in the tool frame
+    inside = (np.abs(S - (ulo + uhi) / 2) <= (uhi - ulo) / 2 + A.rad[rows, None] + slack).all(1)
+    cand, S = rows[inside], S[inside]
+    rad = A.rad[cand]
     for what, lo, hi in boxes:
         # only triangles whose sphere meets the box (grown by the radius) can meet it
         near = cand[(np.abs(S - (lo + hi) / 2) <= (hi - lo) / 2 + rad[:, None]).all(1)]
