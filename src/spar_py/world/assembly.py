@@ -500,13 +500,27 @@ class Sweeper:
     """Sweeps of parts along directions against the other parts (python-fcl)."""
 
     def __init__(self, meshes: dict[str, "trimesh.Trimesh"], shrink: float, step: float) -> None:
-        import fcl
-
         self.meshes = meshes
         self.step = step
-        self.moving = {p: _fcl_mesh(m, shrink) for p, m in meshes.items()}
-        self.fixed = {p: fcl.CollisionObject(_fcl_mesh(m, 0.0), fcl.Transform()) for p, m in meshes.items()}
+        self.shrink = shrink
+        self._moving: dict[str, Any] = {}
+        self._fixed: dict[str, Any] = {}
         self.bounds = {p: np.asarray(m.bounds, float) for p, m in meshes.items()}
+
+    def moving(self, p: str) -> Any:
+        """Part ``p``'s BVH as it moves (shrunk), built on first use: a part that is never swept
+        or never met on a sweep costs no BVH build (about 50 ms on a 50,000-triangle part)."""
+        if p not in self._moving:
+            self._moving[p] = _fcl_mesh(self.meshes[p], self.shrink)
+        return self._moving[p]
+
+    def fixed(self, p: str) -> Any:
+        """Part ``p`` standing at its pose (an fcl CollisionObject), built on first use."""
+        import fcl
+
+        if p not in self._fixed:
+            self._fixed[p] = fcl.CollisionObject(_fcl_mesh(self.meshes[p], 0.0), fcl.Transform())
+        return self._fixed[p]
 
     def hits(self, parts: tuple[str, ...], d: np.ndarray, others: list[str], first_only: bool) -> set[str]:
         """The parts of ``others`` that ``parts`` swept along ``d`` (from their poses until
@@ -544,7 +558,7 @@ class Sweeper:
 
         for off in offs:
             for p in parts:
-                if fcl.collide(fcl.CollisionObject(self.moving[p], fcl.Transform(off)), self.fixed[q], req,
+                if fcl.collide(fcl.CollisionObject(self.moving(p), fcl.Transform(off)), self.fixed(q), req,
                                fcl.CollisionResult()):
                     return True
         return False
