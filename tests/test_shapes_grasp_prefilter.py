@@ -52,7 +52,7 @@ def test_prefilter_keeps_every_triangle_near_the_union(k: int) -> None:
         o = rng.normal(0.0, 25.0, 3)
         half = rng.uniform(1.0, 30.0, 3)
         lo, hi = -half, half * rng.uniform(0.2, 1.0, 3)
-        got = sd._near_union(mesh, A, R, o, lo, hi, 1e-9)
+        got = sd._near_box(mesh, A, R, o, lo, hi, 1e-9)
         want = _union_rows(A, R, o, lo, hi, 1e-9)
         assert np.all(np.diff(got) > 0)
         assert set(want.tolist()) <= set(got.tolist())

@@ -397,7 +397,7 @@ def _gripper_boxes(g: Gripper, width: float, reach: float, shrink: float) -> lis
     return [(what, lo + shrink, hi - shrink) for what, lo, hi in boxes if np.all(hi - lo > 2 * shrink)]
 
 
-CLUSTER_TRIS = 64
+CLUSTER_TRIS = 32
 """About how many triangles :func:`_clusters` puts in one cluster."""
 
 
@@ -436,11 +436,11 @@ def _clusters(mesh: "trimesh.Trimesh", A: _Arrays) -> _Clusters:
     return c
 
 
-def _near_union(mesh: "trimesh.Trimesh", A: _Arrays, R: np.ndarray, o: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+def _near_box(mesh: "trimesh.Trimesh", A: _Arrays, R: np.ndarray, o: np.ndarray, lo: np.ndarray, hi: np.ndarray,
                 slack: float) -> np.ndarray:
     """Ascending triangle indices, a superset of those whose bounding sphere (centre moved to
-    the tool frame by ``(S - o) @ R``) meets the box [lo, hi] grown by ``slack``: the members
-    of the clusters (:func:`_clusters`) whose sphere meets that box. A triangle's sphere lies
+    the tool frame by ``(S - o) @ R``) meets the box [lo, hi] (tool frame) grown by ``slack``:
+    the members of the clusters (:func:`_clusters`) whose sphere meets that box. A triangle's sphere lies
     in its cluster's, and a rotation moves no component of a vector by more than its length,
     so no triangle that meets the box is left out; every triangle when R is not a rotation."""
     n = len(A.S)
@@ -464,17 +464,17 @@ def grasp_problem(mesh: "trimesh.Trimesh", T: np.ndarray, width: float, g: Gripp
     boxes = _gripper_boxes(g, width, reach, from_mm(unit, TOUCH_MM))
     if not boxes:
         return None
-    # the triangles whose sphere meets the boxes' union box: a superset of each box's below
+    # the boxes' union box: a box's triangles are those whose sphere meets both it and the union
     ulo, uhi = np.min([b[1] for b in boxes], axis=0), np.max([b[2] for b in boxes], axis=0)
     slack = 1e-9 * (1.0 + reach)  # rounding: the union test must not drop what a box test keeps
-    rows = _near_union(mesh, A, R, o, ulo, uhi, slack)
-    S = (A.S[rows] - o) @ R  # triangles' bounding spheres' centres in the tool frame
-    inside = (np.abs(S - (ulo + uhi) / 2) <= (uhi - ulo) / 2 + A.rad[rows, None] + slack).all(1)
-    cand, S = rows[inside], S[inside]
-    rad = A.rad[cand]
     for what, lo, hi in boxes:
-        # only triangles whose sphere meets the box (grown by the radius) can meet it
-        near = cand[(np.abs(S - (lo + hi) / 2) <= (hi - lo) / 2 + rad[:, None]).all(1)]
+        # only triangles whose sphere meets the box (grown by the radius) can meet it; those
+        # come from the clusters that meet it, and are tested in the tool frame
+        rows = _near_box(mesh, A, R, o, lo, hi, slack)
+        S = (A.S[rows] - o) @ R  # triangles' bounding spheres' centres in the tool frame
+        rad = A.rad[rows, None]
+        near = rows[(np.abs(S - (ulo + uhi) / 2) <= (uhi - ulo) / 2 + rad + slack).all(1)
+                    & (np.abs(S - (lo + hi) / 2) <= (hi - lo) / 2 + rad).all(1)]
         if not len(near):
             continue
         tri = (A.tri[near] - o) @ R
