@@ -399,6 +399,8 @@ def _gripper_boxes(g: Gripper, width: float, reach: float, shrink: float) -> lis
 
 CLUSTER_TRIS = 32
 """About how many triangles :func:`_clusters` puts in one cluster."""
+CLUSTER_MIN = 4 * CLUSTER_TRIS
+"""The fewest triangles for which :func:`_near_box` looks through clusters (fewer: all)."""
 
 
 @dataclass(frozen=True)
@@ -444,7 +446,7 @@ def _near_box(mesh: "trimesh.Trimesh", A: _Arrays, R: np.ndarray, o: np.ndarray,
     in its cluster's, and a rotation moves no component of a vector by more than its length,
     so no triangle that meets the box is left out; every triangle when R is not a rotation."""
     n = len(A.S)
-    if n < 4 * CLUSTER_TRIS or not np.allclose(R.T @ R, np.eye(3), rtol=0.0, atol=1e-9):
+    if n < CLUSTER_MIN or not np.allclose(R.T @ R, np.eye(3), rtol=0.0, atol=1e-9):
         return np.arange(n)
     C = _clusters(mesh, A)
     Sc = (C.centre - o) @ R
@@ -578,9 +580,14 @@ def _clip_many(P: np.ndarray, cnt: np.ndarray, clip: "np.ndarray | list") -> tup
         keep = valid & (sp <= 0)
         cut = valid & (((sp < 0) & (0 < sq)) | ((sq < 0) & (0 < sp)))
         t = sp / np.where(cut, sp - sq, 1.0)
-        X = np.stack([P[..., 0] + (Q[..., 0] - P[..., 0]) * t, P[..., 1] + (Q[..., 1] - P[..., 1]) * t], axis=-1)
-        cand = np.stack([P, X], axis=2).reshape(len(P), 2 * K, 2)
-        m = np.stack([keep, cut], axis=2).reshape(len(P), 2 * K)
+        cand = np.empty((len(P), K, 2, 2))  # corner k's kept point, then its cut point
+        cand[:, :, 0] = P
+        cand[:, :, 1, 0] = P[..., 0] + (Q[..., 0] - P[..., 0]) * t
+        cand[:, :, 1, 1] = P[..., 1] + (Q[..., 1] - P[..., 1]) * t
+        cand = cand.reshape(len(P), 2 * K, 2)
+        m = np.empty((len(P), K, 2), bool)
+        m[:, :, 0], m[:, :, 1] = keep, cut
+        m = m.reshape(len(P), 2 * K)
         order = np.argsort(~m, axis=1, kind="stable")
         cnt = m.sum(1)
         P = cand[rows, order][:, : int(cnt.max()) if len(cnt) else 0]
@@ -609,8 +616,11 @@ def _area_centroid_many(P: np.ndarray, cnt: np.ndarray) -> tuple[np.ndarray, np.
 
 
 def _ccw(P: np.ndarray) -> np.ndarray:
+    """Polygon ``P`` (k, 2) with its corners counter-clockwise (reversed if its signed area is
+    negative); the successors by slicing, np.roll's values without its overhead."""
     x, y = P[:, 0], P[:, 1]
-    return P if (x * np.roll(y, -1) - np.roll(x, -1) * y).sum() >= 0 else P[::-1]
+    xn, yn = np.concatenate((x[1:], x[:1])), np.concatenate((y[1:], y[:1]))
+    return P if (x * yn - xn * y).sum() >= 0 else P[::-1]
 
 
 def _overlap(mesh: "trimesh.Trimesh", fa: Face, fb: Face, e1: np.ndarray, e2: np.ndarray) -> list[np.ndarray]:
