@@ -401,19 +401,19 @@ CLUSTER_TRIS = 32
 """About how many triangles :func:`_clusters` puts in one cluster."""
 CLUSTER_MIN = 4 * CLUSTER_TRIS
 """The fewest triangles for which :func:`_near_box` looks through clusters (fewer: all)."""
+_EYE3 = np.eye(3)
 
 
 @dataclass(frozen=True)
 class _Clusters:
-    """A mesh's triangles grouped by grid cell: triangle ``members[i]`` is in cluster ``which[i]``,
-    and every bounding sphere of cluster k's triangles lies within the sphere of centre
-    ``centre[k]`` and radius ``radius[k]`` (object frame); ``of`` the sphere centres grouped."""
+    """A mesh's triangles grouped by grid cell: triangle i is in cluster ``cluster[i]``, and every
+    bounding sphere of cluster k's triangles lies within the sphere of centre ``centre[k]`` and
+    radius ``radius[k]`` (object frame); ``of`` the sphere centres grouped."""
 
     of: np.ndarray
     centre: np.ndarray
     radius: np.ndarray
-    members: np.ndarray
-    which: np.ndarray
+    cluster: np.ndarray
 
 
 def _clusters(mesh: "trimesh.Trimesh", A: _Arrays) -> _Clusters:
@@ -425,34 +425,33 @@ def _clusters(mesh: "trimesh.Trimesh", A: _Arrays) -> _Clusters:
     lo, hi = A.S.min(0), A.S.max(0)
     k = max(1, int(round((len(A.S) / CLUSTER_TRIS) ** (1 / 3))))
     cell = np.minimum(((A.S - lo) / np.maximum(hi - lo, 1e-300) * k).astype(int), k - 1)
-    cid = (cell[:, 0] * k + cell[:, 1]) * k + cell[:, 2]
-    members = np.argsort(cid, kind="stable")
-    _, start = np.unique(cid[members], return_index=True)
-    start = np.append(start, len(members))
-    which = np.repeat(np.arange(len(start) - 1), np.diff(start))
-    centre = np.add.reduceat(A.S[members], start[:-1]) / np.diff(start)[:, None]
-    reach = np.linalg.norm(A.S[members] - centre[which], axis=1) + A.rad[members]
-    radius = np.maximum.reduceat(reach, start[:-1])
-    c = _Clusters(A.S, centre, radius, members, which)
+    _, cluster = np.unique((cell[:, 0] * k + cell[:, 1]) * k + cell[:, 2], return_inverse=True)
+    cluster = cluster.ravel()
+    count = np.bincount(cluster)
+    centre = np.column_stack([np.bincount(cluster, A.S[:, d]) for d in range(3)]) / count[:, None]
+    radius = np.zeros(len(count))
+    np.maximum.at(radius, cluster, np.linalg.norm(A.S - centre[cluster], axis=1) + A.rad)
+    c = _Clusters(A.S, centre, radius, cluster)
     mesh.metadata["_spar_clusters"] = c
     return c
 
 
 def _near_box(mesh: "trimesh.Trimesh", A: _Arrays, R: np.ndarray, o: np.ndarray, lo: np.ndarray, hi: np.ndarray,
-                slack: float) -> np.ndarray:
+              slack: float) -> np.ndarray:
     """Ascending triangle indices, a superset of those whose bounding sphere (centre moved to
     the tool frame by ``(S - o) @ R``) meets the box [lo, hi] (tool frame) grown by ``slack``:
-    the members of the clusters (:func:`_clusters`) whose sphere meets that box. A triangle's sphere lies
-    in its cluster's, and a rotation moves no component of a vector by more than its length,
-    so no triangle that meets the box is left out; every triangle when R is not a rotation."""
+    the triangles of the clusters (:func:`_clusters`) whose sphere meets that box. A triangle's
+    sphere lies in its cluster's, and a rotation moves no component of a vector by more than
+    its length, so no triangle that meets the box is left out; every triangle when R is not a
+    rotation or the mesh has fewer than CLUSTER_MIN."""
     n = len(A.S)
-    if n < CLUSTER_MIN or not np.allclose(R.T @ R, np.eye(3), rtol=0.0, atol=1e-9):
+    if n < CLUSTER_MIN or not float(np.abs(R.T @ R - _EYE3).max()) <= 1e-9:
         return np.arange(n)
     C = _clusters(mesh, A)
     Sc = (C.centre - o) @ R
     grow = C.radius * (1 + 1e-6) + slack + 1e-9 * (1.0 + float(np.abs(Sc).max()))
     hit = (np.abs(Sc - (lo + hi) / 2) <= (hi - lo) / 2 + grow[:, None]).all(1)
-    return np.sort(C.members[hit[C.which]])
+    return np.flatnonzero(hit[C.cluster])
 
 
 def grasp_problem(mesh: "trimesh.Trimesh", T: np.ndarray, width: float, g: Gripper, unit: str) -> str | None:
