@@ -219,13 +219,33 @@ def part_mesh(model: "ObjectModel") -> "trimesh.Trimesh | None":
 def _load_mesh(path: str, scale: float) -> "tuple[trimesh.Trimesh, Repair]":
     """Read an STL, OBJ or PLY file as one mesh, scaled by ``scale``, and repair what a CAD
     export leaves open (:func:`repair_mesh`). ValueError (one line) if it cannot be read or
-    is not a closed volume once repaired."""
+    is not a closed volume once repaired. A file read before in this process (same path, size,
+    modification time and scale) is not read again: the caller gets its own copy of the
+    repaired mesh (a product's load reads each part's file for the assembly's derivation and
+    again for the part's own)."""
+    p = Path(path)
+    st = p.stat()
+    if st.st_size > MAX_MESH_BYTES:
+        raise ValueError(f"a mesh file of at most {MAX_MESH_BYTES} bytes, not {st.st_size} bytes")
+    key = (str(p.resolve()), st.st_size, st.st_mtime_ns, float(scale))
+    if key not in _READ:
+        while len(_READ) >= READ_MEMO:
+            del _READ[next(iter(_READ))]
+        m, done = _read_mesh(p, scale)
+        _READ[key] = (m.copy(include_cache=True), done)
+    m, done = _READ[key]
+    return m.copy(include_cache=True), done
+
+
+READ_MEMO = 64
+"""How many repaired meshes :func:`_load_mesh` keeps (the oldest read is dropped first)."""
+_READ: "dict[tuple[str, int, int, float], tuple[trimesh.Trimesh, Repair]]" = {}
+
+
+def _read_mesh(p: Path, scale: float) -> "tuple[trimesh.Trimesh, Repair]":
+    """:func:`_load_mesh`'s read and repair of file ``p``."""
     import trimesh  # ~1.4 s at import: only a mesh or primitives model pays for it
 
-    p = Path(path)
-    size = p.stat().st_size
-    if size > MAX_MESH_BYTES:
-        raise ValueError(f"a mesh file of at most {MAX_MESH_BYTES} bytes, not {size} bytes")
     try:
         m = trimesh.load(str(p), force="mesh", process=True)
     except Exception as e:  # trimesh raises many kinds for a bad file
@@ -451,7 +471,25 @@ def derive_faces(mesh: "trimesh.Trimesh", features: "tuple[FeatureGeometry, ...]
     (its triangles, named by the feature; a ``through`` hole has no bottom cap). ``face_names``
     maps a name to a point on the face (object frame, cell unit); ValueError naming the entry
     if the point is on no face, on a feature's face under another name, or two names share a
-    face; or if two features claim one triangle."""
+    face; or if two features claim one triangle.
+    Derived once per mesh and arguments: kept in the mesh's own trimesh cache, which trimesh
+    empties when the mesh's vertices or faces change (a part's faces are asked for by its
+    derivation, its subassembly poses and its seats). A new list of the same Faces each time:
+    do not modify their arrays."""
+    import hashlib
+    import pickle
+
+    key = "spar_faces_" + hashlib.sha256(pickle.dumps((features, list(face_names.items()), unit))).hexdigest()
+    cache = mesh._cache  # noqa: SLF001 - trimesh's property cache, checked against the mesh's data
+    cache.verify()
+    if key not in cache.cache:
+        cache.cache[key] = _derive_faces(mesh, features, face_names, unit)
+    return list(cache.cache[key])
+
+
+def _derive_faces(mesh: "trimesh.Trimesh", features: "tuple[FeatureGeometry, ...]", face_names: dict[str, np.ndarray],
+                  unit: str) -> list[Face]:
+    """:func:`derive_faces` computed."""
     tol = from_mm(unit, ON_SURFACE_MM)
     n = len(mesh.faces)
     N = mesh.face_normals

@@ -397,6 +397,63 @@ def _gripper_boxes(g: Gripper, width: float, reach: float, shrink: float) -> lis
     return [(what, lo + shrink, hi - shrink) for what, lo, hi in boxes if np.all(hi - lo > 2 * shrink)]
 
 
+CLUSTER_TRIS = 32
+"""About how many triangles :func:`_clusters` puts in one cluster."""
+CLUSTER_MIN = 4 * CLUSTER_TRIS
+"""The fewest triangles for which :func:`_near_box` looks through clusters (fewer: all)."""
+_EYE3 = np.eye(3)
+
+
+@dataclass(frozen=True)
+class _Clusters:
+    """A mesh's triangles grouped by grid cell: triangle i is in cluster ``cluster[i]``, and every
+    bounding sphere of cluster k's triangles lies within the sphere of centre ``centre[k]`` and
+    radius ``radius[k]`` (object frame); ``of`` the sphere centres grouped."""
+
+    of: np.ndarray
+    centre: np.ndarray
+    radius: np.ndarray
+    cluster: np.ndarray
+
+
+def _clusters(mesh: "trimesh.Trimesh", A: _Arrays) -> _Clusters:
+    """The triangles of ``A`` (the arrays of ``mesh``) in clusters of about CLUSTER_TRIS by a
+    grid over their spheres' centres; kept in the mesh's metadata beside its arrays."""
+    c = mesh.metadata.get("_spar_clusters")
+    if c is not None and c.of is A.S:
+        return c
+    lo, hi = A.S.min(0), A.S.max(0)
+    k = max(1, int(round((len(A.S) / CLUSTER_TRIS) ** (1 / 3))))
+    cell = np.minimum(((A.S - lo) / np.maximum(hi - lo, 1e-300) * k).astype(int), k - 1)
+    _, cluster = np.unique((cell[:, 0] * k + cell[:, 1]) * k + cell[:, 2], return_inverse=True)
+    cluster = cluster.ravel()
+    count = np.bincount(cluster)
+    centre = np.column_stack([np.bincount(cluster, A.S[:, d]) for d in range(3)]) / count[:, None]
+    radius = np.zeros(len(count))
+    np.maximum.at(radius, cluster, np.linalg.norm(A.S - centre[cluster], axis=1) + A.rad)
+    c = _Clusters(A.S, centre, radius, cluster)
+    mesh.metadata["_spar_clusters"] = c
+    return c
+
+
+def _near_box(mesh: "trimesh.Trimesh", A: _Arrays, R: np.ndarray, o: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+              slack: float) -> np.ndarray:
+    """Ascending triangle indices, a superset of those whose bounding sphere (centre moved to
+    the tool frame by ``(S - o) @ R``) meets the box [lo, hi] (tool frame) grown by ``slack``:
+    the triangles of the clusters (:func:`_clusters`) whose sphere meets that box. A triangle's
+    sphere lies in its cluster's, and a rotation moves no component of a vector by more than
+    its length, so no triangle that meets the box is left out; every triangle when R is not a
+    rotation or the mesh has fewer than CLUSTER_MIN."""
+    n = len(A.S)
+    if n < CLUSTER_MIN or not float(np.abs(R.T @ R - _EYE3).max()) <= 1e-9:
+        return np.arange(n)
+    C = _clusters(mesh, A)
+    Sc = (C.centre - o) @ R
+    grow = C.radius * (1 + 1e-6) + slack + 1e-9 * (1.0 + float(np.abs(Sc).max()))
+    hit = (np.abs(Sc - (lo + hi) / 2) <= (hi - lo) / 2 + grow[:, None]).all(1)
+    return np.flatnonzero(hit[C.cluster])
+
+
 def grasp_problem(mesh: "trimesh.Trimesh", T: np.ndarray, width: float, g: Gripper, unit: str) -> str | None:
     """Why the gripper at tool pose T (object frame) with fingers ``width`` apart cannot hold the
     part, or None: wider than the opening, or a finger or the palm inside the part."""
@@ -408,15 +465,17 @@ def grasp_problem(mesh: "trimesh.Trimesh", T: np.ndarray, width: float, g: Gripp
     boxes = _gripper_boxes(g, width, reach, from_mm(unit, TOUCH_MM))
     if not boxes:
         return None
-    # the triangles whose sphere meets the boxes' union box: a superset of each box's below
+    # the boxes' union box: a box's triangles are those whose sphere meets both it and the union
     ulo, uhi = np.min([b[1] for b in boxes], axis=0), np.max([b[2] for b in boxes], axis=0)
-    S = (A.S - o) @ R  # triangles' bounding spheres' centres in the tool frame
     slack = 1e-9 * (1.0 + reach)  # rounding: the union test must not drop what a box test keeps
-    cand = np.flatnonzero((np.abs(S - (ulo + uhi) / 2) <= (uhi - ulo) / 2 + A.rad[:, None] + slack).all(1))
-    S, rad = S[cand], A.rad[cand]
     for what, lo, hi in boxes:
-        # only triangles whose sphere meets the box (grown by the radius) can meet it
-        near = cand[(np.abs(S - (lo + hi) / 2) <= (hi - lo) / 2 + rad[:, None]).all(1)]
+        # only triangles whose sphere meets the box (grown by the radius) can meet it; those
+        # come from the clusters that meet it, and are tested in the tool frame
+        rows = _near_box(mesh, A, R, o, lo, hi, slack)
+        S = (A.S[rows] - o) @ R  # triangles' bounding spheres' centres in the tool frame
+        rad = A.rad[rows, None]
+        near = rows[(np.abs(S - (ulo + uhi) / 2) <= (uhi - ulo) / 2 + rad + slack).all(1)
+                    & (np.abs(S - (lo + hi) / 2) <= (hi - lo) / 2 + rad).all(1)]
         if not len(near):
             continue
         tri = (A.tri[near] - o) @ R
@@ -520,9 +579,14 @@ def _clip_many(P: np.ndarray, cnt: np.ndarray, clip: "np.ndarray | list") -> tup
         keep = valid & (sp <= 0)
         cut = valid & (((sp < 0) & (0 < sq)) | ((sq < 0) & (0 < sp)))
         t = sp / np.where(cut, sp - sq, 1.0)
-        X = np.stack([P[..., 0] + (Q[..., 0] - P[..., 0]) * t, P[..., 1] + (Q[..., 1] - P[..., 1]) * t], axis=-1)
-        cand = np.stack([P, X], axis=2).reshape(len(P), 2 * K, 2)
-        m = np.stack([keep, cut], axis=2).reshape(len(P), 2 * K)
+        cand = np.empty((len(P), K, 2, 2))  # corner k's kept point, then its cut point
+        cand[:, :, 0] = P
+        cand[:, :, 1, 0] = P[..., 0] + (Q[..., 0] - P[..., 0]) * t
+        cand[:, :, 1, 1] = P[..., 1] + (Q[..., 1] - P[..., 1]) * t
+        cand = cand.reshape(len(P), 2 * K, 2)
+        m = np.empty((len(P), K, 2), bool)
+        m[:, :, 0], m[:, :, 1] = keep, cut
+        m = m.reshape(len(P), 2 * K)
         order = np.argsort(~m, axis=1, kind="stable")
         cnt = m.sum(1)
         P = cand[rows, order][:, : int(cnt.max()) if len(cnt) else 0]
@@ -551,8 +615,11 @@ def _area_centroid_many(P: np.ndarray, cnt: np.ndarray) -> tuple[np.ndarray, np.
 
 
 def _ccw(P: np.ndarray) -> np.ndarray:
+    """Polygon ``P`` (k, 2) with its corners counter-clockwise (reversed if its signed area is
+    negative); the successors by slicing, np.roll's values without its overhead."""
     x, y = P[:, 0], P[:, 1]
-    return P if (x * np.roll(y, -1) - np.roll(x, -1) * y).sum() >= 0 else P[::-1]
+    xn, yn = np.concatenate((x[1:], x[:1])), np.concatenate((y[1:], y[:1]))
+    return P if (x * yn - xn * y).sum() >= 0 else P[::-1]
 
 
 def _overlap(mesh: "trimesh.Trimesh", fa: Face, fb: Face, e1: np.ndarray, e2: np.ndarray) -> list[np.ndarray]:
@@ -987,15 +1054,25 @@ def _facet_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fe
     with ``unique``, a candidate whose T is one already listed is not repeated."""
     out = list(out)
     order = [f.name for f in faces]
+    listed = np.array([d.T for d in out], float).reshape(-1, 4, 4)
     for names, width, T in cands:
-        if unique and any(np.allclose(T, d.T, atol=1e-9) for d in out):
+        if unique and _listed(T, listed):
             continue
         if grasp_problem(mesh, T, width, g, unit) is not None:
             continue
         cover = {faces[k].name for k in _covered(mesh, faces, features, T, width, g, unit)}
         ofaces = tuple(names) + tuple(sorted(cover - set(names), key=order.index))
         out.append(DerivedGrasp(f"{prefix}{len(out) + 1}", names, ofaces, T, euler_zyz_of(T), float(round(width, 12))))
+        listed = np.concatenate((listed, np.asarray(T, float)[None]))
     return out
+
+
+def _listed(T: np.ndarray, listed: np.ndarray) -> bool:
+    """Whether one of ``listed`` (k, 4, 4) is ``T`` by ``np.allclose(T, listed[i], atol=1e-9)``
+    (the same test, one array operation instead of a call per listed grasp)."""
+    if not len(listed):
+        return False
+    return bool(np.all(np.abs(T - listed) <= 1e-9 + 1e-5 * np.abs(listed), axis=(1, 2)).any())
 
 
 def _shaft_from_above(mesh: "trimesh.Trimesh", root: np.ndarray, d: np.ndarray, r: float, length: float,
