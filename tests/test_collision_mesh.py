@@ -117,3 +117,17 @@ def test_a_box_wholly_inside_a_mesh_collides() -> None:
     assert u.contains(T[:3, 3][None])[0]
     assert collision._exact(small, T, m, np.eye(4)) == 0.0
     assert collision._exact(m, np.eye(4), small, T) == 0.0
+
+
+def test_placed_copies_share_the_mesh_geometry_in_the_object_frame() -> None:
+    """The library's geometry, made once by whichever copy asks first, is the part's own: a copy
+    placed 100 mm away asking first must not move the original (a convex mesh: the hull branch)."""
+    cube = trimesh.creation.box(extents=(20.0, 20.0, 20.0))
+    m = collision.mesh_body("c", WORLD, np.asarray(cube.vertices), _MeshGeometry(cube), "mm")
+    T = np.eye(4)
+    T[0, 3] = 100.0
+    far = m.placed(T, WORLD)
+    probe = collision.box("p", WORLD, np.array([15.0, -5.0, -5.0]), np.array([25.0, 5.0, 5.0]))
+    eye = np.eye(4)
+    assert collision._exact(far, eye, probe, eye) > 60.0   # asked first: 75 mm apart
+    assert abs(collision._exact(m, eye, probe, eye) - 5.0) < 1e-6  # the cube's face x = 10, the probe's 15

@@ -151,12 +151,10 @@ class Body:
                 g = fcl.Capsule(self.size[0], 2 * self.size[1])
             elif self.kind == "cylinder":  # the true cylinder (radius: the prism's inscribed one)
                 g = fcl.Cylinder(self.size[0] * math.cos(math.pi / CYL_SIDES), 2 * self.size[1])
-            elif self.kind == "mesh":
-                g = _mesh_geometry(self)
-            else:  # convex: a hull of the local vertices
+            else:  # convex, mesh: of the local vertices (a placed copy's are moved by T)
                 Tinv = np.linalg.inv(self.T)
                 local = self.points @ Tinv[:3, :3].T + Tinv[:3, 3]
-                g = _fcl_convex(local)
+                g = _mesh_geometry(self.mesh, local) if self.kind == "mesh" else _fcl_convex(local)
             self._fcl.append(g)
         return self._fcl[0]
 
@@ -252,16 +250,17 @@ def mesh_body(name: str, frame: int, hull: np.ndarray, geometry: Any, unit: str)
     return replace(body, kind="mesh", mesh=(geometry, from_mm(unit, HULL_EXCESS_MM)))
 
 
-def _mesh_geometry(body: Body) -> Any:
-    """The library's geometry of a mesh body: its convex hull where the hull is the mesh within
+def _mesh_geometry(mesh_of: tuple[Any, float], hull: np.ndarray) -> Any:
+    """The library's geometry of a mesh body (its ``mesh`` field; ``hull`` its hull's vertices in
+    the body's own frame, the object frame): its convex hull where the hull is the mesh within
     HULL_EXCESS_MM (a convex part: the cheaper exact shape), else the mesh's triangles as a
     python-fcl BVHModel (a concave part: a half-shell's hull would cover its recesses). The BVH
     is a surface: :func:`_exact` adds the containment test for a body wholly inside it."""
     import fcl  # ~0.15 s at import: see Body.fcl_geometry
 
-    mesh = body.mesh[0].mesh()
-    if _hull_is_mesh(mesh, body.points, body.mesh[1]):
-        return _fcl_convex(body.points)
+    mesh = mesh_of[0].mesh()
+    if _hull_is_mesh(mesh, hull, mesh_of[1]):
+        return _fcl_convex(hull)
     V, F = np.asarray(mesh.vertices, float), np.asarray(mesh.faces, int)
     bvh = fcl.BVHModel()
     bvh.beginModel(len(V), len(F))
