@@ -35,6 +35,7 @@ import numpy as np
 
 from spar_py.core.model import Grasp, Product
 from spar_py.core.units import from_mm
+from spar_py.world.workspace import reachable_ignoring_collisions
 
 __all__ = ["CLEAR_TOL_MM", "YAWS", "GraspReport", "MateGrasps", "grasp_report"]
 
@@ -175,80 +176,88 @@ def grasp_report(product: Product, gripper: Any, unit: str, robot: Any = None,
     world.robots.GripperGeometry, cell unit ``unit``); ``robot`` and ``positions`` (each part's
     world pose in the cell) for the reach counts, else those are -1. None when a part has no mesh
     or shape, or the product has no goal."""
-    import trimesh
-
-    from spar_py.world.arcs import hand_above_table
     from spar_py.world.shapes import part_mesh
-    from spar_py.world.shapes_derive import Gripper, grasp_problem, mate_grasp_usable
-    from spar_py.world.shapes_stable import stable_poses
 
     meshes = {p: part_mesh(pp.model) for p, pp in product.parts.items()}
     if any(m is None for m in meshes.values()) or not product.goals:
         return None
     order, before = _order(product)
-    goal = {g.part: g for g in product.goals}
-    shrink = from_mm(unit, CLEAR_TOL_MM)
-    as_derived = Gripper.of_robot(gripper)
-    rows: list[MateGrasps] = []
-    for part in order:
-        g = goal[part]
-        pp = product.parts[part]
-        mates = [m for m in product.mates if m.name in g.mates]
-        pegs = [m for m in mates if m.peg == part]
-        name = (pegs or mates)[0].name if (pegs or mates) else (g.mates[0] if g.mates else f"{part} on {g.parent}")
-        via = product.via.get(part, {})
-        own = [gr for label, gr in pp.model.grasps.items() if label not in via]
-        usable = [gr for gr in own if all(_usable(mate_grasp_usable, gr, gripper, product, m, unit) for m in pegs)]
-        manager = trimesh.collision.CollisionManager()
-        for q in sorted(before[part]):
-            manager.add_object(q, meshes[q], transform=np.asarray(product.parts[q].pose, float))
-        P = np.asarray(pp.pose, float)
-        hits: set[str] = set()
-        clear: list[Grasp] = []
-        for gr in usable:
-            h = _hits(manager, gripper, P @ np.asarray(gr.T, float), gr.width, shrink)
-            hits |= h
-            if not h:
-                clear.append(gr)
-        own_free = [gr for gr in clear if grasp_problem(meshes[part], np.asarray(gr.T, float), gr.width,
-                                                        as_derived, unit) is None]
-        Ts = _poses(pp.model, meshes[part], stable_poses)
-        pick: set[str] = set()
-        reach: set[str] = set()
-        pose_ok: list[str] = []
-        xy = None if positions is None or part not in positions else np.asarray(positions[part], float)[:2, 3]
-        for Tp in Ts:
-            up = [gr for gr in own_free if hand_above_table(gripper, Tp @ np.asarray(gr.T, float), gr.width, unit)]
-            pick |= {gr.label for gr in up}
-            if robot is None or xy is None or not up:
-                continue
-            from spar_py.world.workspace import reachable_ignoring_collisions
-
-            W = np.stack([_yawed(Tp, 2 * math.pi * i / YAWS, xy) @ np.asarray(gr.T, float)
-                          for gr in up for i in range(YAWS)])
-            got = reachable_ignoring_collisions(robot, W).reshape(len(up), YAWS).any(axis=1)
-            if got.any():
-                reach |= {gr.label for gr, ok in zip(up, got) if ok}
-                pose_ok.append(_pose_text(Tp))
-        at_cell, cell_pose = -1, ""
-        if robot is not None and xy is not None:
-            from spar_py.world.workspace import reachable_ignoring_collisions
-
-            Tc = np.asarray(positions[part], float)  # type: ignore[index]
-            up = [gr for gr in own_free if hand_above_table(gripper, Tc @ np.asarray(gr.T, float), gr.width, unit)]
-            cell_pose = _pose_text(Tc)
-            at_cell = int(reachable_ignoring_collisions(robot, np.stack([Tc @ np.asarray(gr.T, float) for gr in up])
-                                                        ).sum()) if up else 0
-        faces = tuple(sorted({str(f) for gr in own for f in gr.gfaces})) if not usable else ()
-        rows.append(MateGrasps(part, g.parent, name, len(own), len(usable), len(clear), len(pick),
-                               len(reach) if robot is not None and xy is not None else -1, at_cell, faces,
-                               tuple(sorted(hits)) if not clear else (), len(Ts), tuple(pose_ok), cell_pose))
+    at = dict(positions or {})
+    rows = [_row(product, part, meshes, before[part], gripper, unit, robot if part in at else None, at.get(part))
+            for part in order]
     for row in rows:
         needs = _needs(row)
         if needs:
             return GraspReport(False, rows, row, needs, f"no grasp of {row.part} serves {row.mate}: {_said(row)}; "
                                f"it needs {needs}")
     return GraspReport(True, rows)
+
+
+def _row(product: Product, part: str, meshes: Mapping[str, Any], placed: set[str], gripper: Any, unit: str,
+         robot: Any, T_cell: np.ndarray | None) -> MateGrasps:
+    """One part's counts (module docstring): ``placed`` the parts in place when it is seated,
+    ``T_cell`` its pose in the cell (world) and ``robot`` the arm, for the reach counts (either
+    None: -1)."""
+    import trimesh
+
+    from spar_py.world.shapes_derive import Gripper, grasp_problem, mate_grasp_usable
+    from spar_py.world.shapes_stable import stable_poses
+
+    g = next(x for x in product.goals if x.part == part)
+    pp = product.parts[part]
+    mates = [m for m in product.mates if m.name in g.mates]
+    pegs = [m for m in mates if m.peg == part]
+    name = (pegs or mates)[0].name if (pegs or mates) else (g.mates[0] if g.mates else f"{part} on {g.parent}")
+    via = product.via.get(part, {})
+    own = [gr for label, gr in pp.model.grasps.items() if label not in via]
+    usable = [gr for gr in own if all(_usable(mate_grasp_usable, gr, gripper, product, m, unit) for m in pegs)]
+    manager = trimesh.collision.CollisionManager()
+    for q in sorted(placed):
+        manager.add_object(q, meshes[q], transform=np.asarray(product.parts[q].pose, float))
+    P = np.asarray(pp.pose, float)
+    hits: set[str] = set()
+    clear: list[Grasp] = []
+    for gr in usable:
+        h = _hits(manager, gripper, P @ np.asarray(gr.T, float), gr.width, from_mm(unit, CLEAR_TOL_MM))
+        hits |= h
+        if not h:
+            clear.append(gr)
+    as_derived = Gripper.of_robot(gripper)
+    free = [gr for gr in clear if grasp_problem(meshes[part], np.asarray(gr.T, float), gr.width, as_derived,
+                                                unit) is None]
+    Ts = _poses(pp.model, meshes[part], stable_poses)
+    pick: set[str] = set()
+    reach: set[str] = set()
+    pose_ok: list[str] = []
+    for Tp in Ts:
+        up = _above(free, gripper, Tp, unit)
+        pick |= {gr.label for gr in up}
+        if robot is None or T_cell is None or not up:
+            continue
+        xy = np.asarray(T_cell, float)[:2, 3]
+        W = np.stack([_yawed(Tp, 2 * math.pi * i / YAWS, xy) @ np.asarray(gr.T, float)
+                      for gr in up for i in range(YAWS)])
+        got = reachable_ignoring_collisions(robot, W).reshape(len(up), YAWS).any(axis=1)
+        if got.any():
+            reach |= {gr.label for gr, ok in zip(up, got) if ok}
+            pose_ok.append(_pose_text(Tp))
+    reached, at_cell, cell_pose = -1, -1, ""
+    if robot is not None and T_cell is not None:
+        Tc = np.asarray(T_cell, float)
+        up = _above(free, gripper, Tc, unit)
+        reached, cell_pose = len(reach), _pose_text(Tc)
+        at_cell = int(reachable_ignoring_collisions(robot, np.stack([Tc @ np.asarray(gr.T, float) for gr in up])
+                                                    ).sum()) if up else 0
+    faces = tuple(sorted({str(f) for gr in own for f in gr.gfaces})) if not usable else ()
+    return MateGrasps(part, g.parent, name, len(own), len(usable), len(clear), len(pick), reached, at_cell, faces,
+                      tuple(sorted(hits)) if not clear else (), len(Ts), tuple(pose_ok), cell_pose)
+
+
+def _above(grasps: list[Grasp], gripper: Any, T_part: np.ndarray, unit: str) -> list[Grasp]:
+    """The grasps whose fingers and palm stay above the table with the part at world pose ``T_part``."""
+    from spar_py.world.arcs import hand_above_table
+
+    return [gr for gr in grasps if hand_above_table(gripper, T_part @ np.asarray(gr.T, float), gr.width, unit)]
 
 
 def _poses(model: Any, mesh: Any, stable_poses: Any) -> list[np.ndarray]:
