@@ -130,11 +130,11 @@ def summary(cell: Cell, reason: dict[str, Any], refusals: Sequence[Refusal]) -> 
     single = reason.get("single_arm") or {}
     if single.get("ok") is False:  # no order and poses keep the loose mates: the cause, whatever the search hit
         return f"NO PLAN {goals}: {single['why']}"
-    grasps = reason.get("grasps") or {}
-    if grasps.get("ok") is False:  # a part no grasp serves for its mate (world.grasp_report): the cause
-        return f"NO PLAN {goals}: {grasps['why']}"
     level = (f"; {single['why']}; the only way left inserts sideways (a level tool): {'; '.join(single['level'])}"
              if single.get("level") else "")
+    grasps = reason.get("grasps") or {}
+    if grasps.get("ok") is False:  # a part no grasp serves for its mate (world.grasp_report): the cause
+        return f"NO PLAN {goals}: {grasps['why']}{level}"
     if reason.get("phase") == 2:
         n = reason.get("instances_examined")
         why = reason.get("why", "")

@@ -17,10 +17,16 @@ counted through four filters, each keeping a subset of the one before:
 4. ``reached``: in such a pose, at the part's spot in the cell turned to one of YAWS yaws, the arm
    reaches the grasp (IK within limits, wrist above the table; no arm collision check).
 ``at_cell`` then counts those the arm reaches, hand above the table, at the pose the cell lays
-the part in. The first part whose count reaches zero is the blocker; the filter where it does
-says what it needs. Every filter is a necessary condition of the planner's own checks, so a
-zero is a real refusal; a part that passes them all may still be refused later (arm collisions,
-motions, uncertainty).
+the part in, ``at_clear`` those of them with an arm solution clear of the world there (the
+caller's collision scene, when it gives one), and ``held`` those of them the arm also reaches,
+clear of the world, seating the part on the product built where the cell lays the base (the
+parts in place there, the others where the cell lays them). The first part whose count
+reaches zero is the blocker (one refused by filters 1 to 3 before one refused only later); the
+filter where it does says what it needs. Filters 1 to 3 are
+necessary conditions of the planner's own checks whatever the layout and order, so a zero there
+is a real refusal; the later counts judge the cell as laid out (a zero names what the layout or
+a regrasp on the table must give). A part that passes them all may still be refused later
+(motions, uncertainty, another order).
 
 Lengths in the cell unit; the product's frame for seated poses, the world's (table top z = 0)
 for pickups.
@@ -29,7 +35,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 import numpy as np
 
@@ -37,13 +43,21 @@ from spar_py.core.model import Grasp, Product
 from spar_py.core.units import from_mm
 from spar_py.world.workspace import reachable_ignoring_collisions
 
-__all__ = ["CLEAR_TOL_MM", "YAWS", "GraspReport", "MateGrasps", "grasp_report"]
+__all__ = ["ArmClear", "CLEAR_TOL_MM", "YAWS", "GraspReport", "MateGrasps", "grasp_report"]
 
 #: The hand's boxes are shrunk by this (mm) before the checks against the parts in place: the
 #: held part touches them when seated, and a finger flush with its face may graze theirs.
 CLEAR_TOL_MM = 0.05
 #: Two poses whose down vectors (object frame) are closer than this (deg) read as one.
 POSE_SAME_DEG = 5.0
+#: How many poses offering a grasp the JSON names (the most probable first).
+POSES_SAID = 6
+#: How many colliding pairs a line names.
+PAIRS_SAID = 3
+#: ``arm_clear(part, T_part, grasp, parts)``: whether the arm reaches ``grasp`` of ``part`` at world
+#: pose ``T_part`` with a solution clear of the world (``parts``: the other parts' world poses),
+#: and the colliding pairs where not.
+ArmClear = Callable[[str, np.ndarray, Grasp, Mapping[str, np.ndarray]], tuple[bool, list[tuple[str, str]]]]
 #: How many faces a line names.
 FACES_SAID = 6
 #: Yaws (evenly spaced about world z) tried for each stable pose in the reach count.
@@ -58,7 +72,9 @@ class MateGrasps:
     (when none is usable: those the mate covers); ``hits`` the parts in place its usable grasps
     meet when seated (when none is clear); ``poses`` the stable poses tried, ``pose_ok`` those
     offering a reached grasp and ``cell_pose`` the cell's, each named by the part's axis that
-    points down (:func:`_pose_text`)."""
+    points down (:func:`_pose_text`); ``at_clear`` those of ``at_cell`` with an arm solution clear
+    of the world, ``arm_pairs`` the pairs the others collide in (with how many grasps each);
+    ``held`` those of ``at_clear`` also reached clear seating the part, ``seat_pairs`` likewise."""
 
     part: str
     parent: str
@@ -74,13 +90,19 @@ class MateGrasps:
     poses: int = 0
     pose_ok: tuple[str, ...] = ()
     cell_pose: str = ""
+    at_clear: int = -1
+    arm_pairs: tuple[str, ...] = ()
+    held: int = -1
+    seat_pairs: tuple[str, ...] = ()
 
     def to_json(self) -> dict[str, Any]:
         """As plain data (one row of the plan's JSON ``reason.grasps.parts``)."""
         return {"part": self.part, "parent": self.parent, "mate": self.mate, "grasps": self.grasps,
                 "usable": self.usable, "clear": self.clear, "pickup": self.pickup, "reached": self.reached,
                 "at_cell": self.at_cell, "faces": list(self.faces), "hits": list(self.hits),
-                "poses": self.poses, "pose_ok": list(self.pose_ok), "cell_pose": self.cell_pose}
+                "poses": self.poses, "pose_ok": list(self.pose_ok[:POSES_SAID]), "cell_pose": self.cell_pose,
+                "at_clear": self.at_clear, "arm_pairs": list(self.arm_pairs), "held": self.held,
+                "seat_pairs": list(self.seat_pairs)}
 
 
 @dataclass
@@ -171,11 +193,13 @@ def _yawed(T: np.ndarray, yaw: float, xy: np.ndarray) -> np.ndarray:
 
 
 def grasp_report(product: Product, gripper: Any, unit: str, robot: Any = None,
-                 positions: Mapping[str, np.ndarray] | None = None) -> GraspReport | None:
+                 positions: Mapping[str, np.ndarray] | None = None, arm_clear: ArmClear | None = None
+                 ) -> GraspReport | None:
     """The report of the module docstring for ``product`` held by ``gripper`` (a
     world.robots.GripperGeometry, cell unit ``unit``); ``robot`` and ``positions`` (each part's
-    world pose in the cell) for the reach counts, else those are -1. None when a part has no mesh
-    or shape, or the product has no goal."""
+    world pose in the cell) for the reach counts, else those are -1; ``arm_clear`` for the
+    arm's collisions at the cell's pickups (:data:`ArmClear`), else ``at_clear`` is -1. None when
+    a part has no mesh or shape, or the product has no goal."""
     from spar_py.world.shapes import part_mesh
 
     meshes = {p: part_mesh(pp.model) for p, pp in product.parts.items()}
@@ -183,9 +207,10 @@ def grasp_report(product: Product, gripper: Any, unit: str, robot: Any = None,
         return None
     order, before = _order(product)
     at = dict(positions or {})
-    rows = [_row(product, part, meshes, before[part], gripper, unit, robot if part in at else None, at.get(part))
-            for part in order]
-    for row in rows:
+    rows = [_row(product, part, meshes, before[part], gripper, unit, robot if part in at else None, at,
+                 arm_clear) for part in order]
+    # a part no layout or order can serve (filters 1 to 3) first, then the first the cell's layout fails
+    for row in sorted(rows, key=lambda r: not _refused_anywhere(r)):
         needs = _needs(row)
         if needs:
             return GraspReport(False, rows, row, needs, f"no grasp of {row.part} serves {row.mate}: {_said(row)}; "
@@ -193,11 +218,16 @@ def grasp_report(product: Product, gripper: Any, unit: str, robot: Any = None,
     return GraspReport(True, rows)
 
 
+def _refused_anywhere(r: MateGrasps) -> bool:
+    """Whether a part keeps no grasp through filters 1 to 3 (whatever the layout and order)."""
+    return r.usable == 0 or r.clear == 0 or r.pickup == 0
+
+
 def _row(product: Product, part: str, meshes: Mapping[str, Any], placed: set[str], gripper: Any, unit: str,
-         robot: Any, T_cell: np.ndarray | None) -> MateGrasps:
+         robot: Any, at: Mapping[str, np.ndarray], arm_clear: ArmClear | None) -> MateGrasps:
     """One part's counts (module docstring): ``placed`` the parts in place when it is seated,
-    ``T_cell`` its pose in the cell (world) and ``robot`` the arm, for the reach counts (either
-    None: -1)."""
+    ``at`` the parts' poses in the cell (world) and ``robot`` the arm, for the reach counts (None,
+    or the part not in ``at``: -1), ``arm_clear`` for ``at_clear`` and ``held``."""
     import trimesh
 
     from spar_py.world.shapes_derive import Gripper, grasp_problem, mate_grasp_usable
@@ -205,6 +235,7 @@ def _row(product: Product, part: str, meshes: Mapping[str, Any], placed: set[str
 
     g = next(x for x in product.goals if x.part == part)
     pp = product.parts[part]
+    T_cell = at.get(part)
     mates = [m for m in product.mates if m.name in g.mates]
     pegs = [m for m in mates if m.peg == part]
     name = (pegs or mates)[0].name if (pegs or mates) else (g.mates[0] if g.mates else f"{part} on {g.parent}")
@@ -241,16 +272,33 @@ def _row(product: Product, part: str, meshes: Mapping[str, Any], placed: set[str
         if got.any():
             reach |= {gr.label for gr, ok in zip(up, got) if ok}
             pose_ok.append(_pose_text(Tp))
-    reached, at_cell, cell_pose = -1, -1, ""
+    reached, at_cell, at_clear, held, cell_pose = -1, -1, -1, -1, ""
+    arm_pairs: list[str] = []
+    seat_pairs: list[str] = []
     if robot is not None and T_cell is not None:
         Tc = np.asarray(T_cell, float)
         up = _above(free, gripper, Tc, unit)
         reached, cell_pose = len(reach), _pose_text(Tc)
-        at_cell = int(reachable_ignoring_collisions(robot, np.stack([Tc @ np.asarray(gr.T, float) for gr in up])
-                                                    ).sum()) if up else 0
+        ok = reachable_ignoring_collisions(robot, np.stack([Tc @ np.asarray(gr.T, float) for gr in up])) if up \
+            else np.zeros(0, bool)
+        at_cell = int(ok.sum())
+        if arm_clear is not None:
+            others = {q: T for q, T in at.items() if q != part}
+            got = [(gr, *arm_clear(part, Tc, gr, others)) for gr, k in zip(up, ok) if k]
+            picked = [gr for gr, c, _ in got if c]
+            at_clear = len(picked)
+            arm_pairs = _pair_counts([pairs for _, _, pairs in got])
+            if product.base in at:
+                W = np.asarray(at[product.base], float) @ np.linalg.inv(np.asarray(product.parts[product.base].pose,
+                                                                                   float))
+                built = {**others, **{q: W @ np.asarray(product.parts[q].pose, float) for q in placed}}
+                seat = [(gr, *arm_clear(part, W @ P, gr, built)) for gr in picked]
+                held = sum(1 for _, c, _ in seat if c)
+                seat_pairs = _pair_counts([pairs for _, _, pairs in seat])
     faces = tuple(sorted({str(f) for gr in own for f in gr.gfaces})) if not usable else ()
     return MateGrasps(part, g.parent, name, len(own), len(usable), len(clear), len(pick), reached, at_cell, faces,
-                      tuple(sorted(hits)) if not clear else (), len(Ts), tuple(pose_ok), cell_pose)
+                      tuple(sorted(hits)) if not clear else (), len(Ts), tuple(pose_ok), cell_pose, at_clear,
+                      tuple(arm_pairs[:PAIRS_SAID]), held, tuple(seat_pairs[:PAIRS_SAID]))
 
 
 def _above(grasps: list[Grasp], gripper: Any, T_part: np.ndarray, unit: str) -> list[Grasp]:
@@ -299,6 +347,10 @@ def _said(r: MateGrasps) -> str:
         out.append(f"{r.reached} of those reached by the arm at its spot")
     if r.reached > 0 and r.at_cell >= 0:
         out.append(f"{r.at_cell} at the pose the cell lays it in")
+    if r.at_cell > 0 and r.at_clear >= 0:
+        out.append(f"{r.at_clear} of those with the arm clear of the world there")
+    if r.at_clear > 0 and r.held >= 0:
+        out.append(f"{r.held} of those also reached clear seating it")
     return ", ".join(out)
 
 
@@ -324,7 +376,24 @@ def _needs(r: MateGrasps) -> str:
                  f"none there)" if r.cell_pose in r.pose_ok else
                  f"resting {' or '.join(other[:3])} (resting {r.cell_pose}, as the cell lays it, offers none)")
         return f"{r.part} laid where a grasp usable for {r.mate} is reached: {where}, or a regrasp on the table"
+    if r.at_clear == 0:
+        return (f"{r.part} laid where the arm reaches a grasp usable for {r.mate} clear of the world (resting "
+                f"{r.cell_pose}, as the cell lays it, every arm solution collides: {', '.join(r.arm_pairs)}), "
+                f"or a regrasp on the table")
+    if r.held == 0:
+        return (f"a regrasp of {r.part} on the table, or the product built elsewhere (the {r.at_clear} grasps usable "
+                f"for {r.mate} the arm reaches where the cell lays {r.part} collide seating it where the cell builds "
+                f"the product: {', '.join(r.seat_pairs)})")
     return ""
+
+
+def _pair_counts(pairs: list[list[tuple[str, str]]]) -> list[str]:
+    """'a-b (n)' for each colliding pair, n the grasps it refused, most often first."""
+    counts: dict[str, int] = {}
+    for ps in pairs:
+        for a, b in ps:
+            counts[f"{a}-{b}"] = counts.get(f"{a}-{b}", 0) + 1
+    return [f"{k} ({n})" for k, n in sorted(counts.items(), key=lambda kv: (-kv[1], kv[0]))]
 
 
 def _pose_text(T: np.ndarray) -> str:
