@@ -118,7 +118,7 @@ def test_headed_pin_keeps_a_grasp(kb):
 
 
 @pytest.mark.parametrize("f", ["bracket_kit.yaml", "plate_pins.yaml", "turn_over.yaml", "shaft_stack.yaml",
-                               "board20.yaml", "disc_pin.yaml"])
+                               "board20.yaml"])
 def test_shipped_products_that_plan_are_not_refused(f):
     p = load_product(ROOT / "kb" / "products" / f, "mm")
     r = grasp_report(p, _gripper(), "mm")
@@ -142,3 +142,25 @@ def test_derive_prints_the_report(kb):
     text = derive_product_text(kb / "flush.yaml")
     assert "# grasps (default gripper, no robot): no grasp of pin serves pin.shaft->cube.bore" in text
     assert "every part keeps one usable" in derive_product_text(kb / "headed.yaml")
+
+
+def test_through_hole_entered_from_its_far_mouth():
+    """Fabrica's car: wheel4 enters the body's through hole2 from the end away from its declared
+    mouth (along +y in the body's frame, the mouth declared at y = +25 mm facing -y). Its usable
+    grasps are those keeping the whole hand on its own side of the far mouth (body y <= -25 mm),
+    counted here from the gripper's boxes alone."""
+    p = load_product(ROOT / "kb" / "products" / "fabrica" / "car_pressfit.yaml", "mm")
+    g = _gripper()
+    body, wheel = p.parts["body"], p.parts["wheel4"]
+    T_a = np.linalg.inv(np.asarray(body.pose)) @ np.asarray(wheel.pose)
+    own = 0
+    for gr in wheel.model.grasps.values():
+        C = np.array([[x, y, z] for _, lo, hi in g.boxes(gr.width) for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                      for z in (lo[2], hi[2])])
+        M = T_a @ gr.T
+        own += int((C @ M[:3, :3].T + M[:3, 3])[:, 1].max() <= -25.0 + 0.05)
+    assert own > 0
+    r = grasp_report(p, g, "mm")
+    assert r is not None
+    row = next(m for m in r.parts if m.part == "wheel4")
+    assert row.mate == "wheel4.peg1->body.hole2" and row.usable == own

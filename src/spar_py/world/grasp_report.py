@@ -333,7 +333,22 @@ def _usable(test: Any, gr: Grasp, gripper: Any, product: Product, m: Any, unit: 
     if hf is None or hf.kind != "hole":
         return True
     T_a = np.linalg.inv(np.asarray(hole.pose, float)) @ np.asarray(peg.pose, float)
-    return bool(test(np.asarray(gr.T, float), gr.width, gripper, T_a, hf, unit))
+    return bool(test(np.asarray(gr.T, float), gr.width, gripper, T_a, _mouth(hf, peg.model, m.peg_feature, T_a), unit))
+
+
+def _mouth(hf: Any, peg_model: Any, peg_feature: str, T_a: np.ndarray) -> Any:
+    """The hole feature as the peg enters it: a through hole entered from its far end (the peg's
+    direction, turned into the hole's frame by ``T_a``, against the hole's) has its mouth there
+    and its direction reversed; otherwise ``hf`` itself."""
+    from dataclasses import replace
+
+    pf = peg_model.feature_named(peg_feature).geometry
+    if not hf.through or pf is None:
+        return hf
+    d = np.asarray(T_a, float)[:3, :3] @ np.asarray(pf.direction, float)
+    if float(d @ np.asarray(hf.direction, float)) >= 0.0:
+        return hf
+    return replace(hf, origin=hf.end, direction=-np.asarray(hf.direction, float))
 
 
 def _said(r: MateGrasps) -> str:
