@@ -122,3 +122,57 @@ def test_layout_refusals_are_one_line(tmp_path):
         load_problem(_problem(tmp_path, f"product: {FABRICA / 'car.yaml'}\nlayout: yes_please"))
     with pytest.raises(KBError, match=r"layout: expected a problem with product:"):
         load_problem(_problem(tmp_path, "layout: auto"))
+
+
+#: The UR5e file's gripper (kb/robots/ur5e.yaml: a 2F-85, the loader's default finger boxes): mm.
+FINGER_LENGTH, FINGER_WIDTH, FINGER_THICKNESS = 60.0, 20.0, 10.0
+MARGIN_MM = 2.0  # kb/robots/ur5e.yaml collision: margin
+
+
+def _finger_boxes(T: np.ndarray, width: float) -> list[trimesh.Trimesh]:
+    """Both closed fingers of the tool at world pose T (mm): boxes FINGER_WIDTH across (tool x),
+    FINGER_THICKNESS out from the contact faces ``width`` apart (tool y), from the tip (the tool
+    centre's plane) FINGER_LENGTH back along -z."""
+    out = []
+    for side in (1.0, -1.0):
+        box = trimesh.creation.box(extents=[FINGER_WIDTH, FINGER_THICKNESS, FINGER_LENGTH])
+        local = np.eye(4)
+        local[:3, 3] = [0.0, side * (width / 2 + FINGER_THICKNESS / 2), -FINGER_LENGTH / 2]
+        box.apply_transform(T @ local)
+        out.append(box)
+    return out
+
+
+def test_plumbers_block_cap_has_a_grasp_clear_of_the_seated_bearing():
+    """The cap goes on over the bearing, whose top stands 11.7 mm above the block: a grasp of
+    the cap from above whose fingers hold only the cap's upper half keeps them off the bearing
+    and the block as the cap is seated, and above the table where the cap lies (own check: the
+    PLY meshes in their product poses, the finger boxes, python-fcl through trimesh)."""
+    cell = load_problem(ROOT / "kb" / "problems" / "fabrica_plumbers_block.yaml")
+    ply = _ply_of("plumbers_block")
+    mesh = {p: trimesh.load(f, process=False) for p, f in ply.items()}
+    for m in mesh.values():
+        m.apply_scale(CM)
+    seated = trimesh.collision.CollisionManager()
+    for p in ("block", "bearing"):
+        seated.add_object(p, mesh[p])
+    cap = trimesh.collision.CollisionManager()
+    cap.add_object("cap", mesh["cap"])
+    T_lying = cell.positions["tr_cap"].T
+    ok = []
+    for label, g in cell.objects["cap"].grasps.items():
+        T = np.asarray(g.T, float)  # the cap's frame is the product frame: seated, it is T
+        fingers = _finger_boxes(T, g.width)
+        if T[2, 2] > -0.5:  # not from above as seated
+            continue
+        if any(seated.min_distance_single(f) < MARGIN_MM for f in fingers):
+            continue
+        # the pads touch the cap: each finger grown by 0.5 mm towards the part meets it
+        touch = [_finger_boxes(T, g.width - 1.0)[k] for k in range(2)]
+        if not all(cap.in_collision_single(f) for f in touch):
+            continue
+        on_table = _finger_boxes(T_lying @ T, g.width)
+        if min(float(f.vertices[:, 2].min()) for f in on_table) < MARGIN_MM:
+            continue
+        ok.append(label)
+    assert ok, "no grasp of the cap from above clear of the seated bearing and the block"
