@@ -884,7 +884,7 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fe
     cos_par = math.cos(math.radians(PARALLEL_DEG))
     cands: list[tuple[tuple[str, ...], float, np.ndarray]] = []  # (gfaces, width, T)
     shallow: list[tuple[tuple[str, ...], float, np.ndarray]] = []  # the same, backed off (_table_clear)
-    half: list[tuple[tuple[str, ...], float, np.ndarray]] = []  # the same, at half depth (_half_depth)
+    pending: list[tuple[tuple[str, ...], float, np.ndarray, tuple]] = []  # facet candidates, their pieces
     planar = [k for k, f in enumerate(faces) if f.planar]
     for i in planar:
         for j in planar:
@@ -913,9 +913,7 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fe
                     for Ts in _table_clear(T, width, g, poses or [], unit):
                         if _pad_contact(flat, areas, e1, e2, Ts, g, min_area) >= min_area:
                             shallow.append((names, width, Ts))
-                    Th = _half_depth(T, flat, areas, e1, e2, g, unit, min_area)
-                    if Th is not None and grasp_problem(mesh, T, width, g, unit) is None:
-                        half.append((names, width, Th))
+                    pending.append((names, width, T, (flat, areas, e1, e2)))
     min_len = from_mm(unit, MIN_CONTACT_MM)
     cyl_normals = {c.face: c.normals for c in mesh_cylinders(mesh, faces, unit)}
     n_pegs = sum(1 for f in features if f.kind == "peg" and f.profile == "round")  # _shafts lists them first
@@ -955,6 +953,13 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fe
                 shallow.append(((name,), 2 * r, T))
     cands += at_root
     out = _facet_grasps(mesh, faces, features, g, unit, prefix, cands, [], unique=False)
+    kept = np.array([d.T for d in out]).reshape(-1, 4, 4)
+    half: list[tuple[tuple[str, ...], float, np.ndarray]] = []  # the kept facet grasps at half depth
+    for names, width, T, pieces in pending:
+        if len(kept) and np.abs(kept - T).max(axis=(1, 2)).min() <= 1e-9:
+            Th = _half_depth(T, *pieces, g, unit, min_area)
+            if Th is not None:
+                half.append((names, width, Th))
     owner = np.full(len(mesh.faces), -1)
     for k, f in enumerate(faces):
         owner[f.tris] = k
@@ -1083,13 +1088,18 @@ def _half_depth(T: np.ndarray, flat: tuple[np.ndarray, np.ndarray, np.ndarray], 
     step = from_mm(unit, TABLE_STEP_MM)
     a = T[:3, 2]
     need = max(min_area, HALF_DEPTH_KEEP * _pad_contact(flat, areas, e1, e2, T, g))
-    best = 0
-    for k in range(1, int(g.finger_length / step) + 1):
+
+    def holds(k: int) -> bool:
         Ts = T.copy()
         Ts[:3, 3] = T[:3, 3] - k * step * a
-        if _pad_contact(flat, areas, e1, e2, Ts, g, need) < need:
-            break
-        best = k
+        return _pad_contact(flat, areas, e1, e2, Ts, g, need) >= need
+
+    # bisection: the contact falls as the pads move off the faces (where it does not, the
+    # back-off found still holds, since every k kept was checked)
+    best, fail = 0, int(g.finger_length / step) + 1
+    while fail - best > 1:
+        mid = (best + fail) // 2
+        best, fail = (mid, fail) if holds(mid) else (best, mid)
     if best * step < from_mm(unit, HALF_DEPTH_MIN_MM) - 1e-9:
         return None
     Ts = T.copy()
