@@ -393,12 +393,21 @@ class CellGeo:
     product: dict[str, np.ndarray] = field(default_factory=dict)
 
 
-def load_product_poses(path: Path) -> tuple[dict[str, Path], dict[str, np.ndarray]]:
-    """A product file's parts: each model file and pose (mm)."""
+def load_product_poses(path: Path) -> tuple[dict[str, Path | list[Body]], dict[str, np.ndarray]]:
+    """A product file's parts: each model file (or, for a ``mesh:`` part, its solid: the convex
+    hull of the mesh in its own frame, conservative) and pose (mm)."""
     doc = yaml.safe_load(path.read_text())
     mm = MM[doc["units"]["length"]]
     deg = math.pi / 180 if doc["units"].get("angle", "deg") == "deg" else 1.0
-    models = {n: (path.parent / p["model"]).resolve() for n, p in doc["parts"].items()}
+    models: dict[str, Path | list[Body]] = {}
+    for n, p in doc["parts"].items():
+        if "model" in p:
+            models[n] = (path.parent / p["model"]).resolve()
+        else:
+            import trimesh
+
+            mesh = trimesh.load(path.parent / p["mesh"], force="mesh")
+            models[n] = [hull_body("", -1, np.asarray(mesh.vertices, float) * mm)]
     return models, {n: xyz_rpy(p.get("pose"), mm, deg) for n, p in doc["parts"].items()}
 
 
@@ -410,8 +419,11 @@ def load_cell(path: Path) -> CellGeo:
     urdf = isinstance(robot, dict)
     arm = load_urdf_arm(robot, path.parent, mm, deg) if urdf else load_arm((path.parent / robot).resolve())
     models, product = load_product_poses((path.parent / doc["product"]).resolve()) if "product" in doc else ({}, {})
-    parts = {name: load_part(models[name] if "model" not in o else (path.parent / o["model"]).resolve())
-             for name, o in doc["objects"].items()}
+    objects = doc.get("objects") or {n: {} for n in models}  # `layout: auto`: the product's parts
+    parts = {}
+    for name, o in objects.items():
+        src = models[name] if "model" not in o else (path.parent / o["model"]).resolve()
+        parts[name] = src if isinstance(src, list) else load_part(src)
     table = doc.get("table")
     ext = None if table is None else tuple(float(v) * mm for v in (*table["x"], *table["y"]))
     margin = (float(doc["clearance"]) * mm if doc.get("clearance") is not None
@@ -723,6 +735,13 @@ def check_step(geo: CellGeo, cell: Any, step: dict, q_deg: np.ndarray | None = N
                         bounds.append(Bound(m.name, w.name, low - top, low - top))
                     continue
                 if step["name"] == "assemble" and (w.name == step["args"][1] or _as_designed(geo, poses, held, w.name)):
+                    continue
+                if step["name"] == "assemble" and w.name == "table":
+                    # seated through its mate down to the plane the base rests on (a through
+                    # pin's tip on the table): touching is the product's own contact; sinking is not
+                    low = min(_z_extent(h)[0] for h in moving if h.name == m.name)
+                    if low < -TOL_MM:
+                        bounds.append(Bound(m.name, w.name, low, low))
                     continue
             bounds.append(pair_bound(m, w, geo.margin))
     # the arm against itself: links two or more frames apart (the pedestal, frame 0, with links

@@ -129,6 +129,7 @@ def test_layout_refusals_are_one_line(tmp_path):
 #: The UR5e's gripper as its robot file leaves it to the defaults (mm): fingers 60 long (tool z,
 #: tips at the tool origin), 20 wide (tool x), 10 thick (tool y, outward of the contact face).
 FINGER_L, FINGER_W, FINGER_T = 60.0, 20.0, 10.0
+MARGIN_MM = 2.0  # kb/robots/ur5e.yaml collision: margin
 
 
 @pytest.fixture(scope="module")
@@ -172,7 +173,10 @@ def _width_at(mesh: trimesh.Trimesh, T_part: np.ndarray, tool: np.ndarray) -> fl
     return 2.0 * float(np.abs(V[window, 1]).max())
 
 
-def _finger_boxes(tool: np.ndarray, width: float, shrink: float) -> list[trimesh.Trimesh]:
+def _finger_boxes(tool: np.ndarray, width: float, shrink: float = 0.0) -> list[trimesh.Trimesh]:
+    """Both closed fingers of the tool at world pose ``tool`` (mm): boxes FINGER_W across (tool x),
+    FINGER_T out from the contact faces ``width`` apart (tool y), from the tip (the tool centre's
+    plane) FINGER_L back along -z; each face moved in by ``shrink``."""
     out = []
     for s in (1.0, -1.0):
         c = np.array([0.0, s * (width / 2 + FINGER_T / 2), -FINGER_L / 2])
@@ -204,3 +208,38 @@ def test_cooling_manifold_grasps_clear(cooling_plan):
         for b in fingers:
             hit, names = cm.in_collision_single(b, return_names=True)
             assert not hit, (st["term"], names)
+
+
+def test_plumbers_block_cap_has_a_grasp_clear_of_the_seated_bearing():
+    """The cap goes on over the bearing, whose top stands 11.7 mm above the block: a grasp of
+    the cap from above whose fingers hold only the cap's upper half keeps them off the bearing
+    and the block as the cap is seated, and above the table where the cap lies (own check: the
+    PLY meshes in their product poses, the finger boxes, python-fcl through trimesh)."""
+    cell = load_problem(ROOT / "kb" / "problems" / "fabrica_plumbers_block.yaml")
+    ply = _ply_of("plumbers_block")
+    mesh = {p: trimesh.load(f, process=False) for p, f in ply.items()}
+    for m in mesh.values():
+        m.apply_scale(CM)
+    seated = trimesh.collision.CollisionManager()
+    for p in ("block", "bearing"):
+        seated.add_object(p, mesh[p])
+    cap = trimesh.collision.CollisionManager()
+    cap.add_object("cap", mesh["cap"])
+    T_lying = cell.positions["tr_cap"].T
+    ok = []
+    for label, g in cell.objects["cap"].grasps.items():
+        T = np.asarray(g.T, float)  # the cap's frame is the product frame: seated, it is T
+        fingers = _finger_boxes(T, g.width)
+        if T[2, 2] > -0.5:  # not from above as seated
+            continue
+        if any(seated.min_distance_single(f) < MARGIN_MM for f in fingers):
+            continue
+        # the pads touch the cap: each finger grown by 0.5 mm towards the part meets it
+        touch = [_finger_boxes(T, g.width - 1.0)[k] for k in range(2)]
+        if not all(cap.in_collision_single(f) for f in touch):
+            continue
+        on_table = _finger_boxes(T_lying @ T, g.width)
+        if min(float(f.vertices[:, 2].min()) for f in on_table) < MARGIN_MM:
+            continue
+        ok.append(label)
+    assert ok, "no grasp of the cap from above clear of the seated bearing and the block"

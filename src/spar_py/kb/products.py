@@ -660,4 +660,15 @@ def derive_product_text(path: str | Path, max_bytes: int = MAX_INPUT_BYTES, out_
     if sa is not None:
         order = f"# one arm on a table builds it in order {', '.join(sa.order)}"
         out.append(f"# {sa.why}" if not sa.ok else order + (f", sideways: {'; '.join(sa.level)}" if sa.level else ""))
+    if sa is None or sa.ok:
+        from spar_py.core.units import mm_per
+        from spar_py.kb.objects import DEFAULT_OPENING_MM
+        from spar_py.world.grasp_report import grasp_report
+        from spar_py.world.robots import GripperGeometry
+
+        gr = grasp_report(p, GripperGeometry.default(from_mm(unit, DEFAULT_OPENING_MM), mm_per(unit)), unit)
+        if gr is not None:
+            out.append(f"# grasps (default gripper, no robot): {gr.why}" if not gr.ok else
+                       "# grasps (default gripper, no robot): every part keeps one usable for its mate, clear of the "
+                       "parts in place and free at pickup")
     return "\n".join(out) + "\n"

@@ -124,13 +124,17 @@ def _cause(cell: Cell, goal_data: Any, refusals: Sequence[Refusal]) -> str | Non
 def summary(cell: Cell, reason: dict[str, Any], refusals: Sequence[Refusal]) -> str:
     """One line: ``NO PLAN within N actions (...) for GOALS: CAUSE`` (phase 1: the goal that could not be met and its
     nearest cause; phase 2: why no instance examined could be executed; a product one arm on a table cannot build,
-    world.single_arm: the insertion and what it needs)."""
+    world.single_arm: the insertion and what it needs; a part no grasp serves for its mate, world.grasp_report: the
+    mate and what it needs)."""
     goals = f"for {_goal_text(cell)}"
     single = reason.get("single_arm") or {}
     if single.get("ok") is False:  # no order and poses keep the loose mates: the cause, whatever the search hit
         return f"NO PLAN {goals}: {single['why']}"
     level = (f"; {single['why']}; the only way left inserts sideways (a level tool): {'; '.join(single['level'])}"
              if single.get("level") else "")
+    grasps = reason.get("grasps") or {}
+    if grasps.get("ok") is False:  # a part no grasp serves for its mate (world.grasp_report): the cause
+        return f"NO PLAN {goals}: {grasps['why']}{level}"
     if reason.get("phase") == 2:
         n = reason.get("instances_examined")
         why = reason.get("why", "")

@@ -343,6 +343,30 @@ def name_mates(cell: Cell, d: dict[str, Any]) -> None:
             for a, b in partial.get("ordering", []) if (part_of.get(a), part_of.get(b)) in reasons]
 
 
+def _grasp_report(cell: Cell, cache: CellCache) -> Any:
+    """world.grasp_report for a product cell: its robot's gripper (else the default for its
+    finger separation), the parts' initial positions for the reach counts, and the run's
+    collision scene (world.workspace.reach_clear: the arm, the hand closing on the part, the
+    other parts) for the arm at pickups and insertions; None without a mesh."""
+    from spar_py.core.units import mm_per
+    from spar_py.world.grasp_report import grasp_report
+    from spar_py.world.robots import GripperGeometry
+    from spar_py.world.workspace import reach_clear
+
+    assert cell.product is not None
+    gripper = cell.robot.gripper or GripperGeometry.default(cell.finger_separation, mm_per(cell.unit))
+    at: dict[str, np.ndarray] = {}
+    for p in cell.positions.values():
+        at.setdefault(p.obj, np.asarray(p.T, float))
+
+    def arm_clear(part: str, T_part: np.ndarray, g: Any, parts: Any) -> tuple[bool, list[tuple[str, str]]]:
+        got = reach_clear(cache, (T_part @ np.asarray(g.T, float))[None], parts={**parts, part: T_part}, grasped=part,
+                          width=g.width)
+        return bool(got.ok[0]), list(got.pairs[0])
+
+    return grasp_report(cell.product, gripper, cell.unit, cell.robot, at, arm_clear)
+
+
 def _motion_reason(d: dict[str, Any], failures: list[MotionFailure]) -> None:
     """A phase-2 no plan whose instances failed for want of a motion says which motion (of
     the first instance that got that far) and which pair of bodies blocked it; ``failures``
@@ -513,6 +537,10 @@ class Planner:
                 sa = single_arm_report(cell.product, cell.unit)
                 if sa is not None and (not sa.ok or sa.level):
                     plan.reason = {**(plan.reason or {}), "single_arm": sa.to_json()}
+                if sa is None or sa.ok:  # the grasps: the first mate no grasp serves, and what it needs
+                    gr = _grasp_report(cell, run.world.cache)
+                    if gr is not None and not gr.ok:
+                        plan.reason = {**(plan.reason or {}), "grasps": gr.to_json()}
             refusals = log.refusals()
             said = collision_lines(refusals)
             if said:

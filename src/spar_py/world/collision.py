@@ -1183,15 +1183,19 @@ class SceneState:
     def clearance(self, q: np.ndarray) -> tuple[np.ndarray, list[tuple[str, str]]]:
         """(n,) minimum distance (cell length unit; <= 0 when touching/penetrating) and, per
         row, the closest pair of named bodies, e.g. ("forearm", "shelf"). The part in the hand
-        and the gripper are not a pair here (their contact is the grasp's: :meth:`grasp_ok`)."""
+        and the gripper are not a pair here (their contact is the grasp's: :meth:`grasp_ok`),
+        nor a body that may touch the table and the table (``table_touch``: a part seated
+        through its mate onto the plane the base rests on; :meth:`check` keeps it from sinking)."""
         q = np.asarray(q, float).reshape(-1, 6)
         F = self._frames(q)
         A, B = self._world_caps(F)
         tab = self._table(F)
+        if self.table_touch is not None and tab.shape[1]:
+            tab = np.where(self.table_touch[None, :], np.inf, tab)
         out = np.full(len(q), np.inf)
         names: list[tuple[str, str]] = [("", "")] * len(q)
         for r in range(len(q)):
-            if tab.shape[1]:
+            if tab.shape[1] and np.isfinite(tab[r]).any():
                 k = int(np.argmin(tab[r]))
                 out[r], names[r] = tab[r, k], (self.bodies[self.table_bodies[k]].name, "table")
             got = self._closest_pair(F, A, B, r, float(out[r]))

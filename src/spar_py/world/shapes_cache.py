@@ -33,7 +33,7 @@ from spar_py.world.shapes import FeatureGeometry, Geometry, derive_faces
 __all__ = ["DERIVE_VERSION", "MAX_ENTRIES", "cache_dir", "derive", "source_digest"]
 
 #: Bumped whenever the derivation's results change for the same inputs.
-DERIVE_VERSION = 10
+DERIVE_VERSION = 11
 #: The modules whose source is part of the key (world/, beside this file).
 DERIVE_SOURCES = ("shapes.py", "shapes_derive.py", "shapes_cache.py")
 #: Derivations kept on disk at most.

@@ -28,6 +28,9 @@ MIN_CONTACT_MM along its side) and neither the closed fingers nor the open gripp
 at the opening and palm, swept in along the approach) enter the part. ``ofaces``: the gripped
 faces, every planar face whose plane the palm or a closed finger reaches beyond (the part
 cannot rest on it while held) and the feature's face if they enter the space its mate needs.
+Each facet grasp kept is also offered at half depth (:func:`_half_depth`, listed after the others):
+backed off along its approach while its pads keep half their contact, so the fingers hold the
+part's outer half and stay off what lies beside the rest (a mated part's neighbours, the table).
 
 Then the antipodal grasps (:func:`antipodal_grasps`): contact pairs sampled on the surface,
 planar or curved, within a friction cone; all of them for a part the candidates above leave
@@ -86,6 +89,11 @@ TABLE_CLEAR_MM = 3.0
 TABLE_STEP_MM = 1.0
 #: ... where the approach descends at least this steeply (deg below the horizontal).
 TABLE_APPROACH_DEG = 15.0
+#: Every facet grasp is also offered backed off along its approach while its pads keep this
+#: fraction of their contact area (_half_depth) ...
+HALF_DEPTH_KEEP = 0.5
+#: ... when that is at least this far back (mm).
+HALF_DEPTH_MIN_MM = 3.0
 #: A shaft grasp straight down onto a lying part slides along the shaft by this (mm) to keep
 #: its fingers off the part beside the shaft (_shaft_from_above).
 SHAFT_SLIDE_MM = 1.0
@@ -938,11 +946,12 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fe
     shaft grasps. With none at all, ``why`` (when given) receives one line
     saying which sizes and opening were compared. With the part's stable ``poses``, the
     shallower facet grasps that keep the fingers above the table (:func:`_table_clear`) follow
-    the others."""
+    the others; the facet grasps at half depth (:func:`_half_depth`) come last."""
     min_area = from_mm(unit, math.sqrt(MIN_CONTACT_MM2)) ** 2
     cos_par = math.cos(math.radians(PARALLEL_DEG))
     cands: list[tuple[tuple[str, ...], float, np.ndarray]] = []  # (gfaces, width, T)
     shallow: list[tuple[tuple[str, ...], float, np.ndarray]] = []  # the same, backed off (_table_clear)
+    pending: list[tuple[tuple[str, ...], float, np.ndarray, tuple]] = []  # facet candidates, their pieces
     planar = [k for k, f in enumerate(faces) if f.planar]
     for i in planar:
         for j in planar:
@@ -971,6 +980,7 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fe
                     for Ts in _table_clear(T, width, g, poses or [], unit):
                         if _pad_contact(flat, areas, e1, e2, Ts, g, min_area) >= min_area:
                             shallow.append((names, width, Ts))
+                    pending.append((names, width, T, (flat, areas, e1, e2)))
     min_len = from_mm(unit, MIN_CONTACT_MM)
     cyl_normals = {c.face: c.normals for c in mesh_cylinders(mesh, faces, unit)}
     n_pegs = sum(1 for f in features if f.kind == "peg" and f.profile == "round")  # _shafts lists them first
@@ -1010,17 +1020,24 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fe
                 shallow.append(((name,), 2 * r, T))
     cands += at_root
     out = _facet_grasps(mesh, faces, features, g, unit, prefix, cands, [], unique=False)
+    kept = np.array([d.T for d in out]).reshape(-1, 4, 4)
+    half: list[tuple[tuple[str, ...], float, np.ndarray]] = []  # the kept facet grasps at half depth
+    for names, width, T, pieces in pending:
+        if len(kept) and np.abs(kept - T).max(axis=(1, 2)).min() <= 1e-9:
+            Th = _half_depth(T, *pieces, g, unit, min_area)
+            if Th is not None:
+                half.append((names, width, Th))
     owner = np.full(len(mesh.faces), -1)
     for k, f in enumerate(faces):
         owner[f.tris] = k
     allowed = None  # triangles one contact of an added antipodal grasp must lie on (None: any)
     if out:
         if prims:  # a part of primitives keeps exactly its facet and shaft grasps
-            return _facet_grasps(mesh, faces, features, g, unit, prefix, shallow, out)
+            return _facet_grasps(mesh, faces, features, g, unit, prefix, shallow + half, out)
         held = {n for d in out for n in d.gfaces}
         free = [k for k, f in enumerate(faces) if not (f.planar or f.feature) and f.name not in held]
         if not free:
-            return _facet_grasps(mesh, faces, features, g, unit, prefix, shallow, out)
+            return _facet_grasps(mesh, faces, features, g, unit, prefix, shallow + half, out)
         allowed = np.isin(owner, free)
     found, least, n_pairs = antipodal_grasps(mesh, g, unit, step, allowed)
     order = [f.name for f in faces]
@@ -1029,7 +1046,7 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fe
         cover = {faces[k].name for k in _covered(mesh, faces, features, T, width, g, unit)}
         ofaces = names + tuple(sorted(cover - set(names), key=order.index))
         out.append(DerivedGrasp(f"{prefix}{len(out) + 1}", names, ofaces, T, euler_zyz_of(T), float(round(width, 12))))
-    out = _facet_grasps(mesh, faces, features, g, unit, prefix, shallow, out)
+    out = _facet_grasps(mesh, faces, features, g, unit, prefix, shallow + half, out)
     if not out and why is not None:
         if least is None:
             why.append(f"no two points of its surface face each other within {FRICTION_DEG:g} deg (a sample of "
@@ -1136,6 +1153,35 @@ def _table_clear(T: np.ndarray, width: float, g: Gripper, poses: "list[DerivedPo
         Ts[:3, 3] = T[:3, 3] - k * step * a
         out.append(clean(Ts, 1e-9))
     return out
+
+
+def _half_depth(T: np.ndarray, flat: tuple[np.ndarray, np.ndarray, np.ndarray], areas: np.ndarray,
+                e1: np.ndarray, e2: np.ndarray, g: Gripper, unit: str, min_area: float) -> np.ndarray | None:
+    """The facet grasp at T backed off along its approach, in whole TABLE_STEP_MM, as far as the
+    pads keep at least HALF_DEPTH_KEEP of the contact area they have at T (and ``min_area``): the
+    fingers hold the part's outer half only, so they stay off what lies beside its inner half (the
+    parts around it where it is mated, the table it lies on). None when that is less than
+    HALF_DEPTH_MIN_MM back (the grasp at T itself)."""
+    step = from_mm(unit, TABLE_STEP_MM)
+    a = T[:3, 2]
+    need = max(min_area, HALF_DEPTH_KEEP * _pad_contact(flat, areas, e1, e2, T, g))
+
+    def holds(k: int) -> bool:
+        Ts = T.copy()
+        Ts[:3, 3] = T[:3, 3] - k * step * a
+        return _pad_contact(flat, areas, e1, e2, Ts, g, need) >= need
+
+    # bisection: the contact falls as the pads move off the faces (where it does not, the
+    # back-off found still holds, since every k kept was checked)
+    best, fail = 0, int(g.finger_length / step) + 1
+    while fail - best > 1:
+        mid = (best + fail) // 2
+        best, fail = (mid, fail) if holds(mid) else (best, mid)
+    if best * step < from_mm(unit, HALF_DEPTH_MIN_MM) - 1e-9:
+        return None
+    Ts = T.copy()
+    Ts[:3, 3] = T[:3, 3] - best * step * a
+    return clean(Ts, 1e-9)
 
 
 def _round(mesh: "trimesh.Trimesh", root: np.ndarray, d: np.ndarray, r: float, length: float, unit: str) -> bool:

@@ -1,0 +1,189 @@
+"""The grasp-feasibility report (world/grasp_report.py): a plain pin seated flush in a blind hole
+has no grasp its mate can use, and the report, the plan's JSON and its summary name that mate;
+products that plan keep a grasp through every filter.
+
+The hand-made product: a 60 mm cube with a round blind hole (radius 10 mm, 40 deg deep) from its
+top face, and a pin (radius 9.5 mm, 40 mm long) seated to its bottom: its top end is flush with
+the cube's top, so every grasp holds it on length that goes into the hole. The headed variant
+(the same pin with a 30 mm head standing 20 mm above the cube) can be held by its head."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from spar_py.core.units import mm_per
+from spar_py.kb.products import load_product
+from spar_py.world.grasp_report import grasp_report
+from spar_py.world.robots import GripperGeometry
+
+ROOT = Path(__file__).resolve().parents[1]
+
+CUBE = """object: cube
+units: {length: mm, angle: deg}
+shape:
+  - {box: {min: [-30, -30, -30], max: [30, 30, 30]}}
+  - {cylinder: {radius: 10, z: [-10, 30], subtract: true}}
+feature: {kind: hole, name: bore, radius: 10, axis: {origin: [0, 0, 30], direction: [0, 0, -1]}, length: 40}
+"""
+PIN = """object: plain_pin
+units: {length: mm, angle: deg}
+shape:
+  - {cylinder: {radius: 9.5, z: [0, 40]}}
+feature: {kind: peg, name: shaft, radius: 9.5, axis: {origin: [0, 0, 40], direction: [0, 0, -1]}, length: 40}
+"""
+HEADED = """object: headed_pin
+units: {length: mm, angle: deg}
+shape:
+  - {cylinder: {radius: 9.5, z: [0, 40]}}
+  - {box: {min: [-15, -15, 40], max: [15, 15, 60]}}
+feature: {kind: peg, name: shaft, radius: 9.5, axis: {origin: [0, 0, 40], direction: [0, 0, -1]}, length: 40}
+"""
+PRODUCT = """product: {name}
+units: {{length: mm, angle: deg}}
+base: cube
+parts:
+  cube: {{model: cube.yaml}}
+  pin: {{model: {pin}.yaml, pose: {{xyz: [0, 0, -10], rpy: [0, 0, 0]}}}}
+mates:
+  - {{peg: pin.shaft, hole: cube.bore}}
+"""
+PROBLEM = """problem: {name}
+units: {{length: mm, angle: deg}}
+robot: {robot}
+product: {name}.yaml
+layout: auto
+gripper: open
+uncertainty:
+  manipulator: {{dx: [-0.01, 0.01], dy: [-0.01, 0.01], dz: [-0.01, 0.01], dtheta: [-0.01, 0.01]}}
+  objects:
+    cube: {{dx: [-0.05, 0.05], dy: [-0.05, 0.05], dz: [-0.05, 0.05], dtheta: [-0.05, 0.05]}}
+    pin: {{dx: [-0.05, 0.05], dy: [-0.05, 0.05], dz: [-0.05, 0.05], dtheta: [-0.05, 0.05]}}
+goals:
+  - assembled({name})
+"""
+
+
+@pytest.fixture(scope="module")
+def kb(tmp_path_factory) -> Path:
+    d = tmp_path_factory.mktemp("grasp_report")
+    (d / "cube.yaml").write_text(CUBE)
+    (d / "plain_pin.yaml").write_text(PIN)
+    (d / "headed_pin.yaml").write_text(HEADED)
+    for name, pin in (("flush", "plain_pin"), ("headed", "headed_pin")):
+        (d / f"{name}.yaml").write_text(PRODUCT.format(name=name, pin=pin))
+        (d / f"{name}_cell.yaml").write_text(PROBLEM.format(name=name, robot=ROOT / "kb" / "robots" / "ur5e.yaml"))
+    return d
+
+
+def _gripper() -> GripperGeometry:
+    return GripperGeometry.default(101.6, mm_per("mm"))
+
+
+def _mouth_depth(T_tool_prod: np.ndarray, g: GripperGeometry, width: float) -> float:
+    """How far (mm) the hand's deepest corner goes below the cube's top (z = 30, product frame):
+    the test's own reading of 'the hand past the hole's mouth'."""
+    C = np.array([[x, y, z] for _, lo, hi in g.boxes(width) for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                  for z in (lo[2], hi[2])])
+    return float(30.0 - (C @ T_tool_prod[:3, :3].T + T_tool_prod[:3, 3])[:, 2].min())
+
+
+def test_flush_pin_names_its_mate_and_other_faces(kb):
+    p = load_product(kb / "flush.yaml", "mm")
+    g = _gripper()
+    pin = p.parts["pin"]
+    assert pin.model.grasps, "the pin must have grasps for the report to judge"
+    # the test's own check: every grasp puts some corner of the hand below the mouth (a flush pin)
+    for gr in pin.model.grasps.values():
+        assert _mouth_depth(np.asarray(pin.pose) @ gr.T, g, gr.width) > 1.0, gr.label
+    r = grasp_report(p, g, "mm")
+    assert r is not None and not r.ok
+    assert r.blocked is not None and r.blocked.part == "pin" and r.blocked.mate == "pin.shaft->cube.bore"
+    assert r.blocked.grasps == len(pin.model.grasps) and r.blocked.usable == 0
+    assert "pin.shaft->cube.bore" in r.why and "grasps on other faces" in r.needs
+    assert r.to_json()["mate"] == "pin.shaft->cube.bore"
+
+
+def test_headed_pin_keeps_a_grasp(kb):
+    p = load_product(kb / "headed.yaml", "mm")
+    g = _gripper()
+    r = grasp_report(p, g, "mm")
+    assert r is not None and r.ok, r.why
+    row = r.parts[0]
+    assert row.part == "pin" and row.usable > 0 and row.clear > 0 and row.pickup > 0
+    # some grasp the test itself finds above the mouth: the head is held
+    pin = p.parts["pin"]
+    assert any(_mouth_depth(np.asarray(pin.pose) @ gr.T, g, gr.width) <= 0.05 for gr in pin.model.grasps.values())
+
+
+@pytest.mark.parametrize("f", ["bracket_kit.yaml", "plate_pins.yaml", "turn_over.yaml", "shaft_stack.yaml",
+                               "board20.yaml"])
+def test_shipped_products_that_plan_are_not_refused(f):
+    p = load_product(ROOT / "kb" / "products" / f, "mm")
+    r = grasp_report(p, _gripper(), "mm")
+    assert r is None or r.ok, r.why
+
+
+def test_plan_summary_and_json_name_the_mate(kb):
+    from spar_py import Planner
+
+    plan = Planner().plan(kb / "flush_cell.yaml")
+    assert plan.outcome.name == "NO_PLAN"
+    grasps = plan.reason["grasps"]
+    assert grasps["ok"] is False and grasps["mate"] == "pin.shaft->cube.bore" and grasps["part"] == "pin"
+    assert "no grasp of pin serves pin.shaft->cube.bore" in plan.reason["summary"]
+    assert "grasps on other faces" in plan.reason["summary"]
+
+
+def test_derive_prints_the_report(kb):
+    from spar_py.kb.products import derive_product_text
+
+    text = derive_product_text(kb / "flush.yaml")
+    assert "# grasps (default gripper, no robot): no grasp of pin serves pin.shaft->cube.bore" in text
+    assert "every part keeps one usable" in derive_product_text(kb / "headed.yaml")
+
+
+def test_through_hole_entered_from_its_far_mouth():
+    """Fabrica's car: wheel4 enters the body's through hole2 from the end away from its declared
+    mouth (along +y in the body's frame, the mouth declared at y = +25 mm facing -y). Its usable
+    grasps are those keeping the whole hand on its own side of the far mouth (body y <= -25 mm),
+    counted here from the gripper's boxes alone."""
+    p = load_product(ROOT / "kb" / "products" / "fabrica" / "car_pressfit.yaml", "mm")
+    g = _gripper()
+    body, wheel = p.parts["body"], p.parts["wheel4"]
+    T_a = np.linalg.inv(np.asarray(body.pose)) @ np.asarray(wheel.pose)
+    own = 0
+    for gr in wheel.model.grasps.values():
+        C = np.array([[x, y, z] for _, lo, hi in g.boxes(gr.width) for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                      for z in (lo[2], hi[2])])
+        M = T_a @ gr.T
+        own += int((C @ M[:3, :3].T + M[:3, 3])[:, 1].max() <= -25.0 + 0.05)
+    assert own > 0
+    r = grasp_report(p, g, "mm")
+    assert r is not None
+    row = next(m for m in r.parts if m.part == "wheel4")
+    assert row.mate == "wheel4.peg1->body.hole2" and row.usable == own
+
+
+def test_duct_upper_usable_grasps_counted_at_the_mouth():
+    """Fabrica's duct: the upper shell's grasps usable for upper.peg1->lower.hole1 are those keeping
+    every corner of the hand on its own side of the plane of the hole's mouth when seated
+    (computed here from the gripper's boxes and the hole's axis alone). The grasps across its
+    shell from above are among them, so the report's count is that count and is not zero."""
+    p = load_product(ROOT / "kb" / "products" / "fabrica" / "duct.yaml", "mm")
+    g = _gripper()
+    lower, upper = p.parts["lower"], p.parts["upper"]
+    hf = lower.model.feature_named("hole1").geometry
+    T_a = np.linalg.inv(np.asarray(lower.pose)) @ np.asarray(upper.pose)
+    own = 0
+    for gr in upper.model.grasps.values():
+        C = np.array([[x, y, z] for _, lo, hi in g.boxes(gr.width) for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                      for z in (lo[2], hi[2])])
+        M = T_a @ gr.T
+        own += int(float(((C @ M[:3, :3].T + M[:3, 3] - hf.origin) @ hf.direction).max()) <= 0.05)
+    assert own > 0
+    r = grasp_report(p, g, "mm")
+    assert r is not None
+    row = next(m for m in r.parts if m.part == "upper")
+    assert row.mate == "upper.peg1->lower.hole1" and row.usable == own
