@@ -101,6 +101,26 @@ def apart(P: np.ndarray, t: np.ndarray, Q: np.ndarray, gap: float) -> np.ndarray
     return ((s + pmin >= qmax + gap) | (s + pmax <= qmin - gap)).any(axis=1)
 
 
+#: Yaws (evenly spaced about world z) a lying part is tried in, yaw 0 first.
+YAWS = 8
+
+
+def _yaw(a: float) -> np.ndarray:
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _held_reached(robot, grasps: Sequence, T: np.ndarray, unit: str, margin: float) -> bool:
+    """Whether the arm reaches (IK, wrist above the table) some of ``grasps`` whose hand keeps
+    ``margin`` over the table with the part at world pose T (the grasp report's "at the pose the
+    cell lays it in": world.grasp_report.above_table, then the reach)."""
+    from spar_py.world.grasp_report import above_table
+
+    up = above_table(list(grasps), robot.gripper, T, unit, margin) if robot.gripper is not None else list(grasps)
+    return bool(up) and bool(reachable_ignoring_collisions(robot, np.stack([T @ np.asarray(g.T, float)
+                                                                            for g in up])).any())
+
+
 def _grasps_reach(robot, model: ObjectModel, T: np.ndarray) -> int:
     """How many of the part's grasps at world pose T the arm reaches (IK, wrist above the table)."""
     G = np.stack([g.T for g in model.grasps.values()]) if model.grasps else np.zeros((0, 4, 4))
@@ -148,29 +168,29 @@ FROM_ABOVE_DEG = 15.0
 
 
 def _lying_pose(model: ObjectModel, usable: frozenset[str] | None, gripper, unit: str,
-                R_asm: np.ndarray | None = None) -> StablePose:
+                R_asm: np.ndarray | None = None, margin: float = 0.0) -> StablePose:
     """The stable pose a part other than the base lies in (module docstring): the most probable
     one where some grasp of ``usable`` (None: no preference) keeps ``gripper``'s hand above the
     table and is from above (FROM_ABOVE_DEG) both there and on the assembled product (``R_asm``,
     the part's world orientation when assembled: a grasp made sideways on the table puts the
     wrist on it, one made sideways on the product puts the hand into it); else the most probable
-    where one keeps the hand above the table; else the most probable."""
-    from spar_py.world.arcs import hand_above_table
+    where one keeps the hand above the table; else the most probable. Above the table: by
+    ``margin`` (cell unit, the collision margin phase 2 keeps the hand off it by;
+    world.grasp_report.above_table, the report's own test)."""
+    from spar_py.world.grasp_report import above_table
 
     poses = list(model.poses.values())
     if not (usable and gripper is not None):
         return poses[0]
     down = -math.sin(math.radians(FROM_ABOVE_DEG))
-    grasps = [np.asarray(g.T, float) for label, g in model.grasps.items() if label in usable]
-    widths = [g.width for label, g in model.grasps.items() if label in usable]
+    grasps = [g for label, g in model.grasps.items() if label in usable]
     above = []
     for pose in poses:
         T = _placed(np.asarray(pose.R, float), pose.height, np.zeros(2))
-        ok = [hand_above_table(gripper, T @ G, w, unit) for G, w in zip(grasps, widths)]
-        if R_asm is not None and any(k and (T @ G)[2, 2] <= down and (R_asm @ G[:3, 2])[2] <= down
-                                     for k, G in zip(ok, grasps)):
+        ok = [np.asarray(g.T, float) for g in above_table(grasps, gripper, T, unit, margin)]
+        if R_asm is not None and any((T @ G)[2, 2] <= down and (R_asm @ G[:3, 2])[2] <= down for G in ok):
             return pose
-        if any(ok):
+        if ok:
             above.append(pose)
     return above[0] if above else poses[0]
 
@@ -207,11 +227,16 @@ def _placed(R: np.ndarray, height: float, xy: np.ndarray) -> np.ndarray:
 def layout_parts(parts: Mapping[str, ObjectModel], poses: Mapping[str, np.ndarray], base: str, robot,
                  unit: str, name: str = "the product",
                  insertions: Sequence[tuple[str, np.ndarray, frozenset[str]]] = (),
-                 usable: Mapping[str, frozenset[str]] | None = None) -> Layout:
+                 usable: Mapping[str, frozenset[str]] | None = None, margin: float | None = None) -> Layout:
     """Lay out ``parts`` (name: model; ``poses``: each part's pose in the product frame, 4x4)
     on the table for ``robot`` (module docstring; ``usable``: each part's grasps its mate can
-    use, :func:`mate_usable_grasps`). SparValueError (one line) when the assembled product is
-    out of reach at every build spot or a part finds no free spot."""
+    use, :func:`mate_usable_grasps`; ``margin``: the hand's clearance over the table at pickup,
+    cell unit, None: the robot's collision margin, else the default). SparValueError (one line)
+    when the assembled product is out of reach at every build spot or a part finds no free spot."""
+    from spar_py.world.collision import DEFAULT_MARGIN_MM
+
+    if margin is None:
+        margin = robot.margin if getattr(robot, "margin", None) is not None else from_mm(unit, DEFAULT_MARGIN_MM)
     step, gap, ped = (from_mm(unit, v) for v in (STEP_MM, GAP_MM, PEDESTAL_MM))
     arm = float(np.abs(robot.dh[:, 1]).sum() + np.abs(robot.dh[:, 2]).sum() + np.linalg.norm(robot.tool[:3, 3]))
     B = np.asarray(robot.base, float)
@@ -242,7 +267,8 @@ def layout_parts(parts: Mapping[str, ObjectModel], poses: Mapping[str, np.ndarra
     out = [PartPlacement(base, bp.label, _placed(Rb, bp.height, xy_b))]
     taken = [prod + xy_b]
     others = [p for p in parts if p != base]
-    lying = {p: _lying_pose(parts[p], (usable or {}).get(p), robot.gripper, unit, world_of[p]) for p in others}
+    lying = {p: _lying_pose(parts[p], (usable or {}).get(p), robot.gripper, unit, world_of[p], margin)
+             for p in others}
     feet = {p: part_footprint(parts[p], lying[p].R) for p in others}
     others.sort(key=lambda p: -float(np.ptp(feet[p][:, 0]) * np.ptp(feet[p][:, 1])))
     n = int(np.ceil(arm / step))
@@ -252,28 +278,40 @@ def layout_parts(parts: Mapping[str, ObjectModel], poses: Mapping[str, np.ndarra
     grid = grid[np.argsort(np.linalg.norm(grid - spot, axis=1), kind="stable")]
     for p in others:
         pose = lying[p]
-        F = feet[p]
-        fc = (F.min(0) + F.max(0)) / 2
-        t = grid - fc                              # the footprint's centre on the grid point
-        ok = np.ones(len(t), bool)
-        for Q in taken:
-            ok &= apart(F, t, Q, gap)
-        # the footprint's every vertex PEDESTAL_MM from the base axis (a convex polygon: its nearest point
-        # to the axis may be on an edge; the centre's distance less the footprint's radius bounds it)
-        ok &= np.linalg.norm(grid - o, axis=1) - float(np.linalg.norm(F - fc, axis=1).max()) >= ped
-        free = np.flatnonzero(ok & (np.linalg.norm(grid - o, axis=1) + float(np.linalg.norm(F - fc, axis=1).max())
-                                    <= arm))
-        for i in free:
-            T = _placed(np.asarray(pose.R, float), pose.height, t[i])
-            if _grasps_reach(robot, parts[p], T):
-                out.append(PartPlacement(p, pose.label, T))
-                taken.append(F + t[i])
-                break
+        want = (usable or {}).get(p)
+        grasps = [g for label, g in parts[p].grasps.items() if not want or label in want]
+        found: tuple[int, int, np.ndarray, np.ndarray] | None = None   # (spot rank, yaw index, T, footprint)
+        nearest: tuple[int, np.ndarray, np.ndarray] | None = None      # the nearest free spot at yaw 0
+        for k in range(YAWS):
+            R = _yaw(2 * math.pi * k / YAWS) @ np.asarray(pose.R, float)
+            F = part_footprint(parts[p], R) if k else feet[p]
+            fc = (F.min(0) + F.max(0)) / 2
+            t = grid - fc                              # the footprint's centre on the grid point
+            ok = np.ones(len(t), bool)
+            for Q in taken:
+                ok &= apart(F, t, Q, gap)
+            # the footprint's every vertex PEDESTAL_MM from the base axis (a convex polygon: its nearest point
+            # to the axis may be on an edge; the centre's distance less the footprint's radius bounds it)
+            rad = float(np.linalg.norm(F - fc, axis=1).max())
+            ok &= np.linalg.norm(grid - o, axis=1) - rad >= ped
+            free = np.flatnonzero(ok & (np.linalg.norm(grid - o, axis=1) + rad <= arm))
+            if not k and len(free):
+                nearest = (int(free[0]), _placed(R, pose.height, t[free[0]]), F + t[free[0]])
+            for i in free:
+                if found is not None and i >= found[0]:
+                    break
+                T = _placed(R, pose.height, t[i])
+                if _held_reached(robot, grasps, T, unit, margin):
+                    found = (int(i), k, T, F + t[i])
+                    break
+        if found is not None:
+            out.append(PartPlacement(p, pose.label, found[2]))
+            taken.append(found[3])
+        elif nearest is not None:  # no grasp of p reaches at any free spot: lay it at the nearest, the planner says why
+            out.append(PartPlacement(p, pose.label, nearest[1]))
+            taken.append(nearest[2])
         else:
-            if len(free):  # no grasp of p reaches at any free spot: lay it at the nearest, the planner says why
-                out.append(PartPlacement(p, pose.label, _placed(np.asarray(pose.R, float), pose.height, t[free[0]])))
-                taken.append(F + t[free[0]])
-                continue
+            F = feet[p]
             raise SparValueError(f"expected room for every part of {name} within {robot.name}'s reach: none for "
                                  f"{p} (footprint {np.ptp(F[:, 0]):.0f} x {np.ptp(F[:, 1]):.0f} {unit}, "
                                  f"{gap:.0f} {unit} apart from the others)")
@@ -283,17 +321,22 @@ def layout_parts(parts: Mapping[str, ObjectModel], poses: Mapping[str, np.ndarra
 def layout_product(product: Product, robot, unit: str) -> Layout:
     """:func:`layout_parts` for the parts of a loaded product (cell unit ``unit``), the base
     turned so that the most insertions are made from above (its goals' directions, their
-    parents and the precedence first)."""
+    parents and the precedence first), each other part laid out for the grasps the grasp report
+    keeps through its filters 1 to 3 (world.grasp_report.held_grasps: usable for its mates, clear
+    of the parts in place when seated, outside the part), so the layout and the report agree."""
     needs: dict[str, set[str]] = {g.part: {g.parent} - {product.base} for g in product.goals}
     for pr in product.precedence:
         if pr.then in needs and pr.first != product.base:
             needs[pr.then].add(pr.first)
     insertions = [(g.part, np.asarray(product.parts[g.parent].pose, float)[:3, :3] @ np.asarray(g.V_a, float),
                    frozenset(needs[g.part])) for g in product.goals]
+    from spar_py.world.grasp_report import held_grasps  # trimesh: a laid-out product only
+
     models = {p: pp.model for p, pp in product.parts.items()}
     sub = product.sub_poses.get(product.base, {})  # poses that need the subtree mated: not the base's alone
     b = models[product.base]
     models[product.base] = replace(b, poses={k: v for k, v in b.poses.items() if k not in sub})
+    held = held_grasps(product, robot.gripper, unit) if robot.gripper is not None else None
     return layout_parts(models, {p: np.asarray(pp.pose, float) for p, pp in product.parts.items()},
                         product.base, robot, unit, f"product {product.name}", insertions,
-                        mate_usable_grasps(product, robot.gripper, unit))
+                        held if held is not None else mate_usable_grasps(product, robot.gripper, unit))
