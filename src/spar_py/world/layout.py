@@ -6,21 +6,25 @@ mated) in which the build makes the most insertions from above (within DOWN_DEG 
 order the precedence allows, before the first that needs a turn); among those the one that
 keeps the product frame's down (-z) down (the product built as assembled); every other part lies in its most
 probable stable pose (a derived model lists its poses most probable first, so the first one
-the planner knows) among those where a grasp its mate can use (world.shapes_derive.
-mate_grasp_usable: the hand outside the hole's mouth plane when seated) keeps the hand above
-the table and comes from above both there and on the assembled product (FROM_ABOVE_DEG), else
-among those where one keeps the hand above the table (a parallel gripper cannot turn a part
+the planner knows) among those where a grasp its mate can use (the grasp report's filters 1
+to 3, world.grasp_report.held_grasps; else world.shapes_derive.mate_grasp_usable: the hand
+outside the hole's mouth plane when seated) keeps the hand the robot's collision margin
+(phase 2's) above the table and comes from above both there and on the assembled product
+(FROM_ABOVE_DEG), else among those where one keeps the hand above the table (a parallel gripper cannot turn a part
 over between its two poses, so a part lying where only grasps from below would seat it is
 never assembled), else its most probable, yaw 0.
 The build spot is on the robot base's x axis, at the distance
 (PEDESTAL_MM + the product's footprint radius up to the arm's length, in STEP_MM) where the
 fewest of the parts' grasps at their assembled poses are out of IK reach (ties: the nearer).
 The other parts, largest footprint first, take the free grid point (STEP_MM) nearest the
-build spot where their footprint keeps GAP_MM (room for the open fingers) from every placed
+build spot, turned about the vertical by one of YAWS yaws (yaw 0 first among equally near
+spots), where their footprint keeps GAP_MM (room for the open fingers) from every placed
 footprint and from the assembled product's, PEDESTAL_MM from the robot's base axis, and some
-grasp of the part there is within IK reach (workspace.reachable_ignoring_collisions); where no
-grasp reaches at any free spot, the nearest free spot within the arm's length (the planner then
-says which grasps fail, rather than the layout refusing the cell).
+grasp the part is laid out for (a product's: world.grasp_report.held_grasps, the grasp
+report's own filters) keeps the hand the collision margin over the table there and is within
+IK reach (workspace.reachable_ignoring_collisions): the report's "at the pose the cell lays
+it in"; where none is at any free spot, the nearest free spot at yaw 0 within the arm's
+length (the planner then says which grasps fail, rather than the layout refusing the cell).
 Footprints: the convex hull of the part's mesh vertices turned by the pose, on the table;
 two are apart when a separating axis (an edge normal of either) shows the gap (conservative).
 
