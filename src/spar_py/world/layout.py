@@ -107,6 +107,8 @@ def apart(P: np.ndarray, t: np.ndarray, Q: np.ndarray, gap: float) -> np.ndarray
 
 #: Yaws (evenly spaced about world z) a lying part is tried in, yaw 0 first.
 YAWS = 8
+#: Free spots whose reach is tested in one batched IK call.
+SPOT_BATCH = 32
 
 
 def _yaw(a: float) -> np.ndarray:
@@ -114,15 +116,71 @@ def _yaw(a: float) -> np.ndarray:
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
-def _held_reached(robot, grasps: Sequence, T: np.ndarray, unit: str, margin: float) -> bool:
-    """Whether the arm reaches (IK, wrist above the table) some of ``grasps`` whose hand keeps
-    ``margin`` over the table with the part at world pose T (the grasp report's "at the pose the
-    cell lays it in": world.grasp_report.above_table, then the reach)."""
+def _seat_clear(robot, unit: str, margin: float, grasps: Sequence, T_seat: np.ndarray) -> list:
+    """Those of ``grasps`` the arm reaches with its links and hand the collision ``margin`` (cell
+    unit) over the table holding the part at its seated world pose ``T_seat`` (world.collision's
+    scene with no parts: the table check phase 2 makes there; the parts are the planner's)."""
+    from spar_py.world.collision import CollisionScene
+    from spar_py.world.workspace import wrist_above_table
+
+    if not grasps or robot.gripper is None or not getattr(robot, "links", ()):
+        return list(grasps)
+    T = np.stack([np.asarray(T_seat, float) @ np.asarray(g.T, float) for g in grasps])
+    Q, okb = robot.ik_batch(T)
+    okb = okb & wrist_above_table(robot, T)[:, None]
+    scene = CollisionScene(robot, robot.gripper, {}, (), margin, None, unit)
+    ok = np.zeros(len(grasps), bool)
+    for w in sorted({g.width for g in grasps}):
+        rows = np.asarray([i for i, g in enumerate(grasps) if g.width == w])
+        r, c = np.nonzero(okb[rows])
+        if len(r):
+            clear, _ = scene.at({}, width=w).check(Q[rows][r, c])
+            ok[rows[r[clear]]] = True
+    return [g for g, k in zip(grasps, ok) if k]
+
+
+def _spot(robot, model: ObjectModel, pose: StablePose, grasps: Sequence, grid: np.ndarray, o: np.ndarray,
+          taken: Sequence[np.ndarray], gap: float, ped: float, arm: float, unit: str, margin: float,
+          F0: np.ndarray | None = None):
+    """Where a part lies in ``pose``: the free ``grid`` point nearest the build spot (the grid's
+    order) and the yaw (YAWS, yaw 0 first) where one of ``grasps`` keeps the hand ``margin`` over
+    the table and is reached (IK, wrist above the table), as (rank, yaw index, T, footprint placed) or
+    None; and the nearest free spot at yaw 0 as (rank, T, footprint placed) or None. Free: the
+    footprint ``gap`` from every ``taken`` one, ``ped`` from the base axis ``o``, within ``arm``."""
     from spar_py.world.grasp_report import above_table
 
-    up = above_table(list(grasps), robot.gripper, T, unit, margin) if robot.gripper is not None else list(grasps)
-    return bool(up) and bool(reachable_ignoring_collisions(robot, np.stack([T @ np.asarray(g.T, float)
-                                                                            for g in up])).any())
+    found = nearest = None
+    # the hand's height over the table does not change with the yaw or the spot: one test per pose
+    up = (above_table(list(grasps), robot.gripper, _placed(np.asarray(pose.R, float), pose.height, np.zeros(2)),
+                      unit, margin) if robot.gripper is not None else list(grasps))
+    G = np.stack([np.asarray(g.T, float) for g in up]) if up else np.zeros((0, 4, 4))
+    for k in range(YAWS):
+        R = _yaw(2 * math.pi * k / YAWS) @ np.asarray(pose.R, float)
+        F = F0 if (not k and F0 is not None) else part_footprint(model, R)
+        fc = (F.min(0) + F.max(0)) / 2
+        t = grid - fc                              # the footprint's centre on the grid point
+        ok = np.ones(len(t), bool)
+        for Q in taken:
+            ok &= apart(F, t, Q, gap)
+        # the footprint's every vertex PEDESTAL_MM from the base axis (a convex polygon: its nearest point
+        # to the axis may be on an edge; the centre's distance less the footprint's radius bounds it)
+        rad = float(np.linalg.norm(F - fc, axis=1).max())
+        ok &= np.linalg.norm(grid - o, axis=1) - rad >= ped
+        free = np.flatnonzero(ok & (np.linalg.norm(grid - o, axis=1) + rad <= arm))
+        if not k and len(free):
+            nearest = (int(free[0]), _placed(R, pose.height, t[free[0]]), F + t[free[0]])
+        if found is not None:
+            free = free[free < found[0]]
+        for c in range(0, len(free) if len(G) else 0, SPOT_BATCH):
+            ii = free[c:c + SPOT_BATCH]
+            Ts = np.stack([_placed(R, pose.height, t[i]) for i in ii])
+            got = reachable_ignoring_collisions(robot, (Ts[:, None] @ G[None]).reshape(-1, 4, 4))
+            hit = np.flatnonzero(got.reshape(len(ii), len(G)).any(axis=1))
+            if len(hit):
+                i = int(ii[hit[0]])
+                found = (i, k, Ts[hit[0]], F + t[i])
+                break
+    return found, nearest
 
 
 def _grasps_reach(robot, model: ObjectModel, T: np.ndarray) -> int:
@@ -238,6 +296,7 @@ def layout_parts(parts: Mapping[str, ObjectModel], poses: Mapping[str, np.ndarra
     cell unit, None: the robot's collision margin, else the default). SparValueError (one line)
     when the assembled product is out of reach at every build spot or a part finds no free spot."""
     from spar_py.world.collision import DEFAULT_MARGIN_MM
+    from spar_py.world.grasp_report import above_table
 
     if margin is None:
         margin = robot.margin if getattr(robot, "margin", None) is not None else from_mm(unit, DEFAULT_MARGIN_MM)
@@ -271,7 +330,17 @@ def layout_parts(parts: Mapping[str, ObjectModel], poses: Mapping[str, np.ndarra
     out = [PartPlacement(base, bp.label, _placed(Rb, bp.height, xy_b))]
     taken = [prod + xy_b]
     others = [p for p in parts if p != base]
-    lying = {p: _lying_pose(parts[p], (usable or {}).get(p), robot.gripper, unit, world_of[p], margin)
+    # each part laid out for the grasps (its mate's, else all) that also seat it where the product is
+    # built with the arm clear of the table, when it has such
+    Tb = _placed(Rb, bp.height, xy_b)
+    keep: dict[str, frozenset[str]] = {}
+    full: dict[str, list] = {}
+    for p in others:
+        want = (usable or {}).get(p)
+        gs = full[p] = [g for label, g in parts[p].grasps.items() if not want or label in want]
+        seated = _seat_clear(robot, unit, margin, gs, Tb @ Pb @ poses[p])
+        keep[p] = frozenset(g.label for g in (seated or gs)) if (want or seated) else frozenset()
+    lying = {p: _lying_pose(parts[p], keep[p] or None, robot.gripper, unit, world_of[p], margin)
              for p in others}
     feet = {p: part_footprint(parts[p], lying[p].R) for p in others}
     others.sort(key=lambda p: -float(np.ptp(feet[p][:, 0]) * np.ptp(feet[p][:, 1])))
@@ -281,33 +350,28 @@ def layout_parts(parts: Mapping[str, ObjectModel], poses: Mapping[str, np.ndarra
     spot = xy_b + c0
     grid = grid[np.argsort(np.linalg.norm(grid - spot, axis=1), kind="stable")]
     for p in others:
-        pose = lying[p]
-        want = (usable or {}).get(p)
+        want = keep[p]
         grasps = [g for label, g in parts[p].grasps.items() if not want or label in want]
-        found: tuple[int, int, np.ndarray, np.ndarray] | None = None   # (spot rank, yaw index, T, footprint)
-        nearest: tuple[int, np.ndarray, np.ndarray] | None = None      # the nearest free spot at yaw 0
-        for k in range(YAWS):
-            R = _yaw(2 * math.pi * k / YAWS) @ np.asarray(pose.R, float)
-            F = part_footprint(parts[p], R) if k else feet[p]
-            fc = (F.min(0) + F.max(0)) / 2
-            t = grid - fc                              # the footprint's centre on the grid point
-            ok = np.ones(len(t), bool)
-            for Q in taken:
-                ok &= apart(F, t, Q, gap)
-            # the footprint's every vertex PEDESTAL_MM from the base axis (a convex polygon: its nearest point
-            # to the axis may be on an edge; the centre's distance less the footprint's radius bounds it)
-            rad = float(np.linalg.norm(F - fc, axis=1).max())
-            ok &= np.linalg.norm(grid - o, axis=1) - rad >= ped
-            free = np.flatnonzero(ok & (np.linalg.norm(grid - o, axis=1) + rad <= arm))
-            if not k and len(free):
-                nearest = (int(free[0]), _placed(R, pose.height, t[free[0]]), F + t[free[0]])
-            for i in free:
-                if found is not None and i >= found[0]:
+        # the pose chosen first, then every other pose where one of those grasps keeps the hand over the table
+        rest = [q for q in parts[p].poses.values() if q.label != lying[p].label and robot.gripper is not None
+                and above_table(full[p], robot.gripper, _placed(np.asarray(q.R, float), q.height, np.zeros(2)),
+                                unit, margin)]
+        nearest: tuple[int, np.ndarray, np.ndarray] | None = None      # the nearest free spot, chosen pose, yaw 0
+        found: tuple[int, int, np.ndarray, np.ndarray] | None = None
+        tries = [grasps]
+        if len(grasps) < len(full[p]):  # none of the grasps that seat it clear reached: any it may be held by
+            tries.append(full[p])
+        for gs in tries:
+            for pose in [lying[p], *rest]:
+                found, near = _spot(robot, parts[p], pose, gs, grid, o, taken, gap, ped, arm, unit, margin,
+                                    feet[p] if pose is lying[p] else None)
+                if pose is lying[p]:
+                    nearest = near
+                if found is not None:
                     break
-                T = _placed(R, pose.height, t[i])
-                if _held_reached(robot, grasps, T, unit, margin):
-                    found = (int(i), k, T, F + t[i])
-                    break
+            if found is not None:
+                break
+        pose = pose if found is not None else lying[p]
         if found is not None:
             out.append(PartPlacement(p, pose.label, found[2]))
             taken.append(found[3])
