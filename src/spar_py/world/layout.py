@@ -107,8 +107,8 @@ def apart(P: np.ndarray, t: np.ndarray, Q: np.ndarray, gap: float) -> np.ndarray
 
 #: Yaws (evenly spaced about world z) a lying part is tried in, yaw 0 first.
 YAWS = 8
-#: Free spots whose reach is tested in one batched IK call.
-SPOT_BATCH = 32
+#: Candidate spots whose footprint and reach are tested in one batch (nearest first).
+SPOT_BATCH = 64
 
 
 def _yaw(a: float) -> np.ndarray:
@@ -159,20 +159,26 @@ def _spot(robot, model: ObjectModel, pose: StablePose, grasps: Sequence, grid: n
         F = F0 if (not k and F0 is not None) else part_footprint(model, R)
         fc = (F.min(0) + F.max(0)) / 2
         t = grid - fc                              # the footprint's centre on the grid point
-        ok = np.ones(len(t), bool)
-        for Q in taken:
-            ok &= apart(F, t, Q, gap)
         # the footprint's every vertex PEDESTAL_MM from the base axis (a convex polygon: its nearest point
         # to the axis may be on an edge; the centre's distance less the footprint's radius bounds it)
         rad = float(np.linalg.norm(F - fc, axis=1).max())
-        ok &= np.linalg.norm(grid - o, axis=1) - rad >= ped
-        free = np.flatnonzero(ok & (np.linalg.norm(grid - o, axis=1) + rad <= arm))
-        if not k and len(free):
-            nearest = (int(free[0]), _placed(R, pose.height, t[free[0]]), F + t[free[0]])
+        d = np.linalg.norm(grid - o, axis=1)
+        cand = np.flatnonzero((d - rad >= ped) & (d + rad <= arm))
         if found is not None:
-            free = free[free < found[0]]
-        for c in range(0, len(free) if len(G) else 0, SPOT_BATCH):
-            ii = free[c:c + SPOT_BATCH]
+            cand = cand[cand < found[0]]
+        # nearest first, in batches: the footprint tests (the costly part) stop with the first spot found
+        for c in range(0, len(cand), SPOT_BATCH):
+            ii = cand[c:c + SPOT_BATCH]
+            ok = np.ones(len(ii), bool)
+            for Q in taken:
+                ok &= apart(F, t[ii], Q, gap)
+            ii = ii[ok]
+            if not len(ii):
+                continue
+            if not k and nearest is None:
+                nearest = (int(ii[0]), _placed(R, pose.height, t[ii[0]]), F + t[ii[0]])
+            if not len(G):
+                break
             Ts = np.stack([_placed(R, pose.height, t[i]) for i in ii])
             got = reachable_ignoring_collisions(robot, (Ts[:, None] @ G[None]).reshape(-1, 4, 4))
             hit = np.flatnonzero(got.reshape(len(ii), len(G)).any(axis=1))
