@@ -434,9 +434,10 @@ def _needs(r: MateGrasps) -> str:
                 f"{r.cell_pose}, as the cell lays it, every arm solution collides: {', '.join(r.arm_pairs)}), "
                 f"or a regrasp on the table")
     if r.held == 0:
+        how = (f"collide seating it where the cell builds the product: {', '.join(r.seat_pairs)}" if r.seat_pairs
+               else "are out of the arm's reach seating it where the cell builds the product")
         return (f"a regrasp of {r.part} on the table, or the product built elsewhere (the {r.at_clear} grasps usable "
-                f"for {r.mate} the arm reaches where the cell lays {r.part} collide seating it where the cell builds "
-                f"the product: {', '.join(r.seat_pairs)})")
+                f"for {r.mate} the arm reaches where the cell lays {r.part} {how})")
     return ""
 
 
