@@ -21,9 +21,12 @@ build spot, turned about the vertical by one of YAWS yaws (yaw 0 first among equ
 spots), where their footprint keeps GAP_MM (room for the open fingers) from every placed
 footprint and from the assembled product's, PEDESTAL_MM from the robot's base axis, and some
 grasp the part is laid out for (a product's: world.grasp_report.held_grasps, the grasp
-report's own filters) keeps the hand the collision margin over the table there and is within
-IK reach (workspace.reachable_ignoring_collisions): the report's "at the pose the cell lays
-it in"; where none is at any free spot, the nearest free spot at yaw 0 within the arm's
+report's own filters; of those, the ones the arm reaches with its links and hand the margin
+over the table seating the part where the product is built, when it has such) keeps the hand
+the collision margin over the table there and is within IK reach (workspace.
+reachable_ignoring_collisions): the report's "at the pose the cell lays it in"; its chosen
+pose first, then the others where such a grasp keeps the hand over the table; where none is
+at any free spot, the nearest free spot at yaw 0 within the arm's
 length (the planner then says which grasps fail, rather than the layout refusing the cell).
 Footprints: the convex hull of the part's mesh vertices turned by the pose, on the table;
 two are apart when a separating axis (an edge normal of either) shows the gap (conservative).
