@@ -364,7 +364,7 @@ def _grasp_report(cell: Cell, cache: CellCache) -> Any:
                           width=g.width)
         return bool(got.ok[0]), list(got.pairs[0])
 
-    return grasp_report(cell.product, gripper, cell.unit, cell.robot, at, arm_clear)
+    return grasp_report(cell.product, gripper, cell.unit, cell.robot, at, arm_clear, cache.scene().margin)
 
 
 def _motion_reason(d: dict[str, Any], failures: list[MotionFailure]) -> None:
