@@ -51,7 +51,8 @@ class InstanceFailure:
     """One phase-2 run of a plan instance that stopped at a step whose geometric precondition
     failed: ``instance`` names the instance (its manipulation steps' terms and its sources; the
     runs of one instance, with sensing inserted or actions given up, share it), ``step`` the
-    step's id, ``term`` its action as text, its first two arguments (``assemble(leg3, seat)``),
+    step's id, ``term`` its action as text without the arguments an instance binds
+    (``assemble(leg3, seat)``, ``pickup(leg3)``: the grasp and the position vary by instance),
     ``name`` and ``args`` the action, ``refusals`` the (what, pairs) refusals of the run (a step
     is refused only when it stops the run: those of this step), ``why`` its unmet geometric
     verdicts' descriptions."""
@@ -65,6 +66,10 @@ class InstanceFailure:
     why: tuple[str, ...]
     grasp: str | None = None
     moved: tuple[str, ...] = ()
+
+
+#: Actions whose arguments after the object are what an instance binds (a grasp, a position).
+_OWN_ARG = ("pickup", "putdown")
 
 
 def _text(arg: Any) -> str:
@@ -91,7 +96,8 @@ def _failure(steps: list[dict[str, Any]], sources: dict[str, dict[str, str]] | N
     picks = [s for s in before if s["name"] == "pickup" and len(s["args"]) > 1 and _text(s["args"][0]) == args[0]]
     grasp = args[1] if at["name"] == "pickup" and len(args) > 1 else (_text(picks[-1]["args"][1]) if picks else None)
     moved = tuple(dict.fromkeys(_text(s["args"][0]) for s in before))
-    return InstanceFailure((manip, src), str(ev.at), f"{at['name']}({', '.join(args[:2])})", str(at["name"]), args,
+    term = f"{at['name']}({', '.join(args[:1 if at['name'] in _OWN_ARG else 2])})"
+    return InstanceFailure((manip, src), str(ev.at), term, str(at["name"]), args,
                            tuple(ev.refusals), why, grasp, moved)
 
 
