@@ -61,6 +61,20 @@ def test_a_phase2_no_plan_gets_the_digest_naming_its_step() -> None:
     assert d["text"] and d["examined"] == r["instances_examined"]
 
 
+def test_a_putdown_without_a_placement_is_named_with_the_capped_search() -> None:
+    """placement_trap under the paper's placement rule: phase 1 plans a put-down of the block
+    no spot serves (tests/test_placement_rule.py); with a cap of 5 instances, every one stops
+    there, and more instances were left."""
+    plan = Planner(paper_placements=True, max_instances=5).plan(str(KB / "problems" / "placement_trap.yaml"))
+    r = plan.reason
+    d = r["phase2"]
+    assert d["steps"] == [{"step": "putdown(block)", "instances": 5}] and d["pairs"] == []
+    assert r["complete"] is False and r["instance_cap"] == 5
+    assert any("larger instance search (5 examined" in n for n in d["needs"])
+    assert any(n.startswith("a spot to put block down") for n in d["needs"])
+    assert "5 of the 5 became infeasible at putdown(block)" in r["summary"]
+
+
 @pytest.mark.parametrize("name", ["peg_in_block", "putdown_blocked"])
 def test_no_digest_on_a_plan(name: str) -> None:
     plan = Planner().plan(str(KB / "problems" / f"{name}.yaml"))

@@ -257,13 +257,15 @@ def phase2_digest(cell: Cell, failures: Sequence[Any], examined: int | None, cap
     if first.name == "assemble" and cell.product is not None:
         made = {g.part: list(g.mates) for g in cell.product.goals}
         mate = ", ".join(made.get(first.args[0], [])) or None
-    needs = []
+    needs: list[str] = []
     if blockers:
         held = first.args[0] if first.args else "the part"
         said = "; ".join(f"{b} in place blocks {held}'s grasps: {', '.join(sorted(ps))}" for b, ps in blockers.items())
         needs.append(f"another order ({said})")
     if any(x in _FIXED or y in _FIXED for f in here for _, pairs in f.refusals for x, y in pairs):
         needs.append("another placement or build spot (the arm or hand meets the table)")
+    if first.name == "putdown" and not counts and first.args:  # no spot at all, not a blocked one
+        needs.append(f"a spot to put {first.args[0]} down that the arm reaches (placement_regions, another pose)")
     n = examined if examined is not None else len(last)
     if cap is not None and n >= cap and not complete:
         needs.append(f"a larger instance search ({n} examined, the cap; more remain: --max-instances raises it)")
