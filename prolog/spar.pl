@@ -278,10 +278,12 @@ plan_dict_(Problem, Opts, P1, Dict) :-
 %   phase2_outcome(+Result, +InstanceDict, -Outcome, -Reason): a partial
 %   plan none of whose instances examined can be executed at all (a
 %   put-down with no reachable placement, a step with no joint solution)
-%   is no plan; phase 2 says why.
+%   is no plan; phase 2 says why, with the cap on the instances and
+%   whether the partial plan has no further instance.
 
-phase2_outcome(no_instance(N, _, _), ID, "no_plan",
-               _{phase: 2, instances_examined: N, why: Why}) :-
+phase2_outcome(no_instance(N, Cap, _), ID, "no_plan",
+               _{phase: 2, instances_examined: N, instance_cap: Cap, complete: C, why: Why}) :-
     !,
-    get_dict(reason, ID, Why).
+    get_dict(reason, ID, Why),
+    get_dict(complete, ID, C).
 phase2_outcome(_, _, "plan", @(none)).

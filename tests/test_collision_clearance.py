@@ -60,6 +60,8 @@ DEFAULT_MARGIN_MM = 2.0
 H0_MM = 20.0
 #: Certified to within this (mm): the final sampling spacing subtracted from the sampled distance.
 TOL_MM = 0.01
+#: A mesh body's exact distance is computed for points its hull's bound puts nearer than this (mm).
+MESH_NEAR_MM = 10.0
 #: Refinement levels and patches per pair at most (a guard; never reached by a clear plan).
 MAX_LEVELS, MAX_PATCHES = 16, 400_000
 
@@ -102,10 +104,12 @@ def inv(T: np.ndarray) -> np.ndarray:
 
 @dataclass
 class Body:
-    """A convex body fixed to ``frame`` (0..6 link frames, 7 the tool, -1 the world): ``kind``
+    """A body fixed to ``frame`` (0..6 link frames, 7 the tool, -1 the world): ``kind``
     box (``T`` its centre pose in the frame, ``half`` extents), cylinder or capsule (``a``, ``b``
-    axis ends, ``r``), hull (``pts`` vertices, ``tris`` (k, 3, 3) facets, ``planes`` (f, 4)).
-    Lengths in mm."""
+    axis ends, ``r``), hull (``pts`` vertices, ``tris`` (k, 3, 3) facets, ``planes`` (f, 4)), or
+    mesh (a closed mesh part that need not be convex: ``mesh`` in its own frame, at ``T``; its
+    hull's ``pts``, ``tris``, ``planes`` as a hull's, for the cheap bounds and its surface when it
+    moves, conservative). Lengths in mm."""
 
     name: str
     frame: int
@@ -118,6 +122,7 @@ class Body:
     pts: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     tris: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 3)))
     planes: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    mesh: Any = None
 
     def moved(self, T: np.ndarray, frame: int, name: str | None = None) -> "Body":
         """This body moved by ``T`` (its coordinates were in a frame that is at ``T``)."""
@@ -127,12 +132,12 @@ class Body:
             n = planes[:, :3] @ R.T
             planes = np.column_stack([n, planes[:, 3] + n @ t])
         return Body(name or self.name, frame, self.kind, T @ self.T, self.half, R @ self.a + t, R @ self.b + t,
-                    self.r, self.pts @ R.T + t, self.tris @ R.T + t, planes)
+                    self.r, self.pts @ R.T + t, self.tris @ R.T + t, planes, self.mesh)
 
     def centre(self) -> np.ndarray:
         if self.kind == "box":
             return self.T[:3, 3]
-        if self.kind == "hull":
+        if self.kind in ("hull", "mesh"):
             return self.pts.mean(axis=0)
         return (self.a + self.b) / 2
 
@@ -354,6 +359,14 @@ def load_part(path: Path) -> list[Body]:
     return out
 
 
+def mesh_body(name: str, frame: int, mesh: Any) -> Body:
+    """A closed mesh part (mm, its own frame) as a "mesh" body; an open one as its hull."""
+    hull = hull_body(name, frame, np.asarray(mesh.vertices, float))
+    if not mesh.is_watertight:
+        return hull
+    return Body(name, frame, "mesh", pts=hull.pts, tris=hull.tris, planes=hull.planes, mesh=mesh)
+
+
 def obstacle_bodies(doc: dict, base: Path, mm: float, deg: float) -> list[Body]:
     out = []
     for o in doc.get("obstacles") or []:
@@ -394,8 +407,8 @@ class CellGeo:
 
 
 def load_product_poses(path: Path) -> tuple[dict[str, Path | list[Body]], dict[str, np.ndarray]]:
-    """A product file's parts: each model file (or, for a ``mesh:`` part, its solid: the convex
-    hull of the mesh in its own frame, conservative) and pose (mm)."""
+    """A product file's parts: each model file (or, for a ``mesh:`` part, its solid: the mesh in
+    its own frame, :func:`mesh_body`) and pose (mm)."""
     doc = yaml.safe_load(path.read_text())
     mm = MM[doc["units"]["length"]]
     deg = math.pi / 180 if doc["units"].get("angle", "deg") == "deg" else 1.0
@@ -406,8 +419,9 @@ def load_product_poses(path: Path) -> tuple[dict[str, Path | list[Body]], dict[s
         else:
             import trimesh
 
-            mesh = trimesh.load(path.parent / p["mesh"], force="mesh")
-            models[n] = [hull_body("", -1, np.asarray(mesh.vertices, float) * mm)]
+            mesh = trimesh.load(path.parent / p["mesh"], force="mesh")  # vertices merged
+            mesh.apply_scale(mm)
+            models[n] = [mesh_body("", -1, mesh)]
     return models, {n: xyz_rpy(p.get("pose"), mm, deg) for n, p in doc["parts"].items()}
 
 
@@ -458,7 +472,9 @@ def axis_frame(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, float]:
 def sdf(body: Body, p: np.ndarray) -> np.ndarray:
     """(k,) signed distance of world points p (k, 3) from ``body`` (world coordinates): exact
     for boxes, cylinders and capsules; for a hull the largest face-plane distance (exact
-    inside, at most the distance outside)."""
+    inside, at most the distance outside); for a mesh its exact signed distance (trimesh's
+    closest points) where its hull's bound is under MESH_NEAR_MM, that bound (a lower bound of
+    the mesh's, which lies inside its hull) elsewhere."""
     if body.kind == "box":
         loc = (p - body.T[:3, 3]) @ body.T[:3, :3]
         q = np.abs(loc) - body.half
@@ -474,7 +490,15 @@ def sdf(body: Body, p: np.ndarray) -> np.ndarray:
         if body.half is None or not np.any(body.half):
             return p[:, 2]
         return sdf(Body("", -1, "box", T=body.T, half=body.half), p)
-    return (p @ body.planes[:, :3].T - body.planes[:, 3]).max(axis=1)
+    d = (p @ body.planes[:, :3].T - body.planes[:, 3]).max(axis=1)
+    if body.kind == "mesh":
+        import trimesh
+
+        near = d < MESH_NEAR_MM
+        if near.any():
+            loc = (p[near] - body.T[:3, 3]) @ body.T[:3, :3]
+            d[near] = -trimesh.proximity.signed_distance(body.mesh, loc)  # trimesh: inside > 0
+    return d
 
 
 def table_body(ext: tuple[float, float, float, float] | None) -> Body:
@@ -601,7 +625,7 @@ def pair_bound(moving: Body, other: Body, margin: float) -> Bound:
     least ``margin - TOL_MM`` or shown (or left, at the guards) below it."""
     goal = margin - TOL_MM
     lower, upper = math.inf, math.inf
-    if other.kind != "table" and moving.kind != "hull":  # is the other body inside the moving one?
+    if other.kind != "table" and moving.kind not in ("hull", "mesh"):  # is the other body inside the moving one?
         inside = float(sdf(moving, other.centre()[None])[0])
         if inside < 0:
             return Bound(moving.name, other.name, inside, inside)
@@ -610,7 +634,7 @@ def pair_bound(moving: Body, other: Body, margin: float) -> Bound:
             c, h = patches.centres()
             v = sdf(other, c) - patches.off
             lb = v - h
-            upper = min(upper, float(v.min()) if other.kind != "hull" or v.min() < 0 else upper)
+            upper = min(upper, float(v.min()) if other.kind not in ("hull", "mesh") or v.min() < 0 else upper)
             ambiguous = lb < goal
             lower = min(lower, float(lb[~ambiguous].min()) if (~ambiguous).any() else lower)
             if not ambiguous.any():
@@ -660,7 +684,7 @@ def _z_extent(b: Body) -> tuple[float, float]:
     if b.kind == "box":
         z = (np.array([[x, y, w] for x in (-1, 1) for y in (-1, 1) for w in (-1, 1)]) * b.half) @ b.T[2, :3] + b.T[2, 3]
         return float(z.min()), float(z.max())
-    if b.kind == "hull":
+    if b.kind in ("hull", "mesh"):
         return float(b.pts[:, 2].min()), float(b.pts[:, 2].max())
     axis = (b.b - b.a) / max(float(np.linalg.norm(b.b - b.a)), 1e-12)
     drop = b.r if b.kind == "capsule" else b.r * math.sqrt(max(0.0, 1.0 - float(axis[2]) ** 2))

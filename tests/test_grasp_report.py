@@ -187,3 +187,33 @@ def test_duct_upper_usable_grasps_counted_at_the_mouth():
     assert r is not None
     row = next(m for m in r.parts if m.part == "upper")
     assert row.mate == "upper.peg1->lower.hole1" and row.usable == own
+
+
+def test_hand_above_table_keeps_the_margin():
+    """A hand closing straight down with its finger tips 1.25 mm over the table is above it, but
+    not by a 2 mm collision margin (the clearance phase 2 keeps): the report and the layout must
+    refuse it as phase 2 does. The tips' height is computed here from the finger length."""
+    from spar_py.world.arcs import hand_above_table
+
+    g = GripperGeometry.default(50.0, mm_per("mm"))
+    T = np.diag([1.0, -1.0, -1.0, 1.0])  # tool z (the approach) pointing down
+    T[2, 3] = 1.25                        # the finger tips (tool z = 0; the fingers run back to -finger_length)
+    tips = min(float((T @ np.array([0.0, 0.0, z, 1.0]))[2]) for z in (-g.finger_length, 0.0))
+    assert tips == pytest.approx(1.25)
+    assert hand_above_table(g, T, 20.0, "mm")
+    assert not hand_above_table(g, T, 20.0, "mm", clearance=2.0)
+    assert hand_above_table(g, T, 20.0, "mm", clearance=1.2)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("cell", ["fabrica_plumbers_block", "fabrica_beam"])
+def test_layout_lays_each_part_where_the_report_reaches_a_grasp(cell):
+    """`layout: auto` lays every non-base part out in a pose and yaw where the report counts a
+    grasp it keeps (with the robot's collision margin over the table) reached by the arm."""
+    from spar_py.kb.problem import load_problem
+
+    c = load_problem(ROOT / "kb" / "problems" / f"{cell}.yaml")
+    at = {p.obj: np.asarray(p.T, float) for p in c.positions.values()}
+    r = grasp_report(c.product, c.robot.gripper, c.unit, c.robot, at, margin=c.robot.margin)
+    assert r is not None
+    assert all(row.at_cell > 0 for row in r.parts), [(row.part, row.at_cell) for row in r.parts]

@@ -13,6 +13,7 @@ from __future__ import annotations
 import re
 from collections import Counter
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -20,7 +21,7 @@ import numpy as np
 from spar_py.core.model import Cell
 from spar_py.world.workspace import Refusal, pair_text
 
-__all__ = ["collision_lines", "expected_failures", "shared_pairs", "summary"]
+__all__ = ["Phase2Digest", "collision_lines", "expected_failures", "phase2_digest", "shared_pairs", "summary"]
 
 #: Pairs named in a summary line at most.
 PAIRS_SHOWN = 3
@@ -139,8 +140,11 @@ def summary(cell: Cell, reason: dict[str, Any], refusals: Sequence[Refusal]) -> 
         n = reason.get("instances_examined")
         why = reason.get("why", "")
         own = reason.get("infeasible") or []
+        digest = reason.get("phase2") or {}
         if own:  # steps refused for a reason of their own (a loose part turned, an unstable body): say those
             why = "; ".join(own[:3]) + (f" (and {len(own) - 3} more)" if len(own) > 3 else "")
+        elif digest and "motion" not in reason:  # no joint solution or placement: where, what blocked, what it needs
+            why = digest["text"]
         return f"NO PLAN {goals}: none of the {n} plan instances examined can be executed: {why}{level}"
     cause = _cause(cell, reason.get("goal_data"), refusals)
     n, bound = reason.get("max_actions"), reason.get("bound")
@@ -169,3 +173,100 @@ def expected_failures(instance: dict[str, Any] | None) -> str | None:
     return (f"EXPECTED FAILURES: {what} of this plan {'is' if len(failing) == 1 else 'are'} expected to fail "
             f"(error count {instance['error_count']}): each is verified and has a recovery (below); "
             f"--strict exits 1 on such a plan")
+
+
+#: Bodies of the cell that are not parts: a pair of one with the table says the spot is wrong.
+_FIXED = ("table",)
+
+
+@dataclass(frozen=True)
+class Phase2Digest:
+    """Why phase 2 found no executable instance: ``steps`` each step (action text) at which an
+    examined instance became infeasible, with the number of instances, most first; at the
+    step most failed at (``step``): its ``mate`` (an assemble of a product part, as the grasp
+    report names it; None otherwise), the ``grasps`` tried there, the blocking ``pairs``
+    (``finger_l-leg5``) each with the number of refusals naming it, most first, the unmet
+    conditions ``why``, and ``needs``, what would get past it."""
+
+    examined: int
+    steps: list[tuple[str, int]]
+    step: str
+    mate: str | None
+    grasps: list[str]
+    pairs: list[tuple[str, int]]
+    why: list[str]
+    needs: list[str]
+
+    def text(self) -> str:
+        """One clause for the summary line."""
+        n = self.steps[0][1]
+        mate = f" ({self.mate})" if self.mate else ""
+        out = f"{n} of the {self.examined} became infeasible at {self.step}{mate}"
+        if self.grasps:
+            out += f" with {len(self.grasps)} grasp{'' if len(self.grasps) == 1 else 's'} ({', '.join(self.grasps[:4])}"
+            out += ", ...)" if len(self.grasps) > 4 else ")"
+        if self.pairs:
+            out += f" blocked by {', '.join(f'{p} ({k})' for p, k in self.pairs[:PAIRS_SHOWN])}"
+        elif self.why:
+            out += f": {self.why[0]}"
+        others = [f"{s} ({k})" for s, k in self.steps[1:3]]
+        if others:
+            out += f"; others at {', '.join(others)}" + (", ..." if len(self.steps) > 3 else "")
+        if self.needs:
+            out += f"; it needs {' or '.join(self.needs)}"
+        return out
+
+    def to_json(self) -> dict[str, Any]:
+        """The digest as the plan's ``reason.phase2``."""
+        return {"examined": self.examined, "steps": [{"step": s, "instances": k} for s, k in self.steps],
+                "step": self.step, "mate": self.mate, "grasps": self.grasps,
+                "pairs": [{"pair": p, "refusals": k} for p, k in self.pairs], "why": self.why,
+                "needs": self.needs, "text": self.text()}
+
+
+def phase2_digest(cell: Cell, failures: Sequence[Any], examined: int | None, cap: int | None,
+                  complete: bool) -> Phase2Digest | None:
+    """The digest of phase 2's infeasible runs ``failures`` (planning.run.InstanceFailure, in
+    order): each instance's last run says where it stopped. None without any. ``examined``,
+    ``cap`` and ``complete`` as the phase-2 reason gives them (a search that hit its cap and
+    was not complete may find an instance with a larger cap)."""
+    last: dict[Any, Any] = {}
+    for f in failures:
+        last.pop(f.instance, None)
+        last[f.instance] = f
+    if not last:
+        return None
+    ends = list(last.values())
+    by_step = Counter(f.term for f in ends)
+    step, _ = by_step.most_common(1)[0]
+    here = [f for f in ends if f.term == step]
+    grasps = list(dict.fromkeys(f.grasp for f in here if f.grasp))
+    counts: Counter[str] = Counter()
+    blockers: dict[str, set[str]] = {}
+    for f in here:
+        for _, pairs in f.refusals:
+            seen = list(dict.fromkeys(pair_text(p) for p in pairs))
+            counts.update(seen)
+            for a, b in pairs:
+                for body, other in ((a, b), (b, a)):
+                    if body in cell.objects and body not in f.args[:2] and body in f.moved:
+                        blockers.setdefault(body, set()).add(pair_text((a, b)))
+    why = list(dict.fromkeys(w for f in here for w in f.why))
+    first = here[0]
+    mate = None
+    if first.name == "assemble" and cell.product is not None:
+        made = {g.part: list(g.mates) for g in cell.product.goals}
+        mate = ", ".join(made.get(first.args[0], [])) or None
+    needs: list[str] = []
+    if blockers:
+        held = first.args[0] if first.args else "the part"
+        said = "; ".join(f"{b} in place blocks {held}'s grasps: {', '.join(sorted(ps))}" for b, ps in blockers.items())
+        needs.append(f"another order ({said})")
+    if any(x in _FIXED or y in _FIXED for f in here for _, pairs in f.refusals for x, y in pairs):
+        needs.append("another placement or build spot (the arm or hand meets the table)")
+    if first.name == "putdown" and not counts and first.args:  # no spot at all, not a blocked one
+        needs.append(f"a spot to put {first.args[0]} down that the arm reaches (placement_regions, another pose)")
+    n = examined if examined is not None else len(last)
+    if cap is not None and n >= cap and not complete:
+        needs.append(f"a larger instance search ({n} examined, the cap; more remain: --max-instances raises it)")
+    return Phase2Digest(n, by_step.most_common(), step, mate, grasps, counts.most_common(), why, needs)

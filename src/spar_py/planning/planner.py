@@ -31,7 +31,7 @@ from spar_py.core.errors import ExpectedFailures, PlanningTimeout, SparValueErro
 from spar_py.kb import load_problem
 from spar_py.core.memo import LRU
 from spar_py.core.model import Bounds, Cell
-from spar_py.planning.messages import collision_lines, expected_failures, summary
+from spar_py.planning.messages import collision_lines, expected_failures, phase2_digest, summary
 from spar_py.planning.run import PlanRun
 from spar_py.world.motion_options import MotionFailure, MotionOptions
 from spar_py.world.run import CellCache, RunOptions
@@ -364,7 +364,7 @@ def _grasp_report(cell: Cell, cache: CellCache) -> Any:
                           width=g.width)
         return bool(got.ok[0]), list(got.pairs[0])
 
-    return grasp_report(cell.product, gripper, cell.unit, cell.robot, at, arm_clear)
+    return grasp_report(cell.product, gripper, cell.unit, cell.robot, at, arm_clear, cache.scene().margin)
 
 
 def _motion_reason(d: dict[str, Any], failures: list[MotionFailure]) -> None:
@@ -541,6 +541,12 @@ class Planner:
                     gr = _grasp_report(cell, run.world.cache)
                     if gr is not None and not gr.ok:
                         plan.reason = {**(plan.reason or {}), "grasps": gr.to_json()}
+            reason = plan.reason or {}
+            if reason.get("phase") == 2:  # where the instances stopped, the blocking pairs, what it needs
+                digest = phase2_digest(cell, run.failures, reason.get("instances_examined"),
+                                       reason.get("instance_cap"), reason.get("complete") is True)
+                if digest is not None:
+                    plan.reason = {**reason, "phase2": digest.to_json()}
             refusals = log.refusals()
             said = collision_lines(refusals)
             if said:

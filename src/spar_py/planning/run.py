@@ -30,7 +30,7 @@ from spar_py.world.run import CellCache, RunOptions, WorldRun
 if TYPE_CHECKING:
     from spar_py.world.motion import InstanceMotion
 
-__all__ = ["PlanRun", "StepData"]
+__all__ = ["InstanceFailure", "PlanRun", "StepData"]
 
 #: The fields of a step's geometry the plan's JSON shows (docs/json-schema.md).
 STEP_FIELDS = ("tool_pose", "joints_deg", "ik_solutions_deg", "ik_solver", "placement", "source", "poses", "held",
@@ -46,16 +46,74 @@ class StepData:
     motion: InstanceMotion | None = None
 
 
+@dataclass(frozen=True)
+class InstanceFailure:
+    """One phase-2 run of a plan instance that stopped at a step whose geometric precondition
+    failed: ``instance`` names the instance (its manipulation steps' terms and its sources; the
+    runs of one instance, with sensing inserted or actions given up, share it), ``step`` the
+    step's id, ``term`` its action as text without the arguments an instance binds
+    (``assemble(leg3, seat)``, ``pickup(leg3)``: the grasp and the position vary by instance),
+    ``name`` and ``args`` the action, ``refusals`` the (what, pairs) refusals of the run (a step
+    is refused only when it stops the run: those of this step), ``why`` its unmet geometric
+    verdicts' descriptions."""
+
+    instance: tuple
+    step: str
+    term: str
+    name: str
+    args: tuple[str, ...]
+    refusals: tuple[tuple[str, tuple[tuple[str, str], ...]], ...]
+    why: tuple[str, ...]
+    grasp: str | None = None
+    moved: tuple[str, ...] = ()
+
+
+#: Actions whose arguments after the object are what an instance binds (a grasp, a position).
+_OWN_ARG = ("pickup", "putdown")
+
+
+def _text(arg: Any) -> str:
+    """A step argument given as term data (foreign.pl's term_data/2) as Prolog writes it."""
+    if isinstance(arg, dict) and "functor" in arg:
+        return f"{arg['functor']}({', '.join(_text(a) for a in arg['args'])})"
+    if isinstance(arg, list):
+        return f"[{', '.join(_text(a) for a in arg)}]"
+    return str(arg)
+
+
+def _failure(steps: list[dict[str, Any]], sources: dict[str, dict[str, str]] | None,
+             ev: phase2.Evaluation) -> InstanceFailure:
+    """The failure record of the infeasible run ``ev`` of the instance ``steps``."""
+    manip = tuple((s["id"], s["name"], tuple(_text(a) for a in s["args"])) for s in steps
+                  if not str(s["id"]).startswith(("sense_", "squeeze_")))
+    src = tuple(sorted((k, tuple(sorted(v.items()))) for k, v in (sources or {}).items()))
+    at = next(s for s in steps if s["id"] == ev.at)
+    args = tuple(_text(a) for a in at["args"])
+    last = ev.steps[-1] if ev.steps and ev.steps[-1]["id"] == ev.at else {"verdicts": []}
+    why = tuple(str(v.get("description") or v.get("constraint")) for v in last["verdicts"]
+                if v.get("kind") == "geometric" and not v.get("satisfied"))
+    before = [s for s in steps[:steps.index(at)] if s["name"] in ("pickup", "putdown", "assemble") and s["args"]]
+    picks = [s for s in before if s["name"] == "pickup" and len(s["args"]) > 1 and _text(s["args"][0]) == args[0]]
+    grasp = args[1] if at["name"] == "pickup" and len(args) > 1 else (_text(picks[-1]["args"][1]) if picks else None)
+    moved = tuple(dict.fromkeys(_text(s["args"][0]) for s in before))
+    term = f"{at['name']}({', '.join(args[:1 if at['name'] in _OWN_ARG else 2])})"
+    return InstanceFailure((manip, src), str(ev.at), term, str(at["name"]), args,
+                           tuple(ev.refusals), why, grasp, moved)
+
+
 class PlanRun:
     """One planning run: its world (``world``: cell cache, options, log) and phase 2's door."""
 
-    __slots__ = ("world", "infeasible")
+    __slots__ = ("world", "infeasible", "failures")
 
     def __init__(self, cache: CellCache, options: RunOptions | None = None) -> None:
         self.world = WorldRun(cache, options)
         #: Why the instances that could not be executed stopped where a body's own state refused a
         #: step (phase2.STATE_CHECKS: unstable, a loose part turned, a part left unsupported), each once.
         self.infeasible: list[str] = []
+        #: Every run of an instance that stopped at a step it could not execute, in order
+        #: (planning.messages.phase2_digest counts them by instance).
+        self.failures: list[InstanceFailure] = []
 
     @property
     def cell(self) -> Cell:
@@ -79,6 +137,8 @@ class PlanRun:
             log.refuse(what, pairs)
         if isinstance(ev.motion, MotionFailure):
             log.fail_motion(ev.motion)
+        if ev.status == "infeasible" and ev.at is not None:
+            self.failures.append(_failure(steps, sources, ev))
         if ev.status == "infeasible" and ev.steps:
             for v in ev.steps[-1]["verdicts"]:
                 why = v.get("description") or ""

@@ -162,14 +162,16 @@ def _holds_on_resting_face(cell: Cell, model: ObjectModel, g: Grasp, T_part: np.
 TABLE_TOL_MM = 0.05
 
 
-def hand_above_table(gripper: GripperGeometry, T_tool: np.ndarray, width: float, unit: str) -> bool:
-    """Whether no corner of the fingers (contact faces ``width`` apart) or the palm of
-    ``gripper`` at tool pose ``T_tool`` (4x4, world, cell unit) lies below the table plane
-    z = 0 by more than TABLE_TOL_MM."""
+def hand_above_table(gripper: GripperGeometry, T_tool: np.ndarray, width: float, unit: str,
+                     clearance: float = 0.0) -> bool:
+    """Whether every corner of the fingers (contact faces ``width`` apart) and the palm of
+    ``gripper`` at tool pose ``T_tool`` (4x4, world, cell unit) keeps ``clearance`` (cell unit:
+    the collision margin phase 2 keeps the hand off the table by) over the table plane z = 0,
+    up to TABLE_TOL_MM."""
     C = np.concatenate([np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
                         for _, lo, hi in gripper.boxes(width)])
     M = np.asarray(T_tool, float)
-    return bool((C @ M[2, :3] + M[2, 3]).min() >= -from_mm(unit, TABLE_TOL_MM))
+    return bool((C @ M[2, :3] + M[2, 3]).min() >= float(clearance) - from_mm(unit, TABLE_TOL_MM))
 
 
 def _hand_clear(cell: Cell, model: ObjectModel, g: Grasp, T_part: np.ndarray, gripper: "GripperGeometry") -> bool:

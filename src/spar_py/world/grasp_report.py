@@ -12,8 +12,9 @@ counted through four filters, each keeping a subset of the one before:
    put before it, transitively: the fewest any order has, so a grasp refused here is refused by
    every order);
 3. ``pickup``: free at pickup in some stable pose of the part on the table (the model's and all
-   those world.shapes_stable finds, not only those the model keeps): the fingers and palm above the table and
-   outside the part itself;
+   those world.shapes_stable finds, not only those the model keeps): the fingers and palm the
+   collision margin above the table (the margin phase 2 keeps them off it by) and outside the
+   part itself;
 4. ``reached``: in such a pose, at the part's spot in the cell turned to one of YAWS yaws, the arm
    reaches the grasp (IK within limits, wrist above the table; no arm collision check).
 ``at_cell`` then counts those the arm reaches, hand above the table, at the pose the cell lays
@@ -43,7 +44,8 @@ from spar_py.core.model import Grasp, Product
 from spar_py.core.units import from_mm
 from spar_py.world.workspace import reachable_ignoring_collisions
 
-__all__ = ["ArmClear", "CLEAR_TOL_MM", "YAWS", "GraspReport", "MateGrasps", "grasp_report"]
+__all__ = ["ArmClear", "CLEAR_TOL_MM", "YAWS", "GraspReport", "MateGrasps", "above_table", "grasp_report",
+           "held_grasps"]
 
 #: The hand's boxes are shrunk by this (mm) before the checks against the parts in place: the
 #: held part touches them when seated, and a finger flush with its face may graze theirs.
@@ -193,13 +195,14 @@ def _yawed(T: np.ndarray, yaw: float, xy: np.ndarray) -> np.ndarray:
 
 
 def grasp_report(product: Product, gripper: Any, unit: str, robot: Any = None,
-                 positions: Mapping[str, np.ndarray] | None = None, arm_clear: ArmClear | None = None
-                 ) -> GraspReport | None:
+                 positions: Mapping[str, np.ndarray] | None = None, arm_clear: ArmClear | None = None,
+                 margin: float = 0.0) -> GraspReport | None:
     """The report of the module docstring for ``product`` held by ``gripper`` (a
     world.robots.GripperGeometry, cell unit ``unit``); ``robot`` and ``positions`` (each part's
     world pose in the cell) for the reach counts, else those are -1; ``arm_clear`` for the
-    arm's collisions at the cell's pickups (:data:`ArmClear`), else ``at_clear`` is -1. None when
-    a part has no mesh or shape, or the product has no goal."""
+    arm's collisions at the cell's pickups (:data:`ArmClear`), else ``at_clear`` is -1;
+    ``margin`` (cell unit) the clearance the hand keeps over the table at pickups (the
+    collision scene's). None when a part has no mesh or shape, or the product has no goal."""
     from spar_py.world.shapes import part_mesh
 
     meshes = {p: part_mesh(pp.model) for p, pp in product.parts.items()}
@@ -208,7 +211,7 @@ def grasp_report(product: Product, gripper: Any, unit: str, robot: Any = None,
     order, before = _order(product)
     at = dict(positions or {})
     rows = [_row(product, part, meshes, before[part], gripper, unit, robot if part in at else None, at,
-                 arm_clear) for part in order]
+                 arm_clear, margin) for part in order]
     # a part no layout or order can serve (filters 1 to 3) first, then the first the cell's layout fails
     for row in sorted(rows, key=lambda r: not _refused_anywhere(r)):
         needs = _needs(row)
@@ -218,27 +221,33 @@ def grasp_report(product: Product, gripper: Any, unit: str, robot: Any = None,
     return GraspReport(True, rows)
 
 
-def _refused_anywhere(r: MateGrasps) -> bool:
-    """Whether a part keeps no grasp through filters 1 to 3 (whatever the layout and order)."""
-    return r.usable == 0 or r.clear == 0 or r.pickup == 0
+def held_grasps(product: Product, gripper: Any, unit: str) -> dict[str, frozenset[str]] | None:
+    """Each non-base part's grasps through filters 1 to 3 but the table (usable for its mates,
+    clear of the parts in place when seated, outside the part itself): those a layout may lay
+    it out for (the table check is the pose's: :func:`above_table`). None when a part has no
+    mesh or shape, or the product has no goal."""
+    from spar_py.world.shapes import part_mesh
+
+    meshes = {p: part_mesh(pp.model) for p, pp in product.parts.items()}
+    if any(m is None for m in meshes.values()) or not product.goals:
+        return None
+    order, before = _order(product)
+    return {part: frozenset(g.label for g in _filtered(product, part, meshes, before[part], gripper, unit)[4])
+            for part in order}
 
 
-def _row(product: Product, part: str, meshes: Mapping[str, Any], placed: set[str], gripper: Any, unit: str,
-         robot: Any, at: Mapping[str, np.ndarray], arm_clear: ArmClear | None) -> MateGrasps:
-    """One part's counts (module docstring): ``placed`` the parts in place when it is seated,
-    ``at`` the parts' poses in the cell (world) and ``robot`` the arm, for the reach counts (None,
-    or the part not in ``at``: -1), ``arm_clear`` for ``at_clear`` and ``held``."""
+def _filtered(product: Product, part: str, meshes: Mapping[str, Any], placed: set[str], gripper: Any, unit: str
+              ) -> tuple[list[Grasp], list[Grasp], list[Grasp], set[str], list[Grasp]]:
+    """Filters 1 to 3 but the table, for ``part`` seated with ``placed`` in place: (its own grasps,
+    those usable for its peg mates, those also clear of ``placed`` when seated, the parts the
+    usable ones meet, those clear ones also outside the part itself)."""
     import trimesh
 
     from spar_py.world.shapes_derive import Gripper, grasp_problem, mate_grasp_usable
-    from spar_py.world.shapes_stable import stable_poses
 
     g = next(x for x in product.goals if x.part == part)
     pp = product.parts[part]
-    T_cell = at.get(part)
-    mates = [m for m in product.mates if m.name in g.mates]
-    pegs = [m for m in mates if m.peg == part]
-    name = (pegs or mates)[0].name if (pegs or mates) else (g.mates[0] if g.mates else f"{part} on {g.parent}")
+    pegs = [m for m in product.mates if m.name in g.mates and m.peg == part]
     via = product.via.get(part, {})
     own = [gr for label, gr in pp.model.grasps.items() if label not in via]
     usable = [gr for gr in own if all(_usable(mate_grasp_usable, gr, gripper, product, m, unit) for m in pegs)]
@@ -256,12 +265,38 @@ def _row(product: Product, part: str, meshes: Mapping[str, Any], placed: set[str
     as_derived = Gripper.of_robot(gripper)
     free = [gr for gr in clear if grasp_problem(meshes[part], np.asarray(gr.T, float), gr.width, as_derived,
                                                 unit) is None]
+    return own, usable, clear, hits, free
+
+
+def _refused_anywhere(r: MateGrasps) -> bool:
+    """Whether a part keeps no grasp through filters 1 to 3 (whatever the layout and order)."""
+    return r.usable == 0 or r.clear == 0 or r.pickup == 0
+
+
+def _row(product: Product, part: str, meshes: Mapping[str, Any], placed: set[str], gripper: Any, unit: str,
+         robot: Any, at: Mapping[str, np.ndarray], arm_clear: ArmClear | None, margin: float = 0.0
+         ) -> MateGrasps:
+    """One part's counts (module docstring): ``placed`` the parts in place when it is seated,
+    ``at`` the parts' poses in the cell (world) and ``robot`` the arm, for the reach counts (None,
+    or the part not in ``at``: -1), ``arm_clear`` for ``at_clear`` and ``held``, ``margin`` the
+    hand's clearance over the table at pickup (cell unit)."""
+
+    from spar_py.world.shapes_stable import stable_poses
+
+    g = next(x for x in product.goals if x.part == part)
+    pp = product.parts[part]
+    T_cell = at.get(part)
+    mates = [m for m in product.mates if m.name in g.mates]
+    pegs = [m for m in mates if m.peg == part]
+    name = (pegs or mates)[0].name if (pegs or mates) else (g.mates[0] if g.mates else f"{part} on {g.parent}")
+    own, usable, clear, hits, free = _filtered(product, part, meshes, placed, gripper, unit)
+    P = np.asarray(pp.pose, float)
     Ts = _poses(pp.model, meshes[part], stable_poses)
     pick: set[str] = set()
     reach: set[str] = set()
     pose_ok: list[str] = []
     for Tp in Ts:
-        up = _above(free, gripper, Tp, unit)
+        up = above_table(free, gripper, Tp, unit, margin)
         pick |= {gr.label for gr in up}
         if robot is None or T_cell is None or not up:
             continue
@@ -277,7 +312,7 @@ def _row(product: Product, part: str, meshes: Mapping[str, Any], placed: set[str
     seat_pairs: list[str] = []
     if robot is not None and T_cell is not None:
         Tc = np.asarray(T_cell, float)
-        up = _above(free, gripper, Tc, unit)
+        up = above_table(free, gripper, Tc, unit, margin)
         reached, cell_pose = len(reach), _pose_text(Tc)
         ok = reachable_ignoring_collisions(robot, np.stack([Tc @ np.asarray(gr.T, float) for gr in up])) if up \
             else np.zeros(0, bool)
@@ -301,11 +336,14 @@ def _row(product: Product, part: str, meshes: Mapping[str, Any], placed: set[str
                       tuple(arm_pairs[:PAIRS_SAID]), held, tuple(seat_pairs[:PAIRS_SAID]))
 
 
-def _above(grasps: list[Grasp], gripper: Any, T_part: np.ndarray, unit: str) -> list[Grasp]:
-    """The grasps whose fingers and palm stay above the table with the part at world pose ``T_part``."""
+def above_table(grasps: list[Grasp], gripper: Any, T_part: np.ndarray, unit: str, margin: float = 0.0
+                ) -> list[Grasp]:
+    """The grasps whose fingers and palm keep ``margin`` (cell unit) over the table with the part
+    at world pose ``T_part`` (world.arcs.hand_above_table)."""
     from spar_py.world.arcs import hand_above_table
 
-    return [gr for gr in grasps if hand_above_table(gripper, T_part @ np.asarray(gr.T, float), gr.width, unit)]
+    return [gr for gr in grasps
+            if hand_above_table(gripper, T_part @ np.asarray(gr.T, float), gr.width, unit, margin)]
 
 
 def _poses(model: Any, mesh: Any, stable_poses: Any) -> list[np.ndarray]:
@@ -396,9 +434,10 @@ def _needs(r: MateGrasps) -> str:
                 f"{r.cell_pose}, as the cell lays it, every arm solution collides: {', '.join(r.arm_pairs)}), "
                 f"or a regrasp on the table")
     if r.held == 0:
+        how = (f"collide seating it where the cell builds the product: {', '.join(r.seat_pairs)}" if r.seat_pairs
+               else "are out of the arm's reach seating it where the cell builds the product")
         return (f"a regrasp of {r.part} on the table, or the product built elsewhere (the {r.at_clear} grasps usable "
-                f"for {r.mate} the arm reaches where the cell lays {r.part} collide seating it where the cell builds "
-                f"the product: {', '.join(r.seat_pairs)})")
+                f"for {r.mate} the arm reaches where the cell lays {r.part} {how})")
     return ""
 
 
