@@ -11,8 +11,9 @@ What is in the scene (:func:`scene_for`, built once per cell and kept by its wor
   finger_separation when no part is in the hand), and the tool body "tool" from the palm back to
   the flange (``gripper: body``; by default, for a robot without ``collision:``, a box the palm's
   size), which counts as the gripper wherever the gripper does;
-- the parts (each object's ``shape:`` solids: boxes, z-cylinders, convex hulls of meshes),
-  placed by :meth:`CollisionScene.at`;
+- the parts (each object's ``shape:`` solids: boxes, z-cylinders; a mesh part: its mesh, as
+  its convex hull where that is the mesh within HULL_EXCESS_MM, else as its triangles, bounded
+  by the hull either way), placed by :meth:`CollisionScene.at`;
 - the obstacles (problem file ``obstacles:``), and the table: the half-space z < 0 over its
   extent (problem file ``table:``; the whole plane when not given).
 
@@ -78,6 +79,9 @@ GRASP_TOL_MM = 0.05
 #: the hull a cylinder obstacle or part is given to the library as): the polygon contains
 #: the cylinder, so a clearance is never overstated.
 CYL_SIDES = 16
+#: A mesh part collides as its convex hull where the hull is the mesh within this on average
+#: (mm: the volume between them over the hull's area), else as its mesh: 0.05 mm.
+HULL_EXCESS_MM = 0.05
 #: Frame index of the tool (gripper, held part) and of the world (parts, obstacles).
 TOOL, WORLD = 7, -1
 #: Bounds of the cell cache's tables: the grasp rule per (part, grasp pose, width); the checked
@@ -101,13 +105,17 @@ _GRIPPER_NAMES = frozenset({"palm", "finger_l", "finger_r", TOOL_BODY})
 
 @dataclass(frozen=True, eq=False)
 class Body:
-    """A convex collision body fixed to ``frame`` (0..6 Craig's link frames, TOOL, WORLD).
+    """A collision body fixed to ``frame`` (0..6 Craig's link frames, TOOL, WORLD).
 
     ``kind`` "capsule" (``size`` = (radius, half length) along the local z axis of ``T``),
-    "cylinder" (same), "box" (``size`` = half extents along ``T``'s axes) or "convex"
-    (``points`` its vertices); ``T`` the shape's pose in the frame (4x4); ``points`` (k, 3)
-    vertices in the frame (a capsule's: its two segment ends; a cylinder's: its circumscribed
-    prism's); ``cap`` the bounding capsule (a, b, r) in the frame."""
+    "cylinder" (same), "box" (``size`` = half extents along ``T``'s axes), "convex"
+    (``points`` its vertices) or "mesh" (a mesh part: ``points`` its convex hull's vertices, which
+    every bound uses, a sound one since the mesh is inside its hull; ``mesh`` = (the part's
+    world.shapes.Geometry, whose mesh the library is given, and HULL_EXCESS_MM in the cell unit:
+    :func:`_mesh_geometry`)); ``T`` the
+    shape's pose in the frame (4x4); ``points`` (k, 3) vertices in the frame (a capsule's: its two
+    segment ends; a cylinder's: its circumscribed prism's); ``cap`` the bounding capsule (a, b, r)
+    in the frame."""
 
     name: str
     frame: int
@@ -117,6 +125,7 @@ class Body:
     points: np.ndarray
     cap: tuple[np.ndarray, np.ndarray, float]
     _fcl: list = field(default_factory=list, repr=False)
+    mesh: Any = field(default=None, repr=False)
 
     @property
     def radius(self) -> float:
@@ -129,7 +138,7 @@ class Body:
         R, t = T_frame[:3, :3], T_frame[:3, 3]
         a, b, r = self.cap
         return Body(name or self.name, frame, self.kind, T_frame @ self.T, self.size, self.points @ R.T + t,
-                    (R @ a + t, R @ b + t, r), self._fcl)
+                    (R @ a + t, R @ b + t, r), self._fcl, self.mesh)
 
     def fcl_geometry(self) -> Any:
         """The body's python-fcl geometry (made on first use, shared by the placed copies)."""
@@ -142,10 +151,10 @@ class Body:
                 g = fcl.Capsule(self.size[0], 2 * self.size[1])
             elif self.kind == "cylinder":  # the true cylinder (radius: the prism's inscribed one)
                 g = fcl.Cylinder(self.size[0] * math.cos(math.pi / CYL_SIDES), 2 * self.size[1])
-            else:  # convex: a hull of the local vertices
+            else:  # convex, mesh: of the local vertices (a placed copy's are moved by T)
                 Tinv = np.linalg.inv(self.T)
                 local = self.points @ Tinv[:3, :3].T + Tinv[:3, 3]
-                g = _fcl_convex(local)
+                g = _mesh_geometry(self.mesh, local) if self.kind == "mesh" else _fcl_convex(local)
             self._fcl.append(g)
         return self._fcl[0]
 
@@ -231,6 +240,46 @@ def _fcl_convex(points: np.ndarray) -> Any:
     index = {int(v): i for i, v in enumerate(hull.vertices)}
     faces = np.array([[3, index[int(a)], index[int(b)], index[int(c)]] for a, b, c in hull.simplices])
     return fcl.Convex(verts, len(faces), faces.ravel())
+
+
+def mesh_body(name: str, frame: int, hull: np.ndarray, geometry: Any, unit: str) -> Body:
+    """A mesh part's body: bounded by its convex hull ``hull`` (k, 3) (frame coordinates, the
+    object frame), colliding as the mesh of ``geometry`` (world.shapes.Geometry, read on first
+    use: :func:`_mesh_geometry`); ``unit`` the cell's length unit."""
+    body = convex(name, frame, hull)
+    return replace(body, kind="mesh", mesh=(geometry, from_mm(unit, HULL_EXCESS_MM)))
+
+
+def _mesh_geometry(mesh_of: tuple[Any, float], hull: np.ndarray) -> Any:
+    """The library's geometry of a mesh body (its ``mesh`` field; ``hull`` its hull's vertices in
+    the body's own frame, the object frame): its convex hull where the hull is the mesh within
+    HULL_EXCESS_MM (a convex part: the cheaper exact shape), else the mesh's triangles as a
+    python-fcl BVHModel (a concave part: a half-shell's hull would cover its recesses). The BVH
+    is a surface: :func:`_exact` adds the containment test for a body wholly inside it."""
+    import fcl  # ~0.15 s at import: see Body.fcl_geometry
+
+    mesh = mesh_of[0].mesh()
+    if _hull_is_mesh(mesh, hull, mesh_of[1]):
+        return _fcl_convex(hull)
+    V, F = np.asarray(mesh.vertices, float), np.asarray(mesh.faces, int)
+    bvh = fcl.BVHModel()
+    bvh.beginModel(len(V), len(F))
+    bvh.addSubModel(V, F)
+    bvh.endModel()
+    return bvh
+
+
+def _hull_is_mesh(mesh: Any, hull: np.ndarray, excess: float) -> bool:
+    """Whether the convex hull of ``hull`` (the mesh's hull vertices) is the closed ``mesh``
+    within ``excess`` (cell unit) on average: the volume between them at most that times the hull's area
+    (a recess of any depth a finger or a part could enter exceeds it). A mesh that is not closed
+    has no volume to compare: its hull stays (the grasp rule still tests its mesh)."""
+    from scipy.spatial import ConvexHull  # ~0.7 s at import: see _fcl_convex
+
+    if not mesh.is_watertight:
+        return True
+    h = ConvexHull(hull)
+    return float(h.volume) - abs(float(mesh.volume)) <= excess * float(h.area)
 
 
 def solid_bodies(name: str, solids: Iterable[Solid]) -> list[Body]:
@@ -386,12 +435,32 @@ def _exact(b1: Body, T1: np.ndarray, b2: Body, T2: np.ndarray) -> float:
     touch or overlap (``collide`` first), else python-fcl's unsigned distance."""
     import fcl  # ~0.15 s at import: see Body.fcl_geometry
 
-    o1 = fcl.CollisionObject(b1.fcl_geometry(), _fcl_transform(T1 @ b1.T))
-    o2 = fcl.CollisionObject(b2.fcl_geometry(), _fcl_transform(T2 @ b2.T))
+    g1, g2 = b1.fcl_geometry(), b2.fcl_geometry()
+    o1 = fcl.CollisionObject(g1, _fcl_transform(T1 @ b1.T))
+    o2 = fcl.CollisionObject(g2, _fcl_transform(T2 @ b2.T))
     if fcl.collide(o1, o2, fcl.CollisionRequest(), fcl.CollisionResult()):
+        return 0.0
+    # a mesh's BVH is its surface: a body wholly inside the mesh meets none of its triangles
+    if isinstance(g2, fcl.BVHModel) and _inside_mesh(b1, T1, b2, T2):
+        return 0.0
+    if isinstance(g1, fcl.BVHModel) and _inside_mesh(b2, T2, b1, T1):
         return 0.0
     d = fcl.distance(o1, o2, fcl.DistanceRequest(), fcl.DistanceResult())
     return max(float(d), 0.0)
+
+
+def _inside_mesh(b: Body, Tb: np.ndarray, m: Body, Tm: np.ndarray) -> bool:
+    """Whether body ``b`` (its frame at world pose Tb), known to meet no triangle of mesh body
+    ``m`` (frame at Tm), is inside the mesh: then all of it is, so one of its vertices decides
+    (the mesh's containment test, asked only when the vertex is inside the mesh's bounding box)."""
+    p = Tb[:3, :3] @ b.points[0] + Tb[:3, 3]
+    Tw = Tm @ m.T
+    local = Tw[:3, :3].T @ (p - Tw[:3, 3])
+    mesh = m.mesh[0].mesh()
+    lo, hi = mesh.bounds
+    if np.any(local < lo) or np.any(local > hi):
+        return False
+    return bool(mesh.contains(local[None, :])[0])
 
 
 def support_gap(Pa: np.ndarray, ra: np.ndarray, Ua: np.ndarray, Pb: np.ndarray, rb: np.ndarray,
@@ -473,8 +542,9 @@ class CollisionScene:
     def __init__(self, robot: Robot, gripper: GripperGeometry, parts: Mapping[str, list[Body]],
                  obstacles: Iterable[Obstacle], margin: float, table: tuple[float, float, float, float] | None,
                  unit: str, memo: Any = None, meshes: Mapping[str, Any] | None = None) -> None:
-        """``meshes``: {model: world.shapes.Geometry} of the mesh parts, whose ``parts`` bodies
-        are their convex hulls; the grasp rule tests the gripper against the mesh itself."""
+        """``meshes``: {model: world.shapes.Geometry} of the mesh parts (``parts`` bodies of kind
+        "mesh", or convex hulls where made by hand); the grasp rule tests the gripper against the
+        mesh itself."""
         self.robot = robot
         self.meshes = dict(meshes or {})
         self._mesh_fcl: dict[str, Any] = {}  # by model: bounded by the cell's parts
@@ -1357,7 +1427,7 @@ def scene_for(cell: Cell, memo: Any = None) -> CollisionScene:
     margin = getattr(cell, "clearance", None)
     if margin is None:
         margin = robot.margin if robot.margin is not None else from_mm(cell.unit, DEFAULT_MARGIN_MM)
-    parts = _part_bodies(cell.objects)
+    parts = _part_bodies(cell.objects, cell.unit)
     scene = CollisionScene(robot, gripper, parts, getattr(cell, "obstacles", ()), margin,
                            getattr(cell, "table", None), cell.unit, memo, _part_meshes(cell.objects))
     return scene
@@ -1381,17 +1451,23 @@ def solids_key(solids: Iterable[Solid]) -> tuple:
     return tuple(s.key() for s in solids)
 
 
-def _part_bodies(objects: Mapping[str, Any]) -> dict[str, list[Body]]:
-    """Each object's :func:`solid_bodies`, made once per distinct shape: the objects of one shape
-    (generated cells: N copies of one peg and one block) get copies renamed, sharing the arrays and
-    the library's geometry (bodies are read-only)."""
+def _part_bodies(objects: Mapping[str, Any], unit: str) -> dict[str, list[Body]]:
+    """Each object's :func:`solid_bodies` (a mesh part's: its :func:`mesh_body`), made once per
+    distinct shape: the objects of one shape (generated cells: N copies of one peg and one block)
+    get copies renamed, sharing the arrays and the library's geometry (bodies are read-only)."""
     made: dict[tuple, list[Body]] = {}
     out: dict[str, list[Body]] = {}
+    meshes = _part_meshes(objects)
     for name, m in objects.items():
-        key = solids_key(m.shape)
+        geo = meshes.get(name)
+        key = solids_key(m.shape) + (((str(geo.mesh_file), float(geo.scale)),) if geo is not None else ())
         first = made.get(key)
         if first is None:
-            out[name] = made[key] = solid_bodies(name, m.shape)
+            if geo is not None and len(m.shape) == 1 and m.shape[0].kind == "hull":
+                made[key] = [mesh_body(name, WORLD, m.shape[0].points, geo, unit)]
+            else:
+                made[key] = solid_bodies(name, m.shape)
+            out[name] = made[key]
         else:
             out[name] = [replace(b, name=name) for b in first]
     return out
