@@ -144,6 +144,21 @@ def test_derive_prints_the_report(kb):
     assert "every part keeps one usable" in derive_product_text(kb / "headed.yaml")
 
 
+def _outside_count(p, g, peg: str, hole: str, origin: np.ndarray, direction: np.ndarray) -> int:
+    """How many grasps of ``peg`` keep every corner of the gripper's boxes (fingers and palm,
+    closed to the grasp's width) on the outer side of the plane through ``origin`` with normal
+    ``direction`` (into ``hole``'s part, its frame, mm) when seated, within 0.05 mm: the test's
+    own count of grasps usable at that mouth."""
+    T_a = np.linalg.inv(np.asarray(p.parts[hole].pose)) @ np.asarray(p.parts[peg].pose)
+    own = 0
+    for gr in p.parts[peg].model.grasps.values():
+        C = np.array([[x, y, z] for _, lo, hi in g.boxes(gr.width) for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                      for z in (lo[2], hi[2])])
+        M = T_a @ gr.T
+        own += int(float(((C @ M[:3, :3].T + M[:3, 3] - origin) @ direction).max()) <= 0.05)
+    return own
+
+
 def test_through_hole_entered_from_its_far_mouth():
     """Fabrica's car: wheel4 enters the body's through hole2 from the end away from its declared
     mouth (along +y in the body's frame, the mouth declared at y = +25 mm facing -y). Its usable
@@ -151,14 +166,7 @@ def test_through_hole_entered_from_its_far_mouth():
     counted here from the gripper's boxes alone."""
     p = load_product(ROOT / "kb" / "products" / "fabrica" / "car_pressfit.yaml", "mm")
     g = _gripper()
-    body, wheel = p.parts["body"], p.parts["wheel4"]
-    T_a = np.linalg.inv(np.asarray(body.pose)) @ np.asarray(wheel.pose)
-    own = 0
-    for gr in wheel.model.grasps.values():
-        C = np.array([[x, y, z] for _, lo, hi in g.boxes(gr.width) for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
-                      for z in (lo[2], hi[2])])
-        M = T_a @ gr.T
-        own += int((C @ M[:3, :3].T + M[:3, 3])[:, 1].max() <= -25.0 + 0.05)
+    own = _outside_count(p, g, "wheel4", "body", np.array([0.0, -25.0, 0.0]), np.array([0.0, 1.0, 0.0]))
     assert own > 0
     r = grasp_report(p, g, "mm")
     assert r is not None
@@ -173,15 +181,8 @@ def test_duct_upper_usable_grasps_counted_at_the_mouth():
     shell from above are among them, so the report's count is that count and is not zero."""
     p = load_product(ROOT / "kb" / "products" / "fabrica" / "duct.yaml", "mm")
     g = _gripper()
-    lower, upper = p.parts["lower"], p.parts["upper"]
-    hf = lower.model.feature_named("hole1").geometry
-    T_a = np.linalg.inv(np.asarray(lower.pose)) @ np.asarray(upper.pose)
-    own = 0
-    for gr in upper.model.grasps.values():
-        C = np.array([[x, y, z] for _, lo, hi in g.boxes(gr.width) for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
-                      for z in (lo[2], hi[2])])
-        M = T_a @ gr.T
-        own += int(float(((C @ M[:3, :3].T + M[:3, 3] - hf.origin) @ hf.direction).max()) <= 0.05)
+    hf = p.parts["lower"].model.feature_named("hole1").geometry
+    own = _outside_count(p, g, "upper", "lower", hf.origin, hf.direction)
     assert own > 0
     r = grasp_report(p, g, "mm")
     assert r is not None

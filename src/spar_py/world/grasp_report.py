@@ -40,6 +40,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
+from spar_py.core.geometry import rotz
 from spar_py.core.model import Grasp, Product
 from spar_py.core.units import from_mm
 from spar_py.world.workspace import reachable_ignoring_collisions
@@ -159,15 +160,9 @@ def _order(product: Product) -> tuple[list[str], dict[str, set[str]]]:
 
 
 def _boxes(gripper: Any, width: float, shrink: float) -> list[tuple[np.ndarray, np.ndarray]]:
-    """(lo, hi) boxes of the closed hand in the tool frame: fingers, palm, tool body (a cylinder by
-    its bounding box), each shrunk by ``shrink``."""
-    out = [(lo, hi) for _, lo, hi in gripper.boxes(width)]
-    body = gripper.body_shape()
-    if body is not None:
-        _, kind, a, b, r = body
-        out.append((np.minimum(a, b) - [r, r, 0.0], np.maximum(a, b) + [r, r, 0.0]) if kind == "cylinder"
-                   else (np.minimum(a, b), np.maximum(a, b)))
-    return [(lo + shrink, hi - shrink) for lo, hi in out if np.all(hi - lo > 2 * shrink)]
+    """(lo, hi) boxes of the closed hand in the tool frame (GripperGeometry.hand_boxes), each
+    shrunk by ``shrink``."""
+    return [(lo + shrink, hi - shrink) for lo, hi in gripper.hand_boxes(width) if np.all(hi - lo > 2 * shrink)]
 
 
 def _hits(manager: Any, gripper: Any, T_tool: np.ndarray, width: float, shrink: float) -> set[str]:
@@ -187,9 +182,7 @@ def _hits(manager: Any, gripper: Any, T_tool: np.ndarray, width: float, shrink: 
 
 def _yawed(T: np.ndarray, yaw: float, xy: np.ndarray) -> np.ndarray:
     """Pose T (world, on the table) turned by ``yaw`` (rad) about world z and moved to ``xy``."""
-    c, s = math.cos(yaw), math.sin(yaw)
-    Rz = np.array([[c, -s, 0.0, 0.0], [s, c, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
-    out = Rz @ np.asarray(T, float)
+    out = rotz(yaw) @ np.asarray(T, float)
     out[:2, 3] = xy
     return out
 

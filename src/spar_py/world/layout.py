@@ -42,7 +42,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from spar_py.core.errors import SparValueError
-from spar_py.core.geometry import convex_hull_2d
+from spar_py.core.geometry import convex_hull_2d, rotz
 from spar_py.core.model import LOOSE_MAX_DEG, ObjectModel, Product, StablePose
 from spar_py.core.units import from_mm
 from spar_py.world.workspace import reachable_ignoring_collisions
@@ -114,11 +114,6 @@ YAWS = 8
 SPOT_BATCH = 64
 
 
-def _yaw(a: float) -> np.ndarray:
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
 def _seat_clear(robot, unit: str, margin: float, grasps: Sequence, T_seat: np.ndarray) -> list:
     """Those of ``grasps`` the arm reaches with its links and hand the collision ``margin`` (cell
     unit) over the table holding the part at its seated world pose ``T_seat`` (world.collision's
@@ -158,7 +153,7 @@ def _spot(robot, model: ObjectModel, pose: StablePose, grasps: Sequence, grid: n
                       unit, margin) if robot.gripper is not None else list(grasps))
     G = np.stack([np.asarray(g.T, float) for g in up]) if up else np.zeros((0, 4, 4))
     for k in range(YAWS):
-        R = _yaw(2 * math.pi * k / YAWS) @ np.asarray(pose.R, float)
+        R = rotz(2 * math.pi * k / YAWS)[:3, :3] @ np.asarray(pose.R, float)
         F = F0 if (not k and F0 is not None) else part_footprint(model, R)
         fc = (F.min(0) + F.max(0)) / 2
         t = grid - fc                              # the footprint's centre on the grid point

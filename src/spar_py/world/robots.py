@@ -138,6 +138,17 @@ class GripperGeometry:
                 ("finger_r", np.array([-u, -w - t, -L]), np.array([u, -w, 0.0])),
                 ("palm", np.array([-pu, -pt, -L - self.palm_length]), np.array([pu, pt, -L]))]
 
+    def hand_boxes(self, width: float | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
+        """(lo, hi) boxes in the tool frame of the whole hand closed to ``width``: :meth:`boxes`
+        and the tool body (:meth:`body_shape`; a cylinder by its bounding box)."""
+        out = [(lo, hi) for _, lo, hi in self.boxes(width)]
+        body = self.body_shape()
+        if body is not None:
+            _, kind, a, b, r = body
+            out.append((np.minimum(a, b) - [r, r, 0.0], np.maximum(a, b) + [r, r, 0.0]) if kind == "cylinder"
+                       else (np.minimum(a, b), np.maximum(a, b)))
+        return out
+
     def body_shape(self) -> tuple[str, str, np.ndarray, np.ndarray, float] | None:
         """The tool body in the tool frame as (name, kind, a, b, radius): a "box" with corners
         ``a`` (min) and ``b`` (max), or a "cylinder" of axis a -> b (from the palm's back face

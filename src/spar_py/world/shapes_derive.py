@@ -1325,14 +1325,8 @@ def mate_grasp_usable(T_grasp: np.ndarray, width: float, gripper: Any, T_a: np.n
     the plane of the hole's mouth (``hole``: origin the mouth's centre, direction into the part),
     within MOUTH_TOL_MM, so the hand holds only the length that stays out of the hole when seated.
     Cell unit throughout."""
-    boxes = [(lo, hi) for _, lo, hi in gripper.boxes(width)]
-    body = gripper.body_shape()
-    if body is not None:
-        _, kind, a, b, r = body
-        boxes.append((np.minimum(a, b) - [r, r, 0.0], np.maximum(a, b) + [r, r, 0.0]) if kind == "cylinder"
-                     else (a, b))
     corners = np.concatenate([np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
-                                        for z in (lo[2], hi[2])]) for lo, hi in boxes])
+                                        for z in (lo[2], hi[2])]) for lo, hi in gripper.hand_boxes(width)])
     M = np.asarray(T_a, float) @ np.asarray(T_grasp, float)  # tool frame in the hole part's frame
     depth = (corners @ M[:3, :3].T + M[:3, 3] - hole.origin) @ hole.direction
     return bool(depth.max() <= from_mm(unit, MOUTH_TOL_MM))
@@ -1382,40 +1376,24 @@ class Antipodal:
     tq: int = -1
 
 
-def _ray_first(mesh: "trimesh.Trimesh", S: np.ndarray, D: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """First hits of rays (S, D) on the mesh: (hit (k,), points (k, 3) with nan where none,
-    triangle index (k,), -1 where none)."""
+def _ray_hit(mesh: "trimesh.Trimesh", S: np.ndarray, D: np.ndarray, farthest_within: float | None = None
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One hit per ray (S, unit D) on the mesh: the first, or with ``farthest_within`` the farthest
+    within that distance of S. (hit (k,), points (k, 3) with nan where none, triangle index (k,),
+    -1 where none)."""
     k = len(S)
     pts = np.full((k, 3), np.nan)
     tri = np.full(k, -1)
     if k == 0:
         return np.zeros(0, bool), pts, tri
-    loc, ri, ti = mesh.ray.intersects_location(S, D, multiple_hits=False)
-    if len(ri):
-        # a ray may still report more than one hit: keep the nearest per ray
-        d = np.einsum("ij,ij->i", loc - S[ri], D[ri])
-        order = np.lexsort((d, ri))
-        ri, ti, loc = ri[order], ti[order], loc[order]
-        first = np.r_[True, ri[1:] != ri[:-1]]
-        pts[ri[first]], tri[ri[first]] = loc[first], ti[first]
-    return tri >= 0, pts, tri
-
-
-def _ray_last(mesh: "trimesh.Trimesh", S: np.ndarray, D: np.ndarray, reach: float
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Farthest hits of rays (S, unit D) on the mesh within ``reach`` of S: (hit (k,), points
-    (k, 3) with nan where none, triangle index (k,), -1 where none)."""
-    k = len(S)
-    pts = np.full((k, 3), np.nan)
-    tri = np.full(k, -1)
-    if k == 0:
-        return np.zeros(0, bool), pts, tri
-    loc, ri, ti = mesh.ray.intersects_location(S, D, multiple_hits=True)
+    loc, ri, ti = mesh.ray.intersects_location(S, D, multiple_hits=farthest_within is not None)
     d = np.einsum("ij,ij->i", loc - S[ri], D[ri]) if len(ri) else np.zeros(0)
-    keep = d <= reach
-    ri, ti, loc, d = ri[keep], ti[keep], loc[keep], d[keep]
+    if farthest_within is not None:
+        keep = d <= farthest_within
+        ri, ti, loc, d = ri[keep], ti[keep], loc[keep], -d[keep]
     if len(ri):
-        order = np.lexsort((-d, ri))
+        # one per ray (a first-hit query may still report more than one): the least d
+        order = np.lexsort((d, ri))
         ri, ti, loc = ri[order], ti[order], loc[order]
         first = np.r_[True, ri[1:] != ri[:-1]]
         pts[ri[first]], tri[ri[first]] = loc[first], ti[first]
@@ -1439,8 +1417,8 @@ def antipodal_pairs(mesh: "trimesh.Trimesh", opening: float, unit: str, samples:
     P = np.asarray(P, float)
     n = A.N[fi]
     S = P - eps * n
-    hit, Q, ti = _ray_first(mesh, S, -n)
-    far, Qf, tf = _ray_last(mesh, S, -n, opening * (1 + 1e-9))
+    hit, Q, ti = _ray_hit(mesh, S, -n)
+    far, Qf, tf = _ray_hit(mesh, S, -n, opening * (1 + 1e-9))
     # also the farthest exit within the opening where it is another point: across a bore or a
     # gap the pads close on the outer surface beyond it (a tube's two sides), where the first
     # exit is the inside of the wall, which no pad reaches
@@ -1494,7 +1472,7 @@ def _pads_on_surface(mesh: "trimesh.Trimesh", P: np.ndarray, Q: np.ndarray, C: n
         D = sign * C
         S = np.concatenate([X + half * (a * e1 + b * e2) - far * D for a, b in offs])
         DD = np.tile(D, (len(offs), 1))
-        hit, H, _ = _ray_first(mesh, S, DD)
+        hit, H, _ = _ray_hit(mesh, S, DD)
         depth = np.einsum("ij,ij->i", np.nan_to_num(H) - np.tile(X, (len(offs), 1)), DD)
         near = (hit & (np.abs(depth) <= tol)).reshape(len(offs), k)
         away = (hit & (depth >= -tol) & (depth <= half)).reshape(len(offs), k)
