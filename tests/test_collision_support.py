@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize
 
+from spar_py.core.geometry import rotz
 from spar_py.kb import load_problem
 from spar_py.world import collision
 from spar_py.world.collision import WORLD, _exact, box, capsule, convex, cylinder, support_gap
@@ -267,3 +268,53 @@ def test_grasp_rule_key_makes_signed_zeros_one_and_its_verdicts_are_the_library_
         assert state.grasp_ok(Ts) == ref
         verdicts.add(ref[0])
     assert verdicts == {True, False}
+
+
+# --------------------------------------------------------------------------- the hand before the IK
+
+
+def test_hand_refusal_refuses_only_what_check_refuses_at_every_solution(tmp_path: Path) -> None:
+    """SceneState.hand_refusal at a tool pose names a pair only where check() refuses every IK
+    solution of that pose (so a squeeze may skip the IK), and it does refuse: tool poses at and
+    beside the parts, in states of every kind of hand."""
+    rng = np.random.default_rng(5)
+    said = agreed = 0
+    for cell in _cells(tmp_path):
+        robot = cell.robot
+        for state, *_ in _states(cell):
+            for b in state.bodies[state.n_moving:]:
+                if b.frame != WORLD:
+                    continue
+                for _ in range(4):
+                    T = np.eye(4)
+                    T[:3, :3] = rotz(rng.uniform(-np.pi, np.pi))[:3, :3] @ np.diag([1.0, -1.0, -1.0])
+                    T[:3, 3] = b.points.mean(axis=0) + rng.uniform(-1.5, 1.5, 3)
+                    hit = state.hand_refusal(T)
+                    sols = robot.ik(T)
+                    if hit is None or not len(sols):
+                        continue
+                    said += 1
+                    ok, why = state.check(sols)
+                    assert not ok.any(), (cell.name, hit)
+                    agreed += hit in why
+    assert said > 20 and agreed > said // 2
+
+
+def test_box_corners_hold_every_vertex() -> None:
+    """A body of many vertices is first bounded by a box (collision._box_corners): every vertex
+    lies in it (solved for in the box's own edges, not its construction), and the support bound
+    it gives two such bodies never exceeds their hulls' distance."""
+    rng = np.random.default_rng(3)
+    for k in range(40):
+        R = _rotation(rng)
+        pts = rng.normal(size=(200, 3)) * rng.uniform(0.05, 5, 3) @ R.T + rng.uniform(-10, 10, 3)
+        C = collision._box_corners(pts)
+        o = C[0]
+        E = np.stack([C[4] - o, C[2] - o, C[1] - o], axis=1)  # the three edges from corner 0
+        s = np.linalg.solve(E, (pts - o).T)
+        assert s.min() >= -1e-9 and s.max() <= 1 + 1e-9, k
+        a, b = convex("a", WORLD, pts), convex("b", WORLD, pts @ _rotation(rng).T + rng.uniform(-20, 20, 3))
+        assert a.corners is not None
+        box_gap = float(support_gap(a.corners[None], np.zeros(1), np.eye(3)[None],
+                                    b.corners[None], np.zeros(1), np.eye(3)[None])[0])
+        assert box_gap <= _hull_distance(a.points, b.points) + 1e-6, k

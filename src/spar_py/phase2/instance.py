@@ -638,8 +638,8 @@ def _part_at(world: World, obj: str, label: str) -> str | None:
 
 def _arm(world: World, T: np.ndarray, what: str = "", held: tuple[str, np.ndarray] | None = None,
          grasped: str | None = None, width: float | None = None,
-         allow: Sequence[tuple[str, str]] = (), via: str | None = None, touch: bool = False
-         ) -> tuple[np.ndarray | None, dict[str, Any], Refusals]:
+         allow: Sequence[tuple[str, str]] = (), via: str | None = None, touch: bool = False,
+         hand_first: bool = False) -> tuple[np.ndarray | None, dict[str, Any], Refusals]:
     """The joint vector reaching tool pose T nearest the previous one among those clear of the
     world at this step (workspace.arm_at: every part where it is now, ``held`` in the hand,
     ``grasped`` being closed on, ``allow`` the step's own contacts), display data (every IK
@@ -647,7 +647,8 @@ def _arm(world: World, T: np.ndarray, what: str = "", held: tuple[str, np.ndarra
     ``collisions`` the pairs) and the refusal of ``what`` with those pairs (empty if none).
     ``via``: the held body is held by this carried part (a via-grasp): the fingers' contact is
     allowed with it alone, and the root is checked as a carried part. ``touch``: an assemble, whose
-    held body may touch the table where the product seats it so (workspace.assembled_touch)."""
+    held body may touch the table where the product seats it so (workspace.assembled_touch).
+    ``hand_first``: workspace.arm_at's (a squeeze tries the part's grasps in turn)."""
     cell = world.cell
     body = set(_held_body(world.unc))
     carried = None
@@ -662,7 +663,7 @@ def _arm(world: World, T: np.ndarray, what: str = "", held: tuple[str, np.ndarra
     parts = {k: o.pose for k, o in world.unc.objects.items() if k not in body}
     near_table = assembled_touch(cell, [held[0], *(carried or {})] if held is not None and touch else [])
     got = arm_at(world.cache, T, world.joints, parts=parts, held=held, grasped=grasped, width=width, allow=allow,
-                 carried=carried, touch=near_table)
+                 carried=carried, touch=near_table, hand_first=hand_first)
     geo: dict[str, Any] = {}
     if got.clearance is not None:
         geo["clearance"] = round(got.clearance, 6)
@@ -997,24 +998,28 @@ def _scan(world: World, s: Step, early: bool = False) -> tuple[list[dict], World
 def _squeeze(world: World, s: Step, early: bool = False) -> tuple[list[dict], World, dict]:
     """Squeeze ``obj`` in place with the first of its grasps the arm reaches there whose pickup
     preconditions hold (Sec. 4.3: the squeeze must meet the pickup's own preconditions).
-    A grasp is checked for a joint solution first and its constraints one by one, up to
-    the first that fails (only the chosen grasp's verdicts are reported)."""
+    A grasp's constraints are checked one by one, up to the first that fails, then the arm's
+    joint solution (only the chosen grasp's verdicts are reported; the arm's refusals only of
+    grasps whose constraints hold)."""
     obj = s["args"][0]
     cell = world.cell
     o = world.unc.obj(obj)
     arc = reachable_pairs(world.cache, obj, list(cell.objects[obj].grasps), _position_label(cell, obj, o))
     refused: Refusals = tuple((r.what, r.pairs) for r in arc.refusals)
+    manip = world.unc.manipulator_error()
     for label in (g for g, _ in arc.pairs):
         g = _grasp(cell, obj, label)
-        q, geo, no = _arm(world, o.pose @ g.T, f"squeeze({obj}) with {label}", grasped=obj, width=g.width)
-        refused += no
-        if q is None:
-            continue
-        manip = world.unc.manipulator_error()
+        # the grasp's constraints first: bounding them is cheap beside the arm's collision check
+        # with every part in place, and a grasp they refuse is no candidate whatever the arm does
         cs = ur.pickup_constraints(world.unc, obj, g.T, g.width, cell.finger_separation, manip, action=s["id"],
                                    memo=world.cache.memo)
         checks = _verdicts_until_unsatisfied(world, cs)
-        if len(checks) == len(cs) and all(c["satisfied"] for c in checks):
+        if not (len(checks) == len(cs) and all(c["satisfied"] for c in checks)):
+            continue
+        q, geo, no = _arm(world, o.pose @ g.T, f"squeeze({obj}) with {label}", grasped=obj, width=g.width,
+                          hand_first=True)
+        refused += no
+        if q is not None:
             geo["grasp"] = label
             w = replace(world, refused=refused, unc=ur.squeeze(world.unc, obj, g.T, manip, world.cache.memo),
                         joints=q,

@@ -126,6 +126,9 @@ class Body:
     cap: tuple[np.ndarray, np.ndarray, float]
     _fcl: list = field(default_factory=list, repr=False)
     mesh: Any = field(default=None, repr=False)
+    #: A body of many vertices (over BOX_FIRST): the 8 corners (k, 3, frame coordinates) of a box
+    #: holding them, which the support bound tries first (:meth:`SceneState._support_bounds`).
+    corners: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def radius(self) -> float:
@@ -138,7 +141,8 @@ class Body:
         R, t = T_frame[:3, :3], T_frame[:3, 3]
         a, b, r = self.cap
         return Body(name or self.name, frame, self.kind, T_frame @ self.T, self.size, self.points @ R.T + t,
-                    (R @ a + t, R @ b + t, r), self._fcl, self.mesh)
+                    (R @ a + t, R @ b + t, r), self._fcl, self.mesh,
+                    None if self.corners is None else self.corners @ R.T + t)
 
     def fcl_geometry(self) -> Any:
         """The body's python-fcl geometry (made on first use, shared by the placed copies)."""
@@ -228,7 +232,20 @@ def convex(name: str, frame: int, points: np.ndarray) -> Body:
     pts = np.asarray(points, float).reshape(-1, 3)
     if len(pts) < 4:
         raise SparValueError(f"convex body {name}: needs at least 4 points")
-    return Body(name, frame, "convex", np.eye(4), (), pts, _bounding_capsule(pts))
+    return Body(name, frame, "convex", np.eye(4), (), pts, _bounding_capsule(pts),
+                corners=_box_corners(pts) if len(pts) > BOX_FIRST else None)
+
+
+def _box_corners(pts: np.ndarray) -> np.ndarray:
+    """(8, 3) the corners of a box holding ``pts`` (k, 3): along their principal axes, so a plate
+    or a rod gets a thin box, widened by a rounding allowance."""
+    c = pts.mean(axis=0)
+    _, vecs = np.linalg.eigh(np.cov((pts - c).T))
+    local = (pts - c) @ vecs
+    pad = 1e-9 * (1.0 + float(np.abs(pts).max()))
+    lo, hi = local.min(axis=0) - pad, local.max(axis=0) + pad
+    signs = np.array([[i >> 2 & 1, i >> 1 & 1, i & 1] for i in range(8)], dtype=bool)
+    return np.where(signs, hi, lo) @ vecs.T + c
 
 
 def _fcl_convex(points: np.ndarray) -> Any:
@@ -463,6 +480,11 @@ def _inside_mesh(b: Body, Tb: np.ndarray, m: Body, Tm: np.ndarray) -> bool:
     return bool(mesh.contains(local[None, :])[0])
 
 
+#: A convex or mesh body with more vertices than this is first bounded by its box's corners
+#: (:func:`_box_corners`); only the cells the box leaves within the margin project every vertex.
+BOX_FIRST = 64
+
+
 def support_gap(Pa: np.ndarray, ra: np.ndarray, Ua: np.ndarray, Pb: np.ndarray, rb: np.ndarray,
                 Ub: np.ndarray) -> np.ndarray:
     """(c,) a lower bound of the distance (length unit of the inputs) between each of c pairs of
@@ -477,6 +499,17 @@ def support_gap(Pa: np.ndarray, ra: np.ndarray, Ua: np.ndarray, Pb: np.ndarray, 
     min over b of u.y - max over a of u.x for every unit u (and with a and b swapped), so the
     answer never exceeds the distance: a pair it puts beyond the margin is clear by it.
     A non-positive answer says nothing (the bodies may touch)."""
+    U, valid = support_directions(Ua, Ub, Pb.mean(axis=1) - Pa.mean(axis=1))
+    pa = Pa @ np.swapaxes(U, 1, 2)                                  # (c, ka, 16)
+    pb = Pb @ np.swapaxes(U, 1, 2)
+    return _gap_of_extents(pa.min(axis=1), pa.max(axis=1), ra, np.abs(Pa).max(axis=(1, 2)),
+                           pb.min(axis=1), pb.max(axis=1), rb, np.abs(Pb).max(axis=(1, 2)), valid)
+
+
+def support_directions(Ua: np.ndarray, Ub: np.ndarray, line: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The 16 unit directions of :func:`support_gap` for c pairs, (c, 16, 3), and which are valid
+    (c, 16) (non-zero before normalising): a's 3 axes, b's 3, their 9 cross products, ``line``
+    (c, 3) (from a's vertices' mean to b's)."""
     A, B = np.swapaxes(Ua, 1, 2), np.swapaxes(Ub, 1, 2)            # (c, 3, 3) axes as rows
     c = len(A)
     U = np.empty((c, 16, 3))                                        # A's 3, B's 3, their 9 crosses, the line
@@ -487,15 +520,20 @@ def support_gap(Pa: np.ndarray, ra: np.ndarray, Ua: np.ndarray, Pb: np.ndarray, 
     X[..., 0] = a1 * b2 - a2 * b1
     X[..., 1] = a2 * b0 - a0 * b2
     X[..., 2] = a0 * b1 - a1 * b0
-    U[:, 15] = Pb.mean(axis=1) - Pa.mean(axis=1)
+    U[:, 15] = line
     norm = np.sqrt((U * U).sum(-1))
     valid = norm > 1e-12
-    U = U / np.where(valid, norm, 1.0)[..., None]
-    pa = Pa @ np.swapaxes(U, 1, 2)                                  # (c, ka, 16)
-    pb = Pb @ np.swapaxes(U, 1, 2)
-    gap = np.maximum(pb.min(axis=1) - pa.max(axis=1), pa.min(axis=1) - pb.max(axis=1))
+    return U / np.where(valid, norm, 1.0)[..., None], valid
+
+
+def _gap_of_extents(alo: np.ndarray, ahi: np.ndarray, ra: np.ndarray, abig: np.ndarray, blo: np.ndarray,
+                    bhi: np.ndarray, rb: np.ndarray, bbig: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """:func:`support_gap` from each body's extent along each direction ((c, 16) min and max), the
+    radii (c,), a bound of each body's largest coordinate (c,) for the rounding allowance, and
+    the directions' validity (c, 16)."""
+    gap = np.maximum(blo - ahi, alo - bhi)
     best = np.where(valid, gap, -np.inf).max(axis=1) - ra - rb
-    scale = np.maximum(np.abs(Pa).max(axis=(1, 2)), np.abs(Pb).max(axis=(1, 2))) + np.maximum(ra, rb)
+    scale = np.maximum(abig, bbig) + np.maximum(ra, rb)
     return best - 1e-9 * (1.0 + scale)
 
 
@@ -959,6 +997,46 @@ class SceneState:
                 return (b.name, "table")
         return None
 
+    def hand_refusal(self, T_tool: np.ndarray) -> tuple[str, str] | None:
+        """The first pair :meth:`check` would find within the margin between a body rigid with the
+        flange (frames 6 and 7: the hand, the tool mount, the part in the hand) and a body fixed in
+        the world (a part, an obstacle) with the tool at world pose ``T_tool`` (4x4), or None.
+        Every joint vector reaching T_tool puts those two bodies there, so :meth:`check` refuses
+        each for it: a caller trying many tool poses may skip their IK (the table, the grasp rule
+        and the links are :meth:`check`'s alone)."""
+        T_tool = np.asarray(T_tool, float)
+        F = np.full((1, 8, 4, 4), np.nan)
+        F[0, 0] = self.scene.robot.base
+        F[0, TOOL] = T_tool
+        F[0, 6] = T_tool @ self.scene.robot.tool_inverse()
+        with np.errstate(invalid="ignore"):
+            A, B = self._world_caps(F)
+        m, moving = self.scene.margin, self.n_moving
+        frame = np.array([b.frame for b in self.bodies])
+        hand = np.isin(frame, (6, TOOL)) & (np.arange(len(self.bodies)) < moving)
+        pi, pj = self.pairs[:, 0], self.pairs[:, 1]
+        ps = np.flatnonzero((hand[pi] & (pj >= moving)) | (hand[pj] & (pi >= moving)))
+        if not len(ps):
+            return None
+        i, j = self.pairs[ps, 0], self.pairs[ps, 1]
+        lb = segment_distance(A[0, i], B[0, i], A[0, j], B[0, j]) - self._cap_r[i] - self._cap_r[j]
+        near = ps[lb <= m]
+        lbs = lb[lb <= m]
+        if not len(near):
+            return None
+        ask = ~self.exact_pair[near]
+        sup = np.full(len(near), -np.inf)
+        if ask.any():
+            sup[ask] = self._support_bounds(F, np.zeros(int(ask.sum()), int), near[ask])
+        for p, lb_p, a, g in zip(near.tolist(), lbs.tolist(), ask.tolist(), sup.tolist()):
+            if a and g > m:
+                continue
+            d = lb_p if not a else self._exact_cell(F, 0, p)
+            if d <= m:
+                a_, b_ = self.pairs[p]
+                return (self.bodies[a_].name, self.bodies[b_].name)
+        return None
+
     def tool_rigid_refusal(self, T_tool: np.ndarray) -> tuple[str, str] | None:
         """What refuses every joint vector of this state whatever the tool pose, as the pair
         :meth:`check` would name, or None: the grasp rule when the part in the hand is given in
@@ -1042,25 +1120,53 @@ class SceneState:
 
     def _support_bounds(self, F: np.ndarray, rows: np.ndarray, ps: np.ndarray) -> np.ndarray:
         """(c,) :func:`support_gap` of pair ps[k] at row rows[k] (frames F (n, 8, 4, 4)): a lower
-        bound of the distance the library would measure there, all c cells in one pass."""
+        bound of the distance the library would measure there, all c cells in one pass of the
+        directions, then one pass per body over its own vertices (a mesh part's thousands of hull
+        vertices are projected only for the cells it is in, not padded into every cell)."""
         i, j = self.pairs[ps, 0], self.pairs[ps, 1]
         ub, inv = np.unique(np.concatenate([i, j]), return_inverse=True)
         used = [self.bodies[u] for u in ub.tolist()]
-        k = max(len(b.points) for b in used)
-        V = np.empty((len(used), k, 3))
-        for n, b in enumerate(used):  # padded by repeating a vertex (the supports stay the same)
-            V[n, :len(b.points)] = b.points
-            V[n, len(b.points):] = b.points[0]
         axes = np.stack([b.T[:3, :3] for b in used])
         radius = np.array([b.radius for b in used])
+        centre = np.stack([b.points.mean(axis=0) for b in used])
         frame = np.array([8 if b.frame == WORLD else b.frame for b in used], dtype=int)
         Fx = np.concatenate([F, np.broadcast_to(np.eye(4), (len(F), 1, 4, 4))], axis=1)  # 8: the world
         ia, ib = inv[:len(i)], inv[len(i):]
         Ga, Gb = Fx[rows, frame[ia]], Fx[rows, frame[ib]]           # (c, 4, 4) the frames' poses
         Ra, Rb = Ga[:, :3, :3], Gb[:, :3, :3]
-        Pa = V[ia] @ np.swapaxes(Ra, 1, 2) + Ga[:, None, :3, 3]
-        Pb = V[ib] @ np.swapaxes(Rb, 1, 2) + Gb[:, None, :3, 3]
-        return support_gap(Pa, radius[ia], Ra @ axes[ia], Pb, radius[ib], Rb @ axes[ib])
+        Ca = np.einsum("cij,cj->ci", Ra, centre[ia]) + Ga[:, :3, 3]
+        Cb = np.einsum("cij,cj->ci", Rb, centre[ib]) + Gb[:, :3, 3]
+        U, valid = support_directions(Ra @ axes[ia], Rb @ axes[ib], Cb - Ca)
+        cheap = [b.points if b.corners is None else b.corners for b in used]
+        gap = self._gap_pass(U, valid, ia, ib, Ga, Gb, Ra, Rb, cheap, radius)
+        big = np.array([b.corners is not None for b in used])
+        again = np.flatnonzero((big[ia] | big[ib]) & (gap <= self.scene.margin))
+        if len(again):
+            full = [b.points for b in used]
+            gap[again] = self._gap_pass(U[again], valid[again], ia[again], ib[again], Ga[again], Gb[again],
+                                        Ra[again], Rb[again], full, radius)
+        return gap
+
+    @staticmethod
+    def _gap_pass(U: np.ndarray, valid: np.ndarray, ia: np.ndarray, ib: np.ndarray, Ga: np.ndarray, Gb: np.ndarray,
+                  Ra: np.ndarray, Rb: np.ndarray, points: list[np.ndarray], radius: np.ndarray) -> np.ndarray:
+        """:func:`support_gap` of c cells along directions U (c, 16, 3), the bodies ia, ib (c,) of
+        ``points`` (vertices each, its frame) at frame poses Ga, Gb (c, 4, 4): each body's vertices
+        are projected only for the cells it is in."""
+        ext = []
+        for side, G, R in ((ia, Ga, Ra), (ib, Gb, Rb)):
+            lo, hi, big = np.empty((len(side), 16)), np.empty((len(side), 16)), np.empty(len(side))
+            for n in np.unique(side).tolist():
+                at = np.flatnonzero(side == n)
+                pts = points[n]
+                local = U[at] @ R[at]                               # (k, 16, 3): u in the body's frame
+                off = np.einsum("kdj,kj->kd", U[at], G[at, :3, 3])
+                proj = np.einsum("pj,kdj->kpd", pts, local) + off[:, None, :]
+                lo[at], hi[at] = proj.min(axis=1), proj.max(axis=1)
+                big[at] = np.abs(G[at, :3, 3]).max(axis=1) + np.sqrt((pts * pts).sum(axis=1)).max()
+            ext.append((lo, hi, big))
+        (alo, ahi, abig), (blo, bhi, bbig) = ext
+        return _gap_of_extents(alo, ahi, radius[ia], abig, blo, bhi, radius[ib], bbig, valid)
 
     def _rigid_once(self, F: np.ndarray, row: int, p: int) -> float:
         i, j = self.pairs[p]

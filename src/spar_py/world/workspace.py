@@ -357,14 +357,16 @@ class ArmAt:
 def arm_at(cache: CellCache, T: np.ndarray, ref: np.ndarray | None, *, parts: Mapping[str, np.ndarray],
            held: tuple[str, np.ndarray] | None = None, grasped: str | None = None, width: float | None = None,
            allow: Iterable[tuple[str, str]] = (), carried: Mapping[str, np.ndarray] | None = None,
-           touch: Iterable[str] = ()) -> ArmAt:
+           touch: Iterable[str] = (), hand_first: bool = False) -> ArmAt:
     """The arm at world tool pose T (4x4) in a world of ``parts`` (key -> T_world_part), ``held``
     in the hand with the parts mated into it ``carried`` (key -> T_tool_part: a subassembly held
     as one body, CollisionScene.at), ``grasped`` being closed on with the fingers ``width`` apart, ``allow`` the
     step's own contacts, ``touch`` the bodies that may touch the table (CollisionScene.at): the
     solution nearest ``ref`` (rad; zeros if None) among those clear of the world (all of them when
     the cell opts out of collision checks), with the reason when there is none (:class:`ArmAt`).
-    Phase 2 asks this for every step that moves the arm."""
+    Phase 2 asks this for every step that moves the arm. ``hand_first``: refuse T before its IK
+    when the hand meets a part or obstacle there (SceneState.hand_refusal; then that one pair is
+    the reason), for a caller trying many tool poses in a crowded world."""
     cell = cache.cell
     sols = solutions(cell.robot, T)
     ref = np.zeros(6) if ref is None else ref
@@ -373,6 +375,10 @@ def arm_at(cache: CellCache, T: np.ndarray, ref: np.ndarray | None, *, parts: Ma
     if not cell.collisions:
         return ArmAt(sols[int(np.argmin(np.abs(sols - ref).sum(axis=1)))], sols)
     state = cache.scene().at(parts, held, grasped, width=width, allow=allow, carried=carried, touch=touch)
+    if hand_first:
+        hit = state.hand_refusal(T)
+        if hit is not None:
+            return ArmAt(None, sols, collisions=[hit])
     clear, why = state.check(sols)
     good = sols[clear]
     if not len(good):
