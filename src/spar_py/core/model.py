@@ -223,6 +223,9 @@ class Cell:
     plan_motions: bool = False
     #: The product the problem's ``product:`` names (its goals compiled), or None.
     product: "Product | None" = None
+    #: A product cell's grasps no plan can seat each part with (world.access.hand_access): the
+    #: assemble of that part does not offer them (kb.prolog_facts' mate_grasps).
+    blocked_grasps: dict[str, frozenset[str]] = field(default_factory=dict)
 
     def position_of(self, label: str) -> Position:
         """The absolute position labelled ``label`` (KeyError if none)."""

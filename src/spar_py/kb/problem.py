@@ -654,6 +654,11 @@ def load_problem(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> Cell:
     )
     if cell.home is None:
         cell.home = robot.home
+    if product is not None:  # the grasps no plan seats a part with, the orders the hand needs
+        from spar_py.world.access import with_hand_access  # the IK and the collision scene: products only
+        from spar_py.world.run import CellCache
+
+        with_hand_access(cell, CellCache(cell))
     mnode = root.key("motion", required=False)
     if mnode is not None and not isinstance(mnode.value, bool):
         raise mnode.fail("true or false (plan the motions between the end-points)", show(mnode.value))

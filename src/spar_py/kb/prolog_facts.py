@@ -109,12 +109,17 @@ def _mate_grasps(cell: Cell) -> list[tuple]:
                 and ta in cell.transforms):
             continue
         pf, hf = _feature_geometry(cell.objects[peg], faces[0]), _feature_geometry(cell.objects[hole], faces[1])
-        if pf is None or hf is None or hf.kind != "hole":
-            continue
         shown = set(faces[0]) if isinstance(faces[0], list) else set()
-        usable = [gr.label for gr in cell.objects[peg].grasps.values()
-                  if (mate_grasp_usable(gr.T, gr.width, gripper, cell.transforms[ta], hf, cell.unit)
-                      if pf.name in gr.gfaces else not shown & set(gr.ofaces))]
+        blocked = cell.blocked_grasps.get(peg, frozenset())
+        if pf is None or hf is None or hf.kind != "hole":  # the rule by ofaces, less what hand access rules out
+            if not blocked:
+                continue
+            usable = [gr.label for gr in cell.objects[peg].grasps.values()
+                      if not shown & set(gr.ofaces) and gr.label not in blocked]
+        else:
+            usable = [gr.label for gr in cell.objects[peg].grasps.values()
+                      if (mate_grasp_usable(gr.T, gr.width, gripper, cell.transforms[ta], hf, cell.unit)
+                          if pf.name in gr.gfaces else not shown & set(gr.ofaces)) and gr.label not in blocked]
         fact = ("mate_grasps", ta, peg, usable)
         if fact not in out:
             out.append(fact)

@@ -351,20 +351,14 @@ def _grasp_report(cell: Cell, cache: CellCache) -> Any:
     from spar_py.core.units import mm_per
     from spar_py.world.grasp_report import grasp_report
     from spar_py.world.robots import GripperGeometry
-    from spar_py.world.workspace import reach_clear
+    from spar_py.world.access import arm_clear_of
 
     assert cell.product is not None
     gripper = cell.robot.gripper or GripperGeometry.default(cell.finger_separation, mm_per(cell.unit))
     at: dict[str, np.ndarray] = {}
     for p in cell.positions.values():
         at.setdefault(p.obj, np.asarray(p.T, float))
-
-    def arm_clear(part: str, T_part: np.ndarray, g: Any, parts: Any) -> tuple[bool, list[tuple[str, str]]]:
-        got = reach_clear(cache, (T_part @ np.asarray(g.T, float))[None], parts={**parts, part: T_part}, grasped=part,
-                          width=g.width)
-        return bool(got.ok[0]), list(got.pairs[0])
-
-    return grasp_report(cell.product, gripper, cell.unit, cell.robot, at, arm_clear, cache.scene().margin)
+    return grasp_report(cell.product, gripper, cell.unit, cell.robot, at, arm_clear_of(cache), cache.scene().margin)
 
 
 def _motion_reason(d: dict[str, Any], failures: list[MotionFailure]) -> None:

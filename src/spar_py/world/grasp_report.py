@@ -46,7 +46,7 @@ from spar_py.core.units import from_mm
 from spar_py.world.workspace import reachable_ignoring_collisions
 
 __all__ = ["ArmClear", "CLEAR_TOL_MM", "YAWS", "GraspReport", "MateGrasps", "above_table", "grasp_report",
-           "held_grasps"]
+           "held_grasps", "seat_order"]
 
 #: The hand's boxes are shrunk by this (mm) before the checks against the parts in place: the
 #: held part touches them when seated, and a finger flush with its face may graze theirs.
@@ -129,7 +129,7 @@ class GraspReport:
         return out
 
 
-def _order(product: Product) -> tuple[list[str], dict[str, set[str]]]:
+def seat_order(product: Product) -> tuple[list[str], dict[str, set[str]]]:
     """The non-base parts in an order the tree (parent first) and the precedence allow (the goals'
     order among the ready), and each part's transitive predecessors (the base included)."""
     parts = [g.part for g in product.goals]
@@ -201,7 +201,7 @@ def grasp_report(product: Product, gripper: Any, unit: str, robot: Any = None,
     meshes = {p: part_mesh(pp.model) for p, pp in product.parts.items()}
     if any(m is None for m in meshes.values()) or not product.goals:
         return None
-    order, before = _order(product)
+    order, before = seat_order(product)
     at = dict(positions or {})
     rows = [_row(product, part, meshes, before[part], gripper, unit, robot if part in at else None, at,
                  arm_clear, margin) for part in order]
@@ -224,7 +224,7 @@ def held_grasps(product: Product, gripper: Any, unit: str) -> dict[str, frozense
     meshes = {p: part_mesh(pp.model) for p, pp in product.parts.items()}
     if any(m is None for m in meshes.values()) or not product.goals:
         return None
-    order, before = _order(product)
+    order, before = seat_order(product)
     return {part: frozenset(g.label for g in _filtered(product, part, meshes, before[part], gripper, unit)[4])
             for part in order}
 

@@ -25,7 +25,7 @@ import numpy as np
 
 from spar_py.core.model import LOOSE_MAX_DEG, Product
 
-__all__ = ["Insertion", "SingleArmReport", "single_arm_report"]
+__all__ = ["Insertion", "SingleArmReport", "insertions", "single_arm_report"]
 
 #: How many poses a refusal's line names (those where the insertion points nearest down; the
 #: report's ``poses`` has them all).
@@ -76,7 +76,7 @@ class SingleArmReport:
         return out
 
 
-def _insertions(product: Product) -> list[Insertion]:
+def insertions(product: Product) -> list[Insertion]:
     """Each goal's insertion, its direction turned from the parent's frame into the product's."""
     by_name = {m.name: m for m in product.mates}
     out = []
@@ -174,7 +174,7 @@ def single_arm_report(product: Product, unit: str = "") -> SingleArmReport | Non
 
     if any(part_mesh(pp.model) is None for pp in product.parts.values()):
         return None
-    ins = _insertions(product)
+    ins = insertions(product)
     hulls = _hulls(product)
     by_part = {i.part: i for i in ins}
     before: dict[str, set[str]] = {i.part: {i.parent} for i in ins}
