@@ -58,6 +58,7 @@
             cms_consistent/1,        % +Net
             cms_pruned_nodes/2,      % +Net, -VarLabels
             cms_solution/2,          % +Net, -Assignment
+            cms_solution/3,          % +Net, :Allowed, -Assignment
             cms_component/3          % +Net, +Vars, -Component
           ]).
 :- use_module(library(assoc)).
@@ -517,6 +518,17 @@ cms_pruned_nodes(Net, VarLabels) :-
 cms_solution(Net, Assignment) :-
     cms_network(Net, CspNet),
     solution(CspNet, Assignment).
+
+:- meta_predicate cms_solution(+, 2, -).
+
+%!  cms_solution(+Net, :Allowed, -Assignment:list) is nondet.
+%
+%   As cms_solution/2, a variable V taking label L only if call(Allowed, V,
+%   L) succeeds (csp:solution/3).
+
+cms_solution(Net, Allowed, Assignment) :-
+    cms_network(Net, CspNet),
+    solution(CspNet, Allowed, Assignment).
 
 %!  cms_component(+Net, +Vars:list, -Component:list) is det.
 %

@@ -25,6 +25,7 @@
             all_consistent/3,       % +Var/Label, +PrevAssns, +Net
             consistent/1,           % +Net
             solution/2,             % +Net, -Assignment
+            solution/3,             % +Net, :Allowed, -Assignment
             ac3/2,                  % +Net, -PrunedNodes
             get_label_set/3,        % +Var, -LabelSet, +Net
             get_constraint_pairs/4  % +Var, +V1, -Pairs, +Net
@@ -52,21 +53,25 @@
 %   does.
 
 csp(VarSet, Constraints, Result) :-
+    csp(VarSet, Constraints, [_, _]>>true, Result).
+
+csp(VarSet, Constraints, Allowed, Result) :-
     arcs_by_var(Constraints, ByVar),
     empty_assoc(Assigned),
-    csp(VarSet, Constraints, ByVar, Assigned, [], Result).
+    csp(VarSet, Constraints, ByVar, Allowed, Assigned, [], Result).
 
-csp([], _, _, _, R, R).
-csp([V|Rest], Constraints, ByVar, Assigned, Asns, R) :-
+csp([], _, _, _, _, R, R).
+csp([V|Rest], Constraints, ByVar, Allowed, Assigned, Asns, R) :-
     get_label_set(V, LabelSet, Constraints),
     (   get_assoc(V, ByVar, Arcs)
     ->  true
     ;   Arcs = []
     ),
     member(Label, LabelSet),
+    call(Allowed, V, Label),
     agrees(Arcs, Label, Assigned),
     put_assoc(V, Assigned, Label, Assigned1),
-    csp(Rest, Constraints, ByVar, Assigned1, [V/Label|Asns], R).
+    csp(Rest, Constraints, ByVar, Allowed, Assigned1, [V/Label|Asns], R).
 
 %   agrees(+Arcs, +Label, +Assigned): Label of a variable V agrees with every
 %   assigned variable V1 of its arcs V1-fwd(Pairs) (Pairs are V-label/V1-label)
@@ -166,8 +171,18 @@ consistent(Net) :-
 %   ==
 
 solution(Net, Assignment) :-
+    solution(Net, [_, _]>>true, Assignment).
+
+:- meta_predicate solution(+, 2, -).
+
+%!  solution(+Net, :Allowed, -Assignment:list) is nondet.
+%
+%   As solution/2, a variable V taking label L only if call(Allowed, V, L)
+%   succeeds when it is chosen (phase 2 rules labels out as it learns).
+
+solution(Net, Allowed, Assignment) :-
     net_vars(Net, Vars),
-    csp(Vars, Net, Result),
+    csp(Vars, Net, Allowed, Result),
     maplist([V/L, V-L]>>true, Result, Pairs),
     keysort(Pairs, Assignment).
 

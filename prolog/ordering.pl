@@ -46,7 +46,8 @@
             ordering_graph/2,          % +G, -Ugraph
             ordering_arcs/2,           % +G, -PriorTos
             ordering_actions/2,        % +G, -Ids
-            linearisation/2            % +G, -Ids
+            linearisation/2,           % +G, -Ids
+            linearisation/3            % +G, :Allowed, -Ids
           ]).
 :- use_module(library(assoc)).
 :- use_module(library(ordsets)).
@@ -357,6 +358,28 @@ linearisation(G, Ids) :-
     ordering_graph(G, U),
     predecessors(U, Preds),
     linearise(Preds, Ids).
+
+:- meta_predicate linearisation(+, 2, -).
+
+%!  linearisation(+G, :Allowed, -Ids:list) is nondet.
+%
+%   As linearisation/2, but an action V goes next after the actions Done
+%   (in execution order) only if call(Allowed, Done, V) succeeds: a
+%   refused prefix cuts every linearisation that starts with it, without
+%   enumerating them (phase 2's instance search, uncertainty.pl).
+
+linearisation(G, Allowed, Ids) :-
+    ordering_graph(G, U),
+    predecessors(U, Preds),
+    linearise(Preds, Allowed, [], Ids).
+
+linearise([], _, _, []) :- !.
+linearise(Preds, Allowed, Done, [V|Vs]) :-
+    member(V-[], Preds),
+    call(Allowed, Done, V),
+    delete_vertex(Preds, V, Preds1),
+    append(Done, [V], Done1),
+    linearise(Preds1, Allowed, Done1, Vs).
 
 %   predecessors(+Ugraph, -Preds): Preds is Ugraph transposed, V-Ps pairs
 %   in standard order, Ps the ordset of the vertices with an arc to V.

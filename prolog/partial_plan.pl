@@ -14,6 +14,7 @@
             partial_ordering/2,      % +Partial, -PriorTos
             partial_network/2,       % +Partial, -Net
             partial_instances/2,     % +Partial, -Instance
+            partial_instances/3,     % +Partial, +Nogoods, -Instance
             partial_dict/2,          % +Partial, -Dict
             print_partial/1          % +Partial
           ]).
@@ -21,8 +22,8 @@
 :- use_module(library(apply)).
 :- use_module(library(pairs)).
 :- use_module(library(yall)).
-:- use_module(cms, [cms_solution/2, cms_nodes/2, cms_pruned_nodes/2, cms_arcs/2]).
-:- use_module(ordering, [ordering_arcs/2, linearisation/2]).
+:- use_module(cms, [cms_solution/2, cms_solution/3, cms_nodes/2, cms_pruned_nodes/2, cms_arcs/2]).
+:- use_module(ordering, [ordering_arcs/2, linearisation/2, linearisation/3, necessarily_before/3]).
 :- use_module(goals, [print_action/1]).
 :- use_module(foreign, [term_data/2]).
 :- use_module(kb, []).
@@ -67,6 +68,69 @@ partial_instances(partial(Actions, Order, Net, Sat), instance(Steps, Bindings)) 
     linearisation(Order, Ids),
     maplist(instance_step(Actions, Assignment), Ids, Steps),
     maplist([V-L, V=L]>>true, Assignment, Bindings).
+
+%!  partial_instances(+Partial, +Nogoods, -Instance) is nondet.
+%
+%   As partial_instances/2, skipping every instance a nogood of Nogoods
+%   rules out, without enumerating them: Nogoods is a term nogoods(List,
+%   Checks) whose List phase 2 extends (nb_setarg/3) as instances fail,
+%   read anew at each step of each linearisation and at each label of the
+%   solution search (a nogood that holds in every linearisation rules the
+%   label out there). Checks counts the steps checked: past 200000 the
+%   rest is enumerated unpruned (every instance is tried, as by
+%   partial_instances/2), so a search that prunes little costs little. A
+%   nogood ng(Id, Action, GId,
+%   GAction, Done, NotDone) (uncertainty.pl, from Python's
+%   phase2.nogood) refuses action Id as the next one when, under the
+%   solution at hand, Id's action is Action and GId's is GAction, every
+%   id of Done is executed already and none of NotDone is: such an
+%   instance fails at Id as the one the nogood came from did.
+
+partial_instances(partial(Actions, Order, Net, Sat), Nogoods, instance(Steps, Bindings)) :-
+    cms_solution(Net, label_allowed(Nogoods, Actions, Order), Assignment),
+    forall(member(sep(D, Cond), Sat),
+           ( substitute(Assignment, D, D1),
+             substitute(Assignment, Cond, Cond1),
+             D1 \= Cond1 )),
+    linearisation(Order, not_ruled_out(Nogoods, Actions, Assignment), Ids),
+    maplist(instance_step(Actions, Assignment), Ids, Steps),
+    maplist([V-L, V=L]>>true, Assignment, Bindings).
+
+not_ruled_out(Nogoods, Actions, Assignment, Done, V) :-
+    Nogoods = nogoods(List, Checks0),
+    Checks is Checks0 + 1,
+    nb_setarg(2, Nogoods, Checks),
+    (   Checks > 200000                  % the budget spent: no more pruning, every instance is tried
+    ->  true
+    ;   no_nogood(List, Actions, Assignment, Done, V)
+    ).
+
+no_nogood(List, Actions, Assignment, Done, V) :-
+    \+ ( member(ng(V, A, GId, GA, InDone, OutDone), List),
+          forall(member(I, InDone), memberchk(I, Done)),
+          \+ ( member(O, OutDone), memberchk(O, Done) ),
+          step_action(Actions, Assignment, V, A),
+          step_action(Actions, Assignment, GId, GA)
+        ).
+
+%   label_allowed(+Nogoods, +Actions, +Order, +Var, +Label): no nogood rules
+%   out Var = Label alone: one whose conditions hold in every
+%   linearisation of Order (each of Done necessarily before its action,
+%   each of NotDone necessarily after) and whose two actions are already
+%   theirs with Var = Label and no other variable bound.
+
+label_allowed(nogoods(List, _), Actions, Order, Var, Label) :-
+    \+ ( member(ng(Id, A, GId, GA, Done, NotDone), List),
+          step_action(Actions, [Var-Label], Id, A),
+          step_action(Actions, [Var-Label], GId, GA),
+          forall(member(I, Done), necessarily_before(I, Id, Order)),
+          forall(member(O, NotDone), necessarily_before(Id, O, Order))
+        ).
+
+step_action(Actions, Assignment, Id, A) :-
+    memberchk(action(Id, T, _, _, _), Actions),
+    substitute(Assignment, T, A0),
+    A0 == A.
 
 instance_step(Actions, Assignment, Id, Step) :-
     memberchk(action(Id, T, Pre, Add, Del), Actions),

@@ -50,7 +50,7 @@
 :- use_module(library(solution_sequences), [limit/2]).  % imported: autoloading reads the library index
 :- use_module(foreign, [py_bridge/2, term_data/2]).
 :- use_module(spar_defaults, [default_option/2]).
-:- use_module(partial_plan, [partial_instances/2]).
+:- use_module(partial_plan, [partial_instances/3]).
 :- use_module('../kb/templates/sensing', []).
 :- use_module('../kb/templates/actions', []).
 
@@ -71,8 +71,9 @@ phase2(Problem, Partial, Options, Result) :-
     option(max_instances(Cap), Options, Cap0),
     must_be(positive_integer, Cap),
     State = best(none, inf, 0, false),
-    (   once(( limit(Cap, partial_instances(Partial, Instance)),
-               examine(Problem, Instance, State, Aug),
+    Nogoods = nogoods([], 0),
+    (   once(( limit(Cap, partial_instances(Partial, Nogoods, Instance)),
+               examine(Problem, Instance, State, Nogoods, Aug),
                arg(2, Aug, 0)
              ))
     ->  true
@@ -86,12 +87,12 @@ phase2(Problem, Partial, Options, Result) :-
     ;   Result = ur(Best, Examined, Cap, Complete)
     ).
 
-examine(Problem, Instance, State, Aug) :-
+examine(Problem, Instance, State, Nogoods, Aug) :-
     arg(3, State, N0), N is N0 + 1, nb_setarg(3, State, N),
     instance_steps(Instance, Steps, Bindings),
     instance_sources(Instance, Sources),
     arg(2, State, BestE),
-    check_instance(Problem, Steps, Sources, BestE, aug(S, E, V, R, C, G)),
+    check_instance(Problem, Steps, Sources, BestE, Nogoods, aug(S, E, V, R, C, G)),
     Aug = aug(S, E, V, R, C, G, Bindings),
     (   (BestE == inf ; E < BestE)
     ->  nb_setarg(1, State, Aug), nb_setarg(2, State, E)
@@ -142,13 +143,23 @@ action_sources(action(Id, _, preconditions(Ops, _), _, _), Id-Pairs) :-
 %   error transformation is not the trans(Dx, Dy, Dz) rotz(Theta) Python
 %   implements.
 
-check_instance(Problem, Steps, Sources, Bound, aug(Final, Errors, Verifs, Recovs, Verdicts, Geometry)) :-
+check_instance(Problem, Steps, Sources, Bound, Augmented) :-
+    check_instance(Problem, Steps, Sources, Bound, none, Augmented).
+
+%   check_instance(+Problem, +Steps, +Sources, +Bound, +Nogoods, -Augmented):
+%   as check_instance/5; a run that stops where Python can say what any
+%   instance meeting the same conditions would stop at (its nogood) adds
+%   ng(Id, Action, GId, GAction, Done, NotDone) to Nogoods (nogoods(List, _),
+%   nb_setarg/3; none: not kept), which partial_instances/3 reads.
+
+check_instance(Problem, Steps, Sources, Bound, Nogoods,
+               aug(Final, Errors, Verifs, Recovs, Verdicts, Geometry)) :-
     must_be(atom, Problem),
     must_be(list, Steps),
     must_be(list, Sources),
     sources_dict(Sources, From),
     sensing_data(Sensing),
-    Ctx = ctx(Problem, From, Sensing),
+    Ctx = ctx(Problem, From, Sensing, Nogoods),
     run(Ctx, Steps, [], Result),
     remedy_loop(Ctx, Steps, [], Result, Bound, Final, Failed, Verdicts, Geometry),
     length(Failed, Errors),
@@ -163,7 +174,7 @@ failed_step(Steps, Id, step(Id, A)) :-
 %   -Verdicts, -Geometry): Result is the run of Steps (run/4). At its first
 %   failing action not yet given up, try the remedies in order; an action
 %   no remedy helps is given up (it counts as an error) and the run goes on
-%   past it. Ctx is ctx(Problem, Sources, Sensing) (sources_dict/2,
+%   past it. Ctx is ctx(Problem, Sources, Sensing, Nogoods) (sources_dict/2,
 %   sensing_data/1).
 
 remedy_loop(_, Steps, GivenUp, ok(Verdicts, Geometry), _, Steps, Failed, Verdicts, Geometry) :-
@@ -188,12 +199,30 @@ remedy_loop(Ctx, Steps, GivenUp, failed(Step, Before), Bound, Final, Failed, Ver
 %   the steps before it. Fails if a geometric precondition fails (the
 %   instance cannot be executed).
 
-run(ctx(Problem, From, Sensing), Steps, GivenUp, Result) :-
+run(ctx(Problem, From, Sensing, Nogoods), Steps, GivenUp, Result) :-
     maplist(step_dict, Steps, Dicts),
     maplist(step_id_text, GivenUp, GivenUpText),
     py_bridge(evaluate(Problem, Dicts, From, GivenUpText, Sensing), Eval),
+    keep_nogood(Nogoods, Eval, Steps),
     atom_string(Status, Eval.status),
     eval_result(Status, Problem, Eval, Steps, Result).
+
+%   keep_nogood(+Nogoods, +Eval, +Steps): add the run's nogood (Python's
+%   phase2.nogood, ids as strings) to Nogoods as ng/6 with the actions of
+%   its two steps in Steps; nothing without one or without a store.
+keep_nogood(Nogoods, Eval, Steps) :-
+    (   Nogoods = nogoods(List0, _),
+        get_dict(nogood, Eval, NG),
+        is_dict(NG),
+        atom_string(Id, NG.step),
+        atom_string(GId, NG.grasp_step),
+        memberchk(step(Id, A), Steps),
+        memberchk(step(GId, GA), Steps)
+    ->  maplist([S, X]>>atom_string(X, S), NG.done, Done),
+        maplist([S, X]>>atom_string(X, S), NG.not_done, NotDone),
+        nb_setarg(1, Nogoods, [ng(Id, A, GId, GA, Done, NotDone)|List0])
+    ;   true
+    ).
 
 %   eval_result(+Status, +Problem, +Eval, +Steps, -Result): Eval holds each
 %   step's id and verdicts; a run that went through also its token (the

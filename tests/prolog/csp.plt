@@ -70,4 +70,17 @@ test(ac3_wipeout, fail) :-
     list_to_assoc([a-b-[1/3]], Arcs),
     ac3(net(Nodes, Arcs), _).
 
+%   solution/3 gives exactly the solutions of solution/2 whose labels its
+%   test allows, in the same order.
+
+no_v1_2(v1, L) :- L \== 2.
+no_v1_2(V, _) :- V \== v1.
+
+test(solutions_filtered, Got == Want) :-
+    fig15(Net),
+    findall(S, solution(Net, no_v1_2, S), Got),
+    findall(S, ( solution(Net, S), \+ memberchk(v1-2, S) ), Want),
+    findall(S, solution(Net, S), All),
+    length(All, NA), length(Want, NW), NW < NA.
+
 :- end_tests(csp_fig15).

@@ -77,6 +77,30 @@ test(linearisation_total_order, Ls == [[action_4, action_3, action_2, action_1]]
            action_4-action_3], G),
     findall(L, linearisation(G, L), Ls).
 
+%   linearisation/3 gives exactly the linearisations of linearisation/2
+%   none of whose prefixes its test refuses, in the same order: here no
+%   d right after b, and no c once a and d are both done.
+
+refused(Done, V) :-
+    (   last(Done, b), V == d
+    ;   V == c, memberchk(a, Done), memberchk(d, Done)
+    ).
+
+allowed(Done, V) :- \+ refused(Done, V).
+
+prefixes_allowed(L) :-
+    \+ ( append(Done, [V|_], L), refused(Done, V) ).
+
+test(linearisations_pruned, Pruned == Filtered) :-
+    empty_ordering(G0),
+    foldl(ordering_add_action, [a, b, c, d], G0, G1),
+    prior_to(a, c, G1, G),
+    findall(L, linearisation(G, allowed, L), Pruned),
+    findall(L, ( linearisation(G, L), prefixes_allowed(L) ), Filtered),
+    Filtered \== [],
+    findall(L, linearisation(G, L), All),
+    length(All, NA), length(Filtered, NF), NF < NA.
+
 test(type_error, [error(type_error(atom, 1))]) :-
     empty_ordering(G),
     prior_to(1, a, G, _).

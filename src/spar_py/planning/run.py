@@ -129,8 +129,9 @@ class PlanRun:
                  given_up: Sequence[str] = (), sensing: dict[str, dict[str, Any]] | None = None) -> dict[str, Any]:
         """Phase 2's door: run a whole plan instance (phase2.evaluate with the run's motion
         options), log its refusals and motion failure, and return what Prolog reads:
-        ``{"status", "at", "steps": [{"id", "verdicts"}], "token"}`` (``token`` names the run's
-        geometry and motions, kept here; only for a run that went through)."""
+        ``{"status", "at", "steps": [{"id", "verdicts"}], "token", "nogood"}`` (``token`` names the
+        run's geometry and motions, kept here; only for a run that went through; ``nogood`` only
+        for an infeasible one phase2.nogood can generalise)."""
         log = self.world.log
         ev = phase2.evaluate(self.world.cache, steps, sources, given_up, sensing, self.world.options.motion)
         for what, pairs in ev.refusals:
@@ -146,6 +147,8 @@ class PlanRun:
                     self.infeasible.append(why)
         out: dict[str, Any] = {"status": ev.status, "at": ev.at,
                                "steps": [{"id": r["id"], "verdicts": r["verdicts"]} for r in ev.steps]}
+        if ev.nogood is not None:  # what any instance meeting the same conditions fails at (phase2.nogood)
+            out["nogood"] = ev.nogood
         if ev.status != "ok":
             return out
         geo = {r["id"]: {**r["geometry"], "poses": r["poses"], "held": r["held"],

@@ -74,7 +74,8 @@ class Access:
 
 def hand_access(cell: Cell, cache: CellCache) -> Access:
     """:class:`Access` for the product cell ``cell`` (whose kept answers are ``cache``). Empty
-    without a product, meshes, or the base's cell position."""
+    without a product, meshes, or one cell position of the base; a part with several initial
+    positions (a stock) is picked where any of them lies."""
     from spar_py.core.units import mm_per
     from spar_py.world.grasp_report import above_table, held_grasps, seat_order
     from spar_py.world.robots import GripperGeometry
@@ -84,13 +85,13 @@ def hand_access(cell: Cell, cache: CellCache) -> Access:
         return Access()
     gripper = cell.robot.gripper or GripperGeometry.default(cell.finger_separation, mm_per(cell.unit))
     held = held_grasps(product, gripper, cell.unit)
-    at: dict[str, np.ndarray] = {}
+    at: dict[str, list[np.ndarray]] = {}  # an object's every initial position (a stock of parts)
     for p in cell.positions.values():
-        at.setdefault(p.obj, np.asarray(p.T, float))
-    if held is None or product.base not in at:
+        at.setdefault(p.obj, []).append(np.asarray(p.T, float))
+    if held is None or len(at.get(product.base, ())) != 1:
         return Access()
     order, before = seat_order(product)
-    W = at[product.base] @ np.linalg.inv(np.asarray(product.parts[product.base].pose, float))
+    W = at[product.base][0] @ np.linalg.inv(np.asarray(product.parts[product.base].pose, float))
     if not _built_in_place(product, W):
         return Access()
     placed = {q: W @ np.asarray(pp.pose, float) for q, pp in product.parts.items()}
@@ -110,8 +111,8 @@ def hand_access(cell: Cell, cache: CellCache) -> Access:
             blocked[part] = frozenset(label for label in model.grasps if label not in via and label not in ok)
         if part not in at:
             continue
-        seated = [g for g in above_table(seat, gripper, at[part], cell.unit, margin)
-                  if arm_clear(part, at[part], g, {})[0]]
+        seated = [g for g in seat if any(above_table([g], gripper, T, cell.unit, margin) and
+                                         arm_clear(part, T, g, {})[0] for T in at[part])]
         if not seated:
             continue  # no grasp at all: the grasp report names what it needs, no order helps
         for q in sorted(product.parts):
@@ -122,8 +123,10 @@ def hand_access(cell: Cell, cache: CellCache) -> Access:
                 continue
             pairs = list(dict.fromkeys(p for _, ps in got for p in ps if q in p))[:PAIRS_SAID]
             said = ", ".join(f"{a}-{b}" for a, b in pairs)
-            out.append(Precedence(part, q, f"{q} in place blocks the arm at all {len(seated)} grasps that seat "
-                                           f"{part}" + (f": {said}" if said else "")))
+            n = len(seated)
+            out.append(Precedence(part, q, f"{q} in place blocks the arm at {'the' if n == 1 else f'all {n}'} "
+                                           f"grasp{'s' if n != 1 else ''} picking and seating {part}"
+                                           + (f": {said}" if said else "")))
     return Access(blocked, tuple(out))
 
 
