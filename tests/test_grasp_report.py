@@ -218,3 +218,21 @@ def test_layout_lays_each_part_where_the_report_reaches_a_grasp(cell):
     r = grasp_report(c.product, c.robot.gripper, c.unit, c.robot, at, margin=c.robot.margin)
     assert r is not None
     assert all(row.at_cell > 0 for row in r.parts), [(row.part, row.at_cell) for row in r.parts]
+
+
+@pytest.mark.parametrize("name, regrasp", [("beam", False), ("plumbers_block", True)])
+def test_a_regrasp_is_offered_only_where_one_would_seat_the_part(name, regrasp):
+    """A part reached where the cell lays it but seated by none of those grasps: the report asks the
+    grasps free in any stable pose too. The beam's bar1 has none that seats it (two put a finger
+    in post3, the others are out of reach), so no regrasp is offered; the plumber's block's bolt1
+    has some, so one is."""
+    from spar_py.planning.planner import Planner
+
+    plan = Planner().plan(ROOT / "kb" / "problems" / f"fabrica_{name}.yaml")
+    gr = plan.reason["grasps"]
+    row = next(r for r in gr["parts"] if r["part"] == gr["part"])
+    assert row["held"] == 0
+    assert (row["seat_any"] > 0) is regrasp
+    assert ("regrasp of" in gr["needs"]) is regrasp
+    if not regrasp:
+        assert "no regrasp on the table helps" in gr["needs"] and "post3" in gr["needs"]

@@ -97,6 +97,11 @@ class MateGrasps:
     arm_pairs: tuple[str, ...] = ()
     held: int = -1
     seat_pairs: tuple[str, ...] = ()
+    #: When ``held`` is 0: of the ``pickup`` grasps (free in some stable pose), those reached clear
+    #: seating the part where the cell builds the product (what a regrasp on the table could use),
+    #: and the pairs the others collide in (out of reach: "no IK"); -1 when not asked.
+    seat_any: int = -1
+    seat_any_pairs: tuple[str, ...] = ()
 
     def to_json(self) -> dict[str, Any]:
         """As plain data (one row of the plan's JSON ``reason.grasps.parts``)."""
@@ -105,7 +110,8 @@ class MateGrasps:
                 "at_cell": self.at_cell, "faces": list(self.faces), "hits": list(self.hits),
                 "poses": self.poses, "pose_ok": list(self.pose_ok[:POSES_SAID]), "cell_pose": self.cell_pose,
                 "at_clear": self.at_clear, "arm_pairs": list(self.arm_pairs), "held": self.held,
-                "seat_pairs": list(self.seat_pairs)}
+                "seat_pairs": list(self.seat_pairs), "seat_any": self.seat_any,
+                "seat_any_pairs": list(self.seat_any_pairs)}
 
 
 @dataclass
@@ -300,7 +306,8 @@ def _row(product: Product, part: str, meshes: Mapping[str, Any], placed: set[str
         if got.any():
             reach |= {gr.label for gr, ok in zip(up, got) if ok}
             pose_ok.append(_pose_text(Tp))
-    reached, at_cell, at_clear, held, cell_pose = -1, -1, -1, -1, ""
+    reached, at_cell, at_clear, held, cell_pose, seat_any = -1, -1, -1, -1, "", -1
+    seat_any_pairs: list[str] = []
     arm_pairs: list[str] = []
     seat_pairs: list[str] = []
     if robot is not None and T_cell is not None:
@@ -323,10 +330,16 @@ def _row(product: Product, part: str, meshes: Mapping[str, Any], placed: set[str
                 seat = [(gr, *arm_clear(part, W @ P, gr, built)) for gr in picked]
                 held = sum(1 for _, c, _ in seat if c)
                 seat_pairs = _pair_counts([pairs for _, _, pairs in seat])
+                if held == 0:  # could a regrasp on the table serve? the grasps free in any pose, seated
+                    pool = [gr for gr in free if gr.label in pick]
+                    anyw = [(gr, *arm_clear(part, W @ P, gr, built)) for gr in pool]
+                    seat_any = sum(1 for _, c, _ in anyw if c)
+                    seat_any_pairs = _pair_counts([pairs or [("no", "IK")] for _, c, pairs in anyw if not c])
     faces = tuple(sorted({str(f) for gr in own for f in gr.gfaces})) if not usable else ()
     return MateGrasps(part, g.parent, name, len(own), len(usable), len(clear), len(pick), reached, at_cell, faces,
                       tuple(sorted(hits)) if not clear else (), len(Ts), tuple(pose_ok), cell_pose, at_clear,
-                      tuple(arm_pairs[:PAIRS_SAID]), held, tuple(seat_pairs[:PAIRS_SAID]))
+                      tuple(arm_pairs[:PAIRS_SAID]), held, tuple(seat_pairs[:PAIRS_SAID]), seat_any,
+                      tuple(seat_any_pairs[:PAIRS_SAID]))
 
 
 def above_table(grasps: list[Grasp], gripper: Any, T_part: np.ndarray, unit: str, margin: float = 0.0
@@ -429,7 +442,14 @@ def _needs(r: MateGrasps) -> str:
     if r.held == 0:
         how = (f"collide seating it where the cell builds the product: {', '.join(r.seat_pairs)}" if r.seat_pairs
                else "are out of the arm's reach seating it where the cell builds the product")
-        return (f"a regrasp of {r.part} on the table, or the product built elsewhere (the {r.at_clear} grasps usable "
+        if r.seat_any == 0:  # no pose on the table offers a grasp that seats it: a regrasp cannot help
+            said = ", ".join(p.replace("no-IK", "out of reach") for p in r.seat_any_pairs)
+            return (f"the product built elsewhere, or grasps of {r.part} that seat it clear (none of the "
+                    f"{r.pickup} grasps usable for {r.mate} free at pickup in some stable pose is reached clear "
+                    f"seating it where the cell builds the product: {said}; so no regrasp on the table helps)")
+        regrasp = (f"a regrasp of {r.part} on the table ({r.seat_any} of its grasps free at pickup in some stable "
+                   f"pose seat it clear)" if r.seat_any > 0 else f"a regrasp of {r.part} on the table")
+        return (f"{regrasp}, or the product built elsewhere (the {r.at_clear} grasps usable "
                 f"for {r.mate} the arm reaches where the cell lays {r.part} {how})")
     return ""
 
