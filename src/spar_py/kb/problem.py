@@ -658,7 +658,7 @@ def load_problem(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> Cell:
         from spar_py.world.access import with_hand_access  # the IK and the collision scene: products only
         from spar_py.world.run import CellCache
 
-        with_hand_access(cell, CellCache(cell))
+        with_hand_access(cell, CellCache(cell), layout.held if layout is not None else None)
     mnode = root.key("motion", required=False)
     if mnode is not None and not isinstance(mnode.value, bool):
         raise mnode.fail("true or false (plan the motions between the end-points)", show(mnode.value))

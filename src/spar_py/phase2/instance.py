@@ -199,6 +199,8 @@ def _first_parts(cell: Cell, steps: list[Step], src: dict[str, dict[str, str]]) 
 #: so a step's result can be reused (its uncertainty variables stay in the registry they
 #: were made in).
 MEMO_LIMIT = 4096
+#: Entries of the cell cache's table of a squeezed part's reach arc at its position (:func:`_squeeze`).
+SQUEEZE_ARCS = 64
 
 
 def _frozen(d: Any) -> Any:
@@ -1064,7 +1066,10 @@ def _squeeze(world: World, s: Step, early: bool = False) -> tuple[list[dict], Wo
     obj = s["args"][0]
     cell = world.cell
     o = world.unc.obj(obj)
-    arc = reachable_pairs(world.cache, obj, list(cell.objects[obj].grasps), _position_label(cell, obj, o))
+    labels = tuple(_position_label(cell, obj, o))
+    # the arc is the cell's alone (no other part in it): kept, a plan squeezes one part many times
+    arc = world.cache.table("phase2.squeeze_arcs", SQUEEZE_ARCS).get_or_compute(
+        (obj, labels), lambda: reachable_pairs(world.cache, obj, list(cell.objects[obj].grasps), list(labels)))
     refused: Refusals = tuple((r.what, r.pairs) for r in arc.refusals)
     manip = world.unc.manipulator_error()
     for label in (g for g, _ in arc.pairs):

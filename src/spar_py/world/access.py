@@ -72,8 +72,9 @@ class Access:
     precedence: tuple[Precedence, ...] = ()
 
 
-def hand_access(cell: Cell, cache: CellCache) -> Access:
-    """:class:`Access` for the product cell ``cell`` (whose kept answers are ``cache``). Empty
+def hand_access(cell: Cell, cache: CellCache, held: Mapping[str, frozenset[str]] | None = None) -> Access:
+    """:class:`Access` for the product cell ``cell`` (whose kept answers are ``cache``; ``held``: the
+    grasp report's held_grasps for the robot's gripper when the caller has them, the layout's). Empty
     without a product, meshes, or one cell position of the base; a part with several initial
     positions (a stock) is picked where any of them lies."""
     from spar_py.core.units import mm_per
@@ -84,7 +85,8 @@ def hand_access(cell: Cell, cache: CellCache) -> Access:
     if product is None or not product.goals:
         return Access()
     gripper = cell.robot.gripper or GripperGeometry.default(cell.finger_separation, mm_per(cell.unit))
-    held = held_grasps(product, gripper, cell.unit)
+    if held is None or cell.robot.gripper is None:
+        held = held_grasps(product, gripper, cell.unit)
     at: dict[str, list[np.ndarray]] = {}  # an object's every initial position (a stock of parts)
     for p in cell.positions.values():
         at.setdefault(p.obj, []).append(np.asarray(p.T, float))
@@ -142,10 +144,11 @@ def _built_in_place(product: Product, W: np.ndarray) -> bool:
     return all(-(R @ np.asarray(i.direction, float))[2] >= limit for i in insertions(product))
 
 
-def with_hand_access(cell: Cell, cache: CellCache) -> None:
-    """Give ``cell`` its :func:`hand_access`: its product (a copy: a loaded product may be shared)
-    gains the precedences, the cell the blocked grasps (``Cell.blocked_grasps``)."""
-    acc = hand_access(cell, cache)
+def with_hand_access(cell: Cell, cache: CellCache, held: Mapping[str, frozenset[str]] | None = None) -> None:
+    """Give ``cell`` its :func:`hand_access` (``held`` as there): its product (a copy: a loaded
+    product may be shared) gains the precedences, the cell the blocked grasps
+    (``Cell.blocked_grasps``)."""
+    acc = hand_access(cell, cache, held)
     cell.blocked_grasps = dict(acc.blocked)
     if acc.precedence and cell.product is not None:
         cell.product = replace(cell.product, precedence=tuple(cell.product.precedence) + acc.precedence)

@@ -75,6 +75,8 @@ class Layout:
 
     placements: tuple[PartPlacement, ...]
     build_spot: tuple[float, float]
+    #: A product's grasps each part was laid out for (world.grasp_report.held_grasps), or None.
+    held: Mapping[str, frozenset[str]] | None = None
 
 
 def part_footprint(model: ObjectModel, R: np.ndarray) -> np.ndarray:
@@ -409,6 +411,7 @@ def layout_product(product: Product, robot, unit: str) -> Layout:
     b = models[product.base]
     models[product.base] = replace(b, poses={k: v for k, v in b.poses.items() if k not in sub})
     held = held_grasps(product, robot.gripper, unit) if robot.gripper is not None else None
-    return layout_parts(models, {p: np.asarray(pp.pose, float) for p, pp in product.parts.items()},
-                        product.base, robot, unit, f"product {product.name}", insertions,
-                        held if held is not None else mate_usable_grasps(product, robot.gripper, unit))
+    out = layout_parts(models, {p: np.asarray(pp.pose, float) for p, pp in product.parts.items()},
+                       product.base, robot, unit, f"product {product.name}", insertions,
+                       held if held is not None else mate_usable_grasps(product, robot.gripper, unit))
+    return replace(out, held=held)
