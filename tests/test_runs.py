@@ -177,7 +177,7 @@ def test_a_phase_2_no_plan_planned_again_explains_itself_again() -> None:
 def test_a_kept_phase_2_step_logs_its_refusal_in_every_run() -> None:
     """Phase 2's door: a pickup whose every joint solution hits the shelf, evaluated by two runs
     of one cell (the second answered from the cell's kept step): each run's log names the
-    refusal and its pair, and the run's answer to Prolog carries no geometry."""
+    refusal and its pair, and the run's answer to Prolog carries no geometry, only the nogood."""
     cache = CellCache(load_problem(PROBLEMS / "collision_no_plan.yaml"))
     steps = [{"id": "action_1", "name": "pickup", "args": ["peg", "p1G10"]}]
     answers, logs = [], []
@@ -186,5 +186,7 @@ def test_a_kept_phase_2_step_logs_its_refusal_in_every_run() -> None:
         answers.append(run.evaluate(steps))
         logs.append([r.text() for r in run.world.log.refusals()])
     assert answers[0] == answers[1] and answers[0]["status"] == "infeasible"
-    assert set(answers[0]) == {"status", "at", "steps"} and set(answers[0]["steps"][0]) == {"id", "verdicts"}
+    assert set(answers[0]) == {"status", "at", "steps", "nogood"} and set(answers[0]["steps"][0]) == {"id", "verdicts"}
+    # the shelf is an obstacle, not a part: the pickup with that grasp fails whatever else is done
+    assert answers[0]["nogood"] == {"step": "action_1", "grasp_step": "action_1", "done": [], "not_done": []}
     assert logs[0] == logs[1] == ["no collision-free IK for pickup(peg, p1G10): tool_mount-shelf"]
