@@ -53,7 +53,10 @@
 %   does.
 
 csp(VarSet, Constraints, Result) :-
-    csp(VarSet, Constraints, [_, _]>>true, Result).
+    csp(VarSet, Constraints, any_label, Result).
+
+%   any_label(+Var, +Label): every label is allowed (csp/3, solution/2).
+any_label(_, _).
 
 csp(VarSet, Constraints, Allowed, Result) :-
     arcs_by_var(Constraints, ByVar),
@@ -171,7 +174,7 @@ consistent(Net) :-
 %   ==
 
 solution(Net, Assignment) :-
-    solution(Net, [_, _]>>true, Assignment).
+    solution(Net, any_label, Assignment).
 
 :- meta_predicate solution(+, 2, -).
 

@@ -355,9 +355,10 @@ ordering_actions(G, Ids) :-
 %   ==
 
 linearisation(G, Ids) :-
-    ordering_graph(G, U),
-    predecessors(U, Preds),
-    linearise(Preds, Ids).
+    linearisation(G, any_next, Ids).
+
+%   any_next(+Done, +V): every action may go next (linearisation/2).
+any_next(_, _).
 
 :- meta_predicate linearisation(+, 2, -).
 
@@ -372,6 +373,10 @@ linearisation(G, Allowed, Ids) :-
     ordering_graph(G, U),
     predecessors(U, Preds),
     linearise(Preds, Allowed, [], Ids).
+
+%   linearise(+Preds, :Allowed, +Done, -Ids): a source V (no predecessor
+%   left, in standard order) that call(Allowed, Done, V) lets go next after
+%   Done, then a linearisation of Preds without V.
 
 linearise([], _, _, []) :- !.
 linearise(Preds, Allowed, Done, [V|Vs]) :-
@@ -400,15 +405,6 @@ take_key([K-X|Arcs0], V, [X|Xs], Arcs) :-
     !,
     take_key(Arcs0, V, Xs, Arcs).
 take_key(Arcs, _, [], Arcs).
-
-%   linearise(+Preds, -Ids): a source V (no predecessor left), in standard
-%   order, then a linearisation of Preds without V.
-
-linearise([], []) :- !.
-linearise(Preds, [V|Vs]) :-
-    member(V-[], Preds),
-    delete_vertex(Preds, V, Preds1),
-    linearise(Preds1, Vs).
 
 delete_vertex([], _, []).
 delete_vertex([W-Ps0|Preds0], V, Preds) :-

@@ -22,8 +22,8 @@
 :- use_module(library(apply)).
 :- use_module(library(pairs)).
 :- use_module(library(yall)).
-:- use_module(cms, [cms_solution/2, cms_solution/3, cms_nodes/2, cms_pruned_nodes/2, cms_arcs/2]).
-:- use_module(ordering, [ordering_arcs/2, linearisation/2, linearisation/3, necessarily_before/3]).
+:- use_module(cms, [cms_solution/3, cms_nodes/2, cms_pruned_nodes/2, cms_arcs/2]).
+:- use_module(ordering, [ordering_arcs/2, linearisation/3, necessarily_before/3]).
 :- use_module(goals, [print_action/1]).
 :- use_module(foreign, [term_data/2]).
 :- use_module(kb, []).
@@ -59,15 +59,8 @@ partial_network(partial(_, _, Net, _), Net).
 %   solution that gives a separated pair sep(D, Cond) the same labels
 %   (D would clobber Cond after all) is skipped.
 
-partial_instances(partial(Actions, Order, Net, Sat), instance(Steps, Bindings)) :-
-    cms_solution(Net, Assignment),
-    forall(member(sep(D, Cond), Sat),
-           ( substitute(Assignment, D, D1),
-             substitute(Assignment, Cond, Cond1),
-             D1 \= Cond1 )),
-    linearisation(Order, Ids),
-    maplist(instance_step(Actions, Assignment), Ids, Steps),
-    maplist([V-L, V=L]>>true, Assignment, Bindings).
+partial_instances(Partial, Instance) :-
+    partial_instances(Partial, nogoods([], 0), Instance).
 
 %!  partial_instances(+Partial, +Nogoods, -Instance) is nondet.
 %

@@ -159,35 +159,39 @@ def _outside_count(p, g, peg: str, hole: str, origin: np.ndarray, direction: np.
     return own
 
 
-def test_through_hole_entered_from_its_far_mouth():
-    """Fabrica's car: wheel4 enters the body's through hole2 from the end away from its declared
-    mouth (along +y in the body's frame, the mouth declared at y = +25 mm facing -y). Its usable
-    grasps are those keeping the whole hand on its own side of the far mouth (body y <= -25 mm),
-    counted here from the gripper's boxes alone."""
-    p = load_product(ROOT / "kb" / "products" / "fabrica" / "car_pressfit.yaml", "mm")
+def _usable_counted_at_the_mouth(product: str, part: str, parent: str, mouth, mate: str) -> None:
+    """The report's usable count for ``part``'s mate is the count of grasps keeping the whole hand
+    on its own side of the mouth plane ``mouth(p)`` = (point, normal), counted from the gripper's
+    boxes alone, and it is not zero."""
+    p = load_product(ROOT / "kb" / "products" / "fabrica" / f"{product}.yaml", "mm")
     g = _gripper()
-    own = _outside_count(p, g, "wheel4", "body", np.array([0.0, -25.0, 0.0]), np.array([0.0, 1.0, 0.0]))
+    own = _outside_count(p, g, part, parent, *mouth(p))
     assert own > 0
     r = grasp_report(p, g, "mm")
     assert r is not None
-    row = next(m for m in r.parts if m.part == "wheel4")
-    assert row.mate == "wheel4.peg1->body.hole2" and row.usable == own
+    row = next(m for m in r.parts if m.part == part)
+    assert row.mate == mate and row.usable == own
+
+
+def test_through_hole_entered_from_its_far_mouth():
+    """Fabrica's car: wheel4 enters the body's through hole2 from the end away from its declared
+    mouth (along +y in the body's frame, the mouth declared at y = +25 mm facing -y). Its usable
+    grasps are those keeping the whole hand on its own side of the far mouth (body y <= -25 mm)."""
+    _usable_counted_at_the_mouth("car_pressfit", "wheel4", "body",
+                                 lambda p: (np.array([0.0, -25.0, 0.0]), np.array([0.0, 1.0, 0.0])),
+                                 "wheel4.peg1->body.hole2")
 
 
 def test_duct_upper_usable_grasps_counted_at_the_mouth():
     """Fabrica's duct: the upper shell's grasps usable for upper.peg1->lower.hole1 are those keeping
-    every corner of the hand on its own side of the plane of the hole's mouth when seated
-    (computed here from the gripper's boxes and the hole's axis alone). The grasps across its
-    shell from above are among them, so the report's count is that count and is not zero."""
-    p = load_product(ROOT / "kb" / "products" / "fabrica" / "duct.yaml", "mm")
-    g = _gripper()
-    hf = p.parts["lower"].model.feature_named("hole1").geometry
-    own = _outside_count(p, g, "upper", "lower", hf.origin, hf.direction)
-    assert own > 0
-    r = grasp_report(p, g, "mm")
-    assert r is not None
-    row = next(m for m in r.parts if m.part == "upper")
-    assert row.mate == "upper.peg1->lower.hole1" and row.usable == own
+    every corner of the hand on its own side of the plane of the hole's mouth when seated (the
+    hole's axis alone). The grasps across its shell from above are among them, so the count is
+    not zero."""
+    def mouth(p):
+        hf = p.parts["lower"].model.feature_named("hole1").geometry
+        return hf.origin, hf.direction
+
+    _usable_counted_at_the_mouth("duct", "upper", "lower", mouth, "upper.peg1->lower.hole1")
 
 
 def test_hand_above_table_keeps_the_margin():

@@ -111,15 +111,12 @@ def _mate_grasps(cell: Cell) -> list[tuple]:
         pf, hf = _feature_geometry(cell.objects[peg], faces[0]), _feature_geometry(cell.objects[hole], faces[1])
         shown = set(faces[0]) if isinstance(faces[0], list) else set()
         blocked = cell.blocked_grasps.get(peg, frozenset())
-        if pf is None or hf is None or hf.kind != "hole":  # the rule by ofaces, less what hand access rules out
-            if not blocked:
-                continue
-            usable = [gr.label for gr in cell.objects[peg].grasps.values()
-                      if not shown & set(gr.ofaces) and gr.label not in blocked]
-        else:
-            usable = [gr.label for gr in cell.objects[peg].grasps.values()
-                      if (mate_grasp_usable(gr.T, gr.width, gripper, cell.transforms[ta], hf, cell.unit)
-                          if pf.name in gr.gfaces else not shown & set(gr.ofaces)) and gr.label not in blocked]
+        shaft = pf is not None and hf is not None and hf.kind == "hole"
+        if not (shaft or blocked):
+            continue  # the planner's rule by ofaces stands as it is
+        usable = [gr.label for gr in cell.objects[peg].grasps.values() if gr.label not in blocked
+                  and (mate_grasp_usable(gr.T, gr.width, gripper, cell.transforms[ta], hf, cell.unit)
+                       if shaft and pf.name in gr.gfaces else not shown & set(gr.ofaces))]
         fact = ("mate_grasps", ta, peg, usable)
         if fact not in out:
             out.append(fact)

@@ -554,14 +554,14 @@ def evaluate(cache: CellCache, steps: Sequence[Step], sources: Sources | None = 
     refused: list[tuple[str, tuple[tuple[str, str], ...]]] = []
     worlds = [world]
     seen: dict[int, tuple[ur.ObjectState, list[list[float]]]] = {}
-    for s in steps:
+    for i, s in enumerate(steps):
         checks, world, geo = step(world, s, early=s["id"] not in skip)
         worlds.append(world)
         refused += world.refused
         out.append({"id": s["id"], "verdicts": checks, "geometry": geo,
                     "poses": poses(world, seen), "held": world.unc.holding})
         if not _all_satisfied(checks, "geometric"):
-            return Evaluation("infeasible", s["id"], out, refused, nogood=nogood(worlds[-2], world, steps, s, checks))
+            return Evaluation("infeasible", s["id"], out, refused, nogood=nogood(worlds[-2], world, steps, i, checks))
         if not _all_satisfied(checks, "uncertainty") and s["id"] not in skip:
             return Evaluation("failed", s["id"], out, refused)
     out = _refined(cache, out, worlds)
@@ -578,9 +578,9 @@ def evaluate(cache: CellCache, steps: Sequence[Step], sources: Sources | None = 
     return Evaluation("ok", None, out, refused)
 
 
-def nogood(before: World, after: World, steps: Sequence[Step], s: Step, checks: list[dict[str, Any]]
+def nogood(before: World, after: World, steps: Sequence[Step], at: int, checks: list[dict[str, Any]]
            ) -> dict[str, Any] | None:
-    """What makes step ``s`` of the instance ``steps`` infeasible, as a condition on any plan
+    """What makes step ``steps[at]`` (``s``) of the instance ``steps`` infeasible, as a condition on any plan
     instance of the same partial plan, for phase 2's instance search (prolog/uncertainty.pl): the
     step ``step`` with the grasp its pickup ``grasp_step`` bound, executed after every step of
     ``done`` and before every step of ``not_done``, fails the same way. None unless that is sure.
@@ -593,18 +593,15 @@ def nogood(before: World, after: World, steps: Sequence[Step], s: Step, checks: 
     body's root, with the root not yet picked. Its world pose is then the same, the tool pose is
     (the grasp and the mate are in the steps' terms), and a part the refusals do not name is
     no obstacle of any solution; more parts elsewhere never free one."""
+    s = steps[at]
     name = s["name"]
-    if name not in ("pickup", "assemble") or any(t["name"] == "putdown" for t in steps):
-        return None
-    cell = before.cell
-    if any(len([p for p in cell.positions.values() if p.obj == o]) > 1 for o in cell.objects):
+    if name not in ("pickup", "assemble") or any(t["name"] == "putdown" for t in steps) or _stock(before.cell):
         return None
     bad = [c for c in checks if c["kind"] == "geometric" and not c["satisfied"]]
     if not bad or any(c.get("constraint") != "reachable" for c in bad):
         return None
     unc = before.unc
     obj = str(s["args"][0])
-    at = next(i for i, t in enumerate(steps) if t is s)
     done_before = steps[:at]
     picks = [t for t in done_before if t["name"] == "pickup" and str(t["args"][0]) == obj]
     grasp_step = s["id"] if name == "pickup" else (picks[-1]["id"] if picks else None)

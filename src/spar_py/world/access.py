@@ -85,7 +85,7 @@ def hand_access(cell: Cell, cache: CellCache, held: Mapping[str, frozenset[str]]
     if product is None or not product.goals:
         return Access()
     gripper = cell.robot.gripper or GripperGeometry.default(cell.finger_separation, mm_per(cell.unit))
-    if held is None or cell.robot.gripper is None:
+    if held is None:
         held = held_grasps(product, gripper, cell.unit)
     at: dict[str, list[np.ndarray]] = {}  # an object's every initial position (a stock of parts)
     for p in cell.positions.values():

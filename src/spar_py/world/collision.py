@@ -53,6 +53,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -129,6 +130,13 @@ class Body:
     #: A body of many vertices (over BOX_FIRST): the 8 corners (k, 3, frame coordinates) of a box
     #: holding them, which the support bound tries first (:meth:`SceneState._support_bounds`).
     corners: np.ndarray | None = field(default=None, repr=False)
+
+    @cached_property
+    def extent(self) -> float:
+        """The largest distance from the frame origin of a vertex or a box corner (frame
+        coordinates): the support bound's rounding allowance scales with it."""
+        pts = self.points if self.corners is None else np.concatenate([self.points, self.corners])
+        return float(np.sqrt((pts * pts).sum(axis=1)).max())
 
     @property
     def radius(self) -> float:
@@ -997,6 +1005,15 @@ class SceneState:
                 return (b.name, "table")
         return None
 
+    def _tool_frames(self, T_tool: np.ndarray) -> np.ndarray:
+        """Frames (1, 8, 4, 4) with only what a tool pose fixes: the robot's base (0), the flange
+        (6) and the tool (TOOL) at world tool pose ``T_tool``; the links' frames NaN."""
+        F = np.full((1, 8, 4, 4), np.nan)
+        F[0, 0] = self.scene.robot.base
+        F[0, TOOL] = T_tool
+        F[0, 6] = np.asarray(T_tool, float) @ self.scene.robot.tool_inverse()
+        return F
+
     def hand_refusal(self, T_tool: np.ndarray) -> tuple[str, str] | None:
         """The first pair :meth:`check` would find within the margin between a body rigid with the
         flange (frames 6 and 7: the hand, the tool mount, the part in the hand) and a body fixed in
@@ -1004,16 +1021,12 @@ class SceneState:
         Every joint vector reaching T_tool puts those two bodies there, so :meth:`check` refuses
         each for it: a caller trying many tool poses may skip their IK (the table, the grasp rule
         and the links are :meth:`check`'s alone)."""
-        T_tool = np.asarray(T_tool, float)
-        F = np.full((1, 8, 4, 4), np.nan)
-        F[0, 0] = self.scene.robot.base
-        F[0, TOOL] = T_tool
-        F[0, 6] = T_tool @ self.scene.robot.tool_inverse()
+        F = self._tool_frames(T_tool)
         with np.errstate(invalid="ignore"):
             A, B = self._world_caps(F)
         m, moving = self.scene.margin, self.n_moving
-        frame = np.array([b.frame for b in self.bodies])
-        hand = np.isin(frame, (6, TOOL)) & (np.arange(len(self.bodies)) < moving)
+        hand = np.zeros(len(self.bodies), bool)
+        hand[:moving] = np.isin(self._body_frames, (6, TOOL))
         pi, pj = self.pairs[:, 0], self.pairs[:, 1]
         ps = np.flatnonzero((hand[pi] & (pj >= moving)) | (hand[pj] & (pi >= moving)))
         if not len(ps):
@@ -1055,9 +1068,7 @@ class SceneState:
                 return (g_name, self.hand[0])
         if not self._rigid:
             return None
-        F = np.full((1, 8, 4, 4), np.nan)
-        F[0, TOOL] = T_tool
-        F[0, 6] = np.asarray(T_tool, float) @ self.scene.robot.tool_inverse()
+        F = self._tool_frames(T_tool)
         with np.errstate(invalid="ignore"):
             A, B = self._world_caps(F)
         m = self.scene.margin
@@ -1138,21 +1149,23 @@ class SceneState:
         Cb = np.einsum("cij,cj->ci", Rb, centre[ib]) + Gb[:, :3, 3]
         U, valid = support_directions(Ra @ axes[ia], Rb @ axes[ib], Cb - Ca)
         cheap = [b.points if b.corners is None else b.corners for b in used]
-        gap = self._gap_pass(U, valid, ia, ib, Ga, Gb, Ra, Rb, cheap, radius)
+        extent = np.array([b.extent for b in used])
+        gap = self._gap_pass(U, valid, ia, ib, Ga, Gb, Ra, Rb, cheap, radius, extent)
         big = np.array([b.corners is not None for b in used])
         again = np.flatnonzero((big[ia] | big[ib]) & (gap <= self.scene.margin))
         if len(again):
             full = [b.points for b in used]
             gap[again] = self._gap_pass(U[again], valid[again], ia[again], ib[again], Ga[again], Gb[again],
-                                        Ra[again], Rb[again], full, radius)
+                                        Ra[again], Rb[again], full, radius, extent)
         return gap
 
     @staticmethod
     def _gap_pass(U: np.ndarray, valid: np.ndarray, ia: np.ndarray, ib: np.ndarray, Ga: np.ndarray, Gb: np.ndarray,
-                  Ra: np.ndarray, Rb: np.ndarray, points: list[np.ndarray], radius: np.ndarray) -> np.ndarray:
+                  Ra: np.ndarray, Rb: np.ndarray, points: list[np.ndarray], radius: np.ndarray,
+                  extent: np.ndarray) -> np.ndarray:
         """:func:`support_gap` of c cells along directions U (c, 16, 3), the bodies ia, ib (c,) of
-        ``points`` (vertices each, its frame) at frame poses Ga, Gb (c, 4, 4): each body's vertices
-        are projected only for the cells it is in."""
+        ``points`` (vertices each, its frame; ``extent`` each body's Body.extent) at frame poses Ga,
+        Gb (c, 4, 4): each body's vertices are projected only for the cells it is in."""
         ext = []
         for side, G, R in ((ia, Ga, Ra), (ib, Gb, Rb)):
             lo, hi, big = np.empty((len(side), 16)), np.empty((len(side), 16)), np.empty(len(side))
@@ -1163,7 +1176,7 @@ class SceneState:
                 off = np.einsum("kdj,kj->kd", U[at], G[at, :3, 3])
                 proj = np.einsum("pj,kdj->kpd", pts, local) + off[:, None, :]
                 lo[at], hi[at] = proj.min(axis=1), proj.max(axis=1)
-                big[at] = np.abs(G[at, :3, 3]).max(axis=1) + np.sqrt((pts * pts).sum(axis=1)).max()
+                big[at] = np.abs(G[at, :3, 3]).max(axis=1) + extent[n]
             ext.append((lo, hi, big))
         (alo, ahi, abig), (blo, bhi, bbig) = ext
         return _gap_of_extents(alo, ahi, radius[ia], abig, blo, bhi, radius[ib], bbig, valid)

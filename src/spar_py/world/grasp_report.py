@@ -331,10 +331,11 @@ def _row(product: Product, part: str, meshes: Mapping[str, Any], placed: set[str
                 held = sum(1 for _, c, _ in seat if c)
                 seat_pairs = _pair_counts([pairs for _, _, pairs in seat])
                 if held == 0:  # could a regrasp on the table serve? the grasps free in any pose, seated
-                    pool = [gr for gr in free if gr.label in pick]
-                    anyw = [(gr, *arm_clear(part, W @ P, gr, built)) for gr in pool]
-                    seat_any = sum(1 for _, c, _ in anyw if c)
-                    seat_any_pairs = _pair_counts([pairs or [("no", "IK")] for _, c, pairs in anyw if not c])
+                    known = {gr.label: (c, pairs) for gr, c, pairs in seat}
+                    anyw = [known.get(gr.label) or arm_clear(part, W @ P, gr, built)
+                            for gr in free if gr.label in pick]
+                    seat_any = sum(1 for c, _ in anyw if c)
+                    seat_any_pairs = _pair_counts([pairs or [("no", "IK")] for c, pairs in anyw if not c])
     faces = tuple(sorted({str(f) for gr in own for f in gr.gfaces})) if not usable else ()
     return MateGrasps(part, g.parent, name, len(own), len(usable), len(clear), len(pick), reached, at_cell, faces,
                       tuple(sorted(hits)) if not clear else (), len(Ts), tuple(pose_ok), cell_pose, at_clear,
