@@ -182,9 +182,8 @@ class DerivedGrasp:
 @dataclass(frozen=True)
 class _Arrays:
     """A mesh's arrays read once (trimesh re-checks its content hash on every property read):
-    vertices V, faces F, triangles (n, 3, 3), normals N, centres C, bounding-box diagonal,
-    centre of mass, and each triangle's bounding sphere (centre S, radius rad: the centre of its
-    box and the farthest corner from it), which culls triangles far from a box in any frame."""
+    vertices V, faces F, triangles (n, 3, 3), normals N, centres C, bounding-box diagonal and
+    centre of mass."""
 
     V: np.ndarray
     F: np.ndarray
@@ -193,8 +192,6 @@ class _Arrays:
     C: np.ndarray
     diag: float
     com: np.ndarray
-    S: np.ndarray
-    rad: np.ndarray
 
 
 def _arrays(mesh: "trimesh.Trimesh") -> _Arrays:
@@ -203,11 +200,8 @@ def _arrays(mesh: "trimesh.Trimesh") -> _Arrays:
     if a is None:
         V = np.asarray(mesh.vertices, float)
         F = np.asarray(mesh.faces)
-        tri = V[F]
-        S = (tri.min(1) + tri.max(1)) / 2
-        rad = np.linalg.norm(tri - S[:, None], axis=2).max(1)
-        a = _Arrays(V, F, tri, np.asarray(mesh.face_normals, float), np.asarray(mesh.triangles_center, float),
-                    float(np.linalg.norm(V.max(0) - V.min(0))), np.asarray(mesh.center_mass, float), S, rad)
+        a = _Arrays(V, F, V[F], np.asarray(mesh.face_normals, float), np.asarray(mesh.triangles_center, float),
+                    float(np.linalg.norm(V.max(0) - V.min(0))), np.asarray(mesh.center_mass, float))
         mesh.metadata["_spar_arrays"] = a
     return a
 
@@ -405,89 +399,51 @@ def _gripper_boxes(g: Gripper, width: float, reach: float, shrink: float) -> lis
     return [(what, lo + shrink, hi - shrink) for what, lo, hi in boxes if np.all(hi - lo > 2 * shrink)]
 
 
-CLUSTER_TRIS = 32
-"""About how many triangles :func:`_clusters` puts in one cluster."""
-CLUSTER_MIN = 4 * CLUSTER_TRIS
-"""The fewest triangles for which :func:`_near_box` looks through clusters (fewer: all)."""
-_EYE3 = np.eye(3)
+class _BVH:
+    """A mesh's python-fcl collision object, kept in its metadata with the arrays it was built
+    from; a copy of the mesh (trimesh deep-copies metadata; fcl's objects cannot be) gets none."""
+
+    def __init__(self, of: _Arrays, obj: Any) -> None:
+        self.of, self.obj = of, obj
+
+    def __deepcopy__(self, memo: dict) -> None:
+        return None
 
 
-@dataclass(frozen=True)
-class _Clusters:
-    """A mesh's triangles grouped by grid cell: triangle i is in cluster ``cluster[i]``, and every
-    bounding sphere of cluster k's triangles lies within the sphere of centre ``centre[k]`` and
-    radius ``radius[k]`` (object frame); ``of`` the sphere centres grouped."""
+def _bvh(mesh: "trimesh.Trimesh") -> Any:
+    """The mesh's triangles as a python-fcl collision object (a BVH, object frame)."""
+    A = _arrays(mesh)
+    c = mesh.metadata.get("_spar_bvh")
+    if c is not None and c.of is A:
+        return c.obj
+    import fcl  # on a derivation only (a cache miss); world.assembly's sweeps import it too
 
-    of: np.ndarray
-    centre: np.ndarray
-    radius: np.ndarray
-    cluster: np.ndarray
-
-
-def _clusters(mesh: "trimesh.Trimesh", A: _Arrays) -> _Clusters:
-    """The triangles of ``A`` (the arrays of ``mesh``) in clusters of about CLUSTER_TRIS by a
-    grid over their spheres' centres; kept in the mesh's metadata beside its arrays."""
-    c = mesh.metadata.get("_spar_clusters")
-    if c is not None and c.of is A.S:
-        return c
-    lo, hi = A.S.min(0), A.S.max(0)
-    k = max(1, int(round((len(A.S) / CLUSTER_TRIS) ** (1 / 3))))
-    cell = np.minimum(((A.S - lo) / np.maximum(hi - lo, 1e-300) * k).astype(int), k - 1)
-    _, cluster = np.unique((cell[:, 0] * k + cell[:, 1]) * k + cell[:, 2], return_inverse=True)
-    cluster = cluster.ravel()
-    count = np.bincount(cluster)
-    centre = np.column_stack([np.bincount(cluster, A.S[:, d]) for d in range(3)]) / count[:, None]
-    radius = np.zeros(len(count))
-    np.maximum.at(radius, cluster, np.linalg.norm(A.S - centre[cluster], axis=1) + A.rad)
-    c = _Clusters(A.S, centre, radius, cluster)
-    mesh.metadata["_spar_clusters"] = c
-    return c
-
-
-def _near_box(mesh: "trimesh.Trimesh", A: _Arrays, R: np.ndarray, o: np.ndarray, lo: np.ndarray, hi: np.ndarray,
-              slack: float) -> np.ndarray:
-    """Ascending triangle indices, a superset of those whose bounding sphere (centre moved to
-    the tool frame by ``(S - o) @ R``) meets the box [lo, hi] (tool frame) grown by ``slack``:
-    the triangles of the clusters (:func:`_clusters`) whose sphere meets that box. A triangle's
-    sphere lies in its cluster's, and a rotation moves no component of a vector by more than
-    its length, so no triangle that meets the box is left out; every triangle when R is not a
-    rotation or the mesh has fewer than CLUSTER_MIN."""
-    n = len(A.S)
-    if n < CLUSTER_MIN or not float(np.abs(R.T @ R - _EYE3).max()) <= 1e-9:
-        return np.arange(n)
-    C = _clusters(mesh, A)
-    Sc = (C.centre - o) @ R
-    grow = C.radius * (1 + 1e-6) + slack + 1e-9 * (1.0 + float(np.abs(Sc).max()))
-    hit = (np.abs(Sc - (lo + hi) / 2) <= (hi - lo) / 2 + grow[:, None]).all(1)
-    return np.flatnonzero(hit[C.cluster])
+    bvh = fcl.BVHModel()
+    bvh.beginModel(len(A.V), len(A.F))
+    bvh.addSubModel(A.V, np.asarray(A.F, np.int32))
+    bvh.endModel()
+    obj = fcl.CollisionObject(bvh, fcl.Transform())
+    mesh.metadata["_spar_bvh"] = _BVH(A, obj)
+    return obj
 
 
 def grasp_problem(mesh: "trimesh.Trimesh", T: np.ndarray, width: float, g: Gripper, unit: str) -> str | None:
     """Why the gripper at tool pose T (object frame) with fingers ``width`` apart cannot hold the
-    part, or None: wider than the opening, or a finger or the palm inside the part."""
+    part, or None: wider than the opening, or a finger or the palm inside the part (a box of
+    :func:`_gripper_boxes` meets one of its triangles: python-fcl's box-triangle test over the
+    mesh's BVH; the boxes are shrunk by TOUCH_MM, so a finger resting on a face is not in it)."""
     if width > g.opening * (1 + 1e-9):
         return f"{width:.4g} {unit} wide, more than the gripper's opening {g.opening:.4g} {unit}"
+    import fcl
+
     A = _arrays(mesh)
-    R, o = T[:3, :3], T[:3, 3]
     reach = 2 * A.diag + g.finger_length + g.palm_depth
-    boxes = _gripper_boxes(g, width, reach, from_mm(unit, TOUCH_MM))
-    if not boxes:
-        return None
-    # the boxes' union box: a box's triangles are those whose sphere meets both it and the union
-    ulo, uhi = np.min([b[1] for b in boxes], axis=0), np.max([b[2] for b in boxes], axis=0)
-    slack = 1e-9 * (1.0 + reach)  # rounding: the union test must not drop what a box test keeps
-    for what, lo, hi in boxes:
-        # only triangles whose sphere meets the box (grown by the radius) can meet it; those
-        # come from the clusters that meet it, and are tested in the tool frame
-        rows = _near_box(mesh, A, R, o, lo, hi, slack)
-        S = (A.S[rows] - o) @ R  # triangles' bounding spheres' centres in the tool frame
-        rad = A.rad[rows, None]
-        near = rows[(np.abs(S - (ulo + uhi) / 2) <= (uhi - ulo) / 2 + rad + slack).all(1)
-                    & (np.abs(S - (lo + hi) / 2) <= (hi - lo) / 2 + rad).all(1)]
-        if not len(near):
-            continue
-        tri = (A.tri[near] - o) @ R
-        if ((tri >= lo) & (tri <= hi)).all(2).any() or _tri_box(tri, lo, hi).any():
+    part = _bvh(mesh)
+    R, o = np.asarray(T, float)[:3, :3], np.asarray(T, float)[:3, 3]
+    request = fcl.CollisionRequest()
+    for what, lo, hi in _gripper_boxes(g, width, reach, from_mm(unit, TOUCH_MM)):
+        box = fcl.CollisionObject(fcl.Box(*(hi - lo)), fcl.Transform(R, R @ ((lo + hi) / 2) + o))
+        if fcl.collide(box, part, request, fcl.CollisionResult()):
             return f"{what} enters the part"
     return None
 
