@@ -224,19 +224,37 @@ def test_layout_lays_each_part_where_the_report_reaches_a_grasp(cell):
     assert all(row.at_cell > 0 for row in r.parts), [(row.part, row.at_cell) for row in r.parts]
 
 
-@pytest.mark.parametrize("name, regrasp", [("beam", False), ("plumbers_block", True)])
-def test_a_regrasp_is_offered_only_where_one_would_seat_the_part(name, regrasp):
+@pytest.mark.parametrize("name", ["beam", "plumbers_block"])
+def test_a_regrasp_is_offered_only_where_one_would_serve(name):
     """A part reached where the cell lays it but seated by none of those grasps: the report asks the
-    grasps free in any stable pose too. The beam's bar1 has none that seats it (two put a finger
-    in post3, the others are out of reach), so no regrasp is offered; the plumber's block's bolt1
-    has some, so one is."""
+    grasps free in any stable pose too, and of those that seat it, the ones the arm reaches after a
+    put-down on the table (phase 1's own put-down arc). The beam's bar1 has none that seats it (two
+    put a finger in post3, the others are out of reach); the plumber's block's bolt1 has 14, but the
+    arm reaches none of its grasps clear of the table after any put-down, so neither is offered a
+    regrasp: both need the product built elsewhere."""
     from spar_py.planning.planner import Planner
+    from spar_py.world.arcs import reachable_pairs
+    from spar_py.world.run import CellCache
 
-    plan = Planner().plan(ROOT / "kb" / "problems" / f"fabrica_{name}.yaml")
+    planner = Planner()
+    plan = planner.plan(ROOT / "kb" / "problems" / f"fabrica_{name}.yaml")
     gr = plan.reason["grasps"]
     row = next(r for r in gr["parts"] if r["part"] == gr["part"])
     assert row["held"] == 0
-    assert (row["seat_any"] > 0) is regrasp
-    assert ("regrasp of" in gr["needs"]) is regrasp
-    if not regrasp:
-        assert "no regrasp on the table helps" in gr["needs"] and "post3" in gr["needs"]
+    assert "regrasp of" not in gr["needs"] and "no regrasp on the table helps" in gr["needs"]
+    assert gr["needs"].startswith("the product built elsewhere")
+    if name == "beam":
+        assert row["seat_any"] == 0 and row["placed_any"] == -1 and "post3" in gr["needs"]
+        return
+    assert row["seat_any"] == 14 and row["placed_any"] == 0
+    # phase 1 stopped at the grasps that make the mate (hand access keeps those that seat it clear):
+    # the put-down arc over every stable pose reaches none of them
+    member = plan.reason["goal_data"]["args"][2]
+    assert member["functor"] == "member"
+    labels = member["args"][1]
+    assert len(labels) == 14 and all(g.startswith("bolt1_") for g in labels)
+    cell = planner.load_problem(ROOT / "kb" / "problems" / f"fabrica_{name}.yaml")
+    arc = reachable_pairs(CellCache(cell), "bolt1", labels, list(cell.objects["bolt1"].poses), "reachable")
+    assert arc.pairs == []
+    some = reachable_pairs(CellCache(cell), "bolt1", list(cell.objects["bolt1"].grasps), ["bolt1_p7"], "reachable")
+    assert some.pairs  # the arc does reach other grasps after a put-down: these 14 are the ones it cannot

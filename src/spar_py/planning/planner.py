@@ -343,22 +343,29 @@ def name_mates(cell: Cell, d: dict[str, Any]) -> None:
             for a, b in partial.get("ordering", []) if (part_of.get(a), part_of.get(b)) in reasons]
 
 
-def _grasp_report(cell: Cell, cache: CellCache) -> Any:
+def _grasp_report(cell: Cell, cache: CellCache, placements: str) -> Any:
     """world.grasp_report for a product cell: its robot's gripper (else the default for its
-    finger separation), the parts' initial positions for the reach counts, and the run's
+    finger separation), the parts' initial positions for the reach counts, the run's
     collision scene (world.workspace.reach_clear: the arm, the hand closing on the part, the
-    other parts) for the arm at pickups and insertions; None without a mesh."""
+    other parts) for the arm at pickups and insertions, and phase 1's put-down arcs under the
+    run's ``placements`` rule (world.arcs.reachable_pairs) for a regrasp; None without a mesh."""
     from spar_py.core.units import mm_per
     from spar_py.world.grasp_report import grasp_report
     from spar_py.world.robots import GripperGeometry
     from spar_py.world.access import arm_clear_of
+    from spar_py.world.arcs import reachable_pairs
 
     assert cell.product is not None
     gripper = cell.robot.gripper or GripperGeometry.default(cell.finger_separation, mm_per(cell.unit))
     at: dict[str, np.ndarray] = {}
     for p in cell.positions.values():
         at.setdefault(p.obj, np.asarray(p.T, float))
-    return grasp_report(cell.product, gripper, cell.unit, cell.robot, at, arm_clear_of(cache), cache.scene().margin)
+    def put_down(part: str, grasps: list[Any]) -> set[str]:
+        poses = list(cell.objects[part].poses)  # phase 1's put-down: in_position_class(Pos, every pose)
+        return {g for g, _ in reachable_pairs(cache, part, [g.label for g in grasps], poses, placements).pairs}
+
+    return grasp_report(cell.product, gripper, cell.unit, cell.robot, at, arm_clear_of(cache), cache.scene().margin,
+                        put_down)
 
 
 def _motion_reason(d: dict[str, Any], failures: list[MotionFailure]) -> None:
@@ -532,7 +539,7 @@ class Planner:
                 if sa is not None and (not sa.ok or sa.level):
                     plan.reason = {**(plan.reason or {}), "single_arm": sa.to_json()}
                 if sa is None or sa.ok:  # the grasps: the first mate no grasp serves, and what it needs
-                    gr = _grasp_report(cell, run.world.cache)
+                    gr = _grasp_report(cell, run.world.cache, run.world.options.placements)
                     if gr is not None and not gr.ok:
                         plan.reason = {**(plan.reason or {}), "grasps": gr.to_json()}
             reason = plan.reason or {}

@@ -61,6 +61,10 @@ PAIRS_SAID = 3
 #: pose ``T_part`` with a solution clear of the world (``parts``: the other parts' world poses),
 #: and the colliding pairs where not.
 ArmClear = Callable[[str, np.ndarray, Grasp, Mapping[str, np.ndarray]], tuple[bool, list[tuple[str, str]]]]
+#: ``put_down(part, grasps)``: the labels of ``grasps`` of ``part`` the arm reaches clear of the
+#: world after a put-down on the cell's table, in one of the part's stable poses that leaves the
+#: grasp free (phase 1's reachable arc for a put-down position: world.arcs.reachable_pairs).
+PutDown = Callable[[str, list[Grasp]], set[str]]
 #: How many faces a line names.
 FACES_SAID = 6
 #: Yaws (evenly spaced about world z) tried for each stable pose in the reach count.
@@ -102,6 +106,9 @@ class MateGrasps:
     #: and the pairs the others collide in (out of reach: "no IK"); -1 when not asked.
     seat_any: int = -1
     seat_any_pairs: tuple[str, ...] = ()
+    #: Of the ``seat_any`` grasps, those the arm reaches clear after a put-down on the cell's table
+    #: (what a regrasp can use: :data:`PutDown`); -1 when not asked.
+    placed_any: int = -1
 
     def to_json(self) -> dict[str, Any]:
         """As plain data (one row of the plan's JSON ``reason.grasps.parts``)."""
@@ -111,7 +118,7 @@ class MateGrasps:
                 "poses": self.poses, "pose_ok": list(self.pose_ok[:POSES_SAID]), "cell_pose": self.cell_pose,
                 "at_clear": self.at_clear, "arm_pairs": list(self.arm_pairs), "held": self.held,
                 "seat_pairs": list(self.seat_pairs), "seat_any": self.seat_any,
-                "seat_any_pairs": list(self.seat_any_pairs)}
+                "seat_any_pairs": list(self.seat_any_pairs), "placed_any": self.placed_any}
 
 
 @dataclass
@@ -195,13 +202,15 @@ def _yawed(T: np.ndarray, yaw: float, xy: np.ndarray) -> np.ndarray:
 
 def grasp_report(product: Product, gripper: Any, unit: str, robot: Any = None,
                  positions: Mapping[str, np.ndarray] | None = None, arm_clear: ArmClear | None = None,
-                 margin: float = 0.0) -> GraspReport | None:
+                 margin: float = 0.0, put_down: PutDown | None = None) -> GraspReport | None:
     """The report of the module docstring for ``product`` held by ``gripper`` (a
     world.robots.GripperGeometry, cell unit ``unit``); ``robot`` and ``positions`` (each part's
     world pose in the cell) for the reach counts, else those are -1; ``arm_clear`` for the
     arm's collisions at the cell's pickups (:data:`ArmClear`), else ``at_clear`` is -1;
     ``margin`` (cell unit) the clearance the hand keeps over the table at pickups (the
-    collision scene's). None when a part has no mesh or shape, or the product has no goal."""
+    collision scene's); ``put_down`` for the grasps a regrasp on the table can use
+    (``placed_any``), else that is -1. None when a part has no mesh or shape, or the product
+    has no goal."""
     from spar_py.world.shapes import part_mesh
 
     meshes = {p: part_mesh(pp.model) for p, pp in product.parts.items()}
@@ -210,7 +219,7 @@ def grasp_report(product: Product, gripper: Any, unit: str, robot: Any = None,
     order, before = seat_order(product)
     at = dict(positions or {})
     rows = [_row(product, part, meshes, before[part], gripper, unit, robot if part in at else None, at,
-                 arm_clear, margin) for part in order]
+                 arm_clear, margin, put_down) for part in order]
     # a part no layout or order can serve (filters 1 to 3) first, then the first the cell's layout fails
     for row in sorted(rows, key=lambda r: not _refused_anywhere(r)):
         needs = _needs(row)
@@ -273,12 +282,12 @@ def _refused_anywhere(r: MateGrasps) -> bool:
 
 
 def _row(product: Product, part: str, meshes: Mapping[str, Any], placed: set[str], gripper: Any, unit: str,
-         robot: Any, at: Mapping[str, np.ndarray], arm_clear: ArmClear | None, margin: float = 0.0
-         ) -> MateGrasps:
+         robot: Any, at: Mapping[str, np.ndarray], arm_clear: ArmClear | None, margin: float = 0.0,
+         put_down: PutDown | None = None) -> MateGrasps:
     """One part's counts (module docstring): ``placed`` the parts in place when it is seated,
     ``at`` the parts' poses in the cell (world) and ``robot`` the arm, for the reach counts (None,
     or the part not in ``at``: -1), ``arm_clear`` for ``at_clear`` and ``held``, ``margin`` the
-    hand's clearance over the table at pickup (cell unit)."""
+    hand's clearance over the table at pickup (cell unit), ``put_down`` for ``placed_any``."""
 
     from spar_py.world.shapes_stable import stable_poses
 
@@ -306,7 +315,7 @@ def _row(product: Product, part: str, meshes: Mapping[str, Any], placed: set[str
         if got.any():
             reach |= {gr.label for gr, ok in zip(up, got) if ok}
             pose_ok.append(_pose_text(Tp))
-    reached, at_cell, at_clear, held, cell_pose, seat_any = -1, -1, -1, -1, "", -1
+    reached, at_cell, at_clear, held, cell_pose, seat_any, placed_any = -1, -1, -1, -1, "", -1, -1
     seat_any_pairs: list[str] = []
     arm_pairs: list[str] = []
     seat_pairs: list[str] = []
@@ -332,15 +341,17 @@ def _row(product: Product, part: str, meshes: Mapping[str, Any], placed: set[str
                 seat_pairs = _pair_counts([pairs for _, _, pairs in seat])
                 if held == 0:  # could a regrasp on the table serve? the grasps free in any pose, seated
                     known = {gr.label: (c, pairs) for gr, c, pairs in seat}
-                    anyw = [known.get(gr.label) or arm_clear(part, W @ P, gr, built)
-                            for gr in free if gr.label in pick]
+                    tried = [gr for gr in free if gr.label in pick]
+                    anyw = [known.get(gr.label) or arm_clear(part, W @ P, gr, built) for gr in tried]
                     seat_any = sum(1 for c, _ in anyw if c)
                     seat_any_pairs = _pair_counts([pairs or [("no", "IK")] for c, pairs in anyw if not c])
+                    if put_down is not None and seat_any > 0:
+                        placed_any = len(put_down(part, [gr for gr, (c, _) in zip(tried, anyw) if c]))
     faces = tuple(sorted({str(f) for gr in own for f in gr.gfaces})) if not usable else ()
     return MateGrasps(part, g.parent, name, len(own), len(usable), len(clear), len(pick), reached, at_cell, faces,
                       tuple(sorted(hits)) if not clear else (), len(Ts), tuple(pose_ok), cell_pose, at_clear,
                       tuple(arm_pairs[:PAIRS_SAID]), held, tuple(seat_pairs[:PAIRS_SAID]), seat_any,
-                      tuple(seat_any_pairs[:PAIRS_SAID]))
+                      tuple(seat_any_pairs[:PAIRS_SAID]), placed_any)
 
 
 def above_table(grasps: list[Grasp], gripper: Any, T_part: np.ndarray, unit: str, margin: float = 0.0
@@ -448,7 +459,14 @@ def _needs(r: MateGrasps) -> str:
             return (f"the product built elsewhere, or grasps of {r.part} that seat it clear (none of the "
                     f"{r.pickup} grasps usable for {r.mate} free at pickup in some stable pose is reached clear "
                     f"seating it where the cell builds the product: {said}; so no regrasp on the table helps)")
-        regrasp = (f"a regrasp of {r.part} on the table ({r.seat_any} of its grasps free at pickup in some stable "
+        if r.placed_any == 0:  # those that seat it are reached after no put-down on the table
+            return (f"the product built elsewhere ({r.seat_any} grasps of {r.part} free at pickup in some stable pose "
+                    f"seat it clear, but the arm reaches none of them clear of the world after a put-down on the "
+                    f"table in a stable pose that leaves it free, so no regrasp on the table helps; the "
+                    f"{r.at_clear} grasps usable for {r.mate} the arm reaches where the cell lays {r.part} {how})")
+        regrasp = (f"a regrasp of {r.part} on the table ({r.placed_any} of its grasps seat it clear and are reached "
+                   f"after a put-down in some stable pose)" if r.placed_any > 0 else
+                   f"a regrasp of {r.part} on the table ({r.seat_any} of its grasps free at pickup in some stable "
                    f"pose seat it clear)" if r.seat_any > 0 else f"a regrasp of {r.part} on the table")
         return (f"{regrasp}, or the product built elsewhere (the {r.at_clear} grasps usable "
                 f"for {r.mate} the arm reaches where the cell lays {r.part} {how})")
