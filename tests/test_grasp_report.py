@@ -254,7 +254,8 @@ def test_a_regrasp_is_offered_only_where_one_would_serve(name):
     labels = member["args"][1]
     assert len(labels) == 14 and all(g.startswith("bolt1_") for g in labels)
     cell = planner.load_problem(ROOT / "kb" / "problems" / f"fabrica_{name}.yaml")
-    arc = reachable_pairs(CellCache(cell), "bolt1", labels, list(cell.objects["bolt1"].poses), "reachable")
+    cache = CellCache(cell)
+    arc = reachable_pairs(cache, "bolt1", labels, list(cell.objects["bolt1"].poses), "reachable")
     assert arc.pairs == []
-    some = reachable_pairs(CellCache(cell), "bolt1", list(cell.objects["bolt1"].grasps), ["bolt1_p7"], "reachable")
+    some = reachable_pairs(cache, "bolt1", list(cell.objects["bolt1"].grasps), ["bolt1_p7"], "reachable")
     assert some.pairs  # the arc does reach other grasps after a put-down: these 14 are the ones it cannot

@@ -17,14 +17,31 @@ def _meshes() -> list[trimesh.Trimesh]:
     return [sphere, rod, bar]
 
 
+def _meets_box(tri: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """(n,) bool: triangles (n, 3, 3) that meet the box [lo, hi], by the separating-axis theorem:
+    they are apart exactly when the projections on one of 13 axes (the box's 3, the triangle's
+    normal, the 9 cross products of a box axis with an edge) do not overlap."""
+    c, h = (lo + hi) / 2, (hi - lo) / 2
+    t = tri - c
+    edges = np.roll(t, -1, axis=1) - t  # (n, 3 edges, 3)
+    axes = [np.broadcast_to(e, (len(t), 3)) for e in np.eye(3)]
+    axes.append(np.cross(edges[:, 0], edges[:, 1]))
+    axes += [np.cross(np.broadcast_to(e, (len(t), 3)), edges[:, k]) for e in np.eye(3) for k in range(3)]
+    meets = np.ones(len(t), bool)
+    for a in axes:
+        p = np.einsum("nvd,nd->nv", t, a)  # the triangle's vertices on the axis
+        r = np.abs(a) @ h  # the box's half-extent on it
+        meets &= ~((p.min(1) > r + 1e-12) | (p.max(1) < -r - 1e-12))
+    return meets
+
+
 def _problem_unfiltered(mesh: trimesh.Trimesh, T: np.ndarray, width: float, g: sd.Gripper) -> str | None:
-    """The first gripper box that meets a triangle, over every triangle."""
-    A = sd._arrays(mesh)
+    """The first gripper box that meets a triangle, over every triangle (:func:`_meets_box`)."""
+    tri = np.asarray(mesh.triangles, float)
     R, o = T[:3, :3], T[:3, 3]
-    reach = 2 * A.diag + g.finger_length + g.palm_depth
+    reach = 2 * float(np.linalg.norm(np.ptp(mesh.vertices, axis=0))) + g.finger_length + g.palm_depth
     for what, lo, hi in sd._gripper_boxes(g, width, reach, sd.from_mm("mm", sd.TOUCH_MM)):
-        tri = (A.tri - o) @ R
-        if ((tri >= lo) & (tri <= hi)).all(2).any() or sd._tri_box(tri, lo, hi).any():
+        if _meets_box((tri - o) @ R, lo, hi).any():
             return f"{what} enters the part"
     return None
 

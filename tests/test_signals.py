@@ -7,6 +7,7 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -49,9 +50,15 @@ def delays(slow_problem: tuple[Path, Path]) -> dict[str, tuple[float, float]]:
     return out
 
 
-def _signal_after(cmd: list[str], sig: int, delay: float) -> tuple[int, float, str]:
+def _signal_after(cmd: list[str], sig: int, delay: float, ready: Callable[[int], bool] | None = None
+                  ) -> tuple[int, float, str]:
+    """Run ``cmd``, send ``sig`` ``delay`` s after its start (and not before ``ready(pid)`` holds,
+    when given): its exit code, the seconds from the signal to its end, its standard error."""
     p = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=ROOT)
-    time.sleep(delay)
+    start = time.monotonic()
+    while ready is not None and not ready(p.pid) and p.poll() is None:
+        time.sleep(0.001)
+    time.sleep(max(0.0, start + delay - time.monotonic()))
     t = time.monotonic()
     p.send_signal(sig)
     _, err = p.communicate(timeout=30)
@@ -141,16 +148,9 @@ def test_a_signal_during_start_up_is_one_line(cmd: list[str], share: float, impo
     The signal goes no earlier than the first line of our code: before it the interpreter itself
     is starting (and compiling ``__main__`` on a fresh clone), where any Python program answers
     Ctrl-C with a traceback. CI once sent it there, at 0.1 s on a loaded machine."""
-    p = subprocess.Popen(cmd + ["plan", str(PAPER)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                         text=True, cwd=ROOT)
-    start = time.monotonic()
-    while not _catches(p.pid, signal.SIGTERM) and p.poll() is None:
-        time.sleep(0.001)
-    time.sleep(max(0.0, start + share * import_floor - time.monotonic()))
-    t = time.monotonic()
-    p.send_signal(signal.SIGINT)
-    _, err = p.communicate(timeout=30)
-    assert p.returncode == 130 and time.monotonic() - t < 0.5, (p.returncode, err)
+    rc, took, err = _signal_after(cmd + ["plan", str(PAPER)], signal.SIGINT, share * import_floor,
+                                  ready=lambda pid: _catches(pid, signal.SIGTERM))
+    assert rc == 130 and took < 0.5, (rc, took, err)
     assert err == "spar: interrupted\n"
 
 

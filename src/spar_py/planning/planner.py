@@ -360,6 +360,7 @@ def _grasp_report(cell: Cell, cache: CellCache, placements: str) -> Any:
     at: dict[str, np.ndarray] = {}
     for p in cell.positions.values():
         at.setdefault(p.obj, np.asarray(p.T, float))
+
     def put_down(part: str, grasps: list[Any]) -> set[str]:
         poses = list(cell.objects[part].poses)  # phase 1's put-down: in_position_class(Pos, every pose)
         return {g for g, _ in reachable_pairs(cache, part, [g.label for g in grasps], poses, placements).pairs}

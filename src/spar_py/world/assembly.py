@@ -486,14 +486,12 @@ def _seats(P: np.ndarray, N: np.ndarray, gaps: np.ndarray, contact_tol: float, s
 
 def _fcl_mesh(mesh: "trimesh.Trimesh", shrink: float) -> Any:
     """The mesh as a python-fcl BVH (vertices pulled ``shrink`` inward along their normals)."""
-    import fcl
+    from spar_py.world.collision import bvh
 
-    V = np.asarray(mesh.vertices, float) - shrink * np.asarray(mesh.vertex_normals, float)
-    bvh = fcl.BVHModel()
-    bvh.beginModel(len(V), len(mesh.faces))
-    bvh.addSubModel(V, np.asarray(mesh.faces, np.int32))
-    bvh.endModel()
-    return bvh
+    V = np.asarray(mesh.vertices, float)
+    if shrink:
+        V = V - shrink * np.asarray(mesh.vertex_normals, float)
+    return bvh(V, np.asarray(mesh.faces))
 
 
 class Sweeper:

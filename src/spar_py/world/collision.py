@@ -281,17 +281,23 @@ def _mesh_geometry(mesh_of: tuple[Any, float], hull: np.ndarray) -> Any:
     HULL_EXCESS_MM (a convex part: the cheaper exact shape), else the mesh's triangles as a
     python-fcl BVHModel (a concave part: a half-shell's hull would cover its recesses). The BVH
     is a surface: :func:`_exact` adds the containment test for a body wholly inside it."""
-    import fcl  # ~0.15 s at import: see Body.fcl_geometry
-
     mesh = mesh_of[0].mesh()
     if _hull_is_mesh(mesh, hull, mesh_of[1]):
         return _fcl_convex(hull)
-    V, F = np.asarray(mesh.vertices, float), np.asarray(mesh.faces, int)
-    bvh = fcl.BVHModel()
-    bvh.beginModel(len(V), len(F))
-    bvh.addSubModel(V, F)
-    bvh.endModel()
-    return bvh
+    return bvh(np.asarray(mesh.vertices, float), np.asarray(mesh.faces, int))
+
+
+def bvh(V: np.ndarray, F: np.ndarray) -> Any:
+    """Triangles (vertices V (n, 3), faces F (m, 3) indices into V) as a python-fcl BVHModel: a
+    surface, in the frame V is given in (the one home of this build: the collision scene's
+    concave bodies, the assembly's sweeps, the grasp derivation's finger test)."""
+    import fcl  # ~0.15 s at import: see Body.fcl_geometry
+
+    model = fcl.BVHModel()
+    model.beginModel(len(V), len(F))
+    model.addSubModel(np.asarray(V, float), np.asarray(F, np.int64))
+    model.endModel()
+    return model
 
 
 def _hull_is_mesh(mesh: Any, hull: np.ndarray, excess: float) -> bool:

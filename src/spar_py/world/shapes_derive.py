@@ -417,12 +417,9 @@ def _bvh(mesh: "trimesh.Trimesh") -> Any:
     if c is not None and c.of is A:
         return c.obj
     import fcl  # on a derivation only (a cache miss); world.assembly's sweeps import it too
+    from spar_py.world.collision import bvh
 
-    bvh = fcl.BVHModel()
-    bvh.beginModel(len(A.V), len(A.F))
-    bvh.addSubModel(A.V, np.asarray(A.F, np.int32))
-    bvh.endModel()
-    obj = fcl.CollisionObject(bvh, fcl.Transform())
+    obj = fcl.CollisionObject(bvh(A.V, A.F), fcl.Transform())
     mesh.metadata["_spar_bvh"] = _BVH(A, obj)
     return obj
 
