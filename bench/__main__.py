@@ -158,7 +158,7 @@ def _f(x, fmt: str = ".2f", none: str = "n/a") -> str:
     return none if x is None else format(x, fmt)
 
 
-def _table(head: list[str], rows: list[list[str]]) -> list[str]:
+def table(head: list[str], rows: list[list[str]]) -> list[str]:
     return ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|",
             *["| " + " | ".join(r) + " |" for r in rows], ""]
 
@@ -240,7 +240,7 @@ def render(r: dict) -> str:
                      "compiles spar-py's sources)"}.get(str(m.get("bytecode", "written")), "unknown")),
          "- time spent: " + ", ".join(f"{n} {t:.0f} s" for n, t in r["seconds"].items()), "",
          "## Targets (issue 7)", ""]
-    L += _table(["target", "measured", "verdict"], [
+    L += table(["target", "measured", "verdict"], [
         [f"IK, all solutions, batch <= {IK_US_PER_POSE:g} us/pose", v["ik_us"][1], _met(v["ik_us"][0])],
         [f"IK >= {IK_RATIO:g}x RTB ikine_a per pose", v["ik_ratio"][1], _met(v["ik_ratio"][0])],
         ["SUP/INF within 1% of the true range (paper's expressions)", v["supinf_tight"][1],
@@ -276,7 +276,7 @@ def render(r: dict) -> str:
                   _f(k["rtb_over_batch"], ".1f")],
                  ["RTB `ikine_a` x 8 (all configurations)", str(k["n_rtb"]), _f(k["rtb_all8_us"]),
                   _f(k["rtb_all8_over_batch"], ".1f")]]
-    L += _table(["method", "poses", "us/pose", "x ik_batch"], rows)
+    L += table(["method", "poses", "us/pose", "x ik_batch"], rows)
     L += [f"Solutions per pose (rows within joint limits): {k['solutions_per_pose']:.1f}. "
           + ("" if k["rtb_us"] is None else
              f"RTB `ikine_a` / spar-py `ik` one call per pose: {k['rtb_over_single']:.1f}x "
@@ -299,7 +299,7 @@ def render(r: dict) -> str:
         rows.append([f"spar-py numeric `ik_batch` (PUMA with d5 = 95 mm; {m['solved']:.0%} solved, own q "
                      f"found {m['own_found']:.0%})", str(m["n"]), _f(m["batch_us"]),
                      _f(m["solutions_per_pose"], ".1f")])
-        L += _table(["method", "poses", "us/pose", "solutions/pose"], rows)
+        L += table(["method", "poses", "us/pose", "solutions/pose"], rows)
         if u["rtb_lm_over_batch"] is not None:
             L += [f"RTB UR5 `ikine_LM` / spar-py UR5 `ik_batch`: {u['rtb_lm_over_batch']:.0f}x.", ""]
 
@@ -310,7 +310,7 @@ def render(r: dict) -> str:
           "described); times in ms, medians; `1-side` is one bound with its compile, as the planner "
           "spends it; `reached` counts expressions refined to the tolerance."), "",
           "### The paper's cell", ""]
-    L += _table(["expression", "vars", "ours/w", "plain/w", "reached", "ours ms (2 bounds)",
+    L += table(["expression", "vars", "ours/w", "plain/w", "reached", "ours ms (2 bounds)",
                  "1-side ms", "compile ms", "plain ms", "INF", "SUP"],
                 [[x["name"], str(x["n_vars"]), _f(x["ours"], ".1e"), _f(x["plain"], ".1e"),
                   "yes" if x["reached"] else "no", _f(x["t_ours"]), _f(x["t_one"]), _f(x["t_compile"]),
@@ -320,7 +320,7 @@ def render(r: dict) -> str:
         if g not in s:
             continue
         L += [f"### {title}, {s['per_length']} per length", ""]
-        L += _table(["plan length", "vars", "ours/w", "plain/w", "reached", "ours ms", "1-side ms",
+        L += table(["plan length", "vars", "ours/w", "plain/w", "reached", "ours ms", "1-side ms",
                      "compile ms", "plain ms"],
                     [[str(x["length"]), f"{x['n_vars']:.0f}", _f(x["ours"], ".1e"), _f(x["plain"], ".1e"),
                       f"{x['reached']}/{x['count']}", _f(x["t_ours"]), _f(x["t_one"]), _f(x["t_compile"]),
@@ -351,7 +351,7 @@ def render(r: dict) -> str:
 
         rows = [deep_row("+-0.1", d)] + ([deep_row(f"+-0.1, angles +-1 ({s['deep_wide']['count']})",
                                                      s["deep_wide"])] if "deep_wide" in s else [])
-        L += _table(["products", "vars", "ours/w (median, worst)", "SX alone/w (median, worst)",
+        L += table(["products", "vars", "ours/w (median, worst)", "SX alone/w (median, worst)",
                      "SX as composed/w (median, worst)", "plain/w", "reached (ours, SX alone, as composed)",
                      "box cap hit (ours, SX alone, as composed)", "boxes (median, max)", "ours ms",
                      "SX alone ms", "SX as composed ms", "cached ms", "compiled=True ms (first)",
@@ -366,7 +366,7 @@ def render(r: dict) -> str:
           "(phase times are Prolog CPU time from `plan.timing`, Python called back included; "
           "`load_problem` timed alone between the runs). Cold: `spar plan` as a fresh process, "
           f"{c['repeats']} runs, interleaved with a process that only starts the engine."), ""]
-    L += _table(["figure", "median", "ratio"], [
+    L += table(["figure", "median", "ratio"], [
         ["warm: phase 1", f"{w['phase1_s'] * 1e3:.1f} ms", f"{w['phase1_s'] / w['wall_s']:.2f} of wall"],
         ["warm: phase 2", f"{w['phase2_s'] * 1e3:.1f} ms", f"{w['phase2_s'] / w['wall_s']:.2f} of wall"],
         ["warm: `load_problem` alone (YAML)", f"{w['load_s'] * 1e3:.1f} ms",
@@ -379,7 +379,7 @@ def render(r: dict) -> str:
     ])
     if "hopeless" in p:
         h = p["hopeless"]
-        L += _table(["hopeless_uncertainty.yaml (cold, interleaved)", "median", "ratio"], [
+        L += table(["hopeless_uncertainty.yaml (cold, interleaved)", "median", "ratio"], [
             ["`spar plan`", f"{h['plan_s']:.2f} s", f"{h['plan_s'] / h['paper_s']:.1f}x the paper's cell"],
             ["`spar plan --phase1-only`", f"{h['phase1_only_s']:.2f} s", ""],
             ["phase 2 (difference)", f"{h['phase2_s']:.2f} s", ""],
@@ -413,7 +413,7 @@ def render(r: dict) -> str:
                      _f(x.get("phase2_s"), ".3f"), _f(x.get("wall_s"), ".3f"), _f(x.get("actions"), "d"),
                      _f(x.get("instances_examined"), "d"), _f(x.get("rss_before_mb"), ".0f"),
                      _f(x.get("rss_peak_mb"), ".0f"), _f(x.get("prolog_stack_mb"), ".1f"), why])
-    L += _table(["N", "max_actions", "outcome", "phase 1 s", "phase 2 s", "wall s", "actions", "instances",
+    L += table(["N", "max_actions", "outcome", "phase 1 s", "phase 2 s", "wall s", "actions", "instances",
                  "RSS before MB", "RSS peak MB", "Prolog stacks MB", "note"], rows)
 
     if r.get("fd"):
@@ -439,7 +439,7 @@ def render(r: dict) -> str:
                f"{r['memory'][0]['warmup']} warm-up plans, then {r['memory'][0]['plans']} more; "
                "growth = (RSS after - RSS after the warm-up) / plans, RSS after `gc.collect()`; "
                "live objects counted after the run."), ""]
-        L += _table(["cell", "plans", "RSS after warm-up MB", "RSS after MB", "kB per plan (median)",
+        L += table(["cell", "plans", "RSS after warm-up MB", "RSS after MB", "kB per plan (median)",
                      "each process", "live Cell", "live World"],
                     [[x["cell"], str(x["plans"]), f"{x['rss_before_kb'] / 1024:.1f}",
                       f"{x['rss_after_kb'] / 1024:.1f}", f"{x['kb_per_plan']:.2f}",
@@ -452,7 +452,7 @@ def render(r: dict) -> str:
               (f"This checkout against `{ba['dir']}` (commit {ba['commit']}), measured in the same run: "
                "cold `spar plan` of the paper's cell, the two checkouts alternating; warm, the median plan "
                "of one process per checkout. Medians."), ""]
-        L += _table(["figure", "before", "after", "after/before"],
+        L += table(["figure", "before", "after", "after/before"],
                     [[name, f"{v['before'] * 1e3:.1f} ms", f"{v['after'] * 1e3:.1f} ms",
                       f"{v['after'] / v['before']:.2f}"] for name, v in ba["figures"].items()])
 

@@ -15,9 +15,9 @@ Run from the project root: ``.venv/bin/python -m bench.collision [--repeats 5] [
 - ``libraries`` (with ``--coal-python PY``, a Python with both ``coal`` and ``python-fcl``, e.g.
   a throwaway venv under /tmp: coal is a 300 MB install and never a project dependency): the
   exact queries the paper cell's per-solution run sends to the library (recorded from
-  world.collision._exact: the body shapes and their world poses) replayed with python-fcl and
+  world.collision.scene.body_distance: the body shapes and their world poses) replayed with python-fcl and
   with coal in that interpreter, us per query (collide, then distance when apart, as
-  world.collision asks) and the largest difference of their distances.
+  world.collision.scene asks) and the largest difference of their distances.
 """
 from __future__ import annotations
 
@@ -52,7 +52,7 @@ def _no_collision_copy(tmp: Path) -> Path:
 def per_solution(cell, obj: str, repeats: int) -> dict[str, float]:
     """Median us per IK solution checked: every grasp of ``obj`` at a 1 in grid of xy over the
     cell's first free region, in its first stable pose, the part grasped (one batched check)."""
-    from spar_py.world.workspace import ik_rows
+    from spar_py.world.reach.workspace import ik_rows
     from spar_py.world.run import CellCache
 
     model = cell.objects[obj]
@@ -80,7 +80,7 @@ def per_solution(cell, obj: str, repeats: int) -> dict[str, float]:
             state.check(q)
         times.append(time.perf_counter() - t)
     # the peer, same rows: the capsule bound on every (row, pair) cell (no sphere broad phase)
-    from spar_py.world.collision import SceneState
+    from spar_py.world.collision.scene import SceneState
 
     plain = []
     near = SceneState._near_bounds
@@ -100,21 +100,21 @@ def per_solution(cell, obj: str, repeats: int) -> dict[str, float]:
 def record_queries(cell, obj: str, limit: int = 2000) -> list[dict]:
     """The exact (library) queries of one per-solution run of ``cell``, as plain data: each body's
     kind, size, local vertices and world pose (4x4 of its shape)."""
-    from spar_py.world import collision as col
+    from spar_py.world.collision import scene as col
 
     out: list[dict] = []
-    real = col._exact
+    real = col.body_distance
 
     def spy(b1, T1, b2, T2):
         if len(out) < limit:
             out.append({"a": _body(b1, T1 @ b1.T), "b": _body(b2, T2 @ b2.T)})
         return real(b1, T1, b2, T2)
 
-    col._exact = spy
+    col.body_distance = spy
     try:
         per_solution(cell, obj, 1)
     finally:
-        col._exact = real
+        col.body_distance = real
     return out
 
 

@@ -59,7 +59,7 @@ def run(repeats: int = 7) -> dict:
     import trimesh  # noqa: F401  (imported before timing)
 
     from spar_py.kb import load_object
-    from spar_py.world.shapes import part_mesh
+    from spar_py.world.parts.mesh import part_mesh
 
     rows = []
     with tempfile.TemporaryDirectory() as tmp:

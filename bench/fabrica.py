@@ -9,8 +9,8 @@ product file (kb/products/fabrica/NAME.yaml when there is one, else one written 
 every part ``mesh:``, nothing declared, the first part the base) is loaded as ``spar plan``
 loads a product (kb.products.load_product_derived, cell unit mm) in a child process of its own
 with an empty derivation cache (``SPAR_CACHE_DIR``): the cold derivation, i.e. the contacts,
-mates, seats, sweeps and precedence (world/assembly.py) and every part's object model (stable
-poses, grasps, faces: world/shapes_derive.py). Recorded: the load's wall and CPU seconds, the
+mates, seats, sweeps and precedence (world/product/assembly.py) and every part's object model (stable
+poses, grasps, faces: world/parts/derive.py). Recorded: the load's wall and CPU seconds, the
 assembly derivation's own seconds, the mates (each with its axis), the seats, the insertion
 order and the child's peak RSS. Then, when ``kb/problems/fabrica_NAME.yaml`` exists, ``spar
 plan`` on it in a child with its own empty cache: its outcome and wall seconds ("no cell"
@@ -72,7 +72,7 @@ def one(name: str, product: Path) -> dict:
     import resource
 
     t_imp = time.perf_counter()
-    import spar_py.world.assembly as wa
+    import spar_py.world.product.assembly as wa
     from spar_py.core.errors import KBError
     from spar_py.kb.products import load_product_derived
     imports = time.perf_counter() - t_imp

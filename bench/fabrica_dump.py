@@ -35,7 +35,7 @@ def _rr(o: Any) -> Any:
 
 def dump(product: Path) -> dict:
     """The derivation of ``product`` as plain data (module docstring)."""
-    import spar_py.world.assembly as wa
+    import spar_py.world.product.assembly as wa
     from spar_py.kb import products as kp
     from spar_py.kb.objects import load_object
 

@@ -11,7 +11,7 @@ cell (:func:`pddl`):
 - the operational part as SPAR's templates have it (Figs. 2-4): pickup(Obj, Grasp) from
   a position, putdown(Obj, Pos) into a stable pose, assemble(Obj1, Obj2); gripper(open),
   holding, part_location, assembled;
-- the geometry as static facts, from the arcs phase 1's network uses (spar_py.world.arcs,
+- the geometry as static facts, from the arcs phase 1's network uses (spar_py.world.reach.arcs,
   the same IK and placement rule): ``reach ?g ?p`` for reachable(Grasp, Position) and
   ``mate ?g ?p`` for mate_reachable(Grasp, Position, T_a) of each goal's pair, the mating
   grasps and poses of Sec. 6 (their ofaces avoid the mating faces; the hole part's initial
@@ -88,9 +88,9 @@ def _ofaces_at(model, T) -> set:
 
 def pddl(cell) -> str:
     """The PDDL problem of ``cell`` (a loaded spar_py Cell whose goals are assembled/5), for
-    :data:`DOMAIN`. Static facts from spar_py.world.arcs, as phase 1's arcs (rule "reachable")."""
+    :data:`DOMAIN`. Static facts from spar_py.world.reach.arcs, as phase 1's arcs (rule "reachable")."""
     from spar_py.kb import term_text
-    from spar_py.world.arcs import mate_reachable_pairs, reachable_pairs
+    from spar_py.world.reach.arcs import mate_reachable_pairs, reachable_pairs
     from spar_py.world.run import CellCache
 
     nm = _name

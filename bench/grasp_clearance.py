@@ -24,7 +24,7 @@ import numpy as np
 
 from spar_py.kb.problem import load_problem
 from spar_py.world.run import CellCache
-from spar_py.world.workspace import ik_rows
+from spar_py.world.reach.workspace import ik_rows
 
 
 def _outcomes(cache: CellCache, T: np.ndarray, parts: Mapping[str, np.ndarray], **at: object) -> list[str]:

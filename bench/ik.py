@@ -83,7 +83,7 @@ def bench_rtb(n: int, repeats: int) -> tuple[float, float, float] | None:
 def _ur_robots() -> dict:
     """The UR5e from its file and RTB's UR5 table (standard DH, m -> mm) as spar-py robots."""
     from spar_py.kb import load_robot
-    from spar_py.world.robots import Robot, standard_to_modified
+    from spar_py.world.robot.model import Robot, standard_to_modified
 
     ur5 = np.array([[90, 0, 89.46], [0, -425, 0], [0, -392.2, 0], [90, 0, 109.1], [-90, 0, 94.65], [0, 0, 82.3]])
     std = np.column_stack([np.radians(ur5[:, 0]), ur5[:, 1], ur5[:, 2], np.zeros(6)])

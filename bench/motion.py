@@ -9,7 +9,7 @@ Goal (issue 16): the paper's cell with motions at most 1 s warm, median over 10 
 
 BEFORE: the same measurement at commit e9a0a9b, when every waypoint of every segment (about
 10,000 per motion at the 0.02 deg resolution) went through SceneState.check; since then a
-segment is certified by clearance (world/motion.py ``certify``) and only waypoints the bound
+segment is certified by clearance (world/motion/paths.py ``certify``) and only waypoints the bound
 cannot decide are checked one by one. Those runs took minutes, so they are recorded here, not
 re-run: ``git archive e9a0a9b src prolog kb`` into a directory and run this module with
 PYTHONPATH pointing at it to reproduce them."""
@@ -31,7 +31,7 @@ BEFORE = {"kb/problems/peg_in_block.yaml": {"median_s": 23.0, "range_s": (19.7, 
 
 def one_cell(path: str, seeds: int, budget: float) -> dict:
     from spar_py import Planner
-    from spar_py.world.motion import MotionOptions
+    from spar_py.world.motion.paths import MotionOptions
 
     peer = Planner(motion=False)
     peer.plan(path)

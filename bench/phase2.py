@@ -10,7 +10,7 @@ plan of that cell in a fresh process (its cold phase 2, the engine already start
 - ``phase 2``: plan.timing's phase2_s (Prolog CPU time, Python called back included);
 - ``Python``: phase2.evaluate, one call per run of an instance;
 - ``placements``: phase2.choose_placements (placement.choose per put-down);
-- ``arm``: phase2._arm, IK and the collision check of every end-point (world/collision.py);
+- ``arm``: phase2._arm, IK and the collision check of every end-point (world/collision/scene.py);
 - ``uncertainty``: the rest of the Python side (constraints, SUP/INF, propagation,
   per-step poses);
 - ``Prolog``: phase 2 less Python: uncertainty.pl's own work and the janus conversions.

@@ -117,15 +117,15 @@ def profile(fn, top: int) -> str:
     s = io.StringIO()
     st = pstats.Stats(pr, stream=s)
     st.sort_stats("tottime").print_stats(top)
-    by_self = _table(s.getvalue())
+    by_self = table(s.getvalue())
     s.seek(0)
     s.truncate()
     st.sort_stats("cumulative").print_stats("spar_py|janus", top)
     return (f"{by_self[0]}\n\nby internal time:\n" + "\n".join(by_self[1:])
-            + "\n\nspar-py and janus functions by cumulative time:\n" + "\n".join(_table(s.getvalue())[1:]))
+            + "\n\nspar-py and janus functions by cumulative time:\n" + "\n".join(table(s.getvalue())[1:]))
 
 
-def _table(text: str) -> list[str]:
+def table(text: str) -> list[str]:
     """pstats' output without its preamble: the totals line, then the table."""
     lines = [ln.rstrip().replace(str(ROOT) + "/", "") for ln in text.splitlines()]
     lines = [ln.replace(str(Path(sys.prefix)) + "/", "") for ln in lines]

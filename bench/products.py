@@ -261,7 +261,7 @@ def render(r: dict) -> list[str]:
           "separate peg-into-block pairs (bench/planning.py's generated problem and child). `wall` is the "
           "cell's loading and its `plan()` call, as `spar plan` does them, `load` the loading alone "
           "(`load_problem`: the YAML and the mesh read, the product compiled: its goals, its precedence by "
-          "swept insertions, world/products.py; the pairs have no product), phase 1/2 the plan's timing "
+          "swept insertions, world/product/products.py; the pairs have no product), phase 1/2 the plan's timing "
           "(Prolog CPU seconds, "
           "Python called back included), `process` the child from start to exit (Python and the engine "
           "starting, the warm-up plan and the generation included), RSS peak sampled every 5 ms while "

@@ -209,7 +209,7 @@ post_prior_to(A1, A2, Plan0, Plan) :-
 %   Post the orderings the product's geometry forces between Action and
 %   the assembles already in the plan: for an assemble of part P and one
 %   of part Q, prior_to(A_P, A_Q) when kb:precedence(P, Q, _) (Q in place
-%   would block P's insertion; world/products.py), and the converse. Fails
+%   would block P's insertion; world/product/products.py), and the converse. Fails
 %   if an ordering closes a cycle. Nothing for other actions, or where the
 %   cell has no product.
 %

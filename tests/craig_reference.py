@@ -1,5 +1,5 @@
 """Craig's (modified DH) forward kinematics written out, for the IK tests to check against:
-independent of spar_py.world.ik (only the robot's table, base and tool are read)."""
+independent of spar_py.world.robot.ik (only the robot's table, base and tool are read)."""
 from __future__ import annotations
 
 import numpy as np

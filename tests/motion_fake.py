@@ -1,4 +1,4 @@
-"""A small stand-in for world/collision.py's scene (tests only): the arm as points along
+"""A small stand-in for world/collision/scene.py's scene (tests only): the arm as points along
 its links (Craig FK written out here, vectorised), the table top z = 0 and axis-aligned
 world boxes as obstacles. Clear means every point is at least ``margin`` above the table
 and outside every box grown by ``margin``. Parts are not modelled; the calls made are

@@ -19,11 +19,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from spar_py.world import arcs
-from spar_py.world import workspace
+from spar_py.world.reach import arcs as arcs
+from spar_py.world.reach import workspace as workspace
 from spar_py.app.gen import generate_assembly
 from spar_py.kb import load_problem
-from spar_py.world.placement import some_placement_reaches_each
+from spar_py.world.reach.placement import some_placement_reaches_each
 from spar_py.world.run import CellCache, WorldRun
 
 PROBLEMS = Path(__file__).resolve().parent.parent / "kb" / "problems"

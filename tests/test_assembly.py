@@ -1,4 +1,4 @@
-"""Products derived from meshes alone (world/assembly.py, kb/products.py's mesh parts).
+"""Products derived from meshes alone (world/product/assembly.py, kb/products.py's mesh parts).
 
 Issue 33's declared products with their declarations removed: each part written as a mesh at
 its product pose (trimesh, here), and the derivation must find the declared mates (axis and

@@ -1,4 +1,4 @@
-"""A bar lying in a block's half-cylinder cradle under a cap (world/assembly.py's curved seats).
+"""A bar lying in a block's half-cylinder cradle under a cap (world/product/assembly.py's curved seats).
 
 The meshes are built here (shapely profiles extruded along y, mm): a block 60 x 40 x 30 with a
 cradle of radius 10.3 about the line x = 0, z = 30 (its top face), a round bar of radius 10,
@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from spar_py.kb.products import load_product_derived
-from spar_py.world.products import seat_direction
+from spar_py.world.product.products import seat_direction
 
 R_CRADLE, R_BAR = 10.3, 10.0
 

@@ -1,4 +1,4 @@
-"""Prismatic fits and cradles in the derivation (world.assembly), on meshes made here: a box
+"""Prismatic fits and cradles in the derivation (world.product.assembly), on meshes made here: a box
 peg in a box socket, a round bar in a half-cylinder cradle. Geometry is checked against the
 boxes' own numbers, not the derivation's."""
 from __future__ import annotations
@@ -10,7 +10,7 @@ import pytest
 
 trimesh = pytest.importorskip("trimesh")
 
-from spar_py.world.assembly import derive_assembly  # noqa: E402
+from spar_py.world.product.assembly import derive_assembly  # noqa: E402
 
 #: The socket block: 40 x 40 x 20 mm, a 12 x 8 mm socket 12 deep from its top; the peg 11.6 x
 #: 7.6 (clearance 0.2 per side) with a 20 x 20 x 5 head on the block's top.

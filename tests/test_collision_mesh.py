@@ -11,8 +11,8 @@ from shapely.geometry import Polygon
 
 from spar_py.core.units import from_mm
 from spar_py.kb import load_problem
-from spar_py.world import collision
-from spar_py.world.collision import CollisionScene, WORLD
+from spar_py.world.collision import scene as collision
+from spar_py.world.collision.scene import CollisionScene, WORLD
 
 PROBLEMS = Path(__file__).resolve().parents[1] / "kb" / "problems"
 
@@ -22,7 +22,7 @@ HALF = 10.0  # the box's half extent
 
 
 class _MeshGeometry:
-    """A stand-in for world.shapes.Geometry: the mesh, given."""
+    """A stand-in for world.parts.mesh.Geometry: the mesh, given."""
 
     def __init__(self, mesh: trimesh.Trimesh) -> None:
         self._mesh = mesh
@@ -115,8 +115,8 @@ def test_a_box_wholly_inside_a_mesh_collides() -> None:
     T = np.eye(4)
     T[:3, 3] = [-35.0, 30.0, 20.0]  # in the U's left arm (x -50..-20), 13 mm from its faces
     assert u.contains(T[:3, 3][None])[0]
-    assert collision._exact(small, T, m, np.eye(4)) == 0.0
-    assert collision._exact(m, np.eye(4), small, T) == 0.0
+    assert collision.body_distance(small, T, m, np.eye(4)) == 0.0
+    assert collision.body_distance(m, np.eye(4), small, T) == 0.0
 
 
 def test_placed_copies_share_the_mesh_geometry_in_the_object_frame() -> None:
@@ -129,5 +129,5 @@ def test_placed_copies_share_the_mesh_geometry_in_the_object_frame() -> None:
     far = m.placed(T, WORLD)
     probe = collision.box("p", WORLD, np.array([15.0, -5.0, -5.0]), np.array([25.0, 5.0, 5.0]))
     eye = np.eye(4)
-    assert collision._exact(far, eye, probe, eye) > 60.0   # asked first: 75 mm apart
-    assert abs(collision._exact(m, eye, probe, eye) - 5.0) < 1e-6  # the cube's face x = 10, the probe's 15
+    assert collision.body_distance(far, eye, probe, eye) > 60.0   # asked first: 75 mm apart
+    assert abs(collision.body_distance(m, eye, probe, eye) - 5.0) < 1e-6  # the cube's face x = 10, the probe's 15

@@ -1,4 +1,4 @@
-"""The checked pairs of a collision state (world/collision.py's _pair_structure), set for the
+"""The checked pairs of a collision state (world/collision/scene.py's _pair_structure), set for the
 world's bodies a name at a time, are the pairs of the rule written out as one loop over every
 (moving body, body) pair (:func:`reference_pairs`, the module notes' rule as it was first
 coded); and the placed bodies the scene keeps on the cell are the bodies placed afresh.
@@ -16,8 +16,8 @@ import pytest
 
 from spar_py.app.gen import generate_assembly
 from spar_py.kb import load_problem
-from spar_py.world import collision
-from spar_py.world.collision import TOOL, WORLD
+from spar_py.world.collision import scene as collision
+from spar_py.world.collision.scene import TOOL, WORLD
 from spar_py.world.run import CellCache
 
 PROBLEMS = Path(__file__).resolve().parent.parent / "kb" / "problems"

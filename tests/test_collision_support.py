@@ -1,7 +1,7 @@
-"""The shortcuts of world/collision.py's check(), clearance() and grasp rule, against the plain
+"""The shortcuts of world/collision/scene.py's check(), clearance() and grasp rule, against the plain
 computations they stand for.
 
-- :func:`~spar_py.world.collision.support_gap` (a lower bound of two convex bodies' distance from
+- :func:`~spar_py.world.collision.scene.support_gap` (a lower bound of two convex bodies' distance from
   their supports) never exceeds the distance, computed here independently as a small quadratic
   programme over the bodies' vertex hulls (scipy's SLSQP), and equals it for boxes side by side.
 - check() asks the library only where that bound does not already put a pair beyond the margin:
@@ -21,8 +21,8 @@ from scipy.optimize import minimize
 
 from spar_py.core.geometry import rotz
 from spar_py.kb import load_problem
-from spar_py.world import collision
-from spar_py.world.collision import WORLD, _exact, box, capsule, convex, cylinder, support_gap
+from spar_py.world.collision import scene as collision
+from spar_py.world.collision.scene import WORLD, body_distance, box, capsule, convex, cylinder, support_gap
 from spar_py.world.run import CellCache
 from test_collision_pairs import _cells, _states
 
@@ -92,7 +92,7 @@ def test_support_gap_never_exceeds_the_distance() -> None:
         gap = _gap(a, b)
         assert gap <= d + 1e-6, (k, a.kind, b.kind, gap, d)
         if a.kind != "cylinder" and b.kind != "cylinder":  # the library's cylinder is the inscribed one
-            assert _exact(a, np.eye(4), b, np.eye(4)) == pytest.approx(d, abs=1e-4)
+            assert body_distance(a, np.eye(4), b, np.eye(4)) == pytest.approx(d, abs=1e-4)
         if d > 0.5:
             apart += 1
             tight += gap >= 0.95 * d
@@ -110,7 +110,7 @@ def test_support_gap_is_the_distance_of_boxes_side_by_side() -> None:
         a = box("a", WORLD, [-2, -1, -1], [2, 1, 1], T)
         b = box("b", WORLD, [-1, -3, -0.5], [1, 3, 0.5], T @ shift)
         assert _gap(a, b) == pytest.approx(7.5 - 2 - 1, abs=1e-7)
-        assert _gap(a, b) <= _exact(a, np.eye(4), b, np.eye(4)) + 1e-9
+        assert _gap(a, b) <= body_distance(a, np.eye(4), b, np.eye(4)) + 1e-9
 
 
 # --------------------------------------------------------------------------- check() and clearance()
@@ -264,7 +264,7 @@ def test_grasp_rule_key_makes_signed_zeros_one_and_its_verdicts_are_the_library_
         Ts[:3, 3] += rng.uniform(-1.0, 1.0, 3)
         bodies = [b.placed(Ts, collision.TOOL, "peg") for b in scene.shapes_of("peg")]
         ref = next(((False, gb.name) for gb in gripper
-                    if any(_exact(gb, np.eye(4), b, np.eye(4)) <= 0.0 for b in bodies)), (True, None))
+                    if any(body_distance(gb, np.eye(4), b, np.eye(4)) <= 0.0 for b in bodies)), (True, None))
         assert state.grasp_ok(Ts) == ref
         verdicts.add(ref[0])
     assert verdicts == {True, False}

@@ -2,7 +2,7 @@
 
 For each Fabrica assembly that derives (a refusal skips it with the refusal's text, so the test
 covers an assembly as soon as it derives) and issue 33's declared products with their
-declarations removed, the derivation (world/assembly.py through kb/products.py) is checked
+declarations removed, the derivation (world/product/assembly.py through kb/products.py) is checked
 against the meshes read and repaired here, with numpy and trimesh's ray-test containment only:
 
 - (a) every insertion is free: the inserted part (or group), moved from its product pose against
@@ -49,7 +49,7 @@ class Case:
     length unit), the contact tolerance and the sweep step in that unit."""
 
     name: str
-    res: object  # world.assembly.AssemblyResult
+    res: object  # world.product.assembly.AssemblyResult
     meshes: dict
     tol: float
     step: float

@@ -1,5 +1,5 @@
 """Fabrica cells (issue 34 item 6): the product files, the parts laid out on the table
-(world/layout.py: ``spar gen layout``, a problem's ``layout: auto``).
+(world/product/layout.py: ``spar gen layout``, a problem's ``layout: auto``).
 
 The geometry is checked with our own code: the parts' PLY files read by trimesh alone (cm,
 the product frame: a mesh part's object frame), placed by the loaded positions, against the
@@ -267,7 +267,7 @@ def _assembles(plan: dict) -> dict[str, tuple[int, str | None]]:
 
 def test_plan_keeps_every_precedence_and_no_blocked_grasp(fabrica_plan):
     """The plan inserts each part before every part its precedence puts after it (the sweeps' and
-    the hand's: world.access), and seats no part with a grasp hand access found blocked."""
+    the hand's: world.product.access), and seats no part with a grasp hand access found blocked."""
     name, plan = fabrica_plan
     cell = load_problem(ROOT / "kb" / "problems" / f"fabrica_{name}.yaml")
     at = _assembles(plan)

@@ -11,7 +11,7 @@ import pytest
 
 from spar_py.core.errors import KBError
 from spar_py.kb.objects import load_object, mesh_note
-from spar_py.world.shapes import _load_mesh
+from spar_py.world.parts.mesh import load_mesh
 
 trimesh = pytest.importorskip("trimesh")
 
@@ -50,7 +50,7 @@ def _plainly_holdable(m: "trimesh.Trimesh", opening: float) -> bool:
     return False
 
 
-#: The default gripper's fingers are 10 mm thick (kb.objects; world.shapes_derive.Gripper.default).
+#: The default gripper's fingers are 10 mm thick (kb.objects; world.parts.derive.Gripper.default).
 FINGER_THICKNESS_MM = 10.0
 #: The default gripper's pad (kb.objects: fingers 20 mm wide, 60 mm long), probed on a grid of
 #: (across, from the tip) offsets in the tool frame, mm: 1 mm apart over the 20 mm nearest the
@@ -117,7 +117,7 @@ def test_there_are_the_seven_assemblies() -> None:
 @pytest.mark.slow
 @pytest.mark.parametrize("part", PARTS, ids=[f"{p.parent.name}/{p.stem}" for p in PARTS])
 def test_part_loads_closed_and_holdable_parts_get_checked_grasps(tmp_path: Path, part: Path) -> None:
-    small, _ = _load_mesh(str(part), 1.0)  # the file's cm read as mm: 10x smaller, repaired alike
+    small, _ = load_mesh(str(part), 1.0)  # the file's cm read as mm: 10x smaller, repaired alike
     assert small.is_watertight and small.volume == pytest.approx(abs(_raw(part).volume) / 1000, rel=1e-6)
     model = load_object(_model(tmp_path, part), "mm", opening=OPENING_MM)
     mesh = model.geometry.mesh()

@@ -5,7 +5,7 @@ from pathlib import Path
 
 import numpy as np
 
-from spar_py.world import placement
+from spar_py.world.reach import placement as placement
 from spar_py.kb import load_problem
 from spar_py.world.run import CellCache
 
@@ -31,7 +31,7 @@ def test_reachable_mask_is_any_ik_candidate() -> None:
 def _reach_everywhere(cell, obj: str, cands: np.ndarray, X: np.ndarray) -> np.ndarray:
     """(m,) bool by brute force: some placement of cands reaches T_O @ X clear of the world
     (no pruning, no chunks: every placement at once)."""
-    from spar_py.world.workspace import requirement_clear
+    from spar_py.world.reach.workspace import requirement_clear
 
     return np.array([requirement_clear(CellCache(cell), obj, cands, x).ok.any() for x in X])
 

@@ -11,7 +11,7 @@ from bench import fd
 from spar_py.app import gen
 from spar_py.kb import load_problem
 from spar_py.world.run import CellCache
-from spar_py.world.arcs import reachable_pairs
+from spar_py.world.reach.arcs import reachable_pairs
 
 
 def test_encoding_names_every_part_goal_and_arc(tmp_path: Path) -> None:

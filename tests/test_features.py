@@ -122,7 +122,7 @@ def test_a_part_with_two_named_through_bores(plate_dir: Path) -> None:
     with pytest.raises(SparValueError, match=r"plate has no feature 'bore_c' \(its features: bore_a, bore_b\)"):
         plate.feature_named("bore_c")
     # a through bore's face is its wall only: every triangle 8.5 from its axis (no bottom cap)
-    from spar_py.world.shapes import derive_faces, part_mesh
+    from spar_py.world.parts.mesh import derive_faces, part_mesh
 
     mesh = part_mesh(plate)
     faces = {f.name: f for f in derive_faces(mesh, tuple(f.geometry for f in plate.features), {}, "mm")}
@@ -354,7 +354,7 @@ def _sampled_max(expr: ca.SX, reg: Registry, n: int = 20000, seed: int = 1) -> f
 def test_the_insertion_check_is_sound_and_tight(yaw_deg: float, tilt: bool) -> None:
     """SUP of the new expression covers every sampled value (sound) and is within 1 % of the
     sampled maximum (tight), for a vertical and a horizontal hole, square or turned on the table."""
-    from spar_py.world.shapes import FeatureGeometry, assembly_transforms
+    from spar_py.world.parts.mesh import FeatureGeometry, assembly_transforms
 
     axis = np.array([1.0, 0.0, 0.0]) if tilt else np.array([0.0, 0.0, -1.0])
     origin = np.array([-40.0, 0, 45]) if tilt else np.array([0.0, 0, 60])

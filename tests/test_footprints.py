@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from spar_py.world import placement
+from spar_py.world.reach import placement as placement
 from spar_py.core.units import LENGTH_UNITS
 from spar_py.kb import load_problem
 from spar_py.world.run import CellCache

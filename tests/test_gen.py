@@ -12,7 +12,7 @@ from spar_py.app import gen
 from spar_py.planning.engine import engine
 from spar_py.core.errors import SparValueError
 from spar_py.kb import check_file, iter_kb_files, load_problem
-from spar_py.world.placement import CLEARANCE_MM, GRID_STEP_MM
+from spar_py.world.reach.placement import CLEARANCE_MM, GRID_STEP_MM
 from spar_py.core.units import from_mm
 
 

@@ -1,4 +1,4 @@
-"""The grasp-feasibility report (world/grasp_report.py): a plain pin seated flush in a blind hole
+"""The grasp-feasibility report (world/product/grasp_report.py): a plain pin seated flush in a blind hole
 has no grasp its mate can use, and the report, the plan's JSON and its summary name that mate;
 products that plan keep a grasp through every filter.
 
@@ -15,8 +15,8 @@ import pytest
 
 from spar_py.core.units import mm_per
 from spar_py.kb.products import load_product
-from spar_py.world.grasp_report import grasp_report
-from spar_py.world.robots import GripperGeometry
+from spar_py.world.product.grasp_report import grasp_report
+from spar_py.world.robot.model import GripperGeometry
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -198,7 +198,7 @@ def test_hand_above_table_keeps_the_margin():
     """A hand closing straight down with its finger tips 1.25 mm over the table is above it, but
     not by a 2 mm collision margin (the clearance phase 2 keeps): the report and the layout must
     refuse it as phase 2 does. The tips' height is computed here from the finger length."""
-    from spar_py.world.arcs import hand_above_table
+    from spar_py.world.reach.arcs import hand_above_table
 
     g = GripperGeometry.default(50.0, mm_per("mm"))
     T = np.diag([1.0, -1.0, -1.0, 1.0])  # tool z (the approach) pointing down
@@ -233,7 +233,7 @@ def test_a_regrasp_is_offered_only_where_one_would_serve(name):
     arm reaches none of its grasps clear of the table after any put-down, so neither is offered a
     regrasp: both need the product built elsewhere."""
     from spar_py.planning.planner import Planner
-    from spar_py.world.arcs import reachable_pairs
+    from spar_py.world.reach.arcs import reachable_pairs
     from spar_py.world.run import CellCache
 
     planner = Planner()

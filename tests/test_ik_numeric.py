@@ -1,4 +1,4 @@
-"""world/ik/numeric.py via Robot: the multi-start DLS fallback on arms outside both closed-form families.
+"""world/robot/ik/numeric.py via Robot: the multi-start DLS fallback on arms outside both closed-form families.
 
 The arm of issue 17: a copy of the PUMA 762 with d5 = 95 mm (joint 5 offset along its axis:
 no spherical wrist, not the UR's structure either). Poses come from Craig's FK written out
@@ -14,7 +14,7 @@ import pytest
 
 from spar_py.core.geometry import rotx, trans
 from spar_py.kb import load_robot
-from spar_py.world.robots import Robot
+from spar_py.world.robot.model import Robot
 from craig_reference import craig_fk
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -1,4 +1,5 @@
-"""world/ik/puma.py via Robot: the PUMA 762 table, FK, all closed-form IK solutions, singularities, batch = single.
+"""world/robot/ik/puma.py via Robot: the PUMA 762 table, FK, all closed-form IK solutions, singularities,
+batch = single.
 
 The round trips check poses with an FK written here from Craig's link transform (eq. 3.6),
 not the code under test."""
@@ -15,7 +16,7 @@ from hypothesis import strategies as st
 from spar_py.core.errors import SparValueError
 from spar_py.core.geometry import inv, rotx, rotz, rpy, trans
 from spar_py.kb import load_robot
-from spar_py.world.robots import LIMIT_TOL, Robot
+from spar_py.world.robot.model import LIMIT_TOL, Robot
 from craig_reference import craig_fk
 
 ROOT = Path(__file__).resolve().parent.parent

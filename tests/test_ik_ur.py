@@ -1,4 +1,4 @@
-"""world/ik/ur.py via Robot: the UR5e and UR10e closed form (Hawkins 2013): round trips, singularities.
+"""world/robot/ik/ur.py via Robot: the UR5e and UR10e closed form (Hawkins 2013): round trips, singularities.
 
 Poses are computed with an FK written here straight from Universal Robots' published
 standard-DH tables (T = prod rotz(theta_i) transz(d_i) transx(a_i) rotx(alpha_i)), not
@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from spar_py.kb import load_robot
-from spar_py.world.robots import Robot
+from spar_py.world.robot.model import Robot
 
 ROOT = Path(__file__).resolve().parent.parent
 TWO_PI = 2 * math.pi

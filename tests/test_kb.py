@@ -155,8 +155,9 @@ def test_bad_robot_file_one_line_error(tmp_path: Path, old: str, new: str, key: 
     assert msg.count("\n") == 0 and str(bad) in msg and f": {key}: " in msg and expected in msg
 
 
-@pytest.mark.parametrize("module", ["spar_py.world.robots", "spar_py.world.ik.puma", "spar_py.world.ik.ur",
-                                    "spar_py.world.ik.numeric", "spar_py.core.model", "spar_py.core.geometry",
+@pytest.mark.parametrize("module", [
+    "spar_py.world.robot.model", "spar_py.world.robot.ik.puma", "spar_py.world.robot.ik.ur",
+                                    "spar_py.world.robot.ik.numeric", "spar_py.core.model", "spar_py.core.geometry",
                                     "spar_py.core.units"])
 def test_the_model_does_not_import_the_kb(module: str) -> None:
     # kb -> model -> kinematics -> kb was an import circle: the robot loader lives in kb now

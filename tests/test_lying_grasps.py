@@ -20,9 +20,9 @@ import pytest
 import trimesh
 
 from spar_py.kb.problem import load_problem
-from spar_py.world import arcs
+from spar_py.world.reach import arcs as arcs
 from spar_py.world.run import CellCache
-from spar_py.world.workspace import Requirement, assembled_touch, requirement_clear
+from spar_py.world.reach.workspace import Requirement, assembled_touch, requirement_clear
 
 ROOT = Path(__file__).resolve().parents[1]
 STOOL = ROOT / "kb" / "products" / "fabrica" / "stool_circular"

@@ -128,7 +128,7 @@ def test_the_prolog_goal_term_is_in_the_trace(planner) -> None:
 
 def test_a_pair_every_refusal_shares_is_said_once() -> None:
     from spar_py.planning.messages import collision_lines
-    from spar_py.world.workspace import Refusal
+    from spar_py.world.reach.workspace import Refusal
 
     lines = collision_lines([Refusal("pickup(peg, p1G1) at tr1", (("upper_arm", "table"), ("palm", "block"))),
                              Refusal("pickup(peg, p1G2) at tr1", (("finger_l", "block"), ("upper_arm", "table"))),
@@ -202,7 +202,7 @@ def _geo(kind: str, args: list, context: list) -> dict:
 
 def test_each_kind_of_failed_goal_has_its_cause_in_the_users_terms() -> None:
     from spar_py.planning.messages import summary
-    from spar_py.world.workspace import Refusal
+    from spar_py.world.reach.workspace import Refusal
 
     cell = load_problem(KB / "problems/peg_in_block.yaml")
     putdown = summary(cell, _geo("reachable", ["grasp_1", "pos_1"], [("holding", ["block", "grasp_1"])]), [])

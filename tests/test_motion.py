@@ -1,7 +1,7 @@
 """Motions between the end-points (issue 16): resolution, free motions (straight and OMPL),
 tool lines, the robot file's motion keys, and the Planner's motion output.
 
-The geometry is checked with code independent of world/motion.py: Craig FK written out
+The geometry is checked with code independent of world/motion/paths.py: Craig FK written out
 in tests/craig_reference.py and tests/motion_fake.py (a small scene of points along the
 links, the table and world boxes)."""
 from __future__ import annotations
@@ -15,7 +15,7 @@ import pytest
 
 from spar_py.core.errors import KBError, SparValueError
 from spar_py.kb import load_robot
-from spar_py.world import motion as mo
+from spar_py.world.motion import paths as mo
 from spar_py.world.run import CellCache
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -284,7 +284,7 @@ def test_every_path_of_every_regression_plan(motion_plans) -> None:
     waypoints within path_resolution_deg in every joint, joint limits, the paths' ends equal
     to the steps' joints and to each other, home at both ends, and every waypoint clear of the
     table (each link shape's exact lowest point above z = 0) and of the obstacle boxes (the
-    links' axes and the tool point outside them), computed here, not by world/collision.py."""
+    links' axes and the tool point outside them), computed here, not by world/collision/scene.py."""
     planned = [(path, cell, plan) for path, cell, plan in motion_plans if plan.ok]
     assert {"wall_detour", "peg_in_block", "second_base"} <= {Path(p).stem for p, _, _ in planned}
     for path, cell, plan in planned:
@@ -561,7 +561,7 @@ def test_the_fast_line_walk_is_the_exact_nearest_previous_walk(robot_file: str, 
     what the point-by-point nearest-previous rule (_walk_exact) returns, bit for bit, on random
     tool lines from random configurations (some with the wrist or elbow nearly straight, where
     branches meet), sampled densely and coarsely; and it walks point by point on few of them."""
-    from spar_py.world.workspace import wrist_above_table
+    from spar_py.world.reach.workspace import wrist_above_table
 
     robot = load_robot(ROOT / "kb" / "robots" / robot_file, "in")
     rng = np.random.default_rng(17)

@@ -18,7 +18,7 @@ from spar_py.phase2 import instance as phase2
 from spar_py.planning import run as planning_run
 from spar_py.kb import load_problem
 from spar_py.planning.planner import Planner
-from spar_py.world.grasp_report import seat_order
+from spar_py.world.product.grasp_report import seat_order
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -51,13 +51,13 @@ def test_the_paper_cells_parts_are_at_least_60_px_across_in_the_whole_cell_view(
 
 
 def test_the_view_is_the_work_not_the_whole_arm(paper) -> None:
-    from spar_py.pictures.cell import _part_points, extent
+    from spar_py.pictures.cell import part_points, extent
     from spar_py.pictures.scene import scenes
 
     cell, plan = paper
     sc = scenes(cell, plan)
     fr = extent(cell, sc)
-    parts = np.vstack(_part_points(cell, sc))
+    parts = np.vstack(part_points(cell, sc))
     assert np.all(fr.lo <= parts.min(axis=0)) and np.all(parts.max(axis=0) <= fr.hi)
     # the robot's base (the PUMA's waist at the origin) is outside: the view is the parts' box, padded
     assert not np.all((fr.lo[:2] <= 0) & (0 <= fr.hi[:2]))
@@ -65,7 +65,7 @@ def test_the_view_is_the_work_not_the_whole_arm(paper) -> None:
 
 
 def test_the_table_is_drawn_at_its_extent() -> None:
-    from spar_py.pictures.cell import Extent, _table, extent
+    from spar_py.pictures.cell import Extent, table, extent
     from spar_py.pictures.scene import Scene, initial_poses
 
     cell = load_problem(PROBLEMS / "ur5e_peg_in_block.yaml")
@@ -79,7 +79,7 @@ def test_the_table_is_drawn_at_its_extent() -> None:
     paper = load_problem(PROBLEMS / "peg_in_block.yaml")
     assert paper.table is None
     lo, hi = np.array([0.0, -5.0, 0.0]), np.array([10.0, 5.0, 3.0])
-    assert _table(paper, lo, hi) == (0.0, 10.0, -5.0, 5.0)
+    assert table(paper, lo, hi) == (0.0, 10.0, -5.0, 5.0)
     assert isinstance(fr, Extent)
 
 

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from spar_py.world import placement
+from spar_py.world.reach import placement as placement
 from spar_py.kb import load_problem
 from spar_py.world.run import CellCache
 
@@ -78,7 +78,7 @@ def test_tool_on_table_prune_refuses_only_what_the_full_check_refuses() -> None:
     """The grid prune (workspace.tool_on_table): where the gripper, tool mount or part in the
     hand meets the (unbounded) table at the grid's first placement, the full check, IK and
     every solution, refuses every placement of the grid too. Some grasps are pruned, some not."""
-    from spar_py.world.workspace import Requirement, requirement_clear, tool_on_table
+    from spar_py.world.reach.workspace import Requirement, requirement_clear, tool_on_table
 
     cache = CellCache(CELL)
     cell = cache.cell
@@ -101,7 +101,7 @@ def test_tool_on_table_prune_refuses_only_what_the_full_check_refuses() -> None:
 
 
 def _mate_requirements(cell):  # the mate_reachable arc's: the peg held by each grasp, onto the block
-    from spar_py.world.workspace import Requirement
+    from spar_py.world.reach.workspace import Requirement
 
     Ta = cell.transforms["trans_1"]
     return [(g.label, Requirement(Ta @ g.T, ("peg", np.linalg.inv(g.T)), g.width))
@@ -113,7 +113,7 @@ def test_rigid_refusal_refuses_only_what_the_full_check_refuses() -> None:
     flange clash (a finger or the tool mount in the block the held peg is mated onto) or the grasp
     rule fails, the full check, IK and every solution, refuses every placement of the grid. Some
     mate requirements are pruned, some not."""
-    from spar_py.world.workspace import requirement_clear, requirement_state, tool_refusal
+    from spar_py.world.reach.workspace import requirement_clear, requirement_state, tool_refusal
 
     cache = CellCache(CELL)
     cell = cache.cell
@@ -135,7 +135,7 @@ def test_somewhere_is_the_whole_grid_answer() -> None:
     """some_placement_reaches (first placement alone, then chunks; prunes before IK), a pose at a time
     and every pose at once (some_placement_reaches_each), answers, for every grasp of either object
     and every mate requirement, what one check of the whole grid answers."""
-    from spar_py.world.workspace import Requirement, requirement_clear
+    from spar_py.world.reach.workspace import Requirement, requirement_clear
 
     cache = CellCache(CELL)
     cell = cache.cell

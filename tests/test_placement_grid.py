@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from test_footprints import _distance, _wrap
 
-from spar_py.world import placement
+from spar_py.world.reach import placement as placement
 from spar_py.core.geometry import rotz
 from spar_py.kb import load_problem
 from spar_py.world.run import CellCache

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from spar_py.world import placement
+from spar_py.world.reach import placement as placement
 from spar_py.planning.engine import engine
 from spar_py.kb import load_problem
 from spar_py.world.run import CellCache

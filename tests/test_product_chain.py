@@ -13,7 +13,7 @@ import pytest
 
 from spar_py.kb import load_problem
 from spar_py.planning.planner import Planner
-from spar_py.world import products as wp
+from spar_py.world.product import products as wp
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -1,4 +1,4 @@
-"""world/arcs.py: the CMS's reachable / mate_reachable pairs (Sec. 5.2.4) on a small hand-built cell."""
+"""world/reach/arcs.py: the CMS's reachable / mate_reachable pairs (Sec. 5.2.4) on a small hand-built cell."""
 from __future__ import annotations
 
 import math
@@ -12,7 +12,7 @@ from spar_py.core.geometry import eulerxyz, rot, rotx, rotz, trans
 from spar_py.kb import load_problem, load_robot
 from spar_py.core.model import Bounds, Cell, Grasp, ObjectModel, Position, StablePose
 from spar_py.world.run import CellCache, WorldRun
-from spar_py.world.arcs import (
+from spar_py.world.reach.arcs import (
     arc,
     mate_reachable_pairs,
     natural_key,
@@ -217,7 +217,7 @@ def test_wrist_under_the_table_is_not_reachable() -> None:
     """A tool pose pointing up from under the table top fails condition 2, whatever IK says."""
     from spar_py.core.geometry import roty, trans
     from spar_py.kb import load_problem
-    from spar_py.world.workspace import wrist_above_table
+    from spar_py.world.reach.workspace import wrist_above_table
 
     cell = load_problem(Path(__file__).resolve().parent.parent / "kb/problems/peg_in_block.yaml")
     down = trans(30, 0, 1.0) @ roty(np.pi)   # tool z pointing down: flange above

@@ -1,4 +1,4 @@
-"""world/robots.py: DH conventions, URDF import (kb/robots/ur5e.urdf), the FK check, the same plan."""
+"""world/robot/model.py: DH conventions, URDF import (kb/robots/ur5e.urdf), the FK check, the same plan."""
 from __future__ import annotations
 
 import math
@@ -12,7 +12,7 @@ import pytest
 from spar_py import Planner
 from spar_py.core.errors import KBError, SparValueError
 from spar_py.kb import load_problem, load_robot
-from spar_py.world.robots import Robot, check_against_urdf, read_urdf_chain, robot_from_urdf, standard_to_modified
+from spar_py.world.robot.model import Robot, check_against_urdf, read_urdf_chain, robot_from_urdf, standard_to_modified
 
 ROOT = Path(__file__).resolve().parent.parent
 URDF = ROOT / "kb" / "robots" / "ur5e.urdf"

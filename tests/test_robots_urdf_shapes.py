@@ -50,7 +50,7 @@ def write_urdf(path: Path) -> Path:
 
 @pytest.fixture(scope="module")
 def arm(tmp_path_factory):
-    from spar_py.world.robots import read_urdf_chain, robot_from_urdf
+    from spar_py.world.robot.model import read_urdf_chain, robot_from_urdf
 
     f = write_urdf(tmp_path_factory.mktemp("urdf") / "kr6_like.urdf")
     chain = read_urdf_chain(f, "base_link", "tool0")

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from spar_py.kb.problem import load_problem
-from spar_py.world.shapes_derive import _pads_on_surface
+from spar_py.world.parts.derive import _pads_on_surface
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -61,7 +61,7 @@ def test_thumbstick_cap_is_held_above_the_mouth_and_the_table() -> None:
     # the planner's rules take them: usable for the mate; condition 1 at the lying pose takes a
     # grasp on the face it rests on whose hand is above the table, and refuses the others
     from spar_py.kb.prolog_facts import _mate_grasps
-    from spar_py.world.arcs import _gripper, _hand_clear, _part_on_table
+    from spar_py.world.reach.arcs import _gripper, _hand_clear, _part_on_table
 
     usable = next(f[3] for f in _mate_grasps(cell) if f[2] == "stick0")
     assert set(seated_ok) <= set(usable)

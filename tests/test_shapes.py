@@ -3,7 +3,7 @@ T_a; hand-written entries checked against the shape; the derivation cache; `spar
 
 The physics of the derived stable poses is checked here with code of its own (a centre of
 mass by the divergence theorem, a monotone-chain hull, point-in-polygon), not with
-world.shapes_derive's support_check or trimesh's centre of mass."""
+world.parts.derive's support_check or trimesh's centre of mass."""
 from __future__ import annotations
 
 import json
@@ -18,8 +18,8 @@ import pytest
 from spar_py.core.errors import KBError
 from spar_py.core.geometry import eulerxyz
 from spar_py.kb import check_file, load_object, load_problem
-from spar_py.world import shapes_cache
-from spar_py.world.shapes import part_mesh
+from spar_py.world.parts import cache as shapes_cache
+from spar_py.world.parts.mesh import part_mesh
 
 from test_problems import PAPER_ACTIONS, PAPER_ORDER, PHASE1, Outcome, phase1
 
@@ -197,8 +197,8 @@ def test_shaft_grasps_are_the_same_from_either_side() -> None:
 def test_line_contact_on_the_pads_edge_does_not_hang_on_rounding() -> None:
     """A contact line parallel to the pad's tip edge, a rounding error either side of it, has
     the same contact length (shapes_derive._line_contact)."""
-    from spar_py.world.robots import GripperGeometry
-    from spar_py.world.shapes_derive import _line_contact
+    from spar_py.world.robot.model import GripperGeometry
+    from spar_py.world.parts.derive import _line_contact
 
     g = GripperGeometry.default(4.0, 25.4)
     T = np.eye(4)  # pad: tool x within +-finger_width/2, z from -finger_length to 0
@@ -552,7 +552,7 @@ def test_grasps_are_derived_for_the_robots_own_fingers() -> None:
     the paper's peg's shaft is 1.5 in long above a 3 in base, so fingers 200 mm wide (along the
     shaft) meet the base in every grasp of the shaft across its axis; the default 20 mm fingers
     fit. The default-sized robot gripper derives exactly the default grasps."""
-    from spar_py.world.robots import GripperGeometry
+    from spar_py.world.robot.model import GripperGeometry
 
     default = load_object(OBJ / "peg_shape.yaml", "in", opening=4.0)
     same = load_object(OBJ / "peg_shape.yaml", "in", gripper=GripperGeometry.default(4.0, 25.4))

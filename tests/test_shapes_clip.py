@@ -1,10 +1,10 @@
-"""The batched polygon clipping and areas of world.shapes_derive give exactly (bit for bit) what
+"""The batched polygon clipping and areas of world.parts.derive give exactly (bit for bit) what
 the one-polygon functions give, so the derived grasps of every cell stay the same."""
 from __future__ import annotations
 
 import numpy as np
 
-from spar_py.world import shapes_derive as sd
+from spar_py.world.parts import derive as sd
 
 
 def test_clip_many_and_area_centroid_many_equal_the_one_polygon_functions() -> None:

@@ -1,4 +1,4 @@
-"""world.shapes_derive.grasp_problem (python-fcl's box-triangle test over the mesh's BVH) gives
+"""world.parts.derive.grasp_problem (python-fcl's box-triangle test over the mesh's BVH) gives
 the answer of a separating-axis test of each gripper box against every triangle, written here."""
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import pytest
 import trimesh
 from scipy.spatial.transform import Rotation
 
-from spar_py.world import shapes_derive as sd
+from spar_py.world.parts import derive as sd
 
 
 def _meshes() -> list[trimesh.Trimesh]:

@@ -1,4 +1,4 @@
-"""world.shapes_stable's stable poses against trimesh's own compute_stable_poses (the
+"""world.parts.stable's stable poses against trimesh's own compute_stable_poses (the
 reference it reimplements with arrays): the same transforms and probabilities, bit for bit, on
 boxes, cylinders, spheres, an off-centre mass, unions of shapes and a Fabrica part's hull."""
 from __future__ import annotations
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from spar_py.world.shapes_stable import stable_poses
+from spar_py.world.parts.stable import stable_poses
 
 FABRICA = Path(__file__).resolve().parents[1] / "kb" / "products" / "fabrica"
 

@@ -1,4 +1,4 @@
-"""Can one arm on a table build a product (world/single_arm.py), and the product file's
+"""Can one arm on a table build a product (world/product/single_arm.py), and the product file's
 ``retention:`` override of derived mates (kb/products.py).
 
 Heights and directions are checked against the Fabrica car's PLY files read by trimesh alone
@@ -14,7 +14,7 @@ import yaml
 from spar_py.core.errors import KBError
 from spar_py.kb.products import load_product
 from spar_py.planning.messages import summary
-from spar_py.world.single_arm import single_arm_report
+from spar_py.world.product.single_arm import single_arm_report
 
 ROOT = Path(__file__).resolve().parents[1]
 FABRICA = ROOT / "kb" / "products" / "fabrica"
@@ -122,13 +122,13 @@ def _rx(deg: float):
 
 
 def test_layout_turns_the_base_to_make_the_most_insertions_from_above():
-    """world.layout._base_pose: upright (-z down) unless another stable pose of the base lets
+    """world.product.layout._base_pose: upright (-z down) unless another stable pose of the base lets
     more insertions in from above, counted in an order the precedence allows."""
     from types import SimpleNamespace
 
     import numpy as np
 
-    from spar_py.world.layout import _base_pose
+    from spar_py.world.product.layout import _base_pose
 
     upright = SimpleNamespace(label="up", R=np.eye(3))
     side = SimpleNamespace(label="side", R=_rx(90.0))       # the product's -y down

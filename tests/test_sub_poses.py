@@ -12,8 +12,8 @@ import yaml
 from scipy.spatial import ConvexHull
 
 from spar_py.kb.products import load_product
-from spar_py.world.products import subassembly_poses
-from spar_py.world.shapes import part_mesh
+from spar_py.world.product.products import subassembly_poses
+from spar_py.world.parts.mesh import part_mesh
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -58,7 +58,7 @@ def test_disc_with_pin_rests_on_its_side_on_the_pin_and_rim() -> None:
 def test_sub_poses_are_cached_by_content_and_a_hit_builds_no_mesh(tmp_path, monkeypatch) -> None:
     """A second call with the same parts reads the poses back (same labels, R, heights, resting
     faces) without building any part's mesh; a changed relative pose misses."""
-    from spar_py.world import shapes
+    from spar_py.world.parts import mesh as shapes
 
     monkeypatch.setenv("SPAR_CACHE_DIR", str(tmp_path))
     product = load_product(ROOT / "kb/products/disc_pin.yaml", "mm")
@@ -113,7 +113,7 @@ def _put_on_its_side(cell, steps: list[dict]) -> tuple[list[dict], object]:
     from dataclasses import replace
 
     from spar_py.phase2 import instance as phase2
-    from spar_py.world.placement import Placement
+    from spar_py.world.reach.placement import Placement
     from spar_py.world.run import CellCache
 
     side = next(k for k, p in cell.objects["disc"].poses.items() if "_sub_" in k and abs(p.R[2, 2]) < 0.2)

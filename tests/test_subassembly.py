@@ -347,7 +347,7 @@ def test_carried_hole_composes_its_pose_through_the_mate() -> None:
 
 
 def test_a_grasp_whose_fingers_meet_a_carried_part_is_refused_naming_it() -> None:
-    from spar_py.world.workspace import arm_at
+    from spar_py.world.reach.workspace import arm_at
 
     cell, cache, world = _turn_over_world()
     parts = {k: o.pose for k, o in world.unc.objects.items()}
@@ -358,7 +358,7 @@ def test_a_grasp_whose_fingers_meet_a_carried_part_is_refused_naming_it() -> Non
 
 
 def test_a_body_resting_on_a_carried_part_or_tipping_is_refused() -> None:
-    from spar_py.world.supports import rest_of_body, surfaces_of
+    from spar_py.world.reach.supports import rest_of_body, surfaces_of
 
     cell, _, world = _turn_over_world()
     T = np.eye(4)

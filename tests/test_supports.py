@@ -2,7 +2,7 @@
 marked ``support: true`` or on another part, initially and after every step; put-downs may
 go onto a support's top; a floating or unstable part is refused in one line.
 
-The checks of resting are the test's own geometry (world.supports is the code under test):
+The checks of resting are the test's own geometry (world.reach.supports is the code under test):
 a part's vertices from its box and cylinder primitives (a cylinder's rims sampled densely),
 its centre of mass from the primitives' volumes, the supports' tops from the problem file's
 own ``box:`` numbers, and point-in-polygon by scipy's convex hull.
@@ -22,9 +22,9 @@ from spar_py import Planner
 from spar_py.core.errors import KBError
 from spar_py.kb import load_problem
 from spar_py.phase2 import instance as phase2
-from spar_py.world import placement as pl
+from spar_py.world.reach import placement as pl
 from spar_py.world.run import CellCache
-from spar_py.world.supports import support_surfaces
+from spar_py.world.reach.supports import support_surfaces
 
 ROOT = Path(__file__).resolve().parent.parent
 PROBLEMS = ROOT / "kb" / "problems"

@@ -36,7 +36,7 @@ def _tool_down(x: float, y: float, z: float) -> np.ndarray:
     return T
 
 
-def _q(cell, T: np.ndarray) -> np.ndarray:
+def q(cell, T: np.ndarray) -> np.ndarray:
     sols = cell.robot.ik(T)
     assert len(sols), "the test's tool pose is out of the UR5e's reach"
     return sols
@@ -53,7 +53,7 @@ def test_a_gripper_just_past_the_edge_below_the_margin_is_refused(edge_cell) -> 
     # above the table top
     T_past = _tool_down(18.0, y_edge + reach + gap, gap)
     assert math.hypot(gap, gap) < margin
-    rows = _q(cell, T_past)
+    rows = q(cell, T_past)
     ok = state.clear(rows)
     assert not ok.any(), (f"{int(ok.sum())} of {len(rows)} IK rows with the fingers {gap * 25.4:.2f} mm past the "
                           f"table's edge and {gap * 25.4:.2f} mm above its top are called clear")
@@ -68,13 +68,13 @@ def test_the_same_gripper_a_margin_past_the_edge_is_clear_of_the_table(edge_cell
     g = cell.robot.gripper
     reach = cell.robot.finger_separation / 2 + g.finger_thickness
     T_far = _tool_down(18.0, y_edge + reach + 1.5 * margin, 0.5 * margin)
-    assert state.clear(_q(cell, T_far)).any()
+    assert state.clear(q(cell, T_far)).any()
 
 
 def test_the_edge_gap_is_a_lower_bound_close_to_the_distance() -> None:
     """_slab_gap against the exact distance of a point to the slab (clamping, by hand): never
     above it, and within 2% of it plus 1e-9 for points beside the edge at every height."""
-    from spar_py.world.collision import _slab_gap
+    from spar_py.world.collision.scene import _slab_gap
 
     ext = (-20.0, 10.0, -20.0, 6.5)
     rng = np.random.default_rng(3)

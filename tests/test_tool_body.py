@@ -19,7 +19,7 @@ from spar_py.core.errors import KBError
 from spar_py.kb.problem import load_problem
 from spar_py.kb.robots import load_robot
 from spar_py.planning.planner import Planner
-from spar_py.world.collision import scene_for
+from spar_py.world.collision.scene import scene_for
 
 ROOT = Path(__file__).resolve().parent.parent
 PUMA = ROOT / "kb" / "robots" / "puma762.yaml"

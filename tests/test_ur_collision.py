@@ -1,6 +1,6 @@
 """The UR5e's collision shapes (kb/robots/ur5e.yaml, kb/robots/ur5e.urdf) where the real arm is.
 
-Independent of world/collision.py and world/robots.py: the link frames are chained here from
+Independent of world/collision/scene.py and world/robot/model.py: the link frames are chained here from
 ur_description's joint origins (written out with numpy, checked against UR's published
 standard DH in test_ik_ur.std_fk) and the cylinders placed in them from the figures the robot
 file cites (UR's offsets along the shoulder axis, the fitted radii, the 2F-85 coupling); each
@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 from spar_py.kb import load_problem
-from spar_py.world.workspace import ik_rows, reach_clear, requirement_clear
+from spar_py.world.reach.workspace import ik_rows, reach_clear, requirement_clear
 from spar_py.world.run import CellCache
 
 sys.path.insert(0, str(Path(__file__).parent))

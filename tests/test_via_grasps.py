@@ -1,5 +1,5 @@
 """Issue 33 item 4: a subassembly is grasped on any of its parts. Each product part gets the
-grasps of the parts that can be mated into it, in its own frame (world.products.via_grasps),
+grasps of the parts that can be mated into it, in its own frame (world.product.products.via_grasps),
 usable only while that part is carried.
 
 Own geometry: the product poses from the product file's numbers (xyz, rpy in degrees), the
@@ -145,7 +145,7 @@ def test_motions_hold_the_body_by_the_grasped_pin() -> None:
     (T_tool_pin = T_G_pin^-1, the pin's own grasp read from the cell), the block carried at
     T_tool_block = T_G_pin^-1 T_rel^-1 (T_rel the pin's product pose, from the product file);
     the pickup's stop closes the fingers on pin_a."""
-    from spar_py.world import motion
+    from spar_py.world.motion import paths as motion
 
     cell = load_problem(ROOT / "kb/problems/turn_over.yaml")
     prod = yaml.safe_load((ROOT / "kb/products/turn_over.yaml").read_text())

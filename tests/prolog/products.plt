@@ -1,5 +1,5 @@
 /*  Tests of establish:post_precedence/3: the orderings a product's
-    geometry forces (kb:precedence/3, world/products.py) posted between the
+    geometry forces (kb:precedence/3, world/product/products.py) posted between the
     assembles of the parts, on the paper cell's knowledge base with two
     assembles (peg into block, block onto peg: only their parts matter).
 

@@ -23,7 +23,7 @@ from spar_py.app.guard import RunGuard
 from spar_py.core.errors import InternalError, KBError, PlanningTimeout, PrologError, SparError, SparValueError
 from spar_py.planning.engine import Engine, engine, start_engine
 from spar_py.planning.qlf import cache_dir
-from spar_py.world.motion_options import PLANNERS, MotionOptions
+from spar_py.world.motion import PLANNERS, MotionOptions
 
 EXIT_OK, EXIT_FAIL, EXIT_INPUT, EXIT_INTERNAL, EXIT_TIMEOUT = 0, 1, 2, 3, 4
 DEFAULT_PROBLEM = "kb/problems/peg_in_block.yaml"

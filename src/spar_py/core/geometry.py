@@ -16,7 +16,7 @@ chosen by the arguments' type, the way spatialmath shims ``sym.cos``:
   (no batch form), e.g. ``trans(dx, 0, 0)`` with ``dx`` an uncertainty variable.
 
 This module never imports CasADi itself: a CasADi value can only reach it once the
-caller has imported CasADi, so numeric users (the kb loaders, world/robots.py and world/ik/) do not pay for it.
+caller has imported CasADi, so numeric users (the kb loaders, world/robot/) do not pay for it.
 
 The paper prints transforms in the row-vector convention, ``tm([[r1], [r2], [r3],
 [d]])`` with r1..r3 the images of the frame's x, y, z axes: :func:`tm_rows` and

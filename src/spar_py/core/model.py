@@ -7,15 +7,14 @@ transforms with column vectors, ``T_world_obj``.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Sequence, Union
+from typing import TYPE_CHECKING, Any, Protocol, Sequence, Union
 
 import numpy as np
 
 from spar_py.core.errors import SparValueError
 
 if TYPE_CHECKING:
-    from spar_py.world.robots import Robot
-    from spar_py.world.shapes import FeatureGeometry, Geometry
+    from spar_py.world.robot import Robot
 
 Face = Union[int, str]
 #: A ground Prolog term as data: an atom (str), a number, a list of terms, or a compound as a
@@ -53,6 +52,63 @@ class Grasp:
 
 
 @dataclass(frozen=True)
+class FeatureGeometry:
+    """A mating feature declared by geometry (object frame, cell unit): ``kind`` peg or hole,
+    the face ``name`` its surfaces get, ``radius``, ``origin`` (a peg's root, a hole's mouth
+    centre), unit ``direction`` (to the peg's tip, into the hole) and ``length`` (the shaft's
+    length, the hole's depth); ``through``: a hole open at both ends (no bottom)."""
+
+    kind: str
+    name: str
+    radius: float
+    origin: np.ndarray
+    direction: np.ndarray
+    length: float
+    through: bool = False
+    #: 'round', or 'prism': plane walls normal to the axis, ``radius`` the profile's inscribed
+    #: half-width and ``corners`` (k, 3) its bounding rectangle's corners as offsets from the
+    #: axis, across it (object frame, cell unit).
+    profile: str = "round"
+    corners: np.ndarray | None = None
+
+    @property
+    def end(self) -> np.ndarray:
+        """The peg's tip centre F_p or the hole's bottom centre F_h (object frame)."""
+        return self.origin + self.length * self.direction
+
+    @property
+    def reach(self) -> float:
+        """The farthest the feature's wall gets from its axis: the radius, a prism's corners."""
+        if self.profile == "prism" and self.corners is not None and len(self.corners):
+            return float(np.linalg.norm(self.corners, axis=1).max())
+        return self.radius
+
+    def spec(self) -> list:
+        """Plain data for the content hash."""
+        out = [self.kind, self.name, round(self.radius, 12), [round(float(v), 12) for v in self.origin],
+               [round(float(v), 12) for v in self.direction], round(self.length, 12), self.through]
+        if self.profile != "round":
+            out += [self.profile, np.round(np.asarray(self.corners, float), 12).tolist()]
+        return out
+
+
+class DeclaredShape(Protocol):
+    """What a model knows of its declared geometry (``mesh:`` or ``shape:``); the world's
+    parts room implements it (world.parts.Geometry) and builds the mesh from it."""
+
+    unit: str
+    mesh_file: str | None
+
+    def digest(self) -> str:
+        """SHA-256 of the geometry's content."""
+        ...
+
+    def mesh(self) -> Any:
+        """The part's mesh (a trimesh.Trimesh; object frame, cell unit), built on first use."""
+        ...
+
+
+@dataclass(frozen=True)
 class MatingFeature:
     """A peg or hole (Sec. 3.2.2): ``kind`` 'peg' or 'hole', the part's faces on it, its
     radius, and its vector in the object frame (F_p, the peg tip centre; F_h, the hole's bottom
@@ -69,7 +125,7 @@ class MatingFeature:
     vector: np.ndarray
     #: The feature declared by geometry (axis origin, direction, length), or None (the
     #: paper's form: faces and vector only).
-    geometry: "FeatureGeometry | None" = None
+    geometry: FeatureGeometry | None = None
     name: str = ""
     through: bool = False
     profile: str = "round"
@@ -86,7 +142,7 @@ class Solid:
     (``lo``, ``hi`` corners), a z-axis cylinder (``radius``, ``lo``/``hi`` as z range
     in ``lo[2]``, ``hi[2]``, centred on the z axis) or a convex ``hull`` (its vertices
     ``points`` (k, 3), ``lo``/``hi`` their bounding box: a mesh part). Used for pictures and
-    clearances; subtracted primitives are not among them (world.shapes keeps them)."""
+    clearances; subtracted primitives are not among them (world.parts.mesh keeps them)."""
 
     kind: str
     lo: np.ndarray
@@ -113,8 +169,8 @@ class ObjectModel:
     features: tuple[MatingFeature, ...] = ()
     shape: tuple[Solid, ...] = ()
     #: The declared geometry (``mesh:`` or ``shape:``) the part's mesh is built from
-    #: (world.shapes.part_mesh), or None.
-    geometry: "Geometry | None" = field(default=None, compare=False, repr=False)
+    #: (world.parts.mesh.part_mesh), or None.
+    geometry: DeclaredShape | None = field(default=None, compare=False, repr=False)
 
     def bounding_radius(self) -> float:
         """Radius of a sphere about the object origin containing the shape (0 without one)."""
@@ -204,26 +260,26 @@ class Cell:
     #: Derived T_a (assembled/2 goals): the goal's transform name -> its turns about the hole's
     #: axis, each (transform name, the hole part's stable poses the mated peg clears the table in).
     turns: dict[str, tuple[tuple[str, tuple[str, ...]], ...]] = field(default_factory=dict)
-    #: Obstacles (world.collision.Obstacle: named bodies, world frame), the table top's extent
+    #: Obstacles (world.collision.scene.Obstacle: named bodies, world frame), the table top's extent
     #: (x0, x1, y0, y1) or None (the whole plane), the collision margin or None (the robot's or
     #: the default): the problem file's ``obstacles:``, ``table:``, ``clearance:`` (cell unit).
     obstacles: tuple = ()
     table: tuple[float, float, float, float] | None = None
     clearance: float | None = None
-    #: Whether reach checks ask the collision scene (world.collision) at all: on unless the
+    #: Whether reach checks ask the collision scene (world.collision.scene) at all: on unless the
     #: problem file says ``collision: false`` (see workspace.reach_clear).
     collisions: bool = True
     #: The files the cell was loaded from (resolved paths: problem, robot, models).
     files: tuple[str, ...] = ()
     #: Home joint vector (6,) rad: the problem's ``home:``, else the robot file's, else None
-    #: (world/motion.py's default).
+    #: (world/motion/paths.py's default).
     home: np.ndarray | None = None
     #: The problem file's ``motion: true``: plan motions unless the Planner says otherwise
     #: (the regression suite plans motions for these cells only).
     plan_motions: bool = False
     #: The product the problem's ``product:`` names (its goals compiled), or None.
     product: "Product | None" = None
-    #: A product cell's grasps no plan can seat each part with (world.access.hand_access): the
+    #: A product cell's grasps no plan can seat each part with (world.product.access.hand_access): the
     #: assemble of that part does not offer them (kb.prolog_facts' mate_grasps).
     blocked_grasps: dict[str, frozenset[str]] = field(default_factory=dict)
 
@@ -246,8 +302,8 @@ class ProductPart:
 
 
 #: A loose mate (held by gravity) stays while its insertion direction is within this angle of
-#: world down (deg): the retention check (phase2.instance), the one-arm search (world.single_arm)
-#: and the layout's insertions "from above" (world.layout) all use it.
+#: world down (deg): the retention check (phase2.instance), the one-arm search (world.product.single_arm)
+#: and the layout's insertions "from above" (world.product.layout) all use it.
 LOOSE_MAX_DEG = 30.0
 
 
@@ -330,11 +386,11 @@ class Product:
     precedence: tuple[Precedence, ...] = ()
     #: The parts' model files (resolved paths).
     files: tuple[str, ...] = ()
-    #: Each part's neighbours at the product poses (world.products.near_parts).
+    #: Each part's neighbours at the product poses (world.product.products.near_parts).
     near: dict[str, tuple[str, ...]] = field(default_factory=dict)
     #: Each part's via-grasps (grasps of a part mated into it): {part: {label: the part held}}.
     via: dict[str, dict[str, str]] = field(default_factory=dict)
-    #: Each part's subassembly stable poses (world.products.subassembly_poses): {part: {label:
+    #: Each part's subassembly stable poses (world.product.products.subassembly_poses): {part: {label:
     #: the parts mated into it that the pose needs, its subtree}}.
     sub_poses: dict[str, dict[str, tuple[str, ...]]] = field(default_factory=dict)
 

@@ -2,7 +2,7 @@
 
 Faces, stable poses (Fig. 18), grasps (Fig. 19) and the mating feature, hand-written or
 (left out of a model with ``mesh:`` or ``shape:``) derived from its geometry by the world
-layer (world.shapes); :func:`check_against_shape` checks hand-written entries against the
+layer (world.parts.mesh); :func:`check_against_shape` checks hand-written entries against the
 geometry. Lengths are converted to the cell's unit, angles to radians.
 """
 from __future__ import annotations
@@ -23,13 +23,13 @@ from spar_py.kb.node import LABEL_RE, MAX_MAGNITUDE, Node, cut, show
 from spar_py.kb.reader import MAX_INPUT_BYTES
 from spar_py.kb.schema import read_kb
 from spar_py.kb.values import LOAD_MEMO_LIMIT, tm_node, units_of
-from spar_py.world.robots import GripperGeometry
+from spar_py.world.robot import GripperGeometry
 
 __all__ = ["DEFAULT_OPENING_MM", "DERIVABLE", "PART_SIZE_MM", "REACH_RATIO", "check_against_shape", "holdable",
            "load_object", "mesh_note", "part_size"]
 
 
-#: The entries an object model may leave out when it gives its geometry (derived: world.shapes).
+#: The entries an object model may leave out when it gives its geometry (derived: world.parts.mesh).
 DERIVABLE = ("faces", "stable_poses", "grasps")
 
 
@@ -72,8 +72,8 @@ def load_object(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, o
     """Load ``kb/objects/*.yaml`` converting lengths to ``unit``.
 
     ``faces``, ``stable_poses`` and ``grasps`` left out of a model with ``mesh:`` or
-    ``shape:`` are derived from its geometry (world.shapes, cached by content hash:
-    world.shapes_cache) for the robot's ``gripper`` (its opening, fingers and palm, cell unit)
+    ``shape:`` are derived from its geometry (world.parts.mesh, cached by content hash:
+    world.parts.cache) for the robot's ``gripper`` (its opening, fingers and palm, cell unit)
     or, without one, a gripper of opening ``opening`` (cell unit; DEFAULT_OPENING_MM without a
     robot) with the default fingers; hand-written ones take precedence. Only a derivation
     imports trimesh. ``memo``: the tables of a load reading many files (:func:`tm_node`,
@@ -100,11 +100,11 @@ def load_object(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, o
         if geometry is None:
             root.key(missing[0])  # raises: key missing
         step = geometry.step
-        from spar_py.world.shapes_cache import derive  # 10 ms, 23 modules at import: a derivation only
+        from spar_py.world.parts import derive_part  # 10 ms, 23 modules at import: a derivation only
 
         grip = _derive_gripper(unit, opening, gripper)
         try:
-            derived = derive(name, geometry, feature_geos, face_names, grip, step, need_hull=True,
+            derived = derive_part(name, geometry, feature_geos, face_names, grip, step, need_hull=True,
                              use_cache=use_cache)
         except KBError:
             raise
@@ -237,7 +237,7 @@ def holdable(path: str | Path, model: ObjectModel) -> None:
 
 
 def mesh_note(model: ObjectModel) -> str | None:
-    """One line saying what loading the model's mesh file repaired (world.shapes.repair_mesh),
+    """One line saying what loading the model's mesh file repaired (world.parts.mesh.repair_mesh),
     ``FILE: repaired: ...`` (the file relative to the working directory where it is under it),
     or None when nothing was (or the model has no mesh, or its mesh was not loaded)."""
     geo = model.geometry
@@ -266,7 +266,7 @@ def _grasp_frame(euler: tuple[float, ...], memo: Memo | None) -> np.ndarray:
 
 def part_size(geometry: Any, solids: tuple[Solid, ...]) -> float:
     """The largest side of a part's axis-aligned bounding box (object frame, cell unit): from
-    the mesh file's vertices (world.shapes.mesh_bounds) or the positive primitives."""
+    the mesh file's vertices (world.parts.mesh.mesh_bounds) or the positive primitives."""
     if geometry.mesh_file is not None:
         lo, hi = _mesh_bounds(Path(geometry.mesh_file))
         return float((hi - lo).max()) * geometry.scale
@@ -332,7 +332,7 @@ def _check_size(root: Node, path: Path, name: str, geometry: Any, solids: tuple[
 
 def _geometry_error(path: str | Path, geometry: Any, e: Exception) -> KBError:
     """A derivation's failure as one line naming the key: ``face_names.NAME`` for a point off
-    the shape, else ``mesh`` or ``shape`` with what was expected (world.shapes raises
+    the shape, else ``mesh`` or ``shape`` with what was expected (world.parts.mesh raises
     ValueError("expected ...") for the cases it knows; any other exception is named)."""
     key = "mesh" if geometry.mesh_file is not None else "shape"
     msg = " ".join(str(e).split())
@@ -363,13 +363,13 @@ def _grasp_step(root: Node, rad_per: float) -> float:
 
 
 def _geometry(root: Node, path: Path, unit: str, scale: float) -> tuple[Any, tuple[Solid, ...]]:
-    """The model's declared geometry (world.shapes.Geometry, or None) and its positive solids."""
+    """The model's declared geometry (world.parts.mesh.Geometry, or None) and its positive solids."""
     mnode, snode = root.key("mesh", required=False), root.key("shape", required=False)
     if mnode is not None and snode is not None:
         raise mnode.fail("mesh: or shape:, not both")
     if mnode is None and snode is None:
         return None, ()
-    from spar_py.world.shapes import Geometry, Primitive  # 4.5 ms at import: only a model with a shape needs it
+    from spar_py.world.parts import Geometry, Primitive  # 4.5 ms at import: only a model with a shape needs it
 
     if mnode is not None:
         ref = path.parent / mnode.text()
@@ -409,7 +409,7 @@ def _through(fnode: Node) -> bool:
 
 
 def _feature_geometry(fnode: Node, scale: float) -> Any:
-    """The geometric form of a feature (world.shapes.FeatureGeometry), or None for the paper's
+    """The geometric form of a feature (world.parts.mesh.FeatureGeometry), or None for the paper's
     form ``{kind, faces, radius, vector}`` (``name:`` then only names the feature); mixing the
     two is an error."""
     if not isinstance(fnode.value, dict):
@@ -424,7 +424,7 @@ def _feature_geometry(fnode: Node, scale: float) -> Any:
         fnode.key("faces")
         fnode.key("vector")
         return None
-    from spar_py.world.shapes import FeatureGeometry  # 4.5 ms at import: a feature given by geometry only
+    from spar_py.core.model import FeatureGeometry
 
     kind = fnode.key("kind").choice(("peg", "hole"))
     name = fnode.key("name").label()
@@ -479,9 +479,9 @@ def _solid(node: Node, scale: float) -> Solid:
 
 
 def _derive_gripper(unit: str, opening: float | None, gripper: GripperGeometry | None) -> Any:
-    """The gripper grasps are derived and checked for (world.shapes_derive.Gripper): the robot's
+    """The gripper grasps are derived and checked for (world.parts.derive.Gripper): the robot's
     own where given, else the default fingers at ``opening`` (or DEFAULT_OPENING_MM)."""
-    from spar_py.world.shapes_derive import Gripper  # 10 ms at import: a derivation or a check only
+    from spar_py.world.parts import Gripper  # 10 ms at import: a derivation or a check only
 
     if gripper is not None:
         return Gripper.of_robot(gripper)
@@ -491,13 +491,13 @@ def _derive_gripper(unit: str, opening: float | None, gripper: GripperGeometry |
 def check_against_shape(path: str | Path, root: Node, model: ObjectModel, unit: str,
                         opening: float | None = None, gripper: GripperGeometry | None = None) -> None:
     """``spar kb check``: the hand-written faces, stable poses and grasps of a model that also
-    gives its geometry must agree with it (world.shapes_derive.check_entries); the first
+    gives its geometry must agree with it (world.parts.derive.check_entries); the first
     disagreement is a KBError naming the entry. ``gripper`` is the robot's (cell unit), else the
     default fingers at ``opening`` (cell unit; DEFAULT_OPENING_MM without a robot)."""
     hand = tuple(k for k in DERIVABLE if k in root.value)
     if model.geometry is None or not hand:
         return
-    from spar_py.world.shapes_derive import check_entries  # 10 ms at import: `spar kb check` of a shape only
+    from spar_py.world.parts import check_entries  # 10 ms at import: `spar kb check` of a shape only
 
     grip = _derive_gripper(unit, opening, gripper)
     try:

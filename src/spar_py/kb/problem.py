@@ -30,7 +30,7 @@ from spar_py.kb.sanity import check_cell
 from spar_py.kb.schema import KINDS, read_kb
 from spar_py.kb.terms import parse_term
 from spar_py.kb.values import LOAD_MEMO_LIMIT, tm_node, units_of, xyz_rpy_frame
-from spar_py.world.robots import GripperGeometry
+from spar_py.world.robot import GripperGeometry
 
 __all__ = ["COAXIAL_TOL", "GOAL_SHAPES", "SENSOR_NAMES", "check_mate", "derived_mate", "goal_features", "hole_axis",
            "load_problem", "mate_goal"]
@@ -238,7 +238,7 @@ def _objects(root: Node, base: Path, unit: str, max_bytes: int, opening: float |
              ) -> tuple[dict[str, ObjectModel], dict[str, Position], list[Path]]:
     """The problem's objects (models loaded; a part of ``product`` takes its model from it), their
     initial positions and the model files (``memo``: the load's tables, ``reach`` the arm's
-    length: :func:`load_object`). With ``layout`` (``layout: auto``: a world.layout.Layout),
+    length: :func:`load_object`). With ``layout`` (``layout: auto``: a world.product.layout.Layout),
     the product's parts are at its placements (position ``init_PART``, label ``tr_PART``) and
     ``objects:`` holds only the other objects, if any."""
     objects: dict[str, ObjectModel] = {}
@@ -394,18 +394,18 @@ def _free_index(transforms: Mapping[str, Any], vectors: Mapping[str, Any], n_tur
 def derived_mate(node: Node, what: str, objects: Mapping[str, ObjectModel], peg: tuple[str, MatingFeature],
                  hole: tuple[str, MatingFeature], transforms: dict, vectors: dict, turns: dict) -> tuple:
     """The ``assembled/5`` goal of a mate whose T_a is derived from the features' geometry
-    (world.shapes.assembly_transforms): the mating faces are the two features' faces.
+    (world.parts.mesh.assembly_transforms): the mating faces are the two features' faces.
 
     T_a is a choice among the turns about the hole's axis, quantised by the finer of the two
     models' ``grasp_step`` (45 deg by default): the first turn (the least rotation of the
     peg's axis onto the hole's) is added to the cell's transforms as trans_K, turn J (J = 2,
     3, ...; turned by (J - 1) steps) as trans_K_tJ, and V_a as vec_K (the first K not taken).
     The goal names trans_K; ``turns[trans_K]`` lists every turn with the hole part's stable
-    poses in which the mated peg stays clear of the table (world.shapes.poses_clear_of_table;
+    poses in which the mated peg stays clear of the table (world.parts.mesh.poses_clear_of_table;
     every pose when the peg has no shape). The planner chooses the turn (kb/templates/actions.pl).
     The mate is checked (:func:`check_mate`; ``what`` names it in messages).
     """
-    from spar_py.world.shapes import assembly_transforms, part_mesh, poses_clear_of_table  # 4.5 ms: derived T_a only
+    from spar_py.world.parts import assembly_transforms, part_mesh, poses_clear_of_table  # 4.5 ms: derived T_a only
 
     (pobj, fp), (hobj, fh) = peg, hole
     if fp.geometry is None or fh.geometry is None:
@@ -564,7 +564,7 @@ def _product(root: Node, base: Path, unit: str, max_bytes: int, robot: Any, memo
 
 def _layout(root: Node, product: Product | None, robot: Any, unit: str) -> Any:
     """``layout: auto``: the product's parts laid out on the table for the robot
-    (world.layout.layout_product); None without the key. A KBError at the key when there is no
+    (world.product.layout.layout_product); None without the key. A KBError at the key when there is no
     ``product:`` or the parts do not fit within reach."""
     lnode = root.key("layout", required=False)
     if lnode is None:
@@ -573,7 +573,7 @@ def _layout(root: Node, product: Product | None, robot: Any, unit: str) -> Any:
         raise lnode.fail("auto (the product's parts laid out on the table at load)", show(lnode.value))
     if product is None:
         raise lnode.fail("a problem with product: (layout: auto lays out a product's parts)")
-    from spar_py.world.layout import layout_product  # trimesh and the IK: a laid-out cell only
+    from spar_py.world.product import layout_product  # trimesh and the IK: a laid-out cell only
 
     try:
         return layout_product(product, robot, unit)
@@ -655,8 +655,8 @@ def load_problem(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> Cell:
     if cell.home is None:
         cell.home = robot.home
     if product is not None:  # the grasps no plan seats a part with, the orders the hand needs
-        from spar_py.world.access import with_hand_access  # the IK and the collision scene: products only
-        from spar_py.world.run import CellCache
+        from spar_py.world.product import with_hand_access  # the IK and the collision scene: products only
+        from spar_py.world.collision import CellCache
 
         with_hand_access(cell, CellCache(cell), layout.held if layout is not None else None)
     mnode = root.key("motion", required=False)

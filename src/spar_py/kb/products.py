@@ -5,8 +5,8 @@ as a robot file's ``base``: T = trans(xyz) rpy(r, p, y); identity when left out)
 part (``base:``, else the first), and its mates: ``{peg: P.f, hole: Q.g, retention: loose |
 fixed}`` (loose by default) and seats ``{seat: P.face, on: Q.face}``. Checked here: every
 ``PART.FEATURE`` and seat face exists, a peg is narrower than its hole, and a mate's features
-line up at the product poses (world.products.mate_misalignment); then the goals and the
-precedence are compiled (world.products), each refusal one line naming the file and key.
+line up at the product poses (world.product.products.mate_misalignment); then the goals and the
+precedence are compiled (world.product.products), each refusal one line naming the file and key.
 Derived mates are loose unless ``retention: {PART: fixed}`` says the mates PART goes in by hold.
 Lengths converted to the cell's unit once, here.
 """
@@ -33,7 +33,7 @@ from spar_py.kb.schema import KINDS, check_shape, describe, file_kind
 from spar_py.kb.values import units_of, xyz_rpy_frame
 
 if TYPE_CHECKING:
-    from spar_py.world.assembly import AssemblyResult
+    from spar_py.world.product import AssemblyResult
 
 __all__ = ["RETENTIONS", "LoadedProduct", "add_goal_frames", "goal_term", "load_product", "load_product_derived",
            "derive_product_text", "is_product_file", "product_goals", "product_part"]
@@ -87,7 +87,7 @@ def _seat_direction(node: Node) -> tuple[float, float, float] | None:
 
 def _mate(node: Node, parts: dict[str, ProductPart], unit: str) -> Mate | Seat:
     """One entry of ``mates:``: a peg-in-hole mate or a seat, checked."""
-    from spar_py.world.products import feature_axis, mate_misalignment
+    from spar_py.world.product import feature_axis, mate_misalignment
 
     keys = set(node.value)
     if {"seat", "on"} <= keys <= {"seat", "on", "direction"}:
@@ -210,7 +210,7 @@ def _derived_objects(path: Path, unit: str, meshparts: dict[str, _MeshPart], der
         seats = [(j, s) for j, s in enumerate(derived.seats if derived else [])
                  if pname in (s.part, s.on) and frozenset((s.part, s.on)) not in declared_pairs]
         if seats:
-            from spar_py.world.shapes import derive_faces, face_of_point
+            from spar_py.world.parts import derive_faces, face_of_point
 
             mesh = _raw_mesh(pname, mp, unit, raw)
             faces = derive_faces(mesh, (), {}, unit)
@@ -279,7 +279,7 @@ def _generated(text: str) -> Path:
     """Where a mesh part's object YAML is kept: by its content, beside the derivations."""
     import hashlib  # OpenSSL's hashes load at import: only a mesh part's model needs them
 
-    from spar_py.world.shapes_cache import cache_dir
+    from spar_py.world.parts import cache_dir
 
     out = cache_dir() / "parts" / f"{hashlib.sha256(text.encode()).hexdigest()[:32]}.yaml"
     if not out.is_file() or out.read_text(encoding="utf-8") != text:
@@ -305,15 +305,15 @@ def load_product(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, 
                  **object_options: Any) -> Product:
     """Load ``kb/products/*.yaml`` in the cell's length ``unit``: parts (their models loaded
     with ``object_options``, as kb.problem loads a cell's), base, mates and seats, checked;
-    then its goals and precedence compiled (world.products). Parts given by ``mesh:`` have
-    their features, mates, seats and precedence derived (world.assembly)."""
+    then its goals and precedence compiled (world.product.products). Parts given by ``mesh:`` have
+    their features, mates, seats and precedence derived (world.product.assembly)."""
     return load_product_derived(path, unit, max_bytes, memo, **object_options).product
 
 
 def load_product_derived(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, memo: Memo | None = None,
                          **object_options: Any) -> LoadedProduct:
     """:func:`load_product` with what was derived (``spar kb derive`` writes it out)."""
-    from spar_py.world import products as wp
+    from spar_py.world import product as wp  # the world layer on first use
 
     path = Path(path)
     root = _read_product(path, max_bytes)
@@ -475,9 +475,9 @@ def _unlinked_contacts(product: Product, derived: AssemblyResult | None) -> str:
 
 
 def _add_via_grasps(product: Product) -> None:
-    """Give each part the grasps of the parts that can be mated into it (world.products.via_grasps)
+    """Give each part the grasps of the parts that can be mated into it (world.product.products.via_grasps)
     and record which part each holds by (``product.via``)."""
-    from spar_py.world import products as wp  # the world layer on first use, as load_product_derived
+    from spar_py.world import product as wp  # the world layer on first use
 
     via = wp.via_grasps(product)
     for name, got in via.items():
@@ -489,10 +489,10 @@ def _add_via_grasps(product: Product) -> None:
 
 def _add_sub_poses(product: Product, unit: str) -> None:
     """Give each part the stable poses of itself with its product subtree mated in
-    (world.products.subassembly_poses), resting on the part's faces that touch the table there,
+    (world.product.products.subassembly_poses), resting on the part's faces that touch the table there,
     and record which parts each needs (``product.sub_poses``)."""
     from spar_py.core.model import StablePose
-    from spar_py.world import products as wp
+    from spar_py.world import product as wp  # the world layer on first use
 
     subs = wp.subassembly_poses(product, unit)
     for name, got in subs.items():
@@ -510,11 +510,11 @@ def _raw_mesh(pname: str, mp: _MeshPart, unit: str, raw: dict[str, Any]) -> Any:
     """Mesh part ``pname`` as its file gives it, in its own frame and the cell unit, read once
     per load into ``raw`` (its repair is said when the part's model loads); KBError naming the
     file's key if it cannot be read or closed."""
-    from spar_py.world.shapes import _load_mesh
+    from spar_py.world.parts import load_mesh
 
     if pname not in raw:
         try:
-            raw[pname] = _load_mesh(str(mp.file), mp.mm_per / LENGTH_UNITS[unit])[0]
+            raw[pname] = load_mesh(str(mp.file), mp.mm_per / LENGTH_UNITS[unit])[0]
         except ValueError as e:
             raise mp.node.key("mesh").fail(str(e), show(mp.node.value["mesh"])) from None
     return raw[pname]
@@ -522,10 +522,10 @@ def _raw_mesh(pname: str, mp: _MeshPart, unit: str, raw: dict[str, Any]) -> Any:
 
 def _derive(root: Node, unit: str, scale: float, base: str, meshparts: dict[str, _MeshPart],
             parts: dict[str, ProductPart], raw: dict[str, Any], use_cache: bool = True) -> AssemblyResult:
-    """The derivation (world.assembly, cached) over every part's mesh at its product pose,
+    """The derivation (world.product.assembly, cached) over every part's mesh at its product pose,
     the mesh parts read from their files in the cell unit (kept in ``raw``, :func:`_raw_mesh`)."""
-    from spar_py.world.assembly import derive_assembly_cached
-    from spar_py.world.shapes import part_mesh
+    from spar_py.world.product import derive_assembly_cached
+    from spar_py.world.parts import part_mesh
 
     contact_tol = _tolerance(root, "contact_tol", 0.1, scale, unit)
     clearance_max = _tolerance(root, "clearance_max", 0.5, scale, unit)
@@ -602,7 +602,7 @@ def derive_product_text(path: str | Path, max_bytes: int = MAX_INPUT_BYTES, out_
     each mesh part with its features and face names (derived ones included), every mate
     with its retention and every seat; the derived insertions (order, direction, whether a
     fixture is needed), precedence and whether one arm on a table can build it
-    (world.single_arm) as comments. Mesh paths relative to ``out_dir``."""
+    (world.product.single_arm) as comments. Mesh paths relative to ``out_dir``."""
     path = Path(path)
     root = _read_product(path, max_bytes)
     unit = root.key("units").key("length").text()
@@ -654,7 +654,7 @@ def derive_product_text(path: str | Path, max_bytes: int = MAX_INPUT_BYTES, out_
             out.append(f"# contact {a} - {b} ({n} samples): neither a mate nor a seat; blocking only")
         if d.unremovable:
             out.append(f"# no free direction found for: {', '.join(d.unremovable)}")
-    from spar_py.world.single_arm import single_arm_report
+    from spar_py.world.product import single_arm_report
 
     sa = single_arm_report(p, unit)
     if sa is not None:
@@ -663,8 +663,8 @@ def derive_product_text(path: str | Path, max_bytes: int = MAX_INPUT_BYTES, out_
     if sa is None or sa.ok:
         from spar_py.core.units import mm_per
         from spar_py.kb.objects import DEFAULT_OPENING_MM
-        from spar_py.world.grasp_report import grasp_report
-        from spar_py.world.robots import GripperGeometry
+        from spar_py.world.product import grasp_report
+        from spar_py.world.robot import GripperGeometry
 
         gr = grasp_report(p, GripperGeometry.default(from_mm(unit, DEFAULT_OPENING_MM), mm_per(unit)), unit)
         if gr is not None:

@@ -15,7 +15,7 @@ from spar_py.core.errors import SparError
 from spar_py.core.geometry import same_stable_pose
 from spar_py.core.model import Cell, Position
 from spar_py.core.units import mm_per
-from spar_py.world.robots import GripperGeometry
+from spar_py.world.robot import GripperGeometry
 
 __all__ = ["facts", "position_class"]
 
@@ -48,7 +48,7 @@ def facts(cell: Cell) -> list[tuple]:
     a derived T_a: turn(Ta, Turn, HolePoses), in order, each turn the planner may assemble
     with and the hole part's stable poses in which the mated peg clears the table;
     mate_grasps(Ta, Peg, Grasps) for a goal whose features have geometry (:func:`_mate_grasps`);
-    for a product cell, precedence(P, Q, Reason) (P before Q, world.products.precedence) and
+    for a product cell, precedence(P, Q, Reason) (P before Q, world.product.products.precedence) and
     mates(Part, Names) (the mates Part's insertion makes).
     """
     out: list[tuple] = [("problem", cell.name)]
@@ -82,7 +82,7 @@ def facts(cell: Cell) -> list[tuple]:
 
 
 def _feature_geometry(model: Any, faces: Any) -> Any:
-    """The geometry (world.shapes.FeatureGeometry) of ``model``'s feature named among ``faces``
+    """The geometry (world.parts.mesh.FeatureGeometry) of ``model``'s feature named among ``faces``
     (a goal's mating faces), or None (none named, or one declared without geometry)."""
     if not isinstance(faces, (list, tuple)):
         return None
@@ -95,9 +95,9 @@ def _mate_grasps(cell: Cell) -> list[tuple]:
     geometry (axis, length): the peg's grasps the goal's assemble may use, which the planner reads
     instead of the rule by ofaces (kb/templates/actions.pl mating_grasps/4). A grasp on the
     peg's shaft (its gripped faces hold the feature's) is usable where it holds only the length
-    staying out of the hole when seated at T_a (world.shapes_derive.mate_grasp_usable); any other
+    staying out of the hole when seated at T_a (world.parts.derive.mate_grasp_usable); any other
     grasp as by the ofaces rule (it hides none of the goal's peg faces)."""
-    from spar_py.world.shapes_derive import mate_grasp_usable  # numpy only; trimesh is not imported
+    from spar_py.world.parts import mate_grasp_usable  # numpy only; trimesh is not imported
 
     gripper = cell.robot.gripper or GripperGeometry.default(cell.finger_separation, mm_per(cell.unit))
     out: list[tuple] = []

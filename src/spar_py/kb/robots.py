@@ -1,5 +1,5 @@
 """The robot loaders: ``kb/robots/*.yaml`` (a DH table) or a problem's inline URDF, to a
-:class:`~spar_py.world.robots.Robot`.
+:class:`~spar_py.world.robot.model.Robot`.
 
 Kinematics (DH rows, joint limits, base and tool frames, the IK family), the gripper's
 boxes, the links' collision shapes and the motion entries (home, joint speeds). Lengths
@@ -21,7 +21,7 @@ from spar_py.kb.node import LABEL_RE, Node, num, show
 from spar_py.kb.reader import MAX_INPUT_BYTES
 from spar_py.kb.schema import URDF_ROBOT_SCHEMA, OneOf, check_shape, keys, read_kb
 from spar_py.kb.values import units_of, xyz_rpy_frame
-from spar_py.world.robots import (
+from spar_py.world.robot import (
     TOOL_BODY,
     GripperGeometry,
     LinkShape,
@@ -38,7 +38,7 @@ __all__ = ["IK_CHOICES", "MAX_JOINT_RAD", "home_angles", "load_robot", "load_urd
 
 
 #: How a robot file's `ik:` may name its solver: auto = the first closed-form family that fits, else
-#: numeric (spar_py.world.ik.FAMILIES)
+#: numeric (spar_py.world.robot.ik.FAMILIES)
 IK_CHOICES = ("auto", "puma", "ur", "numeric")
 
 
@@ -48,14 +48,14 @@ MAX_JOINT_RAD = 4 * math.pi
 
 
 def load_robot(path: str | Path, unit: str | None = None, max_bytes: int = MAX_INPUT_BYTES) -> Robot:
-    """Load ``kb/robots/*.yaml`` as a :class:`~spar_py.world.robots.Robot`.
+    """Load ``kb/robots/*.yaml`` as a :class:`~spar_py.world.robot.model.Robot`.
 
     Lengths (DH a and d, base and tool frames, finger separation) are converted to
     ``unit`` (default: the file's own length unit), angles (DH alpha and offset,
     limits, rpy) to radians; ``base`` is T_world_frame0 and ``tool`` T_flange_tool,
     each ``trans(xyz) @ rpy(r, p, y)``. ``convention`` says how ``dh`` reads: Craig's
     ``modified`` (default) or ``standard`` (UR's published tables; converted to Craig's
-    at load, ``world.robots.standard_to_modified``). ``ik`` picks the solver (IK_CHOICES;
+    at load, ``world.robot.model.standard_to_modified``). ``ik`` picks the solver (IK_CHOICES;
     default auto: the first closed-form family the table fits, else numeric).
     Malformed files raise :class:`KBError` naming the file, the key path and what was
     expected (``puma.yaml: dh[2].alpha: a number, not 'x'``); an unknown ``unit``
@@ -118,7 +118,7 @@ def home_angles(node: Node | None, robot: Robot, rad_per: float) -> np.ndarray |
 
 
 def _robot_motion(robot: Robot, root: Node, rad_per: float) -> None:
-    """The robot's motion entries (world/motion.py): ``home`` (joint angles, the file's angle
+    """The robot's motion entries (world/motion/paths.py): ``home`` (joint angles, the file's angle
     unit) and ``velocity_limits`` (six positive joint speeds, angle unit per second), in rad
     and rad/s on the Robot."""
     robot.home = home_angles(root.key("home", required=False), robot, rad_per)
@@ -146,7 +146,7 @@ def _gripper(gnode: Node, wm: float, scale: float, mm_per_unit: float) -> Grippe
 
 def _tool_body(gnode: Node, gripper: GripperGeometry, tool: np.ndarray, scale: float, has_collision: bool
                ) -> GripperGeometry:
-    """``gripper`` with its tool body (world.robots.ToolBody, robot unit): the ``gripper: body``
+    """``gripper`` with its tool body (world.robot.model.ToolBody, robot unit): the ``gripper: body``
     the file gives (``none``: no body; a box ``{width, thickness}`` or a cylinder ``{radius}``,
     ``length`` by default from the palm back to the flange of ``tool``), else, for a robot without
     a ``collision:`` section (nothing else describes the tool), a box the palm's size from the palm

@@ -10,7 +10,7 @@ file, the key and both parties:
   the tool offset), so no placement grid is ever unbounded;
 - resting: each initial part's rotation is one of its stable poses (kb checks this), its
   lowest point is on the table top (z = 0), a support's top or another part's top within
-  REST_TOL_MM and its centre of mass over its support polygon (world.supports);
+  REST_TOL_MM and its centre of mass over its support polygon (world.reach.supports);
 - overlap: no two initial parts overlap by more than OVERLAP_TOL_MM;
 - gripper: every grasp's width W_g is at most the finger separation W_m;
 - vectors: every approach / mating vector under ``vectors:`` is non-zero.
@@ -40,7 +40,7 @@ from spar_py.core.model import Cell, Position, Solid
 from spar_py.core.units import from_mm
 from spar_py.kb.reader import SAFE_LOADER
 from spar_py.kb.terms import atoms
-from spar_py.world.supports import REST_TOL_MM, lowest, part_surface, rest_of, solid_points, surfaces_of
+from spar_py.world.reach import REST_TOL_MM, lowest, part_surface, rest_of, solid_points, surfaces_of
 
 __all__ = ["REST_TOL_MM", "check_cell", "overlap_depth", "reach_box", "solid_points"]
 
@@ -284,7 +284,7 @@ def _vectors(cell: Cell) -> Iterator[KBError]:
 
 def _on_table(cell: Cell) -> Iterator[KBError]:
     """Each initial part rests on the table top, a support's top or another part's top
-    (world.supports.rest): its lowest point on the surface within REST_TOL_MM and its centre
+    (world.reach.supports.rest): its lowest point on the surface within REST_TOL_MM and its centre
     of mass over its support polygon; a part without a shape: its frame at its stable pose's
     height over the surface. A part on an unbounded table at z = 0 in a stable pose rests there
     (kb checks the pose), so its centre of mass is not computed."""

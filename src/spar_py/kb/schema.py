@@ -167,7 +167,7 @@ PROBLEM_SCHEMA = keys(
 
 #: A product file (kb/products): parts at their poses, mates ({peg, hole, retention}) and
 #: seats ({seat, on}) in one list, the base part (kb.products checks which keys go together).
-#: A part gives ``model:`` or ``mesh:`` (its features and mates then derived: world.assembly);
+#: A part gives ``model:`` or ``mesh:`` (its features and mates then derived: world.product.assembly);
 #: ``retention: {PART: loose | fixed}`` sets the retention of the derived mates PART is put in by.
 PRODUCT_SCHEMA = keys(
     {"product": LEAF, "units": UNITS_SCHEMA,

@@ -42,17 +42,17 @@ from typing import TYPE_CHECKING, Any
 import casadi as ca
 import numpy as np
 
-from spar_py.world import placement as pl
 from spar_py.phase2 import uncertainty as ur
 from spar_py.core.errors import SparValueError
 from spar_py.core.geometry import same_stable_pose
 from spar_py.core.model import LOOSE_MAX_DEG, Bounds, Cell, Grasp, MatingFeature
 from spar_py.core.units import ANGLE_UNITS, LENGTH_UNITS, from_mm
-from spar_py.world.arcs import reachable_pairs
-from spar_py.world.motion_options import MotionFailure, MotionOptions
-from spar_py.world.run import CellCache
-from spar_py.world.supports import REST_TOL_MM, part_surface, rest_of, rest_of_body, surfaces_of
-from spar_py.world.workspace import arm_at, assembled_touch, pair_text
+from spar_py.world import reach
+from spar_py.world.reach import reachable_pairs
+from spar_py.world.motion import MotionFailure, MotionOptions
+from spar_py.world.collision import CellCache
+from spar_py.world.reach import REST_TOL_MM, part_surface, rest_of, rest_of_body, surfaces_of
+from spar_py.world.reach import arm_at, assembled_touch, pair_text
 from spar_py.phase2.supinf import cached_bounds
 from spar_py.phase2.symbolic import Registry, is_symbolic, snap
 
@@ -69,7 +69,7 @@ class World:
 
     cache: CellCache
     unc: ur.WorldState
-    placements: dict[str, pl.Placement | None]
+    placements: dict[str, reach.Placement | None]
     grasps: dict[str, str] = field(default_factory=dict)  # object -> grasp label while held
     joints: np.ndarray | None = None
     sources: dict[str, dict[str, str]] = field(default_factory=dict)  # step id -> {object: position label}
@@ -96,7 +96,7 @@ class Evaluation:
     """One run of a plan instance (:func:`evaluate`): ``status`` ok | failed | infeasible, ``at``
     the step id where it stopped (None if ok), ``steps`` the step records, ``refusals`` what
     its steps refused with the colliding pairs (in order), ``motion`` the instance's motions
-    (world/motion.py InstanceMotion), or the MotionFailure that made it infeasible, or None."""
+    (world/motion/paths.py InstanceMotion), or the MotionFailure that made it infeasible, or None."""
 
     status: str
     at: str | None
@@ -217,7 +217,7 @@ def _step_key(s: Step) -> tuple:
 
 
 def _placements(cache: CellCache, steps: list[Step], src: dict[str, dict[str, str]],
-                motion: MotionOptions | None) -> tuple[tuple, dict[str, pl.Placement | None]]:
+                motion: MotionOptions | None) -> tuple[tuple, dict[str, reach.Placement | None]]:
     """choose_placements memoised per cell, manipulation sequence (sensing moves nothing),
     the parts those manipulations take and the motions' approach length (None without them)."""
     manip = [s for s in steps if s["name"] in ("pickup", "putdown", "assemble")]
@@ -245,7 +245,7 @@ def _grasp(cell: Cell, obj: str, label: str) -> Grasp:
 
 
 def choose_placements(cache: CellCache, steps: list[Step], sources: dict[str, dict[str, str]] | None = None,
-                      length: float | None = None) -> dict[str, pl.Placement | None]:
+                      length: float | None = None) -> dict[str, reach.Placement | None]:
     """For each putdown into a stable pose, the placement nearest the object's previous spot
     at which the arm reaches the put-down grasp and every later grasp and mate on the object
     until it is picked up again, clear of every part on the table; None where no placement
@@ -258,7 +258,7 @@ def choose_placements(cache: CellCache, steps: list[Step], sources: dict[str, di
     on_table: dict[str, tuple[str, np.ndarray]] = {p.name: (p.obj, p.T) for p in cell.positions.values()}
     last: dict[str, np.ndarray] = {}  # object -> where the part in the hand was picked from
     held: dict[str, str] = {}
-    out: dict[str, pl.Placement | None] = {}
+    out: dict[str, reach.Placement | None] = {}
     for i, s in enumerate(steps):
         name, args = s["name"], s["args"]
         if name == "pickup":
@@ -271,14 +271,14 @@ def choose_placements(cache: CellCache, steps: list[Step], sources: dict[str, di
             prev = last.pop(obj, None)
             if pos in cell.positions:
                 T = cell.positions[pos].T
-                out[s["id"]] = pl.Placement(obj, cell.positions[pos].label, *T[:3, 3], 0.0, T)
+                out[s["id"]] = reach.Placement(obj, cell.positions[pos].label, *T[:3, 3], 0.0, T)
             else:
                 uses = [("putdown", _grasp(cell, obj, held[obj]).T, None),
                         *_later_requirements(cell, steps[i + 1:], obj, held)]
-                occupied = [pl.occupant(cache, o, T) for o, T in on_table.values()]
+                occupied = [reach.occupant(cache, o, T) for o, T in on_table.values()]
                 near = prev[:2, 3] if prev is not None else None
                 tops = _part_tops(cell, on_table, occupied, obj, steps, i)
-                out[s["id"]] = pl.choose(cache, obj, pos, [X for _, X, _ in uses], occupied, near,
+                out[s["id"]] = reach.choose(cache, obj, pos, [X for _, X, _ in uses], occupied, near,
                                          reach=[] if length is None else _line_ends(cell, obj, pos, uses, length),
                                          tops=tops)
             held.pop(obj, None)
@@ -289,8 +289,8 @@ def choose_placements(cache: CellCache, steps: list[Step], sources: dict[str, di
     return out
 
 
-def _part_tops(cell: Cell, on_table: dict[str, tuple[str, np.ndarray]], occupied: list[pl.Occupant],
-               obj: str, steps: list[Step], i: int) -> list[pl.Level]:
+def _part_tops(cell: Cell, on_table: dict[str, tuple[str, np.ndarray]], occupied: list[reach.Occupant],
+               obj: str, steps: list[Step], i: int) -> list[reach.Level]:
     """The tops of the parts on the table a put-down of ``obj`` at step ``i`` may go onto
     (placement.part_level): parts with a shape, not of ``obj``, not of a stock (a part's top is
     named by its object), that no step after ``i`` picks up and no step of the plan mates
@@ -307,7 +307,7 @@ def _part_tops(cell: Cell, on_table: dict[str, tuple[str, np.ndarray]], occupied
             continue
         top = part_surface(o, model, T, tol)
         if len(top.polygon) >= 3:
-            out.append(pl.part_level(o, top.polygon, top.z, occupied[:k] + occupied[k + 1:]))
+            out.append(reach.part_level(o, top.polygon, top.z, occupied[:k] + occupied[k + 1:]))
     return out
 
 
@@ -358,7 +358,7 @@ def _later_requirements(cell: Cell, rest: list[Step], obj: str,
 def _line_ends(cell: Cell, obj: str, pose: str, uses: list[tuple[str, np.ndarray, np.ndarray | None]],
                length: float) -> list[np.ndarray]:
     """The far ends of the approach and retreat lines of each use of ``obj`` put down in stable
-    pose ``pose`` (world/motion.py's line_ends), relative to its frame: world z in that frame
+    pose ``pose`` (world/motion/paths.py's line_ends), relative to its frame: world z in that frame
     is the same at every placement of the pose (they differ by a turn about world z)."""
     from spar_py.world.motion import line_ends  # motion.py is some 2 ms of a cold start
 
@@ -568,7 +568,7 @@ def evaluate(cache: CellCache, steps: Sequence[Step], sources: Sources | None = 
     # a run that went through is one Prolog may report: its parts' propagated bounds, per step
     bseen: dict[int, tuple[ur.ObjectState, dict[str, list[float]]]] = {}
     out = [{**rec, "position_bounds": position_bounds(cache, w, bseen)} for rec, w in zip(out, worlds[1:])]
-    if motion is not None:  # the end-points are fixed: the motions between them (world/motion.py)
+    if motion is not None:  # the end-points are fixed: the motions between them (world/motion/paths.py)
         from spar_py.world.motion import run_motions  # motion.py is some 2 ms of a cold start
 
         records, got = run_motions(cache, steps, worlds, out, motion)
@@ -740,7 +740,7 @@ def _arm(world: World, T: np.ndarray, what: str = "", held: tuple[str, np.ndarra
 
 
 def _via(cell: Cell, obj: str, label: str) -> str | None:
-    """The part a via-grasp ``label`` of ``obj`` holds (world.products.via_grasps), None for the
+    """The part a via-grasp ``label`` of ``obj`` holds (world.product.products.via_grasps), None for the
     part's own grasps."""
     if cell.product is None:
         return None
@@ -783,7 +783,7 @@ def retention_refusal(unc: ur.WorldState, what: str) -> str | None:
 def _stacked_on(world: World, obj: str) -> str | None:
     """A part resting on ``obj``'s body (on its top, not mated into it), or None: picking ``obj`` up
     would leave it unsupported. A part rests on it when its lowest point is at the top's height
-    (world.supports' tolerance) over the top's polygon (world.supports.rest_of)."""
+    (world.reach.supports' tolerance) over the top's polygon (world.reach.supports.rest_of)."""
     cell, unc = world.cell, world.unc
     body = unc.body(obj)
     tol = from_mm(cell.unit, REST_TOL_MM)
@@ -970,7 +970,7 @@ def _assemble(world: World, s: Step, early: bool = False) -> tuple[list[dict], W
 def _carried_mate(world: World, peg: str, hole: str, faces: Any, Ta: np.ndarray) -> tuple[str, np.ndarray, Any]:
     """The part, T_a and ``[PegFaces, HoleFaces]`` a product part's insertion into ``hole`` is
     checked against: its goal's first mate with a part ``hole``'s body carries (a goal into the
-    ancestor that still has a location, world.products.goal_parents) when the goal makes none
+    ancestor that still has a location, world.product.products.goal_parents) when the goal makes none
     with ``hole`` itself, that part with T_a relative to it (T_M^-1 T_H T_a at their present
     ideal poses) and the mate's features' faces; else ``hole``, ``Ta`` and ``faces`` unchanged."""
     cell = world.cell

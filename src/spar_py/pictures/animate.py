@@ -1,12 +1,12 @@
 """`spar plan --animate FILE.gif`: the whole plan replayed from its motions.
 
 Read from the plan JSON, not recomputed: each step's ``path``, ``approach`` and
-``retreat`` (waypoints in degrees, world/motion.py) give the arm's joints frame by frame
+``retreat`` (waypoints in degrees, world/motion/paths.py) give the arm's joints frame by frame
 (the travel home after the last step, ``motion.home_path``, is left out: it shows no work);
 the parts stand where the step before left them (``poses``), the held part moves with the tool
 (its grasp). Each frame is the cell
 pictures' 3-D panel (pictures/cell.py: table, parts, the arm's skeleton and gripper), the
-arm's link geometry (the collision scene's bodies, world/collision.py: the robot file's
+arm's link geometry (the collision scene's bodies, world/collision/scene.py: the robot file's
 link capsules, cylinders and boxes, and the gripper's palm and fingers at the frame's
 opening, drawn as their hulls at the frame's joints) and the cell's obstacles, within a view
 of the work (:func:`work_extent`: the parts and the tool's working path over them, the
@@ -27,7 +27,7 @@ import numpy as np
 
 from spar_py.core.errors import SparValueError
 from spar_py.core.model import Cell
-from spar_py.pictures.cell import Extent, _draw_3d, _finger_length, _part_points, _table, extent
+from spar_py.pictures.cell import Extent, draw_3d, finger_length, part_points, table_extent, extent
 from spar_py.pictures.plandoc import as_doc, instance
 from spar_py.pictures.scene import Scene, held_grasp, part_model, scenes
 from spar_py.world.collision import TOOL, CollisionScene, scene_for
@@ -62,7 +62,7 @@ def _tool_points(cell: Cell, steps: list[dict[str, Any]]) -> np.ndarray:
         rows += list(st.get("approach") or []) + list(st.get("retreat") or [])
         for q in np.radians(np.asarray(rows, float)).reshape(-1, 6):
             T = cell.robot.frames(q)[-1]
-            pts += [T[:3, 3], T[:3, :3] @ [0.0, 0.0, -_finger_length(cell)] + T[:3, 3]]
+            pts += [T[:3, 3], T[:3, :3] @ [0.0, 0.0, -finger_length(cell)] + T[:3, 3]]
     return np.array(pts, float).reshape(-1, 3)
 
 
@@ -71,7 +71,7 @@ def _work_points(cell: Cell, plan: Any) -> np.ndarray:
     the tool's working path (:func:`_tool_points`)."""
     doc = as_doc(plan)
     steps = list(instance(doc).get("steps") or [])
-    allp = np.vstack(_part_points(cell, scenes(cell, doc)) + [_tool_points(cell, steps)])
+    allp = np.vstack(part_points(cell, scenes(cell, doc)) + [_tool_points(cell, steps)])
     if not len(allp):
         raise SparValueError("the plan has no parts and no tool path to frame")
     return allp
@@ -89,7 +89,7 @@ def work_extent(cell: Cell, plan: Any, work: np.ndarray | None = None) -> Extent
     view = extent(cell, scenes(cell, as_doc(plan)))
     lo = np.minimum(np.append(allp.min(axis=0)[:2] - pad, min(0.0, float(allp[:, 2].min()))), view.lo)
     hi = np.maximum(allp.max(axis=0) + pad, view.hi)
-    return Extent(_table(cell, lo, hi), lo, hi)
+    return Extent(table_extent(cell, lo, hi), lo, hi)
 
 
 def _fit(fig: Any, ax: Any, pts: np.ndarray) -> None:
@@ -199,7 +199,7 @@ def arm_faces(cell: Cell, q: np.ndarray, width: float | None = None, scene: Coll
 
 def obstacle_faces(cell: Cell) -> list[np.ndarray]:
     """Triangles (each (3, 3) world points, cell unit) of the hulls of the cell's obstacle
-    bodies (world/collision.py's Obstacle: a body's vertices in the world)."""
+    bodies (world/collision/scene.py's Obstacle: a body's vertices in the world)."""
     from scipy.spatial import ConvexHull  # ~0.7 s at import: only when a GIF is drawn
 
     faces = []
@@ -236,7 +236,7 @@ def write_animation(cell: Cell, plan: Any, path: str | Path, max_frames: int = M
     fr = work_extent(cell, plan, work)
     fig = plt.figure(figsize=(FIGSIZE_IN, FIGSIZE_IN), dpi=DPI)
     ax = fig.add_axes((0.02, 0.05, 0.94, 0.89), projection="3d")
-    _draw_3d(ax, cell, frames[0], fr)  # the view (limits, box, angle) is every frame's
+    draw_3d(ax, cell, frames[0], fr)  # the view (limits, box, angle) is every frame's
     _fit(fig, ax, work)
     title = fig.text(0.5, 0.98, "", ha="center", va="top", fontsize=8)
     (x0, y0, z0), (x1, y1, z1) = work.min(axis=0), work.max(axis=0)
@@ -249,7 +249,7 @@ def write_animation(cell: Cell, plan: Any, path: str | Path, max_frames: int = M
             for s in frames:
                 for artist in list(ax.collections) + list(ax.lines):
                     artist.remove()
-                _draw_3d(ax, cell, s, fr)
+                draw_3d(ax, cell, s, fr)
                 if obstacles:
                     ax.add_collection3d(Poly3DCollection(obstacles, facecolor="#9a9a9a", alpha=0.45,
                                                          edgecolor="none", axlim_clip=True), autolim=False)

@@ -1,10 +1,10 @@
 """The work-cell picture at one step: the table, each part drawn from its object's shape at
-its world pose (a part from a mesh, or with holes, by its mesh's facets: world.shapes), the
+its world pose (a part from a mesh, or with holes, by its mesh's facets: world.parts.mesh), the
 obstacles, the arm's collision shapes (each link's capsules, cylinders and boxes, placed in
 its frame), the gripper's palm and fingers at the grasp's width, and the arm's skeleton (a
 polyline through its frames) over them.
 
-The shapes drawn are the collision scene's own bodies (world.collision: ``scene_for(cell)``'s
+The shapes drawn are the collision scene's own bodies (world.collision.scene: ``scene_for(cell)``'s
 link bodies and gripper boxes, ``cell.obstacles``' bodies), so the picture shows what the
 collision check sees: a cylinder as its circumscribed prism, a mesh obstacle as its hull.
 
@@ -34,13 +34,13 @@ from spar_py.core.units import from_mm
 from spar_py.pictures.plandoc import as_doc, instance
 from spar_py.pictures.scene import AT_REST, MIN_SIZE_MM, Scene, part_model, scenes
 from spar_py.world.collision import TOOL, scene_for
-from spar_py.world.shapes import part_mesh
+from spar_py.world.parts import part_mesh
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
 
     from spar_py.world.collision import Body
-    from spar_py.world.robots import Robot
+    from spar_py.world.robot import Robot
     from spar_py.core.model import Cell, MatingFeature, ObjectModel, Solid
 
 __all__ = ["Shape", "Tolerance", "arm_polyline", "assemble_tolerance", "body_faces", "cell_figure", "cell_png",
@@ -251,7 +251,7 @@ def _capsule_mesh(a: np.ndarray, b: np.ndarray, r: float) -> tuple[list[np.ndarr
 
 
 def body_faces(body: Body, T_frame: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
-    """A collision body (world.collision.Body) placed by its frame's world pose ``T_frame``
+    """A collision body (world.collision.scene.Body) placed by its frame's world pose ``T_frame``
     (4x4): its faces (each (m, 3) world points) and outline points (k, 3). A box gives its 6
     faces, a cylinder its prism's, a capsule a tube with round ends, a convex body its hull's
     triangles."""
@@ -322,7 +322,7 @@ class Extent:
     hi: np.ndarray
 
 
-def _finger_length(cell: Cell) -> float:
+def finger_length(cell: Cell) -> float:
     return 0.5 * cell.finger_separation
 
 
@@ -331,11 +331,11 @@ def _arm_points(cell: Cell, s: Scene) -> np.ndarray | None:
     if s.frames is None:
         return None
     tool = s.frames[-1]
-    palm = tool[:3, :3] @ [0.0, 0.0, -_finger_length(cell)] + tool[:3, 3]
+    palm = tool[:3, :3] @ [0.0, 0.0, -finger_length(cell)] + tool[:3, 3]
     return np.vstack([arm_polyline(cell.robot, s.frames), palm])
 
 
-def _part_points(cell: Cell, all_scenes: Sequence[Scene]) -> list[np.ndarray]:
+def part_points(cell: Cell, all_scenes: Sequence[Scene]) -> list[np.ndarray]:
     return [object_points(cell.objects[part_model(k)], T) for s in all_scenes for k, T in s.poses.items()
             if part_model(k) in cell.objects]
 
@@ -347,7 +347,7 @@ WORK_PAD, WORK_PAD_SIZES = 0.1, 1.0
 REACH_OVER = 2.5
 
 
-def _table(cell: Cell, lo: np.ndarray, hi: np.ndarray) -> tuple[float, float, float, float]:
+def table_extent(cell: Cell, lo: np.ndarray, hi: np.ndarray) -> tuple[float, float, float, float]:
     """The table top drawn (x0, x1, y0, y1 at z = 0, cell unit): the cell's ``table:`` extent,
     else the whole view (without ``table:`` the table is the whole plane), cut to the view box
     ``lo``..``hi`` (a polygon is drawn whole or not at all in the 3-D panel)."""
@@ -362,14 +362,14 @@ def extent(cell: Cell, all_scenes: Sequence[Scene]) -> Extent:
     and the obstacles, padded (WORK_PAD, WORK_PAD_SIZES), from the table top up to REACH_OVER
     gripper lengths over the highest part; the arm is drawn where it enters that box. The table
     is its ``table:`` extent cut to the box (cell unit)."""
-    pts = _part_points(cell, all_scenes) + [sh.points for sh in obstacle_shapes(cell)]
+    pts = part_points(cell, all_scenes) + [sh.points for sh in obstacle_shapes(cell)]
     allp = np.vstack(pts) if pts else np.asarray(cell.robot.base, float)[None, :3, 3]
     lo, hi = allp.min(axis=0), allp.max(axis=0)
     size = max((m.bounding_radius() for m in cell.objects.values()), default=from_mm(cell.unit, MIN_SIZE_MM))
     pad = max(WORK_PAD * float(max(hi - lo)), WORK_PAD_SIZES * size, from_mm(cell.unit, 1e-3))
     lo = np.array([lo[0] - pad, lo[1] - pad, min(0.0, float(lo[2])) - 0.02 * pad])
-    hi = np.array([hi[0] + pad, hi[1] + pad, float(hi[2]) + REACH_OVER * 2 * _finger_length(cell)])
-    return Extent(_table(cell, lo, hi), lo, hi)
+    hi = np.array([hi[0] + pad, hi[1] + pad, float(hi[2]) + REACH_OVER * 2 * finger_length(cell)])
+    return Extent(table_extent(cell, lo, hi), lo, hi)
 
 
 # =========================================================================== painting
@@ -424,7 +424,7 @@ LIGHT = np.array([0.3, -0.5, 0.81])
 
 def _mesh_facets(model: ObjectModel, T: np.ndarray, eye: np.ndarray, colour: str
                  ) -> list[tuple[float, str, np.ndarray, str]] | None:
-    """The facets of a part drawn from its real shape (world.shapes.part_mesh) facing the
+    """The facets of a part drawn from its real shape (world.parts.mesh.part_mesh) facing the
     viewer ``eye``, shaded: for a part from a mesh or with subtracted primitives (holes,
     pockets), whose primitives alone do not show it; None for the others."""
     geo = model.geometry
@@ -472,7 +472,7 @@ def _draw_arm(ax: Any, cell: Cell, s: Scene, proj: Projection, zorder: float = 3
             ms=3 if shapes else 4, solid_capstyle="round", zorder=zorder, gid="skeleton", **clip)
     if shapes:
         return
-    for seg in gripper_segments(s.tool, _grip_width(cell, s), _finger_length(cell)):
+    for seg in gripper_segments(s.tool, _grip_width(cell, s), finger_length(cell)):
         ax.plot(*proj(seg), color=GRIPPER_COLOUR, lw=2.4, alpha=_arm_alpha(s), zorder=zorder + 0.1, **clip)
 
 
@@ -494,7 +494,7 @@ def _items(cell: Cell, s: Scene, eye: Sequence[float]) -> list[tuple[str, list[n
     return [it for _, it in items]
 
 
-def _draw_3d(ax: Any, cell: Cell, s: Scene, fr: Extent) -> None:
+def draw_3d(ax: Any, cell: Cell, s: Scene, fr: Extent) -> None:
     """The 3-D panel; painted in a fixed order (table, parts, obstacles and the arm's shapes far
     to near, the skeleton on top)."""
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection  # ~0.9 s at import: drawing only (the viewer needs none)
@@ -605,7 +605,7 @@ def draw_figure(cell: Cell, s: Scene, fr: Extent) -> Any:
 
     fig = plt.figure(figsize=(12, 7.2), dpi=100)
     try:
-        _draw_3d(fig.add_axes((0.0, 0.09, 0.6, 0.82), projection="3d"), cell, s, fr)
+        draw_3d(fig.add_axes((0.0, 0.09, 0.6, 0.82), projection="3d"), cell, s, fr)
         top = fig.add_axes((0.6, 0.56, 0.38, 0.32))
         _draw_2d(top, cell, s, fr, (0, 1), TOP_EYE)
         top.set_title("top view (looking down)", fontsize=9)

@@ -40,27 +40,27 @@ INSTALL_HINT = "install the graphviz package (apt-get install graphviz; `make se
 # =========================================================================== DOT text
 
 
-def _q(s: str, left: bool = False) -> str:
+def dot_id(s: str, left: bool = False) -> str:
     """A DOT double-quoted string. A newline becomes ``\\n`` (lines centred) or, with
     ``left``, every line ends in ``\\l`` (lines left-justified, as in a listing)."""
     body = s.replace("\\", "\\\\").replace('"', '\\"')
     return '"' + (body.replace("\n", "\\l") + "\\l" if left else body.replace("\n", "\\n")) + '"'
 
 
-def _attrs(left_label: bool = False, **kw: str) -> str:
+def dot_attrs(left_label: bool = False, **kw: str) -> str:
     """A DOT attribute list; ``left_label`` left-justifies the lines of ``label`` (node texts)."""
-    return "[" + ", ".join(f"{k}={_q(v, left_label and k == 'label')}" for k, v in kw.items()) + "]"
+    return "[" + ", ".join(f"{k}={dot_id(v, left_label and k == 'label')}" for k, v in kw.items()) + "]"
 
 
-def _header(kind: str, name: str, title: str, rankdir: str, **node: str) -> list[str]:
+def dot_header(kind: str, name: str, title: str, rankdir: str, **node: str) -> list[str]:
     """The opening lines of a graph: title on top, monospace text, white page, node defaults."""
-    graph = _attrs(label=title, labelloc="t", rankdir=rankdir, fontname=FONT, fontsize="12", bgcolor="white",
+    graph = dot_attrs(label=title, labelloc="t", rankdir=rankdir, fontname=FONT, fontsize="12", bgcolor="white",
                    pad="0.25", nodesep="0.35", ranksep="0.45")
     return [
         f"{kind} {name} {{",
         f"  graph {graph};",
-        f"  node {_attrs(shape='box', style='rounded,filled', fontname=FONT, fontsize='10', **node)};",
-        f"  edge {_attrs(fontname=FONT, fontsize='10')};",
+        f"  node {dot_attrs(shape='box', style='rounded,filled', fontname=FONT, fontsize='10', **node)};",
+        f"  edge {dot_attrs(fontname=FONT, fontsize='10')};",
     ]
 
 
@@ -121,12 +121,12 @@ def ordering_dot(plan: Any) -> str:
     implied = implied_edges(edges)
     title = (f"ordering graph: {plan.get('problem', '')}\n"
              "solid: prior_to (transitive reduction)\ndashed: implied by a longer chain")
-    out = _header("digraph", "ordering", title, "TB", fillcolor=ACTION_FILL)
+    out = dot_header("digraph", "ordering", title, "TB", fillcolor=ACTION_FILL)
     for n, t in _action_nodes(plan).items():
-        out.append(f"  {_q(n)} {_attrs(True, label=_action_label(n, t) if t else n)};")
+        out.append(f"  {dot_id(n)} {dot_attrs(True, label=_action_label(n, t) if t else n)};")
     for u, v in dict.fromkeys(edges):
-        extra = " " + _attrs(style="dashed", constraint="false") if (u, v) in implied else ""
-        out.append(f"  {_q(u)} -> {_q(v)}{extra};")
+        extra = " " + dot_attrs(style="dashed", constraint="false") if (u, v) in implied else ""
+        out.append(f"  {dot_id(u)} -> {dot_id(v)}{extra};")
     out.append("}")
     return "\n".join(out) + "\n"
 
@@ -210,15 +210,16 @@ def network_dot(plan: Any) -> str:
             variables.setdefault(str(v), [])
     seps = [s for s in (_separation_vars(x, variables) for x in part.get("separations") or []) if s]
     bindings = instance(plan).get("bindings") or {}
-    out = _header("graph", "network", f"constraint network: {plan.get('problem', '')}", "LR")
+    out = dot_header("graph", "network", f"constraint network: {plan.get('problem', '')}", "LR")
     for v in sorted(variables, key=natural_key):
         label = label_summary(v, variables[v], bindings.get(v))
-        out.append(f"  {_q(v)} {_attrs(True, label=label, fillcolor=_fill_of(v))};")
+        out.append(f"  {dot_id(v)} {dot_attrs(True, label=label, fillcolor=_fill_of(v))};")
     for a in arcs:
         u, v = sorted((str(x) for x in a["vars"]), key=lambda n: (not n.startswith("grasp"), natural_key(n)))
-        out.append(f"  {_q(u)} -- {_q(v)} {_attrs(label=_pairs_label(a))};")
+        out.append(f"  {dot_id(u)} -- {dot_id(v)} {dot_attrs(label=_pairs_label(a))};")
     for s in seps:
-        out.append(f"  {_q(s[0])} -- {_q(s[1])} {_attrs(label='separated (dif)', style='dotted', constraint='false')};")
+        out.append(f"  {dot_id(s[0])} -- {dot_id(s[1])} "
+                   f"{dot_attrs(label='separated (dif)', style='dotted', constraint='false')};")
     out.append("}")
     return "\n".join(out) + "\n"
 

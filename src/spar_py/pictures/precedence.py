@@ -1,6 +1,6 @@
 """A derived product's precedence graph as Graphviz DOT text (drawn as the plan's ordering graph).
 
-One node per insertion of :class:`~spar_py.world.assembly.AssemblyResult` (its parts, its place
+One node per insertion of :class:`~spar_py.world.product.assembly.AssemblyResult` (its parts, its place
 in the derived order, its direction in the product frame and the parts it mates with), the
 base on top; an edge ``first -> then`` per precedence, labelled and tooltipped with its reason.
 As in :func:`~spar_py.pictures.graphs.ordering_dot`: solid edges form the transitive reduction,
@@ -13,10 +13,10 @@ from __future__ import annotations
 import textwrap
 from typing import TYPE_CHECKING
 
-from spar_py.pictures.graphs import ACTION_FILL, _attrs, _header, _q, implied_edges
+from spar_py.pictures.graphs import ACTION_FILL, dot_attrs, dot_header, dot_id, implied_edges
 
 if TYPE_CHECKING:
-    from spar_py.world.assembly import AssemblyResult, Insertion
+    from spar_py.world.product import AssemblyResult, Insertion
 
 __all__ = ["BASE_FILL", "FIXTURE_FILL", "insertion_node", "precedence_dot"]
 
@@ -65,7 +65,7 @@ def precedence_dot(res: "AssemblyResult", name: str) -> str:
              "edge first -> then: then in place blocks first's insertion\n"
              "solid: transitive reduction; dashed: implied by a longer chain"
              + (f"\nred: {fixtures} insertion(s) need a fixture or a second arm" if fixtures else ""))
-    out = _header("digraph", "precedence", title, "TB", fillcolor=ACTION_FILL)
+    out = dot_header("digraph", "precedence", title, "TB", fillcolor=ACTION_FILL)
     for i, ins in enumerate(res.insertions):
         node = insertion_node(ins)
         lines = [f"{i + 1}. {' + '.join(ins.parts)}"]
@@ -81,13 +81,13 @@ def precedence_dot(res: "AssemblyResult", name: str) -> str:
         if ins.needs_fixture:
             lines.append("needs a fixture or a second arm")
             fill = FIXTURE_FILL
-        out.append(f"  {_q(node)} {_attrs(True, label=chr(10).join(lines), fillcolor=fill)};")
+        out.append(f"  {dot_id(node)} {dot_attrs(True, label=chr(10).join(lines), fillcolor=fill)};")
     for (u, v), whys in edges.items():
         why = "; ".join(whys)
         style = {"style": "dashed", "constraint": "false"} if (u, v) in implied else {}
-        out.append(f"  {_q(u)} -> {_q(v)} {_attrs(label=_label(whys), tooltip=why, **style)};")
+        out.append(f"  {dot_id(u)} -> {dot_id(v)} {dot_attrs(label=_label(whys), tooltip=why, **style)};")
     for p in res.unremovable:
-        out.append(f"  {_q(p)} {_attrs(label=f'{p}: no free direction found', fillcolor=FIXTURE_FILL)};")
+        out.append(f"  {dot_id(p)} {dot_attrs(label=f'{p}: no free direction found', fillcolor=FIXTURE_FILL)};")
     out.append("}")
     return "\n".join(out) + "\n"
 

@@ -131,7 +131,7 @@ AT_REST = "home"
 def _home(cell: Cell, plan: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray]:
     """(q rad, robot.frames(q)) of the arm at rest: the home the plan's motions start from
     (``instance.motion.home_deg``), else the cell's ``home``, else the documented default home,
-    the middle of the joint ranges (world.motion.default_home)."""
+    the middle of the joint ranges (world.motion.paths.default_home)."""
     motion = instance(plan).get("motion") or {}
     if motion.get("home_deg") is not None:
         q = np.radians(np.asarray(motion["home_deg"], float))

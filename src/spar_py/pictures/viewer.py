@@ -5,7 +5,7 @@ what this module computes; it never recomputes kinematics. :func:`viewer_data` r
 plan JSON and the cell and gives the page, as data:
 
 - meshes, each in its own frame: every part's (its mesh, or its shape's primitives), every
-  arm collision body's (world.collision: the robot file's link shapes in their Craig frame
+  arm collision body's (world.collision.scene: the robot file's link shapes in their Craig frame
   0..6, the gripper's palm and fingers in the tool frame, one set per finger opening), the
   obstacles' (world frame);
 - states: the initial one (the arm at home when the plan or the cell gives one) and one per
@@ -44,7 +44,7 @@ from spar_py.pictures.plandoc import as_doc, instance, partial, pretty_term
 from spar_py.pictures.scene import Scene, held_grasp, part_model, scenes
 from spar_py.world.collision import TOOL, scene_for
 from spar_py.world.motion import interval_seconds
-from spar_py.world.shapes import part_mesh
+from spar_py.world.parts import part_mesh
 
 if TYPE_CHECKING:
     from spar_py.core.model import Bounds, Cell, ObjectModel
@@ -97,7 +97,7 @@ def _mesh(tris: np.ndarray) -> dict[str, Any]:
 
 def part_triangles(model: ObjectModel, unit: str) -> np.ndarray:
     """A part's triangles (n, 3, 3) in its object frame (``unit``, the cell's): its mesh
-    (world.shapes.part_mesh) when it has ``mesh:`` or ``shape:``, else its primitives' faces; a
+    (world.parts.mesh.part_mesh) when it has ``mesh:`` or ``shape:``, else its primitives' faces; a
     part without a shape is drawn as a cube MARKER_MM wide about its origin."""
     mesh = part_mesh(model) if model.geometry is not None else None
     if mesh is not None:
@@ -200,7 +200,7 @@ def _sample(k: int, n: int = MAX_WAYPOINTS) -> np.ndarray:
 
 def _times(q: np.ndarray, velocity: np.ndarray | None) -> np.ndarray:
     """Seconds from the first waypoint to each of ``q`` (k, 6) rad at the joint velocity limits
-    (world.motion.interval_seconds), or DEFAULT_PACE."""
+    (world.motion.paths.interval_seconds), or DEFAULT_PACE."""
     if len(q) < 2:
         return np.zeros(len(q))
     v = np.full(6, DEFAULT_PACE) if velocity is None else velocity

@@ -202,7 +202,7 @@ class ProblemRegistry:
             return got
         # planning.run imports phase 2, world.run numpy and the collision layer: not for a bare engine
         from spar_py.planning.run import PlanRun
-        from spar_py.world.run import CellCache
+        from spar_py.world.collision import CellCache
 
         cell = self.cell(name)
         cache = self.caches.get(name)

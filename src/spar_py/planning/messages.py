@@ -19,14 +19,14 @@ from typing import Any
 import numpy as np
 
 from spar_py.core.model import Cell
-from spar_py.world.workspace import Refusal, pair_text
+from spar_py.world.reach import Refusal, pair_text
 
 __all__ = ["Phase2Digest", "collision_lines", "expected_failures", "phase2_digest", "shared_pairs", "summary"]
 
 #: Pairs named in a summary line at most.
 PAIRS_SHOWN = 3
 
-#: A refusal's ``what`` for a pickup (world/arcs.py): ``pickup(peg, p1G11) at tr1``.
+#: A refusal's ``what`` for a pickup (world/reach/arcs.py): ``pickup(peg, p1G11) at tr1``.
 _PICKUP = re.compile(r"pickup\((?P<obj>[^,]+), (?P<grasp>[^)]+)\) at (?P<label>\S+)$")
 
 
@@ -125,8 +125,8 @@ def _cause(cell: Cell, goal_data: Any, refusals: Sequence[Refusal]) -> str | Non
 def summary(cell: Cell, reason: dict[str, Any], refusals: Sequence[Refusal]) -> str:
     """One line: ``NO PLAN within N actions (...) for GOALS: CAUSE`` (phase 1: the goal that could not be met and its
     nearest cause; phase 2: why no instance examined could be executed; a product one arm on a table cannot build,
-    world.single_arm: the insertion and what it needs; a part no grasp serves for its mate, world.grasp_report: the
-    mate and what it needs)."""
+    world.product.single_arm: the insertion and what it needs; a part no grasp serves for its mate,
+    world.product.grasp_report: the mate and what it needs)."""
     goals = f"for {_goal_text(cell)}"
     single = reason.get("single_arm") or {}
     if single.get("ok") is False:  # no order and poses keep the loose mates: the cause, whatever the search hit
@@ -134,7 +134,7 @@ def summary(cell: Cell, reason: dict[str, Any], refusals: Sequence[Refusal]) -> 
     level = (f"; {single['why']}; the only way left inserts sideways (a level tool): {'; '.join(single['level'])}"
              if single.get("level") else "")
     grasps = reason.get("grasps") or {}
-    if grasps.get("ok") is False:  # a part no grasp serves for its mate (world.grasp_report): the cause
+    if grasps.get("ok") is False:  # a part no grasp serves for its mate (world.product.grasp_report): the cause
         return f"NO PLAN {goals}: {grasps['why']}{level}"
     if reason.get("phase") == 2:
         n = reason.get("instances_examined")

@@ -33,8 +33,9 @@ from spar_py.core.memo import LRU
 from spar_py.core.model import Bounds, Cell
 from spar_py.planning.messages import collision_lines, expected_failures, phase2_digest, summary
 from spar_py.planning.run import PlanRun
-from spar_py.world.motion_options import MotionFailure, MotionOptions
-from spar_py.world.run import CellCache, RunOptions
+from spar_py.world.motion import MotionFailure, MotionOptions
+from spar_py.world.collision import CellCache
+from spar_py.world.run import RunOptions
 
 #: The plan JSON's schema (docs/json-schema.md); :meth:`Plan.from_json` also reads :data:`READS`.
 SCHEMA = 3
@@ -344,16 +345,16 @@ def name_mates(cell: Cell, d: dict[str, Any]) -> None:
 
 
 def _grasp_report(cell: Cell, cache: CellCache, placements: str) -> Any:
-    """world.grasp_report for a product cell: its robot's gripper (else the default for its
+    """world.product.grasp_report for a product cell: its robot's gripper (else the default for its
     finger separation), the parts' initial positions for the reach counts, the run's
-    collision scene (world.workspace.reach_clear: the arm, the hand closing on the part, the
+    collision scene (world.reach.workspace.reach_clear: the arm, the hand closing on the part, the
     other parts) for the arm at pickups and insertions, and phase 1's put-down arcs under the
-    run's ``placements`` rule (world.arcs.reachable_pairs) for a regrasp; None without a mesh."""
+    run's ``placements`` rule (world.reach.arcs.reachable_pairs) for a regrasp; None without a mesh."""
     from spar_py.core.units import mm_per
-    from spar_py.world.grasp_report import grasp_report
-    from spar_py.world.robots import GripperGeometry
-    from spar_py.world.access import arm_clear_of
-    from spar_py.world.arcs import reachable_pairs
+    from spar_py.world.product import grasp_report
+    from spar_py.world.robot import GripperGeometry
+    from spar_py.world.product import arm_clear_of
+    from spar_py.world.reach import reachable_pairs
 
     assert cell.product is not None
     gripper = cell.robot.gripper or GripperGeometry.default(cell.finger_separation, mm_per(cell.unit))
@@ -414,13 +415,13 @@ class Planner:
     reachable somewhere, Sec. 5.2.4; by default some placement in the free table
     regions must reach it), ``timeout`` (seconds for the whole query, None for none).
 
-    Motions (world/motion.py): ``motion`` True plans the joint paths between
+    Motions (world/motion/paths.py): ``motion`` True plans the joint paths between
     the chosen instance's end-points (home, transit and transfer motions, approach and
     retreat) and makes an instance whose motions do not exist inexecutable; False plans
     end-points only (the paper's phase 2); None (the default) follows the problem file's
     ``motion:`` key (default false: the regression suite plans motions only for the cells
     that ask, since a motion plan costs seconds where end-points cost milliseconds).
-    ``motion_options`` a :class:`~spar_py.world.motion.MotionOptions` (planner, time budget
+    ``motion_options`` a :class:`~spar_py.world.motion.paths.MotionOptions` (planner, time budget
     per motion, seed, approach length, simplification).
 
     ``strict`` True: a plan with actions planned for failure (``error_count`` > 0) raises
@@ -534,7 +535,7 @@ class Planner:
             if run.infeasible:  # steps refused for a reason of their own (stability, retention, support)
                 plan.reason = {**(plan.reason or {}), "infeasible": list(run.infeasible)}
             if cell.product is not None:  # a product one arm on a table cannot build: say which mate and why
-                from spar_py.world.single_arm import single_arm_report
+                from spar_py.world.product import single_arm_report
 
                 sa = single_arm_report(cell.product, cell.unit)
                 if sa is not None and (not sa.ok or sa.level):

@@ -24,8 +24,9 @@ from typing import TYPE_CHECKING, Any
 
 from spar_py.core.model import Cell
 from spar_py.phase2 import instance as phase2
-from spar_py.world.motion_options import MotionFailure
-from spar_py.world.run import CellCache, RunOptions, WorldRun
+from spar_py.world.motion import MotionFailure
+from spar_py.world.collision import CellCache
+from spar_py.world.run import RunOptions, WorldRun
 
 if TYPE_CHECKING:
     from spar_py.world.motion import InstanceMotion

@@ -1,19 +1,24 @@
-"""The world layer: the geometry past the paper, in one place the phases ask questions of.
+"""The world layer: the geometry past the paper, in rooms the phases ask questions of.
 
-- ``shapes``     meshes and primitives: faces, stable poses, grasps, features, T_a derived
-- ``robots``     robot models: DH tables, URDF import, link and gripper collision shapes
-- ``ik``         closed-form IK families (PUMA, UR) and a numeric fallback, one interface
-- ``collision``  one collision scene per run: links, gripper, held part, parts, obstacles,
-                 table; clearance and the closest pair
-- ``motion``     transit/transfer joint paths, approach and retreat
-- ``workspace``  "the arm reaches T, clear of the world": what phase 1's arcs, the
-                 placements and phase 2's steps (``arm_at``) ask
-- ``placement``  where a put-down can go: the free table grid, and whether some placement
-                 of it lets the arm reach a requirement (``some_placement_reaches``)
-- ``arcs``       phase 1's reachable / mate_reachable arcs (Sec. 5.2.4), with the refusals
-- ``run``        the door: a cell's kept answers (``CellCache``) and one planning run
-                 (``WorldRun``: options, log, ``arc_pairs``); phase 2's door is
-                 spar_py.planning.run.PlanRun, which holds a WorldRun
+Each room is a subpackage whose ``__init__`` is its door (``__all__``): code outside a room
+imports from the door only (tests/test_structure.py checks it).
+
+- ``robot``      robot models (DH tables, URDF import), the one gripper type, link shapes,
+                 and ``ik`` (closed-form PUMA and UR families, a numeric fallback)
+- ``parts``      part models from meshes and primitives: faces, stable poses, grasps,
+                 features, the derivation cache
+- ``collision``  one collision scene per cell: links, gripper, held part, parts, obstacles,
+                 table; clearance and the closest pair; the cell's kept answers (CellCache)
+- ``reach``      "the arm reaches T, clear of the world": workspace checks, phase 1's arcs
+                 (Sec. 5.2.4), put-down placements, supports
+- ``motion``     transit/transfer joint paths (OMPL), approach and retreat lines
+- ``product``    products: assembly derivation, goals and precedence, layout, hand access,
+                 grasp reports, single-arm rules
+- ``run``        (a module, its own door) one planning run's world: options, log and
+                 ``arc_pairs``, phase 1's door; phase 2's is spar_py.planning.run.PlanRun
+
+Rooms depend on each other in one direction: robot <- collision <- parts <- reach <-
+{motion, product}; run sits on reach, collision and motion.
 
 Frames: world Z up, table top z = 0; transforms 4x4, column vectors, ``T_world_obj``.
 Units: lengths in the cell's unit (``Cell.unit``); constants written in the code are in mm

@@ -24,14 +24,14 @@ from typing import Any
 import numpy as np
 
 from spar_py.core.errors import SparValueError
-from spar_py.core.memo import LRU, Memo
+from spar_py.core.memo import LRU
 from spar_py.core.model import Cell
-from spar_py.world.arcs import RULES, arc
-from spar_py.world.collision import CollisionScene, scene_for
-from spar_py.world.motion_options import FAILURES_KEPT, MotionFailure, MotionOptions
-from spar_py.world.workspace import Refusal
+from spar_py.world.reach import RULES, arc
+from spar_py.world.collision import CellCache
+from spar_py.world.motion import FAILURES_KEPT, MotionFailure, MotionOptions
+from spar_py.world.reach import Refusal
 
-__all__ = ["CellCache", "RunLog", "RunOptions", "WorldRun"]
+__all__ = ["RunLog", "RunOptions", "WorldRun"]
 
 #: Refusals a run's log keeps (the "no plan" explanation): at most this many distinct ones.
 REFUSALS_LIMIT = 256
@@ -52,28 +52,6 @@ class RunOptions:
     def __post_init__(self) -> None:
         if self.placements not in RULES:
             raise SparValueError(f"placement rule {self.placements!r} is not one of {', '.join(RULES)}")
-
-
-class CellCache:
-    """The bounded answers kept for one cell across its runs (content-keyed memo tables:
-    core/memo.py) and its collision scene. Holds no run's state."""
-
-    __slots__ = ("cell", "memo", "_scene")
-
-    def __init__(self, cell: Cell) -> None:
-        self.cell = cell
-        self.memo = Memo()
-        self._scene: CollisionScene | None = None
-
-    def table(self, name: str, limit: int) -> LRU:
-        """The kept table ``name`` (at most ``limit`` entries)."""
-        return self.memo.table(name, limit)
-
-    def scene(self) -> CollisionScene:
-        """The cell's collision scene (world.collision.scene_for), built once and kept."""
-        if self._scene is None:
-            self._scene = scene_for(self.cell, self.memo)
-        return self._scene
 
 
 @dataclass
@@ -139,7 +117,7 @@ class WorldRun:
     def arc_pairs(self, kind: str, objects: Sequence[str], grasps: Sequence[str], positions: Sequence[str],
                   ta: np.ndarray | str | None = None, rule: str | None = None) -> list[list[str]]:
         """The [grasp, position] pairs of phase 1's arc ``kind`` (reachable | mate_reachable,
-        Sec. 5.2.4; world/arcs.py) under ``rule`` (the run's placement rule by default); the
+        Sec. 5.2.4; world/reach/arcs.py) under ``rule`` (the run's placement rule by default); the
         pairs refused because every joint solution collides are logged with their pairs."""
         got = arc(self.cache, kind, objects, grasps, positions, ta, rule or self.options.placements)
         for r in got.refusals:

@@ -5,7 +5,7 @@ Frames and units: a DH table is Craig's (modified) convention, one row per joint
 offset_i``; lengths in the robot's unit. A solver answers for poses of the flange
 (frame 6) given in the world: ``T_world_tool @ inv(tool)``; it returns joint angles
 ``theta`` (the DH angles, not yet q) per *branch* (one distinct arm configuration),
-and the robot (``spar_py.world.robots.Robot``) turns them into joint vectors q within
+and the robot (``spar_py.world.robot.model.Robot``) turns them into joint vectors q within
 limits, so the limit and turn bookkeeping is written once for every family.
 """
 from __future__ import annotations

@@ -2,7 +2,7 @@
 hand-written ones against it.
 
 Stable poses (Fig. 18): trimesh's ``compute_stable_poses`` (deterministic: no noise, one
-sample; world.shapes_stable computes the same with arrays) gives the resting orientations of
+sample; world.parts.stable computes the same with arrays) gives the resting orientations of
 the convex hull with the probability of each (a hull of more than HULL_FACES_MAX triangles
 thinned first, each pose then snapped to the face of the mesh it rests on);
 those below ``PROB_FLOOR`` are dropped, and every remaining one must pass
@@ -49,7 +49,7 @@ import numpy as np
 
 from spar_py.core.geometry import convex_hull_2d
 from spar_py.core.units import from_mm
-from spar_py.world.shapes import (ON_SURFACE_MM, Face, FeatureGeometry, Primitive, axis_basis, clean, cross,
+from spar_py.world.parts.mesh import (ON_SURFACE_MM, Face, FeatureGeometry, Primitive, axis_basis, clean, cross,
                                   derive_faces, face_of_point, minimal_rotation)
 
 if TYPE_CHECKING:
@@ -83,7 +83,7 @@ MIN_CONTACT_MM = 5.0
 TOUCH_MM = 0.02
 #: A facet grasp from above whose fingers or palm come nearer the table than this in a stable pose
 #: of the part is offered backed off along its approach until they clear it (mm): more than the
-#: collision margin (world.collision's DEFAULT_MARGIN_MM, 2 mm) ...
+#: collision margin (world.collision.scene's DEFAULT_MARGIN_MM, 2 mm) ...
 TABLE_CLEAR_MM = 3.0
 #: ... in steps of this (mm) ...
 TABLE_STEP_MM = 1.0
@@ -125,7 +125,7 @@ class Gripper:
 
     @classmethod
     def of_robot(cls, g: Any) -> "Gripper":
-        """The robot file's gripper (world.robots.GripperGeometry, cell unit): its opening, its
+        """The robot file's gripper (world.robot.model.GripperGeometry, cell unit): its opening, its
         fingers' and palm's boxes, so grasps are derived for the fingers the arm really has."""
         return cls(g.finger_separation, g.finger_length, g.finger_width, g.finger_thickness, g.palm_length,
                    g.palm_width, g.palm_thickness)
@@ -315,7 +315,7 @@ def derive_poses(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fea
                  prefix: str, prob_floor: float = PROB_FLOOR) -> list[DerivedPose]:
     """The stable poses of the part (module docstring), most probable first, labelled
     ``{prefix}1, {prefix}2, ...``."""
-    from spar_py.world.shapes_stable import stable_poses
+    from spar_py.world.parts.stable import stable_poses
 
     A = _arrays(mesh)
     hv = A.V[hull_vertices(mesh)]
@@ -416,7 +416,7 @@ def _bvh(mesh: "trimesh.Trimesh") -> Any:
     c = mesh.metadata.get("_spar_bvh")
     if c is not None and c.of is A:
         return c.obj
-    import fcl  # on a derivation only (a cache miss); world.assembly's sweeps import it too
+    import fcl  # on a derivation only (a cache miss); world.product.assembly's sweeps import it too
     from spar_py.world.collision import bvh
 
     obj = fcl.CollisionObject(bvh(A.V, A.F), fcl.Transform())
@@ -1274,7 +1274,7 @@ def mate_grasp_usable(T_grasp: np.ndarray, width: float, gripper: Any, T_a: np.n
     """Whether a grasp of the peg (tool frame ``T_grasp`` in the peg's frame, fingers ``width``
     apart) can make the mate seated at ``T_a`` (the peg's frame in the hole part's frame, 4x4):
     every corner of the fingers, the palm and the tool body (``gripper``, a
-    world.robots.GripperGeometry: the finger's size, not only its pad) stays on the outer side of
+    world.robot.model.GripperGeometry: the finger's size, not only its pad) stays on the outer side of
     the plane of the hole's mouth (``hole``: origin the mouth's centre, direction into the part),
     within MOUTH_TOL_MM, so the hand holds only the length that stays out of the hole when seated.
     Cell unit throughout."""

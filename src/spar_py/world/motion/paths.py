@@ -51,11 +51,11 @@ from spar_py.core.errors import SparValueError
 from spar_py.core.units import LENGTH_UNITS
 from spar_py.world.collision import TOOL, WORLD, bound_columns, clearance_bounds
 from spar_py.world.collision import SceneState as Exact
-from spar_py.world.motion_options import PLANNERS, MotionFailure, MotionOptions
-from spar_py.world.workspace import wrist_above_table
+from spar_py.world.motion.options import PLANNERS, MotionFailure, MotionOptions
+from spar_py.world.reach import wrist_above_table
 
 if TYPE_CHECKING:
-    from spar_py.world.run import CellCache
+    from spar_py.world.collision import CellCache
 
 __all__ = ["MotionOptions", "Segment", "MotionFailure", "PLANNERS", "resolution", "densify",
            "free_motion", "line_motion", "durations", "DEFAULT_APPROACH_IN"]
@@ -65,7 +65,7 @@ DEFAULT_APPROACH_IN = 2.0
 
 
 class SceneState(Protocol):
-    """What the motions ask of the world at one point of the plan (world/collision.py)."""
+    """What the motions ask of the world at one point of the plan (world/collision/scene.py)."""
 
     def clear(self, q: np.ndarray) -> np.ndarray: ...
 

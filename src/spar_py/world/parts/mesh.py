@@ -22,8 +22,8 @@ normal is that axis when no other face has it; ``f1, f2, ...`` for the rest, num
 a deterministic order (by centroid, then normal).
 
 Stable poses, grasps and the checks of hand-written entries are in
-:mod:`spar_py.world.shapes_derive`; the content-hash cache of derivations in
-:mod:`spar_py.world.shapes_cache`.
+:mod:`spar_py.world.parts.derive`; the content-hash cache of derivations in
+:mod:`spar_py.world.parts.cache`.
 
 Frames: object frame as the model file gives it; T_a is the peg's frame in the hole's
 frame (4x4, column vectors). Units: lengths in the cell unit, the tolerances below in mm
@@ -39,6 +39,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from spar_py.core.model import FeatureGeometry
 from spar_py.core.units import from_mm
 
 if TYPE_CHECKING:
@@ -118,47 +119,6 @@ class Primitive:
                 self.subtract]
 
 
-@dataclass(frozen=True)
-class FeatureGeometry:
-    """A mating feature declared by geometry (object frame, cell unit): ``kind`` peg or hole,
-    the face ``name`` its surfaces get, ``radius``, ``origin`` (a peg's root, a hole's mouth
-    centre), unit ``direction`` (to the peg's tip, into the hole) and ``length`` (the shaft's
-    length, the hole's depth); ``through``: a hole open at both ends (no bottom)."""
-
-    kind: str
-    name: str
-    radius: float
-    origin: np.ndarray
-    direction: np.ndarray
-    length: float
-    through: bool = False
-    #: 'round', or 'prism': plane walls normal to the axis, ``radius`` the profile's inscribed
-    #: half-width and ``corners`` (k, 3) its bounding rectangle's corners as offsets from the
-    #: axis, across it (object frame, cell unit).
-    profile: str = "round"
-    corners: np.ndarray | None = None
-
-    @property
-    def end(self) -> np.ndarray:
-        """The peg's tip centre F_p or the hole's bottom centre F_h (object frame)."""
-        return self.origin + self.length * self.direction
-
-    @property
-    def reach(self) -> float:
-        """The farthest the feature's wall gets from its axis: the radius, a prism's corners."""
-        if self.profile == "prism" and self.corners is not None and len(self.corners):
-            return float(np.linalg.norm(self.corners, axis=1).max())
-        return self.radius
-
-    def spec(self) -> list:
-        """Plain data for the content hash."""
-        out = [self.kind, self.name, round(self.radius, 12), [round(float(v), 12) for v in self.origin],
-               [round(float(v), 12) for v in self.direction], round(self.length, 12), self.through]
-        if self.profile != "round":
-            out += [self.profile, np.round(np.asarray(self.corners, float), 12).tolist()]
-        return out
-
-
 @dataclass
 class Geometry:
     """What a model file declares of its shape: ``mesh_file`` (scaled by ``scale`` from the
@@ -179,7 +139,7 @@ class Geometry:
     #: What loading the mesh file repaired (:class:`Repair`'s line; "" for none), once the mesh
     #: was built or a cached derivation said so.
     repair: str = field(default="", compare=False)
-    #: Why the derivation found no grasp (world.shapes_derive.derive_grasps's line), or "".
+    #: Why the derivation found no grasp (world.parts.derive.derive_grasps's line), or "".
     no_grasp: str = field(default="", compare=False)
     _mesh: Any = field(default=None, compare=False, repr=False)
     _digest: str | None = field(default=None, compare=False, repr=False)
@@ -202,7 +162,7 @@ class Geometry:
         """The part's mesh (object frame, cell unit), built on first use."""
         if self._mesh is None:
             if self.mesh_file:
-                self._mesh, done = _load_mesh(self.mesh_file, self.scale)
+                self._mesh, done = load_mesh(self.mesh_file, self.scale)
                 self.repair = done.line()
             else:
                 self._mesh = _primitives_mesh(self.primitives)
@@ -216,7 +176,7 @@ def part_mesh(model: "ObjectModel") -> "trimesh.Trimesh | None":
     return None if geo is None else geo.mesh()
 
 
-def _load_mesh(path: str, scale: float) -> "tuple[trimesh.Trimesh, Repair]":
+def load_mesh(path: str, scale: float) -> "tuple[trimesh.Trimesh, Repair]":
     """Read an STL, OBJ or PLY file as one mesh, scaled by ``scale``, and repair what a CAD
     export leaves open (:func:`repair_mesh`). ValueError (one line) if it cannot be read or
     is not a closed volume once repaired. A file read before in this process (same path, size,
@@ -238,12 +198,12 @@ def _load_mesh(path: str, scale: float) -> "tuple[trimesh.Trimesh, Repair]":
 
 
 READ_MEMO = 64
-"""How many repaired meshes :func:`_load_mesh` keeps (the oldest read is dropped first)."""
+"""How many repaired meshes :func:`load_mesh` keeps (the oldest read is dropped first)."""
 _READ: "dict[tuple[str, int, int, float], tuple[trimesh.Trimesh, Repair]]" = {}
 
 
 def _read_mesh(p: Path, scale: float) -> "tuple[trimesh.Trimesh, Repair]":
-    """:func:`_load_mesh`'s read and repair of file ``p``."""
+    """:func:`load_mesh`'s read and repair of file ``p``."""
     import trimesh  # ~1.4 s at import: only a mesh or primitives model pays for it
 
     try:

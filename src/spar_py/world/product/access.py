@@ -1,12 +1,12 @@
 """Hand access: which grasps can seat a product's part at all, and which parts in place must wait.
 
-A part P may be insertable along its axis whatever is in place (world.assembly's sweeps give that
+A part P may be insertable along its axis whatever is in place (world.product.assembly's sweeps give that
 precedence), and yet the hand or arm holding it may meet a part already in place: a stool's leg
 held across its side meets the leg seated beside it. Phase 2 finds this only by running plan
 instances into it, and the instances of one partial plan share phase 1's grasps and order. Said
 before planning, phase 1 avoids both (computed once per cell, when it is loaded):
 
-1. ``blocked``: P's grasps no plan can seat it with: refused by world.grasp_report's filters 1 to
+1. ``blocked``: P's grasps no plan can seat it with: refused by world.product.grasp_report's filters 1 to
    3 (not usable for its mates, the hand inside the parts that must be in place, or inside P), or
    with no arm solution clear of the table and of the parts that must be in place (P's
    transitive predecessors) when P is seated. Its assemble does not offer them
@@ -36,11 +36,11 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from spar_py.core.model import LOOSE_MAX_DEG, Grasp, Precedence, Product
-from spar_py.world.grasp_report import ArmClear
+from spar_py.world.product.grasp_report import ArmClear
 
 if TYPE_CHECKING:
     from spar_py.core.model import Cell
-    from spar_py.world.run import CellCache
+    from spar_py.world.collision import CellCache
 
 __all__ = ["Access", "arm_clear_of", "hand_access", "with_hand_access"]
 
@@ -48,10 +48,10 @@ __all__ = ["Access", "arm_clear_of", "hand_access", "with_hand_access"]
 PAIRS_SAID = 2
 
 def arm_clear_of(cache: CellCache) -> ArmClear:
-    """The cell's arm check for world.grasp_report and :func:`hand_access`: the arm, the hand
+    """The cell's arm check for world.product.grasp_report and :func:`hand_access`: the arm, the hand
     closing on the part at ``T_part`` and the part are clear of the table, the obstacles and
-    ``parts`` (world.workspace.reach_clear)."""
-    from spar_py.world.workspace import reach_clear
+    ``parts`` (world.reach.workspace.reach_clear)."""
+    from spar_py.world.reach import reach_clear
 
     def arm_clear(part: str, T_part: np.ndarray, g: Grasp, parts: Mapping[str, np.ndarray]
                   ) -> tuple[bool, list[tuple[str, str]]]:
@@ -65,7 +65,7 @@ def arm_clear_of(cache: CellCache) -> ArmClear:
 @dataclass(frozen=True)
 class Access:
     """What hand access says of a product cell: ``blocked`` per part, the grasps no plan can seat it
-    with (refused by world.grasp_report's filters 1 to 3, or with no arm solution clear of the parts
+    with (refused by world.product.grasp_report's filters 1 to 3, or with no arm solution clear of the parts
     that must be in place); ``precedence`` the orderings of the module docstring."""
 
     blocked: Mapping[str, frozenset[str]] = field(default_factory=dict)
@@ -78,8 +78,8 @@ def hand_access(cell: Cell, cache: CellCache, held: Mapping[str, frozenset[str]]
     without a product, meshes, or one cell position of the base; a part with several initial
     positions (a stock) is picked where any of them lies."""
     from spar_py.core.units import mm_per
-    from spar_py.world.grasp_report import above_table, held_grasps, seat_order
-    from spar_py.world.robots import GripperGeometry
+    from spar_py.world.product.grasp_report import above_table, held_grasps, seat_order
+    from spar_py.world.robot import GripperGeometry
 
     product = cell.product
     if product is None or not product.goals:
@@ -137,7 +137,7 @@ def _built_in_place(product: Product, W: np.ndarray) -> bool:
     with the product at world pose ``W`` (T_world_product): the base then need not move, and the
     checks here at its pose are the plan's. A product some insertion of which needs the partial
     product turned gets no hand access (the parts would be seated in poses not known here)."""
-    from spar_py.world.single_arm import insertions
+    from spar_py.world.product.single_arm import insertions
 
     R = np.asarray(W, float)[:3, :3]
     limit = math.cos(math.radians(LOOSE_MAX_DEG)) - 1e-9

@@ -9,7 +9,7 @@ grasp from below, is refused too, so the CMS stays conservative (Sec. 7.1). With
 cell (:func:`reach_clear`; unless the problem file opts out with ``collision: false``,
 ``Cell.collisions``), an IK solution counts only if the arm, the gripper and the
 part in the hand are clear of the table, the obstacles and the parts given, by the
-margin (world.collision); a pose whose every solution collides is refused with the
+margin (world.collision.scene); a pose whose every solution collides is refused with the
 colliding pairs, which the caller's run logs (world.run.RunLog) so a "no plan" can say
 which pair stood in the way. Every function here is a pure answer about the cell; the
 tables it keeps are its world.run.CellCache's.
@@ -29,8 +29,8 @@ import numpy as np
 if TYPE_CHECKING:
     from spar_py.core.model import Cell
     from spar_py.world.collision import SceneState
-    from spar_py.world.robots import Robot
-    from spar_py.world.run import CellCache
+    from spar_py.world.robot import Robot
+    from spar_py.world.collision import CellCache
 
 __all__ = ["ArmAt", "Reached", "Refusal", "Requirement", "arm_at", "assembled_touch", "clear_of_world", "ik_rows",
            "pair_text", "reach_clear", "reachable_ignoring_collisions", "requirement_clear", "requirement_clear_each",
@@ -101,7 +101,7 @@ def reach_clear(cache: CellCache, T: np.ndarray, *, parts: Mapping[str, np.ndarr
                 attached: Mapping[str, np.ndarray] | None = None, width: float | None = None,
                 allow: Iterable[tuple[str, str]] = ()) -> Reached:
     """Which world tool poses T (n, 4, 4) the arm reaches with a solution clear of the world:
-    the scene (world.collision.scene_for) with ``parts`` at their world poses, ``held`` in the
+    the scene (world.collision.scene.scene_for) with ``parts`` at their world poses, ``held`` in the
     hand, ``grasped`` closing on, ``attached`` parts where the tool is (T_tool_part, the same
     for every row), ``width`` the fingers' opening, ``allow`` the step's own contacts
     (CollisionScene.at). One batched IK call and one batched clearance check."""
@@ -213,7 +213,7 @@ def requirement_clear_each(cache: CellCache, obj: str, TO: np.ndarray, req: Requ
 
 
 def shape_key(cache: CellCache, obj: str) -> tuple:
-    """The collision geometry of ``obj`` (world.collision.CollisionScene.shape_key): equal for
+    """The collision geometry of ``obj`` (world.collision.scene.CollisionScene.shape_key): equal for
     renamed copies of one model."""
     return cache.scene().shape_key(obj)
 

@@ -94,7 +94,7 @@ def insertions(product: Product) -> list[Insertion]:
 def _hulls(product: Product) -> dict[str, tuple[np.ndarray, float, np.ndarray]]:
     """Each part's convex hull vertices at its product pose, its volume and centre of mass
     (product frame): a partial product's hull is the hull of its parts' hull vertices."""
-    from spar_py.world.shapes import part_mesh
+    from spar_py.world.parts import part_mesh
 
     out = {}
     for p, pp in product.parts.items():
@@ -170,7 +170,7 @@ def single_arm_report(product: Product, unit: str = "") -> SingleArmReport | Non
     poses of each partial product for one that makes every insertion with its loose mates kept
     (module docstring); the base rests first in any of its poses. ``unit``: the product's length
     unit, for the heights the report names."""
-    from spar_py.world.shapes import part_mesh
+    from spar_py.world.parts import part_mesh
 
     if any(part_mesh(pp.model) is None for pp in product.parts.values()):
         return None

@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from spar_py.world.shapes import FeatureGeometry, Geometry, derive_faces
+from spar_py.world.parts.mesh import FeatureGeometry, Geometry, derive_faces
 
 __all__ = ["DERIVE_VERSION", "MAX_ENTRIES", "cache_dir", "derive", "source_digest"]
 
@@ -67,7 +67,7 @@ def derive(name: str, geometry: Geometry, features: tuple[FeatureGeometry, ...],
     """The derivation of a part as plain data: ``faces`` (names), ``poses`` (label, rfaces,
     ofaces, R as 9 numbers row-major, height, probability), ``grasps`` (label, gfaces,
     ofaces, euler: X, Y, Z, phi, theta, psi in radians, width), ``repair`` (what loading the
-    mesh repaired, world.shapes.Repair's line, "" for nothing), ``no_grasp`` (with no grasps:
+    mesh repaired, world.parts.mesh.Repair's line, "" for nothing), ``no_grasp`` (with no grasps:
     the sizes and opening compared, else "") and, if ``need_hull``, ``hull``
     (the convex hull's vertices). ``features``: the part's features declared by geometry.
     ValueError (one line, naming the key) for bad geometry."""
@@ -87,7 +87,7 @@ def derive(name: str, geometry: Geometry, features: tuple[FeatureGeometry, ...],
 
 def _compute(name: str, geometry: Geometry, features: tuple[FeatureGeometry, ...], face_names: dict[str, np.ndarray],
              gripper: Any, step: float, need_hull: bool) -> dict[str, Any]:
-    from spar_py.world.shapes_derive import derive_grasps, derive_poses  # ~10 ms at import: a cache miss only
+    from spar_py.world.parts.derive import derive_grasps, derive_poses  # ~10 ms at import: a cache miss only
 
     mesh = geometry.mesh()
     faces = derive_faces(mesh, features, face_names, geometry.unit)
@@ -106,7 +106,7 @@ def _compute(name: str, geometry: Geometry, features: tuple[FeatureGeometry, ...
         "no_grasp": why[0] if why else "",
     }
     if need_hull:
-        from spar_py.world.shapes_derive import hull_vertices  # a cache miss only (see _compute)
+        from spar_py.world.parts.derive import hull_vertices  # a cache miss only (see _compute)
 
         V = np.asarray(mesh.vertices, float)
         out["hull"] = [[float(v) for v in p] for p in V[hull_vertices(mesh)]]

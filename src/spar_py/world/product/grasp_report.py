@@ -5,14 +5,14 @@ For each non-base part, in an order the assembly tree and the precedence allow, 
 counted through four filters, each keeping a subset of the one before:
 
 1. ``usable``: the grasp can make every mate in which the part is the peg
-   (world.shapes_derive.mate_grasp_usable: fingers, palm and tool on the outer side of the hole's
+   (world.parts.derive.mate_grasp_usable: fingers, palm and tool on the outer side of the hole's
    mouth when seated); a part entering as the hole keeps every grasp here (filter 2 sees the peg);
 2. ``clear``: at the seated pose the closed fingers, the palm and the tool body are clear of the
    parts that must be in place before it (its parent and everything the tree and the precedence
    put before it, transitively: the fewest any order has, so a grasp refused here is refused by
    every order);
 3. ``pickup``: free at pickup in some stable pose of the part on the table (the model's and all
-   those world.shapes_stable finds, not only those the model keeps): the fingers and palm the
+   those world.parts.stable finds, not only those the model keeps): the fingers and palm the
    collision margin above the table (the margin phase 2 keeps them off it by) and outside the
    part itself;
 4. ``reached``: in such a pose, at the part's spot in the cell turned to one of YAWS yaws, the arm
@@ -43,7 +43,7 @@ import numpy as np
 from spar_py.core.geometry import rotz
 from spar_py.core.model import Grasp, Product
 from spar_py.core.units import from_mm
-from spar_py.world.workspace import reachable_ignoring_collisions
+from spar_py.world.reach import reachable_ignoring_collisions
 
 __all__ = ["ArmClear", "CLEAR_TOL_MM", "YAWS", "GraspReport", "MateGrasps", "above_table", "grasp_report",
            "held_grasps", "seat_order"]
@@ -63,7 +63,7 @@ PAIRS_SAID = 3
 ArmClear = Callable[[str, np.ndarray, Grasp, Mapping[str, np.ndarray]], tuple[bool, list[tuple[str, str]]]]
 #: ``put_down(part, grasps)``: the labels of ``grasps`` of ``part`` the arm reaches clear of the
 #: world after a put-down on the cell's table, in one of the part's stable poses that leaves the
-#: grasp free (phase 1's reachable arc for a put-down position: world.arcs.reachable_pairs).
+#: grasp free (phase 1's reachable arc for a put-down position: world.reach.arcs.reachable_pairs).
 PutDown = Callable[[str, list[Grasp]], set[str]]
 #: How many faces a line names.
 FACES_SAID = 6
@@ -204,14 +204,14 @@ def grasp_report(product: Product, gripper: Any, unit: str, robot: Any = None,
                  positions: Mapping[str, np.ndarray] | None = None, arm_clear: ArmClear | None = None,
                  margin: float = 0.0, put_down: PutDown | None = None) -> GraspReport | None:
     """The report of the module docstring for ``product`` held by ``gripper`` (a
-    world.robots.GripperGeometry, cell unit ``unit``); ``robot`` and ``positions`` (each part's
+    world.robot.model.GripperGeometry, cell unit ``unit``); ``robot`` and ``positions`` (each part's
     world pose in the cell) for the reach counts, else those are -1; ``arm_clear`` for the
     arm's collisions at the cell's pickups (:data:`ArmClear`), else ``at_clear`` is -1;
     ``margin`` (cell unit) the clearance the hand keeps over the table at pickups (the
     collision scene's); ``put_down`` for the grasps a regrasp on the table can use
     (``placed_any``), else that is -1. None when a part has no mesh or shape, or the product
     has no goal."""
-    from spar_py.world.shapes import part_mesh
+    from spar_py.world.parts import part_mesh
 
     meshes = {p: part_mesh(pp.model) for p, pp in product.parts.items()}
     if any(m is None for m in meshes.values()) or not product.goals:
@@ -234,7 +234,7 @@ def held_grasps(product: Product, gripper: Any, unit: str) -> dict[str, frozense
     clear of the parts in place when seated, outside the part itself): those a layout may lay
     it out for (the table check is the pose's: :func:`above_table`). None when a part has no
     mesh or shape, or the product has no goal."""
-    from spar_py.world.shapes import part_mesh
+    from spar_py.world.parts import part_mesh
 
     meshes = {p: part_mesh(pp.model) for p, pp in product.parts.items()}
     if any(m is None for m in meshes.values()) or not product.goals:
@@ -251,7 +251,7 @@ def _filtered(product: Product, part: str, meshes: Mapping[str, Any], placed: se
     usable ones meet, those clear ones also outside the part itself)."""
     import trimesh
 
-    from spar_py.world.shapes_derive import Gripper, grasp_problem, mate_grasp_usable
+    from spar_py.world.parts import Gripper, grasp_problem, mate_grasp_usable
 
     g = next(x for x in product.goals if x.part == part)
     pp = product.parts[part]
@@ -289,7 +289,7 @@ def _row(product: Product, part: str, meshes: Mapping[str, Any], placed: set[str
     or the part not in ``at``: -1), ``arm_clear`` for ``at_clear`` and ``held``, ``margin`` the
     hand's clearance over the table at pickup (cell unit), ``put_down`` for ``placed_any``."""
 
-    from spar_py.world.shapes_stable import stable_poses
+    from spar_py.world.parts import stable_poses
 
     g = next(x for x in product.goals if x.part == part)
     pp = product.parts[part]
@@ -357,8 +357,8 @@ def _row(product: Product, part: str, meshes: Mapping[str, Any], placed: set[str
 def above_table(grasps: list[Grasp], gripper: Any, T_part: np.ndarray, unit: str, margin: float = 0.0
                 ) -> list[Grasp]:
     """The grasps whose fingers and palm keep ``margin`` (cell unit) over the table with the part
-    at world pose ``T_part`` (world.arcs.hand_above_table)."""
-    from spar_py.world.arcs import hand_above_table
+    at world pose ``T_part`` (world.reach.arcs.hand_above_table)."""
+    from spar_py.world.reach import hand_above_table
 
     return [gr for gr in grasps
             if hand_above_table(gripper, T_part @ np.asarray(gr.T, float), gr.width, unit, margin)]
@@ -366,7 +366,7 @@ def above_table(grasps: list[Grasp], gripper: Any, T_part: np.ndarray, unit: str
 
 def _poses(model: Any, mesh: Any, stable_poses: Any) -> list[np.ndarray]:
     """The part's stable poses on the table (4x4, object to world): the model's own (its derived or
-    declared ones) and every one world.shapes_stable finds on the mesh, one per down vector."""
+    declared ones) and every one world.parts.stable finds on the mesh, one per down vector."""
     out: list[np.ndarray] = []
     for sp in model.poses.values():
         T = np.eye(4)
@@ -383,7 +383,7 @@ def _poses(model: Any, mesh: Any, stable_poses: Any) -> list[np.ndarray]:
 
 def _usable(test: Any, gr: Grasp, gripper: Any, product: Product, m: Any, unit: str) -> bool:
     """Whether grasp ``gr`` of peg ``m.peg`` can make mate ``m`` (``test``:
-    world.shapes_derive.mate_grasp_usable); True when the hole feature has no geometry to judge by."""
+    world.parts.derive.mate_grasp_usable); True when the hole feature has no geometry to judge by."""
     peg, hole = product.parts[m.peg], product.parts[m.hole]
     hf = hole.model.feature_named(m.hole_feature).geometry
     if hf is None or hf.kind != "hole":

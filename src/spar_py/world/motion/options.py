@@ -1,4 +1,4 @@
-"""What a plan asks of its motions and what it hears when one does not exist (world/motion.py).
+"""What a plan asks of its motions and what it hears when one does not exist (world/motion/paths.py).
 
 The options and the failure record of the motion planner, apart from the planner itself so
 that a plan without motions (a cell that does not ask for them, ``--no-motion``, phase 1

@@ -22,7 +22,7 @@ import math
 
 import numpy as np
 
-from spar_py.world.ik.common import craig_links
+from spar_py.world.robot.ik.common import craig_links
 
 __all__ = ["NumericSolver"]
 

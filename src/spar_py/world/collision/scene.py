@@ -6,7 +6,7 @@ What is in the scene (:func:`scene_for`, built once per cell and kept by its wor
 
 - the robot's link shapes (robot file ``collision: links``): capsules, cylinders and boxes,
   each fixed to one of Craig's frames 0..6 (0 is the base: it does not move);
-- the gripper (robot file ``gripper:``, :class:`~spar_py.world.robots.GripperGeometry`): the
+- the gripper (robot file ``gripper:``, :class:`~spar_py.world.robot.model.GripperGeometry`): the
   palm and two fingers whose contact faces are the grasp's width apart (the open
   finger_separation when no part is in the hand), and the tool body "tool" from the palm back to
   the flange (``gripper: body``; by default, for a robot without ``collision:``, a box the palm's
@@ -60,18 +60,18 @@ import numpy as np
 
 from spar_py.core.errors import SparValueError
 from spar_py.core.units import from_mm, mm_per
-from spar_py.world.robots import TOOL_BODY, GripperGeometry
+from spar_py.world.robot import TOOL_BODY, GripperGeometry
 
 if TYPE_CHECKING:
     from spar_py.core.model import Cell, Solid
-    from spar_py.world.robots import Robot
+    from spar_py.world.robot import Robot
 
 __all__ = ["CollisionScene", "DEFAULT_MARGIN_MM", "Obstacle", "SceneState", "scene_for", "segment_distance",
            "solids_key"]
 
 #: The clearance margin when neither the robot nor the problem file gives one: 2 mm.
 DEFAULT_MARGIN_MM = 2.0
-#: A part's lowest vertex this near a support's top rests on it (mm; world.supports' tolerance).
+#: A part's lowest vertex this near a support's top rests on it (mm; world.reach.supports' tolerance).
 REST_TOL_MM = 0.5
 #: Contact between the fingers (or palm) and the part in the hand: allowed up to this overlap
 #: (rounding, not geometry): 0.05 mm.
@@ -112,7 +112,7 @@ class Body:
     "cylinder" (same), "box" (``size`` = half extents along ``T``'s axes), "convex"
     (``points`` its vertices) or "mesh" (a mesh part: ``points`` its convex hull's vertices, which
     every bound uses, a sound one since the mesh is inside its hull; ``mesh`` = (the part's
-    world.shapes.Geometry, whose mesh the library is given, and HULL_EXCESS_MM in the cell unit:
+    world.parts.mesh.Geometry, whose mesh the library is given, and HULL_EXCESS_MM in the cell unit:
     :func:`_mesh_geometry`)); ``T`` the
     shape's pose in the frame (4x4); ``points`` (k, 3) vertices in the frame (a capsule's: its two
     segment ends; a cylinder's: its circumscribed prism's); ``cap`` the bounding capsule (a, b, r)
@@ -269,7 +269,7 @@ def _fcl_convex(points: np.ndarray) -> Any:
 
 def mesh_body(name: str, frame: int, hull: np.ndarray, geometry: Any, unit: str) -> Body:
     """A mesh part's body: bounded by its convex hull ``hull`` (k, 3) (frame coordinates, the
-    object frame), colliding as the mesh of ``geometry`` (world.shapes.Geometry, read on first
+    object frame), colliding as the mesh of ``geometry`` (world.parts.mesh.Geometry, read on first
     use: :func:`_mesh_geometry`); ``unit`` the cell's length unit."""
     body = convex(name, frame, hull)
     return replace(body, kind="mesh", mesh=(geometry, from_mm(unit, HULL_EXCESS_MM)))
@@ -280,7 +280,7 @@ def _mesh_geometry(mesh_of: tuple[Any, float], hull: np.ndarray) -> Any:
     the body's own frame, the object frame): its convex hull where the hull is the mesh within
     HULL_EXCESS_MM (a convex part: the cheaper exact shape), else the mesh's triangles as a
     python-fcl BVHModel (a concave part: a half-shell's hull would cover its recesses). The BVH
-    is a surface: :func:`_exact` adds the containment test for a body wholly inside it."""
+    is a surface: :func:`body_distance` adds the containment test for a body wholly inside it."""
     mesh = mesh_of[0].mesh()
     if _hull_is_mesh(mesh, hull, mesh_of[1]):
         return _fcl_convex(hull)
@@ -365,7 +365,7 @@ def _joined(cols: list[tuple]) -> tuple:
 @dataclass(frozen=True)
 class Obstacle:
     """A named obstacle of the problem file: its bodies in the world frame (cell unit); a
-    ``support`` (a nest, a riser, a fixture plate) is one parts may rest on (its top: world.supports)."""
+    ``support`` (a nest, a riser, a fixture plate) is one parts may rest on (its top: world.reach.supports)."""
 
     name: str
     bodies: tuple[Body, ...]
@@ -455,20 +455,20 @@ def _segment_distance_few(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np
     return np.array(out, dtype=float).reshape(shape)
 
 
-def _fcl_transform(T: np.ndarray) -> Any:
+def fcl_transform(T: np.ndarray) -> Any:
     import fcl  # ~0.15 s at import: see Body.fcl_geometry
 
     return fcl.Transform(np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]))
 
 
-def _exact(b1: Body, T1: np.ndarray, b2: Body, T2: np.ndarray) -> float:
+def body_distance(b1: Body, T1: np.ndarray, b2: Body, T2: np.ndarray) -> float:
     """The distance of two placed bodies (world poses T1, T2 of their frames): 0 when they
     touch or overlap (``collide`` first), else python-fcl's unsigned distance."""
     import fcl  # ~0.15 s at import: see Body.fcl_geometry
 
     g1, g2 = b1.fcl_geometry(), b2.fcl_geometry()
-    o1 = fcl.CollisionObject(g1, _fcl_transform(T1 @ b1.T))
-    o2 = fcl.CollisionObject(g2, _fcl_transform(T2 @ b2.T))
+    o1 = fcl.CollisionObject(g1, fcl_transform(T1 @ b1.T))
+    o2 = fcl.CollisionObject(g2, fcl_transform(T2 @ b2.T))
     if fcl.collide(o1, o2, fcl.CollisionRequest(), fcl.CollisionResult()):
         return 0.0
     # a mesh's BVH is its surface: a body wholly inside the mesh meets none of its triangles
@@ -594,7 +594,7 @@ class CollisionScene:
     def __init__(self, robot: Robot, gripper: GripperGeometry, parts: Mapping[str, list[Body]],
                  obstacles: Iterable[Obstacle], margin: float, table: tuple[float, float, float, float] | None,
                  unit: str, memo: Any = None, meshes: Mapping[str, Any] | None = None) -> None:
-        """``meshes``: {model: world.shapes.Geometry} of the mesh parts (``parts`` bodies of kind
+        """``meshes``: {model: world.parts.mesh.Geometry} of the mesh parts (``parts`` bodies of kind
         "mesh", or convex hulls where made by hand); the grasp rule tests the gripper against the
         mesh itself."""
         self.robot = robot
@@ -681,8 +681,8 @@ class CollisionScene:
             bvh.beginModel(len(V), len(F))
             bvh.addSubModel(V, F)
             bvh.endModel()
-        o1 = fcl.CollisionObject(g.fcl_geometry(), _fcl_transform(g.T))
-        o2 = fcl.CollisionObject(bvh, _fcl_transform(np.asarray(T_tool_part, float)))
+        o1 = fcl.CollisionObject(g.fcl_geometry(), fcl_transform(g.T))
+        o2 = fcl.CollisionObject(bvh, fcl_transform(np.asarray(T_tool_part, float)))
         if fcl.collide(o1, o2, fcl.CollisionRequest(), fcl.CollisionResult()):
             return True
         centre = np.linalg.inv(np.asarray(T_tool_part, float)) @ np.append(g.T[:3, 3], 1.0)
@@ -989,7 +989,7 @@ class SceneState:
                 rows = np.nonzero(band)[0]
                 g = _slab_gap(P[rows], b.radius, ext)
                 for j in np.nonzero(g <= self.scene.margin)[0].tolist():  # within it: the exact distance
-                    g[j] = _exact(b, self._frame_pose(F, int(rows[j]), b), self.scene.slab(), np.eye(4))
+                    g[j] = body_distance(b, self._frame_pose(F, int(rows[j]), b), self.scene.slab(), np.eye(4))
                 out[rows, k] = g
         return out
 
@@ -1133,7 +1133,7 @@ class SceneState:
         i, j = self.pairs[p]
         bi, bj = self.bodies[i], self.bodies[j]
         self.scene.stats["exact"] += 1
-        return _exact(bi, self._frame_pose(F, row, bi), bj, self._frame_pose(F, row, bj))
+        return body_distance(bi, self._frame_pose(F, row, bi), bj, self._frame_pose(F, row, bj))
 
     def _support_bounds(self, F: np.ndarray, rows: np.ndarray, ps: np.ndarray) -> np.ndarray:
         """(c,) :func:`support_gap` of pair ps[k] at row rows[k] (frames F (n, 8, 4, 4)): a lower
@@ -1191,7 +1191,7 @@ class SceneState:
         i, j = self.pairs[p]
         bi, bj = self.bodies[i], self.bodies[j]
         self.scene.stats["exact"] += 1
-        d = self._rigid[p] = _exact(bi, self._frame_pose(F, row, bi), bj, self._frame_pose(F, row, bj))
+        d = self._rigid[p] = body_distance(bi, self._frame_pose(F, row, bi), bj, self._frame_pose(F, row, bj))
         return d
 
     # ------------------------------------------------------------------ the grasp rule
@@ -1232,7 +1232,7 @@ class SceneState:
         gripper = self.scene.shrunk_gripper(self.width, tol)
         near = _near_all(gripper, bodies, 0.0)  # (gripper box, part body): bounding capsules touch
         for gi, g in enumerate(gripper):
-            if any(_exact(g, np.eye(4), b, np.eye(4)) <= 0.0 for bi, b in enumerate(bodies) if near[gi, bi]):
+            if any(body_distance(g, np.eye(4), b, np.eye(4)) <= 0.0 for bi, b in enumerate(bodies) if near[gi, bi]):
                 # a mesh part's body is its convex hull: the gripper in the hull may still be
                 # out of the part (fingers on a peg beside its shoulder), so the mesh decides
                 if self.scene.enters_mesh(part, g, T_tool_part):
@@ -1559,7 +1559,7 @@ def scene_for(cell: Cell, memo: Any = None) -> CollisionScene:
 
 
 def _part_meshes(objects: Mapping[str, Any]) -> dict[str, Any]:
-    """{name: its world.shapes.Geometry} of the objects given by a mesh file (their shape is its
+    """{name: its world.parts.mesh.Geometry} of the objects given by a mesh file (their shape is its
     convex hull); the mesh (object frame) is read on first use (Geometry.mesh())."""
     out = {}
     for name, m in objects.items():

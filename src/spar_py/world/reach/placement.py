@@ -9,7 +9,7 @@ the free table regions, batching every inverse-kinematics query. A placement's w
 footprint (its shape projected on the table, a convex polygon) lies in one free region
 and keeps the clearance from every other part's footprint. The regions are the free table
 regions (clear of the supports' footprints by the clearance) and the top of each obstacle
-marked ``support: true`` (world.supports): a placement there lies wholly on the top, at its
+marked ``support: true`` (world.reach.supports): a placement there lies wholly on the top, at its
 height, so the part rests on it stably (its contact face within the top).
 
 Units: lengths in the cell unit, angles in radians; world frame, table top z = 0. The
@@ -27,12 +27,12 @@ import numpy as np
 from spar_py.core.geometry import convex_hull_2d, rotz
 from spar_py.core.model import Cell, ObjectModel
 from spar_py.core.units import from_mm, mm_per
-from spar_py.world.workspace import (Requirement, ik_rows, reachable_ignoring_collisions, requirement_clear,
+from spar_py.world.reach.workspace import (Requirement, ik_rows, reachable_ignoring_collisions, requirement_clear,
                                      requirement_clear_each, requirement_state, shape_key, tool_refusal, wrist_height)
 
 if TYPE_CHECKING:
     from spar_py.world.collision import SceneState
-    from spar_py.world.run import CellCache
+    from spar_py.world.collision import CellCache
 
 #: Grid spacing of candidate placements: 50.8 mm (2 in); number of yaw steps.
 GRID_STEP_MM = 50.8
@@ -111,7 +111,7 @@ class Level:
 
 def part_level(name: str, top: np.ndarray, z: float, others: Sequence[Occupant]) -> Level:
     """The grid region of a part's flat top: its polygon ``top`` ((k, 2) world xy, CCW) at height
-    ``z`` (world.supports.part_surface), named ``name``; a placement there keeps the clearance
+    ``z`` (world.reach.supports.part_surface), named ``name``; a placement there keeps the clearance
     from the footprints of ``others`` (the occupants but the part under it)."""
     lo, hi = top.min(axis=0), top.max(axis=0)
     return Level((float(lo[0]), float(hi[0])), (float(lo[1]), float(hi[1])), float(z), name,
@@ -120,8 +120,8 @@ def part_level(name: str, top: np.ndarray, z: float, others: Sequence[Occupant])
 
 def levels(cell: Cell) -> list[Level]:
     """The grid's regions: the free table regions (:func:`default_regions`), clear of every
-    support's footprint, then each support's top (world.supports) in the file's order."""
-    from spar_py.world.supports import obstacle_footprint, support_surfaces  # the supports' geometry
+    support's footprint, then each support's top (world.reach.supports) in the file's order."""
+    from spar_py.world.reach.supports import obstacle_footprint, support_surfaces  # the supports' geometry
 
     tops = support_surfaces(cell)
     feet = tuple(obstacle_footprint(o) for o in cell.obstacles if getattr(o, "support", False))
@@ -202,7 +202,7 @@ FOOTPRINT_LIMIT = 4096
 
 
 def _shape_key(model: ObjectModel) -> tuple:
-    """What a footprint depends on in ``model``: its shape's primitives (world.collision.solids_key;
+    """What a footprint depends on in ``model``: its shape's primitives (world.collision.scene.solids_key;
     not the object's name: copies of one model share their footprints)."""
     from spar_py.world.collision import solids_key  # on first use: the collision layer loads lazily
 

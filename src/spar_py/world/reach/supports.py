@@ -37,7 +37,7 @@ REST_TOL_MM = 0.5
 #: Sides of the polygon inscribed in a cylinder's rim, for a part's points (inscribed: a
 #: contact face or top is never overstated, so a centre found inside it is inside the true one).
 RIM_SIDES = 16
-#: A cylinder body of an obstacle is held (world.collision) as its circumscribed prism of this many
+#: A cylinder body of an obstacle is held (world.collision.scene) as its circumscribed prism of this many
 #: sides; its top polygon is shrunk to the inscribed one.
 OBSTACLE_SIDES = 16
 
@@ -185,7 +185,7 @@ def mass_properties(model: ObjectModel) -> tuple[float, np.ndarray]:
     """(volume (cell unit^3), centre of mass (3,), object frame) of the shape, uniform density, as
     :func:`centre_of_mass` finds it; a shapeless model: (0, its frame's origin)."""
     if model.geometry is not None:
-        from spar_py.world.shapes import part_mesh  # trimesh: only a model with geometry
+        from spar_py.world.parts import part_mesh  # trimesh: only a model with geometry
 
         mesh = part_mesh(model)
         return float(abs(mesh.volume)), np.asarray(mesh.center_mass, float)

@@ -1,8 +1,8 @@
 """Inverse kinematics: closed-form families (PUMA, UR) and a numeric fallback, behind one interface.
 
-A solver (:class:`~spar_py.world.ik.common.Solver`) answers, for n world tool poses at
+A solver (:class:`~spar_py.world.robot.ik.common.Solver`) answers, for n world tool poses at
 once, every *branch* (distinct arm configuration) as DH angles with a flag saying it
-is a true solution; the robot (``spar_py.world.robots.Robot``) turns those into joint
+is a true solution; the robot (``spar_py.world.robot.model.Robot``) turns those into joint
 vectors within limits, every full-turn representation included. :func:`solver_for`
 picks the solver for a Craig (modified) DH table: the first closed-form family in
 :data:`FAMILIES` whose structure the table has, else the numeric fallback.
@@ -17,10 +17,10 @@ from collections.abc import Callable
 
 import numpy as np
 
-from spar_py.world.ik.common import LIMIT_TOL, Solver, craig_links, lowest_representation, turn_combinations
-from spar_py.world.ik.numeric import NumericSolver
-from spar_py.world.ik.puma import PUMA_TWISTS, PumaSolver
-from spar_py.world.ik.ur import UR_TWISTS, URSolver
+from spar_py.world.robot.ik.common import LIMIT_TOL, Solver, craig_links, lowest_representation, turn_combinations
+from spar_py.world.robot.ik.numeric import NumericSolver
+from spar_py.world.robot.ik.puma import PUMA_TWISTS, PumaSolver
+from spar_py.world.robot.ik.ur import UR_TWISTS, URSolver
 
 __all__ = ["FAMILIES", "FAMILY_TWISTS", "LIMIT_TOL", "NumericSolver", "PumaSolver", "Solver", "URSolver", "craig_links",
            "lowest_representation", "solver_for", "turn_combinations"]

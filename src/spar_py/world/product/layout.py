@@ -7,7 +7,7 @@ order the precedence allows, before the first that needs a turn); among those th
 keeps the product frame's down (-z) down (the product built as assembled); every other part lies in its most
 probable stable pose (a derived model lists its poses most probable first, so the first one
 the planner knows) among those where a grasp its mate can use (the grasp report's filters 1
-to 3, world.grasp_report.held_grasps; else world.shapes_derive.mate_grasp_usable: the hand
+to 3, world.product.grasp_report.held_grasps; else world.parts.derive.mate_grasp_usable: the hand
 outside the hole's mouth plane when seated) keeps the hand the robot's collision margin
 (phase 2's) above the table and comes from above both there and on the assembled product
 (FROM_ABOVE_DEG), else among those where one keeps the hand above the table (a parallel gripper cannot turn a part
@@ -20,7 +20,7 @@ The other parts, largest footprint first, take the free grid point (STEP_MM) nea
 build spot, turned about the vertical by one of YAWS yaws (yaw 0 first among equally near
 spots), where their footprint keeps GAP_MM (room for the open fingers) from every placed
 footprint and from the assembled product's, PEDESTAL_MM from the robot's base axis, and some
-grasp the part is laid out for (a product's: world.grasp_report.held_grasps, the grasp
+grasp the part is laid out for (a product's: world.product.grasp_report.held_grasps, the grasp
 report's own filters; of those, the ones the arm reaches with its links and hand the margin
 over the table seating the part where the product is built, when it has such) keeps the hand
 the collision margin over the table there and is within IK reach (workspace.
@@ -45,7 +45,7 @@ from spar_py.core.errors import SparValueError
 from spar_py.core.geometry import convex_hull_2d, rotz
 from spar_py.core.model import LOOSE_MAX_DEG, ObjectModel, Product, StablePose
 from spar_py.core.units import from_mm
-from spar_py.world.workspace import reachable_ignoring_collisions
+from spar_py.world.reach import reachable_ignoring_collisions
 
 __all__ = ["GAP_MM", "PEDESTAL_MM", "STEP_MM", "Layout", "PartPlacement", "apart", "layout_parts", "layout_product",
            "mate_usable_grasps",
@@ -75,14 +75,14 @@ class Layout:
 
     placements: tuple[PartPlacement, ...]
     build_spot: tuple[float, float]
-    #: A product's grasps each part was laid out for (world.grasp_report.held_grasps), or None.
+    #: A product's grasps each part was laid out for (world.product.grasp_report.held_grasps), or None.
     held: Mapping[str, frozenset[str]] | None = None
 
 
 def part_footprint(model: ObjectModel, R: np.ndarray) -> np.ndarray:
     """(k, 2) the convex footprint of the part's mesh turned by R (object to world) about the
     object origin, counter-clockwise (cell unit)."""
-    from spar_py.world.shapes import part_mesh  # trimesh: a layout only
+    from spar_py.world.parts import part_mesh  # trimesh: a layout only
 
     mesh = part_mesh(model)
     if mesh is None:
@@ -118,10 +118,10 @@ SPOT_BATCH = 64
 
 def _seat_clear(robot, unit: str, margin: float, grasps: Sequence, T_seat: np.ndarray) -> list:
     """Those of ``grasps`` the arm reaches with its links and hand the collision ``margin`` (cell
-    unit) over the table holding the part at its seated world pose ``T_seat`` (world.collision's
+    unit) over the table holding the part at its seated world pose ``T_seat`` (world.collision.scene's
     scene with no parts: the table check phase 2 makes there; the parts are the planner's)."""
     from spar_py.world.collision import CollisionScene
-    from spar_py.world.workspace import wrist_above_table
+    from spar_py.world.reach import wrist_above_table
 
     if not grasps or robot.gripper is None or not getattr(robot, "links", ()):
         return list(grasps)
@@ -147,7 +147,7 @@ def _spot(robot, model: ObjectModel, pose: StablePose, grasps: Sequence, grid: n
     the table and is reached (IK, wrist above the table), as (rank, yaw index, T, footprint placed) or
     None; and the nearest free spot at yaw 0 as (rank, T, footprint placed) or None. Free: the
     footprint ``gap`` from every ``taken`` one, ``ped`` from the base axis ``o``, within ``arm``."""
-    from spar_py.world.grasp_report import above_table
+    from spar_py.world.product.grasp_report import above_table
 
     found = nearest = None
     # the hand's height over the table does not change with the yaw or the spot: one test per pose
@@ -244,8 +244,8 @@ def _lying_pose(model: ObjectModel, usable: frozenset[str] | None, gripper, unit
     wrist on it, one made sideways on the product puts the hand into it); else the most probable
     where one keeps the hand above the table; else the most probable. Above the table: by
     ``margin`` (cell unit, the collision margin phase 2 keeps the hand off it by;
-    world.grasp_report.above_table, the report's own test)."""
-    from spar_py.world.grasp_report import above_table
+    world.product.grasp_report.above_table, the report's own test)."""
+    from spar_py.world.product.grasp_report import above_table
 
     poses = list(model.poses.values())
     if not (usable and gripper is not None):
@@ -264,10 +264,10 @@ def _lying_pose(model: ObjectModel, usable: frozenset[str] | None, gripper, unit
 
 
 def mate_usable_grasps(product: Product, gripper, unit: str) -> dict[str, frozenset[str]]:
-    """Each mated peg part's grasps usable for its mate (world.shapes_derive.mate_grasp_usable
+    """Each mated peg part's grasps usable for its mate (world.parts.derive.mate_grasp_usable
     at the product poses; the features' geometry in their parts' frames, cell unit); parts
     without a mate of known geometry are absent."""
-    from spar_py.world.shapes_derive import mate_grasp_usable  # numpy only
+    from spar_py.world.parts import mate_grasp_usable  # numpy only
 
     out: dict[str, frozenset[str]] = {}
     if gripper is None:
@@ -302,7 +302,7 @@ def layout_parts(parts: Mapping[str, ObjectModel], poses: Mapping[str, np.ndarra
     cell unit, None: the robot's collision margin, else the default). SparValueError (one line)
     when the assembled product is out of reach at every build spot or a part finds no free spot."""
     from spar_py.world.collision import DEFAULT_MARGIN_MM
-    from spar_py.world.grasp_report import above_table
+    from spar_py.world.product.grasp_report import above_table
 
     if margin is None:
         margin = robot.margin if getattr(robot, "margin", None) is not None else from_mm(unit, DEFAULT_MARGIN_MM)
@@ -396,7 +396,7 @@ def layout_product(product: Product, robot, unit: str) -> Layout:
     """:func:`layout_parts` for the parts of a loaded product (cell unit ``unit``), the base
     turned so that the most insertions are made from above (its goals' directions, their
     parents and the precedence first), each other part laid out for the grasps the grasp report
-    keeps through its filters 1 to 3 (world.grasp_report.held_grasps: usable for its mates, clear
+    keeps through its filters 1 to 3 (world.product.grasp_report.held_grasps: usable for its mates, clear
     of the parts in place when seated, outside the part), so the layout and the report agree."""
     needs: dict[str, set[str]] = {g.part: {g.parent} - {product.base} for g in product.goals}
     for pr in product.precedence:
@@ -404,7 +404,7 @@ def layout_product(product: Product, robot, unit: str) -> Layout:
             needs[pr.then].add(pr.first)
     insertions = [(g.part, np.asarray(product.parts[g.parent].pose, float)[:3, :3] @ np.asarray(g.V_a, float),
                    frozenset(needs[g.part])) for g in product.goals]
-    from spar_py.world.grasp_report import held_grasps  # trimesh: a laid-out product only
+    from spar_py.world.product.grasp_report import held_grasps  # trimesh: a laid-out product only
 
     models = {p: pp.model for p, pp in product.parts.items()}
     sub = product.sub_poses.get(product.base, {})  # poses that need the subtree mated: not the base's alone

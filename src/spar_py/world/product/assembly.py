@@ -34,7 +34,7 @@ file: kb.products builds the meshes and turns the result into features and mates
   insertion order. ``first`` before ``then`` when ``then`` in place blocks ``first``'s sweep.
   An insertion that points up in every stable pose of the partial product needs a fixture or
   a second arm (:attr:`Insertion.needs_fixture`).
-- :func:`derive_assembly_cached` keeps the result on disk by content (world.shapes_cache's
+- :func:`derive_assembly_cached` keeps the result on disk by content (world.parts.cache's
   directory and pattern).
 """
 from __future__ import annotations
@@ -283,7 +283,7 @@ def _axis_of(normals: np.ndarray, weights: np.ndarray) -> np.ndarray | None:
 def _circle(V: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, float] | None:
     """The least-squares circle of points ``V`` about an axis along ``d``: a point on the axis
     and the radius, or None if the points are not on one circle (CIRCLE_REL)."""
-    from spar_py.world.shapes_derive import fit_circle
+    from spar_py.world.parts import fit_circle
 
     return fit_circle(V, d, CIRCLE_REL)
 
@@ -314,7 +314,7 @@ def _wraps(normals: np.ndarray, d: np.ndarray) -> bool:
     """Whether ``normals`` (unit, normal to the axis ``d``) wrap the axis: no angular gap of
     WRAP_GAP or more among their directions across it, so the walls they belong to stop
     motion across the axis in every direction."""
-    from spar_py.world.shapes import axis_basis
+    from spar_py.world.parts import axis_basis
 
     if len(normals) < 3:
         return False
@@ -584,7 +584,7 @@ def _up_in_every_pose(meshes: dict[str, "trimesh.Trimesh"], parts: list[str], d:
     outward normal n and turns d's z component into -n . d)."""
     import trimesh
 
-    from spar_py.world.shapes_stable import stable_poses
+    from spar_py.world.parts import stable_poses
 
     body = trimesh.util.concatenate([meshes[p] for p in parts])
     try:
@@ -894,8 +894,8 @@ def derive_assembly_cached(meshes: dict[str, "trimesh.Trimesh"], base: str, cont
                            clearance_max: float = 0.5, use_cache: bool = True) -> AssemblyResult:
     """:func:`derive_assembly`, kept on disk by content: the key is the SHA-256 of every part's
     name, vertices and faces (as placed), the base, the tolerances and ASSEMBLY_VERSION; kept
-    beside the object models' derivations (world.shapes_cache.cache_dir)."""
-    from spar_py.world.shapes_cache import cache_dir, load, store
+    beside the object models' derivations (world.parts.cache.cache_dir)."""
+    from spar_py.world.parts import cache_dir, load_derivation, store_derivation
 
     h = hashlib.sha256(json.dumps([ASSEMBLY_VERSION, base, round(contact_tol, 12), round(clearance_max, 12)]).encode())
     for p, m in meshes.items():
@@ -904,7 +904,7 @@ def derive_assembly_cached(meshes: dict[str, "trimesh.Trimesh"], base: str, cont
         h.update(np.ascontiguousarray(m.faces, np.int64).tobytes())
     key = h.hexdigest()
     path = cache_dir() / f"assembly-{key}.json"
-    if use_cache and (data := load(path, key)) is not None:
+    if use_cache and (data := load_derivation(path, key)) is not None:
         try:
             return AssemblyResult.from_json(data)
         except (KeyError, TypeError):
@@ -913,5 +913,5 @@ def derive_assembly_cached(meshes: dict[str, "trimesh.Trimesh"], base: str, cont
     if use_cache:
         data = res.to_json()
         data["key"] = key
-        store(path, data)
+        store_derivation(path, data)
     return res

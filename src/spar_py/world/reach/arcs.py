@@ -33,11 +33,11 @@ from spar_py.core.errors import SparValueError
 from spar_py.core.geometry import same_stable_poses
 from spar_py.core.model import Cell, Face, Grasp, ObjectModel
 from spar_py.core.units import from_mm, mm_per
-from spar_py.world.robots import GripperGeometry
-from spar_py.world.workspace import Refusal, Requirement, ik_rows, requirement_clear_ik, requirement_state
+from spar_py.world.robot import GripperGeometry
+from spar_py.world.reach.workspace import Refusal, Requirement, ik_rows, requirement_clear_ik, requirement_state
 
 if TYPE_CHECKING:
-    from spar_py.world.run import CellCache
+    from spar_py.world.collision import CellCache
 
 __all__ = [
     "ARCS",
@@ -209,7 +209,7 @@ def _somewhere(cache: CellCache, obj: str, asks: list[tuple[str, list[Grasp], li
     every pose of the arc at once); all of them under the paper's rule."""
     if rule == "paper":
         return [(g.label, p) for p, grasps, _ in asks for g in grasps]
-    from spar_py.world.placement import some_placement_reaches_each  # placement builds on workspace, not on this module
+    from spar_py.world.reach.placement import some_placement_reaches_each  # on first use
 
     oks = some_placement_reaches_each(cache, obj, [(p, X) for p, _, X in asks])
     return [(g.label, p) for (p, grasps, _), ok in zip(asks, oks) for g, reached in zip(grasps, ok) if reached]

@@ -99,7 +99,7 @@ def seat_direction(product: Product, seat: Seat) -> np.ndarray:
     """The direction (product frame, unit) the seated part moves to its seat: a curved seat's
     own ``direction``; else into the planar surface it rests on, against that face's outward
     normal."""
-    from spar_py.world.shapes import part_mesh
+    from spar_py.world.parts import part_mesh
 
     if seat.direction is not None:
         d = np.asarray(seat.direction, float)
@@ -114,7 +114,7 @@ def seat_direction(product: Product, seat: Seat) -> np.ndarray:
 
 def _face_normal(model: "ObjectModel", face: str) -> np.ndarray:
     """The outward normal of a planar face of a part's shape (object frame, unit)."""
-    from spar_py.world.shapes import derive_faces, part_mesh
+    from spar_py.world.parts import derive_faces, part_mesh
 
     mesh = part_mesh(model)
     feats = tuple(f.geometry for f in model.features if f.geometry is not None)
@@ -351,9 +351,9 @@ def _object(b) -> Any:
     """A placed convex body as a python-fcl collision object."""
     import fcl
 
-    from spar_py.world.collision import _fcl_transform
+    from spar_py.world.collision import fcl_transform
 
-    return fcl.CollisionObject(b.fcl_geometry(), _fcl_transform(b.T))
+    return fcl.CollisionObject(b.fcl_geometry(), fcl_transform(b.T))
 
 
 def _mesh_object(part) -> Any:
@@ -361,15 +361,15 @@ def _mesh_object(part) -> Any:
     (a mesh part's collision solid is its convex hull, which fills its holes and pockets)."""
     import fcl
 
-    from spar_py.world.collision import _fcl_transform
-    from spar_py.world.shapes import part_mesh
+    from spar_py.world.collision import fcl_transform
+    from spar_py.world.parts import part_mesh
 
     mesh = part_mesh(part.model)
     bvh = fcl.BVHModel()
     bvh.beginModel(len(mesh.vertices), len(mesh.faces))
     bvh.addSubModel(np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int32))
     bvh.endModel()
-    return fcl.CollisionObject(bvh, _fcl_transform(part.pose))
+    return fcl.CollisionObject(bvh, fcl_transform(part.pose))
 
 
 def _collide_objects(a: Any, b: Any) -> bool:
@@ -489,8 +489,8 @@ def _mesh_sweep(product: Product, p: str, d: np.ndarray, m: float, unit: str, ot
     """The parts of ``others`` that mesh part P's own mesh (shrunk by ``m``) meets on its way out
     of its product pose against ``d`` (the insertion reversed), in steps no longer than the
     product's smallest mate clearance (at least 0.1 mm); every part as its mesh at its pose."""
-    from spar_py.world.assembly import Sweeper
-    from spar_py.world.shapes import part_mesh
+    from spar_py.world.product.assembly import Sweeper
+    from spar_py.world.parts import part_mesh
 
     if not others:
         return set()
@@ -517,7 +517,7 @@ def near_parts(product: Product, unit: str) -> dict[str, tuple[str, ...]]:
     """Each part's neighbours in the product: the parts whose solids come within NEAR_MM of its
     own at the product poses (a mesh part's solid is its convex hull: nearer, never farther).
     Phase 2 lets an insertion's held part touch them at its end-point (its product pose)."""
-    from spar_py.world.collision import _exact
+    from spar_py.world.collision import body_distance
 
     gap = from_mm(unit, NEAR_MM)
     bodies = {p: _bodies(list(part.model.shape), part.pose, 0.0) for p, part in product.parts.items()}
@@ -529,7 +529,7 @@ def near_parts(product: Product, unit: str) -> dict[str, tuple[str, ...]]:
         for q in names[i + 1:]:
             if not _boxes_meet(*boxes[p], *boxes[q], gap):
                 continue  # farther apart than the gap already by their boxes
-            if any(_exact(a, eye, b, eye) < gap for a in bodies[p] for b in bodies[q]):
+            if any(body_distance(a, eye, b, eye) < gap for a in bodies[p] for b in bodies[q]):
                 out[p].append(q)
                 out[q].append(p)
     return {p: tuple(qs) for p, qs in out.items()}
@@ -703,8 +703,8 @@ def _sub_key(product: Product, name: str, kids: list[str], unit: str) -> str:
     import hashlib
     import json
 
-    from spar_py.world.shapes_cache import source_digest
-    from spar_py.world.supports import REST_TOL_MM
+    from spar_py.world.parts import source_digest
+    from spar_py.world.reach import REST_TOL_MM
 
     pp = product.parts[name]
     inv_p = np.linalg.inv(pp.pose)
@@ -723,12 +723,12 @@ def _sub_key(product: Product, name: str, kids: list[str], unit: str) -> str:
 
 def _sub_poses_cached(product: Product, name: str, kids: list[str], unit: str, use_cache: bool) -> list[SubPose]:
     """Part ``name``'s subassembly poses, from the derivations' cache directory
-    (world.shapes_cache.cache_dir, ``subposes-KEY.json``) when it has them, else computed and kept."""
-    from spar_py.world.shapes_cache import cache_dir, load, store
+    (world.parts.cache.cache_dir, ``subposes-KEY.json``) when it has them, else computed and kept."""
+    from spar_py.world.parts import cache_dir, load_derivation, store_derivation
 
     key = _sub_key(product, name, kids, unit)
     path = cache_dir() / f"subposes-{key}.json"
-    if use_cache and (data := load(path, key)) is not None:
+    if use_cache and (data := load_derivation(path, key)) is not None:
         try:
             return [SubPose(d["label"], np.asarray(d["R"], float).reshape(3, 3), float(d["height"]),
                             float(d["probability"]), tuple(d["rfaces"])) for d in data["poses"]]
@@ -736,7 +736,7 @@ def _sub_poses_cached(product: Product, name: str, kids: list[str], unit: str, u
             pass  # an entry of an older form: computed again
     got = _sub_poses(product, name, kids, unit)
     if use_cache:
-        store(path, {"key": key, "poses": [{"label": sp.label, "R": [float(v) for v in sp.R.ravel()],
+        store_derivation(path, {"key": key, "poses": [{"label": sp.label, "R": [float(v) for v in sp.R.ravel()],
                                              "height": sp.height, "probability": sp.prob,
                                              "rfaces": list(sp.rfaces)} for sp in got]})
     return got
@@ -744,7 +744,7 @@ def _sub_poses_cached(product: Product, name: str, kids: list[str], unit: str, u
 
 def _sub_poses(product: Product, name: str, kids: list[str], unit: str) -> list[SubPose]:
     """Part ``name``'s subassembly poses computed (:func:`subassembly_poses`)."""
-    from spar_py.world.shapes import part_mesh
+    from spar_py.world.parts import part_mesh
 
     pp = product.parts[name]
     own = part_mesh(pp.model)
@@ -763,7 +763,7 @@ def _sub_rests(meshes: list, owned: list[np.ndarray], tol: float) -> list[tuple[
     ``meshes`` (the root's first, all in the root's frame), as :func:`subassembly_poses` says."""
     import trimesh  # a derivation only
 
-    from spar_py.world.shapes_stable import stable_poses
+    from spar_py.world.parts import stable_poses
 
     union = trimesh.util.concatenate(meshes)
     com = np.sum([m.center_mass * m.volume for m in meshes], axis=0) / sum(m.volume for m in meshes)
@@ -790,8 +790,8 @@ def resting_faces(model: ObjectModel, R: np.ndarray, height: float, unit: str) -
     """The names of the faces of ``model``'s shape (as its derivation names them) that touch the
     table when the part is turned by R (3x3) with its frame ``height`` above the table (cell
     unit): a vertex of the face within REST_TOL_MM of it."""
-    from spar_py.world.shapes import derive_faces, part_mesh
-    from spar_py.world.supports import REST_TOL_MM
+    from spar_py.world.parts import derive_faces, part_mesh
+    from spar_py.world.reach import REST_TOL_MM
 
     mesh = part_mesh(model)
     if mesh is None or model.geometry is None:

@@ -2,7 +2,7 @@
 
 One model, :class:`Robot`, whatever the source: Craig's (modified) DH table, joint
 limits, base and tool frames, the gripper opening, and the IK solver its structure
-allows (``spar_py.world.ik``: the PUMA or UR closed form, else the numeric fallback).
+allows (``spar_py.world.robot.ik``: the PUMA or UR closed form, else the numeric fallback).
 
 - a standard-DH table (UR's published one) becomes Craig's exactly:
   :func:`standard_to_modified`;
@@ -28,7 +28,7 @@ import numpy as np
 
 from spar_py.core.errors import SparValueError
 from spar_py.core.geometry import check_transform, inv, rotx, trans
-from spar_py.world.ik import (FAMILY_TWISTS, LIMIT_TOL, Solver, craig_links, lowest_representation, solver_for,
+from spar_py.world.robot.ik import (FAMILY_TWISTS, LIMIT_TOL, Solver, craig_links, lowest_representation, solver_for,
                               turn_combinations)
 
 __all__ = ["GripperGeometry", "LIMIT_TOL", "LinkShape", "Robot", "TOOL_BODY", "ToolBody", "UrdfChain",
@@ -101,7 +101,7 @@ class GripperGeometry:
     the fingers (z from -finger_length - palm_length to -finger_length), ``palm_width`` along x,
     ``palm_thickness`` along y (centred). Defaults (:meth:`default`): fingers 60 x 20 x 10 mm, a palm
     25 mm deep, as wide as a finger and as thick as the open fingers' span (finger_separation + 2
-    finger thicknesses): the sizes world.shapes_derive's grasp filter has always assumed. ``body``
+    finger thicknesses): the sizes world.parts.derive's grasp filter has always assumed. ``body``
     the tool behind the palm (:class:`ToolBody`; the loader gives a robot without ``collision:``
     the default, :meth:`with_default_body`).
     """
@@ -202,7 +202,7 @@ class Robot:
     allowed: frozenset = frozenset()
     #: the clearance margin the robot file asks for (robot unit), None: the problem's or the default
     margin: float | None = None
-    #: Motion entries (world/motion.py): home joint vector (6,) rad and joint velocity
+    #: Motion entries (world/motion/paths.py): home joint vector (6,) rad and joint velocity
     #: limits (6,) rad/s, or None (kb.py's _robot_motion).
     home: np.ndarray | None = None
     velocity_limits: np.ndarray | None = None

@@ -1,0 +1,263 @@
+"""Structure facts of src/spar_py, read from the sources (the AST), not from importing them.
+
+- no import circle among the package's modules, ``if TYPE_CHECKING:`` imports and imports
+  inside functions counted;
+- the world layer's rooms (subpackages of world/) are entered through their doors: code
+  outside a room imports ``spar_py.world.<room>`` and names its ``__all__`` lists, never a
+  module behind it;
+- no private name (``_x``) taken across modules, by import or by attribute of an imported
+  module;
+- no file over 1,000 lines; one gripper class; ``Cell`` a frozen dataclass.
+
+Each check is also run on a small synthetic package, so a check that cannot fail is caught.
+"""
+from __future__ import annotations
+
+import ast
+from collections import defaultdict
+from pathlib import Path
+
+import pytest
+
+SRC = Path(__file__).resolve().parent.parent / "src"
+MAX_LINES = 1000
+
+
+def modules(src: Path) -> dict[str, Path]:
+    """Dotted module name -> file, for every .py under ``src``."""
+    out = {}
+    for p in sorted(src.rglob("*.py")):
+        parts = list(p.relative_to(src).with_suffix("").parts)
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        out[".".join(parts)] = p
+    return out
+
+
+def _target(mod: str, path: Path, node: ast.ImportFrom) -> str:
+    if not node.level:
+        return node.module or ""
+    base = mod.split(".") if path.name == "__init__.py" else mod.split(".")[:-1]
+    base = base[: len(base) - (node.level - 1)]
+    return ".".join(base + ([node.module] if node.module else []))
+
+
+def imports(mods: dict[str, Path], root: str) -> list[tuple[str, str, str, int]]:
+    """(importer, imported module, name or "", line) for every import of a module of package
+    ``root`` (at any depth of the file: functions and TYPE_CHECKING blocks included)."""
+    out = []
+    for mod, path in mods.items():
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.ImportFrom):
+                target = _target(mod, path, node)
+                if target != root and not target.startswith(root + "."):
+                    continue
+                for a in node.names:
+                    sub = f"{target}.{a.name}"
+                    if sub in mods and a.name not in door_exports(mods.get(target, path)):  # `from pkg import module`
+                        out.append((mod, sub, "", node.lineno))
+                    else:
+                        out.append((mod, target, a.name, node.lineno))
+            elif isinstance(node, ast.Import):
+                for a in node.names:
+                    if a.name == root or a.name.startswith(root + "."):
+                        out.append((mod, a.name, "", node.lineno))
+    return out
+
+
+def cycles(mods: dict[str, Path], root: str) -> list[list[str]]:
+    """The import circles (strongly connected components of two or more modules, or a module
+    importing itself), each as its sorted module names. A package's import of one of its own
+    modules counts (the door imports what it exports), a module's import of its own package
+    counts too."""
+    graph: dict[str, set[str]] = defaultdict(set)
+    for a, b, _, _ in imports(mods, root):
+        if b in mods and a != b:
+            graph[a].add(b)
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on: set[str] = set()
+    out: list[list[str]] = []
+
+    def visit(v: str) -> None:  # Tarjan, iterative enough for a few hundred modules
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on.add(v)
+        for w in graph[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+
+    for v in list(mods):
+        if v not in index:
+            visit(v)
+    return out
+
+
+def rooms(mods: dict[str, Path], world: str) -> set[str]:
+    """The rooms of ``world``: its subpackages (dotted names)."""
+    return {m for m, p in mods.items() if p.name == "__init__.py" and m.startswith(world + ".")
+            and m.count(".") == world.count(".") + 1}
+
+
+def room_of(mod: str, rms: set[str]) -> str | None:
+    return next((r for r in rms if mod == r or mod.startswith(r + ".")), None)
+
+
+def door_exports(path: Path) -> set[str]:
+    """The names a door's (a package's ``__init__``) ``__all__`` lists."""
+    if path.name != "__init__.py":
+        return set()
+    for node in ast.parse(path.read_text()).body:
+        if isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == "__all__" for t in node.targets):
+            return {e.value for e in node.value.elts}  # type: ignore[attr-defined]
+    return set()
+
+
+def door_breaches(mods: dict[str, Path], root: str) -> list[str]:
+    """Imports that enter a room of ``root``.world other than through its door, or take a
+    name its door does not list."""
+    world = f"{root}.world"
+    rms = rooms(mods, world)
+    out = []
+    for a, b, name, line in imports(mods, root):
+        r = room_of(b, rms)
+        if r is None or room_of(a, rms) == r:
+            continue
+        if b != r:
+            out.append(f"{a}:{line} imports {b}{'.' + name if name else ''} behind the door {r}")
+        elif name and name not in door_exports(mods[r]):
+            out.append(f"{a}:{line} takes {name} from {r}, whose __all__ does not list it")
+    return out
+
+
+def private_crossings(mods: dict[str, Path], root: str) -> list[str]:
+    """Private names (one leading underscore) one module takes from another: ``from m import _x``
+    or ``m._x`` where ``m`` names an imported module of the package."""
+    out = []
+    for a, b, name, line in imports(mods, root):
+        if name.startswith("_") and not name.startswith("__") and a != b:
+            out.append(f"{a}:{line} imports {b}.{name}")
+    for mod, path in mods.items():
+        tree = ast.parse(path.read_text())
+        aliases: dict[str, str] = {}
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom):
+                target = _target(mod, path, node)
+                for al in node.names:
+                    if f"{target}.{al.name}" in mods:
+                        aliases[al.asname or al.name] = f"{target}.{al.name}"
+            elif isinstance(node, ast.Import):
+                for al in node.names:
+                    if al.name in mods and al.asname:
+                        aliases[al.asname] = al.name
+        for node in ast.walk(tree):
+            if (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id in aliases
+                    and node.attr.startswith("_") and not node.attr.startswith("__")
+                    and aliases[node.value.id] != mod):
+                out.append(f"{mod}:{node.lineno} takes {aliases[node.value.id]}.{node.attr}")
+    return out
+
+
+def long_files(mods: dict[str, Path]) -> list[str]:
+    return [f"{m}: {n} lines" for m, p in mods.items() if (n := len(p.read_text().splitlines())) > MAX_LINES]
+
+
+def classes_named(mods: dict[str, Path], word: str) -> list[str]:
+    """Classes whose name contains ``word`` (case-insensitive)."""
+    return [f"{m}.{n.name}" for m, p in mods.items() for n in ast.walk(ast.parse(p.read_text()))
+            if isinstance(n, ast.ClassDef) and word in n.name.lower()]
+
+
+def is_frozen_dataclass(path: Path, cls: str) -> bool:
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ClassDef) and node.name == cls:
+            for d in node.decorator_list:
+                if isinstance(d, ast.Call) and getattr(d.func, "id", getattr(d.func, "attr", "")) == "dataclass":
+                    return any(k.arg == "frozen" and getattr(k.value, "value", False) is True for k in d.keywords)
+    return False
+
+
+# ---------------------------------------------------------------------------------- the package
+
+MODS = modules(SRC)
+
+
+def test_no_import_circle() -> None:
+    assert cycles(MODS, "spar_py") == []
+
+
+def test_rooms_are_entered_through_their_doors() -> None:
+    rms = rooms(MODS, "spar_py.world")
+    assert {"spar_py.world.robot", "spar_py.world.parts", "spar_py.world.collision", "spar_py.world.reach",
+            "spar_py.world.motion", "spar_py.world.product"} <= rms
+    for r in rms:  # every door says what its room answers and lists what it exports
+        tree = ast.parse(MODS[r].read_text())
+        assert ast.get_docstring(tree), f"{r}: the door has no docstring"
+        assert door_exports(MODS[r]), f"{r}: the door has no __all__"
+    assert door_breaches(MODS, "spar_py") == []
+
+
+def test_no_private_name_crosses_modules() -> None:
+    assert private_crossings(MODS, "spar_py") == []
+
+
+def test_no_file_over_1000_lines() -> None:
+    assert long_files(MODS) == []
+
+
+def test_one_gripper_class() -> None:
+    assert len(classes_named(MODS, "gripper")) == 1, classes_named(MODS, "gripper")
+
+
+def test_cell_is_frozen() -> None:
+    assert is_frozen_dataclass(MODS["spar_py.core.model"], "Cell")
+
+
+# ------------------------------------------------------------------ the checks can fail: a fake package
+
+
+@pytest.fixture()
+def fake(tmp_path: Path) -> Path:
+    def w(rel: str, text: str) -> None:
+        p = tmp_path / "pkg" / rel
+        p.parent.mkdir(parents=True, exist_ok=True)
+        p.write_text(text)
+
+    w("__init__.py", "")
+    w("world/__init__.py", "")
+    w("world/room/__init__.py", '"""A room."""\nfrom pkg.world.room.inner import f\n__all__ = ["f"]\n')
+    w("world/room/inner.py", "def f(): pass\ndef _g(): pass\ndef h(): pass\n")
+    w("a.py", "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from pkg.b import x\n")
+    w("b.py", "from pkg.a import y\n")
+    w("c.py", "from pkg.world.room.inner import f\nfrom pkg.world.room import h\n"
+              "from pkg.world.room import inner\ninner._g()\nfrom pkg.world.room.inner import _g\n")
+    w("big.py", "x = 1\n" * (MAX_LINES + 1))
+    w("model.py", "from dataclasses import dataclass\n@dataclass\nclass Cell:\n    x: int\n"
+                  "class Gripper: pass\nclass GripperGeometry: pass\n")
+    return tmp_path
+
+
+def test_the_checks_find_what_they_look_for(fake: Path) -> None:
+    mods = modules(fake)
+    assert cycles(mods, "pkg") == [["pkg.a", "pkg.b"]]  # the TYPE_CHECKING import counts
+    breaches = door_breaches(mods, "pkg")
+    assert any("behind the door" in b for b in breaches) and any("does not list it" in b for b in breaches)
+    crossings = private_crossings(mods, "pkg")
+    assert any("inner._g" in c for c in crossings) and sum("_g" in c for c in crossings) == 2
+    assert long_files(mods) == [f"pkg.big: {MAX_LINES + 1} lines"]
+    assert len(classes_named(mods, "gripper")) == 2
+    assert not is_frozen_dataclass(mods["pkg.model"], "Cell")
