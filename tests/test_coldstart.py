@@ -100,13 +100,13 @@ def test_an_edited_source_is_loaded_on_the_next_run(tree: Path, tmp_path: Path) 
 
 
 def test_an_edit_to_a_module_loaded_by_another_is_seen(tree: Path, tmp_path: Path) -> None:
-    """kb/templates/actions.pl is loaded through use_module from prolog/ files; changing it
+    """kb/templates/spar_actions.pl is loaded through use_module from prolog/ files; changing it
     (here: a new clause of a predicate the planner reads) gives a new image."""
     cache = tmp_path / "cache"
     code = PROBE.replace('"spar_defaults:default_option(max_actions_floor, N)"',
                          '"catch(spar_actions:coldstart_marker(N), _, N = none)"')
     assert _run(tree, cache, code)["bound"] == "none"
-    f = tree / "kb" / "templates" / "actions.pl"
+    f = tree / "kb" / "templates" / "spar_actions.pl"
     f.write_text(f.read_text() + "\ncoldstart_marker(seen).\n")
     got = _run(tree, cache, code)
     assert got["how"] == "compiled" and got["bound"] == "seen"

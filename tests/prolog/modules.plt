@@ -145,6 +145,19 @@ test(every_file_a_module, Missing == []) :-
     maplist(xref_source, Files),
     exclude([F]>>xref_module(F, _), Files, Missing).
 
+%   Each file's module is named as the file (prolog/spar_toplevel.pl is
+%   module spar_toplevel), so a module's name finds its file.
+test(module_named_as_its_file, Misnamed == []) :-
+    repo_root(Root),
+    planner_files(Root, Files),
+    maplist(xref_source, Files),
+    findall(File-M,
+            ( member(File, Files),
+              xref_module(File, M),
+              file_base_name(File, Base),
+              \+ file_name_extension(M, pl, Base) ),
+            Misnamed).
+
 test(graph_has_imports_and_qualified_calls) :-
     repo_root(Root),
     module_graph(Root, G),
