@@ -75,7 +75,8 @@
 :- use_module(ordering).
 :- use_module(cms).
 :- use_module(plan_state).
-:- use_module('../kb/templates/spar_actions', [instantiate_establishing_action//3]).
+:- use_module(spar_paths, []).    % the file search path spar
+:- use_module(spar(kb/templates/spar_actions), [instantiate_establishing_action//3]).
 
 %!  establish(+Goal, +Plan0, -Plan, -Establisher) is nondet.
 %

@@ -20,6 +20,8 @@
       ../kb/templates/spar_actions.pl   templates and rules (Figs. 2-6)
       ../kb/templates/spar_sensing.pl   Figs. 11-13, for phase 2
       kb.pl         the knowledge base (module kb), loaded from Python
+      spar_paths.pl the file search path spar (the checkout): the
+                    templates are loaded as spar(kb/templates/...)
 
     spar reexports partial_plan.pl and spar_toplevel.pl: a user of the
     planner finds every entry point here.
@@ -62,8 +64,9 @@
 :- use_module(establish, [known_declobber_method/1]).
 :- use_module(goals, [phase1_search/3, max_action_bound/2]).
 :- use_module(spar_defaults, [default_option/2]).
-:- use_module('../kb/templates/spar_actions', []).
-:- use_module('../kb/templates/spar_sensing', []).
+:- use_module(spar_paths, []).    % the file search path spar
+:- use_module(spar(kb/templates/spar_actions), []).
+:- use_module(spar(kb/templates/spar_sensing), []).
 :- use_module(uncertainty, [phase2/4, print_ur/1, ur_dict/2]).
 %   What a user of the planner calls besides the entry points above: the
 %   partial plan's readers, instances, dict and printing (partial_plan.pl),

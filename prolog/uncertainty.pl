@@ -51,8 +51,9 @@
 :- use_module(foreign, [py_bridge/2, term_data/2]).
 :- use_module(spar_defaults, [default_option/2]).
 :- use_module(partial_plan, [partial_instances/3]).
-:- use_module('../kb/templates/spar_sensing', []).
-:- use_module('../kb/templates/spar_actions', []).
+:- use_module(spar_paths, []).    % the file search path spar
+:- use_module(spar(kb/templates/spar_sensing), []).
+:- use_module(spar(kb/templates/spar_actions), []).
 
 %!  phase2(+Problem, +Partial, +Options, -Result) is det.
 %

@@ -178,6 +178,24 @@ def test_two_checkouts_with_the_same_sources_do_not_share_an_image(tree: Path, t
     assert a["bound"].startswith(str(tree)) and b["bound"].startswith(str(other))
 
 
+def test_the_spar_path_is_the_checkout_however_loaded(tree: Path, tmp_path: Path) -> None:
+    """prolog/spar_paths.pl's file search path spar names the copy's own templates from the
+    sources, the image it compiled, the image loaded again and the saved state; a second
+    copy sharing the cache gets its own."""
+    cache = tmp_path / "cache"
+    code = PROBE.replace('"spar_defaults:default_option(max_actions_floor, N)"',
+                         '"absolute_file_name(spar(kb/templates/spar_actions), N, '
+                         '[file_type(prolog), access(read)])"')
+    want = str(tree / "kb" / "templates" / "spar_actions.pl")
+    runs = [_run(tree, "off", code), _run(tree, cache, code), _run(tree, cache, code),
+            _run(tree, cache, code, state=True), _run(tree, cache, code, state=True)]
+    assert [r["how"] for r in runs] == ["source", "compiled", "qlf", "qlf", "state"]
+    assert {r["bound"] for r in runs} == {want}
+    other = tmp_path / "other"
+    shutil.copytree(tree, other)
+    assert _run(other, cache, code)["bound"] == str(other / "kb" / "templates" / "spar_actions.pl")
+
+
 def test_eviction_keeps_the_most_recently_used(tmp_path: Path) -> None:
     for i in range(5):
         d = tmp_path / f"k{i}"

@@ -15,6 +15,7 @@
     swipl -g run_tests -t halt tests/prolog/modules.plt
 */
 :- use_module(library(plunit)).
+:- use_module('../../prolog/spar_paths', []).  % spar(...) paths, for xref
 :- use_module(library(prolog_xref)).
 :- use_module(library(ugraphs)).
 :- use_module(library(lists)).

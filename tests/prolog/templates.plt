@@ -4,8 +4,8 @@
     swipl -g run_tests -t halt tests/prolog/templates.plt
 */
 :- use_module('../../prolog/spar').
-:- use_module('../../kb/templates/spar_actions').
-:- use_module('../../kb/templates/spar_sensing').
+:- use_module(spar(kb/templates/spar_actions)).
+:- use_module(spar(kb/templates/spar_sensing)).
 :- use_module(fixtures/paper_cell).
 :- use_module(library(plunit)).
 
