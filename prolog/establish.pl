@@ -9,7 +9,7 @@
          before adding actions, Sec. 2),
       2. the initial state, the add list of the null action `start`
          (Sec. 7.1); a position it names gets its single label in the CMS,
-      3. a new action from the rule base (kb/templates/actions.pl).
+      3. a new action from the rule base (kb/templates/spar_actions.pl).
 
     declobber/4 then deals with every action C that may clobber the goal:
     C has a delete-list element unifiable with the condition (tested
@@ -75,7 +75,8 @@
 :- use_module(ordering).
 :- use_module(cms).
 :- use_module(plan_state).
-:- use_module('../kb/templates/actions', [instantiate_establishing_action//3]).
+:- use_module(spar_paths, []).    % the file search path spar
+:- use_module(spar(kb/templates/spar_actions), [instantiate_establishing_action//3]).
 
 %!  establish(+Goal, +Plan0, -Plan, -Establisher) is nondet.
 %

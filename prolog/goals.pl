@@ -72,7 +72,8 @@
 :- use_module(establish).
 :- use_module(plan_state).
 :- use_module(spar_defaults).
-:- use_module('../kb/templates/actions',
+:- use_module(spar_paths, []).    % the file search path spar
+:- use_module(spar(kb/templates/spar_actions),
               [gensym//2, mating_grasps/4, assembly_turn/3]).
 
 %!  phase1_search(+Options, -Outcome, -Bound) is det.

@@ -38,10 +38,26 @@
 */
 :- module(kb,
           [ replace_facts/1,        % +Facts
-            unload_facts/1,       % +Problem
+            unload_facts/1,         % +Problem
             loaded_problem/1,       % ?Problem
             with_problem/2,         % +Problem, :Goal
-            problem_in_scope/1      % -Problem
+            problem_in_scope/1,     % -Problem
+            % the accessors: the facts of the problem in scope
+            problem/1,              % ?Problem
+            object/1,               % ?Object
+            face/2,                 % ?Object, ?Face
+            pose/5,                 % ?Object, ?Label, ?RFaces, ?OFaces, ?Tm
+            grasp/6,                % ?Object, ?Label, ?GFaces, ?OFaces, ?Euler, ?Width
+            position/4,             % ?Name, ?Object, ?Label, ?Tm
+            position_class/2,       % ?Label, ?PoseLabel
+            initial/1,              % ?Condition
+            goal/1,                 % ?Goal
+            transform/2,            % ?Name, ?Tm
+            vector/2,               % ?Name, ?XYZ
+            turn/3,                 % ?Ta, ?Turn, ?HolePoses
+            mate_grasps/3,          % ?Ta, ?Peg, ?Grasps
+            precedence/3,           % ?Part, ?Later, ?Reason
+            mates/2                 % ?Part, ?Names
           ]).
 :- use_module(library(error)).
 :- use_module(library(apply)).
@@ -82,6 +98,31 @@ storage_clause((Head :- problem_in_scope(P), Stored)) :-
     kb_predicate(N, A),
     functor(Head, N, A),
     stored(Head, P, Stored).
+
+%!  problem(?Problem) is semidet.
+%!  object(?Object) is nondet.
+%!  face(?Object, ?Face) is nondet.
+%!  pose(?Object, ?Label, ?RFaces, ?OFaces, ?Tm) is nondet.
+%!  grasp(?Object, ?Label, ?GFaces, ?OFaces, ?Euler, ?Width) is nondet.
+%!  position(?Name, ?Object, ?Label, ?Tm) is nondet.
+%!  position_class(?Label, ?PoseLabel) is nondet.
+%!  initial(?Condition) is nondet.
+%!  goal(?Goal) is nondet.
+%!  transform(?Name, ?Tm) is nondet.
+%!  vector(?Name, ?XYZ) is nondet.
+%!  turn(?Ta, ?Turn, ?HolePoses) is nondet.
+%!  mate_grasps(?Ta, ?Peg, ?Grasps) is nondet.
+%!  precedence(?Part, ?Later, ?Reason) is nondet.
+%!  mates(?Part, ?Names) is nondet.
+%
+%   The accessors: the facts of the problem in scope (problem_in_scope/1),
+%   in the shapes this file's header gives, in load order. Each reads the
+%   dynamic predicate '$Name'/Arity+1 that replace_facts/1 fills.
+%   Other modules call them qualified (kb:grasp/6), so a reader sees
+%   where the fact comes from.
+%
+%   @error existence_error(problem_in_scope, kb) outside with_problem/2
+%          with no problem or several loaded.
 
 kb_storage.
 

@@ -6,7 +6,7 @@
 
     Its readers, its plan instances, its dict for the JSON and its printed
     form. goals:plan_partial/2 builds it; spar.pl (the entry points),
-    uncertainty.pl (phase 2) and toplevel.pl (printing answers) read it
+    uncertainty.pl (phase 2) and spar_toplevel.pl (printing answers) read it
     here, so none of them needs another.
 */
 :- module(partial_plan,

@@ -5,7 +5,7 @@
     so that each uses only modules below it (no cycle:
     tests/prolog/modules.plt):
 
-      toplevel.pl   the toplevel: load_problem/1,2, print_plan/1, help
+      spar_toplevel.pl the toplevel: load_problem/1,2, print_plan/1, help
       uncertainty.pl  phase 2: plan instances run, sensing and recovery
                     inserted (Secs. 3.3, 4.3)
       partial_plan.pl the partial plan: readers, instances, dict, printing
@@ -17,12 +17,14 @@
       cms.pl        the geometric constraint network
       csp.pl        network consistency (Figs. 16-17), AC-3, solutions
       foreign.pl    the calls into Python
-      ../kb/templates/actions.pl   templates and rules (Figs. 2-6)
-      ../kb/templates/sensing.pl   Figs. 11-13, for phase 2
+      ../kb/templates/spar_actions.pl   templates and rules (Figs. 2-6)
+      ../kb/templates/spar_sensing.pl   Figs. 11-13, for phase 2
       kb.pl         the knowledge base (module kb), loaded from Python
+      spar_paths.pl the file search path spar (the checkout): the
+                    templates are loaded as spar(kb/templates/...)
 
-    spar reexports partial_plan.pl and toplevel.pl: a user of the planner
-    finds every entry point here.
+    spar reexports partial_plan.pl and spar_toplevel.pl: a user of the
+    planner finds every entry point here.
 
     Terms:
 
@@ -62,15 +64,16 @@
 :- use_module(establish, [known_declobber_method/1]).
 :- use_module(goals, [phase1_search/3, max_action_bound/2]).
 :- use_module(spar_defaults, [default_option/2]).
-:- use_module('../kb/templates/actions', []).
-:- use_module('../kb/templates/sensing', []).
+:- use_module(spar_paths, []).    % the file search path spar
+:- use_module(spar(kb/templates/spar_actions), []).
+:- use_module(spar(kb/templates/spar_sensing), []).
 :- use_module(uncertainty, [phase2/4, print_ur/1, ur_dict/2]).
 %   What a user of the planner calls besides the entry points above: the
 %   partial plan's readers, instances, dict and printing (partial_plan.pl),
 %   print_plan/1, load_problem/1,2 and the rest of the toplevel
-%   (toplevel.pl).
+%   (spar_toplevel.pl).
 :- reexport(partial_plan).
-:- reexport(toplevel).
+:- reexport(spar_toplevel).
 
 :- meta_predicate phase1(+, :, -).
 

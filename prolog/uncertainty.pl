@@ -12,7 +12,7 @@
     JSON there. Every decision
     stays here. At the first action whose uncertainty-reduction
     preconditions fail (and that is not given up), the remedies are read as
-    data from kb/templates/sensing.pl and tried in order:
+    data from kb/templates/spar_sensing.pl and tried in order:
 
       1. spar_sensing:remedy_rule/3, clause by clause: insert its actions
          (dense_range_scan sensing, squeeze) before the failing action or
@@ -51,8 +51,9 @@
 :- use_module(foreign, [py_bridge/2, term_data/2]).
 :- use_module(spar_defaults, [default_option/2]).
 :- use_module(partial_plan, [partial_instances/3]).
-:- use_module('../kb/templates/sensing', []).
-:- use_module('../kb/templates/actions', []).
+:- use_module(spar_paths, []).    % the file search path spar
+:- use_module(spar(kb/templates/spar_sensing), []).
+:- use_module(spar(kb/templates/spar_actions), []).
 
 %!  phase2(+Problem, +Partial, +Options, -Result) is det.
 %
@@ -390,7 +391,7 @@ step_id_text(Id, Id).
 
 
 %   verification(+Step, -V) and recovery(+Step, -R): Figs. 12-13 from the
-%   templates in kb/templates/sensing.pl, their action id bound.
+%   templates in kb/templates/spar_sensing.pl, their action id bound.
 verification(step(Id, Action), V) :-
     (   spar_sensing:verification_template(Action, V0)
     ->  V0 = verification(Id, _, _), V = V0

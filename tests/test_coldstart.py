@@ -100,13 +100,13 @@ def test_an_edited_source_is_loaded_on_the_next_run(tree: Path, tmp_path: Path) 
 
 
 def test_an_edit_to_a_module_loaded_by_another_is_seen(tree: Path, tmp_path: Path) -> None:
-    """kb/templates/actions.pl is loaded through use_module from prolog/ files; changing it
+    """kb/templates/spar_actions.pl is loaded through use_module from prolog/ files; changing it
     (here: a new clause of a predicate the planner reads) gives a new image."""
     cache = tmp_path / "cache"
     code = PROBE.replace('"spar_defaults:default_option(max_actions_floor, N)"',
                          '"catch(spar_actions:coldstart_marker(N), _, N = none)"')
     assert _run(tree, cache, code)["bound"] == "none"
-    f = tree / "kb" / "templates" / "actions.pl"
+    f = tree / "kb" / "templates" / "spar_actions.pl"
     f.write_text(f.read_text() + "\ncoldstart_marker(seen).\n")
     got = _run(tree, cache, code)
     assert got["how"] == "compiled" and got["bound"] == "seen"
@@ -176,6 +176,24 @@ def test_two_checkouts_with_the_same_sources_do_not_share_an_image(tree: Path, t
     a, b = _run(tree, cache, code), _run(other, cache, code)
     assert a["how"] == b["how"] == "compiled"
     assert a["bound"].startswith(str(tree)) and b["bound"].startswith(str(other))
+
+
+def test_the_spar_path_is_the_checkout_however_loaded(tree: Path, tmp_path: Path) -> None:
+    """prolog/spar_paths.pl's file search path spar names the copy's own templates from the
+    sources, the image it compiled, the image loaded again and the saved state; a second
+    copy sharing the cache gets its own."""
+    cache = tmp_path / "cache"
+    code = PROBE.replace('"spar_defaults:default_option(max_actions_floor, N)"',
+                         '"absolute_file_name(spar(kb/templates/spar_actions), N, '
+                         '[file_type(prolog), access(read)])"')
+    want = str(tree / "kb" / "templates" / "spar_actions.pl")
+    runs = [_run(tree, "off", code), _run(tree, cache, code), _run(tree, cache, code),
+            _run(tree, cache, code, state=True), _run(tree, cache, code, state=True)]
+    assert [r["how"] for r in runs] == ["source", "compiled", "qlf", "qlf", "state"]
+    assert {r["bound"] for r in runs} == {want}
+    other = tmp_path / "other"
+    shutil.copytree(tree, other)
+    assert _run(other, cache, code)["bound"] == str(other / "kb" / "templates" / "spar_actions.pl")
 
 
 def test_eviction_keeps_the_most_recently_used(tmp_path: Path) -> None:

@@ -214,7 +214,7 @@ def test_schema_keys_follow_the_schema() -> None:
 
 
 def test_sensor_names_are_the_templates_sensing_actions() -> None:
-    text = (ROOT / "kb" / "templates" / "sensing.pl").read_text()
+    text = (ROOT / "kb" / "templates" / "spar_sensing.pl").read_text()
     assert set(SENSOR_NAMES) == set(re.findall(r"^sensing_rule\((\w+)\(", text, re.M))
 
 

@@ -8,14 +8,20 @@
     imports, xref_called/3 the qualified calls (meta-calls included:
     limit/2, phrase/3, findall/3, ...).
 
+    A qualified call M:G into a planner module is a call of one of M's
+    exports (module kb's accessors, say, kb:grasp/6): for module kb this
+    is checked over the planner's files and the tests' (unexported_calls/3).
+
     swipl -g run_tests -t halt tests/prolog/modules.plt
 */
 :- use_module(library(plunit)).
+:- use_module('../../prolog/spar_paths', []).  % spar(...) paths, for xref
 :- use_module(library(prolog_xref)).
 :- use_module(library(ugraphs)).
 :- use_module(library(lists)).
 :- use_module(library(apply)).
 :- use_module(library(yall)).
+:- use_module(library(error)).
 
 :- prolog_load_context(directory, Dir),
    asserta(modules_test_dir(Dir)).
@@ -75,6 +81,51 @@ module_dependency(File, _, FileModules, M2) :-
     atom(M2),
     memberchk(_-M2, FileModules).
 
+%!  test_files(+Root, -Files) is det.
+%
+%   The plunit files under Root's tests/prolog (the bare ones too) and
+%   their fixtures, as absolute paths.
+
+test_files(Root, Files) :-
+    findall(File,
+            ( member(P, [ '/tests/prolog/*.plt', '/tests/prolog/bare/*.plt',
+                          '/tests/prolog/fixtures/*.pl' ]),
+              atomic_list_concat([Root, P], Pattern),
+              expand_file_name(Pattern, Fs),
+              member(F, Fs),
+              absolute_file_name(F, File) ),
+            Files0),
+    sort(Files0, Files).
+
+%!  unexported_calls(+Files, +Module, -Calls) is det.
+%
+%   Calls are File-Module:Name/Arity, sorted, for every qualified call
+%   Module:G in Files (meta-calls included, as xref_called/3 sees them)
+%   of a predicate that Module's file, one of Files, does not export.
+%
+%   @error existence_error(module_file, Module) if no file of Files is
+%          module Module.
+
+unexported_calls(Files, Module, Calls) :-
+    maplist([F]>>xref_source(F, [silent(true)]), Files),
+    (   member(MFile, Files),
+        xref_module(MFile, Module)
+    ->  true
+    ;   existence_error(module_file, Module)
+    ),
+    findall(File-Module:Name/Arity,
+            ( member(File, Files),
+              xref_called(File, Called, _By),
+              nonvar(Called),
+              Called = M:Goal,
+              M == Module,
+              callable(Goal),
+              functor(Goal, Name, Arity),
+              functor(Head, Name, Arity),
+              \+ xref_exported(MFile, Head) ),
+            Calls0),
+    sort(Calls0, Calls).
+
 %!  module_cycles(+Graph, -Pairs) is det.
 %
 %   Pairs are the arcs M1-M2 of Graph that lie on a cycle (M1 is reachable
@@ -94,6 +145,19 @@ test(every_file_a_module, Missing == []) :-
     planner_files(Root, Files),
     maplist(xref_source, Files),
     exclude([F]>>xref_module(F, _), Files, Missing).
+
+%   Each file's module is named as the file (prolog/spar_toplevel.pl is
+%   module spar_toplevel), so a module's name finds its file.
+test(module_named_as_its_file, Misnamed == []) :-
+    repo_root(Root),
+    planner_files(Root, Files),
+    maplist(xref_source, Files),
+    findall(File-M,
+            ( member(File, Files),
+              xref_module(File, M),
+              file_base_name(File, Base),
+              \+ file_name_extension(M, pl, Base) ),
+            Misnamed).
 
 test(graph_has_imports_and_qualified_calls) :-
     repo_root(Root),
@@ -127,5 +191,27 @@ test(no_cycle, Cycles == []) :-
     ->  assertion(top_sort(G, _))
     ;   true
     ).
+
+%   Every call kb:G in the planner and its tests (kb:grasp/6, kb:initial/1,
+%   kb:replace_facts/1, ...) is of an export of kb.pl. Python's calls are
+%   checked by tests/test_kb_exports.py.
+test(kb_calls_are_to_exports, Calls == []) :-
+    repo_root(Root),
+    planner_files(Root, Planner),
+    test_files(Root, Tests),
+    append(Planner, Tests, Files),
+    unexported_calls(Files, kb, Calls).
+
+%   A module exporting a/0 and a caller of qk:a, qk:b and (in a findall)
+%   qk:c(_): the two unexported ones are found.
+test(unexported_calls_found, [ Calls == [B-qk:b/0, B-qk:c/1],
+                               cleanup(maplist(delete_file, [A, B])) ]) :-
+    tmp_file_stream(text, A, SA),
+    format(SA, ":- module(qk, [a/0]).~na.~nb.~nc(_).~n", []),
+    close(SA),
+    tmp_file_stream(text, B, SB),
+    format(SB, ":- module(qcaller, [d/0]).~nd :- qk:a, qk:b, findall(X, qk:c(X), _).~n", []),
+    close(SB),
+    unexported_calls([A, B], qk, Calls).
 
 :- end_tests(planner_modules).

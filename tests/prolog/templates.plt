@@ -1,10 +1,11 @@
-/*  Tests of kb/templates/actions.pl (Figs. 2-6) and sensing.pl (Figs. 11-13).
+/*  Tests of kb/templates/spar_actions.pl (Figs. 2-6) and spar_sensing.pl
+    (Figs. 11-13).
 
     swipl -g run_tests -t halt tests/prolog/templates.plt
 */
 :- use_module('../../prolog/spar').
-:- use_module('../../kb/templates/actions').
-:- use_module('../../kb/templates/sensing').
+:- use_module(spar(kb/templates/spar_actions)).
+:- use_module(spar(kb/templates/spar_sensing)).
 :- use_module(fixtures/paper_cell).
 :- use_module(library(plunit)).
 

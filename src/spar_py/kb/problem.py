@@ -36,7 +36,7 @@ __all__ = ["COAXIAL_TOL", "GOAL_SHAPES", "SENSOR_NAMES", "check_mate", "derived_
            "load_problem", "mate_goal"]
 
 
-# The sensing actions kb/templates/sensing.pl defines: the names `sensors:` may use.
+# The sensing actions kb/templates/spar_sensing.pl defines: the names `sensors:` may use.
 SENSOR_NAMES = ("dense_range_scan",)
 
 
@@ -296,7 +296,7 @@ def _object_bounds(unc: Node, objects: Mapping[str, ObjectModel], rad_per: float
 
 
 def _sensors(root: Node, rad_per: float, large_ok: bool = True) -> dict[str, Sensor]:
-    """``sensors``: each named after a sensing action of kb/templates/sensing.pl (SENSOR_NAMES; ``large_ok``:
+    """``sensors``: each named after a sensing action of kb/templates/spar_sensing.pl (SENSOR_NAMES; ``large_ok``:
     :func:`_bounds`)."""
     snode = root.key("sensors", required=False)
     out: dict[str, Sensor] = {}
@@ -402,7 +402,7 @@ def derived_mate(node: Node, what: str, objects: Mapping[str, ObjectModel], peg:
     3, ...; turned by (J - 1) steps) as trans_K_tJ, and V_a as vec_K (the first K not taken).
     The goal names trans_K; ``turns[trans_K]`` lists every turn with the hole part's stable
     poses in which the mated peg stays clear of the table (world.parts.mesh.poses_clear_of_table;
-    every pose when the peg has no shape). The planner chooses the turn (kb/templates/actions.pl).
+    every pose when the peg has no shape). The planner chooses the turn (kb/templates/spar_actions.pl).
     The mate is checked (:func:`check_mate`; ``what`` names it in messages).
     """
     from spar_py.world.parts import assembly_transforms, part_mesh, poses_clear_of_table  # 4.5 ms: derived T_a only

@@ -93,7 +93,7 @@ def _feature_geometry(model: Any, faces: Any) -> Any:
 def _mate_grasps(cell: Cell) -> list[tuple]:
     """``mate_grasps(Ta, Peg, Grasps)`` per assembled goal whose peg and hole features both have
     geometry (axis, length): the peg's grasps the goal's assemble may use, which the planner reads
-    instead of the rule by ofaces (kb/templates/actions.pl mating_grasps/4). A grasp on the
+    instead of the rule by ofaces (kb/templates/spar_actions.pl mating_grasps/4). A grasp on the
     peg's shaft (its gripped faces hold the feature's) is usable where it holds only the length
     staying out of the hole when seated at T_a (world.parts.derive.mate_grasp_usable); any other
     grasp as by the ofaces rule (it hides none of the goal's peg faces)."""

@@ -19,7 +19,7 @@ run that meets it again hears why its arm did not reach.
 
 The bounds a sensing action leaves (Fig. 11) come from the problem file's ``sensors``
 entry where it has one, else from the sensing rule's bounds that Prolog passes with
-the call (kb/templates/sensing.pl's sensing_rule/5, in its own units, converted here by
+the call (kb/templates/spar_sensing.pl's sensing_rule/5, in its own units, converted here by
 :func:`sensing_bounds`).
 
 An object may have several initial positions (a stock of identical parts, kb-format.md).
@@ -136,7 +136,7 @@ def sensing_bounds(cell: Cell, rules: Mapping[str, Mapping[str, Any]] | None) ->
     """The bounds each sensing rule leaves, in the cell's units: ``rules`` maps a sensing
     action's name to ``{"dx": [lo, hi], "dy": ..., "dz": ..., "dtheta": [lo, hi],
     "units": {"length": "in", "angle": "deg"}}`` (uncertainty.pl's sensing data, from
-    kb/templates/sensing.pl's sensing_rule/5, in the units the templates state)."""
+    kb/templates/spar_sensing.pl's sensing_rule/5, in the units the templates state)."""
     out: dict[str, Bounds] = {}
     for name, r in (rules or {}).items():
         units = r.get("units", {})

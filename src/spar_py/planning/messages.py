@@ -82,7 +82,7 @@ def _refused_line(here: Sequence[Refusal]) -> str:
 
 def _cause(cell: Cell, goal_data: Any, refusals: Sequence[Refusal]) -> str | None:
     """The nearest cause of a phase-1 no plan from the failed goal's term (its constraint, of
-    kb/templates/actions.pl, and its context), or None when the term is not a geometric goal."""
+    kb/templates/spar_actions.pl, and its context), or None when the term is not a geometric goal."""
     functor, args = _args(goal_data)
     if functor != "geo" or len(args) < 4:
         return None

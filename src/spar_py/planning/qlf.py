@@ -8,8 +8,9 @@ cache directory under a key that is the SHA-256 of
 - every ``*.pl`` file of the source directories (prolog/, kb/templates/): name and
   content, so an edit, an added or a removed file gives a new key;
 - the SWI-Prolog version and home (a .qlf is only valid for the VM that wrote it);
-- the files' absolute paths (the image records its source files by path: two
-  checkouts with the same sources must not share one);
+- the files' absolute paths (the image records its source files by path, and
+  prolog/spar_paths.pl's file search path ``spar`` as the checkout it was compiled in:
+  two checkouts with the same sources must not share one);
 - :data:`FORMAT`, this module's own layout version.
 
 A process computes the key from the files as they are now, before it loads anything,

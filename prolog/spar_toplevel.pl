@@ -49,6 +49,7 @@
 :- use_module(partial_plan, [print_partial/1, partial_actions/2, partial_ordering/2]).
 :- use_module(uncertainty, [print_ur/1, step_id_text/2]).
 :- use_module(foreign, [py_bridge/2]).
+:- use_module(spar_paths, []).    % the file search path spar
 :- autoload(library(pldoc/doc_process), [doc_comment/4]).  % loaded by spar_help/1
 
 %!  load_problem(+File) is det.
@@ -399,18 +400,15 @@ store_docs :-
     assertz(docs_stored).
 
 planner_files(Files) :-
-    module_property(spar_toplevel, file(Me)),
-    file_directory_name(Me, Dir),
-    atom_concat(Dir, '/../kb/templates', Templates),
+    absolute_file_name(spar(prolog), Dir, [file_type(directory)]),
+    absolute_file_name(spar(kb/templates), Templates, [file_type(directory)]),
     directory_files_pl(Dir, Own),
     directory_files_pl(Templates, Tpl),
     append(Own, Tpl, Files).
 
 spar_module(M) :-
     module_property(M, file(F)),
-    module_property(spar_toplevel, file(Me)),
-    file_directory_name(Me, Dir),
-    file_directory_name(Dir, Root),
+    absolute_file_name(spar(.), Root, [file_type(directory)]),
     sub_atom(F, 0, _, _, Root).
 
 print_comment(C) :-
