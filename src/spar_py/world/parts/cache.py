@@ -3,7 +3,7 @@
 :func:`derive` returns the derivation as plain data, from a content-hash cache on disk when
 it has one: the key is the SHA-256 of everything the result depends on (the geometry's
 content and scale, the feature, ``face_names``, the gripper, the approach step, the
-labels' prefix, DERIVE_VERSION and the source of the modules that derive: world/shapes*.py),
+labels' prefix, DERIVE_VERSION and the source of the modules that derive: every module of world/parts/),
 so an edited mesh or model is derived again and an unchanged one never is, across runs, cells
 and processes, and a derivation changed without a bump of DERIVE_VERSION (a branch's earlier
 code under the same number) is never read back as the new one's. The cache lives in the user's
@@ -17,7 +17,6 @@ Units: lengths in the cell unit, angles in radians (as in the models).
 """
 from __future__ import annotations
 
-import functools
 import hashlib
 import json
 import math
@@ -35,7 +34,6 @@ __all__ = ["DERIVE_VERSION", "MAX_ENTRIES", "cache_dir", "derive", "source_diges
 #: Bumped whenever the derivation's results change for the same inputs.
 DERIVE_VERSION = 11
 #: The modules whose source is part of the key (world/, beside this file).
-DERIVE_SOURCES = ("shapes.py", "shapes_derive.py", "shapes_cache.py")
 #: Derivations kept on disk at most.
 MAX_ENTRIES = 256
 
@@ -48,18 +46,18 @@ def cache_dir() -> Path:
     return Path(base) / "spar-py" / "derive"
 
 
-@functools.cache
 def source_digest() -> str:
-    """SHA-256 of the derivation's source (DERIVE_SOURCES), read once per process; "" where a
-    module's file cannot be read (an installation without sources: DERIVE_VERSION alone)."""
+    """SHA-256 of the derivation's source (every module of this room, by name); "" where none
+    can be read (an installation without sources: DERIVE_VERSION alone). Read at each call:
+    a few hundred kB, small beside the derivation it keys."""
     h = hashlib.sha256()
-    here = Path(__file__).resolve().parent
-    for name in DERIVE_SOURCES:
-        try:
-            h.update((here / name).read_bytes())
-        except OSError:
-            return ""
-    return h.hexdigest()
+    files = sorted(Path(__file__).resolve().parent.glob("*.py"))
+    try:
+        for f in files:
+            h.update(f.name.encode() + b"\0" + f.read_bytes())
+    except OSError:
+        return ""
+    return h.hexdigest() if files else ""
 
 
 def derive(name: str, geometry: Geometry, features: tuple[FeatureGeometry, ...], face_names: dict[str, np.ndarray],
