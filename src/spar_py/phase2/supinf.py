@@ -105,17 +105,6 @@ HULL_AFTER = 512
 HULL_TOL = 0.1
 HULL_ROUNDS = 3
 BATCH = 256
-#: The search's affine step (``AffineProgram``) on the expression alone, or (AFFINE_GRADIENT)
-#: on the expression and its gradient, whose enclosures then tighten the interval gradient.
-USE_AFFINE = True
-AFFINE_GRADIENT = True
-#: Bisect boxes that have a gradient model on the variable whose share of the model's
-#: remainder is largest (otherwise on the largest width * |derivative|).
-SPLIT_BY_REMAINDER = True
-#: Derivative reasoning (mean value, monotonicity, gradient model) also on boxes where a
-#: ``fabs`` has its kink, through the Clarke gradient (Bounder._kinks_only); False: such
-#: boxes are bisected only, the search before this change (bench/supinf.py compares).
-CLARKE_FABS = True
 
 _INF = math.inf
 _DIR = np.array([[-np.inf], [np.inf]])
@@ -1428,9 +1417,14 @@ class Bounder:
     and a search that has not finished once it has evaluated :data:`HULL_AFTER` boxes also
     bounds it by point sets through the chain (:mod:`spar_py.phase2.hulls`), which keeps deep
     products tight. (An SX alone carries no chain: build deep products as chains.)
+    ``clarke_fabs``: derivative reasoning (mean value, monotonicity, gradient model) also on
+    boxes where a ``fabs`` has its kink, through the Clarke gradient (:meth:`_kinks_only`);
+    False: such boxes are bisected only, the search before that change (bench/supinf.py
+    compares the two).
     """
 
-    def __init__(self, expr: ca.SX | float | ChainExpr, compiled: bool = False) -> None:
+    def __init__(self, expr: ca.SX | float | ChainExpr, compiled: bool = False, *,
+                 clarke_fabs: bool = True) -> None:
         e = _as_scalar(expr)
         self.chain: ChainExpr | None = expr if isinstance(expr, ChainExpr) else None
         self._compiled = compiled
@@ -1450,7 +1444,7 @@ class Bounder:
             fg = ca.Function("fg", [x], [e, ca.densify(ca.jacobian(e, x))], {"cse": True})
             self._fg_instructions = _instructions(fg)
             try:
-                kinks = CLARKE_FABS and self._kinks_only(fg)
+                kinks = clarke_fabs and self._kinks_only(fg)
                 self.gradient = AdaptiveProgram(fg, compiled, kinks, self._fg_instructions)
                 self._fg = fg
             except SparValueError:
@@ -1935,7 +1929,7 @@ class _Search:
         bl, bh, side, L, infl, neg = bl[sp], bh[sp], side[sp], L[sp], infl[sp], neg[sp]
         # (from the second pass on: most expressions are settled by the first, with the
         # cheaper affine form of f alone)
-        AG = B.affine_gradient if USE_AFFINE and AFFINE_GRADIENT and G is not None and self.steps > 1 else None
+        AG = B.affine_gradient if G is not None and self.steps > 1 else None
         if AG is not None:
             # ... of f and its gradient: the gradient enclosure, intersected with the interval
             # one (both sound), gives a tighter mean-value form and proves more monotonicity
@@ -1974,13 +1968,13 @@ class _Search:
             self.push(nl[reduced], nh[reduced], side[reduced], L[reduced])
             infl = width * np.maximum(np.abs(Gs[0]), np.abs(Gs[1])).T
             infl = np.where(np.isfinite(infl) & oks[:, None], infl, width)
-            if SPLIT_BY_REMAINDER:  # split where the model's remainder (its error) is largest
-                gam = (model.rd * model.rho)[keep]
-                infl = np.where((usable[keep] & np.isfinite(gam).all(1))[:, None], gam, infl)
+            # split where the model's remainder (its error) is largest
+            gam = (model.rd * model.rho)[keep]
+            infl = np.where((usable[keep] & np.isfinite(gam).all(1))[:, None], gam, infl)
             keep = ~reduced
             if not keep.any():
                 return
-        elif USE_AFFINE:
+        else:  # ... of f alone
             F = B.affine(bl, bh)[:, 0, :]
             self.evaluated += side.size
             fa = B.affine.enclosure(F)
@@ -1991,8 +1985,6 @@ class _Search:
             keep = self.settle(bl, bh, side, L)
             if not keep.any():
                 return
-        else:
-            keep = np.ones(side.size, bool)
         bl, bh, side, L, infl = bl[keep], bh[keep], side[keep], L[keep], infl[keep]
         # 4. bisect on the most influential variable
         score = np.where(bh > bl, np.nan_to_num(infl, nan=0.0), -1.0)
