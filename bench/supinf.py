@@ -405,8 +405,8 @@ def planner_questions(problem: Path = HOPELESS) -> list[tuple[ca.SX, dict, dict]
     import io
 
     from spar_py.app import cli
-    from spar_py.phase2 import supinf
     from spar_py.phase2 import uncertainty
+    from spar_py.phase2.supinf import canonical
 
     asked: list[tuple[ca.SX, dict, dict]] = []
     real = uncertainty.cached_bounds
@@ -423,7 +423,7 @@ def planner_questions(problem: Path = HOPELESS) -> list[tuple[ca.SX, dict, dict]
         uncertainty.cached_bounds = real
     out, seen = [], set()
     for expr, box, options in asked:
-        canon, names = supinf._canonical(expr)
+        canon, names = canonical(expr)
         cbox = {f"v{i}": tuple(box[n]) for i, n in enumerate(names)}
         key = (canon.serialize(), tuple(sorted(cbox.items())), tuple(sorted(options.items())))
         if key not in seen:
