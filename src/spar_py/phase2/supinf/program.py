@@ -8,8 +8,8 @@ bounded (NaN: 0 * inf, a function outside its domain) is reported as (-inf, inf)
 
 :class:`CompiledIntervalProgram` writes the same rules once as a CasADi SX graph and
 evaluates a batch in one call; :class:`AdaptiveProgram` chooses between the two by batch
-size (``Bounder(expr, compiled=True)``). Building the compiled graph costs ~250 us per
-instruction, so it pays only for a bounder used many times.
+size (``Bounder(expr, compiled=True)``). Building the compiled graph is costly, so it pays
+only for a bounder used many times.
 """
 from __future__ import annotations
 
@@ -435,9 +435,9 @@ class CompiledIntervalProgram:
         return (outs, disc, kink) if with_kinks else (outs, disc)
 
 
-#: Batches of at most this many boxes go to the compiled program when there is one (on
-#: deep products it is 4-10x faster there; on large batches numpy's whole-array
-#: operations win: bench/supinf.py).
+#: Batches of at most this many boxes go to the compiled program when there is one: on small
+#: batches of deep products its one CasADi call beats the grouped schedule, on large batches
+#: numpy's whole-array operations win (bench/supinf.py measures both; bench/RESULTS.md).
 COMPILED_MAX_BATCH = 64
 
 
@@ -447,9 +447,9 @@ class AdaptiveProgram:
     :class:`IntervalProgram`. Same interface and guarantees (both are sound). Which one
     answers depends only on the batch size, never on timing, so a run is reproducible.
 
-    Compiling costs about 250 us per instruction of the Function (building the SX graph
-    in Python: 0.5 s for a product of 8 transforms), so it pays only for an expression
-    bounded many times over; the planner leaves it off (bench/supinf.py measures both).
+    Compiling builds an SX graph in Python, instruction by instruction, which costs far
+    more than a pass, so it pays only for an expression bounded many times over; the
+    planner leaves it off (bench/supinf.py measures both; bench/RESULTS.md).
     """
 
     def __init__(self, fn: ca.Function, compiled: bool = False, sign_continuous: bool = False,

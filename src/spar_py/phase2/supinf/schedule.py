@@ -6,7 +6,7 @@ instructions) that overhead is the whole cost. A :class:`Schedule` is built once
 Function: the instructions in single-assignment form, levelled (an instruction's level is
 one more than its deepest argument's), and the instructions of one level that apply the
 same rule grouped, so that each group is one gather, one vectorised rule over all its
-instructions and all boxes at once, and one scatter (about 10x fewer numpy calls). Values
+instructions and all boxes at once, and one scatter (far fewer numpy calls). Values
 live in a register file whose rows are reused once their last reader has run (liveness),
 so memory stays near the Function's own work size. The interval program (program.py) and
 the affine one (affine.py) run the same schedule with their own rules, so a pass costs a
