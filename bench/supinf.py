@@ -3,7 +3,7 @@
 Run from the project root: ``.venv/bin/python -m bench.supinf [--per-length 10] [--seed 0]``;
 ``--uniform N`` only the table by depth at +-0.1, ``--model N`` only the gradient model's
 remainder by depth (why deep products need many boxes), ``--depths 6,8`` to choose depths,
-``--kinks R`` only hopeless_uncertainty.yaml's own questions with ``supinf.CLARKE_FABS`` off
+``--kinks R`` only hopeless_uncertainty.yaml's own questions with ``Bounder(clarke_fabs=...)`` off
 and on (R interleaved rounds).
 
 For each expression it reports, as medians over a group of expressions:
@@ -405,8 +405,8 @@ def planner_questions(problem: Path = HOPELESS) -> list[tuple[ca.SX, dict, dict]
     import io
 
     from spar_py.app import cli
-    from spar_py.phase2 import supinf
     from spar_py.phase2 import uncertainty
+    from spar_py.phase2.supinf import canonical
 
     asked: list[tuple[ca.SX, dict, dict]] = []
     real = uncertainty.cached_bounds
@@ -423,7 +423,7 @@ def planner_questions(problem: Path = HOPELESS) -> list[tuple[ca.SX, dict, dict]
         uncertainty.cached_bounds = real
     out, seen = [], set()
     for expr, box, options in asked:
-        canon, names = supinf._canonical(expr)
+        canon, names = canonical(expr)
         cbox = {f"v{i}": tuple(box[n]) for i, n in enumerate(names)}
         key = (canon.serialize(), tuple(sorted(cbox.items())), tuple(sorted(options.items())))
         if key not in seen:
@@ -434,23 +434,19 @@ def planner_questions(problem: Path = HOPELESS) -> list[tuple[ca.SX, dict, dict]
 
 def kinks_table(rounds: int = 3, problem: Path = HOPELESS, progress=None) -> dict:
     """``problem``'s distinct SUP/INF questions answered cold (Bounder built, then bounded),
-    with ``supinf.CLARKE_FABS`` off (the search before the Clarke-gradient change: boxes
+    with ``clarke_fabs`` off (the search before the Clarke-gradient change: boxes
     holding a kink of fabs are only bisected) and on, interleaved over ``rounds``: total
     time (ms, median over rounds), boxes, tolerance reached, and the largest change of a
     bound the planner reads (INF for '>' , SUP for '<')."""
-    from spar_py.phase2 import supinf
-
     say = progress or (lambda line: None)
     qs = planner_questions(problem)
     times: dict[bool, list[float]] = {False: [], True: []}
     res: dict[bool, list] = {}
     for _ in range(rounds):
         for flag in (False, True):
-            supinf.CLARKE_FABS = flag
             t = time.perf_counter()
-            res[flag] = [Bounder(e).bounds(box, **opt) for e, box, opt in qs]
+            res[flag] = [Bounder(e, clarke_fabs=flag).bounds(box, **opt) for e, box, opt in qs]
             times[flag].append((time.perf_counter() - t) * 1e3)
-    supinf.CLARKE_FABS = True
     read = [(r.lo if opt.get("want") == "lo" else r.hi) for r, (_, _, opt) in zip(res[True], qs)]
     old = [(r.lo if opt.get("want") == "lo" else r.hi) for r, (_, _, opt) in zip(res[False], qs)]
     out = {"questions": len(qs), "problem": problem.name,
@@ -462,7 +458,7 @@ def kinks_table(rounds: int = 3, problem: Path = HOPELESS, progress=None) -> dic
     say(f"{problem.name}: {out['questions']} distinct SUP/INF questions, cold (compile + bound), "
         f"median of {rounds} interleaved rounds")
     say(f"{'':<22}{'ms':>8}{'boxes':>8}{'reached':>9}")
-    for f, name in ((False, "CLARKE_FABS off (old)"), (True, "CLARKE_FABS on")):
+    for f, name in ((False, "clarke_fabs off (old)"), (True, "clarke_fabs on")):
         tag = "new" if f else "old"
         say(f"{name:<22}{out['ms_' + tag]:>8.0f}{out['boxes_' + tag]:>8}{out['reached_' + tag]:>5}/{out['questions']}")
     say(f"bounds read by the planner changed: {out['changed']}, by at most {out['max_change']:.2e}")
@@ -565,7 +561,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--model", type=int, default=0, metavar="N",
                     help="only the gradient model's remainder by depth 1-8 at +-0.1 (N expressions per depth)")
     ap.add_argument("--kinks", type=int, default=0, metavar="R",
-                    help="only hopeless_uncertainty.yaml's SUP/INF questions, CLARKE_FABS off vs on (R rounds)")
+                    help="only hopeless_uncertainty.yaml's SUP/INF questions, clarke_fabs off vs on (R rounds)")
     ap.add_argument("--depths", type=str, default="1-8", help="with --uniform or --model: e.g. 1-8 or 6,8")
     args = ap.parse_args(argv)
     a, _, b = args.depths.partition("-")

@@ -1,4 +1,4 @@
-"""supinf.py: SUP/INF (Sec. 5.3) — interval operations, soundness on random HTM products, tightness.
+"""supinf: SUP/INF (Sec. 5.3) — interval operations, soundness on random HTM products, tightness.
 
 Soundness: ``lo <= f(x) <= hi`` at every sampled point x of the box, for random
 expressions built like the planner's (products of homogeneous transforms with bounded
@@ -129,9 +129,10 @@ def box_arrays(B: Bounder, box: dict) -> tuple[np.ndarray, np.ndarray]:
     return (np.array([box[n][0] for n in B.names]), np.array([box[n][1] for n in B.names]))
 
 
-def check_sound(e: ca.SX, box: dict, rng: np.random.Generator, n_points: int, **opts: object) -> BoundResult:
+def check_sound(e: ca.SX, box: dict, rng: np.random.Generator, n_points: int, clarke_fabs: bool = True,
+                **opts: object) -> BoundResult:
     """Bound e over box and check lo <= f <= hi at random points, corners and the found optima."""
-    B = Bounder(e)
+    B = Bounder(e, clarke_fabs=clarke_fabs)
     r = B.bounds(box, **opts)
     lo, hi = box_arrays(B, box)
     P = np.vstack([rng.uniform(lo, hi, (n_points, lo.size)), lo, hi,
@@ -512,7 +513,7 @@ def test_compiled_program_encloses_the_interpreted_one(seed: int, n: int) -> Non
     reg = Registry()
     e = random_chain(rng, n, reg)
     B = Bounder(e)
-    C, P = CompiledIntervalProgram(B._fg), IntervalProgram(B._fg)
+    C, P = CompiledIntervalProgram(B.value_gradient), IntervalProgram(B.value_gradient)
     lo, hi = box_arrays(B, reg.box(e))
     a, b = rng.uniform(lo, hi, (40, lo.size)), rng.uniform(lo, hi, (40, lo.size))
     L, H = np.minimum(a, b), np.maximum(a, b)
@@ -613,13 +614,14 @@ def test_cached_bounds_by_structure_not_names() -> None:
     assert cached_bounds(e1, b1, memo, want="lo").lo == cached_bounds(e1, b1, None, want="lo").lo
     assert memo.table("supinf.results", RESULT_LIMIT).limit == RESULT_LIMIT
     assert memo.table("supinf.bounders", BOUNDER_LIMIT).limit == BOUNDER_LIMIT
-    # an expression object asked again reads its canonical form; another object, even of an
-    # equal structure, is renamed anew and finds the same bounder
-    from spar_py.phase2.supinf import CANONICAL_LIMIT, _canonical_key
+    # an expression object asked again reads its canonical form (e1 above: still two); another
+    # object, even of an equal structure, is renamed anew and finds the same bounder
+    from spar_py.phase2.supinf import CANONICAL_LIMIT
 
-    c1 = _canonical_key(e1, memo)
-    assert _canonical_key(e1, memo)[0] is c1[0] and c1[2] == expression_key(e1)
-    assert _canonical_key(build(0)[0], memo)[0] is not c1[0]
+    before = memo.sizes()
+    e3, b3 = build(0)
+    assert cached_bounds(e3, b3, memo) == r1
+    assert memo.sizes() == {**before, "supinf.canonical": before["supinf.canonical"] + 1}
     assert memo.table("supinf.canonical", CANONICAL_LIMIT).limit == CANONICAL_LIMIT
 
 
@@ -657,12 +659,12 @@ def test_grouped_programs_enclose_every_output_at_samples(seed: int, n: int) -> 
     B = Bounder(e)
     lo, hi = box_arrays(B, reg.box(e))
     L, H = _sub_boxes(rng, lo, hi, 6)
-    (f, g), _ = IntervalProgram(B._fg)(L, H)
+    (f, g), _ = IntervalProgram(B.value_gradient)(L, H)
     F = B.affine_gradient(L, H)  # (rows, 1 + nv, m): forms of f and each df/dx_i
     K = B.affine_gradient.K
     for b in range(L.shape[0]):
         x = rng.uniform(L[b], H[b], (300, lo.size))
-        vf, vg = B._fg(x.T)
+        vf, vg = B.value_gradient(x.T)
         vals = np.vstack((np.asarray(vf), np.asarray(vg).reshape(-1, lo.size).T))  # (1 + nv, 300)
         slack = 1e-11 * (1.0 + np.abs(vals))
         ivl = np.concatenate((f[:, :, b], g[:, :, b]), axis=1)  # (2, 1 + nv)
@@ -676,8 +678,8 @@ def test_grouped_programs_enclose_every_output_at_samples(seed: int, n: int) -> 
         rad = (np.abs(Fb[K + 1:-1]).sum(0) + Fb[-1])[:, None]
         assert (np.abs(vals - centre) <= rad + slack + 1e-12 * np.abs(centre)).all()
     P = rng.uniform(lo, hi, (5, lo.size))
-    (fp, gp), _ = IntervalProgram(B._fg)(P, P)
-    vf = np.asarray(B._fg(P.T)[0]).ravel()
+    (fp, gp), _ = IntervalProgram(B.value_gradient)(P, P)
+    vf = np.asarray(B.value_gradient(P.T)[0]).ravel()
     assert (fp[0, 0] <= vf).all() and (vf <= fp[1, 0]).all()
     assert (fp[1, 0] - fp[0, 0] <= 1e-9 * (1 + np.abs(vf))).all()
 
@@ -740,7 +742,7 @@ def test_gradient_model_bound_and_monotone_faces_are_sound(seed: int, n: int, up
     for b in range(m):
         x = np.vstack((rng.uniform(L[b], H[b], (2000, lo.size)),
                        np.where(rng.random((200, lo.size)) < 0.5, L[b], H[b])))
-        vf, vg = B._fg(x.T)
+        vf, vg = B.value_gradient(x.T)
         g = sign * np.asarray(vf).ravel()
         slack = 1e-11 * (1.0 + np.abs(g))
         assert (LQ[b] <= g + slack).all(), (LQ[b], g.min())
@@ -829,16 +831,13 @@ def test_sign_of_its_own_keeps_the_discontinuity() -> None:
     assert r.lo <= -1.01 + 1e-9 and r.hi >= 1.51 - 1e-9
 
 
-def test_clarke_fabs_off_restores_the_bisection_only_search(monkeypatch: pytest.MonkeyPatch) -> None:
-    import spar_py.phase2.supinf as supinf
-
+def test_clarke_fabs_off_restores_the_bisection_only_search() -> None:
     reg = Registry()
     a, b = reg.new("a", -0.05, 0.05), reg.new("b", -0.05, 0.05)
     e = (ca.fabs(a - b) + 3.0) ** 2 + (ca.fabs(a + b) + 3.6) ** 2
     on = check_sound(e, reg.box(e), np.random.default_rng(3), 20000, want="hi")
-    monkeypatch.setattr(supinf, "CLARKE_FABS", False)
-    assert not Bounder(e).gradient.sign_continuous
-    off = check_sound(e, reg.box(e), np.random.default_rng(3), 20000, want="hi")
+    assert Bounder(e).gradient.sign_continuous and not Bounder(e, clarke_fabs=False).gradient.sign_continuous
+    off = check_sound(e, reg.box(e), np.random.default_rng(3), 20000, clarke_fabs=False, want="hi")
     assert on.boxes < off.boxes
 
 

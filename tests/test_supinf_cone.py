@@ -1,7 +1,7 @@
-"""supinf._cone: the value's instructions cut from the value-and-gradient Function's.
+"""supinf.cone: the value's instructions cut from the value-and-gradient Function's.
 
 Bounder builds one CasADi Function (value and gradient) and takes the instruction list
-of the value alone from it (:func:`spar_py.phase2.supinf._cone`) for the affine program of the
+of the value alone from it (:func:`spar_py.phase2.supinf.cone`) for the affine program of the
 value and for the kinks check, instead of building a second Function. The results are
 only the same bit for bit if the cut list is, instruction for instruction, the list the
 second Function would have had; these tests check that on expressions like the
@@ -14,14 +14,14 @@ import numpy as np
 import pytest
 
 from spar_py.core import geometry
-from spar_py.phase2.supinf import _UNARY, AffineProgram, Bounder, _cone, _instructions
+from spar_py.phase2.supinf import AffineProgram, Bounder, arity, cone, instruction_list
 
 _INSTR = list[tuple[int, list[int], list[int], float]]
 
 
 def _ssa(instructions: _INSTR) -> list[tuple]:
     """The list with registers replaced by the index of the instruction that wrote them
-    (the form _Schedule reads: register numbers, reused by CasADi, do not matter)."""
+    (the form supinf's Schedule reads: register numbers, reused by CasADi, do not matter)."""
     reg: dict[int, int] = {}
     out: list[tuple] = []
     for op, ins, outs, c in instructions:
@@ -33,8 +33,7 @@ def _ssa(instructions: _INSTR) -> list[tuple]:
         elif op == ca.OP_CONST:
             out.append(("const", c))
         else:
-            arity = 1 if op in _UNARY or op == ca.OP_ASSIGN else 2
-            out.append((op, tuple(reg[i] for i in ins[:arity])))
+            out.append((op, tuple(reg[i] for i in ins[:arity(op)])))
         reg[outs[0]] = len(out) - 1
     return out
 
@@ -52,11 +51,11 @@ def _expressions() -> list[ca.SX]:
 
 @pytest.mark.parametrize("k", range(len(_expressions())))
 def test_value_instructions_are_those_of_a_value_function(k: int) -> None:
-    """Fails if _cone keeps an instruction the value does not read, drops one it does, or
+    """Fails if cone keeps an instruction the value does not read, drops one it does, or
     orders them otherwise than CasADi orders a Function of the value alone."""
     B = Bounder(_expressions()[k])
-    assert B._fg is not None
-    assert _ssa(B._value_instructions) == _ssa(_instructions(B._point))
+    assert B.value_gradient is not None
+    assert _ssa(B.value_instructions) == _ssa(instruction_list(B.value_function))
 
 
 @pytest.mark.parametrize("k", range(len(_expressions())))
@@ -69,23 +68,23 @@ def test_affine_program_from_the_cut_list_answers_bit_for_bit(k: int) -> None:
     c = rng.uniform(-1.0, 1.0, (40, n))
     r = rng.uniform(0.0, 0.3, (40, n))
     ours = B.affine(c - r, c + r)
-    theirs = AffineProgram(B._point)(c - r, c + r)
+    theirs = AffineProgram(B.value_function)(c - r, c + r)
     assert ours.shape == theirs.shape
     np.testing.assert_array_equal(ours, theirs)  # NaN == NaN here, bits otherwise
 
 
 def test_cone_selects_one_output_and_what_it_reads() -> None:
     """A Function whose outputs read different operations: each output's cone holds its own
-    operations only (fails if _cone keeps everything or resolves a reused register wrong)."""
+    operations only (fails if cone keeps everything or resolves a reused register wrong)."""
     x = ca.SX.sym("x", 2)
     fn = ca.Function("two", [x], [ca.sin(x[0]) * x[1], ca.exp(x[1]) + 2.0], {"cse": True})
-    ins = _instructions(fn)
-    ops0 = {op for op, _, _, _ in _cone(ins, 0)}
-    ops1 = {op for op, _, _, _ in _cone(ins, 1)}
+    ins = instruction_list(fn)
+    ops0 = {op for op, _, _, _ in cone(ins, 0)}
+    ops1 = {op for op, _, _, _ in cone(ins, 1)}
     assert ca.OP_SIN in ops0 and ca.OP_MUL in ops0 and ca.OP_EXP not in ops0
     assert ca.OP_EXP in ops1 and ca.OP_SIN not in ops1 and ca.OP_MUL not in ops1
     f0 = ca.Function("f0", [x], [ca.sin(x[0]) * x[1]], {"cse": True})
-    assert _ssa(_cone(ins, 0)) == _ssa(_instructions(f0))
+    assert _ssa(cone(ins, 0)) == _ssa(instruction_list(f0))
 
 
 def test_kinks_check_reads_the_value_instructions() -> None:
