@@ -14,6 +14,7 @@ housing is in the table; the cells present the block at the table's edge instead
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import sys
 from pathlib import Path
@@ -106,9 +107,7 @@ def least(T: np.ndarray, r: float, L: float, axis: int) -> float:
 
 def cell_on_open_table(name: str):
     """The cell with its table the whole plane (the geometry as it was before the edge)."""
-    cell = load_problem(PROBLEMS / f"{name}.yaml")
-    cell.table = None
-    return cell
+    return dataclasses.replace(load_problem(PROBLEMS / f"{name}.yaml"), table=None)
 
 
 def module_heights(cell, q: np.ndarray) -> dict[str, np.ndarray]:

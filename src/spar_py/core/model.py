@@ -235,12 +235,13 @@ class Sensor:
     leaves: Bounds
 
 
-@dataclass
+@dataclass(frozen=True)
 class Cell:
     """A whole problem: robot, objects, initial positions, uncertainty, sensors and goals.
 
-    Read only once loaded: a planning run keeps its own state (world.run.WorldRun) and the
-    answers worth keeping across runs sit beside the cell (world.run.CellCache)."""
+    Frozen: loading reads and validates the files, derives what is geometric, then builds the
+    cell once (kb.problem.load_problem); a planning run keeps its own state (world.run.WorldRun)
+    and the answers worth keeping across runs sit beside the cell (world.collision.CellCache)."""
 
     name: str
     file: str

@@ -627,6 +627,10 @@ def load_problem(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> Cell:
     initial: list[Term] = [("gripper", grip)] + [("part_location", p.obj, p.name) for p in positions.values()]
     meshes = [m.geometry.mesh_file for m in objects.values() if m.geometry is not None and m.geometry.mesh_file]
     files = tuple(dict.fromkeys(str(Path(u).resolve()) for u in [path, rpath, *model_files, *meshes]))
+    home = home_angles(root.key("home", required=False), robot, rad_per)
+    mnode = root.key("motion", required=False)
+    if mnode is not None and not isinstance(mnode.value, bool):
+        raise mnode.fail("true or false (plan the motions between the end-points)", show(mnode.value))
     cell = Cell(
         files=files,
         name=name,
@@ -649,19 +653,13 @@ def load_problem(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> Cell:
         table=_table(root),
         clearance=_clearance(root),
         collisions=_collision_switch(root),
-        home=home_angles(root.key("home", required=False), robot, rad_per),
+        home=home if home is not None else robot.home,
         product=product,
+        plan_motions=bool(mnode is not None and mnode.value),
     )
-    if cell.home is None:
-        cell.home = robot.home
     if product is not None:  # the grasps no plan seats a part with, the orders the hand needs
         from spar_py.world.product import with_hand_access  # the IK and the collision scene: products only
-        from spar_py.world.collision import CellCache
 
-        with_hand_access(cell, CellCache(cell), layout.held if layout is not None else None)
-    mnode = root.key("motion", required=False)
-    if mnode is not None and not isinstance(mnode.value, bool):
-        raise mnode.fail("true or false (plan the motions between the end-points)", show(mnode.value))
-    cell.plan_motions = bool(mnode is not None and mnode.value)
+        cell = with_hand_access(cell, layout.held if layout is not None else None)
     check_cell(cell)  # physically possible: parts apart, on the table, in reach (kb.sanity)
     return cell

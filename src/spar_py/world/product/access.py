@@ -36,11 +36,11 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from spar_py.core.model import LOOSE_MAX_DEG, Grasp, Precedence, Product
+from spar_py.world.collision import CellCache
 from spar_py.world.product.grasp_report import ArmClear
 
 if TYPE_CHECKING:
     from spar_py.core.model import Cell
-    from spar_py.world.collision import CellCache
 
 __all__ = ["Access", "arm_clear_of", "hand_access", "with_hand_access"]
 
@@ -144,11 +144,12 @@ def _built_in_place(product: Product, W: np.ndarray) -> bool:
     return all(-(R @ np.asarray(i.direction, float))[2] >= limit for i in insertions(product))
 
 
-def with_hand_access(cell: Cell, cache: CellCache, held: Mapping[str, frozenset[str]] | None = None) -> None:
-    """Give ``cell`` its :func:`hand_access` (``held`` as there): its product (a copy: a loaded
-    product may be shared) gains the precedences, the cell the blocked grasps
-    (``Cell.blocked_grasps``)."""
-    acc = hand_access(cell, cache, held)
-    cell.blocked_grasps = dict(acc.blocked)
-    if acc.precedence and cell.product is not None:
-        cell.product = replace(cell.product, precedence=tuple(cell.product.precedence) + acc.precedence)
+def with_hand_access(cell: Cell, held: Mapping[str, frozenset[str]] | None = None) -> Cell:
+    """``cell`` with its :func:`hand_access` (``held`` as there, asked of a cache of its own):
+    a new cell whose product (a copy: a loaded product may be shared) gains the precedences
+    and which has the blocked grasps (``Cell.blocked_grasps``)."""
+    acc = hand_access(cell, CellCache(cell), held)
+    product = cell.product
+    if acc.precedence and product is not None:
+        product = replace(product, precedence=tuple(product.precedence) + acc.precedence)
+    return replace(cell, blocked_grasps=dict(acc.blocked), product=product)
