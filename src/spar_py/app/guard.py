@@ -85,12 +85,6 @@ class RunGuard:
         os.close(self._w)
         self.cleanup()
 
-    def remaining(self) -> float | None:
-        """Seconds left before the deadline (None without one; never below 0.01)."""
-        if self.deadline is None:
-            return None
-        return max(self.deadline - time.monotonic(), 0.01)
-
     # ------------------------------------------------------------------ outputs
 
     def staging(self, final: Path) -> Path:

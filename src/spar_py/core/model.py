@@ -6,6 +6,7 @@ transforms with column vectors, ``T_world_obj``.
 """
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Protocol, Sequence, Union
 
@@ -20,6 +21,12 @@ Face = Union[int, str]
 #: A ground Prolog term as data: an atom (str), a number, a list of terms, or a compound as a
 #: tuple (functor, arg1, ...), the form the bridge sends to Prolog (kb.terms renders it as text).
 Term = Union[str, int, float, list["Term"], tuple["Term", ...]]
+
+
+def natural_key(label: str) -> tuple[int | str, ...]:
+    """Sort key putting p1G2 before p1G10 and action_2 before action_10 (digit runs compare as
+    numbers), as partial_plan.pl's natural_key/2 does."""
+    return tuple(int(t) if t.isdigit() else t for t in re.split(r"(\d+)", label))
 
 
 @dataclass(frozen=True)
@@ -283,14 +290,6 @@ class Cell:
     #: A product cell's grasps no plan can seat each part with (world.product.access.hand_access): the
     #: assemble of that part does not offer them (kb.prolog_facts' mate_grasps).
     blocked_grasps: dict[str, frozenset[str]] = field(default_factory=dict)
-
-    def position_of(self, label: str) -> Position:
-        """The absolute position labelled ``label`` (KeyError if none)."""
-        return self.positions[label]
-
-    def is_pose_label(self, obj: str, label: str) -> bool:
-        """True if ``label`` names a stable pose of ``obj``."""
-        return label in self.objects[obj].poses
 
 
 @dataclass(frozen=True)

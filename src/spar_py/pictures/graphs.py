@@ -20,7 +20,8 @@ from pathlib import Path
 from typing import Any
 
 from spar_py.core.errors import SparError
-from spar_py.pictures.plandoc import as_doc, instance, natural_key, partial, pretty_term
+from spar_py.core.model import natural_key
+from spar_py.pictures.plandoc import as_doc, instance, partial, pretty_term
 
 __all__ = ["dot_executable", "implied_edges", "label_summary", "network_dot", "ordering_dot", "render_png"]
 

@@ -11,7 +11,7 @@ from typing import Any
 
 from spar_py.kb import parse_term, term_text
 
-__all__ = ["PlanDoc", "as_doc", "instance", "is_plan", "natural_key", "partial", "pretty_term", "term_parts"]
+__all__ = ["PlanDoc", "as_doc", "instance", "is_plan", "partial", "pretty_term", "term_parts"]
 
 PlanDoc = Mapping[str, Any]  # the plan JSON document
 
@@ -34,11 +34,6 @@ def instance(plan: PlanDoc) -> Mapping[str, Any]:
 def is_plan(plan: PlanDoc) -> bool:
     """True when the planner found a plan (outcome ``"plan"``)."""
     return plan.get("outcome") == "plan"
-
-
-def natural_key(label: str) -> tuple[Any, ...]:
-    """Sort key putting p1G2 before p1G10 and action_2 before action_10 (digit runs as numbers)."""
-    return tuple(int(t) if t.isdigit() else t for t in re.split(r"(\d+)", label))
 
 
 def pretty_term(term: str) -> str:

@@ -646,10 +646,6 @@ class Stop:
         return self.grasped or self.obj
 
 
-def _without(parts: Mapping[str, np.ndarray], key: str) -> dict[str, np.ndarray]:
-    return {k: v for k, v in parts.items() if k != key}
-
-
 #: Bound of the cell cache's table of approach / retreat pairs ("motion.lines").
 LINES_LIMIT = 1024
 

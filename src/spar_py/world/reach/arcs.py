@@ -21,8 +21,6 @@ Lengths are in the cell's unit, which is also the unit the robot was loaded in.
 """
 from __future__ import annotations
 
-import functools
-import re
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
@@ -31,7 +29,7 @@ import numpy as np
 
 from spar_py.core.errors import SparValueError
 from spar_py.core.geometry import same_stable_poses
-from spar_py.core.model import Cell, Face, Grasp, ObjectModel
+from spar_py.core.model import Cell, Face, Grasp, ObjectModel, natural_key
 from spar_py.core.units import from_mm, mm_per
 from spar_py.world.robot import GripperGeometry
 from spar_py.world.reach.workspace import Refusal, Requirement, ik_rows, requirement_clear_ik, requirement_state
@@ -45,17 +43,10 @@ __all__ = [
     "arc",
     "hand_above_table",
     "mate_reachable_pairs",
-    "natural_key",
     "reachable_pairs",
     "resting_faces",
     "solutions_for",
 ]
-
-
-@functools.lru_cache(maxsize=65536)
-def natural_key(label: str) -> tuple:
-    """Sort key putting p1G2 before p1G10 (digit runs compare as numbers)."""
-    return tuple(int(t) if t.isdigit() else t for t in re.split(r"(\d+)", label))
 
 
 @dataclass
@@ -68,7 +59,9 @@ class Arc:
 
 
 def _sorted_pairs(pairs: Iterable[tuple[str, str]]) -> list[list[str]]:
-    return [[g, p] for g, p in sorted(set(pairs), key=lambda gp: (natural_key(gp[0]), natural_key(gp[1])))]
+    pairs = set(pairs)
+    keys = {label: natural_key(label) for pair in pairs for label in pair}  # each label's key once
+    return [[g, p] for g, p in sorted(pairs, key=lambda gp: (keys[gp[0]], keys[gp[1]]))]
 
 
 def _object(cell: Cell, obj: str) -> ObjectModel:

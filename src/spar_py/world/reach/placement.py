@@ -267,11 +267,6 @@ def _occupant_polygon(entry: Sequence) -> np.ndarray:
     return _disc(np.asarray(entry[0], float), float(entry[1]))
 
 
-def _minkowski(P: np.ndarray, Q: np.ndarray) -> np.ndarray:
-    """(k, 2) the Minkowski sum of convex CCW polygons P and Q (edges merged by angle)."""
-    return _minkowski_batch(np.asarray(P, float)[None], np.asarray(Q, float)[None])[0]
-
-
 def _minkowski_batch(P: np.ndarray, Q: np.ndarray) -> np.ndarray:
     """(b, a + c, 2) the Minkowski sums of b pairs of convex CCW polygons P (b, a, 2) and
     Q (b, c, 2), each sum as :func:`_minkowski` forms it: both polygons started at their
@@ -287,12 +282,6 @@ def _minkowski_batch(P: np.ndarray, Q: np.ndarray) -> np.ndarray:
     steps = np.take_along_axis(E, np.argsort(ang, axis=1, kind="stable")[..., None], axis=1)
     walk = np.concatenate([np.zeros((len(E), 1, 2)), np.cumsum(steps, axis=1)[:, :-1]], axis=1)
     return (P[:, :1] + Q[:, :1]) + walk
-
-
-def _clear_of(M: np.ndarray, t: np.ndarray, gap: float) -> np.ndarray:
-    """(n,) bool: points t (n, 2) lie outside the convex CCW polygon M, at least ``gap``
-    from it."""
-    return _clear_of_each(np.broadcast_to(M, (len(t),) + np.shape(M)), t, gap)
 
 
 def _clear_of_each(M: np.ndarray, t: np.ndarray, gap: float) -> np.ndarray:
@@ -774,35 +763,6 @@ def _some_placement(cache: CellCache, obj: str, items: list[tuple[np.ndarray, Re
 #: met at the second (7 of 7 in the paper's cell), and one more row in a batched check costs
 #: far less than the chunk's own call it saves.
 FIRST_PLACEMENTS = 2
-
-
-def _any_placement(cell: Cell, cands: np.ndarray, X: np.ndarray, chunk: int = 48) -> np.ndarray:
-    """(m,) bool: for each X, some object pose of ``cands`` (n,4,4) with T_O @ X reachable.
-    Placements are tried a chunk at a time and a requirement is dropped once met, so the
-    usual case (met in the first chunk) costs a fraction of the whole grid.
-
-    The grid's placements differ only by a turn about world z and a shift in x, y, so
-    the height of the wrist for a given X is the same at all of them: an X whose wrist
-    is below the table top at the first placement (by more than rounding) is below it at
-    every one and fails without solving IK over the whole grid (below by more than
-    ROUND_MM: a prune only, as :func:`workspace.reaches` refuses every wrist below z = 0)."""
-    ok = np.zeros(len(X), dtype=bool)
-    if not len(cands):
-        return ok
-    if np.all(cands[:, 2, :] == cands[0, 2, :]):  # one z row: turns about z, shifts in x, y
-        T0 = np.einsum("ij,mjk->mik", cands[0], X)
-        below = wrist_height(cell.robot, T0) < -from_mm(cell.unit, ROUND_MM)
-    else:
-        below = np.zeros(len(X), dtype=bool)
-    for start in range(0, len(cands), chunk):
-        open_ = np.flatnonzero(~ok & ~below)
-        if not len(open_):
-            break
-        C = cands[start:start + chunk]
-        T = np.einsum("nij,mjk->nmik", C, X[open_]).reshape(-1, 4, 4)
-        hit = reachable_ignoring_collisions(cell.robot, T).reshape(len(C), len(open_)).any(axis=0)
-        ok[open_[hit]] = True
-    return ok
 
 
 #: Bounds of the cell cache's tables: some_placement_reaches's answers per
