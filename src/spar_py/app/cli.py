@@ -673,7 +673,7 @@ def exiting(code: object = ...) -> None:
     with the SystemExit ``code`` that :func:`main` raised (``...``: it raised none). Move every
     object to the collector's permanent generation (gc.freeze), so the interpreter's shutdown
     collections skip the heap numpy, casadi, the embedded Prolog's bridge and the plan left
-    (about 50 ms of a cold ``spar plan``, more than the run's own output); then, for a run
+    (in a cold ``spar plan``, more than the run's own output); then, for a run
     that ended with a plan or without one (codes 0 and 1), :func:`_end_now`. Every output file
     is closed and in place before :func:`main` exits. Neither when a LEAK_REPORTING library is
     loaded (a plan with motions: OMPL): the usual shutdown then runs."""
@@ -686,7 +686,7 @@ def exiting(code: object = ...) -> None:
 
 def _end_now(code: int) -> None:
     """End the process with ``code`` at once (os._exit), skipping the interpreter's teardown,
-    which frees every module and object one by one (about 6 ms of a cold ``spar plan``), once
+    which frees every module and object one by one, once
     what that shutdown would still do for this run is done: Python's stdout and stderr and
     SWI-Prolog's user_output and user_error flushed. Returns (the usual shutdown follows) if a
     flush fails (a closed pipe: the usual path reports it), if a thread other than a

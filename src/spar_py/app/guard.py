@@ -159,7 +159,7 @@ class RunGuard:
         with them and leave a half-emptied directory behind.
 
         shutil is imported only here and in :meth:`_discard` (a plan without outputs never
-        needs it: 2 ms of a cold start), and only once a temporary exists, when staging's
+        needs it), and only once a temporary exists, when staging's
         tempfile has imported it: a stop on the watchdog's thread never runs an import."""
         if not self._temporaries:
             return

@@ -89,7 +89,7 @@ def run_on_cluster(paths: list[str], client: Any, progress: Any = None) -> list[
     worker is rescheduled by Dask; one that Dask gives up on (``KilledWorker``) is
     submitted again, at most :data:`CLUSTER_RETRIES` times; any other failure of a task
     (not a SparError, which its row reports) is an ERROR row naming it."""
-    # distributed: ~0.8 s at import, an optional extra (spar-py[cluster]): --scheduler only
+    # distributed: imported on first use, an optional extra (spar-py[cluster]): --scheduler only
     from distributed import as_completed
     from distributed.scheduler import KilledWorker
 

@@ -101,7 +101,7 @@ def _entries_symbolic(x: object) -> bool:
 
 def as_sx(M: Any) -> ca.SX:
     """``M`` as a CasADi SX matrix (numbers become constant entries; MX is refused)."""
-    import casadi as ca  # ~80 ms at import: only a symbolic caller pays for it
+    import casadi as ca  # only a symbolic caller pays for it
 
     if isinstance(M, ca.SX):
         return M

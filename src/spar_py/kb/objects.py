@@ -100,7 +100,7 @@ def load_object(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, o
         if geometry is None:
             root.key(missing[0])  # raises: key missing
         step = geometry.step
-        from spar_py.world.parts import derive_part  # 10 ms, 23 modules at import: a derivation only
+        from spar_py.world.parts import derive_part  # on first use: a derivation only
 
         grip = _derive_gripper(unit, opening, gripper)
         try:
@@ -369,7 +369,7 @@ def _geometry(root: Node, path: Path, unit: str, scale: float) -> tuple[Any, tup
         raise mnode.fail("mesh: or shape:, not both")
     if mnode is None and snode is None:
         return None, ()
-    from spar_py.world.parts import Geometry, Primitive  # 4.5 ms at import: only a model with a shape needs it
+    from spar_py.world.parts import Geometry, Primitive  # only a model with a shape needs it
 
     if mnode is not None:
         ref = path.parent / mnode.text()
@@ -481,7 +481,7 @@ def _solid(node: Node, scale: float) -> Solid:
 def _derive_gripper(unit: str, opening: float | None, gripper: GripperGeometry | None) -> Any:
     """The gripper grasps are derived and checked for (world.parts.derive.Gripper): the robot's
     own where given, else the default fingers at ``opening`` (or DEFAULT_OPENING_MM)."""
-    from spar_py.world.parts import Gripper  # 10 ms at import: a derivation or a check only
+    from spar_py.world.parts import Gripper  # on first use: a derivation or a check only
 
     if gripper is not None:
         return Gripper.of_robot(gripper)
@@ -497,7 +497,7 @@ def check_against_shape(path: str | Path, root: Node, model: ObjectModel, unit: 
     hand = tuple(k for k in DERIVABLE if k in root.value)
     if model.geometry is None or not hand:
         return
-    from spar_py.world.parts import check_entries  # 10 ms at import: `spar kb check` of a shape only
+    from spar_py.world.parts import check_entries  # on first use: `spar kb check` of a shape only
 
     grip = _derive_gripper(unit, opening, gripper)
     try:

@@ -126,7 +126,7 @@ def _axes(s: Solid, sides: int = CYL_SIDES) -> tuple[np.ndarray, np.ndarray]:
 
 def _hull_axes(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(unique face normals, unique edge directions) of the convex hull of points P (k, 3)."""
-    from scipy.spatial import ConvexHull  # about 0.8 s to import: only a part with a hull (a mesh) needs it
+    from scipy.spatial import ConvexHull  # only a part with a hull (a mesh) needs it
 
     h = ConvexHull(P)
     normals = np.unique(np.round(h.equations[:, :3], 9), axis=0)

@@ -153,7 +153,7 @@ class _Points:
         V, idx = np.unique(self.V, axis=0, return_index=True)
         keep = idx
         if len(V) > 4:
-            from scipy.spatial import ConvexHull, QhullError  # ~0.7 s at import: only a pruned vertex set
+            from scipy.spatial import ConvexHull, QhullError  # only a pruned vertex set
 
             try:
                 keep = idx[ConvexHull(V).vertices]
@@ -170,7 +170,7 @@ def _flat_vertices(V: np.ndarray) -> tuple[np.ndarray, float]:
     of their projection on their best plane (or line), and how far that can leave out: every
     point is within ``h`` of the plane (its largest residual), so within 2 h (plus rounding)
     of the hull of the kept points themselves."""
-    from scipy.spatial import ConvexHull, QhullError  # ~0.7 s at import: see prune
+    from scipy.spatial import ConvexHull, QhullError  # see prune
 
     c = V.mean(axis=0)
     D = V - c

@@ -50,7 +50,7 @@ KEEP_LOADED = 8
 def _malloc_trim() -> Any:
     """glibc's malloc_trim(3), or None where the C library has none."""
     try:
-        import ctypes  # ~2 ms at import: only a run that trims needs it
+        import ctypes  # only a run that trims needs it
 
         return ctypes.CDLL(None).malloc_trim
     except (OSError, AttributeError):
@@ -162,7 +162,7 @@ print("state ok" if ok else "state refused")
 def _starts_from(state: Path, roots: list[Path]) -> bool:
     """True if a fresh process starts SWI-Prolog from ``state`` and finds the planner there
     (a state SWI-Prolog cannot read aborts the process that tries: never this one)."""
-    import subprocess  # ~8 ms at import: only when a saved state is tested (numpy loads it later anyway)
+    import subprocess  # only when a saved state is tested (numpy loads it later anyway)
 
     try:
         r = subprocess.run([sys.executable, "-c", _CHECK_STATE, str(PACKAGE_DIR.parent), str(state),
@@ -510,7 +510,7 @@ class Engine(ProblemRegistry):
         so a long-lived process planning again and again stays at one size
         (bench/memory.py)."""
         self._query_once("trim_stacks")
-        if self._trim is False:  # looked up after the first run: ctypes is 2 ms of a cold start
+        if self._trim is False:  # looked up after the first run: a cold start need not import ctypes
             self._trim = _malloc_trim()
         if self._trim is not None:
             self._trim(0)

@@ -23,9 +23,8 @@ with their hashes in the manifest and checked on every load.
 Beside the image, the cache keeps a **saved state** of SWI-Prolog (``qsave_program/2``)
 taken just after a process started janus and loaded the image: the Prolog system,
 library(janus) and the planner, in one file. A process that finds it starts SWI-Prolog
-from it (``-x``, engine.py's ``_import_janus``): about 15 ms, where janus' own start
-compiles library(janus) and its libraries from source (some 50 ms) before the image can
-even load. Its key is computed before Prolog runs, so it cannot ask SWI-Prolog its
+from it (``-x``, engine.py's ``_import_janus``), where janus' own start compiles
+library(janus) and its libraries from source before the image can even load. Its key is computed before Prolog runs, so it cannot ask SWI-Prolog its
 version: it holds the sources' key parts, the SWI-Prolog home with the size and mtime of
 its boot file, and janus' own files (the ``_swipl`` extension's size and mtime, the hash
 of janus.pl, which the state holds compiled). A state is published only once a fresh
@@ -51,7 +50,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 try:  # hashlib.sha256 without hashlib: its import loads OpenSSL's libcrypto and _blake2,
-    # some 5 ms of every cold start for a few dozen small files (the digests are the same)
+    # a cost of every cold start for a few dozen small files (the digests are the same)
     from _sha256 import sha256  # CPython 3.11
 except ImportError:  # pragma: no cover - other versions and implementations
     try:
@@ -232,7 +231,7 @@ class Entry:
         """Write the manifest (atomically, last): the entry is complete from now on. It holds
         the image's own hash and ``extra``: the files the image holds beyond the scanned
         directories, with their hashes."""
-        import tempfile  # ~6 ms at import: only when a manifest is written
+        import tempfile  # only when a manifest is written
 
         doc = {"format": FORMAT, "image": self.image_name, "sha256": file_digest(self.image), "extra": extra}
         fd, tmp = tempfile.mkstemp(dir=self.directory, prefix=".manifest.", suffix=".tmp")
@@ -280,7 +279,7 @@ def building(e: Entry, wait: bool = True) -> Iterator[bool]:
 def evict(base: Path, keep: int = KEEP, spare: str | None = None) -> list[Path]:
     """Remove all but the ``keep`` most recently used entries under ``base`` (never
     ``spare``); return the removed directories. Best effort: errors are ignored."""
-    import shutil  # ~2 ms at import (bz2, lzma): only when entries are evicted
+    import shutil  # only when entries are evicted
 
     entries: list[tuple[float, Path]] = []
     try:

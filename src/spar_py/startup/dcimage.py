@@ -4,8 +4,7 @@
 ``__setattr__`` ... as Python source and compiles it with ``exec`` when the class is
 defined. A cold ``spar plan`` defines some 54 dataclasses (model, kb, planner,
 uncertainty, the world layer), about 290 generated functions, and compiling their source
-is the largest single cost of importing the planner: some 35-45 ms, more than half of
-it (bench/coldstart.py).
+is the largest single cost of importing the planner (bench/coldstart.py, bench/RESULTS.md).
 
 This module compiles each such source text once and keeps the code objects in a
 ``marshal`` file in the planner's cache directory (qlf.py's, ``SPAR_QLF_CACHE``; ``off``

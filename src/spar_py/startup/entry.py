@@ -48,8 +48,8 @@ def one_blas_thread() -> None:
 
     The planner's numerical work is small: 4x4 transforms and batches of a few hundred rows,
     which BLAS runs on one thread anyway. numpy's OpenBLAS otherwise starts one worker per
-    core as numpy loads, and the workers spin while idle: on two cores that is about 100 ms
-    of CPU taken from the planner in a cold ``spar plan`` (bench/coldstart.py), and N
+    core as numpy loads, and the workers spin while idle, taking CPU from the planner in a
+    cold ``spar plan`` (bench/coldstart.py), and N
     workers of ``spar regress -j N`` would start N pools on one machine."""
     if not any(v in os.environ for v in BLAS_THREADS):
         os.environ["OPENBLAS_NUM_THREADS"] = "1"

@@ -2,8 +2,7 @@
 
 The options and the failure record of the motion planner, apart from the planner itself so
 that a plan without motions (a cell that does not ask for them, ``--no-motion``, phase 1
-alone) need not import it: motion.py is some 2 ms of a cold ``spar plan``. motion.py
-re-exports every name.
+alone) need not import it; the room's door exports both.
 """
 from __future__ import annotations
 

@@ -484,7 +484,7 @@ WALK_SWITCHES = 16
 
 def _walk(Q: np.ndarray, ok: np.ndarray, q0: np.ndarray, limits: np.ndarray) -> np.ndarray | None:
     """:func:`_walk_exact`'s result, without its per-point numpy calls (a tool line near a
-    singularity has thousands of points: 1.1 million calls, 31 s, for one UR16e cell's lines).
+    singularity has thousands of points, and per-point calls dominated such lines).
 
     From each point whose row is known, the walk guesses that the next points stay on the same
     branch (the closed forms number their branches consistently), computes their values by
