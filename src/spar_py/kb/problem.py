@@ -405,7 +405,7 @@ def derived_mate(node: Node, what: str, objects: Mapping[str, ObjectModel], peg:
     every pose when the peg has no shape). The planner chooses the turn (kb/templates/spar_actions.pl).
     The mate is checked (:func:`check_mate`; ``what`` names it in messages).
     """
-    from spar_py.world.parts import assembly_transforms, part_mesh, poses_clear_of_table  # on first use: derived T_a only
+    from spar_py.world.parts import assembly_transforms, part_mesh, poses_clear_of_table  # derived T_a only
 
     (pobj, fp), (hobj, fh) = peg, hole
     if fp.geometry is None or fh.geometry is None:
@@ -466,7 +466,7 @@ def _obstacles(root: Node, base: Path, rad_per: float) -> list:
     ``cylinder: {radius, z: [lo, hi], center: [x, y]}`` (axis along world z) or ``mesh: FILE``
     placed at ``xyz``, ``rpy`` (its convex hull: a conservative stand-in for a concave fixture);
     ``support: true`` marks one parts may rest on (its top: a nest, a riser, a fixture plate)."""
-    from spar_py.world.collision import Obstacle, box, convex, cylinder  # on first use: paid by a load, not by the import
+    from spar_py.world.collision import Obstacle, box, convex, cylinder  # paid by a load, not by the import
 
     onode = root.key("obstacles", required=False)
     out: list = []

@@ -22,14 +22,15 @@ with their hashes in the manifest and checked on every load.
 
 Beside the image, the cache keeps a **saved state** of SWI-Prolog (``qsave_program/2``)
 taken just after a process started janus and loaded the image: the Prolog system,
-library(janus) and the planner, in one file. A process that finds it starts SWI-Prolog
-from it (``-x``, engine.py's ``_import_janus``), where janus' own start compiles
-library(janus) and its libraries from source before the image can even load. Its key is computed before Prolog runs, so it cannot ask SWI-Prolog its
-version: it holds the sources' key parts, the SWI-Prolog home with the size and mtime of
-its boot file, and janus' own files (the ``_swipl`` extension's size and mtime, the hash
-of janus.pl, which the state holds compiled). A state is published only once a fresh
-process has started from it (a state SWI-Prolog cannot read aborts the process that
-tries), and it is used only if its bytes still hash to what its manifest says.
+library(janus) and the planner, in one file. A process that finds it starts SWI-Prolog from
+it (``-x``, engine.py's ``_import_janus``), where janus' own start compiles library(janus)
+and its libraries from source before the image can even load. Its key is computed before
+Prolog runs, so it cannot ask SWI-Prolog its version: it holds the sources' key parts, the
+SWI-Prolog home with the size and mtime of its boot file, and janus' own files (the
+``_swipl`` extension's size and mtime, the hash of janus.pl, which the state holds
+compiled). A state is published only once a fresh process has started from it (a state SWI-
+Prolog cannot read aborts the process that tries), and it is used only if its bytes still
+hash to what its manifest says.
 ``SPAR_SAVED_STATE=off`` keeps janus' own start (and the image).
 
 The cache is filled at set-up (``spar cache``, run by scripts/setup.sh) and

@@ -172,7 +172,7 @@ class PlanRun:
                 st[k] = g.get(k)
         instance["motion"] = None
         if data.motion is not None:
-            from spar_py.world.motion import motion_summary  # on first use: a run without motions need not import motion
+            from spar_py.world.motion import motion_summary  # a run without motions skips it
 
             instance["motion"] = motion_summary(data.motion)
         return data.motion
