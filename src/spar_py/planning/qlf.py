@@ -28,9 +28,9 @@ and its libraries from source before the image can even load. Its key is compute
 Prolog runs, so it cannot ask SWI-Prolog its version: it holds the sources' key parts, the
 SWI-Prolog home with the size and mtime of its boot file, and janus' own files (the
 ``_swipl`` extension's size and mtime, the hash of janus.pl, which the state holds
-compiled). A state is published only once a fresh process has started from it (a state SWI-
-Prolog cannot read aborts the process that tries), and it is used only if its bytes still
-hash to what its manifest says.
+compiled). A state is published only once a fresh process has started from it (a state
+SWI-Prolog cannot read aborts the process that tries), and it is used only if its bytes
+still hash to what its manifest says.
 ``SPAR_SAVED_STATE=off`` keeps janus' own start (and the image).
 
 The cache is filled at set-up (``spar cache``, run by scripts/setup.sh) and
