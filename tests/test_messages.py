@@ -11,7 +11,8 @@ import pytest
 from spar_py.core.errors import KBError
 from spar_py.kb import load_problem
 
-ROOT = Path(__file__).resolve().parent.parent
+from paths import ROOT
+
 KB = ROOT / "kb"
 
 
