@@ -106,13 +106,6 @@ NO_PLAN_LINES = {
 }
 
 
-@pytest.fixture(scope="module")
-def planner():
-    from spar_py.planning.planner import Planner
-
-    return Planner()
-
-
 @pytest.mark.parametrize("name", sorted(NO_PLAN_LINES))
 def test_no_plan_ends_with_one_line_in_the_users_terms(planner, name: str) -> None:
     plan = planner.plan(KB / "problems" / f"{name}.yaml")

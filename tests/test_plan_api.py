@@ -19,11 +19,6 @@ PROBLEMS = ROOT / "kb" / "problems"
 
 
 @pytest.fixture(scope="module")
-def planner() -> Planner:
-    return Planner()
-
-
-@pytest.fixture(scope="module")
 def with_motions(planner: Planner) -> Plan:
     """wall_detour: its file asks for motions (motion: true)."""
     plan = planner.plan(str(PROBLEMS / "wall_detour.yaml"))

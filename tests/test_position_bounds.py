@@ -30,11 +30,6 @@ KEYS = ("dx", "dy", "dz", "dtheta_deg")
 
 
 @pytest.fixture(scope="module")
-def planner() -> Planner:
-    return Planner()
-
-
-@pytest.fixture(scope="module")
 def plans(planner: Planner) -> dict:
     """Each cell of CELLS with its plan, and its plan's JSON as written and read back."""
     out = {}
