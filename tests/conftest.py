@@ -17,7 +17,12 @@ another's half-written entry.
 """
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import pytest
+
+if TYPE_CHECKING:
+    from spar_py.planning.planner import Planner
 
 #: Files whose shared fixtures cost the most (measured with --durations, heaviest first).
 HEAVY_FIRST = ("test_bench", "test_fuzz", "test_bench_run", "test_signals", "test_schema", "test_motion")
@@ -37,3 +42,14 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     slow_modules = {item.module.__name__ for item in items
                     if item.get_closest_marker("slow") and getattr(item, "module", None)}
     items.sort(key=lambda it: _order(it, slow_modules))
+
+
+@pytest.fixture(scope="module")
+def planner() -> Planner:
+    """A Planner with the default options, built once per test file and shared by its
+    tests. A file needing other options defines its own
+    ``planner`` (test_phase2.py: max_instances=5). The import is in the fixture (as
+    test_messages.py had it), so loading this conftest imports nothing of spar_py."""
+    from spar_py.planning.planner import Planner
+
+    return Planner()

@@ -6,13 +6,12 @@ from __future__ import annotations
 import math
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 from bench import __main__ as bench_main
 from bench import ik, planning, supinf
 
-ROOT = Path(__file__).resolve().parent.parent
+from paths import ROOT
 
 
 def _positive(x: object) -> bool:

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 from bench import planning
 
-ROOT = Path(__file__).resolve().parent.parent
+from paths import ROOT
 
 
 @pytest.mark.slow

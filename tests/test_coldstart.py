@@ -20,7 +20,8 @@ import pytest
 
 from spar_py.planning import qlf
 
-ROOT = Path(__file__).resolve().parent.parent
+from paths import ROOT
+
 
 #: Run in the copy: load the planner, report how, and ask it two questions (the default
 #: action bound from spar_defaults.pl and whether a probe predicate exists).

@@ -22,7 +22,8 @@ import pytest
 from spar_py.startup import dcimage
 from spar_py.planning import qlf
 
-ROOT = Path(__file__).resolve().parent.parent
+from paths import ROOT
+
 METHODS = ("__init__", "__repr__", "__eq__", "__hash__", "__setattr__", "__delattr__", "__lt__", "__le__",
            "__gt__", "__ge__", "__getstate__", "__setstate__")
 

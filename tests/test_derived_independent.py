@@ -31,7 +31,8 @@ import pytest
 from spar_py.core.errors import KBError
 from spar_py.kb.products import load_product, load_product_derived
 
-ROOT = Path(__file__).resolve().parents[1]
+from paths import ROOT
+
 FABRICA = ROOT / "kb" / "products" / "fabrica"
 ASSEMBLIES = sorted(p.name for p in FABRICA.iterdir() if p.is_dir() and any(p.glob("*.ply")))
 DECLARED = ("plate_pins", "bracket_kit", "shaft_stack")

@@ -6,7 +6,7 @@ import re
 import struct
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
+from paths import ROOT
 
 
 def test_quickstart_python_example(capsys) -> None:

@@ -14,8 +14,7 @@ from spar_py.planning.engine import engine, swipl_record
 from spar_py.core.errors import PrologError
 from spar_py.planning.planner import Outcome, Planner
 
-ROOT = Path(__file__).resolve().parent.parent
-SPAR = [sys.executable, "-m", "spar_py"]
+from paths import ROOT, SPAR
 
 
 def test_runs_the_recorded_swi_prolog() -> None:

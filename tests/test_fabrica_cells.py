@@ -16,7 +16,8 @@ import trimesh
 from spar_py.core.errors import KBError
 from spar_py.kb.problem import load_problem
 
-ROOT = Path(__file__).resolve().parents[1]
+from paths import ROOT
+
 FABRICA = ROOT / "kb" / "products" / "fabrica"
 #: UR5e's published reach (mm, from the base axis to the flange) plus its tool's 150 mm.
 UR5E_REACH_MM = 850.0 + 150.0

@@ -1,15 +1,14 @@
 """The shortcuts taken for speed (issue 7) give the answers of the plain computations they replace."""
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 
 from spar_py.world.reach import placement as placement
 from spar_py.kb import load_problem
 from spar_py.world.run import CellCache
 
-ROOT = Path(__file__).resolve().parent.parent
+from paths import ROOT
+
 CELL = load_problem(ROOT / "kb/problems/peg_in_block.yaml")
 
 

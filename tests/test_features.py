@@ -31,7 +31,8 @@ from spar_py.phase2.uncertainty import (
 )
 from spar_py.planning.planner import Planner
 
-ROOT = Path(__file__).resolve().parent.parent
+from paths import ROOT
+
 PUMA = ROOT / "kb" / "robots" / "puma762.yaml"
 DEG = math.pi / 180
 

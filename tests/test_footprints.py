@@ -20,7 +20,8 @@ from spar_py.world.run import CellCache
 from spar_py.core.model import Cell, ObjectModel
 from spar_py.planning.planner import Planner
 
-ROOT = Path(__file__).resolve().parent.parent
+from paths import ROOT
+
 PROBLEMS = sorted((ROOT / "kb/problems").glob("*.yaml"))
 CLEARANCE_MM = 25.4   # the gap the planner promises between footprints (1 in)
 MARGIN_MM = 304.8     # free table without placement_regions: initial positions +- 12 in

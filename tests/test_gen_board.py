@@ -15,7 +15,7 @@ import yaml
 
 from spar_py.app import gen
 
-ROOT = Path(__file__).resolve().parent.parent
+from paths import ROOT
 
 
 def _spar(*args: str) -> subprocess.CompletedProcess:

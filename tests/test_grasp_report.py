@@ -18,7 +18,8 @@ from spar_py.kb.products import load_product
 from spar_py.world.product.grasp_report import grasp_report
 from spar_py.world.robot.model import GripperGeometry
 
-ROOT = Path(__file__).resolve().parents[1]
+from paths import ROOT
+
 
 CUBE = """object: cube
 units: {length: mm, angle: deg}

@@ -16,8 +16,8 @@ from spar_py.core.geometry import rotx, trans
 from spar_py.kb import load_robot
 from spar_py.world.robot.model import Robot
 from craig_reference import craig_fk
+from paths import ROOT
 
-ROOT = Path(__file__).resolve().parent.parent
 PUMA = ROOT / "kb" / "robots" / "puma762.yaml"
 TWO_PI = 2 * math.pi
 

@@ -6,7 +6,6 @@ not the code under test."""
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,8 +17,8 @@ from spar_py.core.geometry import inv, rotx, rotz, rpy, trans
 from spar_py.kb import load_robot
 from spar_py.world.robot.model import LIMIT_TOL, Robot
 from craig_reference import craig_fk
+from paths import ROOT
 
-ROOT = Path(__file__).resolve().parent.parent
 PUMA = ROOT / "kb" / "robots" / "puma762.yaml"
 TWO_PI = 2 * math.pi
 

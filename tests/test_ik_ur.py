@@ -7,7 +7,6 @@ from the robot files, their conversion to Craig's table, or the code under test.
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,7 +14,8 @@ import pytest
 from spar_py.kb import load_robot
 from spar_py.world.robot.model import Robot
 
-ROOT = Path(__file__).resolve().parent.parent
+from paths import ROOT
+
 TWO_PI = 2 * math.pi
 # Universal Robots' published standard DH (mm, deg): (alpha_i, a_i, d_i) per joint
 PUBLISHED = {

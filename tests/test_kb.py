@@ -14,7 +14,8 @@ from spar_py.app.cli import main
 from spar_py.core.errors import KBError, SparValueError
 from spar_py.kb import facts, load_object, load_problem, load_robot, parse_term, term_text
 
-ROOT = Path(__file__).resolve().parent.parent
+from paths import ROOT
+
 BAD = sorted((ROOT / "tests" / "bad").glob("*.yaml"))
 PAPER = ROOT / "kb" / "problems" / "peg_in_block.yaml"
 PUMA = ROOT / "kb" / "robots" / "puma762.yaml"

@@ -11,7 +11,8 @@ from pathlib import Path
 
 from spar_py.planning.engine import engine
 
-ROOT = Path(__file__).resolve().parent.parent
+from paths import ROOT
+
 CALL = re.compile(r"(?<![\w.])kb:([a-z]\w*)\(")
 
 

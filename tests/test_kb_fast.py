@@ -28,7 +28,8 @@ from spar_py.app.gen import generate_assembly
 from spar_py.core.geometry import tm_rows
 from spar_py.core.memo import Memo
 
-ROOT = Path(__file__).resolve().parent.parent
+from paths import ROOT
+
 YAMLS = sorted(p for d in ("kb", "tests") for p in (ROOT / d).rglob("*.yaml"))
 
 

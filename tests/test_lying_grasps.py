@@ -13,8 +13,6 @@ The geometry is checked with our own code: the PLY files read by trimesh alone (
 frame, which is a mesh part's object frame), the gripper's boxes from the robot file's sizes."""
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 import trimesh
@@ -24,7 +22,8 @@ from spar_py.world.reach import arcs as arcs
 from spar_py.world.run import CellCache
 from spar_py.world.reach.workspace import Requirement, assembled_touch, requirement_clear
 
-ROOT = Path(__file__).resolve().parents[1]
+from paths import ROOT
+
 STOOL = ROOT / "kb" / "products" / "fabrica" / "stool_circular"
 CM = 10.0  # mm per cm
 #: The UR5e file's gripper (kb/robots/ur5e.yaml: a 2F-85, the loader's default finger boxes): mm.

@@ -11,7 +11,8 @@ import pytest
 from spar_py.core.errors import KBError
 from spar_py.kb import load_problem
 
-ROOT = Path(__file__).resolve().parent.parent
+from paths import ROOT
+
 KB = ROOT / "kb"
 
 
@@ -103,13 +104,6 @@ NO_PLAN_LINES = {
                      "approach to action_2 (pickup(peg, p1G10)), blocked by finger_l and lid_e: the tool line is "
                      "blocked 2 along it",
 }
-
-
-@pytest.fixture(scope="module")
-def planner():
-    from spar_py.planning.planner import Planner
-
-    return Planner()
 
 
 @pytest.mark.parametrize("name", sorted(NO_PLAN_LINES))

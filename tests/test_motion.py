@@ -21,8 +21,8 @@ from spar_py.world.run import CellCache
 sys.path.insert(0, str(Path(__file__).parent))
 from craig_reference import craig_fk  # noqa: E402
 from motion_fake import FakeScene, arm_points  # noqa: E402
+from paths import ROOT  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
 PUMA = ROOT / "kb" / "robots" / "puma762.yaml"
 MARGIN = 0.1  # in
 

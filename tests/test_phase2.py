@@ -17,7 +17,8 @@ from spar_py.kb import load_problem
 from spar_py.planning.planner import Planner
 from spar_py.world.run import CellCache
 
-ROOT = Path(__file__).resolve().parent.parent
+from paths import ROOT
+
 PROBLEMS = ROOT / "kb" / "problems"
 
 

@@ -9,7 +9,6 @@ parts done, so the condition holds), and each run that gets that far must stop t
 from __future__ import annotations
 
 import random
-from pathlib import Path
 
 import pytest
 
@@ -20,7 +19,7 @@ from spar_py.kb import load_problem
 from spar_py.planning.planner import Planner
 from spar_py.world.product.grasp_report import seat_order
 
-ROOT = Path(__file__).resolve().parents[1]
+from paths import ROOT
 
 
 @pytest.fixture(scope="module")

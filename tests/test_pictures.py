@@ -31,7 +31,8 @@ from spar_py.pictures.cell import arm_polyline, gripper_segments, hole_mouth, ob
 from spar_py.pictures.graphs import DPI, implied_edges
 from spar_py.pictures.scene import held_grasp, step_world
 
-ROOT = Path(__file__).resolve().parent.parent
+from paths import ROOT
+
 PROBLEM = ROOT / "kb" / "problems" / "peg_in_block.yaml"
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 

@@ -10,7 +10,8 @@ import pytest
 
 from spar_py.kb import load_problem
 
-ROOT = Path(__file__).resolve().parent.parent
+from paths import ROOT
+
 PROBLEMS = ROOT / "kb" / "problems"
 #: The 3-D (whole-cell) panel of a 1200 x 720 px cell picture: rows, columns (draw_figure's axes
 #: at (0, 0.09, 0.6, 0.82) of the figure, the legend below it left out).

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,7 +16,8 @@ from spar_py.core.geometry import rotz
 from spar_py.kb import load_problem
 from spar_py.world.run import CellCache
 
-ROOT = Path(__file__).resolve().parent.parent
+from paths import ROOT
+
 CELL = ROOT / "kb/problems/peg_in_block.yaml"
 GAP = 1.0  # CLEARANCE_MM in the paper cell's inches
 BAND = 1e-6  # placements this close to the clearance either way are not judged

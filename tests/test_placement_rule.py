@@ -1,8 +1,6 @@
 """Issue 8: put-downs the arm can really reach, against the paper's stable-pose rule."""
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -10,7 +8,7 @@ from spar_py.core.geometry import rotz, trans
 from spar_py.kb import load_problem
 from spar_py.planning.planner import Planner
 
-ROOT = Path(__file__).resolve().parent.parent
+from paths import ROOT
 
 
 def _reaches(fk: np.ndarray, tool_pose: list) -> bool:

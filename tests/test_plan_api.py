@@ -6,7 +6,6 @@ from __future__ import annotations
 import json
 import os
 import re
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,13 +13,9 @@ import pytest
 from spar_py import Planner
 from spar_py.planning.planner import Plan, Step
 
-ROOT = Path(__file__).resolve().parent.parent
+from paths import ROOT
+
 PROBLEMS = ROOT / "kb" / "problems"
-
-
-@pytest.fixture(scope="module")
-def planner() -> Planner:
-    return Planner()
 
 
 @pytest.fixture(scope="module")

@@ -11,7 +11,6 @@ from __future__ import annotations
 import itertools
 import json
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -22,16 +21,12 @@ from spar_py.phase2 import instance as phase2
 from spar_py.phase2 import uncertainty as ur
 from spar_py.world.run import CellCache
 
-ROOT = Path(__file__).resolve().parents[1]
+from paths import ROOT
+
 PROBLEMS = ROOT / "kb" / "problems"
 #: Cells whose plans sense (large_uncertainty), squeeze (squeeze), turn a part over and insert.
 CELLS = ("large_uncertainty", "squeeze", "peg_in_block", "ur5e_peg_in_block")
 KEYS = ("dx", "dy", "dz", "dtheta_deg")
-
-
-@pytest.fixture(scope="module")
-def planner() -> Planner:
-    return Planner()
 
 
 @pytest.fixture(scope="module")

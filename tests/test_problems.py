@@ -14,7 +14,8 @@ from spar_py.planning.engine import engine
 from spar_py.kb import load_problem
 from spar_py.world.run import CellCache
 
-ROOT = Path(__file__).resolve().parent.parent
+from paths import ROOT
+
 PROBLEMS = sorted((ROOT / "kb" / "problems").glob("*.yaml"))
 
 ASSEMBLE = "assemble(peg,block,[[peg_face],[block_face]],trans_1,vec_1)"

@@ -15,7 +15,8 @@ from spar_py.kb import load_problem
 from spar_py.planning.planner import Planner
 from spar_py.world.product import products as wp
 
-ROOT = Path(__file__).resolve().parent.parent
+from paths import ROOT
+
 
 BLOCK = """object: block
 units: {length: mm, angle: deg}

@@ -21,7 +21,8 @@ from spar_py.kb import load_problem
 from spar_py.kb.products import load_product
 from spar_py.planning.planner import Planner
 
-ROOT = Path(__file__).resolve().parent.parent
+from paths import ROOT
+
 PROBLEMS = ROOT / "kb" / "problems"
 PRODUCTS = ROOT / "kb" / "products"
 CELLS = ("plate_pins", "bracket_kit", "shaft_stack", "board20")

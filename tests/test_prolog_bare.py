@@ -15,7 +15,8 @@ from pathlib import Path
 
 from spar_py.planning.engine import swipl_record
 
-ROOT = Path(__file__).resolve().parent.parent
+from paths import ROOT
+
 BARE_PLT = ROOT / "tests" / "prolog" / "bare" / "spar.plt"
 QUICKSTART = ROOT / "docs" / "quickstart.md"
 

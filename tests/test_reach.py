@@ -20,7 +20,8 @@ from spar_py.world.reach.arcs import (
     solutions_for,
 )
 
-ROOT = Path(__file__).resolve().parent.parent
+from paths import ROOT
+
 PUMA = ROOT / "kb" / "robots" / "puma762.yaml"
 FACES = ("top", "bottom", "xp", "xn", "yp", "yn")
 GRASPS = ["g1", "g2", "g10"]

@@ -10,7 +10,8 @@ import pytest
 from spar_py.app.guard import RunGuard
 from spar_py.app.regress import run_regression
 
-ROOT = Path(__file__).resolve().parent.parent
+from paths import ROOT
+
 KB = ROOT / "kb"
 
 

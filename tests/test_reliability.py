@@ -3,14 +3,13 @@ from __future__ import annotations
 
 import json
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
+from paths import ROOT, SPAR
+
 BAD = sorted((ROOT / "tests" / "bad").glob("*.yaml"))
-SPAR = [sys.executable, "-m", "spar_py"]
 
 
 def spar(*args: str, timeout: float = 300) -> subprocess.CompletedProcess[str]:

@@ -2,11 +2,8 @@
 from __future__ import annotations
 
 import subprocess
-import sys
-from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
-SPAR = [sys.executable, "-m", "spar_py"]
+from paths import ROOT, SPAR
 
 
 def session(script: str) -> subprocess.CompletedProcess[str]:

@@ -14,7 +14,8 @@ from spar_py.core.errors import KBError, SparValueError
 from spar_py.kb import load_problem, load_robot
 from spar_py.world.robot.model import Robot, check_against_urdf, read_urdf_chain, robot_from_urdf, standard_to_modified
 
-ROOT = Path(__file__).resolve().parent.parent
+from paths import ROOT
+
 URDF = ROOT / "kb" / "robots" / "ur5e.urdf"
 UR5E = ROOT / "kb" / "robots" / "ur5e.yaml"
 PROBLEMS = ROOT / "kb" / "problems"

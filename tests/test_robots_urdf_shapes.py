@@ -18,6 +18,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from paths import ROOT
+
 DH = [(25, 400, -90), (455, 0, 0), (35, 0, -90), (0, 420, 90), (0, 0, -90), (0, 80, 0)]  # a, d (mm), alpha (deg)
 LIMITS = [(-170, 170), (-190, 45), (-120, 156), (-185, 185), (-120, 120), (-350, 350)]
 RADII = [75, 65, 55, 45, 40, 35]
@@ -110,9 +112,6 @@ def test_the_first_link_stays_above_the_base_plane(arm) -> None:
     _f, robot = arm
     M = _model_corners(robot, np.zeros(6))["link_1"]
     assert M[:, 2].min() == pytest.approx(5.0, abs=1e-6)
-
-
-ROOT = Path(__file__).resolve().parent.parent
 
 
 def _urdf_cell_with(tmp_path: Path, collision: dict) -> Path:

@@ -18,7 +18,8 @@ from spar_py.kb.objects import load_object
 from spar_py.kb.problem import load_problem
 from spar_py.world.robot.model import GripperGeometry
 
-ROOT = Path(__file__).resolve().parent.parent
+from paths import ROOT
+
 #: The stepped shaft's profile (radius, z) mm: a D30 shoulder 20 mm long, a D16 shaft 100 mm long.
 PROFILE = [(0, 0), (15, 0), (15, 20), (8, 20), (8, 120), (0, 120)]
 #: Each cylinder of it: (radius, z from, z to).

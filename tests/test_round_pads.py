@@ -7,14 +7,12 @@ hole's mouth plane and the table plane from the gripper's box corners.
 """
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 
 from spar_py.kb.problem import load_problem
 from spar_py.world.parts.derive import _pads_on_surface
 
-ROOT = Path(__file__).resolve().parent.parent
+from paths import ROOT
 
 
 def test_pads_hold_a_12mm_round_along_its_axis() -> None:

@@ -23,7 +23,8 @@ from spar_py.planning import engine as engine_module
 from spar_py.planning.run import PlanRun
 from spar_py.world.run import CellCache, RunOptions, WorldRun
 
-ROOT = Path(__file__).resolve().parent.parent
+from paths import ROOT
+
 PROBLEMS = ROOT / "kb" / "problems"
 
 

@@ -13,7 +13,8 @@ from spar_py.core.errors import KBError
 from spar_py.kb import load_problem
 from spar_py.core.model import Solid
 
-ROOT = Path(__file__).resolve().parent.parent
+from paths import ROOT
+
 PEG_AT = "[30, -8, 1.5]]}"
 
 

@@ -26,7 +26,8 @@ from spar_py.kb.problem import SENSOR_NAMES
 from spar_py.kb.reader import MAX_NODES, BoundedLoader
 from spar_py.kb.schema import schema_keys
 
-ROOT = Path(__file__).resolve().parent.parent
+from paths import ROOT
+
 BAD = ROOT / "tests" / "bad"
 PAPER = ROOT / "kb" / "problems" / "peg_in_block.yaml"
 PEG = ROOT / "kb" / "objects" / "peg.yaml"

@@ -12,8 +12,6 @@ from __future__ import annotations
 
 import json
 import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -21,9 +19,9 @@ import pytest
 from spar_py.planning.engine import engine
 from spar_py.kb import load_problem
 
-ROOT = Path(__file__).resolve().parent.parent
+from paths import ROOT, SPAR
+
 PROBLEM = ROOT / "kb" / "problems" / "separation.yaml"
-SPAR = [sys.executable, "-m", "spar_py"]
 FIXTURE = ROOT / "tests" / "prolog" / "fixtures" / "separation_cell.pl"
 TWO = ["pickup(peg,grasp_1)", "assemble(peg,block,[[peg_face],[block_face]],trans_1,vec_1)"]
 

@@ -22,10 +22,9 @@ from spar_py.world.parts import cache as shapes_cache
 from spar_py.world.parts.mesh import part_mesh
 
 from test_problems import PAPER_ACTIONS, PAPER_ORDER, PHASE1, Outcome, phase1
+from paths import ROOT, SPAR
 
-ROOT = Path(__file__).resolve().parent.parent
 OBJ = ROOT / "kb" / "objects"
-SPAR = [sys.executable, "-m", "spar_py"]
 
 
 @pytest.fixture(autouse=True)

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
-SPAR = [sys.executable, "-m", "spar_py"]
+from paths import ROOT, SPAR
+
 PAPER = ROOT / "kb/problems/peg_in_block.yaml"
 
 

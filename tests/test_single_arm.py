@@ -16,7 +16,8 @@ from spar_py.kb.products import load_product
 from spar_py.planning.messages import summary
 from spar_py.world.product.single_arm import single_arm_report
 
-ROOT = Path(__file__).resolve().parents[1]
+from paths import ROOT
+
 FABRICA = ROOT / "kb" / "products" / "fabrica"
 CM = 10.0  # mm per cm
 WHEELS = ("wheel0", "wheel3", "wheel4", "wheel5")

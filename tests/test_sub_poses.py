@@ -15,7 +15,7 @@ from spar_py.kb.products import load_product
 from spar_py.world.product.products import subassembly_poses
 from spar_py.world.parts.mesh import part_mesh
 
-ROOT = Path(__file__).resolve().parent.parent
+from paths import ROOT
 
 
 def test_disc_with_pin_rests_on_its_side_on_the_pin_and_rim() -> None:

@@ -26,7 +26,8 @@ from spar_py.world.reach import placement as pl
 from spar_py.world.run import CellCache
 from spar_py.world.reach.supports import support_surfaces
 
-ROOT = Path(__file__).resolve().parent.parent
+from paths import ROOT
+
 PROBLEMS = ROOT / "kb" / "problems"
 #: The checks' tolerance on heights (cell unit: in or mm, well under either's rounding).
 TOL = 1e-6

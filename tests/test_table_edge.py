@@ -9,12 +9,11 @@ The gaps here are computed by hand from the tool pose: no spar_py geometry decid
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
+from paths import ROOT
 
 
 @pytest.fixture(scope="module")

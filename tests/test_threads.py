@@ -12,7 +12,8 @@ from typing import Any
 
 from spar_py.planning.planner import Outcome, Plan, Planner
 
-ROOT = Path(__file__).resolve().parent.parent
+from paths import ROOT
+
 A = ROOT / "kb/problems/peg_in_block.yaml"
 B = ROOT / "kb/problems/separation.yaml"
 CALLS = 100

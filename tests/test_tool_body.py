@@ -21,7 +21,8 @@ from spar_py.kb.robots import load_robot
 from spar_py.planning.planner import Planner
 from spar_py.world.collision.scene import scene_for
 
-ROOT = Path(__file__).resolve().parent.parent
+from paths import ROOT
+
 PUMA = ROOT / "kb" / "robots" / "puma762.yaml"
 SHELF = ROOT / "kb" / "problems" / "shelf.yaml"
 MM_PER_IN = 25.4

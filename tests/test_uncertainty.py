@@ -6,7 +6,6 @@ expression is the pickup precondition y(P_1^-1 C_1) of the peg (W_p = 3, W_m = 4
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import casadi as ca
 import numpy as np
@@ -37,7 +36,8 @@ from spar_py.phase2.uncertainty import (
     table_error,
 )
 
-ROOT = Path(__file__).resolve().parent.parent
+from paths import ROOT
+
 CELL = ROOT / "kb" / "problems" / "peg_in_block.yaml"
 DEG = math.pi / 180
 TABLE2_MANIP = Bounds((-0.001, 0.001), (-0.001, 0.001), (-0.001, 0.001), (-0.001, 0.001))

@@ -8,7 +8,6 @@ checked against the pin's own cylinders read from its object file."""
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,7 +18,8 @@ from spar_py.kb import load_problem
 from spar_py.phase2 import instance as phase2
 from spar_py.world.run import CellCache
 
-ROOT = Path(__file__).resolve().parent.parent
+from paths import ROOT
+
 #: Lengths' tolerance (mm).
 TOL = 1e-6
 

@@ -14,7 +14,6 @@ import os
 import shutil
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -25,8 +24,8 @@ from spar_py.kb import load_problem
 from spar_py.pictures.scene import initial_poses
 from spar_py.pictures.viewer import MAX_WAYPOINTS, render_html, viewer_data
 
-ROOT = Path(__file__).resolve().parents[1]
-SPAR = [sys.executable, "-m", "spar_py"]
+from paths import ROOT, SPAR
+
 PAPER = ROOT / "kb/problems/peg_in_block.yaml"
 UR5E = ROOT / "kb/problems/ur5e_peg_in_block.yaml"
 SETUP = ROOT / "scripts/setup-browser.sh"

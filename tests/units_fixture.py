@@ -13,7 +13,8 @@ from typing import Any
 
 import yaml
 
-ROOT = Path(__file__).resolve().parent.parent
+from paths import ROOT
+
 MM_PER = {"mm": 1.0, "m": 1000.0, "in": 25.4, "cm": 10.0}
 
 
