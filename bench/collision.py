@@ -53,7 +53,7 @@ def per_solution(cell, obj: str, repeats: int) -> dict[str, float]:
     """Median us per IK solution checked: every grasp of ``obj`` at a 1 in grid of xy over the
     cell's first free region, in its first stable pose, the part grasped (one batched check)."""
     from spar_py.world.reach.workspace import ik_rows
-    from spar_py.world.run import CellCache
+    from spar_py.world.collision import CellCache
 
     model = cell.objects[obj]
     pose = next(iter(model.poses.values()))

@@ -91,7 +91,7 @@ def pddl(cell) -> str:
     :data:`DOMAIN`. Static facts from spar_py.world.reach.arcs, as phase 1's arcs (rule "reachable")."""
     from spar_py.kb import term_text
     from spar_py.world.reach.arcs import mate_reachable_pairs, reachable_pairs
-    from spar_py.world.run import CellCache
+    from spar_py.world.collision import CellCache
 
     nm = _name
     cache = CellCache(cell)

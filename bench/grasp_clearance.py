@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from spar_py.kb.problem import load_problem
-from spar_py.world.run import CellCache
+from spar_py.world.collision import CellCache
 from spar_py.world.reach.workspace import ik_rows
 
 

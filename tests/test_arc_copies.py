@@ -24,7 +24,8 @@ from spar_py.world.reach import workspace as workspace
 from spar_py.app.gen import generate_assembly
 from spar_py.kb import load_problem
 from spar_py.world.reach.placement import some_placement_reaches_each
-from spar_py.world.run import CellCache, WorldRun
+from spar_py.world.collision import CellCache
+from spar_py.world.run import WorldRun
 
 PROBLEMS = Path(__file__).resolve().parent.parent / "kb" / "problems"
 

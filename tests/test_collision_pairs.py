@@ -18,7 +18,7 @@ from spar_py.app.gen import generate_assembly
 from spar_py.kb import load_problem
 from spar_py.world.collision import scene as collision
 from spar_py.world.collision.scene import TOOL, WORLD
-from spar_py.world.run import CellCache
+from spar_py.world.collision import CellCache
 
 PROBLEMS = Path(__file__).resolve().parent.parent / "kb" / "problems"
 

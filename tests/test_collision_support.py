@@ -23,7 +23,7 @@ from spar_py.core.geometry import rotz
 from spar_py.kb import load_problem
 from spar_py.world.collision import scene as collision
 from spar_py.world.collision.scene import WORLD, body_distance, box, capsule, convex, cylinder, support_gap
-from spar_py.world.run import CellCache
+from spar_py.world.collision import CellCache
 from test_collision_pairs import _cells, _states
 
 PROBLEMS = Path(__file__).resolve().parent.parent / "kb" / "problems"

@@ -5,7 +5,7 @@ import numpy as np
 
 from spar_py.world.reach import placement as placement
 from spar_py.kb import load_problem
-from spar_py.world.run import CellCache
+from spar_py.world.collision import CellCache
 
 from paths import ROOT
 

@@ -10,7 +10,7 @@ import pytest
 from bench import fd
 from spar_py.app import gen
 from spar_py.kb import load_problem
-from spar_py.world.run import CellCache
+from spar_py.world.collision import CellCache
 from spar_py.world.reach.arcs import reachable_pairs
 
 

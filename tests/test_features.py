@@ -215,7 +215,7 @@ def test_two_pins_each_checked_against_its_own_bore(plate_dir: Path) -> None:
         assert bore in v.description
     # Monte Carlo replay: no draw of the uncertainty variables breaks a satisfied verdict
     from spar_py.phase2.instance import sample_check
-    from spar_py.world.run import CellCache
+    from spar_py.world.collision import CellCache
 
     steps = [{"id": s.id, "name": s.name, "args": list(s.args)} | ({"source": s.source} if s.source else {})
              for s in plan.steps]

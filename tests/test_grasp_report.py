@@ -235,7 +235,7 @@ def test_a_regrasp_is_offered_only_where_one_would_serve(name):
     regrasp: both need the product built elsewhere."""
     from spar_py.planning.planner import Planner
     from spar_py.world.reach.arcs import reachable_pairs
-    from spar_py.world.run import CellCache
+    from spar_py.world.collision import CellCache
 
     planner = Planner()
     plan = planner.plan(ROOT / "kb" / "problems" / f"fabrica_{name}.yaml")

@@ -19,7 +19,7 @@ import trimesh
 
 from spar_py.kb.problem import load_problem
 from spar_py.world.reach import arcs as arcs
-from spar_py.world.run import CellCache
+from spar_py.world.collision import CellCache
 from spar_py.world.reach.workspace import Requirement, assembled_touch, requirement_clear
 
 from paths import ROOT

@@ -16,7 +16,7 @@ import pytest
 from spar_py.core.errors import KBError, SparValueError
 from spar_py.kb import load_robot
 from spar_py.world.motion import paths as mo
-from spar_py.world.run import CellCache
+from spar_py.world.collision import CellCache
 
 sys.path.insert(0, str(Path(__file__).parent))
 from craig_reference import craig_fk  # noqa: E402

@@ -15,7 +15,7 @@ from spar_py.phase2 import instance as phase2
 from spar_py.core.geometry import rotz
 from spar_py.kb import load_problem
 from spar_py.planning.planner import Planner
-from spar_py.world.run import CellCache
+from spar_py.world.collision import CellCache
 
 from paths import ROOT
 

@@ -8,7 +8,7 @@ import numpy as np
 
 from spar_py.world.reach import placement as placement
 from spar_py.kb import load_problem
-from spar_py.world.run import CellCache
+from spar_py.world.collision import CellCache
 
 CELL = load_problem(Path(__file__).resolve().parent.parent / "kb/problems/peg_in_block.yaml")
 

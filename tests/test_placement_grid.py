@@ -14,7 +14,7 @@ from test_footprints import _distance, _wrap
 from spar_py.world.reach import placement as placement
 from spar_py.core.geometry import rotz
 from spar_py.kb import load_problem
-from spar_py.world.run import CellCache
+from spar_py.world.collision import CellCache
 
 from paths import ROOT
 

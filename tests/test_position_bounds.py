@@ -19,7 +19,7 @@ from spar_py import Planner
 from spar_py.core.model import Bounds
 from spar_py.phase2 import instance as phase2
 from spar_py.phase2 import uncertainty as ur
-from spar_py.world.run import CellCache
+from spar_py.world.collision import CellCache
 
 from paths import ROOT
 

@@ -12,7 +12,7 @@ import pytest
 from spar_py.world.reach import placement as placement
 from spar_py.planning.engine import engine
 from spar_py.kb import load_problem
-from spar_py.world.run import CellCache
+from spar_py.world.collision import CellCache
 
 from paths import ROOT
 

@@ -11,7 +11,8 @@ from spar_py.core.errors import SparValueError
 from spar_py.core.geometry import eulerxyz, rot, rotx, rotz, trans
 from spar_py.kb import load_problem, load_robot
 from spar_py.core.model import Bounds, Cell, Grasp, ObjectModel, Position, StablePose, natural_key
-from spar_py.world.run import CellCache, WorldRun
+from spar_py.world.collision import CellCache
+from spar_py.world.run import WorldRun
 from spar_py.world.reach.arcs import (
     arc,
     mate_reachable_pairs,

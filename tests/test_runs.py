@@ -21,7 +21,8 @@ from spar_py import Planner
 from spar_py.kb import load_problem
 from spar_py.planning import engine as engine_module
 from spar_py.planning.run import PlanRun
-from spar_py.world.run import CellCache, RunOptions, WorldRun
+from spar_py.world.collision import CellCache
+from spar_py.world.run import RunOptions, WorldRun
 
 from paths import ROOT
 

@@ -114,7 +114,7 @@ def _put_on_its_side(cell, steps: list[dict]) -> tuple[list[dict], object]:
 
     from spar_py.phase2 import instance as phase2
     from spar_py.world.reach.placement import Placement
-    from spar_py.world.run import CellCache
+    from spar_py.world.collision import CellCache
 
     side = next(k for k, p in cell.objects["disc"].poses.items() if "_sub_" in k and abs(p.R[2, 2]) < 0.2)
     steps[-1]["args"][1] = side

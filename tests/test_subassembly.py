@@ -22,7 +22,7 @@ from test_products import PROBLEMS, PRODUCTS, Shape, _apply, _pose
 from spar_py.kb import load_problem
 from spar_py.phase2.instance import sample_check
 from spar_py.planning.planner import Planner
-from spar_py.world.run import CellCache
+from spar_py.world.collision import CellCache
 
 CELLS = ("plate_pins", "bracket_kit", "shaft_stack", "board20", "turn_over")
 #: A part's lowest point this near a surface rests on it (mm; the cells are in mm).

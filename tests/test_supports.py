@@ -23,7 +23,7 @@ from spar_py.core.errors import KBError
 from spar_py.kb import load_problem
 from spar_py.phase2 import instance as phase2
 from spar_py.world.reach import placement as pl
-from spar_py.world.run import CellCache
+from spar_py.world.collision import CellCache
 from spar_py.world.reach.supports import support_surfaces
 
 from paths import ROOT

@@ -19,7 +19,7 @@ from paths import ROOT
 @pytest.fixture(scope="module")
 def edge_cell():
     from spar_py import Planner
-    from spar_py.world.run import CellCache
+    from spar_py.world.collision import CellCache
 
     cell = Planner().load_problem(ROOT / "kb" / "problems" / "ur5e_peg_in_block.yaml")
     scene = CellCache(cell).scene()

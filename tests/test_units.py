@@ -13,7 +13,7 @@ import pytest
 from spar_py.world.reach import placement as placement
 from spar_py.core.units import LENGTH_UNITS
 from spar_py.kb import load_problem
-from spar_py.world.run import CellCache
+from spar_py.world.collision import CellCache
 from spar_py.planning.planner import Planner
 
 from units_fixture import ROOT, write_cell

@@ -24,7 +24,7 @@ import pytest
 
 from spar_py.kb import load_problem
 from spar_py.world.reach.workspace import ik_rows, reach_clear, requirement_clear
-from spar_py.world.run import CellCache
+from spar_py.world.collision import CellCache
 
 sys.path.insert(0, str(Path(__file__).parent))
 from test_ik_ur import std_fk  # noqa: E402  (UR's published DH, written out)
