@@ -15,9 +15,9 @@ Run from the project root: ``.venv/bin/python -m bench.collision [--repeats 5] [
 - ``libraries`` (with ``--coal-python PY``, a Python with both ``coal`` and ``python-fcl``, e.g.
   a throwaway venv under /tmp: coal is a 300 MB install and never a project dependency): the
   exact queries the paper cell's per-solution run sends to the library (recorded from
-  world.collision.scene.body_distance: the body shapes and their world poses) replayed with python-fcl and
+  world.collision.bodies.body_distance: the body shapes and their world poses) replayed with python-fcl and
   with coal in that interpreter, us per query (collide, then distance when apart, as
-  world.collision.scene asks) and the largest difference of their distances.
+  body_distance asks) and the largest difference of their distances.
 """
 from __future__ import annotations
 
@@ -80,7 +80,7 @@ def per_solution(cell, obj: str, repeats: int) -> dict[str, float]:
             state.check(q)
         times.append(time.perf_counter() - t)
     # the peer, same rows: the capsule bound on every (row, pair) cell (no sphere broad phase)
-    from spar_py.world.collision.scene import SceneState
+    from spar_py.world.collision.state import SceneState
 
     plain = []
     near = SceneState._near_bounds
@@ -100,7 +100,7 @@ def per_solution(cell, obj: str, repeats: int) -> dict[str, float]:
 def record_queries(cell, obj: str, limit: int = 2000) -> list[dict]:
     """The exact (library) queries of one per-solution run of ``cell``, as plain data: each body's
     kind, size, local vertices and world pose (4x4 of its shape)."""
-    from spar_py.world.collision import scene as col
+    from spar_py.world.collision import state as col  # the module whose checks ask the library
 
     out: list[dict] = []
     real = col.body_distance

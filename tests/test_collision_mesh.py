@@ -11,8 +11,8 @@ from shapely.geometry import Polygon
 
 from spar_py.core.units import from_mm
 from spar_py.kb import load_problem
-from spar_py.world.collision import scene as collision
-from spar_py.world.collision.scene import CollisionScene, WORLD
+from spar_py.world.collision.bodies import WORLD, body_distance, box, convex, mesh_body
+from spar_py.world.collision.scene import CollisionScene, scene_for
 
 PROBLEMS = Path(__file__).resolve().parents[1] / "kb" / "problems"
 
@@ -41,9 +41,9 @@ def _u_mesh(s: float = 1.0) -> trimesh.Trimesh:
 
 def _scene(cell, u: trimesh.Trimesh) -> CollisionScene:
     s = from_mm(cell.unit, 1.0)
-    base = collision.scene_for(cell)
-    parts = {"u": [collision.mesh_body("u", WORLD, np.asarray(u.convex_hull.vertices), _MeshGeometry(u), cell.unit)],
-             "blk": [collision.box("blk", WORLD, -np.full(3, HALF * s), np.full(3, HALF * s))]}
+    base = scene_for(cell)
+    parts = {"u": [mesh_body("u", WORLD, np.asarray(u.convex_hull.vertices), _MeshGeometry(u), cell.unit)],
+             "blk": [box("blk", WORLD, -np.full(3, HALF * s), np.full(3, HALF * s))]}
     return CollisionScene(base.robot, base.gripper, parts, (), base.margin, None, cell.unit)
 
 
@@ -88,7 +88,7 @@ def test_box_in_the_recess_of_a_u_is_clear_and_one_in_its_wall_collides() -> Non
     assert ok[0], why
     # the hull would refuse it: the same scene with the U as its convex hull
     hull_scene = CollisionScene(scene.robot, scene.gripper,
-                                {"u": [collision.convex("u", WORLD, scene.parts["u"][0].points)],
+                                {"u": [convex("u", WORLD, scene.parts["u"][0].points)],
                                  "blk": scene.parts["blk"]}, (), scene.margin, None, cell.unit)
     hs, _, _ = _state_and_q(cell, hull_scene, inside)
     ok_h, why_h = hs.check(q[None])
@@ -110,24 +110,24 @@ def test_box_in_the_recess_of_a_u_is_clear_and_one_in_its_wall_collides() -> Non
 def test_a_box_wholly_inside_a_mesh_collides() -> None:
     """A BVH is a surface: the containment test catches a body meeting none of its triangles."""
     u = _u_mesh()
-    m = collision.mesh_body("u", WORLD, np.asarray(u.convex_hull.vertices), _MeshGeometry(u), "mm")
-    small = collision.box("s", WORLD, -np.full(3, 2.0), np.full(3, 2.0))
+    m = mesh_body("u", WORLD, np.asarray(u.convex_hull.vertices), _MeshGeometry(u), "mm")
+    small = box("s", WORLD, -np.full(3, 2.0), np.full(3, 2.0))
     T = np.eye(4)
     T[:3, 3] = [-35.0, 30.0, 20.0]  # in the U's left arm (x -50..-20), 13 mm from its faces
     assert u.contains(T[:3, 3][None])[0]
-    assert collision.body_distance(small, T, m, np.eye(4)) == 0.0
-    assert collision.body_distance(m, np.eye(4), small, T) == 0.0
+    assert body_distance(small, T, m, np.eye(4)) == 0.0
+    assert body_distance(m, np.eye(4), small, T) == 0.0
 
 
 def test_placed_copies_share_the_mesh_geometry_in_the_object_frame() -> None:
     """The library's geometry, made once by whichever copy asks first, is the part's own: a copy
     placed 100 mm away asking first must not move the original (a convex mesh: the hull branch)."""
     cube = trimesh.creation.box(extents=(20.0, 20.0, 20.0))
-    m = collision.mesh_body("c", WORLD, np.asarray(cube.vertices), _MeshGeometry(cube), "mm")
+    m = mesh_body("c", WORLD, np.asarray(cube.vertices), _MeshGeometry(cube), "mm")
     T = np.eye(4)
     T[0, 3] = 100.0
     far = m.placed(T, WORLD)
-    probe = collision.box("p", WORLD, np.array([15.0, -5.0, -5.0]), np.array([25.0, 5.0, 5.0]))
+    probe = box("p", WORLD, np.array([15.0, -5.0, -5.0]), np.array([25.0, 5.0, 5.0]))
     eye = np.eye(4)
-    assert collision.body_distance(far, eye, probe, eye) > 60.0   # asked first: 75 mm apart
-    assert abs(collision.body_distance(m, eye, probe, eye) - 5.0) < 1e-6  # the cube's face x = 10, the probe's 15
+    assert body_distance(far, eye, probe, eye) > 60.0   # asked first: 75 mm apart
+    assert abs(body_distance(m, eye, probe, eye) - 5.0) < 1e-6  # the cube's face x = 10, the probe's 15

@@ -1,4 +1,4 @@
-"""The checked pairs of a collision state (world/collision/scene.py's _pair_structure), set for the
+"""The checked pairs of a collision state (world/collision/pairs.py's pair_structure), set for the
 world's bodies a name at a time, are the pairs of the rule written out as one loop over every
 (moving body, body) pair (:func:`reference_pairs`, the module notes' rule as it was first
 coded); and the placed bodies the scene keeps on the cell are the bodies placed afresh.
@@ -16,8 +16,9 @@ import pytest
 
 from spar_py.app.gen import generate_assembly
 from spar_py.kb import load_problem
-from spar_py.world.collision import scene as collision
-from spar_py.world.collision.scene import TOOL, WORLD
+from spar_py.world.collision import bounds
+from spar_py.world.collision.bodies import TOOL, WORLD
+from spar_py.world.collision.pairs import pair_structure
 from spar_py.world.collision import CellCache
 
 PROBLEMS = Path(__file__).resolve().parent.parent / "kb" / "problems"
@@ -109,7 +110,7 @@ def test_pair_structure_is_the_plain_loops(tmp_path: Path) -> None:
     for cell in _cells(tmp_path):
         for state, hand, allow, attached in _states(cell):
             ref = reference_pairs(state.scene, state.bodies, state.n_moving, hand, allow, attached)
-            got = collision._pair_structure(state.scene, state.bodies, state.n_moving, hand, allow, attached)
+            got = pair_structure(state.scene, state.bodies, state.n_moving, hand, allow, attached)
             for g, r in zip(got[:3], ref[:3]):
                 assert g.dtype == r.dtype and np.array_equal(g, r)
             assert got[3] == ref[3]
@@ -125,7 +126,7 @@ def test_pair_structure_without_a_memo_is_the_same(tmp_path: Path) -> None:
         ref = reference_pairs(state.scene, state.bodies, state.n_moving, hand, allow, attached)
         memo, state.scene.memo = state.scene.memo, None
         try:
-            got = collision._pair_structure(state.scene, state.bodies, state.n_moving, hand, allow, attached)
+            got = pair_structure(state.scene, state.bodies, state.n_moving, hand, allow, attached)
         finally:
             state.scene.memo = memo
         assert np.array_equal(got[0], ref[0]) and got[3] == ref[3]
@@ -180,14 +181,14 @@ def test_segment_distance_few_pairs_same_bits_as_vectorised() -> None:
     segments and on broadcast shapes, and both agree with a brute-force minimum over points of
     the two segments (an independent check of the formula)."""
     rng = np.random.default_rng(7)
-    few = collision.FEW_SEGMENTS
+    few = bounds.FEW_SEGMENTS
 
     def vectorised(*P):
-        collision.FEW_SEGMENTS = -1
+        bounds.FEW_SEGMENTS = -1
         try:
-            return collision.segment_distance(*P)
+            return bounds.segment_distance(*P)
         finally:
-            collision.FEW_SEGMENTS = few
+            bounds.FEW_SEGMENTS = few
 
     for trial in range(3000):
         n = int(rng.integers(1, few + 1))
@@ -201,7 +202,7 @@ def test_segment_distance_few_pairs_same_bits_as_vectorised() -> None:
             P[2], P[3] = P[0] + 0.5 * (P[1] - P[0]), P[0] + 1.5 * (P[1] - P[0])  # collinear, overlapping
         elif kind == 4:
             P[3] = P[2] + 2.0 * (P[1] - P[0])  # parallel
-        got = collision.segment_distance(*P)
+        got = bounds.segment_distance(*P)
         assert np.array_equal(got, vectorised(*P), equal_nan=True)
         if trial % 100 == 0:  # brute force: the least distance between 401 points on each
             u = np.linspace(0.0, 1.0, 401)[:, None]
@@ -214,6 +215,6 @@ def test_segment_distance_few_pairs_same_bits_as_vectorised() -> None:
                 assert brute - got[k] <= 0.01 * scale
     A, B = rng.normal(size=(2, 3, 3)), rng.normal(size=(2, 3, 3))
     C, D = rng.normal(size=(1, 3, 3)), rng.normal(size=(2, 1, 3))
-    assert collision.segment_distance(A, B, C, D).shape == (2, 3)
-    assert np.array_equal(collision.segment_distance(A, B, C, D), vectorised(A, B, C, D))
-    assert collision.segment_distance(np.zeros(3), np.ones(3), np.full(3, 2.0), np.full(3, 3.0)).shape == ()
+    assert bounds.segment_distance(A, B, C, D).shape == (2, 3)
+    assert np.array_equal(bounds.segment_distance(A, B, C, D), vectorised(A, B, C, D))
+    assert bounds.segment_distance(np.zeros(3), np.ones(3), np.full(3, 2.0), np.full(3, 3.0)).shape == ()

@@ -1,7 +1,7 @@
-"""The shortcuts of world/collision/scene.py's check(), clearance() and grasp rule, against the plain
+"""The shortcuts of world/collision/state.py's check(), clearance() and grasp rule, against the plain
 computations they stand for.
 
-- :func:`~spar_py.world.collision.scene.support_gap` (a lower bound of two convex bodies' distance from
+- :func:`~spar_py.world.collision.bounds.support_gap` (a lower bound of two convex bodies' distance from
   their supports) never exceeds the distance, computed here independently as a small quadratic
   programme over the bodies' vertex hulls (scipy's SLSQP), and equals it for boxes side by side.
 - check() asks the library only where that bound does not already put a pair beyond the margin:
@@ -21,8 +21,9 @@ from scipy.optimize import minimize
 
 from spar_py.core.geometry import rotz
 from spar_py.kb import load_problem
-from spar_py.world.collision import scene as collision
-from spar_py.world.collision.scene import WORLD, body_distance, box, capsule, convex, cylinder, support_gap
+from spar_py.world.collision.bodies import TOOL, WORLD, _box_corners, body_distance, box, capsule, convex, cylinder
+from spar_py.world.collision.bounds import support_gap
+from spar_py.world.collision.state import GRASP_LIMIT, SceneState
 from spar_py.world.collision import CellCache
 from test_collision_pairs import _cells, _states
 
@@ -223,7 +224,7 @@ def test_clearance_names_the_pair_the_whole_sort_names_at_a_tie(tmp_path: Path, 
     from spar_py.planning.planner import Planner
 
     seen = {"rows": 0, "ties": 0}
-    clearance = collision.SceneState.clearance
+    clearance = SceneState.clearance
 
     def checked(state, q):
         got = clearance(state, q)
@@ -233,7 +234,7 @@ def test_clearance_names_the_pair_the_whole_sort_names_at_a_tie(tmp_path: Path, 
         seen["ties"] += _ties(state, np.asarray(q, float).reshape(-1, 6))
         return got
 
-    monkeypatch.setattr(collision.SceneState, "clearance", checked)
+    monkeypatch.setattr(SceneState, "clearance", checked)
     plan = Planner(timeout=600).plan(load_problem(generate_assembly(15, tmp_path / "g15")))
     assert plan.outcome == "plan"
     assert seen["rows"] >= 40 and seen["ties"] > 0
@@ -251,7 +252,7 @@ def test_grasp_rule_key_makes_signed_zeros_one_and_its_verdicts_are_the_library_
     T = np.where(T == 0.0, 0.0, T)
     signed = np.where(T == 0.0, -0.0, T)
     assert T.tobytes() != signed.tobytes()
-    table = scene.memo.table("collision.grasp", collision.GRASP_LIMIT)
+    table = scene.memo.table("collision.grasp", GRASP_LIMIT)
     table.clear()
     first = state.grasp_ok(T)
     assert state.grasp_ok(signed) == first and len(table) == 1
@@ -262,7 +263,7 @@ def test_grasp_rule_key_makes_signed_zeros_one_and_its_verdicts_are_the_library_
     for _ in range(60):
         Ts = T.copy()
         Ts[:3, 3] += rng.uniform(-1.0, 1.0, 3)
-        bodies = [b.placed(Ts, collision.TOOL, "peg") for b in scene.shapes_of("peg")]
+        bodies = [b.placed(Ts, TOOL, "peg") for b in scene.shapes_of("peg")]
         ref = next(((False, gb.name) for gb in gripper
                     if any(body_distance(gb, np.eye(4), b, np.eye(4)) <= 0.0 for b in bodies)), (True, None))
         assert state.grasp_ok(Ts) == ref
@@ -301,14 +302,14 @@ def test_hand_refusal_refuses_only_what_check_refuses_at_every_solution(tmp_path
 
 
 def test_box_corners_hold_every_vertex() -> None:
-    """A body of many vertices is first bounded by a box (collision._box_corners): every vertex
+    """A body of many vertices is first bounded by a box (bodies.py's _box_corners): every vertex
     lies in it (solved for in the box's own edges, not its construction), and the support bound
     it gives two such bodies never exceeds their hulls' distance."""
     rng = np.random.default_rng(3)
     for k in range(40):
         R = _rotation(rng)
         pts = rng.normal(size=(200, 3)) * rng.uniform(0.05, 5, 3) @ R.T + rng.uniform(-10, 10, 3)
-        C = collision._box_corners(pts)
+        C = _box_corners(pts)
         o = C[0]
         E = np.stack([C[4] - o, C[2] - o, C[1] - o], axis=1)  # the three edges from corner 0
         s = np.linalg.solve(E, (pts - o).T)

@@ -71,9 +71,9 @@ def test_the_same_gripper_a_margin_past_the_edge_is_clear_of_the_table(edge_cell
 
 
 def test_the_edge_gap_is_a_lower_bound_close_to_the_distance() -> None:
-    """_slab_gap against the exact distance of a point to the slab (clamping, by hand): never
+    """slab_gap against the exact distance of a point to the slab (clamping, by hand): never
     above it, and within 2% of it plus 1e-9 for points beside the edge at every height."""
-    from spar_py.world.collision.scene import _slab_gap
+    from spar_py.world.collision.bounds import slab_gap
 
     ext = (-20.0, 10.0, -20.0, 6.5)
     rng = np.random.default_rng(3)
@@ -83,6 +83,6 @@ def test_the_edge_gap_is_a_lower_bound_close_to_the_distance() -> None:
     dx = np.maximum(np.maximum(ext[0] - pts[:, 0], pts[:, 0] - ext[1]), 0)
     dy = np.maximum(np.maximum(ext[2] - pts[:, 1], pts[:, 1] - ext[3]), 0)
     exact = np.sqrt(dx ** 2 + dy ** 2 + np.maximum(pts[:, 2], 0) ** 2)
-    lb = _slab_gap(pts[:, None, :], 0.0, ext)
+    lb = slab_gap(pts[:, None, :], 0.0, ext)
     assert (lb <= exact + 1e-12).all()
     assert (lb >= 0.98 * exact - 1e-9).all(), float((exact - lb).max())

@@ -199,7 +199,7 @@ def arm_faces(cell: Cell, q: np.ndarray, width: float | None = None, scene: Coll
 
 def obstacle_faces(cell: Cell) -> list[np.ndarray]:
     """Triangles (each (3, 3) world points, cell unit) of the hulls of the cell's obstacle
-    bodies (world/collision/scene.py's Obstacle: a body's vertices in the world)."""
+    bodies (world.collision.Obstacle, world/collision/bodies.py: a body's vertices in the world)."""
     from scipy.spatial import ConvexHull  # ~0.7 s at import: only when a GIF is drawn
 
     faces = []

@@ -251,7 +251,7 @@ def _capsule_mesh(a: np.ndarray, b: np.ndarray, r: float) -> tuple[list[np.ndarr
 
 
 def body_faces(body: Body, T_frame: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
-    """A collision body (world.collision.scene.Body) placed by its frame's world pose ``T_frame``
+    """A collision body (world.collision.Body) placed by its frame's world pose ``T_frame``
     (4x4): its faces (each (m, 3) world points) and outline points (k, 3). A box gives its 6
     faces, a cylinder its prism's, a capsule a tube with round ends, a convex body its hull's
     triangles."""

@@ -6,11 +6,12 @@ This is the room's door: code outside world/collision/ imports these names from 
 from the modules behind it.
 """
 
-from spar_py.world.collision.cache import CellCache
-from spar_py.world.collision.scene import (
-    TOOL, WORLD, Body, CollisionScene, DEFAULT_MARGIN_MM, Obstacle, SceneState, body_distance, bound_columns, box,
-    bvh, clearance_bounds, convex, cylinder, fcl_transform, scene_for, solid_bodies, solids_key,
+from spar_py.world.collision.bodies import (
+    TOOL, WORLD, Body, Obstacle, body_distance, box, bvh, convex, cylinder, fcl_transform, solid_bodies,
 )
+from spar_py.world.collision.cache import CellCache
+from spar_py.world.collision.scene import DEFAULT_MARGIN_MM, CollisionScene, scene_for, solids_key
+from spar_py.world.collision.state import SceneState, bound_columns, clearance_bounds
 
 __all__ = [
     "Body", "body_distance", "bound_columns", "box", "bvh", "CellCache", "clearance_bounds", "CollisionScene",

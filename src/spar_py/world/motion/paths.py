@@ -65,7 +65,7 @@ DEFAULT_APPROACH_IN = 2.0
 
 
 class SceneState(Protocol):
-    """What the motions ask of the world at one point of the plan (world/collision/scene.py)."""
+    """What the motions ask of the world at one point of the plan (world/collision/state.py)."""
 
     def clear(self, q: np.ndarray) -> np.ndarray: ...
 

@@ -37,7 +37,7 @@ REST_TOL_MM = 0.5
 #: Sides of the polygon inscribed in a cylinder's rim, for a part's points (inscribed: a
 #: contact face or top is never overstated, so a centre found inside it is inside the true one).
 RIM_SIDES = 16
-#: A cylinder body of an obstacle is held (world.collision.scene) as its circumscribed prism of this many
+#: A cylinder body of an obstacle is held (world/collision/bodies.py) as its circumscribed prism of this many
 #: sides; its top polygon is shrunk to the inscribed one.
 OBSTACLE_SIDES = 16
 
