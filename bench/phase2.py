@@ -9,8 +9,9 @@ plan of that cell in a fresh process (its cold phase 2, the engine already start
 
 - ``phase 2``: plan.timing's phase2_s (Prolog CPU time, Python called back included);
 - ``Python``: phase2.evaluate, one call per run of an instance;
-- ``placements``: phase2.choose_placements (placement.choose per put-down);
-- ``arm``: phase2._arm, IK and the collision check of every end-point (world/collision/scene.py);
+- ``placements``: phase2/placements.py's choose_placements (placement.choose per put-down);
+- ``arm``: phase2/arm.py's arm_for (as phase2/steps.py calls it), IK and the collision check of
+  every end-point (world/collision/scene.py);
 - ``uncertainty``: the rest of the Python side (constraints, SUP/INF, propagation,
   per-step poses);
 - ``Prolog``: phase 2 less Python: uncertainty.pl's own work and the janus conversions.
@@ -31,19 +32,20 @@ CELL = "kb/problems/peg_in_block.yaml"
 _CHILD = r"""
 import json, sys, time
 from spar_py.planning.planner import Planner, load_problem
-from spar_py.phase2 import instance as phase2
+from spar_py.phase2 import instance, placements, steps
 acc = {}
-def wrap(name):
-    f = getattr(phase2, name)
+def wrap(mod, name, key):  # in the module that calls it: its global is what the call looks up
+    f = getattr(mod, name)
     def g(*a, **k):
         t = time.process_time()
         try:
             return f(*a, **k)
         finally:
-            acc[name] = acc.get(name, 0.0) + time.process_time() - t
-    setattr(phase2, name, g)
-for n in ("evaluate", "choose_placements", "_arm"):
-    wrap(n)
+            acc[key] = acc.get(key, 0.0) + time.process_time() - t
+    setattr(mod, name, g)
+for m, n, key in ((instance, "evaluate", "evaluate"), (placements, "choose_placements", "choose_placements"),
+                  (steps, "arm_for", "arm")):
+    wrap(m, n, key)
 path, warm = sys.argv[1], sys.argv[2] == "1"
 if warm:
     Planner().plan(load_problem(sys.argv[3]))
@@ -82,7 +84,7 @@ def main(argv: list[str] | None = None) -> None:
                 return statistics.median(r.get(k, 0.0) for r in runs)
 
             p2, py = med("phase2"), med("evaluate")
-            pl, arm = med("choose_placements"), med("_arm")
+            pl, arm = med("choose_placements"), med("arm")
             rows.append((label, int(runs[0]["actions"]), p2, py, pl, arm, py - pl - arm, p2 - py))
     print("| problem | actions | phase 2 s | ms/action | Python s | placements s | arm s | uncertainty s | Prolog s |")
     print("|---|---|---|---|---|---|---|---|---|")

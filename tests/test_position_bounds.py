@@ -19,6 +19,7 @@ import pytest
 from spar_py import Planner
 from spar_py.core.model import Bounds
 from spar_py.phase2 import instance as phase2
+from spar_py.phase2.positions import BOUNDS_LIMIT
 from spar_py.phase2 import uncertainty as ur
 from spar_py.world.run import CellCache
 
@@ -176,7 +177,7 @@ def test_bounds_are_cached_per_structure(plans) -> None:
     steps = doc["instance"]["steps"]
     cache = CellCache(cell)
     first = [phase2.position_bounds(cache, w) for w in _worlds(cache, steps)]
-    table = cache.table("phase2.position_bounds", phase2.BOUNDS_LIMIT)
+    table = cache.table("phase2.position_bounds", BOUNDS_LIMIT)
     n = len(table)
     assert n > 0
     again = [phase2.position_bounds(cache, w) for w in _worlds(cache, steps)]

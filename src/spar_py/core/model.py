@@ -302,7 +302,7 @@ class ProductPart:
 
 
 #: A loose mate (held by gravity) stays while its insertion direction is within this angle of
-#: world down (deg): the retention check (phase2.instance), the one-arm search (world.product.single_arm)
+#: world down (deg): the retention check (phase2.rest), the one-arm search (world.product.single_arm)
 #: and the layout's insertions "from above" (world.product.layout) all use it.
 LOOSE_MAX_DEG = 30.0
 

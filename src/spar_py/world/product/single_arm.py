@@ -5,7 +5,7 @@ needs.
 One arm puts a part in while the partial product rests on the table in one of its stable poses
 (trimesh's, of the placed parts' convex hull as one body), and may turn the partial product over
 between insertions (pick it up, put it down in another stable pose). A loose mate (held by
-gravity: phase2.instance.retention_refusal) stays only while its insertion direction is within
+gravity: phase2.rest.retention_refusal) stays only while its insertion direction is within
 LOOSE_MAX_DEG of world down, from its insertion on, in every pose the product rests in after;
 an insertion whose direction points up (more than 90 deg from down) needs the product held
 above the part. The search finds an order and poses that keep every loose mate, or says which

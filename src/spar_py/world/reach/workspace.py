@@ -2,7 +2,7 @@
 joint solution for T, with its wrist above the table top, clear of the world".
 
 Phase 1's reach arcs (arcs.py), the put-down placement search (placement.py) and
-phase 2's steps (phase2/instance.py, :func:`arm_at`) all ask here, so the rule is written once. The paper's
+phase 2's steps (phase2/arm.py, :func:`arm_at`) all ask here, so the rule is written once. The paper's
 condition 2 of a reachable constraint (Sec. 5.2.4) looks at joint limits only; a tool
 pose whose wrist (the flange origin) would be under the table top (z = 0), e.g. a
 grasp from below, is refused too, so the CMS stays conservative (Sec. 7.1). With the
