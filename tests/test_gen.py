@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from spar_py.app import gen
+from spar_py.app.gen import cells, models
 from spar_py.planning.engine import engine
 from spar_py.core.errors import SparValueError
 from spar_py.kb import check_file, iter_kb_files, load_problem
@@ -187,7 +188,7 @@ def test_layout_is_clear_and_in_reach(n: int, tmp_path: Path) -> None:
     step = from_mm(cell.unit, GRID_STEP_MM)
     for obj, bx in boxes.items():
         near = np.clip(base, bx[:2], bx[2:])
-        assert np.hypot(*(near - base)) >= gen.PEDESTAL_RADIUS
+        assert np.hypot(*(near - base)) >= cells.PEDESTAL_RADIUS
         assert region["x"][0] <= bx[0] and bx[2] <= region["x"][1]
         assert region["y"][0] <= bx[1] and bx[3] <= region["y"][1]
     Ta = cell.transforms["trans_1"]
@@ -295,8 +296,8 @@ def test_scaled_models_are_the_templates_times_k(tmp_path: Path) -> None:
 
     from spar_py.kb import load_object
 
-    k = gen.SMALL_SCALE
-    for src in (gen.PEG_MODEL, gen.BLOCK_MODEL):
+    k = cells.SMALL_SCALE
+    for src in (models.PEG_MODEL, models.BLOCK_MODEL):
         full = load_object(src, "in")
         path = tmp_path / src.name
         path.write_text(gen.scaled_model(src.read_text(), k))
@@ -310,8 +311,8 @@ def test_scaled_models_are_the_templates_times_k(tmp_path: Path) -> None:
         for lbl, p in full.poses.items():
             assert np.allclose(small.poses[lbl].R, p.R) and np.isclose(small.poses[lbl].height, k * p.height)
         assert np.isclose(small.features[0].radius, k * full.features[0].radius)
-    full_r = yaml.safe_load(gen.ROBOT.read_text())
-    small_r = yaml.safe_load(gen.robot_text(gen.ROBOT.read_text(), k))
+    full_r = yaml.safe_load(models.ROBOT.read_text())
+    small_r = yaml.safe_load(gen.robot_text(models.ROBOT.read_text(), k))
     assert small_r["gripper"]["finger_separation"] == pytest.approx(k * full_r["gripper"]["finger_separation"])
     assert small_r["gripper"]["palm"]["thickness"] == pytest.approx(k * full_r["gripper"]["palm"]["thickness"])
     assert small_r["dh"] == full_r["dh"] and small_r["collision"] == full_r["collision"]

@@ -14,6 +14,7 @@ import pytest
 import yaml
 
 from spar_py.app import gen
+from spar_py.app.gen import board as board_gen
 
 from paths import ROOT
 
@@ -99,9 +100,9 @@ def test_layout_rows_columns_and_spacing() -> None:
     assert (b.rows, b.cols) == (2, 5) and len(b.holes) == len(b.pins) == 10
     xy = np.asarray(b.pins)
     gaps = np.linalg.norm(xy[:, None] - xy[None], axis=-1) + np.eye(10) * 1e9
-    assert gaps.min() == pytest.approx(gen.PIN_PITCH)
+    assert gaps.min() == pytest.approx(board_gen.PIN_PITCH)
     hole_xy = np.asarray(b.holes)
-    assert np.all(np.abs(hole_xy) + (gen.HOLE_RADIUS, gen.HOLE_RADIUS) < np.asarray(b.size) / 2)
+    assert np.all(np.abs(hole_xy) + (board_gen.HOLE_RADIUS, board_gen.HOLE_RADIUS) < np.asarray(b.size) / 2)
 
 
 @pytest.mark.parametrize("args, words", [
