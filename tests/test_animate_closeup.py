@@ -7,10 +7,18 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from spar_py.planning.planner import Outcome, Plan
 
 from paths import ROOT
 
 PROBLEMS = ROOT / "kb" / "problems"
+
+
+def _typed(doc: dict) -> Plan:
+    """The typed Plan of a plan JSON document, or of a test's partial one (the pictures take a Plan and
+    read its problem, outcome, partial plan and instance)."""
+    return Plan(problem=doc.get("problem", ""), outcome=Outcome(doc["outcome"]), partial=doc.get("partial"),
+                instance=doc.get("instance"))
 
 
 @pytest.fixture(scope="module")
@@ -42,7 +50,7 @@ def test_each_assemble_step_has_a_closeup_showing_the_parts(paper, tmp_path: Pat
     from spar_py.pictures.cell import OBJECT_COLOURS
 
     cell, doc = paper
-    paths = write_pictures(cell, doc, tmp_path)
+    paths = write_pictures(cell, _typed(doc), tmp_path)
     steps = doc["instance"]["steps"]
     assembles = [k for k, st in enumerate(steps, start=1) if st.get("name") == "assemble"]
     assert assembles
@@ -63,17 +71,17 @@ def test_the_closeup_draws_the_tolerance_of_the_insertion_check(paper) -> None:
     from spar_py.pictures.scene import scenes
 
     cell, doc = paper
-    sc = scenes(cell, doc)
+    sc = scenes(cell, _typed(doc))
     inst = doc["instance"]
     k = next(k for k, st in enumerate(inst["steps"], start=1) if st.get("name") == "assemble")
-    tol = assemble_tolerance(cell, doc, sc[k])
+    tol = assemble_tolerance(cell, _typed(doc), sc[k])
     check = next(c for c in inst["constraints"] + inst.get("verifications", [])
                  if c["action"] == inst["steps"][k - 1]["id"] and c["constraint"] == "centres")
     assert tol is not None and tol.hole == "block"
     assert tol.tolerance == pytest.approx(np.sqrt(check["threshold"]))
     assert tol.bound == pytest.approx(np.sqrt(check["bound"]))
     assert tol.satisfied and tol.bound < tol.tolerance
-    assert all(assemble_tolerance(cell, doc, s) is None for s in sc if s.index != k)
+    assert all(assemble_tolerance(cell, _typed(doc), s) is None for s in sc if s.index != k)
 
 
 def test_the_animation_leaves_out_the_trip_home_and_frames_the_work(paper, tmp_path: Path) -> None:
@@ -89,15 +97,15 @@ def test_the_animation_leaves_out_the_trip_home_and_frames_the_work(paper, tmp_p
     work = sum(count(st.get(key)) for st in steps for key in ("path", "approach", "retreat"))
     home = count(doc["instance"]["motion"]["home_path"])
     assert home > 0  # there is a trip home to leave out
-    frames = frames_of(cell, doc, max_frames=work + home)
+    frames = frames_of(cell, _typed(doc), max_frames=work + home)
     assert len(frames) == work  # every waypoint of the steps' motions, none of the home path
     assert not any("home" in f.title for f in frames)
     assert np.allclose(frames[-1].q, np.radians(steps[-1]["retreat"][-1] if steps[-1].get("retreat")
                                                 else steps[-1]["path"][-1]))
-    gif = write_animation(cell, doc, tmp_path / "a.gif")
+    gif = write_animation(cell, _typed(doc), tmp_path / "a.gif")
     with Image.open(gif) as im:
         # Pillow merges a frame identical to the one before it (the arm still between two samples)
-        assert 1 < im.n_frames <= len(frames_of(cell, doc)) == min(MAX_FRAMES, work)
+        assert 1 < im.n_frames <= len(frames_of(cell, _typed(doc))) == min(MAX_FRAMES, work)
     _check_framing(cell, gif)
 
 
@@ -125,9 +133,9 @@ def test_the_animation_frames_a_ur5e_cells_work(tmp_path: Path) -> None:
     pl = Planner(motion=True)
     cell = pl.load_problem(PROBLEMS / "ur5e_peg_in_block.yaml")
     doc = pl.plan(cell).to_json()
-    _check_framing(cell, write_animation(cell, doc, tmp_path / "u.gif"))
+    _check_framing(cell, write_animation(cell, _typed(doc), tmp_path / "u.gif"))
     # the axes' box clips, and holds every part at every step and the tool at every step's end-point
-    fr = work_extent(cell, doc)
+    fr = work_extent(cell, _typed(doc))
     for st in doc["instance"]["steps"]:
         for T in st["poses"].values():
             assert np.all(fr.lo <= np.asarray(T)[:3, 3]) and np.all(np.asarray(T)[:3, 3] <= fr.hi)

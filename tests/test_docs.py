@@ -5,8 +5,16 @@ import os
 import re
 import struct
 from pathlib import Path
+from spar_py.planning.planner import Outcome, Plan
 
 from paths import ROOT
+
+
+def _typed(doc: dict) -> Plan:
+    """The typed Plan of a plan JSON document, or of a test's partial one (the pictures take a Plan and
+    read its problem, outcome, partial plan and instance)."""
+    return Plan(problem=doc.get("problem", ""), outcome=Outcome(doc["outcome"]), partial=doc.get("partial"),
+                instance=doc.get("instance"))
 
 
 def test_quickstart_python_example(capsys) -> None:
@@ -40,7 +48,7 @@ def test_demo_graphs_are_current(tmp_path: Path) -> None:
 
     plan = Planner().plan(ROOT / "kb" / "problems" / "peg_in_block.yaml").to_json()
     demo = ROOT / "docs" / "demo"
-    for stem, text in (("network", network_dot(plan)), ("ordering", ordering_dot(plan))):
+    for stem, text in (("network", network_dot(_typed(plan))), ("ordering", ordering_dot(_typed(plan)))):
         assert (demo / f"{stem}.dot").read_text() == text
         assert _png_size(demo / f"{stem}.png") == _png_size(render_png(text, tmp_path / f"{stem}.png"))
     steps = plan["instance"]["steps"]

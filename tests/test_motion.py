@@ -345,10 +345,10 @@ def test_animation_replays_the_motions(motion_plans, tmp_path: Path) -> None:
     from spar_py.pictures.animate import frames_of, write_animation
 
     path, cell, plan = next(x for x in motion_plans if Path(x[0]).stem == "wall_detour")
-    frames = frames_of(cell, plan.to_json(), max_frames=6)
+    frames = frames_of(cell, plan, max_frames=6)
     assert len(frames) == 6 and all(f.frames is not None for f in frames)
     assert np.allclose(np.degrees(frames[0].q), plan.instance["motion"]["home_deg"], atol=1e-3)
-    gif = write_animation(cell, plan.to_json(), tmp_path / "plan.gif", max_frames=4)
+    gif = write_animation(cell, plan, tmp_path / "plan.gif", max_frames=4)
     with Image.open(gif) as im:
         assert im.n_frames == 4
 
@@ -356,12 +356,13 @@ def test_animation_replays_the_motions(motion_plans, tmp_path: Path) -> None:
 @pytest.mark.slow
 def test_animation_needs_motions(motion_plans) -> None:
     from spar_py.pictures.animate import frames_of
+    from spar_py.planning.planner import Plan
 
     _, cell, plan = next(x for x in motion_plans if Path(x[0]).stem == "wall_detour")
     doc = plan.to_json()
     doc["instance"] = {**doc["instance"], "motion": None}
     with pytest.raises(SparValueError, match="no-motion"):
-        frames_of(cell, doc)
+        frames_of(cell, Plan.from_json(doc))
 
 
 @pytest.mark.slow

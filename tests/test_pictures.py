@@ -30,6 +30,7 @@ from spar_py.pictures import graphs
 from spar_py.pictures.cell import arm_polyline, gripper_segments, hole_mouth, object_points, solid_points
 from spar_py.pictures.graphs import DPI, implied_edges
 from spar_py.pictures.scene import held_grasp, step_world
+from spar_py.planning.planner import Outcome, Plan
 
 from paths import ROOT
 
@@ -64,6 +65,13 @@ ACTIONS = {
 # turn it hole-up (p2P1) at (24, 0) in, take the lying peg by its base (p1G11), insert it.
 BLOCK_GRASP, PEG_GRASP = "p2G1", "p1G11"
 PLACEMENT = {"x": 24.0, "y": 0.0, "z": 1.5, "yaw_deg": 0.0, "pose": "p2P1"}
+
+
+def _typed(doc: dict) -> Plan:
+    """The typed Plan of a plan JSON document, or of a test's partial one (the pictures take a Plan and
+    read its problem, outcome, partial plan and instance)."""
+    return Plan(problem=doc.get("problem", ""), outcome=Outcome(doc["outcome"]), partial=doc.get("partial"),
+                instance=doc.get("instance"))
 
 
 def paper_partial() -> dict[str, Any]:
@@ -181,7 +189,7 @@ def _xy(node: dict[str, Any]) -> tuple[float, float]:
 
 
 def test_fig24_ordering_dot_has_every_action_and_prior_to_edge() -> None:
-    dot = ordering_dot(graph_plan())
+    dot = ordering_dot(_typed(graph_plan()))
     assert dot.startswith("digraph ordering {")
     assert '"action_3" [label="action_3\\lputdown(block, pos_1)\\l"];' in dot
     nodes, edges = _nodes_edges(dot_json(dot))
@@ -199,14 +207,14 @@ def test_fig24_ordering_dot_has_every_action_and_prior_to_edge() -> None:
 
 
 def test_ordering_layout_puts_each_action_below_the_ones_prior_to_it() -> None:
-    nodes, edges = _nodes_edges(dot_json(ordering_dot(graph_plan())))
+    nodes, edges = _nodes_edges(dot_json(ordering_dot(_typed(graph_plan()))))
     for u, v, _ in edges:
         assert _xy(nodes[u])[1] > _xy(nodes[v])[1]  # dot's y grows upwards: Before above After
     assert sorted(nodes, key=lambda n: -_xy(nodes[n])[1]) == ["action_4", "action_3", "action_2", "action_1"]
 
 
 def test_ordering_nodes_for_actions_known_only_from_the_ordering() -> None:
-    dot = ordering_dot({"outcome": "plan", "partial": {"ordering": [["action_10", "action_9"]]}})
+    dot = ordering_dot(_typed({"outcome": "plan", "partial": {"ordering": [["action_10", "action_9"]]}}))
     nodes, edges = _nodes_edges(dot_json(dot))
     assert set(nodes) == {"action_9", "action_10"} and [(u, v) for u, v, _ in edges] == [("action_10", "action_9")]
     assert dot.index('"action_9" [') < dot.index('"action_10" [')  # natural order
@@ -216,7 +224,7 @@ def test_ordering_nodes_for_actions_known_only_from_the_ordering() -> None:
 
 
 def test_fig25_network_has_one_node_per_variable_with_its_label_count() -> None:
-    dot = network_dot(graph_plan())
+    dot = network_dot(_typed(graph_plan()))
     assert dot.startswith("graph network {")
     nodes, edges = _nodes_edges(dot_json(dot))
     assert set(nodes) == set(VARIABLES)
@@ -231,7 +239,7 @@ def test_fig25_network_has_one_node_per_variable_with_its_label_count() -> None:
 
 
 def test_fig25_network_has_an_edge_per_arc_with_its_pair_count() -> None:
-    nodes, edges = _nodes_edges(dot_json(network_dot(graph_plan())))
+    nodes, edges = _nodes_edges(dot_json(network_dot(_typed(graph_plan()))))
     assert {(u, v): e["label"] for u, v, e in edges} == {k: f"{n} pairs" for k, n in ARC_COUNTS.items()}
     # grasps are written first, so dot ranks them left of the positions
     for u, v, _ in edges:
@@ -241,12 +249,12 @@ def test_fig25_network_has_an_edge_per_arc_with_its_pair_count() -> None:
 def test_network_arc_kind_and_a_single_pair() -> None:
     partial = {"variables": {"grasp_1": ["g"], "pos_1": ["p"]},
                "arcs": [{"vars": ["grasp_1", "pos_1"], "pairs": [["g", "p"]], "kind": "reachable"}]}
-    _, edges = _nodes_edges(dot_json(network_dot({"outcome": "plan", "partial": partial})))
+    _, edges = _nodes_edges(dot_json(network_dot(_typed({"outcome": "plan", "partial": partial}))))
     assert [e["label"] for *_, e in edges] == ["reachable\\n1 pair"]
 
 
 def test_separations_are_drawn_when_present() -> None:
-    dot = network_dot(graph_plan(separations=[{"vars": ["pos_1", "init_pos1"]}, {"junk": 1}]))
+    dot = network_dot(_typed(graph_plan(separations=[{"vars": ["pos_1", "init_pos1"]}, {"junk": 1}])))
     _, edges = _nodes_edges(dot_json(dot))
     seps = [(u, v, e["style"], e["constraint"]) for u, v, e in edges if e["label"] == "separated (dif)"]
     assert seps == [("pos_1", "init_pos1", "dotted", "false")]
@@ -258,7 +266,7 @@ def test_separations_as_the_plan_json_gives_them(tmp_path: Path) -> None:
     sep = {"deleted": {"functor": "part_location", "args": ["peg", "pos_1"]},
            "condition": {"functor": "part_location", "args": ["peg", "init_pos1"]},
            "text": ["part_location(peg,pos_1)", "part_location(peg,init_pos1)"]}
-    dot = network_dot(graph_plan(separations=[sep]))
+    dot = network_dot(_typed(graph_plan(separations=[sep])))
     assert '"pos_1" -- "init_pos1" [label="separated (dif)", style="dotted", constraint="false"];' in dot
     assert "part_location" not in dot
     assert_png(render_png(dot, tmp_path / "n.png"))
@@ -267,7 +275,7 @@ def test_separations_as_the_plan_json_gives_them(tmp_path: Path) -> None:
 def test_quotes_and_backslashes_in_names_reach_dot_intact() -> None:
     """A quote closes no string early and a backslash stays one (dot keeps escStrings raw: ``\\\\``)."""
     partial = {"actions": [{"id": 'a"1', "term": "say('x\\y')"}], "ordering": []}
-    nodes, _ = _nodes_edges(dot_json(ordering_dot({"outcome": "plan", "partial": partial})))
+    nodes, _ = _nodes_edges(dot_json(ordering_dot(_typed({"outcome": "plan", "partial": partial}))))
     assert list(nodes) == ['a"1'] and nodes['a"1']["label"] == "a\"1\\lsay('x\\\\y')\\l"
 
 
@@ -277,7 +285,7 @@ def test_quotes_and_backslashes_in_names_reach_dot_intact() -> None:
 @pytest.mark.parametrize("which", ["ordering", "network"])
 def test_png_is_dots_drawing_at_the_set_resolution(tmp_path: Path, which: str) -> None:
     """The PNG is dot's layout drawn at DPI: its size is dot's bounding box (points) plus the pad."""
-    dot = (ordering_dot if which == "ordering" else network_dot)(graph_plan())
+    dot = (ordering_dot if which == "ordering" else network_dot)(_typed(graph_plan()))
     path = render_png(dot, tmp_path / f"{which}.png")
     w, h = assert_png(path)
     g = dot_json(dot)
@@ -290,11 +298,11 @@ def test_missing_dot_is_a_one_line_spar_error(cell: Cell, plan: dict[str, Any], 
                                               monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(graphs.shutil, "which", lambda name: None)
     with pytest.raises(SparError, match="install the graphviz package") as e:
-        render_png(ordering_dot(plan), tmp_path / "o.png")
+        render_png(ordering_dot(_typed(plan)), tmp_path / "o.png")
     assert "\n" not in str(e.value) and not (tmp_path / "o.png").exists()
     out = tmp_path / "pics"
     with pytest.raises(SparError, match="graphviz"):
-        write_pictures(cell, plan, out)
+        write_pictures(cell, _typed(plan), out)
     assert not out.exists()  # checked before anything is written
 
 
@@ -320,7 +328,7 @@ def test_dot_failure_is_a_spar_error_with_dots_reason(tmp_path: Path) -> None:
 
 
 def test_initial_objects_rest_on_the_table_where_the_problem_puts_them(cell: Cell, plan: dict[str, Any]) -> None:
-    s0 = scenes(cell, plan)[0]
+    s0 = scenes(cell, _typed(plan))[0]
     for pos in cell.positions.values():
         T = s0.poses[pos.obj]
         assert np.allclose(T, pos.T)
@@ -334,7 +342,7 @@ def test_initial_objects_rest_on_the_table_where_the_problem_puts_them(cell: Cel
 
 
 def test_scenes_draw_the_poses_and_held_the_plan_gives(cell: Cell, plan: dict[str, Any]) -> None:
-    sc = scenes(cell, plan)
+    sc = scenes(cell, _typed(plan))
     steps = plan["instance"]["steps"]
     assert len(sc) == len(steps) + 1
     for s, st in zip(sc[1:], steps):
@@ -352,13 +360,13 @@ def test_scenes_do_not_replay_the_plan(cell: Cell) -> None:
     p = paper_plan(cell)
     odd = {"peg": trans(100, -40, 0.5).tolist(), "block": (trans(1, 2, 3) @ rotz(1.0)).tolist()}
     p["instance"]["steps"][-1]["poses"] = odd
-    last = scenes(cell, p)[-1]
+    last = scenes(cell, _typed(p))[-1]
     assert np.array_equal(last.poses["peg"], np.asarray(odd["peg"]))
     assert np.array_equal(last.poses["block"], np.asarray(odd["block"]))
 
 
 def test_the_arm_is_drawn_from_the_steps_joints(cell: Cell, plan: dict[str, Any]) -> None:
-    sc = scenes(cell, plan)
+    sc = scenes(cell, _typed(plan))
     steps = plan["instance"]["steps"]
     for s, st in zip(sc[1:], steps):
         if st["joints_deg"] is not None:
@@ -393,7 +401,7 @@ def test_stock_parts_keep_keys_of_their_own(cell: Cell) -> None:
     spare = (trans(20, -10, 0) @ cell.positions["tr1"].T).tolist()
     for st in p["instance"]["steps"]:
         st["poses"]["peg@tr9"] = spare
-    last = scenes(cell, p)[-1]
+    last = scenes(cell, _typed(p))[-1]
     assert np.array_equal(last.poses["peg@tr9"], np.asarray(spare))
 
 
@@ -406,7 +414,7 @@ def test_the_planners_plan_draws_the_peg_seated_in_the_hole(cell: Cell) -> None:
     from spar_py.planning.planner import Planner
 
     doc = Planner().plan(PROBLEM).to_json()
-    sc = scenes(cell, doc)
+    sc = scenes(cell, _typed(doc))
     peg, block = cell.objects["peg"], cell.objects["block"]
     tip = sc[-1].poses["peg"] @ np.append(peg.features[0].vector, 1)
     bottom = sc[-1].poses["block"] @ np.append(block.features[0].vector, 1)
@@ -418,7 +426,7 @@ def test_a_step_without_poses_is_a_value_error(cell: Cell, plan: dict[str, Any])
     p = paper_plan(cell)
     del p["instance"]["steps"][1]["poses"]
     with pytest.raises(SparValueError, match="step 2: no poses"):
-        scenes(cell, p)
+        scenes(cell, _typed(p))
 
 
 # --------------------------------------------------------------------------- cell geometry
@@ -475,42 +483,32 @@ def test_gripper_fingertips_straddle_the_tool_centre() -> None:
 
 
 def test_write_pictures_on_the_paper_cell(cell: Cell, plan: dict[str, Any], tmp_path: Path) -> None:
-    paths = write_pictures(cell, plan, tmp_path / "pics")
+    paths = write_pictures(cell, _typed(plan), tmp_path / "pics")
     names = [p.name for p in paths]
     assert names == ["ordering.dot", "ordering.png", "network.dot", "network.png", "cell_00_initial.png",
                      "cell_01_pickup.png", "cell_02_putdown.png", "cell_03_dense_range_scan.png",
                      "cell_04_pickup.png", "cell_05_assemble.png"]
-    assert paths[0].read_text() == ordering_dot(plan)
-    assert paths[2].read_text() == network_dot(plan)
+    assert paths[0].read_text() == ordering_dot(_typed(plan))
+    assert paths[2].read_text() == network_dot(_typed(plan))
     for p in paths:
         if p.suffix == ".png":
             assert_png(p)
     assert [png_size(p) for p in paths[4:]] == [(1200, 720)] * 6
 
 
-def test_a_plan_object_with_to_json_is_accepted(cell: Cell, plan: dict[str, Any]) -> None:
-    class PlanLike:  # the planner's Plan: to_json() gives the JSON document
-        def to_json(self) -> dict[str, Any]:
-            return plan
-
-    assert ordering_dot(PlanLike()) == ordering_dot(plan)
-    assert network_dot(PlanLike()) == network_dot(plan)
-    assert len(scenes(cell, PlanLike())) == len(plan["instance"]["steps"]) + 1
-
-
 def test_no_plan_writes_nothing(cell: Cell, tmp_path: Path) -> None:
     out = tmp_path / "none"
-    assert write_pictures(cell, {"schema": 1, "outcome": "no_plan", "partial": None}, out) == []
+    assert write_pictures(cell, _typed({"schema": 1, "outcome": "no_plan", "partial": None}), out) == []
     assert not out.exists()
 
 
 def test_cell_png_step_titles_and_range(cell: Cell, plan: dict[str, Any], tmp_path: Path) -> None:
-    sc = scenes(cell, plan)
+    sc = scenes(cell, _typed(plan))
     assert sc[0].title == "initial state"
     assert sc[4].title == f"step 4: pickup(peg, {PEG_GRASP})"
-    assert_png(cell_png(cell, plan, 4, tmp_path / "s4.png"))
+    assert_png(cell_png(cell, _typed(plan), 4, tmp_path / "s4.png"))
     with pytest.raises(ValueError, match="step_index"):
-        cell_png(cell, plan, 6, tmp_path / "s6.png")
+        cell_png(cell, _typed(plan), 6, tmp_path / "s6.png")
 
 
 def test_no_matplotlib_import_at_package_import() -> None:
@@ -542,7 +540,7 @@ def test_each_link_shape_the_gripper_and_each_obstacle_is_drawn_in_every_panel(p
     links = [ln["name"] for ln in yaml.safe_load(ROBOT_YAML.read_text())["collision"]["links"]]
     shelf_box = yaml.safe_load(SHELF.read_text())["obstacles"][0]["box"]
     shelf = load_problem(SHELF)
-    sc = scenes(shelf, plan)
+    sc = scenes(shelf, _typed(plan))
     fig = draw_figure(shelf, sc[4], extent(shelf, sc))
     try:
         panels = fig.axes[:3]
@@ -570,7 +568,7 @@ def test_fingers_at_the_grasp_width_and_links_in_their_frames(plan: dict[str, An
     f = doc["gripper"]["finger"]
     fore = next(ln for ln in doc["collision"]["links"] if ln["name"] == "forearm")
     cell_ = load_problem(SHELF)
-    s = scenes(cell_, plan)[4]  # after pickup(peg, p1G11): 3 in wide
+    s = scenes(cell_, _typed(plan))[4]  # after pickup(peg, p1G11): 3 in wide
     w = cell_.objects["peg"].grasps[PEG_GRASP].width
     shapes = {sh.gid: sh for sh in robot_shapes(cell_, s)}
     T = np.linalg.inv(s.tool)
@@ -597,7 +595,7 @@ def test_a_cell_with_an_obstacle_is_drawn_differently(plan: dict[str, Any], tmp_
 
     shelf = load_problem(SHELF)
     bare = dataclasses.replace(shelf, obstacles=())
-    sc = scenes(shelf, plan)
+    sc = scenes(shelf, _typed(plan))
     fr = extent(shelf, sc)
     with_it = mpimg.imread(cell_figure(shelf, sc[4], fr, tmp_path / "shelf.png"))
     without = mpimg.imread(cell_figure(bare, sc[4], fr, tmp_path / "bare.png"))

@@ -23,7 +23,7 @@ def paper() -> tuple:
     from spar_py.planning.planner import Planner
 
     cell = load_problem(PROBLEMS / "peg_in_block.yaml")
-    return cell, Planner().plan(cell).to_json()
+    return cell, Planner().plan(cell)
 
 
 def _extent_px(img: np.ndarray, colour: str) -> tuple[int, int]:

@@ -21,6 +21,7 @@ from spar_py.phase2 import instance as phase2
 from spar_py.phase2.positions import BOUNDS_LIMIT
 from spar_py.phase2 import uncertainty as ur
 from spar_py.world.collision import CellCache
+from spar_py.planning.planner import Outcome, Plan
 
 from paths import ROOT
 
@@ -28,6 +29,13 @@ PROBLEMS = ROOT / "kb" / "problems"
 #: Cells whose plans sense (large_uncertainty), squeeze (squeeze), turn a part over and insert.
 CELLS = ("large_uncertainty", "squeeze", "peg_in_block", "ur5e_peg_in_block")
 KEYS = ("dx", "dy", "dz", "dtheta_deg")
+
+
+def _typed(doc: dict) -> Plan:
+    """The typed Plan of a plan JSON document, or of a test's partial one (the pictures take a Plan and
+    read its problem, outcome, partial plan and instance)."""
+    return Plan(problem=doc.get("problem", ""), outcome=Outcome(doc["outcome"]), partial=doc.get("partial"),
+                instance=doc.get("instance"))
 
 
 @pytest.fixture(scope="module")
@@ -192,7 +200,7 @@ def test_the_viewer_draws_each_steps_propagated_bounds(plans) -> None:
     from spar_py.pictures.viewer import viewer_data
 
     cell, plan, doc = plans["large_uncertainty"]
-    data = viewer_data(cell, doc)
+    data = viewer_data(cell, _typed(doc))
     assert data["states"][0]["uncertainty_from"] == "declared"
     assert data["states"][0]["uncertainty"]["peg"][:2] == list(cell.object_bounds["peg"].dx)
     for k, s in enumerate(doc["instance"]["steps"], start=1):

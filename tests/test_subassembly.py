@@ -398,11 +398,10 @@ def test_motions_and_animation_carry_the_subassembly() -> None:
 
     plan = Planner(motion=True).plan(PROBLEMS / "turn_over.yaml")
     assert plan.ok, plan.reason
-    doc = plan.to_json()
     prod = _product("turn_over")
     rel = np.linalg.inv(prod["parts"]["block"]["pose"]) @ prod["parts"]["pin_a"]["pose"]
     cell = load_problem(PROBLEMS / "turn_over.yaml")
-    frames = frames_of(cell, doc, max_frames=400)
+    frames = frames_of(cell, plan, max_frames=400)
     carried = [f for f in frames if f.held == "block"]
     assert carried
     for f in carried:
@@ -410,7 +409,7 @@ def test_motions_and_animation_carry_the_subassembly() -> None:
     # the 3-D viewer's motion segments carry pin_a the same way (poses flat, row by row, rounded)
     from spar_py.pictures.viewer import viewer_data
 
-    segs = [g for st in viewer_data(cell, doc)["steps"] for g in st["motion"] if g["held"] == "block"]
+    segs = [g for st in viewer_data(cell, plan)["steps"] for g in st["motion"] if g["held"] == "block"]
     assert segs and all("pin_a" in g["carried"] for g in segs)
     for g in segs:
         for hp, cp in zip(g["held_pose"], g["carried"]["pin_a"]):

@@ -23,6 +23,7 @@ import pytest
 from spar_py.kb import load_problem
 from spar_py.pictures.scene import initial_poses
 from spar_py.pictures.viewer import MAX_WAYPOINTS, render_html, viewer_data
+from spar_py.planning.planner import Outcome, Plan
 
 from paths import ROOT, SPAR
 
@@ -37,6 +38,13 @@ CHROMIUM_FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic
                   "--host-resolver-rules=MAP * ~NOTFOUND", "--window-size=1280,800", "--hide-scrollbars",
                   "--mute-audio")
 PAGE_TIMEOUT_S = 60.0
+
+
+def _typed(doc: dict) -> Plan:
+    """The typed Plan of a plan JSON document, or of a test's partial one (the pictures take a Plan and
+    read its problem, outcome, partial plan and instance)."""
+    return Plan(problem=doc.get("problem", ""), outcome=Outcome(doc["outcome"]), partial=doc.get("partial"),
+                instance=doc.get("instance"))
 
 
 def spar(*args: str, timeout: float = 300) -> subprocess.CompletedProcess[str]:
@@ -79,7 +87,7 @@ def test_viewer_data_arm_from_robot_frames(paper_plan):
     """The page's arm frames are robot.frames at each step's joints; every part in every state."""
     _, _, doc = paper_plan
     cell = load_problem(PAPER)
-    data = viewer_data(cell, doc)
+    data = viewer_data(cell, _typed(doc))
     steps = doc["instance"]["steps"]
     assert len(data["states"]) == len(steps) + 1 and len(data["steps"]) == len(steps)
     for st, step in zip(data["states"][1:], steps):
@@ -95,7 +103,7 @@ def test_viewer_data_arm_from_robot_frames(paper_plan):
 def test_viewer_motions_sampled_and_timed(ur5e_plan):
     _, _, doc = ur5e_plan
     cell = load_problem(UR5E)
-    data = viewer_data(cell, doc)
+    data = viewer_data(cell, _typed(doc))
     for step, src in zip(data["steps"], doc["instance"]["steps"]):
         kinds = [m["kind"] for m in step["motion"]]
         assert kinds == ["path", "approach", "retreat"]
@@ -143,7 +151,7 @@ def test_plan_html_unwritable_before_planning(tmp_path):
 def test_render_html_escapes_script_end(paper_plan):
     _, _, doc = paper_plan
     cell = load_problem(PAPER)
-    text = render_html(cell, dict(doc, problem="</script><b>x"))
+    text = render_html(cell, _typed(dict(doc, problem="</script><b>x")))
     assert "</script><b>x" not in text
 
 
@@ -317,7 +325,7 @@ def _check_page(result: dict, doc: dict, cell_path: Path) -> None:
     assert view.std() > 10 and len(np.unique(view.reshape(-1, 3), axis=0)) > 200  # not blank
     x, y = result["proj"]
     assert 0 <= x < 900 and 0 <= y < 800, result["proj"]  # the hole is in the 3-D view
-    colours = [p["colour"] for p in viewer_data(cell, doc)["parts"]]
+    colours = [p["colour"] for p in viewer_data(cell, _typed(doc))["parts"]]
     assert _part_pixels(result["png"], [x, y], colours) >= 300  # of the 3600 pixels round the hole
 
 

@@ -231,19 +231,19 @@ def cmd_plan(args: argparse.Namespace) -> int:
     for d in picture_dirs:
         from spar_py.pictures import write_pictures  # matplotlib: only with --png/--dot
 
-        for p in write_pictures(cell, plan.to_json(), guard.staging(d)):
+        for p in write_pictures(cell, plan, guard.staging(d)):
             staged.append((p, d / p.name))
     if animate is not None:
         from spar_py.pictures.animate import write_animation  # matplotlib: only with --animate
 
         tmpgif = guard.staging(animate) / animate.name
-        write_animation(cell, plan.to_json(), tmpgif)
+        write_animation(cell, plan, tmpgif)
         staged.append((tmpgif, animate))
     page = None
     if html is not None and plan.ok:
         from spar_py.pictures.viewer import write_viewer  # the mesh layer: only with --html
 
-        page = write_viewer(cell, plan.to_json(), guard.staging(html) / html.name)
+        page = write_viewer(cell, plan, guard.staging(html) / html.name)
         staged.append((page.path, html))
     if output is not None:
         tmpfile = guard.staging(output) / output.name
@@ -260,14 +260,14 @@ def cmd_plan(args: argparse.Namespace) -> int:
     if args.json and output is None:
         sys.stdout.write(plan.dumps() + "\n")
     elif not args.json:  # JSON carries the colliding pairs in reason.collisions, the last line in reason.summary
-        no_plan = (plan.reason or {}) if plan.outcome is Outcome.NO_PLAN else {}
-        for line in no_plan.get("collisions", []):
+        why = plan.explanation if plan.outcome is Outcome.NO_PLAN else None
+        for line in why.collisions if why is not None else ():
             print(line)
         if failing:
             print(failing)
         sys.stdout.write(plan.trace)
-        if no_plan.get("summary"):
-            print(no_plan["summary"])
+        if why is not None and why.summary:
+            print(why.summary)
     for d in picture_dirs:
         n = sum(1 for _, f in staged if f.parent == d)
         print(f"spar: wrote {n} pictures to {d}", file=sys.stderr)
@@ -345,12 +345,13 @@ def cmd_view(args: argparse.Namespace) -> int:
     # kb (numpy) and the viewer (the mesh layer): this command only, not every command's start-up
     from spar_py.kb import load_problem
     from spar_py.pictures.viewer import write_viewer
+    from spar_py.planning.planner import Plan
 
     cell = load_problem(problem, max_bytes=max_bytes)
     if cell.name != doc.get("problem"):
         raise SparError(f"{problem}: expected the problem {doc.get('problem')!r} of {src}, not {cell.name!r}")
     try:
-        page = write_viewer(cell, doc, args.guard.staging(out) / out.name)
+        page = write_viewer(cell, Plan.from_json(doc), args.guard.staging(out) / out.name)
         with args.guard.commit():
             os.replace(page.path, out)
     except OSError as e:

@@ -14,15 +14,16 @@ from __future__ import annotations
 
 import re
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from spar_py.pictures.cell import cell_figure, cell_png, closeup_png, extent
 from spar_py.pictures.graphs import dot_executable, network_dot, ordering_dot, render_png
-from spar_py.pictures.plandoc import as_doc, instance, is_plan
+from spar_py.pictures.plandoc import instance, is_plan
 from spar_py.pictures.scene import Scene, scenes
 
 if TYPE_CHECKING:
     from spar_py.core.model import Cell
+    from spar_py.planning.planner import Plan
 
 __all__ = ["Scene", "cell_png", "network_dot", "ordering_dot", "render_png", "scenes", "write_pictures"]
 
@@ -31,24 +32,23 @@ def _slug(name: str) -> str:
     return re.sub(r"[^A-Za-z0-9_]+", "_", name).strip("_") or "step"
 
 
-def _step_names(plan: Any) -> list[str]:
+def _step_names(plan: Plan) -> list[str]:
     """File-name stems of the cell pictures: ``initial``, then each step's action name."""
     steps = instance(plan).get("steps") or []
     return ["initial"] + [_slug(str(st.get("name") or str(st.get("term", "")).split("(")[0])) for st in steps]
 
 
-def write_pictures(cell: Cell, plan: Any, outdir: str | Path) -> list[Path]:
+def write_pictures(cell: Cell, plan: Plan, outdir: str | Path) -> list[Path]:
     """Write every picture of a plan into ``outdir`` and return their paths, in this order:
     ordering.dot, ordering.png, network.dot, network.png, cell_00_initial.png,
     cell_01_<name>.png, ... (one per step of the instance, named by the step's action name), each
     assemble step's followed by its close-up cell_<k>_assemble_closeup.png (the peg, the hole
     and the insertion check's tolerance: pictures.cell.closeup_png).
 
-    ``plan`` is the plan JSON or a ``planner.Plan``. A plan whose outcome is not ``"plan"``
-    writes nothing and returns []. Raises SparError (one line) before writing anything
+    ``plan`` a ``planner.Plan`` (a plan JSON read from a file: ``Plan.from_json``). A plan whose
+    outcome is not ``"plan"`` writes nothing and returns []. Raises SparError (one line) before writing anything
     when Graphviz's ``dot`` is not installed.
     """
-    plan = as_doc(plan)
     if not is_plan(plan):
         return []
     dot_executable()

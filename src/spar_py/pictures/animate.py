@@ -21,16 +21,19 @@ from __future__ import annotations
 
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from spar_py.core.errors import SparValueError
 from spar_py.core.model import Cell
 from spar_py.pictures.cell import Extent, draw_3d, finger_length, part_points, table_extent, extent
-from spar_py.pictures.plandoc import as_doc, instance
+from spar_py.pictures.plandoc import instance
 from spar_py.pictures.scene import Scene, held_grasp, part_model, scenes
 from spar_py.world.collision import TOOL, CollisionScene, scene_for
+
+if TYPE_CHECKING:
+    from spar_py.planning.planner import Plan
 
 __all__ = ["arm_faces", "frames_of", "obstacle_faces", "work_extent", "write_animation"]
 
@@ -66,18 +69,17 @@ def _tool_points(cell: Cell, steps: list[dict[str, Any]]) -> np.ndarray:
     return np.array(pts, float).reshape(-1, 3)
 
 
-def _work_points(cell: Cell, plan: Any) -> np.ndarray:
+def _work_points(cell: Cell, plan: Plan) -> np.ndarray:
     """What the animation shows (k, 3), world, cell unit: the parts' points in every scene and
     the tool's working path (:func:`_tool_points`)."""
-    doc = as_doc(plan)
-    steps = list(instance(doc).get("steps") or [])
-    allp = np.vstack(part_points(cell, scenes(cell, doc)) + [_tool_points(cell, steps)])
+    steps = list(instance(plan).get("steps") or [])
+    allp = np.vstack(part_points(cell, scenes(cell, plan)) + [_tool_points(cell, steps)])
     if not len(allp):
         raise SparValueError("the plan has no parts and no tool path to frame")
     return allp
 
 
-def work_extent(cell: Cell, plan: Any, work: np.ndarray | None = None) -> Extent:
+def work_extent(cell: Cell, plan: Plan, work: np.ndarray | None = None) -> Extent:
     """The 3-D axes' box (cell unit), which only clips: the work (``work``, else
     :func:`_work_points`) padded by WORK_PAD_SIZES part sizes, joined with the cell pictures'
     view (pictures/cell.py ``extent``: the parts, the obstacles, the arm's reach over them), so
@@ -86,7 +88,7 @@ def work_extent(cell: Cell, plan: Any, work: np.ndarray | None = None) -> Extent
     allp = _work_points(cell, plan) if work is None else work
     size = max((m.bounding_radius() for m in cell.objects.values()), default=0.0)
     pad = max(WORK_PAD_SIZES * size, 1e-3 * float(np.ptp(allp, axis=0).max()), 1e-9)
-    view = extent(cell, scenes(cell, as_doc(plan)))
+    view = extent(cell, scenes(cell, plan))
     lo = np.minimum(np.append(allp.min(axis=0)[:2] - pad, min(0.0, float(allp[:, 2].min()))), view.lo)
     hi = np.maximum(allp.max(axis=0) + pad, view.hi)
     return Extent(table_extent(cell, lo, hi), lo, hi)
@@ -111,18 +113,17 @@ def _fit(fig: Any, ax: Any, pts: np.ndarray) -> None:
     ax.set_position((0.5 - w * uc[0], BOTTOM + height / 2 - h * uc[1], w, h))
 
 
-def frames_of(cell: Cell, plan: Any, max_frames: int = MAX_FRAMES) -> list[Scene]:
+def frames_of(cell: Cell, plan: Plan, max_frames: int = MAX_FRAMES) -> list[Scene]:
     """The scenes of the animation: for each arm step, its path, approach and retreat
     waypoints in the world before (path, approach) and after (retreat) the step (not the
     path home after the last step); sampled evenly to at most ``max_frames``. SparValueError if the plan has
     no motions (planned with --no-motion)."""
-    doc = as_doc(plan)
-    inst = instance(doc)
+    inst = instance(plan)
     motion = inst.get("motion")
     if not motion:
         raise SparValueError("the plan has no motions to animate (it was planned with --no-motion)")
     steps = list(inst.get("steps") or [])
-    sc = scenes(cell, doc)
+    sc = scenes(cell, plan)
     seq: list[tuple[Scene, np.ndarray, str, tuple[str, ...]]] = []  # (world scene, q rad, caption, carried)
     for k, st in enumerate(steps, start=1):
         before, after = sc[k - 1], sc[k]
@@ -218,7 +219,7 @@ def _width(cell: Cell, s: Scene) -> float | None:
     return None
 
 
-def write_animation(cell: Cell, plan: Any, path: str | Path, max_frames: int = MAX_FRAMES) -> Path:
+def write_animation(cell: Cell, plan: Plan, path: str | Path, max_frames: int = MAX_FRAMES) -> Path:
     """Write the GIF of the plan's motions to ``path`` (Pillow writer); returns the path. The
     view is the work's (:func:`work_extent`), filling the frame (:func:`_fit`); each frame
     replaces the previous frame's artists in one reused 3-D axes."""

@@ -31,7 +31,7 @@ import numpy as np
 from spar_py.core.errors import SparValueError
 from spar_py.core.geometry import convex_hull_2d
 from spar_py.core.units import from_mm
-from spar_py.pictures.plandoc import as_doc, instance
+from spar_py.pictures.plandoc import instance
 from spar_py.pictures.scene import AT_REST, MIN_SIZE_MM, Scene, part_model, scenes
 from spar_py.world.collision import TOOL, scene_for
 from spar_py.world.parts import part_mesh
@@ -39,6 +39,7 @@ from spar_py.world.parts import part_mesh
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
 
+    from spar_py.planning.planner import Plan
     from spar_py.world.collision import Body
     from spar_py.world.robot import Robot
     from spar_py.core.model import Cell, MatingFeature, ObjectModel, Solid
@@ -639,7 +640,7 @@ def _save_png(fig: Any, path: str | Path) -> Path:
     return Path(path)
 
 
-def cell_png(cell: Cell, plan: Any, step_index: int, path: str | Path) -> Path:
+def cell_png(cell: Cell, plan: Plan, step_index: int, path: str | Path) -> Path:
     """Draw the work cell at step ``step_index`` (0 = initial state, k = after step k) into ``path``.
 
     Extents are those of the whole plan, as :func:`spar_py.pictures.write_pictures` uses.
@@ -677,11 +678,11 @@ class Tolerance:
     satisfied: bool
 
 
-def assemble_tolerance(cell: Cell, plan: Any, s: Scene) -> Tolerance | None:
+def assemble_tolerance(cell: Cell, plan: Plan, s: Scene) -> Tolerance | None:
     """The :class:`Tolerance` of the step scene ``s`` shows (``s.index`` >= 1), if it is an
     assemble step whose insertion check (the ``centres`` constraint, with a threshold) is in
     the plan and whose hole has a mouth (:func:`hole_mouth`); None otherwise."""
-    inst = instance(as_doc(plan))
+    inst = instance(plan)
     steps = list(inst.get("steps") or [])
     if not 1 <= s.index <= len(steps):
         return None
@@ -784,7 +785,7 @@ def closeup_figure(cell: Cell, s: Scene, tol: Tolerance) -> Any:
     return fig
 
 
-def closeup_png(cell: Cell, plan: Any, s: Scene, path: str | Path) -> Path | None:
+def closeup_png(cell: Cell, plan: Plan, s: Scene, path: str | Path) -> Path | None:
     """Draw the close-up of the assemble step scene ``s`` shows into the PNG ``path`` and return
     the path; None (nothing written) when ``s`` is no assemble step with an insertion check."""
     tol = assemble_tolerance(cell, plan, s)

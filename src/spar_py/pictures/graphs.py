@@ -17,11 +17,14 @@ import subprocess
 import textwrap
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from spar_py.core.errors import SparError
 from spar_py.core.model import natural_key
-from spar_py.pictures.plandoc import as_doc, instance, partial, pretty_term
+from spar_py.pictures.plandoc import instance, partial, pretty_term
+
+if TYPE_CHECKING:
+    from spar_py.planning.planner import Plan
 
 __all__ = ["dot_executable", "implied_edges", "label_summary", "network_dot", "ordering_dot", "render_png"]
 
@@ -65,7 +68,7 @@ def dot_header(kind: str, name: str, title: str, rankdir: str, **node: str) -> l
     ]
 
 
-def _action_nodes(plan: Mapping[str, Any]) -> dict[str, str]:
+def _action_nodes(plan: Plan) -> dict[str, str]:
     """Action id -> its term text (paper spacing), for every action in actions or ordering."""
     nodes: dict[str, str] = {}
     for a in partial(plan).get("actions") or []:
@@ -108,7 +111,7 @@ def implied_edges(edges: Sequence[tuple[str, str]]) -> set[tuple[str, str]]:
     return {(u, v) for u, v in set(edges) if reaches(u, v, (u, v))}
 
 
-def ordering_dot(plan: Any) -> str:
+def ordering_dot(plan: Plan) -> str:
     """The ordering graph (Fig. 24, bottom) as Graphviz DOT text, first action on top.
 
     Nodes are the plan's actions labelled ``"action_3\\lputdown(block, pos_1)\\l"``; an
@@ -117,10 +120,9 @@ def ordering_dot(plan: Any) -> str:
     dashed (``constraint=false``, so it does not stretch the ranks) when a longer chain
     of prior_to already implies it.
     """
-    plan = as_doc(plan)
     edges = [(str(e[0]), str(e[1])) for e in partial(plan).get("ordering") or []]
     implied = implied_edges(edges)
-    title = (f"ordering graph: {plan.get('problem', '')}\n"
+    title = (f"ordering graph: {plan.problem}\n"
              "solid: prior_to (transitive reduction)\ndashed: implied by a longer chain")
     out = dot_header("digraph", "ordering", title, "TB", fillcolor=ACTION_FILL)
     for n, t in _action_nodes(plan).items():
@@ -193,7 +195,7 @@ def _pairs_label(arc: Mapping[str, Any]) -> str:
     return f"{arc['kind']}\n{count}" if arc.get("kind") else count
 
 
-def network_dot(plan: Any) -> str:
+def network_dot(plan: Plan) -> str:
     """The geometric constraint network (Fig. 24, top; Fig. 25) as Graphviz DOT text.
 
     Nodes are the plan variables with their pruned label sets (abbreviated, see
@@ -202,7 +204,6 @@ def network_dot(plan: Any) -> str:
     written grasp first so that ``dot`` puts grasps left of positions; separations, if
     any, dotted (``constraint=false``).
     """
-    plan = as_doc(plan)
     part = partial(plan)
     variables: dict[str, list[str]] = {str(k): list(v or []) for k, v in (part.get("variables") or {}).items()}
     arcs = [a for a in part.get("arcs") or [] if len(a.get("vars") or []) == 2]
@@ -211,7 +212,7 @@ def network_dot(plan: Any) -> str:
             variables.setdefault(str(v), [])
     seps = [s for s in (_separation_vars(x, variables) for x in part.get("separations") or []) if s]
     bindings = instance(plan).get("bindings") or {}
-    out = dot_header("graph", "network", f"constraint network: {plan.get('problem', '')}", "LR")
+    out = dot_header("graph", "network", f"constraint network: {plan.problem}", "LR")
     for v in sorted(variables, key=natural_key):
         label = label_summary(v, variables[v], bindings.get(v))
         out.append(f"  {dot_id(v)} {dot_attrs(True, label=label, fillcolor=_fill_of(v))};")

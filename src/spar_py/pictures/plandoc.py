@@ -1,39 +1,35 @@
-"""Reading the plan JSON (the dict the planner emits) for the pictures: its parts and its term texts.
+"""Reading a plan (planning.planner.Plan) for the pictures: its parts and its term texts.
 
-Every picture function takes the plan document itself or anything with a ``to_json()``
-that returns one (``planner.Plan``); :func:`as_doc` makes the two one.
+Every picture function takes the typed ``Plan``; a plan JSON document read from a file is
+one by ``Plan.from_json``.
 """
 from __future__ import annotations
 
 import re
 from collections.abc import Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from spar_py.kb import parse_term, term_text
 
-__all__ = ["PlanDoc", "as_doc", "instance", "is_plan", "partial", "pretty_term", "term_parts"]
+if TYPE_CHECKING:
+    from spar_py.planning.planner import Plan
 
-PlanDoc = Mapping[str, Any]  # the plan JSON document
-
-
-def as_doc(plan: Any) -> PlanDoc:
-    """The plan JSON dict of ``plan``: the dict itself, or ``plan.to_json()`` (planner.Plan)."""
-    return plan.to_json() if hasattr(plan, "to_json") else plan
+__all__ = ["instance", "is_plan", "partial", "pretty_term", "term_parts"]
 
 
-def partial(plan: PlanDoc) -> Mapping[str, Any]:
-    """The partial plan (actions, ordering, variables, arcs, separations); {} if none."""
-    return plan.get("partial") or {}
+def partial(plan: Plan) -> Mapping[str, Any]:
+    """The partial plan (actions, ordering, variables, arcs, separations) as the JSON has it; {} if none."""
+    return plan.partial or {}
 
 
-def instance(plan: PlanDoc) -> Mapping[str, Any]:
-    """The chosen plan instance (bindings, steps, ...); {} if none."""
-    return plan.get("instance") or {}
+def instance(plan: Plan) -> Mapping[str, Any]:
+    """The chosen plan instance (bindings, steps, ...) as the JSON has it; {} if none."""
+    return plan.instance or {}
 
 
-def is_plan(plan: PlanDoc) -> bool:
+def is_plan(plan: Plan) -> bool:
     """True when the planner found a plan (outcome ``"plan"``)."""
-    return plan.get("outcome") == "plan"
+    return plan.ok
 
 
 def pretty_term(term: str) -> str:

@@ -21,10 +21,11 @@ import numpy as np
 
 from spar_py.core.errors import SparValueError
 from spar_py.core.units import from_mm
-from spar_py.pictures.plandoc import as_doc, instance, pretty_term
+from spar_py.pictures.plandoc import instance, pretty_term
 
 if TYPE_CHECKING:
     from spar_py.core.model import Cell
+    from spar_py.planning.planner import Plan
 
 __all__ = ["Scene", "World", "initial_poses", "part_model", "scenes", "step_world"]
 
@@ -94,7 +95,7 @@ def step_world(step: Mapping[str, Any], index: int) -> World:
     return World(poses, None if held is None else str(held))
 
 
-def _worlds(cell: Cell, plan: Mapping[str, Any], steps: Sequence[Mapping[str, Any]]) -> list[World]:
+def _worlds(cell: Cell, plan: Plan, steps: Sequence[Mapping[str, Any]]) -> list[World]:
     """Each step's world from its ``poses`` and ``held`` (plan JSON schema 2)."""
     out = []
     for k, step in enumerate(steps):
@@ -128,7 +129,7 @@ def _joints(cell: Cell, step: Mapping[str, Any] | None) -> tuple[np.ndarray | No
 AT_REST = "home"
 
 
-def _home(cell: Cell, plan: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray]:
+def _home(cell: Cell, plan: Plan) -> tuple[np.ndarray, np.ndarray]:
     """(q rad, robot.frames(q)) of the arm at rest: the home the plan's motions start from
     (``instance.motion.home_deg``), else the cell's ``home``, else the documented default home,
     the middle of the joint ranges (world.motion.paths.default_home)."""
@@ -176,13 +177,12 @@ def _step_scene(cell: Cell, step: Mapping[str, Any], world: World, before: Scene
     return s
 
 
-def scenes(cell: Cell, plan: Any) -> list[Scene]:
+def scenes(cell: Cell, plan: Plan) -> list[Scene]:
     """The work cell before the plan (index 0) and after each step of the plan instance (1..n).
 
     Initial part poses come from ``cell.positions``; the initial picture and the sensing steps
     show the arm at rest (:func:`_home`).
     """
-    plan = as_doc(plan)
     steps = list(instance(plan).get("steps") or [])
     rest = _home(cell, plan)
     out = [Scene(0, "initial state", "arm at rest (home)", initial_poses(cell), q=rest[0], frames=rest[1],

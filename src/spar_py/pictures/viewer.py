@@ -40,7 +40,7 @@ from spar_py.core.errors import SparValueError
 from spar_py.core.model import Solid
 from spar_py.core.units import from_mm
 from spar_py.pictures.cell import OBJECT_COLOURS, body_faces, hole_mouth, obstacle_shapes, solid_faces
-from spar_py.pictures.plandoc import as_doc, instance, partial, pretty_term
+from spar_py.pictures.plandoc import instance, is_plan, partial, pretty_term
 from spar_py.pictures.scene import Scene, held_grasp, part_model, scenes
 from spar_py.world.collision import TOOL, scene_for
 from spar_py.world.motion import interval_seconds
@@ -48,6 +48,7 @@ from spar_py.world.parts import part_mesh
 
 if TYPE_CHECKING:
     from spar_py.core.model import Bounds, Cell, ObjectModel
+    from spar_py.planning.planner import Plan
 
 __all__ = ["MAX_WAYPOINTS", "ViewerPage", "render_html", "viewer_data", "write_viewer"]
 
@@ -155,9 +156,9 @@ def _propagated(d: Mapping[str, Mapping[str, Sequence[float]]]) -> dict[str, lis
             for k, b in d.items()}
 
 
-def _home(cell: Cell, doc: Mapping[str, Any]) -> np.ndarray | None:
+def _home(cell: Cell, plan: Plan) -> np.ndarray | None:
     """The arm's rest configuration (rad): the plan's motion home, the cell's, the robot file's, or None."""
-    motion = instance(doc).get("motion") or {}
+    motion = instance(plan).get("motion") or {}
     if motion.get("home_deg") is not None:
         return np.radians(np.asarray(motion["home_deg"], float))
     for q in (getattr(cell, "home", None), getattr(cell.robot, "home", None)):
@@ -272,9 +273,9 @@ def _tolerance(cell: Cell, step: Mapping[str, Any], verdicts: Sequence[Mapping[s
             "bound": math.sqrt(max(float(check["bound"]), 0.0)), "satisfied": bool(check.get("satisfied"))}
 
 
-def _partial(doc: Mapping[str, Any]) -> dict[str, Any]:
+def _partial(plan: Plan) -> dict[str, Any]:
     """The partial order: the partial plan's actions (id, term) and its prior_to pairs (before, after)."""
-    p = partial(doc)
+    p = partial(plan)
     return {"actions": [{"id": a.get("id"), "term": pretty_term(str(a.get("term", "")))}
                         for a in p.get("actions") or []],
             "ordering": [[str(a), str(b)] for a, b in p.get("ordering") or []]}
@@ -319,15 +320,14 @@ def _table(cell: Cell, focus: Mapping[str, Any]) -> dict[str, Any]:
     return {"extent": _r([x0, x1, y0, y1]), "declared": False}
 
 
-def viewer_data(cell: Cell, plan: Any) -> dict[str, Any]:
+def viewer_data(cell: Cell, plan: Plan) -> dict[str, Any]:
     """Everything the page draws, as JSON-ready data (see the module docstring). SparValueError
     (one line) if ``plan`` is not a plan (its outcome is not ``"plan"``) or its steps carry no poses."""
-    doc = as_doc(plan)
-    if doc.get("outcome") != "plan":
-        raise SparValueError(f"expected a plan to view, not outcome {doc.get('outcome')!r} (no steps to show)")
-    inst = instance(doc)
+    if not is_plan(plan):
+        raise SparValueError(f"expected a plan to view, not outcome {plan.outcome.value!r} (no steps to show)")
+    inst = instance(plan)
     steps = list(inst.get("steps") or [])
-    sc = scenes(cell, doc)
+    sc = scenes(cell, plan)
     widths = _Widths()
     part_tris = {name: part_triangles(m, cell.unit) for name, m in cell.objects.items()}
     colours = {name: OBJECT_COLOURS[k % len(OBJECT_COLOURS)] for k, name in enumerate(cell.objects)}
@@ -339,7 +339,7 @@ def viewer_data(cell: Cell, plan: Any) -> dict[str, Any]:
 
     # before the plan every part has its declared bounds (phase 2's initial world); after a step,
     # what phase 2 propagated to it
-    home = _home(cell, doc)
+    home = _home(cell, plan)
     states = [_state(cell, sc[0], home if home is not None else sc[0].q, widths, per_part(declared, sc[0].poses),
                      False)]
     states[0]["arm_note"] = "home" if home is not None or sc[0].q is not None else ""  # scenes: the arm at rest
@@ -402,10 +402,10 @@ def viewer_data(cell: Cell, plan: Any) -> dict[str, Any]:
         obstacles.append({"name": sh.gid.split(":", 1)[-1], "mesh": mid})
     focus = _focus(cell, part_tris, states, out_steps)
     return {
-        "problem": doc.get("problem"), "unit": cell.unit, "robot": cell.robot.name,
+        "problem": plan.problem, "unit": cell.unit, "robot": cell.robot.name,
         "base": _flat(cell.robot.base), "table": _table(cell, focus), "focus": focus,
         "meshes": meshes, "parts": parts, "links": links, "grippers": grippers, "obstacles": obstacles,
-        "states": states, "steps": out_steps, "home_motion": home_seg, "partial": _partial(doc),
+        "states": states, "steps": out_steps, "home_motion": home_seg, "partial": _partial(plan),
         "motion": {k: motion.get(k) for k in ("planner", "duration_s", "path_resolution_deg")} if motion else None,
         "hole_colour": "#1a1a1a",
     }
@@ -420,7 +420,7 @@ def _script_text(text: str) -> str:
     return re.sub(r"</(script)", r"<\\/\1", text, flags=re.IGNORECASE)
 
 
-def _page(cell: Cell, plan: Any) -> tuple[str, dict[str, Any]]:
+def _page(cell: Cell, plan: Plan) -> tuple[str, dict[str, Any]]:
     """The viewer page's text and the data in it."""
     data = viewer_data(cell, plan)
     template = TEMPLATE.read_text(encoding="utf-8")
@@ -432,12 +432,12 @@ def _page(cell: Cell, plan: Any) -> tuple[str, dict[str, Any]]:
     return re.sub(r"\{\{(TITLE|LIBS|DATA)\}\}", lambda m: fill[m.group(1)], template), data
 
 
-def render_html(cell: Cell, plan: Any) -> str:
+def render_html(cell: Cell, plan: Plan) -> str:
     """The whole viewer page (one HTML document: three.js, the page's code and the plan's data inline)."""
     return _page(cell, plan)[0]
 
 
-def write_viewer(cell: Cell, plan: Any, path: str | Path) -> ViewerPage:
+def write_viewer(cell: Cell, plan: Plan, path: str | Path) -> ViewerPage:
     """Write the viewer page of ``plan`` to ``path`` (the caller stages it: spar plan/view write it
     whole or not at all) and say what it holds."""
     text, data = _page(cell, plan)

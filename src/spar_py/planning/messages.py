@@ -216,6 +216,14 @@ class Phase2Digest:
             out += f"; it needs {' or '.join(self.needs)}"
         return out
 
+    @classmethod
+    def from_json(cls, d: dict[str, Any]) -> Phase2Digest:
+        """From the plan's ``reason.phase2`` (its ``text`` is said again by :meth:`text`)."""
+        return cls(d["examined"], [(s["step"], s["instances"]) for s in d.get("steps") or []], d["step"],
+                   d.get("mate"), list(d.get("grasps") or []),
+                   [(p["pair"], p["refusals"]) for p in d.get("pairs") or []], list(d.get("why") or []),
+                   list(d.get("needs") or []))
+
     def to_json(self) -> dict[str, Any]:
         """The digest as the plan's ``reason.phase2``."""
         return {"examined": self.examined, "steps": [{"step": s, "instances": k} for s, k in self.steps],

@@ -31,9 +31,10 @@ from spar_py.core.errors import ExpectedFailures, PlanningTimeout, SparValueErro
 from spar_py.kb import load_problem
 from spar_py.core.memo import LRU
 from spar_py.core.model import Bounds, Cell
-from spar_py.planning.messages import collision_lines, expected_failures, phase2_digest, summary
+from spar_py.planning.explain import Explanation, explain, timed_out
+from spar_py.planning.messages import expected_failures
 from spar_py.planning.run import PlanRun
-from spar_py.world.motion import MotionFailure, MotionOptions
+from spar_py.world.motion import MotionOptions
 from spar_py.world.collision import CellCache
 from spar_py.world.run import RunOptions
 
@@ -159,15 +160,16 @@ class Plan:
 
     ``outcome`` an :class:`Outcome`; ``partial`` the phase-1 partial plan (actions,
     ordering, variables, arcs, separations) as the JSON has it; ``instance`` the chosen
-    phase-2 instance or None (``phase1_only``, no plan, timeout); ``reason`` why there is
-    no plan (or the timeout); ``actions``, ``steps`` and ``verdicts`` the typed views.
+    phase-2 instance or None (``phase1_only``, no plan, timeout); ``explanation`` why there is
+    no plan (or the timeout), a :class:`~spar_py.planning.explain.Explanation` (None for a plan);
+    ``actions``, ``steps`` and ``verdicts`` the typed views.
     """
 
     problem: str
     outcome: Outcome
     partial: dict[str, Any] | None = None
     instance: dict[str, Any] | None = None
-    reason: dict[str, Any] | None = None
+    explanation: Explanation | None = None
     timing: dict[str, float] = field(default_factory=dict)
     trace: str = ""
     actions: list[Action] = field(default_factory=list)
@@ -177,6 +179,11 @@ class Plan:
     def ok(self) -> bool:
         """True when a plan was found."""
         return self.outcome is Outcome.PLAN
+
+    @property
+    def reason(self) -> dict[str, Any] | None:
+        """The JSON's ``reason``: ``explanation.to_json()``, or None for a plan."""
+        return self.explanation.to_json() if self.explanation is not None else None
 
     @property
     def bound_actions(self) -> list[Action]:
@@ -315,8 +322,10 @@ def _plan(problem: str, d: dict[str, Any], trace: str) -> Plan:
     actions = [Action(a["id"], a["name"], tuple(a["args"]), a["term"]) for a in (partial or {}).get("actions", [])]
     verdicts = [_verdict(c) for c in (instance or {}).get("constraints", [])]
     steps = [_step(s, verdicts) for s in (instance or {}).get("steps", [])]
+    reason = d.get("reason")
     return Plan(problem=problem, outcome=Outcome(d["outcome"]), partial=partial, instance=instance,
-                reason=d.get("reason"), timing=dict(d.get("timing") or {}), trace=trace,
+                explanation=Explanation.from_json(reason) if reason is not None else None,
+                timing=dict(d.get("timing") or {}), trace=trace,
                 actions=actions, steps=steps)
 
 
@@ -342,49 +351,6 @@ def name_mates(cell: Cell, d: dict[str, Any]) -> None:
         partial["precedence"] = [
             {"before": a, "after": b, "reason": reasons[(part_of[a], part_of[b])]}
             for a, b in partial.get("ordering", []) if (part_of.get(a), part_of.get(b)) in reasons]
-
-
-def _grasp_report(cell: Cell, cache: CellCache, placements: str) -> Any:
-    """world.product.grasp_report for a product cell: its robot's gripper (else the default for its
-    finger separation), the parts' initial positions for the reach counts, the run's
-    collision scene (world.reach.workspace.reach_clear: the arm, the hand closing on the part, the
-    other parts) for the arm at pickups and insertions, and phase 1's put-down arcs under the
-    run's ``placements`` rule (world.reach.arcs.reachable_pairs) for a regrasp; None without a mesh."""
-    from spar_py.core.units import mm_per
-    from spar_py.world.product import grasp_report
-    from spar_py.world.robot import GripperGeometry
-    from spar_py.world.product import arm_clear_of
-    from spar_py.world.reach import reachable_pairs
-
-    assert cell.product is not None
-    gripper = cell.robot.gripper or GripperGeometry.default(cell.finger_separation, mm_per(cell.unit))
-    at: dict[str, np.ndarray] = {}
-    for p in cell.positions.values():
-        at.setdefault(p.obj, np.asarray(p.T, float))
-
-    def put_down(part: str, grasps: list[Any]) -> set[str]:
-        poses = list(cell.objects[part].poses)  # phase 1's put-down: in_position_class(Pos, every pose)
-        return {g for g, _ in reachable_pairs(cache, part, [g.label for g in grasps], poses, placements).pairs}
-
-    return grasp_report(cell.product, gripper, cell.unit, cell.robot, at, arm_clear_of(cache), cache.scene().margin,
-                        put_down)
-
-
-def _motion_reason(d: dict[str, Any], failures: list[MotionFailure]) -> None:
-    """A phase-2 no plan whose instances failed for want of a motion says which motion (of
-    the first instance that got that far) and which pair of bodies blocked it; ``failures``
-    lists each instance's distinct failure (at most FAILURES_KEPT)."""
-    reason = d.get("reason")
-    if not failures or d.get("outcome") != "no_plan" or not isinstance(reason, dict) or reason.get("phase") != 2:
-        return
-
-    def data(f: MotionFailure) -> dict[str, Any]:
-        return {"motion": f.motion, "at": f.at, "pair": list(f.pair) if f.pair else None, "detail": f.detail,
-                "text": f.text()}
-
-    reason["why"] = failures[0].text()
-    reason["motion"] = data(failures[0])
-    reason["motion_failures"] = [data(f) for f in failures]
 
 
 #: Loaded cells a Planner keeps, by file, and cells with their kept answers (world.run.CellCache),
@@ -516,7 +482,7 @@ class Planner:
                                              {"Problem": cell.name, "Options": opts})
             except PlanningTimeout:
                 return Plan(problem=cell.name, outcome=Outcome.TIMEOUT,
-                            reason={"timeout_s": self.timeout},
+                            explanation=timed_out(self.timeout),
                             timing={"total_s": round(time.perf_counter() - t0, 6)})
             raw = ans["Dict"]
             motion = run.join(raw["instance"]) if isinstance(raw.get("instance"), dict) else None
@@ -528,33 +494,9 @@ class Planner:
         d.setdefault("timing", {})["total_s"] = round(time.perf_counter() - t0, 6)
         if cell.product is not None:
             name_mates(cell, d)
-        log = run.world.log
-        _motion_reason(d, log.motion_failures)
         plan = _plan(cell.name, d, ans.get("Trace", ""))
-        if plan.outcome is Outcome.NO_PLAN:  # name the colliding pairs that stood in the way, and why
-            if run.infeasible:  # steps refused for a reason of their own (stability, retention, support)
-                plan.reason = {**(plan.reason or {}), "infeasible": list(run.infeasible)}
-            if cell.product is not None:  # a product one arm on a table cannot build: say which mate and why
-                from spar_py.world.product import single_arm_report
-
-                sa = single_arm_report(cell.product, cell.unit)
-                if sa is not None and (not sa.ok or sa.level):
-                    plan.reason = {**(plan.reason or {}), "single_arm": sa.to_json()}
-                if sa is None or sa.ok:  # the grasps: the first mate no grasp serves, and what it needs
-                    gr = _grasp_report(cell, run.world.cache, run.world.options.placements)
-                    if gr is not None and not gr.ok:
-                        plan.reason = {**(plan.reason or {}), "grasps": gr.to_json()}
-            reason = plan.reason or {}
-            if reason.get("phase") == 2:  # where the instances stopped, the blocking pairs, what it needs
-                digest = phase2_digest(cell, run.failures, reason.get("instances_examined"),
-                                       reason.get("instance_cap"), reason.get("complete") is True)
-                if digest is not None:
-                    plan.reason = {**reason, "phase2": digest.to_json()}
-            refusals = log.refusals()
-            said = collision_lines(refusals)
-            if said:
-                plan.reason = {**(plan.reason or {}), "collisions": said}
-            plan.reason = {**(plan.reason or {}), "summary": summary(cell, plan.reason or {}, refusals)}
+        if plan.outcome is Outcome.NO_PLAN:  # why, in one place (planning/explain.py)
+            plan.explanation = explain(cell, d.get("reason") or {}, run)
         self.last = plan
         line = expected_failures(plan.instance) if self.strict and plan.ok else None
         if line is not None:
