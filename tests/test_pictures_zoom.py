@@ -66,7 +66,7 @@ def test_the_view_is_the_work_not_the_whole_arm(paper) -> None:
 
 
 def test_the_table_is_drawn_at_its_extent() -> None:
-    from spar_py.pictures.cell import Extent, table, extent
+    from spar_py.pictures.cell import Extent, extent, table_extent
     from spar_py.pictures.scene import Scene, initial_poses
 
     cell = load_problem(PROBLEMS / "ur5e_peg_in_block.yaml")
@@ -80,7 +80,7 @@ def test_the_table_is_drawn_at_its_extent() -> None:
     paper = load_problem(PROBLEMS / "peg_in_block.yaml")
     assert paper.table is None
     lo, hi = np.array([0.0, -5.0, 0.0]), np.array([10.0, 5.0, 3.0])
-    assert table(paper, lo, hi) == (0.0, 10.0, -5.0, 5.0)
+    assert table_extent(paper, lo, hi) == (0.0, 10.0, -5.0, 5.0)
     assert isinstance(fr, Extent)
 
 
