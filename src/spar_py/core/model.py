@@ -268,7 +268,7 @@ class Cell:
     #: Derived T_a (assembled/2 goals): the goal's transform name -> its turns about the hole's
     #: axis, each (transform name, the hole part's stable poses the mated peg clears the table in).
     turns: dict[str, tuple[tuple[str, tuple[str, ...]], ...]] = field(default_factory=dict)
-    #: Obstacles (world.collision.scene.Obstacle: named bodies, world frame), the table top's extent
+    #: Obstacles (world.collision.Obstacle: named bodies, world frame), the table top's extent
     #: (x0, x1, y0, y1) or None (the whole plane), the collision margin or None (the robot's or
     #: the default): the problem file's ``obstacles:``, ``table:``, ``clearance:`` (cell unit).
     obstacles: tuple = ()

@@ -202,7 +202,7 @@ FOOTPRINT_LIMIT = 4096
 
 
 def _shape_key(model: ObjectModel) -> tuple:
-    """What a footprint depends on in ``model``: its shape's primitives (world.collision.scene.solids_key;
+    """What a footprint depends on in ``model``: its shape's primitives (world.collision.solids_key;
     not the object's name: copies of one model share their footprints)."""
     from spar_py.world.collision import solids_key  # on first use: the collision layer loads lazily
 
