@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from spar_py.kb.problem import load_problem
-from spar_py.world.parts.derive import _pads_on_surface
+from spar_py.world.parts.antipodal import _pads_on_surface
 
 ROOT = Path(__file__).resolve().parent.parent
 
