@@ -10,7 +10,7 @@ every part ``mesh:``, nothing declared, the first part the base) is loaded as ``
 loads a product (kb.products.load_product_derived, cell unit mm) in a child process of its own
 with an empty derivation cache (``SPAR_CACHE_DIR``): the cold derivation, i.e. the contacts,
 mates, seats, sweeps and precedence (world/product/assembly.py) and every part's object model (stable
-poses, grasps, faces: world/parts/derive.py). Recorded: the load's wall and CPU seconds, the
+poses, grasps, faces: world/parts/poses.py, grasps.py). Recorded: the load's wall and CPU seconds, the
 assembly derivation's own seconds, the mates (each with its axis), the seats, the insertion
 order and the child's peak RSS. Then, when ``kb/problems/fabrica_NAME.yaml`` exists, ``spar
 plan`` on it in a child with its own empty cache: its outcome and wall seconds ("no cell"

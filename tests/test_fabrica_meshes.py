@@ -50,7 +50,7 @@ def _plainly_holdable(m: "trimesh.Trimesh", opening: float) -> bool:
     return False
 
 
-#: The default gripper's fingers are 10 mm thick (kb.objects; world.parts.derive.Gripper.default).
+#: The default gripper's fingers are 10 mm thick (kb.objects; world.robot.Gripper.of_unit).
 FINGER_THICKNESS_MM = 10.0
 #: The default gripper's pad (kb.objects: fingers 20 mm wide, 60 mm long), probed on a grid of
 #: (across, from the tip) offsets in the tool frame, mm: 1 mm apart over the 20 mm nearest the

@@ -16,7 +16,7 @@ import pytest
 from spar_py.core.units import mm_per
 from spar_py.kb.products import load_product
 from spar_py.world.product.grasp_report import grasp_report
-from spar_py.world.robot.model import GripperGeometry
+from spar_py.world.robot import Gripper
 
 from paths import ROOT
 
@@ -78,11 +78,11 @@ def kb(tmp_path_factory) -> Path:
     return d
 
 
-def _gripper() -> GripperGeometry:
-    return GripperGeometry.default(101.6, mm_per("mm"))
+def _gripper() -> Gripper:
+    return Gripper.default(101.6, mm_per("mm"))
 
 
-def _mouth_depth(T_tool_prod: np.ndarray, g: GripperGeometry, width: float) -> float:
+def _mouth_depth(T_tool_prod: np.ndarray, g: Gripper, width: float) -> float:
     """How far (mm) the hand's deepest corner goes below the cube's top (z = 30, product frame):
     the test's own reading of 'the hand past the hole's mouth'."""
     C = np.array([[x, y, z] for _, lo, hi in g.boxes(width) for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
@@ -201,7 +201,7 @@ def test_hand_above_table_keeps_the_margin():
     refuse it as phase 2 does. The tips' height is computed here from the finger length."""
     from spar_py.world.reach.arcs import hand_above_table
 
-    g = GripperGeometry.default(50.0, mm_per("mm"))
+    g = Gripper.default(50.0, mm_per("mm"))
     T = np.diag([1.0, -1.0, -1.0, 1.0])  # tool z (the approach) pointing down
     T[2, 3] = 1.25                        # the finger tips (tool z = 0; the fingers run back to -finger_length)
     tips = min(float((T @ np.array([0.0, 0.0, z, 1.0]))[2]) for z in (-g.finger_length, 0.0))

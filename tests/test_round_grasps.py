@@ -16,7 +16,7 @@ import yaml
 from spar_py.core.errors import KBError
 from spar_py.kb.objects import load_object
 from spar_py.kb.problem import load_problem
-from spar_py.world.robot.model import GripperGeometry
+from spar_py.world.robot import Gripper
 
 from paths import ROOT
 
@@ -37,8 +37,8 @@ def _stepped_stl(d: Path, sections: int = 48) -> Path:
     return d / "stepped.yaml"
 
 
-def _gripper(opening: float) -> GripperGeometry:
-    return GripperGeometry.default(opening, 1.0)
+def _gripper(opening: float) -> Gripper:
+    return Gripper.default(opening, 1.0)
 
 
 def _on_which_cylinder(g) -> tuple[float, float, float]:
@@ -56,7 +56,7 @@ def test_stepped_shaft_mesh_cylinders(tmp_path: Path) -> None:
     import trimesh
 
     from spar_py.world.parts.mesh import derive_faces
-    from spar_py.world.parts.derive import mesh_cylinders
+    from spar_py.world.parts.shafts import mesh_cylinders
 
     mesh = trimesh.load(_stepped_stl(tmp_path).with_suffix(".stl"), force="mesh")
     faces = derive_faces(mesh, (), {}, "mm")

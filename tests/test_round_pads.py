@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from spar_py.kb.problem import load_problem
-from spar_py.world.parts.derive import _pads_on_surface
+from spar_py.world.parts.antipodal import _pads_on_surface
 
 from paths import ROOT
 
@@ -59,11 +59,12 @@ def test_thumbstick_cap_is_held_above_the_mouth_and_the_table() -> None:
     # the planner's rules take them: usable for the mate; condition 1 at the lying pose takes a
     # grasp on the face it rests on whose hand is above the table, and refuses the others
     from spar_py.kb.prolog_facts import _mate_grasps
-    from spar_py.world.reach.arcs import _gripper, _hand_clear, _part_on_table
+    from spar_py.world.reach.arcs import _hand_clear, _part_on_table
+    from spar_py.world.robot import gripper_for
 
     usable = next(f[3] for f in _mate_grasps(cell) if f[2] == "stick0")
     assert set(seated_ok) <= set(usable)
-    T_lying, gripper = _part_on_table(stick, "stick0_p1", None), _gripper(cell)
+    T_lying, gripper = _part_on_table(stick, "stick0_p1", None), gripper_for(cell)
     assert lying_ok and all(_hand_clear(cell, stick, g, T_lying, gripper) for g in lying_ok)
     assert low and not any(_hand_clear(cell, stick, g, T_lying, gripper) for g in low)
 

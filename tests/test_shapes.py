@@ -3,7 +3,7 @@ T_a; hand-written entries checked against the shape; the derivation cache; `spar
 
 The physics of the derived stable poses is checked here with code of its own (a centre of
 mass by the divergence theorem, a monotone-chain hull, point-in-polygon), not with
-world.parts.derive's support_check or trimesh's centre of mass."""
+world.parts.poses' support_check or trimesh's centre of mass."""
 from __future__ import annotations
 
 import json
@@ -195,16 +195,16 @@ def test_shaft_grasps_are_the_same_from_either_side() -> None:
 
 def test_line_contact_on_the_pads_edge_does_not_hang_on_rounding() -> None:
     """A contact line parallel to the pad's tip edge, a rounding error either side of it, has
-    the same contact length (shapes_derive._line_contact)."""
-    from spar_py.world.robot.model import GripperGeometry
-    from spar_py.world.parts.derive import _line_contact
+    the same contact length (world.parts.shafts.line_contact)."""
+    from spar_py.world.parts.shafts import line_contact
+    from spar_py.world.robot import Gripper
 
-    g = GripperGeometry.default(4.0, 25.4)
+    g = Gripper.default(4.0, 25.4)
     T = np.eye(4)  # pad: tool x within +-finger_width/2, z from -finger_length to 0
     d = np.array([1.0, 0.0, 0.0])
-    got = [_line_contact(np.array([-0.1, 0.0, w]), d, 0.2, T, g) for w in (-1e-15, 0.0, 1e-15)]
+    got = [line_contact(np.array([-0.1, 0.0, w]), d, 0.2, T, g) for w in (-1e-15, 0.0, 1e-15)]
     assert got == pytest.approx([0.2] * 3)
-    assert _line_contact(np.array([-0.1, 0.0, 1e-3]), d, 0.2, T, g) == 0.0  # off the pad: none
+    assert line_contact(np.array([-0.1, 0.0, 1e-3]), d, 0.2, T, g) == 0.0  # off the pad: none
 
 
 def test_ofaces_name_the_face_the_gripper_comes_from() -> None:
@@ -551,11 +551,11 @@ def test_grasps_are_derived_for_the_robots_own_fingers() -> None:
     the paper's peg's shaft is 1.5 in long above a 3 in base, so fingers 200 mm wide (along the
     shaft) meet the base in every grasp of the shaft across its axis; the default 20 mm fingers
     fit. The default-sized robot gripper derives exactly the default grasps."""
-    from spar_py.world.robot.model import GripperGeometry
+    from spar_py.world.robot import Gripper
 
     default = load_object(OBJ / "peg_shape.yaml", "in", opening=4.0)
-    same = load_object(OBJ / "peg_shape.yaml", "in", gripper=GripperGeometry.default(4.0, 25.4))
-    wide = GripperGeometry.default(4.0, 25.4, finger={"length": 60 / 25.4, "width": 200 / 25.4,
+    same = load_object(OBJ / "peg_shape.yaml", "in", gripper=Gripper.default(4.0, 25.4))
+    wide = Gripper.default(4.0, 25.4, finger={"length": 60 / 25.4, "width": 200 / 25.4,
                                                        "thickness": 10 / 25.4})
     got = load_object(OBJ / "peg_shape.yaml", "in", gripper=wide)
 

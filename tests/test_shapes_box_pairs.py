@@ -1,4 +1,4 @@
-"""world.parts.derive._box_pairs (the face overlap's candidate triangle pairs) against the
+"""world.parts.clip._box_pairs (the face overlap's candidate triangle pairs) against the
 plain all-pairs test: the same pairs, on boxes of mixed sizes, slivers spanning many cells,
 touching edges and degenerate (zero-width) boxes."""
 from __future__ import annotations
@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from spar_py.world.parts.derive import _box_pairs
+from spar_py.world.parts.clip import _box_pairs
 
 
 def _brute(alo: np.ndarray, ahi: np.ndarray, blo: np.ndarray, bhi: np.ndarray) -> set[tuple[int, int]]:

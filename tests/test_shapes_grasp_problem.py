@@ -1,4 +1,4 @@
-"""world.parts.derive.grasp_problem (python-fcl's box-triangle test over the mesh's BVH) gives
+"""world.parts.hand.grasp_problem (python-fcl's box-triangle test over the mesh's BVH) gives
 the answer of a separating-axis test of each gripper box against every triangle, written here."""
 from __future__ import annotations
 
@@ -7,7 +7,9 @@ import pytest
 import trimesh
 from scipy.spatial.transform import Rotation
 
-from spar_py.world.parts import derive as sd
+from spar_py.core.units import from_mm
+from spar_py.world.parts import hand as sd
+from spar_py.world.robot import Gripper
 
 
 def _meshes() -> list[trimesh.Trimesh]:
@@ -35,12 +37,12 @@ def _meets_box(tri: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     return meets
 
 
-def _problem_unfiltered(mesh: trimesh.Trimesh, T: np.ndarray, width: float, g: sd.Gripper) -> str | None:
+def _problem_unfiltered(mesh: trimesh.Trimesh, T: np.ndarray, width: float, g: Gripper) -> str | None:
     """The first gripper box that meets a triangle, over every triangle (:func:`_meets_box`)."""
     tri = np.asarray(mesh.triangles, float)
     R, o = T[:3, :3], T[:3, 3]
-    reach = 2 * float(np.linalg.norm(np.ptp(mesh.vertices, axis=0))) + g.finger_length + g.palm_depth
-    for what, lo, hi in sd._gripper_boxes(g, width, reach, sd.from_mm("mm", sd.TOUCH_MM)):
+    reach = 2 * float(np.linalg.norm(np.ptp(mesh.vertices, axis=0))) + g.finger_length + g.palm_length
+    for what, lo, hi in sd.swept_boxes(g, width, reach, from_mm("mm", sd.TOUCH_MM)):
         if _meets_box((tri - o) @ R, lo, hi).any():
             return f"{what} enters the part"
     return None
@@ -49,7 +51,7 @@ def _problem_unfiltered(mesh: trimesh.Trimesh, T: np.ndarray, width: float, g: s
 @pytest.mark.parametrize("k", range(3))
 def test_grasp_problem_agrees_with_every_triangle_tested(k: int) -> None:
     mesh = _meshes()[k]
-    g = sd.Gripper.default("mm", 90.0)
+    g = Gripper.of_unit("mm", 90.0)
     rng = np.random.default_rng(10 + k)
     answers = set()
     for _ in range(60):
@@ -67,7 +69,7 @@ def test_fingers_resting_on_the_faces_hold_the_part() -> None:
     """Across the bar's 20 mm: fingers 20 mm apart rest on its faces (the boxes are shrunk by
     TOUCH_MM), 19 mm apart they are in it; from the end of a 80 mm bar the palm meets it."""
     bar = trimesh.creation.box((80.0, 20.0, 10.0))
-    g = sd.Gripper.default("mm", 90.0)
+    g = Gripper.of_unit("mm", 90.0)
     T = np.eye(4)  # closing along y, approach along z: down onto the bar's top
     T[2, 3] = 5.0  # the finger tips at the bar's top face
     assert sd.grasp_problem(bar, T, 20.0, g, "mm") is None

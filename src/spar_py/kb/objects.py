@@ -23,7 +23,7 @@ from spar_py.kb.node import LABEL_RE, MAX_MAGNITUDE, Node, cut, show
 from spar_py.kb.reader import MAX_INPUT_BYTES
 from spar_py.kb.schema import read_kb
 from spar_py.kb.values import LOAD_MEMO_LIMIT, tm_node, units_of
-from spar_py.world.robot import GripperGeometry
+from spar_py.world.robot import Gripper
 
 __all__ = ["DEFAULT_OPENING_MM", "DERIVABLE", "PART_SIZE_MM", "REACH_RATIO", "check_against_shape", "holdable",
            "load_object", "mesh_note", "part_size"]
@@ -67,7 +67,7 @@ def _faces(node: Node, known: set[Face] | None, min_len: int = 1) -> tuple[Face,
 
 
 def load_object(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, opening: float | None = None,
-                use_cache: bool = True, gripper: GripperGeometry | None = None,
+                use_cache: bool = True, gripper: Gripper | None = None,
                 memo: Memo | None = None, reach: float | None = None) -> ObjectModel:
     """Load ``kb/objects/*.yaml`` converting lengths to ``unit``.
 
@@ -478,20 +478,19 @@ def _solid(node: Node, scale: float) -> Solid:
     raise node.fail("a shape primitive {box: {min, max}} or {cylinder: {radius, z}}", show(node.value))
 
 
-def _derive_gripper(unit: str, opening: float | None, gripper: GripperGeometry | None) -> Any:
-    """The gripper grasps are derived and checked for (world.parts.derive.Gripper): the robot's
-    own where given, else the default fingers at ``opening`` (or DEFAULT_OPENING_MM)."""
-    from spar_py.world.parts import Gripper  # on first use: a derivation or a check only
-
+def _derive_gripper(unit: str, opening: float | None, gripper: Gripper | None) -> Gripper:
+    """The gripper grasps are derived and checked for: the robot's own where given, else the
+    default fingers at ``opening`` (or DEFAULT_OPENING_MM) sized as such derivations always were
+    (world.robot.Gripper.of_unit)."""
     if gripper is not None:
-        return Gripper.of_robot(gripper)
-    return Gripper.default(unit, opening if opening is not None else from_mm(unit, DEFAULT_OPENING_MM))
+        return gripper
+    return Gripper.of_unit(unit, opening if opening is not None else from_mm(unit, DEFAULT_OPENING_MM))
 
 
 def check_against_shape(path: str | Path, root: Node, model: ObjectModel, unit: str,
-                        opening: float | None = None, gripper: GripperGeometry | None = None) -> None:
+                        opening: float | None = None, gripper: Gripper | None = None) -> None:
     """``spar kb check``: the hand-written faces, stable poses and grasps of a model that also
-    gives its geometry must agree with it (world.parts.derive.check_entries); the first
+    gives its geometry must agree with it (world.parts.check_entries); the first
     disagreement is a KBError naming the entry. ``gripper`` is the robot's (cell unit), else the
     default fingers at ``opening`` (cell unit; DEFAULT_OPENING_MM without a robot)."""
     hand = tuple(k for k in DERIVABLE if k in root.value)

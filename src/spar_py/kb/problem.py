@@ -30,7 +30,7 @@ from spar_py.kb.sanity import check_cell
 from spar_py.kb.schema import KINDS, read_kb
 from spar_py.kb.terms import parse_term
 from spar_py.kb.values import LOAD_MEMO_LIMIT, tm_node, units_of, xyz_rpy_frame
-from spar_py.world.robot import GripperGeometry
+from spar_py.world.robot import Gripper
 
 __all__ = ["COAXIAL_TOL", "GOAL_SHAPES", "SENSOR_NAMES", "check_mate", "derived_mate", "goal_features", "hole_axis",
            "load_problem", "mate_goal"]
@@ -233,7 +233,7 @@ def _same_stable_pose(R_abs: np.ndarray, R_pose: np.ndarray, memo: Memo | None) 
 
 
 def _objects(root: Node, base: Path, unit: str, max_bytes: int, opening: float | None = None,
-             gripper: GripperGeometry | None = None, memo: Memo | None = None, reach: float | None = None,
+             gripper: Gripper | None = None, memo: Memo | None = None, reach: float | None = None,
              product: Product | None = None, layout: Any = None
              ) -> tuple[dict[str, ObjectModel], dict[str, Position], list[Path]]:
     """The problem's objects (models loaded; a part of ``product`` takes its model from it), their

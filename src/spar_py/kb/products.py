@@ -664,9 +664,9 @@ def derive_product_text(path: str | Path, max_bytes: int = MAX_INPUT_BYTES, out_
         from spar_py.core.units import mm_per
         from spar_py.kb.objects import DEFAULT_OPENING_MM
         from spar_py.world.product import grasp_report
-        from spar_py.world.robot import GripperGeometry
+        from spar_py.world.robot import Gripper
 
-        gr = grasp_report(p, GripperGeometry.default(from_mm(unit, DEFAULT_OPENING_MM), mm_per(unit)), unit)
+        gr = grasp_report(p, Gripper.default(from_mm(unit, DEFAULT_OPENING_MM), mm_per(unit)), unit)
         if gr is not None:
             out.append(f"# grasps (default gripper, no robot): {gr.why}" if not gr.ok else
                        "# grasps (default gripper, no robot): every part keeps one usable for its mate, clear of the "

@@ -14,8 +14,7 @@ import numpy as np
 from spar_py.core.errors import SparError
 from spar_py.core.geometry import same_stable_pose
 from spar_py.core.model import Cell, Position
-from spar_py.core.units import mm_per
-from spar_py.world.robot import GripperGeometry
+from spar_py.world.robot import gripper_for
 
 __all__ = ["facts", "position_class"]
 
@@ -95,11 +94,11 @@ def _mate_grasps(cell: Cell) -> list[tuple]:
     geometry (axis, length): the peg's grasps the goal's assemble may use, which the planner reads
     instead of the rule by ofaces (kb/templates/spar_actions.pl mating_grasps/4). A grasp on the
     peg's shaft (its gripped faces hold the feature's) is usable where it holds only the length
-    staying out of the hole when seated at T_a (world.parts.derive.mate_grasp_usable); any other
+    staying out of the hole when seated at T_a (world.parts.mate_grasp_usable); any other
     grasp as by the ofaces rule (it hides none of the goal's peg faces)."""
     from spar_py.world.parts import mate_grasp_usable  # numpy only; trimesh is not imported
 
-    gripper = cell.robot.gripper or GripperGeometry.default(cell.finger_separation, mm_per(cell.unit))
+    gripper = gripper_for(cell)
     out: list[tuple] = []
     for g in cell.goals:
         if not (isinstance(g, tuple) and g[0] == "assembled" and len(g) == 6):

@@ -23,7 +23,7 @@ from spar_py.kb.schema import URDF_ROBOT_SCHEMA, OneOf, check_shape, keys, read_
 from spar_py.kb.values import units_of, xyz_rpy_frame
 from spar_py.world.robot import (
     TOOL_BODY,
-    GripperGeometry,
+    Gripper,
     LinkShape,
     Robot,
     ToolBody,
@@ -136,16 +136,16 @@ TOOL_BODY_SCHEMA = OneOf(MappingProxyType({"box": keys(["width", "thickness"], [
                                            "cylinder": keys(["radius"], ["length"])}))
 
 
-def _gripper(gnode: Node, wm: float, scale: float, mm_per_unit: float) -> GripperGeometry:
-    """The ``gripper:`` section's boxes (robot unit; GripperGeometry's documented defaults where absent)."""
+def _gripper(gnode: Node, wm: float, scale: float, mm_per_unit: float) -> Gripper:
+    """The ``gripper:`` section's boxes (robot unit; Gripper's documented defaults where absent)."""
     def sizes(key: str) -> dict | None:
         n = gnode.key(key, required=False)
         return None if n is None else {k: n.key(k).positive() * scale for k in ("length", "width", "thickness")}
-    return GripperGeometry.default(wm, mm_per_unit, sizes("finger"), sizes("palm"))
+    return Gripper.default(wm, mm_per_unit, sizes("finger"), sizes("palm"))
 
 
-def _tool_body(gnode: Node, gripper: GripperGeometry, tool: np.ndarray, scale: float, has_collision: bool
-               ) -> GripperGeometry:
+def _tool_body(gnode: Node, gripper: Gripper, tool: np.ndarray, scale: float, has_collision: bool
+               ) -> Gripper:
     """``gripper`` with its tool body (world.robot.model.ToolBody, robot unit): the ``gripper: body``
     the file gives (``none``: no body; a box ``{width, thickness}`` or a cylinder ``{radius}``,
     ``length`` by default from the palm back to the flange of ``tool``), else, for a robot without

@@ -318,13 +318,12 @@ def _grasp_report(cell: Cell, cache: CellCache, placements: str) -> Any:
     collision scene (world.reach.workspace.reach_clear: the arm, the hand closing on the part, the
     other parts) for the arm at pickups and insertions, and phase 1's put-down arcs under the
     run's ``placements`` rule (world.reach.arcs.reachable_pairs) for a regrasp; None without a mesh."""
-    from spar_py.core.units import mm_per
     from spar_py.world.product import arm_clear_of, grasp_report
     from spar_py.world.reach import reachable_pairs
-    from spar_py.world.robot import GripperGeometry
+    from spar_py.world.robot import gripper_for
 
     assert cell.product is not None
-    gripper = cell.robot.gripper or GripperGeometry.default(cell.finger_separation, mm_per(cell.unit))
+    gripper = gripper_for(cell)
     at: dict[str, np.ndarray] = {}
     for p in cell.positions.values():
         at.setdefault(p.obj, np.asarray(p.T, float))

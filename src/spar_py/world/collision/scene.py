@@ -6,7 +6,7 @@ What is in the scene (:func:`scene_for`, built once per cell and kept by its wor
 
 - the robot's link shapes (robot file ``collision: links``): capsules, cylinders and boxes,
   each fixed to one of Craig's frames 0..6 (0 is the base: it does not move);
-- the gripper (robot file ``gripper:``, :class:`~spar_py.world.robot.model.GripperGeometry`): the
+- the gripper (robot file ``gripper:``, :class:`~spar_py.world.robot.Gripper`): the
   palm and two fingers whose contact faces are the grasp's width apart (the open
   finger_separation when no part is in the hand), and the tool body "tool" from the palm back to
   the flange (``gripper: body``; by default, for a robot without ``collision:``, a box the palm's
@@ -62,13 +62,13 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from spar_py.core.errors import SparValueError
-from spar_py.core.units import from_mm, mm_per
+from spar_py.core.units import from_mm
 from spar_py.world.collision.bodies import (
     TOOL, WORLD, Body, Obstacle, Placed, box, cylinder, fcl_transform, group_columns, link_body, mesh_body,
     solid_bodies,
 )
 from spar_py.world.collision.state import SceneState
-from spar_py.world.robot import GripperGeometry
+from spar_py.world.robot import Gripper, gripper_for
 
 if TYPE_CHECKING:
     from spar_py.core.model import Cell, Solid
@@ -93,7 +93,7 @@ class CollisionScene:
     """The run's collision world: link and gripper shapes, part shapes, obstacles, the table,
     the clearance ``margin`` (cell unit). Place the parts with :meth:`at`."""
 
-    def __init__(self, robot: Robot, gripper: GripperGeometry, parts: Mapping[str, list[Body]],
+    def __init__(self, robot: Robot, gripper: Gripper, parts: Mapping[str, list[Body]],
                  obstacles: Iterable[Obstacle], margin: float, table: tuple[float, float, float, float] | None,
                  unit: str, memo: Any = None, meshes: Mapping[str, Any] | None = None) -> None:
         """``meshes``: {model: world.parts.mesh.Geometry} of the mesh parts (``parts`` bodies of kind
@@ -191,7 +191,7 @@ class CollisionScene:
         return bool(mesh.contains(centre[None, :3])[0])
 
     def _tool_body(self, shrink: float) -> list[Body]:
-        """The gripper's tool body (robots.GripperGeometry.body_shape) as a body in the TOOL frame,
+        """The gripper's tool body (world.robot.Gripper.body_shape) as a body in the TOOL frame,
         shrunk by ``shrink`` on every side; [] without one."""
         shape = self.gripper.body_shape()
         if shape is None:
@@ -318,7 +318,7 @@ def scene_for(cell: Cell, memo: Any = None) -> CollisionScene:
     the table; the clearance margin (cell's length unit). ``memo`` (core.memo.Memo) keeps the
     scene's derived answers; a planning run's scene is its cell cache's (world.run.CellCache.scene)."""
     robot = cell.robot
-    gripper = robot.gripper or GripperGeometry.default(cell.finger_separation, mm_per(cell.unit))
+    gripper = gripper_for(cell)
     margin = getattr(cell, "clearance", None)
     if margin is None:
         margin = robot.margin if robot.margin is not None else from_mm(cell.unit, DEFAULT_MARGIN_MM)

@@ -85,7 +85,8 @@ def derive(name: str, geometry: Geometry, features: tuple[FeatureGeometry, ...],
 
 def _compute(name: str, geometry: Geometry, features: tuple[FeatureGeometry, ...], face_names: dict[str, np.ndarray],
              gripper: Any, step: float, need_hull: bool) -> dict[str, Any]:
-    from spar_py.world.parts.derive import derive_grasps, derive_poses  # ~10 ms at import: a cache miss only
+    from spar_py.world.parts.grasps import derive_grasps  # a cache miss only
+    from spar_py.world.parts.poses import derive_poses
 
     mesh = geometry.mesh()
     faces = derive_faces(mesh, features, face_names, geometry.unit)
@@ -104,7 +105,7 @@ def _compute(name: str, geometry: Geometry, features: tuple[FeatureGeometry, ...
         "no_grasp": why[0] if why else "",
     }
     if need_hull:
-        from spar_py.world.parts.derive import hull_vertices  # a cache miss only (see _compute)
+        from spar_py.world.parts.poses import hull_vertices  # a cache miss only (see _compute)
 
         V = np.asarray(mesh.vertices, float)
         out["hull"] = [[float(v) for v in p] for p in V[hull_vertices(mesh)]]

@@ -21,9 +21,9 @@ plane are merged. Names, in order of precedence: the features' ``name``; ``face_
 normal is that axis when no other face has it; ``f1, f2, ...`` for the rest, numbered in
 a deterministic order (by centroid, then normal).
 
-Stable poses, grasps and the checks of hand-written entries are in
-:mod:`spar_py.world.parts.derive`; the content-hash cache of derivations in
-:mod:`spar_py.world.parts.cache`.
+Stable poses are in :mod:`spar_py.world.parts.poses`, grasps and the checks of hand-written
+entries in :mod:`spar_py.world.parts.grasps` (with the modules it draws on: hand, clip, shafts,
+facets, antipodal); the content-hash cache of derivations in :mod:`spar_py.world.parts.cache`.
 
 Frames: object frame as the model file gives it; T_a is the peg's frame in the hole's
 frame (4x4, column vectors). Units: lengths in the cell unit, the tolerances below in mm
@@ -139,7 +139,7 @@ class Geometry:
     #: What loading the mesh file repaired (:class:`Repair`'s line; "" for none), once the mesh
     #: was built or a cached derivation said so.
     repair: str = field(default="", compare=False)
-    #: Why the derivation found no grasp (world.parts.derive.derive_grasps's line), or "".
+    #: Why the derivation found no grasp (world.parts.grasps.derive_grasps's line), or "".
     no_grasp: str = field(default="", compare=False)
     _mesh: Any = field(default=None, compare=False, repr=False)
     _digest: str | None = field(default=None, compare=False, repr=False)

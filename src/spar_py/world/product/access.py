@@ -77,14 +77,13 @@ def hand_access(cell: Cell, cache: CellCache, held: Mapping[str, frozenset[str]]
     grasp report's held_grasps for the robot's gripper when the caller has them, the layout's). Empty
     without a product, meshes, or one cell position of the base; a part with several initial
     positions (a stock) is picked where any of them lies."""
-    from spar_py.core.units import mm_per
     from spar_py.world.product.grasp_report import above_table, held_grasps, seat_order
-    from spar_py.world.robot import GripperGeometry
+    from spar_py.world.robot import gripper_for
 
     product = cell.product
     if product is None or not product.goals:
         return Access()
-    gripper = cell.robot.gripper or GripperGeometry.default(cell.finger_separation, mm_per(cell.unit))
+    gripper = gripper_for(cell)
     if held is None:
         held = held_grasps(product, gripper, cell.unit)
     at: dict[str, list[np.ndarray]] = {}  # an object's every initial position (a stock of parts)

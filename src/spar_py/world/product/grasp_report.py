@@ -5,7 +5,7 @@ For each non-base part, in an order the assembly tree and the precedence allow, 
 counted through four filters, each keeping a subset of the one before:
 
 1. ``usable``: the grasp can make every mate in which the part is the peg
-   (world.parts.derive.mate_grasp_usable: fingers, palm and tool on the outer side of the hole's
+   (world.parts.mate_grasp_usable: fingers, palm and tool on the outer side of the hole's
    mouth when seated); a part entering as the hole keeps every grasp here (filter 2 sees the peg);
 2. ``clear``: at the seated pose the closed fingers, the palm and the tool body are clear of the
    parts that must be in place before it (its parent and everything the tree and the precedence
@@ -173,7 +173,7 @@ def seat_order(product: Product) -> tuple[list[str], dict[str, set[str]]]:
 
 
 def _boxes(gripper: Any, width: float, shrink: float) -> list[tuple[np.ndarray, np.ndarray]]:
-    """(lo, hi) boxes of the closed hand in the tool frame (GripperGeometry.hand_boxes), each
+    """(lo, hi) boxes of the closed hand in the tool frame (Gripper.hand_boxes), each
     shrunk by ``shrink``."""
     return [(lo + shrink, hi - shrink) for lo, hi in gripper.hand_boxes(width) if np.all(hi - lo > 2 * shrink)]
 
@@ -204,7 +204,7 @@ def grasp_report(product: Product, gripper: Any, unit: str, robot: Any = None,
                  positions: Mapping[str, np.ndarray] | None = None, arm_clear: ArmClear | None = None,
                  margin: float = 0.0, put_down: PutDown | None = None) -> GraspReport | None:
     """The report of the module docstring for ``product`` held by ``gripper`` (a
-    world.robot.model.GripperGeometry, cell unit ``unit``); ``robot`` and ``positions`` (each part's
+    world.robot.Gripper, cell unit ``unit``); ``robot`` and ``positions`` (each part's
     world pose in the cell) for the reach counts, else those are -1; ``arm_clear`` for the
     arm's collisions at the cell's pickups (:data:`ArmClear`), else ``at_clear`` is -1;
     ``margin`` (cell unit) the clearance the hand keeps over the table at pickups (the
@@ -251,7 +251,7 @@ def _filtered(product: Product, part: str, meshes: Mapping[str, Any], placed: se
     usable ones meet, those clear ones also outside the part itself)."""
     import trimesh
 
-    from spar_py.world.parts import Gripper, grasp_problem, mate_grasp_usable
+    from spar_py.world.parts import grasp_problem, mate_grasp_usable
 
     g = next(x for x in product.goals if x.part == part)
     pp = product.parts[part]
@@ -270,8 +270,7 @@ def _filtered(product: Product, part: str, meshes: Mapping[str, Any], placed: se
         hits |= h
         if not h:
             clear.append(gr)
-    as_derived = Gripper.of_robot(gripper)
-    free = [gr for gr in clear if grasp_problem(meshes[part], np.asarray(gr.T, float), gr.width, as_derived,
+    free = [gr for gr in clear if grasp_problem(meshes[part], np.asarray(gr.T, float), gr.width, gripper,
                                                 unit) is None]
     return own, usable, clear, hits, free
 
@@ -383,7 +382,7 @@ def _poses(model: Any, mesh: Any, stable_poses: Any) -> list[np.ndarray]:
 
 def _usable(test: Any, gr: Grasp, gripper: Any, product: Product, m: Any, unit: str) -> bool:
     """Whether grasp ``gr`` of peg ``m.peg`` can make mate ``m`` (``test``:
-    world.parts.derive.mate_grasp_usable); True when the hole feature has no geometry to judge by."""
+    world.parts.mate_grasp_usable); True when the hole feature has no geometry to judge by."""
     peg, hole = product.parts[m.peg], product.parts[m.hole]
     hf = hole.model.feature_named(m.hole_feature).geometry
     if hf is None or hf.kind != "hole":

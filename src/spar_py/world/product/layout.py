@@ -7,7 +7,7 @@ order the precedence allows, before the first that needs a turn); among those th
 keeps the product frame's down (-z) down (the product built as assembled); every other part lies in its most
 probable stable pose (a derived model lists its poses most probable first, so the first one
 the planner knows) among those where a grasp its mate can use (the grasp report's filters 1
-to 3, world.product.grasp_report.held_grasps; else world.parts.derive.mate_grasp_usable: the hand
+to 3, world.product.grasp_report.held_grasps; else world.parts.mate_grasp_usable: the hand
 outside the hole's mouth plane when seated) keeps the hand the robot's collision margin
 (phase 2's) above the table and comes from above both there and on the assembled product
 (FROM_ABOVE_DEG), else among those where one keeps the hand above the table (a parallel gripper cannot turn a part
@@ -264,7 +264,7 @@ def _lying_pose(model: ObjectModel, usable: frozenset[str] | None, gripper, unit
 
 
 def mate_usable_grasps(product: Product, gripper, unit: str) -> dict[str, frozenset[str]]:
-    """Each mated peg part's grasps usable for its mate (world.parts.derive.mate_grasp_usable
+    """Each mated peg part's grasps usable for its mate (world.parts.mate_grasp_usable
     at the product poses; the features' geometry in their parts' frames, cell unit); parts
     without a mate of known geometry are absent."""
     from spar_py.world.parts import mate_grasp_usable  # numpy only

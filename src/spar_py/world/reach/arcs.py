@@ -30,8 +30,8 @@ import numpy as np
 from spar_py.core.errors import SparValueError
 from spar_py.core.geometry import same_stable_poses
 from spar_py.core.model import Cell, Face, Grasp, ObjectModel, natural_key
-from spar_py.core.units import from_mm, mm_per
-from spar_py.world.robot import GripperGeometry
+from spar_py.core.units import from_mm
+from spar_py.world.robot import Gripper, gripper_for
 from spar_py.world.reach.workspace import Refusal, Requirement, ik_rows, requirement_clear_ik, requirement_state
 
 if TYPE_CHECKING:
@@ -135,7 +135,7 @@ def _part_on_table(model: ObjectModel, label: str, T_O: np.ndarray | None) -> np
 
 
 def _holds_on_resting_face(cell: Cell, model: ObjectModel, g: Grasp, T_part: np.ndarray | None,
-                           gripper: "GripperGeometry") -> bool:
+                           gripper: "Gripper") -> bool:
     """Condition 1 for a part whose faces are derived (``T_part``: :func:`_part_on_table`): the
     paper's faces are planar, so a face the part rests on is on the table wherever the fingers
     would touch it; a derived face may be curved (a round or rounded side lying on the table
@@ -155,7 +155,7 @@ def _holds_on_resting_face(cell: Cell, model: ObjectModel, g: Grasp, T_part: np.
 TABLE_TOL_MM = 0.05
 
 
-def hand_above_table(gripper: GripperGeometry, T_tool: np.ndarray, width: float, unit: str,
+def hand_above_table(gripper: Gripper, T_tool: np.ndarray, width: float, unit: str,
                      clearance: float = 0.0) -> bool:
     """Whether every corner of the fingers (contact faces ``width`` apart) and the palm of
     ``gripper`` at tool pose ``T_tool`` (4x4, world, cell unit) keeps ``clearance`` (cell unit:
@@ -167,7 +167,7 @@ def hand_above_table(gripper: GripperGeometry, T_tool: np.ndarray, width: float,
     return bool((C @ M[2, :3] + M[2, 3]).min() >= float(clearance) - from_mm(unit, TABLE_TOL_MM))
 
 
-def _hand_clear(cell: Cell, model: ObjectModel, g: Grasp, T_part: np.ndarray, gripper: "GripperGeometry") -> bool:
+def _hand_clear(cell: Cell, model: ObjectModel, g: Grasp, T_part: np.ndarray, gripper: "Gripper") -> bool:
     """Whether grasp ``g`` of a part with a mesh, at world pose ``T_part``, has the whole hand above
     the table (:func:`hand_above_table`). A face a part rests on whole (a planar one) has every
     pad on it at the table and the finger behind the pad below it, so this refuses those as the
@@ -176,11 +176,6 @@ def _hand_clear(cell: Cell, model: ObjectModel, g: Grasp, T_part: np.ndarray, gr
     if model.geometry is None or model.geometry.mesh_file is None:
         return False
     return hand_above_table(gripper, T_part @ np.asarray(g.T, float), g.width, cell.unit)
-
-
-def _gripper(cell: Cell) -> "GripperGeometry":
-    """The cell's gripper boxes: the robot file's, else the default for its finger separation."""
-    return cell.robot.gripper or GripperGeometry.default(cell.finger_separation, mm_per(cell.unit))
 
 
 #: How a stable-pose label (a put-down position with no X, Y) counts for condition 2:
@@ -252,7 +247,7 @@ def reachable_pairs(cache: CellCache, obj: str, grasp_labels: Sequence[str],
     for p in pos_labels:
         T_O = _absolute(cell, model, p)
         rfaces = set(resting_faces(cell, obj, p))
-        T_part, gripper = _part_on_table(model, p, T_O), _gripper(cell)
+        T_part, gripper = _part_on_table(model, p, T_O), gripper_for(cell)
         free = [g for g in grasps if not rfaces & set(g.gfaces)
                 or _holds_on_resting_face(cell, model, g, T_part, gripper)]  # condition 1
         if T_O is None:

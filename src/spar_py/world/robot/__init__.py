@@ -5,12 +5,12 @@ This is the room's door: code outside world/robot/ imports these names from here
 from the modules behind it.
 """
 
+from spar_py.world.robot.gripper import TOOL_BODY, Gripper, ToolBody, gripper_for, tool_body_behind
 from spar_py.world.robot.model import (
-    GripperGeometry, LinkShape, Robot, TOOL_BODY, ToolBody, UrdfMeshError, read_urdf_chain, robot_from_urdf,
-    standard_to_modified, tool_body_behind,
+    LinkShape, Robot, UrdfMeshError, read_urdf_chain, robot_from_urdf, standard_to_modified,
 )
 
 __all__ = [
-    "GripperGeometry", "LinkShape", "read_urdf_chain", "Robot", "robot_from_urdf", "standard_to_modified",
+    "Gripper", "gripper_for", "LinkShape", "read_urdf_chain", "Robot", "robot_from_urdf", "standard_to_modified",
     "TOOL_BODY", "tool_body_behind", "ToolBody", "UrdfMeshError",
 ]
