@@ -370,7 +370,7 @@ class Precedence:
     reason: str
 
 
-@dataclass
+@dataclass(frozen=True)
 class Product:
     """A product (kb/products/*.yaml): its parts at their poses in the product frame, the base
     part, the mates and seats, and what they compile to: one :class:`PartGoal` per non-base

@@ -23,7 +23,7 @@ import yaml
 
 from spar_py.core.errors import KBError, SparValueError, WrongKindError
 from spar_py.core.memo import Memo
-from spar_py.core.model import Mate, ObjectModel, PartGoal, Precedence, Product, ProductPart, Seat
+from spar_py.core.model import Mate, ObjectModel, PartGoal, Product, ProductPart, Seat
 from spar_py.core.units import LENGTH_UNITS, from_mm
 from spar_py.kb.node import Node, did_you_mean, show
 from spar_py.kb.objects import load_object
@@ -313,7 +313,7 @@ def load_product(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, 
 def load_product_derived(path: str | Path, unit: str, max_bytes: int = MAX_INPUT_BYTES, memo: Memo | None = None,
                          **object_options: Any) -> LoadedProduct:
     """:func:`load_product` with what was derived (``spar kb derive`` writes it out)."""
-    from spar_py.world import product as wp  # the world layer on first use
+    from spar_py.world.product import compile_product  # the world layer on first use
 
     path = Path(path)
     root = _read_product(path, max_bytes)
@@ -403,23 +403,7 @@ def load_product_derived(path: str | Path, unit: str, max_bytes: int = MAX_INPUT
                       tuple(s for s in links if isinstance(s, Seat)), files=tuple(files))
     where = root.key("mates") if mates_node is not None else root.key("parts")
     try:
-        order = None if derived is None else [p for i in derived.insertions for p in i.parts]
-        product.goals = wp.compile_goals(product, order)
-        # a derived product's precedence is the disassembly's (exact meshes both ways; the
-        # declared products' sweep moves a mesh part's hull, which fills its bores)
-        prec = (wp.precedence(product, unit) if derived is None else
-                tuple(Precedence(a, b, why) for a, b, why in derived.precedence))
-        # a part whose tree parent is in place first goes into the part that still has a location
-        # (the order's pairs where known, else the precedence's; the sweeps do not depend on it)
-        first = (wp.insertion_pairs([i.parts for i in derived.insertions]) if derived is not None
-                 else tuple((pr.first, pr.then) for pr in prec))
-        product.goals = wp.compile_goals(product, order, first)
-        have = {(pr.first, pr.then) for pr in prec}
-        product.precedence = prec + tuple(pr for pr in wp.through_precedence(product, first)
-                                          if (pr.first, pr.then) not in have)
-        product.near = wp.near_parts(product, unit)
-        _add_via_grasps(product)
-        _add_sub_poses(product, unit)
+        product = compile_product(product, unit, derived)  # the one geometric step (world.product)
     except KBError:
         raise
     except SparValueError as e:
@@ -472,38 +456,6 @@ def _unlinked_contacts(product: Product, derived: AssemblyResult | None) -> str:
         return ""
     return (f"; they touch the rest only in contacts that are neither a mate nor a planar seat "
             f"(a cradle, a guide, a fit that is neither round nor prism): {', '.join(cut)}")
-
-
-def _add_via_grasps(product: Product) -> None:
-    """Give each part the grasps of the parts that can be mated into it (world.product.products.via_grasps)
-    and record which part each holds by (``product.via``)."""
-    from spar_py.world import product as wp  # the world layer on first use
-
-    via = wp.via_grasps(product)
-    for name, got in via.items():
-        pp = product.parts[name]
-        grasps = {**pp.model.grasps, **{label: g for label, (_, g) in got.items()}}
-        product.parts[name] = replace(pp, model=replace(pp.model, grasps=grasps))
-    product.via = {name: {label: c for label, (c, _) in got.items()} for name, got in via.items()}
-
-
-def _add_sub_poses(product: Product, unit: str) -> None:
-    """Give each part the stable poses of itself with its product subtree mated in
-    (world.product.products.subassembly_poses), resting on the part's faces that touch the table there,
-    and record which parts each needs (``product.sub_poses``)."""
-    from spar_py.core.model import StablePose
-    from spar_py.world import product as wp  # the world layer on first use
-
-    subs = wp.subassembly_poses(product, unit)
-    for name, got in subs.items():
-        pp = product.parts[name]
-        known = set(pp.model.faces)
-        poses = dict(pp.model.poses)
-        for sp in got:
-            rfaces = tuple(f for f in sp.rfaces if f in known)
-            poses[sp.label] = StablePose(sp.label, rfaces, (), sp.R, sp.height)
-        product.parts[name] = replace(pp, model=replace(pp.model, poses=poses))
-    product.sub_poses = {name: {sp.label: tuple(wp.subtree(product, name)) for sp in got} for name, got in subs.items()}
 
 
 def _raw_mesh(pname: str, mp: _MeshPart, unit: str, raw: dict[str, Any]) -> Any:
