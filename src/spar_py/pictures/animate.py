@@ -180,7 +180,7 @@ def arm_faces(cell: Cell, q: np.ndarray, width: float | None = None, scene: Coll
     open), its name and its hull's triangles (each (3, 3) world points, cell unit). ``scene``
     the cell's collision scene and ``hulls`` each body's hull in its own frame, when the caller
     keeps them for many frames (bounded by the arm's bodies and the grasp widths)."""
-    from scipy.spatial import ConvexHull  # ~0.7 s at import: only when a GIF is drawn
+    from scipy.spatial import ConvexHull  # only when a GIF is drawn
 
     scene = scene if scene is not None else scene_for(cell)
     F = cell.robot.frames(np.asarray(q, float))
@@ -201,7 +201,7 @@ def arm_faces(cell: Cell, q: np.ndarray, width: float | None = None, scene: Coll
 def obstacle_faces(cell: Cell) -> list[np.ndarray]:
     """Triangles (each (3, 3) world points, cell unit) of the hulls of the cell's obstacle
     bodies (world.collision.Obstacle, world/collision/bodies.py: a body's vertices in the world)."""
-    from scipy.spatial import ConvexHull  # ~0.7 s at import: only when a GIF is drawn
+    from scipy.spatial import ConvexHull  # only when a GIF is drawn
 
     faces = []
     for ob in getattr(cell, "obstacles", None) or ():
@@ -223,7 +223,7 @@ def write_animation(cell: Cell, plan: Plan, path: str | Path, max_frames: int = 
     """Write the GIF of the plan's motions to ``path`` (Pillow writer); returns the path. The
     view is the work's (:func:`work_extent`), filling the frame (:func:`_fit`); each frame
     replaces the previous frame's artists in one reused 3-D axes."""
-    import matplotlib  # ~0.9 s at import: only when a GIF is drawn; Agg is chosen before pyplot loads
+    import matplotlib  # only when a GIF is drawn; Agg is chosen before pyplot loads
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

@@ -262,7 +262,7 @@ def body_faces(body: Body, T_frame: np.ndarray) -> tuple[list[np.ndarray], np.nd
         return _capsule_mesh(P[0], P[-1], float(body.size[0]))
     if body.kind in ("box", "cylinder"):
         return _faces_of_points(P), P
-    from scipy.spatial import ConvexHull  # ~0.7 s at import: a convex body only
+    from scipy.spatial import ConvexHull  # a convex body only
 
     try:
         hull = ConvexHull(P)
@@ -431,7 +431,7 @@ def _mesh_facets(model: ObjectModel, T: np.ndarray, eye: np.ndarray, colour: str
     geo = model.geometry
     if geo is None or not (geo.mesh_file or any(p.subtract for p in geo.primitives)):
         return None
-    from matplotlib.colors import to_hex, to_rgb  # ~0.9 s at import: drawing only (the viewer needs none)
+    from matplotlib.colors import to_hex, to_rgb  # drawing only (the viewer needs none)
 
     mesh = part_mesh(model)
     R = np.asarray(T, float)[:3, :3]
@@ -498,7 +498,7 @@ def _items(cell: Cell, s: Scene, eye: Sequence[float]) -> list[tuple[str, list[n
 def draw_3d(ax: Any, cell: Cell, s: Scene, fr: Extent) -> None:
     """The 3-D panel; painted in a fixed order (table, parts, obstacles and the arm's shapes far
     to near, the skeleton on top)."""
-    from mpl_toolkits.mplot3d.art3d import Poly3DCollection  # ~0.9 s at import: drawing only (the viewer needs none)
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection  # drawing only (the viewer needs none)
 
     ax.computed_zorder = False
     x0, x1, y0, y1 = fr.table
@@ -540,7 +540,7 @@ def _tick_step(lo: float, hi: float) -> float:
 
 def _draw_2d(ax: Axes, cell: Cell, s: Scene, fr: Extent, axes: tuple[int, int], eye: Sequence[float]) -> None:
     """An orthographic view onto world axes ``axes`` (0 x, 1 y, 2 z) seen from ``eye``, far to near."""
-    from matplotlib.patches import Polygon, Rectangle  # ~0.9 s at import: drawing only (the viewer needs none)
+    from matplotlib.patches import Polygon, Rectangle  # drawing only (the viewer needs none)
 
     i, j = axes
     x0, x1, y0, y1 = fr.table
@@ -570,7 +570,7 @@ def _draw_2d(ax: Axes, cell: Cell, s: Scene, fr: Extent, axes: tuple[int, int], 
 def _legend(cell: Cell, s: Scene) -> list[Any]:
     """Legend entries: each object present (the held one with its grasp), hole mouths if any
     is seen, the obstacles, the link shapes, the table, the arm's frames and the gripper."""
-    # matplotlib: ~0.9 s at import: drawing only (the viewer needs none)
+    # matplotlib: drawing only (the viewer needs none)
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 
@@ -599,7 +599,7 @@ def draw_figure(cell: Cell, s: Scene, fr: Extent) -> Any:
     """The matplotlib Figure (1200 x 720 px at 100 dpi) of scene ``s`` within extents ``fr``,
     not saved; the caller closes it (``matplotlib.pyplot.close``). Each drawn collision body's
     artists carry its ``gid`` (:class:`Shape`): one per panel."""
-    import matplotlib  # ~0.9 s at import, only to draw; Agg is chosen before pyplot loads
+    import matplotlib  # only to draw; Agg is chosen before pyplot loads
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -720,7 +720,7 @@ def _draw_closeup(ax: Axes, cell: Cell, s: Scene, tol: Tolerance, across: np.nda
                   eye: np.ndarray, alpha: float) -> None:
     """The parts of ``s`` (no arm: it would hide the mouth) projected onto (``across``, ``up``)
     about the mouth's centre, far to near along ``eye``."""
-    from matplotlib.patches import Polygon  # ~0.9 s at import: drawing only
+    from matplotlib.patches import Polygon  # drawing only
 
     for kind, p, colour in _paint_list(cell, s, eye):
         q = np.column_stack([(p - tol.centre) @ across, (p - tol.centre) @ up])
@@ -734,7 +734,7 @@ def closeup_figure(cell: Cell, s: Scene, tol: Tolerance) -> Any:
     looking down the hole (the peg over the hole's mouth, the tolerance R_h - R_p circle and
     the bound reached drawn about the mouth's centre) and across it (the same radii at the
     mouth). The caller closes it."""
-    import matplotlib  # ~0.9 s at import, only to draw; Agg is chosen before pyplot loads
+    import matplotlib  # only to draw; Agg is chosen before pyplot loads
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

@@ -141,7 +141,7 @@ def _janus_from_state(state: Path) -> tuple[Any, bool]:
 
 #: The query true when every file named in ``Fs`` (:func:`_root_names`) is loaded. member/2
 #: by its module: the query runs in ``user``, which does not import library(lists), and a
-#: bare member/2 there is autoloaded, which reads SWI-Prolog's library index first (some 6 ms
+#: bare member/2 there is autoloaded, which reads SWI-Prolog's library index first (a cost
 #: of every start from the saved state; the planner's modules import what they use).
 ROOTS_LOADED = "forall(lists:member(_S, Fs), (atom_string(_F, _S), source_file(_F)))"
 #: The query a process started from a saved state answers before the state is published

@@ -59,7 +59,7 @@ def keep_compiled_methods() -> CodeImage | None:
     """Dataclasses defined from now on take their generated methods' code from the cache
     (dcimage.py: compiling their source is the largest cost of importing the planner); the
     image to save at the end, or None (cache off). Console script only, never the Python API."""
-    from spar_py.startup.dcimage import install  # ~12 ms of imports (qlf, json): after the early handlers
+    from spar_py.startup.dcimage import install  # after the early handlers
 
     return install()
 

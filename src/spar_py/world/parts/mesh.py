@@ -204,7 +204,7 @@ _READ: "dict[tuple[str, int, int, float], tuple[trimesh.Trimesh, Repair]]" = {}
 
 def _read_mesh(p: Path, scale: float) -> "tuple[trimesh.Trimesh, Repair]":
     """:func:`load_mesh`'s read and repair of file ``p``."""
-    import trimesh  # ~1.4 s at import: only a mesh or primitives model pays for it
+    import trimesh  # only a mesh or primitives model pays for it
 
     try:
         m = trimesh.load(str(p), force="mesh", process=True)
@@ -344,7 +344,7 @@ def _fill_small_holes(m: "trimesh.Trimesh", max_across: float) -> int:
 
 def _primitives_mesh(prims: tuple[Primitive, ...]) -> "trimesh.Trimesh":
     """The union of the positive primitives less the union of the subtracted ones."""
-    import trimesh  # ~1.4 s at import: only a mesh or primitives model pays for it
+    import trimesh  # only a mesh or primitives model pays for it
 
     def solid(p: Primitive) -> trimesh.Trimesh:
         if p.kind == "box":
@@ -527,7 +527,7 @@ def _face(name: str, tris: np.ndarray, mesh: "trimesh.Trimesh", is_feature: bool
 
 def face_of_point(faces: list[Face], mesh: "trimesh.Trimesh", p: np.ndarray, tol: float) -> int | None:
     """The index of the face ``p`` lies on (within ``tol``), or None."""
-    import trimesh  # ~1.4 s at import: only a mesh or primitives model pays for it
+    import trimesh  # only a mesh or primitives model pays for it
 
     tri = mesh.triangles
     closest = trimesh.triangles.closest_point(tri, np.repeat(np.asarray(p, float)[None], len(tri), 0))
@@ -587,7 +587,7 @@ def _name_key(name: str) -> tuple:
 
 
 def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """The cross product over the last axis (numpy's np.cross costs ~20 us a call on 3-vectors)."""
+    """The cross product over the last axis (np.cross's per-call overhead dominates on 3-vectors)."""
     a, b = np.asarray(a, float), np.asarray(b, float)
     return np.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1], a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
                      a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)

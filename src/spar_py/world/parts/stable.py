@@ -2,7 +2,7 @@
 sample, threshold 0) with its topple graph built from arrays.
 
 trimesh builds the topple graph face by face in Python (networkx, a static probability and a
-cross product per face): about 0.5 s for a hull of a few thousand faces, and a derivation asks
+cross product per face), slow for a hull of a few thousand faces, and a derivation asks
 for many (each part, each subassembly, each partial product). :func:`stable_poses` returns
 the same transforms and probabilities: the same faces topple to the same neighbours in the same
 order, the probabilities flow to the sinks in trimesh's breadth-first order and the poses are
