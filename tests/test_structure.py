@@ -7,7 +7,7 @@
   module behind it;
 - no private name (``_x``) taken across modules, by import or by attribute of an imported
   module;
-- no file over 1,000 lines; one gripper class; ``Cell`` a frozen dataclass.
+- no file over 1,000 lines; one gripper class; ``Cell`` and ``Product`` frozen dataclasses.
 
 Each check is also run on a small synthetic package, so a check that cannot fail is caught.
 """
@@ -223,8 +223,9 @@ def test_one_gripper_class() -> None:
     assert len(classes_named(MODS, "gripper")) == 1, classes_named(MODS, "gripper")
 
 
-def test_cell_is_frozen() -> None:
+def test_cell_and_product_are_frozen() -> None:
     assert is_frozen_dataclass(MODS["spar_py.core.model"], "Cell")
+    assert is_frozen_dataclass(MODS["spar_py.core.model"], "Product")
 
 
 # ------------------------------------------------------------------ the checks can fail: a fake package
