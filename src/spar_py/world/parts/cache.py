@@ -17,11 +17,9 @@ Units: lengths in the cell unit, angles in radians (as in the models).
 """
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -50,6 +48,8 @@ def source_digest() -> str:
     """SHA-256 of the derivation's source (every module of this room, by name); "" where none
     can be read (an installation without sources: DERIVE_VERSION alone). Read at each call:
     a few hundred kB, small beside the derivation it keys."""
+    import hashlib  # here: the parts door loads this module, and a plan that derives nothing never hashes
+
     h = hashlib.sha256()
     files = sorted(Path(__file__).resolve().parent.glob("*.py"))
     try:
@@ -72,6 +72,8 @@ def derive(name: str, geometry: Geometry, features: tuple[FeatureGeometry, ...],
     key_data = [DERIVE_VERSION, source_digest(), name, geometry.digest(), [f.spec() for f in features],
                 sorted((k, [round(float(v), 12) for v in p]) for k, p in face_names.items()),
                 gripper.spec(), round(step, 12), need_hull]
+    import hashlib
+
     key = hashlib.sha256(json.dumps(key_data).encode()).hexdigest()
     path = cache_dir() / f"{key}.json"
     if use_cache and (data := load(path, key)) is not None:
@@ -130,6 +132,8 @@ def store(path: Path, data: dict[str, Any]) -> None:
     try:
         text = json.dumps(data, allow_nan=False)  # one shot: the C encoder (json.dump streams in Python)
         path.parent.mkdir(parents=True, exist_ok=True)
+        import tempfile  # only a derivation written to disk
+
         fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-", suffix=".json")
         with os.fdopen(fd, "w", encoding="utf-8") as fh:
             fh.write(text)

@@ -39,7 +39,6 @@ file: kb.products builds the meshes and turns the result into features and mates
 """
 from __future__ import annotations
 
-import hashlib
 import itertools
 import json
 import math
@@ -196,6 +195,8 @@ class AssemblyResult:
 
 def _samples(name: str, mesh: "trimesh.Trimesh", spacing: float) -> tuple[np.ndarray, np.ndarray]:
     """Points on the surface (seeded by the part's name) and their triangles."""
+    import hashlib  # here: the product door loads this module for plans that derive nothing
+
     import trimesh
 
     n = int(min(SAMPLES, max(500, mesh.area / spacing ** 2)))
@@ -896,6 +897,8 @@ def derive_assembly_cached(meshes: dict[str, "trimesh.Trimesh"], base: str, cont
     name, vertices and faces (as placed), the base, the tolerances and ASSEMBLY_VERSION; kept
     beside the object models' derivations (world.parts.cache.cache_dir)."""
     from spar_py.world.parts import cache_dir, load_derivation, store_derivation
+
+    import hashlib
 
     h = hashlib.sha256(json.dumps([ASSEMBLY_VERSION, base, round(contact_tol, 12), round(clearance_max, 12)]).encode())
     for p, m in meshes.items():
