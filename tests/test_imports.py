@@ -14,10 +14,11 @@ SRC = Path(__file__).resolve().parent.parent / "src"
 PACKAGE = "spar_py"
 
 
-def _modules() -> dict[str, Path]:
+def modules(src: Path = SRC, package: str = PACKAGE) -> dict[str, Path]:
+    """Dotted module name -> file, for every .py of ``package`` under the directory ``src``."""
     out = {}
-    for p in sorted((SRC / PACKAGE).rglob("*.py")):
-        parts = list(p.relative_to(SRC).with_suffix("").parts)
+    for p in sorted((src / package).rglob("*.py")):
+        parts = list(p.relative_to(src).with_suffix("").parts)
         if parts[-1] == "__init__":
             parts = parts[:-1]
         out[".".join(parts)] = p
@@ -55,11 +56,11 @@ def _edges(name: str, path: Path, modules: dict[str, Path]) -> set[str]:
 
 
 def _graph() -> dict[str, set[str]]:
-    modules = _modules()
-    return {m: _edges(m, p, modules) for m, p in modules.items()}
+    mods = modules()
+    return {m: _edges(m, p, mods) for m, p in mods.items()}
 
 
-def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+def import_cycles(graph: dict[str, set[str]]) -> list[list[str]]:
     """The strongly connected components of more than one module (Tarjan), each sorted."""
     index: dict[str, int] = {}
     low: dict[str, int] = {}
@@ -101,12 +102,12 @@ def test_the_graph_is_read() -> None:
 
 
 def test_a_cycle_is_found() -> None:
-    assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
-    assert _cycles({"a": {"b"}, "b": set()}) == []
+    assert import_cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    assert import_cycles({"a": {"b"}, "b": set()}) == []
 
 
 def test_spar_py_has_no_import_cycle() -> None:
-    cycles = _cycles(_graph())
+    cycles = import_cycles(_graph())
     assert cycles == [], "import cycles: " + "; ".join(" <-> ".join(c) for c in cycles)
 
 

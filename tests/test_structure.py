@@ -14,24 +14,41 @@ Each check is also run on a small synthetic package, so a check that cannot fail
 from __future__ import annotations
 
 import ast
-from collections import defaultdict
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import pytest
+
+from test_imports import import_cycles, modules
 
 SRC = Path(__file__).resolve().parent.parent / "src"
 MAX_LINES = 1000
 
 
-def modules(src: Path) -> dict[str, Path]:
-    """Dotted module name -> file, for every .py under ``src``."""
-    out = {}
-    for p in sorted(src.rglob("*.py")):
-        parts = list(p.relative_to(src).with_suffix("").parts)
-        if parts[-1] == "__init__":
-            parts = parts[:-1]
-        out[".".join(parts)] = p
-    return out
+@dataclass
+class Sources:
+    """A package's modules read once: each module's file, its parsed tree and, for a package,
+    the names its ``__all__`` lists."""
+
+    root: str
+    files: dict[str, Path]
+    trees: dict[str, ast.Module] = field(init=False)
+    exports: dict[str, set[str]] = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.trees = {m: ast.parse(p.read_text(), str(p)) for m, p in self.files.items()}
+        self.exports = {m: _all_of(self.trees[m]) for m, p in self.files.items() if p.name == "__init__.py"}
+
+
+def read(src: Path, root: str) -> Sources:
+    return Sources(root, modules(src, root))
+
+
+def _all_of(tree: ast.Module) -> set[str]:
+    for node in tree.body:
+        if isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == "__all__" for t in node.targets):
+            return {e.value for e in node.value.elts}  # type: ignore[attr-defined]
+    return set()
 
 
 def _target(mod: str, path: Path, node: ast.ImportFrom) -> str:
@@ -42,19 +59,19 @@ def _target(mod: str, path: Path, node: ast.ImportFrom) -> str:
     return ".".join(base + ([node.module] if node.module else []))
 
 
-def imports(mods: dict[str, Path], root: str) -> list[tuple[str, str, str, int]]:
-    """(importer, imported module, name or "", line) for every import of a module of package
-    ``root`` (at any depth of the file: functions and TYPE_CHECKING blocks included)."""
-    out = []
-    for mod, path in mods.items():
-        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+def imports(src: Sources) -> list[tuple[str, str, str, int]]:
+    """(importer, imported module, name or "", line) for every import of a module of the package
+    (at any depth of the file: functions and TYPE_CHECKING blocks included)."""
+    root, mods, out = src.root, src.files, []
+    for mod, tree in src.trees.items():
+        for node in ast.walk(tree):
             if isinstance(node, ast.ImportFrom):
-                target = _target(mod, path, node)
+                target = _target(mod, mods[mod], node)
                 if target != root and not target.startswith(root + "."):
                     continue
                 for a in node.names:
                     sub = f"{target}.{a.name}"
-                    if sub in mods and a.name not in door_exports(mods.get(target, path)):  # `from pkg import module`
+                    if sub in mods and a.name not in src.exports.get(target, set()):  # `from pkg import module`
                         out.append((mod, sub, "", node.lineno))
                     else:
                         out.append((mod, target, a.name, node.lineno))
@@ -65,98 +82,55 @@ def imports(mods: dict[str, Path], root: str) -> list[tuple[str, str, str, int]]
     return out
 
 
-def cycles(mods: dict[str, Path], root: str) -> list[list[str]]:
-    """The import circles (strongly connected components of two or more modules, or a module
-    importing itself), each as its sorted module names. A package's import of one of its own
-    modules counts (the door imports what it exports), a module's import of its own package
-    counts too."""
-    graph: dict[str, set[str]] = defaultdict(set)
-    for a, b, _, _ in imports(mods, root):
-        if b in mods and a != b:
+def cycles(src: Sources) -> list[list[str]]:
+    """The import circles (test_imports' strongly connected components), counting every import
+    of :func:`imports`: a package's import of its own modules (the door imports what it
+    exports) and a module's import of its own package too."""
+    graph: dict[str, set[str]] = {m: set() for m in src.files}
+    for a, b, _, _ in imports(src):
+        if b in src.files and a != b:
             graph[a].add(b)
-    index: dict[str, int] = {}
-    low: dict[str, int] = {}
-    stack: list[str] = []
-    on: set[str] = set()
-    out: list[list[str]] = []
-
-    def visit(v: str) -> None:  # Tarjan, iterative enough for a few hundred modules
-        index[v] = low[v] = len(index)
-        stack.append(v)
-        on.add(v)
-        for w in graph[v]:
-            if w not in index:
-                visit(w)
-                low[v] = min(low[v], low[w])
-            elif w in on:
-                low[v] = min(low[v], index[w])
-        if low[v] == index[v]:
-            comp = []
-            while True:
-                w = stack.pop()
-                on.discard(w)
-                comp.append(w)
-                if w == v:
-                    break
-            if len(comp) > 1:
-                out.append(sorted(comp))
-
-    for v in list(mods):
-        if v not in index:
-            visit(v)
-    return out
+    return import_cycles(graph)
 
 
-def rooms(mods: dict[str, Path], world: str) -> set[str]:
-    """The rooms of ``world``: its subpackages (dotted names)."""
-    return {m for m, p in mods.items() if p.name == "__init__.py" and m.startswith(world + ".")
-            and m.count(".") == world.count(".") + 1}
+def rooms(src: Sources) -> set[str]:
+    """The rooms of the package's ``world``: its subpackages (dotted names)."""
+    world = f"{src.root}.world"
+    return {m for m in src.exports if m.startswith(world + ".") and m.count(".") == world.count(".") + 1}
 
 
 def room_of(mod: str, rms: set[str]) -> str | None:
     return next((r for r in rms if mod == r or mod.startswith(r + ".")), None)
 
 
-def door_exports(path: Path) -> set[str]:
-    """The names a door's (a package's ``__init__``) ``__all__`` lists."""
-    if path.name != "__init__.py":
-        return set()
-    for node in ast.parse(path.read_text()).body:
-        if isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == "__all__" for t in node.targets):
-            return {e.value for e in node.value.elts}  # type: ignore[attr-defined]
-    return set()
-
-
-def door_breaches(mods: dict[str, Path], root: str) -> list[str]:
-    """Imports that enter a room of ``root``.world other than through its door, or take a
+def door_breaches(src: Sources) -> list[str]:
+    """Imports that enter a room of the package's world other than through its door, or take a
     name its door does not list."""
-    world = f"{root}.world"
-    rms = rooms(mods, world)
+    rms = rooms(src)
     out = []
-    for a, b, name, line in imports(mods, root):
+    for a, b, name, line in imports(src):
         r = room_of(b, rms)
         if r is None or room_of(a, rms) == r:
             continue
         if b != r:
             out.append(f"{a}:{line} imports {b}{'.' + name if name else ''} behind the door {r}")
-        elif name and name not in door_exports(mods[r]):
+        elif name and name not in src.exports[r]:
             out.append(f"{a}:{line} takes {name} from {r}, whose __all__ does not list it")
     return out
 
 
-def private_crossings(mods: dict[str, Path], root: str) -> list[str]:
+def private_crossings(src: Sources) -> list[str]:
     """Private names (one leading underscore) one module takes from another: ``from m import _x``
     or ``m._x`` where ``m`` names an imported module of the package."""
-    out = []
-    for a, b, name, line in imports(mods, root):
+    mods, out = src.files, []
+    for a, b, name, line in imports(src):
         if name.startswith("_") and not name.startswith("__") and a != b:
             out.append(f"{a}:{line} imports {b}.{name}")
-    for mod, path in mods.items():
-        tree = ast.parse(path.read_text())
+    for mod, tree in src.trees.items():
         aliases: dict[str, str] = {}
         for node in ast.walk(tree):
             if isinstance(node, ast.ImportFrom):
-                target = _target(mod, path, node)
+                target = _target(mod, mods[mod], node)
                 for al in node.names:
                     if f"{target}.{al.name}" in mods:
                         aliases[al.asname or al.name] = f"{target}.{al.name}"
@@ -172,18 +146,18 @@ def private_crossings(mods: dict[str, Path], root: str) -> list[str]:
     return out
 
 
-def long_files(mods: dict[str, Path]) -> list[str]:
-    return [f"{m}: {n} lines" for m, p in mods.items() if (n := len(p.read_text().splitlines())) > MAX_LINES]
+def long_files(src: Sources) -> list[str]:
+    return [f"{m}: {n} lines" for m, p in src.files.items() if (n := len(p.read_text().splitlines())) > MAX_LINES]
 
 
-def classes_named(mods: dict[str, Path], word: str) -> list[str]:
+def classes_named(src: Sources, word: str) -> list[str]:
     """Classes whose name contains ``word`` (case-insensitive)."""
-    return [f"{m}.{n.name}" for m, p in mods.items() for n in ast.walk(ast.parse(p.read_text()))
+    return [f"{m}.{n.name}" for m, tree in src.trees.items() for n in ast.walk(tree)
             if isinstance(n, ast.ClassDef) and word in n.name.lower()]
 
 
-def is_frozen_dataclass(path: Path, cls: str) -> bool:
-    for node in ast.walk(ast.parse(path.read_text())):
+def is_frozen_dataclass(tree: ast.Module, cls: str) -> bool:
+    for node in ast.walk(tree):
         if isinstance(node, ast.ClassDef) and node.name == cls:
             for d in node.decorator_list:
                 if isinstance(d, ast.Call) and getattr(d.func, "id", getattr(d.func, "attr", "")) == "dataclass":
@@ -193,39 +167,38 @@ def is_frozen_dataclass(path: Path, cls: str) -> bool:
 
 # ---------------------------------------------------------------------------------- the package
 
-MODS = modules(SRC)
+PKG = read(SRC, "spar_py")
 
 
 def test_no_import_circle() -> None:
-    assert cycles(MODS, "spar_py") == []
+    assert cycles(PKG) == []
 
 
 def test_rooms_are_entered_through_their_doors() -> None:
-    rms = rooms(MODS, "spar_py.world")
+    rms = rooms(PKG)
     assert {"spar_py.world.robot", "spar_py.world.parts", "spar_py.world.collision", "spar_py.world.reach",
             "spar_py.world.motion", "spar_py.world.product"} <= rms
     for r in rms:  # every door says what its room answers and lists what it exports
-        tree = ast.parse(MODS[r].read_text())
-        assert ast.get_docstring(tree), f"{r}: the door has no docstring"
-        assert door_exports(MODS[r]), f"{r}: the door has no __all__"
-    assert door_breaches(MODS, "spar_py") == []
+        assert ast.get_docstring(PKG.trees[r]), f"{r}: the door has no docstring"
+        assert PKG.exports[r], f"{r}: the door has no __all__"
+    assert door_breaches(PKG) == []
 
 
 def test_no_private_name_crosses_modules() -> None:
-    assert private_crossings(MODS, "spar_py") == []
+    assert private_crossings(PKG) == []
 
 
 def test_no_file_over_1000_lines() -> None:
-    assert long_files(MODS) == []
+    assert long_files(PKG) == []
 
 
 def test_one_gripper_class() -> None:
-    assert len(classes_named(MODS, "gripper")) == 1, classes_named(MODS, "gripper")
+    assert len(classes_named(PKG, "gripper")) == 1, classes_named(PKG, "gripper")
 
 
 def test_cell_and_product_are_frozen() -> None:
-    assert is_frozen_dataclass(MODS["spar_py.core.model"], "Cell")
-    assert is_frozen_dataclass(MODS["spar_py.core.model"], "Product")
+    assert is_frozen_dataclass(PKG.trees["spar_py.core.model"], "Cell")
+    assert is_frozen_dataclass(PKG.trees["spar_py.core.model"], "Product")
 
 
 # ------------------------------------------------------------------ the checks can fail: a fake package
@@ -253,12 +226,12 @@ def fake(tmp_path: Path) -> Path:
 
 
 def test_the_checks_find_what_they_look_for(fake: Path) -> None:
-    mods = modules(fake)
-    assert cycles(mods, "pkg") == [["pkg.a", "pkg.b"]]  # the TYPE_CHECKING import counts
-    breaches = door_breaches(mods, "pkg")
+    mods = read(fake, "pkg")
+    assert cycles(mods) == [["pkg.a", "pkg.b"]]  # the TYPE_CHECKING import counts
+    breaches = door_breaches(mods)
     assert any("behind the door" in b for b in breaches) and any("does not list it" in b for b in breaches)
-    crossings = private_crossings(mods, "pkg")
+    crossings = private_crossings(mods)
     assert any("inner._g" in c for c in crossings) and sum("_g" in c for c in crossings) == 2
     assert long_files(mods) == [f"pkg.big: {MAX_LINES + 1} lines"]
     assert len(classes_named(mods, "gripper")) == 2
-    assert not is_frozen_dataclass(mods["pkg.model"], "Cell")
+    assert not is_frozen_dataclass(mods.trees["pkg.model"], "Cell")
