@@ -4,8 +4,9 @@ A no plan's :class:`Explanation` has its ``cause`` (phase 1: the goal that could
 :class:`GoalFailure`; phase 2: no instance examined could be executed, :class:`NoInstance`; or the
 run's :class:`Timeout`) and what the run saw on the way: the motions that did not exist
 (:class:`MotionStop`), the steps refused for a reason of their own (``infeasible``), a product's
-single-arm report (:class:`SingleArm`) and grasp report (:class:`Grasps`, one :class:`GraspRow` per
-part), the phase-2 digest (planning.messages.Phase2Digest), the collision lines and the summary line.
+single-arm report (:class:`SingleArm`) and grasp report (world.product's ``GraspReport``, which
+reads and writes its own JSON), the phase-2 digest (planning.messages.Phase2Digest), the collision
+lines and the summary line.
 :func:`explain` builds it from a run; :meth:`Explanation.to_json` writes the ``reason`` dict of
 docs/json-schema.md (its keys in the order the plan JSON has always had them) and
 :meth:`Explanation.from_json` reads it back.
@@ -14,7 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -24,7 +25,10 @@ from spar_py.planning.run import PlanRun
 from spar_py.world.collision import CellCache
 from spar_py.world.motion import MotionFailure
 
-__all__ = ["Cause", "Explanation", "GoalFailure", "GraspBlock", "GraspRow", "Grasps", "MotionStop", "NoInstance",
+if TYPE_CHECKING:
+    from spar_py.world.product import GraspReport
+
+__all__ = ["Cause", "Explanation", "GoalFailure", "MotionStop", "NoInstance",
            "SingleArm", "Timeout", "explain", "timed_out"]
 
 
@@ -106,93 +110,6 @@ class MotionStop:
 
 
 @dataclass(frozen=True)
-class GraspRow:
-    """One part's row of the grasp report (``reason.grasps.parts``; world.product.grasp_report
-    says what each count is): ``part`` into ``parent`` making ``mate``, the grasps left by each
-    filter, and what says why."""
-
-    part: str
-    parent: str
-    mate: str
-    grasps: int
-    usable: int
-    clear: int
-    pickup: int
-    reached: int
-    at_cell: int
-    faces: tuple[str, ...]
-    hits: tuple[str, ...]
-    poses: int
-    pose_ok: tuple[str, ...]
-    cell_pose: str
-    at_clear: int
-    arm_pairs: tuple[str, ...]
-    held: int
-    seat_pairs: tuple[str, ...]
-    seat_any: int
-    seat_any_pairs: tuple[str, ...]
-    placed_any: int
-
-    @classmethod
-    def from_json(cls, d: Mapping[str, Any]) -> GraspRow:
-        """From a row of ``reason.grasps.parts``."""
-        return cls(part=d["part"], parent=d["parent"], mate=d["mate"], grasps=d["grasps"], usable=d["usable"],
-                   clear=d["clear"], pickup=d["pickup"], reached=d["reached"], at_cell=d["at_cell"],
-                   faces=tuple(d.get("faces") or ()), hits=tuple(d.get("hits") or ()), poses=d.get("poses", 0),
-                   pose_ok=tuple(d.get("pose_ok") or ()), cell_pose=d.get("cell_pose", ""),
-                   at_clear=d.get("at_clear", -1), arm_pairs=tuple(d.get("arm_pairs") or ()),
-                   held=d.get("held", -1), seat_pairs=tuple(d.get("seat_pairs") or ()),
-                   seat_any=d.get("seat_any", -1), seat_any_pairs=tuple(d.get("seat_any_pairs") or ()),
-                   placed_any=d.get("placed_any", -1))
-
-    def to_json(self) -> dict[str, Any]:
-        """As the plan JSON has it."""
-        return {"part": self.part, "parent": self.parent, "mate": self.mate, "grasps": self.grasps,
-                "usable": self.usable, "clear": self.clear, "pickup": self.pickup, "reached": self.reached,
-                "at_cell": self.at_cell, "faces": list(self.faces), "hits": list(self.hits), "poses": self.poses,
-                "pose_ok": list(self.pose_ok), "cell_pose": self.cell_pose, "at_clear": self.at_clear,
-                "arm_pairs": list(self.arm_pairs), "held": self.held, "seat_pairs": list(self.seat_pairs),
-                "seat_any": self.seat_any, "seat_any_pairs": list(self.seat_any_pairs),
-                "placed_any": self.placed_any}
-
-
-@dataclass(frozen=True)
-class GraspBlock:
-    """The first part no grasp serves: ``part``, its ``mate``, what it ``needs`` and ``why`` (one line)."""
-
-    part: str
-    mate: str
-    needs: str
-    why: str
-
-
-@dataclass(frozen=True)
-class Grasps:
-    """A product's grasp report (``reason.grasps``): ``ok`` when every part keeps a grasp through
-    every filter, ``parts`` a row per part in insertion order, ``blocked`` the first part that keeps
-    none (None when ``ok``)."""
-
-    ok: bool
-    parts: tuple[GraspRow, ...]
-    blocked: GraspBlock | None = None
-
-    @classmethod
-    def from_json(cls, d: Mapping[str, Any]) -> Grasps:
-        """From ``reason.grasps`` (world.product.grasp_report's ``to_json()``)."""
-        blocked = (GraspBlock(d["part"], d["mate"], d.get("needs", ""), d.get("why", ""))
-                   if not d["ok"] and "part" in d else None)
-        return cls(bool(d["ok"]), tuple(GraspRow.from_json(r) for r in d.get("parts") or ()), blocked)
-
-    def to_json(self) -> dict[str, Any]:
-        """As the plan JSON has it."""
-        out: dict[str, Any] = {"ok": self.ok, "parts": [r.to_json() for r in self.parts]}
-        if not self.ok and self.blocked is not None:
-            b = self.blocked
-            out.update(part=b.part, mate=b.mate, needs=b.needs, why=b.why)
-        return out
-
-
-@dataclass(frozen=True)
 class SingleArm:
     """A product's single-arm report (``reason.single_arm``, world.product.single_arm_report): ``ok``
     when some order and poses keep every loose mate, ``order`` that order and ``level`` the
@@ -247,7 +164,7 @@ class Explanation:
     motions: tuple[MotionStop, ...] = ()
     infeasible: tuple[str, ...] = ()
     single_arm: SingleArm | None = None
-    grasps: Grasps | None = None
+    grasps: GraspReport | None = None
     phase2: Phase2Digest | None = None
     collisions: tuple[str, ...] = ()
     summary: str | None = None
@@ -295,10 +212,17 @@ class Explanation:
                    motions=tuple(MotionStop.from_json(m) for m in d.get("motion_failures") or ()),
                    infeasible=tuple(d.get("infeasible") or ()),
                    single_arm=SingleArm.from_json(d["single_arm"]) if d.get("single_arm") else None,
-                   grasps=Grasps.from_json(d["grasps"]) if d.get("grasps") else None,
+                   grasps=_grasp_report_of(d["grasps"]) if d.get("grasps") else None,
                    phase2=Phase2Digest.from_json(d["phase2"]) if d.get("phase2") else None,
                    collisions=tuple(d.get("collisions") or ()), summary=d.get("summary"),
                    extra=tuple((k, v) for k, v in d.items() if k not in known))
+
+
+def _grasp_report_of(d: Mapping[str, Any]) -> GraspReport:
+    """A read reason's grasp report (the product room on first use: only a product's no plan has one)."""
+    from spar_py.world.product import GraspReport
+
+    return GraspReport.from_json(d)
 
 
 def timed_out(seconds: float | None) -> Explanation:
@@ -360,7 +284,7 @@ def explain(cell: Cell, reason: Mapping[str, Any], run: PlanRun) -> Explanation:
         if sa is None or sa.ok:  # the grasps: the first mate no grasp serves, and what it needs
             gr = _grasp_report(cell, run.world.cache, run.world.options.placements)
             if gr is not None and not gr.ok:
-                grasps = Grasps.from_json(gr.to_json())
+                grasps = gr
     digest = None
     if isinstance(cause, NoInstance):  # where the instances stopped, the blocking pairs, what it needs
         digest = phase2_digest(cell, run.failures, cause.examined, cause.cap, cause.complete)

@@ -35,7 +35,7 @@ for pickups.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Any, Callable, Mapping
 
 import numpy as np
@@ -120,6 +120,13 @@ class MateGrasps:
                 "seat_pairs": list(self.seat_pairs), "seat_any": self.seat_any,
                 "seat_any_pairs": list(self.seat_any_pairs), "placed_any": self.placed_any}
 
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> MateGrasps:
+        """From a row :meth:`to_json` wrote (lists read back as tuples; a count left out keeps its
+        default)."""
+        return cls(**{f.name: tuple(d[f.name]) if isinstance(d[f.name], list) else d[f.name]
+                      for f in fields(cls) if f.name in d})
+
 
 @dataclass
 class GraspReport:
@@ -140,6 +147,13 @@ class GraspReport:
         if not self.ok and self.blocked is not None:
             out.update(part=self.blocked.part, mate=self.blocked.mate, needs=self.needs, why=self.why)
         return out
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> GraspReport:
+        """From what :meth:`to_json` wrote: the blocked part is its row among ``parts``."""
+        rows = [MateGrasps.from_json(r) for r in d.get("parts") or ()]
+        blocked = None if d["ok"] else next((r for r in rows if r.part == d.get("part")), None)
+        return cls(bool(d["ok"]), rows, blocked, d.get("needs", ""), d.get("why", ""))
 
 
 def seat_order(product: Product) -> tuple[list[str], dict[str, set[str]]]:
