@@ -24,8 +24,11 @@
       precedence(P, Q, Reason)    a product's part P must be inserted
                                   before part Q (Q in place would block
                                   P's insertion; Reason a string)
-      mates(Part, Names)          the mates a product part's insertion
-                                  makes (strings, PART.F->PART.G)
+      mates(Part, Pairs)          the mates and seats a product part's
+                                  insertion can make, Name-Other (Name
+                                  a string, PART.F->PART.G; Other the
+                                  mate's other part): it makes one when
+                                  Other is in place before it
 
     The planner reads them through the accessors of the same names
     (kb:grasp/6, ...), which answer for the problem in scope: a planning
@@ -57,7 +60,7 @@
             turn/3,                 % ?Ta, ?Turn, ?HolePoses
             mate_grasps/3,          % ?Ta, ?Peg, ?Grasps
             precedence/3,           % ?Part, ?Later, ?Reason
-            mates/2                 % ?Part, ?Names
+            mates/2                 % ?Part, ?Pairs
           ]).
 :- use_module(library(error)).
 :- use_module(library(apply)).
@@ -113,7 +116,7 @@ storage_clause((Head :- problem_in_scope(P), Stored)) :-
 %!  turn(?Ta, ?Turn, ?HolePoses) is nondet.
 %!  mate_grasps(?Ta, ?Peg, ?Grasps) is nondet.
 %!  precedence(?Part, ?Later, ?Reason) is nondet.
-%!  mates(?Part, ?Names) is nondet.
+%!  mates(?Part, ?Pairs) is nondet.
 %
 %   The accessors: the facts of the problem in scope (problem_in_scope/1),
 %   in the shapes this file's header gives, in load order. Each reads the

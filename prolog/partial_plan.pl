@@ -204,7 +204,7 @@ print_partial(Partial) :-
     partial_ordering(Partial, PriorTos),
     format("ORDERING~n"),
     forall(member(P, PriorTos), print_prior_to(Actions, P)),
-    print_mates(Actions),
+    print_mates(Actions, PriorTos),
     format("NETWORK ARCS~n"),
     cms_arcs(Net, Arcs),
     forall(member(arc(V1, V2, Pairs), Arcs),
@@ -239,22 +239,67 @@ print_prior_to(Actions, prior_to(A, B)) :-
     ;   nl
     ).
 
-%   print_mates(+Actions): for a product cell, the mates each assemble
-%   makes (kb:mates/2), oldest action first; nothing otherwise.
+%   print_mates(+Actions, +PriorTos): for a product cell, the mates each assemble of
+%   the partial plan makes, oldest action first: a mate is made by the
+%   insertion that brings its two parts together, so an assemble makes
+%   the mates (kb:mates/2) whose other part is never assembled (the base)
+%   or is assembled necessarily before it; one whose other part's assemble
+%   is unordered with it is made by whichever of the two a plan instance
+%   takes later ("or by"). Nothing for a cell without a product.
 
-print_mates(Actions) :-
-    findall(Id-Names,
+print_mates(Actions, PriorTos) :-
+    findall(Id-Made,
             ( member(action(Id, assemble(P, _, _, _, _), _, _, _), Actions),
-              kb:mates(P, Names) ),
+              kb:mates(P, Pairs),
+              mates_made(Pairs, Id, Actions, PriorTos, Made) ),
             Made0),
     (   Made0 == []
     ->  true
     ;   reverse(Made0, Made),
         format("MATES~n"),
-        forall(member(Id-Names, Made),
-               ( atomic_list_concat(Names, ', ', Text),
-                 format("  ~q makes ~w~n", [Id, Text]) ))
+        forall(member(Id-made(Sure, Either), Made), print_made(Id, Sure, Either))
     ).
+
+%   mates_made(+Pairs, +Id, +Actions, +PriorTos, -made(Sure, Either)): of
+%   the Name-Other pairs an assemble Id may make, the names it makes in
+%   every linearisation of the ordering PriorTos (Sure) and those with
+%   Other's assemble unordered with Id (Either, as Name-OtherAction).
+
+mates_made(Pairs, Id, Actions, PriorTos, made(Sure, Either)) :-
+    findall(Name,
+            ( member(Name-Other, Pairs),
+              (   other_assemble(Other, Actions, B)
+              ->  path_before(B, Id, PriorTos)
+              ;   true
+              ) ),
+            Sure),
+    findall(Name-B,
+            ( member(Name-Other, Pairs),
+              other_assemble(Other, Actions, B),
+              \+ path_before(B, Id, PriorTos),
+              \+ path_before(Id, B, PriorTos) ),
+            Either).
+
+%   path_before(+A, +B, +PriorTos): a path A -> B of prior_to/2 arcs.
+
+path_before(A, B, PriorTos) :-
+    path_before(A, B, PriorTos, [A]).
+
+path_before(A, B, PriorTos, Seen) :-
+    member(prior_to(A, C), PriorTos),
+    \+ memberchk(C, Seen),
+    (   C == B -> true ; path_before(C, B, PriorTos, [C|Seen]) ),
+    !.
+
+other_assemble(Other, Actions, B) :-
+    memberchk(action(B, assemble(Other, _, _, _, _), _, _, _), Actions).
+
+print_made(Id, Sure, Either) :-
+    atomic_list_concat(Sure, ', ', Text),
+    format("  ~q makes ~w", [Id, Text]),
+    forall(member(Name-B, Either),
+           format("~w~w (or ~q, whichever comes later)", [", " , Name, B])),
+    nl.
 
 print_labels(V, Labels) :-
     map_list_to_pairs(natural_key, Labels, Keyed),

@@ -495,6 +495,7 @@ print_step(geo(Problem, Token), I, Id, A) :-
     py_bridge(step_geometry(Problem, Token, T), G),
     moves_text(G, Moves),
     format("  ~w. ~w: ~q~s~s~n", [I, T, A, Mark, Moves]),
+    print_made(G),
     (   get_dict(joints_deg, G, Q), is_list(Q)
     ->  (   get_dict(ik_solver, G, S), S \== @(none)
         ->  format("       joints (deg, ~w IK): ~w~n", [S, Q])
@@ -509,6 +510,22 @@ print_step(geo(Problem, Token), I, Id, A) :-
         ),
         format("       placement: x=~w y=~w z=~w yaw=~w deg (~w)~w~n",
                [P.x, P.y, P.z, P.yaw_deg, P.pose, Where])
+    ;   true
+    ).
+
+%   print_made(+Geometry): the mates a product step's insertion makes, in
+%   the order this instance took (phase2.mates), and the tightest of their
+%   insertion checks, as lengths; nothing for other steps.
+print_made(G) :-
+    (   get_dict(mates, G, Names), Names = [_|_]
+    ->  atomic_list_concat(Names, ', ', Text),
+        format("       makes ~w~n", [Text]),
+        (   get_dict(tightest, G, T), is_dict(T)
+        ->  (   T.satisfied == true -> V = "satisfied" ; V = "NOT satisfied" ),
+            format("       tightest: ~w (~w), ~4f of ~w: ~w~n",
+                   [T.mate, T.constraint, T.bound, T.threshold, V])
+        ;   true
+        )
     ;   true
     ).
 
@@ -528,8 +545,9 @@ print_verdict(Id0, C) :-
     ->  format("  ~w ~w: ~w (~w)~n", [Id, C.constraint, V, C.description])
     ;   readable(C.threshold, Th),
         (   get_dict(unit, C, U0) -> format(string(U), " ~w", [U0]) ; U = "" ),
-        format("  ~w ~w: bound ~4f~s ~w ~w~s: ~w~n",
-               [Id, C.constraint, C.bound, U, C.sense, Th, U, V])
+        (   get_dict(mate, C, M) -> format(string(Of), " (~w)", [M]) ; Of = "" ),
+        format("  ~w ~w~s: bound ~4f~s ~w ~w~s: ~w~n",
+               [Id, C.constraint, Of, C.bound, U, C.sense, Th, U, V])
     ).
 
 %   readable(+X, -Y): X rounded to 9 decimals for printing (0.16, not the

@@ -332,13 +332,15 @@ mates:
 
 
 def test_mated_goal_is_the_goal_of_the_insertion_that_makes_it(tmp_path: Path) -> None:
-    """mated(pin_a, shaft, bracket, bore_a) in the bracket kit: pin_a's goal (into the base, whose
-    insertion makes both of pin_a's mates); an unknown mate is refused naming the known ones."""
+    """mated(pin_a, shaft, bracket, bore_a) in the bracket kit: pin_a goes into the base, not the
+    bracket, so the mate holds once both are in place: the bracket's goal and pin_a's (whichever
+    insertion comes later makes it); an unknown mate is refused naming the known ones."""
     text = (PROBLEMS / "bracket_kit.yaml").read_text().replace("../", f"{ROOT}/kb/")
     p = tmp_path / "kit.yaml"
     p.write_text(text.replace("assembled(bracket_kit)", "mated(pin_a, shaft, bracket, bore_a)"))
     cell = load_problem(p)
-    assert cell.goals == [("assembled", "pin_a", "base", [["shaft"], ["bore_a"]], "trans_pin_a", "vec_pin_a")]
+    assert cell.goals == [("assembled", "bracket", "base", [["bottom"], ["top"]], "trans_bracket", "vec_bracket"),
+                          ("assembled", "pin_a", "base", [["shaft"], ["bore_a"]], "trans_pin_a", "vec_pin_a")]
     p.write_text(text.replace("assembled(bracket_kit)", "mated(pin_a, shaft, bracket, bore_b)"))
     with pytest.raises(KBError) as e:
         load_problem(p)

@@ -402,13 +402,36 @@ def load_product_derived(path: str | Path, unit: str, max_bytes: int = MAX_INPUT
     product = Product(name, str(path), base, parts, tuple(m for m in links if isinstance(m, Mate)),
                       tuple(s for s in links if isinstance(s, Seat)), files=tuple(files))
     where = root.key("mates") if mates_node is not None else root.key("parts")
+    given = _given_precedence(root, pnodes)
+    if given:
+        where = root.key("precedence")
     try:
-        product = compile_product(product, unit, derived)  # the one geometric step (world.product)
+        product = compile_product(product, unit, derived, given)  # the one geometric step (world.product)
     except KBError:
         raise
     except SparValueError as e:
         raise where.fail("mates that make an assembly", str(e) + _unlinked_contacts(product, derived)) from None
     return LoadedProduct(product, derived, objects, unit)
+
+
+def _given_precedence(root: Node, parts: Any) -> tuple[tuple[str, str], ...]:
+    """The product file's ``precedence: [[A, B], ...]``: A in place before B arrives (part names);
+    a KBError naming the pair if it is not two different parts of the product."""
+    node = root.key("precedence", required=False)
+    if node is None:
+        return ()
+    out = []
+    for pair in node.elements(1):
+        items = pair.elements(2)
+        names = [i.label() for i in items]
+        for i, n in zip(items, names):
+            if n not in parts:
+                raise i.fail(f"a part of the product ({', '.join(parts)})", show(n))
+        if len(names) != 2 or names[0] == names[1]:
+            raise pair.fail("a pair [A, B] of two different parts (A in place before B is inserted)",
+                            show(pair.value))
+        out.append((names[0], names[1]))
+    return tuple(out)
 
 
 def _inserted_by(dm: Any, derived: AssemblyResult) -> str:
@@ -524,19 +547,23 @@ def goal_term(g: PartGoal) -> tuple:
 
 def product_goals(node: Node, term: Any, product: Product) -> list[tuple] | None:
     """A problem goal about the product as the planner's goals: ``assembled(KIT)`` (every part
-    goal, file order), ``mated(Peg, PegFeature, Hole, HoleFeature)`` (the goal of the part whose
-    insertion makes that mate); None for any other goal."""
+    goal, file order), ``mated(Peg, PegFeature, Hole, HoleFeature)`` (the goal of the part that
+    goes into the other, else the goals of both parts, file order: the mate is made once both
+    are in place, by whichever insertion comes later); None for any other goal."""
     if isinstance(term, tuple) and term[0] == "assembled" and len(term) == 2:
         if term[1] != product.name:
             raise node.fail(f"assembled({product.name}), the cell's product", show(term[1]))
         return [goal_term(g) for g in product.goals]
     if isinstance(term, tuple) and term[0] == "mated" and len(term) == 5:
         name = f"{term[1]}.{term[2]}->{term[3]}.{term[4]}"
-        for g in product.goals:
-            if name in g.mates:
-                return [goal_term(g)]
-        known = ", ".join(m.name for m in product.mates)
-        raise node.fail(f"a mate of product {product.name} ({known})", name)
+        mate = next((m for m in product.mates if m.name == name), None)
+        if mate is None:
+            known = ", ".join(m.name for m in product.mates)
+            raise node.fail(f"a mate of product {product.name} ({known})", name)
+        # a goal into the other part makes the mate by itself; else it holds once both parts are in place
+        ends = {mate.peg, mate.hole}
+        direct = next((g for g in product.goals if {g.part, g.parent} == ends), None)
+        return [goal_term(direct)] if direct is not None else [goal_term(g) for g in product.goals if g.part in ends]
     return None
 
 

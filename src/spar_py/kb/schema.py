@@ -174,7 +174,7 @@ PRODUCT_SCHEMA = keys(
      "parts": Named(keys({}, {"model": LEAF, "pose": FRAME_SCHEMA, "mesh": LEAF, "units": UNITS_SCHEMA,
                              "features": Each(FEATURE_SCHEMA, 1), "face_names": Named(LEAF)}))},
     {"base": LEAF, "mates": Each(keys({}, ["peg", "hole", "retention", "seat", "on", "direction"]), 1),
-     "contact_tol": LEAF, "clearance_max": LEAF, "retention": Named(LEAF)},
+     "contact_tol": LEAF, "clearance_max": LEAF, "retention": Named(LEAF), "precedence": Each(Each(LEAF, 2), 1)},
 )
 
 

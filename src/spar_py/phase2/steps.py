@@ -5,6 +5,7 @@ putdown, assemble, dense_range_scan, squeeze (:data:`STEPS`).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 from typing import Any
 
@@ -15,7 +16,10 @@ from spar_py.core.errors import SparValueError
 from spar_py.core.model import Cell
 from spar_py.world.reach import reachable_pairs, rest_of_body, surfaces_of
 from spar_py.phase2.arm import arm_for, no_arm, via_part
-from spar_py.phase2.mates import carried_mate, mate_features, mate_retention, product_mate
+from spar_py.phase2.mates import (
+    carried_mate, made_links, made_retention, mate_constraints, mate_features, mate_retention, product_mate,
+    wrong_way,
+)
 from spar_py.phase2.rest import retention_refusal, stacked_on
 from spar_py.phase2.state import MEMO_LIMIT, Refusals, Step, World, grasp_of, hashable, lies_at, model_of, step_key
 
@@ -207,8 +211,10 @@ def _assemble(world: World, s: Step, early: bool = False) -> tuple[list[dict], W
     Ta = cell.transforms[ta]
     g = grasp_of(cell, peg, world.grasps[peg])
     goal_hole, goal_Ta = hole, Ta
+    goal_va = np.asarray(cell.vectors[va], float) if isinstance(va, str) and va in cell.vectors else None
+    made = made_links(world, peg, goal_hole)
     hole, Ta, faces = carried_mate(world, peg, hole, faces, Ta)
-    va_vec = np.asarray(cell.vectors[va], float) if isinstance(va, str) and va in cell.vectors else None
+    va_vec = goal_va
     if va_vec is not None and hole != goal_hole:  # V_a is in the goal parent's frame: into the mated part's
         va_vec = (world.unc.obj(hole).pose[:3, :3].T @ world.unc.obj(goal_hole).pose[:3, :3]) @ va_vec
     pair = product_mate(cell, peg, hole, faces, Ta)
@@ -216,11 +222,16 @@ def _assemble(world: World, s: Step, early: bool = False) -> tuple[list[dict], W
         fp, fh = mate_features(cell, peg, hole, faces)
     else:
         fp, fh = pair
-    cs = [] if fp is None else ur.assemble_constraints(
-        world.unc, peg, hole, Ta, fp, fh, action=s["id"], memo=world.cache.memo,
-        axis=va_vec)
+    if cell.product is not None and cell.product.goal_of(peg) is not None:
+        # every peg-hole mate the insertion makes, each where its peg meets its mouth
+        cs = mate_constraints(world, peg, goal_hole, goal_Ta, made, goal_va, s["id"])
+    else:
+        cs = [] if fp is None else ur.assemble_constraints(
+            world.unc, peg, hole, Ta, fp, fh, action=s["id"], memo=world.cache.memo, axis=va_vec)
     checks = _verdicts(world, cs, early)
     what = f"assemble({peg}, {goal_hole})"
+    for why in wrong_way(world, made, goal_hole, goal_va):
+        checks.append(_reach_verdict(s["id"], False, f"{what} cannot make {why}", "direction"))
     near = cell.product.near.get(peg, ()) if cell.product is not None else ()
     q, geo, refused = arm_for(world, world.unc.obj(goal_hole).pose @ goal_Ta @ g.T, what,
                            held=(peg, np.linalg.inv(g.T)), width=g.width,
@@ -228,9 +239,17 @@ def _assemble(world: World, s: Step, early: bool = False) -> tuple[list[dict], W
                            via=via_part(cell, peg, world.grasps[peg]), touch=True)
     if q is None:
         checks.append(_reach_verdict(s["id"], False, no_arm(what, geo)))
+    if cell.product is not None:
+        geo["mates"] = [m.link.name for m in made]
+        tight = tightest(checks)
+        if tight is not None:
+            geo["tightest"] = tight
     grasps = {k: v for k, v in world.grasps.items() if k != peg}
     margin = 0.0 if fp is None else max(0.0, float(fh.radius) - float(fp.radius))
     retention, mate = mate_retention(cell, peg, hole, fh)
+    if made:  # the mates this insertion makes, in the order the plan took
+        retention = made_retention(made)
+        mate = f"{retention}{mate[mate.index(' '):]}"
     unc = ur.assemble(world.unc, peg, hole, Ta, retention=retention, direction=va_vec, clearance=margin,
                       axis=None if fp is None else va_vec, mate=mate)
     # a non-product cell's goal asks for this mate as the paper's cells make it (the insertion itself
@@ -243,6 +262,24 @@ def _assemble(world: World, s: Step, early: bool = False) -> tuple[list[dict], W
                 joints=q if q is not None else world.joints, checked=_checked(world, cs, checks),
                 complete=sum(c["kind"] == "uncertainty" for c in checks) == len(cs))
     return checks, w, geo
+
+
+def tightest(checks: list[dict[str, Any]]) -> dict[str, Any] | None:
+    """The insertion check of ``checks`` with the least room: the largest bound over threshold,
+    as lengths (a squared check's square roots): ``{"mate", "constraint", "bound", "threshold",
+    "satisfied"}`` (cell unit), or None without an insertion check."""
+    best, key = None, -math.inf
+    for c in checks:
+        if c.get("kind") != "uncertainty" or c.get("sense") != "<" or not c.get("mate"):
+            continue
+        p = int(c.get("power") or 1)
+        b = max(float(c["bound"]), 0.0) ** (1.0 / p)
+        t = max(float(c["threshold"]), 0.0) ** (1.0 / p)
+        r = b / t if t > 0 else math.inf
+        if r > key:
+            best, key = {"mate": c["mate"], "constraint": c["constraint"], "bound": b, "threshold": t,
+                         "satisfied": bool(c["satisfied"])}, r
+    return best
 
 
 def _scan(world: World, s: Step, early: bool = False) -> tuple[list[dict], World, dict]:

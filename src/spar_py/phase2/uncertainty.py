@@ -511,6 +511,8 @@ class Constraint:
     #: The power of the length ``expr`` is: 1 a length (the pickup contacts), 2 a squared
     #: length (the assemble check's |C_h - C_p|^2); its bound's unit is the cell's to it.
     power: int = 1
+    #: The product mate an insertion check is of (``pin_1.shaft->cover.ph1``; empty otherwise).
+    mate: str = field(default="", compare=False)
 
     def __post_init__(self) -> None:
         if self.sense not in (">", "<"):
@@ -832,7 +834,8 @@ class Verdict:
         c = self.constraint
         return {"action": c.action, "constraint": c.name, "sense": c.sense, "bound": self.bound,
                 "threshold": self.threshold, "satisfied": self.satisfied,
-                "tolerance_reached": self.tolerance_reached, "description": c.description}
+                "tolerance_reached": self.tolerance_reached, "description": c.description,
+                "power": c.power, **({"mate": c.mate} if c.mate else {})}
 
 
 def evaluate(constraint: Constraint, registry: Registry, *, memo: Memo | None = None, decide: bool = False,

@@ -93,6 +93,10 @@ class Verdict:
     satisfied: bool
     tolerance_reached: bool
     description: str
+    #: An insertion check's product mate (``pin_1.shaft->cover.ph1``), else empty.
+    mate: str = ""
+    #: 1 for a length, 2 for a squared length (the insertion checks): the bound's unit is the cell's to it.
+    power: int = 1
 
 
 @dataclass(frozen=True)
@@ -152,6 +156,10 @@ class Step:
     duration_s: float | None = None
     position_bounds: dict[str, Bounds] | None = None
     moves: tuple[str, ...] = ()
+    #: A product assemble's mates and seats, those its insertion makes in this instance's order.
+    mates: tuple[str, ...] = ()
+    #: Its tightest insertion check as lengths: {mate, constraint, bound, threshold, satisfied}.
+    tightest: dict[str, Any] | None = None
 
 
 @dataclass
@@ -268,7 +276,8 @@ def _verdict(c: dict[str, Any]) -> Verdict:
     return Verdict(action=c["action"], constraint=c["constraint"], kind=c["kind"], sense=c.get("sense", ""),
                    bound=c.get("bound"), threshold=c.get("threshold"), satisfied=bool(c["satisfied"]),
                    tolerance_reached=bool(c.get("tolerance_reached", True)),
-                   description=c.get("description", ""))
+                   description=c.get("description", ""), mate=str(c.get("mate") or ""),
+                   power=int(c.get("power") or 1))
 
 
 def _bind(data: Any, bindings: dict[str, str]) -> Any:
@@ -314,6 +323,7 @@ def _step(s: dict[str, Any], verdicts: list[Verdict]) -> Step:
                 duration_s=None if s.get("duration_s") is None else float(s["duration_s"]),
                 position_bounds=_bounds(s.get("position_bounds")), moves=tuple(s.get("moves") or ()),
                 closest_pair=tuple(s["closest_pair"]) if s.get("closest_pair") else None,
+                mates=tuple(s.get("mates") or ()), tightest=s.get("tightest"),
                 verdicts=tuple(v for v in verdicts if v.action == s["id"]))
 
 
@@ -330,27 +340,65 @@ def _plan(problem: str, d: dict[str, Any], trace: str) -> Plan:
 
 
 def name_mates(cell: Cell, d: dict[str, Any]) -> None:
-    """A product cell's plan document (in place): each assemble of a part, among the partial
-    plan's actions and the instance's steps, gets ``mates``, the names of the mates and seats
-    its insertion makes (``pin_a.shaft->base.bore_a``); the partial plan gets ``precedence``,
-    the orderings the product's geometry forced, ``{before, after, reason}`` with the text
-    the printed plan gives (``bracket before pin_a (...)``)."""
+    """A product cell's plan document (in place): each assemble of the partial plan gets
+    ``mates``, the names of the mates and seats its insertion makes (``pin_a.shaft->base.bore_a``):
+    the instance's, whose steps carry the mates phase 2 credited them in the order it took
+    (phase2.mates.made_links); without an instance, those the partial order fixes (the other
+    part never assembled, or necessarily before), and ``may_make`` those whose other part's
+    assemble is unordered with it (made by whichever comes later). The partial plan gets
+    ``precedence``, the orderings the product's geometry forced, ``{before, after, reason}``
+    with the text the printed plan gives (``bracket before pin_a (...)``)."""
     product = cell.product
-    made = {g.part: list(g.mates) for g in product.goals}
+    can = {g.part: list(g.mates) for g in product.goals}
+    other = {m.name: (m.peg, m.hole) for m in product.mates}
+    other.update({s.name: (s.part, s.on) for s in product.seats})
     partial = d.get("partial") or {}
+    steps = {st["id"]: st for st in (d.get("instance") or {}).get("steps", []) if st.get("name") == "assemble"}
     part_of: dict[str, str] = {}
+    assembles = {a["args"][0]: a["id"] for a in partial.get("actions", [])
+                 if a.get("name") == "assemble" and a.get("args") and a["args"][0] in can}
+    before = _closure(partial.get("ordering", []))
     for a in partial.get("actions", []):
-        if a.get("name") == "assemble" and a.get("args") and a["args"][0] in made:
-            a["mates"] = made[a["args"][0]]
-            part_of[a["id"]] = a["args"][0]
-    for st in (d.get("instance") or {}).get("steps", []):
-        if st.get("name") == "assemble" and st.get("args") and st["args"][0] in made:
-            st["mates"] = made[st["args"][0]]
+        if a.get("name") != "assemble" or not a.get("args") or a["args"][0] not in can:
+            continue
+        p = a["args"][0]
+        part_of[a["id"]] = p
+        if a["id"] in steps and "mates" in steps[a["id"]]:
+            a["mates"] = list(steps[a["id"]]["mates"])
+            continue
+        sure, either = [], []
+        for n in can[p]:
+            q = next(x for x in other[n] if x != p)
+            b = assembles.get(q)
+            if b is None or (b, a["id"]) in before:
+                sure.append(n)
+            elif (a["id"], b) not in before:
+                either.append(n)
+        a["mates"] = sure
+        if either:
+            a["may_make"] = either
     if partial:
         reasons = {(pr.first, pr.then): f"{pr.first} before {pr.then} ({pr.reason})" for pr in product.precedence}
         partial["precedence"] = [
             {"before": a, "after": b, "reason": reasons[(part_of[a], part_of[b])]}
             for a, b in partial.get("ordering", []) if (part_of.get(a), part_of.get(b)) in reasons]
+
+
+def _closure(pairs: Any) -> set[tuple[str, str]]:
+    """The transitive closure of the ordering pairs ``[[a, b], ...]`` (a before b)."""
+    succ: dict[str, set[str]] = {}
+    for a, b in pairs:
+        succ.setdefault(a, set()).add(b)
+    out: set[tuple[str, str]] = set()
+    for a in list(succ):
+        stack, seen = list(succ[a]), set()
+        while stack:
+            b = stack.pop()
+            if b not in seen:
+                seen.add(b)
+                stack.extend(succ.get(b, ()))
+        out |= {(a, b) for b in seen}
+    return out
 
 
 #: Loaded cells a Planner keeps, by file, and cells with their kept answers (world.run.CellCache),

@@ -35,7 +35,7 @@ __all__ = ["InstanceFailure", "PlanRun", "StepData"]
 
 #: The fields of a step's geometry the plan's JSON shows (docs/json-schema.md).
 STEP_FIELDS = ("tool_pose", "joints_deg", "ik_solutions_deg", "ik_solver", "placement", "source", "poses", "held",
-               "moves", "clearance", "closest_pair", "position_bounds")
+               "moves", "clearance", "closest_pair", "position_bounds", "mates", "tightest")
 
 
 @dataclass(frozen=True)

@@ -12,12 +12,13 @@ Lengths in the cell unit; part poses in the product frame.
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import replace
 from typing import TYPE_CHECKING
 
 from spar_py.core.model import Precedence, Product, StablePose
 from spar_py.world.product.products import (
-    compile_goals, insertion_pairs, near_parts, precedence, subassembly_poses, subtree, through_precedence, via_grasps,
+    compile_goals, insertion_pairs, near_parts, no_cycle, precedence, subassembly_poses, subtree, through_precedence, via_grasps,
 )
 
 if TYPE_CHECKING:
@@ -26,20 +27,28 @@ if TYPE_CHECKING:
 __all__ = ["compile_product"]
 
 
-def compile_product(product: Product, unit: str, derived: AssemblyResult | None = None) -> Product:
+def compile_product(product: Product, unit: str, derived: AssemblyResult | None = None,
+                    given: Sequence[tuple[str, str]] = ()) -> Product:
     """``product`` compiled (module docstring); ``derived`` the assembly derivation of a product
-    of meshes (its insertion order and precedence), None for declared mates. SparValueError
-    (one line) where the mates do not make an assembly."""
+    of meshes (its insertion order and precedence), None for declared mates; ``given`` the
+    product file's own orderings (A, B): A in place before B arrives, merged with the
+    geometry's. SparValueError (one line) where the mates do not make an assembly or the
+    orderings form a cycle (naming each ordering of it and why it holds)."""
     order = None if derived is None else [p for i in derived.insertions for p in i.parts]
     product = replace(product, goals=compile_goals(product, order))
     # a derived product's precedence is the disassembly's (exact meshes both ways; the
     # declared products' sweep moves a mesh part's hull, which fills its bores)
     prec = (precedence(product, unit) if derived is None else
             tuple(Precedence(a, b, why) for a, b, why in derived.precedence))
+    known = {(pr.first, pr.then) for pr in prec}
+    prec += tuple(Precedence(a, b, "the product file orders them") for a, b in dict.fromkeys(given)
+                  if (a, b) not in known)
+    no_cycle(product, prec)
     # a part whose tree parent is in place first goes into the part that still has a location
     # (the order's pairs where known, else the precedence's; the sweeps do not depend on it)
-    first = (insertion_pairs([i.parts for i in derived.insertions]) if derived is not None
-             else tuple((pr.first, pr.then) for pr in prec))
+    first = tuple(dict.fromkeys(
+        (insertion_pairs([i.parts for i in derived.insertions]) if derived is not None else ())
+        + tuple((pr.first, pr.then) for pr in prec)))
     product = replace(product, goals=compile_goals(product, order, first))
     have = {(pr.first, pr.then) for pr in prec}
     product = replace(product, precedence=prec + tuple(pr for pr in through_precedence(product, first)

@@ -40,8 +40,9 @@ if TYPE_CHECKING:
     from spar_py.core.model import MatingFeature, ObjectModel
 
 __all__ = ["AXIS_TOL_MM", "NEAR_MM", "SUB", "SWEEP_MARGIN_MM", "VIA", "Axis", "SubPose", "compile_goals",
-           "feature_axis", "goal_parents", "insertion_pairs", "through_precedence",
-           "mate_misalignment", "near_parts", "precedence", "resting_faces", "seat_direction", "subassembly_poses",
+           "feature_axis", "goal_parents", "insertion_directions", "insertion_pairs", "link_directions", "makers", "through_precedence",
+           "unmakeable",
+           "mate_misalignment", "near_parts", "no_cycle", "precedence", "resting_faces", "seat_direction", "subassembly_poses",
            "subtree", "via_grasps"]
 
 #: A mate's axes are coaxial when the peg's axis passes within this of the hole's (mm) and
@@ -183,58 +184,115 @@ def _parents(product: Product) -> dict[str, str]:
     return parents
 
 
-def _made_by(product: Product, parents: dict[str, str], order: Sequence[str] | None = None
-             ) -> dict[str, list[Mate | Seat]]:
-    """The part whose insertion makes each mate or seat: the child of a tree edge, else the
-    part deeper in the tree (for equals the later in ``order``, the insertion order where it
-    is known (a derived product's), then the file's)."""
-    def depth(p: str) -> int:
-        n = 0
-        while p != product.base:
-            p, n = parents[p], n + 1
-        return n
-    known = [p for p in (order or ()) if p in product.parts]
-    order = known + [p for p in product.parts if p not in known]
-    out: dict[str, list[Mate | Seat]] = {p: [] for p in parents}
+def link_directions(product: Product, link: Mate | Seat, mover: str) -> list[np.ndarray]:
+    """The directions (product frame, unit) ``mover`` (one of ``link``'s two parts) may move along
+    to make ``link``: the peg toward its tip; the hole part against it, or either way when the
+    hole is through (it slides over a peg from the peg's root end: a dowel standing in a base
+    takes a plate coming down over it); a seat's part into its seat, the part it rests on the
+    opposite way."""
+    d = _direction(product, link, mover)
+    if isinstance(link, Mate) and mover == link.hole:
+        f = product.parts[link.hole].model.feature_named(link.hole_feature)
+        if f.through or (f.geometry is not None and f.geometry.through):
+            return [d, -d]
+    return [d]
+
+
+def _agrees(d: np.ndarray, allowed: Sequence[np.ndarray]) -> bool:
+    """Whether direction ``d`` is one of ``allowed`` (unit vectors, within 1e-6)."""
+    return any(float(a @ d) > 1 - 1e-6 for a in allowed)
+
+
+def insertion_directions(product: Product, parents: dict[str, str] | None = None) -> dict[str, np.ndarray]:
+    """Each non-base part's insertion direction (product frame, unit): one the link to its tree
+    parent (:func:`_parents`; its first in file order) allows, the one most of the part's other
+    links allow (a cover over two shafts and four dowels through holes comes down, as both
+    shafts need), ties to the first allowed."""
+    parents = _parents(product) if parents is None else parents
+    links = _links(product)
+    out: dict[str, np.ndarray] = {}
+    for p, parent in parents.items():
+        own = [lk for _, lk in links[p]]
+        tree = next(lk for q, lk in links[p] if q == parent)
+        cands = link_directions(product, tree, p)
+        out[p] = max(cands, key=lambda d: sum(_agrees(d, link_directions(product, lk, p)) for lk in own))
+    return out
+
+
+def makers(product: Product, parents: dict[str, str] | None = None,
+           dirs: dict[str, np.ndarray] | None = None) -> dict[str, tuple[str, ...]]:
+    """For each mate and seat (by name), the parts whose own insertion can make it: of its two
+    parts, those not the base whose insertion direction (:func:`insertion_directions`) the link
+    allows. Which one does in a plan is the order's: the later of the two (a pin set into the
+    housing first makes its housing mate; the cover coming down over it later makes the cover's).
+    A mate neither part can make is made, if at all, when a subassembly carrying one of them
+    goes in (:func:`unmakeable`)."""
+    parents = _parents(product) if parents is None else parents
+    dirs = insertion_directions(product, parents) if dirs is None else dirs
+    out: dict[str, tuple[str, ...]] = {}
+    for lk in (*product.mates, *product.seats):
+        pair = (lk.peg, lk.hole) if isinstance(lk, Mate) else (lk.part, lk.on)
+        out[lk.name] = tuple(p for p in pair if p in dirs and _agrees(dirs[p], link_directions(product, lk, p)))
+    return out
+
+
+def unmakeable(product: Product, parents: dict[str, str] | None = None) -> list[str]:
+    """The mates and seats no insertion in any order can make: neither part's own insertion, nor
+    that of a subassembly carrying one part and not the other (an ancestor in the assembly tree
+    below both parts' common ancestor, moving along its own direction with the part riding on it),
+    moves that part the way the link allows."""
+    parents = _parents(product) if parents is None else parents
+    dirs = insertion_directions(product, parents)
+
+    def chain(p: str) -> list[str]:
+        out = [p]
+        while out[-1] in parents:
+            out.append(parents[out[-1]])
+        return out
+    bad = []
     for lk in (*product.mates, *product.seats):
         a, b = (lk.peg, lk.hole) if isinstance(lk, Mate) else (lk.part, lk.on)
-        if parents.get(a) == b:
-            mover = a
-        elif parents.get(b) == a:
-            mover = b
-        else:
-            mover = max((a, b), key=lambda p: (depth(p), order.index(p)))
-        out[mover].append(lk)
-    return out
+        ca_, cb = chain(a), chain(b)
+        common = next(x for x in ca_ if x in cb)
+        ok = False
+        for side, ch in ((a, ca_), (b, cb)):
+            for mover in ch[:ch.index(common)]:  # the side's part and its ancestors below the common one
+                # a subassembly keeps its parts' product-relative poses: one frame for every direction
+                ok = ok or _agrees(dirs[mover], link_directions(product, lk, side))
+        if not ok:
+            bad.append(lk.name)
+    return bad
 
 
 def compile_goals(product: Product, order: Sequence[str] | None = None,
                   first: Collection[tuple[str, str]] = ()) -> tuple[PartGoal, ...]:
     """One goal per non-base part (file order): into its goal parent (:func:`goal_parents`),
-    with the part's faces of the mates and seats its insertion makes with that parent and the
-    parts between them and the parent's faces of those with it, T_a from the product poses
-    and V_a its insertion direction in the goal parent's frame; ``order`` the insertion order
-    where known (a derived product's), ``first`` the pairs (A, B) with A in place before B
-    is inserted. Every mate or seat the part's insertion makes must agree on the direction
-    (SparValueError naming them otherwise)."""
+    along its insertion direction (:func:`insertion_directions`), with the part's faces of the
+    mates and seats its insertion can make (:func:`makers`) with that parent and the parts
+    between them and the parent's faces of those with it, T_a from the product poses and V_a the
+    direction in the goal parent's frame; ``mates`` the names of the mates and seats the
+    insertion can make (which it does make in a plan is the order's: phase2.mates). ``order``
+    is accepted for a derived product's insertion order and not needed: the directions come
+    from the mates. ``first`` the pairs (A, B) with A in place before B is inserted. A product
+    whose mates cannot all be made by any order is a SparValueError naming them."""
+    del order  # the mates decide each part's direction; the order the plan's
     parents = _parents(product)
-    made = _made_by(product, parents, order)
+    dirs = insertion_directions(product, parents)
+    bad = unmakeable(product, parents)
+    if bad:
+        raise SparValueError(f"product {product.name}: no order of insertions makes {', '.join(bad)} (each "
+                             "part's insertion goes the way its mate with the part nearer the base needs, "
+                             "and neither part of these goes the way they need)")
+    can = makers(product, parents, dirs)
+    links = _links(product)
     into = goal_parents(product, first)
     goals = []
     for p in parents:
-        links = made[p]
-        d = None
-        for lk in links:
-            dk = _direction(product, lk, p)
-            if d is None:
-                d, first_link = dk, lk
-            elif float(dk @ d) < 1 - 1e-6:
-                raise SparValueError(f"product {product.name}: {first_link.name} and {lk.name} are made by one "
-                                     f"insertion of {p} but need different directions")
+        made = [lk for _, lk in links[p] if p in can[lk.name]]
         parent = into[p]
         chain = set(_ancestors(parents, p, parent))
         own, other = [], []
-        for lk in links:
+        for lk in made:
             a, b = (lk.peg, lk.hole) if isinstance(lk, Mate) else (lk.part, lk.on)
             q = b if a == p else a
             if q not in chain:
@@ -250,9 +308,9 @@ def compile_goals(product: Product, order: Sequence[str] | None = None,
                     other.append(lk.on_face if lk.part == p else lk.face)
         Tp, Tq = product.parts[p].pose, product.parts[parent].pose
         Ta = np.linalg.inv(Tq) @ Tp
-        Va = Tq[:3, :3].T @ d
+        Va = Tq[:3, :3].T @ dirs[p]
         goals.append(PartGoal(p, parent, tuple(dict.fromkeys(own)), tuple(dict.fromkeys(other)), Ta, Va,
-                              f"trans_{p}", f"vec_{p}", tuple(lk.name for lk in links)))
+                              f"trans_{p}", f"vec_{p}", tuple(dict.fromkeys(lk.name for lk in made))))
     return tuple(goals)
 
 
@@ -460,7 +518,7 @@ def precedence(product: Product, unit: str) -> tuple[Precedence, ...]:
             if not any(_collide_objects(_object(s), o) for s in swept for o in others):
                 continue
             _blocked(product, p, q, out, lambda: _hit_feature(product, p, q, swept))
-    _no_cycle(product, out)
+    no_cycle(product, out)
     return tuple(out)
 
 
@@ -563,8 +621,9 @@ def _extent(product: Product) -> tuple[np.ndarray, np.ndarray]:
     return allp.min(0), allp.max(0)
 
 
-def _no_cycle(product: Product, prec: list[Precedence]) -> None:
-    """SparValueError naming the parts of a cycle among the orderings, if there is one."""
+def no_cycle(product: Product, prec: Sequence[Precedence]) -> None:
+    """SparValueError naming a cycle among the orderings, if there is one: each ordering of it
+    and why it holds (``a before b (the product file orders them), b before a (...)``)."""
     succ: dict[str, list[str]] = {}
     for pr in prec:
         succ.setdefault(pr.first, []).append(pr.then)
@@ -575,8 +634,9 @@ def _no_cycle(product: Product, prec: list[Precedence]) -> None:
         for q in succ.get(p, []):
             if state.get(q) == 1:
                 loop = path[path.index(q):] + [q] if q in path else [p, q]
-                raise SparValueError(f"product {product.name}: the parts block each other's insertions in a cycle "
-                                     f"({' before '.join(loop)})")
+                why = {(pr.first, pr.then): pr.reason for pr in prec}
+                said = ", ".join(f"{a} before {b} ({why[a, b]})" for a, b in zip(loop, loop[1:]))
+                raise SparValueError(f"product {product.name}: the orderings form a cycle: {said}")
             if q not in state:
                 visit(q, path + [q])
         state[p] = 2
