@@ -95,7 +95,7 @@ def test_viewer_data_arm_from_robot_frames(paper_plan):
         assert np.allclose(np.array(st["frames"]).reshape(8, 4, 4), F, atol=1e-4)
         assert set(st["parts"]) == set(initial_poses(cell))
     assert data["unit"] == "in" and [p["key"] for p in data["parts"]] == list(initial_poses(cell))
-    tol = data["steps"][-1]["tolerance"]  # the assemble step: the check's tolerance at the mouth
+    [tol] = data["steps"][-1]["tolerances"]  # the assemble step: its one check's tolerance at the mouth
     assert tol["hole"] == "block" and tol["satisfied"] and tol["bound"] < tol["tolerance"] == pytest.approx(0.4)
     assert data["partial"]["ordering"] == doc["partial"]["ordering"]
 
@@ -357,7 +357,7 @@ def test_browser_paper_cell(chromium, tmp_path, paper_plan):
     _, page, doc = paper_plan
     k = _assemble_step(doc)
     t0 = time.monotonic()
-    result = _open(chromium, tmp_path, page, k, f"window.sparData.steps[{k - 1}].tolerance.centre")
+    result = _open(chromium, tmp_path, page, k, f"window.sparData.steps[{k - 1}].tolerances[0].centre")
     assert result["body"].get("state") == str(k)
     _check_page(result, doc, PAPER)
     assert time.monotonic() - t0 < 60
@@ -371,7 +371,7 @@ def test_browser_ur5e_with_motions(chromium, tmp_path, ur5e_plan):
     _, page, doc = ur5e_plan
     assert doc["instance"]["motion"] is not None
     k = _assemble_step(doc)
-    result = _open(chromium, tmp_path, page, k, f"window.sparData.steps[{k - 1}].tolerance.centre")
+    result = _open(chromium, tmp_path, page, k, f"window.sparData.steps[{k - 1}].tolerances[0].centre")
     _check_page(result, doc, UR5E)
 
 

@@ -249,28 +249,40 @@ def _verdicts(inst: Mapping[str, Any], step: Mapping[str, Any], sid: str) -> lis
     for c in list(inst.get("constraints") or []) + list(inst.get("verifications") or []):
         if c.get("action") == sid:
             out.append({k: c.get(k) for k in ("constraint", "description", "kind", "bound", "sense", "threshold",
-                                               "satisfied", "tolerance_reached")})
+                                               "satisfied", "tolerance_reached", "mate", "power")})
     return out
 
 
-def _tolerance(cell: Cell, step: Mapping[str, Any], verdicts: Sequence[Mapping[str, Any]],
-               poses: Mapping[str, np.ndarray]) -> dict[str, Any] | None:
-    """The insertion check of an assemble step drawn at the hole's mouth: the mouth's world centre
-    and outward axis, the hole's radius, the tolerance R_h - R_p (the square root of the check's
-    threshold) and the bound reached (the square root of its bound), cell unit; None otherwise."""
+def _tolerances(cell: Cell, step: Mapping[str, Any], verdicts: Sequence[Mapping[str, Any]],
+                poses: Mapping[str, np.ndarray]) -> list[dict[str, Any]]:
+    """The insertion checks of an assemble step, each drawn at its hole's mouth: the mouth's world
+    centre and outward axis, the hole's radius, the tolerance R_h - R_p (the square root of the
+    check's threshold) and the bound reached (the square root of its bound), cell unit, and the
+    mate it checks. A product step has one per peg-hole mate it makes (the verdict names the
+    mate: its hole part's hole feature); a plain cell's its goal hole's only hole."""
     args = step.get("args") or []
     if step.get("name") != "assemble" or len(args) < 2:
-        return None
-    check = next((v for v in verdicts if v.get("constraint") == "centres" and v.get("threshold") is not None), None)
-    hole = str(args[1])
-    mouth = hole_mouth(cell, hole)
-    T = poses.get(hole)
-    if check is None or mouth is None or T is None:
-        return None
-    c, n, radius = mouth
-    return {"hole": hole, "centre": _r(T[:3, :3] @ c + T[:3, 3]), "axis": _r(T[:3, :3] @ n),
-            "hole_radius": radius, "tolerance": math.sqrt(max(float(check["threshold"]), 0.0)),
-            "bound": math.sqrt(max(float(check["bound"]), 0.0)), "satisfied": bool(check.get("satisfied"))}
+        return []
+    out = []
+    for check in verdicts:
+        if not str(check.get("constraint", "")).startswith("centres") or check.get("threshold") is None:
+            continue
+        mate = next((m for m in (cell.product.mates if cell.product is not None else ())
+                     if m.name == check.get("mate")), None)
+        hole = mate.hole if mate is not None else str(args[1])
+        model = cell.objects.get(hole)
+        feature = model.feature_named(mate.hole_feature) if mate is not None and model is not None else None
+        mouth = hole_mouth(cell, hole, feature)
+        T = poses.get(hole)
+        if mouth is None or T is None:
+            continue
+        T = np.asarray(T, float)
+        c, n, radius = mouth
+        out.append({"hole": hole, "mate": check.get("mate") or "", "centre": _r(T[:3, :3] @ c + T[:3, 3]),
+                    "axis": _r(T[:3, :3] @ n), "hole_radius": radius,
+                    "tolerance": math.sqrt(max(float(check["threshold"]), 0.0)),
+                    "bound": math.sqrt(max(float(check["bound"]), 0.0)), "satisfied": bool(check.get("satisfied"))})
+    return out
 
 
 def _partial(plan: Plan) -> dict[str, Any]:
@@ -295,8 +307,8 @@ def _focus(cell: Cell, part_tris: Mapping[str, np.ndarray], states: Sequence[Map
         if st["frames"] is not None and st is not states[0]:
             pts.append(np.asarray(st["frames"][7], float).reshape(4, 4)[:3, 3][None])
     for s in steps:
-        if s.get("tolerance"):
-            pts.append(np.asarray(s["tolerance"]["centre"], float)[None])
+        for t in s.get("tolerances") or ():
+            pts.append(np.asarray(t["centre"], float)[None])
     allp = np.vstack(pts) if pts else np.zeros((1, 3))
     lo, hi = allp.min(axis=0), allp.max(axis=0)
     centre = (lo + hi) / 2
@@ -368,7 +380,7 @@ def viewer_data(cell: Cell, plan: Plan) -> dict[str, Any]:
             "term": pretty_term(str(step.get("term", ""))), "clearance": step.get("clearance"),
             "closest_pair": step.get("closest_pair"), "joints_deg": step.get("joints_deg"),
             "duration_s": step.get("duration_s"), "verdicts": verdicts,
-            "tolerance": _tolerance(cell, step, verdicts, s.poses),
+            "tolerances": _tolerances(cell, step, verdicts, s.poses),
             "motion": [g for g in segs if g is not None]})
     home_seg = None
     motion = inst.get("motion") or {}
