@@ -161,3 +161,24 @@ def test_a_turn_of_the_bracket_moves_its_far_bores(planner: Planner, tmp_path: P
     for plain, turned in zip(bounds["plain"], bounds["turned"]):
         # the worst turn and the worst play add across: |(0.2, 0.2 + arm)| at least
         assert turned >= math.hypot(0.2, 0.2 + arm) - 1e-3 and turned > plain + 0.15
+
+
+def test_a_precedence_cycle_is_one_line_naming_its_orderings(tmp_path: Path) -> None:
+    """The file's precedence against itself (the geometry's merged in): one line, each ordering
+    with its reason, naming the key."""
+    from spar_py.core.errors import KBError
+
+    path = _dowels(tmp_path, 0.01)
+    prod = tmp_path / "prod.yaml"
+    prod.write_text(prod.read_text().replace("precedence: [[dowel_a, bracket], [dowel_b, bracket]]",
+                                             "precedence: [[dowel_a, bracket], [bracket, dowel_a]]"))
+    with pytest.raises(KBError) as e:
+        load_problem(path)
+    msg = str(e.value)
+    assert "\n" not in msg and "precedence" in msg and "cycle" in msg
+    assert "dowel_a before bracket (the product file orders them)" in msg
+    assert "bracket before dowel_a (the product file orders them)" in msg
+    prod.write_text(prod.read_text().replace("[bracket, dowel_a]", "[bracket, nut]"))
+    with pytest.raises(KBError) as e:
+        load_problem(path)
+    assert "nut" in str(e.value) and "a part of the product" in str(e.value)
