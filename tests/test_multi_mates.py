@@ -182,3 +182,26 @@ def test_a_precedence_cycle_is_one_line_naming_its_orderings(tmp_path: Path) -> 
     with pytest.raises(KBError) as e:
         load_problem(path)
     assert "nut" in str(e.value) and "a part of the product" in str(e.value)
+
+
+def test_mates_no_order_can_make_are_refused_naming_them() -> None:
+    """A shaft whose journal goes down into one bore of the base and whose middle, pointing up,
+    is declared into another bore of the base: no insertion moves the shaft both ways, and the
+    base never moves, so that mate is refused by name; its journal mate alone compiles."""
+    from spar_py.core.errors import SparValueError
+    from spar_py.core.model import Mate, Product, ProductPart
+    from spar_py.kb.objects import load_object
+    from spar_py.world.product import compile_goals
+
+    housing = load_object(KB / "objects" / "gearbox_housing.yaml", "mm")
+    shaft = load_object(KB / "objects" / "gearbox_shaft.yaml", "mm")
+    T = np.eye(4)
+    T[:3, 3] = (-20, 0, 24)
+    parts = {"housing": ProductPart("housing", housing, np.eye(4)), "shaft": ProductPart("shaft", shaft, T)}
+    good = Mate("shaft", "journal", "housing", "bore_a")
+    bad = Mate("shaft", "middle", "housing", "bore_b")
+    [goal] = compile_goals(Product("p", "p.yaml", "housing", parts, (good,)))
+    assert goal.mates == (good.name,) and np.allclose(goal.V_a, (0, 0, -1))
+    with pytest.raises(SparValueError) as e:
+        compile_goals(Product("p", "p.yaml", "housing", parts, (good, bad)))
+    assert "\n" not in str(e.value) and bad.name in str(e.value) and good.name not in str(e.value)
