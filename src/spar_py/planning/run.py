@@ -35,7 +35,9 @@ __all__ = ["InstanceFailure", "PlanRun", "StepData"]
 
 #: The fields of a step's geometry the plan's JSON shows (docs/json-schema.md).
 STEP_FIELDS = ("tool_pose", "joints_deg", "ik_solutions_deg", "ik_solver", "placement", "source", "poses", "held",
-               "moves", "clearance", "closest_pair", "position_bounds", "mates", "tightest")
+               "moves", "clearance", "closest_pair", "position_bounds")
+#: Those a product cell's assemble step adds where it has them (its mates, its tightest check).
+PRODUCT_STEP_FIELDS = ("mates", "tightest")
 
 
 @dataclass(frozen=True)
@@ -170,6 +172,7 @@ class PlanRun:
             g = data.steps.get(st["id"], {})
             for k in STEP_FIELDS:
                 st[k] = g.get(k)
+            st.update({k: g[k] for k in PRODUCT_STEP_FIELDS if k in g})
         instance["motion"] = None
         if data.motion is not None:
             from spar_py.world.motion import motion_summary  # a run without motions skips it
