@@ -229,6 +229,7 @@ def _assemble(world: World, s: Step, early: bool = False) -> tuple[list[dict], W
         cs = [] if fp is None else ur.assemble_constraints(
             world.unc, peg, hole, Ta, fp, fh, action=s["id"], memo=world.cache.memo, axis=va_vec)
     checks = _verdicts(world, cs, early)
+    _floors(world, cs, checks)
     what = f"assemble({peg}, {goal_hole})"
     for why in wrong_way(world, made, goal_hole, goal_va):
         checks.append(_reach_verdict(s["id"], False, f"{what} cannot make {why}", "direction"))
@@ -262,6 +263,21 @@ def _assemble(world: World, s: Step, early: bool = False) -> tuple[list[dict], W
                 joints=q if q is not None else world.joints, checked=_checked(world, cs, checks),
                 complete=sum(c["kind"] == "uncertainty" for c in checks) == len(cs))
     return checks, w, geo
+
+
+def _floors(world: World, cs: list[ur.Constraint], checks: list[dict[str, Any]]) -> None:
+    """Each unsatisfied insertion check of ``checks`` (in place, in ``cs``'s order) with its
+    ``floor`` (uncertainty.clearance_floor: what the mates' clearances alone make it reach) and
+    ``remediable``: False when the floor is not below the threshold, so no scan or squeeze can
+    make it hold (phase 2 gives the step up without trying them)."""
+    offsets = [v for a in world.unc.attached.values() for v in a.offsets]
+    for c, d in zip(cs, checks):
+        if d["satisfied"] or not offsets:
+            continue
+        floor = ur.clearance_floor(c, world.unc.registry, offsets)
+        if floor is not None:
+            d["floor"] = floor
+            d["remediable"] = floor < float(d["threshold"])
 
 
 def tightest(checks: list[dict[str, Any]]) -> dict[str, Any] | None:

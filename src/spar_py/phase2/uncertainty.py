@@ -902,3 +902,32 @@ def evaluate_all(constraints: Sequence[Constraint], registry: Registry, *, memo:
                  **options: Any) -> list[Verdict]:
     """:func:`evaluate` each constraint, in order."""
     return [evaluate(c, registry, memo=memo, **options) for c in constraints]
+
+
+#: At most this many clearance offsets are searched corner by corner (2**n evaluations) by
+#: :func:`clearance_floor`; a constraint with more gets no floor.
+FLOOR_MAX_OFFSETS = 10
+
+
+def clearance_floor(constraint: Constraint, registry: Registry, offsets: Sequence[ca.SX]) -> float | None:
+    """A value ``constraint``'s expression takes in its box, with every variable but the mates'
+    clearance ``offsets`` (Attachment.offsets: what a part may move within the clearance its
+    mate leaves) at 0 and those at the corner of their box (``registry``'s bounds) where it is
+    largest. SUP is never below it. The remedies (kb/templates/spar_sensing.pl: scans of the
+    parts on the table, a squeeze) give parts fresh error boxes about 0 and leave a mate's
+    clearance alone, so a '<' constraint whose floor is not below its threshold fails after any
+    of them: phase 2 need not try them. None for a '>' constraint, without offsets in the
+    expression, or with more than FLOOR_MAX_OFFSETS of them. Cell unit to the constraint's power."""
+    if constraint.sense != "<":
+        return None
+    names = {v.name() for v in offsets}
+    xs = ca.symvar(constraint.expr)
+    free = [i for i, v in enumerate(xs) if v.name() in names]
+    if not free or len(free) > FLOOR_MAX_OFFSETS:
+        return None
+    f = ca.Function("floor", [ca.vertcat(*xs)], [constraint.expr])
+    grid = np.array(np.meshgrid(*[registry.bounds(xs[i].name()) for i in free], indexing="ij"))
+    corners = grid.reshape(len(free), -1)
+    X = np.zeros((len(xs), corners.shape[1]))
+    X[free, :] = corners
+    return float(np.max(np.asarray(f.map(corners.shape[1])(X)).ravel()))

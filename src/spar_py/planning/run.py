@@ -152,6 +152,10 @@ class PlanRun:
                                "steps": [{"id": r["id"], "verdicts": r["verdicts"]} for r in ev.steps]}
         if ev.nogood is not None:  # what any instance meeting the same conditions fails at (phase2.nogood)
             out["nogood"] = ev.nogood
+        if ev.status == "failed" and ev.steps:
+            # no remedy can help where every unmet check is beyond reach of them (steps._floors)
+            unmet = [v for v in ev.steps[-1]["verdicts"] if v.get("kind") == "uncertainty" and not v["satisfied"]]
+            out["hopeless"] = bool(unmet) and all(v.get("remediable") is False for v in unmet)
         if ev.status != "ok":
             return out
         geo = {r["id"]: {**r["geometry"], "poses": r["poses"], "held": r["held"],
