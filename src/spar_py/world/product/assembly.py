@@ -5,6 +5,9 @@ Frames and units: every mesh is given in the product frame (its part's pose appl
 lengths in one unit (the caller's; the tolerances in the same unit). Nothing here reads a
 file: kb.products builds the meshes and turns the result into features and mates.
 
+- Overlaps: parts whose meshes overlap as placed (world.product.overlap) are found first; when
+  any do, they are the result (:attr:`AssemblyResult.overlaps`) and nothing else is derived.
+
 - Contacts: points sampled on each part's surface (seeded, so a derivation is repeatable)
   within ``clearance_max + contact_tol`` of another part whose nearest point there has an
   antiparallel normal (the two surfaces face each other).
@@ -48,6 +51,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from spar_py.world.product.overlap import Overlap, Wall, overlaps
+
 if TYPE_CHECKING:
     import trimesh
 
@@ -55,7 +60,7 @@ __all__ = ["ASSEMBLY_VERSION", "AssemblyResult", "Contact", "DerivedMate", "Deri
            "derive_assembly", "derive_assembly_cached"]
 
 #: Bumped whenever the derivation's results change for the same inputs.
-ASSEMBLY_VERSION = 5
+ASSEMBLY_VERSION = 6
 #: Surface samples per part (at most; fewer for a small area at the sample spacing).
 SAMPLES = 6000
 #: Normals of facing surfaces: n_a . n_b below -COS_FACING.
@@ -164,13 +169,15 @@ class AssemblyResult:
     precedence: list[tuple[str, str, str]] = field(default_factory=list)
     seconds: float = 0.0
     unremovable: tuple[str, ...] = ()
+    #: Parts that overlap as placed (world.product.overlap): when any do, nothing else is derived.
+    overlaps: list[Overlap] = field(default_factory=list)
 
     def to_json(self) -> dict[str, Any]:
         """As plain data (the cache's form)."""
         return {"base": self.base, "mates": [asdict(m) for m in self.mates], "seats": [asdict(s) for s in self.seats],
                 "blocking": [list(b) for b in self.blocking], "insertions": [asdict(i) for i in self.insertions],
                 "precedence": [list(p) for p in self.precedence], "seconds": self.seconds,
-                "unremovable": list(self.unremovable)}
+                "unremovable": list(self.unremovable), "overlaps": [asdict(o) for o in self.overlaps]}
 
     @classmethod
     def from_json(cls, d: dict[str, Any]) -> "AssemblyResult":
@@ -183,11 +190,14 @@ class AssemblyResult:
             for k in ("corners", "hole_corners"):
                 m[k] = tuple(tuple(c) for c in m.get(k, ()))
             return DerivedMate(**m)
+        def wall(w: dict[str, Any]) -> Wall:
+            return Wall(w["kind"], tuple(w["point"]), tup(w["axis"]), w["radius"])
         return cls(d["base"], [mate(m) for m in d["mates"]],
                    [DerivedSeat(**{k: tup(v) for k, v in s.items()}) for s in d["seats"]],
                    [tuple(b) for b in d["blocking"]],  # type: ignore[misc]
                    [Insertion(tuple(i["parts"]), tuple(i["direction"]), i["needs_fixture"]) for i in d["insertions"]],
-                   [tuple(p) for p in d["precedence"]], d["seconds"], tuple(d.get("unremovable", ())))  # type: ignore[misc]
+                   [tuple(p) for p in d["precedence"]], d["seconds"], tuple(d.get("unremovable", ())),  # type: ignore[misc]
+                   [Overlap(o["a"], o["b"], o["volume"], wall(o["wall_a"]), wall(o["wall_b"])) for o in d["overlaps"]])
 
 
 # --------------------------------------------------------------------------- contacts
@@ -613,6 +623,10 @@ def derive_assembly(meshes: dict[str, "trimesh.Trimesh"], base: str, contact_tol
     reach = clearance_max + contact_tol
     tol = max(contact_tol, 1e-6 * size)
     res = AssemblyResult(base)
+    res.overlaps = overlaps(meshes, contact_tol)
+    if res.overlaps:  # parts that cannot be where they are placed: no contacts, fits or ways out to find
+        res.seconds = time.perf_counter() - t_start
+        return res
     con = _contacts(meshes, reach, spacing)
     # a's contact samples with b that hold it: touching, or on a fit's walls (marked below)
     holds = {ab: gaps <= contact_tol for ab, (_, _, gaps) in con.items()}
@@ -733,10 +747,13 @@ def derive_assembly(meshes: dict[str, "trimesh.Trimesh"], base: str, contact_tol
     # the mates' senses: the way the peg moves into the hole, from the later part's insertion
     direction = {p: np.asarray(i.direction, float) for i in res.insertions for p in i.parts}
     for m in mates:
-        later = m.peg if pos.get(m.peg, 0) > pos.get(m.hole, 0) else m.hole
-        sense = direction[later] if later == m.peg else -direction[later]
-        if later == base or m.peg not in pos or m.hole not in pos:
-            sense = np.asarray(m.axis, float)
+        # a part left unremovable has no insertion (nor a place in the order): its mates keep
+        # their fitted axis, as the base's do
+        sense = np.asarray(m.axis, float)
+        if m.peg in pos and m.hole in pos:
+            later = m.peg if pos[m.peg] > pos[m.hole] else m.hole
+            if later != base:
+                sense = direction[later] if later == m.peg else -direction[later]
         res.mates.append(_orient(m, meshes, sense, tol))
     # seats between parts without a mate: the later inserted part rests on the earlier one
     res.seats.extend(_seats_of(planes, mated, pos, res.insertions))
