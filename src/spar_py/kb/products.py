@@ -115,7 +115,8 @@ def _mate(node: Node, parts: dict[str, ProductPart], unit: str) -> Mate | Seat:
     why = mate_misalignment(feature_axis(parts[peg].pose, fp), feature_axis(parts[hole].pose, fh),
                             bool(getattr(fh, "through", False)), unit)
     if why is not None:
-        raise node.fail(f"{peg}.{pf} and {hole}.{hf} lined up at the product poses (coaxial, overlapping)", why)
+        raise node.fail(f"{peg}.{pf} and {hole}.{hf} lined up at the product poses (coaxial within the clearance, "
+                        "overlapping)", why)
     return Mate(peg, pf, hole, hf, retention)
 
 
@@ -189,7 +190,8 @@ def _derived_objects(path: Path, unit: str, meshparts: dict[str, _MeshPart], der
             peg = pname == m.peg
             d = np.asarray(m.axis, float)
             t0, length = (m.peg_t0, m.peg_len) if peg else (m.hole_t0, m.hole_len)
-            o = inv[:3, :3] @ (np.asarray(m.origin, float) + t0 * d) + inv[:3, 3]
+            axis_at = np.asarray(m.origin, float) + (0.0 if peg else np.asarray(m.hole_shift, float))  # its own axis
+            o = inv[:3, :3] @ (axis_at + t0 * d) + inv[:3, 3]
             dd = inv[:3, :3] @ d
             f = {"kind": "peg" if peg else "hole", "radius": _num(k * (m.peg_radius if peg else m.hole_radius)),
                  "axis": {"origin": [_num(k * x) for x in o], "direction": [_num(x) for x in dd]},
@@ -477,7 +479,7 @@ def _derive(root: Node, unit: str, scale: float, base: str, meshparts: dict[str,
             parts: dict[str, ProductPart], raw: dict[str, Any], use_cache: bool = True) -> AssemblyResult:
     """The derivation (world.product.assembly, cached) over every part's mesh at its product pose,
     the mesh parts read from their files in the cell unit (kept in ``raw``, :func:`_raw_mesh`)."""
-    from spar_py.world.product import derive_assembly_cached
+    from spar_py.world.product import AXIS_TOL_MM, derive_assembly_cached
     from spar_py.world.parts import part_mesh
 
     contact_tol = _tolerance(root, "contact_tol", 0.1, scale, unit)
@@ -495,7 +497,7 @@ def _derive(root: Node, unit: str, scale: float, base: str, meshparts: dict[str,
             m = pm.copy()
             m.apply_transform(parts[pname].pose)
         meshes[pname] = m
-    return derive_assembly_cached(meshes, base, contact_tol, clearance_max, use_cache)
+    return derive_assembly_cached(meshes, base, contact_tol, clearance_max, use_cache, from_mm(unit, AXIS_TOL_MM))
 
 
 def _refuse_stuck(root: Node, unit: str, scale: float, derived: AssemblyResult, meshparts: dict[str, _MeshPart],
