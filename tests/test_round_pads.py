@@ -55,7 +55,14 @@ def test_thumbstick_cap_is_held_above_the_mouth_and_the_table() -> None:
         if set(g.gfaces) & set(pose.rfaces):
             (lying_ok if lying[:, 2].min() >= -0.05 else low).append(g)
     assert seated_ok, "no grasp of stick0 keeps the hand above the housing's mouth when seated"
-    assert all(set(stick.grasps[label].gfaces) == {"f1"} for label in seated_ok)  # on the cap only
+    # on the cap only: the stick's largest round face that is not its peg (named by its derived order)
+    from spar_py.world.parts import derive_faces, part_mesh
+
+    feats = tuple(f.geometry for f in stick.features if f.geometry is not None)
+    faces = derive_faces(part_mesh(stick), feats, dict(stick.geometry.face_names), "mm")
+    cap = max((f for f in faces if not f.planar and not f.feature), key=lambda f: f.area)
+    assert cap.centroid[2] > mouth_z + 10  # well above the mouth: the cap
+    assert all(set(stick.grasps[label].gfaces) == {cap.name} for label in seated_ok)
     # the planner's rules take them: usable for the mate; condition 1 at the lying pose takes a
     # grasp on the face it rests on whose hand is above the table, and refuses the others
     from spar_py.kb.prolog_facts import _mate_grasps

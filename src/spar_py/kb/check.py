@@ -35,7 +35,7 @@ def check_file(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> str:
         notes = [n for n in dict.fromkeys(mesh_note(p.model) for p in pr.parts.values()) if n]
         return "\n".join([f"{path}: ok (product {pr.name}: {len(pr.parts)} parts, "
                           f"{len(pr.mates) + len(pr.seats)} mates, {len(pr.precedence)} orderings by geometry)",
-                          *notes])
+                          *_offset_notes(path, pr, units_of(root)[0]), *notes])
     if kind.name == "problem":
         cell = load_problem(path, max_bytes)
         for oname, model in cell.objects.items():
@@ -54,6 +54,27 @@ def check_file(path: str | Path, max_bytes: int = MAX_INPUT_BYTES) -> str:
                 f"{len(o.grasps)} grasps)") + (f"\n{note}" if note else "")
     r = load_robot(path, max_bytes=max_bytes)
     return f"{path}: ok (robot {r.name}, {r.solver_name} IK)"
+
+
+def _offset_notes(path: str | Path, product: Any, unit: str) -> list[str]:
+    """A line per mate whose peg stands off its hole's axis at the product poses (beyond
+    world.product.AXIS_TOL_MM; the load refuses one not within the clearance): by how much, and
+    the margin R_hole - R_peg that leaves to the wall (``unit``: the product file's)."""
+    from spar_py.world.product import AXIS_TOL_MM, axis_offset, feature_axis
+
+    out = []
+    for m in product.mates:
+        peg, hole = product.parts[m.peg], product.parts[m.hole]
+        fp, fh = peg.model.feature_named(m.peg_feature), hole.model.feature_named(m.hole_feature)
+        if fp.geometry is None or fh.geometry is None:
+            continue
+        a, b = feature_axis(peg.pose, fp), feature_axis(hole.pose, fh)
+        off = axis_offset(a, b)
+        if off > from_mm(unit, AXIS_TOL_MM):
+            margin = b.radius - a.radius
+            out.append(f"{path}: mate {m.name}: the peg's axis {num(off)} {unit} off the hole's: its margin "
+                       f"R_hole - R_peg = {num(margin)} {unit} is {num(margin - off)} {unit} to the wall")
+    return out
 
 
 def derive_text(path: str | Path, max_bytes: int = MAX_INPUT_BYTES, robot: str | Path | None = None,

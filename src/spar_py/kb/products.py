@@ -115,7 +115,8 @@ def _mate(node: Node, parts: dict[str, ProductPart], unit: str) -> Mate | Seat:
     why = mate_misalignment(feature_axis(parts[peg].pose, fp), feature_axis(parts[hole].pose, fh),
                             bool(getattr(fh, "through", False)), unit)
     if why is not None:
-        raise node.fail(f"{peg}.{pf} and {hole}.{hf} lined up at the product poses (coaxial, overlapping)", why)
+        raise node.fail(f"{peg}.{pf} and {hole}.{hf} lined up at the product poses (coaxial within the clearance, "
+                        "overlapping)", why)
     return Mate(peg, pf, hole, hf, retention)
 
 
@@ -189,7 +190,8 @@ def _derived_objects(path: Path, unit: str, meshparts: dict[str, _MeshPart], der
             peg = pname == m.peg
             d = np.asarray(m.axis, float)
             t0, length = (m.peg_t0, m.peg_len) if peg else (m.hole_t0, m.hole_len)
-            o = inv[:3, :3] @ (np.asarray(m.origin, float) + t0 * d) + inv[:3, 3]
+            axis_at = np.asarray(m.origin, float) + (0.0 if peg else np.asarray(m.hole_shift, float))  # its own axis
+            o = inv[:3, :3] @ (axis_at + t0 * d) + inv[:3, 3]
             dd = inv[:3, :3] @ d
             f = {"kind": "peg" if peg else "hole", "radius": _num(k * (m.peg_radius if peg else m.hole_radius)),
                  "axis": {"origin": [_num(k * x) for x in o], "direction": [_num(x) for x in dd]},
@@ -376,6 +378,7 @@ def load_product_derived(path: str | Path, unit: str, max_bytes: int = MAX_INPUT
     if meshparts:
         raw: dict[str, Any] = {}  # each mesh part's file read once, in its own frame (cell unit)
         derived = _derive(root, unit, scale, base, meshparts, parts, raw, bool(object_options.get("use_cache", True)))
+        _refuse_stuck(root, unit, scale, derived, meshparts, parts)
         objects, dnames = _derived_objects(path, unit, meshparts, derived, declared_pairs,
                                            2 * _tolerance(root, "contact_tol", 0.1, scale, unit), raw)
         for pname, text in objects.items():
@@ -499,7 +502,7 @@ def _derive(root: Node, unit: str, scale: float, base: str, meshparts: dict[str,
             parts: dict[str, ProductPart], raw: dict[str, Any], use_cache: bool = True) -> AssemblyResult:
     """The derivation (world.product.assembly, cached) over every part's mesh at its product pose,
     the mesh parts read from their files in the cell unit (kept in ``raw``, :func:`_raw_mesh`)."""
-    from spar_py.world.product import derive_assembly_cached
+    from spar_py.world.product import AXIS_TOL_MM, derive_assembly_cached
     from spar_py.world.parts import part_mesh
 
     contact_tol = _tolerance(root, "contact_tol", 0.1, scale, unit)
@@ -517,7 +520,98 @@ def _derive(root: Node, unit: str, scale: float, base: str, meshparts: dict[str,
             m = pm.copy()
             m.apply_transform(parts[pname].pose)
         meshes[pname] = m
-    return derive_assembly_cached(meshes, base, contact_tol, clearance_max, use_cache)
+    return derive_assembly_cached(meshes, base, contact_tol, clearance_max, use_cache, from_mm(unit, AXIS_TOL_MM))
+
+
+def _refuse_stuck(root: Node, unit: str, scale: float, derived: AssemblyResult, meshparts: dict[str, _MeshPart],
+                  parts: dict[str, ProductPart]) -> None:
+    """One line naming the parts the derivation found overlapping as placed (the largest overlap,
+    what meets where, the others' pairs), or stuck (no way out found); lengths and volumes in
+    the product file's unit (``scale``: cell units per product unit)."""
+    pu = root.key("units").key("length").text()
+    if derived.overlaps:
+        tol = _tolerance(root, "contact_tol", 0.1, scale, unit)
+        o, *more = derived.overlaps
+        sides = [(o.a, o.wall_a), (o.b, o.wall_b)]
+        if o.wall_a.kind == "hole" and o.wall_b.kind == "peg":
+            sides.reverse()  # the peg's part first
+        line = (f"{sides[0][0]} and {sides[1][0]} overlap by {o.volume / scale ** 3:.3g} {pu}^3 where "
+                + _overlap_where(*sides, _declared_axes(meshparts, parts, unit), tol, scale, pu))
+        if more:
+            line += "; also " + ", ".join(f"{x.a} and {x.b} ({x.volume / scale ** 3:.3g} {pu}^3)" for x in more)
+        raise root.key("parts").fail("parts that touch without overlapping as placed", line)
+    if derived.unremovable:
+        raise root.key("parts").fail(
+            "parts that each have a way out of the assembled product",
+            f"{', '.join(derived.unremovable)} without one (none found alone or with the parts they touch, along "
+            f"the product frame's axes and the fits' axes)")
+
+
+def _declared_axes(meshparts: dict[str, _MeshPart], parts: dict[str, ProductPart], unit: str
+                   ) -> dict[str, list[tuple[str, str, float, np.ndarray, np.ndarray]]]:
+    """Each part's declared round features as (name, kind, radius, a point on the axis, unit
+    direction), product frame and cell unit: a model part's from its model, a mesh part's from
+    its ``features:`` as written (its unit and frame; an entry that does not read is left out,
+    its model's load says what is wrong with it)."""
+    out: dict[str, list[tuple[str, str, float, np.ndarray, np.ndarray]]] = {}
+    for p, mp in meshparts.items():
+        out[p] = []
+        k = mp.mm_per / LENGTH_UNITS[unit]  # the part's unit -> the cell unit
+        for f in mp.node.value.get("features") or []:
+            try:
+                o = np.asarray(f["axis"]["origin"], float).reshape(3) * k
+                d = np.asarray(f["axis"]["direction"], float).reshape(3)
+                r, name, kind = float(f["radius"]) * k, str(f["name"]), str(f["kind"])
+            except (KeyError, TypeError, ValueError):
+                continue
+            if np.linalg.norm(d) > 0 and f.get("profile", "round") == "round":
+                out[p].append((name, kind, r, mp.pose[:3, :3] @ o + mp.pose[:3, 3],
+                               mp.pose[:3, :3] @ d / np.linalg.norm(d)))
+    for p, part in parts.items():
+        out[p] = []
+        for f in part.model.features:
+            g = f.geometry
+            if g is not None and g.profile == "round":
+                out[p].append((f.name, g.kind, float(g.radius), part.pose[:3, :3] @ g.origin + part.pose[:3, 3],
+                               part.pose[:3, :3] @ g.direction))
+    return out
+
+
+def _overlap_where(a: tuple[str, Any], b: tuple[str, Any], axes: dict[str, list[tuple[str, str, float, np.ndarray,
+                                                                                     np.ndarray]]],
+                   tol: float, scale: float, pu: str) -> str:
+    """Where two parts overlap, for the one line: ``a`` and ``b`` each a part and its wall inside
+    the other (world.product.overlap.Wall, cell unit); each wall by the part's declared feature's
+    name (same kind, radius and axis within ``tol``) or by its kind and radius, else the surface
+    by a point; then the axes."""
+    def n(x: float) -> str:
+        return f"{round(x / scale, 6) + 0.0:.4g}"
+
+    def vec(v: Any, s: float = 1.0) -> str:
+        return "(" + ", ".join(f"{round(x / s, 6) + 0.0:.4g}" for x in v) + ")"
+
+    def name(part: str, w: Any) -> str:
+        if w.kind == "surface":
+            return f"{part}'s surface near {vec(w.point, scale)}"
+        p, d = np.asarray(w.point, float), np.asarray(w.axis, float)
+        for fname, kind, r, fo, fd in axes.get(part, []):
+            off = p - fo
+            if (kind == w.kind and abs(r - w.radius) <= tol and abs(float(fd @ d)) > math.cos(math.radians(1.0))
+                    and float(np.linalg.norm(off - (off @ fd) * fd)) <= tol):
+                return f"{part}'s {fname}"
+        return f"{part}'s {w.kind} (r {n(w.radius)} {pu})"
+    (pa_name, wa), (pb_name, wb) = a, b
+    text = f"{name(pa_name, wa)} meets {name(pb_name, wb)}"
+    if wa.kind == "surface" or wb.kind == "surface":
+        return text
+    pa, pb, d = np.asarray(wa.point, float), np.asarray(wb.point, float), np.asarray(wa.axis, float)
+    off = pb - pa
+    apart = float(np.linalg.norm(off - (off @ d) * d))
+    if abs(float(d @ np.asarray(wb.axis, float))) < math.cos(math.radians(1.0)):
+        return text + f", axes along {vec(d)} and {vec(wb.axis)}"
+    if apart <= tol:
+        return text + f" about the axis through {vec(pa, scale)} along {vec(d)}"
+    return text + f", axes {n(apart)} {pu} apart (through {vec(pa, scale)} and {vec(pb, scale)} along {vec(d)})"
 
 
 def product_part(onode: Node, product: Product, name: str) -> ObjectModel:

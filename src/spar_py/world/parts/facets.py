@@ -31,6 +31,10 @@ HALF_DEPTH_KEEP = 0.5
 HALF_DEPTH_MIN_MM = 3.0
 #: Opposite faces: normals antiparallel within this (deg).
 PARALLEL_DEG = 0.05
+#: A backed-off pad keeps its share of contact up to this fraction of it: a face whose far half
+#: is exactly the share (a block's face under a pad twice its depth) keeps it in any file unit,
+#: where a mesh file's float32 vertices (1e-7 of a coordinate) would decide it by chance.
+AREA_REL = 1e-6
 
 
 def facet_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[FeatureGeometry, ...], g: Gripper,
@@ -76,7 +80,8 @@ def half_depth(T: np.ndarray, flat: tuple[np.ndarray, np.ndarray, np.ndarray], a
     def holds(k: int) -> bool:
         Ts = T.copy()
         Ts[:3, 3] = T[:3, 3] - k * step * a
-        return pad_contact(flat, areas, e1, e2, Ts, g, need) >= need
+        least = need * (1 - AREA_REL)
+        return pad_contact(flat, areas, e1, e2, Ts, g, least) >= least
 
     # bisection: the contact falls as the pads move off the faces (where it does not, the
     # back-off found still holds, since every k kept was checked)

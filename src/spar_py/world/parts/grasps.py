@@ -39,7 +39,9 @@ from spar_py.world.parts.facets import (
 from spar_py.world.parts.hand import (
     DerivedGrasp, approaches, canonical, covered_faces, euler_zyz_of, grasp_problem, table_clear, tool_frame
 )
-from spar_py.world.parts.mesh import Face, FeatureGeometry, Primitive, axis_basis, clean, cross, derive_faces
+from spar_py.world.parts.mesh import (
+    ON_SURFACE_MM, Face, FeatureGeometry, Primitive, axis_basis, clean, cross, derive_faces,
+)
 from spar_py.world.parts.poses import DerivedPose, support_check
 from spar_py.world.parts.shafts import (
     MIN_CONTACT_MM, is_round, line_contact, mesh_cylinders, pads_find, shaft_from_above, shafts_of
@@ -100,6 +102,10 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fe
                             shallow.append((names, width, Ts))
                     pending.append((names, width, T, (flat, areas, e1, e2)))
     min_len = from_mm(unit, MIN_CONTACT_MM)
+    # at least MIN_CONTACT_MM up to ON_SURFACE_MM: a 10 mm shaft closed on from its end has
+    # exactly 5 mm under the pad, which a mesh file's float32 vertices (1e-7 of a coordinate)
+    # put either side of it, differently in each file unit
+    contact_least = min_len - from_mm(unit, ON_SURFACE_MM)
     cyl_normals = {c.face: c.normals for c in mesh_cylinders(mesh, faces, unit)}
     n_pegs = sum(1 for f in features if f.kind == "peg" and f.profile == "round")  # shafts_of lists them first
     at_root: list[tuple[tuple[str, ...], float, np.ndarray]] = []  # a peg's shaft held at its root end
@@ -120,9 +126,7 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fe
                 continue
             for a in approaches(c, step):
                 T = tool_frame(p, c, a)
-                # at least MIN_CONTACT_MM up to rounding: a 10 mm shaft closed on at 45 deg has
-                # exactly 5 mm under the pad, which rounding puts just below it in some units
-                if line_contact(root + c * r, d, length, T, g) >= min_len * (1 - 1e-9):
+                if line_contact(root + c * r, d, length, T, g) >= contact_least:
                     cands.append(((name,), 2 * r, T))
                 if k_shaft >= n_pegs or float(a @ d) < -1e-9:
                     continue
@@ -131,7 +135,7 @@ def derive_grasps(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fe
                 t_root = min_len - g.finger_width / 2 * abs(float(cross(c, a) @ d))
                 if t_root < length / 2 - 1e-9 * (1.0 + length):
                     T = tool_frame(clean(root + d * t_root, 1e-9), c, a)
-                    if line_contact(root + c * r, d, length, T, g) >= min_len * (1 - 1e-9):
+                    if line_contact(root + c * r, d, length, T, g) >= contact_least:
                         at_root.append(((name,), 2 * r, T))
         for T in shaft_from_above(mesh, root, d, r, length, g, unit, poses or [], min_len):
             if pads_find(normals, T[:3, 1]):

@@ -69,6 +69,13 @@ MAX_MESH_BYTES = 64_000_000
 MERGE_REL = 1e-5
 #: Holes (loops of open edges) at most this fraction of the part's size across are filled.
 FILL_REL = 0.02
+#: Unnamed faces are numbered by their centroids to this fraction of the largest coordinate, then
+#: their areas to ORDER_AREA_DIGITS significant digits: coarser than a mesh file's float32
+#: vertices (6e-8 of a coordinate, a few times over between two faces and two files), which
+#: differ by file unit, so a part in metres gets the names it gets in mm (a gear's rim and bore
+#: share a centroid; a closed round face's mean normal is noise).
+ORDER_REL = 2e-6
+ORDER_AREA_DIGITS = 4
 
 
 @dataclass(frozen=True)
@@ -544,8 +551,9 @@ _AXES = {"px": (1, 0, 0), "nx": (-1, 0, 0), "py": (0, 1, 0), "ny": (0, -1, 0), "
 def _name_faces(faces: list[Face], mesh: "trimesh.Trimesh", face_names: dict[str, np.ndarray], tol: float,
                 mm: float = 1.0) -> list[Face]:
     """Names by precedence: features' (already on their faces), face_names, axis names where
-    unique, then f1, f2, ... in the order of their centroids in mm to 1e-6 mm (``mm``: one mm
-    in the cell unit), then their normals: the same names whatever the file's length unit."""
+    unique, then f1, f2, ... in the order of their centroids to ORDER_REL of the largest coordinate, then
+    their areas in mm^2 (ORDER_AREA_DIGITS; ``mm``: one mm in the cell unit), then their normals:
+    the same names whatever the file's length unit."""
     names: dict[int, str] = {k: f.name for k, f in enumerate(faces) if f.feature}
     for name, p in face_names.items():
         k = face_of_point(faces, mesh, p, tol)
@@ -562,8 +570,11 @@ def _name_faces(faces: list[Face], mesh: "trimesh.Trimesh", face_names: dict[str
         if len(hits) == 1 and hits[0] not in names and ax not in used:
             names[hits[0]] = ax
             used.add(ax)
+    grid = ORDER_REL * float(np.abs(mesh.vertices).max())
     order = sorted((k for k in range(len(faces)) if k not in names),
-                   key=lambda k: (*np.round(faces[k].centroid / mm, 6), *np.round(faces[k].normal, 6)))
+                   key=lambda k: (*np.round(faces[k].centroid / grid),
+                                  float(f"{faces[k].area / mm ** 2:.{ORDER_AREA_DIGITS}g}"),
+                                  *np.round(faces[k].normal, 6)))
     i = 0
     for k in order:
         i += 1

@@ -154,9 +154,10 @@ def shaft_from_above(mesh: "trimesh.Trimesh", root: np.ndarray, d: np.ndarray, r
     seldom fall on it), the tool centre on the axis at the shaft's middle or, where the fingers
     meet the part there (a pad wider than a short peg reaches its shoulder), slid along the axis
     by SHAFT_SLIDE_MM steps to the nearest place they do not, while at least ``min_len`` of the
-    shaft stays under the pads."""
+    shaft (up to ON_SURFACE_MM: a mesh's float32 vertices) stays under the pads."""
     out: list[np.ndarray] = []
     slide = from_mm(unit, SHAFT_SLIDE_MM)
+    least = min_len - from_mm(unit, ON_SURFACE_MM)
     for pose in poses:
         up = np.asarray(pose.R, float)[2]
         c = cross(d, up)
@@ -167,7 +168,7 @@ def shaft_from_above(mesh: "trimesh.Trimesh", root: np.ndarray, d: np.ndarray, r
         n = int(length / 2 // slide) + 1
         for k in sorted(range(-n, n + 1), key=lambda k: (abs(k), k)):
             T = tool_frame(clean(root + d * (length / 2 + k * slide), 1e-9), c, a)
-            if line_contact(root + c * r, d, length, T, g) < min_len * (1 - 1e-9):
+            if line_contact(root + c * r, d, length, T, g) < least:
                 continue
             if grasp_problem(mesh, T, 2 * r, g, unit) is None:
                 if not any(np.allclose(T, U, atol=1e-9) for U in out):

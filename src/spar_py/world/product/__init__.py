@@ -12,14 +12,15 @@ from spar_py.world.product.assembly import AssemblyResult, Insertion, derive_ass
 from spar_py.world.product.grasp_report import GraspReport, grasp_report
 from spar_py.world.product.layout import layout_product
 from spar_py.world.product.products import (
-    compile_goals, feature_axis, insertion_pairs, link_directions, makers, mate_misalignment, near_parts, precedence, subassembly_poses,
-    subtree, through_precedence, via_grasps,
+    AXIS_TOL_MM, axis_offset, compile_goals, feature_axis, insertion_pairs, link_directions, makers, mate_misalignment,
+    near_parts, precedence, subassembly_poses, subtree, through_precedence, via_grasps,
 )
 from spar_py.world.product.single_arm import single_arm_report
 
 __all__ = [
-    "arm_clear_of", "AssemblyResult", "compile_goals", "compile_product", "derive_assembly_cached", "feature_axis",
-    "grasp_report", "GraspReport", "Insertion", "insertion_pairs", "layout_product", "link_directions", "makers", "mate_misalignment", "near_parts",
+    "AXIS_TOL_MM", "arm_clear_of", "AssemblyResult", "axis_offset", "compile_goals", "compile_product",
+    "derive_assembly_cached", "feature_axis", "grasp_report", "GraspReport", "Insertion", "insertion_pairs",
+    "layout_product", "link_directions", "makers", "mate_misalignment", "near_parts",
     "precedence", "single_arm_report", "subassembly_poses", "subtree", "through_precedence", "via_grasps",
     "with_hand_access",
 ]

@@ -5,6 +5,9 @@ Frames and units: every mesh is given in the product frame (its part's pose appl
 lengths in one unit (the caller's; the tolerances in the same unit). Nothing here reads a
 file: kb.products builds the meshes and turns the result into features and mates.
 
+- Overlaps: parts whose meshes overlap as placed (world.product.overlap) are found first; when
+  any do, they are the result (:attr:`AssemblyResult.overlaps`) and nothing else is derived.
+
 - Contacts: points sampled on each part's surface (seeded, so a derivation is repeatable)
   within ``clearance_max + contact_tol`` of another part whose nearest point there has an
   antiparallel normal (the two surfaces face each other).
@@ -48,6 +51,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from spar_py.world.product.overlap import Overlap, Wall, overlaps
+
 if TYPE_CHECKING:
     import trimesh
 
@@ -55,7 +60,7 @@ __all__ = ["ASSEMBLY_VERSION", "AssemblyResult", "Contact", "DerivedMate", "Deri
            "derive_assembly", "derive_assembly_cached"]
 
 #: Bumped whenever the derivation's results change for the same inputs.
-ASSEMBLY_VERSION = 5
+ASSEMBLY_VERSION = 6
 #: Surface samples per part (at most; fewer for a small area at the sample spacing).
 SAMPLES = 6000
 #: Normals of facing surfaces: n_a . n_b below -COS_FACING.
@@ -119,6 +124,10 @@ class DerivedMate:
     corners: tuple[tuple[float, float, float], ...] = ()
     #: A prism hole's profile (its walls' bounding rectangle), the same way.
     hole_corners: tuple[tuple[float, float, float], ...] = ()
+    #: The hole's axis less the peg's, across them (product frame): zero when the fitted axes are
+    #: one (within axis_tol, ``origin`` then midway between them); else ``origin`` is on the peg's
+    #: axis and the peg stands this far off the hole's centre, less than the clearance.
+    hole_shift: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 
 @dataclass(frozen=True)
@@ -164,13 +173,15 @@ class AssemblyResult:
     precedence: list[tuple[str, str, str]] = field(default_factory=list)
     seconds: float = 0.0
     unremovable: tuple[str, ...] = ()
+    #: Parts that overlap as placed (world.product.overlap): when any do, nothing else is derived.
+    overlaps: list[Overlap] = field(default_factory=list)
 
     def to_json(self) -> dict[str, Any]:
         """As plain data (the cache's form)."""
         return {"base": self.base, "mates": [asdict(m) for m in self.mates], "seats": [asdict(s) for s in self.seats],
                 "blocking": [list(b) for b in self.blocking], "insertions": [asdict(i) for i in self.insertions],
                 "precedence": [list(p) for p in self.precedence], "seconds": self.seconds,
-                "unremovable": list(self.unremovable)}
+                "unremovable": list(self.unremovable), "overlaps": [asdict(o) for o in self.overlaps]}
 
     @classmethod
     def from_json(cls, d: dict[str, Any]) -> "AssemblyResult":
@@ -183,11 +194,14 @@ class AssemblyResult:
             for k in ("corners", "hole_corners"):
                 m[k] = tuple(tuple(c) for c in m.get(k, ()))
             return DerivedMate(**m)
+        def wall(w: dict[str, Any]) -> Wall:
+            return Wall(w["kind"], tuple(w["point"]), tup(w["axis"]), w["radius"])
         return cls(d["base"], [mate(m) for m in d["mates"]],
                    [DerivedSeat(**{k: tup(v) for k, v in s.items()}) for s in d["seats"]],
                    [tuple(b) for b in d["blocking"]],  # type: ignore[misc]
                    [Insertion(tuple(i["parts"]), tuple(i["direction"]), i["needs_fixture"]) for i in d["insertions"]],
-                   [tuple(p) for p in d["precedence"]], d["seconds"], tuple(d.get("unremovable", ())))  # type: ignore[misc]
+                   [tuple(p) for p in d["precedence"]], d["seconds"], tuple(d.get("unremovable", ())),  # type: ignore[misc]
+                   [Overlap(o["a"], o["b"], o["volume"], wall(o["wall_a"]), wall(o["wall_b"])) for o in d["overlaps"]])
 
 
 # --------------------------------------------------------------------------- contacts
@@ -410,11 +424,13 @@ def _components(P: np.ndarray, link: float) -> list[np.ndarray]:
 
 
 def _cylinder(meshes: dict[str, "trimesh.Trimesh"], a: str, b: str, ta: np.ndarray, tb: np.ndarray, tol: float,
-              cradle: bool = False) -> DerivedMate | None:
+              cradle: bool = False, axis_tol: float = 0.0) -> DerivedMate | None:
     """A mate from a's contact triangles ``ta`` and b's ``tb`` facing them, if both are
-    cylindrical about one axis with a's normals pointing away from it (a the peg) and a's
-    normals wrap the axis; with ``cradle``, the same fit when they do not (a lying in b's
-    half cylinder: b a cradle, not a hole)."""
+    cylindrical about parallel axes with a's normals pointing away from its own (a the peg) and
+    a's normals wrap it; with ``cradle``, the same fit when they do not (a lying in b's half
+    cylinder: b a cradle, not a hole). The axes are one within ``axis_tol``; farther apart, the
+    peg stands off the hole's centre (:attr:`DerivedMate.hole_shift`), by less than the clearance
+    (else it would be in the wall: no fit)."""
     ma, mb = meshes[a], meshes[b]
     Na, Nb = ma.face_normals[ta], mb.face_normals[tb]
     d = _axis_of(np.vstack([Na, Nb]), np.concatenate([ma.area_faces[ta], mb.area_faces[tb]]))
@@ -425,7 +441,8 @@ def _cylinder(meshes: dict[str, "trimesh.Trimesh"], a: str, b: str, ta: np.ndarr
     if ca is None or cb is None:
         return None
     (oa, ra), (ob, rb) = ca, cb
-    if np.linalg.norm(oa - ob) > max(tol, 1e-3 * ra) or rb <= ra:
+    shift = float(np.linalg.norm(oa - ob))  # both on the plane through the origin normal to d
+    if rb <= ra or (shift > axis_tol and shift >= rb - ra):
         return None
     Ca = ma.triangles_center[ta]
     radial = Ca - oa - np.outer((Ca - oa) @ d, d)
@@ -433,13 +450,15 @@ def _cylinder(meshes: dict[str, "trimesh.Trimesh"], a: str, b: str, ta: np.ndarr
         return None  # a's normals towards the axis: a is not the peg
     if _wraps(Na, d) == cradle:
         return None  # a cradle (half a cylinder) stops motion across the axis one way only: no mate
-    o = (oa + ob) / 2
+    o = (oa + ob) / 2 if shift <= axis_tol else oa
+    ho = o if shift <= axis_tol else ob  # the hole's own axis (the same t along it: both on one plane)
     tva = (ma.vertices[np.unique(ma.faces[ta])] - o) @ d
     tvb = (mb.vertices[np.unique(mb.faces[tb])] - o) @ d
     lo, hi = max(tva.min(), tvb.min()), min(tva.max(), tvb.max())
     p0, p1 = _wall_extent(ma, o, d, ra, lo, hi, tol)
-    h0, h1 = _wall_extent(mb, o, d, rb, lo, hi, tol)
-    return DerivedMate(a, b, tuple(o), tuple(d), ra, rb, p0, p1 - p0, h0, h1 - h0, hi - lo, False)
+    h0, h1 = _wall_extent(mb, ho, d, rb, lo, hi, tol)
+    return DerivedMate(a, b, tuple(o), tuple(d), ra, rb, p0, p1 - p0, h0, h1 - h0, hi - lo, False,
+                       hole_shift=tuple(float(x) for x in ho - o))
 
 
 def _orient(m: DerivedMate, meshes: dict[str, "trimesh.Trimesh"], sense: np.ndarray, tol: float) -> DerivedMate:
@@ -452,13 +471,13 @@ def _orient(m: DerivedMate, meshes: dict[str, "trimesh.Trimesh"], sense: np.ndar
     if float(sense @ d) < 0:
         d, p0, p1, h0, h1 = -d, -p1, -p0, -h1, -h0
     mb = meshes[m.hole]
-    start = o + d * (h1 - 2 * tol)
+    start = o + np.asarray(m.hole_shift, float) + d * (h1 - 2 * tol)
     hits = mb.ray.intersects_location([start], [d])[0]
     far = float(np.linalg.norm(mb.extents))
     blind = len(hits) > 0 and float(np.min((hits - start) @ d)) < min(3 * tol, far)
     return DerivedMate(m.peg, m.hole, tuple(float(x) for x in o), tuple(float(x) for x in d), m.peg_radius,
                        m.hole_radius, float(p0), float(p1 - p0), float(h0), float(h1 - h0), m.depth, not blind,
-                       m.profile, m.corners, m.hole_corners)
+                       m.profile, m.corners, m.hole_corners, m.hole_shift)
 
 
 def _seats(P: np.ndarray, N: np.ndarray, gaps: np.ndarray, contact_tol: float, spacing: float
@@ -602,10 +621,11 @@ def _up_in_every_pose(meshes: dict[str, "trimesh.Trimesh"], parts: list[str], d:
 
 
 def derive_assembly(meshes: dict[str, "trimesh.Trimesh"], base: str, contact_tol: float = 0.1,
-                    clearance_max: float = 0.5) -> AssemblyResult:
+                    clearance_max: float = 0.5, axis_tol: float = 0.01) -> AssemblyResult:
     """Derive mates, seats, insertions and precedence of the parts ``meshes`` (product frame,
-    one length unit, ``contact_tol`` and ``clearance_max`` in it); ``base`` is never removed.
-    See the module docstring."""
+    one length unit, ``contact_tol``, ``clearance_max`` and ``axis_tol`` in it: a round fit's
+    two axes closer than ``axis_tol`` are one); ``base`` is never removed. See the module
+    docstring."""
     t_start = time.perf_counter()
     size = float(np.linalg.norm(np.max([m.bounds[1] for m in meshes.values()], axis=0)
                                 - np.min([m.bounds[0] for m in meshes.values()], axis=0)))
@@ -613,6 +633,10 @@ def derive_assembly(meshes: dict[str, "trimesh.Trimesh"], base: str, contact_tol
     reach = clearance_max + contact_tol
     tol = max(contact_tol, 1e-6 * size)
     res = AssemblyResult(base)
+    res.overlaps = overlaps(meshes, contact_tol)
+    if res.overlaps:  # parts that cannot be where they are placed: no contacts, fits or ways out to find
+        res.seconds = time.perf_counter() - t_start
+        return res
     con = _contacts(meshes, reach, spacing)
     # a's contact samples with b that hold it: touching, or on a fit's walls (marked below)
     holds = {ab: gaps <= contact_tol for ab, (_, _, gaps) in con.items()}
@@ -635,12 +659,12 @@ def derive_assembly(meshes: dict[str, "trimesh.Trimesh"], base: str, contact_tol
             tb = np.unique(Tb[np.all((Pb >= lo) & (Pb <= hi), axis=1)])
             if len(ta) < 3 or len(tb) < 3:
                 continue
-            m = _cylinder_filtered(meshes, a, b, ta, tb, tol)
+            m = _cylinder_filtered(meshes, a, b, ta, tb, tol, axis_tol=axis_tol)
             if m is None:
                 m = _prism(meshes, a, b, ta, tb, N[comp], gaps[comp], contact_tol)
             cradle = None
             if m is None:
-                cradle = m = _cylinder_filtered(meshes, a, b, ta, tb, tol, cradle=True)
+                cradle = m = _cylinder_filtered(meshes, a, b, ta, tb, tol, cradle=True, axis_tol=axis_tol)
             if m is None:
                 continue
             d = np.asarray(m.axis, float)
@@ -667,7 +691,7 @@ def derive_assembly(meshes: dict[str, "trimesh.Trimesh"], base: str, contact_tol
             res.blocking.append((a, b, int(len(P) + len(con.get((b, a), ((),))[0]))))
 
     # insertion directions and the disassembly
-    gaps = [m.hole_radius - m.peg_radius for m in mates]
+    gaps = [m.hole_radius - m.peg_radius - float(np.linalg.norm(m.hole_shift)) for m in mates]  # nearest walls
     step = max(min([clearance_max, *gaps]), size / 400.0)
     sweeper = Sweeper(meshes, SHRINK * contact_tol, step)
     cands = [np.eye(3)[i] * s for i in (2, 0, 1) for s in (1, -1)]
@@ -733,10 +757,13 @@ def derive_assembly(meshes: dict[str, "trimesh.Trimesh"], base: str, contact_tol
     # the mates' senses: the way the peg moves into the hole, from the later part's insertion
     direction = {p: np.asarray(i.direction, float) for i in res.insertions for p in i.parts}
     for m in mates:
-        later = m.peg if pos.get(m.peg, 0) > pos.get(m.hole, 0) else m.hole
-        sense = direction[later] if later == m.peg else -direction[later]
-        if later == base or m.peg not in pos or m.hole not in pos:
-            sense = np.asarray(m.axis, float)
+        # a part left unremovable has no insertion (nor a place in the order): its mates keep
+        # their fitted axis, as the base's do
+        sense = np.asarray(m.axis, float)
+        if m.peg in pos and m.hole in pos:
+            later = m.peg if pos[m.peg] > pos[m.hole] else m.hole
+            if later != base:
+                sense = direction[later] if later == m.peg else -direction[later]
         res.mates.append(_orient(m, meshes, sense, tol))
     # seats between parts without a mate: the later inserted part rests on the earlier one
     res.seats.extend(_seats_of(planes, mated, pos, res.insertions))
@@ -835,10 +862,10 @@ def _cradle_seats(cradles: list[tuple[DerivedMate, np.ndarray, np.ndarray]], con
 
 
 def _cylinder_filtered(meshes: dict[str, "trimesh.Trimesh"], a: str, b: str, ta: np.ndarray, tb: np.ndarray,
-                       tol: float, cradle: bool = False) -> DerivedMate | None:
+                       tol: float, cradle: bool = False, axis_tol: float = 0.0) -> DerivedMate | None:
     """:func:`_cylinder` on the triangles of ``ta`` and ``tb`` that are not normal to the
     axis fitted on the rest (an end face or shoulder among a cylinder's contacts)."""
-    m = _cylinder(meshes, a, b, ta, tb, tol, cradle)
+    m = _cylinder(meshes, a, b, ta, tb, tol, cradle, axis_tol)
     if m is not None:
         return m
     Na, Nb = meshes[a].face_normals[ta], meshes[b].face_normals[tb]
@@ -850,7 +877,7 @@ def _cylinder_filtered(meshes: dict[str, "trimesh.Trimesh"], a: str, b: str, ta:
         seen.append(d)
         ka, kb = np.abs(Na @ d) < SIN_AXIS, np.abs(Nb @ d) < SIN_AXIS
         if ka.sum() >= 3 and kb.sum() >= 3:
-            m = _cylinder(meshes, a, b, ta[ka], tb[kb], tol, cradle)
+            m = _cylinder(meshes, a, b, ta[ka], tb[kb], tol, cradle, axis_tol)
             if m is not None:
                 return m
         if len(seen) > 50:
@@ -892,7 +919,8 @@ def _connected(group: tuple[str, ...], con: dict) -> bool:
 
 
 def derive_assembly_cached(meshes: dict[str, "trimesh.Trimesh"], base: str, contact_tol: float = 0.1,
-                           clearance_max: float = 0.5, use_cache: bool = True) -> AssemblyResult:
+                           clearance_max: float = 0.5, use_cache: bool = True, axis_tol: float = 0.01
+                           ) -> AssemblyResult:
     """:func:`derive_assembly`, kept on disk by content: the key is the SHA-256 of every part's
     name, vertices and faces (as placed), the base, the tolerances and ASSEMBLY_VERSION; kept
     beside the object models' derivations (world.parts.cache.cache_dir)."""
@@ -900,7 +928,8 @@ def derive_assembly_cached(meshes: dict[str, "trimesh.Trimesh"], base: str, cont
 
     import hashlib
 
-    h = hashlib.sha256(json.dumps([ASSEMBLY_VERSION, base, round(contact_tol, 12), round(clearance_max, 12)]).encode())
+    h = hashlib.sha256(json.dumps([ASSEMBLY_VERSION, base, round(contact_tol, 12), round(clearance_max, 12),
+                                   round(axis_tol, 12)]).encode())
     for p, m in meshes.items():
         h.update(p.encode())
         h.update(np.ascontiguousarray(np.round(m.vertices, 9), float).tobytes())
@@ -912,7 +941,7 @@ def derive_assembly_cached(meshes: dict[str, "trimesh.Trimesh"], base: str, cont
             return AssemblyResult.from_json(data)
         except (KeyError, TypeError):
             pass  # an entry of an older form: derived again
-    res = derive_assembly(meshes, base, contact_tol, clearance_max)
+    res = derive_assembly(meshes, base, contact_tol, clearance_max, axis_tol)
     if use_cache:
         data = res.to_json()
         data["key"] = key

@@ -5,7 +5,8 @@ Frames: a part's pose is T_product_part (4x4, column vectors); a feature's origi
 direction are in its part's frame. Units: the cell unit throughout (the product file's
 lengths converted at load).
 
-- :func:`mate_misalignment`: whether a mate's features line up (coaxial, overlapping).
+- :func:`mate_misalignment`: whether a mate's features line up (coaxial within the clearance,
+  overlapping); :func:`axis_offset`, how far off centre the peg is.
 - :func:`compile_goals`: the assembly tree rooted at the base part and one
   :class:`~spar_py.core.model.PartGoal` per other part (T_a = T_parent^-1 T_part, V_a the
   insertion direction in the parent's frame), the parent the nearest ancestor not known to
@@ -39,10 +40,10 @@ from spar_py.core.units import from_mm
 if TYPE_CHECKING:
     from spar_py.core.model import MatingFeature, ObjectModel
 
-__all__ = ["AXIS_TOL_MM", "NEAR_MM", "SUB", "SWEEP_MARGIN_MM", "VIA", "Axis", "SubPose", "compile_goals",
-           "feature_axis", "goal_parents", "insertion_directions", "insertion_pairs", "link_directions", "makers", "through_precedence",
-           "unmakeable",
-           "mate_misalignment", "near_parts", "no_cycle", "precedence", "resting_faces", "seat_direction", "subassembly_poses",
+__all__ = ["AXIS_TOL_MM", "NEAR_MM", "SUB", "SWEEP_MARGIN_MM", "VIA", "Axis", "SubPose", "axis_offset", "compile_goals",
+           "feature_axis", "goal_parents", "insertion_directions", "insertion_pairs", "link_directions", "makers",
+           "mate_misalignment", "near_parts", "no_cycle", "precedence", "resting_faces", "seat_direction",
+           "subassembly_poses", "through_precedence", "unmakeable",
            "subtree", "via_grasps"]
 
 #: A mate's axes are coaxial when the peg's axis passes within this of the hole's (mm) and
@@ -77,18 +78,31 @@ def feature_axis(T: np.ndarray, f: "MatingFeature") -> Axis:
     return Axis(T[:3, :3] @ g.origin + T[:3, 3], T[:3, :3] @ g.direction, float(g.length), float(g.radius))
 
 
+def axis_offset(peg: Axis, hole: Axis) -> float:
+    """How far the peg's axis passes from the hole's, across the hole's axis, at the peg's root
+    (the mate's units): the nominal peg sits off centre by this, and its margin R_hole - R_peg
+    is less by as much."""
+    d = hole.direction
+    off = peg.origin - hole.origin
+    return float(np.linalg.norm(off - (off @ d) * d))
+
+
 def mate_misalignment(peg: Axis, hole: Axis, through: bool, unit: str) -> str | None:
     """Why a peg's axis and a hole's do not line up (None if they do): the angle between
-    them, the peg axis's offset from the hole's, or their lengths not overlapping along it.
-    The peg enters the hole along the hole's direction, or either way through a through hole."""
+    them, the peg axis's offset from the hole's (:func:`axis_offset`) when it is not within the
+    clearance R_hole - R_peg (beyond AXIS_TOL_MM: a peg off centre but clear of the wall fits,
+    with that much less margin), or their lengths not overlapping along it. The peg enters the
+    hole along the hole's direction, or either way through a through hole."""
     cos = float(peg.direction @ hole.direction)
     if not (cos > math.cos(math.radians(AXIS_TOL_DEG)) or (through and -cos > math.cos(math.radians(AXIS_TOL_DEG)))):
         return f"axes {math.degrees(math.acos(max(-1.0, min(1.0, cos)))):.3g} deg apart"
     d = hole.direction
     off = peg.origin - hole.origin
-    radial = float(np.linalg.norm(off - (off @ d) * d))
-    if radial > from_mm(unit, AXIS_TOL_MM):
-        return f"axes {radial:.4g} {unit} apart"
+    radial = axis_offset(peg, hole)
+    margin = hole.radius - peg.radius
+    if radial > from_mm(unit, AXIS_TOL_MM) and radial >= margin:
+        return (f"axes {radial:.4g} {unit} apart, as much as the clearance R_hole - R_peg = {margin:.4g} {unit} "
+                f"or more (the peg in the hole's wall)")
     p0, p1 = sorted((float(off @ d), float((peg.end - hole.origin) @ d)))
     if min(p1, hole.length) - max(p0, 0.0) <= 0:
         return (f"no overlap along the axis (peg from {p0:.4g} to {p1:.4g} {unit}, hole from 0 to "
