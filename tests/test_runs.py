@@ -190,5 +190,5 @@ def test_a_kept_phase_2_step_logs_its_refusal_in_every_run() -> None:
     assert answers[0] == answers[1] and answers[0]["status"] == "infeasible"
     assert set(answers[0]) == {"status", "at", "steps", "nogood"} and set(answers[0]["steps"][0]) == {"id", "verdicts"}
     # the shelf is an obstacle, not a part: the pickup with that grasp fails whatever else is done
-    assert answers[0]["nogood"] == {"step": "action_1", "grasp_step": "action_1", "done": [], "not_done": []}
+    assert answers[0]["nogood"] == {"step": "action_1", "labels": [], "prefix": [], "before": []}
     assert logs[0] == logs[1] == ["no collision-free IK for pickup(peg, p1G10): tool_mount-shelf"]
