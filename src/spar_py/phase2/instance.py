@@ -228,11 +228,15 @@ def evaluate(cache: CellCache, steps: Sequence[Step], sources: Sources | None = 
 def _motion_nogood(steps: Sequence[Step], at: str) -> dict[str, Any] | None:
     """The nogood of a run whose motions stop at step ``at``: the motions are planned stop after
     stop from the one before (world/motion/paths.py's plan_stops, seeded), each from the worlds
-    of the steps so far, so the prefix fixes them (nogood.exact_prefix); None at a step a remedy
-    inserted."""
+    of the steps so far, so the prefix fixes them (nogood.exact_prefix). None at a step a remedy
+    inserted, and after a squeeze: a squeeze moves the arm, and a remedy may put one before the
+    step for the sake of a later one (before the pickup of a part whose insertion comes later)."""
+    k = next((i for i, t in enumerate(steps) if t["id"] == at), None)
+    if k is None or any(t["name"] == "squeeze" for t in steps[:k + 1]):
+        return None
     manip = [t for t in steps if t["name"] in ("pickup", "putdown", "assemble")]
-    k = next((i for i, t in enumerate(manip) if t["id"] == at), None)
-    return None if k is None else exact_prefix(manip, k)
+    j = next((i for i, t in enumerate(manip) if t["id"] == at), None)
+    return None if j is None else exact_prefix(manip, j)
 
 
 def _refined(cache: CellCache, out: list[dict[str, Any]], worlds: list[World]) -> list[dict[str, Any]]:
