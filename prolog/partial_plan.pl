@@ -18,7 +18,6 @@
             next_instance/3,         % +Partial, +Search, -Instance
             search_examined/3,       % +Instance, +Search0, -Search
             search_nogood/3,         % +Nogood, +Search0, -Search
-            search_nogoods/2,        % +Search, -Nogoods
             instance_nogood/4,       % +Partial, +Instance, +Learnt, -Nogood
             partial_dict/2,          % +Partial, -Dict
             print_partial/1          % +Partial
@@ -135,31 +134,30 @@ search_examined(instance(Steps, Bindings), search(Ngs, E0), search(Ngs, E)) :-
 
 search_nogood(Ng, search(Ngs, E), search([Ng|Ngs], E)).
 
-%!  search_nogoods(+Search, -Nogoods:list) is det.
-%
-%   The nogoods learnt, newest first.
-
-search_nogoods(search(Ngs, _), Ngs).
-
 %!  instance_nogood(+Partial, +Instance, +Learnt, -Nogood) is semidet.
 %
 %   The nogood ng(Own, Labels, Prefix, Pairs) of a run of Instance that
 %   stopped where Learnt says: Learnt is learnt(Step, LabelIds, Prefix,
-%   Pairs) with action ids (phase2.nogood): Own the bindings of the
+%   Pairs0) with action ids (phase2.nogood): Own the bindings of the
 %   network variables of Step (in its action and its operational
 %   preconditions: its grasp, where it takes its part from), Labels those
-%   of Step and of every action of LabelIds, Prefix and Pairs as given.
-%   Fails if an id is not one of Partial's actions (then there is no
-%   nogood: learning none is always sound).
+%   of Step and of every action of LabelIds, Prefix as given and Pairs
+%   the pairs of Pairs0 that some linearisation of Partial's ordering
+%   breaks (the others hold in every instance). Fails if an id is not
+%   one of Partial's actions or no linearisation keeps the pairs (then
+%   there is no nogood: learning none is always sound).
 
-instance_nogood(partial(Actions, _, _, _), instance(_, Bindings),
-                learnt(Step, Ids, Prefix, Pairs), ng(Own, Labels, Prefix, Pairs)) :-
-    findall(Id, ( member(Id, [Step|Ids]) ; member(Id, Prefix) ; member(A-B, Pairs), member(Id, [A, B]) ), All),
+instance_nogood(partial(Actions, Order, _, _), instance(_, Bindings),
+                learnt(Step, Ids, Prefix, Pairs0), ng(Own, Labels, Prefix, Pairs)) :-
+    findall(Id, ( member(Id, [Step|Ids]) ; member(Id, Prefix) ; member(A-B, Pairs0), member(Id, [A, B]) ), All),
     forall(member(Id, All), memberchk(action(Id, _, _, _, _), Actions)),
     action_labels(Actions, Bindings, Step, Own),
     maplist(action_labels(Actions, Bindings), Ids, Lss),
     append([Own|Lss], Labels0),
-    sort(Labels0, Labels).
+    sort(Labels0, Labels),
+    ordering_closure(Order, G),
+    \+ ( member(X-Y, Pairs0), necessarily_before(Y, X, G) ),
+    exclude(kept_by(G), Pairs0, Pairs).
 
 %   action_labels(+Actions, +Bindings, +Id, -Labels): the Var-Label pairs
 %   of the network variables in action Id's term and operational
@@ -184,12 +182,9 @@ search_budget(200000).
 %   first (see above). Fails when there is none left.
 
 next_instance(Partial, search(Ngs, Examined), Instance) :-
-    Partial = partial(_, Order, _, _),
-    ordering_closure(Order, Closure),
-    convlist(prepared(Closure), Ngs, Prepared),
     search_budget(Limit),
     Budget = budget(0, Limit),
-    catch(once(pruned_instance(Partial, Prepared, Examined, Budget, Instance)),
+    catch(once(pruned_instance(Partial, Ngs, Examined, Budget, Instance)),
           phase2_search_budget,
           once(plain_instance(Partial, Examined, Instance))).
 
@@ -205,23 +200,17 @@ ordering_closure(Order, G) :-
         foldl([X-Y, H0, H]>>prior_to(X, Y, H0, H), Arcs, G1, G)
     ).
 
-%   prepared(+G, +Ng, -P): Ng as p(Own, Labels, Prefix, Pairs) without
-%   the pairs every linearisation of G keeps; fails for one no
-%   linearisation can meet (it rules out nothing).
-prepared(G, ng(Own, Labels, Prefix, Pairs0), p(Own, Labels, Prefix, Pairs)) :-
-    \+ ( member(X-Y, Pairs0), necessarily_before(Y, X, G) ),
-    exclude(kept_by(G), Pairs0, Pairs).
-
+%   kept_by(+G, +Pair): every linearisation of G puts A before B.
 kept_by(G, A-B) :-
     necessarily_before(A, B, G).
 
-pruned_instance(partial(Actions, Order, Net, Sat), Prepared, Examined, Budget, Instance) :-
-    label_index(Prepared, Index),
-    own_counts(Prepared, Counts),
+pruned_instance(partial(Actions, Order, Net, Sat), Ngs, Examined, Budget, Instance) :-
+    label_index(Ngs, Index),
+    own_counts(Ngs, Counts),
     cms_solution(Net, choose_labels(Index, Counts, Budget), Assignment),
     separated(Sat, Assignment),
-    include(labels_hold(Assignment), Prepared, Held),
-    maplist([p(_, _, Prefix, Pairs), live(Prefix, Pairs)]>>true, Held, Live),
+    include(labels_hold(Assignment), Ngs, Held),
+    maplist([ng(_, _, Prefix, Pairs), live(Prefix, Pairs)]>>true, Held, Live),
     empty_assoc(Placed),
     linearisation(Order, next_step(Budget), st(Placed, Live), Ids),
     \+ get_assoc(Ids-Assignment, Examined, _),
@@ -234,18 +223,18 @@ plain_instance(partial(Actions, Order, Net, Sat), Examined, Instance) :-
     \+ get_assoc(Ids-Assignment, Examined, _),
     instance_of(Actions, Assignment, Ids, Instance).
 
-%   label_index(+Prepared, -Index): the assoc Var-Label -> [Labels] of the
+%   label_index(+Ngs, -Index): the assoc Var-Label -> [Labels] of the
 %   nogoods that need nothing of the order, under each of their labels.
-label_index(Prepared, Index) :-
-    findall(VL-Labels, ( member(p(_, Labels, [], []), Prepared), member(VL, Labels) ), KVs0),
+label_index(Ngs, Index) :-
+    findall(VL-Labels, ( member(ng(_, Labels, [], []), Ngs), member(VL, Labels) ), KVs0),
     keysort(KVs0, KVs),
     group_pairs_by_key(KVs, Grouped),
     list_to_assoc(Grouped, Index).
 
-%   own_counts(+Prepared, -Counts): the assoc Var-Label -> the number of
+%   own_counts(+Ngs, -Counts): the assoc Var-Label -> the number of
 %   nogoods with it among their own labels.
-own_counts(Prepared, Counts) :-
-    findall(VL, ( member(p(Own, _, _, _), Prepared), member(VL, Own) ), VLs0),
+own_counts(Ngs, Counts) :-
+    findall(VL, ( member(ng(Own, _, _, _), Ngs), member(VL, Own) ), VLs0),
     msort(VLs0, VLs),
     clumped(VLs, Counted),
     list_to_assoc(Counted, Counts).
@@ -270,7 +259,7 @@ ruled_out(Index, V, Assigned, L) :-
 failures(Counts, V, L, N) :-
     (   get_assoc(V-L, Counts, N) -> true ; N = 0 ).
 
-labels_hold(Assignment, p(_, Labels, _, _)) :-
+labels_hold(Assignment, ng(_, Labels, _, _)) :-
     forall(member(V-L, Labels), memberchk(V-L, Assignment)).
 
 %   next_step(+Budget, +V, +St0, -St): ordering:linearisation/4's hook.
