@@ -59,6 +59,7 @@
             cms_pruned_nodes/2,      % +Net, -VarLabels
             cms_solution/2,          % +Net, -Assignment
             cms_solution/3,          % +Net, :Choose, -Assignment
+            cms_solution/4,          % +Net, :Order, :Choose, -Assignment
             cms_component/3          % +Net, +Vars, -Component
           ]).
 :- use_module(library(assoc)).
@@ -529,6 +530,17 @@ cms_solution(Net, Assignment) :-
 cms_solution(Net, Choose, Assignment) :-
     cms_network(Net, CspNet),
     solution(CspNet, Choose, Assignment).
+
+:- meta_predicate cms_solution(+, 2, 4, -).
+
+%!  cms_solution(+Net, :Order, :Choose, -Assignment:list) is nondet.
+%
+%   As cms_solution/3, the variables searched in the order call(Order,
+%   Vars0, Vars) makes of the first-fail order (csp:solution/4).
+
+cms_solution(Net, Order, Choose, Assignment) :-
+    cms_network(Net, CspNet),
+    solution(CspNet, Order, Choose, Assignment).
 
 %!  cms_component(+Net, +Vars:list, -Component:list) is det.
 %

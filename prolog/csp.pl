@@ -26,6 +26,7 @@
             consistent/1,           % +Net
             solution/2,             % +Net, -Assignment
             solution/3,             % +Net, :Choose, -Assignment
+            solution/4,             % +Net, :Order, :Choose, -Assignment
             ac3/2,                  % +Net, -PrunedNodes
             get_label_set/3,        % +Var, -LabelSet, +Net
             get_constraint_pairs/4  % +Var, +V1, -Pairs, +Net
@@ -194,7 +195,21 @@ solution(Net, Assignment) :-
 %   ==
 
 solution(Net, Choose, Assignment) :-
-    net_vars(Net, Vars),
+    solution(Net, same_order, Choose, Assignment).
+
+same_order(Vars, Vars).
+
+:- meta_predicate solution(+, 2, 4, -).
+
+%!  solution(+Net, :Order, :Choose, -Assignment:list) is nondet.
+%
+%   As solution/3, the variables searched in the order call(Order, Vars0,
+%   Vars) makes of the first-fail order Vars0 (a permutation: phase 2
+%   searches the variables of failing steps first).
+
+solution(Net, Order, Choose, Assignment) :-
+    net_vars(Net, Vars0),
+    call(Order, Vars0, Vars),
     csp(Vars, Net, Choose, Result),
     maplist([V/L, V-L]>>true, Result, Pairs),
     keysort(Pairs, Assignment).

@@ -27,7 +27,7 @@
 :- use_module(library(pairs)).
 :- use_module(library(yall)).
 :- use_module(library(assoc)).
-:- use_module(cms, [cms_solution/3, cms_nodes/2, cms_pruned_nodes/2, cms_arcs/2]).
+:- use_module(cms, [cms_solution/3, cms_solution/4, cms_nodes/2, cms_pruned_nodes/2, cms_arcs/2]).
 :- use_module(ordering, [ordering_arcs/2, linearisation/2, linearisation/4, necessarily_before/3,
                         empty_ordering/1, ordering_add_action/3, prior_to/4]).
 :- use_module(goals, [print_action/1]).
@@ -95,16 +95,18 @@ instance_of(Actions, Assignment, Ids, instance(Steps, Bindings)) :-
     instance whose bindings hold each Var-Label of Labels, whose order
     starts with the ids of Prefix and puts A before B for each A-B of
     Pairs cannot be executed (phase2.nogood in Python says why that is
-    sure). Own are the failing step's own labels (its grasp, the position
-    it takes its part from): the labels the next instance should change
-    first.
+    sure). Own are the failing step's own labels, each with a weight: its
+    grasp 2, the rest (where it takes its part from or puts it) 1: what
+    the next instance should change first, the grasp before the rest.
 
     The search (next_instance/3) is the enumeration of partial_instances/2
     with three changes: a label ruled out by a nogood that needs nothing
     of the order is never tried (the solution search refuses it as soon
-    as the nogood's last variable gets its label); a label is tried after
-    those that have failed less often as a failing step's own label (so
-    the failing grasp moves first); and an order is cut at the first step
+    as the nogood's last variable gets its label); the variables of
+    failing steps are searched first, the most failed first, and their
+    labels that have failed least first (so the next instance changes the
+    failing step's grasp, or where its part is when no other grasp fits
+    there); and an order is cut at the first step
     that settles a nogood (the one that puts the last of its Prefix or
     Pairs in place). Instances examined already are skipped. A search
     that makes more than search_budget/1 checks gives up pruning and
@@ -138,10 +140,12 @@ search_nogood(Ng, search(Ngs, E), search([Ng|Ngs], E)).
 %
 %   The nogood ng(Own, Labels, Prefix, Pairs) of a run of Instance that
 %   stopped where Learnt says: Learnt is learnt(Step, LabelIds, Prefix,
-%   Pairs0) with action ids (phase2.nogood): Own the bindings of the
-%   network variables of Step (in its action and its operational
-%   preconditions: its grasp, where it takes its part from), Labels those
-%   of Step and of every action of LabelIds, Prefix as given and Pairs
+%   Pairs0) with action ids (phase2.nogood): Labels the bindings of the
+%   network variables of Step and of every action of LabelIds (in its
+%   term and its operational preconditions: a grasp, where a part is
+%   taken from or put), Own those of Step as Weight-(Var-Label), 2 for
+%   its grasp (a pickup's, or the one its holding/2 precondition names)
+%   and 1 for the others, Prefix as given and Pairs
 %   the pairs of Pairs0 that some linearisation of Partial's ordering
 %   breaks (the others hold in every instance). Fails if an id is not
 %   one of Partial's actions or no linearisation keeps the pairs (then
@@ -151,9 +155,11 @@ instance_nogood(partial(Actions, Order, _, _), instance(_, Bindings),
                 learnt(Step, Ids, Prefix, Pairs0), ng(Own, Labels, Prefix, Pairs)) :-
     findall(Id, ( member(Id, [Step|Ids]) ; member(Id, Prefix) ; member(A-B, Pairs0), member(Id, [A, B]) ), All),
     forall(member(Id, All), memberchk(action(Id, _, _, _, _), Actions)),
-    action_labels(Actions, Bindings, Step, Own),
+    action_grasp_labels(Actions, Bindings, Step, Grasp),
+    action_labels(Actions, Bindings, Step, Mine),
+    maplist(weighted(Grasp), Mine, Own),
     maplist(action_labels(Actions, Bindings), Ids, Lss),
-    append([Own|Lss], Labels0),
+    append([Mine|Lss], Labels0),
     sort(Labels0, Labels),
     ordering_closure(Order, G),
     \+ ( member(X-Y, Pairs0), necessarily_before(Y, X, G) ),
@@ -167,6 +173,21 @@ action_labels(Actions, Bindings, Id, Labels) :-
     findall(V-L, ( sub_term(V, T-Ops), atom(V), memberchk(V=L, Bindings) ), Labels0),
     sort(Labels0, Labels).
 
+%   weighted(+Grasp, +VL, -W-VL): a failing step's label VL with its
+%   weight: 2 for its grasp (a label of Grasp), 1 for the others.
+weighted(Grasp, VL, W-VL) :-
+    (   memberchk(VL, Grasp) -> W = 2 ; W = 1 ).
+
+%   action_grasp_labels(+Actions, +Bindings, +Id, -Labels): the Var-Label
+%   pairs of action Id's grasp variable: a pickup's own, else the one of
+%   its holding/2 precondition.
+action_grasp_labels(Actions, Bindings, Id, Labels) :-
+    memberchk(action(Id, T, preconditions(Ops, _), _, _), Actions),
+    findall(V-L, ( ( T = pickup(_, V) ; member(op(_, _, holding(_, V)), Ops) ),
+                   atom(V), memberchk(V=L, Bindings) ),
+            Labels0),
+    sort(Labels0, Labels).
+
 %!  search_budget(-Checks:integer) is det.
 %
 %   The checks (labels and order steps weighed against the nogoods) one
@@ -178,7 +199,7 @@ search_budget(200000).
 %
 %   The next plan instance phase 2 examines (partial_instances/2's
 %   Instance): one no nogood of Search rules out and not examined yet,
-%   labels that have failed less often as a failing step's own tried
+%   labels that have failed less often as a failing step's grasp tried
 %   first (see above). Fails when there is none left.
 
 next_instance(Partial, search(Ngs, Examined), Instance) :-
@@ -195,10 +216,16 @@ ordering_closure(Order, G) :-
     (   Order = ord(_, _, _)
     ->  G = Order
     ;   empty_ordering(G0),
-        foldl([V-_, H0, H]>>ordering_add_action(V, H0, H), Order, G0, G1),
+        foldl(add_node, Order, G0, G1),
         findall(A-B, ( member(A-Bs, Order), member(B, Bs) ), Arcs),
-        foldl([X-Y, H0, H]>>prior_to(X, Y, H0, H), Arcs, G1, G)
+        foldl(add_arc, Arcs, G1, G)
     ).
+
+add_node(V-_, G0, G) :-
+    ordering_add_action(V, G0, G).
+
+add_arc(A-B, G0, G) :-
+    prior_to(A, B, G0, G).
 
 %   kept_by(+G, +Pair): every linearisation of G puts A before B.
 kept_by(G, A-B) :-
@@ -206,8 +233,8 @@ kept_by(G, A-B) :-
 
 pruned_instance(partial(Actions, Order, Net, Sat), Ngs, Examined, Budget, Instance) :-
     label_index(Ngs, Index),
-    own_counts(Ngs, Counts),
-    cms_solution(Net, choose_labels(Index, Counts, Budget), Assignment),
+    own_counts(Ngs, Counts, VarCounts),
+    cms_solution(Net, failing_first(VarCounts), choose_labels(Index, Counts, Budget), Assignment),
     separated(Sat, Assignment),
     include(labels_hold(Assignment), Ngs, Held),
     maplist([ng(_, _, Prefix, Pairs), live(Prefix, Pairs)]>>true, Held, Live),
@@ -231,13 +258,33 @@ label_index(Ngs, Index) :-
     group_pairs_by_key(KVs, Grouped),
     list_to_assoc(Grouped, Index).
 
-%   own_counts(+Ngs, -Counts): the assoc Var-Label -> the number of
-%   nogoods with it among their own labels.
-own_counts(Ngs, Counts) :-
-    findall(VL, ( member(ng(Own, _, _, _), Ngs), member(VL, Own) ), VLs0),
-    msort(VLs0, VLs),
-    clumped(VLs, Counted),
-    list_to_assoc(Counted, Counts).
+%   own_counts(+Ngs, -Counts, -VarCounts): the assocs Var-Label -> and
+%   Var -> the weights summed over the nogoods with them among their own
+%   labels (how often, and how near the grasp, they failed).
+own_counts(Ngs, Counts, VarCounts) :-
+    findall(VL-W, ( member(ng(Own, _, _, _), Ngs), member(W-VL, Own) ), Ws),
+    summed(Ws, Counts),
+    findall(V-W, member(V-_-W, Ws), VWs),
+    summed(VWs, VarCounts).
+
+summed(KWs0, Assoc) :-
+    keysort(KWs0, KWs),
+    group_pairs_by_key(KWs, Grouped),
+    maplist(sum_of, Grouped, Sums),
+    list_to_assoc(Sums, Assoc).
+
+sum_of(K-Ws, K-N) :-
+    sum_list(Ws, N).
+
+%   failing_first(+VarCounts, +Vars0, -Vars): csp:solution/4's order: the
+%   variables of Vars0 most failed first, the rest in Vars0's order.
+failing_first(VarCounts, Vars0, Vars) :-
+    map_list_to_pairs(most_failed_key(VarCounts), Vars0, Keyed),
+    keysort(Keyed, Sorted),
+    pairs_values(Sorted, Vars).
+
+most_failed_key(VarCounts, V, K) :-
+    (   get_assoc(V, VarCounts, N) -> K is -N ; K = 0 ).
 
 %   choose_labels(+Index, +Counts, +Budget, +Var, +LabelSet, +Assigned,
 %   -Labels): csp:solution/3's hook: the labels of Var no nogood of Index

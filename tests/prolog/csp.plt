@@ -94,6 +94,14 @@ v3_not_with_v1_2(v3, Ls, Assigned, Out) :- !,
     (   get_assoc(v1, Assigned, 2) -> Out = [] ; Out = Ls ).
 v3_not_with_v1_2(_, Ls, _, Ls).
 
+%   solution/4 searches the variables in the order its hook gives: v3
+%   first, it sees nothing assigned and refuses nothing.
+
+test(solutions_in_given_order, Got == All) :-
+    fig15(Net),
+    findall(S, solution(Net, [Vs0, [v3|Vs]]>>exclude(==(v3), Vs0, Vs), v3_not_with_v1_2, S), Got),
+    findall(S, solution(Net, S), All).
+
 test(solutions_see_assigned, Got == [[v1-1, v2-2, v3-4]]) :-
     fig15(Net),
     findall(S, solution(Net, v3_not_with_v1_2, S), Got).

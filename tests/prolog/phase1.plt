@@ -232,12 +232,14 @@ test(search_every_instance_once, N == 48) :-
     length(Set, N).
 
 %   A run of the first instance that stopped at the assemble (action_1)
-%   for a reason of its own labels: the peg's grasp and the block's pose.
-test(search_learns_own_labels, Own == [grasp_1-p1G12, pos_1-p2P1]) :-
+%   for a reason of its own labels: the peg's grasp (to change first) and
+%   the block's pose.
+test(search_learns_own_labels,
+     Own-Labels == [2-(grasp_1-p1G12), 1-(pos_1-p2P1)]-[grasp_1-p1G12, pos_1-p2P1]) :-
     partial(P),
     instance_search(S0),
     next_instance(P, S0, I),
-    instance_nogood(P, I, learnt(action_1, [], [], []), ng(Own, _, _, _)).
+    instance_nogood(P, I, learnt(action_1, [], [], []), ng(Own, Labels, _, _)).
 
 test(search_rules_out_what_the_nogood_names, N == Want) :-
     partial(P),
