@@ -48,7 +48,8 @@ def nogood(before: World, after: World, steps: Sequence[Step], at: int, checks: 
       that all collide, each collides with a pair the refusal names: those parts at the same poses
       refuse every solution again (the solutions are the tool pose's, workspace.arm_at), and a part
       elsewhere frees none; the moving body too, whole (its parts are carried, and decide which
-      may touch the table).
+      may touch the table), and at an assemble the body it goes into, whole (it decides which part
+      the held body may touch, the one its mate is checked against).
     - ``via_grasp``: the make-up of the part's body (is the part held by the grasp in it).
     - ``supported``: the body and the part resting on it (more parts never lift it).
     - ``retention``: the moving body and the body it goes into (the mate turned is one of theirs,
@@ -85,18 +86,20 @@ def _reads(before: World, after: World, s: Step, kind: str) -> tuple[set[str], s
     hole = {str(s["args"][1])} if s["name"] == "assemble" else set()
     if hole and not hole <= set(unc.objects):
         return None
+    into = set(unc.body(unc.root(next(iter(hole))))) if hole else set()
     if kind == "reachable":
         if not after.refused:  # no joint solution: the tool pose alone
             return (hole or {obj}), set()
         named = {n.removeprefix("held:") for _, pairs in after.refused for pair in pairs for n in pair}
-        return body | hole | (named & set(unc.objects)), ({obj} if hole else set())
+        # an assemble's allowed contacts are with the part its mate is checked against, which its
+        # goal's mates and the body it goes into decide (phase2/mates.py's carried_mate)
+        return body | hole | into | (named & set(unc.objects)), ({obj} | {unc.root(h) for h in hole})
     if kind == "via_grasp":
         return body, {obj}
     if kind == "supported":
         on = stacked_on(before, obj)
         return None if on is None else (body | {on}, {obj})
     if kind == "retention":
-        into = set(unc.body(unc.root(next(iter(hole))))) if hole else set()
         return body | hole | into, {obj} | {unc.root(h) for h in hole}
     return None
 
