@@ -58,7 +58,8 @@
             cms_consistent/1,        % +Net
             cms_pruned_nodes/2,      % +Net, -VarLabels
             cms_solution/2,          % +Net, -Assignment
-            cms_solution/3,          % +Net, :Allowed, -Assignment
+            cms_solution/3,          % +Net, :Choose, -Assignment
+            cms_solution/4,          % +Net, :Order, :Choose, -Assignment
             cms_component/3          % +Net, +Vars, -Component
           ]).
 :- use_module(library(assoc)).
@@ -519,16 +520,27 @@ cms_solution(Net, Assignment) :-
     cms_network(Net, CspNet),
     solution(CspNet, Assignment).
 
-:- meta_predicate cms_solution(+, 2, -).
+:- meta_predicate cms_solution(+, 4, -).
 
-%!  cms_solution(+Net, :Allowed, -Assignment:list) is nondet.
+%!  cms_solution(+Net, :Choose, -Assignment:list) is nondet.
 %
-%   As cms_solution/2, a variable V taking label L only if call(Allowed, V,
-%   L) succeeds (csp:solution/3).
+%   As cms_solution/2, the labels of each variable V tried in the order
+%   call(Choose, V, LabelSet, Assigned, Labels) gives (csp:solution/3).
 
-cms_solution(Net, Allowed, Assignment) :-
+cms_solution(Net, Choose, Assignment) :-
     cms_network(Net, CspNet),
-    solution(CspNet, Allowed, Assignment).
+    solution(CspNet, Choose, Assignment).
+
+:- meta_predicate cms_solution(+, 2, 4, -).
+
+%!  cms_solution(+Net, :Order, :Choose, -Assignment:list) is nondet.
+%
+%   As cms_solution/3, the variables searched in the order call(Order,
+%   Vars0, Vars) makes of the first-fail order (csp:solution/4).
+
+cms_solution(Net, Order, Choose, Assignment) :-
+    cms_network(Net, CspNet),
+    solution(CspNet, Order, Choose, Assignment).
 
 %!  cms_component(+Net, +Vars:list, -Component:list) is det.
 %

@@ -25,7 +25,8 @@
             all_consistent/3,       % +Var/Label, +PrevAssns, +Net
             consistent/1,           % +Net
             solution/2,             % +Net, -Assignment
-            solution/3,             % +Net, :Allowed, -Assignment
+            solution/3,             % +Net, :Choose, -Assignment
+            solution/4,             % +Net, :Order, :Choose, -Assignment
             ac3/2,                  % +Net, -PrunedNodes
             get_label_set/3,        % +Var, -LabelSet, +Net
             get_constraint_pairs/4  % +Var, +V1, -Pairs, +Net
@@ -53,28 +54,29 @@
 %   does.
 
 csp(VarSet, Constraints, Result) :-
-    csp(VarSet, Constraints, any_label, Result).
+    csp(VarSet, Constraints, all_labels, Result).
 
-%   any_label(+Var, +Label): every label is allowed (csp/3, solution/2).
-any_label(_, _).
+%   all_labels(+Var, +LabelSet, +Assigned, -Labels): every label, in
+%   label-set order (csp/3, solution/2).
+all_labels(_, Labels, _, Labels).
 
-csp(VarSet, Constraints, Allowed, Result) :-
+csp(VarSet, Constraints, Choose, Result) :-
     arcs_by_var(Constraints, ByVar),
     empty_assoc(Assigned),
-    csp(VarSet, Constraints, ByVar, Allowed, Assigned, [], Result).
+    csp(VarSet, Constraints, ByVar, Choose, Assigned, [], Result).
 
 csp([], _, _, _, _, R, R).
-csp([V|Rest], Constraints, ByVar, Allowed, Assigned, Asns, R) :-
+csp([V|Rest], Constraints, ByVar, Choose, Assigned, Asns, R) :-
     get_label_set(V, LabelSet, Constraints),
     (   get_assoc(V, ByVar, Arcs)
     ->  true
     ;   Arcs = []
     ),
-    member(Label, LabelSet),
-    call(Allowed, V, Label),
+    call(Choose, V, LabelSet, Assigned, Labels),
+    member(Label, Labels),
     agrees(Arcs, Label, Assigned),
     put_assoc(V, Assigned, Label, Assigned1),
-    csp(Rest, Constraints, ByVar, Allowed, Assigned1, [V/Label|Asns], R).
+    csp(Rest, Constraints, ByVar, Choose, Assigned1, [V/Label|Asns], R).
 
 %   agrees(+Arcs, +Label, +Assigned): Label of a variable V agrees with every
 %   assigned variable V1 of its arcs V1-fwd(Pairs) (Pairs are V-label/V1-label)
@@ -174,18 +176,41 @@ consistent(Net) :-
 %   ==
 
 solution(Net, Assignment) :-
-    solution(Net, any_label, Assignment).
+    solution(Net, all_labels, Assignment).
 
-:- meta_predicate solution(+, 2, -).
+:- meta_predicate solution(+, 4, -).
 
-%!  solution(+Net, :Allowed, -Assignment:list) is nondet.
+%!  solution(+Net, :Choose, -Assignment:list) is nondet.
 %
-%   As solution/2, a variable V taking label L only if call(Allowed, V, L)
-%   succeeds when it is chosen (phase 2 rules labels out as it learns).
+%   As solution/2, the labels of each variable V tried in the order of
+%   call(Choose, V, LabelSet, Assigned, Labels) when V is chosen: Labels
+%   is a sublist of LabelSet in the order to try, Assigned the assoc of
+%   the variables assigned before V to their labels (phase 2 leaves out
+%   the labels it has ruled out and tries first those that have failed
+%   least, partial_plan.pl).
+%
+%   ==
+%   ?- fig15(Net), findall(S, solution(Net, [_, Ls, _, Rs]>>reverse(Ls, Rs), S), Ss).
+%   Ss = [[v1-2,v2-2,v3-4], [v1-1,v2-2,v3-4]].
+%   ==
 
-solution(Net, Allowed, Assignment) :-
-    net_vars(Net, Vars),
-    csp(Vars, Net, Allowed, Result),
+solution(Net, Choose, Assignment) :-
+    solution(Net, same_order, Choose, Assignment).
+
+same_order(Vars, Vars).
+
+:- meta_predicate solution(+, 2, 4, -).
+
+%!  solution(+Net, :Order, :Choose, -Assignment:list) is nondet.
+%
+%   As solution/3, the variables searched in the order call(Order, Vars0,
+%   Vars) makes of the first-fail order Vars0 (a permutation: phase 2
+%   searches the variables of failing steps first).
+
+solution(Net, Order, Choose, Assignment) :-
+    net_vars(Net, Vars0),
+    call(Order, Vars0, Vars),
+    csp(Vars, Net, Choose, Result),
     maplist([V/L, V-L]>>true, Result, Pairs),
     keysort(Pairs, Assignment).
 

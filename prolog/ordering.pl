@@ -47,7 +47,8 @@
             ordering_arcs/2,           % +G, -PriorTos
             ordering_actions/2,        % +G, -Ids
             linearisation/2,           % +G, -Ids
-            linearisation/3            % +G, :Allowed, -Ids
+            linearisation/3,           % +G, :Allowed, -Ids
+            linearisation/4            % +G, :Next, +S0, -Ids
           ]).
 :- use_module(library(assoc)).
 :- use_module(library(ordsets)).
@@ -367,24 +368,47 @@ any_next(_, _).
 %   As linearisation/2, but an action V goes next after the actions Done
 %   (in execution order) only if call(Allowed, Done, V) succeeds: a
 %   refused prefix cuts every linearisation that starts with it, without
-%   enumerating them (phase 2's instance search, uncertainty.pl).
+%   enumerating them.
 
 linearisation(G, Allowed, Ids) :-
+    linearisation(G, done_allowed(Allowed), [], Ids).
+
+done_allowed(Allowed, V, Done, Done1) :-
+    call(Allowed, Done, V),
+    append(Done, [V], Done1).
+
+:- meta_predicate linearisation(+, 3, +, -).
+
+%!  linearisation(+G, :Next, +S0, -Ids:list) is nondet.
+%
+%   As linearisation/2, threading a state through the prefix: an action V
+%   goes next in state S0 only if call(Next, V, S0, S) succeeds, and the
+%   rest of the order is chosen in state S. A refused V cuts every
+%   linearisation whose prefix it would extend (phase 2's instance search,
+%   partial_plan.pl, keeps there what each nogood still needs).
+%
+%   ==
+%   ?- empty_ordering(G0), foldl(ordering_add_action, [a,b,c], G0, G),
+%      findall(L, linearisation(G, [V, N0, N]>>(N is N0 + 1, (V == c -> N > 1 ; true)),
+%                               0, L), Ls).
+%   Ls = [[a,b,c],[a,c,b],[b,a,c],[b,c,a]].
+%   ==
+
+linearisation(G, Next, S0, Ids) :-
     ordering_graph(G, U),
     predecessors(U, Preds),
-    linearise(Preds, Allowed, [], Ids).
+    linearise(Preds, Next, S0, Ids).
 
-%   linearise(+Preds, :Allowed, +Done, -Ids): a source V (no predecessor
-%   left, in standard order) that call(Allowed, Done, V) lets go next after
-%   Done, then a linearisation of Preds without V.
+%   linearise(+Preds, :Next, +S0, -Ids): a source V (no predecessor left,
+%   in standard order) that call(Next, V, S0, S) lets go next, then a
+%   linearisation of Preds without V from state S.
 
 linearise([], _, _, []) :- !.
-linearise(Preds, Allowed, Done, [V|Vs]) :-
+linearise(Preds, Next, S0, [V|Vs]) :-
     member(V-[], Preds),
-    call(Allowed, Done, V),
+    call(Next, V, S0, S),
     delete_vertex(Preds, V, Preds1),
-    append(Done, [V], Done1),
-    linearise(Preds1, Allowed, Done1, Vs).
+    linearise(Preds1, Next, S, Vs).
 
 %   predecessors(+Ugraph, -Preds): Preds is Ugraph transposed, V-Ps pairs
 %   in standard order, Ps the ordset of the vertices with an arc to V.

@@ -14,7 +14,11 @@
             partial_ordering/2,      % +Partial, -PriorTos
             partial_network/2,       % +Partial, -Net
             partial_instances/2,     % +Partial, -Instance
-            partial_instances/3,     % +Partial, +Nogoods, -Instance
+            instance_search/1,       % -Search
+            next_instance/3,         % +Partial, +Search, -Instance
+            search_examined/3,       % +Instance, +Search0, -Search
+            search_nogood/3,         % +Nogood, +Search0, -Search
+            instance_nogood/4,       % +Partial, +Instance, +Learnt, -Nogood
             partial_dict/2,          % +Partial, -Dict
             print_partial/1          % +Partial
           ]).
@@ -22,8 +26,10 @@
 :- use_module(library(apply)).
 :- use_module(library(pairs)).
 :- use_module(library(yall)).
-:- use_module(cms, [cms_solution/3, cms_nodes/2, cms_pruned_nodes/2, cms_arcs/2]).
-:- use_module(ordering, [ordering_arcs/2, linearisation/3, necessarily_before/3]).
+:- use_module(library(assoc)).
+:- use_module(cms, [cms_solution/3, cms_solution/4, cms_nodes/2, cms_pruned_nodes/2, cms_arcs/2]).
+:- use_module(ordering, [ordering_arcs/2, linearisation/2, linearisation/4, necessarily_before/3,
+                        empty_ordering/1, ordering_add_action/3, prior_to/4]).
 :- use_module(goals, [print_action/1]).
 :- use_module(foreign, [term_data/2]).
 :- use_module(kb, []).
@@ -59,71 +65,295 @@ partial_network(partial(_, _, Net, _), Net).
 %   solution that gives a separated pair sep(D, Cond) the same labels
 %   (D would clobber Cond after all) is skipped.
 
-partial_instances(Partial, Instance) :-
-    partial_instances(Partial, nogoods([], 0), Instance).
+partial_instances(partial(Actions, Order, Net, Sat), Instance) :-
+    cms_solution(Net, every_label, Assignment),
+    separated(Sat, Assignment),
+    linearisation(Order, Ids),
+    instance_of(Actions, Assignment, Ids, Instance).
 
-%!  partial_instances(+Partial, +Nogoods, -Instance) is nondet.
-%
-%   As partial_instances/2, skipping every instance a nogood of Nogoods
-%   rules out, without enumerating them: Nogoods is a term nogoods(List,
-%   Checks) whose List phase 2 extends (nb_setarg/3) as instances fail,
-%   read anew at each step of each linearisation and at each label of the
-%   solution search (a nogood that holds in every linearisation rules the
-%   label out there). Checks counts the steps checked: past 200000 the
-%   rest is enumerated unpruned (every instance is tried, as by
-%   partial_instances/2), so a search that prunes little costs little. A
-%   nogood ng(Id, Action, GId,
-%   GAction, Done, NotDone) (uncertainty.pl, from Python's
-%   phase2.nogood) refuses action Id as the next one when, under the
-%   solution at hand, Id's action is Action and GId's is GAction, every
-%   id of Done is executed already and none of NotDone is: such an
-%   instance fails at Id as the one the nogood came from did.
+every_label(_, Labels, _, Labels).
 
-partial_instances(partial(Actions, Order, Net, Sat), Nogoods, instance(Steps, Bindings)) :-
-    cms_solution(Net, label_allowed(Nogoods, Actions, Order), Assignment),
+%   separated(+Sat, +Assignment): no separated pair sep(D, Cond) gets the
+%   same labels under Assignment.
+separated(Sat, Assignment) :-
     forall(member(sep(D, Cond), Sat),
            ( substitute(Assignment, D, D1),
              substitute(Assignment, Cond, Cond1),
-             D1 \= Cond1 )),
-    linearisation(Order, not_ruled_out(Nogoods, Actions, Assignment), Ids),
+             D1 \= Cond1 )).
+
+instance_of(Actions, Assignment, Ids, instance(Steps, Bindings)) :-
     maplist(instance_step(Actions, Assignment), Ids, Steps),
     maplist([V-L, V=L]>>true, Assignment, Bindings).
 
-not_ruled_out(Nogoods, Actions, Assignment, Done, V) :-
-    Nogoods = nogoods(List, Checks0),
-    Checks is Checks0 + 1,
-    nb_setarg(2, Nogoods, Checks),
-    (   Checks > 200000                  % the budget spent: no more pruning, every instance is tried
-    ->  true
-    ;   no_nogood(List, Actions, Assignment, Done, V)
+/*  Phase 2's instance search (uncertainty.pl): each next instance is
+    searched anew, knowing every instance examined and every nogood learnt
+    so far, so the instance after a failure changes a choice the failure
+    depends on instead of the last choice made.
+
+    A nogood is ng(Own, Labels, Prefix, Pairs), learnt from a run that
+    stopped at a step it could not execute (instance_nogood/4): every
+    instance whose bindings hold each Var-Label of Labels, whose order
+    starts with the ids of Prefix and puts A before B for each A-B of
+    Pairs cannot be executed (phase2.nogood in Python says why that is
+    sure). Own are the failing step's own labels, each with a weight: its
+    grasp 2, the rest (where it takes its part from or puts it) 1: what
+    the next instance should change first, the grasp before the rest.
+
+    The search (next_instance/3) is the enumeration of partial_instances/2
+    with three changes: a label ruled out by a nogood that needs nothing
+    of the order is never tried (the solution search refuses it as soon
+    as the nogood's last variable gets its label); the variables of
+    failing steps are searched first, the most failed first, and their
+    labels that have failed least first (so the next instance changes the
+    failing step's grasp, or where its part is when no other grasp fits
+    there); and an order is cut at the first step
+    that settles a nogood (the one that puts the last of its Prefix or
+    Pairs in place). Instances examined already are skipped. A search
+    that makes more than search_budget/1 checks gives up pruning and
+    takes the first instance not examined yet, as partial_instances/2
+    orders them: a nogood only saves the runs it would have skipped.
+*/
+
+%!  instance_search(-Search) is det.
+%
+%   The state of a new instance search: nothing examined, no nogood.
+
+instance_search(search([], Examined)) :-
+    empty_assoc(Examined).
+
+%!  search_examined(+Instance, +Search0, -Search) is det.
+%
+%   Search0 with Instance examined: no later next_instance/3 gives it.
+
+search_examined(instance(Steps, Bindings), search(Ngs, E0), search(Ngs, E)) :-
+    maplist(arg(1), Steps, Ids),
+    maplist([V=L, V-L]>>true, Bindings, Assignment),
+    put_assoc(Ids-Assignment, E0, true, E).
+
+%!  search_nogood(+Nogood, +Search0, -Search) is det.
+%
+%   Search0 with Nogood (ng/4, instance_nogood/4) learnt.
+
+search_nogood(Ng, search(Ngs, E), search([Ng|Ngs], E)).
+
+%!  instance_nogood(+Partial, +Instance, +Learnt, -Nogood) is semidet.
+%
+%   The nogood ng(Own, Labels, Prefix, Pairs) of a run of Instance that
+%   stopped where Learnt says: Learnt is learnt(Step, LabelIds, Prefix,
+%   Pairs0) with action ids (phase2.nogood): Labels the bindings of the
+%   network variables of Step and of every action of LabelIds (in its
+%   term and its operational preconditions: a grasp, where a part is
+%   taken from or put), Own those of Step as Weight-(Var-Label), 2 for
+%   its grasp (a pickup's, or the one its holding/2 precondition names)
+%   and 1 for the others, Prefix as given and Pairs
+%   the pairs of Pairs0 that some linearisation of Partial's ordering
+%   breaks (the others hold in every instance). Fails if an id is not
+%   one of Partial's actions or no linearisation keeps the pairs (then
+%   there is no nogood: learning none is always sound).
+
+instance_nogood(partial(Actions, Order, _, _), instance(_, Bindings),
+                learnt(Step, Ids, Prefix, Pairs0), ng(Own, Labels, Prefix, Pairs)) :-
+    findall(Id, ( member(Id, [Step|Ids]) ; member(Id, Prefix) ; member(A-B, Pairs0), member(Id, [A, B]) ), All),
+    forall(member(Id, All), memberchk(action(Id, _, _, _, _), Actions)),
+    action_grasp_labels(Actions, Bindings, Step, Grasp),
+    action_labels(Actions, Bindings, Step, Mine),
+    maplist(weighted(Grasp), Mine, Own),
+    maplist(action_labels(Actions, Bindings), Ids, Lss),
+    append([Mine|Lss], Labels0),
+    sort(Labels0, Labels),
+    ordering_closure(Order, G),
+    \+ ( member(X-Y, Pairs0), necessarily_before(Y, X, G) ),
+    exclude(kept_by(G), Pairs0, Pairs).
+
+%   action_labels(+Actions, +Bindings, +Id, -Labels): the Var-Label pairs
+%   of the network variables in action Id's term and operational
+%   preconditions, in standard order.
+action_labels(Actions, Bindings, Id, Labels) :-
+    memberchk(action(Id, T, preconditions(Ops, _), _, _), Actions),
+    findall(V-L, ( sub_term(V, T-Ops), atom(V), memberchk(V=L, Bindings) ), Labels0),
+    sort(Labels0, Labels).
+
+%   weighted(+Grasp, +VL, -W-VL): a failing step's label VL with its
+%   weight: 2 for its grasp (a label of Grasp), 1 for the others.
+weighted(Grasp, VL, W-VL) :-
+    (   memberchk(VL, Grasp) -> W = 2 ; W = 1 ).
+
+%   action_grasp_labels(+Actions, +Bindings, +Id, -Labels): the Var-Label
+%   pairs of action Id's grasp variable: a pickup's own, else the one of
+%   its holding/2 precondition.
+action_grasp_labels(Actions, Bindings, Id, Labels) :-
+    memberchk(action(Id, T, preconditions(Ops, _), _, _), Actions),
+    findall(V-L, ( ( T = pickup(_, V) ; member(op(_, _, holding(_, V)), Ops) ),
+                   atom(V), memberchk(V=L, Bindings) ),
+            Labels0),
+    sort(Labels0, Labels).
+
+%!  search_budget(-Checks:integer) is det.
+%
+%   The checks (labels and order steps weighed against the nogoods) one
+%   next_instance/3 makes before it gives up pruning.
+
+search_budget(200000).
+
+%!  next_instance(+Partial, +Search, -Instance) is semidet.
+%
+%   The next plan instance phase 2 examines (partial_instances/2's
+%   Instance): one no nogood of Search rules out and not examined yet,
+%   labels that have failed less often as a failing step's grasp tried
+%   first (see above). Fails when there is none left.
+
+next_instance(Partial, search(Ngs, Examined), Instance) :-
+    search_budget(Limit),
+    Budget = budget(0, Limit),
+    catch(once(pruned_instance(Partial, Ngs, Examined, Budget, Instance)),
+          phase2_search_budget,
+          once(plain_instance(Partial, Examined, Instance))).
+
+%   ordering_closure(+Order, -G): the ordering graph Order (a ugraph, as
+%   the partial plan keeps it, or ordering.pl's graph) as ordering.pl's
+%   graph, whose closure necessarily_before/3 reads.
+ordering_closure(Order, G) :-
+    (   Order = ord(_, _, _)
+    ->  G = Order
+    ;   empty_ordering(G0),
+        foldl(add_node, Order, G0, G1),
+        findall(A-B, ( member(A-Bs, Order), member(B, Bs) ), Arcs),
+        foldl(add_arc, Arcs, G1, G)
     ).
 
-no_nogood(List, Actions, Assignment, Done, V) :-
-    \+ ( member(ng(V, A, GId, GA, InDone, OutDone), List),
-          forall(member(I, InDone), memberchk(I, Done)),
-          \+ ( member(O, OutDone), memberchk(O, Done) ),
-          step_action(Actions, Assignment, V, A),
-          step_action(Actions, Assignment, GId, GA)
-        ).
+add_node(V-_, G0, G) :-
+    ordering_add_action(V, G0, G).
 
-%   label_allowed(+Nogoods, +Actions, +Order, +Var, +Label): no nogood rules
-%   out Var = Label alone: one whose conditions hold in every
-%   linearisation of Order (each of Done necessarily before its action,
-%   each of NotDone necessarily after) and whose two actions are already
-%   theirs with Var = Label and no other variable bound.
+add_arc(A-B, G0, G) :-
+    prior_to(A, B, G0, G).
 
-label_allowed(nogoods(List, _), Actions, Order, Var, Label) :-
-    \+ ( member(ng(Id, A, GId, GA, Done, NotDone), List),
-          step_action(Actions, [Var-Label], Id, A),
-          step_action(Actions, [Var-Label], GId, GA),
-          forall(member(I, Done), necessarily_before(I, Id, Order)),
-          forall(member(O, NotDone), necessarily_before(Id, O, Order))
-        ).
+%   kept_by(+G, +Pair): every linearisation of G puts A before B.
+kept_by(G, A-B) :-
+    necessarily_before(A, B, G).
 
-step_action(Actions, Assignment, Id, A) :-
-    memberchk(action(Id, T, _, _, _), Actions),
-    substitute(Assignment, T, A0),
-    A0 == A.
+pruned_instance(partial(Actions, Order, Net, Sat), Ngs, Examined, Budget, Instance) :-
+    label_index(Ngs, Index),
+    own_counts(Ngs, Counts, VarCounts),
+    cms_solution(Net, failing_first(VarCounts), choose_labels(Index, Counts, Budget), Assignment),
+    separated(Sat, Assignment),
+    include(labels_hold(Assignment), Ngs, Held),
+    maplist([ng(_, _, Prefix, Pairs), live(Prefix, Pairs)]>>true, Held, Live),
+    empty_assoc(Placed),
+    linearisation(Order, next_step(Budget), st(Placed, Live), Ids),
+    \+ get_assoc(Ids-Assignment, Examined, _),
+    instance_of(Actions, Assignment, Ids, Instance).
+
+plain_instance(partial(Actions, Order, Net, Sat), Examined, Instance) :-
+    cms_solution(Net, every_label, Assignment),
+    separated(Sat, Assignment),
+    linearisation(Order, Ids),
+    \+ get_assoc(Ids-Assignment, Examined, _),
+    instance_of(Actions, Assignment, Ids, Instance).
+
+%   label_index(+Ngs, -Index): the assoc Var-Label -> [Labels] of the
+%   nogoods that need nothing of the order, under each of their labels.
+label_index(Ngs, Index) :-
+    findall(VL-Labels, ( member(ng(_, Labels, [], []), Ngs), member(VL, Labels) ), KVs0),
+    keysort(KVs0, KVs),
+    group_pairs_by_key(KVs, Grouped),
+    list_to_assoc(Grouped, Index).
+
+%   own_counts(+Ngs, -Counts, -VarCounts): the assocs Var-Label -> and
+%   Var -> the weights summed over the nogoods with them among their own
+%   labels (how often, and how near the grasp, they failed).
+own_counts(Ngs, Counts, VarCounts) :-
+    findall(VL-W, ( member(ng(Own, _, _, _), Ngs), member(W-VL, Own) ), Ws),
+    summed(Ws, Counts),
+    findall(V-W, member(V-_-W, Ws), VWs),
+    summed(VWs, VarCounts).
+
+summed(KWs0, Assoc) :-
+    keysort(KWs0, KWs),
+    group_pairs_by_key(KWs, Grouped),
+    maplist(sum_of, Grouped, Sums),
+    list_to_assoc(Sums, Assoc).
+
+sum_of(K-Ws, K-N) :-
+    sum_list(Ws, N).
+
+%   failing_first(+VarCounts, +Vars0, -Vars): csp:solution/4's order: the
+%   variables of Vars0 most failed first, the rest in Vars0's order.
+failing_first(VarCounts, Vars0, Vars) :-
+    map_list_to_pairs(most_failed_key(VarCounts), Vars0, Keyed),
+    keysort(Keyed, Sorted),
+    pairs_values(Sorted, Vars).
+
+most_failed_key(VarCounts, V, K) :-
+    (   get_assoc(V, VarCounts, N) -> K is -N ; K = 0 ).
+
+%   choose_labels(+Index, +Counts, +Budget, +Var, +LabelSet, +Assigned,
+%   -Labels): csp:solution/3's hook: the labels of Var no nogood of Index
+%   rules out with the variables Assigned, fewest failures first (ties in
+%   label-set order).
+choose_labels(Index, Counts, Budget, V, LabelSet, Assigned, Labels) :-
+    tick(Budget),
+    exclude(ruled_out(Index, V, Assigned), LabelSet, Allowed),
+    map_list_to_pairs(failures(Counts, V), Allowed, Keyed),
+    keysort(Keyed, Sorted),
+    pairs_values(Sorted, Labels).
+
+ruled_out(Index, V, Assigned, L) :-
+    get_assoc(V-L, Index, LabelSets),
+    member(Labels, LabelSets),
+    forall(member(W-M, Labels), ( W == V -> M == L ; get_assoc(W, Assigned, M) )),
+    !.
+
+failures(Counts, V, L, N) :-
+    (   get_assoc(V-L, Counts, N) -> true ; N = 0 ).
+
+labels_hold(Assignment, ng(_, Labels, _, _)) :-
+    forall(member(V-L, Labels), memberchk(V-L, Assignment)).
+
+%   next_step(+Budget, +V, +St0, -St): ordering:linearisation/4's hook.
+%   St is st(Placed, Live): the ids placed so far (an assoc) and, for each
+%   nogood whose labels the instance has, live(Prefix, Pairs) with what
+%   is still open of its order. V goes next unless it settles a nogood;
+%   a nogood V contradicts is dropped.
+next_step(Budget, V, st(Placed0, Live0), st(Placed, Live)) :-
+    tick(Budget),
+    foldl(advance(V, Placed0), Live0, Live, []),
+    put_assoc(V, Placed0, true, Placed).
+
+%   advance(+V, +Placed, +Live0, -Live, ?Tail): Live0 after V is placed,
+%   kept in Live if still open, dropped if contradicted; fails if settled.
+advance(V, Placed, live(Prefix0, Pairs0), Live, Tail) :-
+    (   prefix_after(Prefix0, V, Prefix),
+        pairs_after(Pairs0, V, Placed, Pairs)
+    ->  ( Prefix == [], Pairs == [] -> fail ; Live = [live(Prefix, Pairs)|Tail] )
+    ;   Live = Tail
+    ).
+
+prefix_after([], _, []).
+prefix_after([P|Ps], V, Ps) :-
+    P == V.
+
+%   pairs_after(+Pairs0, +V, +Placed, -Pairs): the pairs A-B still open
+%   once V goes after the ids Placed; fails if V is a B whose A is not
+%   placed.
+pairs_after([], _, _, []).
+pairs_after([A-B|Ps0], V, Placed, Ps) :-
+    (   A == V
+    ->  Ps = Ps1
+    ;   B == V
+    ->  get_assoc(A, Placed, _),
+        Ps = Ps1
+    ;   Ps = [A-B|Ps1]
+    ),
+    pairs_after(Ps0, V, Placed, Ps1).
+
+tick(Budget) :-
+    arg(1, Budget, N0),
+    N is N0 + 1,
+    nb_setarg(1, Budget, N),
+    (   arg(2, Budget, Limit), N > Limit
+    ->  throw(phase2_search_budget)
+    ;   true
+    ).
 
 instance_step(Actions, Assignment, Id, Step) :-
     memberchk(action(Id, T, Pre, Add, Del), Actions),

@@ -31,7 +31,10 @@
     evaluation; a problem file's sensors entry takes precedence there.
 
     The first instance with no error wins; otherwise the one with the fewest
-    errors among at most max_instances(Cap) examined.
+    errors among at most max_instances(Cap) examined. Each next instance is
+    searched knowing the earlier ones (partial_plan:next_instance/3): a run
+    that stops at a step it cannot execute says on what that depends
+    (Python's phase2.nogood), and no later instance meets it again.
 */
 :- module(uncertainty,
           [ phase2/4,              % +Problem, +Partial, +Options, -Result
@@ -47,10 +50,10 @@
 :- use_module(library(option)).
 :- use_module(library(error)).
 :- use_module(library(yall)).
-:- use_module(library(solution_sequences), [limit/2]).  % imported: autoloading reads the library index
 :- use_module(foreign, [py_bridge/2, term_data/2]).
 :- use_module(spar_defaults, [default_option/2]).
-:- use_module(partial_plan, [partial_instances/3]).
+:- use_module(partial_plan, [instance_search/1, next_instance/3, search_examined/3, search_nogood/3,
+                              instance_nogood/4]).
 :- use_module(spar_paths, []).    % the file search path spar
 :- use_module(spar(kb/templates/spar_sensing), []).
 :- use_module(spar(kb/templates/spar_actions), []).
@@ -71,33 +74,51 @@ phase2(Problem, Partial, Options, Result) :-
     default_option(max_instances, Cap0),
     option(max_instances(Cap), Options, Cap0),
     must_be(positive_integer, Cap),
-    State = best(none, inf, 0, false),
-    Nogoods = nogoods([], 0),
-    (   once(( limit(Cap, partial_instances(Partial, Nogoods, Instance)),
-               examine(Problem, Instance, State, Nogoods, Aug),
-               arg(2, Aug, 0)
-             ))
-    ->  true
-    ;   arg(3, State, N), N < Cap
-    ->  nb_setarg(4, State, true)
-    ;   true
-    ),
-    State = best(Best, _, Examined, Complete),
-    (   Best == none
-    ->  Result = no_instance(Examined, Cap, Complete)
-    ;   Result = ur(Best, Examined, Cap, Complete)
+    instance_search(Search),
+    search_loop(Problem, Partial, Cap, Search, best(none, inf), 0, Result).
+
+%   search_loop(+Problem, +Partial, +Cap, +Search, +Best, +N, -Result):
+%   examine the next instance (partial_plan:next_instance/3) until one has
+%   no error, Cap are examined or none is left; N examined so far, Best
+%   best(Aug, Errors) the best of them (best(none, inf) before any), Search
+%   what the search knows (the instances examined, the nogoods learnt).
+search_loop(Problem, Partial, Cap, Search0, Best0, N0, Result) :-
+    (   N0 >= Cap
+    ->  search_result(Best0, N0, Cap, false, Result)
+    ;   next_instance(Partial, Search0, Instance)
+    ->  N is N0 + 1,
+        examine(Problem, Partial, Instance, Best0, Best, Search0, Search),
+        (   Best = best(_, 0)
+        ->  search_result(Best, N, Cap, false, Result)
+        ;   search_loop(Problem, Partial, Cap, Search, Best, N, Result)
+        )
+    ;   search_result(Best0, N0, Cap, true, Result)
     ).
 
-examine(Problem, Instance, State, Nogoods, Aug) :-
-    arg(3, State, N0), N is N0 + 1, nb_setarg(3, State, N),
+search_result(best(none, _), N, Cap, Complete, no_instance(N, Cap, Complete)) :- !.
+search_result(best(Aug, _), N, Cap, Complete, ur(Aug, N, Cap, Complete)).
+
+%   examine(+Problem, +Partial, +Instance, +Best0, -Best, +Search0, -Search):
+%   run Instance (check_instance/6, bounded by Best0's error count); Best
+%   the better of Best0 and it, Search0 with it examined and with the
+%   nogood of each run that stopped at a step it could not execute.
+examine(Problem, Partial, Instance, best(Aug0, E0), Best, Search0, Search) :-
     instance_steps(Instance, Steps, Bindings),
     instance_sources(Instance, Sources),
-    arg(2, State, BestE),
-    check_instance(Problem, Steps, Sources, BestE, Nogoods, aug(S, E, V, R, C, G)),
-    Aug = aug(S, E, V, R, C, G, Bindings),
-    (   (BestE == inf ; E < BestE)
-    ->  nb_setarg(1, State, Aug), nb_setarg(2, State, E)
-    ;   true
+    Learnt = learnt([]),
+    (   check_instance(Problem, Steps, Sources, E0, Learnt, aug(S, E, V, R, C, G)),
+        (E0 == inf ; E < E0)
+    ->  Best = best(aug(S, E, V, R, C, G, Bindings), E)
+    ;   Best = best(Aug0, E0)
+    ),
+    arg(1, Learnt, Ls),
+    search_examined(Instance, Search0, Search1),
+    foldl(learn(Partial, Instance), Ls, Search1, Search).
+
+learn(Partial, Instance, L, Search0, Search) :-
+    (   instance_nogood(Partial, Instance, L, Ng)
+    ->  search_nogood(Ng, Search0, Search)
+    ;   Search = Search0
     ).
 
 %!  instance_steps(+Instance, -Steps, -Bindings) is det.
@@ -147,20 +168,21 @@ action_sources(action(Id, _, preconditions(Ops, _), _, _), Id-Pairs) :-
 check_instance(Problem, Steps, Sources, Bound, Augmented) :-
     check_instance(Problem, Steps, Sources, Bound, none, Augmented).
 
-%   check_instance(+Problem, +Steps, +Sources, +Bound, +Nogoods, -Augmented):
-%   as check_instance/5; a run that stops where Python can say what any
-%   instance meeting the same conditions would stop at (its nogood) adds
-%   ng(Id, Action, GId, GAction, Done, NotDone) to Nogoods (nogoods(List, _),
-%   nb_setarg/3; none: not kept), which partial_instances/3 reads.
+%   check_instance(+Problem, +Steps, +Sources, +Bound, +Learnt, -Augmented):
+%   as check_instance/5; a run that stops at a step it cannot execute and
+%   whose nogood Python can state (phase2.nogood: on what any instance
+%   stopping there depends) adds learnt(Step, LabelIds, Prefix, Pairs) to
+%   Learnt (learnt(List), nb_setarg/3; none: not kept), which phase2/4
+%   turns into the search's nogood (partial_plan:instance_nogood/4).
 
-check_instance(Problem, Steps, Sources, Bound, Nogoods,
+check_instance(Problem, Steps, Sources, Bound, Learnt,
                aug(Final, Errors, Verifs, Recovs, Verdicts, Geometry)) :-
     must_be(atom, Problem),
     must_be(list, Steps),
     must_be(list, Sources),
     sources_dict(Sources, From),
     sensing_data(Sensing),
-    Ctx = ctx(Problem, From, Sensing, Nogoods),
+    Ctx = ctx(Problem, From, Sensing, Learnt),
     run(Ctx, Steps, [], Result),
     remedy_loop(Ctx, Steps, [], Result, Bound, Final, Failed, Verdicts, Geometry),
     length(Failed, Errors),
@@ -175,7 +197,7 @@ failed_step(Steps, Id, step(Id, A)) :-
 %   -Verdicts, -Geometry): Result is the run of Steps (run/4). At its first
 %   failing action not yet given up, try the remedies in order; an action
 %   no remedy helps is given up (it counts as an error) and the run goes on
-%   past it. Ctx is ctx(Problem, Sources, Sensing, Nogoods) (sources_dict/2,
+%   past it. Ctx is ctx(Problem, Sources, Sensing, Learnt) (sources_dict/2,
 %   sensing_data/1).
 
 remedy_loop(_, Steps, GivenUp, ok(Verdicts, Geometry), _, Steps, Failed, Verdicts, Geometry) :-
@@ -200,30 +222,36 @@ remedy_loop(Ctx, Steps, GivenUp, failed(Step, Before), Bound, Final, Failed, Ver
 %   the steps before it. Fails if a geometric precondition fails (the
 %   instance cannot be executed).
 
-run(ctx(Problem, From, Sensing, Nogoods), Steps, GivenUp, Result) :-
+run(ctx(Problem, From, Sensing, Learnt), Steps, GivenUp, Result) :-
     maplist(step_dict, Steps, Dicts),
     maplist(step_id_text, GivenUp, GivenUpText),
     py_bridge(evaluate(Problem, Dicts, From, GivenUpText, Sensing), Eval),
-    keep_nogood(Nogoods, Eval, Steps),
+    keep_nogood(Learnt, Eval),
     atom_string(Status, Eval.status),
     eval_result(Status, Problem, Eval, Steps, Result).
 
-%   keep_nogood(+Nogoods, +Eval, +Steps): add the run's nogood (Python's
-%   phase2.nogood, ids as strings) to Nogoods as ng/6 with the actions of
-%   its two steps in Steps; nothing without one or without a store.
-keep_nogood(Nogoods, Eval, Steps) :-
-    (   Nogoods = nogoods(List0, _),
+%   keep_nogood(+Learnt, +Eval): add the run's nogood (Python's
+%   phase2.nogood: step, labels, prefix, before, ids as strings) to Learnt
+%   as learnt(Step, LabelIds, Prefix, Pairs); nothing without one or
+%   without a store.
+keep_nogood(Learnt, Eval) :-
+    (   Learnt = learnt(List0),
         get_dict(nogood, Eval, NG),
-        is_dict(NG),
-        atom_string(Id, NG.step),
-        atom_string(GId, NG.grasp_step),
-        memberchk(step(Id, A), Steps),
-        memberchk(step(GId, GA), Steps)
-    ->  maplist([S, X]>>atom_string(X, S), NG.done, Done),
-        maplist([S, X]>>atom_string(X, S), NG.not_done, NotDone),
-        nb_setarg(1, Nogoods, [ng(Id, A, GId, GA, Done, NotDone)|List0])
+        is_dict(NG)
+    ->  atom_string(Step, NG.step),
+        maplist(text_atom, NG.labels, Ids),
+        maplist(text_atom, NG.prefix, Prefix),
+        maplist(text_pair, NG.before, Pairs),
+        nb_setarg(1, Learnt, [learnt(Step, Ids, Prefix, Pairs)|List0])
     ;   true
     ).
+
+text_atom(S, A) :-
+    atom_string(A, S).
+
+text_pair([S1, S2], A1-A2) :-
+    atom_string(A1, S1),
+    atom_string(A2, S2).
 
 %   eval_result(+Status, +Problem, +Eval, +Steps, -Result): Eval holds each
 %   step's id and verdicts; a run that went through also its token (the

@@ -135,6 +135,17 @@ def test_a_pair_every_refusal_shares_is_said_once() -> None:
     assert sum("upper_arm-table" in line for line in lines) == 1
 
 
+def test_a_refusal_many_instances_met_is_one_line_with_their_number() -> None:
+    from spar_py.planning.messages import collision_lines
+    from spar_py.world.reach.workspace import Refusal
+
+    refusals = [Refusal("assemble(gear_a, shaft_a)", (("fingers", "gear_b"),)),
+                Refusal("pickup(gear_a, gear_a_g15)", (("palm", "housing"),))]
+    lines = collision_lines(refusals, {"assemble(gear_a, shaft_a)": 37, "pickup(gear_a, gear_a_g15)": 1})
+    assert lines == ["no collision-free IK for assemble(gear_a, shaft_a): fingers-gear_b (x37 instances)",
+                     "no collision-free IK for pickup(gear_a, gear_a_g15): palm-housing"]
+
+
 # ---------------------------------------------------------------- units of the bounds
 
 @pytest.mark.parametrize("name, unit", [("peg_in_block", "in"), ("shaft_in_bracket", "mm")])

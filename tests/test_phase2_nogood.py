@@ -1,10 +1,11 @@
-"""Phase 2's nogoods (phase2/instance.py's nogood, prolog/partial_plan.pl's partial_instances/3): an
-infeasible run of a plan instance says on what condition any instance of the same partial plan
-fails at the same step, and the instance search skips those instances without running them.
+"""Phase 2's nogoods (phase2/nogood.py, prolog/partial_plan.pl's next_instance/3): an infeasible
+run of a plan instance says on what condition any instance of the same partial plan fails at the
+same step, and the instance search skips those instances without running them.
 
 Checked here on the run itself, not on the code that derives the condition: the instance a
-nogood came from is run again with the steps before the failing one in other orders (the same
-parts done, so the condition holds), and each run that gets that far must stop there, infeasible.
+nogood came from is run again with the steps before the failing one in other orders that keep
+the nogood's order (``before``), and each run that gets that far must stop there, infeasible.
+tests/test_phase2_search.py checks the nogoods against every instance of small cells.
 """
 from __future__ import annotations
 
@@ -77,18 +78,19 @@ def test_the_stool_plans_and_learns_nogoods(stool_nogoods):
     assert plan.outcome.value == "plan"
     assert got, "no infeasible run gave a nogood"
     for _, _, ng in got:
-        assert ng["step"] and ng["grasp_step"]
+        assert ng["step"] and set(ng) == {"step", "labels", "prefix", "before"}
 
 
 def test_every_nogood_holds_in_other_orders_of_its_prefix(stool_nogoods):
-    """The prefix's blocks shuffled (the failing step's own block stays last): each run that gets to
-    the nogood's step is infeasible there."""
+    """The prefix's blocks shuffled (the failing step's own block stays last), keeping the nogood's
+    ``before`` pairs: each run that gets to the nogood's step is infeasible there."""
     _, got, caches = stool_nogoods
     rng = random.Random(7)
     cell = load_problem(ROOT / "kb" / "problems" / "fabrica_stool_circular.yaml")
     before = seat_order(cell.product)[1]
     confirmed = 0
     for (steps, sources, ng), cache in zip(got, caches):
+        assert not ng["prefix"], "the stool has no put-down: its nogoods need no prefix"
         blocks = _blocks(steps)
         at = next(i for i, b in enumerate(blocks) if any(s["id"] == ng["step"] for s in b))
         head, own = blocks[:at], blocks[at]
@@ -97,8 +99,10 @@ def test_every_nogood_holds_in_other_orders_of_its_prefix(stool_nogoods):
         for _ in range(15):
             order = _random_order(head, part, before, rng)
             trial = [s for b in order for s in b] + own
-            ids = {s["id"] for s in trial[:-1]}
-            assert set(ng["done"]) <= ids and not set(ng["not_done"]) & ids
+            pos = {s["id"]: i for i, s in enumerate(trial)}
+            if any(a in pos and b in pos and pos[a] > pos[b] for a, b in ng["before"]):
+                continue  # an order the nogood does not speak of
+            assert all(a in pos for a, b in ng["before"] if b == ng["step"])
             try:
                 ev = phase2.evaluate(cache, trial, sources, given_up=[s["id"] for s in trial])
             except SparValueError:

@@ -190,5 +190,21 @@ def test_a_kept_phase_2_step_logs_its_refusal_in_every_run() -> None:
     assert answers[0] == answers[1] and answers[0]["status"] == "infeasible"
     assert set(answers[0]) == {"status", "at", "steps", "nogood"} and set(answers[0]["steps"][0]) == {"id", "verdicts"}
     # the shelf is an obstacle, not a part: the pickup with that grasp fails whatever else is done
-    assert answers[0]["nogood"] == {"step": "action_1", "grasp_step": "action_1", "done": [], "not_done": []}
+    assert answers[0]["nogood"] == {"step": "action_1", "labels": [], "prefix": [], "before": []}
     assert logs[0] == logs[1] == ["no collision-free IK for pickup(peg, p1G10): tool_mount-shelf"]
+
+
+def test_a_run_counts_the_instances_that_met_each_refusal() -> None:
+    """Phase 2's door counts, per refusal, the instances whose runs met it: a second run of one
+    instance (as after a remedy) adds none, another instance meeting it adds one; the no-plan lines
+    say it once with that number."""
+    from spar_py.planning.messages import collision_lines
+
+    run = PlanRun(CellCache(load_problem(PROBLEMS / "collision_no_plan.yaml")))
+    one = [{"id": "action_1", "name": "pickup", "args": ["peg", "p1G10"]}]
+    other = [{"id": "action_2", "name": "pickup", "args": ["peg", "p1G10"]}]
+    for steps in (one, one, other):
+        assert run.evaluate(steps)["status"] == "infeasible"
+    assert run.refusal_instances() == {"pickup(peg, p1G10)": 2}
+    assert collision_lines(run.world.log.refusals(), run.refusal_instances()) == [
+        "no collision-free IK for pickup(peg, p1G10): tool_mount-shelf (x2 instances)"]

@@ -71,10 +71,10 @@ test(ac3_wipeout, fail) :-
     ac3(net(Nodes, Arcs), _).
 
 %   solution/3 gives exactly the solutions of solution/2 whose labels its
-%   test allows, in the same order.
+%   hook keeps, in the order it gives the labels.
 
-no_v1_2(v1, L) :- L \== 2.
-no_v1_2(V, _) :- V \== v1.
+no_v1_2(v1, Ls, _, Out) :- !, exclude(==(2), Ls, Out).
+no_v1_2(_, Ls, _, Ls).
 
 test(solutions_filtered, Got == Want) :-
     fig15(Net),
@@ -82,5 +82,28 @@ test(solutions_filtered, Got == Want) :-
     findall(S, ( solution(Net, S), \+ memberchk(v1-2, S) ), Want),
     findall(S, solution(Net, S), All),
     length(All, NA), length(Want, NW), NW < NA.
+
+test(solutions_reordered, Got == [[v1-2, v2-2, v3-4], [v1-1, v2-2, v3-4]]) :-
+    fig15(Net),
+    findall(S, solution(Net, [_, Ls, _, Rs]>>reverse(Ls, Rs), S), Got).
+
+%   The hook sees the labels assigned so far: v3 is chosen after v1 and v2
+%   (first-fail order), and its hook refuses a label when v1 is 2.
+
+v3_not_with_v1_2(v3, Ls, Assigned, Out) :- !,
+    (   get_assoc(v1, Assigned, 2) -> Out = [] ; Out = Ls ).
+v3_not_with_v1_2(_, Ls, _, Ls).
+
+%   solution/4 searches the variables in the order its hook gives: v3
+%   first, it sees nothing assigned and refuses nothing.
+
+test(solutions_in_given_order, Got == All) :-
+    fig15(Net),
+    findall(S, solution(Net, [Vs0, [v3|Vs]]>>exclude(==(v3), Vs0, Vs), v3_not_with_v1_2, S), Got),
+    findall(S, solution(Net, S), All).
+
+test(solutions_see_assigned, Got == [[v1-1, v2-2, v3-4]]) :-
+    fig15(Net),
+    findall(S, solution(Net, v3_not_with_v1_2, S), Got).
 
 :- end_tests(csp_fig15).

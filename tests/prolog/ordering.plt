@@ -101,6 +101,21 @@ test(linearisations_pruned, Pruned == Filtered) :-
     findall(L, linearisation(G, L), All),
     length(All, NA), length(Filtered, NF), NF < NA.
 
+%   linearisation/4 threads its state through each prefix: here the
+%   number of actions placed, c refused as the first.
+
+test(linearisations_threaded, Ls == [[a, b, c], [a, c, b], [b, a, c], [b, c, a]]) :-
+    empty_ordering(G0),
+    foldl(ordering_add_action, [a, b, c], G0, G),
+    findall(L, linearisation(G, [V, N0, N]>>(N is N0 + 1, (V == c -> N > 1 ; true)), 0, L), Ls).
+
+test(linearisations_threaded_as_pruned, Threaded == Pruned) :-
+    empty_ordering(G0),
+    foldl(ordering_add_action, [a, b, c, d], G0, G1),
+    prior_to(a, c, G1, G),
+    findall(L, linearisation(G, [V, D0, D]>>(allowed(D0, V), append(D0, [V], D)), [], L), Threaded),
+    findall(L, linearisation(G, allowed, L), Pruned).
+
 test(type_error, [error(type_error(atom, 1))]) :-
     empty_ordering(G),
     prior_to(1, a, G, _).

@@ -198,6 +198,111 @@ test(instance_substitutes_everywhere) :-
     assertion(memberchk(op(_, action_4, part_location(block, tr2)), Ops)),
     assertion(memberchk(part_location(block, tr2), Dels)).
 
+%   Phase 2's instance search (partial_plan:next_instance/3): with nothing
+%   learnt it gives partial_instances/2's instances in their order; a
+%   nogood rules out exactly the instances it names; a failing step's own
+%   label is tried after the others.
+
+instance_terms(instance(Steps, Bindings), Terms-Bindings) :-
+    maplist([action(_, T, _, _, _), T]>>true, Steps, Terms).
+
+%   search_all(+P, +S0, -Is): every instance next_instance/3 gives from S0,
+%   each marked examined before the next is asked for.
+search_all(P, S0, [I|Is]) :-
+    next_instance(P, S0, I),
+    !,
+    search_examined(I, S0, S),
+    search_all(P, S, Is).
+search_all(_, _, []).
+
+test(search_first_two_as_enumerated, Got == Want) :-
+    partial(P),
+    findall(T, limit(2, ( partial_instances(P, I), instance_terms(I, T) )), Want),
+    instance_search(S0),
+    next_instance(P, S0, I1),
+    search_examined(I1, S0, S1),
+    next_instance(P, S1, I2),
+    maplist(instance_terms, [I1, I2], Got).
+
+test(search_every_instance_once, N == 48) :-
+    partial(P),
+    instance_search(S0),
+    search_all(P, S0, Is),
+    sort(Is, Set),
+    length(Set, N).
+
+%   A run of the first instance that stopped at the assemble (action_1)
+%   for a reason of its own labels: the peg's grasp (to change first) and
+%   the block's pose.
+test(search_learns_own_labels,
+     Own-Labels == [2-(grasp_1-p1G12), 1-(pos_1-p2P1)]-[grasp_1-p1G12, pos_1-p2P1]) :-
+    partial(P),
+    instance_search(S0),
+    next_instance(P, S0, I),
+    instance_nogood(P, I, learnt(action_1, [], [], []), ng(Own, Labels, _, _)).
+
+test(search_rules_out_what_the_nogood_names, N == Want) :-
+    partial(P),
+    aggregate_all(count, ( partial_instances(P, instance(_, Bs)),
+                           \+ ( memberchk(grasp_1 = p1G12, Bs), memberchk(pos_1 = p2P1, Bs) ) ),
+                  Want),
+    assertion(Want < 47),
+    instance_search(S0),
+    next_instance(P, S0, I),
+    instance_nogood(P, I, learnt(action_1, [], [], []), Ng),
+    search_examined(I, S0, S1),
+    search_nogood(Ng, S1, S2),
+    search_all(P, S2, Is),
+    length(Is, N).
+
+%   The nogood names the peg's grasp with the block's first grasp (the
+%   pickup action_4 is among its labels): only that pair is ruled out, but
+%   the peg's grasp, the failing step's own label, changes first.
+test(search_moves_the_failing_label_first, true(G \== p1G12)) :-
+    partial(P),
+    findall(Bs2, limit(2, partial_instances(P, instance(_, Bs2))), [_, Second]),
+    assertion(memberchk(grasp_1 = p1G12, Second)),   % the enumeration's next keeps it
+    instance_search(S0),
+    next_instance(P, S0, I),
+    instance_nogood(P, I, learnt(action_1, [action_4], [], []), Ng),
+    Ng = ng(_, Labels, _, _),
+    assertion(memberchk(grasp_2-p2G1, Labels)),
+    search_examined(I, S0, S1),
+    search_nogood(Ng, S1, S2),
+    next_instance(P, S2, instance(_, Bs)),
+    memberchk(grasp_1 = G, Bs).
+
+%   An order the only linearisation never takes gives no nogood; one it
+%   always takes is needed by no check (every instance with the labels is
+%   ruled out).
+test(search_order_pairs, N-Pairs == 36-[]) :-
+    partial(P),
+    instance_search(S0),
+    next_instance(P, S0, I),
+    search_examined(I, S0, S1),
+    \+ instance_nogood(P, I, learnt(action_2, [], [], [action_1-action_4]), _),
+    instance_nogood(P, I, learnt(action_2, [], [], [action_4-action_1]), Ng),
+    Ng = ng(_, _, _, Pairs),
+    search_nogood(Ng, S1, S2),
+    search_all(P, S2, Is),
+    length(Is, N).
+
+test(search_prefix, N == 36) :-
+    partial(P),
+    instance_search(S0),
+    next_instance(P, S0, I),
+    search_examined(I, S0, S1),
+    instance_nogood(P, I, learnt(action_2, [], [action_4, action_3, action_2], []), Ng),
+    search_nogood(Ng, S1, S2),
+    search_all(P, S2, Is),
+    length(Is, N).
+
+test(search_unknown_id, fail) :-
+    partial(P),
+    instance_search(S0),
+    next_instance(P, S0, I),
+    instance_nogood(P, I, learnt(sense_action_1_1, [], [], []), _).
+
 :- end_tests(sec6_paper_cell).
 
                  /*******************************

@@ -47,6 +47,7 @@ from spar_py.core.model import Bounds, Cell
 from spar_py.core.units import ANGLE_UNITS, LENGTH_UNITS
 from spar_py.world.motion import MotionFailure, MotionOptions
 from spar_py.world.collision import CellCache
+from spar_py.phase2.nogood import exact_prefix, nogood
 from spar_py.phase2.placements import choose_placements, placements_for
 from spar_py.phase2.positions import poses, position_bounds
 from spar_py.phase2.rest import STATE_CHECKS, retention_refusal
@@ -91,7 +92,7 @@ class Evaluation:
     steps: list[dict[str, Any]]
     refusals: list[tuple[str, tuple[tuple[str, str], ...]]] = field(default_factory=list)
     motion: InstanceMotion | MotionFailure | None = None
-    #: An infeasible run's :func:`nogood`, or None.
+    #: An infeasible run's nogood (phase2/nogood.py), or None.
     nogood: dict[str, Any] | None = None
 
 
@@ -218,64 +219,24 @@ def evaluate(cache: CellCache, steps: Sequence[Step], sources: Sources | None = 
 
         records, got = run_motions(cache, steps, worlds, out, motion)
         if isinstance(got, MotionFailure):
-            return Evaluation("infeasible", records[-1]["id"], records, refused, got)
+            at = records[-1]["id"]
+            return Evaluation("infeasible", at, records, refused, got, nogood=_motion_nogood(steps, at))
         return Evaluation("ok", None, records, refused, got)
     return Evaluation("ok", None, out, refused)
 
 
-def nogood(before: World, after: World, steps: Sequence[Step], at: int, checks: list[dict[str, Any]]
-           ) -> dict[str, Any] | None:
-    """What makes step ``steps[at]`` (``s``) of the instance ``steps`` infeasible, as a condition on any plan
-    instance of the same partial plan, for phase 2's instance search (prolog/uncertainty.pl): the
-    step ``step`` with the grasp its pickup ``grasp_step`` bound, executed after every step of
-    ``done`` and before every step of ``not_done``, fails the same way. None unless that is sure.
-
-    It is sure when the step is a pickup or an assemble refused only for want of an arm solution
-    (no IK, or every solution collides: no state check), the instance has no put-down (every part
-    is where the cell lays it or in its place on its body) and no stock object, and every part
-    the refusals name outside the moving body, and the part an assemble goes into, lies as
-    ``done``/``not_done`` fix it: the steps that mated it and each part between it and its
-    body's root, with the root not yet picked. Its world pose is then the same, the tool pose is
-    (the grasp and the mate are in the steps' terms), and a part the refusals do not name is
-    no obstacle of any solution; more parts elsewhere never free one."""
-    s = steps[at]
-    name = s["name"]
-    if name not in ("pickup", "assemble") or any(t["name"] == "putdown" for t in steps) or stock_of(before.cell):
+def _motion_nogood(steps: Sequence[Step], at: str) -> dict[str, Any] | None:
+    """The nogood of a run whose motions stop at step ``at``: the motions are planned stop after
+    stop from the one before (world/motion/paths.py's plan_stops, seeded), each from the worlds
+    of the steps so far, so the prefix fixes them (nogood.exact_prefix). None at a step a remedy
+    inserted, and after a squeeze: a squeeze moves the arm, and a remedy may put one before the
+    step for the sake of a later one (before the pickup of a part whose insertion comes later)."""
+    k = next((i for i, t in enumerate(steps) if t["id"] == at), None)
+    if k is None or any(t["name"] == "squeeze" for t in steps[:k + 1]):
         return None
-    bad = [c for c in checks if c["kind"] == "geometric" and not c["satisfied"]]
-    if not bad or any(c.get("constraint") != "reachable" for c in bad):
-        return None
-    unc = before.unc
-    obj = str(s["args"][0])
-    done_before = steps[:at]
-    picks = [t for t in done_before if t["name"] == "pickup" and str(t["args"][0]) == obj]
-    grasp_step = s["id"] if name == "pickup" else (picks[-1]["id"] if picks else None)
-    if grasp_step is None or unc.root(obj) != obj:
-        return None
-    moving = set(unc.body(obj))
-    named = {n.removeprefix("held:") for _, pairs in after.refused for pair in pairs for n in pair}
-    fixed = {n for n in named if n in unc.objects} - {obj}
-    if fixed & moving:
-        return None  # a part carried with it: its presence is the body's, not said here
-    if name == "assemble":
-        fixed.add(str(s["args"][1]))
-    done: set[str] = set()
-    not_done: set[str] = set()
-    for part in sorted(fixed):
-        chain = [part]
-        while chain[-1] in unc.attached:
-            chain.append(unc.attached[chain[-1]].parent)
-        root = chain[-1]
-        if unc.obj(root).where == ur.HAND or any(t["name"] == "pickup" and str(t["args"][0]) == root
-                                                 for t in done_before):
-            return None  # its body has moved: its pose is the plan's
-        for c in chain[:-1]:
-            mated = [t["id"] for t in done_before if t["name"] == "assemble" and str(t["args"][0]) == c]
-            if not mated:
-                return None
-            done.add(mated[-1])
-        not_done |= {t["id"] for t in steps if t["name"] == "pickup" and str(t["args"][0]) == root}
-    return {"step": s["id"], "grasp_step": grasp_step, "done": sorted(done), "not_done": sorted(not_done)}
+    manip = [t for t in steps if t["name"] in ("pickup", "putdown", "assemble")]
+    j = next((i for i, t in enumerate(manip) if t["id"] == at), None)
+    return None if j is None else exact_prefix(manip, j)
 
 
 def _refined(cache: CellCache, out: list[dict[str, Any]], worlds: list[World]) -> list[dict[str, Any]]:

@@ -290,5 +290,5 @@ def explain(cell: Cell, reason: Mapping[str, Any], run: PlanRun) -> Explanation:
         digest = phase2_digest(cell, run.failures, cause.examined, cause.cap, cause.complete)
     refusals = log.refusals()
     out = Explanation(cause, motions, tuple(run.infeasible), single, grasps, digest,
-                      tuple(collision_lines(refusals)), None, extra)
+                      tuple(collision_lines(refusals, run.refusal_instances())), None, extra)
     return replace(out, summary=summary(cell, out.to_json(), refusals))

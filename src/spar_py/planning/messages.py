@@ -5,14 +5,15 @@ reachable(grasp_1, init_pos1), [part_location(peg, init_pos1)])``) or, in phase 
 instance failure. :func:`summary` turns it into one line that says which of the cell's goals
 could not be met and the nearest cause: a part out of the arm's reach, every grasp refused by
 collisions (with the pairs seen most often), no placement for a put-down. :func:`collision_lines`
-writes the run's collision refusals, a pair that every refusal shares said once.
+writes the run's collision refusals, a pair that every refusal shares said once, a refusal many
+plan instances met once with their number.
 :func:`expected_failures` is the first line of a plan with actions planned for failure.
 """
 from __future__ import annotations
 
 import re
 from collections import Counter
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -45,9 +46,12 @@ def shared_pairs(refusals: Sequence[Refusal]) -> list[tuple[str, str]]:
     return [p for p in refusals[0].pairs if p in common]
 
 
-def collision_lines(refusals: Sequence[Refusal]) -> list[str]:
+def collision_lines(refusals: Sequence[Refusal], instances: Mapping[str, int] | None = None) -> list[str]:
     """One line per refusal; a pair that every refusal shares is said once, first, and left out
-    of the lines below it (``upper_arm-table`` on every refused grasp says nothing per grasp)."""
+    of the lines below it (``upper_arm-table`` on every refused grasp says nothing per grasp).
+    ``instances``: for a refusal of phase 2's steps, the number of plan instances whose runs met
+    it, said once at the end of its line (``(x37 instances)``) instead of a line per instance."""
+    counts = instances or {}
     shared = shared_pairs(refusals)
     out = []
     if shared:
@@ -56,7 +60,9 @@ def collision_lines(refusals: Sequence[Refusal]) -> list[str]:
                    f"the other pairs of each refusal:")
     for r in refusals:
         rest = list(dict.fromkeys(pair_text(p) for p in r.pairs if p not in shared))
-        out.append(f"no collision-free IK for {r.what}: {', '.join(rest) if rest else 'only the shared pairs'}")
+        n = counts.get(r.what, 1)
+        times = f" (x{n} instances)" if n > 1 else ""
+        out.append(f"no collision-free IK for {r.what}: {', '.join(rest) if rest else 'only the shared pairs'}{times}")
     return out
 
 

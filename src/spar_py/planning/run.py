@@ -84,12 +84,18 @@ def _text(arg: Any) -> str:
     return str(arg)
 
 
-def _failure(steps: list[dict[str, Any]], sources: dict[str, dict[str, str]] | None,
-             ev: phase2.Evaluation) -> InstanceFailure:
-    """The failure record of the infeasible run ``ev`` of the instance ``steps``."""
+def _instance_key(steps: list[dict[str, Any]], sources: dict[str, dict[str, str]] | None) -> tuple:
+    """What names a plan instance across its runs: its manipulation steps' terms and its sources
+    (the runs of one instance, with sensing inserted or actions given up, share it)."""
     manip = tuple((s["id"], s["name"], tuple(_text(a) for a in s["args"])) for s in steps
                   if not str(s["id"]).startswith(("sense_", "squeeze_")))
     src = tuple(sorted((k, tuple(sorted(v.items()))) for k, v in (sources or {}).items()))
+    return manip, src
+
+
+def _failure(steps: list[dict[str, Any]], sources: dict[str, dict[str, str]] | None,
+             ev: phase2.Evaluation) -> InstanceFailure:
+    """The failure record of the infeasible run ``ev`` of the instance ``steps``."""
     at = next(s for s in steps if s["id"] == ev.at)
     args = tuple(_text(a) for a in at["args"])
     last = ev.steps[-1] if ev.steps and ev.steps[-1]["id"] == ev.at else {"verdicts": []}
@@ -100,14 +106,14 @@ def _failure(steps: list[dict[str, Any]], sources: dict[str, dict[str, str]] | N
     grasp = args[1] if at["name"] == "pickup" and len(args) > 1 else (_text(picks[-1]["args"][1]) if picks else None)
     moved = tuple(dict.fromkeys(_text(s["args"][0]) for s in before))
     term = f"{at['name']}({', '.join(args[:1 if at['name'] in _OWN_ARG else 2])})"
-    return InstanceFailure((manip, src), str(ev.at), term, str(at["name"]), args,
+    return InstanceFailure(_instance_key(steps, sources), str(ev.at), term, str(at["name"]), args,
                            tuple(ev.refusals), why, grasp, moved)
 
 
 class PlanRun:
     """One planning run: its world (``world``: cell cache, options, log) and phase 2's door."""
 
-    __slots__ = ("world", "infeasible", "failures")
+    __slots__ = ("world", "infeasible", "failures", "_refused_in")
 
     def __init__(self, cache: CellCache, options: RunOptions | None = None) -> None:
         self.world = WorldRun(cache, options)
@@ -117,6 +123,8 @@ class PlanRun:
         #: Every run of an instance that stopped at a step it could not execute, in order
         #: (planning.messages.phase2_digest counts them by instance).
         self.failures: list[InstanceFailure] = []
+        #: Each refusal of phase 2's steps (its ``what``) -> the instances whose runs met it.
+        self._refused_in: dict[str, set[tuple]] = {}
 
     @property
     def cell(self) -> Cell:
@@ -137,8 +145,10 @@ class PlanRun:
         for an infeasible one phase2.nogood can generalise)."""
         log = self.world.log
         ev = phase2.evaluate(self.world.cache, steps, sources, given_up, sensing, self.world.options.motion)
+        key = _instance_key(steps, sources)
         for what, pairs in ev.refusals:
             log.refuse(what, pairs)
+            self._refused_in.setdefault(what, set()).add(key)
         if isinstance(ev.motion, MotionFailure):
             log.fail_motion(ev.motion)
         if ev.status == "infeasible" and ev.at is not None:
@@ -162,6 +172,11 @@ class PlanRun:
                          "position_bounds": r.get("position_bounds")} for r in ev.steps}
         out["token"] = log.keep(StepData(geo, ev.motion))
         return out
+
+    def refusal_instances(self) -> dict[str, int]:
+        """Each refusal of phase 2's steps (its ``what``, as the run's log keeps it) -> the number of
+        plan instances whose runs met it (planning.messages.collision_lines sums them in one line)."""
+        return {what: len(keys) for what, keys in self._refused_in.items()}
 
     def join(self, instance: dict[str, Any]) -> Any:
         """Put the kept geometry of the chosen phase-2 run into the plan's ``instance`` (in place):
