@@ -50,10 +50,11 @@
 :- use_module(library(option)).
 :- use_module(library(error)).
 :- use_module(library(yall)).
+:- use_module(library(aggregate), [aggregate_all/3]).
 :- use_module(foreign, [py_bridge/2, term_data/2]).
 :- use_module(spar_defaults, [default_option/2]).
 :- use_module(partial_plan, [instance_search/1, next_instance/3, search_examined/3, search_nogood/3,
-                              instance_nogood/4]).
+                              instance_nogood/4, partial_ordering/2]).
 :- use_module(spar_paths, []).    % the file search path spar
 :- use_module(spar(kb/templates/spar_sensing), []).
 :- use_module(spar(kb/templates/spar_actions), []).
@@ -75,45 +76,78 @@ phase2(Problem, Partial, Options, Result) :-
     option(max_instances(Cap), Options, Cap0),
     must_be(positive_integer, Cap),
     instance_search(Search),
-    search_loop(Problem, Partial, Cap, Search, best(none, inf), 0, Result).
+    search_loop(Problem, Partial, Cap, Search, best(none, inf, 0), 0, Result).
 
 %   search_loop(+Problem, +Partial, +Cap, +Search, +Best, +N, -Result):
 %   examine the next instance (partial_plan:next_instance/3) until one has
-%   no error, Cap are examined or none is left; N examined so far, Best
-%   best(Aug, Errors) the best of them (best(none, inf) before any), Search
-%   what the search knows (the instances examined, the nogoods learnt).
+%   no error, or only errors every instance has (forced/3), Cap are
+%   examined or none is left; N examined so far, Best best(Aug, Errors,
+%   Forced) the best of them (best(none, inf, 0) before any), Search what
+%   the search knows (the instances examined, the nogoods learnt).
 search_loop(Problem, Partial, Cap, Search0, Best0, N0, Result) :-
     (   N0 >= Cap
     ->  search_result(Best0, N0, Cap, false, Result)
     ;   next_instance(Partial, Search0, Instance)
     ->  N is N0 + 1,
         examine(Problem, Partial, Instance, Best0, Best, Search0, Search),
-        (   Best = best(_, 0)
+        (   Best = best(_, E, F), (E == 0 ; E == F)
         ->  search_result(Best, N, Cap, false, Result)
         ;   search_loop(Problem, Partial, Cap, Search, Best, N, Result)
         )
     ;   search_result(Best0, N0, Cap, true, Result)
     ).
 
-search_result(best(none, _), N, Cap, Complete, no_instance(N, Cap, Complete)) :- !.
-search_result(best(Aug, _), N, Cap, Complete, ur(Aug, N, Cap, Complete)).
+search_result(best(none, _, _), N, Cap, Complete, no_instance(N, Cap, Complete)) :- !.
+search_result(best(Aug, _, _), N, Cap, Complete, ur(Aug, N, Cap, Complete)).
 
 %   examine(+Problem, +Partial, +Instance, +Best0, -Best, +Search0, -Search):
 %   run Instance (check_instance/6, bounded by Best0's error count); Best
 %   the better of Best0 and it, Search0 with it examined and with the
 %   nogood of each run that stopped at a step it could not execute.
-examine(Problem, Partial, Instance, best(Aug0, E0), Best, Search0, Search) :-
+examine(Problem, Partial, Instance, best(Aug0, E0, F0), Best, Search0, Search) :-
     instance_steps(Instance, Steps, Bindings),
     instance_sources(Instance, Sources),
     Learnt = learnt([]),
     (   check_instance(Problem, Steps, Sources, E0, Learnt, aug(S, E, V, R, C, G)),
         (E0 == inf ; E < E0)
-    ->  Best = best(aug(S, E, V, R, C, G, Bindings), E)
-    ;   Best = best(Aug0, E0)
+    ->  arg(1, Learnt, Ls0),
+        forced(Partial, Ls0, F),
+        Best = best(aug(S, E, V, R, C, G, Bindings), E, F)
+    ;   Best = best(Aug0, E0, F0)
     ),
-    arg(1, Learnt, Ls),
+    arg(1, Learnt, Ls1),
+    exclude([X]>>(X = hopeless(_, _)), Ls1, Ls),
     search_examined(Instance, Search0, Search1),
     foldl(learn(Partial, Instance), Ls, Search1, Search).
+
+%   forced(+Partial, +Learnt, -F): how many of the steps an instance gave up
+%   as beyond every remedy (hopeless(Id, Parts) in Learnt: the clearance of
+%   the mates of Parts breaks its insertion check whatever the grasps,
+%   positions and remedies) every instance of Partial gives up too: those
+%   whose Parts are each inserted necessarily before Id (or never: the base),
+%   so that in every linearisation they are mated the same way when Id
+%   comes, and the check meets the same floor. No instance has fewer errors
+%   than F.
+forced(Partial, Learnt, F) :-
+    partial_ordering(Partial, PriorTos),
+    Partial = partial(Actions, _, _, _),
+    aggregate_all(count,
+                  ( member(hopeless(Id, Parts), Learnt),
+                    forall(member(P, Parts), inserted_before(P, Id, Actions, PriorTos)) ),
+                  F).
+
+inserted_before(Part, Id, Actions, PriorTos) :-
+    (   memberchk(action(B, assemble(Part, _, _, _, _), _, _, _), Actions),
+        B \== Id
+    ->  prior_path(B, Id, PriorTos, [B])
+    ;   true
+    ).
+
+prior_path(A, B, PriorTos, Seen) :-
+    member(prior_to(A, C), PriorTos),
+    \+ memberchk(C, Seen),
+    (   C == B -> true ; prior_path(C, B, PriorTos, [C|Seen]) ),
+    !.
 
 learn(Partial, Instance, L, Search0, Search) :-
     (   instance_nogood(Partial, Instance, L, Ng)
@@ -197,16 +231,20 @@ failed_step(Steps, Id, step(Id, A)) :-
 %   -Verdicts, -Geometry): Result is the run of Steps (run/4). At its first
 %   failing action not yet given up, try the remedies in order; an action
 %   no remedy helps is given up (it counts as an error) and the run goes on
-%   past it. Ctx is ctx(Problem, Sources, Sensing, Learnt) (sources_dict/2,
+%   past it. An action whose unmet checks no remedy can reach (Python's
+%   hopeless: the clearance its mates leave alone breaks them, see
+%   phase2/steps.py's _floors) is given up without trying them. Ctx is ctx(Problem, Sources, Sensing, Learnt) (sources_dict/2,
 %   sensing_data/1).
 
 remedy_loop(_, Steps, GivenUp, ok(Verdicts, Geometry), _, Steps, Failed, Verdicts, Geometry) :-
     !,
     reverse(GivenUp, Failed).
-remedy_loop(Ctx, Steps, GivenUp, failed(Step, Before), Bound, Final, Failed, Verdicts, Geometry) :-
-    (   remedy(Ctx, Step, Before, Steps, GivenUp, Steps1, Result1)
+remedy_loop(Ctx, Steps, GivenUp, failed(Step, Before, Hopeless), Bound, Final, Failed, Verdicts, Geometry) :-
+    (   Hopeless == false,
+        remedy(Ctx, Step, Before, Steps, GivenUp, Steps1, Result1)
     ->  remedy_loop(Ctx, Steps1, GivenUp, Result1, Bound, Final, Failed, Verdicts, Geometry)
     ;   Step = step(Id, _),
+        keep_hopeless(Ctx, Id, Hopeless),
         length(GivenUp, N0),
         N is N0 + 1,
         (Bound == inf -> true ; N < Bound),
@@ -217,9 +255,10 @@ remedy_loop(Ctx, Steps, GivenUp, failed(Step, Before), Bound, Final, Failed, Ver
 
 %   run(+Ctx, +Steps, +GivenUp, -Result): run Steps in one Python call
 %   (spar_py.planning.engine:evaluate/5). Result = ok(Verdicts, Geometry), or
-%   failed(Step, Before) for the first action whose uncertainty-reduction
-%   preconditions are not all satisfied and that is not in GivenUp, Before
-%   the steps before it. Fails if a geometric precondition fails (the
+%   failed(Step, Before, Hopeless) for the first action whose
+%   uncertainty-reduction preconditions are not all satisfied and that is
+%   not in GivenUp, Before the steps before it, Hopeless true when no remedy
+%   can make them hold. Fails if a geometric precondition fails (the
 %   instance cannot be executed).
 
 run(ctx(Problem, From, Sensing, Learnt), Steps, GivenUp, Result) :-
@@ -246,6 +285,15 @@ keep_nogood(Learnt, Eval) :-
     ;   true
     ).
 
+%   keep_hopeless(+Ctx, +Id, +Hopeless): a step given up as beyond every
+%   remedy, with the parts its failure depends on, kept in the run's store
+%   as hopeless(Id, Parts) for forced/3; nothing otherwise.
+keep_hopeless(ctx(_, _, _, Learnt), Id, Hopeless) :-
+    (   Hopeless = hopeless(Parts), is_list(Parts), Learnt = learnt(List0)
+    ->  nb_setarg(1, Learnt, [hopeless(Id, Parts)|List0])
+    ;   true
+    ).
+
 text_atom(S, A) :-
     atom_string(A, S).
 
@@ -261,7 +309,14 @@ eval_result(ok, Problem, Eval, Steps, ok(Verdicts, geo(Problem, Token))) :-
     exclude([verdict(_, _, [])]>>true, Verdicts0, Verdicts),
     get_dict(token, Eval, Token).
 
-eval_result(failed, _, Eval, Steps, failed(Step, Before)) :-
+eval_result(failed, _, Eval, Steps, failed(Step, Before, Hopeless)) :-
+    (   get_dict(hopeless, Eval, @(true))
+    ->  (   get_dict(depends, Eval, Ds)
+        ->  maplist(text_atom, Ds, Parts), Hopeless = hopeless(Parts)
+        ;   Hopeless = hopeless(unknown)
+        )
+    ;   Hopeless = false
+    ),
     atom_string(At, Eval.at),
     append(Before, [Step|_], Steps),
     Step = step(Id, _),
@@ -340,7 +395,7 @@ insert_before(Id, New, Steps, Steps1) :-
 %   gets_past(+Id, +Result): in the run Result, action Id's
 %   preconditions hold (it is done, or the run fails at a later step).
 gets_past(_, ok(_, _)) :- !.
-gets_past(Id, failed(_, Before)) :-
+gets_past(Id, failed(_, Before, _)) :-
     memberchk(step(Id, _), Before).
 
 %!  step_dict(+Step, -Dict) is det.

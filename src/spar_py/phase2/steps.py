@@ -269,15 +269,24 @@ def _floors(world: World, cs: list[ur.Constraint], checks: list[dict[str, Any]])
     """Each unsatisfied insertion check of ``checks`` (in place, in ``cs``'s order) with its
     ``floor`` (uncertainty.clearance_floor: what the mates' clearances alone make it reach) and
     ``remediable``: False when the floor is not below the threshold, so no scan or squeeze can
-    make it hold (phase 2 gives the step up without trying them)."""
+    make it hold (phase 2 gives the step up without trying them), and then ``depends``: the
+    parts whose mates the floor reads (the mate's two parts, each up its body to the root): a
+    plan instance with those parts mated the same way before the step meets the same failure."""
     offsets = [v for a in world.unc.attached.values() for v in a.offsets]
+    product = world.cell.product
     for c, d in zip(cs, checks):
         if d["satisfied"] or not offsets:
             continue
         floor = ur.clearance_floor(c, world.unc.registry, offsets)
-        if floor is not None:
-            d["floor"] = floor
-            d["remediable"] = floor < float(d["threshold"])
+        if floor is None:
+            continue
+        d["floor"] = floor
+        d["remediable"] = floor < float(d["threshold"])
+        mate = next((m for m in (product.mates if product is not None else ()) if m.name == c.mate), None)
+        if mate is not None and not d["remediable"]:
+            # what the floor reads: the mate's two parts and the chain of mates that carries each
+            # (their attachments' relative poses, axes and clearances), not any grasp or position
+            d["depends"] = list(dict.fromkeys(world.unc.path_to_root(mate.peg) + world.unc.path_to_root(mate.hole)))
 
 
 def tightest(checks: list[dict[str, Any]]) -> dict[str, Any] | None:

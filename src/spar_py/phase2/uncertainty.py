@@ -245,6 +245,13 @@ class WorldState:
             out += self.body(c)
         return out
 
+    def path_to_root(self, name: str) -> list[str]:
+        """``name`` and the parts it is mated into, up to its body's root (that last)."""
+        out = [name]
+        while out[-1] in self.attached:
+            out.append(self.attached[out[-1]].parent)
+        return out
+
     def carried(self, name: str) -> list[str]:
         """The parts that move with ``name``'s body other than its root (``body`` less the root)."""
         return self.body(self.root(name))[1:]

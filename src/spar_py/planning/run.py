@@ -166,6 +166,8 @@ class PlanRun:
             # no remedy can help where every unmet check is beyond reach of them (steps._floors)
             unmet = [v for v in ev.steps[-1]["verdicts"] if v.get("kind") == "uncertainty" and not v["satisfied"]]
             out["hopeless"] = bool(unmet) and all(v.get("remediable") is False for v in unmet)
+            if out["hopeless"] and all("depends" in v for v in unmet):
+                out["depends"] = list(dict.fromkeys(p for v in unmet for p in v["depends"]))
         if ev.status != "ok":
             return out
         geo = {r["id"]: {**r["geometry"], "poses": r["poses"], "held": r["held"],
