@@ -96,7 +96,7 @@ def test_every_nogood_holds_in_other_orders_of_its_prefix(stool_nogoods):
         head, own = blocks[:at], blocks[at]
         own = own[:next(k for k, s in enumerate(own) if s["id"] == ng["step"]) + 1]
         part = {id(b): str(b[0]["args"][0]) for b in head}
-        for _ in range(15):
+        for _ in range(60):
             order = _random_order(head, part, before, rng)
             trial = [s for b in order for s in b] + own
             pos = {s["id"]: i for i, s in enumerate(trial)}
