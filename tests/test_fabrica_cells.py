@@ -57,7 +57,8 @@ def test_parts_in_stable_poses_on_the_table(car):
     for pos in car.positions.values():
         R = pos.T[:3, :3]
         poses = car.objects[pos.obj].poses.values()
-        assert any(np.allclose(R, p.R, atol=1e-9) and math.isclose(pos.T[2, 3], p.height, abs_tol=1e-6)
+        # a stable pose turned about the vertical (the layout tries YAWS yaws): the same row 3
+        assert any(np.allclose(R[2], p.R[2], atol=1e-9) and math.isclose(pos.T[2, 3], p.height, abs_tol=1e-6)
                    for p in poses), pos.obj
         assert placed[pos.obj][:, 2].min() == pytest.approx(0.0, abs=1e-3), pos.obj
 
@@ -69,7 +70,7 @@ def test_base_keeps_the_product_upright_and_others_most_probable(car):
     for pos in car.positions.values():
         if pos.obj != base:
             first = next(iter(car.objects[pos.obj].poses.values()))
-            assert np.allclose(pos.T[:3, :3], first.R)
+            assert np.allclose(pos.T[2, :3], first.R[2])  # turned about the vertical at most
 
 
 def _gap(A: np.ndarray, B: np.ndarray, n: int = 2880) -> float:

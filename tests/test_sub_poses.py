@@ -29,7 +29,9 @@ def test_disc_with_pin_rests_on_its_side_on_the_pin_and_rim() -> None:
     com = sum(m.center_mass * m.volume for m in meshes) / sum(m.volume for m in meshes)
     disc = product.parts["disc"].model
     own_down = [np.asarray(p.R, float)[2] for label, p in disc.poses.items() if "_sub_p" not in label]
-    assert len(own_down) == 2  # the disc alone: flat on either face
+    # the disc alone: flat on either face, and upright on its rim (6 mm of rim under a centre of mass
+    # 30 mm up: 5.7 deg), rolled to where the off-centre bore leaves its centre of mass lowest
+    assert len(own_down) == 3 and sum(abs(d[2]) < 1e-9 for d in own_down) == 1
     for s in got["disc"]:
         np.testing.assert_allclose(s.R @ s.R.T, np.eye(3), atol=1e-9)
         W = V @ s.R.T

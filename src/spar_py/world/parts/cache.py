@@ -30,7 +30,7 @@ from spar_py.world.parts.mesh import FeatureGeometry, Geometry, derive_faces
 __all__ = ["DERIVE_VERSION", "MAX_ENTRIES", "cache_dir", "derive", "source_digest"]
 
 #: Bumped whenever the derivation's results change for the same inputs.
-DERIVE_VERSION = 11
+DERIVE_VERSION = 12
 #: The modules whose source is part of the key (world/, beside this file).
 #: Derivations kept on disk at most.
 MAX_ENTRIES = 256
@@ -92,7 +92,7 @@ def _compute(name: str, geometry: Geometry, features: tuple[FeatureGeometry, ...
 
     mesh = geometry.mesh()
     faces = derive_faces(mesh, features, face_names, geometry.unit)
-    poses = derive_poses(mesh, faces, features, geometry.unit, f"{name}_p")
+    poses = derive_poses(mesh, faces, features, geometry.unit, f"{name}_p", prims=geometry.primitives)
     why: list[str] = []
     grasps = derive_grasps(mesh, faces, features, geometry.primitives, gripper, geometry.unit, f"{name}_g", step,
                            why, poses)
@@ -107,7 +107,7 @@ def _compute(name: str, geometry: Geometry, features: tuple[FeatureGeometry, ...
         "no_grasp": why[0] if why else "",
     }
     if need_hull:
-        from spar_py.world.parts.poses import hull_vertices  # a cache miss only (see _compute)
+        from spar_py.world.parts.support import hull_vertices  # a cache miss only (see _compute)
 
         V = np.asarray(mesh.vertices, float)
         out["hull"] = [[float(v) for v in p] for p in V[hull_vertices(mesh)]]

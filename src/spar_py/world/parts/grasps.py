@@ -42,7 +42,8 @@ from spar_py.world.parts.hand import (
 from spar_py.world.parts.mesh import (
     ON_SURFACE_MM, Face, FeatureGeometry, Primitive, axis_basis, clean, cross, derive_faces,
 )
-from spar_py.world.parts.poses import DerivedPose, support_check
+from spar_py.world.parts.poses import rest_check
+from spar_py.world.parts.support import DerivedPose
 from spar_py.world.parts.shafts import (
     MIN_CONTACT_MM, is_round, line_contact, mesh_cylinders, pads_find, shaft_from_above, shafts_of
 )
@@ -207,7 +208,7 @@ def check_entries(model: "object", gripper: Gripper, unit: str, which: tuple[str
                             "point on it)", repr(f)))
     if "stable_poses" in which:
         for i, p in enumerate(model.poses.values()):  # type: ignore[attr-defined]
-            why, height, lying = support_check(mesh, p.R, faces, unit)
+            why, height, lying = rest_check(mesh, p.R, faces, feats, geo.primitives, unit)
             key = f"stable_poses[{i}]"
             if why is not None:
                 out.append((key, "a stable pose of the shape", f"{p.label}: {why}"))

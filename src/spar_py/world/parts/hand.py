@@ -16,7 +16,7 @@ import numpy as np
 from spar_py.core.units import from_mm
 from spar_py.world.parts.arrays import MeshArrays, mesh_arrays
 from spar_py.world.parts.mesh import Face, FeatureGeometry, axis_basis, clean, cross
-from spar_py.world.parts.poses import DerivedPose, feature_face
+from spar_py.world.parts.support import DerivedPose, feature_face
 
 if TYPE_CHECKING:
     import trimesh

@@ -1,19 +1,23 @@
-"""Stable poses derived from a part's mesh, and the quasi-static support check.
+"""Stable poses derived from a part's mesh.
 
 Stable poses (Fig. 18): trimesh's ``compute_stable_poses`` (deterministic: no noise, one
 sample; world.parts.stable computes the same with arrays) gives the resting orientations of
 the convex hull with the probability of each (a hull of more than HULL_FACES_MAX triangles
 thinned first, each pose then snapped to the face of the mesh it rests on);
 those below ``PROB_FLOOR`` are dropped, and every remaining one must pass
-:func:`support_check`, our own quasi-static test (the part rests on a face of its own, not
-an edge or a point, and its centre of mass projects inside the support polygon, the convex
-hull of the mesh's points on the table, by at least STABLE_MARGIN_MM), since that function
-can return poses that are not stable; and it must not topple on a tilt of STABLE_TILT_DEG about
-any edge of that polygon (the angle whose tangent is the margin over the centre of mass's
-height). A pose is kept as R, the least rotation taking the
+:func:`support_check`, our own quasi-static test (world.parts.support: the part rests on a
+face, its centre of mass STABLE_MARGIN_MM inside the support polygon, and a tilt of
+STABLE_TILT_DEG about any edge of it does not topple it), since that function can return
+poses that are not stable. A pose is kept as R, the least rotation taking the
 resting face's outward normal to world -z (so a pose is written as the paper writes it,
 ``tm`` rows and the frame's height above the table), its ``rfaces`` (faces lying on the
 table) and ``ofaces`` (those plus a feature whose mouth or tip is on the table).
+
+A round side of the hull (a pin's, a shaft's, a headed pin's head rim to shaft tip: world.parts.
+rolling) is one pose family, any roll about its axis: trimesh's poses resting on it (one per
+side facet, each rolling off its narrow facet or kept by a tessellation's chance) are replaced
+by one pose standing for the family, with the sum of their probabilities, kept by the same
+rule read along the line it touches the table on (:func:`rest_check` judges any pose so).
 
 Units: lengths in the cell unit, constants in mm (converted with spar_py.core.units.from_mm);
 angles in radians. Frames: object frame; tool frames T_g are 4x4 in the object frame.
@@ -21,20 +25,20 @@ angles in radians. Frames: object frame; tool frames T_g are 4x4 in the object f
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from spar_py.core.geometry import convex_hull_2d
 from spar_py.core.units import from_mm
 from spar_py.world.parts.arrays import mesh_arrays
-from spar_py.world.parts.mesh import Face, FeatureGeometry, clean, cross, minimal_rotation
+from spar_py.world.parts.mesh import Face, FeatureGeometry, Primitive, clean, cross, minimal_rotation
+from spar_py.world.parts.rolling import round_sides, side_of, touching_faces
+from spar_py.world.parts.support import DerivedPose, SUPPORT_TOL_MM, feature_face, hull_vertices, support_check
 
 if TYPE_CHECKING:
     import trimesh
 
-__all__ = ["DerivedPose", "derive_poses", "feature_face", "hull_vertices", "support_check"]
+__all__ = ["derive_poses", "rest_check"]
 
 #: Poses whose basin of attraction (trimesh's probability) is smaller are dropped.
 PROB_FLOOR = 0.01
@@ -44,49 +48,6 @@ HULL_FACES_MAX = 64
 HULL_GRID = 100
 #: A pose trimesh finds is snapped to a face whose normal is within this (deg).
 SNAP_DEG = 2.0
-#: The centre of mass must project this far inside the support polygon (mm).
-STABLE_MARGIN_MM = 0.5
-#: ... and the part must stay after a tilt of this much about any edge of it (deg): a part
-#: balanced with its centre of mass high over a narrow face (a peg on a tip off its centre of
-#: mass by a millimetre) passes the margin but is knocked over by the least disturbance.
-STABLE_TILT_DEG = 5.0
-#: Points within this of the table plane support the part (mm).
-SUPPORT_TOL_MM = 0.01
-
-
-@dataclass(frozen=True)
-class DerivedPose:
-    """A derived stable pose: R (3x3, object to world, resting face down), the frame's
-    ``height`` above the table (cell unit), the faces it rests on and hides, and trimesh's
-    probability of it."""
-
-    label: str
-    rfaces: tuple[str, ...]
-    ofaces: tuple[str, ...]
-    R: np.ndarray
-    height: float
-    probability: float
-
-
-def hull_vertices(mesh: "trimesh.Trimesh") -> np.ndarray:
-    """Indices of the mesh's vertices on its convex hull (sorted; kept in the mesh's metadata).
-
-    qhull with joggled input (``QJ``): a finely tessellated round part has thousands of
-    coplanar and cocircular points, over which qhull's default facet merging is slow; joggling is
-    much faster and moves a point by about 1e-11 of the part's
-    size, so it can only keep or drop a point that far from the hull. Qhull's default is
-    the fallback if joggling fails."""
-    h = mesh.metadata.get("_spar_hull")
-    if h is None:
-        from scipy.spatial import ConvexHull, QhullError  # scipy: a model with a hull only
-
-        V = mesh_arrays(mesh).V
-        try:
-            h = np.sort(ConvexHull(V, qhull_options="QJ").vertices)
-        except QhullError:
-            h = np.sort(ConvexHull(V).vertices)
-        mesh.metadata["_spar_hull"] = h
-    return h
 
 
 def _hull_mesh(P: np.ndarray) -> "trimesh.Trimesh":
@@ -103,52 +64,20 @@ def _hull_mesh(P: np.ndarray) -> "trimesh.Trimesh":
     return trimesh.Trimesh(P, F, process=True)
 
 
-def support_check(mesh: "trimesh.Trimesh", R: np.ndarray, faces: list[Face], unit: str,
-                  com: np.ndarray | None = None) -> tuple[str | None, float, list[int]]:
-    """Is the part at rotation R (object to world) resting quasi-statically on the table?
-
-    Returns (why not or None, height of the object frame above the table, indices of the
-    faces lying on the table). Independent of trimesh's pose search: the lowest points of
-    the mesh are the support, their 2-D convex hull the support polygon, and the centre of
-    mass must project inside it by STABLE_MARGIN_MM; the part must rest on a face.
-    """
-    tol = from_mm(unit, SUPPORT_TOL_MM)
-    A = mesh_arrays(mesh)
-    V = A.V @ np.asarray(R, float).T
-    zmin = float(V[:, 2].min())
-    low = V[:, 2] < zmin + tol
-    lying = [k for k, f in enumerate(faces) if (V[A.F[f.tris], 2] < zmin + tol).all(1).any()]
-    if not lying:
-        return "it rests on an edge or a point, not on a face", -zmin, []
-    hull = convex_hull_2d(V[low, :2])
-    cw = np.asarray(R, float) @ (A.com if com is None else com)
-    c = cw[:2]
-    margin = _inside_margin(hull, c)
-    need = from_mm(unit, STABLE_MARGIN_MM)
-    if margin < need:
-        where = "outside" if margin < 0 else "only"
-        return (f"its centre of mass is {where} {abs(margin):.4g} {unit} "
-                f"{'from' if margin < 0 else 'inside'} the support polygon's edge (at least {need:.4g} {unit} "
-                "inside needed)"), -zmin, lying
-    tilt = math.degrees(math.atan2(margin, max(float(cw[2]) - zmin, 1e-300)))
-    if tilt < STABLE_TILT_DEG:
-        return (f"it tips over on a tilt of {tilt:.3g} deg (its centre of mass {float(cw[2]) - zmin:.4g} {unit} "
-                f"high, {margin:.4g} {unit} inside the support polygon's edge; at least {STABLE_TILT_DEG:g} deg "
-                "needed)"), -zmin, lying
-    return None, -zmin, lying
-
-
-def _inside_margin(hull: np.ndarray, c: np.ndarray) -> float:
-    """Signed distance of point c inside the convex polygon ``hull`` (CCW, (k, 2)); negative
-    outside; -inf for a degenerate polygon (fewer than 3 corners)."""
-    if len(hull) < 3:
-        return -math.inf
-    a, b = hull, np.roll(hull, -1, axis=0)
-    e = b - a
-    L = np.linalg.norm(e, axis=1)
-    ok = L > 0
-    cross = e[ok, 0] * (c[1] - a[ok, 1]) - e[ok, 1] * (c[0] - a[ok, 0])
-    return float((cross / L[ok]).min())
+def rest_check(mesh: "trimesh.Trimesh", R: np.ndarray, faces: list[Face], features: tuple[FeatureGeometry, ...],
+               prims: tuple[Primitive, ...], unit: str) -> tuple[str | None, float, list[int]]:
+    """Does the part keep the pose R (object to world) on the table? :func:`support_check`'s
+    (why not or None, the frame's height, the faces it rests on), judged on a round side of
+    its hull by the side's rule where R rests on one (world.parts.rolling: along the line it
+    touches the table on, and the roll), so a lying pin is kept as its derived pose is."""
+    hull = mesh_arrays(mesh).V[hull_vertices(mesh)]
+    sides = round_sides(mesh, hull, faces, features, prims, unit)
+    down = np.asarray(R, float).T @ np.array([0.0, 0.0, -1.0])
+    k = side_of(sides, hull, down, unit)
+    if k is None:
+        return support_check(mesh, R, faces, unit)
+    height = -float((mesh_arrays(mesh).V @ np.asarray(R, float)[2]).min())
+    return sides[k].member_problem(down), height, touching_faces(mesh, faces, R, unit)
 
 
 def _hidden(faces: list[Face], lying: list[int], features: tuple[FeatureGeometry, ...], R: np.ndarray,
@@ -165,19 +94,18 @@ def _hidden(faces: list[Face], lying: list[int], features: tuple[FeatureGeometry
     return out
 
 
-def feature_face(faces: list[Face], feature: FeatureGeometry) -> int | None:
-    """The index of ``feature``'s face among ``faces`` (None if its surfaces are not on the mesh)."""
-    return next((i for i, f in enumerate(faces) if f.feature and f.name == feature.name), None)
-
-
 def derive_poses(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[FeatureGeometry, ...], unit: str,
-                 prefix: str, prob_floor: float = PROB_FLOOR) -> list[DerivedPose]:
+                 prefix: str, prob_floor: float = PROB_FLOOR, prims: tuple[Primitive, ...] = ()) -> list[DerivedPose]:
     """The stable poses of the part (module docstring), most probable first, labelled
-    ``{prefix}1, {prefix}2, ...``."""
+    ``{prefix}1, {prefix}2, ...``: trimesh's poses the part keeps (:func:`support_check`) and
+    one member per round side it keeps (world.parts.rolling), whose probability is the sum of
+    trimesh's over the poses resting on that side (each of which is then no pose of its own)."""
     from spar_py.world.parts.stable import stable_poses
 
     A = mesh_arrays(mesh)
-    hv = A.V[hull_vertices(mesh)]
+    full = A.V[hull_vertices(mesh)]
+    sides = round_sides(mesh, full, faces, features, prims, unit)
+    hv = full
     if len(hv) > HULL_FACES_MAX // 2:
         # thin the hull's vertices on a grid of 1/HULL_GRID of the part's size: the topple
         # graph of a finely tessellated round part is otherwise most of the derivation; the
@@ -191,11 +119,17 @@ def derive_poses(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fea
     normals = [f.normal for f in faces if f.planar]
     normals += [f.direction for f in features if f.kind == "peg"]  # the tips' caps
     cos_snap = math.cos(math.radians(SNAP_DEG))
-    found: list[tuple[float, np.ndarray, float, list[int], list[int]]] = []
+    rolled = [0.0] * len(sides)  # trimesh's probability of the poses on each round side
+    pending: list[tuple[float, np.ndarray]] = []
     for T, p in zip(Ts, probs):
-        if p < prob_floor:
-            continue
         down = np.asarray(T, float)[:3, :3].T @ np.array([0.0, 0.0, -1.0])  # object vector pointing down
+        k = side_of(sides, full, down, unit)
+        if k is not None:
+            rolled[k] += float(p)
+        elif p >= prob_floor:
+            pending.append((float(p), down))
+    found: list[tuple[float, np.ndarray, float, list[int], list[int]]] = []
+    for p, down in pending:
         best = max(normals, key=lambda n: float(n @ down), default=None)
         if best is not None and float(best @ down) > cos_snap:
             down = best
@@ -205,7 +139,13 @@ def derive_poses(mesh: "trimesh.Trimesh", faces: list[Face], features: tuple[Fea
         why, height, lying = support_check(mesh, R, faces, unit)
         if why is not None:
             continue
-        found.append((float(p), R, height, lying, _hidden(faces, lying, features, R, height, tol)))
+        found.append((p, R, height, lying, _hidden(faces, lying, features, R, height, tol)))
+    for side, p in zip(sides, rolled):
+        if side.why is not None or p < prob_floor:
+            continue
+        R, height = side.rest(mesh)
+        lying = touching_faces(mesh, faces, R, unit)
+        found.append((p, R, height, lying, _hidden(faces, lying, features, R, height, tol)))
     found.sort(key=lambda f: (-round(f[0], 9), tuple(np.round(f[1][2], 9))))
     return [DerivedPose(f"{prefix}{i + 1}", tuple(faces[k].name for k in lying),
                         tuple(faces[k].name for k in hidden), R, float(round(height, 12)), p)

@@ -20,7 +20,7 @@ from spar_py.world.parts.mesh import Face, FeatureGeometry, ON_SURFACE_MM, Primi
 
 if TYPE_CHECKING:
     import trimesh
-    from spar_py.world.parts.poses import DerivedPose
+    from spar_py.world.parts.support import DerivedPose
     from spar_py.world.robot import Gripper
 
 __all__ = [

@@ -11,10 +11,10 @@ counted through four filters, each keeping a subset of the one before:
    parts that must be in place before it (its parent and everything the tree and the precedence
    put before it, transitively: the fewest any order has, so a grasp refused here is refused by
    every order);
-3. ``pickup``: free at pickup in some stable pose of the part on the table (the model's and all
-   those world.parts.stable finds, not only those the model keeps): the fingers and palm the
-   collision margin above the table (the margin phase 2 keeps them off it by) and outside the
-   part itself;
+3. ``pickup``: free at pickup in some stable pose of the part alone on the table (its model's:
+   the only poses the planner puts it down in or a cell may lay it in; a round side's family
+   counted once): the fingers and palm the collision margin above the table (the margin
+   phase 2 keeps them off it by) and outside the part itself;
 4. ``reached``: in such a pose, at the part's spot in the cell turned to one of YAWS yaws, the arm
    reaches the grasp (IK within limits, wrist above the table; no arm collision check).
 ``at_cell`` then counts those the arm reaches, hand above the table, at the pose the cell lays
@@ -51,7 +51,7 @@ __all__ = ["ArmClear", "CLEAR_TOL_MM", "YAWS", "GraspReport", "MateGrasps", "abo
 #: The hand's boxes are shrunk by this (mm) before the checks against the parts in place: the
 #: held part touches them when seated, and a finger flush with its face may graze theirs.
 CLEAR_TOL_MM = 0.05
-#: Two poses whose down vectors (object frame) are closer than this (deg) read as one.
+#: A pose is named by the object axis within this of its down vector (deg): '+z down'.
 POSE_SAME_DEG = 5.0
 #: How many poses offering a grasp the JSON names (the most probable first).
 POSES_SAID = 6
@@ -302,8 +302,6 @@ def _row(product: Product, part: str, meshes: Mapping[str, Any], placed: set[str
     or the part not in ``at``: -1), ``arm_clear`` for ``at_clear`` and ``held``, ``margin`` the
     hand's clearance over the table at pickup (cell unit), ``put_down`` for ``placed_any``."""
 
-    from spar_py.world.parts import stable_poses
-
     g = next(x for x in product.goals if x.part == part)
     pp = product.parts[part]
     T_cell = at.get(part)
@@ -312,7 +310,7 @@ def _row(product: Product, part: str, meshes: Mapping[str, Any], placed: set[str
     name = (pegs or mates)[0].name if (pegs or mates) else (g.mates[0] if g.mates else f"{part} on {g.parent}")
     own, usable, clear, hits, free = _filtered(product, part, meshes, placed, gripper, unit)
     P = np.asarray(pp.pose, float)
-    Ts = _poses(pp.model, meshes[part], stable_poses)
+    Ts = _poses(pp.model, product.sub_poses.get(part, {}))
     pick: set[str] = set()
     reach: set[str] = set()
     pose_ok: list[str] = []
@@ -377,20 +375,17 @@ def above_table(grasps: list[Grasp], gripper: Any, T_part: np.ndarray, unit: str
             if hand_above_table(gripper, T_part @ np.asarray(gr.T, float), gr.width, unit, margin)]
 
 
-def _poses(model: Any, mesh: Any, stable_poses: Any) -> list[np.ndarray]:
-    """The part's stable poses on the table (4x4, object to world): the model's own (its derived or
-    declared ones) and every one world.parts.stable finds on the mesh, one per down vector."""
+def _poses(model: Any, sub: Mapping[str, Any]) -> list[np.ndarray]:
+    """The stable poses of the part alone on the table (4x4, object to world): its model's own,
+    derived or declared, less those that need its subtree mated (``sub``'s labels)."""
     out: list[np.ndarray] = []
     for sp in model.poses.values():
+        if sp.label in sub:
+            continue
         T = np.eye(4)
         T[:3, :3] = np.asarray(sp.R, float)
         T[2, 3] = float(sp.height)
         out.append(T)
-    Ts, _ = stable_poses(mesh, mesh.center_mass)
-    cos = math.cos(math.radians(POSE_SAME_DEG))
-    for T in Ts:
-        if all(float(np.asarray(T)[2, :3] @ U[2, :3]) < cos for U in out):
-            out.append(np.asarray(T, float))
     return out
 
 

@@ -4,12 +4,13 @@
 The base part stands at the build spot in its own stable pose (not one that needs its subtree
 mated) in which the build makes the most insertions from above (within DOWN_DEG of down, in an
 order the precedence allows, before the first that needs a turn); among those the one that
-keeps the product frame's down (-z) down (the product built as assembled); every other part lies in its most
-probable stable pose (a derived model lists its poses most probable first, so the first one
-the planner knows) among those where a grasp its mate can use (the grasp report's filters 1
-to 3, world.product.grasp_report.held_grasps; else world.parts.mate_grasp_usable: the hand
-outside the hole's mouth plane when seated) keeps the hand the robot's collision margin
-(phase 2's) above the table and comes from above both there and on the assembled product
+keeps the product frame's down (-z) down (the product built as assembled); every other part
+lies in its most probable stable pose of its own (it starts alone: none that needs its subtree
+mated; a derived model lists its poses most probable first, so the first one the planner
+knows) among those where a grasp its mate can use (the grasp report's filters 1 to 3,
+world.product.grasp_report.held_grasps; else world.parts.mate_grasp_usable: the hand outside
+the hole's mouth plane when seated) keeps the hand the robot's collision margin (phase 2's)
+above the table and comes from above both there and on the assembled product
 (FROM_ABOVE_DEG), else among those where one keeps the hand above the table (a parallel gripper cannot turn a part
 over between its two poses, so a part lying where only grasps from below would seat it is
 never assembled), else its most probable, yaw 0.
@@ -406,10 +407,10 @@ def layout_product(product: Product, robot, unit: str) -> Layout:
                    frozenset(needs[g.part])) for g in product.goals]
     from spar_py.world.product.grasp_report import held_grasps  # trimesh: a laid-out product only
 
-    models = {p: pp.model for p, pp in product.parts.items()}
-    sub = product.sub_poses.get(product.base, {})  # poses that need the subtree mated: not the base's alone
-    b = models[product.base]
-    models[product.base] = replace(b, poses={k: v for k, v in b.poses.items() if k not in sub})
+    # every part starts alone on the table: not in a pose that needs its subtree mated
+    models = {p: replace(pp.model, poses={k: v for k, v in pp.model.poses.items()
+                                          if k not in product.sub_poses.get(p, {})})
+              for p, pp in product.parts.items()}
     held = held_grasps(product, robot.gripper, unit) if robot.gripper is not None else None
     out = layout_parts(models, {p: np.asarray(pp.pose, float) for p, pp in product.parts.items()},
                        product.base, robot, unit, f"product {product.name}", insertions,
