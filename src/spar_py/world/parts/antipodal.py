@@ -46,12 +46,6 @@ DIRECTION_CELLS = 4
 ANTIPODAL_GRID = 4
 #: At most this many clusters are tried for approaches (the best first).
 ANTIPODAL_CLUSTERS = 12
-#: Pairs and clusters are ranked on their lengths to this (mm) and angles to this (deg), then in
-#: sample order: coarser than a mesh file's float32 vertices (1e-7 of a coordinate, 1e-6 mm on a
-#: 10 mm part), which differ by file unit (a pin in metres is not the same floats as in mm), so
-#: that noise never picks the grasps.
-TIE_MM = 1e-3
-TIE_DEG = 1e-3
 
 
 @dataclass(frozen=True)
@@ -202,7 +196,7 @@ def antipodal_grasps(mesh: "trimesh.Trimesh", g: Gripper, unit: str, step: float
     count: dict[tuple, int] = {}
 
     def rank(a: Antipodal) -> tuple:
-        return round(a.angle / TIE_DEG), round(a.width / mm / TIE_MM)
+        return round(a.angle, 6), round(a.width / mm, 9)
 
     for a in pairs:
         c = canonical(a.c)
@@ -214,7 +208,7 @@ def antipodal_grasps(mesh: "trimesh.Trimesh", g: Gripper, unit: str, step: float
             groups[key] = a
     # the groups with the most pairs first (the most surface to close on), then the squarest
     ranked = sorted(groups, key=lambda k: (-count[k], *rank(groups[k]),
-                                           *np.round((groups[k].p + groups[k].q) / 2 / mm / TIE_MM)))
+                                           *np.round((groups[k].p + groups[k].q) / 2 / mm, 9)))
     chosen = [groups[k] for k in ranked[:ANTIPODAL_CLUSTERS]]
     inset = min(from_mm(unit, PAD_PATCH_MM) / 2, g.finger_length / 2)
     out: list[tuple[np.ndarray, float, Antipodal]] = []
