@@ -399,16 +399,23 @@ def _feature_solid(model: "ObjectModel", f: "MatingFeature", unit: str) -> int |
 
 
 def _solids_against(product: Product, p: str, q: str, unit: str) -> list[Solid] | None:
-    """P's solids as tested against Q: without P's peg feature solids of mates with Q; None
-    when such a peg is not a separate solid (the pair is not tested)."""
+    """P's solids as tested against Q: without P's peg feature solids of mates with Q, nor P's
+    other cylinders on that peg's axis thin enough to pass through Q's hole (a stepped shaft's
+    thinner end goes through the gear slid onto its middle: primitive shapes do not cut their
+    holes, so Q's solid fills that hole); None when such a peg is not a separate solid (the pair
+    is not tested)."""
     model = product.parts[p].model
+    tol = from_mm(unit, AXIS_TOL_MM) * 10
     drop = set()
     for m in product.mates:
         if m.peg == p and m.hole == q:
-            i = _feature_solid(model, model.feature_named(m.peg_feature), unit)
+            f = model.feature_named(m.peg_feature)
+            i = _feature_solid(model, f, unit)
             if i is None:
                 return None
             drop.add(i)
+            r_hole = float(product.parts[q].model.feature_named(m.hole_feature).radius)
+            drop |= {k for k, sk in enumerate(model.shape) if sk.kind == "cylinder" and sk.radius <= r_hole + tol}
     return [s for i, s in enumerate(model.shape) if i not in drop]
 
 
