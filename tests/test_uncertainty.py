@@ -344,7 +344,8 @@ def test_pickup_fails_with_large_uncertainty_and_scan_helps() -> None:
     assert all(v.satisfied for v in verdicts)
     d = verdicts[1].as_dict()
     assert set(d) == {"action", "constraint", "sense", "bound", "threshold", "satisfied",
-                      "tolerance_reached", "description"}
+                      "tolerance_reached", "description", "power"}
+    assert d["power"] == 1  # a pickup contact is a length
     assert d["constraint"] == "p1_c2" and d["sense"] == ">" and d["satisfied"] is True
 
 

@@ -30,7 +30,7 @@ from spar_py.world.parts.mesh import FeatureGeometry, Geometry, derive_faces
 __all__ = ["DERIVE_VERSION", "MAX_ENTRIES", "cache_dir", "derive", "source_digest"]
 
 #: Bumped whenever the derivation's results change for the same inputs.
-DERIVE_VERSION = 13
+DERIVE_VERSION = 12
 #: The modules whose source is part of the key (world/, beside this file).
 #: Derivations kept on disk at most.
 MAX_ENTRIES = 256

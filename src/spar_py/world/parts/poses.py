@@ -41,7 +41,7 @@ if TYPE_CHECKING:
 __all__ = ["derive_poses", "rest_check"]
 
 #: Poses whose basin of attraction (trimesh's probability) is smaller are dropped.
-PROB_FLOOR = 0.001
+PROB_FLOOR = 0.01
 #: A convex hull of more triangles is thinned before trimesh's pose search (see derive_poses).
 HULL_FACES_MAX = 64
 #: ... on a grid of the part's size over this.

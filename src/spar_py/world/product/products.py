@@ -217,19 +217,32 @@ def _agrees(d: np.ndarray, allowed: Sequence[np.ndarray]) -> bool:
     return any(float(a @ d) > 1 - 1e-6 for a in allowed)
 
 
-def insertion_directions(product: Product, parents: dict[str, str] | None = None) -> dict[str, np.ndarray]:
+def insertion_directions(product: Product, parents: dict[str, str] | None = None,
+                         given: dict[str, np.ndarray] | None = None) -> dict[str, np.ndarray]:
     """Each non-base part's insertion direction (product frame, unit): one the link to its tree
-    parent (:func:`_parents`; its first in file order) allows, the one most of the part's other
-    links allow (a cover over two shafts and four dowels through holes comes down, as both
-    shafts need), ties to the first allowed."""
+    parent (:func:`_parents`; its first in file order) allows, the one most of the part's links
+    with parts no deeper in the tree allow (those it may be inserted after: a cover over two
+    shafts and four dowels through holes comes down, as both shafts need; a collar that will
+    rest on a bushing later has no say in the bushing's way), ties to the first allowed (for a
+    hole part, against the peg: the way it was always taken). ``given``: directions known
+    otherwise (a derived product's disassembly), which win where given."""
     parents = _parents(product) if parents is None else parents
     links = _links(product)
+
+    def depth(p: str) -> int:
+        n = 0
+        while p in parents:
+            p, n = parents[p], n + 1
+        return n
     out: dict[str, np.ndarray] = {}
     for p, parent in parents.items():
-        own = [lk for _, lk in links[p]]
+        own = [lk for q, lk in links[p] if depth(q) <= depth(p)]
         tree = next(lk for q, lk in links[p] if q == parent)
         cands = link_directions(product, tree, p)
         out[p] = max(cands, key=lambda d: sum(_agrees(d, link_directions(product, lk, p)) for lk in own))
+    for p, d in (given or {}).items():
+        if p in out:
+            out[p] = np.asarray(d, float) / np.linalg.norm(d)
     return out
 
 
@@ -250,13 +263,14 @@ def makers(product: Product, parents: dict[str, str] | None = None,
     return out
 
 
-def unmakeable(product: Product, parents: dict[str, str] | None = None) -> list[str]:
+def unmakeable(product: Product, parents: dict[str, str] | None = None,
+               dirs: dict[str, np.ndarray] | None = None) -> list[str]:
     """The mates and seats no insertion in any order can make: neither part's own insertion, nor
     that of a subassembly carrying one part and not the other (an ancestor in the assembly tree
     below both parts' common ancestor, moving along its own direction with the part riding on it),
     moves that part the way the link allows."""
     parents = _parents(product) if parents is None else parents
-    dirs = insertion_directions(product, parents)
+    dirs = insertion_directions(product, parents) if dirs is None else dirs
 
     def chain(p: str) -> list[str]:
         out = [p]
@@ -279,7 +293,8 @@ def unmakeable(product: Product, parents: dict[str, str] | None = None) -> list[
 
 
 def compile_goals(product: Product, order: Sequence[str] | None = None,
-                  first: Collection[tuple[str, str]] = ()) -> tuple[PartGoal, ...]:
+                  first: Collection[tuple[str, str]] = (),
+                  directions: dict[str, np.ndarray] | None = None) -> tuple[PartGoal, ...]:
     """One goal per non-base part (file order): into its goal parent (:func:`goal_parents`),
     along its insertion direction (:func:`insertion_directions`), with the part's faces of the
     mates and seats its insertion can make (:func:`makers`) with that parent and the parts
@@ -287,12 +302,14 @@ def compile_goals(product: Product, order: Sequence[str] | None = None,
     direction in the goal parent's frame; ``mates`` the names of the mates and seats the
     insertion can make (which it does make in a plan is the order's: phase2.mates). ``order``
     is accepted for a derived product's insertion order and not needed: the directions come
-    from the mates. ``first`` the pairs (A, B) with A in place before B is inserted. A product
-    whose mates cannot all be made by any order is a SparValueError naming them."""
-    del order  # the mates decide each part's direction; the order the plan's
+    from the mates. ``first`` the pairs (A, B) with A in place before B is inserted;
+    ``directions`` a derived product's insertion directions (its disassembly's, product frame),
+    which win. A product whose mates cannot all be made by any order is a SparValueError naming
+    them."""
+    del order  # the mates (or the derivation) decide each part's direction; the order the plan's
     parents = _parents(product)
-    dirs = insertion_directions(product, parents)
-    bad = unmakeable(product, parents)
+    dirs = insertion_directions(product, parents, directions)
+    bad = unmakeable(product, parents, dirs)
     if bad:
         raise SparValueError(f"product {product.name}: no order of insertions makes {', '.join(bad)} (each "
                              "part's insertion goes the way its mate with the part nearer the base needs, "
