@@ -160,7 +160,8 @@ def mate_constraints(world: World, peg: str, goal_hole: str, goal_Ta: np.ndarray
     axis moves a pattern's far pegs by the turn times their distance, and each mate has its own
     margin. A mate's part carried by the held part (a subassembly going in) is at its nominal
     place in the held part, its mates' clearances taken off the margin (each at most
-    sqrt(2) c across: the bounds are a box per axis): sound, not tight.
+    sqrt(2) c across: the bounds are a box per axis): sound, not tight. A peg that seats off
+    its hole's axis (within the clearance) has that offset taken off the margin too.
     ``goal_Ta`` the held part's pose relative to ``goal_hole`` when seated; ``va`` the insertion
     direction in ``goal_hole``'s frame. Names: the first mate's ``centres`` (and ``cornerN``),
     the k-th's ``centres_k``."""
@@ -184,14 +185,17 @@ def mate_constraints(world: World, peg: str, goal_hole: str, goal_Ta: np.ndarray
         if X == mate.peg:
             fp = cell.objects[model_of(X)].feature_named(mate.peg_feature)
             fh = cell.objects[model_of(Y)].feature_named(mate.hole_feature)
-            fp = replace(fp, vector=_apply(T_PX, fp.vector), radius=float(fp.radius) + slack,
+            tip = _apply(T_PX, fp.vector)
+            off = _off_axis(fh, _apply(Ta, tip))  # the seated tip, in Y's frame, off Y's hole axis
+            fp = replace(fp, vector=tip, radius=float(fp.radius) + slack + off,
                          corners=None if fp.corners is None else np.array([_apply(T_PX, c) for c in fp.corners]))
         else:  # the held part's hole slides onto Y's fixed peg: the fixed tip is the point checked
             fa = cell.objects[model_of(X)].feature_named(mate.hole_feature)
             fb = cell.objects[model_of(Y)].feature_named(mate.peg_feature)
             tip = np.asarray(fb.vector, float)
             seated = _apply(np.linalg.inv(Ta), tip)  # where Y's tip sits in the held part's frame, seated
-            fp = replace(fa, kind="peg", radius=float(fb.radius) + slack, vector=seated, geometry=None,
+            off = _off_axis(fa, _apply(np.linalg.inv(T_PX), seated))
+            fp = replace(fa, kind="peg", radius=float(fb.radius) + slack + off, vector=seated, geometry=None,
                          profile="round", corners=None)
             fh = replace(fb, kind="hole", radius=fa.radius, vector=tip, geometry=None, profile="round",
                          corners=None)
@@ -200,6 +204,19 @@ def mate_constraints(world: World, peg: str, goal_hole: str, goal_Ta: np.ndarray
             name = c.name if k == 1 else f"{c.name}_{k}"
             out.append(replace(c, name=name, mate=mate.name))
     return out
+
+
+def _off_axis(hole: MatingFeature, point: np.ndarray) -> float:
+    """How far ``point`` (the hole part's frame) lies from ``hole``'s axis (0 without its geometry):
+    a peg seated off its hole's centre (within the clearance: kb.products accepts it) has that
+    much less room, taken off the margin R_h - R_p."""
+    g = hole.geometry
+    if g is None:
+        return 0.0
+    u = np.asarray(g.direction, float) / np.linalg.norm(g.direction)
+    v = np.asarray(point, float) - np.asarray(g.origin, float)
+    r = float(np.linalg.norm(v - (v @ u) * u))
+    return r if r > 1e-9 else 0.0
 
 
 def _apply(T: np.ndarray, p: Any) -> np.ndarray:
