@@ -20,7 +20,8 @@ import numpy as np
 
 from spar_py.core.model import Precedence, Product, StablePose
 from spar_py.world.product.products import (
-    compile_goals, insertion_pairs, near_parts, no_cycle, precedence, subassembly_poses, subtree, through_precedence, via_grasps,
+    compile_goals, insertion_pairs, near_parts, no_cycle, precedence, subassembly_poses, subtree, through_precedence,
+    via_grasps,
 )
 
 if TYPE_CHECKING:
