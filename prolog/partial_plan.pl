@@ -12,6 +12,7 @@
 :- module(partial_plan,
           [ partial_actions/2,       % +Partial, -Actions
             partial_ordering/2,      % +Partial, -PriorTos
+            path_before/3,           % +A, +B, +PriorTos
             partial_network/2,       % +Partial, -Net
             partial_instances/2,     % +Partial, -Instance
             instance_search/1,       % -Search
@@ -510,7 +511,10 @@ mates_made(Pairs, Id, Actions, PriorTos, made(Sure, Either)) :-
               \+ path_before(Id, B, PriorTos) ),
             Either).
 
-%   path_before(+A, +B, +PriorTos): a path A -> B of prior_to/2 arcs.
+%!  path_before(+A, +B, +PriorTos:list) is semidet.
+%
+%   A path A -> B of prior_to/2 arcs in PriorTos (partial_ordering/2's
+%   list): A precedes B in every linearisation.
 
 path_before(A, B, PriorTos) :-
     path_before(A, B, PriorTos, [A]).

@@ -54,7 +54,7 @@
 :- use_module(foreign, [py_bridge/2, term_data/2]).
 :- use_module(spar_defaults, [default_option/2]).
 :- use_module(partial_plan, [instance_search/1, next_instance/3, search_examined/3, search_nogood/3,
-                              instance_nogood/4, partial_ordering/2]).
+                              instance_nogood/4, partial_ordering/2, path_before/3]).
 :- use_module(spar_paths, []).    % the file search path spar
 :- use_module(spar(kb/templates/spar_sensing), []).
 :- use_module(spar(kb/templates/spar_actions), []).
@@ -139,15 +139,9 @@ forced(Partial, Learnt, F) :-
 inserted_before(Part, Id, Actions, PriorTos) :-
     (   memberchk(action(B, assemble(Part, _, _, _, _), _, _, _), Actions),
         B \== Id
-    ->  prior_path(B, Id, PriorTos, [B])
+    ->  path_before(B, Id, PriorTos)
     ;   true
     ).
-
-prior_path(A, B, PriorTos, Seen) :-
-    member(prior_to(A, C), PriorTos),
-    \+ memberchk(C, Seen),
-    (   C == B -> true ; prior_path(C, B, PriorTos, [C|Seen]) ),
-    !.
 
 learn(Partial, Instance, L, Search0, Search) :-
     (   instance_nogood(Partial, Instance, L, Ng)

@@ -323,6 +323,11 @@ class Mate:
         """How messages and the plan name the mate: ``pin_a.shaft->bracket.bore_a``."""
         return f"{self.peg}.{self.peg_feature}->{self.hole}.{self.hole_feature}"
 
+    @property
+    def ends(self) -> tuple[str, str]:
+        """The mate's two parts: (peg part, hole part)."""
+        return self.peg, self.hole
+
 
 @dataclass(frozen=True)
 class Seat:
@@ -340,6 +345,11 @@ class Seat:
     def name(self) -> str:
         """How messages and the plan name the seat: ``bracket.bottom->base.top``."""
         return f"{self.part}.{self.face}->{self.on}.{self.on_face}"
+
+    @property
+    def ends(self) -> tuple[str, str]:
+        """The seat's two parts: (the part seated, the part it rests on)."""
+        return self.part, self.on
 
 
 @dataclass(frozen=True)

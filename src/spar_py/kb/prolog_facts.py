@@ -76,8 +76,7 @@ def facts(cell: Cell) -> list[tuple]:
     out += _mate_grasps(cell)
     if cell.product is not None:
         out += [("precedence", pr.first, pr.then, pr.reason) for pr in cell.product.precedence]
-        other = {m.name: (m.peg, m.hole) for m in cell.product.mates}
-        other.update({s.name: (s.part, s.on) for s in cell.product.seats})
+        other = {lk.name: lk.ends for lk in (*cell.product.mates, *cell.product.seats)}
         out += [("mates", g.part, [("-", n, next(q for q in other[n] if q != g.part)) for n in g.mates])
                 for g in cell.product.goals]
     return out

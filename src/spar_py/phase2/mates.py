@@ -119,7 +119,7 @@ def made_links(world: World, peg: str, hole: str) -> list[MadeLink]:
     target = set(unc.body(unc.root(hole)))
     out = []
     for lk in (*product.mates, *product.seats):
-        a, b = (lk.peg, lk.hole) if isinstance(lk, Mate) else (lk.part, lk.on)
+        a, b = lk.ends
         if a in moving and b in target:
             out.append(MadeLink(lk, a, b))
         elif b in moving and a in target:

@@ -350,8 +350,7 @@ def name_mates(cell: Cell, d: dict[str, Any]) -> None:
     with the text the printed plan gives (``bracket before pin_a (...)``)."""
     product = cell.product
     can = {g.part: list(g.mates) for g in product.goals}
-    other = {m.name: (m.peg, m.hole) for m in product.mates}
-    other.update({s.name: (s.part, s.on) for s in product.seats})
+    other = {lk.name: lk.ends for lk in (*product.mates, *product.seats)}
     partial = d.get("partial") or {}
     steps = {st["id"]: st for st in (d.get("instance") or {}).get("steps", []) if st.get("name") == "assemble"}
     part_of: dict[str, str] = {}

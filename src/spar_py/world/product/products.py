@@ -258,7 +258,7 @@ def makers(product: Product, parents: dict[str, str] | None = None,
     dirs = insertion_directions(product, parents) if dirs is None else dirs
     out: dict[str, tuple[str, ...]] = {}
     for lk in (*product.mates, *product.seats):
-        pair = (lk.peg, lk.hole) if isinstance(lk, Mate) else (lk.part, lk.on)
+        pair = lk.ends
         out[lk.name] = tuple(p for p in pair if p in dirs and _agrees(dirs[p], link_directions(product, lk, p)))
     return out
 
@@ -279,7 +279,7 @@ def unmakeable(product: Product, parents: dict[str, str] | None = None,
         return out
     bad = []
     for lk in (*product.mates, *product.seats):
-        a, b = (lk.peg, lk.hole) if isinstance(lk, Mate) else (lk.part, lk.on)
+        a, b = lk.ends
         ca_, cb = chain(a), chain(b)
         common = next(x for x in ca_ if x in cb)
         ok = False
@@ -324,7 +324,7 @@ def compile_goals(product: Product, order: Sequence[str] | None = None,
         chain = set(_ancestors(parents, p, parent))
         own, other = [], []
         for lk in made:
-            a, b = (lk.peg, lk.hole) if isinstance(lk, Mate) else (lk.part, lk.on)
+            a, b = lk.ends
             q = b if a == p else a
             if q not in chain:
                 continue
