@@ -22,6 +22,7 @@ from spar_py.kb.objects import load_object
 from spar_py.world.robot import Gripper
 
 from paths import ROOT
+from test_grasp_report import PROBLEM  # the pinned cell's problem file, one template
 
 MARGIN_MM, TILT_DEG = 0.5, 5.0  # the model's rule, stated here independently (world.parts.poses)
 
@@ -255,20 +256,6 @@ parts:
 mates:
   - {peg: pin.shaft, hole: cube.bore}
 """
-PROBLEM = """problem: pinned
-units: {{length: mm, angle: deg}}
-robot: {robot}
-product: pinned.yaml
-layout: auto
-gripper: open
-uncertainty:
-  manipulator: {{dx: [-0.01, 0.01], dy: [-0.01, 0.01], dz: [-0.01, 0.01], dtheta: [-0.01, 0.01]}}
-  objects:
-    cube: {{dx: [-0.05, 0.05], dy: [-0.05, 0.05], dz: [-0.05, 0.05], dtheta: [-0.05, 0.05]}}
-    pin: {{dx: [-0.05, 0.05], dy: [-0.05, 0.05], dz: [-0.05, 0.05], dtheta: [-0.05, 0.05]}}
-goals:
-  - assembled(pinned)
-"""
 
 
 @pytest.fixture(scope="module")
@@ -277,7 +264,7 @@ def pinned(tmp_path_factory) -> Path:
     _long_pin(d)
     (d / "cube.yaml").write_text(CUBE)
     (d / "pinned.yaml").write_text(PRODUCT)
-    (d / "problem.yaml").write_text(PROBLEM.format(robot=ROOT / "kb" / "robots" / "ur5e.yaml"))
+    (d / "problem.yaml").write_text(PROBLEM.format(name="pinned", robot=ROOT / "kb" / "robots" / "ur5e.yaml"))
     return d
 
 
