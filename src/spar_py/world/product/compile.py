@@ -37,9 +37,8 @@ def compile_product(product: Product, unit: str, derived: AssemblyResult | None 
     product file's own orderings (A, B): A in place before B arrives, merged with the
     geometry's. SparValueError (one line) where the mates do not make an assembly or the
     orderings form a cycle (naming each ordering of it and why it holds)."""
-    order = None if derived is None else [p for i in derived.insertions for p in i.parts]
     dirs = None if derived is None else {p: np.asarray(i.direction, float) for i in derived.insertions for p in i.parts}
-    product = replace(product, goals=compile_goals(product, order, directions=dirs))
+    product = replace(product, goals=compile_goals(product, directions=dirs))
     # a derived product's precedence is the disassembly's (exact meshes both ways; the
     # declared products' sweep moves a mesh part's hull, which fills its bores)
     prec = (precedence(product, unit) if derived is None else
@@ -53,7 +52,7 @@ def compile_product(product: Product, unit: str, derived: AssemblyResult | None 
     first = tuple(dict.fromkeys(
         (insertion_pairs([i.parts for i in derived.insertions]) if derived is not None else ())
         + tuple((pr.first, pr.then) for pr in prec)))
-    product = replace(product, goals=compile_goals(product, order, first, dirs))
+    product = replace(product, goals=compile_goals(product, first, dirs))
     have = {(pr.first, pr.then) for pr in prec}
     product = replace(product, precedence=prec + tuple(pr for pr in through_precedence(product, first)
                                                        if (pr.first, pr.then) not in have))

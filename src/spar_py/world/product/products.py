@@ -292,21 +292,18 @@ def unmakeable(product: Product, parents: dict[str, str] | None = None,
     return bad
 
 
-def compile_goals(product: Product, order: Sequence[str] | None = None,
-                  first: Collection[tuple[str, str]] = (),
+def compile_goals(product: Product, first: Collection[tuple[str, str]] = (),
                   directions: dict[str, np.ndarray] | None = None) -> tuple[PartGoal, ...]:
     """One goal per non-base part (file order): into its goal parent (:func:`goal_parents`),
     along its insertion direction (:func:`insertion_directions`), with the part's faces of the
     mates and seats its insertion can make (:func:`makers`) with that parent and the parts
     between them and the parent's faces of those with it, T_a from the product poses and V_a the
     direction in the goal parent's frame; ``mates`` the names of the mates and seats the
-    insertion can make (which it does make in a plan is the order's: phase2.mates). ``order``
-    is accepted for a derived product's insertion order and not needed: the directions come
-    from the mates. ``first`` the pairs (A, B) with A in place before B is inserted;
+    insertion can make (which it does make in a plan is the order's: phase2.mates). ``first``
+    the pairs (A, B) with A in place before B is inserted;
     ``directions`` a derived product's insertion directions (its disassembly's, product frame),
     which win. A product whose mates cannot all be made by any order is a SparValueError naming
     them."""
-    del order  # the mates (or the derivation) decide each part's direction; the order the plan's
     parents = _parents(product)
     dirs = insertion_directions(product, parents, directions)
     bad = unmakeable(product, parents, dirs)
