@@ -40,17 +40,20 @@ def carried_mate(world: World, peg: str, hole: str, faces: Any, Ta: np.ndarray) 
     return hole, Ta, faces
 
 
-def mate_retention(cell: Cell, peg: str, hole: str, fh: MatingFeature | None) -> tuple[str, str]:
+def mate_retention(cell: Cell, peg: str, hole: str, fh: MatingFeature | None,
+                   made: "list[MadeLink]") -> tuple[str, str]:
     """(retention, the mate as messages name it) of the insertion of ``peg`` into ``hole``: a product
-    part's goal is ``fixed`` if a mate it makes is fixed, else loose (seats are held by gravity);
-    outside a product loose. Named ``loose in block.bore_b`` by the mate into ``hole`` (else
-    the hole feature, else the part)."""
+    part's insertion is ``fixed`` if a mate it makes (``made``, :func:`made_links`; where none is
+    known, one its goal can make) is fixed, else loose (seats are held by gravity); outside a
+    product loose. Named ``loose in block.bore_b`` by the mate into ``hole`` (else the hole
+    feature, else the part)."""
     where = hole if fh is None or not fh.name else f"{hole}.{fh.name}"
     if cell.product is None or cell.product.goal_of(peg) is None:
         return "loose", f"loose in {where}"
     goal = cell.product.goal_of(peg)
     mates = [m for m in cell.product.mates if m.name in goal.mates]
-    retention = "fixed" if any(m.retention == "fixed" for m in mates) else "loose"
+    retention = made_retention(made) if made else (
+        "fixed" if any(m.retention == "fixed" for m in mates) else "loose")
     into = next((m for m in mates if (m.peg, m.hole) == (peg, hole)), None)
     if into is not None:
         return retention, f"{retention} in {into.hole}.{into.hole_feature}"

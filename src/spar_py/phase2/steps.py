@@ -17,7 +17,7 @@ from spar_py.core.model import Cell
 from spar_py.world.reach import reachable_pairs, rest_of_body, surfaces_of
 from spar_py.phase2.arm import arm_for, no_arm, via_part
 from spar_py.phase2.mates import (
-    carried_mate, made_links, made_retention, mate_constraints, mate_features, mate_retention, product_mate,
+    carried_mate, made_links, mate_constraints, mate_features, mate_retention, product_mate,
     wrong_way,
 )
 from spar_py.phase2.rest import retention_refusal, stacked_on
@@ -247,10 +247,7 @@ def _assemble(world: World, s: Step, early: bool = False) -> tuple[list[dict], W
             geo["tightest"] = tight
     grasps = {k: v for k, v in world.grasps.items() if k != peg}
     margin = 0.0 if fp is None else max(0.0, float(fh.radius) - float(fp.radius))
-    retention, mate = mate_retention(cell, peg, hole, fh)
-    if made:  # the mates this insertion makes, in the order the plan took
-        retention = made_retention(made)
-        mate = f"{retention}{mate[mate.index(' '):]}"
+    retention, mate = mate_retention(cell, peg, hole, fh, made)
     unc = ur.assemble(world.unc, peg, hole, Ta, retention=retention, direction=va_vec, clearance=margin,
                       axis=None if fp is None else va_vec, mate=mate)
     # a non-product cell's goal asks for this mate as the paper's cells make it (the insertion itself
